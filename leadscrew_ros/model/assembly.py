@@ -1,0 +1,106 @@
+"""Matrices of the linearised equations of motion (27), precomputed once per geometry.
+
+    qdd + (C + G + W3 + W4 + W5qdot) qd + ([omega^2] - Omega^2 I + W1 + W2 + W5q) q = 0   (27)
+
+`Geometry` holds everything that depends on geometry and material only; an operating point
+(speed, load, friction and damping values) only rescales its matrices.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from functools import cached_property
+
+import numpy as np
+
+from .contact import ContactIntegrals, contact_integrals
+from .kernels import scales
+from .modes import KIND_X, KIND_Y, ModalBasis, modal_basis
+from .parameters import ScrewParameters
+
+
+def gyroscopic_unit(basis: ModalBasis) -> np.ndarray:
+    """G / Omega (A.2): rho * integral over the section of r dr dtheta = rho A (reading 5), so
+    with mass-normalised shapes G couples B_nx and B_ny by -+2 Omega."""
+    same_order = basis.order[:, None] == basis.order[None, :]
+    xy = (basis.kind[:, None] == KIND_X) & (basis.kind[None, :] == KIND_Y) & same_order
+    return 2.0 * (xy.T.astype(float) - xy.astype(float))
+
+
+@dataclass(frozen=True)
+class SystemMatrices:
+    """N x N matrices of (27) at one operating point; `stiffness` and `damping` are the sums."""
+
+    C: np.ndarray
+    G: np.ndarray
+    W: dict[str, np.ndarray]
+    stiffness: np.ndarray
+    damping: np.ndarray
+
+
+@dataclass(frozen=True)
+class Geometry:
+    params: ScrewParameters
+    basis: ModalBasis
+    contact: ContactIntegrals
+    G_unit: np.ndarray
+    lower_half_units: np.ndarray   # (5, N*2N) lower half [K | D] per scale factor:
+    #                               W1+W2, W5q, W3+W4, W5qdot, G (pairs share a scale)
+
+    @property
+    def n(self) -> int:
+        return self.basis.n
+
+    def with_operating_params(self, params: ScrewParameters) -> "Geometry":
+        """Same geometry with other friction / damping values (no re-integration)."""
+        if params.geometry_key() != self.params.geometry_key():
+            return build_geometry(params)
+        return replace(self, params=params)
+
+    def matrices(self, speed_rad_s: float, load_n: float) -> SystemMatrices:
+        s = scales(self.params, speed_rad_s, load_n, self.contact.alpha)
+        W = {k: float(s[k]) * v for k, v in self.contact.unit.items()}
+        om = self.basis.omega_rad_s
+        C = np.diag(2 * self.params.modal_damping * om)                            # (A.1)
+        G = speed_rad_s * self.G_unit                                               # (A.2)
+        K = np.diag(om ** 2 - speed_rad_s ** 2) + W["W1"] + W["W2"] + W["W5q"]
+        D = C + G + W["W3"] + W["W4"] + W["W5qdot"]
+        return SystemMatrices(C=C, G=G, W=W, stiffness=K, damping=D)
+
+    @cached_property
+    def _template(self) -> np.ndarray:
+        """State matrix at zero speed and load: [[0, I], [-[omega^2], -C]]."""
+        n, om = self.n, self.basis.omega_rad_s
+        a = np.zeros((2 * n, 2 * n))
+        a[np.arange(n), n + np.arange(n)] = 1.0
+        a[n + np.arange(n), np.arange(n)] = -om ** 2
+        a[n + np.arange(n), n + np.arange(n)] = -2 * self.params.modal_damping * om    # (A.1)
+        return a
+
+    def state_matrices(self, speed_rad_s, load_n) -> np.ndarray:
+        """First-order state matrices [[0, I], [-K, -D]] of (27) for arrays of operating points
+        (broadcast), shape (..., 2N, 2N). One matrix product rescales all precomputed parts."""
+        speed = np.asarray(speed_rad_s, float)
+        s = scales(self.params, speed, load_n, self.contact.alpha)
+        parts = (s["W1"], s["W5q"], s["W3"], s["W5qdot"], speed)
+        coef = (np.array(parts) if speed.ndim == 0 and np.ndim(load_n) == 0
+                else np.stack(np.broadcast_arrays(*parts), axis=-1))
+        n = self.n
+        lower = (coef @ self.lower_half_units).reshape(coef.shape[:-1] + (n, 2 * n))
+        out = np.broadcast_to(self._template, lower.shape[:-2] + (2 * n, 2 * n)).copy()
+        out[..., n:, :] -= lower
+        out[..., n + np.arange(n), np.arange(n)] += (speed ** 2)[..., None]   # -Omega^2 I in K
+        return out
+
+
+def build_geometry(params: ScrewParameters) -> Geometry:
+    basis = modal_basis(params)
+    contact = contact_integrals(params, basis)
+    u = contact.unit
+    G_unit = gyroscopic_unit(basis)
+    zero = np.zeros_like(G_unit)
+    halves = [np.hstack(pair) for pair in (
+        (u["W1"] + u["W2"], zero), (u["W5q"], zero), (zero, u["W3"] + u["W4"]),
+        (zero, u["W5qdot"]), (zero, G_unit))]
+    return Geometry(params=params, basis=basis, contact=contact, G_unit=G_unit,
+                    lower_half_units=np.stack([h.ravel() for h in halves]))

@@ -1,0 +1,30 @@
+"""Velocity-dependent friction law (12) and its values at steady sliding (A.10, A.11)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .parameters import ScrewParameters
+
+
+def friction_coefficient(p: ScrewParameters, sliding_speed_m_s):
+    """mu(|Vc|) = mu_k + (mu_s - mu_k) exp(-d |Vc|)  (12)."""
+    v = np.abs(sliding_speed_m_s)
+    return p.mu_kinetic + (p.mu_static - p.mu_kinetic) * np.exp(-p.friction_decay_s_m * v)
+
+
+def sliding_speed(p: ScrewParameters, speed_rad_s):
+    """Steady contact sliding speed |Vc| = R |Omega| / cos(beta), m/s (from (4), (11))."""
+    return p.radius_m * np.abs(speed_rad_s) / np.cos(p.helix_angle_rad)
+
+
+def mu_o(p: ScrewParameters, speed_rad_s):
+    """Friction coefficient at the steady sliding speed (A.10, NOTES.md reading 4)."""
+    return friction_coefficient(p, sliding_speed(p, speed_rad_s))
+
+
+def gamma(p: ScrewParameters, speed_rad_s):
+    """Friction slope term gamma = dmu/d|Vc| * cos(beta), 1/(m/s) * 1  (A.11)."""
+    d = p.friction_decay_s_m
+    return (-(p.mu_static - p.mu_kinetic) * d * np.exp(-d * sliding_speed(p, speed_rad_s))
+            * np.cos(p.helix_angle_rad))

@@ -1,0 +1,154 @@
+"""Model parameters in SI units; defaults are Table 1 of the paper plus the friction law of Fig. 4.
+
+Every field carries metadata (unit, allowed range, description, whether it changes the geometry)
+so the CLI, the ROS parameter descriptors and the YAML config are all generated from this one
+table.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+FORMULATIONS = ("paper", "consistent")
+
+
+class ParameterError(ValueError):
+    """A model parameter or operating point is invalid; the message names field, value and range."""
+
+
+def _p(default: Any, unit: str, description: str, lo: float | None = None,
+       hi: float | None = None, lo_open: bool = False, hi_open: bool = False,
+       geometry: bool = True) -> Any:
+    return field(default=default, metadata=dict(
+        unit=unit, description=description, lo=lo, hi=hi, lo_open=lo_open, hi_open=hi_open,
+        geometry=geometry))
+
+
+@dataclass(frozen=True)
+class ScrewParameters:
+    """Lead screw, nut contact and friction parameters (Table 1, SI units).
+
+    Fields marked ``geometry=True`` in their metadata change the modal basis or the contact
+    integrals; the others only rescale precomputed matrices.
+    """
+
+    radius_m: float = _p(0.005, "m", "effective screw radius R", 0.0, 1.0, lo_open=True)
+    length_m: float = _p(0.300, "m", "screw length L", 0.0, 100.0, lo_open=True)
+    thread_height_m: float = _p(0.001, "m", "thread height h", 0.0, 1.0, lo_open=True)
+    helix_angle_rad: float = _p(math.radians(5.0), "rad", "screw helix angle beta", 0.0,
+                                math.pi / 2, lo_open=True, hi_open=True)
+    nut_position_m: float = _p(0.150, "m", "contact (nut) start location z_o", 0.0, 100.0)
+    nut_length_m: float = _p(0.060, "m", "contact (nut) length b", 0.0, 100.0, lo_open=True)
+    youngs_modulus_pa: float = _p(207e9, "Pa", "Young's modulus E", 0.0, 1e13, lo_open=True)
+    shear_modulus_pa: float = _p(79.3e9, "Pa", "shear modulus G", 0.0, 1e13, lo_open=True)
+    density_kg_m3: float = _p(7820.0, "kg/m^3", "density rho", 0.0, 1e5, lo_open=True)
+    axial_load_n: float = _p(200.0, "N", "nominal axial load F_z (default operating load)",
+                             -1e7, 1e7, geometry=False)
+    modal_damping: float = _p(3.0e-3, "1", "modal damping ratio xi_n of every mode", 0.0, 1.0,
+                              hi_open=True, geometry=False)
+    mu_static: float = _p(0.25, "1", "static friction coefficient mu_s", 0.0, 2.0,
+                          geometry=False)
+    mu_kinetic: float = _p(0.20, "1", "kinetic friction coefficient mu_k", 0.0, 2.0,
+                           geometry=False)
+    friction_decay_s_m: float = _p(10.0, "s/m", "friction decay constant d", 0.0, 1e4,
+                                   geometry=False)
+    n_bending: int = _p(6, "1", "bending orders per direction (x and y)", 1, 40)
+    n_torsion: int = _p(6, "1", "torsion orders", 1, 40)
+    formulation: str = _p("paper", "", "Appendix A as printed ('paper') or first-principles "
+                          "linearisation ('consistent')")
+    quadrature_nodes_per_turn: int = _p(32, "1", "Gauss-Legendre nodes per thread turn for "
+                                        "the contact integrals", 8, 1024)
+    min_speed_rad_s: float = _p(0.5, "rad/s", "lowest |speed| at which the sliding "
+                                "linearisation is trusted", 0.0, 1e4, lo_open=True,
+                                geometry=False)
+    risk_damping_scale: float = _p(1.0e-3, "1", "damping ratio at which squeak risk is 1/e",
+                                   0.0, 1.0, lo_open=True, geometry=False)
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+    @property
+    def n_modes(self) -> int:
+        return 2 * self.n_bending + self.n_torsion
+
+    def with_(self, **changes: Any) -> "ScrewParameters":
+        """Copy with some fields changed (validated)."""
+        unknown = set(changes) - set(field_names())
+        if unknown:
+            raise ParameterError(f"unknown parameter(s): {', '.join(sorted(unknown))}; "
+                                 f"known: {', '.join(field_names())}")
+        return replace(self, **{k: coerce(k, v) for k, v in changes.items()})
+
+    def geometry_key(self) -> tuple:
+        """Values of the fields that change modes or contact integrals (cache key)."""
+        return tuple(getattr(self, f.name) for f in fields(self) if f.metadata["geometry"])
+
+    def as_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+def field_names() -> list[str]:
+    return [f.name for f in fields(ScrewParameters)]
+
+
+def field_info(name: str) -> dict[str, Any]:
+    for f in fields(ScrewParameters):
+        if f.name == name:
+            return dict(f.metadata, default=f.default, type=f.type)
+    raise ParameterError(f"unknown parameter {name!r}; known: {', '.join(field_names())}")
+
+
+def coerce(name: str, value: Any) -> Any:
+    """Convert a value (e.g. a CLI string) to the field's type, with a clear error."""
+    typ = field_info(name)["type"]
+    try:
+        if typ == "int":
+            if isinstance(value, float) and not value.is_integer():
+                raise ValueError
+            return int(float(value)) if isinstance(value, str) else int(value)
+        if typ == "float":
+            if isinstance(value, bool):
+                raise ValueError
+            return float(value)
+        return str(value)
+    except (TypeError, ValueError, OverflowError):
+        raise ParameterError(f"{name} = {value!r} is not a valid {typ}") from None
+
+
+def _range_text(md: dict[str, Any]) -> str:
+    lo = "(" if md["lo_open"] else "["
+    hi = ")" if md["hi_open"] else "]"
+    return f"{lo}{md['lo']:g}, {md['hi']:g}{hi} {md['unit']}".rstrip()
+
+
+def validate(p: ScrewParameters) -> None:
+    """Check every field and the cross-field constraints; raise ParameterError naming the field."""
+    for f in fields(p):
+        v, md = getattr(p, f.name), f.metadata
+        if f.name == "formulation":
+            if v not in FORMULATIONS:
+                raise ParameterError(f"formulation = {v!r} is not allowed; "
+                                     f"choose one of {', '.join(FORMULATIONS)}")
+            continue
+        expected = int if f.type == "int" else float
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or (
+                expected is int and not isinstance(v, int)):
+            raise ParameterError(f"{f.name} = {v!r} must be a {f.type}")
+        if not math.isfinite(v):
+            raise ParameterError(f"{f.name} = {v} must be finite, allowed {_range_text(md)}")
+        too_low = v <= md["lo"] if md["lo_open"] else v < md["lo"]
+        too_high = v >= md["hi"] if md["hi_open"] else v > md["hi"]
+        if too_low or too_high:
+            raise ParameterError(f"{f.name} = {v:g} is out of range, allowed {_range_text(md)}")
+    if p.nut_position_m + p.nut_length_m > p.length_m:
+        raise ParameterError(
+            f"nut_position_m + nut_length_m = {p.nut_position_m + p.nut_length_m:g} m exceeds "
+            f"length_m = {p.length_m:g} m: the nut must lie on the screw (z_o + b <= L)")
+    if p.mu_kinetic > p.mu_static:
+        raise ParameterError(f"mu_kinetic = {p.mu_kinetic:g} exceeds mu_static = "
+                             f"{p.mu_static:g}: need mu_static >= mu_kinetic >= 0")
+    if p.thread_height_m >= p.radius_m:
+        raise ParameterError(f"thread_height_m = {p.thread_height_m:g} m must be smaller than "
+                             f"radius_m = {p.radius_m:g} m")

@@ -1,0 +1,133 @@
+"""The squeak predictor: geometry once, then one small eigenproblem per operating point."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .assembly import Geometry, build_geometry
+from .friction import mu_o
+from .parameters import ScrewParameters, field_info
+from .risk import squeak_risk
+from .stability import ModeResult, classify
+
+_LOAD_LIMIT_N = field_info("axial_load_n")["hi"]
+
+
+class OperatingPointError(ValueError):
+    """Speed or load is not a usable number (NaN, inf, absurd magnitude, wrong type)."""
+
+
+@dataclass(frozen=True)
+class Prediction:
+    speed_rad_s: float
+    load_n: float
+    formulation: str
+    valid: bool
+    reason: str                          # why the point is outside validity ("" when valid)
+    modes: tuple[ModeResult, ...] = ()   # oscillatory modes, growth rate descending
+    divergence_rates: tuple[float, ...] = ()
+    risk: float | None = None
+
+    @property
+    def stable(self) -> bool | None:
+        if not self.valid:
+            return None
+        return not self.divergence_rates and not any(m.unstable for m in self.modes)
+
+    @property
+    def squeak_modes(self) -> tuple[ModeResult, ...]:
+        return tuple(m for m in self.modes if m.unstable)
+
+    @property
+    def unstable_frequencies_hz(self) -> list[float]:
+        """Squeak frequencies, most unstable first."""
+        return [m.frequency_hz for m in self.squeak_modes]
+
+    @property
+    def max_growth_rate(self) -> float | None:
+        return self.modes[0].growth_rate if self.valid and self.modes else None
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"speed_rad_s": self.speed_rad_s, "load_n": self.load_n,
+                "formulation": self.formulation, "valid": self.valid, "reason": self.reason,
+                "stable": self.stable, "risk": self.risk,
+                "max_growth_rate": self.max_growth_rate,
+                "unstable_frequencies_hz": self.unstable_frequencies_hz,
+                "divergence_rates": list(self.divergence_rates),
+                "modes": [m.as_dict() for m in self.modes]}
+
+
+def check_operating_point(speed_rad_s: Any, load_n: Any) -> tuple[float, float]:
+    """Reject values that are not finite real numbers of sane magnitude."""
+    out = []
+    for name, unit, v in (("speed", "rad/s", speed_rad_s), ("load", "N", load_n)):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+            raise OperatingPointError(f"{name} = {v!r} is not a number ({unit})")
+        v = float(v)
+        if not math.isfinite(v):
+            raise OperatingPointError(f"{name} = {v} is not finite ({unit})")
+        out.append(v)
+    if abs(out[1]) > _LOAD_LIMIT_N:
+        raise OperatingPointError(f"load = {out[1]:g} N exceeds the plausible magnitude "
+                                  f"{_LOAD_LIMIT_N:g} N")
+    return out[0], out[1]
+
+
+class SqueakModel:
+    """Precomputes modes and contact integrals for one parameter set; `predict` is cheap."""
+
+    def __init__(self, params: ScrewParameters | None = None, geometry: Geometry | None = None):
+        self.geometry = geometry or build_geometry(params or ScrewParameters())
+        self.params = self.geometry.params
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        return self.geometry.basis.labels
+
+    @property
+    def critical_speed_rad_s(self) -> float:
+        """First critical speed: the backward whirl of the lowest mode reaches zero frequency."""
+        return float(self.geometry.basis.omega_rad_s.min())
+
+    def with_params(self, **changes: Any) -> "SqueakModel":
+        """A model with changed parameters, re-integrating only if the geometry changed."""
+        return SqueakModel(geometry=self.geometry.with_operating_params(
+            self.params.with_(**changes)))
+
+    def validity(self, speed_rad_s: float, load_n: float) -> str:
+        """'' when the linearisation holds at this point, else the reason (NOTES.md reading 7)."""
+        p, w = self.params, abs(speed_rad_s)
+        if w < p.min_speed_rad_s:
+            return (f"outside the model's validity: |speed| = {w:g} rad/s is below "
+                    f"min_speed_rad_s = {p.min_speed_rad_s:g} rad/s (near-stick, the sliding "
+                    "linearisation does not hold; a nonlinear analysis is needed)")
+        if w >= self.critical_speed_rad_s:
+            return (f"outside the model's validity: |speed| = {w:g} rad/s is not below the "
+                    f"first critical speed {self.critical_speed_rad_s:.1f} rad/s")
+        if p.formulation == "consistent" and speed_rad_s * load_n < 0:
+            if mu_o(p, speed_rad_s) * math.tan(p.helix_angle_rad) >= 1:
+                return ("outside the model's validity: overhauling load with mu_o tan(beta) >= 1 "
+                        "(no steady sliding, the thread self-locks)")
+        return ""
+
+    def state_matrix(self, speed_rad_s: float, load_n: float) -> np.ndarray:
+        """State matrix of (27) at one operating point (2N x 2N)."""
+        return self.geometry.state_matrices(speed_rad_s, load_n)
+
+    def predict(self, speed_rad_s: float, load_n: float | None = None) -> Prediction:
+        """Squeak prediction at one operating point (speed in rad/s, axial load in N)."""
+        if load_n is None:
+            load_n = self.params.axial_load_n
+        speed, load = check_operating_point(speed_rad_s, load_n)
+        reason = self.validity(speed, load)
+        if reason:
+            return Prediction(speed, load, self.params.formulation, False, reason)
+        lam, vec = np.linalg.eig(self.state_matrix(speed, load))
+        modes, divergence = classify(lam, vec, self.labels)
+        zeta = min((m.damping_ratio for m in modes), default=math.inf)
+        return Prediction(speed, load, self.params.formulation, True, "", modes, divergence,
+                          squeak_risk(zeta, self.params.risk_damping_scale))

@@ -1,0 +1,56 @@
+"""Eigen-analysis of (27): squeak (flutter) modes, divergence, labels (NOTES.md reading 6)."""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+# Relative thresholds against round-off of a 2N eigenproblem whose eigenvalues reach ~1e5 1/s.
+_IMAG_TOL = 1e-9
+_GROWTH_TOL = 1e-10
+
+
+class ModeResult(NamedTuple):
+    """One oscillatory eigenpair (a NamedTuple: built per mode on the live path, so cheap)."""
+
+    label: str               # dominant modal coordinate, e.g. "B1y"
+    frequency_hz: float      # |Im(lambda)| / 2 pi
+    growth_rate: float       # Re(lambda), 1/s
+    damping_ratio: float     # -Re(lambda) / |lambda|
+    unstable: bool           # squeak: Re > 0 with Im != 0
+
+    def as_dict(self) -> dict:
+        return self._asdict()
+
+
+def oscillatory_mask(eigvals: np.ndarray) -> np.ndarray:
+    """One eigenvalue of each complex-conjugate pair (Im > 0)."""
+    return eigvals.imag > _IMAG_TOL * np.abs(eigvals)
+
+
+def max_growth_rate(eigvals: np.ndarray) -> np.ndarray:
+    """Largest Re(lambda) over the oscillatory eigenvalues, along the last axis (1/s)."""
+    return np.where(oscillatory_mask(eigvals), eigvals.real, -np.inf).max(axis=-1)
+
+
+def classify(eigvals: np.ndarray, eigvecs: np.ndarray, labels: tuple[str, ...]
+             ) -> tuple[tuple[ModeResult, ...], tuple[float, ...]]:
+    """Oscillatory modes sorted by growth rate (descending) and divergence rates (Re > 0, Im = 0).
+
+    A mode is labelled by its dominant modal coordinate (largest |q_i| in the displacement half
+    of the state eigenvector; the basis is mass-normalised so amplitudes are comparable).
+    """
+    mag = np.abs(eigvals)
+    osc = np.flatnonzero(eigvals.imag > _IMAG_TOL * mag)
+    osc = osc[np.argsort(-eigvals.real[osc], kind="stable")]
+    lam, mag_osc = eigvals[osc], mag[osc]
+    dominant = np.abs(eigvecs[:len(labels), osc]).argmax(axis=0)
+    growth = lam.real > _GROWTH_TOL * mag_osc
+    modes = tuple(map(ModeResult, [labels[d] for d in dominant.tolist()],
+                      (lam.imag / (2 * math.pi)).tolist(), lam.real.tolist(),
+                      (-lam.real / mag_osc).tolist(), growth.tolist()))
+    real = eigvals.real[np.abs(eigvals.imag) <= _IMAG_TOL * mag]
+    divergence = tuple(sorted(real[real > _GROWTH_TOL * np.abs(real)].tolist(), reverse=True))
+    return modes, divergence
