@@ -9,7 +9,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -51,12 +51,6 @@ class Geometry:
     def n(self) -> int:
         return self.basis.n
 
-    def with_operating_params(self, params: ScrewParameters) -> "Geometry":
-        """Same geometry with other friction / damping values (no re-integration)."""
-        if params.geometry_key() != self.params.geometry_key():
-            return build_geometry(params)
-        return replace(self, params=params)
-
     def matrices(self, speed_rad_s: float, load_n: float) -> SystemMatrices:
         s = scales(self.params, speed_rad_s, load_n, self.contact.alpha)
         W = {k: float(s[k]) * v for k, v in self.contact.unit.items()}
@@ -94,6 +88,12 @@ class Geometry:
 
 
 def build_geometry(params: ScrewParameters) -> Geometry:
+    """Geometry for these parameters; integrals are cached per geometry (sweeps revisit them)."""
+    return replace(_geometry_of(params.geometry_only()), params=params)
+
+
+@lru_cache(maxsize=256)
+def _geometry_of(params: ScrewParameters) -> Geometry:
     basis = modal_basis(params)
     contact = contact_integrals(params, basis)
     u = contact.unit

@@ -81,9 +81,10 @@ class ScrewParameters:
                                  f"known: {', '.join(field_names())}")
         return replace(self, **{k: coerce(k, v) for k, v in changes.items()})
 
-    def geometry_key(self) -> tuple:
-        """Values of the fields that change modes or contact integrals (cache key)."""
-        return tuple(getattr(self, f.name) for f in fields(self) if f.metadata["geometry"])
+    def geometry_only(self) -> "ScrewParameters":
+        """These parameters with every non-geometry field at its default (a cache key)."""
+        return replace(self, **{f.name: f.default for f in fields(self)
+                                if not f.metadata["geometry"]})
 
     def as_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self)}

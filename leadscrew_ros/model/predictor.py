@@ -8,13 +8,16 @@ from typing import Any
 
 import numpy as np
 
-from .assembly import Geometry, build_geometry
+from .assembly import build_geometry
 from .friction import mu_o
 from .parameters import ScrewParameters, field_info
 from .risk import squeak_risk
 from .stability import ModeResult, classify
 
 _LOAD_LIMIT_N = field_info("axial_load_n")["hi"]
+
+
+VALID, TOO_SLOW, SUPERCRITICAL, SELF_LOCKING = range(4)
 
 
 class OperatingPointError(ValueError):
@@ -80,8 +83,8 @@ def check_operating_point(speed_rad_s: Any, load_n: Any) -> tuple[float, float]:
 class SqueakModel:
     """Precomputes modes and contact integrals for one parameter set; `predict` is cheap."""
 
-    def __init__(self, params: ScrewParameters | None = None, geometry: Geometry | None = None):
-        self.geometry = geometry or build_geometry(params or ScrewParameters())
+    def __init__(self, params: ScrewParameters | None = None):
+        self.geometry = build_geometry(params or ScrewParameters())
         self.params = self.geometry.params
 
     @property
@@ -95,24 +98,32 @@ class SqueakModel:
 
     def with_params(self, **changes: Any) -> "SqueakModel":
         """A model with changed parameters, re-integrating only if the geometry changed."""
-        return SqueakModel(geometry=self.geometry.with_operating_params(
-            self.params.with_(**changes)))
+        return SqueakModel(self.params.with_(**changes))
+
+    def validity_code(self, speed_rad_s, load_n) -> np.ndarray:
+        """Vectorised validity (NOTES.md reading 7): VALID, or why the linearisation fails."""
+        p = self.params
+        w = np.abs(np.asarray(speed_rad_s, float))
+        overhauling = (p.formulation == "consistent") & (np.sign(speed_rad_s) * np.sign(load_n) < 0)
+        locks = overhauling & (mu_o(p, w) * math.tan(p.helix_angle_rad) >= 1)
+        return np.where(w < p.min_speed_rad_s, TOO_SLOW, np.where(
+            w >= self.critical_speed_rad_s, SUPERCRITICAL, np.where(locks, SELF_LOCKING, VALID)))
 
     def validity(self, speed_rad_s: float, load_n: float) -> str:
-        """'' when the linearisation holds at this point, else the reason (NOTES.md reading 7)."""
-        p, w = self.params, abs(speed_rad_s)
-        if w < p.min_speed_rad_s:
-            return (f"outside the model's validity: |speed| = {w:g} rad/s is below "
-                    f"min_speed_rad_s = {p.min_speed_rad_s:g} rad/s (near-stick, the sliding "
-                    "linearisation does not hold; a nonlinear analysis is needed)")
-        if w >= self.critical_speed_rad_s:
-            return (f"outside the model's validity: |speed| = {w:g} rad/s is not below the "
-                    f"first critical speed {self.critical_speed_rad_s:.1f} rad/s")
-        if p.formulation == "consistent" and speed_rad_s * load_n < 0:
-            if mu_o(p, speed_rad_s) * math.tan(p.helix_angle_rad) >= 1:
-                return ("outside the model's validity: overhauling load with mu_o tan(beta) >= 1 "
-                        "(no steady sliding, the thread self-locks)")
-        return ""
+        """'' when the linearisation holds at this point, else the reason in words."""
+        code = int(self.validity_code(speed_rad_s, load_n))
+        if code == VALID:
+            return ""
+        w, p = abs(speed_rad_s), self.params
+        return {
+            TOO_SLOW: (f"outside the model's validity: |speed| = {w:g} rad/s is below "
+                       f"min_speed_rad_s = {p.min_speed_rad_s:g} rad/s (near stick the sliding "
+                       "linearisation does not hold; a nonlinear analysis is needed)"),
+            SUPERCRITICAL: (f"outside the model's validity: |speed| = {w:g} rad/s is not below "
+                            f"the first critical speed {self.critical_speed_rad_s:.1f} rad/s"),
+            SELF_LOCKING: ("outside the model's validity: overhauling load with "
+                           "mu_o tan(beta) >= 1 (no steady sliding, the thread self-locks)"),
+        }[code]
 
     def state_matrix(self, speed_rad_s: float, load_n: float) -> np.ndarray:
         """State matrix of (27) at one operating point (2N x 2N)."""
@@ -120,13 +131,28 @@ class SqueakModel:
 
     def predict(self, speed_rad_s: float, load_n: float | None = None) -> Prediction:
         """Squeak prediction at one operating point (speed in rad/s, axial load in N)."""
-        if load_n is None:
-            load_n = self.params.axial_load_n
-        speed, load = check_operating_point(speed_rad_s, load_n)
+        speed, load = check_operating_point(
+            speed_rad_s, self.params.axial_load_n if load_n is None else load_n)
         reason = self.validity(speed, load)
         if reason:
             return Prediction(speed, load, self.params.formulation, False, reason)
-        lam, vec = np.linalg.eig(self.state_matrix(speed, load))
+        return self._prediction(speed, load, *np.linalg.eig(self.state_matrix(speed, load)))
+
+    def predict_many(self, speeds_rad_s, loads_n) -> list[Prediction]:
+        """Predictions at many operating points (broadcast) with one batched eigen-solve."""
+        speeds, loads = (a.ravel() for a in np.broadcast_arrays(
+            np.asarray(speeds_rad_s, float), np.asarray(loads_n, float)))
+        points = [check_operating_point(s, f) for s, f in zip(speeds.tolist(), loads.tolist())]
+        reasons = [self.validity(s, f) for s, f in points]
+        ok = [i for i, r in enumerate(reasons) if not r]
+        out = [Prediction(s, f, self.params.formulation, False, r) for (s, f), r in zip(points, reasons)]
+        if ok:
+            lam, vec = np.linalg.eig(self.geometry.state_matrices(speeds[ok], loads[ok]))
+            for k, i in enumerate(ok):
+                out[i] = self._prediction(*points[i], lam[k], vec[k])
+        return out
+
+    def _prediction(self, speed: float, load: float, lam: np.ndarray, vec: np.ndarray) -> Prediction:
         modes, divergence = classify(lam, vec, self.labels)
         zeta = min((m.damping_ratio for m in modes), default=math.inf)
         return Prediction(speed, load, self.params.formulation, True, "", modes, divergence,

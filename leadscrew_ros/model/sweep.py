@@ -1,0 +1,241 @@
+"""Parameter sweeps and stability maps, batched over operating points, with stability
+boundaries refined by root finding (brentq on the largest squeak growth rate).
+
+An axis is the speed (`speed_rad_s`), the load (`load_n`) or any numeric `ScrewParameters`
+field. Points that share all parameter values are solved in one batched eigenproblem; only a
+change of a geometry field (R, z_o, beta, ...) re-integrates the contact.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Iterable
+
+import numpy as np
+from scipy.optimize import brentq
+
+from .parameters import ParameterError, field_info, field_names
+from .predictor import VALID, Prediction, SqueakModel
+from .stability import max_growth_rate
+
+OPERATING_AXES = ("speed_rad_s", "load_n")
+REFERENCE_SPEED_RAD_S = 20.0        # fixed speed of the paper's Figs. 9 and 10
+_CHUNK = 1024                       # points per batched eigen-solve (~10 MB of state matrices)
+
+
+def axis_names() -> list[str]:
+    return list(OPERATING_AXES) + [n for n in field_names()
+                                    if field_info(n)["type"] in ("float", "int")]
+
+
+def check_axis(name: str) -> None:
+    if name not in axis_names():
+        raise ParameterError(f"cannot sweep {name!r}; choose one of {', '.join(axis_names())}")
+
+
+@dataclass(frozen=True)
+class GrowthField:
+    """Largest squeak growth rate (1/s) on a set of points; NaN where the model is not valid."""
+
+    max_growth_rate: np.ndarray
+    valid: np.ndarray
+    # Frequency (Hz) of the most unstable oscillatory mode, NaN where invalid.
+    peak_frequency_hz: np.ndarray
+
+
+def _point_models(model: SqueakModel, params: dict[str, np.ndarray], size: int
+                  ) -> Iterable[tuple[SqueakModel | None, np.ndarray]]:
+    """Group flat point indices by their parameter values; None where the values are invalid."""
+    if not params:
+        yield model, np.arange(size)
+        return
+    names = list(params)
+    uniq, inverse = np.unique(np.column_stack([params[n] for n in names]), axis=0,
+                              return_inverse=True)
+    for k, row in enumerate(uniq):
+        idx = np.flatnonzero(inverse.ravel() == k)
+        try:
+            yield model.with_params(**{n: _native(n, v) for n, v in zip(names, row)}), idx
+        except ParameterError:
+            yield None, idx
+
+
+def _native(name: str, value: float):
+    return int(round(value)) if field_info(name)["type"] == "int" else float(value)
+
+
+def growth_field(model: SqueakModel, speed_rad_s, load_n,
+                 progress: Callable[[int], None] | None = None, **params) -> GrowthField:
+    """Largest squeak growth rate at every point of the broadcast of all given arrays
+    (speed in rad/s, load in N, any numeric parameter fields by name)."""
+    arrays = np.broadcast_arrays(np.asarray(speed_rad_s, float), np.asarray(load_n, float),
+                                 *(np.asarray(v, float) for v in params.values()))
+    shape = arrays[0].shape
+    speeds, loads, *columns = (a.ravel() for a in arrays)
+    if not all(np.all(np.isfinite(a)) for a in (speeds, loads, *columns)):
+        raise ParameterError("sweep values must be finite numbers")
+    growth = np.full(speeds.size, np.nan)
+    freq = np.full(speeds.size, np.nan)
+    for sub, idx in _point_models(model, dict(zip(params, columns)), speeds.size):
+        if sub is None:
+            continue
+        ok = idx[sub.validity_code(speeds[idx], loads[idx]) == VALID]
+        for start in range(0, ok.size, _CHUNK):
+            part = ok[start:start + _CHUNK]
+            lam = np.linalg.eigvals(sub.geometry.state_matrices(speeds[part], loads[part]))
+            growth[part] = max_growth_rate(lam)
+            peak = np.argmax(np.where(lam.imag > 0, lam.real, -np.inf), axis=-1)
+            freq[part] = np.take_along_axis(lam.imag, peak[:, None], -1)[:, 0] / (2 * math.pi)
+        if progress:
+            progress(idx.size)
+    valid = np.isfinite(growth)
+    return GrowthField(growth.reshape(shape), valid.reshape(shape), freq.reshape(shape))
+
+
+def _scalar_growth(model: SqueakModel, fixed: dict[str, float], axis: str) -> Callable[[float], float]:
+    def f(x: float) -> float:
+        point = dict(fixed, **{axis: x})
+        speed, load = point.pop("speed_rad_s"), point.pop("load_n")
+        return float(growth_field(model, speed, load, **point).max_growth_rate)
+    return f
+
+
+def refine_crossings(f: Callable[[float], float], x: np.ndarray, g: np.ndarray,
+                     rtol: float = 1e-9) -> list[float]:
+    """Roots of f between consecutive grid points where g changes sign (both valid);
+    `rtol` is relative to the grid span."""
+    roots, xtol = [], rtol * float(np.ptp(x)) if len(x) > 1 else 0.0
+    for i in range(len(x) - 1):
+        a, b = g[i], g[i + 1]
+        if np.isfinite(a) and np.isfinite(b) and (a > 0) != (b > 0):
+            roots.append(brentq(f, x[i], x[i + 1], xtol=xtol, rtol=1e-12))
+    return roots
+
+
+def _fixed(model: SqueakModel, speed_rad_s: float | None, load_n: float | None) -> dict[str, float]:
+    return {"speed_rad_s": float(REFERENCE_SPEED_RAD_S if speed_rad_s is None else speed_rad_s),
+            "load_n": float(model.params.axial_load_n if load_n is None else load_n)}
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    axis: str
+    values: np.ndarray
+    fixed: dict[str, float]
+    predictions: list[Prediction]
+    boundaries: list[float]                          # refined stability boundaries on the axis
+    unstable_bands: list[tuple[float, float]] = field(default_factory=list)
+
+    @property
+    def max_growth_rate(self) -> np.ndarray:
+        return np.array([p.max_growth_rate if p.valid else np.nan for p in self.predictions])
+
+    def as_dict(self) -> dict:
+        return {
+            "axis": self.axis, self.axis: self.values.tolist(), "fixed": self.fixed,
+            "valid": [p.valid for p in self.predictions],
+            "max_growth_rate": [None if math.isnan(g) else g for g in self.max_growth_rate],
+            "risk": [p.risk for p in self.predictions],
+            "unstable_modes": [[m.label for m in p.squeak_modes] for p in self.predictions],
+            "unstable_frequencies_hz": [p.unstable_frequencies_hz for p in self.predictions],
+            "stability_boundaries": self.boundaries,
+            f"unstable_bands_{_unit_suffix(self.axis)}": [list(b) for b in self.unstable_bands],
+        }
+
+
+def _unit_suffix(axis: str) -> str:
+    """`speed_rad_s` -> `rad_s`, `load_n` -> `n`, `radius_m` -> `m` (unit part of the name)."""
+    units = {"speed_rad_s": "rad_s", "load_n": "n"}
+    if axis in units:
+        return units[axis]
+    unit = field_info(axis)["unit"] or "1"
+    return unit.replace("/", "_").replace("^", "").replace(" ", "") if unit != "1" else "1"
+
+
+def _bands(values: np.ndarray, growth: np.ndarray, boundaries: list[float]) -> list[tuple[float, float]]:
+    """Intervals of the axis with squeak, closed by refined boundaries or the grid ends."""
+    bands, start, roots = [], None, iter(boundaries)
+    for i, g in enumerate(growth):
+        unstable = bool(np.isfinite(g) and g > 0)
+        if unstable and start is None:
+            start = next(roots) if i > 0 and np.isfinite(growth[i - 1]) else float(values[i])
+        elif not unstable and start is not None:
+            bands.append((start, next(roots) if np.isfinite(g) else float(values[i - 1])))
+            start = None
+    if start is not None:
+        bands.append((start, float(values[-1])))
+    return bands
+
+
+def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = None,
+          load_n: float | None = None) -> SweepResult:
+    """Predictions along one axis (batched), with refined stability boundaries and bands."""
+    check_axis(axis)
+    values = np.asarray(values, float)
+    fixed = _fixed(model, speed_rad_s, load_n)
+    fixed.pop(axis, None)
+    if axis in OPERATING_AXES:
+        point = dict(fixed, **{axis: values})
+        predictions = model.predict_many(point["speed_rad_s"], point["load_n"])
+    else:
+        predictions = []
+        for v in values.tolist():
+            try:
+                sub = model.with_params(**{axis: _native(axis, v)})
+            except ParameterError as exc:
+                predictions.append(Prediction(fixed["speed_rad_s"], fixed["load_n"],
+                                              model.params.formulation, False, str(exc)))
+                continue
+            predictions.append(sub.predict(fixed["speed_rad_s"], fixed["load_n"]))
+    growth = np.array([p.max_growth_rate if p.valid else np.nan for p in predictions])
+    boundaries = refine_crossings(_scalar_growth(model, fixed, axis), values, growth)
+    return SweepResult(axis, values, fixed, predictions, boundaries,
+                       _bands(values, growth, boundaries))
+
+
+@dataclass(frozen=True)
+class MapResult:
+    x_axis: str
+    x: np.ndarray
+    y_axis: str
+    y: np.ndarray
+    fixed: dict[str, float]
+    field: GrowthField                               # arrays of shape (len(y), len(x))
+    boundary: list[tuple[float, float]]              # refined (x, y) points on the boundary
+
+    def as_dict(self) -> dict:
+        g = self.field.max_growth_rate
+        return {"x_axis": self.x_axis, "x": self.x.tolist(), "y_axis": self.y_axis,
+                "y": self.y.tolist(), "fixed": self.fixed,
+                "max_growth_rate": [[None if math.isnan(v) else v for v in row]
+                                    for row in g.tolist()],
+                "unstable": (np.nan_to_num(g, nan=-1.0) > 0).tolist(),
+                "boundary": [list(p) for p in self.boundary]}
+
+
+def stability_map(model: SqueakModel, x_axis: str, x, y_axis: str, y,
+                  speed_rad_s: float | None = None, load_n: float | None = None,
+                  progress: Callable[[int], None] | None = None) -> MapResult:
+    """Largest squeak growth rate on a 2-D grid and its zero contour refined along rows and
+    columns by root finding."""
+    for a in (x_axis, y_axis):
+        check_axis(a)
+    if x_axis == y_axis:
+        raise ParameterError("map axes must differ")
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    fixed = _fixed(model, speed_rad_s, load_n)
+    for a in (x_axis, y_axis):
+        fixed.pop(a, None)
+    grid = dict(fixed, **{x_axis: x[None, :], y_axis: y[:, None]})
+    speed, load = grid.pop("speed_rad_s"), grid.pop("load_n")
+    gf = growth_field(model, speed, load, progress=progress, **grid)
+    g = gf.max_growth_rate
+    boundary = []
+    for j, yv in enumerate(y.tolist()):
+        f = _scalar_growth(model, dict(fixed, **{y_axis: yv}), x_axis)
+        boundary += [(r, yv) for r in refine_crossings(f, x, g[j])]
+    for i, xv in enumerate(x.tolist()):
+        f = _scalar_growth(model, dict(fixed, **{x_axis: xv}), y_axis)
+        boundary += [(xv, r) for r in refine_crossings(f, y, g[:, i])]
+    return MapResult(x_axis, x, y_axis, y, fixed, gf, boundary)
