@@ -1,0 +1,107 @@
+"""Packaging: the pure model stays free of rclpy, package.xml is sound, colcon builds and installs."""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGE = "leadscrew_ros"
+EXEC_DEPENDS = ["rclpy", "std_msgs", "sensor_msgs", "geometry_msgs", "diagnostic_msgs",
+                "std_srvs", "python3-numpy", "python3-scipy", "python3-matplotlib"]
+# What a colcon workspace needs of the source tree (no .venv, build outputs, tests or tools).
+SOURCE_ITEMS = ["package.xml", "setup.py", "setup.cfg", "resource", "config", PACKAGE]
+
+
+def _run(cmd, **kwargs):
+    """Run with the parent's environment (the ros-wheels bootstrapper needs it) and capture."""
+    kwargs.setdefault("env", os.environ.copy())
+    return subprocess.run(cmd, capture_output=True, text=True, **kwargs)
+
+
+def test_model_imports_without_rclpy():
+    code = (
+        "import importlib, pkgutil, sys\n"
+        "import leadscrew_ros.model as m\n"
+        "names = [i.name for i in pkgutil.walk_packages(m.__path__, m.__name__ + '.')]\n"
+        "for n in names: importlib.import_module(n)\n"
+        "assert len(names) >= 5, names\n"
+        "bad = sorted(k for k in sys.modules if k == 'rclpy' or k.startswith('rclpy.'))\n"
+        "print('rclpy modules:', bad); print('imported:', names)\n"
+        "sys.exit(1 if bad else 0)\n"
+    )
+    r = _run([sys.executable, "-c", code], cwd=REPO, timeout=120)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_package_xml():
+    root = ET.parse(REPO / "package.xml").getroot()
+    assert root.tag == "package" and root.get("format") == "3"
+    assert root.findtext("name") == PACKAGE
+    assert root.findtext("version") == "0.1.0"
+    assert root.findtext("license") == "Apache-2.0"
+    assert root.findtext("export/build_type") == "ament_python"
+    assert root.find("maintainer").get("email")
+    exec_depends = {e.text for e in root.findall("exec_depend")}
+    assert set(EXEC_DEPENDS) <= exec_depends
+    assert "python3-pytest" in {e.text for e in root.findall("test_depend")}
+
+
+@pytest.fixture(scope="module")
+def colcon_install(tmp_path_factory):
+    """`colcon build` (plain; setuptools >= 80 breaks --symlink-install) in a scratch workspace."""
+    colcon = Path(sys.executable).parent / "colcon"
+    if not colcon.exists():
+        pytest.fail(f"colcon not found next to {sys.executable}: pip install -e '.[test]'")
+    ws = tmp_path_factory.mktemp("colcon_ws")
+    src = ws / "src" / PACKAGE
+    src.mkdir(parents=True)
+    for item in SOURCE_ITEMS:
+        if (REPO / item).is_dir():
+            shutil.copytree(REPO / item, src / item,
+                            ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.egg-info"))
+        else:
+            shutil.copy2(REPO / item, src / item)
+    env = dict(os.environ, AMENT_PREFIX_PATH=sys.prefix)
+    r = _run([str(colcon), "--log-base", str(ws / "log"), "build", "--base-paths", "src",
+              "--event-handlers", "console_direct-"], cwd=ws, env=env, timeout=300)
+    assert r.returncode == 0, f"colcon build failed:\n{r.stdout}\n{r.stderr}"
+    return ws / "install" / PACKAGE
+
+
+def test_colcon_installs_share_files(colcon_install):
+    share = colcon_install / "share"
+    assert (share / PACKAGE / "package.xml").is_file()
+    assert (share / PACKAGE / "config" / "leadscrew.yaml").is_file()
+    assert (share / "ament_index" / "resource_index" / "packages" / PACKAGE).is_file()
+
+
+def _installed_env(colcon_install):
+    site = sorted(colcon_install.glob("lib/python3*/site-packages"))
+    assert len(site) == 1, site
+    return dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(site[0])] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
+
+
+def test_installed_package_is_the_one_imported(colcon_install, tmp_path):
+    r = _run([sys.executable, "-c", "import leadscrew_ros; print(leadscrew_ros.__file__)"],
+             cwd=tmp_path, env=_installed_env(colcon_install), timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert Path(r.stdout.strip()).resolve().is_relative_to(colcon_install.resolve()), r.stdout
+
+
+def test_installed_console_script_runs(colcon_install, tmp_path):
+    # setup.cfg puts scripts where `ros2 run` looks: lib/<package>/
+    script = colcon_install / "lib" / PACKAGE / "leadscrew-squeak"
+    assert script.is_file(), sorted(str(p) for p in colcon_install.rglob("leadscrew-squeak"))
+    r = _run([str(script), "modes", "--json"], cwd=tmp_path, env=_installed_env(colcon_install),
+             timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    modes = json.loads(r.stdout)["modes"]
+    assert modes and all({"label", "frequency_hz"} <= set(m) for m in modes)
+    assert modes[0]["frequency_hz"] == pytest.approx(224.0, rel=0.005)
