@@ -47,13 +47,17 @@ def helix_quadrature(start: float, span: float, nodes_per_turn: int) -> tuple[np
 
 def integrate_kernels(basis: ModalBasis, kernels: dict[str, np.ndarray], theta: np.ndarray,
                       weights: np.ndarray, lead_per_rad: float) -> dict[str, np.ndarray]:
-    """integral k_ab(theta) [Phi_i^a Phi_j^b](R tan(beta) theta) dtheta for every matrix."""
+    """integral k_ab(theta) [Phi_i^a Phi_j^b](R tan(beta) theta) dtheta for every matrix,
+    one (modes of kind a) x (modes of kind b) product per non-zero block."""
     shape = basis.shapes(lead_per_rad * theta)
-    phi = shape * weights[None, :]
+    weighted = shape * weights[None, :]
+    rows = [np.flatnonzero(basis.kind == a) for a in range(3)]
     out = {}
     for name, k in kernels.items():
-        k_full = k[basis.kind][:, basis.kind]                            # (N, N, n_theta)
-        out[name] = np.einsum("in,ijn,jn->ij", phi, k_full, shape, optimize=True)
+        m = np.zeros((basis.n, basis.n))
+        for a, b in zip(*np.nonzero(np.any(k != 0, axis=-1))):
+            m[np.ix_(rows[a], rows[b])] = (weighted[rows[a]] * k[a, b]) @ shape[rows[b]].T
+        out[name] = m
     return out
 
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 FORMULATIONS = ("paper", "consistent")
+MAX_CONTACT_TURNS = 5000      # bounds the helix quadrature (nodes = turns * nodes per turn)
 
 
 class ParameterError(ValueError):
@@ -34,13 +35,13 @@ class ScrewParameters:
     integrals; the others only rescale precomputed matrices.
     """
 
-    radius_m: float = _p(0.005, "m", "effective screw radius R", 0.0, 1.0, lo_open=True)
-    length_m: float = _p(0.300, "m", "screw length L", 0.0, 100.0, lo_open=True)
+    radius_m: float = _p(0.005, "m", "effective screw radius R", 1e-4, 0.5)
+    length_m: float = _p(0.300, "m", "screw length L", 1e-3, 20.0)
     thread_height_m: float = _p(0.001, "m", "thread height h", 0.0, 1.0, lo_open=True)
     helix_angle_rad: float = _p(math.radians(5.0), "rad", "screw helix angle beta", 0.0,
                                 math.pi / 2, lo_open=True, hi_open=True)
-    nut_position_m: float = _p(0.150, "m", "contact (nut) start location z_o", 0.0, 100.0)
-    nut_length_m: float = _p(0.060, "m", "contact (nut) length b", 0.0, 100.0, lo_open=True)
+    nut_position_m: float = _p(0.150, "m", "contact (nut) start location z_o", 0.0, 20.0)
+    nut_length_m: float = _p(0.060, "m", "contact (nut) length b", 0.0, 20.0, lo_open=True)
     youngs_modulus_pa: float = _p(207e9, "Pa", "Young's modulus E", 0.0, 1e13, lo_open=True)
     shear_modulus_pa: float = _p(79.3e9, "Pa", "shear modulus G", 0.0, 1e13, lo_open=True)
     density_kg_m3: float = _p(7820.0, "kg/m^3", "density rho", 0.0, 1e5, lo_open=True)
@@ -150,6 +151,11 @@ def validate(p: ScrewParameters) -> None:
     if p.mu_kinetic > p.mu_static:
         raise ParameterError(f"mu_kinetic = {p.mu_kinetic:g} exceeds mu_static = "
                              f"{p.mu_static:g}: need mu_static >= mu_kinetic >= 0")
+    turns = p.nut_length_m / (2 * math.pi * p.radius_m * math.tan(p.helix_angle_rad))
+    if turns > MAX_CONTACT_TURNS:
+        raise ParameterError(
+            f"the nut spans {turns:.3g} thread turns (nut_length_m / lead); at most "
+            f"{MAX_CONTACT_TURNS} are supported: increase helix_angle_rad or radius_m")
     if p.thread_height_m >= p.radius_m:
         raise ParameterError(f"thread_height_m = {p.thread_height_m:g} m must be smaller than "
                              f"radius_m = {p.radius_m:g} m")

@@ -136,7 +136,12 @@ class SqueakModel:
         reason = self.validity(speed, load)
         if reason:
             return Prediction(speed, load, self.params.formulation, False, reason)
-        return self._prediction(speed, load, *np.linalg.eig(self.state_matrix(speed, load)))
+        try:
+            lam, vec = np.linalg.eig(self.state_matrix(speed, load))
+        except np.linalg.LinAlgError as exc:          # LAPACK gave up: say so, no number
+            return Prediction(speed, load, self.params.formulation, False,
+                              f"eigen-solver failed at this operating point: {exc}")
+        return self._prediction(speed, load, lam, vec)
 
     def predict_many(self, speeds_rad_s, loads_n) -> list[Prediction]:
         """Predictions at many operating points (broadcast) with one batched eigen-solve."""

@@ -1,0 +1,93 @@
+"""Sweeps and maps: batched results equal single predictions; boundaries are refined roots."""
+
+import numpy as np
+import pytest
+
+from leadscrew_ros.model import ParameterError, SqueakModel
+from leadscrew_ros.model.risk import squeak_risk
+from leadscrew_ros.model.sweep import growth_field, stability_map, sweep
+
+
+@pytest.fixture(scope="module")
+def model():
+    return SqueakModel()
+
+
+def test_batched_growth_equals_single_predictions(model):
+    speeds = np.array([0.2, 1.0, 7.0, 20.0, 60.0, 400.0, 2000.0])
+    loads = np.array([[10.0], [200.0], [-300.0]])
+    gf = growth_field(model, speeds[None, :], loads)
+    for j, f in enumerate(loads[:, 0]):
+        for i, w in enumerate(speeds):
+            p = model.predict(w, f)
+            assert gf.valid[j, i] == p.valid
+            if p.valid:
+                assert gf.max_growth_rate[j, i] == pytest.approx(p.max_growth_rate, rel=1e-9,
+                                                                 abs=1e-9)
+                assert gf.peak_frequency_hz[j, i] == pytest.approx(p.modes[0].frequency_hz,
+                                                                   rel=1e-9)
+            else:
+                assert np.isnan(gf.max_growth_rate[j, i])
+
+
+def test_predict_many_equals_predict(model):
+    many = model.predict_many([0.1, 5.0, 20.0, -30.0], [200.0, 100.0, 200.0, 50.0])
+    for p in many:
+        q = model.predict(p.speed_rad_s, p.load_n)
+        assert p.valid == q.valid and p.reason == q.reason
+        assert [m.label for m in p.modes] == [m.label for m in q.modes]
+        np.testing.assert_allclose([m.growth_rate for m in p.modes],
+                                   [m.growth_rate for m in q.modes], rtol=1e-9, atol=1e-9)
+
+
+def test_speed_sweep_bands_are_refined_to_the_root(model):
+    r = sweep(model, "speed_rad_s", np.linspace(0.5, 120, 25))
+    assert len(r.unstable_bands) == 1
+    lo, hi = r.unstable_bands[0]
+    grid_step = (120 - 0.5) / 24
+    for edge in (lo, hi):
+        assert abs(model.predict(edge).max_growth_rate) < 1e-6           # a root, not a cell
+        assert model.predict(edge - 1e-3).stable != model.predict(edge + 1e-3).stable
+    fine = sweep(model, "speed_rad_s", np.linspace(0.5, 120, 200)).unstable_bands[0]
+    np.testing.assert_allclose(fine, (lo, hi), rtol=1e-7)
+    assert grid_step > 1.0                                                 # coarse grid, exact edge
+    d = r.as_dict()
+    assert d["unstable_bands_rad_s"] == [[lo, hi]] and len(d["max_growth_rate"]) == 25
+
+
+def test_sweep_over_a_geometry_parameter_and_invalid_values(model):
+    r = sweep(model, "nut_position_m", np.linspace(0.0, 0.3, 7), speed_rad_s=20.0)
+    valid = [p.valid for p in r.predictions]
+    assert valid == [True] * 5 + [False] * 2                              # z_o + b > L
+    assert "z_o + b <= L" in r.predictions[-1].reason
+    with pytest.raises(ParameterError, match="cannot sweep"):
+        sweep(model, "formulation", [0, 1])
+
+
+def test_map_boundary_points_are_roots_and_grid_matches(model):
+    m = stability_map(model, "speed_rad_s", np.linspace(1.0, 80.0, 12), "load_n",
+                      np.linspace(5.0, 400.0, 10))
+    assert m.field.max_growth_rate.shape == (10, 12)
+    assert m.field.max_growth_rate[5, 4] == pytest.approx(
+        model.predict(m.x[4], m.y[5]).max_growth_rate, rel=1e-9)
+    assert len(m.boundary) >= 10
+    for x, y in m.boundary:
+        assert abs(model.predict(x, y).max_growth_rate) < 1e-5
+    d = m.as_dict()
+    assert len(d["max_growth_rate"]) == 10 and len(d["boundary"]) == len(m.boundary)
+
+
+def test_risk_is_monotone_and_documented():
+    z = np.array([-0.1, 0.0, 1e-4, 1e-3, 3e-3, 1e-2, 0.5])
+    r = squeak_risk(z, 1e-3)
+    assert r[0] == r[1] == 1.0
+    assert np.all(np.diff(r[1:]) < 0) and r[-1] >= 0.0
+    assert r[3] == pytest.approx(np.exp(-1)) and r[4] == pytest.approx(0.0498, abs=1e-4)
+
+
+def test_risk_tracks_least_stable_mode(model):
+    inside, edge, outside = model.predict(20.0), model.predict(54.0), model.predict(100.0)
+    assert inside.risk == 1.0 and edge.risk == 1.0
+    assert 0.0 < outside.risk < 1.0
+    near = model.predict(60.0)
+    assert outside.risk < near.risk < 1.0                   # closer to the band: higher risk
