@@ -91,3 +91,15 @@ def test_risk_tracks_least_stable_mode(model):
     assert 0.0 < outside.risk < 1.0
     near = model.predict(60.0)
     assert outside.risk < near.risk < 1.0                   # closer to the band: higher risk
+
+
+def test_divergence_is_reported_separately_from_squeak(model):
+    """Small radius, paper formulation: a real eigenvalue > 0 (divergence) exists."""
+    small = model.with_params(radius_m=0.0027)
+    p = small.predict(20.0, 400.0)
+    assert p.divergence_rates and all(r > 0 for r in p.divergence_rates)
+    assert p.stable is False
+    gf = growth_field(small, np.array([20.0]), np.array([400.0, 50.0]))
+    assert gf.divergence_rate[0] == pytest.approx(p.divergence_rates[0], rel=1e-9)
+    q = small.predict(20.0, 50.0)
+    assert gf.divergence_rate[1] == pytest.approx(max(q.divergence_rates, default=0.0), rel=1e-9)

@@ -24,7 +24,7 @@ def mu_o(p: ScrewParameters, speed_rad_s):
 
 
 def gamma(p: ScrewParameters, speed_rad_s):
-    """Friction slope term gamma = dmu/d|Vc| * cos(beta), 1/(m/s) * 1  (A.11)."""
+    """Friction slope term gamma = cos(beta) dmu/d|Vc| at steady sliding, s/m  (A.11)."""
     d = p.friction_decay_s_m
     return (-(p.mu_static - p.mu_kinetic) * d * np.exp(-d * sliding_speed(p, speed_rad_s))
             * np.cos(p.helix_angle_rad))

@@ -35,6 +35,13 @@ def max_growth_rate(eigvals: np.ndarray) -> np.ndarray:
     return np.where(oscillatory_mask(eigvals), eigvals.real, -np.inf).max(axis=-1)
 
 
+def max_divergence_rate(eigvals: np.ndarray) -> np.ndarray:
+    """Largest real eigenvalue > 0 (non-oscillatory growth) along the last axis, else 0 (1/s)."""
+    real = np.abs(eigvals.imag) <= _IMAG_TOL * np.abs(eigvals)
+    growing = real & (eigvals.real > _GROWTH_TOL * np.abs(eigvals))
+    return np.where(growing, eigvals.real, 0.0).max(axis=-1)
+
+
 def classify(eigvals: np.ndarray, eigvecs: np.ndarray, labels: tuple[str, ...]
              ) -> tuple[tuple[ModeResult, ...], tuple[float, ...]]:
     """Oscillatory modes sorted by growth rate (descending) and divergence rates (Re > 0, Im = 0).
@@ -51,6 +58,7 @@ def classify(eigvals: np.ndarray, eigvecs: np.ndarray, labels: tuple[str, ...]
     modes = tuple(map(ModeResult, [labels[d] for d in dominant.tolist()],
                       (lam.imag / (2 * math.pi)).tolist(), lam.real.tolist(),
                       (-lam.real / mag_osc).tolist(), growth.tolist()))
-    real = eigvals.real[np.abs(eigvals.imag) <= _IMAG_TOL * mag]
-    divergence = tuple(sorted(real[real > _GROWTH_TOL * np.abs(real)].tolist(), reverse=True))
+    real = eigvals.real[(np.abs(eigvals.imag) <= _IMAG_TOL * mag)
+                        & (eigvals.real > _GROWTH_TOL * mag)]
+    divergence = tuple(sorted(real.tolist(), reverse=True))
     return modes, divergence

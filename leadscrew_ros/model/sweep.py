@@ -17,7 +17,7 @@ from scipy.optimize import brentq
 
 from .parameters import ParameterError, field_info, field_names
 from .predictor import VALID, Prediction, SqueakModel
-from .stability import max_growth_rate
+from .stability import max_divergence_rate, max_growth_rate
 
 OPERATING_AXES = ("speed_rad_s", "load_n")
 REFERENCE_SPEED_RAD_S = 20.0        # fixed speed of the paper's Figs. 9 and 10
@@ -42,6 +42,8 @@ class GrowthField:
     valid: np.ndarray
     # Frequency (Hz) of the most unstable oscillatory mode, NaN where invalid.
     peak_frequency_hz: np.ndarray
+    # Largest real eigenvalue > 0 (divergence, not squeak), 0 where none, NaN where invalid.
+    divergence_rate: np.ndarray
 
 
 def _point_models(model: SqueakModel, params: dict[str, np.ndarray], size: int
@@ -75,8 +77,7 @@ def growth_field(model: SqueakModel, speed_rad_s, load_n,
     speeds, loads, *columns = (a.ravel() for a in arrays)
     if not all(np.all(np.isfinite(a)) for a in (speeds, loads, *columns)):
         raise ParameterError("sweep values must be finite numbers")
-    growth = np.full(speeds.size, np.nan)
-    freq = np.full(speeds.size, np.nan)
+    growth, freq, diverge = (np.full(speeds.size, np.nan) for _ in range(3))
     for sub, idx in _point_models(model, dict(zip(params, columns)), speeds.size):
         if sub is None:
             continue
@@ -87,10 +88,11 @@ def growth_field(model: SqueakModel, speed_rad_s, load_n,
             growth[part] = max_growth_rate(lam)
             peak = np.argmax(np.where(lam.imag > 0, lam.real, -np.inf), axis=-1)
             freq[part] = np.take_along_axis(lam.imag, peak[:, None], -1)[:, 0] / (2 * math.pi)
+            diverge[part] = max_divergence_rate(lam)
         if progress:
             progress(idx.size)
     valid = np.isfinite(growth)
-    return GrowthField(growth.reshape(shape), valid.reshape(shape), freq.reshape(shape))
+    return GrowthField(*(a.reshape(shape) for a in (growth, valid, freq, diverge)))
 
 
 def _scalar_growth(model: SqueakModel, fixed: dict[str, float], axis: str) -> Callable[[float], float]:
@@ -211,6 +213,7 @@ class MapResult:
                 "max_growth_rate": [[None if math.isnan(v) else v for v in row]
                                     for row in g.tolist()],
                 "unstable": (np.nan_to_num(g, nan=-1.0) > 0).tolist(),
+                "divergence": (np.nan_to_num(self.field.divergence_rate) > 0).tolist(),
                 "boundary": [list(p) for p in self.boundary]}
 
 

@@ -1,0 +1,221 @@
+"""The `leadscrew-squeak` command line, called in-process through `main(argv)`."""
+
+import csv
+import io
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from leadscrew_ros.cli import main, parse_range
+
+REPO = Path(__file__).resolve().parents[1]
+TABLE2_HZ = [224, 898, 2020, 2654, 3592, 5612, 7961, 8082]
+PREDICTION_KEYS = {"speed_rad_s", "load_n", "formulation", "valid", "reason", "stable", "risk",
+                   "max_growth_rate", "unstable_frequencies_hz", "divergence_rates", "modes"}
+MODE_KEYS = {"label", "frequency_hz", "growth_rate", "damping_ratio", "unstable"}
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def run_json(capsys, *argv):
+    code, out, err = run(capsys, *argv, "--json")
+    assert code == 0, err
+    return json.loads(out)
+
+
+def close(a, b, rel):
+    return abs(a - b) <= rel * abs(b)
+
+
+# ----------------------------------------------------------------------------- modes
+def test_modes_json_reproduces_table2(capsys):
+    modes = run_json(capsys, "modes")["modes"]
+    freqs = [m["frequency_hz"] for m in modes]
+    assert len(modes) == 18 and freqs == sorted(freqs)
+    assert close(freqs[0], 224, 0.005) and modes[0]["label"].startswith("B1")
+    for f in TABLE2_HZ:
+        assert any(close(g, f, 0.005) for g in freqs), f
+
+
+def test_modes_text_is_a_sorted_table(capsys):
+    code, out, _ = run(capsys, "modes")
+    rows = [line.split() for line in out.splitlines()[1:]]
+    assert code == 0 and len(rows) == 18
+    assert [float(r[1]) for r in rows] == sorted(float(r[1]) for r in rows)
+    assert rows[0][0] == "B1x" and close(float(rows[0][1]), 224.5, 0.001)
+
+
+def test_modes_follow_params(capsys):
+    """Bending frequencies scale with R: --param reaches the model."""
+    modes = run_json(capsys, "modes", "--param", "radius_m=0.006")["modes"]
+    assert close(modes[0]["frequency_hz"], 224.49 * 1.2, 0.002)
+
+
+# ----------------------------------------------------------------------------- predict
+def test_predict_json_squeaks_at_20_rad_s(capsys):
+    d = run_json(capsys, "predict", "--speed", "20", "--load", "200")
+    assert set(d) == PREDICTION_KEYS
+    assert d["valid"] is True and d["stable"] is False and d["risk"] == 1
+    assert d["formulation"] == "paper" and d["speed_rad_s"] == 20 and d["load_n"] == 200
+    f = sorted(d["unstable_frequencies_hz"])
+    assert len(f) == 2 and close(f[0], 224, 0.01) and close(f[1], 898, 0.01)
+    growth = [m["growth_rate"] for m in d["modes"]]
+    assert growth == sorted(growth, reverse=True) and growth[0] == d["max_growth_rate"] > 0
+    assert all(set(m) == MODE_KEYS for m in d["modes"])
+
+
+def test_predict_load_defaults_to_parameter(capsys):
+    d = run_json(capsys, "predict", "--speed", "20", "--param", "axial_load_n=50")
+    assert d["load_n"] == 50
+
+
+def test_predict_text_summary(capsys):
+    code, out, _ = run(capsys, "predict", "--speed", "20")
+    assert code == 0 and "UNSTABLE" in out and "B1y 224" in out and "squeak" in out
+
+
+def test_predict_outside_validity(capsys):
+    d = run_json(capsys, "predict", "--speed", "0.1")
+    assert d["valid"] is False and d["risk"] is None and d["stable"] is None
+    assert "validity" in d["reason"] and d["modes"] == []
+    code, out, err = run(capsys, "predict", "--speed", "0.1")
+    assert code == 0 and "validity" in out and err == ""
+
+
+def test_formulation_option_switches_the_physics(capsys):
+    d = run_json(capsys, "predict", "--speed", "20", "--formulation", "consistent")
+    assert d["formulation"] == "consistent"
+    assert not any(close(f, 224, 0.01) for f in d["unstable_frequencies_hz"])
+
+
+def test_params_file_applies_known_keys_only(capsys, tmp_path):
+    f = tmp_path / "p.yaml"
+    f.write_text("squeak_predictor:\n  ros__parameters:\n    radius_m: 0.006\n"
+                 "    publish_rate_hz: 10.0\n")
+    modes = run_json(capsys, "modes", "--params-file", str(f))["modes"]
+    assert close(modes[0]["frequency_hz"], 224.49 * 1.2, 0.002)
+    # --param wins over the file
+    modes = run_json(capsys, "modes", "--params-file", str(f), "--param", "radius_m=0.005")["modes"]
+    assert close(modes[0]["frequency_hz"], 224.49, 0.002)
+
+
+def test_repository_config_file_is_accepted(capsys):
+    d = run_json(capsys, "predict", "--speed", "20", "--params-file",
+                 str(REPO / "config" / "leadscrew.yaml"))
+    assert d["valid"] and not d["stable"]
+
+
+# ----------------------------------------------------------------------------- errors
+BAD = {
+    "nan speed": ["predict", "--speed", "nan"],
+    "inf speed": ["predict", "--speed", "inf"],
+    "text speed": ["predict", "--speed", "abc"],
+    "missing speed": ["predict"],
+    "no command": [],
+    "unknown command": ["fly"],
+    "negative radius": ["predict", "--speed", "20", "--param", "radius_m=-1"],
+    "unknown param": ["predict", "--speed", "20", "--param", "nosuch=1"],
+    "param without value": ["predict", "--speed", "20", "--param", "radius_m"],
+    "param not a number": ["predict", "--speed", "20", "--param", "radius_m=abc"],
+    "nut beyond screw": ["predict", "--speed", "20", "--param", "nut_position_m=0.29"],
+    "bad formulation": ["predict", "--speed", "20", "--formulation", "foo"],
+    "absurd load": ["predict", "--speed", "20", "--load", "1e12"],
+    "missing params file": ["modes", "--params-file", "/nonexistent/p.yaml"],
+    "x spec without count": ["map", "--x", "radius_m:1:2", "--y", "load_n:0:600:5"],
+    "x spec unknown axis": ["map", "--x", "nosuch:0:1:3", "--y", "load_n:0:600:5"],
+    "x spec count 1": ["map", "--x", "radius_m:0.004:0.006:1", "--y", "load_n:0:600:5"],
+    "x spec nan": ["map", "--x", "radius_m:nan:0.006:3", "--y", "load_n:0:600:5"],
+    "map same axes": ["map", "--x", "load_n:0:100:3", "--y", "load_n:0:600:5"],
+    "sweep count not int": ["sweep", "--speed", "0.5:120:x"],
+    "sweep empty range": ["sweep", "--speed", "1:1:5"],
+    "sweep without range": ["sweep"],
+    "sweep axis without values": ["sweep", "--axis", "radius_m"],
+    "sweep json and csv": ["sweep", "--speed", "1:2:3", "--json", "--csv"],
+}
+
+
+@pytest.mark.parametrize("argv", BAD.values(), ids=BAD.keys())
+def test_bad_input_is_one_error_line_and_exit_2(capsys, argv):
+    code, out, err = run(capsys, *argv)
+    assert code == 2
+    assert out == ""
+    lines = err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("leadscrew-squeak: error: "), err
+    assert "Traceback" not in err
+
+
+def test_parse_range_validates():
+    assert list(parse_range("0:1:3", "x")) == [0.0, 0.5, 1.0]
+    for bad in ("0:1", "0:1:1", "0:inf:3", "a:1:3", "0:1:2.5", "0:0:4"):
+        with pytest.raises(Exception, match=r"x"):
+            parse_range(bad, "x")
+
+
+def test_module_entry_point_reports_error_without_traceback():
+    r = subprocess.run([sys.executable, "-m", "leadscrew_ros.cli", "predict", "--speed", "nan"],
+                       capture_output=True, text=True, cwd=REPO, timeout=60)
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr
+    assert len(r.stderr.splitlines()) == 1 and "error" in r.stderr
+
+
+# ----------------------------------------------------------------------------- sweep
+def test_sweep_json_has_the_refined_band(capsys):
+    d = run_json(capsys, "sweep", "--speed", "0.5:120:60")
+    assert len(d["speed_rad_s"]) == 60 and len(d["max_growth_rate"]) == 60
+    bands = d["unstable_bands_rad_s"]
+    assert len(bands) == 1
+    lo, hi = bands[0]
+    assert 0.5 < lo < 2 and 40 < hi < 70
+    assert d["stability_boundaries"] == pytest.approx([lo, hi])
+
+
+def test_sweep_csv_parses(capsys):
+    code, out, _ = run(capsys, "sweep", "--speed", "0.5:120:25", "--csv")
+    rows = list(csv.DictReader(io.StringIO(out)))
+    assert code == 0 and len(rows) == 25
+    assert list(rows[0]) == ["speed_rad_s", "valid", "max_growth_rate", "risk",
+                             "unstable_modes", "unstable_frequencies_hz"]
+    unstable = [r for r in rows if float(r["max_growth_rate"]) > 0]
+    assert unstable and all(r["unstable_modes"] and r["risk"] == "1" for r in unstable)
+    assert all(any(close(float(f), 224, 0.01) for f in r["unstable_frequencies_hz"].split(";"))
+               for r in unstable)
+
+
+def test_sweep_text_reports_bands(capsys):
+    code, out, _ = run(capsys, "sweep", "--speed", "0.5:120:30")
+    assert code == 0 and "unstable bands [rad/s]: [0.80" in out
+
+
+def test_sweep_other_axis(capsys, tmp_path):
+    png = tmp_path / "radius.png"
+    d = run_json(capsys, "sweep", "--axis", "radius_m", "--values", "0.004:0.012:5",
+                 "--speed", "20", "--plot", str(png))
+    assert d["axis"] == "radius_m" and d["fixed"] == {"speed_rad_s": 20.0, "load_n": 200.0}
+    assert len(d["radius_m"]) == 5 and len(d["unstable_bands_m"]) == 1
+    assert d["unstable_bands_m"][0][0] == 0.004 and 0.006 < d["unstable_bands_m"][0][1] < 0.012
+    assert png.read_bytes().startswith(b"\x89PNG")
+
+
+# ----------------------------------------------------------------------------- map
+def test_map_json_and_plot(capsys, tmp_path):
+    png = tmp_path / "map.png"
+    d = run_json(capsys, "map", "--x", "load_n:0:400:4", "--y", "speed_rad_s:0.5:80:5",
+                 "--plot", str(png))
+    assert d["x_axis"] == "load_n" and d["y_axis"] == "speed_rad_s"
+    assert len(d["max_growth_rate"]) == 5 and len(d["max_growth_rate"][0]) == 4
+    assert any(any(row) for row in d["unstable"]) and d["boundary"]
+    assert png.read_bytes().startswith(b"\x89PNG")
+
+
+def test_map_text_summary(capsys):
+    code, out, _ = run(capsys, "map", "--x", "radius_m:0.004:0.008:3",
+                       "--y", "load_n:0:400:3", "--speed", "20")
+    assert code == 0 and "unstable fraction" in out and "boundary points" in out
