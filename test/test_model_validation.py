@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from leadscrew_ros.model import (OperatingPointError, ParameterError, ScrewParameters,
                                  SqueakModel)
-from leadscrew_ros.model.parameters import field_info, field_names
+from leadscrew_ros.model.parameters import MAX_CONTACT_TURNS, field_info, field_names
 
 
 @pytest.mark.parametrize("changes, words", [
@@ -85,12 +85,13 @@ def _finite_in(name, lo=None, hi=None):
 def valid_parameters(draw):
     R = draw(_finite_in("radius_m", 1e-3, 0.05))
     L = draw(_finite_in("length_m", 0.05, 3.0))
-    b = draw(st.floats(0.01 * L, 0.9 * L))
+    beta = draw(st.floats(math.radians(1.0), math.radians(60.0)))
+    max_b = 0.99 * MAX_CONTACT_TURNS * 2 * math.pi * R * math.tan(beta)
+    b = draw(st.floats(0.01 * L, min(0.9 * L, max_b)))
     z0 = draw(st.floats(0.0, L - b))
     mus = draw(_finite_in("mu_static"))
     return dict(
-        radius_m=R, length_m=L, nut_length_m=b, nut_position_m=z0,
-        helix_angle_rad=draw(st.floats(math.radians(1.0), math.radians(60.0))),
+        radius_m=R, length_m=L, nut_length_m=b, nut_position_m=z0, helix_angle_rad=beta,
         thread_height_m=draw(st.floats(0.01 * R, 0.9 * R)),
         mu_static=mus, mu_kinetic=draw(st.floats(0.0, mus)),
         friction_decay_s_m=draw(_finite_in("friction_decay_s_m", 0.0, 100.0)),
@@ -102,7 +103,8 @@ def valid_parameters(draw):
         formulation=draw(st.sampled_from(["paper", "consistent"])))
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=60, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
 @given(valid_parameters(), st.floats(-1e4, 1e4), st.floats(-1e5, 1e5))
 def test_valid_inputs_never_raise_and_never_give_nan(params, speed, load):
     p = SqueakModel(ScrewParameters(**params)).predict(speed, load)
@@ -116,7 +118,7 @@ def test_valid_inputs_never_raise_and_never_give_nan(params, speed, load):
         assert d["reason"] and d["risk"] is None and not d["modes"]
 
 
-@settings(max_examples=80, deadline=None)
+@settings(max_examples=80, deadline=None, derandomize=True)
 @given(st.sampled_from([n for n in field_names() if field_info(n)["type"] == "float"]),
        st.one_of(st.just(float("nan")), st.just(float("inf")), st.just(-float("inf")),
                  st.floats(-1e15, -1e-300), st.floats(1e3, 1e15)))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -91,7 +92,7 @@ class SqueakModel:
     def labels(self) -> tuple[str, ...]:
         return self.geometry.basis.labels
 
-    @property
+    @cached_property
     def critical_speed_rad_s(self) -> float:
         """First critical speed: the backward whirl of the lowest mode reaches zero frequency."""
         return float(self.geometry.basis.omega_rad_s.min())
@@ -104,10 +105,13 @@ class SqueakModel:
         """Vectorised validity (NOTES.md reading 7): VALID, or why the linearisation fails."""
         p = self.params
         w = np.abs(np.asarray(speed_rad_s, float))
-        overhauling = (p.formulation == "consistent") & (np.sign(speed_rad_s) * np.sign(load_n) < 0)
-        locks = overhauling & (mu_o(p, w) * math.tan(p.helix_angle_rad) >= 1)
-        return np.where(w < p.min_speed_rad_s, TOO_SLOW, np.where(
-            w >= self.critical_speed_rad_s, SUPERCRITICAL, np.where(locks, SELF_LOCKING, VALID)))
+        code = np.where(w < p.min_speed_rad_s, TOO_SLOW,
+                        np.where(w >= self.critical_speed_rad_s, SUPERCRITICAL, VALID))
+        if p.formulation == "consistent":      # overhauling load on a self-locking thread
+            locks = ((np.sign(speed_rad_s) * np.sign(load_n) < 0)
+                     & (mu_o(p, w) * math.tan(p.helix_angle_rad) >= 1))
+            code = np.where((code == VALID) & locks, SELF_LOCKING, code)
+        return code
 
     def validity(self, speed_rad_s: float, load_n: float) -> str:
         """'' when the linearisation holds at this point, else the reason in words."""

@@ -1,0 +1,253 @@
+"""Benchmark of the squeak model core against bare LAPACK eigen-solves, all in one run.
+
+    .venv/bin/python benchmarks/bench_model.py [--quick] [--json OUT.json]
+
+Prints a Markdown table: (1) one operating-point update, `SqueakModel.predict`, against a bare
+`numpy.linalg.eig` of the same state matrix; (2) the throughput of a speed x load map with
+`growth_field` against bare batched `numpy.linalg.eigvals` on the same pre-built matrices, and
+against a naive map that integrates the contact again at every point; (3) the uncached
+geometry precompute. Calls being compared alternate within each round, so a load change on
+the machine hits both; ratios are medians of the per-round ratios. See benchmarks/README.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import sys
+import time
+from dataclasses import replace
+from statistics import median
+from typing import Callable
+
+import numpy as np
+import scipy
+
+from leadscrew_ros.model import SqueakModel, assembly
+from leadscrew_ros.model.contact import contact_integrals
+from leadscrew_ros.model.modes import modal_basis
+from leadscrew_ros.model.risk import squeak_risk
+from leadscrew_ros.model.stability import classify
+from leadscrew_ros.model.sweep import _CHUNK, growth_field
+
+TARGET_POINT_RATIO = 1.5     # predict / bare eig
+TARGET_MAP_RATIO = 1.2       # growth_field / bare eigvals, per point
+
+# Work per benchmark: default run ~70 s, --quick ~5 s (2-core machine).
+CONFIGS = {
+    "default": dict(point_rounds=41, point_loops=4, map_grid=200, map_rounds=5,
+                    naive_points=50, geometry_rounds=31),
+    "quick": dict(point_rounds=15, point_loops=2, map_grid=64, map_rounds=3,
+                  naive_points=20, geometry_rounds=11),
+}
+
+
+def interleaved(fns: dict[str, Callable[[], object]], rounds: int, warmup: int = 1
+                ) -> tuple[dict[str, list[float]], dict[str, list[float]]]:
+    """Wall and process-CPU seconds per call of each function, `rounds` samples each, the
+    functions alternating within a round (order reversed every other round) after `warmup`
+    untimed calls each."""
+    for fn in fns.values():
+        for _ in range(warmup):
+            fn()
+    wall: dict[str, list[float]] = {name: [] for name in fns}
+    cpu: dict[str, list[float]] = {name: [] for name in fns}
+    for r in range(rounds):
+        for name in (list(fns) if r % 2 == 0 else list(fns)[::-1]):
+            c0, t0 = time.process_time(), time.perf_counter()
+            fns[name]()
+            wall[name].append(time.perf_counter() - t0)
+            cpu[name].append(time.process_time() - c0)
+    return wall, cpu
+
+
+def paired_ratio(a: list[float], b: list[float]) -> float:
+    """Median over rounds of a/b (robust to the machine's load changing between rounds)."""
+    return median([x / y for x, y in zip(a, b)])
+
+
+def operating_points(n: int = 16) -> list[tuple[float, float]]:
+    """n distinct points, speeds 5..100 rad/s and loads 50..400 N in shuffled pairings."""
+    speeds = np.linspace(5.0, 100.0, n)
+    loads = np.linspace(50.0, 400.0, n)[np.random.default_rng(0).permutation(n)]
+    return list(zip(speeds.tolist(), loads.tolist()))
+
+
+def bench_point(model: SqueakModel, rounds: int, loops: int) -> dict:
+    """Per operating point: full `predict` vs bare `eig` of the pre-built state matrix, plus
+    the two model-side pieces (rescale, labels + risk) to show where the overhead goes."""
+    points = operating_points()
+    mats = [model.state_matrix(s, f) for s, f in points]
+    eigs = [np.linalg.eig(a) for a in mats]
+    labels, scale = model.labels, model.params.risk_damping_scale
+
+    def predict():
+        for _ in range(loops):
+            for s, f in points:
+                model.predict(s, f)
+
+    def eig():
+        for _ in range(loops):
+            for a in mats:
+                np.linalg.eig(a)
+
+    def rescale():
+        for _ in range(loops):
+            for s, f in points:
+                model.state_matrix(s, f)
+
+    def label_risk():
+        for _ in range(loops):
+            for lam, vec in eigs:
+                modes, _ = classify(lam, vec, labels)
+                squeak_risk(min((m.damping_ratio for m in modes), default=np.inf), scale)
+
+    calls = loops * len(points)
+    raw, _ = interleaved(dict(predict=predict, eig=eig, rescale=rescale,
+                              label_risk=label_risk), rounds)
+    us = {k: [t / calls * 1e6 for t in v] for k, v in raw.items()}
+    return dict(points=points, calls_per_sample=calls, samples_us=us,
+                median_us={k: median(v) for k, v in us.items()},
+                ratio=paired_ratio(us["predict"], us["eig"]))
+
+
+def naive_state_matrix(model: SqueakModel, speed: float, load: float) -> np.ndarray:
+    """State matrix with every contact-matrix entry integrated again (no precomputation)."""
+    g = model.geometry
+    m = replace(g, contact=contact_integrals(g.params, g.basis)).matrices(speed, load)
+    n = g.n
+    return np.block([[np.zeros((n, n)), np.eye(n)], [-m.stiffness, -m.damping]])
+
+
+def bench_map(model: SqueakModel, grid: int, rounds: int, naive_points: int) -> dict:
+    """points/s of growth_field on a grid x grid speed x load map vs bare batched eigvals on
+    the same matrices (pre-built in growth_field's chunks) vs a naive per-point assembly."""
+    speed = np.linspace(1.0, 100.0, grid)
+    load = np.linspace(10.0, 600.0, grid)
+    s_flat, f_flat = (a.ravel() for a in np.broadcast_arrays(speed[None, :], load[:, None]))
+    assert np.all(model.validity_code(s_flat, f_flat) == 0), "map must be all valid points"
+    chunks = [model.geometry.state_matrices(s_flat[i:i + _CHUNK], f_flat[i:i + _CHUNK])
+              for i in range(0, s_flat.size, _CHUNK)]
+    pick = np.linspace(0, s_flat.size - 1, naive_points).astype(int)
+    naive_pts = list(zip(s_flat[pick].tolist(), f_flat[pick].tolist()))
+    s0, f0 = naive_pts[0]
+    assert np.allclose(naive_state_matrix(model, s0, f0), model.state_matrix(s0, f0),
+                       rtol=1e-9, atol=1e-6), "naive assembly must give the same matrix"
+
+    def map_():
+        growth_field(model, speed[None, :], load[:, None])
+
+    def eigvals():
+        for a in chunks:
+            np.linalg.eigvals(a)
+
+    def naive():
+        for s, f in naive_pts:
+            np.linalg.eigvals(naive_state_matrix(model, s, f))
+
+    growth_field(model, speed[None, :8], load[:8, None])     # warm up on a small map only
+    np.linalg.eigvals(chunks[0])
+    raw, cpu = interleaved(dict(map=map_, eigvals=eigvals, naive=naive), rounds, warmup=0)
+    n = {"map": s_flat.size, "eigvals": s_flat.size, "naive": naive_points}
+    pps = {k: [n[k] / t for t in v] for k, v in raw.items()}
+    med = {k: median(v) for k, v in pps.items()}
+    return dict(grid=[grid, grid], points=s_flat.size, chunk=_CHUNK, naive_points=naive_points,
+                samples_s=raw, samples_points_per_s=pps, median_points_per_s=med,
+                samples_cpu_s=cpu, cpu_per_wall={k: paired_ratio(cpu[k], raw[k]) for k in raw},
+                ratio=paired_ratio(raw["map"], raw["eigvals"]),
+                speedup_over_naive=med["map"] / med["naive"])
+
+
+def bench_geometry(model: SqueakModel, rounds: int) -> dict:
+    """Uncached geometry precompute, and its two parts: modal basis and contact integrals."""
+    p = model.params.geometry_only()
+    basis = modal_basis(p)
+    raw, _ = interleaved(dict(
+        total=lambda: assembly._geometry_of.__wrapped__(p),
+        modal_basis=lambda: modal_basis(p),
+        contact_integrals=lambda: contact_integrals(p, basis)), rounds)
+    ms = {k: [t * 1e3 for t in v] for k, v in raw.items()}
+    return dict(samples_ms=ms, median_ms={k: median(v) for k, v in ms.items()})
+
+
+def environment() -> dict:
+    try:
+        blas = np.show_config(mode="dicts")["Build Dependencies"]["blas"]
+        blas = f"{blas['name']} {blas['version']}"
+    except Exception:                                            # pragma: no cover
+        blas = "unknown"
+    return dict(date=datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
+                python=platform.python_version(), numpy=np.__version__,
+                scipy=scipy.__version__, blas=blas, cpu_count=os.cpu_count(),
+                openblas_coretype=os.environ.get("OPENBLAS_CORETYPE", ""),
+                machine=platform.machine(), load_avg_1min_start=os.getloadavg()[0])
+
+
+def verdict(ratio: float, target: float) -> str:
+    return f"≤ {target}× {'met' if ratio <= target else 'MISSED'}"
+
+
+def table(res: dict) -> str:
+    pt, mp, geo, env = res["point"], res["map"], res["geometry"], res["env"]
+    u, pps, ms = pt["median_us"], mp["median_points_per_s"], geo["median_ms"]
+    g = "×".join(map(str, mp["grid"]))
+    rows = [
+        ("1 per point", f"`predict` (rescale + eig + labels + risk), {len(pt['points'])} "
+         "points cycled", f"{u['predict']:.1f} µs", f"bare `eig` {u['eig']:.1f} µs",
+         f"{pt['ratio']:.2f}×", verdict(pt["ratio"], TARGET_POINT_RATIO)),
+        ("", "… of which rescale (`state_matrix`, timed alone)", f"{u['rescale']:.1f} µs", "", "", ""),
+        ("", "… of which labels + risk (`classify`, `squeak_risk`, timed alone)",
+         f"{u['label_risk']:.1f} µs", "", "", ""),
+        ("2 map", f"`growth_field` {g} speed×load", f"{pps['map']:,.0f} pts/s",
+         f"bare `eigvals` (chunks of {mp['chunk']}) {pps['eigvals']:,.0f} pts/s",
+         f"{mp['ratio']:.2f}×", verdict(mp["ratio"], TARGET_MAP_RATIO)),
+        ("", "CPU time / wall time of the map (1 = one busy thread; ~2 = an idle BLAS "
+         "worker thread spinning on the second core)", f"{mp['cpu_per_wall']['map']:.2f}",
+         f"bare `eigvals` {mp['cpu_per_wall']['eigvals']:.2f}", "", ""),
+        ("", f"naive: integrate every entry per point ({mp['naive_points']} points)",
+         f"{pps['naive']:,.1f} pts/s", "map speed-up over naive",
+         f"{mp['speedup_over_naive']:,.0f}×", ""),
+        ("3 geometry", "uncached `_geometry_of` (modal basis + contact integrals + units)",
+         f"{ms['total']:.2f} ms", f"basis {ms['modal_basis']:.3f} ms, contact "
+         f"{ms['contact_integrals']:.2f} ms", "", ""),
+    ]
+    head = ("| benchmark | measurement | result | reference | ratio | target |\n"
+            "|---|---|---:|---|---:|---|")
+    body = "\n".join("| " + " | ".join(r) + " |" for r in rows)
+    envline = (f"{env['date']} · Python {env['python']} · numpy {env['numpy']} · scipy "
+               f"{env['scipy']} · BLAS {env['blas']} · {env['cpu_count']} CPUs ({env['machine']})"
+               + (f" · OPENBLAS_CORETYPE={env['openblas_coretype']}"
+                  if env["openblas_coretype"] else "")
+               + f" · load avg {env['load_avg_1min_start']:.2f} → {env['load_avg_1min_end']:.2f}"
+               + f" · mode {res['mode']} · {res['wall_s']:.1f} s")
+    return f"{head}\n{body}\n\n{envline}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="smaller run (~5 s)")
+    ap.add_argument("--json", metavar="OUT.json", help="also write the raw numbers here")
+    args = ap.parse_args(argv)
+    mode = "quick" if args.quick else "default"
+    cfg = CONFIGS[mode]
+    t0 = time.perf_counter()
+    model = SqueakModel()
+    res = dict(mode=mode, config=cfg, env=environment(), n_modes=model.params.n_modes,
+               targets=dict(point_ratio=TARGET_POINT_RATIO, map_ratio=TARGET_MAP_RATIO))
+    res["point"] = bench_point(model, cfg["point_rounds"], cfg["point_loops"])
+    res["map"] = bench_map(model, cfg["map_grid"], cfg["map_rounds"], cfg["naive_points"])
+    res["geometry"] = bench_geometry(model, cfg["geometry_rounds"])
+    res["wall_s"] = time.perf_counter() - t0
+    res["env"]["load_avg_1min_end"] = os.getloadavg()[0]
+    print(table(res))
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(res, fh, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
