@@ -46,6 +46,7 @@ setup(
     entry_points={
         "console_scripts": [
             "leadscrew-squeak = leadscrew_ros.cli:main",
+            "squeak_node = leadscrew_ros.node:main",
         ],
     },
 )

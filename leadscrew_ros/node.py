@@ -1,0 +1,259 @@
+"""ROS 2 node `squeak_predictor`: live squeak prediction beside an actuator controller.
+
+Subscribes (sensor-data QoS): motor_speed (std_msgs/Float64, rad/s), axial_load (Float64, N),
+nut_position (Float64, m) and joint_states (sensor_msgs/JointState, joint `joint_name`).
+Publishes (reliable, transient local, depth 1): squeak/risk, squeak/unstable_frequencies,
+squeak/active, squeak/modes, squeak/safe_speed and /diagnostics.
+The physics lives in `leadscrew_ros.model`; the recompute policy in `leadscrew_ros.live`.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import fields
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
+                       qos_profile_sensor_data)
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool, Float64, Float64MultiArray, MultiArrayDimension
+
+from .live import Level, LivePredictor, LiveSettings
+from .model import ParameterError, Prediction, ScrewParameters, SqueakModel
+from .model.parameters import FORMULATIONS
+from .ros_env import confine_to_localhost
+
+NODE_NAME = "squeak_predictor"
+MODE_COLUMNS = ("frequency_hz", "growth_rate", "damping_ratio")
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     history=HistoryPolicy.KEEP_LAST)
+
+# The node's own parameters: name -> (default, unit, description, (lo, hi) or None, read_only).
+NODE_PARAMETERS: dict[str, tuple] = {
+    "speed_deadband_rad_s": (0.1, "rad/s", "recompute when the speed moved more than this",
+                             (0.0, 1000.0), False),
+    "load_deadband_n": (1.0, "N", "recompute when the load moved more than this",
+                        (0.0, 1e5), False),
+    "nut_deadband_m": (0.0005, "m", "re-integrate the contact when the nut moved more than "
+                       "this", (0.0, 1.0), False),
+    "max_rate_hz": (100.0, "Hz", "maximum recompute rate (bursts are coalesced)",
+                    (0.1, 10000.0), False),
+    "risk_warn_threshold": (0.5, "1", "diagnostic WARN above this squeak risk", (0.0, 1.0),
+                            False),
+    "stale_timeout_s": (1.0, "s", "diagnostic STALE when speed or load is older than this",
+                        (0.01, 3600.0), False),
+    "diagnostics_period_s": (1.0, "s", "period of /diagnostics when nothing changes",
+                             (0.05, 60.0), False),
+    "safe_speed_margin": (0.05, "1", "relative distance kept from a squeak band edge by "
+                          "squeak/safe_speed", (0.0, 0.5), False),
+    "joint_name": ("", "", "screw joint in joint_states ('' ignores joint_states)", None, False),
+    "nut_position_at_zero_angle_m": (0.15, "m", "nut position when the screw joint angle is 0; "
+                                     "the nut travels R tan(beta) per radian", (-100.0, 100.0),
+                                     False),
+    "hardware_id": ("leadscrew", "", "hardware_id of the diagnostic status", None, True),
+    "input_queue_depth": (5, "1", "queue depth of the input subscriptions", (1, 1000), True),
+}
+LIVE_FIELDS = {f.name for f in fields(LiveSettings)}
+
+
+def _descriptor(name: str, default, unit: str, description: str, bounds, read_only: bool,
+                extra: str = "") -> ParameterDescriptor:
+    d = ParameterDescriptor(name=name, description=f"{description} [{unit}]" if unit else
+                            description, read_only=read_only, additional_constraints=extra)
+    if bounds is not None and isinstance(default, float):
+        d.floating_point_range = [FloatingPointRange(from_value=float(bounds[0]),
+                                                     to_value=float(bounds[1]))]
+    elif bounds is not None and isinstance(default, int):
+        d.integer_range = [IntegerRange(from_value=int(bounds[0]), to_value=int(bounds[1]),
+                                        step=1)]
+    return d
+
+
+class SqueakPredictorNode(Node):
+    def __init__(self, **kwargs):
+        super().__init__(NODE_NAME, **kwargs)
+        self._declare_parameters()
+        self.live = LivePredictor(SqueakModel(self._screw_parameters({})),
+                                  self._live_settings({}))
+        self._level: Level | None = None
+        self._last_diagnostics = -math.inf
+
+        depth = self.get_parameter("input_queue_depth").value
+        sensor = QoSProfile(depth=depth, reliability=qos_profile_sensor_data.reliability,
+                            durability=qos_profile_sensor_data.durability)
+        self.create_subscription(Float64, "motor_speed", self._on_speed, sensor)
+        self.create_subscription(Float64, "axial_load", self._on_load, sensor)
+        self.create_subscription(Float64, "nut_position", self._on_nut_position, sensor)
+        self.create_subscription(JointState, "joint_states", self._on_joint_states, sensor)
+        self.risk_pub = self.create_publisher(Float64, "squeak/risk", LATCHED)
+        self.frequencies_pub = self.create_publisher(Float64MultiArray,
+                                                     "squeak/unstable_frequencies", LATCHED)
+        self.active_pub = self.create_publisher(Bool, "squeak/active", LATCHED)
+        self.modes_pub = self.create_publisher(Float64MultiArray, "squeak/modes", LATCHED)
+        self.safe_speed_pub = self.create_publisher(Float64, "squeak/safe_speed", LATCHED)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", LATCHED)
+
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self._timer = self.create_timer(1.0 / self.live.settings.max_rate_hz, self._tick)
+        self._publish_diagnostics(time.monotonic())
+
+    # ---------------------------------------------------------------- parameters
+    def _declare_parameters(self) -> None:
+        for f in fields(ScrewParameters):
+            md = f.metadata
+            extra = f"one of: {', '.join(FORMULATIONS)}" if f.name == "formulation" else (
+                "open bound" if md.get("lo_open") or md.get("hi_open") else "")
+            bounds = None if md.get("lo") is None else (md["lo"], md["hi"])
+            self.declare_parameter(f.name, f.default, _descriptor(
+                f.name, f.default, md["unit"], md["description"], bounds, False, extra))
+        for name, (default, unit, description, bounds, read_only) in NODE_PARAMETERS.items():
+            self.declare_parameter(name, default, _descriptor(name, default, unit, description,
+                                                              bounds, read_only))
+
+    def _values(self, changes: dict) -> dict:
+        return {**{p.name: p.value for p in self.get_parameters(
+            [f.name for f in fields(ScrewParameters)] + list(NODE_PARAMETERS))}, **changes}
+
+    def _screw_parameters(self, changes: dict) -> ScrewParameters:
+        values = self._values(changes)
+        return ScrewParameters(**{f.name: values[f.name] for f in fields(ScrewParameters)})
+
+    def _live_settings(self, changes: dict) -> LiveSettings:
+        values = self._values(changes)
+        return LiveSettings(**{k: values[k] for k in LIVE_FIELDS})
+
+    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        """The new set as a whole must make a valid model; else nothing changes."""
+        try:
+            self._screw_parameters({p.name: p.value for p in params})
+        except (ParameterError, TypeError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, params: list[Parameter]) -> None:
+        model_changed = any(p.name in ScrewParameters.__dataclass_fields__ for p in params)
+        model = SqueakModel(self._screw_parameters({})) if model_changed else self.live.model
+        self.live.set_model(model, self._live_settings({}))
+        if any(p.name == "max_rate_hz" for p in params):
+            self._timer.cancel()
+            self.destroy_timer(self._timer)
+            self._timer = self.create_timer(1.0 / self.live.settings.max_rate_hz, self._tick)
+        self._recompute(time.monotonic())
+
+    # ---------------------------------------------------------------- inputs
+    def _on_speed(self, msg: Float64) -> None:
+        self._input(self.live.set_speed(msg.data, time.monotonic()))
+
+    def _on_load(self, msg: Float64) -> None:
+        self._input(self.live.set_load(msg.data, time.monotonic()))
+
+    def _on_nut_position(self, msg: Float64) -> None:
+        self._input(self.live.set_nut_position(msg.data, time.monotonic()))
+
+    def _on_joint_states(self, msg: JointState) -> None:
+        joint = self.get_parameter("joint_name").value
+        if not joint or joint not in msg.name:
+            return
+        i, now = msg.name.index(joint), time.monotonic()
+        if i < len(msg.velocity):
+            self._input(self.live.set_speed(msg.velocity[i], now), now)
+        if i < len(msg.position):
+            p = self.live.model.params
+            lead = p.radius_m * math.tan(p.helix_angle_rad)              # m per radian
+            z = self.get_parameter("nut_position_at_zero_angle_m").value + msg.position[i] * lead
+            self._input(self.live.set_nut_position(z, now), now)
+
+    def _input(self, error: str, now: float | None = None) -> None:
+        now = time.monotonic() if now is None else now
+        if error:
+            self.get_logger().warning(f"input rejected: {error}", throttle_duration_sec=2.0)
+            self._publish_diagnostics(now)
+        elif self.live.due(now):
+            self._recompute(now)
+
+    # ---------------------------------------------------------------- outputs
+    def _tick(self) -> None:
+        now = time.monotonic()
+        if self.live.due(now):
+            self._recompute(now)
+        elif (now - self._last_diagnostics >= self.get_parameter("diagnostics_period_s").value
+              or self.live.status(now).level != self._level):      # e.g. input went stale
+            self._publish_diagnostics(now)
+
+    def _recompute(self, now: float) -> None:
+        p = self.live.update(now)
+        if p is None:                        # outside validity: keep the last good outputs
+            self.get_logger().warning(self.live.status(now).message, throttle_duration_sec=2.0)
+        else:
+            self._publish_prediction(p)
+        self._publish_diagnostics(now)
+
+    def _publish_prediction(self, p: Prediction) -> None:
+        self.risk_pub.publish(Float64(data=float(p.risk)))
+        freqs = Float64MultiArray(data=p.unstable_frequencies_hz)
+        freqs.layout.dim = [MultiArrayDimension(label="frequency_hz", size=len(freqs.data),
+                                                stride=len(freqs.data))]
+        self.frequencies_pub.publish(freqs)
+        self.active_pub.publish(Bool(data=not p.stable))
+        self.modes_pub.publish(modes_message(p))
+        if self.live.safe_speed_rad_s is not None:
+            self.safe_speed_pub.publish(Float64(data=float(self.live.safe_speed_rad_s)))
+
+    def _publish_diagnostics(self, now: float) -> None:
+        status = self.live.status(now)
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.status = [DiagnosticStatus(
+            level=bytes([int(status.level)]), name=f"{self.get_name()}: squeak prediction",
+            message=status.message, hardware_id=self.get_parameter("hardware_id").value,
+            values=[KeyValue(key=k, value=v) for k, v in status.values.items()])]
+        self.diagnostics_pub.publish(msg)
+        self._level, self._last_diagnostics = status.level, now
+
+
+def modes_message(p: Prediction) -> Float64MultiArray:
+    """Rows = oscillatory modes (growth rate descending), columns = MODE_COLUMNS; the row
+    dimension's label lists the mode labels."""
+    msg = Float64MultiArray(data=[v for m in p.modes for v in
+                                  (m.frequency_hz, m.growth_rate, m.damping_ratio)])
+    rows, cols = len(p.modes), len(MODE_COLUMNS)
+    msg.layout.dim = [
+        MultiArrayDimension(label="modes:" + ",".join(m.label for m in p.modes), size=rows,
+                            stride=rows * cols),
+        MultiArrayDimension(label=",".join(MODE_COLUMNS), size=cols, stride=cols)]
+    return msg
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the node until SIGINT/SIGTERM; exit 0 on a clean shutdown, 2 on bad parameters."""
+    confine_to_localhost()
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = SqueakPredictorNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ParameterError, ParameterException) as exc:
+        print(f"{NODE_NAME}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
