@@ -1,4 +1,5 @@
-"""`leadscrew-squeak`: squeak predictions, sweeps, stability maps and the paper's figures.
+"""`leadscrew-squeak`: squeak predictions, sweeps, stability maps and the paper's figures; the
+ROS 2 demo (`demo`: predictor node + actuator simulator) and the simulator alone (`simulate`).
 
 Every error a user can cause (bad option, invalid parameter or operating point, unreadable
 file) is reported as one line `leadscrew-squeak: error: <message>` with exit code 2.
@@ -319,6 +320,36 @@ def cmd_figures(args: argparse.Namespace) -> int:
     return 0
 
 
+def _stroke(duration_s: float | None):
+    """The simulator's stroke profile (imports rclpy: only for demo and simulate)."""
+    from .simulator import ProfileError, StrokeProfile
+    try:
+        return StrokeProfile() if duration_s is None else StrokeProfile(duration_s=duration_s)
+    except ProfileError as exc:
+        raise CliError(f"argument --duration: {exc}") from None
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    profile = _stroke(args.duration)
+    from .demo import run_demo
+    try:
+        return run_demo(profile.duration_s)
+    except RuntimeError as exc:          # e.g. rclpy could not start, no subscription
+        raise CliError(str(exc)) from None
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    profile = _stroke(args.duration)
+    from .simulator import MAX_RATE_HZ, run_simulator
+    if not 0 < args.rate <= MAX_RATE_HZ:
+        raise CliError(f"argument --rate: must be in (0, {MAX_RATE_HZ:g}] Hz, got {args.rate:g}")
+    try:
+        return run_simulator(profile, rate_hz=args.rate, loop=args.loop,
+                             joint_name=args.joint_name, wait_for_subscriber=not args.no_wait)
+    except RuntimeError as exc:
+        raise CliError(str(exc)) from None
+
+
 # ----------------------------------------------------------------------------- parser
 def _common() -> Parser:
     common = Parser(add_help=False)
@@ -383,6 +414,29 @@ def build_parser() -> Parser:
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--quick", action="store_true", help="coarse grids (a few seconds)")
     p.set_defaults(run=cmd_figures)
+
+    p = sub.add_parser("demo", help="the ROS 2 predictor node driven by the actuator simulator "
+                                    "(one process, loopback, private ROS_DOMAIN_ID)")
+    p.add_argument("--duration", type=finite, metavar="S",
+                   help="stroke duration [s] (default 12; at most about 13, or the nut would "
+                        "leave the screw)")
+    p.set_defaults(run=cmd_demo)
+
+    p = sub.add_parser("simulate", help="publish a simulated power-seat stroke for a separately "
+                                        "started squeak_node (same ROS_DOMAIN_ID)")
+    p.add_argument("--duration", type=finite, metavar="S",
+                   help="stroke duration [s] (default 12; at most about 13, or the nut would "
+                        "leave the screw)")
+    p.add_argument("--rate", type=finite, default=100.0, metavar="HZ",
+                   help="publishing rate [Hz] (default 100)")
+    p.add_argument("--loop", action="store_true",
+                   help="repeat the stroke, back and forth, until Ctrl-C")
+    p.add_argument("--joint-name", default="", metavar="NAME",
+                   help="also publish joint_states with this joint (screw angle, speed)")
+    p.add_argument("--no-wait", action="store_true",
+                   help="start the stroke at once instead of when something subscribes to "
+                        "motor_speed")
+    p.set_defaults(run=cmd_simulate)
     return parser
 
 

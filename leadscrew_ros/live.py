@@ -16,6 +16,10 @@ from .model.advice import safe_speed, speed_bands
 from .model.predictor import check_operating_point
 
 
+_LOAD_BIN = 0.05          # relative load bin of the cached squeak bands (safe-speed advice)
+_NUT_BIN_M = 0.005        # nut position bin of the cached squeak bands
+
+
 class Level(IntEnum):
     """diagnostic_msgs/DiagnosticStatus levels."""
 
@@ -64,7 +68,8 @@ class LivePredictor:
         self.recomputes = 0
         self._computed_at: tuple[float, float, float] | None = None  # speed, load, nut
         self._last_update = -math.inf
-        self._input_error = ""                         # latest rejected input, until fixed
+        self._input_errors: dict[str, str] = {}        # input -> why its latest value was
+                                                       # rejected, until a good one arrives
         self._validity = ""                            # why the latest point has no prediction
         self._bands: dict[tuple, list[tuple[float, float]]] = {}
 
@@ -81,13 +86,13 @@ class LivePredictor:
         p = self.model.params
         try:
             z = float(value)                                        # type: ignore[arg-type]
-        except (TypeError, ValueError):
-            return self._reject(f"nut position {value!r} is not a number")
+        except (TypeError, ValueError, OverflowError):             # OverflowError: huge int
+            return self._reject("nut", f"nut position {value!r} is not a number")
         if not (math.isfinite(z) and 0.0 <= z <= p.length_m - p.nut_length_m):
-            return self._reject(f"nut position {z:g} m is off the screw: allowed "
-                                f"[0, {p.length_m - p.nut_length_m:g}] m (z_o + b <= L)")
+            return self._reject("nut", f"nut position {z:g} m is off the screw: allowed "
+                                       f"[0, {p.length_m - p.nut_length_m:g}] m (z_o + b <= L)")
         self.inputs.nut_position_m = z
-        self._input_error = ""
+        self._input_errors.pop("nut", None)
         return ""
 
     def _accept(self, kind: str, value: object, now: float) -> str:
@@ -97,16 +102,16 @@ class LivePredictor:
             else:
                 _, v = check_operating_point(0.0, value)
         except OperatingPointError as exc:
-            return self._reject(str(exc))
+            return self._reject(kind, str(exc))
         if kind == "speed":
             self.inputs.speed_rad_s, self.inputs.speed_time = v, now
         else:
             self.inputs.load_n, self.inputs.load_time = v, now
-        self._input_error = ""
+        self._input_errors.pop(kind, None)
         return ""
 
-    def _reject(self, reason: str) -> str:
-        self._input_error = reason
+    def _reject(self, kind: str, reason: str) -> str:
+        self._input_errors[kind] = reason
         return reason
 
     # ---------------------------------------------------------------- model
@@ -169,8 +174,11 @@ class LivePredictor:
     def _safe_speed(self, model: SqueakModel, p: Prediction) -> float:
         if p.stable:
             return p.speed_rad_s
-        q = self.settings.load_deadband_n or 1e-9
-        key = (round(p.load_n / q), model.params.nut_position_m, math.copysign(1, p.speed_rad_s))
+        # Band edges move slowly with load and nut position: reuse them within a bin (one band
+        # computation costs ~15 ms, a recompute ~0.4 ms).
+        load_bin = round(math.log(abs(p.load_n)) / math.log(1 + _LOAD_BIN)) if p.load_n else None
+        key = (load_bin, round(model.params.nut_position_m / _NUT_BIN_M),
+               math.copysign(1, p.speed_rad_s))
         if key not in self._bands:
             self._bands = {key: speed_bands(model, p.load_n, p.speed_rad_s)}   # keep one
         return safe_speed(self._bands[key], p.speed_rad_s, model.params.min_speed_rad_s,
@@ -192,8 +200,9 @@ class LivePredictor:
             "safe_speed_rad_s": _fmt(self.safe_speed_rad_s),
             "recomputes": str(self.recomputes),
         }
-        if self._input_error:
-            return Status(Level.ERROR, f"invalid input: {self._input_error}", values)
+        if self._input_errors:
+            errors = "; ".join(self._input_errors.values())
+            return Status(Level.ERROR, f"invalid input: {errors}", values)
         stale = [n for n, t in (("motor_speed", i.speed_time), ("axial_load", i.load_time))
                  if now - t > s.stale_timeout_s]
         if stale:

@@ -10,6 +10,7 @@ The physics lives in `leadscrew_ros.model`; the recompute policy in `leadscrew_r
 from __future__ import annotations
 
 import math
+import signal
 import sys
 import time
 from dataclasses import fields
@@ -19,11 +20,12 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
                        qos_profile_sensor_data)
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray, MultiArrayDimension
 
@@ -34,6 +36,7 @@ from .ros_env import confine_to_localhost
 
 NODE_NAME = "squeak_predictor"
 MODE_COLUMNS = ("frequency_hz", "growth_rate", "damping_ratio")
+HOUSEKEEPING_PERIOD_S = 0.05
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      history=HistoryPolicy.KEEP_LAST)
@@ -85,7 +88,7 @@ class SqueakPredictorNode(Node):
         self._declare_parameters()
         self.live = LivePredictor(SqueakModel(self._screw_parameters({})),
                                   self._live_settings({}))
-        self._level: Level | None = None
+        self._published: tuple[Level, str] | None = None     # last diagnostic level, message
         self._last_diagnostics = -math.inf
 
         depth = self.get_parameter("input_queue_depth").value
@@ -105,7 +108,10 @@ class SqueakPredictorNode(Node):
 
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        self._timer = self.create_timer(1.0 / self.live.settings.max_rate_hz, self._tick)
+        # Housekeeping (staleness, bad-input verdict, periodic diagnostics) at a fixed slow
+        # rate; the rate-limit timer runs only while an input waits for the rate limit.
+        self.create_timer(HOUSEKEEPING_PERIOD_S, self._housekeeping)
+        self._rate_timer = self._create_rate_timer()
         self._publish_diagnostics(time.monotonic())
 
     # ---------------------------------------------------------------- parameters
@@ -146,10 +152,14 @@ class SqueakPredictorNode(Node):
         model = SqueakModel(self._screw_parameters({})) if model_changed else self.live.model
         self.live.set_model(model, self._live_settings({}))
         if any(p.name == "max_rate_hz" for p in params):
-            self._timer.cancel()
-            self.destroy_timer(self._timer)
-            self._timer = self.create_timer(1.0 / self.live.settings.max_rate_hz, self._tick)
+            self.destroy_timer(self._rate_timer)
+            self._rate_timer = self._create_rate_timer()
         self._recompute(time.monotonic())
+
+    def _create_rate_timer(self):
+        timer = self.create_timer(1.0 / self.live.settings.max_rate_hz, self._on_rate_timer)
+        timer.cancel()
+        return timer
 
     # ---------------------------------------------------------------- inputs
     def _on_speed(self, msg: Float64) -> None:
@@ -166,30 +176,42 @@ class SqueakPredictorNode(Node):
         if not joint or joint not in msg.name:
             return
         i, now = msg.name.index(joint), time.monotonic()
+        errors = []                     # both inputs first: one recompute at the new point
         if i < len(msg.velocity):
-            self._input(self.live.set_speed(msg.velocity[i], now), now)
+            errors.append(self.live.set_speed(msg.velocity[i], now))
         if i < len(msg.position):
             p = self.live.model.params
             lead = p.radius_m * math.tan(p.helix_angle_rad)              # m per radian
             z = self.get_parameter("nut_position_at_zero_angle_m").value + msg.position[i] * lead
-            self._input(self.live.set_nut_position(z, now), now)
+            errors.append(self.live.set_nut_position(z, now))
+        self._input("; ".join(e for e in errors if e), now)
 
     def _input(self, error: str, now: float | None = None) -> None:
         now = time.monotonic() if now is None else now
-        if error:
+        if error:                 # the next tick reports it: a flood of bad input stays bounded
             self.get_logger().warning(f"input rejected: {error}", throttle_duration_sec=2.0)
-            self._publish_diagnostics(now)
         elif self.live.due(now):
             self._recompute(now)
+        elif self.live.changed() and self._rate_timer.is_canceled():
+            self._rate_timer.reset()         # held back by the rate limit: recompute later
 
     # ---------------------------------------------------------------- outputs
-    def _tick(self) -> None:
+    def _on_rate_timer(self) -> None:
         now = time.monotonic()
         if self.live.due(now):
             self._recompute(now)
-        elif (now - self._last_diagnostics >= self.get_parameter("diagnostics_period_s").value
-              or self.live.status(now).level != self._level):      # e.g. input went stale
+        if not self.live.changed():
+            self._rate_timer.cancel()
+
+    def _housekeeping(self) -> None:
+        now = time.monotonic()
+        if (now - self._last_diagnostics >= self.get_parameter("diagnostics_period_s").value
+                or self._verdict(now) != self._published):  # e.g. bad input, input went stale
             self._publish_diagnostics(now)
+
+    def _verdict(self, now: float) -> tuple[Level, str]:
+        status = self.live.status(now)
+        return status.level, status.message
 
     def _recompute(self, now: float) -> None:
         p = self.live.update(now)
@@ -219,7 +241,7 @@ class SqueakPredictorNode(Node):
             message=status.message, hardware_id=self.get_parameter("hardware_id").value,
             values=[KeyValue(key=k, value=v) for k, v in status.values.items()])]
         self.diagnostics_pub.publish(msg)
-        self._level, self._last_diagnostics = status.level, now
+        self._published, self._last_diagnostics = (status.level, status.message), now
 
 
 def modes_message(p: Prediction) -> Float64MultiArray:
@@ -238,13 +260,20 @@ def modes_message(p: Prediction) -> Float64MultiArray:
 def main(args: list[str] | None = None) -> int:
     """Run the node until SIGINT/SIGTERM; exit 0 on a clean shutdown, 2 on bad parameters."""
     confine_to_localhost()
-    rclpy.init(args=args)
+    # SIGINT/SIGTERM only set `stop`; the loop ends between callbacks. rclpy's own handlers
+    # shut the context down from another thread (a publish in flight then fails with "context
+    # is invalid", exit 1 with a traceback) or raise KeyboardInterrupt inside any callback.
+    stop: list[int] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, _frame: stop.append(signum))
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
         node = SqueakPredictorNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not stop:
+            executor.spin_once(timeout_sec=0.1)    # stops after the current callback
     except (ParameterError, ParameterException) as exc:
         print(f"{NODE_NAME}: error: {' '.join(str(exc).split())}", file=sys.stderr)
         return 2

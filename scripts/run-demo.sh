@@ -7,8 +7,7 @@ ensure_venv
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
 export MPLBACKEND="${MPLBACKEND:-Agg}"
-mkdir -p out
 
-# The demo: one command per line.
-.venv/bin/leadscrew-squeak predict --speed 20 --load 200
-.venv/bin/leadscrew-squeak sweep --speed 0.5:120:120 --load 200 --plot out/sweep.png
+# The demo: the squeak predictor node driven by a simulated power-seat stroke (one process, on
+# a ROS_DOMAIN_ID of its own); live status line, summary, exits by itself (about 15 s).
+.venv/bin/leadscrew-squeak demo

@@ -71,7 +71,10 @@ def check_operating_point(speed_rad_s: Any, load_n: Any) -> tuple[float, float]:
     for name, unit, v in (("speed", "rad/s", speed_rad_s), ("load", "N", load_n)):
         if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
             raise OperatingPointError(f"{name} = {v!r} is not a number ({unit})")
-        v = float(v)
+        try:
+            v = float(v)
+        except OverflowError:                         # an int beyond the float range
+            raise OperatingPointError(f"{name} = {v!r} is not finite ({unit})") from None
         if not math.isfinite(v):
             raise OperatingPointError(f"{name} = {v} is not finite ({unit})")
         out.append(v)

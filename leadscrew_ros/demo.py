@@ -1,0 +1,270 @@
+"""`leadscrew-squeak demo`: the squeak predictor node driven by the actuator simulator.
+
+One process, one rclpy Context, one single-threaded executor with three nodes: the predictor
+(`SqueakPredictorNode`), the simulator (`ActuatorSimulator`, a power-seat stroke) and a monitor
+that listens to the predictor's outputs like any other client would (over DDS, with the
+predictor's latched QoS). Prints a live one-line status and a summary, then exits by itself.
+DDS stays on loopback, on a ROS_DOMAIN_ID of this process's own unless one is set.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import TextIO
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.logging import LoggingSeverity
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from std_msgs.msg import Bool, Float64, Float64MultiArray
+
+from .node import LATCHED, SqueakPredictorNode
+from .ros_env import confine_to_localhost
+from .simulator import (ActuatorSimulator, ActuatorState, StopSignals, StrokeProfile,
+                        expected_squeak)
+
+START_TIMEOUT_S = 10.0       # the simulator waits this long for the predictor's subscription
+TAIL_S = 0.3                 # keep spinning after the stroke so the last outputs arrive
+SPIN_STEP_S = 0.01
+STATUS_MODES = 3             # squeak modes named in the status line
+
+
+@dataclass
+class SqueakRecord:
+    """What the monitor has seen on the predictor's outputs."""
+
+    predictions: int = 0                           # squeak/risk messages (one per prediction)
+    max_risk: float | None = None
+    risk: float | None = None
+    active: bool = False
+    frequencies: list[float] = field(default_factory=list)
+    squeak_modes: list[tuple[str, float]] = field(default_factory=list)   # latest, (label, Hz)
+    safe_speed: float | None = None
+    valid: bool = False                            # latest diagnostics: a prediction holds
+    message: str = ""
+    recomputes: str = ""
+    squeak_time_s: float = 0.0
+    squeak_since: float | None = None              # monotonic time squeak started
+    speed_range: list[float] = field(default_factory=list)               # [min, max] |rad/s|
+    frequency_range: dict[str, list[float]] = field(default_factory=dict)  # label -> [lo, hi]
+
+
+class SqueakMonitor(Node):
+    """Subscribes to squeak/risk, squeak/unstable_frequencies, squeak/active, squeak/modes,
+    squeak/safe_speed and /diagnostics; keeps a `SqueakRecord`.
+
+    Time in squeak and the squeak speeds come from /diagnostics, which the predictor publishes
+    after every recompute with the inputs used, the validity and the squeak frequencies: squeak
+    counts while the latest diagnostics say the prediction is valid and lists frequencies."""
+
+    def __init__(self, **kwargs):
+        super().__init__("squeak_monitor", **kwargs)
+        # The predictor's latched QoS (reliable, transient local), with room for bursts.
+        qos = QoSProfile(depth=100, reliability=LATCHED.reliability,
+                         durability=LATCHED.durability, history=LATCHED.history)
+        self.record = SqueakRecord()
+        self.create_subscription(Float64, "squeak/risk", self._on_risk, qos)
+        self.create_subscription(Float64MultiArray, "squeak/unstable_frequencies",
+                                 self._on_frequencies, qos)
+        self.create_subscription(Bool, "squeak/active", self._on_active, qos)
+        self.create_subscription(Float64MultiArray, "squeak/modes", self._on_modes, qos)
+        self.create_subscription(Float64, "squeak/safe_speed", self._on_safe_speed, qos)
+        self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, qos)
+
+    def _on_risk(self, msg: Float64) -> None:
+        r = self.record
+        r.predictions += 1
+        r.risk = msg.data
+        r.max_risk = msg.data if r.max_risk is None else max(r.max_risk, msg.data)
+
+    def _on_frequencies(self, msg: Float64MultiArray) -> None:
+        self.record.frequencies = list(msg.data)
+
+    def _on_active(self, msg: Bool) -> None:
+        self.record.active = msg.data
+
+    def _on_safe_speed(self, msg: Float64) -> None:
+        self.record.safe_speed = msg.data
+
+    def _on_modes(self, msg: Float64MultiArray) -> None:
+        """Rows (frequency_hz, growth_rate, damping_ratio); labels in dim[0].label."""
+        if not msg.layout.dim:
+            return
+        labels = msg.layout.dim[0].label.partition(":")[2].split(",")
+        rows = [msg.data[i:i + 3] for i in range(0, len(msg.data), 3)]
+        squeak = [(label, row[0]) for label, row in zip(labels, rows) if row[1] > 0]
+        self.record.squeak_modes = squeak
+        for label, f in squeak:
+            lo_hi = self.record.frequency_range.setdefault(label, [f, f])
+            lo_hi[0], lo_hi[1] = min(lo_hi[0], f), max(lo_hi[1], f)
+
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        if not msg.status:
+            return
+        status, r = msg.status[0], self.record
+        values = {kv.key: kv.value for kv in status.values}
+        r.valid, r.message = values.get("valid") == "true", status.message
+        r.recomputes = values.get("recomputes", r.recomputes)
+        squeak = r.valid and bool(values.get("squeak_frequencies_hz"))
+        self.set_squeak(squeak, time.monotonic())
+        if squeak:
+            try:
+                w = abs(float(values["speed_rad_s"]))
+            except (KeyError, ValueError):
+                return
+            r.speed_range = [min(r.speed_range[0], w), max(r.speed_range[1], w)] \
+                if r.speed_range else [w, w]
+
+    def set_squeak(self, squeak: bool, now: float) -> None:
+        """Squeak on/off at `now`; accumulates the time in squeak."""
+        r = self.record
+        if squeak and r.squeak_since is None:
+            r.squeak_since = now
+        elif not squeak and r.squeak_since is not None:
+            r.squeak_time_s += now - r.squeak_since
+            r.squeak_since = None
+
+
+# ----------------------------------------------------------------------------- text
+def status_line(t: float, s: ActuatorState | None, r: SqueakRecord) -> str:
+    """One line: time, inputs | verdict, risk, safe speed | squeak modes (most unstable first).
+    The least important part comes last, where a narrow terminal cuts it off."""
+    head = (f"t {t:5.1f} s {s.speed_rad_s:6.1f} rad/s {s.load_n:4.0f} N nut "
+            f"{s.nut_position_m:.3f} m" if s else f"t {t:5.1f} s  waiting for the predictor")
+    if not r.valid or r.risk is None:
+        why = _short(r.message) if not r.valid and r.message else ""
+        return f"{head} | no prediction" + (f" ({why})" if why else " yet")
+    safe = "" if r.safe_speed is None else f" safe {r.safe_speed:5.1f} rad/s"
+    line = f"{head} | {'SQUEAK' if r.active else 'ok':<6} risk {r.risk:.2f}{safe}"
+    if r.active:
+        modes = [f"{label} {f:.0f} Hz" for label, f in r.squeak_modes] or \
+            [f"{f:.0f} Hz" for f in r.frequencies]
+        more = f" +{len(modes) - STATUS_MODES}" if len(modes) > STATUS_MODES else ""
+        line += f" | {', '.join(modes[:STATUS_MODES])}{more}"
+    return line
+
+
+def _short(message: str) -> str:
+    """The predictor's diagnostic message, shortened for the status line."""
+    if "below min_speed" in message:
+        return "too slow for the sliding model"
+    if message.startswith("waiting for the first prediction"):
+        return ""
+    if message.startswith("no fresh input"):
+        return "waiting for inputs"
+    return message.removeprefix("no prediction: ").split(":")[0][:60]
+
+
+def summary(profile: StrokeProfile, r: SqueakRecord, elapsed_s: float, finished: bool,
+            expected_s: float | None) -> str:
+    d = profile.duration_s
+    loads = [profile.state(t).load_n for t in [d * i / 200 for i in range(201)]]
+    lines = [f"summary of the {d:g} s stroke (0 -> {profile.peak_speed_rad_s:g} rad/s -> 0, "
+             f"load {min(loads):.0f}-{max(loads):.0f} N, nut {profile.start_nut_position_m:.3f}"
+             f" -> {profile.end_nut_position_m:.3f} m):"]
+    if not finished:
+        lines.append(f"  interrupted after {elapsed_s:.1f} s")
+    share = 100 * r.squeak_time_s / d
+    model = "" if expected_s is None else f"; the model along the profile: {expected_s:.2f} s"
+    lines.append(f"  time in squeak:     {r.squeak_time_s:.2f} s ({share:.1f} % of the stroke)"
+                 f"{model}")
+    freqs = ", ".join(f"{label} {lo:.1f} Hz" if round(lo, 1) == round(hi, 1) else
+                      f"{label} {lo:.1f}-{hi:.1f} Hz"
+                      for label, (lo, hi) in sorted(r.frequency_range.items(),
+                                                    key=lambda kv: kv[1][0]))
+    lines.append(f"  squeak frequencies: {freqs or 'none'}")
+    lines.append("  squeak speeds:      " + (f"{r.speed_range[0]:.2f} - {r.speed_range[1]:.1f} "
+                                             f"rad/s" if r.speed_range else "none"))
+    lines.append("  max risk:           " + ("none" if r.max_risk is None else
+                                             f"{r.max_risk:.2f}"))
+    lines.append(f"  predictions:        {r.predictions}"
+                 + (f" (node recomputes: {r.recomputes})" if r.recomputes else ""))
+    return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------- run
+def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float = 4.0,
+             out: TextIO | None = None) -> int:
+    """Run predictor + simulator + monitor for one stroke; 0 when done, 128 + the signal number
+    on SIGINT (130) or SIGTERM (143), with the summary so far. A bad duration raises
+    ProfileError before anything starts; RuntimeError if rclpy or the discovery fails."""
+    out = out or sys.stdout
+    profile = StrokeProfile(duration_s=duration_s)
+    confine_to_localhost(private_domain=True)
+    tty = out.isatty()
+    with StopSignals() as stop:
+        ctx = Context()
+        rclpy.init(context=ctx)
+        nodes: list[Node] = []
+        executor = monitor = sim = None
+        width, stopped = 0, time.monotonic()
+        try:
+            predictor = SqueakPredictorNode(context=ctx)
+            # Its warnings (e.g. "no prediction" while the motor rests) repeat what the status
+            # line shows; keep the terminal to the status line and the summary.
+            predictor.get_logger().set_level(LoggingSeverity.ERROR)
+            nodes.append(predictor)
+            monitor = SqueakMonitor(context=ctx)
+            nodes.append(monitor)
+            sim = ActuatorSimulator(profile, rate_hz=rate_hz, wait_for_subscriber=True,
+                                    context=ctx)
+            nodes.append(sim)
+            executor = SingleThreadedExecutor(context=ctx)
+            for node in nodes:
+                executor.add_node(node)
+            print(f"leadscrew_ros demo: squeak predictor + simulated power-seat stroke "
+                  f"({duration_s:g} s, 0 -> {profile.peak_speed_rad_s:g} rad/s -> 0), "
+                  f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}, discovery "
+                  f"{os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE')}", file=out, flush=True)
+            begin = time.monotonic()
+            next_status, done_at = begin, None
+            while not stop.signum:
+                executor.spin_once(timeout_sec=SPIN_STEP_S)
+                now = time.monotonic()
+                if sim.started_at is None and now - begin > START_TIMEOUT_S:
+                    raise RuntimeError("the predictor node did not subscribe to motor_speed "
+                                       f"within {START_TIMEOUT_S:g} s")
+                if now >= next_status:
+                    line = status_line(sim.elapsed_s, sim.last_state, monitor.record)
+                    if tty:                          # overwrite, within the terminal
+                        line = line[:shutil.get_terminal_size().columns - 1]
+                        print("\r" + line.ljust(width), end="", file=out, flush=True)
+                        width = len(line)
+                    else:
+                        print(line, file=out, flush=True)
+                    next_status += 1.0 / status_hz
+                if sim.done and done_at is None:
+                    done_at = now
+                if done_at is not None and now - done_at >= TAIL_S:
+                    break
+        finally:
+            stopped = time.monotonic()
+            if tty and width:
+                print(file=out)
+            for node in reversed(nodes):
+                if executor is not None:
+                    executor.remove_node(node)
+                node.destroy_node()
+            if executor is not None:
+                executor.shutdown(timeout_sec=1.0)
+            rclpy.try_shutdown(context=ctx)
+    finished = sim is not None and sim.done
+    if monitor is not None:
+        monitor.set_squeak(False, stopped)                # close an open squeak interval
+        expected = None
+        if finished:
+            times, flags = expected_squeak(profile)
+            expected = float(flags.mean() * profile.duration_s)
+        print(summary(profile, monitor.record, sim.elapsed_s if sim else 0.0, finished,
+                      expected), file=out, flush=True)
+    if finished:
+        return 0
+    print("leadscrew-squeak: interrupted", file=sys.stderr)
+    return 128 + stop.signum

@@ -1,0 +1,324 @@
+"""Actuator simulator: a power-seat adjuster stroke that drives the squeak predictor node.
+
+`StrokeProfile` is the pure, deterministic part (no rclpy in it): motor speed, axial load, nut
+position and screw angle as functions of time. `ActuatorSimulator` is the ROS 2 node that
+publishes the profile on the predictor's input topics (std_msgs/Float64 `motor_speed` [rad/s],
+`axial_load` [N], `nut_position` [m]; optionally sensor_msgs/JointState `joint_states`).
+
+The stroke (fractions of `duration_s`): the motor rests, ramps up quadratically from 0 through
+the squeak band (about 0.8-55 rad/s at Table 1, paper formulation) to `peak_speed_rad_s`
+beyond it, holds, ramps back down (mirror image) and rests. The quadratic ramps spend most of
+their time at low and moderate speed, i.e. in the band, while moving the nut less than linear
+ramps would: the nut advances `lead` = R tan(beta) per radian of screw rotation and must stay on
+the screw (0 <= z_o <= L - b; a default stroke travels 0.20 m of the 0.24 m available). The
+axial load grows with the travel (seat spring) plus one slow weight shift of the occupant,
+always within [load_min_n, load_max_n].
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from typing import NamedTuple, TextIO
+
+import numpy as np
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+from .model import ScrewParameters, SqueakModel
+from .ros_env import confine_to_localhost
+
+# Phases as fractions of the stroke duration: rest, ramp up, hold, ramp down, rest.
+REST_START, RAMP, HOLD, REST_END = 0.05, 0.36, 0.08, 0.15
+SPRING_SHARE = 0.8           # share of the load range that follows the travel (the rest: occupant)
+NODE_NAME = "actuator_simulator"
+MAX_RATE_HZ = 10_000.0
+_DEFAULTS = ScrewParameters()
+
+
+class ProfileError(ValueError):
+    """A stroke that cannot be simulated (bad numbers, or the nut would leave the screw)."""
+
+
+class ActuatorState(NamedTuple):
+    speed_rad_s: float
+    load_n: float
+    nut_position_m: float
+    screw_angle_rad: float
+
+
+@dataclass(frozen=True)
+class StrokeProfile:
+    duration_s: float = 12.0
+    peak_speed_rad_s: float = 120.0
+    load_min_n: float = 120.0
+    load_max_n: float = 350.0
+    start_nut_position_m: float = 0.02
+    lead_m_per_rad: float = _DEFAULTS.radius_m * math.tan(_DEFAULTS.helix_angle_rad)
+    max_nut_position_m: float = _DEFAULTS.length_m - _DEFAULTS.nut_length_m       # L - b
+    # Screw angle 0 <-> this nut position (the node's `nut_position_at_zero_angle_m` default),
+    # so that joint_states and nut_position describe the same nut.
+    nut_position_at_zero_angle_m: float = 0.15
+
+    @classmethod
+    def for_params(cls, params: ScrewParameters, **changes) -> "StrokeProfile":
+        """A profile for this screw: lead R tan(beta) and travel limit L - b from `params`."""
+        return cls(lead_m_per_rad=params.radius_m * math.tan(params.helix_angle_rad),
+                   max_nut_position_m=params.length_m - params.nut_length_m, **changes)
+
+    def __post_init__(self) -> None:
+        for name in ("duration_s", "peak_speed_rad_s", "lead_m_per_rad"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ProfileError(f"{name} must be a finite number > 0, got {value!r}")
+        for name in ("load_min_n", "load_max_n", "start_nut_position_m",
+                     "max_nut_position_m", "nut_position_at_zero_angle_m"):
+            if not math.isfinite(getattr(self, name)):
+                raise ProfileError(f"{name} must be finite, got {getattr(self, name)!r}")
+        if not 0 <= self.load_min_n <= self.load_max_n:
+            raise ProfileError(f"need 0 <= load_min_n <= load_max_n, got {self.load_min_n:g} "
+                               f"and {self.load_max_n:g} N")
+        end = self.start_nut_position_m + self.travel_m
+        if not 0 <= self.start_nut_position_m <= end <= self.max_nut_position_m:
+            longest = ((self.max_nut_position_m - self.start_nut_position_m)
+                       / (self.travel_m / self.duration_s))
+            raise ProfileError(
+                f"a {self.duration_s:g} s stroke at {self.peak_speed_rad_s:g} rad/s moves the nut "
+                f"{self.travel_m:.3g} m from {self.start_nut_position_m:g} m, off the screw "
+                f"(nut positions 0..{self.max_nut_position_m:g} m); the longest stroke at this "
+                f"speed is {max(longest, 0):.3g} s (use --loop to keep going)")
+
+    # ---------------------------------------------------------------- shape
+    @property
+    def travel_m(self) -> float:
+        """Nut travel of one stroke: lead times the screw angle turned."""
+        return self.lead_m_per_rad * self._angle_of_stroke(1.0)
+
+    @property
+    def end_nut_position_m(self) -> float:
+        return self.start_nut_position_m + self.travel_m
+
+    def _speed_fraction(self, tau: float) -> float:
+        """Speed / peak at normalised time tau in [0, 1]."""
+        up = tau - REST_START
+        down = tau - (REST_START + RAMP + HOLD)
+        if up <= 0 or down >= RAMP:
+            return 0.0
+        if up < RAMP:
+            return (up / RAMP) ** 2
+        if down <= 0:
+            return 1.0
+        return (1.0 - down / RAMP) ** 2
+
+    def _angle_of_stroke(self, tau: float) -> float:
+        """Screw angle turned since the start (rad), exact integral of the speed."""
+        w, d = self.peak_speed_rad_s, self.duration_s
+        up = min(max(tau - REST_START, 0.0), RAMP) / RAMP
+        hold = min(max(tau - REST_START - RAMP, 0.0), HOLD)
+        down = min(max(tau - REST_START - RAMP - HOLD, 0.0), RAMP) / RAMP
+        return w * d * (RAMP * up ** 3 / 3 + hold + RAMP * (1 - (1 - down) ** 3) / 3)
+
+    def state(self, t: float, loop: bool = False) -> ActuatorState:
+        """Speed [rad/s], load [N], nut position [m] and screw angle [rad] at time t [s].
+
+        Without `loop` the stroke holds its end state (at rest) after `duration_s` and its start
+        state before 0. With `loop` it repeats forever, every second stroke backwards (negative
+        speed, the nut returning), so the nut never jumps."""
+        d = self.duration_s
+        t = max(float(t), 0.0)
+        k = int(t // d) if loop else 0
+        tau = (t - k * d) / d if loop else min(t / d, 1.0)
+        sign = -1.0 if k % 2 else 1.0
+        travel = self.lead_m_per_rad * self._angle_of_stroke(tau)
+        nut = (self.start_nut_position_m + travel if sign > 0
+               else self.end_nut_position_m - travel)
+        nut = min(max(nut, 0.0), self.max_nut_position_m)       # guards rounding only
+        u = (nut - self.start_nut_position_m) / self.travel_m                # 0..1
+        occupant = 0.5 * (1.0 - math.cos(2.0 * math.pi * tau))              # 0..1..0
+        load = self.load_min_n + (self.load_max_n - self.load_min_n) * (
+            SPRING_SHARE * min(max(u, 0.0), 1.0) + (1.0 - SPRING_SHARE) * occupant)
+        angle = (nut - self.nut_position_at_zero_angle_m) / self.lead_m_per_rad
+        return ActuatorState(sign * self.peak_speed_rad_s * self._speed_fraction(tau), load,
+                             nut, angle)
+
+
+def state(t: float, profile: StrokeProfile | None = None, loop: bool = False) -> ActuatorState:
+    """`StrokeProfile.state` of the default profile (or of `profile`)."""
+    return (profile or StrokeProfile()).state(t, loop)
+
+
+def expected_squeak(profile: StrokeProfile, model: SqueakModel | None = None,
+                    samples: int = 241) -> tuple[np.ndarray, np.ndarray]:
+    """The model along the stroke, at `samples` evenly spaced times: (times [s], squeak flags).
+
+    What an ideal, lag-free predictor would say; the demo compares the node's output with it."""
+    model = model or SqueakModel()
+    times = np.linspace(0.0, profile.duration_s, samples)
+    flags = np.zeros(samples, bool)
+    for i, t in enumerate(times):
+        s = profile.state(t)
+        if abs(s.speed_rad_s) < model.params.min_speed_rad_s:
+            continue                                           # at rest: no squeak
+        p = model.with_params(nut_position_m=s.nut_position_m).predict(s.speed_rad_s, s.load_n)
+        flags[i] = bool(p.valid and p.squeak_modes)
+    return times, flags
+
+
+# ----------------------------------------------------------------------------- ROS 2 node
+class ActuatorSimulator(Node):
+    """Publishes `profile` at `rate_hz` on motor_speed, axial_load, nut_position (Float64) and,
+    with a `joint_name`, joint_states (one joint: position = screw angle, velocity = speed).
+
+    The stroke clock starts at the first tick, or with `wait_for_subscriber` when something
+    subscribes to motor_speed. Time is wall-clock time since then, so a late tick shifts no
+    sample. After the stroke the end state (at rest) is published once more and `done` turns
+    True; with `loop` the stroke repeats, back and forth, until the node is destroyed."""
+
+    def __init__(self, profile: StrokeProfile | None = None, rate_hz: float = 100.0,
+                 loop: bool = False, joint_name: str = "", wait_for_subscriber: bool = False,
+                 **kwargs):
+        if not (math.isfinite(rate_hz) and 0 < rate_hz <= MAX_RATE_HZ):
+            raise ProfileError(f"rate_hz must be in (0, {MAX_RATE_HZ:g}] Hz, got {rate_hz!r}")
+        super().__init__(kwargs.pop("node_name", NODE_NAME), **kwargs)
+        self.profile = profile or StrokeProfile()
+        self.loop, self.joint_name = loop, joint_name
+        self.wait_for_subscriber = wait_for_subscriber
+        self.started_at: float | None = None           # time.monotonic() of t = 0
+        self.done = False
+        self.published = 0
+        self.last_state: ActuatorState | None = None
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.speed_pub = self.create_publisher(Float64, "motor_speed", qos)
+        self.load_pub = self.create_publisher(Float64, "axial_load", qos)
+        self.nut_pub = self.create_publisher(Float64, "nut_position", qos)
+        self.joint_pub = (self.create_publisher(JointState, "joint_states", qos)
+                          if joint_name else None)
+        self._timer = self.create_timer(1.0 / rate_hz, self._tick)
+
+    @property
+    def elapsed_s(self) -> float:
+        """Stroke time so far (0 before the start)."""
+        return 0.0 if self.started_at is None else time.monotonic() - self.started_at
+
+    def _tick(self) -> None:
+        if self.done:
+            return
+        if self.started_at is None:
+            if self.wait_for_subscriber and self.speed_pub.get_subscription_count() == 0:
+                return
+            self.started_at = time.monotonic()
+        t = self.elapsed_s
+        finished = not self.loop and t >= self.profile.duration_s
+        self.publish(self.profile.state(self.profile.duration_s if finished else t, self.loop))
+        if finished:
+            self.done = True
+            self._timer.cancel()
+
+    def publish(self, s: ActuatorState) -> None:
+        self.speed_pub.publish(Float64(data=float(s.speed_rad_s)))
+        self.load_pub.publish(Float64(data=float(s.load_n)))
+        self.nut_pub.publish(Float64(data=float(s.nut_position_m)))
+        if self.joint_pub is not None:
+            msg = JointState(name=[self.joint_name], position=[float(s.screw_angle_rad)],
+                             velocity=[float(s.speed_rad_s)])
+            msg.header.stamp = self.get_clock().now().to_msg()
+            self.joint_pub.publish(msg)
+        self.last_state = s
+        self.published += 1
+
+
+class StopSignals:
+    """Context manager: SIGINT and SIGTERM set `signum` instead of interrupting, so a spin loop
+    can end cleanly between two callbacks (with a non-default Context rclpy installs no signal
+    handlers: SIGTERM would kill the process, SIGINT raise anywhere). A second signal of the
+    same kind acts as usual. Handlers are restored on exit; outside the main thread nothing is
+    installed."""
+
+    def __enter__(self) -> "StopSignals":
+        self.signum = 0
+        self._old: dict[int, object] = {}
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._old[sig] = signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signum: int, frame) -> None:
+        if self.signum == signum:                                  # asked twice: give in
+            signal.signal(signum, self._old.pop(signum))
+            if signum == signal.SIGINT:
+                raise KeyboardInterrupt
+            os.kill(os.getpid(), signum)
+        self.signum = self.signum or signum
+
+    def __exit__(self, *exc) -> None:
+        for sig, old in self._old.items():
+            signal.signal(sig, old)
+
+
+def run_simulator(profile: StrokeProfile | None = None, rate_hz: float = 100.0,
+                  loop: bool = False, joint_name: str = "", wait_for_subscriber: bool = True,
+                  out: TextIO | None = None) -> int:
+    """`leadscrew-squeak simulate`: publish the stroke on the user's ROS_DOMAIN_ID (loopback
+    discovery unless chosen otherwise) for a separately started predictor node.
+
+    Returns 0 when the stroke is done (or, with `loop`, when stopped by SIGINT/SIGTERM), else
+    128 + the signal number (130 SIGINT, 143 SIGTERM) when stopped before the end."""
+    out = out or sys.stdout
+    profile = profile or StrokeProfile()
+    confine_to_localhost()
+    with StopSignals() as stop:
+        ctx = Context()
+        rclpy.init(context=ctx)
+        node = executor = None
+        try:
+            node = ActuatorSimulator(profile, rate_hz=rate_hz, loop=loop,
+                                     joint_name=joint_name,
+                                     wait_for_subscriber=wait_for_subscriber, context=ctx)
+            executor = SingleThreadedExecutor(context=ctx)
+            executor.add_node(node)
+            topics = ", ".join(t for t in ("motor_speed", "axial_load", "nut_position",
+                                           "joint_states" if joint_name else "") if t)
+            print(f"simulating a {profile.duration_s:g} s stroke (0 -> "
+                  f"{profile.peak_speed_rad_s:g} rad/s -> 0, nut "
+                  f"{profile.start_nut_position_m:.3f} -> {profile.end_nut_position_m:.3f} m)"
+                  f"{', looped back and forth' if loop else ''} at {rate_hz:g} Hz on {topics} "
+                  f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')})", file=out,
+                  flush=True)
+            if wait_for_subscriber:
+                print("waiting for a subscriber on motor_speed ...", file=out, flush=True)
+            announced = False
+            while not node.done and not stop.signum:
+                executor.spin_once(timeout_sec=0.02)
+                if node.started_at is not None and not announced:
+                    print("stroke started", file=out, flush=True)
+                    announced = True
+            linger = time.monotonic() + 0.3       # let the last samples reach the subscribers
+            while node.done and not stop.signum and time.monotonic() < linger:
+                executor.spin_once(timeout_sec=0.02)
+        finally:
+            if node is not None:
+                if executor is not None:
+                    executor.remove_node(node)
+                node.destroy_node()
+            if executor is not None:
+                executor.shutdown(timeout_sec=1.0)
+            rclpy.try_shutdown(context=ctx)
+    published = node.published if node is not None else 0
+    if node is not None and node.done:
+        print(f"stroke done: {published} samples published", file=out, flush=True)
+        return 0
+    if loop:
+        print(f"stopped: {published} samples published", file=out, flush=True)
+        return 0
+    print("leadscrew-squeak: interrupted", file=sys.stderr)
+    return 128 + stop.signum

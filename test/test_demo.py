@@ -1,0 +1,200 @@
+"""The demo (`leadscrew-squeak demo`) and the simulator driving a separately started node, as
+subprocesses with the venv's python and the parent's environment (loopback discovery), each on a
+ROS_DOMAIN_ID of its own (201..230: clear of conftest's per-process domains 1..200)."""
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from std_msgs.msg import Float64
+
+from leadscrew_ros.node import LATCHED
+
+REPO = Path(__file__).resolve().parents[1]
+CLI = [sys.executable, "-m", "leadscrew_ros.cli"]
+
+
+def domain(offset: int) -> int:
+    return 201 + (os.getpid() + offset) % 30
+
+
+def env_for(domain_id: int) -> dict:
+    return dict(os.environ, ROS_DOMAIN_ID=str(domain_id),
+                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
+
+
+def start(argv, domain_id, tmp_path, name):
+    out, err = (open(tmp_path / f"{name}.{s}", "w+") for s in ("out", "err"))
+    proc = subprocess.Popen(argv, cwd=REPO, env=env_for(domain_id), stdout=out, stderr=err,
+                            text=True)
+    proc.files = (out, err)
+    return proc
+
+
+def output(proc) -> tuple[str, str]:
+    texts = []
+    for f in proc.files:
+        f.flush()
+        f.seek(0)
+        texts.append(f.read())
+    return texts[0], texts[1]
+
+
+def stop(*procs):
+    """Cleanup: anything still running is SIGKILLed, then Fast DDS shared memory it left is
+    cleaned (only zombie segments: `fastdds shm clean` leaves live processes alone)."""
+    killed = False
+    for proc in procs:
+        if proc is not None and proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+            killed = True
+        if proc is not None:
+            for f in proc.files:
+                f.close()
+    if killed:
+        tool = Path(sys.prefix) / "tools" / "fastdds" / "fastdds.py"
+        if tool.exists():
+            subprocess.run([sys.executable, str(tool), "shm", "clean"], capture_output=True,
+                           timeout=30)
+
+
+def summary_values(out: str) -> dict:
+    squeak = re.search(r"time in squeak: +([\d.]+) s \(([\d.]+) % of the stroke\)", out)
+    freqs = re.search(r"squeak frequencies: (.*)", out)
+    speeds = re.search(r"squeak speeds: +([\d.]+) - ([\d.]+) rad/s", out)
+    risk = re.search(r"max risk: +([\d.]+)", out)
+    predictions = re.search(r"predictions: +(\d+)", out)
+    assert squeak and freqs and speeds and risk and predictions, out
+    return {"squeak_s": float(squeak[1]), "squeak_pct": float(squeak[2]),
+            "frequencies": [(m[1], float(m[2])) for m in
+                            re.finditer(r"(\w+) ([\d.]+)(?:-[\d.]+)? Hz", freqs[1])],
+            "speeds": (float(speeds[1]), float(speeds[2])), "max_risk": float(risk[1]),
+            "predictions": int(predictions[1])}
+
+
+# ----------------------------------------------------------------------------- demo
+def test_demo_runs_a_stroke_and_summarises_it(tmp_path):
+    proc = None
+    try:
+        t0 = time.monotonic()
+        proc = start(CLI + ["demo", "--duration", "3"], domain(0), tmp_path, "demo")
+        code = proc.wait(timeout=60)
+        elapsed = time.monotonic() - t0
+        out, err = output(proc)
+    finally:
+        stop(proc)
+    assert code == 0, (out, err)
+    assert "Traceback" not in out + err and err == "", err
+    assert elapsed < 30
+    assert f"ROS_DOMAIN_ID={domain(0)}, discovery LOCALHOST" in out
+    status = [line for line in out.splitlines() if line.startswith("t ")]
+    assert len(status) >= 8 and "\r" not in out                       # plain lines: no TTY
+    assert any(re.search(r"\| SQUEAK risk 1\.00 .*\| .*B1y 22\d Hz", line) for line in status), \
+        status
+    assert any(re.search(r"\s1[01]\d\.\d rad/s .*\| ok +risk 0\.\d\d safe +\d+\.\d rad/s$", line)
+               for line in status), status                           # beyond the band
+    v = summary_values(out)
+    # About 40 % of the stroke squeaks (the model along the profile says the same).
+    assert 0.5 < v["squeak_s"] < 2.5 and v["squeak_pct"] > 15
+    model = float(re.search(r"the model along the profile: ([\d.]+) s", out)[1])
+    assert abs(v["squeak_s"] - model) < 0.5
+    assert ("B1y", pytest.approx(224.3, abs=3)) in [(k, f) for k, f in v["frequencies"]]
+    assert v["max_risk"] == 1.0 and v["predictions"] > 30
+    lo, hi = v["speeds"]
+    assert 0.5 <= lo < 5 and 30 < hi < 75                  # the band, not the 120 rad/s peak
+
+
+def test_demo_stops_cleanly_on_sigterm(tmp_path):
+    proc = None
+    try:
+        proc = start(CLI + ["demo", "--duration", "10"], domain(1), tmp_path, "demo")
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and proc.poll() is None:
+            if re.search(r"^t +\d.*risk", output(proc)[0], re.M):      # predictions flowing
+                break
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        code = proc.wait(timeout=20)
+        out, err = output(proc)
+    finally:
+        stop(proc)
+    assert code == 143, (out, err)
+    assert "Traceback" not in out + err
+    assert err.strip() == "leadscrew-squeak: interrupted"
+    assert "interrupted after" in out
+    summary_values(out)                                           # a summary all the same
+
+
+# ----------------------------------------------------------------------------- simulate + node
+class RiskProbe(Node):
+    def __init__(self, **kwargs):
+        super().__init__("risk_probe", **kwargs)
+        self.risks, self.diagnostics = [], 0
+        qos = QoSProfile(depth=100, reliability=LATCHED.reliability,
+                         durability=LATCHED.durability)
+        self.create_subscription(Float64, "squeak/risk", lambda m: self.risks.append(m.data),
+                                 qos)
+        self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, qos)
+
+    def _on_diagnostics(self, msg):
+        self.diagnostics += 1
+
+
+def spin_until(executor, done, timeout):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and not done():
+        executor.spin_once(timeout_sec=0.05)
+    return done()
+
+
+def test_simulate_drives_a_separately_started_node(tmp_path):
+    """Fast DDS tells a newcomer about an older participant only at the older one's next
+    periodic announcement (every ~3 s), so the order matters: the node first, then the probe
+    until it receives the node's latched diagnostics (the node will reach the probe from then
+    on), then the simulator, which waits for the node's subscription before its stroke."""
+    dom = domain(2)
+    node = sim = None
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=dom)
+    try:
+        probe = RiskProbe(context=ctx)
+        executor = SingleThreadedExecutor(context=ctx)
+        executor.add_node(probe)
+        node = start([sys.executable, "-m", "leadscrew_ros.node"], dom, tmp_path, "node")
+        assert spin_until(executor, lambda: probe.diagnostics or node.poll() is not None, 30)
+        assert node.poll() is None and probe.risks == [], output(node)
+        sim = start(CLI + ["simulate", "--duration", "3", "--joint-name", "screw"], dom,
+                    tmp_path, "sim")
+        spin_until(executor, lambda: sim.poll() is not None, 60)
+        sim_code = sim.returncode
+        spin_until(executor, lambda: False, 0.5)             # the last predictions
+        assert node.poll() is None, output(node)
+        node.send_signal(signal.SIGTERM)
+        node_code = node.wait(timeout=20)
+        executor.shutdown()
+        probe.destroy_node()
+        node_out, node_err = output(node)
+        sim_out, sim_err = output(sim)
+    finally:
+        rclpy.shutdown(context=ctx)
+        stop(node, sim)
+    assert sim_code == 0, (sim_out, sim_err)
+    assert "waiting for a subscriber on motor_speed" in sim_out and "stroke done" in sim_out
+    assert f"ROS_DOMAIN_ID={dom}" in sim_out and "joint_states" in sim_out
+    assert "Traceback" not in sim_err
+    assert 1.0 in probe.risks, probe.risks                      # squeak predicted at some point
+    assert min(probe.risks) < 0.5, probe.risks                   # and not at the peak
+    assert node_code == 0, (node_out, node_err)
+    assert "Traceback" not in node_err

@@ -1,0 +1,606 @@
+"""The squeak_predictor node over loopback DDS, launch-free.
+
+Each test gets its own rclpy Context, a unique namespace for the node and the probe, and one
+SingleThreadedExecutor spun with deadlines (`Ros`, below). conftest.py keeps DDS on loopback
+(ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) and on a domain of this test process. Every message on
+every output topic is checked for non-finite numbers as it arrives.
+"""
+
+from __future__ import annotations
+
+import gc
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+import tracemalloc
+import uuid
+from pathlib import Path
+
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool, Float64, Float64MultiArray
+
+from leadscrew_ros.live import Level
+from leadscrew_ros.model import SqueakModel
+from leadscrew_ros.model.advice import speed_bands
+from leadscrew_ros.node import MODE_COLUMNS, NODE_NAME, SqueakPredictorNode, modes_message
+
+MODEL = SqueakModel()                      # Table 1: squeak band ~0.81..55.2 rad/s at 200 N
+LOAD, SQUEAK, STABLE = 200.0, 20.0, 100.0
+OUTPUTS = {"squeak/risk": Float64, "squeak/unstable_frequencies": Float64MultiArray,
+           "squeak/active": Bool, "squeak/modes": Float64MultiArray,
+           "squeak/safe_speed": Float64, "/diagnostics": DiagnosticArray}
+INPUTS = {"motor_speed": Float64, "axial_load": Float64, "nut_position": Float64,
+          "joint_states": JointState}
+# every message of a test, however fast they come: reliable, deep, and late-joining
+COLLECT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def non_finite(msg) -> list[str]:
+    """Numbers in an output message that are NaN or infinite."""
+    if isinstance(msg, Float64):
+        values = [msg.data]
+    elif isinstance(msg, Float64MultiArray):
+        values = list(msg.data)
+    elif isinstance(msg, DiagnosticArray):
+        values = []
+        for s in msg.status:
+            for kv in s.values:
+                for token in kv.value.split(","):
+                    try:
+                        values.append(float(token))
+                    except ValueError:
+                        pass
+    else:
+        values = []
+    return [f"{type(msg).__name__}: {v}" for v in values if not math.isfinite(v)]
+
+
+class Ros:
+    """One test's ROS world: a private context, a probe node (and optionally the predictor)
+    in a unique namespace, and one executor for both."""
+
+    def __init__(self):
+        self.ns = f"/t{uuid.uuid4().hex}"
+        self.hardware_id = f"hw_{self.ns[2:]}"
+        self.ctx = Context()
+        rclpy.init(context=self.ctx)
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.probe = Node("probe", context=self.ctx, namespace=self.ns)
+        self.executor.add_node(self.probe)
+        self.node: SqueakPredictorNode | None = None
+        self.latest: dict[str, object] = {}
+        self.count = dict.fromkeys(OUTPUTS, 0)
+        self.violations: list[str] = []
+        self.pubs = {}
+        for topic, msg_type in OUTPUTS.items():
+            self.probe.create_subscription(msg_type, topic,
+                                           lambda msg, t=topic: self._received(t, msg), COLLECT)
+
+    def _received(self, topic: str, msg) -> None:
+        if topic == "/diagnostics":          # absolute topic: keep this test's status only
+            status = [s for s in msg.status if s.hardware_id == self.hardware_id]
+            if not status:
+                return
+            msg.status = status
+        self.violations += non_finite(msg)
+        self.latest[topic] = msg
+        self.count[topic] += 1
+
+    def start(self, **params) -> SqueakPredictorNode:
+        """The predictor in this test's namespace, with parameter overrides."""
+        overrides = [Parameter(k, value=v) for k, v in
+                     {"hardware_id": self.hardware_id, **params}.items()]
+        self.node = SqueakPredictorNode(context=self.ctx, namespace=self.ns,
+                                        parameter_overrides=overrides)
+        self.executor.add_node(self.node)
+        return self.node
+
+    def spin_until(self, condition, timeout: float = 2.0, what: str = "condition") -> None:
+        deadline = time.monotonic() + timeout
+        while not condition():
+            if time.monotonic() > deadline:
+                raise AssertionError(f"timeout after {timeout} s waiting for {what}; latest "
+                                     f"outputs: {self.latest}")
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def drain(self, rounds: int = 5) -> None:
+        """Handle whatever is ready now (no waiting for anything new)."""
+        for _ in range(rounds):
+            self.executor.spin_once(timeout_sec=0.0)
+
+    def publisher(self, topic: str, timeout: float = 2.0):
+        if topic not in self.pubs:
+            pub = self.probe.create_publisher(INPUTS[topic], topic, 10)
+            self.spin_until(lambda: pub.get_subscription_count() > 0, timeout,
+                            f"a subscriber on {topic}")
+            self.pubs[topic] = pub
+        return self.pubs[topic]
+
+    def send(self, topic: str, value) -> None:
+        msg = value if isinstance(value, JointState) else Float64(data=float(value))
+        self.publisher(topic).publish(msg)
+
+    def wait_for(self, topic: str, predicate, timeout: float = 2.0):
+        """The latest message on an output topic, once it satisfies `predicate`."""
+        self.spin_until(lambda: topic in self.latest and predicate(self.latest[topic]),
+                        timeout, f"a matching message on {topic}")
+        return self.latest[topic]
+
+    def status(self, predicate, timeout: float = 2.0) -> DiagnosticStatus:
+        return self.wait_for("/diagnostics", lambda m: predicate(m.status[0]),
+                             timeout).status[0]
+
+    def close(self) -> None:
+        try:
+            for node in (self.node, self.probe):
+                if node is not None:
+                    node.destroy_node()
+            self.executor.shutdown(timeout_sec=1.0)
+        finally:
+            rclpy.shutdown(context=self.ctx)
+
+
+@pytest.fixture
+def ros():
+    r = Ros()
+    try:
+        yield r
+        assert not r.violations, r.violations[:10]
+    finally:
+        r.close()
+
+
+def at(ros: Ros, speed: float, load: float = LOAD):
+    """Send an operating point and wait for the prediction published for it."""
+    core = MODEL.predict(speed, load)
+    ros.send("motor_speed", speed)
+    ros.send("axial_load", load)
+    ros.wait_for("squeak/risk", lambda m: m.data == pytest.approx(core.risk, rel=1e-9))
+    return core
+
+
+def growth(modes: Float64MultiArray) -> float:
+    """Largest growth rate in a squeak/modes message (row 0, column growth_rate)."""
+    return modes.data[MODE_COLUMNS.index("growth_rate")]
+
+
+# ----------------------------------------------------------------------------- topics
+def test_topics_live_in_the_namespace(ros):
+    node = ros.start()
+    topics = {p.topic_name for p in node.publishers} | {s.topic_name for s in node.subscriptions}
+    for name in [*OUTPUTS, *INPUTS]:
+        assert (name if name.startswith("/") else f"{ros.ns}/{name}") in topics
+    assert node.get_fully_qualified_name() == f"{ros.ns}/{NODE_NAME}"
+    # before any input: nothing predicted, diagnostics say so
+    status = ros.status(lambda s: True)
+    assert status.level == bytes([Level.STALE]) and "motor_speed" in status.message
+    assert status.name == f"{NODE_NAME}: squeak prediction"
+    ros.drain()
+    assert ros.count["squeak/risk"] == 0
+
+
+# ----------------------------------------------------------------------------- prediction
+def test_table1_squeak_at_20_rad_s(ros):
+    ros.start()
+    core = at(ros, SQUEAK)
+    assert ros.latest["squeak/risk"].data == 1.0
+    assert ros.wait_for("squeak/active", lambda m: m.data).data is True
+    freqs = ros.wait_for("squeak/unstable_frequencies", lambda m: len(m.data) > 0)
+    assert list(freqs.data) == pytest.approx(core.unstable_frequencies_hz, rel=1e-9)
+    assert len(core.unstable_frequencies_hz) == 2                 # B1y ~224 Hz, B2y ~898 Hz
+    assert freqs.layout.dim[0].label == "frequency_hz"
+    assert freqs.layout.dim[0].size == len(freqs.data)
+
+    modes = ros.wait_for("squeak/modes", lambda m: len(m.data) > 0)
+    dims = modes.layout.dim
+    assert len(dims) == 2
+    labels = dims[0].label.removeprefix("modes:").split(",")
+    assert dims[0].label.startswith("modes:") and labels == [m.label for m in core.modes]
+    assert dims[1].label == ",".join(MODE_COLUMNS) and dims[1].size == 3
+    assert dims[0].size == len(labels) and dims[0].size * dims[1].size == len(modes.data)
+    assert dims[0].stride == len(modes.data) and dims[1].stride == 3
+    assert list(modes.data) == pytest.approx(list(modes_message(core).data), rel=1e-9)
+
+    status = ros.status(lambda s: s.level == bytes([Level.ERROR]))
+    assert status.message == "squeak predicted: B1y 224 Hz, B2y 898 Hz"
+    values = {kv.key: kv.value for kv in status.values}
+    assert values["risk"] == "1" and values["formulation"] == "paper"
+
+
+def test_high_speed_outside_the_band_is_quiet(ros):
+    ros.start()
+    at(ros, SQUEAK)
+    core = at(ros, STABLE)
+    assert core.stable and ros.latest["squeak/risk"].data < 1.0
+    assert ros.wait_for("squeak/active", lambda m: not m.data).data is False
+    assert list(ros.wait_for("squeak/unstable_frequencies", lambda m: len(m.data) == 0).data) == []
+    status = ros.status(lambda s: s.level == bytes([Level.OK]))
+    assert status.message.startswith("no squeak")
+
+
+def test_nut_position_topic_changes_the_prediction(ros):
+    ros.start()
+    at(ros, SQUEAK)
+    middle = growth(ros.wait_for("squeak/modes", lambda m: len(m.data) > 0))
+    assert middle == pytest.approx(MODEL.predict(SQUEAK, LOAD).max_growth_rate, rel=1e-9)
+    expected = MODEL.with_params(nut_position_m=0.02).predict(SQUEAK, LOAD).max_growth_rate
+    ros.send("nut_position", 0.02)
+    modes = ros.wait_for("squeak/modes", lambda m: growth(m) != middle)
+    assert growth(modes) == pytest.approx(expected, rel=1e-9)
+    assert abs(growth(modes) - middle) > 10.0                     # 44.6 vs 73.6 1/s
+    status = ros.status(lambda s: {kv.key: kv.value for kv in s.values}["nut_position_m"]
+                        == "0.02")
+    assert status.level == bytes([Level.ERROR])                   # still squeaking
+
+
+def test_joint_states_give_speed_and_nut_travel(ros):
+    ros.start(joint_name="screw", nut_position_at_zero_angle_m=0.15)
+    p = MODEL.params
+    lead = p.radius_m * math.tan(p.helix_angle_rad)               # m of nut travel per radian
+    angle = (0.02 - 0.15) / lead
+    expected = MODEL.with_params(nut_position_m=0.02).predict(SQUEAK, LOAD)
+    ros.send("axial_load", LOAD)
+    ros.send("joint_states", JointState(name=["wheel", "screw"], position=[1.0, angle],
+                                        velocity=[STABLE, SQUEAK]))
+    modes = ros.wait_for("squeak/modes", lambda m: True)
+    assert list(modes.data) == pytest.approx(list(modes_message(expected).data), rel=1e-9)
+    ros.drain()
+    assert ros.count["squeak/modes"] == 1        # one prediction, at the new speed AND position
+    status = ros.status(lambda s: s.message.startswith("squeak predicted"))
+    values = {kv.key: kv.value for kv in status.values}
+    assert float(values["speed_rad_s"]) == SQUEAK
+    assert float(values["nut_position_m"]) == pytest.approx(0.02, abs=1e-6)
+
+
+# ----------------------------------------------------------------------------- safe speed
+def test_safe_speed(ros):
+    ros.start()
+    at(ros, SQUEAK)
+    safe = ros.wait_for("squeak/safe_speed", lambda m: True).data
+    assert 0.0 < safe and not any(lo <= safe <= hi for lo, hi in speed_bands(MODEL, LOAD))
+    check = MODEL.predict(safe, LOAD)
+    assert check.valid and check.stable
+    at(ros, STABLE)
+    assert ros.wait_for("squeak/safe_speed", lambda m: m.data == STABLE).data == STABLE
+    at(ros, -SQUEAK)
+    assert ros.wait_for("squeak/safe_speed", lambda m: m.data < 0).data == pytest.approx(
+        -safe, rel=1e-3)
+
+
+# ----------------------------------------------------------------------------- parameters
+@pytest.mark.parametrize("name, value, words", [
+    ("radius_m", -1.0, ["radius_m", "out of range"]),
+    ("nut_position_m", 0.25, ["z_o + b <= L"]),
+    ("formulation", "foo", ["'foo'", "paper, consistent"]),
+    ("n_bending", 2.5, ["expected", "INTEGER"]),                  # wrong type
+    ("max_rate_hz", 0.0, ["max_rate_hz", "out of range"]),
+    ("hardware_id", "other", ["read-only"]),
+    ("input_queue_depth", 10, ["read-only"]),
+])
+def test_rejected_parameter_keeps_the_old_model(ros, name, value, words):
+    node = ros.start()
+    at(ros, SQUEAK)
+    model, published = node.live.model, dict(ros.count)
+    old = node.get_parameter(name).value
+    [result] = node.set_parameters([Parameter(name, value=value)])
+    assert not result.successful
+    for w in words:
+        assert w in result.reason, result.reason
+    assert node.get_parameter(name).value == old
+    assert node.live.model is model
+    ros.drain()
+    assert ros.count["squeak/risk"] == published["squeak/risk"]   # nothing republished
+    # the old model still answers: a new point is predicted with Table 1 as before
+    expected = MODEL.predict(SQUEAK + 1.0, LOAD).unstable_frequencies_hz
+    ros.send("motor_speed", SQUEAK + 1.0)
+    ros.wait_for("squeak/unstable_frequencies",
+                 lambda m: list(m.data) == pytest.approx(expected, rel=1e-9))
+
+
+def test_rejected_set_is_atomic_and_reason_reaches_a_remote_caller(ros):
+    node = ros.start()
+    at(ros, SQUEAK)
+    client = AsyncParameterClient(ros.probe, f"{ros.ns}/{NODE_NAME}")
+    ros.spin_until(lambda: client.services_are_ready(), what="parameter services")
+    # valid on its own, invalid with the other: nothing of the set is applied
+    future = client.set_parameters_atomically([Parameter("nut_length_m", value=0.1),
+                                               Parameter("nut_position_m", value=0.25)])
+    ros.spin_until(future.done, what="set_parameters_atomically")
+    result = future.result().result
+    assert not result.successful and "z_o + b <= L" in result.reason
+    assert node.get_parameter("nut_length_m").value == 0.06
+    assert node.get_parameter("nut_position_m").value == 0.15
+
+
+def test_accepted_parameter_is_applied_and_republished(ros):
+    node = ros.start()
+    at(ros, SQUEAK)
+    before = ros.count["squeak/unstable_frequencies"]
+    [result] = node.set_parameters([Parameter("formulation", value="consistent")])
+    assert result.successful
+    freqs = ros.wait_for("squeak/unstable_frequencies",
+                         lambda m: len(m.data) > 0 and abs(m.data[0] - 2654.0) < 2.0)
+    assert ros.count["squeak/unstable_frequencies"] > before
+    core = MODEL.with_params(formulation="consistent").predict(SQUEAK, LOAD)
+    assert list(freqs.data) == pytest.approx(core.unstable_frequencies_hz, rel=1e-9)
+    assert node.live.model.params.formulation == "consistent"
+    status = ros.status(lambda s: {kv.key: kv.value for kv in s.values}["formulation"]
+                        == "consistent")
+    assert status.message.startswith("squeak predicted: T1 2654 Hz")
+    # a node setting: a new rate limit re-creates the rate-limit timer
+    [result] = node.set_parameters([Parameter("max_rate_hz", value=20.0)])
+    assert result.successful and node.live.settings.max_rate_hz == 20.0
+    assert node._rate_timer.timer_period_ns == 50_000_000
+
+
+# ----------------------------------------------------------------------------- bad input
+GOOD = {"motor_speed": SQUEAK, "axial_load": LOAD, "nut_position": 0.15,
+        "joint_states": JointState(name=["screw"], velocity=[SQUEAK], position=[0.0])}
+
+
+@pytest.mark.parametrize("topic, value, words", [
+    ("motor_speed", math.nan, ["speed = nan", "not finite"]),
+    ("motor_speed", math.inf, ["speed = inf", "not finite"]),
+    ("axial_load", -math.inf, ["load = -inf", "not finite"]),
+    ("axial_load", 1e12, ["load = 1e+12", "exceeds"]),
+    ("nut_position", 0.25, ["nut position 0.25 m", "off the screw", "z_o + b <= L"]),
+    ("nut_position", math.nan, ["nut position nan"]),
+    ("joint_states", JointState(name=["screw"], velocity=[math.nan]), ["speed = nan"]),
+    ("joint_states", JointState(name=["screw"], velocity=[math.nan], position=[0.0]),
+     ["speed = nan"]),                                            # a good position keeps it
+    ("joint_states", JointState(name=["screw"], position=[1e9]), ["nut position", "off the "
+                                                                  "screw"]),
+])
+def test_bad_input_is_an_error_diagnostic_and_publishes_nothing(ros, topic, value, words):
+    ros.start(joint_name="screw")
+    at(ros, SQUEAK)
+    ros.drain()
+    published = {t: n for t, n in ros.count.items() if t != "/diagnostics"}
+    ros.send(topic, value)
+    status = ros.status(lambda s: s.message.startswith("invalid input"))
+    assert status.level == bytes([Level.ERROR])
+    for w in words:
+        assert w in status.message, status.message
+    ros.drain()
+    assert {t: n for t, n in ros.count.items() if t != "/diagnostics"} == published
+    assert ros.latest["squeak/risk"].data == 1.0                  # the last good state stays
+    # a good value on the same input clears the error
+    ros.send(topic, GOOD[topic])
+    assert ros.status(lambda s: s.message.startswith("squeak predicted")).level == bytes(
+        [Level.ERROR])
+
+
+def test_a_flood_of_bad_input_gives_a_bounded_number_of_diagnostics(ros):
+    """The same bad value over and over is one diagnostic (then one per period), not one per
+    message: a broken sensor must not flood /diagnostics."""
+    ros.start()
+    at(ros, SQUEAK)
+    ros.drain()
+    before, t0 = ros.count["/diagnostics"], time.monotonic()
+    for i in range(2000):
+        ros.send("motor_speed", math.nan)
+        if i % 10 == 0:
+            ros.drain(1)                      # the node takes about 200 of them
+    ros.status(lambda s: "speed = nan" in s.message)
+    ros.drain()
+    periods = (time.monotonic() - t0) / 1.0   # diagnostics_period_s
+    assert ros.count["/diagnostics"] - before <= 2 + periods, ros.count["/diagnostics"] - before
+
+
+def test_outside_validity_warns_and_keeps_the_last_prediction(ros):
+    ros.start()
+    at(ros, SQUEAK)
+    ros.drain()
+    published = {t: n for t, n in ros.count.items() if t != "/diagnostics"}
+    ros.send("motor_speed", 5000.0)
+    status = ros.status(lambda s: s.level == bytes([Level.WARN]))
+    assert status.message.startswith("no prediction: outside the model's validity")
+    ros.drain()
+    assert {t: n for t, n in ros.count.items() if t != "/diagnostics"} == published
+
+
+def test_stale_input(ros):
+    ros.start(stale_timeout_s=0.2)
+    at(ros, STABLE)
+    t_input = time.monotonic()
+    assert ros.status(lambda s: s.level == bytes([Level.OK])).message.startswith("no squeak")
+    status = ros.status(lambda s: s.level == bytes([Level.STALE]), timeout=1.5)
+    assert time.monotonic() - t_input >= 0.2
+    assert "motor_speed" in status.message and "axial_load" in status.message
+    assert "0.2 s" in status.message
+    ros.send("motor_speed", STABLE)                               # speed fresh, load still old
+    status = ros.status(lambda s: "motor_speed" not in s.message)
+    assert status.level == bytes([Level.STALE]) and "axial_load" in status.message
+    ros.send("axial_load", LOAD)
+    assert ros.status(lambda s: s.level != bytes([Level.STALE])).level == bytes([Level.OK])
+
+
+# ----------------------------------------------------------------------------- burst
+def test_burst_is_coalesced_with_flat_memory(ros):
+    """10,000 speeds as fast as the probe can publish them (spinning now and then, so the node
+    takes about every tenth; the rest is dropped by the keep-last input queue), then 10,000
+    straight into the node's motor_speed callback (every one reaches the node): recomputes
+    bounded by max_rate_hz, the last input wins, no memory growth."""
+    node = ros.start()
+    at(ros, STABLE)
+    pub = ros.publisher("motor_speed")
+    [on_speed] = [s.callback for s in node.subscriptions
+                  if s.topic_name == f"{ros.ns}/motor_speed"]
+
+    def burst(n: int, last: float, direct: bool = False) -> None:
+        t0, r0 = time.monotonic(), node.live.recomputes
+        for i in range(n):
+            msg = Float64(data=60.0 + (i % 200) * 0.5)              # stable speeds, 60..159.5
+            if direct:
+                on_speed(msg)
+            else:
+                pub.publish(msg)
+                if i % 10 == 0:
+                    ros.executor.spin_once(timeout_sec=0.0)
+        pub.publish(Float64(data=last))
+        ros.wait_for("squeak/safe_speed", lambda m: m.data == last)    # stable: safe == speed
+        elapsed, recomputes = time.monotonic() - t0, node.live.recomputes - r0
+        assert 1 <= recomputes <= node.live.settings.max_rate_hz * elapsed + 2, (
+            recomputes, elapsed)
+        assert node.live.prediction.speed_rad_s == last
+
+    tracemalloc.start()
+    try:
+        burst(2_000, 111.25)                  # warm-up: rclpy/DDS caches fill, traced too
+        burst(2_000, 112.25, direct=True)
+        gc.collect()
+        before = tracemalloc.get_traced_memory()[0]
+        tracemalloc.reset_peak()
+        burst(10_000, 123.25)
+        burst(10_000, 124.25, direct=True)
+        gc.collect()
+        current, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    # measured ~50-80 kB (rclpy's own bounded caches). Leaking one float per input the node
+    # handled (>= 11,000 of them) would add >= 350 kB, one Float64 message >= 880 kB.
+    assert current - before < 256_000, current - before
+    assert peak - before < 5_000_000, peak - before
+
+
+# ----------------------------------------------------------------------------- shutdown
+def test_destroy_node_does_not_hang(ros):
+    node = ros.start()
+    at(ros, SQUEAK)
+    t0 = time.monotonic()
+    node.destroy_node()
+    ros.executor.remove_node(node)
+    ros.node = None
+    ros.probe.destroy_node()
+    ros.probe = None
+    assert time.monotonic() - t0 < 1.0
+
+
+# ----------------------------------------------------------------------------- process
+def node_command() -> list[str]:
+    script = Path(sys.executable).with_name("squeak_node")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "leadscrew_ros.node"]
+
+
+def stop(proc: subprocess.Popen) -> None:
+    """Failure path only: SIGTERM, then SIGKILL as the last resort."""
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def wait_initialised(procs: list[subprocess.Popen], timeout: float = 10.0) -> None:
+    """Wait until each process has run rclpy.init (its log file exists in ROS_LOG_DIR)."""
+    log_dir, deadline = Path(os.environ["ROS_LOG_DIR"]), time.monotonic() + timeout
+    for proc in procs:
+        while not any(log_dir.glob(f"*_{proc.pid}_*.log")):
+            assert proc.poll() is None, f"node process exited early ({proc.returncode})"
+            assert time.monotonic() < deadline, "node process did not initialise rclpy"
+            time.sleep(0.01)
+
+
+def test_node_processes_answer_and_exit_cleanly_on_sigterm_and_sigint(tmp_path):
+    """Two node processes, one per signal, on this test process's private domain over loopback
+    DDS; each is busy with inputs when it gets its signal (a callback publishing while rclpy
+    shuts the context down must not end in a traceback)."""
+    assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    ns, children, ros = f"/t{uuid.uuid4().hex}", {}, None
+    try:
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            err = tmp_path / f"{sig.name}.stderr"
+            with open(tmp_path / f"{sig.name}.stdout", "wb") as out, open(err, "wb") as errf:
+                proc = subprocess.Popen(
+                    [*node_command(), "--ros-args", "-r", f"__ns:={ns}/{sig.name.lower()}",
+                     "-p", f"hardware_id:=hw_{ns[2:]}_{sig.name}"],
+                    stdout=out, stderr=errf, env=dict(os.environ))
+            children[sig] = {"proc": proc, "err": err, "risk": [], "status": []}
+        # Fast DDS: a participant appearing after another's initial announcements often learns
+        # of it only at the next periodic announcement (3 s). Creating ours once the children
+        # have initialised lets the initial announcements of both sides meet (~0.1 s).
+        wait_initialised([c["proc"] for c in children.values()])
+        ros = Ros()
+        for sig, child in children.items():
+            probe = child["probe"] = Node("probe", context=ros.ctx,
+                                          namespace=f"{ns}/{sig.name.lower()}")
+            ros.executor.add_node(probe)
+            probe.create_subscription(Float64, "squeak/risk", child["risk"].append, COLLECT)
+            probe.create_subscription(
+                DiagnosticArray, "/diagnostics", lambda m, c=child, h=f"hw_{ns[2:]}_{sig.name}":
+                c["status"].extend(s for s in m.status if s.hardware_id == h), COLLECT)
+            child["pubs"] = [probe.create_publisher(Float64, t, 10)
+                             for t in ("motor_speed", "axial_load")]
+
+        def stream(i: int) -> None:
+            """Inputs are a best-effort stream, as from a sensor."""
+            for child in children.values():
+                for pub, value in zip(child["pubs"], (SQUEAK + i % 3, LOAD)):
+                    pub.publish(Float64(data=value))
+            ros.executor.spin_once(timeout_sec=0.002)
+
+        for child in children.values():
+            for pub in child["pubs"]:
+                ros.spin_until(lambda: pub.get_subscription_count() > 0, 10.0,
+                               f"the node process subscribing to {pub.topic_name}")
+        # the node may not yet have matched our writer when ours has matched its reader:
+        # keep streaming until both answer
+        deadline, i = time.monotonic() + 10.0, 0
+        while not all(c["risk"] and c["status"] for c in children.values()):
+            assert time.monotonic() < deadline, "no answer from a node process"
+            stream(i := i + 1)
+        for sig, child in children.items():
+            assert child["risk"][-1].data == 1.0, sig
+            assert not [v for m in child["risk"] for v in non_finite(m)], sig
+            ros.spin_until(lambda c=child: any(s.message.startswith("squeak predicted")
+                                               for s in c["status"]), what="ERROR diagnostic")
+        for sig, child in children.items():
+            child["proc"].send_signal(sig)
+        deadline = time.monotonic() + 10.0
+        while any(c["proc"].poll() is None for c in children.values()):   # busy until the end
+            assert time.monotonic() < deadline, "a node process ignored its signal"
+            stream(i := i + 1)
+        for sig, child in children.items():
+            stderr = child["err"].read_text()
+            print(f"{sig.name} node process stderr:\n{stderr}")   # shown in full on failure
+            assert child["proc"].returncode == 0, (sig, stderr)
+            assert "Traceback" not in stderr, sig
+    finally:
+        for child in children.values():
+            stop(child["proc"])
+        if ros is not None:
+            for child in children.values():
+                if "probe" in child:
+                    child["probe"].destroy_node()
+            ros.close()
+
+
+@pytest.mark.parametrize("param, words", [
+    ("radius_m:=-1.0", ["radius_m", "out of range"]),
+    ("nut_position_m:=0.25", ["z_o + b <= L"]),
+])
+def test_node_process_with_an_invalid_parameter_exits_with_one_line(param, words):
+    proc = subprocess.run([*node_command(), "--ros-args", "-p", param], capture_output=True,
+                          text=True, timeout=20, env=dict(os.environ))
+    assert proc.returncode != 0
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith(f"{NODE_NAME}: error:")
+    for w in words:
+        assert w in lines[0]
+    assert "Traceback" not in proc.stderr + proc.stdout
