@@ -20,6 +20,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 from rclpy.exceptions import ParameterException
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -94,17 +95,28 @@ class SqueakPredictorNode(Node):
         depth = self.get_parameter("input_queue_depth").value
         sensor = QoSProfile(depth=depth, reliability=qos_profile_sensor_data.reliability,
                             durability=qos_profile_sensor_data.durability)
-        self.create_subscription(Float64, "motor_speed", self._on_speed, sensor)
-        self.create_subscription(Float64, "axial_load", self._on_load, sensor)
-        self.create_subscription(Float64, "nut_position", self._on_nut_position, sensor)
-        self.create_subscription(JointState, "joint_states", self._on_joint_states, sensor)
-        self.risk_pub = self.create_publisher(Float64, "squeak/risk", LATCHED)
-        self.frequencies_pub = self.create_publisher(Float64MultiArray,
-                                                     "squeak/unstable_frequencies", LATCHED)
-        self.active_pub = self.create_publisher(Bool, "squeak/active", LATCHED)
-        self.modes_pub = self.create_publisher(Float64MultiArray, "squeak/modes", LATCHED)
-        self.safe_speed_pub = self.create_publisher(Float64, "squeak/safe_speed", LATCHED)
-        self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", LATCHED)
+        # Best-effort inputs and reliable transient-local outputs match every peer's QoS, so
+        # the default QoS-event handlers could never fire; without them each executor cycle
+        # waits on 20 fewer entities (measured: lower input-to-risk latency).
+        sub_events = SubscriptionEventCallbacks(use_default_callbacks=False)
+        pub_events = PublisherEventCallbacks(use_default_callbacks=False)
+
+        def subscribe(msg_type, topic, callback):
+            self.create_subscription(msg_type, topic, callback, sensor, event_callbacks=sub_events)
+
+        def publisher(msg_type, topic):
+            return self.create_publisher(msg_type, topic, LATCHED, event_callbacks=pub_events)
+
+        subscribe(Float64, "motor_speed", self._on_speed)
+        subscribe(Float64, "axial_load", self._on_load)
+        subscribe(Float64, "nut_position", self._on_nut_position)
+        subscribe(JointState, "joint_states", self._on_joint_states)
+        self.risk_pub = publisher(Float64, "squeak/risk")
+        self.frequencies_pub = publisher(Float64MultiArray, "squeak/unstable_frequencies")
+        self.active_pub = publisher(Bool, "squeak/active")
+        self.modes_pub = publisher(Float64MultiArray, "squeak/modes")
+        self.safe_speed_pub = publisher(Float64, "squeak/safe_speed")
+        self.diagnostics_pub = publisher(DiagnosticArray, "/diagnostics")
 
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -219,7 +231,8 @@ class SqueakPredictorNode(Node):
             self.get_logger().warning(self.live.status(now).message, throttle_duration_sec=2.0)
         else:
             self._publish_prediction(p)
-        self._publish_diagnostics(now)
+        if self._verdict(now) != self._published:    # else the housekeeping period covers it
+            self._publish_diagnostics(now)
 
     def _publish_prediction(self, p: Prediction) -> None:
         self.risk_pub.publish(Float64(data=float(p.risk)))
