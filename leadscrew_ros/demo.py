@@ -26,7 +26,7 @@ from rclpy.qos import QoSProfile
 from std_msgs.msg import Bool, Float64, Float64MultiArray
 
 from .node import LATCHED, SqueakPredictorNode
-from .ros_env import confine_to_localhost
+from .ros_env import close, confine_to_localhost
 from .simulator import (ActuatorSimulator, ActuatorState, StopSignals, StrokeProfile,
                         expected_squeak)
 
@@ -248,13 +248,7 @@ def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float 
             stopped = time.monotonic()
             if tty and width:
                 print(file=out)
-            for node in reversed(nodes):
-                if executor is not None:
-                    executor.remove_node(node)
-                node.destroy_node()
-            if executor is not None:
-                executor.shutdown(timeout_sec=1.0)
-            rclpy.try_shutdown(context=ctx)
+            close(ctx, executor, list(reversed(nodes)))
     finished = sim is not None and sim.done
     if monitor is not None:
         monitor.set_squeak(False, stopped)                # close an open squeak interval

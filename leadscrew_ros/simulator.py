@@ -36,7 +36,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from .model import ScrewParameters, SqueakModel
-from .ros_env import confine_to_localhost
+from .ros_env import close, confine_to_localhost
 
 # Phases as fractions of the stroke duration: rest, ramp up, hold, ramp down, rest.
 REST_START, RAMP, HOLD, REST_END = 0.05, 0.36, 0.08, 0.15
@@ -306,13 +306,7 @@ def run_simulator(profile: StrokeProfile | None = None, rate_hz: float = 100.0,
             while node.done and not stop.signum and time.monotonic() < linger:
                 executor.spin_once(timeout_sec=0.02)
         finally:
-            if node is not None:
-                if executor is not None:
-                    executor.remove_node(node)
-                node.destroy_node()
-            if executor is not None:
-                executor.shutdown(timeout_sec=1.0)
-            rclpy.try_shutdown(context=ctx)
+            close(ctx, executor, [node] if node is not None else [])
     published = node.published if node is not None else 0
     if node is not None and node.done:
         print(f"stroke done: {published} samples published", file=out, flush=True)
