@@ -61,6 +61,7 @@ class Status:
 class LivePredictor:
     def __init__(self, model: SqueakModel, settings: LiveSettings = LiveSettings()):
         self.model = model
+        self._nut_model = model                        # model at the nut position in use
         self.settings = settings
         self.inputs = Inputs()
         self.prediction: Prediction | None = None        # last good (valid) prediction
@@ -118,6 +119,7 @@ class LivePredictor:
     def set_model(self, model: SqueakModel, settings: LiveSettings | None = None) -> None:
         """New parameters: the next `due` is true and recomputes with them."""
         self.model, self.settings = model, settings or self.settings
+        self._nut_model = model
         self._computed_at, self._bands = None, {}
 
     def _operating_point(self) -> tuple[float, float, float] | None:
@@ -163,13 +165,16 @@ class LivePredictor:
         return p
 
     def _model_at(self, nut: float) -> SqueakModel | None:
-        if nut == self.model.params.nut_position_m:
-            return self.model
+        """The model with the contact at the nut; rebuilt (contact re-integrated) only when the
+        nut moved more than nut_deadband_m from where the current one was built."""
+        if abs(nut - self._nut_model.params.nut_position_m) <= self.settings.nut_deadband_m:
+            return self._nut_model
         try:                            # geometry is cached: a revisited position is free
-            return self.model.with_params(nut_position_m=nut)
+            self._nut_model = self.model.with_params(nut_position_m=nut)
         except ParameterError as exc:
             self._validity = f"nut position {nut:g} m: {exc}"
             return None
+        return self._nut_model
 
     def _safe_speed(self, model: SqueakModel, p: Prediction) -> float:
         if p.stable:

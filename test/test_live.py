@@ -255,6 +255,23 @@ def test_nut_movement_beyond_the_deadband_changes_the_prediction():
     assert lp.status(2.0).values["nut_position_m"] == "0.12"
 
 
+def test_contact_is_reintegrated_only_beyond_the_nut_deadband():
+    """A speed change recomputes; a nut drift within nut_deadband_m keeps the same geometry."""
+    lp = at(SQUEAK)
+    lp.set_nut_position(0.1, 1.0)
+    lp.update(1.0)
+    built = lp._nut_model.geometry.contact
+    lp.set_nut_position(0.1 + 0.0003, 2.0)             # within the 0.5 mm deadband
+    lp.set_speed(SQUEAK + 1.0, 2.0)
+    assert lp.update(2.0) is not None
+    assert lp._nut_model.geometry.contact is built
+    assert lp._nut_model.params.nut_position_m == 0.1
+    lp.set_nut_position(0.1 + 0.0008, 3.0)             # beyond it
+    lp.update(3.0)
+    assert lp._nut_model.geometry.contact is not built
+    assert lp._nut_model.params.nut_position_m == pytest.approx(0.1008)
+
+
 # ----------------------------------------------------------------------------- parameters
 def test_new_model_recomputes_with_the_new_parameters():
     lp = at(SQUEAK)

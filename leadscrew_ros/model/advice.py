@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from .predictor import SqueakModel
-from .sweep import _bands, growth_field, refine_crossings
+from .sweep import growth_field, refine_crossings, unstable_intervals
 
 _BAND_POINTS = 64          # log-spaced speeds between min_speed and the critical speed
 
@@ -24,7 +24,7 @@ def speed_bands(model: SqueakModel, load_n: float, direction: float = 1.0
     def f(x: float) -> float:
         return float(growth_field(model, sign * x, load_n).max_growth_rate)
 
-    return _bands(w, growth, refine_crossings(f, w, growth, rtol=1e-6))
+    return unstable_intervals(w, growth, refine_crossings(f, w, growth, rtol=1e-6))
 
 
 def safe_speed(bands: list[tuple[float, float]], speed_rad_s: float, lowest_rad_s: float,

@@ -155,7 +155,8 @@ def _unit_suffix(axis: str) -> str:
     return unit.replace("/", "_").replace("^", "").replace(" ", "") if unit != "1" else "1"
 
 
-def _bands(values: np.ndarray, growth: np.ndarray, boundaries: list[float]) -> list[tuple[float, float]]:
+def unstable_intervals(values: np.ndarray, growth: np.ndarray, boundaries: list[float]
+                       ) -> list[tuple[float, float]]:
     """Intervals of the axis with squeak, closed by refined boundaries or the grid ends."""
     bands, start, roots = [], None, iter(boundaries)
     for i, g in enumerate(growth):
@@ -193,7 +194,7 @@ def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = Non
     growth = np.array([p.max_growth_rate if p.valid else np.nan for p in predictions])
     boundaries = refine_crossings(_scalar_growth(model, fixed, axis), values, growth)
     return SweepResult(axis, values, fixed, predictions, boundaries,
-                       _bands(values, growth, boundaries))
+                       unstable_intervals(values, growth, boundaries))
 
 
 @dataclass(frozen=True)
