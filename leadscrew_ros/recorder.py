@@ -1,0 +1,305 @@
+"""MCAP recorder in rosbag2's layout, split by size and duration, safe against crashes.
+
+Each recording is a rosbag2 bag directory `<directory>/squeak_<UTC start>/` holding
+`squeak_<UTC start>_<index>.mcap` files and a `metadata.yaml`. Files use profile `ros2`, one
+channel per topic, `ros2msg` schemas with the complete definition from the installed message
+packages (`msgdefs`) and `cdr` payloads from `rclpy.serialization`.
+
+Crash safety: the open chunk is finished and handed to the operating system every
+`flush_period_s`, so SIGKILL loses at most that much (plus one housekeeping tick); the cut-off
+file is read by `logfile.read_messages(strict=False)` and repaired by `logfile.recover`.
+A failing disk (missing or read-only directory, file size limit, disk full) stops the recording
+with `error` naming the path; nothing is raised to the caller.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+from mcap.writer import CompressionType, Writer
+from rclpy.serialization import serialize_message
+
+from . import msgdefs
+
+COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
+                "none": CompressionType.NONE}
+_CHUNK_BYTES = 4 << 20         # chunks are closed by the flush period long before this size
+_ROS_DISTRO = "jazzy"
+
+
+_BASIC_SIZE = {"boolean": 1, "octet": 1, "char": 1, "int8": 1, "uint8": 1, "int16": 2,
+               "uint16": 2, "int32": 4, "uint32": 4, "float": 4, "int64": 8, "uint64": 8,
+               "double": 8}
+
+
+def cdr_payload(msg) -> bytes:
+    """CDR bytes of `msg`, cut at the end of its data. Fast CDR sizes the buffer with alignment
+    for empty sequences that it then does not write, leaving up to 4 bytes of uninitialised
+    memory per empty sequence at the end; Fast CDR reads the cut form back identically, and
+    strict readers (`rosbags`) reject the uncut one."""
+    data = serialize_message(msg)
+    try:
+        end = 4 + _cdr_end(msg, 0)
+    except _Unsized:
+        return data
+    return data[:end] if end < len(data) else data
+
+
+class _Unsized(Exception):
+    pass
+
+
+def _align(pos: int, size: int) -> int:
+    return pos + (-pos) % size
+
+
+def _cdr_end(msg, pos: int) -> int:
+    """Offset after the last byte of `msg` serialized at `pos` (XCDR1, as Fast CDR writes)."""
+    for name, slot in zip(msg.get_fields_and_field_types(), msg.SLOT_TYPES):
+        pos = _value_end(getattr(msg, name), slot, pos)
+    return pos
+
+
+def _value_end(value, slot, pos: int) -> int:
+    kind = type(slot).__name__
+    if kind == "BasicType":
+        size = _BASIC_SIZE.get(slot.typename)
+        if size is None:
+            raise _Unsized(slot.typename)
+        return _align(pos, size) + size
+    if kind in ("UnboundedString", "BoundedString"):
+        return _align(pos, 4) + 4 + len(value.encode()) + 1
+    if kind == "NamespacedType":
+        return _cdr_end(value, pos)
+    if kind in ("UnboundedSequence", "BoundedSequence", "Array"):
+        if kind != "Array":
+            pos = _align(pos, 4) + 4
+        if len(value) == 0:
+            return pos
+        item = slot.value_type
+        if type(item).__name__ == "BasicType" and item.typename in _BASIC_SIZE:
+            size = _BASIC_SIZE[item.typename]
+            return _align(pos, size) + size * len(value)
+        for v in value:
+            pos = _value_end(v, item, pos)
+        return pos
+    raise _Unsized(kind)
+
+
+@dataclass(frozen=True)
+class RecordSettings:
+    directory: str = "."
+    split_size_mb: float = 512.0          # 0: no split by size
+    split_duration_s: float = 600.0       # 0: no split by duration
+    compression: str = "zstd"
+    flush_period_s: float = 0.5           # bound of the data lost to SIGKILL
+
+    def __post_init__(self):
+        if self.compression not in COMPRESSIONS:
+            raise ValueError(f"compression must be one of {', '.join(COMPRESSIONS)}, "
+                             f"not {self.compression!r}")
+        if not self.directory:
+            raise ValueError("directory must not be empty")
+        for name in ("split_size_mb", "split_duration_s"):
+            value = getattr(self, name)
+            if not value >= 0.0 or value == float("inf"):
+                raise ValueError(f"{name} must be finite and >= 0, not {value}")
+        if not 0.0 < self.flush_period_s <= 10.0:
+            raise ValueError(f"flush_period_s must be in (0, 10], not {self.flush_period_s}")
+
+
+@dataclass
+class _FileStats:
+    path: Path
+    start_ns: int | None = None
+    end_ns: int | None = None
+    messages: int = 0
+
+
+@dataclass
+class _Topic:
+    name: str
+    type_name: str
+    count: int = 0
+    channel_id: int | None = None       # in the current file
+
+
+@dataclass
+class Recorder:
+    """Writes ROS messages to a split MCAP bag. Call `tick` periodically (flush and split)."""
+
+    settings: RecordSettings = field(default_factory=RecordSettings)
+    bag: Path | None = None              # directory of the recording in progress / last one
+    error: str = ""                      # why the last recording stopped on its own
+    files: list[_FileStats] = field(default_factory=list)
+    _out: object = None
+    _writer: Writer | None = None
+    _topics: dict[str, _Topic] = field(default_factory=dict)
+    _file_start_ns: int = 0
+    _last_flush_ns: int = 0
+
+    @property
+    def active(self) -> bool:
+        return self._writer is not None
+
+    @property
+    def path(self) -> Path | None:
+        """The file being written (None when not recording)."""
+        return self.files[-1].path if self.active else None
+
+    @property
+    def messages(self) -> int:
+        return sum(f.messages for f in self.files)
+
+    def start(self, now_ns: int) -> bool:
+        """Open a new bag; False (with `error`) if the directory cannot take it."""
+        if self.active:
+            return True
+        self.error, self.files, self._topics = "", [], {}
+        root = Path(self.settings.directory).expanduser()
+        if not root.is_dir():
+            self.error = f"{root}: record directory does not exist"
+            return False
+        stamp = _dt.datetime.fromtimestamp(now_ns / 1e9, _dt.timezone.utc).strftime(
+            "%Y_%m_%d-%H_%M_%S_%f")[:-3]
+        self.bag = root / f"squeak_{stamp}"
+        try:
+            self.bag.mkdir()
+        except OSError as exc:
+            self.error = f"{self.bag}: {exc.strerror or exc}"
+            return False
+        return self._open(now_ns)
+
+    def stop(self) -> None:
+        """Finish the current file (summary, index, footer) and write metadata.yaml."""
+        if not self.active:
+            return
+        self._close(finish=True)
+        self._write_metadata()
+
+    def write(self, topic: str, msg, log_time_ns: int, publish_time_ns: int | None = None
+              ) -> None:
+        """Record one message (publish_time defaults to the header stamp, else log_time)."""
+        if not self.active:
+            return
+        t = self._topics.get(topic)
+        if t is None:
+            t = self._topics[topic] = _Topic(topic, msgdefs.type_name(msg))
+        if publish_time_ns is None:
+            stamp = getattr(getattr(msg, "header", None), "stamp", None)
+            publish_time_ns = (stamp.sec * 1_000_000_000 + stamp.nanosec if stamp is not None
+                               else log_time_ns)
+        try:
+            if t.channel_id is None:
+                t.channel_id = self._register(t)
+            self._writer.add_message(t.channel_id, log_time_ns, cdr_payload(msg),
+                                     publish_time_ns, t.count)
+        except OSError as exc:
+            self._fail(exc)
+            return
+        t.count += 1
+        f = self.files[-1]
+        f.messages += 1
+        f.start_ns = log_time_ns if f.start_ns is None else min(f.start_ns, log_time_ns)
+        f.end_ns = log_time_ns if f.end_ns is None else max(f.end_ns, log_time_ns)
+
+    def tick(self, now_ns: int) -> None:
+        """Flush when the flush period is over; split when the file is too big or too old."""
+        if not self.active:
+            return
+        s = self.settings
+        try:
+            if now_ns - self._last_flush_ns >= s.flush_period_s * 1e9:
+                self._writer.flush()
+                self._last_flush_ns = now_ns
+            too_big = s.split_size_mb > 0 and self._out.tell() >= s.split_size_mb * 1e6
+            too_old = s.split_duration_s > 0 and now_ns - self._file_start_ns >= \
+                s.split_duration_s * 1e9
+        except OSError as exc:
+            self._fail(exc)
+            return
+        if too_big or too_old:
+            self._close(finish=True)
+            if not self.error and self._open(now_ns):
+                self._write_metadata()
+
+    # ------------------------------------------------------------------ files
+    def _open(self, now_ns: int) -> bool:
+        path = self.bag / f"{self.bag.name}_{len(self.files)}.mcap"
+        self.files.append(_FileStats(path))
+        try:
+            self._out = open(path, "wb")
+            self._writer = Writer(self._out, chunk_size=_CHUNK_BYTES,
+                                  compression=COMPRESSIONS[self.settings.compression])
+            self._writer.start(profile="ros2", library="leadscrew_ros recorder")
+            self._out.flush()
+        except OSError as exc:
+            self._fail(exc)
+            return False
+        for t in self._topics.values():
+            t.channel_id = None                  # each file registers its own channels
+        self._file_start_ns = self._last_flush_ns = now_ns
+        return True
+
+    def _register(self, t: _Topic) -> int:
+        schema = self._writer.register_schema(t.type_name, "ros2msg",
+                                              msgdefs.definition(t.type_name).encode())
+        return self._writer.register_channel(t.name, "cdr", schema,
+                                             {"offered_qos_profiles": ""})
+
+    def _close(self, finish: bool) -> None:
+        writer, out, self._writer, self._out = self._writer, self._out, None, None
+        try:
+            if finish:
+                writer.finish()
+            out.flush()
+            os.fsync(out.fileno())
+        except OSError as exc:
+            if finish:
+                self._fail(exc, writer_gone=True)
+        finally:
+            try:
+                out.close()
+            except OSError:
+                pass                  # the buffer could not be written: already reported
+
+    def _fail(self, exc: OSError, writer_gone: bool = False) -> None:
+        path = exc.filename or (self.files[-1].path if self.files else self.bag)
+        self.error = f"{path}: {exc.strerror or exc}; recording stopped"
+        if not writer_gone and self._writer is not None:
+            self._close(finish=False)
+
+    def _write_metadata(self) -> None:
+        """rosbag2 metadata.yaml, so that `ros2 bag info/play` and rosbags take the directory."""
+        files = [f for f in self.files if f.path.exists()]
+        starts = [f.start_ns for f in files if f.start_ns is not None]
+        ends = [f.end_ns for f in files if f.end_ns is not None]
+        start = min(starts, default=0)
+        info = {"rosbag2_bagfile_information": {
+            "version": 9,
+            "storage_identifier": "mcap",
+            "relative_file_paths": [f.path.name for f in files],
+            "starting_time": {"nanoseconds_since_epoch": start},
+            "duration": {"nanoseconds": max(ends, default=start) - start},
+            "message_count": sum(f.messages for f in files),
+            "topics_with_message_count": [
+                {"topic_metadata": {"name": t.name, "type": t.type_name,
+                                    "serialization_format": "cdr",
+                                    "offered_qos_profiles": "", "type_description_hash": ""},
+                 "message_count": t.count} for t in self._topics.values()],
+            "compression_format": "",
+            "compression_mode": "",
+            "files": [{"path": f.path.name,
+                       "starting_time": {"nanoseconds_since_epoch": f.start_ns or start},
+                       "duration": {"nanoseconds": (f.end_ns or start) - (f.start_ns or start)},
+                       "message_count": f.messages} for f in files],
+            "custom_data": {},
+            "ros_distro": _ROS_DISTRO}}
+        try:
+            (self.bag / "metadata.yaml").write_text(yaml.safe_dump(info, sort_keys=False))
+        except OSError as exc:
+            self.error = self.error or f"{self.bag / 'metadata.yaml'}: {exc.strerror or exc}"
