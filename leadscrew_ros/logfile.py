@@ -163,6 +163,8 @@ def _records(path: Path, buf, topics, strict: bool, info: LogInfo) -> Iterator[L
     pos = len(MAGIC)
     try:
         while True:
+            if pos == size:
+                raise _Damage(f"ends after {size} bytes without a footer (interrupted)")
             if pos + 9 > size:
                 raise _Damage(f"cut off at byte {pos} of {size}")
             op, length = _RECORD.unpack_from(buf, pos)

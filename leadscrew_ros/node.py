@@ -4,7 +4,9 @@ Subscribes (sensor-data QoS): motor_speed (std_msgs/Float64, rad/s), axial_load 
 nut_position (Float64, m) and joint_states (sensor_msgs/JointState, joint `joint_name`).
 Publishes (reliable, transient local, depth 1): squeak/risk, squeak/unstable_frequencies,
 squeak/active, squeak/modes, squeak/safe_speed and /diagnostics.
-The physics lives in `leadscrew_ros.model`; the recompute policy in `leadscrew_ros.live`.
+Records inputs and outputs to MCAP (`record.*` parameters, std_srvs/SetBool `~/record`).
+The physics lives in `leadscrew_ros.model`, the recompute policy in `leadscrew_ros.live`, the
+recording in `leadscrew_ros.recorder`.
 """
 
 from __future__ import annotations
@@ -29,10 +31,12 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityP
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray, MultiArrayDimension
+from std_srvs.srv import SetBool
 
 from .live import Level, LivePredictor, LiveSettings
 from .model import ParameterError, Prediction, ScrewParameters, SqueakModel
 from .model.parameters import FORMULATIONS
+from .recorder import COMPRESSIONS, Recorder, RecordSettings
 from .ros_env import confine_to_localhost
 
 NODE_NAME = "squeak_predictor"
@@ -66,8 +70,21 @@ NODE_PARAMETERS: dict[str, tuple] = {
                                      False),
     "hardware_id": ("leadscrew", "", "hardware_id of the diagnostic status", None, True),
     "input_queue_depth": (5, "1", "queue depth of the input subscriptions", (1, 1000), True),
+    "record.enabled": (False, "", "record inputs and outputs to MCAP (also ~/record)", None,
+                       False),
+    "record.directory": (".", "", "directory that receives one squeak_<UTC time> bag per "
+                         "recording; must exist", None, False),
+    "record.split_size_mb": (512.0, "MB", "start a new file beyond this size (0: never)",
+                             (0.0, 1e6), False),
+    "record.split_duration_s": (600.0, "s", "start a new file after this long (0: never)",
+                                (0.0, 1e7), False),
+    "record.compression": ("zstd", "", f"chunk compression: {' | '.join(COMPRESSIONS)}", None,
+                           False),
+    "record.flush_period_s": (0.5, "s", "hand recorded data to the OS this often: the most a "
+                              "killed process loses", (0.05, 10.0), False),
 }
 LIVE_FIELDS = {f.name for f in fields(LiveSettings)}
+RECORD_PREFIX = "record."
 
 
 def _descriptor(name: str, default, unit: str, description: str, bounds, read_only: bool,
@@ -89,7 +106,8 @@ class SqueakPredictorNode(Node):
         self._declare_parameters()
         self.live = LivePredictor(SqueakModel(self._screw_parameters({})),
                                   self._live_settings({}))
-        self._published: tuple[Level, str] | None = None     # last diagnostic level, message
+        self.recorder = Recorder(self._record_settings({}))
+        self._published: tuple | None = None          # verdict of the last /diagnostics
         self._last_diagnostics = -math.inf
 
         depth = self.get_parameter("input_queue_depth").value
@@ -102,7 +120,8 @@ class SqueakPredictorNode(Node):
         pub_events = PublisherEventCallbacks(use_default_callbacks=False)
 
         def subscribe(msg_type, topic, callback):
-            self.create_subscription(msg_type, topic, callback, sensor, event_callbacks=sub_events)
+            sub = self.create_subscription(msg_type, topic, lambda msg: callback(msg, sub),
+                                           sensor, event_callbacks=sub_events)
 
         def publisher(msg_type, topic):
             return self.create_publisher(msg_type, topic, LATCHED, event_callbacks=pub_events)
@@ -124,7 +143,14 @@ class SqueakPredictorNode(Node):
         # rate; the rate-limit timer runs only while an input waits for the rate limit.
         self.create_timer(HOUSEKEEPING_PERIOD_S, self._housekeeping)
         self._rate_timer = self._create_rate_timer()
+        self.create_service(SetBool, "~/record", self._on_record_service)
+        if self.get_parameter("record.enabled").value:
+            self._set_recording(True)
         self._publish_diagnostics(time.monotonic())
+
+    def destroy_node(self) -> None:
+        self.recorder.stop()                  # summary, index and footer: a clean file
+        super().destroy_node()
 
     # ---------------------------------------------------------------- parameters
     def _declare_parameters(self) -> None:
@@ -151,39 +177,87 @@ class SqueakPredictorNode(Node):
         values = self._values(changes)
         return LiveSettings(**{k: values[k] for k in LIVE_FIELDS})
 
+    def _record_settings(self, changes: dict) -> RecordSettings:
+        values = self._values(changes)
+        return RecordSettings(**{k[len(RECORD_PREFIX):]: v for k, v in values.items()
+                                 if k.startswith(RECORD_PREFIX) and k != "record.enabled"})
+
     def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        """The new set as a whole must make a valid model; else nothing changes."""
+        """The new set as a whole must make a valid model and recorder; else nothing changes."""
+        changes = {p.name: p.value for p in params}
         try:
-            self._screw_parameters({p.name: p.value for p in params})
-        except (ParameterError, TypeError) as exc:
+            self._screw_parameters(changes)
+            self._record_settings(changes)
+        except (ParameterError, TypeError, ValueError) as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
-        model_changed = any(p.name in ScrewParameters.__dataclass_fields__ for p in params)
-        model = SqueakModel(self._screw_parameters({})) if model_changed else self.live.model
-        self.live.set_model(model, self._live_settings({}))
-        if any(p.name == "max_rate_hz" for p in params):
-            self.destroy_timer(self._rate_timer)
-            self._rate_timer = self._create_rate_timer()
-        self._recompute(time.monotonic())
+        names = {p.name for p in params}
+        if names & {f.name for f in fields(ScrewParameters)} | LIVE_FIELDS:
+            model_changed = bool(names & set(ScrewParameters.__dataclass_fields__))
+            model = SqueakModel(self._screw_parameters({})) if model_changed else self.live.model
+            self.live.set_model(model, self._live_settings({}))
+            if "max_rate_hz" in names:
+                self.destroy_timer(self._rate_timer)
+                self._rate_timer = self._create_rate_timer()
+            self._recompute(time.monotonic())
+        if any(n.startswith(RECORD_PREFIX) for n in names):
+            settings = self._record_settings({})
+            if settings != self.recorder.settings:      # takes effect with a new bag
+                self.recorder.stop()
+                self.recorder = Recorder(settings)
+            self._set_recording(self.get_parameter("record.enabled").value)
 
     def _create_rate_timer(self):
         timer = self.create_timer(1.0 / self.live.settings.max_rate_hz, self._on_rate_timer)
         timer.cancel()
         return timer
 
+    # ---------------------------------------------------------------- recording
+    def _set_recording(self, on: bool) -> None:
+        if on and not self.recorder.active:
+            if self.recorder.start(self.get_clock().now().nanoseconds):
+                self.get_logger().info(f"recording to {self.recorder.bag}")
+            else:
+                self.get_logger().error(f"recording failed: {self.recorder.error}")
+        elif not on and self.recorder.active:
+            self.recorder.stop()
+            self.get_logger().info(f"recording stopped: {self.recorder.bag}")
+        # /diagnostics follows within a housekeeping period: the verdict includes recording
+
+    def _on_record_service(self, request: SetBool.Request, response: SetBool.Response
+                           ) -> SetBool.Response:
+        """Start (data=true) or stop recording; `record.enabled` follows."""
+        self.set_parameters([Parameter("record.enabled", value=bool(request.data))])
+        response.success = self.recorder.active == request.data
+        response.message = (str(self.recorder.path) if self.recorder.active else
+                            self.recorder.error or f"stopped; last bag: {self.recorder.bag}")
+        return response
+
+    def _record(self, topic: str, msg) -> None:
+        if self.recorder.active:
+            self.recorder.write(topic, msg, self.get_clock().now().nanoseconds)
+
+    def _publish(self, publisher, msg) -> None:
+        publisher.publish(msg)
+        self._record(publisher.topic_name, msg)
+
     # ---------------------------------------------------------------- inputs
-    def _on_speed(self, msg: Float64) -> None:
+    def _on_speed(self, msg: Float64, sub) -> None:
+        self._record(sub.topic_name, msg)
         self._input(self.live.set_speed(msg.data, time.monotonic()))
 
-    def _on_load(self, msg: Float64) -> None:
+    def _on_load(self, msg: Float64, sub) -> None:
+        self._record(sub.topic_name, msg)
         self._input(self.live.set_load(msg.data, time.monotonic()))
 
-    def _on_nut_position(self, msg: Float64) -> None:
+    def _on_nut_position(self, msg: Float64, sub) -> None:
+        self._record(sub.topic_name, msg)
         self._input(self.live.set_nut_position(msg.data, time.monotonic()))
 
-    def _on_joint_states(self, msg: JointState) -> None:
+    def _on_joint_states(self, msg: JointState, sub) -> None:
+        self._record(sub.topic_name, msg)
         joint = self.get_parameter("joint_name").value
         if not joint or joint not in msg.name:
             return
@@ -216,14 +290,15 @@ class SqueakPredictorNode(Node):
             self._rate_timer.cancel()
 
     def _housekeeping(self) -> None:
+        self.recorder.tick(self.get_clock().now().nanoseconds)
         now = time.monotonic()
         if (now - self._last_diagnostics >= self.get_parameter("diagnostics_period_s").value
                 or self._verdict(now) != self._published):  # e.g. bad input, input went stale
             self._publish_diagnostics(now)
 
-    def _verdict(self, now: float) -> tuple[Level, str]:
+    def _verdict(self, now: float) -> tuple:
         status = self.live.status(now)
-        return status.level, status.message
+        return status.level, status.message, self.recorder.active, self.recorder.error
 
     def _recompute(self, now: float) -> None:
         p = self.live.update(now)
@@ -235,26 +310,42 @@ class SqueakPredictorNode(Node):
             self._publish_diagnostics(now)
 
     def _publish_prediction(self, p: Prediction) -> None:
-        self.risk_pub.publish(Float64(data=float(p.risk)))
+        self._publish(self.risk_pub, Float64(data=float(p.risk)))
         freqs = Float64MultiArray(data=p.unstable_frequencies_hz)
         freqs.layout.dim = [MultiArrayDimension(label="frequency_hz", size=len(freqs.data),
                                                 stride=len(freqs.data))]
-        self.frequencies_pub.publish(freqs)
-        self.active_pub.publish(Bool(data=not p.stable))
-        self.modes_pub.publish(modes_message(p))
+        self._publish(self.frequencies_pub, freqs)
+        self._publish(self.active_pub, Bool(data=not p.stable))
+        self._publish(self.modes_pub, modes_message(p))
         if self.live.safe_speed_rad_s is not None:
-            self.safe_speed_pub.publish(Float64(data=float(self.live.safe_speed_rad_s)))
+            self._publish(self.safe_speed_pub, Float64(data=float(self.live.safe_speed_rad_s)))
 
     def _publish_diagnostics(self, now: float) -> None:
         status = self.live.status(now)
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
+        hardware_id = self.get_parameter("hardware_id").value
         msg.status = [DiagnosticStatus(
             level=bytes([int(status.level)]), name=f"{self.get_name()}: squeak prediction",
-            message=status.message, hardware_id=self.get_parameter("hardware_id").value,
-            values=[KeyValue(key=k, value=v) for k, v in status.values.items()])]
-        self.diagnostics_pub.publish(msg)
-        self._published, self._last_diagnostics = (status.level, status.message), now
+            message=status.message, hardware_id=hardware_id,
+            values=[KeyValue(key=k, value=v) for k, v in status.values.items()]),
+            self._recording_status(hardware_id)]
+        self._publish(self.diagnostics_pub, msg)
+        self._published, self._last_diagnostics = self._verdict(now), now
+
+    def _recording_status(self, hardware_id: str) -> DiagnosticStatus:
+        r = self.recorder
+        if r.error:
+            level, message = Level.ERROR, r.error
+        elif r.active:
+            level, message = Level.OK, f"recording to {r.path}"
+        else:
+            level, message = Level.OK, "not recording"
+        values = {"bag": str(r.bag or ""), "files": str(len(r.files)),
+                  "messages": str(r.messages)}
+        return DiagnosticStatus(level=bytes([int(level)]), name=f"{self.get_name()}: recording",
+                                message=message, hardware_id=hardware_id,
+                                values=[KeyValue(key=k, value=v) for k, v in values.items()])
 
 
 def modes_message(p: Prediction) -> Float64MultiArray:

@@ -18,11 +18,23 @@ DEFAULTS = {**{f.name: (f.default, f.type) for f in fields(ScrewParameters)},
             **{name: (spec[0], type(spec[0]).__name__) for name, spec in NODE_PARAMETERS.items()}}
 
 
+def _flat(tree: dict, prefix: str = "") -> dict:
+    """ROS parameter names of a nested ros__parameters mapping ({'record': {'enabled': x}} ->
+    'record.enabled')."""
+    out = {}
+    for key, value in tree.items():
+        if isinstance(value, dict):
+            out.update(_flat(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
 def _params(path: Path = CONFIG) -> dict:
     doc = yaml.safe_load(path.read_text())
     assert list(doc) == ["squeak_predictor"]
     assert list(doc["squeak_predictor"]) == ["ros__parameters"]
-    return doc["squeak_predictor"]["ros__parameters"]
+    return _flat(doc["squeak_predictor"]["ros__parameters"])
 
 
 def _same(value, default, typ: str) -> bool:
@@ -33,7 +45,7 @@ def _same(value, default, typ: str) -> bool:
 
 def test_node_parameter_types_are_plain():
     assert set(FIELDS).isdisjoint(NODE_PARAMETERS)
-    assert {t for _, t in DEFAULTS.values()} <= {"float", "int", "str"}
+    assert {t for _, t in DEFAULTS.values()} <= {"float", "int", "str", "bool"}
 
 
 def test_keys_are_the_dataclass_fields_and_the_node_parameters():
@@ -50,7 +62,8 @@ def test_value_is_the_default_with_the_right_type(name):
 
 def test_every_entry_has_a_unit_comment():
     lines = [ln for ln in CONFIG.read_text().splitlines()
-             if ln.startswith("    ") and not ln.lstrip().startswith("#")]
+             if ln.startswith("    ") and not ln.lstrip().startswith("#")
+             and not ln.rstrip().endswith(":")]                 # nested-name headers
     assert len(lines) == len(DEFAULTS)
     for ln in lines:
         assert "# [" in ln and "]" in ln.split("# [", 1)[1], ln
@@ -61,7 +74,7 @@ def test_defaults_build_valid_parameters():
     assert ScrewParameters(**screw) == ScrewParameters()
 
 
-ROS_TYPES = {"float": "DOUBLE", "int": "INTEGER", "str": "STRING"}
+ROS_TYPES = {"float": "DOUBLE", "int": "INTEGER", "str": "STRING", "bool": "BOOL"}
 
 
 def test_ros_reads_the_types_we_mean():
@@ -119,7 +132,8 @@ def test_node_takes_every_value_from_the_file(tmp_path):
     really overrides them."""
     changed = {"radius_m": 0.006, "n_bending": 5, "formulation": "consistent",
                "max_rate_hz": 50.0, "stale_timeout_s": 2.5, "joint_name": "screw_joint",
-               "hardware_id": "screw_7", "input_queue_depth": 7}
+               "hardware_id": "screw_7", "input_queue_depth": 7,
+               "record.split_duration_s": 30.0, "record.compression": "lz4"}
     doc = {"squeak_predictor": {"ros__parameters": {**_params(), **changed}}}
     path = tmp_path / "changed.yaml"
     path.write_text(yaml.safe_dump(doc))

@@ -1,0 +1,472 @@
+"""MCAP recording by the squeak_predictor node: round trip through three independent readers,
+the ~/record service, splitting, compression, disk errors, and crash safety (SIGKILL/SIGTERM of
+a node process). Uses the launch-free `Ros` world of test_node.py."""
+
+from __future__ import annotations
+
+import array
+import dataclasses
+import os
+import resource
+import signal
+import subprocess
+import time
+import uuid
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message
+from rosbags.rosbag2 import Reader as RosbagsReader
+from rosbags.typesys import Stores, get_typestore
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+from std_srvs.srv import SetBool
+
+from leadscrew_ros import msgdefs
+from leadscrew_ros.logfile import LogError, inspect, is_complete, log_files, read_log, recover
+from leadscrew_ros.recorder import Recorder, RecordSettings, cdr_payload
+from test_node import COLLECT, LOAD, SQUEAK, Ros, at, node_command, wait_initialised
+from test_demo import stop as stop_processes
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+
+
+@pytest.fixture
+def ros():
+    r = Ros()
+    try:
+        yield r
+    finally:
+        r.close()
+
+
+def plain(value):
+    """A message (rclpy, mcap_ros2 or rosbags object) as nested Python lists/dicts/scalars."""
+    if isinstance(value, (bytes, bytearray)) and len(value) == 1:
+        return value[0]                                  # rclpy 'byte' fields
+    if isinstance(value, (list, tuple, array.array, np.ndarray)):
+        return [plain(v) for v in value]
+    if isinstance(value, (np.generic,)):
+        return value.item()
+    fields = getattr(value, "get_fields_and_field_types", None)
+    if fields is not None:                                  # rclpy
+        names = list(fields())
+    elif dataclasses.is_dataclass(value):                   # rosbags, mcap_ros2
+        names = [f.name for f in dataclasses.fields(value)    # not __msgtype__, constants
+                 if not f.name.startswith("_") and not f.name.isupper()]
+    else:
+        names = [n for n in getattr(value, "__slots__", ()) if not n.startswith("_")]
+    if names:
+        return {n: plain(getattr(value, n)) for n in names}
+    return value
+
+
+def spy_publications(node) -> list[tuple[str, object]]:
+    """Every (topic, message) the node publishes from now on."""
+    published, publish = [], node._publish
+    node._publish = lambda pub, msg: (published.append((pub.topic_name, msg)),
+                                      publish(pub, msg))
+    return published
+
+
+def joint_state(angle: float, speed: float) -> JointState:
+    js = JointState(name=["screw"], position=[angle], velocity=[speed])
+    js.header.stamp.sec, js.header.stamp.nanosec = 1_700_000_000, 123_456_789
+    return js
+
+
+def drive(ros: Ros, node) -> list[tuple[str, object]]:
+    """Inputs on all four topics through the squeak band and out; waits for each answer."""
+    sent = []
+    for speed, nut in ((5.0, 0.10), (SQUEAK, 0.12), (40.0, 0.12), (100.0, 0.14)):
+        for topic, msg in (("nut_position", Float64(data=nut)),
+                           ("axial_load", Float64(data=LOAD)),
+                           ("motor_speed", Float64(data=speed))):
+            ros.publisher(topic).publish(msg)
+            sent.append((f"{ros.ns}/{topic}", msg))
+        ros.spin_until(lambda s=speed: node.live.inputs.speed_rad_s == s, what="the speed")
+        ros.spin_until(lambda: not node.live.changed(), what="the recompute")
+    js = joint_state(1.5, 30.0)
+    ros.publisher("joint_states").publish(js)
+    sent.append((f"{ros.ns}/joint_states", js))
+    ros.spin_until(lambda: node.live.inputs.speed_rad_s == 30.0, what="joint_states")
+    ros.drain()
+    return sent
+
+
+def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
+    node = ros.start(**{"record.directory": str(tmp_path), "joint_name": "screw"})
+    published = spy_publications(node)
+    assert node.set_parameters([Parameter("record.enabled", value=True)])[0].successful
+    sent = drive(ros, node)
+    bag = node.recorder.bag
+    node.destroy_node()                                   # closes the file cleanly
+    ros.executor.remove_node(node)
+    ros.node = None
+    expected = sent + published
+    assert {t for t, _ in published} >= {f"{ros.ns}/squeak/risk", f"{ros.ns}/squeak/modes",
+                                         f"{ros.ns}/squeak/unstable_frequencies",
+                                         f"{ros.ns}/squeak/active", "/diagnostics"}
+    files = log_files(bag)
+    assert len(files) == 1 and is_complete(files[0])
+    assert (bag / "metadata.yaml").is_file()
+
+    # 1. the mcap library's indexed reader: layout as rosbag2 writes it
+    by_topic: dict[str, list] = {}
+    with open(files[0], "rb") as f:
+        reader = make_reader(f)
+        assert reader.get_header().profile == "ros2"
+        summary = reader.get_summary()
+        assert summary.statistics.message_count == len(expected)
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            assert schema.encoding == "ros2msg" and channel.message_encoding == "cdr"
+            assert schema.data.decode() == msgdefs.definition(schema.name)
+            by_topic.setdefault(channel.topic, []).append((schema.name, message))
+    for topic in {t for t, _ in expected}:
+        want = [m for t, m in expected if t == topic]
+        got = by_topic[topic]
+        assert [deserialize_message(m.data, type(want[0])) for _, m in got] == want, topic
+        assert all(name == msgdefs.type_name(want[0]) for name, _ in got)
+        times = [m.log_time for _, m in got]
+        assert times == sorted(times)
+        for (_, m), w in zip(got, want):                  # publish_time = header stamp
+            stamp = getattr(getattr(w, "header", None), "stamp", None)
+            assert m.publish_time == (stamp.sec * 10**9 + stamp.nanosec if stamp is not None
+                                      else m.log_time)
+
+    # 2. mcap-ros2-support's dynamic decoder (from the schema text alone)
+    decoded: dict[str, list] = {}
+    with open(files[0], "rb") as f:
+        for _, channel, _, msg in make_reader(
+                f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            decoded.setdefault(channel.topic, []).append(plain(msg))
+    for topic in decoded:
+        want = [plain(m) for t, m in expected if t == topic]
+        assert len(decoded[topic]) == len(want)
+        for got, w in zip(decoded[topic], want):
+            assert got == w, (topic, got, w)
+
+    # 3. rosbags, independent of both, reading the bag directory (metadata.yaml)
+    from_rosbags: dict[str, list] = {}
+    with RosbagsReader(bag) as reader:
+        assert reader.message_count == len(expected)
+        for conn, _, raw in reader.messages():
+            from_rosbags.setdefault(conn.topic, []).append(
+                plain(TYPESTORE.deserialize_cdr(raw, conn.msgtype)))
+    assert set(from_rosbags) == {t for t, _ in expected}
+    for topic in from_rosbags:
+        assert from_rosbags[topic] == [plain(m) for t, m in expected if t == topic], topic
+
+
+def test_cdr_payload_is_what_rclpy_and_rosbags_read():
+    """Fast CDR leaves uninitialised padding after empty sequences; the recorder cuts it."""
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
+    messages = [JointState(), JointState(name=["a"], position=[1.0], velocity=[2.0]),
+                Float64MultiArray(), Float64(data=0.0), DiagnosticArray()]
+    messages += [Float64MultiArray(layout=MultiArrayLayout(
+        dim=[MultiArrayDimension(label="x" * k, size=k, stride=k)], data_offset=k))
+        for k in range(8)]
+    messages += [JointState(name=["j" * k]) for k in range(8)]
+    for msg in messages:
+        data = cdr_payload(msg)
+        assert deserialize_message(data, type(msg)) == msg
+        assert plain(TYPESTORE.deserialize_cdr(data, msgdefs.type_name(msg))) == plain(msg)
+
+
+def test_record_service_starts_and_stops_and_the_parameter_follows(ros, tmp_path):
+    node = ros.start(**{"record.directory": str(tmp_path)})
+    client = ros.probe.create_client(SetBool, f"{ros.ns}/squeak_predictor/record")
+    ros.spin_until(client.service_is_ready, 5.0, "the ~/record service")
+
+    def call(on: bool) -> SetBool.Response:
+        future = client.call_async(SetBool.Request(data=on))
+        ros.spin_until(future.done, 5.0, "the service response")
+        return future.result()
+
+    bags = []
+    for _ in range(2):
+        r = call(True)
+        assert r.success and r.message.endswith(".mcap"), r.message
+        assert node.get_parameter("record.enabled").value is True
+        at(ros, SQUEAK)
+        bags.append(node.recorder.bag)
+        r = call(False)
+        assert r.success and str(bags[-1]) in r.message
+        assert node.get_parameter("record.enabled").value is False
+    assert bags[0] != bags[1]
+    for bag in bags:
+        info = inspect(log_files(bag)[0])
+        assert info.complete and info.counts[f"{ros.ns}/squeak/risk"] >= 1
+
+
+def test_recording_splits_by_duration_and_by_size(ros, tmp_path):
+    for split, value in (("record.split_duration_s", 0.3), ("record.split_size_mb", 0.004)):
+        directory = tmp_path / split
+        directory.mkdir()
+        node = ros.start(**{"record.enabled": True, "record.directory": str(directory),
+                            "record.flush_period_s": 0.05, "record.compression": "none",
+                            split: value})
+        end, i = time.monotonic() + 1.2, 0
+        while time.monotonic() < end:
+            ros.publisher("motor_speed").publish(Float64(data=10.0 + i % 20))
+            ros.publisher("axial_load").publish(Float64(data=LOAD))
+            ros.executor.spin_once(timeout_sec=0.005)
+            i += 1
+        bag = node.recorder.bag
+        node.destroy_node()
+        ros.executor.remove_node(node)
+        ros.node = None
+        files = log_files(bag)
+        assert len(files) >= 3, (split, files)
+        assert all(is_complete(f) for f in files)
+        assert [f.name for f in files] == [f"{bag.name}_{k}.mcap" for k in range(len(files))]
+        messages = list(read_log(bag))
+        times = [m.log_time_ns for m in messages]
+        assert times == sorted(times)                     # split files continue in order
+        speeds = [m for m in messages if m.topic.name.endswith("/motor_speed")]
+        assert len(speeds) == sum(inspect(f).counts[speeds[0].topic.name] for f in files)
+        meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+        assert meta["relative_file_paths"] == [f.name for f in files]
+        assert meta["message_count"] == len(messages)
+        for f in files[:-1]:                   # split at the first check past the limit
+            if split == "record.split_size_mb":
+                assert f.stat().st_size >= value * 1e6
+            else:
+                info = inspect(f)
+                assert (info.end_ns - info.start_ns) / 1e9 <= value + 0.1
+
+
+@pytest.mark.parametrize("compression, chunk", [("zstd", "zstd"), ("lz4", "lz4"),
+                                                ("none", "")])
+def test_compression_setting_reaches_the_chunks(tmp_path, compression, chunk):
+    rec = Recorder(RecordSettings(directory=str(tmp_path), compression=compression))
+    assert rec.start(time.time_ns())
+    for i in range(200):
+        rec.write("/motor_speed", Float64(data=float(i)), time.time_ns())
+    rec.stop()
+    with open(log_files(rec.bag)[0], "rb") as f:
+        indexes = make_reader(f).get_summary().chunk_indexes
+    assert indexes and {c.compression for c in indexes} == {chunk}
+
+
+@pytest.mark.parametrize("name, value, words", [
+    ("record.compression", "gzip", ["compression", "zstd"]),
+    ("record.split_size_mb", -1.0, ["record.split_size_mb"]),
+    ("record.flush_period_s", 0.0, ["record.flush_period_s"]),
+    ("record.directory", "", ["directory"]),
+])
+def test_invalid_record_parameters_are_rejected(ros, name, value, words):
+    node = ros.start()
+    result = node.set_parameters([Parameter(name, value=value)])[0]
+    assert not result.successful
+    assert all(w in result.reason for w in words), result.reason
+    assert node.get_parameter(name).value != value
+
+
+def recording_status(ros: Ros, predicate, timeout: float = 3.0):
+    """The latest 'recording' diagnostic of this test's node, once it satisfies predicate."""
+    found = []
+
+    def check():
+        msg = ros.latest.get("/diagnostics")
+        found[:] = [s for s in (msg.status if msg else []) if s.name.endswith(": recording")]
+        return bool(found) and predicate(found[0])
+
+    ros.spin_until(check, timeout, "a matching recording diagnostic")
+    return found[0]
+
+
+def test_missing_or_unwritable_directory_is_an_error_and_predictions_continue(ros, tmp_path):
+    missing = tmp_path / "no" / "such" / "dir"
+    node = ros.start(**{"record.enabled": True, "record.directory": str(missing)})
+    status = recording_status(ros, lambda s: s.level == b"\x02")
+    assert str(missing) in status.message and "does not exist" in status.message
+    at(ros, SQUEAK)                                      # still predicting
+    assert not node.recorder.active
+    # A directory this process may not write to. Root ignores file modes; the kernel's own
+    # sysfs refuses anyone.
+    if os.geteuid() == 0:
+        readonly = Path("/sys/kernel")
+    else:
+        readonly = tmp_path / "readonly"
+        readonly.mkdir(mode=0o555)
+    node.set_parameters([Parameter("record.directory", value=str(readonly))])
+    status = recording_status(ros, lambda s: str(readonly) in s.message)
+    assert status.level == b"\x02", status.message
+    assert "recording" not in ros.latest["/diagnostics"].status[0].message  # prediction status
+    at(ros, 40.0)
+
+
+# ----------------------------------------------------------------------------- processes
+def start_recording_node(tmp_path: Path, ns: str, extra: list[str] = (), preexec_fn=None
+                         ) -> tuple[subprocess.Popen, Path]:
+    directory = tmp_path / "bags"
+    directory.mkdir()
+    err = open(tmp_path / "node.stderr", "w+")
+    proc = subprocess.Popen(
+        [*node_command(), "--ros-args", "-r", f"__ns:={ns}", "-p", f"hardware_id:=hw_{ns[2:]}",
+         "-p", "record.enabled:=true", "-p", f"record.directory:={directory}", *extra],
+        stdout=subprocess.DEVNULL, stderr=err, env=dict(os.environ), preexec_fn=preexec_fn)
+    proc.files = [err, err]
+    return proc, directory
+
+
+class Feed:
+    """Probe side of a node process: publishes inputs, collects risk and recording status."""
+
+    def __init__(self, ns: str):
+        self.ros = Ros()
+        self.node = Node("feed", context=self.ros.ctx, namespace=ns)
+        self.ros.executor.add_node(self.node)
+        self.risk, self.recording = [], []
+        self.node.create_subscription(Float64, "squeak/risk", self.risk.append, COLLECT)
+        self.node.create_subscription(
+            DiagnosticArray, "/diagnostics", lambda m: self.recording.extend(
+                s for s in m.status if s.hardware_id == f"hw_{ns[2:]}"
+                and s.name.endswith(": recording")), COLLECT)
+        self.pubs = [self.node.create_publisher(type_, topic, 10) for type_, topic in
+                     ((Float64, "motor_speed"), (Float64, "axial_load"),
+                      (JointState, "joint_states"))]
+        for pub in self.pubs:
+            self.ros.spin_until(lambda p=pub: p.get_subscription_count() > 0,
+                                10.0, f"node subscribing {pub.topic_name}")
+        self.sent = 0
+
+    def send(self, i: int, joints: int = 1) -> None:
+        self.pubs[0].publish(Float64(data=SQUEAK + i % 20))
+        self.pubs[1].publish(Float64(data=LOAD))
+        if joints > 1:
+            self.pubs[2].publish(JointState(name=[f"joint_{k:04d}" for k in range(joints)],
+                                            position=[0.0] * joints))
+        self.sent += 1
+        self.ros.executor.spin_once(timeout_sec=0.0)
+
+    def run(self, seconds: float, rate_hz: float = 200.0, **kw) -> None:
+        t0 = time.monotonic()
+        k = 0
+        while (now := time.monotonic()) < t0 + seconds:
+            if now >= t0 + k / rate_hz:
+                self.send(k, **kw)
+                k += 1
+            self.ros.executor.spin_once(timeout_sec=0.001)
+
+    def close(self) -> None:
+        self.node.destroy_node()
+        self.ros.close()
+
+
+@pytest.fixture
+def ns():
+    return f"/t{uuid.uuid4().hex}"
+
+
+def test_sigkill_loses_at_most_one_second_and_the_file_is_recoverable(tmp_path, ns):
+    proc, directory = start_recording_node(tmp_path, ns)
+    feed = None
+    try:
+        wait_initialised([proc])
+        feed = Feed(ns)
+        deadline = time.monotonic() + 10
+        while not feed.risk:                   # the node is up and answering
+            assert time.monotonic() < deadline, "no answer from the node process"
+            feed.run(0.05)
+        feed.run(2.0)                          # 2 s of 200 Hz speed + load
+        killed_ns = time.time_ns()
+        proc.kill()
+        proc.wait(timeout=10)
+    finally:
+        stop_processes(proc)
+        if feed is not None:
+            feed.close()
+    files = log_files(next(directory.iterdir()))
+    assert len(files) == 1 and not is_complete(files[0])
+    with pytest.raises(LogError, match="recover"):
+        list(read_log(files[0]))
+    info = inspect(files[0])
+    speed_topic = f"{ns}/motor_speed"
+    assert info.counts[speed_topic] > 0
+    loss_s = (killed_ns - info.end_ns) / 1e9
+    print(f"SIGKILL: {info.messages} messages readable, last one {loss_s:.3f} s before the "
+          f"kill ({info.damage or 'no damage'})")
+    assert 0.0 <= loss_s <= 1.0
+    fixed = tmp_path / "recovered.mcap"
+    recovered = recover(files[0], fixed)
+    assert recovered.messages == info.messages and is_complete(fixed)
+    with open(fixed, "rb") as f:
+        assert make_reader(f).get_summary().statistics.message_count == info.messages
+    with RosbagsReader(fixed) as reader:
+        assert reader.message_count == info.messages
+
+
+def test_sigterm_closes_the_file_with_summary_and_index(tmp_path, ns):
+    proc, directory = start_recording_node(tmp_path, ns)
+    feed = None
+    try:
+        wait_initialised([proc])
+        feed = Feed(ns)
+        deadline = time.monotonic() + 10
+        while not feed.risk:
+            assert time.monotonic() < deadline, "no answer from the node process"
+            feed.run(0.05)
+        feed.run(0.5)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=10) == 0
+    finally:
+        stop_processes(proc)
+        if feed is not None:
+            feed.close()
+    bag = next(directory.iterdir())
+    files = log_files(bag)
+    assert len(files) == 1 and is_complete(files[0])
+    with open(files[0], "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary.statistics.message_count == inspect(files[0]).messages > 100
+    assert summary.chunk_indexes
+    assert (bag / "metadata.yaml").is_file()
+
+
+def test_disk_full_stops_the_recording_with_an_error_and_predictions_continue(tmp_path, ns):
+    """RLIMIT_FSIZE makes every write beyond 3 MB fail with EFBIG, as a full disk would."""
+    limit = 3_000_000
+
+    def small_disk():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    proc, directory = start_recording_node(tmp_path, ns, ["-p", "record.compression:=none",
+                                                          "-p", "record.flush_period_s:=0.1"],
+                                           preexec_fn=small_disk)
+    feed = None
+    try:
+        wait_initialised([proc])
+        feed = Feed(ns)
+        deadline = time.monotonic() + 10
+        while not feed.risk:
+            assert time.monotonic() < deadline, "no answer from the node process"
+            feed.run(0.05)
+        deadline = time.monotonic() + 20
+        while not any(s.level == b"\x02" for s in feed.recording):
+            assert time.monotonic() < deadline, "no recording error while the disk filled up"
+            feed.run(0.1, joints=200)             # ~8 kB per joint_states message
+        error = next(s for s in feed.recording if s.level == b"\x02")
+        assert str(directory) in error.message and "File too large" in error.message, \
+            error.message
+        before = len(feed.risk)
+        feed.run(0.5)
+        assert len(feed.risk) > before            # still predicting
+        assert proc.poll() is None
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=10) == 0
+    finally:
+        stop_processes(proc)
+        if feed is not None:
+            feed.close()
+    bag = next(directory.iterdir())
+    info = inspect(log_files(bag)[0])                   # what was written before stays readable
+    assert info.messages > 0
