@@ -333,7 +333,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     profile = _stroke(args.duration)
     from .demo import run_demo
     try:
-        return run_demo(profile.duration_s)
+        return run_demo(profile.duration_s,
+                        record_dir=None if args.no_record else Path(args.record_dir))
     except RuntimeError as exc:          # e.g. rclpy could not start, no subscription
         raise CliError(str(exc)) from None
 
@@ -420,6 +421,10 @@ def build_parser() -> Parser:
     p.add_argument("--duration", type=finite, metavar="S",
                    help="stroke duration [s] (default 12; at most about 13, or the nut would "
                         "leave the screw)")
+    p.add_argument("--record-dir", default="squeak_demo", metavar="DIR",
+                   help="the predictor records inputs and outputs into a bag in DIR (created; "
+                        "default ./squeak_demo)")
+    p.add_argument("--no-record", action="store_true", help="do not record")
     p.set_defaults(run=cmd_demo)
 
     p = sub.add_parser("simulate", help="publish a simulated power-seat stroke for a separately "

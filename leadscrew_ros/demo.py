@@ -3,7 +3,8 @@
 One process, one rclpy Context, one single-threaded executor with three nodes: the predictor
 (`SqueakPredictorNode`), the simulator (`ActuatorSimulator`, a power-seat stroke) and a monitor
 that listens to the predictor's outputs like any other client would (over DDS, with the
-predictor's latched QoS). Prints a live one-line status and a summary, then exits by itself.
+predictor's latched QoS). The predictor records its inputs and outputs to an MCAP bag. Prints a
+live one-line status and a summary (with the recording), then exits by itself.
 DDS stays on loopback, on a ROS_DOMAIN_ID of this process's own unless one is set.
 """
 
@@ -14,6 +15,7 @@ import shutil
 import sys
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TextIO
 
 import rclpy
@@ -22,10 +24,13 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.logging import LoggingSeverity
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from std_msgs.msg import Bool, Float64, Float64MultiArray
 
+from .logfile import LogError, inspect, log_files
 from .node import LATCHED, SqueakPredictorNode
+from .recorder import Recorder
 from .ros_env import close, confine_to_localhost
 from .simulator import (ActuatorSimulator, ActuatorState, StopSignals, StrokeProfile,
                         expected_squeak)
@@ -189,27 +194,55 @@ def summary(profile: StrokeProfile, r: SqueakRecord, elapsed_s: float, finished:
     return "\n".join(lines)
 
 
+def recording_summary(recorder: Recorder) -> str:
+    """One line on the bag the predictor wrote, read back from disk."""
+    if recorder.bag is None:
+        return f"  recording:          none ({recorder.error or 'not enabled'})"
+    try:
+        files = log_files(recorder.bag)
+        infos = [inspect(f) for f in files]
+    except LogError as exc:
+        return f"  recording:          unreadable: {exc}"
+    size = sum(f.stat().st_size for f in files)
+    starts = [i.start_ns for i in infos if i.start_ns is not None]
+    ends = [i.end_ns for i in infos if i.end_ns is not None]
+    span = (max(ends) - min(starts)) / 1e9 if starts else 0.0
+    state = "complete" if all(i.complete for i in infos) else "NOT complete"
+    line = (f"  recording:          {recorder.bag} ({len(files)} file"
+            f"{'s' * (len(files) != 1)}, {size / 1e3:.0f} kB, {sum(i.messages for i in infos)} "
+            f"messages over {span:.1f} s, {len(infos[0].topics) if infos else 0} topics, {state})")
+    return line + (f"; error: {recorder.error}" if recorder.error else "")
+
+
 # ----------------------------------------------------------------------------- run
 def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float = 4.0,
-             out: TextIO | None = None) -> int:
+             out: TextIO | None = None, record_dir: Path | None = None) -> int:
     """Run predictor + simulator + monitor for one stroke; 0 when done, 128 + the signal number
-    on SIGINT (130) or SIGTERM (143), with the summary so far. A bad duration raises
-    ProfileError before anything starts; RuntimeError if rclpy or the discovery fails."""
+    on SIGINT (130) or SIGTERM (143), with the summary so far. The predictor records into a
+    bag in `record_dir` (created; None: no recording). A bad duration raises ProfileError
+    before anything starts; RuntimeError if rclpy or the discovery fails."""
     out = out or sys.stdout
     profile = StrokeProfile(duration_s=duration_s)
+    recording = []
+    if record_dir is not None:
+        Path(record_dir).mkdir(parents=True, exist_ok=True)
+        recording = [Parameter("record.enabled", value=True),
+                     Parameter("record.directory", value=str(record_dir))]
     confine_to_localhost(private_domain=True)
     tty = out.isatty()
     with StopSignals() as stop:
         ctx = Context()
         rclpy.init(context=ctx)
         nodes: list[Node] = []
-        executor = monitor = sim = None
+        executor = monitor = sim = predictor = None
         width, stopped = 0, time.monotonic()
         try:
             predictor = SqueakPredictorNode(context=ctx)
             # Its warnings (e.g. "no prediction" while the motor rests) repeat what the status
             # line shows; keep the terminal to the status line and the summary.
             predictor.get_logger().set_level(LoggingSeverity.ERROR)
+            if recording:
+                predictor.set_parameters_atomically(recording)
             nodes.append(predictor)
             monitor = SqueakMonitor(context=ctx)
             nodes.append(monitor)
@@ -258,6 +291,8 @@ def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float 
             expected = float(flags.mean() * profile.duration_s)
         print(summary(profile, monitor.record, sim.elapsed_s if sim else 0.0, finished,
                       expected), file=out, flush=True)
+    if predictor is not None and record_dir is not None:
+        print(recording_summary(predictor.recorder), file=out, flush=True)
     if finished:
         return 0
     print("leadscrew-squeak: interrupted", file=sys.stderr)

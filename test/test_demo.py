@@ -19,6 +19,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from std_msgs.msg import Float64
 
+from leadscrew_ros.logfile import inspect, log_files
 from leadscrew_ros.node import LATCHED
 
 REPO = Path(__file__).resolve().parents[1]
@@ -89,7 +90,8 @@ def test_demo_runs_a_stroke_and_summarises_it(tmp_path):
     proc = None
     try:
         t0 = time.monotonic()
-        proc = start(CLI + ["demo", "--duration", "3"], domain(0), tmp_path, "demo")
+        proc = start(CLI + ["demo", "--duration", "3", "--record-dir", str(tmp_path / "rec")],
+                     domain(0), tmp_path, "demo")
         code = proc.wait(timeout=60)
         elapsed = time.monotonic() - t0
         out, err = output(proc)
@@ -114,12 +116,20 @@ def test_demo_runs_a_stroke_and_summarises_it(tmp_path):
     assert v["max_risk"] == 1.0 and v["predictions"] > 30
     lo, hi = v["speeds"]
     assert 0.5 <= lo < 5 and 30 < hi < 75                  # the band, not the 120 rad/s peak
+    # ... and the recording it names holds the stroke's inputs and every prediction
+    line = re.search(r"recording: +(\S+) \(1 file, \d+ kB, (\d+) messages .* complete\)", out)
+    assert line, out
+    counts = inspect(log_files(line[1])[0]).counts
+    assert sum(counts.values()) == int(line[2])
+    assert counts["/motor_speed"] >= 290 and counts["/axial_load"] >= 290      # 3 s at 100 Hz
+    assert counts["/squeak/risk"] == v["predictions"]
 
 
 def test_demo_stops_cleanly_on_sigterm(tmp_path):
     proc = None
     try:
-        proc = start(CLI + ["demo", "--duration", "10"], domain(1), tmp_path, "demo")
+        proc = start(CLI + ["demo", "--duration", "10", "--record-dir", str(tmp_path / "rec")],
+                     domain(1), tmp_path, "demo")
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline and proc.poll() is None:
             if re.search(r"^t +\d.*risk", output(proc)[0], re.M):      # predictions flowing
@@ -135,6 +145,7 @@ def test_demo_stops_cleanly_on_sigterm(tmp_path):
     assert err.strip() == "leadscrew-squeak: interrupted"
     assert "interrupted after" in out
     summary_values(out)                                           # a summary all the same
+    assert re.search(r"recording: .* messages .* complete\)", out), out   # closed cleanly
 
 
 # ----------------------------------------------------------------------------- simulate + node
