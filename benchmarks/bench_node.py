@@ -7,8 +7,10 @@ SingleThreadedExecutor (own Context), from just before a motor_speed publish to 
 squeak/risk, in the squeak band (20 rad/s, also safe-speed advice) and outside it (100 rad/s);
 (2) the same with the node as a separate process; (3) the node process's CPU use while the probe
 publishes motor_speed at 1 kHz (default parameters, slowly varying speed), the number of
-recomputes and whether the node kept up. DDS stays on loopback and on private ROS_DOMAIN_IDs
-(one per phase, derived from the PID, 101..200), also for the child processes.
+recomputes and whether the node kept up; (4) the overhead of MCAP recording (record.enabled,
+zstd, default flush period): benchmarks 1 and 3 again with the node recording, and the bag it
+wrote. DDS stays on loopback and on private ROS_DOMAIN_IDs (one per phase, derived from the PID,
+101..200), also for the child processes.
 `--profile` runs the in-process measurement once more under cProfile and prints where the time
 goes. See benchmarks/README.md.
 """
@@ -35,7 +37,7 @@ from importlib import metadata
 
 # Loopback only and a private domain per phase, before anything starts the RMW.
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-DOMAINS = [101 + (os.getpid() + 33 * k) % 100 for k in range(3)]   # distinct, 101..200
+DOMAINS = [101 + (os.getpid() + 19 * k) % 100 for k in range(5)]   # distinct, 101..200
 os.environ["ROS_DOMAIN_ID"] = str(DOMAINS[0])
 if "ROS_LOG_DIR" not in os.environ:
     _LOG_DIR = tempfile.mkdtemp(prefix="bench_node_log_")
@@ -55,6 +57,7 @@ from rclpy.event_handler import (PublisherEventCallbacks,  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data                        # noqa: E402
 from std_msgs.msg import Float64                                     # noqa: E402
 
+from leadscrew_ros.logfile import inspect, log_files                  # noqa: E402
 from leadscrew_ros.model import SqueakModel                          # noqa: E402
 from leadscrew_ros.node import LATCHED, SqueakPredictorNode          # noqa: E402
 
@@ -243,13 +246,30 @@ def both_runs(ex, probe, cfg) -> dict:
 
 
 # ---------------------------------------------------------------- 1 in-process
-def bench_in_process(cfg: dict, domain: int, profile: bool = False) -> dict:
+def record_params(record_dir: str | None) -> dict:
+    return {} if record_dir is None else {"record.enabled": True, "record.directory": record_dir}
+
+
+def bag_stats(record_dir: str) -> dict:
+    """The bag the node wrote into `record_dir`: files, bytes, messages, time span."""
+    files = [f for bag in sorted(os.scandir(record_dir), key=lambda e: e.name)
+             for f in log_files(bag.path)]
+    infos = [inspect(f) for f in files]
+    span = (max(i.end_ns for i in infos) - min(i.start_ns for i in infos)) / 1e9
+    return dict(files=len(files), bytes=sum(f.stat().st_size for f in files),
+                messages=sum(i.messages for i in infos), span_s=span,
+                complete=all(i.complete for i in infos))
+
+
+def bench_in_process(cfg: dict, domain: int, profile: bool = False,
+                     record_dir: str | None = None) -> dict:
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)
     node = probe = ex = None
     try:
         node = SqueakPredictorNode(context=ctx, parameter_overrides=[
-            Parameter("max_rate_hz", Parameter.Type.DOUBLE, 10000.0)])
+            Parameter(k, value=v) for k, v in
+            {"max_rate_hz": 10000.0, **record_params(record_dir)}.items()])
         probe = Probe(ctx)
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(node)
@@ -357,7 +377,7 @@ def burst_speed(t: float) -> float:
     return 40.0 + 30.0 * math.sin(2 * math.pi * t / 5.0)
 
 
-def bench_cpu(cfg: dict, domain: int) -> dict:
+def bench_cpu(cfg: dict, domain: int, record_dir: str | None = None) -> dict:
     expected_marker_risk = SqueakModel().predict(MARKER_SPEED, LOAD_N).risk
 
     def body(ex: SingleThreadedExecutor, probe: Probe, child: ChildNode) -> dict:
@@ -422,7 +442,20 @@ def bench_cpu(cfg: dict, domain: int) -> dict:
                     marker_latency_ms=marker_ms, kept_up=bool(ok and marker_ms < 50.0),
                     clk_tck=os.sysconf("SC_CLK_TCK"))
 
-    return with_child(domain, [], body)
+    return with_child(domain, [a for k, v in record_params(record_dir).items()
+                               for a in ("-p", f"{k}:={str(v).lower()}")], body)
+
+
+def bench_recording(cfg: dict, domains: list[int]) -> dict:
+    """Benchmarks 1 and 3 with the node recording; each bag read back after the node closed
+    it."""
+    res = {}
+    for key, run in (("in_process", lambda d: bench_in_process(cfg, domains[0], record_dir=d)),
+                     ("cpu", lambda d: bench_cpu(cfg, domains[1], record_dir=d))):
+        with tempfile.TemporaryDirectory(prefix="bench_node_bag_") as d:
+            res[key] = run(d)
+            res[key]["bag"] = bag_stats(d)
+    return res
 
 
 # ---------------------------------------------------------------- report
@@ -495,7 +528,33 @@ def table(res: dict) -> str:
     exits = ", ".join(f"benchmark {n} exit {res[k]['child']['returncode']}"
                       + (" (SIGKILL)" if res[k]["child"]["killed"] else "")
                       for n, k in ((2, "cross_process"), (3, "cpu")))
-    return f"{lat}\n\n{cpu}\n\nNode processes after SIGTERM: {exits}.\n\n{envline}"
+    return (f"{lat}\n\n{cpu}\n\n{recording_table(res)}\n\nNode processes after SIGTERM: "
+            f"{exits}.\n\n{envline}")
+
+
+def recording_table(res: dict) -> str:
+    rec = res["recording"]
+    rows = []
+    for run, what in (("band", "in-process latency, in the band"),
+                      ("clear", "in-process latency, no squeak")):
+        off, on = res["in_process"][run], rec["in_process"][run]
+        rows.append((what, f"p50 {fmt(off['p50_ms'], 3)} / p99 {fmt(off['p99_ms'], 3)} ms",
+                     f"p50 {fmt(on['p50_ms'], 3)} / p99 {fmt(on['p99_ms'], 3)} ms",
+                     f"p99 {on['p99_ms'] / off['p99_ms']:.2f}×"))
+    off, on = res["cpu"], rec["cpu"]
+    rows.append(("node CPU, 1 kHz motor_speed", f"{off['node_cpu_pct']:.1f} %",
+                 f"{on['node_cpu_pct']:.1f} %",
+                 f"+{on['node_cpu_pct'] - off['node_cpu_pct']:.1f} points"))
+    rows.append(("kept up at 1 kHz", "yes" if off["kept_up"] else "NO",
+                 "yes" if on["kept_up"] else "NO", ""))
+    bag = rec["cpu"]["bag"]
+    rate = bag["bytes"] / bag["span_s"] * 3600 / 1e6 if bag["span_s"] else math.nan
+    rows.append(("bag of the 1 kHz run", "–",
+                 f"{bag['files']} file, {bag['bytes'] / 1e6:.2f} MB, {bag['messages']} msgs "
+                 f"over {bag['span_s']:.1f} s ({rate:.0f} MB/h), "
+                 f"{'complete' if bag['complete'] else 'NOT complete'}", ""))
+    return ("| 4 recording overhead | recording off | recording on (zstd) | ratio |\n"
+            "|---|---|---|---|\n" + "\n".join("| " + " | ".join(r) + " |" for r in rows))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -523,11 +582,13 @@ def main(argv: list[str] | None = None) -> int:
         res["in_process"] = bench_in_process(cfg, DOMAINS[0])
         res["cross_process"] = bench_cross_process(cfg, DOMAINS[1])
         res["cpu"] = bench_cpu(cfg, DOMAINS[2])
+        res["recording"] = bench_recording(cfg, DOMAINS[3:5])
         res["wall_s"] = time.perf_counter() - t0
         res["env"]["load_avg_1min_end"] = os.getloadavg()[0]
         print(table(res))
-        for key in ("cross_process", "cpu"):
-            ch = res[key]["child"]
+        for key, ch in (("cross_process", res["cross_process"]["child"]),
+                        ("cpu", res["cpu"]["child"]),
+                        ("cpu (recording)", res["recording"]["cpu"]["child"])):
             if ch["returncode"] != 0 or ch["killed"]:
                 hang = " (SIGKILL after a hang: check /dev/shm/fastrtps_*)" if ch["killed"] else ""
                 print(f"\nwarning: {key} node process exit {ch['returncode']}{hang}\n"
