@@ -30,6 +30,8 @@ setup(
         "ros-jazzy-common-interfaces",
         "mcap",
         "mcap-ros2-support",
+        "zstandard",             # MCAP chunk compression, read and written directly
+        "lz4",
     ],
     extras_require={
         "test": [
