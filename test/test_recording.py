@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import array
 import dataclasses
+import math
 import os
 import resource
 import signal
@@ -17,16 +18,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import Stores, get_typestore
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64
+from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 from std_srvs.srv import SetBool
 
 from leadscrew_ros import msgdefs
@@ -165,19 +168,41 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
         assert from_rosbags[topic] == [plain(m) for t, m in expected if t == topic], topic
 
 
-def test_cdr_payload_is_what_rclpy_and_rosbags_read():
-    """Fast CDR leaves uninitialised padding after empty sequences; the recorder cuts it."""
-    from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
-    messages = [JointState(), JointState(name=["a"], position=[1.0], velocity=[2.0]),
-                Float64MultiArray(), Float64(data=0.0), DiagnosticArray()]
-    messages += [Float64MultiArray(layout=MultiArrayLayout(
-        dim=[MultiArrayDimension(label="x" * k, size=k, stride=k)], data_offset=k))
-        for k in range(8)]
-    messages += [JointState(name=["j" * k]) for k in range(8)]
-    for msg in messages:
-        data = cdr_payload(msg)
-        assert deserialize_message(data, type(msg)) == msg
-        assert plain(TYPESTORE.deserialize_cdr(data, msgdefs.type_name(msg))) == plain(msg)
+names = st.text(st.characters(codec="utf-8", exclude_characters="\x00"), max_size=12)
+floats = st.lists(st.floats(allow_nan=False), max_size=4)
+
+
+@st.composite
+def messages(draw):
+    """Messages whose serialized length varies in every way alignment can care about."""
+    kind = draw(st.sampled_from(["joint_state", "multi_array", "diagnostics"]))
+    if kind == "joint_state":
+        msg = JointState(name=draw(st.lists(names, max_size=3)), position=draw(floats),
+                         velocity=draw(floats), effort=draw(floats))
+        msg.header.frame_id = draw(names)
+        return msg
+    if kind == "multi_array":
+        dims = [MultiArrayDimension(label=draw(names), size=draw(st.integers(0, 2**32 - 1)),
+                                    stride=0) for _ in range(draw(st.integers(0, 2)))]
+        return Float64MultiArray(layout=MultiArrayLayout(dim=dims, data_offset=draw(
+            st.integers(0, 2**32 - 1))), data=draw(floats))
+    return DiagnosticArray(status=[DiagnosticStatus(
+        level=bytes([draw(st.integers(0, 3))]), name=draw(names), message=draw(names),
+        values=[KeyValue(key=draw(names), value=draw(names))
+                for _ in range(draw(st.integers(0, 2)))])
+        for _ in range(draw(st.integers(0, 2)))])
+
+
+@settings(max_examples=300, deadline=None)
+@given(messages())
+def test_cdr_payload_is_what_rclpy_and_rosbags_read(msg):
+    """Fast CDR leaves up to 4 bytes of uninitialised padding after empty sequences; the
+    recorder cuts the payload at the end of the data, which both readers take as the same
+    message."""
+    data = cdr_payload(msg)
+    assert data == serialize_message(msg)[:len(data)]
+    assert deserialize_message(data, type(msg)) == msg
+    assert plain(TYPESTORE.deserialize_cdr(data, msgdefs.type_name(msg))) == plain(msg)
 
 
 def test_record_service_starts_and_stops_and_the_parameter_follows(ros, tmp_path):
@@ -254,6 +279,21 @@ def test_compression_setting_reaches_the_chunks(tmp_path, compression, chunk):
     with open(log_files(rec.bag)[0], "rb") as f:
         indexes = make_reader(f).get_summary().chunk_indexes
     assert indexes and {c.compression for c in indexes} == {chunk}
+
+
+@settings(max_examples=200, deadline=None)
+@given(size=st.floats(), duration=st.floats(), flush=st.floats(),
+       compression=st.sampled_from(["zstd", "lz4", "none", "gzip", "", "ZSTD"]))
+def test_record_settings_accept_exactly_the_valid_values(size, duration, flush, compression):
+    valid = (math.isfinite(size) and size >= 0 and math.isfinite(duration) and duration >= 0
+             and 0 < flush <= 10 and compression in ("zstd", "lz4", "none"))
+    try:
+        RecordSettings(split_size_mb=size, split_duration_s=duration, flush_period_s=flush,
+                       compression=compression)
+    except ValueError as exc:
+        assert not valid, exc
+    else:
+        assert valid
 
 
 @pytest.mark.parametrize("name, value, words", [
