@@ -160,7 +160,7 @@ class Recorder:
         if self.active:
             return True
         self.error, self.files, self._topics = "", [], {}
-        root = Path(self.settings.directory).expanduser()
+        root = Path(self.settings.directory).expanduser().absolute()
         if not root.is_dir():
             self.error = f"{root}: record directory does not exist"
             return False
