@@ -1,0 +1,457 @@
+"""Live replay (`replay LOG --publish`): a recorded log republished over loopback DDS.
+
+Launch-free: `publish_log` runs in a background thread (own rclpy Context) or in a child process
+(signals), while a collector on a Context of its own spins in the test's thread. The test log
+(`Recorder`, two split files) holds 2 s of inputs at 50 Hz, a suffix-named input, look-alikes
+that must not be replayed by default, and some of the node's own outputs.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from io import StringIO
+from pathlib import Path
+
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from mcap.writer import Writer
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, String
+
+from leadscrew_ros import msgdefs
+from leadscrew_ros.logfile import LogError, log_files, read_log
+from leadscrew_ros.model import SqueakModel
+from leadscrew_ros.node import SqueakPredictorNode
+from leadscrew_ros.recorder import Recorder, RecordSettings
+from leadscrew_ros.replay_live import publish_log
+
+T0 = 1_700_000_000_000_000_000            # log time of the first message [ns]
+STEP_NS, STEPS = 20_000_000, 100            # 50 Hz for 2 s
+SPAN_S = (STEPS - 1) * STEP_NS / 1e9        # 1.98 s from the first to the last message
+INPUTS = ["/motor_speed", "/axial_load", "/joint_states", "/robot/nut_position"]
+TYPES = {"/motor_speed": Float64, "/axial_load": Float64, "/joint_states": JointState,
+         "/robot/nut_position": Float64, "/replay/motor_speed": Float64,
+         "/other/motor_speed": String, "/squeak/risk": Float64, "/diagnostics": DiagnosticArray}
+# every message of a test: reliable, deep (the replay's reliable writer retransmits what a
+# reader missed while matching)
+COLLECT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def speed(i: int) -> float:
+    """Through the squeak band (~0.8..55 rad/s) to a stable speed."""
+    return 10.0 + i
+
+
+def load(i: int) -> float:
+    """Steps beyond the node's load deadband (1 N), so that it recomputes at the last one."""
+    return 150.0 + 2.0 * i
+
+
+def record(directory: Path, steps: int = STEPS, split_s: float = 1.0) -> list[Path]:
+    rec = Recorder(RecordSettings(directory=str(directory), split_duration_s=split_s))
+    assert rec.start(T0), rec.error
+    for i in range(steps):
+        t = T0 + i * STEP_NS
+        rec.write("/motor_speed", Float64(data=speed(i)), t)
+        rec.write("/axial_load", Float64(data=load(i)), t)
+        joint = JointState(name=["screw"], position=[0.01 * i], velocity=[speed(i)])
+        joint.header.stamp.sec, joint.header.stamp.nanosec = divmod(t, 1_000_000_000)
+        rec.write("/joint_states", joint, t)
+        rec.write("/robot/nut_position", Float64(data=0.05 + 1e-4 * i), t)
+        rec.write("/replay/motor_speed", Float64(data=-1.0), t)        # not an input
+        rec.write("/other/motor_speed", String(data="x"), t)          # wrong type
+        if i % 5 == 0:
+            rec.write("/squeak/risk", Float64(data=0.5), t)
+            rec.write("/diagnostics", DiagnosticArray(status=[DiagnosticStatus(name="n")]), t)
+        rec.tick(t)
+    rec.stop()
+    assert not rec.error, rec.error
+    return log_files(rec.bag)
+
+
+@pytest.fixture(scope="module")
+def log(tmp_path_factory) -> list[Path]:
+    files = record(tmp_path_factory.mktemp("log"))
+    assert len(files) == 2                      # split by duration: replayed across files
+    return files
+
+
+def expected(files: list[Path], topic: str, after_ns: int = T0) -> list:
+    """The log's messages on `topic` (from `after_ns` on), deserialized, in log order."""
+    return [deserialize_message(m.data, TYPES[topic]) for f in files
+            for m in read_log(f, {topic}) if m.log_time_ns >= after_ns]
+
+
+class Collector:
+    """A subscriber node on a Context of its own: (arrival time, message) per topic."""
+
+    def __init__(self, topics: dict[str, type]):
+        self.ctx = Context()
+        rclpy.init(context=self.ctx)
+        self.node = Node("collector", context=self.ctx, start_parameter_services=False)
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor.add_node(self.node)
+        self.got: dict[str, list[tuple[float, object]]] = {t: [] for t in topics}
+        for topic, msg_type in topics.items():
+            self.node.create_subscription(
+                msg_type, topic, lambda m, t=topic: self.got[t].append((time.monotonic(), m)),
+                COLLECT)
+
+    def messages(self, topic: str) -> list:
+        return [m for _, m in self.got[topic]]
+
+    def spin_until(self, condition, timeout: float, what: str) -> None:
+        deadline = time.monotonic() + timeout
+        while not condition():
+            assert time.monotonic() < deadline, f"timeout after {timeout} s waiting for {what}"
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def drain(self, seconds: float = 0.2) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def close(self) -> None:
+        try:
+            self.node.destroy_node()
+            self.executor.shutdown(timeout_sec=1.0)
+        finally:
+            rclpy.shutdown(context=self.ctx)
+
+
+@pytest.fixture
+def collector():
+    made: list[Collector] = []
+
+    def make(topics: dict[str, type]) -> Collector:
+        made.append(Collector(topics))
+        return made[-1]
+
+    yield make
+    for c in made:
+        c.close()
+
+
+class Replay(threading.Thread):
+    """publish_log in a background thread: `result` (messages published) or `error`."""
+
+    def __init__(self, files: list[Path], **kwargs):
+        super().__init__(daemon=True)
+        self.files, self.kwargs = files, {"progress": False, **kwargs}
+        self.result: int | None = None
+        self.error: BaseException | None = None
+
+    def run(self) -> None:
+        try:
+            self.result = publish_log(self.files, **self.kwargs)
+        except BaseException as exc:                   # reported by the test's thread
+            self.error = exc
+
+
+def replay(c: Collector, files: list[Path], timeout: float = 15.0, **kwargs) -> Replay:
+    """Run a replay to its end while the collector spins; then let the last messages in."""
+    r = Replay(files, **kwargs)
+    r.start()
+    c.spin_until(lambda: not r.is_alive(), timeout, "the replay to end")
+    r.join()
+    c.drain()
+    if r.error is not None:
+        raise r.error
+    return r
+
+
+def ns() -> str:
+    return f"/t{uuid.uuid4().hex[:12]}"
+
+
+# ----------------------------------------------------------------------------- publishing
+def test_default_selection_republishes_the_inputs_unchanged_and_in_order(log, collector):
+    c = collector(TYPES)                      # listens to every topic of the log
+    r = replay(c, log, rate=20.0)
+    for topic in INPUTS:                      # incl. /robot/nut_position (a suffix match)
+        assert c.messages(topic) == expected(log, topic), topic
+    for topic in set(TYPES) - set(INPUTS):    # look-alikes and the node's own outputs
+        assert c.got[topic] == [], topic
+    assert r.result == len(INPUTS) * STEPS
+
+
+@pytest.mark.parametrize("rate", [2.0, 8.0])
+def test_timing_follows_the_log_divided_by_rate(log, collector, rate):
+    c = collector({"/motor_speed": Float64})
+    replay(c, log, rate=rate, topics=["/motor_speed"])
+    arrivals = [t for t, _ in c.got["/motor_speed"]]
+    assert len(arrivals) == STEPS
+    duration = arrivals[-1] - arrivals[0]
+    assert duration == pytest.approx(SPAN_S / rate, abs=0.03 + 0.03 * SPAN_S / rate)
+    # each message at its own due time: no drift along the replay
+    late = sorted(abs(t - arrivals[0] - i * STEP_NS / 1e9 / rate) for i, t in enumerate(arrivals))
+    assert late[int(0.9 * len(late))] < 0.02, late[-10:]
+
+
+def test_start_offset_skips_the_beginning(log, collector):
+    c = collector({"/motor_speed": Float64, "/axial_load": Float64})
+    r = replay(c, log, rate=10.0, start_offset_s=1.5, topics=["/motor_speed", "axial_load"])
+    after = T0 + 1_500_000_000
+    assert c.messages("/motor_speed") == expected(log, "/motor_speed", after)
+    assert c.messages("/axial_load") == expected(log, "/axial_load", after)
+    assert r.result == 2 * 25                        # samples 75..99
+    assert c.messages("/motor_speed")[0].data == speed(75)
+
+
+def test_topic_filter_and_remap(log, collector):
+    space = ns()
+    c = collector({f"{space}/speed": Float64, "/squeak/risk": Float64,
+                   "/motor_speed": Float64, "/axial_load": Float64})
+    r = replay(c, log, rate=20.0, topics=["/motor_speed", "/squeak/risk"],
+               remap={"/motor_speed": f"{space}/speed", "squeak/risk": "squeak/risk"})
+    assert c.messages(f"{space}/speed") == expected(log, "/motor_speed")
+    assert c.messages("/squeak/risk") == expected(log, "/squeak/risk")      # chosen explicitly
+    assert c.got["/motor_speed"] == [] and c.got["/axial_load"] == []
+    assert r.result == STEPS + STEPS // 5
+
+
+def test_without_subscriber_it_publishes_after_the_wait_with_a_status_line(log, monkeypatch,
+                                                                           capsys):
+    class Tty(StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    stderr = Tty()
+    monkeypatch.setattr(sys, "stderr", stderr)
+    t0 = time.monotonic()
+    published = publish_log(log, rate=4.0, topics=["/motor_speed"],
+                            remap={"/motor_speed": f"{ns()}/nobody"}, wait_for_subscriber_s=0.3)
+    assert published == STEPS and time.monotonic() - t0 < 0.3 + SPAN_S / 4 + 2.0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith(f"replaying {log[0].parent} (2 files): 1.980 s of log on "
+                             f"/motor_speed -> /t") and "at rate 4" in out[0]
+    assert out[1:] == ["waiting up to 0.3 s for a subscriber ...",
+                       "no subscriber after 0.3 s: publishing anyway", out[-1]]
+    assert out[-1].startswith(f"replay done: {STEPS} messages in 0.")
+    status = stderr.getvalue().split("\r")
+    shown = [s for s in status if s.startswith("replay ")]
+    assert 1 <= len(shown) <= 4 and shown[-1].split(", ")[0].endswith("/2.0 s")
+    assert "messages" in shown[-1] and status[-1] == ""           # the line is cleared
+    # not a terminal: no status line; no wait at all (the simulator's --no-wait)
+    monkeypatch.setattr(sys, "stderr", StringIO())
+    assert publish_log(log, rate=50.0, topics=["/motor_speed"], wait_for_subscriber_s=0.0,
+                       remap={"/motor_speed": f"{ns()}/nobody"}) == STEPS
+    assert sys.stderr.getvalue() == ""
+    assert "waiting" not in capsys.readouterr().out
+
+
+def test_end_to_end_the_predictor_node_answers_a_replayed_log(log, collector):
+    """The real node in-process, its inputs fed from the log; its risk follows the log."""
+    space = ns()
+    c = collector({f"{space}/squeak/risk": Float64})
+    node = SqueakPredictorNode(context=c.ctx, namespace=space,
+                               parameter_overrides=[Parameter("hardware_id", value=space)])
+    c.executor.add_node(node)
+    try:
+        replay(c, log, rate=4.0, topics=["/motor_speed", "/axial_load"],
+               remap={"/motor_speed": f"{space}/motor_speed",
+                      "/axial_load": f"{space}/axial_load"})
+        final = SqueakModel().predict(speed(STEPS - 1), load(STEPS - 1))
+        risks = c.got[f"{space}/squeak/risk"]
+        c.spin_until(lambda: risks and risks[-1][1].data == pytest.approx(final.risk, rel=1e-9),
+                     3.0, "the risk of the last operating point")
+        values = [m.data for _, m in risks]
+        assert len(values) > 20 and 1.0 in values and all(math.isfinite(v) for v in values)
+        assert node.live.inputs.speed_rad_s == speed(STEPS - 1)
+    finally:
+        c.executor.remove_node(node)
+        node.destroy_node()
+
+
+# ----------------------------------------------------------------------------- signals
+CHILD = """
+import sys
+from leadscrew_ros.logfile import log_files
+from leadscrew_ros.replay_live import Interrupted, publish_log
+try:
+    n = publish_log(log_files(sys.argv[1]), rate=float(sys.argv[2]), loop=sys.argv[3] == "loop",
+                    topics=["/motor_speed"], remap={"/motor_speed": sys.argv[4]})
+except Interrupted as exc:
+    print(f"INTERRUPTED {exc.signum} {exc.published}")
+    sys.exit(130)
+print(f"RETURNED {n}")
+"""
+
+
+def child(log: list[Path], rate: float, mode: str, topic: str, tmp_path: Path):
+    err = open(tmp_path / "stderr", "w+")
+    proc = subprocess.Popen([sys.executable, "-c", CHILD, str(log[0].parent), str(rate), mode,
+                             topic], stdout=subprocess.PIPE, stderr=err, text=True,
+                            env=dict(os.environ))
+    return proc, err
+
+
+def finish(proc: subprocess.Popen, err) -> tuple[str, str]:
+    """The child's output once it exited; a child that does not exit is SIGKILLed and the
+    Fast DDS shared memory it left is cleaned (`fastdds shm clean` leaves live processes'
+    segments alone)."""
+    try:
+        out, _ = proc.communicate(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+            tool = Path(sys.prefix) / "tools" / "fastdds" / "fastdds.py"
+            if tool.exists():
+                subprocess.run([sys.executable, str(tool), "shm", "clean"],
+                               capture_output=True, timeout=30)
+    err.seek(0)
+    stderr = err.read()
+    err.close()
+    return out, stderr
+
+
+def test_loop_repeats_until_sigint_then_exits_cleanly(log, collector, tmp_path):
+    topic = f"{ns()}/speed"
+    c = collector({topic: Float64})
+    proc, err = child(log, 10.0, "loop", topic, tmp_path)
+    c.spin_until(lambda: len(c.got[topic]) >= 2 * STEPS + 10 or proc.poll() is not None, 15.0,
+                 "two passes")
+    proc.send_signal(signal.SIGINT)
+    out, stderr = finish(proc, err)
+    c.drain()
+    assert proc.returncode == 0 and "Traceback" not in stderr, (out, stderr)
+    got = c.messages(topic)
+    passes = len(got) // STEPS
+    assert passes >= 2 and got == (expected(log, "/motor_speed") * (passes + 1))[:len(got)]
+    assert out.splitlines()[-2] == (f"replay stopped: {len(got)} messages published "
+                                    f"({passes} passes)")
+    assert out.splitlines()[-1] == f"RETURNED {len(got)}"
+
+
+def test_sigterm_stops_a_replay_cleanly_before_its_end(log, collector, tmp_path):
+    topic = f"{ns()}/speed"
+    c = collector({topic: Float64})
+    proc, err = child(log, 0.5, "once", topic, tmp_path)              # 4 s of replay
+    c.spin_until(lambda: len(c.got[topic]) >= 5 or proc.poll() is not None, 15.0,
+                 "the first messages")
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGTERM)
+    out, stderr = finish(proc, err)
+    assert time.monotonic() - t0 < 2.0
+    c.drain()
+    assert proc.returncode == 130 and "Traceback" not in stderr, (out, stderr)
+    lines = out.splitlines()
+    n = len(c.got[topic])
+    assert 5 <= n < STEPS
+    assert lines[-2:] == [f"replay stopped: {n} messages published",
+                          f"INTERRUPTED {int(signal.SIGTERM)} {n}"]
+
+
+# ----------------------------------------------------------------------------- errors
+@pytest.fixture
+def nothing_starts(monkeypatch):
+    """Errors must come before rclpy starts (so before anything is published)."""
+    def refuse(*args, **kwargs):
+        raise AssertionError("rclpy.init called")
+    monkeypatch.setattr(rclpy, "init", refuse)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"rate": 0.0}, "rate must be a finite number > 0"),
+    ({"rate": -1.0}, "rate must be"),
+    ({"rate": math.nan}, "rate must be"),
+    ({"rate": math.inf}, "rate must be"),
+    ({"start_offset_s": -0.1}, "start offset must be a finite number >= 0"),
+    ({"start_offset_s": math.nan}, "start offset must be"),
+    ({"start_offset_s": 1.98}, r"not less than the log's duration \(1.980 s\)"),
+    ({"topics": ["/motor_speed", "/nope"]}, "topic /nope not in the log"),
+    ({"remap": {"/nope": "/x"}}, "remapped topic /nope not in the log"),
+    ({"remap": {"/motor_speed": "bad name"}}, "remap target 'bad name' is not a valid ROS"),
+    ({"remap": {"/motor_speed": "/axial_load"}}, "would both be published on /axial_load"),
+    ({"wait_for_subscriber_s": -1.0}, "subscriber wait"),
+])
+def test_bad_arguments_raise_value_error_before_anything_starts(log, nothing_starts, kwargs,
+                                                                 match):
+    with pytest.raises(ValueError, match=match):
+        publish_log(log, **kwargs)
+
+
+def test_no_files_and_a_zero_length_loop_are_bad_arguments(tmp_path, nothing_starts):
+    with pytest.raises(ValueError, match="no log files"):
+        publish_log([])
+    single = record(tmp_path, steps=1)
+    with pytest.raises(ValueError, match="cannot loop a log whose messages all have the same"):
+        publish_log(single, loop=True)
+
+
+def foreign_mcap(path: Path, profile: str = "ros2", type_name: str = "std_msgs/msg/Float64",
+                 payload: bytes = b"\x00\x01\x00\x00") -> Path:
+    """An MCAP with one /motor_speed message, written by hand."""
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start(profile=profile, library="test")
+        schema = w.register_schema(type_name, "ros2msg",
+                                   msgdefs.definition("std_msgs/msg/Float64").encode())
+        channel = w.register_channel("/motor_speed", "cdr", schema)
+        w.add_message(channel, T0, payload, T0)
+        w.finish()
+    return path
+
+
+@pytest.mark.parametrize("damage, match", [
+    ("truncated second file", "_1.mcap: truncated: no footer"),
+    ("garbage", r"garbage.mcap: not an MCAP file \(bad magic\)"),
+    ("empty", "empty.mcap: not an MCAP file"),
+    ("missing", "(?i)missing.mcap: no such file"),
+    ("foreign profile", "foreign MCAP: profile ''"),
+    ("bad payload", "message 0 on /motor_speed is not a valid std_msgs/msg/Float64"),
+    ("unknown type", "type 'nosuch_msgs/msg/Thing', which is not an installed"),
+    ("only outputs", "no predictor input topics"),
+    ("type change", "other_0.mcap: topic /motor_speed is std_msgs/msg/Float32 here, "
+                    "std_msgs/msg/Float64 in an earlier file"),
+])
+def test_unreadable_logs_raise_log_error_before_anything_starts(log, tmp_path, nothing_starts,
+                                                                damage, match):
+    files = [tmp_path / f.name for f in log]
+    for src, dst in zip(log, files):
+        shutil.copy(src, dst)
+    if damage == "truncated second file":
+        with open(files[1], "r+b") as f:
+            f.truncate(f.seek(0, os.SEEK_END) // 2)
+    elif damage == "garbage":
+        files = [tmp_path / "garbage.mcap"]
+        files[0].write_bytes(b"not a log at all" * 10)
+    elif damage == "empty":
+        files = [tmp_path / "empty.mcap"]
+        files[0].touch()
+    elif damage == "missing":
+        files.insert(1, tmp_path / "missing.mcap")
+    elif damage == "foreign profile":
+        files = [foreign_mcap(tmp_path / "f.mcap", profile="")]
+    elif damage == "bad payload":
+        files = [foreign_mcap(tmp_path / "f.mcap")]
+    elif damage == "unknown type":
+        files = [foreign_mcap(tmp_path / "f.mcap", type_name="nosuch_msgs/msg/Thing")]
+    elif damage == "type change":                # a split file from somewhere else
+        files.append(foreign_mcap(tmp_path / "other_0.mcap", type_name="std_msgs/msg/Float32",
+                                  payload=serialize_message(Float64(data=1.0))))
+    elif damage == "only outputs":
+        rec = Recorder(RecordSettings(directory=str(tmp_path)))
+        rec.start(T0)
+        rec.write("/squeak/risk", Float64(data=0.1), T0)
+        rec.stop()
+        files = log_files(rec.bag)
+    with pytest.raises(LogError, match=match) as exc:
+        publish_log(files)
+    assert "\n" not in str(exc.value)
