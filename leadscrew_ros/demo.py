@@ -31,8 +31,8 @@ from std_msgs.msg import Bool, Float64, Float64MultiArray
 from .logfile import LogError, inspect, log_files
 from .node import LATCHED, SqueakPredictorNode
 from .recorder import Recorder
-from .ros_env import close, confine_to_localhost
-from .simulator import (ActuatorSimulator, ActuatorState, StopSignals, StrokeProfile,
+from .ros_env import StopSignals, close, confine_to_localhost
+from .simulator import (ActuatorSimulator, ActuatorState, StrokeProfile,
                         expected_squeak)
 
 START_TIMEOUT_S = 10.0       # the simulator waits this long for the predictor's subscription

@@ -34,8 +34,7 @@ from rclpy.serialization import deserialize_message
 from rclpy.validate_full_topic_name import validate_full_topic_name
 
 from .logfile import LogError, LogInfo, LogMessage, Topic, read_messages
-from .ros_env import close, confine_to_localhost
-from .simulator import StopSignals
+from .ros_env import StopSignals, close, confine_to_localhost
 
 NODE_NAME = "log_replay"
 # The predictor's inputs (base name -> the type it subscribes with).

@@ -19,9 +19,7 @@ from __future__ import annotations
 
 import math
 import os
-import signal
 import sys
-import threading
 import time
 from dataclasses import dataclass
 from typing import NamedTuple, TextIO
@@ -36,7 +34,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from .model import ScrewParameters, SqueakModel
-from .ros_env import close, confine_to_localhost
+from .ros_env import StopSignals, close, confine_to_localhost
 
 # Phases as fractions of the stroke duration: rest, ramp up, hold, ramp down, rest.
 REST_START, RAMP, HOLD, REST_END = 0.05, 0.36, 0.08, 0.15
@@ -235,34 +233,6 @@ class ActuatorSimulator(Node):
             self.joint_pub.publish(msg)
         self.last_state = s
         self.published += 1
-
-
-class StopSignals:
-    """Context manager: SIGINT and SIGTERM set `signum` instead of interrupting, so a spin loop
-    can end cleanly between two callbacks (with a non-default Context rclpy installs no signal
-    handlers: SIGTERM would kill the process, SIGINT raise anywhere). A second signal of the
-    same kind acts as usual. Handlers are restored on exit; outside the main thread nothing is
-    installed."""
-
-    def __enter__(self) -> "StopSignals":
-        self.signum = 0
-        self._old: dict[int, object] = {}
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                self._old[sig] = signal.signal(sig, self._handle)
-        return self
-
-    def _handle(self, signum: int, frame) -> None:
-        if self.signum == signum:                                  # asked twice: give in
-            signal.signal(signum, self._old.pop(signum))
-            if signum == signal.SIGINT:
-                raise KeyboardInterrupt
-            os.kill(os.getpid(), signum)
-        self.signum = self.signum or signum
-
-    def __exit__(self, *exc) -> None:
-        for sig, old in self._old.items():
-            signal.signal(sig, old)
 
 
 def run_simulator(profile: StrokeProfile | None = None, rate_hz: float = 100.0,
