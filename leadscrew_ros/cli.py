@@ -1,5 +1,6 @@
 """`leadscrew-squeak`: squeak predictions, sweeps, stability maps and the paper's figures; the
-ROS 2 demo (`demo`: predictor node + actuator simulator) and the simulator alone (`simulate`).
+ROS 2 demo (`demo`: predictor node + actuator simulator) and the simulator alone (`simulate`);
+MCAP logs: offline replay (`replay`), playback (`replay --publish`), `recover` and `info`.
 
 Every error a user can cause (bad option, invalid parameter or operating point, unreadable
 file) is reported as one line `leadscrew-squeak: error: <message>` with exit code 2.
@@ -13,16 +14,20 @@ import json
 import math
 import os
 import sys
+from dataclasses import fields
 from pathlib import Path
 from typing import Any, Callable, NoReturn, Sequence
 
 import numpy as np
 import yaml
 
+from .jsonsafe import json_safe
+from .logfile import LogError, LogInfo, inspect, log_files, recover
 from .model.parameters import (FORMULATIONS, ParameterError, ScrewParameters, field_info,
                                field_names)
 from .model.predictor import OperatingPointError, Prediction, SqueakModel
 from .model.sweep import MapResult, SweepResult, axis_names, check_axis, sweep
+from .timeline import InputSettings
 
 PROG = "leadscrew-squeak"
 SPEED_AXIS = "speed_rad_s"
@@ -119,6 +124,11 @@ def read_params_file(path: str) -> dict[str, Any]:
     return {k: v for k, v in values.items() if k in field_names()}
 
 
+def _yaml_parameters(path: str) -> dict[str, Any]:
+    """Every `ros__parameters` value of a parameter file already checked by read_params_file."""
+    return _ros_parameters(yaml.safe_load(Path(path).read_text(encoding="utf-8")))
+
+
 def build_model(args: argparse.Namespace) -> SqueakModel:
     """Defaults <- --params-file <- --param NAME=VALUE <- --formulation (validated together)."""
     changes: dict[str, Any] = read_params_file(args.params_file) if args.params_file else {}
@@ -133,23 +143,10 @@ def build_model(args: argparse.Namespace) -> SqueakModel:
 
 
 # ----------------------------------------------------------------------------- output
-def _clean(obj: Any) -> Any:
-    """JSON-safe copy: NaN/inf -> null, numpy scalars/arrays -> Python."""
-    if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple, np.ndarray)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, (np.floating, float)):
-        return float(obj) if math.isfinite(obj) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    return obj
 
 
 def print_json(obj: Any) -> None:
-    print(json.dumps(_clean(obj), allow_nan=False))
+    print(json.dumps(json_safe(obj), allow_nan=False))
 
 
 def _mode_table(prediction: Prediction, count: int) -> list[str]:
@@ -351,6 +348,139 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
 
 
+# ----------------------------------------------------------------------------- logs
+REPLAY_INPUTS = [f.name for f in fields(InputSettings)]    # = option dests, node parameters
+TOPIC_INPUTS = ("speed_topic", "load_topic", "nut_topic", "joint_states_topic")
+LIVE_OPTIONS = ("rate", "loop", "start_offset", "topics", "remap", "no_wait")
+
+
+def _topic(name: str) -> str:
+    return name if name.startswith("/") else "/" + name
+
+
+def _replay_inputs(args: argparse.Namespace) -> InputSettings:
+    """InputSettings: defaults <- node parameters of --params-file <- options."""
+    values = _yaml_parameters(args.params_file) if args.params_file else {}
+    values = {name: values[name] for name in REPLAY_INPUTS if name in values}
+    values.update({name: getattr(args, name) for name in REPLAY_INPUTS
+                   if getattr(args, name) is not None})
+    for name in TOPIC_INPUTS:
+        if name in values:
+            values[name] = _topic(str(values[name]))
+    try:
+        return InputSettings(**values)
+    except (TypeError, ValueError) as exc:
+        raise CliError(f"replay inputs: {exc}") from None
+
+
+def _parse_remap(items: list[str]) -> dict[str, str]:
+    remap = {}
+    for item in items:
+        old, sep, new = item.partition(":=")
+        if not sep or not old or not new:
+            raise CliError(f"argument --remap: expected OLD:=NEW, got {item!r}")
+        remap[_topic(old)] = new
+    return remap
+
+
+def _publish(args: argparse.Namespace) -> int:
+    if args.out is not None or args.no_report:
+        raise CliError("--out and --no-report are for the offline replay, not --publish")
+    from .replay_live import WAIT_FOR_SUBSCRIBER_S, publish_log
+    try:
+        publish_log(log_files(args.log), rate=1.0 if args.rate is None else args.rate,
+                    loop=args.loop,
+                    start_offset_s=0.0 if args.start_offset is None else args.start_offset,
+                    topics=[_topic(t) for t in args.topics] if args.topics else None,
+                    remap=_parse_remap(args.remap), progress=not args.quiet,
+                    wait_for_subscriber_s=0.0 if args.no_wait else WAIT_FOR_SUBSCRIBER_S)
+    except (ValueError, RuntimeError) as exc:    # bad arguments; rclpy could not start
+        raise CliError(str(exc)) from None
+    return 0
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    if args.publish:
+        return _publish(args)
+    given = [o for o in LIVE_OPTIONS if getattr(args, o) not in (None, False, [])]
+    if given:
+        raise CliError(f"--{given[0].replace('_', '-')} needs --publish")
+    if args.episodes < 0:
+        raise CliError("argument --episodes: must be >= 0")
+    model = build_model(args)
+    inputs = _replay_inputs(args)
+    from .replay import ReplaySettings, log_name, replay
+    try:
+        settings = ReplaySettings(inputs, namespace=_topic(args.namespace),
+                                  workers=args.workers, progress=not args.quiet)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    out = Path(args.out) if args.out else Path(f"{log_name(Path(args.log))}_replay")
+    result = replay(args.log, model, out, settings)
+    if not args.no_report:
+        from .report import write_report
+        result.outputs += write_report(result, model, out)
+    if not args.quiet:
+        print(result.summary_text())
+        for e in result.episodes[:args.episodes]:
+            print(f"  squeak {e.start_s:10.2f} - {e.end_s:10.2f} s  peak growth "
+                  f"{e.peak_growth_rate:7.1f} 1/s  "
+                  + ", ".join(f"{m} {f:.0f} Hz" for m, f in zip(e.modes, e.frequencies_hz)))
+        if len(result.episodes) > args.episodes:
+            print(f"  ... {len(result.episodes) - args.episodes} more in episodes.json")
+        print("wrote: " + ", ".join(str(p) for p in result.outputs))
+    return 0
+
+
+def _span(info: LogInfo) -> str:
+    if info.start_ns is None:
+        return "no messages"
+    return (f"{(info.end_ns - info.start_ns) / 1e9:.3f} s ({_utc(info.start_ns)} to "
+            f"{_utc(info.end_ns)})")
+
+
+def _utc(ns: int) -> str:
+    import datetime
+    return datetime.datetime.fromtimestamp(ns / 1e9, datetime.timezone.utc).isoformat(
+        timespec="milliseconds")
+
+
+def _topic_lines(info: LogInfo) -> list[str]:
+    return [f"  {name:<32} {t.type_name:<36} {info.counts[name]:>10}"
+            for name, t in sorted(info.topics.items())]
+
+
+def cmd_recover(args: argparse.Namespace) -> int:
+    src = Path(args.log)
+    dst = Path(args.output) if args.output else src.with_name(f"{src.stem}.recovered.mcap")
+    info = recover(src, dst)
+    print(f"recovered {info.messages} messages on {len(info.topics)} topics from {src} into "
+          f"{dst}")
+    print(f"time span: {_span(info)}")
+    print("damage: " + (info.damage or "none (the file was complete)"))
+    print("\n".join(_topic_lines(info)))
+    return 0
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    infos = [inspect(f) for f in log_files(args.log)]
+    if args.json:
+        print_json([{"file": str(i.path), "complete": i.complete, "damage": i.damage,
+                     "profile": i.profile, "library": i.library, "messages": i.messages,
+                     "start_ns": i.start_ns, "end_ns": i.end_ns,
+                     "topics": [{"name": n, "type": t.type_name, "count": i.counts[n]}
+                                for n, t in sorted(i.topics.items())]} for i in infos])
+        return 0
+    for i in infos:
+        state = "complete" if i.complete else (
+            f"TRUNCATED: {i.damage}; recover with `{PROG} recover {i.path}`")
+        print(f"{i.path}: {state}")
+        print(f"  {i.messages} messages, {_span(i)}; profile {i.profile!r}, "
+              f"written by {i.library or 'unknown'}")
+        print("\n".join(_topic_lines(i)))
+    return 0
+
+
 # ----------------------------------------------------------------------------- parser
 def _common() -> Parser:
     common = Parser(add_help=False)
@@ -442,6 +572,74 @@ def build_parser() -> Parser:
                    help="start the stroke at once instead of when something subscribes to "
                         "motor_speed")
     p.set_defaults(run=cmd_simulate)
+
+    p = sub.add_parser("replay", parents=common,
+                       help="recompute the node's predictions for an MCAP log (offline, into "
+                            "--out), or play the log to ROS 2 topics (--publish)")
+    p.add_argument("log", metavar="LOG", help="MCAP file, or a directory of split .mcap files")
+    p.add_argument("--out", metavar="DIR", help="output directory (default ./<log name>_replay): "
+                   "<log name>.annotated.mcap, episodes.json, summary.json/.txt, PNG report")
+    g = p.add_argument_group("inputs (defaults: the node's topics; node parameters from "
+                             "--params-file)")
+    g.add_argument("--speed-topic", metavar="TOPIC", help="std_msgs/Float64 speed [rad/s] "
+                                                          "(default /motor_speed)")
+    g.add_argument("--load-topic", metavar="TOPIC", help="std_msgs/Float64 axial load [N] "
+                                                         "(default /axial_load)")
+    g.add_argument("--nut-topic", metavar="TOPIC", help="std_msgs/Float64 nut position [m] "
+                                                        "(default /nut_position)")
+    g.add_argument("--joint-states-topic", metavar="TOPIC",
+                   help="sensor_msgs/JointState (default /joint_states)")
+    g.add_argument("--joint-name", metavar="NAME", help="screw joint in the JointState messages "
+                   "(default: the joint of single-joint messages)")
+    g.add_argument("--nut-position-at-zero-angle", dest="nut_position_at_zero_angle_m",
+                   type=finite, metavar="M",
+                   help="nut position [m] at screw angle 0 (default 0.15)")
+    g.add_argument("--speed-deadband", dest="speed_deadband_rad_s", type=finite,
+                   metavar="RAD_S",
+                   help="recompute when the speed moved more than this (default 0.1; 0: every "
+                        "input)")
+    g.add_argument("--load-deadband", dest="load_deadband_n", type=finite, metavar="N",
+                   help="recompute when the load moved more than this (default 1)")
+    g.add_argument("--nut-deadband", dest="nut_deadband_m", type=finite, metavar="M",
+                   help="recompute and re-integrate the contact when the nut moved more than "
+                        "this (default 0.0005)")
+    g = p.add_argument_group("offline replay")
+    g.add_argument("--namespace", default="/replay", metavar="NS",
+                   help="namespace of the prediction topics in the annotated log "
+                        "(default /replay: /replay/squeak/risk, ...)")
+    g.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="prediction processes for long logs (default 1; 0: one process)")
+    g.add_argument("--no-report", action="store_true", help="skip the PNG report")
+    g.add_argument("--episodes", type=int, default=10, metavar="N",
+                   help="squeak episodes listed on stdout (default 10)")
+    p.add_argument("--quiet", action="store_true", help="no progress and no summary")
+    g = p.add_argument_group("playback to ROS 2 topics")
+    g.add_argument("--publish", action="store_true",
+                   help="publish the log's messages in real time instead")
+    g.add_argument("--rate", type=finite, metavar="R", help="speed factor (default 1)")
+    g.add_argument("--loop", action="store_true", help="repeat until Ctrl-C")
+    g.add_argument("--start-offset", type=finite, metavar="S",
+                   help="skip this much of the log [s]")
+    g.add_argument("--topics", nargs="+", metavar="T",
+                   help="publish exactly these topics (default: the predictor's inputs)")
+    g.add_argument("--remap", action="append", default=[], metavar="OLD:=NEW",
+                   help="publish topic OLD on NEW (repeatable)")
+    g.add_argument("--no-wait", action="store_true",
+                   help="start at once instead of waiting (up to 5 s) for a subscriber")
+    p.set_defaults(run=cmd_replay)
+
+    p = sub.add_parser("recover", help="rewrite the whole messages of a cut-off MCAP file "
+                                       "(crash while recording) into a finished file")
+    p.add_argument("log", metavar="BROKEN.mcap")
+    p.add_argument("-o", "--output", metavar="OUT.mcap",
+                   help="output file (default <name>.recovered.mcap beside the input)")
+    p.set_defaults(run=cmd_recover)
+
+    p = sub.add_parser("info", help="topics, types, counts, time span of an MCAP log; "
+                                    "complete or truncated")
+    p.add_argument("log", metavar="LOG", help="MCAP file or directory of split files")
+    p.add_argument("--json", action="store_true", help="print JSON (one object per file)")
+    p.set_defaults(run=cmd_info)
     return parser
 
 
@@ -459,7 +657,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:      # `... | head`: the reader left; stay quiet like other tools
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
-    except (CliError, ParameterError, OperatingPointError, OSError) as exc:
+    except (CliError, ParameterError, OperatingPointError, LogError, OSError) as exc:
         # OSError: unwritable --out / --plot and the like.
         print(f"{PROG}: error: {_one_line(exc)}", file=sys.stderr)
         return 2

@@ -31,6 +31,7 @@ from .model.sweep import (REFERENCE_SPEED_RAD_S, MapResult, SweepResult,  # noqa
 from .progress import progress_bar  # noqa: E402
 
 GROWTH_LABEL = r"growth rate Re($\lambda$) [1/s]"
+Overlay = Callable[[plt.Axes], list]     # draws on a finished plot, returns legend handles
 
 
 class Display(NamedTuple):
@@ -188,9 +189,10 @@ def plot_sweep(result: SweepResult, path: Path, title: str = "", top: int = 6,
 
 
 def plot_map(result: MapResult, path: Path, title: str = "", dpi: int = 120,
-             formulation: str = "") -> None:
+             formulation: str = "", overlay: Overlay | None = None) -> None:
     """Filled contour of the largest growth rate (red: squeak, blue: stable), the zero contour,
-    the root-refined boundary points, and hatching where the model is not valid."""
+    the root-refined boundary points, and hatching where the model is not valid; `overlay`
+    draws more (in display units) and returns its legend handles."""
     kx, ky = axis_display(result.x_axis).factor, axis_display(result.y_axis).factor
     x, y, g = result.x * kx, result.y * ky, np.ma.masked_invalid(result.field.max_growth_rate)
     fig, ax = plt.subplots(figsize=(7, 5.2), constrained_layout=True)
@@ -213,6 +215,8 @@ def plot_map(result: MapResult, path: Path, title: str = "", dpi: int = 120,
     if result.boundary:
         bx, by = np.array(result.boundary).T
         handles += ax.plot(bx * kx, by * ky, "k.", ms=3, label="stability boundary (refined)")
+    if overlay is not None:
+        handles += overlay(ax)
     _scale_axis(ax, "x", result.x)
     _scale_axis(ax, "y", result.y)
     ax.set_xlim(x[0], x[-1])
@@ -222,7 +226,8 @@ def plot_map(result: MapResult, path: Path, title: str = "", dpi: int = 120,
     default = "; ".join(filter(None, (_fixed_text(result.fixed),
                                       formulation and f"{formulation} formulation")))
     ax.set_title(title or f"Stability map ({default})", fontsize=10)
-    fig.legend(handles=handles, fontsize=8, loc="outside lower center", ncols=len(handles))
+    fig.legend(handles=handles, fontsize=8, loc="outside lower center",
+               ncols=min(len(handles), 4))
     _save(fig, path, dpi)
 
 
@@ -234,8 +239,10 @@ def _formulation(result: SweepResult) -> str:
     return result.predictions[0].formulation if result.predictions else "?"
 
 
-def plot_frequencies(result: SweepResult, path: Path, title: str = "", dpi: int = 120) -> None:
-    """Frequency of every oscillatory mode along the axis: thin line, thick where Re > 0."""
+def plot_frequencies(result: SweepResult, path: Path, title: str = "", dpi: int = 120,
+                     overlay: Overlay | None = None) -> None:
+    """Frequency of every oscillatory mode along the axis: thin line, thick where Re > 0;
+    `overlay` draws more (in display units) and returns its legend handles."""
     k = axis_display(result.axis).factor
     x = result.values * k
     fig, ax = plt.subplots(figsize=(7.5, 5.2), constrained_layout=True)
@@ -256,7 +263,8 @@ def plot_frequencies(result: SweepResult, path: Path, title: str = "", dpi: int 
     ax.grid(alpha=0.3, which="both")
     ax.legend(handles=[plt.Line2D([], [], color="0.25", lw=0.8, label=r"Re($\lambda$) $\leq$ 0"),
                        plt.Line2D([], [], color="tab:red", lw=4,
-                                  label=r"Re($\lambda$) > 0 (squeak)")], fontsize=8)
+                                  label=r"Re($\lambda$) > 0 (squeak)")]
+              + (overlay(ax) if overlay is not None else []), fontsize=8)
     _save(fig, path, dpi)
 
 

@@ -54,6 +54,11 @@ class Topic:
     schema: str                 # complete message definition
     message_encoding: str
     metadata: dict[str, str]
+    schema_name: str = ""       # as stored (e.g. 'pkg/Type'); copies keep it verbatim
+
+    @property
+    def stored_schema_name(self) -> str:
+        return self.schema_name or self.type_name
 
 
 @dataclass(frozen=True)
@@ -144,6 +149,8 @@ def read_messages(path: Path | str, topics: set[str] | None = None, strict: bool
 def _incomplete(path: Path) -> str:
     with open(path, "rb") as f:
         head = f.read(len(MAGIC))
+    if not head:
+        return "empty file"
     if head != MAGIC:
         return "not an MCAP file (bad magic)"
     return (f"truncated: no footer (the recording was interrupted); "
@@ -232,7 +239,7 @@ def _channel(path: Path, c: Channel, schemas, channels, topics, info: LogInfo) -
         raise LogError(path, f"foreign MCAP: topic {c.topic} is {c.message_encoding!r} with "
                              f"a {encoding!r} schema, expected cdr with ros2msg")
     topic = Topic(c.topic, _full_type(name), encoding, text, c.message_encoding,
-                  dict(c.metadata))
+                  dict(c.metadata), name)
     channels[c.id] = info.topics.setdefault(c.topic, topic)
 
 
@@ -344,5 +351,5 @@ def recover(src: Path | str, dst: Path | str,
 
 
 def _register(writer: Writer, t: Topic) -> int:
-    schema = writer.register_schema(t.type_name, t.schema_encoding, t.schema.encode())
+    schema = writer.register_schema(t.stored_schema_name, t.schema_encoding, t.schema.encode())
     return writer.register_channel(t.name, t.message_encoding, schema, t.metadata)

@@ -311,10 +311,7 @@ class SqueakPredictorNode(Node):
 
     def _publish_prediction(self, p: Prediction) -> None:
         self._publish(self.risk_pub, Float64(data=float(p.risk)))
-        freqs = Float64MultiArray(data=p.unstable_frequencies_hz)
-        freqs.layout.dim = [MultiArrayDimension(label="frequency_hz", size=len(freqs.data),
-                                                stride=len(freqs.data))]
-        self._publish(self.frequencies_pub, freqs)
+        self._publish(self.frequencies_pub, frequencies_message(p))
         self._publish(self.active_pub, Bool(data=not p.stable))
         self._publish(self.modes_pub, modes_message(p))
         if self.live.safe_speed_rad_s is not None:
@@ -346,6 +343,14 @@ class SqueakPredictorNode(Node):
         return DiagnosticStatus(level=bytes([int(level)]), name=f"{self.get_name()}: recording",
                                 message=message, hardware_id=hardware_id,
                                 values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+
+def frequencies_message(p: Prediction) -> Float64MultiArray:
+    """Squeak frequencies [Hz], most unstable first."""
+    msg = Float64MultiArray(data=p.unstable_frequencies_hz)
+    msg.layout.dim = [MultiArrayDimension(label="frequency_hz", size=len(msg.data),
+                                          stride=len(msg.data))]
+    return msg
 
 
 def modes_message(p: Prediction) -> Float64MultiArray:

@@ -14,9 +14,10 @@ from tqdm import tqdm
 
 
 @contextmanager
-def progress_bar(total: int, desc: str, unit: str = "pt", leave: bool = False
+def progress_bar(total: int | None, desc: str, unit: str = "pt", leave: bool = False
                  ) -> Iterator[Callable[[int], None]]:
-    """A tqdm bar on stderr; yields its `update(n_done)` callable (the model's `progress=`)."""
+    """A tqdm bar on stderr (a counter when `total` is None: unknown); yields its
+    `update(n_done)` callable (the model's `progress=`)."""
     with tqdm(total=total, desc=desc, unit=unit, leave=leave, disable=None,
               file=sys.stderr, dynamic_ncols=True) as bar:
         yield bar.update

@@ -37,55 +37,67 @@ _BASIC_SIZE = {"boolean": 1, "octet": 1, "char": 1, "int8": 1, "uint8": 1, "int1
 
 
 def cdr_payload(msg) -> bytes:
-    """CDR bytes of `msg`, cut at the end of its data. Fast CDR sizes the buffer with alignment
-    for empty sequences that it then does not write, leaving up to 4 bytes of uninitialised
-    memory per empty sequence at the end; Fast CDR reads the cut form back identically, and
-    strict readers (`rosbags`) reject the uncut one."""
+    """CDR bytes of `msg` with Fast CDR's uninitialised bytes removed: it leaves alignment
+    padding unwritten (stray process memory in a log, and the same message serializing to
+    different bytes), and sizes the buffer with alignment for empty sequences that it then does
+    not use, leaving up to 4 such bytes per empty sequence at the end, which strict readers
+    (`rosbags`) reject. Padding is zeroed and the payload cut at the end of the data; Fast CDR
+    reads the result back identically."""
     data = serialize_message(msg)
+    gaps: list[tuple[int, int]] = []
     try:
-        end = 4 + _cdr_end(msg, 0)
+        end = 4 + _cdr_end(msg, 0, gaps)                 # 4: the encapsulation header
     except _Unsized:
         return data
-    return data[:end] if end < len(data) else data
+    if end > len(data):
+        return data
+    out = bytearray(data[:end])
+    for start, stop in gaps:
+        out[4 + start:4 + stop] = bytes(stop - start)
+    return bytes(out)
 
 
 class _Unsized(Exception):
     pass
 
 
-def _align(pos: int, size: int) -> int:
-    return pos + (-pos) % size
+def _align(pos: int, size: int, gaps: list) -> int:
+    pad = (-pos) % size
+    if pad:
+        gaps.append((pos, pos + pad))
+    return pos + pad
 
 
-def _cdr_end(msg, pos: int) -> int:
-    """Offset after the last byte of `msg` serialized at `pos` (XCDR1, as Fast CDR writes)."""
+def _cdr_end(msg, pos: int, gaps: list) -> int:
+    """Offset after the last byte of `msg` serialized at `pos` (XCDR1, as Fast CDR writes);
+    alignment gaps are appended to `gaps`."""
     for name, slot in zip(msg.get_fields_and_field_types(), msg.SLOT_TYPES):
-        pos = _value_end(getattr(msg, name), slot, pos)
+        pos = _value_end(getattr(msg, name), slot, pos, gaps)
     return pos
 
 
-def _value_end(value, slot, pos: int) -> int:
+def _value_end(value, slot, pos: int, gaps: list) -> int:
     kind = type(slot).__name__
     if kind == "BasicType":
         size = _BASIC_SIZE.get(slot.typename)
         if size is None:
             raise _Unsized(slot.typename)
-        return _align(pos, size) + size
+        return _align(pos, size, gaps) + size
     if kind in ("UnboundedString", "BoundedString"):
-        return _align(pos, 4) + 4 + len(value.encode()) + 1
+        return _align(pos, 4, gaps) + 4 + len(value.encode()) + 1
     if kind == "NamespacedType":
-        return _cdr_end(value, pos)
+        return _cdr_end(value, pos, gaps)
     if kind in ("UnboundedSequence", "BoundedSequence", "Array"):
         if kind != "Array":
-            pos = _align(pos, 4) + 4
+            pos = _align(pos, 4, gaps) + 4
         if len(value) == 0:
             return pos
         item = slot.value_type
         if type(item).__name__ == "BasicType" and item.typename in _BASIC_SIZE:
             size = _BASIC_SIZE[item.typename]
-            return _align(pos, size) + size * len(value)
+            return _align(pos, size, gaps) + size * len(value)
         for v in value:
-            pos = _value_end(v, item, pos)
+            pos = _value_end(v, item, pos, gaps)
         return pos
     raise _Unsized(kind)
 

@@ -412,7 +412,7 @@ def foreign_mcap(path: Path, profile: str = "ros2", type_name: str = "std_msgs/m
 @pytest.mark.parametrize("damage, match", [
     ("truncated second file", "_1.mcap: truncated: no footer"),
     ("garbage", r"garbage.mcap: not an MCAP file \(bad magic\)"),
-    ("empty", "empty.mcap: not an MCAP file"),
+    ("empty", "empty.mcap: empty file"),
     ("missing", "(?i)missing.mcap: no such file"),
     ("foreign profile", "foreign MCAP: profile ''"),
     ("bad payload", "message 0 on /motor_speed is not a valid std_msgs/msg/Float64"),

@@ -1,0 +1,483 @@
+"""Offline replay of an MCAP log: the node's predictions recomputed for the whole log.
+
+read the log (`logfile`, strict: a damaged or foreign file is a one-line `LogError`) ->
+operating-point timeline with the node's deadbands (`timeline`) -> batched predictions, in
+worker processes for long logs -> squeak episodes -> `<log>.annotated.mcap`: every original
+message copied verbatim (channel, schema, times, sequence, bytes) plus the predictions on
+`<namespace>/squeak/{risk,unstable_frequencies,active,modes}` with the node's types, each at the
+log time of the input that triggered it; `episodes.json`, `summary.json` and `summary.txt`.
+
+Messages stream through in segments: a segment is written once its predictions are back, so
+memory stays bounded and reading overlaps with the eigen-solves.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing
+import re
+import signal
+import sys
+import time
+from collections import Counter, deque
+from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, field
+from functools import partial
+from pathlib import Path
+from typing import Any, BinaryIO, Callable
+
+import numpy as np
+from mcap.writer import CompressionType, Writer
+from std_msgs.msg import Bool, Float64, Float64MultiArray
+
+from . import msgdefs
+from .jsonsafe import json_safe
+from .logfile import LogError, LogMessage, Topic, log_files, read_messages
+from .model import Prediction, SqueakModel
+from .model.predictor import SELF_LOCKING, SUPERCRITICAL, TOO_SLOW
+from .node import frequencies_message, modes_message
+from .progress import progress_bar
+from .recorder import cdr_payload
+from .timeline import InputError, InputSettings, Job, Timeline, predict_jobs
+
+DEFAULT_NAMESPACE = "/replay"
+OUTPUT_TOPICS = {"risk": Float64, "unstable_frequencies": Float64MultiArray, "active": Bool,
+                 "modes": Float64MultiArray}
+_BATCH_JOBS = 256              # predictions per batched solve (one worker task)
+_SEGMENT_MESSAGES = 20_000     # a segment without predictions is written at this size
+# Messages held while their predictions are computed (~250 bytes each): enough to read on
+# through a rest while the workers solve the stroke before it.
+_IN_FLIGHT_MESSAGES = 250_000
+_NAME = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
+
+
+@dataclass(frozen=True)
+class ReplaySettings:
+    inputs: InputSettings = field(default_factory=InputSettings)
+    namespace: str = DEFAULT_NAMESPACE
+    workers: int = 1          # prediction processes for long logs (0: all in this process)
+    progress: bool = True     # progress bar on stderr (a terminal only)
+
+    def __post_init__(self) -> None:
+        if not _NAME.fullmatch(self.namespace):
+            raise ValueError(f"namespace must be a ROS name like /replay, got "
+                             f"{self.namespace!r}")
+        if self.workers < 0:
+            raise ValueError(f"workers must be >= 0, got {self.workers}")
+
+
+@dataclass
+class Episode:
+    """A contiguous interval with squeak predicted (seconds from the log's first message)."""
+
+    start_s: float
+    end_s: float
+    peak_growth_rate: float                       # 1/s
+    speed_range_rad_s: tuple[float, float]
+    load_range_n: tuple[float, float]
+    predictions: int
+    frequencies: dict[str, list[float]] = field(default_factory=dict)   # mode -> Hz seen
+
+    @property
+    def modes(self) -> list[str]:
+        """Squeak modes, by median frequency."""
+        return sorted(self.frequencies, key=lambda label: np.median(self.frequencies[label]))
+
+    @property
+    def frequencies_hz(self) -> list[float]:
+        """The distinct squeak frequencies: each mode's median frequency, ascending."""
+        return [float(np.median(self.frequencies[label])) for label in self.modes]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"start_s": self.start_s, "end_s": self.end_s,
+                "duration_s": self.end_s - self.start_s,
+                "frequencies_hz": self.frequencies_hz, "modes": self.modes,
+                "peak_growth_rate": self.peak_growth_rate,
+                "speed_min_rad_s": self.speed_range_rad_s[0],
+                "speed_max_rad_s": self.speed_range_rad_s[1],
+                "load_min_n": self.load_range_n[0], "load_max_n": self.load_range_n[1],
+                "predictions": self.predictions}
+
+
+@dataclass
+class PredictionSeries:
+    """One row per recompute with a prediction (seconds from the log's first message)."""
+
+    time_s: list[float] = field(default_factory=list)
+    speed_rad_s: list[float] = field(default_factory=list)
+    load_n: list[float] = field(default_factory=list)
+    nut_position_m: list[float] = field(default_factory=list)
+    risk: list[float] = field(default_factory=list)
+    active: list[bool] = field(default_factory=list)
+    squeak_hz: list[float] = field(default_factory=list)       # every squeak frequency...
+    squeak_rows: list[int] = field(default_factory=list)       # ...and its row
+
+    def add(self, t: float, job: Job, p: Prediction) -> None:
+        self.squeak_hz += p.unstable_frequencies_hz
+        self.squeak_rows += [len(self.time_s)] * len(p.squeak_modes)
+        for column, value in ((self.time_s, t), (self.speed_rad_s, p.speed_rad_s),
+                              (self.load_n, p.load_n), (self.nut_position_m, job.nut_position_m),
+                              (self.risk, p.risk), (self.active, not p.stable)):
+            column.append(value)
+
+
+@dataclass
+class ReplayResult:
+    log: Path
+    files: list[Path]
+    out_dir: Path
+    annotated: Path
+    start_ns: int                     # log time of the first message: t = 0
+    duration_s: float                 # to the last message
+    messages: int                     # original messages
+    inputs: Counter                   # input messages per topic
+    recomputes: int                   # operating points that moved beyond the deadbands
+    predictions: int                  # recomputes with a prediction (valid points)
+    no_prediction: Counter            # recomputes outside validity, by reason
+    rejected: Counter                 # input values not taken, by reason
+    ignored: Counter                  # joint_states messages without the joint
+    episodes: list[Episode]
+    series: PredictionSeries
+    timeline: Timeline                # the point after every input message
+    wall_s: float = math.nan
+    outputs: list[Path] = field(default_factory=list)
+
+    @property
+    def time_in_squeak_s(self) -> float:
+        return sum(e.end_s - e.start_s for e in self.episodes)
+
+    @property
+    def x_real_time(self) -> float:
+        """Log duration / wall time of the replay (x real time)."""
+        return self.duration_s / self.wall_s if self.wall_s > 0 else math.inf
+
+    def summary(self) -> dict[str, Any]:
+        return {"log": str(self.log), "files": [str(f) for f in self.files],
+                "annotated": str(self.annotated), "duration_s": self.duration_s,
+                "messages": self.messages, "input_messages": dict(self.inputs),
+                "recomputes": self.recomputes, "predictions": self.predictions,
+                "no_prediction": dict(self.no_prediction), "rejected_inputs": dict(self.rejected),
+                "ignored_inputs": dict(self.ignored), "episodes": len(self.episodes),
+                "time_in_squeak_s": self.time_in_squeak_s,
+                "squeak_share": self.time_in_squeak_s / self.duration_s
+                if self.duration_s > 0 else 0.0,
+                "wall_s": self.wall_s, "x_real_time": self.x_real_time}
+
+    def summary_text(self) -> str:
+        s = self.summary()
+        lines = [f"replay of {self.log}: {len(self.files)} file(s), {self.messages} messages "
+                 f"over {self.duration_s:.1f} s",
+                 "input messages: " + (", ".join(f"{k} {v}" for k, v in self.inputs.items())
+                                       or "none"),
+                 f"recomputes: {self.recomputes} ({self.predictions} with a prediction)",
+                 f"squeak episodes: {len(self.episodes)}, time in squeak "
+                 f"{self.time_in_squeak_s:.2f} s ({100 * s['squeak_share']:.1f} % of the log)"]
+        for title, counts in (("no prediction (outside the model's validity)", self.no_prediction),
+                              ("rejected inputs", self.rejected), ("ignored inputs", self.ignored)):
+            lines += [f"{title}: {n} x {reason}" for reason, n in sorted(counts.items())]
+        lines.append(f"wall time {self.wall_s:.2f} s ({self.x_real_time:.0f}x real time)")
+        lines.append(f"annotated log: {self.annotated}")
+        return "\n".join(lines)
+
+
+def log_name(path: Path) -> str:
+    """`run.mcap` -> `run`, a bag directory -> its name."""
+    path = Path(path)
+    return path.stem if path.is_file() else path.resolve().name
+
+
+# ---------------------------------------------------------------------- the annotated log
+class _AnnotatedWriter:
+    """Original channels copied as they are, plus the prediction topics under `namespace`."""
+
+    def __init__(self, fh: BinaryIO, namespace: str):
+        self.writer = Writer(fh, compression=CompressionType.ZSTD)
+        self.writer.start(profile="ros2", library="leadscrew_ros replay")
+        self._schemas: dict[tuple[str, str, str], int] = {}
+        self._channels: dict[int, tuple[Topic, int]] = {}        # id(topic) -> topic, channel
+        self._by_value: dict[tuple, int] = {}
+        self._outputs = {name: self._channel(Topic(
+            f"{namespace}/squeak/{name}", msgdefs.type_name(t), "ros2msg",
+            msgdefs.definition(msgdefs.type_name(t)), "cdr", {"offered_qos_profiles": ""}))
+            for name, t in OUTPUT_TOPICS.items()}
+        self._sequence = Counter()
+
+    def _channel(self, t: Topic) -> int:
+        key = (t.name, t.stored_schema_name, t.schema_encoding, t.schema, t.message_encoding,
+               tuple(sorted(t.metadata.items())))
+        if key not in self._by_value:
+            schema_key = (t.stored_schema_name, t.schema_encoding, t.schema)
+            if schema_key not in self._schemas:
+                self._schemas[schema_key] = self.writer.register_schema(
+                    t.stored_schema_name, t.schema_encoding, t.schema.encode())
+            self._by_value[key] = self.writer.register_channel(
+                t.name, t.message_encoding, self._schemas[schema_key], dict(t.metadata))
+        return self._by_value[key]
+
+    def original(self, m: LogMessage) -> None:
+        entry = self._channels.get(id(m.topic))
+        if entry is None:             # holding the topic keeps its id from being reused
+            entry = self._channels[id(m.topic)] = (m.topic, self._channel(m.topic))
+        self.writer.add_message(entry[1], m.log_time_ns, m.data, m.publish_time_ns, m.sequence)
+
+    def prediction(self, log_time_ns: int, p: Prediction) -> None:
+        for name, msg in (("risk", Float64(data=float(p.risk))),
+                          ("unstable_frequencies", frequencies_message(p)),
+                          ("active", Bool(data=not p.stable)),
+                          ("modes", modes_message(p))):
+            self.writer.add_message(self._outputs[name], log_time_ns, cdr_payload(msg),
+                                    log_time_ns, self._sequence[name])
+            self._sequence[name] += 1
+
+    def finish(self) -> None:
+        self.writer.finish()
+
+
+# ---------------------------------------------------------------------- predictions
+@dataclass
+class _Segment:
+    messages: list[LogMessage] = field(default_factory=list)
+    jobs: list[Job] = field(default_factory=list)
+    predictions: Future | list[Prediction] | None = None
+    args: tuple = ()                  # of predict_jobs
+
+    def done(self) -> bool:
+        return not isinstance(self.predictions, Future) or self.predictions.done()
+
+    def result(self) -> list[Prediction]:
+        if isinstance(self.predictions, Future):
+            try:
+                self.predictions = self.predictions.result()
+            except BrokenProcessPool:      # a worker died (killed, out of memory): solve here
+                self.predictions = predict_jobs(*self.args)
+        return self.predictions
+
+
+class _Solver:
+    """Batched predictions: in this process for short logs; from the second batch on (a long
+    log) in `workers` spawned processes, while this one reads and writes."""
+
+    def __init__(self, model: SqueakModel, workers: int):
+        self.params, self.workers = model.params, workers
+        self.batches = 0
+        self.pool: ProcessPoolExecutor | None = None
+
+    def submit(self, seg: _Segment) -> None:
+        if not seg.jobs:
+            seg.predictions = []
+            return
+        seg.args = (self.params, *(np.array([getattr(j, f) for j in seg.jobs]) for f in
+                                   ("speed_rad_s", "load_n", "model_nut_m")))
+        self.batches += 1
+        if self.workers and self.batches > 1 and self.pool is None:
+            # spawn, not fork: the parent holds BLAS and tqdm threads. Workers ignore SIGINT:
+            # Ctrl-C reaches the whole process group, and this process shuts the pool down.
+            self.pool = ProcessPoolExecutor(
+                self.workers, multiprocessing.get_context("spawn"),
+                initializer=partial(signal.signal, signal.SIGINT, signal.SIG_IGN))
+        if self.pool is not None:
+            try:
+                seg.predictions = self.pool.submit(predict_jobs, *seg.args)
+                return
+            except BrokenProcessPool:
+                self.pool.shutdown(wait=False)
+                self.pool, self.workers = None, 0
+        seg.predictions = predict_jobs(*seg.args)
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+
+
+# ---------------------------------------------------------------------- episodes
+class _Episodes:
+    """Squeak episodes from the predictions in log order. An episode starts at the first
+    prediction with squeak (not stable) and ends at the next recompute that is stable or
+    outside validity (motor at rest: no squeak), or at the end of the log."""
+
+    def __init__(self) -> None:
+        self.done: list[Episode] = []
+        self.open: Episode | None = None
+
+    def add(self, t: float, p: Prediction) -> None:
+        squeak = p.valid and not p.stable
+        e = self.open
+        if not squeak:
+            if e is not None:
+                e.end_s, self.open = t, None
+            return
+        growth = p.max_growth_rate if p.max_growth_rate is not None else -math.inf
+        if e is None:
+            e = self.open = Episode(t, t, growth, (p.speed_rad_s, p.speed_rad_s),
+                                    (p.load_n, p.load_n), 0)
+            self.done.append(e)
+        e.end_s = t
+        e.peak_growth_rate = max(e.peak_growth_rate, growth, *p.divergence_rates)
+        e.speed_range_rad_s = (min(e.speed_range_rad_s[0], p.speed_rad_s),
+                               max(e.speed_range_rad_s[1], p.speed_rad_s))
+        e.load_range_n = (min(e.load_range_n[0], p.load_n), max(e.load_range_n[1], p.load_n))
+        e.predictions += 1
+        for m in p.squeak_modes:
+            e.frequencies.setdefault(m.label, []).append(m.frequency_hz)
+
+    def close(self, end_s: float) -> list[Episode]:
+        if self.open is not None:
+            self.open.end_s, self.open = end_s, None
+        return self.done
+
+
+# ---------------------------------------------------------------------- the replay
+def _message_total(files: list[Path]) -> int | None:
+    """Message count from the files' summaries, for the progress bar (None if unknown)."""
+    from mcap.reader import make_reader
+    total = 0
+    try:
+        for f in files:
+            with open(f, "rb") as fh:
+                stats = make_reader(fh).get_summary().statistics
+            total += stats.message_count
+    except Exception:            # only a hint: a damaged summary shows up when reading
+        return None
+    return total
+
+
+class _Run:
+    """One replay in progress: messages go to the timeline and into segments; a segment is
+    written (originals, predictions after their inputs) once its predictions are back."""
+
+    def __init__(self, model: SqueakModel, settings: ReplaySettings, out: _AnnotatedWriter,
+                 progress: Callable[[int], None] | None):
+        self.model, self.out, self.progress = model, out, progress
+        self.timeline = Timeline(model.params, settings.inputs)
+        self.solver = _Solver(model, settings.workers)
+        self.series, self.episodes = PredictionSeries(), _Episodes()
+        self.no_prediction: Counter[str] = Counter()
+        self.messages, self.start_ns, self.end_ns = 0, None, None
+        self.queue: deque[_Segment] = deque()
+        self.held = 0                                    # messages in `queue`
+        self.segment = _Segment()
+
+    def add(self, m: LogMessage) -> None:
+        if self.start_ns is None:
+            self.start_ns = self.end_ns = m.log_time_ns
+        self.end_ns = max(self.end_ns, m.log_time_ns)
+        self.messages += 1
+        seg = self.segment
+        seg.messages.append(m)
+        job = self.timeline.feed(m, len(seg.messages) - 1)
+        if job is not None:
+            seg.jobs.append(job)
+        if len(seg.jobs) >= _BATCH_JOBS or len(seg.messages) >= _SEGMENT_MESSAGES:
+            self._seal()
+            while self.queue and (self.queue[0].done() or self.held > _IN_FLIGHT_MESSAGES):
+                self._write(self.queue.popleft())
+
+    def finish(self) -> None:
+        self._seal()
+        while self.queue:
+            self._write(self.queue.popleft())
+        self.out.finish()
+
+    def _seal(self) -> None:
+        self.solver.submit(self.segment)
+        self.queue.append(self.segment)
+        self.held += len(self.segment.messages)
+        self.segment = _Segment()
+
+    def _write(self, seg: _Segment) -> None:
+        self.held -= len(seg.messages)
+        jobs = iter(zip(seg.jobs, seg.result()))
+        job, p = next(jobs, (None, None))
+        for i, m in enumerate(seg.messages):
+            self.out.original(m)
+            if job is not None and job.index == i:
+                t = (job.log_time_ns - self.start_ns) / 1e9
+                if p.valid:
+                    self.out.prediction(job.log_time_ns, p)
+                    self.series.add(t, job, p)
+                else:
+                    self.no_prediction[_short_reason(self.model, p)] += 1
+                self.episodes.add(t, p)
+                job, p = next(jobs, (None, None))
+        if self.progress is not None:
+            self.progress(len(seg.messages))
+
+
+def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
+           settings: ReplaySettings = ReplaySettings()) -> ReplayResult:
+    """Replay `log` (an MCAP file or a directory of split files) offline into `out_dir`."""
+    t0 = time.perf_counter()
+    log, out_dir = Path(log), Path(out_dir)
+    files = log_files(log)
+    if log.is_dir() and out_dir.resolve() == log.resolve():
+        raise LogError(log, "the output directory must not be the log directory (the "
+                            "annotated log would become one of its split files)")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    annotated = out_dir / f"{log_name(log)}.annotated.mcap"
+    unfinished = annotated.with_name(annotated.name + ".partial")
+    show = settings.progress and sys.stderr.isatty()
+    run = None
+    try:
+        with open(unfinished, "wb") as fh, progress_bar(
+                _message_total(files) if show else None, "replay", unit="msg") as bar:
+            run = _Run(model, settings, _AnnotatedWriter(fh, settings.namespace),
+                       bar if show else None)
+            for f in files:
+                try:
+                    for m in read_messages(f):
+                        run.add(m)
+                except InputError as exc:
+                    raise LogError(f, str(exc)) from None
+            run.finish()
+        _check_inputs(log, run.timeline)
+        unfinished.replace(annotated)
+    except BaseException:
+        unfinished.unlink(missing_ok=True)
+        raise
+    finally:
+        if run is not None:
+            run.solver.close()
+    duration = 0.0 if run.start_ns is None else (run.end_ns - run.start_ns) / 1e9
+    tl = run.timeline
+    result = ReplayResult(
+        log=log, files=files, out_dir=out_dir, annotated=annotated, start_ns=run.start_ns or 0,
+        duration_s=duration, messages=run.messages, inputs=tl.inputs, recomputes=tl.recomputes,
+        predictions=len(run.series.time_s), no_prediction=run.no_prediction,
+        rejected=tl.rejected, ignored=tl.ignored, episodes=run.episodes.close(duration),
+        series=run.series, timeline=tl)
+    _write_json(out_dir / "episodes.json", [e.as_dict() for e in result.episodes])
+    result.wall_s = time.perf_counter() - t0
+    _write_json(out_dir / "summary.json", result.summary())
+    (out_dir / "summary.txt").write_text(result.summary_text() + "\n", encoding="utf-8")
+    result.outputs = [annotated, out_dir / "episodes.json", out_dir / "summary.json",
+                      out_dir / "summary.txt"]
+    return result
+
+
+def _short_reason(model: SqueakModel, p: Prediction) -> str:
+    """Why a recompute has no prediction, without the numbers (a counter key)."""
+    return _VALIDITY.get(int(model.validity_code(p.speed_rad_s, p.load_n)), p.reason)
+
+
+_VALIDITY = {TOO_SLOW: "speed below min_speed_rad_s",
+             SUPERCRITICAL: "speed at or above the first critical speed",
+             SELF_LOCKING: "overhauling load on a self-locking thread"}
+
+
+def _check_inputs(log: Path, timeline: Timeline) -> None:
+    """A log without speed or load gives no prediction at all: say which topics it has."""
+    s = timeline.settings
+    missing = [what for what, value in (
+        (f"speed (std_msgs/Float64 on {s.speed_topic} or a joint velocity on "
+         f"{s.joint_states_topic})", timeline.speed),
+        (f"axial load (std_msgs/Float64 on {s.load_topic})", timeline.load)) if value is None]
+    if missing:
+        raise LogError(log, f"no {' and no '.join(missing)} in the log (its topics: "
+                            f"{', '.join(timeline.topics) or 'none'}); choose the topics with "
+                            f"--speed-topic, --load-topic, --joint-states-topic, --joint-name")
+
+
+def _write_json(path: Path, obj: Any) -> None:
+    path.write_text(json.dumps(json_safe(obj), indent=1, allow_nan=False) + "\n", encoding="utf-8")

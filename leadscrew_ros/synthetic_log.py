@@ -1,0 +1,103 @@
+"""Synthetic input logs: hours of power-seat strokes as the robot would record them.
+
+A duty cycle of seat strokes (`simulator.StrokeProfile`, alternately forwards and backwards, the
+nut going back and forth) each followed by a rest, sampled at `rate_hz` with small sensor noise,
+written by our `Recorder` (a rosbag2-style bag directory of split MCAP files) on the node's
+input topics: `/motor_speed` and `/axial_load` (std_msgs/Float64), `/joint_states`
+(sensor_msgs/JointState: screw angle and speed of one joint) and optionally `/nut_position`.
+Used by the replay tests and benchmark.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+from .recorder import Recorder, RecordSettings
+from .simulator import StrokeProfile
+
+SPEED_TOPIC, LOAD_TOPIC = "/motor_speed", "/axial_load"
+JOINT_STATES_TOPIC, NUT_TOPIC = "/joint_states", "/nut_position"
+_TOPIC_OFFSET_NS = 100_000       # topics of one sample are logged 0.1 ms apart, as on a robot
+
+
+@dataclass(frozen=True)
+class DutyCycle:
+    """What the log contains; everything is deterministic for a given `seed`."""
+
+    duration_s: float = 3600.0
+    rate_hz: float = 100.0
+    rest_s: float = 48.0                    # motor off after each stroke (12 s stroke: 20 % duty)
+    stroke: StrokeProfile = field(default_factory=StrokeProfile)
+    joint_name: str = "seat_screw"
+    nut_position_topic: bool = False        # also log the nut position (Float64, m)
+    speed_noise_rad_s: float = 0.02         # standard deviation of the speed signal
+    load_noise_n: float = 0.3               # standard deviation of the load cell
+    encoder_counts_per_rev: int = 4096      # resolution of the screw angle
+    seed: int = 0
+    start_ns: int = 1_767_225_600_000_000_000     # 2026-01-01T00:00:00Z
+
+    @property
+    def samples(self) -> int:
+        return int(round(self.duration_s * self.rate_hz))
+
+
+@dataclass(frozen=True)
+class Samples:
+    """The signals of a duty cycle, one row per sample (SI units)."""
+
+    time_s: np.ndarray              # since the first sample
+    speed_rad_s: np.ndarray         # measured (with noise)
+    load_n: np.ndarray              # measured (with noise)
+    nut_position_m: np.ndarray      # from the quantised screw angle
+    screw_angle_rad: np.ndarray     # quantised
+
+
+def samples(cycle: DutyCycle) -> Samples:
+    p, rng = cycle.stroke, np.random.default_rng(cycle.seed)
+    t = np.arange(cycle.samples) / cycle.rate_hz
+    period = p.duration_s + cycle.rest_s
+    k = np.floor(t / period)
+    # Stroke k runs at loop time k * duration: odd strokes go backwards and bring the nut back;
+    # during the rest the stroke's end state holds.
+    states = [p.state(s, loop=True) for s in
+              (k * p.duration_s + np.minimum(t - k * period, p.duration_s)).tolist()]
+    speed, load, _, angle = (np.array(a) for a in zip(*states))
+    step = 2 * np.pi / cycle.encoder_counts_per_rev
+    angle = np.round(angle / step) * step
+    return Samples(t, speed + rng.normal(0.0, cycle.speed_noise_rad_s, t.size),
+                   load + rng.normal(0.0, cycle.load_noise_n, t.size),
+                   p.nut_position_at_zero_angle_m + angle * p.lead_m_per_rad, angle)
+
+
+def write_log(cycle: DutyCycle, directory: Path | str, split_duration_s: float = 600.0,
+              compression: str = "zstd") -> Path:
+    """Record `cycle` into a new bag directory under `directory` (created if needed); returns
+    the bag directory."""
+    s = samples(cycle)
+    Path(directory).mkdir(parents=True, exist_ok=True)
+    rec = Recorder(RecordSettings(directory=str(directory), split_size_mb=0.0,
+                                  split_duration_s=split_duration_s, compression=compression))
+    if not rec.start(cycle.start_ns):
+        raise OSError(rec.error)
+    times = cycle.start_ns + np.round(s.time_s * 1e9).astype(np.int64)
+    for now, speed, load, nut, angle in zip(times.tolist(), s.speed_rad_s.tolist(),
+                                            s.load_n.tolist(), s.nut_position_m.tolist(),
+                                            s.screw_angle_rad.tolist()):
+        rec.write(SPEED_TOPIC, Float64(data=speed), now)
+        rec.write(LOAD_TOPIC, Float64(data=load), now + _TOPIC_OFFSET_NS)
+        joint = JointState(name=[cycle.joint_name], position=[angle], velocity=[speed])
+        stamp = now + 2 * _TOPIC_OFFSET_NS
+        joint.header.stamp.sec, joint.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+        rec.write(JOINT_STATES_TOPIC, joint, stamp)
+        if cycle.nut_position_topic:
+            rec.write(NUT_TOPIC, Float64(data=nut), now + 3 * _TOPIC_OFFSET_NS)
+        rec.tick(now)
+    rec.stop()
+    if rec.error:
+        raise OSError(rec.error)
+    return rec.bag
