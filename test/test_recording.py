@@ -5,6 +5,7 @@ a node process). Uses the launch-free `Ros` world of test_node.py."""
 from __future__ import annotations
 
 import array
+import contextlib
 import dataclasses
 import math
 import os
@@ -403,29 +404,36 @@ class Feed:
         self.ros.close()
 
 
+@contextlib.contextmanager
+def answering_node(tmp_path: Path, ns: str, extra: list[str] = (), preexec_fn=None):
+    """A recording node process and a Feed it already answers; both cleaned up on exit."""
+    proc, directory = start_recording_node(tmp_path, ns, extra, preexec_fn)
+    feed = None
+    try:
+        wait_initialised([proc])
+        feed = Feed(ns)
+        deadline = time.monotonic() + 10
+        while not feed.risk:
+            assert time.monotonic() < deadline, "no answer from the node process"
+            feed.run(0.05)
+        yield proc, directory, feed
+    finally:
+        stop_processes(proc)
+        if feed is not None:
+            feed.close()
+
+
 @pytest.fixture
 def ns():
     return f"/t{uuid.uuid4().hex}"
 
 
 def test_sigkill_loses_at_most_one_second_and_the_file_is_recoverable(tmp_path, ns):
-    proc, directory = start_recording_node(tmp_path, ns)
-    feed = None
-    try:
-        wait_initialised([proc])
-        feed = Feed(ns)
-        deadline = time.monotonic() + 10
-        while not feed.risk:                   # the node is up and answering
-            assert time.monotonic() < deadline, "no answer from the node process"
-            feed.run(0.05)
+    with answering_node(tmp_path, ns) as (proc, directory, feed):
         feed.run(2.0)                          # 2 s of 200 Hz speed + load
         killed_ns = time.time_ns()
         proc.kill()
         proc.wait(timeout=10)
-    finally:
-        stop_processes(proc)
-        if feed is not None:
-            feed.close()
     files = log_files(next(directory.iterdir()))
     assert len(files) == 1 and not is_complete(files[0])
     with pytest.raises(LogError, match="recover"):
@@ -447,22 +455,10 @@ def test_sigkill_loses_at_most_one_second_and_the_file_is_recoverable(tmp_path, 
 
 
 def test_sigterm_closes_the_file_with_summary_and_index(tmp_path, ns):
-    proc, directory = start_recording_node(tmp_path, ns)
-    feed = None
-    try:
-        wait_initialised([proc])
-        feed = Feed(ns)
-        deadline = time.monotonic() + 10
-        while not feed.risk:
-            assert time.monotonic() < deadline, "no answer from the node process"
-            feed.run(0.05)
+    with answering_node(tmp_path, ns) as (proc, directory, feed):
         feed.run(0.5)
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=10) == 0
-    finally:
-        stop_processes(proc)
-        if feed is not None:
-            feed.close()
     bag = next(directory.iterdir())
     files = log_files(bag)
     assert len(files) == 1 and is_complete(files[0])
@@ -480,17 +476,9 @@ def test_disk_full_stops_the_recording_with_an_error_and_predictions_continue(tm
     def small_disk():
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
-    proc, directory = start_recording_node(tmp_path, ns, ["-p", "record.compression:=none",
-                                                          "-p", "record.flush_period_s:=0.1"],
-                                           preexec_fn=small_disk)
-    feed = None
-    try:
-        wait_initialised([proc])
-        feed = Feed(ns)
-        deadline = time.monotonic() + 10
-        while not feed.risk:
-            assert time.monotonic() < deadline, "no answer from the node process"
-            feed.run(0.05)
+    with answering_node(tmp_path, ns, ["-p", "record.compression:=none",
+                                       "-p", "record.flush_period_s:=0.1"],
+                        preexec_fn=small_disk) as (proc, directory, feed):
         deadline = time.monotonic() + 20
         while not any(s.level == b"\x02" for s in feed.recording):
             assert time.monotonic() < deadline, "no recording error while the disk filled up"
@@ -504,10 +492,6 @@ def test_disk_full_stops_the_recording_with_an_error_and_predictions_continue(tm
         assert proc.poll() is None
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=10) == 0
-    finally:
-        stop_processes(proc)
-        if feed is not None:
-            feed.close()
     bag = next(directory.iterdir())
     info = inspect(log_files(bag)[0])                   # what was written before stays readable
     assert info.messages > 0
