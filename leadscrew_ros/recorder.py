@@ -21,85 +21,14 @@ from pathlib import Path
 
 import yaml
 from mcap.writer import CompressionType, Writer
-from rclpy.serialization import serialize_message
 
 from . import msgdefs
+from .serialization import cdr_payload
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}
 _CHUNK_BYTES = 4 << 20         # chunks are closed by the flush period long before this size
 _ROS_DISTRO = "jazzy"
-
-
-_BASIC_SIZE = {"boolean": 1, "octet": 1, "char": 1, "int8": 1, "uint8": 1, "int16": 2,
-               "uint16": 2, "int32": 4, "uint32": 4, "float": 4, "int64": 8, "uint64": 8,
-               "double": 8}
-
-
-def cdr_payload(msg) -> bytes:
-    """CDR bytes of `msg` with Fast CDR's uninitialised bytes removed: it leaves alignment
-    padding unwritten (stray process memory in a log, and the same message serializing to
-    different bytes), and sizes the buffer with alignment for empty sequences that it then does
-    not use, leaving up to 4 such bytes per empty sequence at the end, which strict readers
-    (`rosbags`) reject. Padding is zeroed and the payload cut at the end of the data; Fast CDR
-    reads the result back identically."""
-    data = serialize_message(msg)
-    gaps: list[tuple[int, int]] = []
-    try:
-        end = 4 + _cdr_end(msg, 0, gaps)                 # 4: the encapsulation header
-    except _Unsized:
-        return data
-    if end > len(data):
-        return data
-    out = bytearray(data[:end])
-    for start, stop in gaps:
-        out[4 + start:4 + stop] = bytes(stop - start)
-    return bytes(out)
-
-
-class _Unsized(Exception):
-    pass
-
-
-def _align(pos: int, size: int, gaps: list) -> int:
-    pad = (-pos) % size
-    if pad:
-        gaps.append((pos, pos + pad))
-    return pos + pad
-
-
-def _cdr_end(msg, pos: int, gaps: list) -> int:
-    """Offset after the last byte of `msg` serialized at `pos` (XCDR1, as Fast CDR writes);
-    alignment gaps are appended to `gaps`."""
-    for name, slot in zip(msg.get_fields_and_field_types(), msg.SLOT_TYPES):
-        pos = _value_end(getattr(msg, name), slot, pos, gaps)
-    return pos
-
-
-def _value_end(value, slot, pos: int, gaps: list) -> int:
-    kind = type(slot).__name__
-    if kind == "BasicType":
-        size = _BASIC_SIZE.get(slot.typename)
-        if size is None:
-            raise _Unsized(slot.typename)
-        return _align(pos, size, gaps) + size
-    if kind in ("UnboundedString", "BoundedString"):
-        return _align(pos, 4, gaps) + 4 + len(value.encode()) + 1
-    if kind == "NamespacedType":
-        return _cdr_end(value, pos, gaps)
-    if kind in ("UnboundedSequence", "BoundedSequence", "Array"):
-        if kind != "Array":
-            pos = _align(pos, 4, gaps) + 4
-        if len(value) == 0:
-            return pos
-        item = slot.value_type
-        if type(item).__name__ == "BasicType" and item.typename in _BASIC_SIZE:
-            size = _BASIC_SIZE[item.typename]
-            return _align(pos, size, gaps) + size * len(value)
-        for v in value:
-            pos = _value_end(v, item, pos, gaps)
-        return pos
-    raise _Unsized(kind)
 
 
 @dataclass(frozen=True)

@@ -39,7 +39,7 @@ from .model import Prediction, SqueakModel
 from .model.predictor import SELF_LOCKING, SUPERCRITICAL, TOO_SLOW
 from .node import frequencies_message, modes_message
 from .progress import progress_bar
-from .recorder import cdr_payload
+from .serialization import cdr_payload
 from .timeline import InputError, InputSettings, Job, Timeline, predict_jobs
 
 DEFAULT_NAMESPACE = "/replay"

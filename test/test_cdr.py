@@ -12,7 +12,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from leadscrew_ros.cdr import decode_float64, decode_joint_state
-from leadscrew_ros.recorder import cdr_payload
+from leadscrew_ros.serialization import cdr_payload
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 FLOATS = st.floats(allow_nan=False, width=64)

@@ -35,7 +35,8 @@ from std_srvs.srv import SetBool
 
 from leadscrew_ros import msgdefs
 from leadscrew_ros.logfile import LogError, inspect, is_complete, log_files, read_log, recover
-from leadscrew_ros.recorder import Recorder, RecordSettings, cdr_payload
+from leadscrew_ros.recorder import Recorder, RecordSettings
+from leadscrew_ros.serialization import cdr_payload
 from test_node import COLLECT, LOAD, SQUEAK, Ros, at, node_command, wait_initialised
 from test_demo import stop as stop_processes
 

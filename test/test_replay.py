@@ -27,7 +27,7 @@ from std_msgs.msg import Float64
 from leadscrew_ros import msgdefs
 from leadscrew_ros.cli import main
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.recorder import cdr_payload
+from leadscrew_ros.serialization import cdr_payload
 from leadscrew_ros.replay import OUTPUT_TOPICS, ReplaySettings, replay
 from leadscrew_ros.report import QUICK, write_report
 from leadscrew_ros.simulator import StrokeProfile
