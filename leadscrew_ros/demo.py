@@ -211,7 +211,9 @@ def recording_summary(recorder: Recorder) -> str:
     line = (f"  recording:          {recorder.bag} ({len(files)} file"
             f"{'s' * (len(files) != 1)}, {size / 1e3:.0f} kB, {sum(i.messages for i in infos)} "
             f"messages over {span:.1f} s, {len(infos[0].topics) if infos else 0} topics, {state})")
-    return line + (f"; error: {recorder.error}" if recorder.error else "")
+    line += f"; error: {recorder.error}" if recorder.error else ""
+    return (f"{line}\n  review it offline:  leadscrew-squeak replay {recorder.bag} --out "
+            f"{recorder.bag}_review")
 
 
 # ----------------------------------------------------------------------------- run
