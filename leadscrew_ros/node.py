@@ -33,7 +33,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import SetBool
 
-from .live import Level, LivePredictor, LiveSettings
+from .live import Level, LivePredictor, LiveSettings, Status
 from .model import ParameterError, Prediction, ScrewParameters, SqueakModel
 from .model.parameters import FORMULATIONS
 from .recorder import COMPRESSIONS, Recorder, RecordSettings
@@ -107,6 +107,7 @@ class SqueakPredictorNode(Node):
         self.live = LivePredictor(SqueakModel(self._screw_parameters({})),
                                   self._live_settings({}))
         self.recorder = Recorder(self._record_settings({}))
+        self.latched: dict[str, object] = {}          # topic -> last message published on it
         self._published: tuple | None = None          # verdict of the last /diagnostics
         self._last_diagnostics = -math.inf
 
@@ -194,7 +195,7 @@ class SqueakPredictorNode(Node):
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
         names = {p.name for p in params}
-        if names & {f.name for f in fields(ScrewParameters)} | LIVE_FIELDS:
+        if names & ({f.name for f in fields(ScrewParameters)} | LIVE_FIELDS):
             model_changed = bool(names & set(ScrewParameters.__dataclass_fields__))
             model = SqueakModel(self._screw_parameters({})) if model_changed else self.live.model
             self.live.set_model(model, self._live_settings({}))
@@ -217,8 +218,11 @@ class SqueakPredictorNode(Node):
     # ---------------------------------------------------------------- recording
     def _set_recording(self, on: bool) -> None:
         if on and not self.recorder.active:
-            if self.recorder.start(self.get_clock().now().nanoseconds):
+            now_ns = self.get_clock().now().nanoseconds
+            if self.recorder.start(now_ns):
                 self.get_logger().info(f"recording to {self.recorder.bag}")
+                for topic, msg in self.latched.items():   # a bag starts with the current state,
+                    self.recorder.write(topic, msg, now_ns)   # as a latched subscriber gets it
             else:
                 self.get_logger().error(f"recording failed: {self.recorder.error}")
         elif not on and self.recorder.active:
@@ -241,6 +245,7 @@ class SqueakPredictorNode(Node):
 
     def _publish(self, publisher, msg) -> None:
         publisher.publish(msg)
+        self.latched[publisher.topic_name] = msg
         self._record(publisher.topic_name, msg)
 
     # ---------------------------------------------------------------- inputs
@@ -292,22 +297,24 @@ class SqueakPredictorNode(Node):
     def _housekeeping(self) -> None:
         self.recorder.tick(self.get_clock().now().nanoseconds)
         now = time.monotonic()
-        if (now - self._last_diagnostics >= self.get_parameter("diagnostics_period_s").value
-                or self._verdict(now) != self._published):  # e.g. bad input, input went stale
-            self._publish_diagnostics(now)
-
-    def _verdict(self, now: float) -> tuple:
         status = self.live.status(now)
+        if (now - self._last_diagnostics >= self.get_parameter("diagnostics_period_s").value
+                or self._verdict(status) != self._published):  # e.g. bad input, input went stale
+            self._publish_diagnostics(now, status)
+
+    def _verdict(self, status: Status) -> tuple:
+        """What /diagnostics says: republished when it changes."""
         return status.level, status.message, self.recorder.active, self.recorder.error
 
     def _recompute(self, now: float) -> None:
         p = self.live.update(now)
+        status = self.live.status(now)
         if p is None:                        # outside validity: keep the last good outputs
-            self.get_logger().warning(self.live.status(now).message, throttle_duration_sec=2.0)
+            self.get_logger().warning(status.message, throttle_duration_sec=2.0)
         else:
             self._publish_prediction(p)
-        if self._verdict(now) != self._published:    # else the housekeeping period covers it
-            self._publish_diagnostics(now)
+        if self._verdict(status) != self._published:  # else the housekeeping period covers it
+            self._publish_diagnostics(now, status)
 
     def _publish_prediction(self, p: Prediction) -> None:
         self._publish(self.risk_pub, Float64(data=float(p.risk)))
@@ -317,8 +324,8 @@ class SqueakPredictorNode(Node):
         if self.live.safe_speed_rad_s is not None:
             self._publish(self.safe_speed_pub, Float64(data=float(self.live.safe_speed_rad_s)))
 
-    def _publish_diagnostics(self, now: float) -> None:
-        status = self.live.status(now)
+    def _publish_diagnostics(self, now: float, status: Status | None = None) -> None:
+        status = self.live.status(now) if status is None else status
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
         hardware_id = self.get_parameter("hardware_id").value
@@ -328,7 +335,7 @@ class SqueakPredictorNode(Node):
             values=[KeyValue(key=k, value=v) for k, v in status.values.items()]),
             self._recording_status(hardware_id)]
         self._publish(self.diagnostics_pub, msg)
-        self._published, self._last_diagnostics = self._verdict(now), now
+        self._published, self._last_diagnostics = self._verdict(status), now
 
     def _recording_status(self, hardware_id: str) -> DiagnosticStatus:
         r = self.recorder

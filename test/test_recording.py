@@ -108,6 +108,8 @@ def drive(ros: Ros, node) -> list[tuple[str, object]]:
 
 def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
     node = ros.start(**{"record.directory": str(tmp_path), "joint_name": "screw"})
+    latched = list(node.latched.items())       # a new bag starts with these (/diagnostics)
+    assert [t for t, _ in latched] == ["/diagnostics"]
     published = spy_publications(node)
     assert node.set_parameters([Parameter("record.enabled", value=True)])[0].successful
     sent = drive(ros, node)
@@ -115,7 +117,7 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
     node.destroy_node()                                   # closes the file cleanly
     ros.executor.remove_node(node)
     ros.node = None
-    expected = sent + published
+    expected = latched + sent + published
     assert {t for t, _ in published} >= {f"{ros.ns}/squeak/risk", f"{ros.ns}/squeak/modes",
                                          f"{ros.ns}/squeak/unstable_frequencies",
                                          f"{ros.ns}/squeak/active", "/diagnostics"}
