@@ -172,6 +172,22 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
         assert from_rosbags[topic] == [plain(m) for t, m in expected if t == topic], topic
 
 
+def test_message_definitions_come_from_the_installed_packages_with_every_dependency():
+    text = msgdefs.definition("diagnostic_msgs/msg/DiagnosticArray")
+    root, *deps = text.split(msgdefs.DELIMITER + "\n")
+    assert root.rstrip("\n") == msgdefs.msg_text("diagnostic_msgs/msg/DiagnosticArray").rstrip()
+    # depth first in field order, each once, as rosbag2 writes them
+    assert [d.splitlines()[0] for d in deps] == [
+        "MSG: std_msgs/msg/Header", "MSG: builtin_interfaces/msg/Time",
+        "MSG: diagnostic_msgs/msg/DiagnosticStatus", "MSG: diagnostic_msgs/msg/KeyValue"]
+    for d in deps:
+        name = d.splitlines()[0].removeprefix("MSG: ")
+        assert d.split("\n", 1)[1].rstrip() == msgdefs.msg_text(name).rstrip()
+    assert msgdefs.definition("std_msgs/msg/Float64") == msgdefs.msg_text("std_msgs/Float64")
+    with pytest.raises(msgdefs.MessageDefinitionError):
+        msgdefs.definition("no_such_pkg/msg/Nothing")
+
+
 names = st.text(st.characters(codec="utf-8", exclude_characters="\x00"), max_size=12)
 floats = st.lists(st.floats(allow_nan=False), max_size=4)
 
