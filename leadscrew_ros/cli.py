@@ -496,6 +496,12 @@ def _common() -> Parser:
     return common
 
 
+def _duration_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--duration", type=finite, metavar="S",
+                   help="stroke duration [s] (default 12; at most about 13, or the nut would "
+                        "leave the screw)")
+
+
 def build_parser() -> Parser:
     common = [_common()]
     parser = Parser(prog=PROG, description="Predict friction-induced squeak of a lead screw "
@@ -548,9 +554,7 @@ def build_parser() -> Parser:
 
     p = sub.add_parser("demo", help="the ROS 2 predictor node driven by the actuator simulator "
                                     "(one process, loopback, private ROS_DOMAIN_ID)")
-    p.add_argument("--duration", type=finite, metavar="S",
-                   help="stroke duration [s] (default 12; at most about 13, or the nut would "
-                        "leave the screw)")
+    _duration_option(p)
     p.add_argument("--record-dir", default="squeak_demo", metavar="DIR",
                    help="the predictor records inputs and outputs into a bag in DIR (created; "
                         "default ./squeak_demo)")
@@ -559,9 +563,7 @@ def build_parser() -> Parser:
 
     p = sub.add_parser("simulate", help="publish a simulated power-seat stroke for a separately "
                                         "started squeak_node (same ROS_DOMAIN_ID)")
-    p.add_argument("--duration", type=finite, metavar="S",
-                   help="stroke duration [s] (default 12; at most about 13, or the nut would "
-                        "leave the screw)")
+    _duration_option(p)
     p.add_argument("--rate", type=finite, default=100.0, metavar="HZ",
                    help="publishing rate [Hz] (default 100)")
     p.add_argument("--loop", action="store_true",

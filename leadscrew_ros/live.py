@@ -40,6 +40,15 @@ class LiveSettings:
     safe_speed_margin: float = 0.05
 
 
+def moved(point: tuple[float, float, float], last: tuple[float, float, float],
+          deadbands) -> bool:
+    """(speed, load, nut) moved beyond a deadband from `last` (deadbands: any object with
+    speed_deadband_rad_s, load_deadband_n, nut_deadband_m)."""
+    limits = (deadbands.speed_deadband_rad_s, deadbands.load_deadband_n,
+              deadbands.nut_deadband_m)
+    return any(abs(a - b) > lim for a, b, lim in zip(point, last, limits))
+
+
 @dataclass
 class Inputs:
     """Latest accepted value of each input and when it arrived (monotonic seconds)."""
@@ -134,11 +143,7 @@ class LivePredictor:
         point = self._operating_point()
         if point is None:
             return False
-        if self._computed_at is None:
-            return True
-        s = self.settings
-        limits = (s.speed_deadband_rad_s, s.load_deadband_n, s.nut_deadband_m)
-        return any(abs(a - b) > lim for a, b, lim in zip(point, self._computed_at, limits))
+        return self._computed_at is None or moved(point, self._computed_at, self.settings)
 
     def due(self, now: float) -> bool:
         """A change is waiting and the rate limit allows a recompute now."""

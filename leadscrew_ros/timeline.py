@@ -23,7 +23,7 @@ from typing import Callable
 import numpy as np
 
 from .cdr import decode_float64, decode_joint_state
-from .live import LiveSettings
+from .live import LiveSettings, moved
 from .logfile import LogMessage
 from .model import ParameterError, Prediction, ScrewParameters, SqueakModel
 from .model.parameters import field_info
@@ -195,10 +195,7 @@ class Timeline:
         if self.speed is None or self.load is None:
             return None
         point = (self.speed, self.load, self.nut)
-        s, last = self.settings, self._computed_at
-        if last is not None and (abs(point[0] - last[0]) <= s.speed_deadband_rad_s
-                                 and abs(point[1] - last[1]) <= s.load_deadband_n
-                                 and abs(point[2] - last[2]) <= s.nut_deadband_m):
+        if self._computed_at is not None and not moved(point, self._computed_at, self.settings):
             return None
         self._computed_at = point
         self.recomputes += 1
