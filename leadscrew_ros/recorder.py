@@ -19,16 +19,15 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import yaml
 from mcap.writer import CompressionType, Writer
 
 from . import msgdefs
+from .bagmeta import METADATA, BagStats, FileStats, TopicStats
 from .serialization import cdr_payload
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}
 _CHUNK_BYTES = 4 << 20         # chunks are closed by the flush period long before this size
-_ROS_DISTRO = "jazzy"
 
 
 @dataclass(frozen=True)
@@ -54,14 +53,6 @@ class RecordSettings:
 
 
 @dataclass
-class _FileStats:
-    path: Path
-    start_ns: int | None = None
-    end_ns: int | None = None
-    messages: int = 0
-
-
-@dataclass
 class _Topic:
     name: str
     type_name: str
@@ -76,7 +67,7 @@ class Recorder:
     settings: RecordSettings = field(default_factory=RecordSettings)
     bag: Path | None = None              # directory of the recording in progress / last one
     error: str = ""                      # why the last recording stopped on its own
-    files: list[_FileStats] = field(default_factory=list)
+    files: list[FileStats] = field(default_factory=list)
     _out: object = None
     _writer: Writer | None = None
     _topics: dict[str, _Topic] = field(default_factory=dict)
@@ -143,10 +134,7 @@ class Recorder:
             self._fail(exc)
             return
         t.count += 1
-        f = self.files[-1]
-        f.messages += 1
-        f.start_ns = log_time_ns if f.start_ns is None else min(f.start_ns, log_time_ns)
-        f.end_ns = log_time_ns if f.end_ns is None else max(f.end_ns, log_time_ns)
+        self.files[-1].add(log_time_ns)
 
     def tick(self, now_ns: int) -> None:
         """Flush when the flush period is over; split when the file is too big or too old."""
@@ -171,7 +159,7 @@ class Recorder:
     # ------------------------------------------------------------------ files
     def _open(self, now_ns: int) -> bool:
         path = self.bag / f"{self.bag.name}_{len(self.files)}.mcap"
-        self.files.append(_FileStats(path))
+        self.files.append(FileStats(path))
         try:
             self._out = open(path, "wb")
             self._writer = Writer(self._out, chunk_size=_CHUNK_BYTES,
@@ -216,31 +204,10 @@ class Recorder:
 
     def _write_metadata(self) -> None:
         """rosbag2 metadata.yaml, so that `ros2 bag info/play` and rosbags take the directory."""
-        files = [f for f in self.files if f.path.exists()]
-        starts = [f.start_ns for f in files if f.start_ns is not None]
-        ends = [f.end_ns for f in files if f.end_ns is not None]
-        start = min(starts, default=0)
-        info = {"rosbag2_bagfile_information": {
-            "version": 9,
-            "storage_identifier": "mcap",
-            "relative_file_paths": [f.path.name for f in files],
-            "starting_time": {"nanoseconds_since_epoch": start},
-            "duration": {"nanoseconds": max(ends, default=start) - start},
-            "message_count": sum(f.messages for f in files),
-            "topics_with_message_count": [
-                {"topic_metadata": {"name": t.name, "type": t.type_name,
-                                    "serialization_format": "cdr",
-                                    "offered_qos_profiles": "", "type_description_hash": ""},
-                 "message_count": t.count} for t in self._topics.values()],
-            "compression_format": "",
-            "compression_mode": "",
-            "files": [{"path": f.path.name,
-                       "starting_time": {"nanoseconds_since_epoch": f.start_ns or start},
-                       "duration": {"nanoseconds": (f.end_ns or start) - (f.start_ns or start)},
-                       "message_count": f.messages} for f in files],
-            "custom_data": {},
-            "ros_distro": _ROS_DISTRO}}
+        stats = BagStats(files=[f for f in self.files if f.path.exists()],
+                         topics=[TopicStats(t.name, t.type_name, t.count)
+                                 for t in self._topics.values()])
         try:
-            (self.bag / "metadata.yaml").write_text(yaml.safe_dump(info, sort_keys=False))
+            stats.write(self.bag)
         except OSError as exc:
-            self.error = self.error or f"{self.bag / 'metadata.yaml'}: {exc.strerror or exc}"
+            self.error = self.error or f"{self.bag / METADATA}: {exc.strerror or exc}"

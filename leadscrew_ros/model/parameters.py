@@ -11,6 +11,8 @@ import math
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
+from .display import exact
+
 FORMULATIONS = ("paper", "consistent")
 MAX_CONTACT_TURNS = 5000      # bounds the helix quadrature (nodes = turns * nodes per turn)
 
@@ -143,14 +145,16 @@ def validate(p: ScrewParameters) -> None:
         too_low = v <= md["lo"] if md["lo_open"] else v < md["lo"]
         too_high = v >= md["hi"] if md["hi_open"] else v > md["hi"]
         if too_low or too_high:
-            raise ParameterError(f"{f.name} = {v:g} is out of range, allowed {_range_text(md)}")
+            raise ParameterError(f"{f.name} = {exact(v)} is out of range, allowed "
+                                 f"{_range_text(md)}")
     if p.nut_position_m + p.nut_length_m > p.length_m:
         raise ParameterError(
-            f"nut_position_m + nut_length_m = {p.nut_position_m + p.nut_length_m:g} m exceeds "
-            f"length_m = {p.length_m:g} m: the nut must lie on the screw (z_o + b <= L)")
+            f"nut_position_m + nut_length_m = {exact(p.nut_position_m + p.nut_length_m)} m "
+            f"exceeds "
+            f"length_m = {exact(p.length_m)} m: the nut must lie on the screw (z_o + b <= L)")
     if p.mu_kinetic > p.mu_static:
-        raise ParameterError(f"mu_kinetic = {p.mu_kinetic:g} exceeds mu_static = "
-                             f"{p.mu_static:g}: need mu_static >= mu_kinetic >= 0")
+        raise ParameterError(f"mu_kinetic = {exact(p.mu_kinetic)} exceeds mu_static = "
+                             f"{exact(p.mu_static)}: need mu_static >= mu_kinetic >= 0")
     turns = p.nut_length_m / (2 * math.pi * p.radius_m * math.tan(p.helix_angle_rad))
     if turns > MAX_CONTACT_TURNS:
         raise ParameterError(

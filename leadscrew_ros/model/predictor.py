@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from .assembly import build_geometry
+from .display import exact
 from .friction import mu_o
 from .parameters import ScrewParameters, field_info
 from .risk import squeak_risk
@@ -79,7 +80,7 @@ def check_operating_point(speed_rad_s: Any, load_n: Any) -> tuple[float, float]:
             raise OperatingPointError(f"{name} = {v} is not finite ({unit})")
         out.append(v)
     if abs(out[1]) > _LOAD_LIMIT_N:
-        raise OperatingPointError(f"load = {out[1]:g} N exceeds the plausible magnitude "
+        raise OperatingPointError(f"load = {exact(out[1])} N exceeds the plausible magnitude "
                                   f"{_LOAD_LIMIT_N:g} N")
     return out[0], out[1]
 
