@@ -4,13 +4,16 @@ Records are parsed sequentially from a memory map, so a damaged length can never
 reader allocate or wait for more than the file holds; chunk sizes, CRCs and the footer are
 checked. Every problem becomes a one-line `LogError` naming the file. A recording cut off by a
 crash (no summary, no footer) is read in `strict=False` mode up to the last whole record, and
-`recover` rewrites that into a finished file.
+`recover` rewrites that into a finished file; `recover_bag` does so in place for every cut-off
+file of a rosbag2 bag directory and regenerates its `metadata.yaml` (like `ros2 bag reindex`),
+so that every tool opens the bag afterwards.
 """
 
 from __future__ import annotations
 
 import io
 import mmap
+import os
 import re
 import struct
 import zlib
@@ -20,10 +23,13 @@ from pathlib import Path
 from typing import Iterator
 
 import lz4.frame
+import yaml
 import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.records import Channel, Header, Schema
 from mcap.writer import CompressionType, Writer
+
+from .bagmeta import METADATA, BagStats, FileStats, TopicStats
 
 MAGIC = b"\x89MCAP0\r\n"
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_DATA_END = (
@@ -36,6 +42,8 @@ _CHUNK = struct.Struct("<QQQI")
 ENCODINGS = {"cdr"}
 SCHEMA_ENCODINGS = {"ros2msg", "ros2idl"}
 RECOVER_HINT = "leadscrew-squeak recover"
+BROKEN_SUFFIX = ".broken"             # `<name>.mcap.broken`: an original set aside by recover
+_REWRITE_SUFFIX = ".recovering"       # `<name>.mcap.recovering`: a rewrite not yet verified
 
 
 class LogError(Exception):
@@ -83,6 +91,7 @@ class LogInfo:
     end_ns: int | None = None
     complete: bool = False            # footer reached
     damage: str = ""                  # why reading stopped early ('' if it did not)
+    cut_off: bool = False             # damage is only a missing tail: every byte before it read
 
     @property
     def messages(self) -> int:
@@ -94,13 +103,17 @@ def log_files(path: Path | str) -> list[Path]:
     (rosbag2 and our recorder number splits `<name>_<index>.mcap`)."""
     path = Path(path)
     if path.is_dir():
-        files = sorted(path.glob("*.mcap"), key=_split_key)
+        files = _split_files(path)
         if not files:
             raise LogError(path, "directory holds no .mcap files")
         return files
     if not path.exists():
         raise LogError(path, "no such file or directory")
     return [path]
+
+
+def _split_files(directory: Path) -> list[Path]:
+    return sorted(directory.glob("*.mcap"), key=_split_key)
 
 
 def _split_key(p: Path):
@@ -154,11 +167,27 @@ def _incomplete(path: Path) -> str:
     if head != MAGIC:
         return "not an MCAP file (bad magic)"
     return (f"truncated: no footer (the recording was interrupted); "
-            f"recover it with `{RECOVER_HINT} {path}`")
+            f"recover it with `{RECOVER_HINT} {bag_of(path) or path}`")
+
+
+def bag_of(path: Path | str) -> Path | None:
+    """The rosbag2 bag directory an MCAP file belongs to (its parent holds `metadata.yaml`, or
+    the file is named `<directory name>_<index>.mcap` as rosbag2 and our recorder name splits);
+    None for a loose file."""
+    path = Path(path)
+    parent = path.parent
+    if (parent / METADATA).is_file() or re.fullmatch(re.escape(parent.name) + r"_\d+\.mcap",
+                                                     path.name):
+        return parent
+    return None
 
 
 class _Damage(Exception):
     pass
+
+
+class _CutOff(_Damage):
+    """The file ends inside or right after a whole record: a recording cut off, not corrupted."""
 
 
 def _records(path: Path, buf, topics, strict: bool, info: LogInfo) -> Iterator[LogMessage]:
@@ -171,13 +200,13 @@ def _records(path: Path, buf, topics, strict: bool, info: LogInfo) -> Iterator[L
     try:
         while True:
             if pos == size:
-                raise _Damage(f"ends after {size} bytes without a footer (interrupted)")
+                raise _CutOff(f"ends after {size} bytes without a footer (interrupted)")
             if pos + 9 > size:
-                raise _Damage(f"cut off at byte {pos} of {size}")
+                raise _CutOff(f"cut off at byte {pos} of {size}")
             op, length = _RECORD.unpack_from(buf, pos)
             body = pos + 9
             if length > size - body:
-                raise _Damage(f"record at byte {pos} claims {length} bytes, "
+                raise _CutOff(f"record at byte {pos} claims {length} bytes, "
                               f"only {size - body} remain")
             if pos == len(MAGIC) and op != OP_HEADER:
                 raise _Damage("first record is not an MCAP header")
@@ -217,6 +246,7 @@ def _records(path: Path, buf, topics, strict: bool, info: LogInfo) -> Iterator[L
         raise
     except _Damage as exc:
         problem = str(exc)
+        info.cut_off = isinstance(exc, _CutOff)
     except (Exception, MemoryError) as exc:       # any parse error of a damaged record
         problem = f"damaged record near byte {pos}: {type(exc).__name__}: {exc}"
     if strict:
@@ -324,6 +354,16 @@ def inspect(path: Path | str) -> LogInfo:
 def recover(src: Path | str, dst: Path | str,
             compression: CompressionType = CompressionType.ZSTD) -> LogInfo:
     """Rewrite every whole message of a cut-off (or damaged) file into a finished file."""
+    info = _rewrite(src, dst, compression)
+    if not info.messages:
+        Path(dst).unlink(missing_ok=True)
+        raise LogError(src, info.damage or "no messages to recover")
+    return info
+
+
+def _rewrite(src: Path | str, dst: Path | str,
+             compression: CompressionType = CompressionType.ZSTD) -> LogInfo:
+    """`recover` without the check for messages: dst is finished and synced even if empty."""
     src, dst = Path(src), Path(dst)
     if src.resolve() == dst.resolve():
         raise LogError(dst, "recovery output must differ from its input")
@@ -342,14 +382,228 @@ def recover(src: Path | str, dst: Path | str,
                 if t.name not in ids:
                     _register(writer, t)
             writer.finish()
+            out.flush()
+            os.fsync(out.fileno())
     except OSError as exc:
-        raise LogError(dst, exc.strerror or exc) from None
-    if not info.messages:
         dst.unlink(missing_ok=True)
-        raise LogError(src, info.damage or "no messages to recover")
+        raise LogError(dst, exc.strerror or exc) from None
+    except LogError:                                   # foreign or not MCAP: nothing written
+        dst.unlink(missing_ok=True)
+        raise
     return info
 
 
 def _register(writer: Writer, t: Topic) -> int:
     schema = writer.register_schema(t.stored_schema_name, t.schema_encoding, t.schema.encode())
     return writer.register_channel(t.name, t.message_encoding, schema, t.metadata)
+
+
+# ----------------------------------------------------------------------------- bag recovery
+@dataclass
+class FileRecovery:
+    """What `recover_bag` did to one MCAP file."""
+
+    path: Path
+    action: str                 # 'complete' (untouched), 'recovered' or 'set aside'
+    messages: int               # whole messages the file holds now (0 if set aside)
+    topics: int = 0
+    damage: str = ""            # why the original could not be read to its end
+    broken: Path | None = None  # the original, kept as `<name>.mcap.broken`
+    info: LogInfo | None = field(default=None, repr=False)   # of the file as it is now
+
+    def line(self) -> str:
+        """One line for the user."""
+        if self.action == "complete":
+            return f"{self.path}: complete, {self.messages} messages"
+        if self.action == "set aside":
+            return f"{self.path}: no whole message ({self.damage}); moved to {self.broken}"
+        kept = (f"; original kept as {self.broken} (damaged before its end: a specialised tool "
+                f"may get more out of it)" if self.broken else "")
+        return (f"{self.path}: recovered {self.messages} messages on {self.topics} topics "
+                f"(was: {self.damage}){kept}")
+
+
+@dataclass
+class BagRecovery:
+    """What `recover_bag` did: per file, and whether the bag's `metadata.yaml` was written."""
+
+    path: Path                          # the bag directory or file asked for
+    bag: Path | None                    # the bag directory (None: a loose file)
+    files: list[FileRecovery] = field(default_factory=list)
+    metadata_written: bool = False
+    still_cut_off: list[Path] = field(default_factory=list)   # other files of the bag
+
+    @property
+    def changed(self) -> bool:
+        return self.metadata_written or any(f.action != "complete" for f in self.files)
+
+    @property
+    def messages(self) -> int:
+        return sum(f.messages for f in self.files)
+
+    def summary(self) -> str:
+        """The one-line result."""
+        what = self.bag or self.path
+        if not self.changed:
+            return f"nothing to recover: {what} is complete ({self.messages} messages)"
+        done = [f"{sum(f.action == 'recovered' for f in self.files)} file(s) recovered"]
+        if self.metadata_written:
+            done.append(f"{self.bag / METADATA} regenerated")
+        rest = (f"; {len(self.still_cut_off)} other file(s) of the bag still cut off: "
+                f"`{RECOVER_HINT} {self.bag}`" if self.still_cut_off else "")
+        return f"{what}: " + ", ".join(done) + f"; {self.messages} messages readable" + rest
+
+
+def cut_off_bags(directory: Path | str) -> list[Path]:
+    """Recordings under `directory` that need `recover_bag`: bag directories directly under it
+    with .mcap files but no `metadata.yaml`, or with a file lacking its footer, and loose .mcap
+    files lacking their footer. Cheap (reads file tails only), so a node can call it on start.
+    A recording still in progress (by another process) looks cut off too."""
+    found = []
+    try:
+        entries = sorted(Path(directory).iterdir())
+    except OSError:
+        return []
+    for entry in entries:
+        if entry.is_dir():
+            files = list(entry.glob("*.mcap"))
+            if files and (not (entry / METADATA).is_file()
+                          or not all(is_complete(f) for f in files)):
+                found.append(entry)
+        elif entry.suffix == ".mcap" and entry.is_file() and not is_complete(entry):
+            found.append(entry)
+    return found
+
+
+def recover_bag(path: Path | str) -> BagRecovery:
+    """Make a bag directory, or one MCAP file, readable by every tool; idempotent.
+
+    Each cut-off or damaged file is rewritten complete beside itself (`<name>.mcap.recovering`),
+    the original renamed `<name>.mcap.broken`, the rewrite moved to the original name and read
+    back in full; only when it holds exactly the recovered messages per topic is the original
+    removed. An original damaged before its end (not just cut off) is kept as `.broken`; one
+    without a single whole message is moved there and left out of the bag. A bag's
+    `metadata.yaml` is regenerated from its files when it is missing or does not match them
+    (keeping its `custom_data` and QoS profiles). Raises LogError (nothing changed for the
+    file concerned) for a file that is not a ros2 MCAP or a rewrite that does not verify.
+    """
+    path = Path(path)
+    if path.is_dir():
+        _restore_interrupted(path)
+        bag = path
+    else:
+        _restore_interrupted(path.parent)
+        bag = bag_of(path)
+    result = BagRecovery(path, bag, [_recover_file(f) for f in log_files(path)])
+    if bag is not None:
+        result.metadata_written = _reindex(bag, result.files)
+        result.still_cut_off = [f for f in _split_files(bag) if f != path
+                                and not is_complete(f)]
+    return result
+
+
+def _restore_interrupted(directory: Path) -> None:
+    """A recovery killed between its two renames left `<name>.mcap.broken` and the unverified
+    `<name>.mcap.recovering` without `<name>.mcap`: put the original back, so this run starts
+    over from it. (A file set aside for want of messages has no `.recovering` and stays.)"""
+    for rewrite in directory.glob("*.mcap" + _REWRITE_SUFFIX):
+        original = rewrite.with_name(rewrite.name[:-len(_REWRITE_SUFFIX)])
+        broken = original.with_name(original.name + BROKEN_SUFFIX)
+        if not original.exists() and broken.exists():
+            os.replace(broken, original)
+        rewrite.unlink()
+
+
+def _recover_file(path: Path) -> FileRecovery:
+    if is_complete(path):
+        info = inspect(path)
+        if not info.damage:
+            return FileRecovery(path, "complete", info.messages, len(info.topics), info=info)
+    rewrite = path.with_name(path.name + _REWRITE_SUFFIX)
+    broken = path.with_name(path.name + BROKEN_SUFFIX)
+    try:
+        info = _rewrite(path, rewrite)
+    except LogError as exc:
+        if path.stat().st_size:                      # foreign or not MCAP: leave it alone
+            raise
+        info = LogInfo(path, damage=exc.problem)     # an empty file: set it aside
+    if not info.messages:
+        rewrite.unlink(missing_ok=True)
+        os.replace(path, broken)
+        return FileRecovery(path, "set aside", 0, damage=info.damage, broken=broken)
+    os.replace(path, broken)
+    os.replace(rewrite, path)
+    _sync_directory(path.parent)
+    check = LogInfo(path)
+    try:
+        for _ in read_messages(path, strict=True, info=check):
+            pass
+        problem = "" if check.counts == info.counts else (
+            f"read back {check.messages} messages, expected {info.messages}")
+    except LogError as exc:
+        problem = exc.problem
+    if problem:
+        os.replace(broken, path)                     # the original back in place
+        raise LogError(path, f"recovery did not verify ({problem}); the file is unchanged")
+    if info.cut_off:
+        broken.unlink()
+        broken = None
+    return FileRecovery(path, "recovered", info.messages, len(info.topics), info.damage, broken,
+                        check)
+
+
+def _sync_directory(directory: Path) -> None:
+    fd = os.open(directory, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _reindex(bag: Path, done: list[FileRecovery]) -> bool:
+    """Write `bag/metadata.yaml` from the bag's files unless nothing was recovered and it
+    already matches them; True if written."""
+    known = {f.path: f.info for f in done}
+    old = _read_metadata(bag)
+    old_qos = {(t.get("topic_metadata") or {}).get("name"):
+               (t.get("topic_metadata") or {}).get("offered_qos_profiles")
+               for t in old.get("topics_with_message_count") or [] if isinstance(t, dict)}
+    stats = BagStats(custom_data=dict(old.get("custom_data") or {}))
+    topics: dict[str, TopicStats] = {}
+    for f in _split_files(bag):
+        info = known.get(f) or inspect(f)
+        stats.files.append(FileStats(f, info.start_ns, info.end_ns, info.messages))
+        for name, t in info.topics.items():
+            if name not in topics:
+                qos = old_qos.get(name) or t.metadata.get("offered_qos_profiles", "")
+                topics[name] = TopicStats(name, t.type_name, 0, str(qos))
+            topics[name].count += info.counts[name]
+    stats.topics = list(topics.values())
+    if all(f.action == "complete" for f in done) and _matches(
+            old, stats.info()["rosbag2_bagfile_information"]):
+        return False
+    try:
+        stats.write(bag)
+    except OSError as exc:
+        raise LogError(bag / METADATA, exc.strerror or exc) from None
+    return True
+
+
+def _read_metadata(bag: Path) -> dict:
+    """The `rosbag2_bagfile_information` of an existing metadata.yaml ({} if none or bad)."""
+    try:
+        doc = yaml.safe_load((bag / METADATA).read_text(encoding="utf-8"))
+        info = doc["rosbag2_bagfile_information"]
+    except (OSError, yaml.YAMLError, TypeError, KeyError):
+        return {}
+    return info if isinstance(info, dict) else {}
+
+
+def _matches(old: dict, new: dict) -> bool:
+    """Old metadata describes the same files, messages and per-topic counts as the files."""
+    def counts(info):
+        return {(t.get("topic_metadata") or {}).get("name"): t.get("message_count")
+                for t in info.get("topics_with_message_count") or [] if isinstance(t, dict)}
+    return bool(old) and all(old.get(k) == new[k] for k in (
+        "relative_file_paths", "message_count", "starting_time", "duration")) and \
+        counts(old) == counts(new)
