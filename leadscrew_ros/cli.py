@@ -22,7 +22,8 @@ import numpy as np
 import yaml
 
 from .jsonsafe import json_safe
-from .logfile import LogError, LogInfo, inspect, log_files, recover
+from .logfile import (LogError, LogInfo, bag_of, cut_off_bags, inspect, log_files, recover,
+                      recover_bag)
 from .model.parameters import (FORMULATIONS, ParameterError, ScrewParameters, field_info,
                                field_names)
 from .model.predictor import OperatingPointError, Prediction, SqueakModel
@@ -450,15 +451,37 @@ def _topic_lines(info: LogInfo) -> list[str]:
             for name, t in sorted(info.topics.items())]
 
 
+def _record_directory(path: Path) -> bool:
+    """A directory of recordings (bag directories, loose files) rather than one bag: it has no
+    metadata.yaml and holds no .mcap file or a subdirectory with one."""
+    return path.is_dir() and not (path / "metadata.yaml").exists() and (
+        not any(path.glob("*.mcap")) or any(path.glob("*/*.mcap")))
+
+
 def cmd_recover(args: argparse.Namespace) -> int:
     src = Path(args.log)
-    dst = Path(args.output) if args.output else src.with_name(f"{src.stem}.recovered.mcap")
-    info = recover(src, dst)
-    print(f"recovered {info.messages} messages on {len(info.topics)} topics from {src} into "
-          f"{dst}")
-    print(f"time span: {_span(info)}")
-    print("damage: " + (info.damage or "none (the file was complete)"))
-    print("\n".join(_topic_lines(info)))
+    if args.output:                      # a copy elsewhere; the input stays as it is
+        if src.is_dir():
+            raise CliError("-o/--output is for one file; a bag directory is recovered in place")
+        info = recover(src, Path(args.output))
+        print(f"recovered {info.messages} messages on {len(info.topics)} topics from {src} "
+              f"into {args.output}")
+        print(f"time span: {_span(info)}")
+        print("damage: " + (info.damage or "none (the file was complete)"))
+        print("\n".join(_topic_lines(info)))
+        return 0
+    if _record_directory(src):
+        targets = cut_off_bags(src)
+        if not targets:
+            print(f"nothing to recover: no cut-off recording in {src}")
+            return 0
+    else:
+        targets = [src]
+    for target in targets:
+        result = recover_bag(target)
+        for f in result.files:
+            print(f.line())
+        print(result.summary())
     return 0
 
 
@@ -473,7 +496,7 @@ def cmd_info(args: argparse.Namespace) -> int:
         return 0
     for i in infos:
         state = "complete" if i.complete else (
-            f"TRUNCATED: {i.damage}; recover with `{PROG} recover {i.path}`")
+            f"TRUNCATED: {i.damage}; recover with `{PROG} recover {bag_of(i.path) or i.path}`")
         print(f"{i.path}: {state}")
         print(f"  {i.messages} messages, {_span(i)}; profile {i.profile!r}, "
               f"written by {i.library or 'unknown'}")
@@ -630,11 +653,17 @@ def build_parser() -> Parser:
                    help="start at once instead of waiting (up to 5 s) for a subscriber")
     p.set_defaults(run=cmd_replay)
 
-    p = sub.add_parser("recover", help="rewrite the whole messages of a cut-off MCAP file "
-                                       "(crash while recording) into a finished file")
-    p.add_argument("log", metavar="BROKEN.mcap")
+    p = sub.add_parser(
+        "recover", help="make a recording cut off by a crash readable by every tool: each cut-off "
+                        "file rewritten complete in place (the original kept as "
+                        "<name>.mcap.broken until the rewrite reads back), the bag's "
+                        "metadata.yaml regenerated; a second run changes nothing")
+    p.add_argument("log", metavar="BAGDIR|FILE",
+                   help="bag directory, one .mcap file (its bag's metadata.yaml is regenerated "
+                        "too), or a record directory (every cut-off bag in it)")
     p.add_argument("-o", "--output", metavar="OUT.mcap",
-                   help="output file (default <name>.recovered.mcap beside the input)")
+                   help="write the recovered messages of one FILE to OUT.mcap instead, leaving "
+                        "the input untouched")
     p.set_defaults(run=cmd_recover)
 
     p = sub.add_parser("info", help="topics, types, counts, time span of an MCAP log; "

@@ -470,8 +470,8 @@ def test_cli_truncated_log_then_recover_then_replay(short_log, tmp_path, capsys)
     code, out, err = cli(capsys, "info", cut)
     assert code == 0 and "TRUNCATED" in out and "recover" in out
 
-    code, out, err = cli(capsys, "recover", cut)
-    recovered = tmp_path / "cut.recovered.mcap"
+    recovered = tmp_path / "elsewhere.mcap"
+    code, out, err = cli(capsys, "recover", cut, "-o", recovered)
     assert code == 0, err
     assert out.startswith(f"recovered ") and str(recovered) in out
     assert "damage: " in out and "/joint_states" in out and "time span: " in out
@@ -485,8 +485,9 @@ def test_cli_truncated_log_then_recover_then_replay(short_log, tmp_path, capsys)
     assert code == 0 and err == ""
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["messages"] == n
 
-    code, out, err = cli(capsys, "recover", cut, "-o", tmp_path / "elsewhere.mcap")
-    assert code == 0 and (tmp_path / "elsewhere.mcap").is_file()
+    code, out, err = cli(capsys, "recover", cut)              # default: in place
+    assert code == 0 and f"{cut}: recovered {n} messages" in out
+    assert cli(capsys, "info", cut)[1].splitlines()[0] == f"{cut}: complete"
 
 
 def test_cli_info(bag, capsys):
