@@ -3,21 +3,31 @@ coalescing, last good state, staleness and the diagnostic verdict.
 
 The node feeds it the latest inputs and asks `due(now)`; bursts are coalesced because only the
 latest value of each input is kept and one recompute serves all of them.
+
+Safe-speed advice needs the squeak band around the speed (tens of eigen-solves, up to a second
+with 40/40 modes), so it is searched on a background thread (`LatestWorker`): a recompute never
+waits for it, the last advice stays until the new one is ready, and `poll_advice` (or
+`wait_for_advice`, for callers that want the answer now) picks it up.
 """
 
 from __future__ import annotations
 
 import math
+import threading
+import time
 from dataclasses import dataclass, field
 from enum import IntEnum
+from functools import partial
+from typing import Callable
 
 from .model import OperatingPointError, ParameterError, Prediction, SqueakModel
-from .model.advice import safe_speed, speed_bands
+from .model.advice import Band, band_around
 from .model.predictor import check_operating_point
 
 
 _LOAD_BIN = 0.05          # relative load bin of the cached squeak bands (safe-speed advice)
 _NUT_BIN_M = 0.005        # nut position bin of the cached squeak bands
+_BANDS_KEPT = 4           # bands kept for the current bin (speeds moving around within it)
 
 
 class Level(IntEnum):
@@ -67,6 +77,103 @@ class Status:
     values: dict[str, str] = field(default_factory=dict)
 
 
+class Superseded(Exception):
+    """Raised at a checkpoint of a background job that a newer request replaced."""
+
+
+class LatestWorker:
+    """Runs one job at a time on a background thread; the latest request wins: a new one
+    replaces a waiting one and abandons a running one at its next checkpoint, so no queue
+    grows. rclpy-free.
+
+    The thread starts with a request and ends when nothing is left to do, so an idle worker
+    holds no thread; it is a daemon and never keeps the process alive."""
+
+    def __init__(self, name: str = "squeak-advice"):
+        self._name = name
+        self._cv = threading.Condition()
+        self._latest = 0                                    # id of the newest request
+        self._waiting: tuple[int, Callable] | None = None   # request not started yet
+        self._running = False
+        self._done: tuple[int, object, Exception | None] | None = None
+        self._thread: threading.Thread | None = None
+        self._closed = False
+
+    def submit(self, job: Callable[[Callable[[], None]], object]) -> int:
+        """Run `job(checkpoint)` in the background (checkpoint raises `Superseded` once the
+        request is stale); returns the request's id. Any older request is dropped."""
+        with self._cv:
+            self._latest += 1
+            self._done = None
+            if self._closed:
+                return self._latest
+            self._waiting = (self._latest, job)
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._run, name=self._name, daemon=True)
+                self._thread.start()
+            self._cv.notify_all()
+            return self._latest
+
+    def cancel(self) -> None:
+        """Drop the waiting request and abandon the running one."""
+        with self._cv:
+            self._latest += 1
+            self._waiting = self._done = None
+            self._cv.notify_all()
+
+    def take(self) -> tuple[int, object, Exception | None] | None:
+        """The finished latest request (id, result, error), once; None if there is none."""
+        with self._cv:
+            done, self._done = self._done, None
+            return done
+
+    @property
+    def busy(self) -> bool:
+        with self._cv:
+            return self._waiting is not None or self._running
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Block until no request waits or runs; False if `timeout` (s) passed first."""
+        with self._cv:
+            return self._cv.wait_for(lambda: self._waiting is None and not self._running,
+                                     timeout)
+
+    def close(self, timeout: float = 1.0) -> None:
+        """Abandon all work and let the thread end (joined for at most `timeout` s)."""
+        with self._cv:
+            self._closed = True
+            self._latest += 1
+            self._waiting = self._done = None
+            thread = self._thread
+            self._cv.notify_all()
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout)
+
+    def _checkpoint(self, ident: int) -> None:
+        if ident != self._latest:       # an int read: atomic, no lock on the hot path
+            raise Superseded
+
+    def _run(self) -> None:
+        while True:
+            with self._cv:
+                if self._waiting is None:
+                    self._thread, self._running = None, False
+                    self._cv.notify_all()
+                    return
+                (ident, job), self._waiting, self._running = self._waiting, None, True
+            try:
+                result, error = job(partial(self._checkpoint, ident)), None
+            except Superseded:
+                continue
+            except Exception as exc:          # reported through take(), never lost silently
+                result, error = None, exc
+            with self._cv:
+                self._running = False
+                if ident == self._latest:
+                    self._done = (ident, result, error)
+                self._cv.notify_all()
+
+
 class LivePredictor:
     def __init__(self, model: SqueakModel, settings: LiveSettings = LiveSettings()):
         self.model = model
@@ -74,14 +181,20 @@ class LivePredictor:
         self.settings = settings
         self.inputs = Inputs()
         self.prediction: Prediction | None = None        # last good (valid) prediction
-        self.safe_speed_rad_s: float | None = None
+        self.safe_speed_rad_s: float | None = None      # last advice, kept while a new one
+        #                                                   is searched in the background
         self.recomputes = 0
         self._computed_at: tuple[float, float, float] | None = None  # speed, load, nut
         self._last_update = -math.inf
         self._input_errors: dict[str, str] = {}        # input -> why its latest value was
                                                        # rejected, until a good one arrives
         self._validity = ""                            # why the latest point has no prediction
-        self._bands: dict[tuple, list[tuple[float, float]]] = {}
+        self._bands: dict[tuple, list[Band]] = {}       # one bin: bands found in it
+        self._advised: tuple[SqueakModel, Prediction] | None = None  # what advice is for
+        self._search: tuple[int, tuple] | None = None   # background request: id, bin key
+        self._failed: tuple | None = None               # bin whose search raised
+        self._advice_error = ""
+        self._worker = LatestWorker()
 
     # ---------------------------------------------------------------- inputs
     def set_speed(self, value: object, now: float) -> str:
@@ -130,6 +243,8 @@ class LivePredictor:
         self.model, self.settings = model, settings or self.settings
         self._nut_model = model
         self._computed_at, self._bands = None, {}
+        self._worker.cancel()
+        self._search = self._failed = None
 
     def _operating_point(self) -> tuple[float, float, float] | None:
         i = self.inputs
@@ -166,7 +281,7 @@ class LivePredictor:
         if not p.valid:
             return None
         self.prediction = p
-        self.safe_speed_rad_s = self._safe_speed(model, p)
+        self._advise(model, p)
         return p
 
     def _model_at(self, nut: float) -> SqueakModel | None:
@@ -181,18 +296,82 @@ class LivePredictor:
             return None
         return self._nut_model
 
-    def _safe_speed(self, model: SqueakModel, p: Prediction) -> float:
+    # ---------------------------------------------------------------- safe-speed advice
+    @property
+    def advice_pending(self) -> bool:
+        """A background search for the latest prediction's advice is under way; until it
+        ends `safe_speed_rad_s` is the previous advice."""
+        return self._search is not None
+
+    def _advise(self, model: SqueakModel, p: Prediction) -> None:
+        """Advice for the latest prediction: at once when the point is squeak-free or a band
+        found earlier in its bin decides it; else from a background search."""
+        self._collect()
+        self._advised = (model, p)
         if p.stable:
-            return p.speed_rad_s
-        # Band edges move slowly with load and nut position: reuse them within a bin (one band
-        # computation costs ~15 ms, a recompute ~0.4 ms).
+            return self._set_advice(p.speed_rad_s)
+        lowest, highest = model.params.min_speed_rad_s, model.critical_speed_rad_s
+        margin = self.settings.safe_speed_margin
+        # Band edges move slowly with load and nut position: reuse them within a bin.
         load_bin = round(math.log(abs(p.load_n)) / math.log(1 + _LOAD_BIN)) if p.load_n else None
         key = (load_bin, round(model.params.nut_position_m / _NUT_BIN_M),
                math.copysign(1, p.speed_rad_s))
-        if key not in self._bands:
-            self._bands = {key: speed_bands(model, p.load_n, p.speed_rad_s)}   # keep one
-        return safe_speed(self._bands[key], p.speed_rad_s, model.params.min_speed_rad_s,
-                          model.critical_speed_rad_s, self.settings.safe_speed_margin)
+        for band in self._bands.get(key, ()):
+            safe = band.safe_speed(p.speed_rad_s, lowest, highest, margin)
+            if safe is not None:
+                return self._set_advice(safe)
+        if key == self._failed or (self._search is not None and self._search[1] == key):
+            return                # a search of this bin is under way: re-checked when it ends
+        job = partial(band_around, model, p.load_n, p.speed_rad_s, margin)
+        self._search = (self._worker.submit(lambda checkpoint: job(checkpoint=checkpoint)),
+                        key)
+
+    def _set_advice(self, safe_speed_rad_s: float) -> None:
+        self.safe_speed_rad_s = safe_speed_rad_s
+        if self._search is not None:                  # the search is for an older point
+            self._worker.cancel()
+            self._search = None
+
+    def _collect(self) -> bool:
+        """Store the band of a finished search (non-blocking); True if one arrived."""
+        done = self._worker.take()
+        if done is None or self._search is None or done[0] != self._search[0]:
+            return False
+        (_, band, error), key = done, self._search[1]
+        self._search = None
+        if error is not None:     # keep the last advice; no retry within this bin
+            self._failed, self._advice_error = key, f"safe-speed search failed: {error}"
+        elif band is not None:    # None: not squeak-free by growth (divergence): speed itself
+            self._bands = {key: ([band] + self._bands.get(key, []))[:_BANDS_KEPT]}
+            self._advice_error = ""
+        return True
+
+    def poll_advice(self) -> bool:
+        """Pick up a finished background search without blocking; True when the latest
+        prediction got its advice from it (publish `safe_speed_rad_s` then)."""
+        if not self._collect() or self._advised is None:
+            return False
+        self._advise(*self._advised)      # the speed may have moved on: maybe search again
+        return not self.advice_pending
+
+    def wait_for_advice(self, timeout: float | None = None) -> bool:
+        """Block until the latest prediction's advice is ready (synchronous callers, tests);
+        False if `timeout` (s) passed first."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while self.advice_pending:
+            remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
+            if not self._worker.wait(remaining):
+                return False
+            if not self._collect():       # nothing came back (closed worker): stop waiting
+                self._search = None
+            elif self._advised is not None:
+                self._advise(*self._advised)
+        return True
+
+    def close(self) -> None:
+        """Stop the background search (the owner is shutting down)."""
+        self._worker.close()
+        self._search = None
 
     # ---------------------------------------------------------------- verdict
     def status(self, now: float) -> Status:
@@ -208,6 +387,8 @@ class LivePredictor:
             "squeak_frequencies_hz": ", ".join(f"{f:.1f}" for f in p.unstable_frequencies_hz)
             if p else "",
             "safe_speed_rad_s": _fmt(self.safe_speed_rad_s),
+            "safe_speed_pending": str(self.advice_pending).lower(),
+            "safe_speed_error": self._advice_error,
             "recomputes": str(self.recomputes),
         }
         if self._input_errors:

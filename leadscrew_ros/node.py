@@ -150,6 +150,7 @@ class SqueakPredictorNode(Node):
         self._publish_diagnostics(time.monotonic())
 
     def destroy_node(self) -> None:
+        self.live.close()                     # the background safe-speed search ends too
         self.recorder.stop()                  # summary, index and footer: a clean file
         super().destroy_node()
 
@@ -297,6 +298,8 @@ class SqueakPredictorNode(Node):
     def _housekeeping(self) -> None:
         self.recorder.tick(self.get_clock().now().nanoseconds)
         now = time.monotonic()
+        if self.live.poll_advice():          # a background safe-speed search has finished
+            self._publish_safe_speed()
         status = self.live.status(now)
         if (now - self._last_diagnostics >= self.get_parameter("diagnostics_period_s").value
                 or self._verdict(status) != self._published):  # e.g. bad input, input went stale
@@ -321,6 +324,10 @@ class SqueakPredictorNode(Node):
         self._publish(self.frequencies_pub, frequencies_message(p))
         self._publish(self.active_pub, Bool(data=not p.stable))
         self._publish(self.modes_pub, modes_message(p))
+        if not self.live.advice_pending:     # else the last advice stays until the new one
+            self._publish_safe_speed()
+
+    def _publish_safe_speed(self) -> None:
         if self.live.safe_speed_rad_s is not None:
             self._publish(self.safe_speed_pub, Float64(data=float(self.live.safe_speed_rad_s)))
 

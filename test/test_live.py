@@ -28,6 +28,7 @@ def at(speed: float, load: float = LOAD, now: float = 0.0, **settings) -> LivePr
     assert lp.set_speed(speed, now) == "" and lp.set_load(load, now) == ""
     assert lp.due(now)
     lp.update(now)
+    assert lp.wait_for_advice(timeout=60.0)
     return lp
 
 

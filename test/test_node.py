@@ -169,6 +169,10 @@ def at(ros: Ros, speed: float, load: float = LOAD):
     ros.send("motor_speed", speed)
     ros.send("axial_load", load)
     ros.wait_for("squeak/risk", lambda m: m.data == pytest.approx(core.risk, rel=1e-9))
+    # safe-speed advice comes from a background search: wait for it to be published too
+    live = ros.node.live
+    ros.spin_until(lambda: not live.advice_pending, 30.0, "safe-speed advice")
+    ros.wait_for("squeak/safe_speed", lambda m: m.data == live.safe_speed_rad_s)
     return core
 
 

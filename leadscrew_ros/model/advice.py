@@ -1,15 +1,36 @@
-"""Controller advice: the squeak-free speed nearest to the current one (same direction)."""
+"""Controller advice: the squeak-free speed nearest to the current one (same direction).
+
+`speed_bands` is the full search: every squeak band in one direction, on a log grid over the
+valid speed range. `band_around` learns only what the advice at one speed needs: the band that
+speed sits in, scanned outward from it on the same grid spacing in small batched eigen-solves,
+with an edge refined by root finding only when it can give the nearest squeak-free speed.
+"""
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, replace
+from typing import Callable, Literal
 
 import numpy as np
+from scipy.optimize import brentq
 
 from .predictor import SqueakModel
 from .sweep import growth_field, refine_crossings, unstable_intervals
 
 _BAND_POINTS = 64          # log-spaced speeds between min_speed and the critical speed
+_SCAN_BATCH = 4            # grid points per side in one batched eigen-solve of `band_around`
+EDGE_RTOL = 1e-7           # relative tolerance of an edge refined by `band_around`
+_MAX_REFINE = 60           # brentq iterations per edge (bisection needs < 25 at EDGE_RTOL)
+
+# What lies beyond an end of a `Band`: squeak-free speeds (the end is a refined edge), ground
+# where the model is not valid or the end of the valid range ("limit"), or not searched yet.
+End = Literal["edge", "limit", "unknown"]
+
+
+def _grid_ends(model: SqueakModel) -> tuple[float, float]:
+    """Lowest and highest |speed| (rad/s) of the search grid."""
+    return model.params.min_speed_rad_s, model.critical_speed_rad_s * (1 - 1e-9)
 
 
 def speed_bands(model: SqueakModel, load_n: float, direction: float = 1.0
@@ -17,8 +38,7 @@ def speed_bands(model: SqueakModel, load_n: float, direction: float = 1.0
     """Unstable |speed| intervals (rad/s) in one direction of rotation at this load, ends
     refined by root finding; the grid is log-spaced over the model's valid speed range."""
     sign = math.copysign(1.0, direction)
-    w = np.geomspace(model.params.min_speed_rad_s, model.critical_speed_rad_s * (1 - 1e-9),
-                     _BAND_POINTS)
+    w = np.geomspace(*_grid_ends(model), _BAND_POINTS)
     growth = growth_field(model, sign * w, load_n).max_growth_rate
 
     def f(x: float) -> float:
@@ -27,17 +47,106 @@ def speed_bands(model: SqueakModel, load_n: float, direction: float = 1.0
     return unstable_intervals(w, growth, refine_crossings(f, w, growth, rtol=1e-6))
 
 
-def safe_speed(bands: list[tuple[float, float]], speed_rad_s: float, lowest_rad_s: float,
-               highest_rad_s: float, margin: float = 0.05) -> float:
-    """Nearest squeak-free speed with the sign of `speed_rad_s` (rad/s).
+@dataclass(frozen=True)
+class Band:
+    """What is known of one squeak band (|speed| in rad/s, one direction, one load): squeak on
+    all of [low_rad_s, high_rad_s] (on the search grid), and what lies beyond each end."""
 
-    The current speed when it is outside every band; else the band edge nearer to it, moved
-    out of the band by `margin` (relative), if that lies in the valid range
-    [lowest, highest); else 0 (stopping is always squeak-free)."""
-    w, sign = abs(speed_rad_s), math.copysign(1.0, speed_rad_s)
-    for lo, hi in bands:
-        if lo <= w <= hi:
-            below, above = lo * (1 - margin), hi * (1 + margin)
-            options = [v for v in (below, above) if lowest_rad_s <= v < highest_rad_s]
-            return sign * min(options, key=lambda v: abs(v - w)) if options else 0.0
-    return speed_rad_s
+    low_rad_s: float
+    high_rad_s: float
+    below: End
+    above: End
+
+    def contains(self, speed_rad_s: float) -> bool:
+        return self.low_rad_s <= abs(speed_rad_s) <= self.high_rad_s
+
+    def safe_speed(self, speed_rad_s: float, lowest_rad_s: float, highest_rad_s: float,
+                   margin: float = 0.05) -> float | None:
+        """Nearest squeak-free speed with the sign of `speed_rad_s` (rad/s), or None when this
+        band does not contain the speed or an unsearched side could still hold a nearer one.
+
+        A candidate is a refined edge moved out of the band by `margin` (relative) that lies
+        in the valid range [lowest, highest); the nearer one wins; 0 when there is none
+        (stopping is always squeak-free)."""
+        if not self.contains(speed_rad_s):
+            return None
+        best, undecided = self._options(abs(speed_rad_s), lowest_rad_s, highest_rad_s, margin)
+        if undecided:
+            return None
+        return 0.0 if best is None else math.copysign(best, speed_rad_s)
+
+    def _options(self, w: float, lowest: float, highest: float, margin: float
+                 ) -> tuple[float | None, list[str]]:
+        """The best candidate |speed| found so far (None: none) and the unsearched sides whose
+        candidate could still be nearer to w."""
+        best, reach = None, {}
+        for side, end, v in (("below", self.below, self.low_rad_s * (1 - margin)),
+                             ("above", self.above, self.high_rad_s * (1 + margin))):
+            if not lowest <= v < highest or end == "limit":
+                continue          # an edge further out moves v further out of range too
+            if end == "unknown":  # the edge is at or beyond this end: v is this near at best
+                reach[side] = abs(v - w)
+            elif best is None or abs(v - w) < abs(best - w):
+                best = v
+        return best, [s for s, d in reach.items() if best is None or d < abs(best - w)]
+
+
+def band_around(model: SqueakModel, load_n: float, speed_rad_s: float, margin: float = 0.05,
+                checkpoint: Callable[[], None] | None = None) -> Band | None:
+    """The squeak band containing `speed_rad_s` at this load, searched just far enough that
+    `Band.safe_speed` at this speed (and `margin`) is decided; None when the speed is
+    squeak-free or outside the model's validity.
+
+    Both sides are scanned outward from the speed on the log grid of `speed_bands` (same
+    spacing), `_SCAN_BATCH` points per side per batched solve; a side stops at its first
+    squeak-free point (edge refined to `EDGE_RTOL` with brentq), at invalid ground or at the
+    grid end, or as soon as it can no longer offer the nearer candidate. At most
+    `_BAND_POINTS + 2 * _SCAN_BATCH` scan points and 2 refinements. `checkpoint` is called
+    before every eigen-solve; it may raise to abandon the search."""
+    sign, w = math.copysign(1.0, speed_rad_s), abs(speed_rad_s)
+    lowest, highest = _grid_ends(model)
+    step = (highest / lowest) ** (1 / (_BAND_POINTS - 1))
+
+    def growth(x) -> np.ndarray:
+        if checkpoint is not None:
+            checkpoint()
+        return growth_field(model, sign * np.asarray(x, float), load_n).max_growth_rate
+
+    if not growth(w) > 0:                             # NaN (invalid) compares False too
+        return None
+    band = Band(w, w, "unknown", "unknown")
+    while sides := band._options(w, lowest, highest, margin)[1]:
+        points = [_next_points(band, s, step, lowest, highest) for s in sides]
+        g = growth(np.concatenate(points))
+        for s, x, start in zip(sides, points, np.cumsum([0] + [len(x) for x in points])):
+            band = _extend(band, s, x, g[start:start + len(x)], lowest, highest, growth)
+    return band
+
+
+def _next_points(band: Band, side: str, step: float, lowest: float, highest: float
+                 ) -> np.ndarray:
+    """The next scan points beyond one end of the band, ending at the grid end."""
+    k = np.arange(1, _SCAN_BATCH + 1)
+    if side == "below":
+        x = band.low_rad_s / step ** k
+        return np.append(x[x > lowest], lowest)[:_SCAN_BATCH]
+    x = band.high_rad_s * step ** k
+    return np.append(x[x < highest], highest)[:_SCAN_BATCH]
+
+
+def _extend(band: Band, side: str, x: np.ndarray, g: np.ndarray, lowest: float,
+            highest: float, growth: Callable) -> Band:
+    """The band after scanning `x` (outward, growth `g`) beyond its `side` end."""
+    end = "low_rad_s" if side == "below" else "high_rad_s"
+    last = getattr(band, end)                         # last squeak point, outward
+    for xi, gi in zip(x.tolist(), g.tolist()):
+        if math.isnan(gi):                            # invalid ground: no advice beyond
+            return replace(band, **{end: last, side: "limit"})
+        if gi <= 0:                                   # squeak-free: refine the edge
+            def f(v: float) -> float:                 # invalid inside counts as squeak-free
+                return float(np.nan_to_num(growth(v), nan=-1.0))
+            edge = brentq(f, last, xi, xtol=1e-300, rtol=EDGE_RTOL, maxiter=_MAX_REFINE)
+            return replace(band, **{end: edge, side: "edge"})
+        last = xi
+    at_grid_end = last == (lowest if side == "below" else highest)
+    return replace(band, **{end: last, side: "limit" if at_grid_end else "unknown"})
