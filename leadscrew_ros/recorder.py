@@ -1,9 +1,17 @@
 """MCAP recorder in rosbag2's layout, split by size and duration, safe against crashes.
 
-Each recording is a rosbag2 bag directory `<directory>/squeak_<UTC start>/` holding
-`squeak_<UTC start>_<index>.mcap` files and a `metadata.yaml`. Files use profile `ros2`, one
-channel per topic, `ros2msg` schemas with the complete definition from the installed message
-packages (`msgdefs`) and `cdr` payloads from `rclpy.serialization`.
+Each recording is a rosbag2 bag directory `<directory>/<name>_<UTC wall-clock start>/` holding
+`<bag>_<index>.mcap` files and a `metadata.yaml`; the directory is created if missing (like
+`ros2 bag record -o`). Bags are named and split by the wall clock (unique even within one
+millisecond); each message's log time is whatever the caller gives (the node's clock, which may
+be sim time, as rosbag2 does). Files use profile `ros2`, one channel per topic, `ros2msg`
+schemas with the complete definition from the installed message packages (`msgdefs`) and `cdr`
+payloads, from a message (`write`) or serialized by the caller (`write_serialized`).
+
+Thread safe: the node's input recording thread and its model thread write concurrently.
+Messages the recorder never got are counted per topic (`TopicLoss`: gaps in the publishers'
+sequence numbers and DDS message-lost events) and stored in the bag's `metadata.yaml`
+(`custom_data`).
 
 Crash safety: the open chunk is finished and handed to the operating system every
 `flush_period_s`, so SIGKILL loses at most that much (plus one housekeeping tick); the cut-off
@@ -15,9 +23,14 @@ with `error` naming the path; nothing is raised to the caller.
 from __future__ import annotations
 
 import datetime as _dt
+import json
 import os
+import tempfile
+import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 from mcap.writer import CompressionType, Writer
 
@@ -28,6 +41,22 @@ from .serialization import cdr_payload
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}
 _CHUNK_BYTES = 4 << 20         # chunks are closed by the flush period long before this size
+_MAX_QUEUE_DEPTH = 1_000_000
+LOST_KEY, LOST_BY_TOPIC_KEY = "lost_messages", "lost_messages_by_topic"   # metadata custom_data
+
+
+def ensure_directory(directory: str) -> Path:
+    """`directory` as an absolute path, created if missing (`mkdir -p`) and checked writable by
+    creating and removing a probe directory in it; raises OSError with a one-line reason
+    naming the path (e.g. /proc, a path under a plain file, a read-only file system)."""
+    root = Path(directory).expanduser().absolute()
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        os.rmdir(tempfile.mkdtemp(prefix=".probe_", dir=root))
+    except OSError as exc:
+        raise OSError(exc.errno, f"{exc.filename or root}: {exc.strerror or exc}; cannot "
+                      f"record into {root}") from None
+    return root
 
 
 @dataclass(frozen=True)
@@ -37,6 +66,7 @@ class RecordSettings:
     split_duration_s: float = 600.0       # 0: no split by duration
     compression: str = "zstd"
     flush_period_s: float = 0.5           # bound of the data lost to SIGKILL
+    queue_depth: int = 10000              # DDS history of each input recording subscription
 
     def __post_init__(self):
         if self.compression not in COMPRESSIONS:
@@ -50,6 +80,49 @@ class RecordSettings:
                 raise ValueError(f"{name} must be finite and >= 0, not {value}")
         if not 0.0 < self.flush_period_s <= 10.0:
             raise ValueError(f"flush_period_s must be in (0, 10], not {self.flush_period_s}")
+        if not 1 <= self.queue_depth <= _MAX_QUEUE_DEPTH:
+            raise ValueError(f"queue_depth must be in [1, {_MAX_QUEUE_DEPTH}], not "
+                             f"{self.queue_depth}")
+
+
+@dataclass
+class TopicLoss:
+    """Messages of one recorded topic that never reached the recorder.
+
+    `sequence_gaps` counts missing publication sequence numbers of the publisher (whatever
+    dropped them: the DDS reader's queue overflowing while the recorder was busy, or the
+    transport); `dds_lost` counts DDS message-lost events (Fast DDS reports transport gaps, not
+    queue overflow). With several publishers on a topic their numbers interleave and rclpy gives
+    no publisher id, so only the DDS events count there (`sequence_checked` False).
+    """
+
+    sequence_gaps: int = 0
+    dds_lost: int = 0
+    sequence_checked: bool = True
+    _last: int | None = None
+
+    def received(self, sequence: int | None, publishers: Callable[[], int]) -> None:
+        """A message with publication sequence number `sequence` was taken; `publishers`
+        (called only when the sequence does not continue) counts the topic's publishers."""
+        last, self._last = self._last, sequence
+        if sequence is None:                   # the middleware does not number its messages
+            self.sequence_checked = False
+        if not self.sequence_checked or last is None or sequence == last + 1:
+            return
+        if publishers() > 1:
+            self.sequence_checked = False
+        elif sequence > last + 1:
+            self.sequence_gaps += sequence - last - 1
+        # a lower number from a single publisher: a new publisher, nothing lost
+
+    @property
+    def lost(self) -> int:
+        """Best count of the lost messages (the DDS events are a subset of the gaps)."""
+        return max(self.sequence_gaps, self.dds_lost) if self.sequence_checked else self.dds_lost
+
+    def as_dict(self) -> dict:
+        return {"lost": self.lost, "sequence_gaps": self.sequence_gaps,
+                "dds_lost": self.dds_lost, "sequence_checked": self.sequence_checked}
 
 
 @dataclass
@@ -65,14 +138,18 @@ class Recorder:
     """Writes ROS messages to a split MCAP bag. Call `tick` periodically (flush and split)."""
 
     settings: RecordSettings = field(default_factory=RecordSettings)
+    name: str = "squeak"                 # bag directory prefix (the node adds its namespace)
+    clock: Callable[[], int] = time.time_ns   # log time [ns] of a message written without one
     bag: Path | None = None              # directory of the recording in progress / last one
     error: str = ""                      # why the last recording stopped on its own
     files: list[FileStats] = field(default_factory=list)
+    losses: dict[str, TopicLoss] = field(default_factory=dict)   # topic -> what never arrived
     _out: object = None
     _writer: Writer | None = None
     _topics: dict[str, _Topic] = field(default_factory=dict)
     _file_start_ns: int = 0
     _last_flush_ns: int = 0
+    _lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
 
     @property
     def active(self) -> bool:
@@ -87,74 +164,96 @@ class Recorder:
     def messages(self) -> int:
         return sum(f.messages for f in self.files)
 
-    def start(self, now_ns: int) -> bool:
-        """Open a new bag; False (with `error`) if the directory cannot take it."""
-        if self.active:
-            return True
-        self.error, self.files, self._topics = "", [], {}
-        root = Path(self.settings.directory).expanduser().absolute()
-        if not root.is_dir():
-            self.error = f"{root}: record directory does not exist"
-            return False
-        stamp = _dt.datetime.fromtimestamp(now_ns / 1e9, _dt.timezone.utc).strftime(
-            "%Y_%m_%d-%H_%M_%S_%f")[:-3]
-        self.bag = root / f"squeak_{stamp}"
-        try:
-            self.bag.mkdir()
-        except OSError as exc:
-            self.error = f"{self.bag}: {exc.strerror or exc}"
-            return False
-        return self._open(now_ns)
+    @property
+    def lost(self) -> int:
+        """Messages of this recording counted as lost before they reached the recorder."""
+        return sum(loss.lost for loss in list(self.losses.values()))
+
+    def start(self, now_ns: int | None = None, topics: tuple[str, ...] = ()) -> bool:
+        """Open a new bag named by the wall clock; False (with `error`) if the directory cannot
+        take it. `now_ns` starts the time base of `tick` (default: a monotonic wall clock);
+        `topics` get a loss counter each (`losses`)."""
+        with self._lock:
+            if self.active:
+                return True
+            self.error, self.files, self._topics = "", [], {}
+            self.losses = {t: TopicLoss() for t in topics}
+            try:
+                root = ensure_directory(self.settings.directory)
+                self.bag = _new_bag(root, self.name)
+            except OSError as exc:
+                self.error = exc.strerror or str(exc)
+                return False
+            return self._open(time.monotonic_ns() if now_ns is None else now_ns)
 
     def stop(self) -> None:
         """Finish the current file (summary, index, footer) and write metadata.yaml."""
-        if not self.active:
-            return
-        self._close(finish=True)
-        self._write_metadata()
+        with self._lock:
+            if not self.active:
+                return
+            self._close(finish=True)
+            self._write_metadata()
 
-    def write(self, topic: str, msg, log_time_ns: int, publish_time_ns: int | None = None
-              ) -> None:
-        """Record one message (publish_time defaults to the header stamp, else log_time)."""
+    def write(self, topic: str, msg, log_time_ns: int | None = None,
+              publish_time_ns: int | None = None) -> None:
+        """Record one ROS message (publish_time defaults to the header stamp, else log_time)."""
         if not self.active:
             return
-        t = self._topics.get(topic)
-        if t is None:
-            t = self._topics[topic] = _Topic(topic, msgdefs.type_name(msg))
         if publish_time_ns is None:
             stamp = getattr(getattr(msg, "header", None), "stamp", None)
-            publish_time_ns = (stamp.sec * 1_000_000_000 + stamp.nanosec if stamp is not None
-                               else log_time_ns)
-        try:
-            if t.channel_id is None:
-                t.channel_id = self._register(t)
-            self._writer.add_message(t.channel_id, log_time_ns, cdr_payload(msg),
-                                     publish_time_ns, t.count)
-        except OSError as exc:
-            self._fail(exc)
-            return
-        t.count += 1
-        self.files[-1].add(log_time_ns)
+            if stamp is not None:
+                publish_time_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        self.write_serialized(topic, msgdefs.type_name(msg), cdr_payload(msg), log_time_ns,
+                              publish_time_ns)
 
-    def tick(self, now_ns: int) -> None:
-        """Flush when the flush period is over; split when the file is too big or too old."""
-        if not self.active:
-            return
-        s = self.settings
-        try:
-            if now_ns - self._last_flush_ns >= s.flush_period_s * 1e9:
-                self._writer.flush()
-                self._last_flush_ns = now_ns
-            too_big = s.split_size_mb > 0 and self._out.tell() >= s.split_size_mb * 1e6
-            too_old = s.split_duration_s > 0 and now_ns - self._file_start_ns >= \
-                s.split_duration_s * 1e9
-        except OSError as exc:
-            self._fail(exc)
-            return
-        if too_big or too_old:
-            self._close(finish=True)
-            if not self.error and self._open(now_ns):
-                self._write_metadata()
+    def write_serialized(self, topic: str, type_name: str, data: bytes,
+                         log_time_ns: int | None = None, publish_time_ns: int | None = None
+                         ) -> None:
+        """Record one serialized (CDR) message of type 'pkg/msg/Type'. log_time defaults to
+        `clock()` read under the lock, so that writers on several threads keep a file in log
+        time order; publish_time defaults to log_time."""
+        with self._lock:
+            if not self.active:
+                return
+            if log_time_ns is None:
+                log_time_ns = self.clock()
+            t = self._topics.get(topic)
+            if t is None:
+                t = self._topics[topic] = _Topic(topic, type_name)
+            try:
+                if t.channel_id is None:
+                    t.channel_id = self._register(t)
+                self._writer.add_message(t.channel_id, log_time_ns, data,
+                                         log_time_ns if publish_time_ns is None
+                                         else publish_time_ns, t.count)
+            except OSError as exc:
+                self._fail(exc)
+                return
+            t.count += 1
+            self.files[-1].add(log_time_ns)
+
+    def tick(self, now_ns: int | None = None) -> None:
+        """Flush when the flush period is over; split when the file is too big or too old.
+        `now_ns` is on the time base given to `start` (default: the monotonic wall clock)."""
+        with self._lock:
+            if not self.active:
+                return
+            now_ns = time.monotonic_ns() if now_ns is None else now_ns
+            s = self.settings
+            try:
+                if now_ns - self._last_flush_ns >= s.flush_period_s * 1e9:
+                    self._writer.flush()
+                    self._last_flush_ns = now_ns
+                too_big = s.split_size_mb > 0 and self._out.tell() >= s.split_size_mb * 1e6
+                too_old = s.split_duration_s > 0 and now_ns - self._file_start_ns >= \
+                    s.split_duration_s * 1e9
+            except OSError as exc:
+                self._fail(exc)
+                return
+            if too_big or too_old:
+                self._close(finish=True)
+                if not self.error and self._open(now_ns):
+                    self._write_metadata()
 
     # ------------------------------------------------------------------ files
     def _open(self, now_ns: int) -> bool:
@@ -204,10 +303,29 @@ class Recorder:
 
     def _write_metadata(self) -> None:
         """rosbag2 metadata.yaml, so that `ros2 bag info/play` and rosbags take the directory."""
+        losses = {topic: loss.as_dict() for topic, loss in list(self.losses.items())}
         stats = BagStats(files=[f for f in self.files if f.path.exists()],
                          topics=[TopicStats(t.name, t.type_name, t.count)
-                                 for t in self._topics.values()])
+                                 for t in self._topics.values()],
+                         custom_data={LOST_KEY: str(self.lost),
+                                      LOST_BY_TOPIC_KEY: json.dumps(losses, sort_keys=True)})
         try:
             stats.write(self.bag)
         except OSError as exc:
             self.error = self.error or f"{self.bag / METADATA}: {exc.strerror or exc}"
+
+
+def _new_bag(root: Path, name: str) -> Path:
+    """Create `root/<name>_<UTC wall-clock time, ms>`, `_1`, `_2`... if that exists."""
+    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y_%m_%d-%H_%M_%S_%f")[:-3]
+    base = root / f"{name}_{stamp}"
+    for n in range(1000):
+        bag = base if n == 0 else base.with_name(f"{base.name}_{n}")
+        try:
+            bag.mkdir()
+            return bag
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise OSError(exc.errno, f"{bag}: {exc.strerror or exc}") from None
+    raise OSError(f"{base}: 1000 bags of this name exist")

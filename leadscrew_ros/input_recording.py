@@ -1,0 +1,107 @@
+"""Recording of the node's inputs from DDS readers of their own, on a thread of their own.
+
+The model's subscriptions keep a short queue (the newest input is what matters) and wait while a
+prediction is computed; a recording needs every message. So, while recording, each input topic
+gets a second subscription: serialized bytes (`raw=True`, what rosbag2 stores, no
+deserialize/serialize round trip), best effort (matches any publisher), KEEP_LAST with a deep
+history (`RecordSettings.queue_depth`), in a hidden helper node spun by its own executor on a
+separate thread, so that recording never waits for the model. Each wake-up takes everything
+queued on the subscription. What still never arrives is counted per topic
+(`recorder.TopicLoss`): gaps in the publishers' sequence numbers (message info) and DDS
+message-lost events.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
+
+from . import msgdefs
+from .recorder import Recorder, TopicLoss
+
+_SPIN_TIMEOUT_S = 0.1
+
+
+@dataclass
+class _Input:
+    topic: str                   # fully qualified
+    msg_type: type
+    type_name: str
+    loss: TopicLoss
+    subscription: Subscription | None = None
+
+
+class InputRecording:
+    """Records `inputs` (fully qualified topic -> message class) into `recorder` from their
+    own subscriptions until `stop`; log times come from `recorder.clock` (the node's clock)."""
+
+    def __init__(self, node: Node, inputs: dict[str, type], recorder: Recorder):
+        self._recorder = recorder
+        # Hidden helper node: no global arguments (a `__node:=` remap or a params file is the
+        # main node's), no rosout, no parameter services. Topics are absolute already.
+        self._node = Node(f"_{node.get_name()}_recorder", namespace=node.get_namespace(),
+                          context=node.context, use_global_arguments=False,
+                          enable_rosout=False, start_parameter_services=False)
+        qos = QoSProfile(depth=recorder.settings.queue_depth,
+                         history=HistoryPolicy.KEEP_LAST,
+                         reliability=ReliabilityPolicy.BEST_EFFORT,
+                         durability=DurabilityPolicy.VOLATILE)
+        self._inputs = []
+        for topic, msg_type in inputs.items():
+            entry = _Input(topic, msg_type, msgdefs.type_name(msg_type), recorder.losses[topic])
+            events = SubscriptionEventCallbacks(
+                message_lost=lambda info, e=entry: self._dds_lost(e, info),
+                use_default_callbacks=False)
+            entry.subscription = self._node.create_subscription(
+                msg_type, topic, lambda data, info, e=entry: self._received(e, data, info),
+                qos, raw=True, event_callbacks=events)
+            self._inputs.append(entry)
+        self._executor = SingleThreadedExecutor(context=node.context)
+        self._executor.add_node(self._node)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._spin, daemon=True,
+                                        name=f"{node.get_name()} input recording")
+        self._thread.start()
+
+    def stop(self) -> None:
+        """End the thread and remove the subscriptions (messages still queued are not part of
+        the recording: it has stopped)."""
+        self._stop.set()
+        self._executor.wake()
+        self._thread.join()
+        self._executor.remove_node(self._node)
+        self._executor.shutdown(timeout_sec=1.0)
+        self._node.destroy_node()
+
+    def _spin(self) -> None:
+        try:
+            while not self._stop.is_set():
+                self._executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
+        except Exception:           # context shut down under us (process exit): nothing to do
+            if not self._stop.is_set() and self._node.context.ok():
+                raise
+
+    def _received(self, e: _Input, data: bytes, info: dict) -> None:
+        """Write this message and whatever else is queued on the subscription now."""
+        sub = e.subscription
+        while True:
+            e.loss.received(info.get("publication_sequence_number"), sub.get_publisher_count)
+            self._recorder.write_serialized(e.topic, e.type_name, data,
+                                            publish_time_ns=info.get("source_timestamp") or None)
+            if self._stop.is_set():
+                return
+            with sub.handle:
+                taken = sub.handle.take_message(e.msg_type, True)
+            if taken is None:
+                return
+            data, info = taken
+
+    @staticmethod
+    def _dds_lost(e: _Input, info) -> None:
+        e.loss.dds_lost = info.total_count
