@@ -351,7 +351,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
 # ----------------------------------------------------------------------------- logs
 REPLAY_INPUTS = [f.name for f in fields(InputSettings)]    # = option dests, node parameters
-TOPIC_INPUTS = ("speed_topic", "load_topic", "nut_topic", "joint_states_topic")
 LIVE_OPTIONS = ("rate", "loop", "start_offset", "topics", "remap", "no_wait")
 
 
@@ -360,14 +359,12 @@ def _topic(name: str) -> str:
 
 
 def _replay_inputs(args: argparse.Namespace) -> InputSettings:
-    """InputSettings: defaults <- node parameters of --params-file <- options."""
+    """InputSettings: defaults <- node parameters of --params-file <- options. Topic names
+    stay as given: relative ones resolve in the input namespace (--namespace, or the log's)."""
     values = _yaml_parameters(args.params_file) if args.params_file else {}
     values = {name: values[name] for name in REPLAY_INPUTS if name in values}
     values.update({name: getattr(args, name) for name in REPLAY_INPUTS
                    if getattr(args, name) is not None})
-    for name in TOPIC_INPUTS:
-        if name in values:
-            values[name] = _topic(str(values[name]))
     try:
         return InputSettings(**values)
     except (TypeError, ValueError) as exc:
@@ -412,8 +409,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
     inputs = _replay_inputs(args)
     from .replay import ReplaySettings, log_name, replay
     try:
-        settings = ReplaySettings(inputs, namespace=_topic(args.namespace),
-                                  workers=args.workers, progress=not args.quiet)
+        settings = ReplaySettings(
+            inputs, namespace=args.namespace and _topic(args.namespace),
+            out_namespace=args.out_namespace and _topic(args.out_namespace),
+            workers=args.workers, progress=not args.quiet)
     except ValueError as exc:
         raise CliError(str(exc)) from None
     out = Path(args.out) if args.out else Path(f"{log_name(Path(args.log))}_replay")
@@ -427,8 +426,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
             print(f"  squeak {e.start_s:10.2f} - {e.end_s:10.2f} s  peak growth "
                   f"{e.peak_growth_rate:7.1f} 1/s  "
                   + ", ".join(f"{m} {f:.0f} Hz" for m, f in zip(e.modes, e.frequencies_hz)))
-        if len(result.episodes) > args.episodes:
-            print(f"  ... {len(result.episodes) - args.episodes} more in episodes.json")
+        if result.episode_count > args.episodes:
+            print(f"  ... {result.episode_count - args.episodes} more in episodes.json")
         print("wrote: " + ", ".join(str(p) for p in result.outputs))
     return 0
 
@@ -601,19 +600,20 @@ def build_parser() -> Parser:
     p = sub.add_parser("replay", parents=common,
                        help="recompute the node's predictions for an MCAP log (offline, into "
                             "--out), or play the log to ROS 2 topics (--publish)")
-    p.add_argument("log", metavar="LOG", help="MCAP file, or a directory of split .mcap files")
+    p.add_argument("log", metavar="LOG", help="MCAP file, or a directory of split .mcap files "
+                   "(offline also rosbag2 sqlite3 .db3)")
     p.add_argument("--out", metavar="DIR", help="output directory (default ./<log name>_replay): "
                    "<log name>.annotated.mcap, episodes.json, summary.json/.txt, PNG report")
-    g = p.add_argument_group("inputs (defaults: the node's topics; node parameters from "
-                             "--params-file)")
+    g = p.add_argument_group("inputs (defaults: the node's topics, relative names in the input "
+                             "namespace; node parameters from --params-file)")
     g.add_argument("--speed-topic", metavar="TOPIC", help="std_msgs/Float64 speed [rad/s] "
-                                                          "(default /motor_speed)")
+                                                          "(default motor_speed)")
     g.add_argument("--load-topic", metavar="TOPIC", help="std_msgs/Float64 axial load [N] "
-                                                         "(default /axial_load)")
+                                                         "(default axial_load)")
     g.add_argument("--nut-topic", metavar="TOPIC", help="std_msgs/Float64 nut position [m] "
-                                                        "(default /nut_position)")
+                                                        "(default nut_position)")
     g.add_argument("--joint-states-topic", metavar="TOPIC",
-                   help="sensor_msgs/JointState (default /joint_states)")
+                   help="sensor_msgs/JointState (default joint_states)")
     g.add_argument("--joint-name", metavar="NAME", help="screw joint in the JointState messages "
                    "(default: the joint of single-joint messages)")
     g.add_argument("--nut-position-at-zero-angle", dest="nut_position_at_zero_angle_m",
@@ -629,9 +629,15 @@ def build_parser() -> Parser:
                    help="recompute and re-integrate the contact when the nut moved more than "
                         "this (default 0.0005)")
     g = p.add_argument_group("offline replay")
-    g.add_argument("--namespace", default="/replay", metavar="NS",
-                   help="namespace of the prediction topics in the annotated log "
-                        "(default /replay: /replay/squeak/risk, ...)")
+    g.add_argument("--namespace", metavar="NS",
+                   help="namespace of the input topics, as a node's __ns (default: the one "
+                        "namespace of the log that has predictor inputs)")
+    g.add_argument("--out-namespace", metavar="NS",
+                   help="namespace of the prediction topics in the annotated log (default "
+                        "/replay + the input namespace: /replay/squeak/risk, ...)")
+    g.add_argument("--load", dest="nominal_load_n", type=finite, metavar="N",
+                   help="nominal axial load [N] from the start, for a log without load topic "
+                        "(a load topic in the log overrides it)")
     g.add_argument("--workers", type=int, default=1, metavar="N",
                    help="prediction processes for long logs (default 1; 0: one process)")
     g.add_argument("--no-report", action="store_true", help="skip the PNG report")

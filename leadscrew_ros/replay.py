@@ -1,14 +1,19 @@
-"""Offline replay of an MCAP log: the node's predictions recomputed for the whole log.
+"""Offline replay of a log: the node's predictions recomputed for the whole log.
 
-read the log (`logfile`, strict: a damaged or foreign file is a one-line `LogError`) ->
+read the log (`logsource`: MCAP via `logfile`, or rosbag2 sqlite3 .db3; strict: a damaged or
+foreign file is a one-line `LogError`) -> input topics resolved in the log's input namespace
+(`timeline.is_input`, as `replay --publish` selects them) ->
 operating-point timeline with the node's deadbands (`timeline`) -> batched predictions, in
 worker processes for long logs -> squeak episodes -> `<log>.annotated.mcap`: every original
 message copied verbatim (channel, schema, times, sequence, bytes) plus the predictions on
-`<namespace>/squeak/{risk,unstable_frequencies,active,modes}` with the node's types, each at the
-log time of the input that triggered it; `episodes.json`, `summary.json` and `summary.txt`.
+`<out namespace>/squeak/{risk,unstable_frequencies,active,modes}` with the node's types, each at
+the log time of the input that triggered it; `episodes.json`, `summary.json` and `summary.txt`.
 
-Messages stream through in segments: a segment is written once its predictions are back, so
-memory stays bounded and reading overlaps with the eigen-solves.
+Memory does not grow with the log: messages stream through in segments (a segment is written
+once its predictions are back, reading overlaps with the eigen-solves, at most
+`_IN_FLIGHT_MESSAGES` held); episodes go to episodes.json as they end (the first
+`EPISODES_KEPT` stay in the result); what the report draws is binned or sampled to a fixed size
+(`decimation`).
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ import multiprocessing
 import re
 import signal
 import sys
+import textwrap
 import time
 from collections import Counter, deque
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -26,21 +32,24 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
-from typing import Any, BinaryIO, Callable
+from typing import Any, BinaryIO, Callable, TextIO
 
 import numpy as np
 from mcap.writer import CompressionType, Writer
 from std_msgs.msg import Bool, Float64, Float64MultiArray
 
 from . import msgdefs
+from .decimation import Envelope, Reservoir
 from .jsonsafe import json_safe
-from .logfile import LogError, LogMessage, Topic, log_files, read_messages
+from .logfile import LogError, LogMessage, Topic
+from .logsource import LogSource, log_topics, open_log
 from .model import Prediction, SqueakModel
 from .model.predictor import SELF_LOCKING, SUPERCRITICAL, TOO_SLOW
 from .node import frequencies_message, modes_message
 from .progress import progress_bar
 from .serialization import cdr_payload
-from .timeline import InputError, InputSettings, Job, Timeline, predict_jobs
+from .timeline import (InputError, InputSettings, Job, Timeline, input_namespaces,
+                       predict_jobs)
 
 DEFAULT_NAMESPACE = "/replay"
 OUTPUT_TOPICS = {"risk": Float64, "unstable_frequencies": Float64MultiArray, "active": Bool,
@@ -50,20 +59,23 @@ _SEGMENT_MESSAGES = 20_000     # a segment without predictions is written at thi
 # Messages held while their predictions are computed (~250 bytes each): enough to read on
 # through a rest while the workers solve the stroke before it.
 _IN_FLIGHT_MESSAGES = 250_000
+EPISODES_KEPT = 1000           # episodes kept in the result (all of them in episodes.json)
+_FREQUENCIES_KEPT = 512        # frequencies per mode and episode kept for its median
 _NAME = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
 
 
 @dataclass(frozen=True)
 class ReplaySettings:
     inputs: InputSettings = field(default_factory=InputSettings)
-    namespace: str = DEFAULT_NAMESPACE
+    namespace: str | None = None      # of the inputs; None: the log's single input namespace
+    out_namespace: str | None = None  # of the predictions; None: /replay + input namespace
     workers: int = 1          # prediction processes for long logs (0: all in this process)
     progress: bool = True     # progress bar on stderr (a terminal only)
 
     def __post_init__(self) -> None:
-        if not _NAME.fullmatch(self.namespace):
-            raise ValueError(f"namespace must be a ROS name like /replay, got "
-                             f"{self.namespace!r}")
+        for what, ns in (("namespace", self.namespace), ("output namespace", self.out_namespace)):
+            if ns is not None and ns != "/" and not _NAME.fullmatch(ns):
+                raise ValueError(f"{what} must be a ROS name like /seat_left, got {ns!r}")
         if self.workers < 0:
             raise ValueError(f"workers must be >= 0, got {self.workers}")
 
@@ -78,7 +90,22 @@ class Episode:
     speed_range_rad_s: tuple[float, float]
     load_range_n: tuple[float, float]
     predictions: int
-    frequencies: dict[str, list[float]] = field(default_factory=dict)   # mode -> Hz seen
+    # mode -> Hz seen: every `stride`-th value, at most _FREQUENCIES_KEPT (bounded memory)
+    frequencies: dict[str, list[float]] = field(default_factory=dict)
+    _strides: Counter = field(default_factory=Counter, repr=False, compare=False)
+    _seen: Counter = field(default_factory=Counter, repr=False, compare=False)
+
+    def add_frequency(self, label: str, hz: float) -> None:
+        """Keep every stride-th frequency of the mode; when full, every other and twice the
+        stride (the median of a long episode from an even sample of it)."""
+        stride = self._strides[label] or 1
+        if self._seen[label] % stride == 0:
+            kept = self.frequencies.setdefault(label, [])
+            kept.append(hz)
+            if len(kept) >= _FREQUENCIES_KEPT:
+                del kept[1::2]
+                self._strides[label] = 2 * stride
+        self._seen[label] += 1
 
     @property
     def modes(self) -> list[str]:
@@ -102,25 +129,23 @@ class Episode:
 
 
 @dataclass
-class PredictionSeries:
-    """One row per recompute with a prediction (seconds from the log's first message)."""
+class PlotData:
+    """What the report draws, in constant memory (seconds from the log's first message)."""
 
-    time_s: list[float] = field(default_factory=list)
-    speed_rad_s: list[float] = field(default_factory=list)
-    load_n: list[float] = field(default_factory=list)
-    nut_position_m: list[float] = field(default_factory=list)
-    risk: list[float] = field(default_factory=list)
-    active: list[bool] = field(default_factory=list)
-    squeak_hz: list[float] = field(default_factory=list)       # every squeak frequency...
-    squeak_rows: list[int] = field(default_factory=list)       # ...and its row
+    # Per recompute: risk (NaN without prediction) and squeak (1/0), binned over time.
+    risk: Envelope = field(default_factory=lambda: Envelope(2))
+    # Valid predictions: speed, load, nut position, squeak (1/0); a uniform sample.
+    points: Reservoir = field(default_factory=lambda: Reservoir(4))
+    # Squeak frequencies: speed, load, nut position, frequency [Hz]; a uniform sample.
+    squeak: Reservoir = field(default_factory=lambda: Reservoir(4))
 
     def add(self, t: float, job: Job, p: Prediction) -> None:
-        self.squeak_hz += p.unstable_frequencies_hz
-        self.squeak_rows += [len(self.time_s)] * len(p.squeak_modes)
-        for column, value in ((self.time_s, t), (self.speed_rad_s, p.speed_rad_s),
-                              (self.load_n, p.load_n), (self.nut_position_m, job.nut_position_m),
-                              (self.risk, p.risk), (self.active, not p.stable)):
-            column.append(value)
+        squeak = p.valid and not p.stable
+        self.risk.add(t, p.risk if p.valid else math.nan, float(squeak))
+        if p.valid:
+            self.points.add(p.speed_rad_s, p.load_n, job.nut_position_m, float(squeak))
+        for hz in p.unstable_frequencies_hz:
+            self.squeak.add(p.speed_rad_s, p.load_n, job.nut_position_m, hz)
 
 
 @dataclass
@@ -138,15 +163,26 @@ class ReplayResult:
     no_prediction: Counter            # recomputes outside validity, by reason
     rejected: Counter                 # input values not taken, by reason
     ignored: Counter                  # joint_states messages without the joint
-    episodes: list[Episode]
-    series: PredictionSeries
-    timeline: Timeline                # the point after every input message
+    episodes: list[Episode]           # the first EPISODES_KEPT
+    episode_count: int                # all of them (in episodes.json)
+    time_in_squeak_s: float
+    plot: PlotData
+    timeline: Timeline                # counters, and the inputs over time (binned)
+    namespace: str = "/"              # of the inputs
+    out_namespace: str = DEFAULT_NAMESPACE
     wall_s: float = math.nan
     outputs: list[Path] = field(default_factory=list)
 
     @property
-    def time_in_squeak_s(self) -> float:
-        return sum(e.end_s - e.start_s for e in self.episodes)
+    def warnings(self) -> list[str]:
+        """Log-time problems: stale (backwards) and duplicated input times, per topic."""
+        tl, out = self.timeline, []
+        for topic, n in sorted(tl.backwards.items()):
+            out.append(f"log time goes backwards {n} time(s) on {topic} (up to "
+                       f"{tl.backwards_max_s:.6g} s): those messages were not applied")
+        for topic, n in sorted(tl.duplicates.items()):
+            out.append(f"log time repeats {n} time(s) on {topic} (the later value applied)")
+        return out
 
     @property
     def x_real_time(self) -> float:
@@ -159,8 +195,14 @@ class ReplayResult:
                 "messages": self.messages, "input_messages": dict(self.inputs),
                 "recomputes": self.recomputes, "predictions": self.predictions,
                 "no_prediction": dict(self.no_prediction), "rejected_inputs": dict(self.rejected),
-                "ignored_inputs": dict(self.ignored), "episodes": len(self.episodes),
+                "rejected_examples": dict(self.timeline.rejected_example),
+                "ignored_inputs": dict(self.ignored), "episodes": self.episode_count,
                 "time_in_squeak_s": self.time_in_squeak_s,
+                "namespace": self.namespace, "out_namespace": self.out_namespace,
+                "log_time": {"backwards": dict(self.timeline.backwards),
+                             "backwards_max_s": self.timeline.backwards_max_s,
+                             "duplicates": dict(self.timeline.duplicates)},
+                "warnings": self.warnings,
                 "squeak_share": self.time_in_squeak_s / self.duration_s
                 if self.duration_s > 0 else 0.0,
                 "wall_s": self.wall_s, "x_real_time": self.x_real_time}
@@ -172,11 +214,15 @@ class ReplayResult:
                  "input messages: " + (", ".join(f"{k} {v}" for k, v in self.inputs.items())
                                        or "none"),
                  f"recomputes: {self.recomputes} ({self.predictions} with a prediction)",
-                 f"squeak episodes: {len(self.episodes)}, time in squeak "
+                 f"squeak episodes: {self.episode_count}, time in squeak "
                  f"{self.time_in_squeak_s:.2f} s ({100 * s['squeak_share']:.1f} % of the log)"]
+        examples = self.timeline.rejected_example
         for title, counts in (("no prediction (outside the model's validity)", self.no_prediction),
                               ("rejected inputs", self.rejected), ("ignored inputs", self.ignored)):
-            lines += [f"{title}: {n} x {reason}" for reason, n in sorted(counts.items())]
+            lines += [f"{title}: {n} x {reason}"
+                      + (f" (first: {examples[reason]})" if reason in examples else "")
+                      for reason, n in sorted(counts.items())]
+        lines += [f"warning: {w}" for w in self.warnings]
         lines.append(f"wall time {self.wall_s:.2f} s ({self.x_real_time:.0f}x real time)")
         lines.append(f"annotated log: {self.annotated}")
         return "\n".join(lines)
@@ -295,24 +341,27 @@ class _Solver:
 class _Episodes:
     """Squeak episodes from the predictions in log order. An episode starts at the first
     prediction with squeak (not stable) and ends at the next recompute that is stable or
-    outside validity (motor at rest: no squeak), or at the end of the log."""
+    outside validity (motor at rest: no squeak), or at the end of the log. Each ended episode
+    is written to `sink` (a JSON list); the first `keep` stay in `kept`."""
 
-    def __init__(self) -> None:
-        self.done: list[Episode] = []
+    def __init__(self, sink: TextIO, keep: int = EPISODES_KEPT) -> None:
+        self.sink, self.keep = sink, keep
+        self.kept: list[Episode] = []
         self.open: Episode | None = None
+        self.count, self.time_in_squeak_s = 0, 0.0
+        sink.write("[")
 
     def add(self, t: float, p: Prediction) -> None:
         squeak = p.valid and not p.stable
         e = self.open
         if not squeak:
             if e is not None:
-                e.end_s, self.open = t, None
+                self._end(t)
             return
         growth = p.max_growth_rate if p.max_growth_rate is not None else -math.inf
         if e is None:
             e = self.open = Episode(t, t, growth, (p.speed_rad_s, p.speed_rad_s),
                                     (p.load_n, p.load_n), 0)
-            self.done.append(e)
         e.end_s = t
         e.peak_growth_rate = max(e.peak_growth_rate, growth, *p.divergence_rates)
         e.speed_range_rad_s = (min(e.speed_range_rad_s[0], p.speed_rad_s),
@@ -320,12 +369,22 @@ class _Episodes:
         e.load_range_n = (min(e.load_range_n[0], p.load_n), max(e.load_range_n[1], p.load_n))
         e.predictions += 1
         for m in p.squeak_modes:
-            e.frequencies.setdefault(m.label, []).append(m.frequency_hz)
+            e.add_frequency(m.label, m.frequency_hz)
 
-    def close(self, end_s: float) -> list[Episode]:
+    def _end(self, t: float) -> None:
+        e, self.open = self.open, None
+        e.end_s = t
+        self.sink.write(("," if self.count else "") + "\n" + textwrap.indent(json.dumps(
+            json_safe(e.as_dict()), indent=1, allow_nan=False), " "))
+        self.count += 1
+        self.time_in_squeak_s += e.end_s - e.start_s
+        if len(self.kept) < self.keep:
+            self.kept.append(e)
+
+    def close(self, end_s: float) -> None:
         if self.open is not None:
-            self.open.end_s, self.open = end_s, None
-        return self.done
+            self._end(end_s)
+        self.sink.write("\n]\n")
 
 
 # ---------------------------------------------------------------------- the replay
@@ -338,7 +397,7 @@ def _message_total(files: list[Path]) -> int | None:
             with open(f, "rb") as fh:
                 stats = make_reader(fh).get_summary().statistics
             total += stats.message_count
-    except Exception:            # only a hint: a damaged summary shows up when reading
+    except Exception:            # only a hint: a damaged summary (or a .db3) shows no total
         return None
     return total
 
@@ -347,14 +406,16 @@ class _Run:
     """One replay in progress: messages go to the timeline and into segments; a segment is
     written (originals, predictions after their inputs) once its predictions are back."""
 
-    def __init__(self, model: SqueakModel, settings: ReplaySettings, out: _AnnotatedWriter,
+    def __init__(self, model: SqueakModel, inputs: InputSettings, workers: int,
+                 out: _AnnotatedWriter, episodes: TextIO,
                  progress: Callable[[int], None] | None):
         self.model, self.out, self.progress = model, out, progress
-        self.timeline = Timeline(model.params, settings.inputs)
-        self.solver = _Solver(model, settings.workers)
-        self.series, self.episodes = PredictionSeries(), _Episodes()
+        self.timeline = Timeline(model.params, inputs)
+        self.solver = _Solver(model, workers)
+        self.plot, self.episodes = PlotData(), _Episodes(episodes)
         self.no_prediction: Counter[str] = Counter()
-        self.messages, self.start_ns, self.end_ns = 0, None, None
+        self.messages = self.predictions = 0
+        self.start_ns, self.end_ns = None, None
         self.queue: deque[_Segment] = deque()
         self.held = 0                                    # messages in `queue`
         self.segment = _Segment()
@@ -379,6 +440,11 @@ class _Run:
         while self.queue:
             self._write(self.queue.popleft())
         self.out.finish()
+        self.episodes.close(self.duration_s)
+
+    @property
+    def duration_s(self) -> float:
+        return 0.0 if self.start_ns is None else (self.end_ns - self.start_ns) / 1e9
 
     def _seal(self) -> None:
         self.solver.submit(self.segment)
@@ -393,66 +459,87 @@ class _Run:
         for i, m in enumerate(seg.messages):
             self.out.original(m)
             if job is not None and job.index == i:
-                t = (job.log_time_ns - self.start_ns) / 1e9
+                t = (job.clock_ns - self.start_ns) / 1e9
                 if p.valid:
                     self.out.prediction(job.log_time_ns, p)
-                    self.series.add(t, job, p)
+                    self.predictions += 1
                 else:
                     self.no_prediction[_short_reason(self.model, p)] += 1
+                self.plot.add(t, job, p)
                 self.episodes.add(t, p)
                 job, p = next(jobs, (None, None))
         if self.progress is not None:
             self.progress(len(seg.messages))
 
 
+def _namespaces(source: LogSource, settings: ReplaySettings) -> tuple[str, str]:
+    """(input namespace, output namespace): the one given, or the only one in the log whose
+    topics are predictor inputs (as `replay --publish` selects them)."""
+    ns = settings.namespace
+    if ns is None:
+        found = input_namespaces(log_topics(source).values()) if settings.inputs.relative \
+            else []
+        if len(found) > 1:
+            raise LogError(source.path, f"predictor inputs in several namespaces "
+                                        f"({', '.join(found)}); choose one with --namespace NS")
+        ns = found[0] if found else "/"
+    out = settings.out_namespace or DEFAULT_NAMESPACE + ("" if ns == "/" else ns)
+    return ns, out
+
+
 def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
            settings: ReplaySettings = ReplaySettings()) -> ReplayResult:
-    """Replay `log` (an MCAP file or a directory of split files) offline into `out_dir`."""
+    """Replay `log` (an MCAP or .db3 file, or a bag directory of split files) offline into
+    `out_dir`."""
     t0 = time.perf_counter()
     log, out_dir = Path(log), Path(out_dir)
-    files = log_files(log)
+    source = open_log(log)
     if log.is_dir() and out_dir.resolve() == log.resolve():
         raise LogError(log, "the output directory must not be the log directory (the "
                             "annotated log would become one of its split files)")
+    namespace, out_namespace = _namespaces(source, settings)
+    inputs = settings.inputs.resolved(namespace)
     out_dir.mkdir(parents=True, exist_ok=True)
     annotated = out_dir / f"{log_name(log)}.annotated.mcap"
-    unfinished = annotated.with_name(annotated.name + ".partial")
+    episodes = out_dir / "episodes.json"
+    partial = [p.with_name(p.name + ".partial") for p in (annotated, episodes)]
     show = settings.progress and sys.stderr.isatty()
     run = None
     try:
-        with open(unfinished, "wb") as fh, progress_bar(
-                _message_total(files) if show else None, "replay", unit="msg") as bar:
-            run = _Run(model, settings, _AnnotatedWriter(fh, settings.namespace),
-                       bar if show else None)
-            for f in files:
+        with open(partial[0], "wb") as fh, open(partial[1], "w", encoding="utf-8") as eh, \
+                progress_bar(_message_total(source.files) if show else None, "replay",
+                             unit="msg") as bar:
+            run = _Run(model, inputs, settings.workers, _AnnotatedWriter(fh, out_namespace),
+                       eh, bar if show else None)
+            for f, m in source.messages():
                 try:
-                    for m in read_messages(f):
-                        run.add(m)
+                    run.add(m)
                 except InputError as exc:
                     raise LogError(f, str(exc)) from None
             run.finish()
-        _check_inputs(log, run.timeline)
-        unfinished.replace(annotated)
+        _check_inputs(log, run.timeline, source.counts)
+        for p, final in zip(partial, (annotated, episodes)):
+            p.replace(final)
     except BaseException:
-        unfinished.unlink(missing_ok=True)
+        for p in partial:
+            p.unlink(missing_ok=True)
         raise
     finally:
         if run is not None:
             run.solver.close()
-    duration = 0.0 if run.start_ns is None else (run.end_ns - run.start_ns) / 1e9
     tl = run.timeline
     result = ReplayResult(
-        log=log, files=files, out_dir=out_dir, annotated=annotated, start_ns=run.start_ns or 0,
-        duration_s=duration, messages=run.messages, inputs=tl.inputs, recomputes=tl.recomputes,
-        predictions=len(run.series.time_s), no_prediction=run.no_prediction,
-        rejected=tl.rejected, ignored=tl.ignored, episodes=run.episodes.close(duration),
-        series=run.series, timeline=tl)
-    _write_json(out_dir / "episodes.json", [e.as_dict() for e in result.episodes])
+        log=log, files=source.files, out_dir=out_dir, annotated=annotated,
+        start_ns=run.start_ns or 0, duration_s=run.duration_s, messages=run.messages,
+        inputs=tl.inputs, recomputes=tl.recomputes, predictions=run.predictions,
+        no_prediction=run.no_prediction, rejected=tl.rejected, ignored=tl.ignored,
+        episodes=run.episodes.kept, episode_count=run.episodes.count,
+        time_in_squeak_s=run.episodes.time_in_squeak_s, plot=run.plot, timeline=tl,
+        namespace=namespace, out_namespace=out_namespace)
     result.wall_s = time.perf_counter() - t0
     _write_json(out_dir / "summary.json", result.summary())
     (out_dir / "summary.txt").write_text(result.summary_text() + "\n", encoding="utf-8")
-    result.outputs = [annotated, out_dir / "episodes.json", out_dir / "summary.json",
-                      out_dir / "summary.txt"]
+    result.outputs = [annotated, episodes, out_dir / "summary.json", out_dir / "summary.txt"]
     return result
 
 
@@ -466,17 +553,32 @@ _VALIDITY = {TOO_SLOW: "speed below min_speed_rad_s",
              SELF_LOCKING: "overhauling load on a self-locking thread"}
 
 
-def _check_inputs(log: Path, timeline: Timeline) -> None:
-    """A log without speed or load gives no prediction at all: say which topics it has."""
+def _check_inputs(log: Path, timeline: Timeline, counts: dict[str, int]) -> None:
+    """A log without speed or load gives no prediction at all: say which topics it has, which
+    of the input topics exist without messages, and how to choose others."""
     s = timeline.settings
-    missing = [what for what, value in (
-        (f"speed (std_msgs/Float64 on {s.speed_topic} or a joint velocity on "
-         f"{s.joint_states_topic})", timeline.speed),
-        (f"axial load (std_msgs/Float64 on {s.load_topic})", timeline.load)) if value is None]
-    if missing:
-        raise LogError(log, f"no {' and no '.join(missing)} in the log (its topics: "
-                            f"{', '.join(timeline.topics) or 'none'}); choose the topics with "
-                            f"--speed-topic, --load-topic, --joint-states-topic, --joint-name")
+    missing = [(what, where, topics) for what, where, topics, value in (
+        ("speed", f"std_msgs/Float64 on {s.speed_topic} or a joint velocity on "
+                  f"{s.joint_states_topic}", (s.speed_topic, s.joint_states_topic),
+         timeline.speed),
+        ("axial load", f"std_msgs/Float64 on {s.load_topic}", (s.load_topic,), timeline.load))
+        if value is None]
+    if not missing:
+        return
+    parts = []
+    for what, where, topics in missing:
+        empty = [t for t in topics if t in counts and not counts[t]]
+        if empty:
+            where += (f"; {' and '.join(empty)} exist{'s' if len(empty) == 1 else ''} in the "
+                      f"log but {'has' if len(empty) == 1 else 'have'} no messages")
+        parts.append(f"{what} ({where})")
+    listed = ", ".join(f"{t}{'' if n else ' (empty)'}" for t, n in sorted(counts.items()))
+    hint = ("choose the topics with --speed-topic, --load-topic, --joint-states-topic, "
+            "--joint-name or --namespace")
+    if timeline.load is None and timeline.speed is not None:
+        hint = f"for a log without load give a nominal load with --load N, or {hint}"
+    raise LogError(log, f"no {' and no '.join(parts)} in the log (its topics: "
+                        f"{listed or 'none'}); {hint}")
 
 
 def _write_json(path: Path, obj: Any) -> None:

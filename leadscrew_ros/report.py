@@ -1,16 +1,22 @@
 """PNG report of a replay: the run over time, and its trajectory on the stability maps.
 
-- `timeline.png`: speed, load, nut position and squeak risk over time, episodes shaded;
-- `map_speed_load.png`: the run's operating points on the speed-load stability map (the
-  paper's Fig. 7), squeak predictions highlighted;
+- `timeline.png`: speed, load, nut position (only when the log has a nut input: a nut topic
+  or joint positions) and squeak risk over time, squeak shaded. Drawn from the replay's binned
+  series (`decimation.Envelope`: min-max band per bin), so an hour-long log is as readable and
+  as cheap as a minute;
+- `map_speed_load.png`: the run's operating points (a fixed-size sample) on the speed-load
+  stability map (the paper's Fig. 7), squeak predictions highlighted. When the nut travels
+  (more than `NUT_BAND_MIN_M`), the points are split into 2-4 nut-position bands: the map is
+  filled for the band holding the median nut position and the squeak boundary of every other
+  band is overlaid in that band's colour, with its points in the same colour;
 - `frequency_vs_speed.png`: the predicted squeak frequencies over the mode frequencies vs speed
-  (the paper's Fig. 11).
-The maps are drawn at the run's median nut position and (Fig. 11) median load, as |speed| and
-|load| (a negative speed is the screw turning the other way); the figures module draws them.
+  (the paper's Fig. 11), at the run's median nut position and load.
+Maps use |speed| and |load| (a negative speed is the screw turning the other way).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,6 +31,9 @@ TIMELINE_FILE = "timeline.png"
 MAP_FILE = "map_speed_load.png"
 FREQUENCY_FILE = "frequency_vs_speed.png"
 SQUEAK_COLOR = "orange"
+NUT_BAND_MIN_M = 0.01        # nut travel below this: one map at the median nut position
+NUT_BAND_M = 0.025           # band width aimed at, 2 to 4 bands
+BAND_COLORS = ("tab:blue", "tab:green", "tab:purple", "tab:brown")
 
 
 @dataclass(frozen=True)
@@ -33,102 +42,152 @@ class ReportGrids:
     map_speeds: int
     sweep_speeds: int
     dpi: int
-    max_points: int          # time-series samples drawn per curve (min/max per bin beyond)
 
 
-FULL = ReportGrids(map_loads=41, map_speeds=51, sweep_speeds=300, dpi=110, max_points=20_000)
-QUICK = ReportGrids(map_loads=7, map_speeds=9, sweep_speeds=40, dpi=60, max_points=2_000)
+FULL = ReportGrids(map_loads=41, map_speeds=51, sweep_speeds=300, dpi=110)
+QUICK = ReportGrids(map_loads=7, map_speeds=9, sweep_speeds=40, dpi=60)
 
 
-def _decimate(t: np.ndarray, y: np.ndarray, max_points: int) -> tuple[np.ndarray, np.ndarray]:
-    """At most ~max_points samples that keep each bin's minimum and maximum (spikes stay)."""
-    if t.size <= max_points:
-        return t, y
-    bins = max_points // 2
-    edges = np.linspace(0, t.size, bins + 1).astype(int)
-    keep = []
-    for a, b in zip(edges[:-1], edges[1:]):
-        part = y[a:b]
-        if np.isnan(part).all():
-            keep.append(a)
-            continue
-        keep += sorted({a + int(np.nanargmin(part)), a + int(np.nanargmax(part))})
-    idx = np.array(keep)
-    return t[idx], y[idx]
+def _held(last: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """`last` with empty bins (count 0) holding the previous bin's value, as a published
+    value holds until the next one."""
+    idx = np.where(count > 0, np.arange(count.size), 0)
+    np.maximum.accumulate(idx, out=idx)
+    out = last[idx]
+    out[: np.argmax(count > 0) if count.any() else count.size] = np.nan
+    return out
+
+
+def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    """(first, last) index of each run of True."""
+    edges = np.diff(np.r_[0, flags.astype(np.int8), 0])
+    return list(zip(np.flatnonzero(edges == 1).tolist(), (np.flatnonzero(edges == -1) - 1).tolist()))
 
 
 def plot_timeline(result: ReplayResult, path: Path, grids: ReportGrids) -> None:
-    tl, s = result.timeline, result.series
-    t = (np.frombuffer(tl.time_ns, np.int64) - result.start_ns) / 1e9
-    fig, axes = plt.subplots(4, 1, figsize=(10, 8.5), sharex=True, constrained_layout=True)
-    for ax, values, label in zip(axes, (tl.speeds, tl.loads, tl.nuts),
-                                 ("speed [rad/s]", "axial load [N]", "nut position [mm]")):
-        y = np.frombuffer(values, float) * (1e3 if "mm" in label else 1.0)
-        ax.plot(*_decimate(t, y, grids.max_points), lw=0.7, color="tab:blue")
+    tl = result.timeline
+    t, lo, hi, _, _ = tl.trace.series()
+    panels = [(0, "speed [rad/s]", 1.0), (1, "axial load [N]", 1.0)]
+    if tl.nut_measured:
+        panels.append((2, "nut position [mm]", 1e3))
+    fig, axes = plt.subplots(len(panels) + 1, 1, figsize=(10, 2.1 * (len(panels) + 1) + 0.2),
+                             sharex=True, constrained_layout=True)
+    for ax, (k, label, factor) in zip(axes, panels):
+        ax.fill_between(t, lo[:, k] * factor, hi[:, k] * factor, step="mid", color="tab:blue",
+                        edgecolor="tab:blue", lw=0.7)
         ax.set_ylabel(label)
-    risk = axes[3]
-    if s.time_s:
-        # The published risk holds until the next prediction.
-        risk.step(s.time_s, s.risk, where="post", lw=0.8, color="tab:red")
+    rt, rlo, rhi, rlast, rcount = result.plot.risk.series()
+    risk = axes[-1]
+    if rt.size:
+        # The published risk holds until the next prediction: empty bins take the last one.
+        held = _held(rlast, rcount)
+        rlo = np.where(rcount[:, None] > 0, rlo, held)
+        rhi = np.where(rcount[:, None] > 0, rhi, held)
+        risk.fill_between(rt, rlo[:, 0], rhi[:, 0], step="mid", color="tab:red",
+                          edgecolor="tab:red", lw=0.8)
+        squeak = np.nan_to_num(np.fmax(rhi[:, 1], held[:, 1])) > 0
+        half = result.plot.risk.bin_s / 2
+        for a, b in _runs(squeak):
+            for ax in axes:
+                ax.axvspan(rt[a] - half, rt[b] + half, color=SQUEAK_COLOR, alpha=0.3, lw=0)
     risk.set_ylim(-0.05, 1.05)
     risk.set_ylabel("squeak risk [0..1]")
     risk.set_xlabel("time since the log's first message [s]")
     for ax in axes:
-        for e in result.episodes:
-            ax.axvspan(e.start_s, e.end_s, color=SQUEAK_COLOR, alpha=0.3, lw=0)
         ax.grid(alpha=0.3)
-    axes[0].set_title(f"Replay of {result.log.name}: {len(result.episodes)} squeak episodes "
-                      f"(shaded), {result.time_in_squeak_s:.1f} s in squeak")
+    nut = "" if tl.nut_measured else (
+        f"; no nut input: model nut at {tl.nut * 1e3:.0f} mm (parameter nut_position_m)")
+    axes[0].set_title(f"Replay of {result.log.name}: {result.episode_count} squeak episodes "
+                      f"(shaded), {result.time_in_squeak_s:.1f} s in squeak{nut}", fontsize=10)
     fig.savefig(path, dpi=grids.dpi)
     plt.close(fig)
 
 
-def _median_abs(values: list[float], default: float) -> float:
-    return float(np.median(np.abs(values))) if values else default
+def nut_bands(nuts: np.ndarray) -> np.ndarray:
+    """Edges of the nut-position bands of a run: one band if the nut barely moves, else 2-4
+    equal bands over its range."""
+    if not nuts.size:
+        return np.array([])
+    lo, hi = float(nuts.min()), float(nuts.max())
+    if hi - lo <= NUT_BAND_MIN_M:
+        return np.array([lo, hi])
+    n = int(np.clip(math.ceil((hi - lo) / NUT_BAND_M), 2, 4))
+    return np.linspace(lo, hi, n + 1)
 
 
 def write_report(result: ReplayResult, model: SqueakModel, out: Path | str,
                  grids: ReportGrids = FULL) -> list[Path]:
     """Write the three PNGs into `out`; returns their paths."""
-    out, s = Path(out), result.series
+    out = Path(out)
     paths = [out / TIMELINE_FILE, out / MAP_FILE, out / FREQUENCY_FILE]
     plot_timeline(result, paths[0], grids)
 
-    nut = float(np.median(s.nut_position_m)) if s.nut_position_m else model.params.nut_position_m
-    at_nut = model.with_params(nut_position_m=nut)
-    speed = np.abs(s.speed_rad_s)
-    load = np.abs(s.load_n)
-    active = np.array(s.active, bool)
+    points = result.plot.points.sample()
+    speed, load, nuts = np.abs(points[:, 0]), np.abs(points[:, 1]), points[:, 2]
+    active = points[:, 3] > 0
     p = model.params
+    median_nut = float(np.median(nuts)) if nuts.size else p.nut_position_m
     speed_hi = min(max(200.0, 1.1 * speed.max(initial=0.0)), 0.99 * model.critical_speed_rad_s)
     speeds = np.geomspace(p.min_speed_rad_s, speed_hi, grids.map_speeds)
     loads = np.linspace(0.0, max(600.0, 1.1 * load.max(initial=0.0)), grids.map_loads)
 
-    def trajectory(ax) -> list:
-        if not speed.size:
-            return []
-        handles = ax.plot(load, speed, "-", color="0.15", lw=0.6, alpha=0.6,
-                          label="replayed operating points")
-        return handles + ax.plot(load[active], speed[active], "o", ms=3, mfc=SQUEAK_COLOR,
-                                 mec="k", mew=0.3, ls="none", label="squeak predicted")
+    edges = nut_bands(nuts)
+    bands = len(edges) - 1
+    band = np.clip(np.searchsorted(edges, nuts, side="right") - 1, 0, max(bands - 1, 0))
+    home = int(np.clip(np.searchsorted(edges, median_nut, side="right") - 1, 0,
+                       max(bands - 1, 0)))
 
-    result_map = stability_map(at_nut, "load_n", loads, "speed_rad_s", speeds)
+    def at_band(k: int) -> float:
+        inside = nuts[band == k]
+        return float(np.median(inside)) if inside.size else float(edges[k:k + 2].mean())
+
+    map_nut = at_band(home) if bands > 1 else median_nut
+
+    def band_text(k: int) -> str:
+        return f"nut {edges[k] * 1e3:.0f}-{edges[k + 1] * 1e3:.0f} mm"
+
+    def trajectory(ax) -> list:
+        handles = []
+        for k in range(max(bands, 1)):
+            sel = band == k
+            if not sel.any():
+                continue
+            color = "0.15" if bands <= 1 else BAND_COLORS[k]
+            label = "replayed operating points" if bands <= 1 else band_text(k)
+            handles += ax.plot(load[sel], speed[sel], ".", ms=2, color=color, alpha=0.6,
+                               label=label)
+            if bands > 1 and k != home:
+                other = stability_map(model.with_params(nut_position_m=at_band(k)), "load_n",
+                                      loads, "speed_rad_s", speeds)
+                g = np.nan_to_num(other.field.max_growth_rate, nan=-1.0)
+                if g.min() < 0 < g.max():
+                    ax.contour(loads, speeds, g, levels=[0.0], colors=[color], linewidths=1.4)
+        if active.any():
+            handles += ax.plot(load[active], speed[active], "o", ms=3, mfc=SQUEAK_COLOR,
+                               mec="k", mew=0.3, ls="none", label="squeak predicted")
+        return handles
+
+    result_map = stability_map(model.with_params(nut_position_m=map_nut), "load_n", loads,
+                               "speed_rad_s", speeds)
+    where = (f"nut at {map_nut * 1e3:.0f} mm (median of the run)" if bands <= 1 else
+             f"filled: {band_text(home)}; lines: squeak boundary of each other nut band")
     plot_map(result_map, paths[1], f"Replay on the speed-load stability map (Fig. 7 style)\n"
-             f"nut at {nut * 1e3:.0f} mm (median of the run); |speed|, |load|", grids.dpi,
-             p.formulation, overlay=trajectory)
+             f"{where}; |speed|, |load|", grids.dpi, p.formulation, overlay=trajectory)
+
+    squeak = result.plot.squeak.sample()
 
     def squeak_points(ax) -> list:
-        if not s.squeak_hz:
+        if not squeak.size:
             return []
-        return ax.plot(speed[np.array(s.squeak_rows)], s.squeak_hz, "o", ms=3, mfc=SQUEAK_COLOR, mec="k", mew=0.3,
-                       ls="none", label="replayed squeak predictions")
+        return ax.plot(np.abs(squeak[:, 0]), squeak[:, 3], "o", ms=3, mfc=SQUEAK_COLOR,
+                       mec="k", mew=0.3, ls="none", label="replayed squeak predictions")
 
-    median_load = _median_abs(s.load_n, p.axial_load_n)
-    speed_sweep = sweep(at_nut, "speed_rad_s",
+    median_load = float(np.median(load)) if load.size else p.axial_load_n
+    speed_sweep = sweep(model.with_params(nut_position_m=median_nut), "speed_rad_s",
                         np.geomspace(p.min_speed_rad_s, speed_hi, grids.sweep_speeds),
                         load_n=median_load)
     plot_frequencies(speed_sweep, paths[2], f"Replayed squeak frequencies on the modes vs speed "
-                     f"(Fig. 11 style)\nload {median_load:.0f} N, nut {nut * 1e3:.0f} mm "
-                     f"(medians of the run; points at their own load)", grids.dpi,
+                     f"(Fig. 11 style)\nload {median_load:.0f} N, nut {median_nut * 1e3:.0f} mm "
+                     f"(medians of the run; points at their own load and nut)", grids.dpi,
                      overlay=squeak_points)
     return paths

@@ -3,35 +3,70 @@ position -> recompute decisions with the node's deadbands -> batched predictions
 
 rclpy-free (prediction workers import it). The rules follow the node (`live.py`, `node.py`):
 a rejected value (NaN, inf, |F_z| > 1e7 N, nut off the screw) keeps the previous one; nothing
-is predicted before both a speed and a load are known; the nut defaults to the model's
-`nut_position_m`; a JointState sets the speed from the joint's velocity and the nut from its
+is predicted before both a speed and a load are known (`nominal_load_n`: a load known from the
+start, as a load published once to the node); the nut defaults to the model's `nut_position_m`; a JointState sets the speed from the joint's velocity and the nut from its
 angle, `nut_position_at_zero_angle_m + angle * R tan(beta)`, and counts as one input. A
 recompute happens when the point moved beyond a deadband from the last recomputed one (offline
 there is no rate limit); the contact is re-integrated only when the nut moved more than the nut
 deadband from where it was last integrated (geometries are cached per process, so positions
 that strokes revisit, e.g. on an encoder's grid, cost nothing the second time).
+
+Topics are found as `replay --publish` finds them (`is_input`): relative input names (the
+defaults `motor_speed`, ...) resolve in a namespace, as a node's do under `__ns`; the log's
+single input namespace by default (`input_namespaces`).
+
+Log time: messages are taken in file order (the order the node received them). An input
+message whose log time is earlier than the previous one on its topic is stale (a clock reset,
+merged recordings): it is counted and not applied; one with the same log time as the previous
+is counted and applied (the later value wins). Times of recomputes, episodes and plots are the
+latest log time seen so far, so they never run backwards.
 """
 
 from __future__ import annotations
 
 import math
-from array import array
 from collections import Counter, OrderedDict
-from dataclasses import dataclass
-from typing import Callable
+from dataclasses import dataclass, replace
+from typing import Callable, Iterable
 
 import numpy as np
 
 from .cdr import decode_float64, decode_joint_state
+from .decimation import Envelope
 from .live import LiveSettings, moved
-from .logfile import LogMessage
+from .logfile import LogMessage, Topic
 from .model import ParameterError, Prediction, ScrewParameters, SqueakModel
+from .model.display import exact
 from .model.parameters import field_info
 
 FLOAT64, JOINT_STATE = "std_msgs/msg/Float64", "sensor_msgs/msg/JointState"
 NUT_POSITION_AT_ZERO_ANGLE_M = 0.15          # the node's parameter default
 _MODEL_CACHE = 1024                          # nut positions kept per process (~60 kB each)
 _LOAD_LIMIT_N = field_info("axial_load_n")["hi"]    # as the node's input check
+# The predictor's inputs (base name -> the type it subscribes with).
+INPUTS = {"motor_speed": FLOAT64, "axial_load": FLOAT64, "nut_position": FLOAT64,
+          "joint_states": JOINT_STATE}
+# Namespaces of the node's and the replay's own outputs: never inputs.
+OWN_NAMESPACES = {"squeak", "replay"}
+TOPIC_FIELDS = ("speed_topic", "load_topic", "nut_topic", "joint_states_topic")
+
+
+def is_input(topic: Topic) -> bool:
+    """A predictor input: by name, or a topic of the input's type named `.../<input>`."""
+    *namespaces, base = topic.name.split("/")
+    if base not in INPUTS or OWN_NAMESPACES.intersection(namespaces):
+        return False
+    return topic.name == "/" + base or topic.type_name == INPUTS[base]
+
+
+def input_namespaces(topics: Iterable[Topic]) -> list[str]:
+    """The namespaces holding predictor inputs ('/' for the root), sorted."""
+    return sorted({t.name.rsplit("/", 1)[0] or "/" for t in topics if is_input(t)})
+
+
+def resolve(name: str, namespace: str) -> str:
+    """A topic name as a node in `namespace` resolves it: absolute names stay."""
+    return name if name.startswith("/") else f"{namespace.rstrip('/')}/{name}"
 
 
 class InputError(ValueError):
@@ -42,21 +77,27 @@ class InputError(ValueError):
 class InputSettings:
     """Where the inputs are in the log and when to recompute (node parameter names in SI)."""
 
-    speed_topic: str = "/motor_speed"                   # std_msgs/Float64, rad/s
-    load_topic: str = "/axial_load"                     # std_msgs/Float64, N
-    nut_topic: str = "/nut_position"                    # std_msgs/Float64, m
-    joint_states_topic: str = "/joint_states"           # sensor_msgs/JointState
+    # Relative names resolve in the input namespace (`resolved`), absolute ones stay.
+    speed_topic: str = "motor_speed"                    # std_msgs/Float64, rad/s
+    load_topic: str = "axial_load"                      # std_msgs/Float64, N
+    nut_topic: str = "nut_position"                     # std_msgs/Float64, m
+    joint_states_topic: str = "joint_states"            # sensor_msgs/JointState
     joint_name: str = ""                # '' : the joint of single-joint messages
     nut_position_at_zero_angle_m: float = NUT_POSITION_AT_ZERO_ANGLE_M
     speed_deadband_rad_s: float = LiveSettings.speed_deadband_rad_s
     load_deadband_n: float = LiveSettings.load_deadband_n
     nut_deadband_m: float = LiveSettings.nut_deadband_m
+    nominal_load_n: float | None = None   # load from the start (a log without load topic)
 
     def __post_init__(self) -> None:
-        topics = (self.speed_topic, self.load_topic, self.nut_topic, self.joint_states_topic)
-        if not all(t.startswith("/") for t in topics) or len(set(topics)) < len(topics):
-            raise ValueError(f"input topics must be distinct absolute names, got "
-                             f"{', '.join(topics)}")
+        topics = self.topics
+        if not all(t.strip("/") and " " not in t for t in topics) \
+                or len(set(topics)) < len(topics):
+            raise ValueError(f"input topics must be distinct names, got {', '.join(topics)}")
+        if self.nominal_load_n is not None and not (
+                math.isfinite(self.nominal_load_n) and abs(self.nominal_load_n) <= _LOAD_LIMIT_N):
+            raise ValueError(f"nominal load {exact(self.nominal_load_n)} N is not a finite "
+                             f"number within ±{exact(_LOAD_LIMIT_N)} N")
         for name in ("speed_deadband_rad_s", "load_deadband_n", "nut_deadband_m"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
@@ -64,13 +105,27 @@ class InputSettings:
         if not math.isfinite(self.nut_position_at_zero_angle_m):
             raise ValueError("nut_position_at_zero_angle_m must be finite")
 
+    @property
+    def topics(self) -> tuple[str, str, str, str]:
+        return tuple(getattr(self, f) for f in TOPIC_FIELDS)
+
+    @property
+    def relative(self) -> bool:
+        """Some input topic depends on the namespace."""
+        return not all(t.startswith("/") for t in self.topics)
+
+    def resolved(self, namespace: str) -> InputSettings:
+        """These settings with every topic name absolute, resolved in `namespace`."""
+        return replace(self, **{f: resolve(getattr(self, f), namespace) for f in TOPIC_FIELDS})
+
 
 @dataclass(frozen=True)
 class Job:
     """A recompute: the operating point and the nut position the contact is integrated at."""
 
     index: int              # of the triggering message in its segment
-    log_time_ns: int
+    log_time_ns: int        # of the triggering message
+    clock_ns: int           # latest log time so far (>= log_time_ns): episodes, plots
     speed_rad_s: float
     load_n: float
     nut_position_m: float   # true nut position
@@ -78,29 +133,39 @@ class Job:
 
 
 class Timeline:
-    """Feeds messages in log order; `feed` returns the operating point to recompute, if any."""
+    """Feeds messages in log order; `feed` returns the operating point to recompute, if any.
+
+    `settings` topics are used as they are if absolute, else resolved in the root namespace.
+    Memory is constant: counters, and the point after every input message in `trace`
+    (speed, load, nut; NaN until known, the nut NaN until a nut input was taken), binned."""
 
     def __init__(self, params: ScrewParameters, settings: InputSettings = InputSettings()):
-        self.settings = settings
+        self.settings = settings = settings.resolved("/")
         self.lead_m_per_rad = params.radius_m * math.tan(params.helix_angle_rad)
         self.nut_max_m = params.length_m - params.nut_length_m
         self.speed: float | None = None
-        self.load: float | None = None
+        self.load: float | None = settings.nominal_load_n
         self.nut = params.nut_position_m                   # until a nut input arrives
+        self.nut_measured = False                          # a nut input was taken
         self._model_nut_m = params.nut_position_m          # where the contact is integrated
         self._computed_at: tuple[float, float, float] | None = None
         self.inputs: Counter[str] = Counter()              # accepted-or-not input messages
         self.rejected: Counter[str] = Counter()            # values not taken, by reason
+        self.rejected_example: dict[str, str] = {}         # reason -> its first value
         self.ignored: Counter[str] = Counter()             # messages without the joint
+        self.backwards: Counter[str] = Counter()           # stale inputs (not applied), by topic
+        self.backwards_max_s = 0.0                         # largest step back in log time
+        self.duplicates: Counter[str] = Counter()          # same log time as the previous
         self.recomputes = 0
-        # The point after every input message (NaN: not known yet), for the report.
-        self.time_ns, self.speeds, self.loads, self.nuts = (array("q"), array("d"),
-                                                            array("d"), array("d"))
-        s = settings
+        self.start_ns: int | None = None                   # first message: t = 0
+        self.now_ns = 0                                    # latest log time seen
+        self.trace = Envelope(3)
+        self._last_ns: dict[str, int] = {}                 # per input topic
         self._routes: dict[str, tuple[str, Callable[[bytes], bool]]] = {
-            s.speed_topic: (FLOAT64, self._on_speed), s.load_topic: (FLOAT64, self._on_load),
-            s.nut_topic: (FLOAT64, self._on_nut),
-            s.joint_states_topic: (JOINT_STATE, self._on_joint_states)}
+            settings.speed_topic: (FLOAT64, self._on_speed),
+            settings.load_topic: (FLOAT64, self._on_load),
+            settings.nut_topic: (FLOAT64, self._on_nut),
+            settings.joint_states_topic: (JOINT_STATE, self._on_joint_states)}
         self._handlers: dict[tuple[str, str], Callable[[bytes], bool] | None] = {}
 
     @property
@@ -108,25 +173,40 @@ class Timeline:
         """Every topic seen so far."""
         return sorted({name for name, _ in self._handlers})
 
+    def seconds(self, log_time_ns: int) -> float:
+        """Seconds from the first message."""
+        return (log_time_ns - (self.start_ns or 0)) / 1e9
+
     # ------------------------------------------------------------------ feeding
     def feed(self, m: LogMessage, index: int) -> Job | None:
+        if self.start_ns is None:
+            self.start_ns = self.now_ns = m.log_time_ns
+        self.now_ns = max(self.now_ns, m.log_time_ns)
         key = (m.topic.name, m.topic.type_name)
         handler = self._handlers.get(key, False)
         if handler is False:
             handler = self._handlers[key] = self._handler(*key)
         if handler is None:
             return None
-        self.inputs[m.topic.name] += 1
+        name = m.topic.name
+        self.inputs[name] += 1
+        last = self._last_ns.get(name)
+        if last is not None and m.log_time_ns <= last:
+            if m.log_time_ns < last:          # stale: the newer value stays
+                self.backwards[name] += 1
+                self.backwards_max_s = max(self.backwards_max_s, (last - m.log_time_ns) / 1e9)
+                return None
+            self.duplicates[name] += 1
+        self._last_ns[name] = m.log_time_ns
         try:
             accepted = handler(m.data)
         except ValueError:
-            self.rejected[f"{m.topic.name}: undecodable payload"] += 1
+            self._reject(f"{name}: undecodable payload", "")
             accepted = False
         nan = math.nan
-        self.time_ns.append(m.log_time_ns)
-        self.speeds.append(nan if self.speed is None else self.speed)
-        self.loads.append(nan if self.load is None else self.load)
-        self.nuts.append(self.nut)
+        self.trace.add(self.seconds(self.now_ns), nan if self.speed is None else self.speed,
+                       nan if self.load is None else self.load,
+                       self.nut if self.nut_measured else nan)
         return self._recompute(index, m.log_time_ns) if accepted else None
 
     def _handler(self, topic: str, type_name: str) -> Callable[[bytes], bool] | None:
@@ -137,17 +217,22 @@ class Timeline:
             raise InputError(f"topic {topic} is {type_name}, expected {route[0]}")
         return route[1]
 
+    def _reject(self, reason: str, example: str) -> bool:
+        self.rejected[reason] += 1
+        if example:
+            self.rejected_example.setdefault(reason, example)
+        return False
+
     def _on_speed(self, data: bytes) -> bool:
         return self._set_speed(decode_float64(data))
 
     def _on_load(self, data: bytes) -> bool:
         value = decode_float64(data)
         if not math.isfinite(value):
-            self.rejected["load not finite"] += 1
-            return False
+            return self._reject("load not finite", f"load {exact(value)} N")
         if abs(value) > _LOAD_LIMIT_N:
-            self.rejected[f"load beyond {_LOAD_LIMIT_N:g} N"] += 1
-            return False
+            return self._reject(f"load beyond {exact(_LOAD_LIMIT_N)} N",
+                                f"{exact(value)} N exceeds {exact(_LOAD_LIMIT_N)} N")
         self.load = value
         return True
 
@@ -178,16 +263,16 @@ class Timeline:
 
     def _set_speed(self, value: float) -> bool:
         if not math.isfinite(value):
-            self.rejected["speed not finite"] += 1
-            return False
+            return self._reject("speed not finite", f"speed {exact(value)} rad/s")
         self.speed = value
         return True
 
     def _set_nut(self, value: float) -> bool:
         if not (math.isfinite(value) and 0.0 <= value <= self.nut_max_m):
-            self.rejected[f"nut position off the screw [0, {self.nut_max_m:g}] m"] += 1
-            return False
-        self.nut = value
+            screw = f"[0, {exact(self.nut_max_m)}]"
+            return self._reject(f"nut position off the screw {screw} m",
+                                f"nut position {exact(value)} m is off the screw {screw}")
+        self.nut, self.nut_measured = value, True
         return True
 
     # ------------------------------------------------------------------ coalescing
@@ -199,7 +284,7 @@ class Timeline:
             return None
         self._computed_at = point
         self.recomputes += 1
-        return Job(index, log_time_ns, *point, self._model_nut(point[2]))
+        return Job(index, log_time_ns, self.now_ns, *point, self._model_nut(point[2]))
 
     def _model_nut(self, nut: float) -> float:
         if abs(nut - self._model_nut_m) > self.settings.nut_deadband_m:
@@ -238,7 +323,7 @@ def predict_jobs(params: ScrewParameters, speeds: np.ndarray, loads: np.ndarray,
         model = _model_at(params, nut)
         if model is None:
             preds = [Prediction(float(speeds[i]), float(loads[i]), params.formulation, False,
-                                f"nut position {nut:g} m is not allowed by the parameters")
+                                f"nut position {exact(nut)} m is not allowed by the parameters")
                      for i in idx]
         else:
             preds = model.predict_many(speeds[idx], loads[idx])

@@ -392,7 +392,9 @@ def test_invalid_inputs_are_counted_never_predicted(tmp_path):
                                      "speed at or above the first critical speed": 1}
     (p,) = decoded(r.annotated, topics=["/replay/squeak/risk"])
     assert p[1] == 3 * s and math.isfinite(p[5].data)
-    assert r.series.time_s == [2.0]                # seconds from the first message
+    t, lo, _, _, count = r.plot.risk.series()     # seconds from the first message
+    (k,) = np.flatnonzero(np.isfinite(lo[:, 0]))
+    assert abs(t[k] - 2.0) <= r.plot.risk.bin_s and count.sum() == r.recomputes
 
 
 def test_wrong_input_type_is_a_one_line_error(tmp_path, capsys):
@@ -409,7 +411,7 @@ def test_wrong_input_type_is_a_one_line_error(tmp_path, capsys):
 # ----------------------------------------------------------------------------- command line
 def test_cli_replay_with_report(bag, tmp_path, capsys):
     code, out, err = cli(capsys, "replay", bag, "--out", tmp_path, "--speed-deadband", "0.5",
-                         "--namespace", "/offline")
+                         "--out-namespace", "/offline")
     assert code == 0, err
     assert "squeak episodes:" in out and "x real time" in out and "wrote:" in out
     names = {p.name for p in tmp_path.iterdir()}
@@ -507,6 +509,8 @@ def test_cli_info(bag, capsys):
     (["--publish", "--remap", "speed"], "expected OLD:=NEW"),
     (["--speed-deadband", "-1"], "speed_deadband_rad_s must be a finite number >= 0"),
     (["--namespace", "/bad name"], "namespace must be a ROS name"),
+    (["--out-namespace", "/bad name"], "output namespace must be a ROS name"),
+    (["--load", "1e8"], "nominal load 1e+08 N is not a finite number within ±1e+07 N"),
     (["--workers", "-1"], "workers must be >= 0"),
     (["--load-topic", "motor_speed"], "input topics must be distinct"),
     (["--speed-deadband", "nan"], "is not a finite number"),

@@ -1,0 +1,149 @@
+"""The log an offline replay reads: MCAP files (`logfile`) or rosbag2's sqlite3 storage (.db3,
+the default before Iron), as one stream of `LogMessage`s in file order.
+
+A .db3 file is read with Python's sqlite3 (read-only, immutable; no extra dependency): the
+`topics` table gives names, types and QoS, `messages` is read in insertion order (the order
+rosbag2 received them), and the message definitions come from the `message_definitions` table
+(Iron and later) or else from the installed ROS 2 message files (copies into the annotated MCAP
+need them), or stay empty for types that are not installed.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+from . import msgdefs
+from .logfile import (ENCODINGS, LogError, LogInfo, LogMessage, Topic, _full_type, _split_key,
+                      log_files, read_messages)
+
+DB3 = ".db3"
+
+
+@dataclass
+class LogSource:
+    """A log's files and, once read, every topic it declares with its message count."""
+
+    path: Path
+    files: list[Path]
+    sqlite: bool = False
+    topics: dict[str, Topic] = field(default_factory=dict)
+    counts: Counter = field(default_factory=Counter)
+
+    def messages(self) -> Iterator[tuple[Path, LogMessage]]:
+        """(file, message) of every file in split order, each file in file order; collects
+        `topics` (including those without messages) and `counts` on the way."""
+        for f in self.files:
+            info = LogInfo(f)
+            for m in (_db3_messages(f, info) if self.sqlite else read_messages(f, info=info)):
+                yield f, m
+            for name, topic in info.topics.items():
+                self.topics.setdefault(name, topic)
+            self.counts.update({name: info.counts[name] for name in info.topics})
+
+
+def open_log(path: Path | str) -> LogSource:
+    """The log at `path`: an .mcap or .db3 file, or a bag directory of split files (MCAP
+    preferred when both are present). LogError if there is none."""
+    path = Path(path)
+    if path.is_dir() and not any(path.glob("*.mcap")):
+        db3 = sorted(path.glob(f"*{DB3}"), key=lambda p: _split_key(p.with_suffix(".mcap")))
+        if db3:
+            return LogSource(path, db3, sqlite=True)
+    if path.is_file() and path.suffix == DB3:
+        return LogSource(path, [path], sqlite=True)
+    return LogSource(path, log_files(path))
+
+
+def log_topics(source: LogSource) -> dict[str, Topic]:
+    """Every topic the log declares, before reading its messages: from the MCAP summaries or
+    the sqlite3 `topics` tables (a file without summary is read through)."""
+    topics: dict[str, Topic] = {}
+    for f in source.files:
+        found = _db3_topics(f, _connect(f)) if source.sqlite else _mcap_topics(f)
+        for t in found.values():
+            topics.setdefault(t.name, t)
+    return topics
+
+
+def _mcap_topics(path: Path) -> dict[str, Topic]:
+    from mcap.reader import make_reader
+    try:
+        with open(path, "rb") as fh:
+            summary = make_reader(fh).get_summary()
+    except Exception:                 # damaged or foreign: the strict read says why later
+        summary = None
+    if summary is None:
+        info = LogInfo(path)
+        for _ in read_messages(path, strict=False, info=info):
+            pass
+        return info.topics
+    out = {}
+    for c in summary.channels.values():
+        s = summary.schemas.get(c.schema_id)
+        if s is not None:
+            out[c.topic] = Topic(c.topic, _full_type(s.name), s.encoding, "", c.message_encoding,
+                                 dict(c.metadata), s.name)
+    return out
+
+
+# ----------------------------------------------------------------------------- sqlite3
+def _connect(path: Path) -> sqlite3.Connection:
+    if not path.is_file():
+        raise LogError(path, "no such file")
+    try:
+        con = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro&immutable=1", uri=True)
+        con.execute("SELECT id, name, type, serialization_format FROM topics LIMIT 1")
+        con.execute("SELECT topic_id, timestamp, data FROM messages LIMIT 1")
+    except sqlite3.Error as exc:
+        raise LogError(path, f"not a rosbag2 sqlite3 (.db3) file: {exc}") from None
+    return con
+
+
+def _db3_topics(path: Path, con: sqlite3.Connection) -> dict[int, Topic]:
+    """Topic id -> Topic, with the stored or installed message definition."""
+    stored: dict[str, tuple[str, str]] = {}
+    try:
+        stored = {t: (enc, text) for t, enc, text in con.execute(
+            "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions")}
+    except sqlite3.Error:             # before Iron: no definitions in the file
+        pass
+    topics = {}
+    for tid, name, type_name, encoding, qos in con.execute(
+            "SELECT id, name, type, serialization_format, offered_qos_profiles FROM topics"):
+        if encoding not in ENCODINGS:
+            raise LogError(path, f"foreign rosbag2 storage: topic {name} is serialized as "
+                                 f"{encoding!r}, expected cdr")
+        schema_encoding, text = stored.get(type_name, ("ros2msg", ""))
+        if not text:
+            try:
+                text = msgdefs.definition(type_name)
+            except msgdefs.MessageDefinitionError:
+                text = ""
+        topics[tid] = Topic(name, type_name, schema_encoding or "ros2msg", text, encoding,
+                            {"offered_qos_profiles": qos or ""})
+    return topics
+
+
+def _db3_messages(path: Path, info: LogInfo) -> Iterator[LogMessage]:
+    con = _connect(path)
+    try:
+        topics = _db3_topics(path, con)
+        info.topics.update({t.name: t for t in topics.values()})
+        sequence: Counter[int] = Counter()
+        try:
+            for tid, stamp, data in con.execute(
+                    "SELECT topic_id, timestamp, data FROM messages ORDER BY id"):
+                topic = topics.get(tid)
+                if topic is None:
+                    raise LogError(path, f"message on unknown topic id {tid}")
+                info.counts[topic.name] += 1
+                yield LogMessage(topic, stamp, stamp, sequence[tid], bytes(data))
+                sequence[tid] += 1
+        except sqlite3.Error as exc:
+            raise LogError(path, f"damaged sqlite3 file: {exc}") from None
+    finally:
+        con.close()
