@@ -4,7 +4,10 @@ Subscribes (sensor-data QoS): motor_speed (std_msgs/Float64, rad/s), axial_load 
 nut_position (Float64, m) and joint_states (sensor_msgs/JointState, joint `joint_name`).
 Publishes (reliable, transient local, depth 1): squeak/risk, squeak/unstable_frequencies,
 squeak/active, squeak/modes, squeak/safe_speed and /diagnostics.
-Records inputs and outputs to MCAP (`record.*` parameters, std_srvs/SetBool `~/record`).
+Records inputs and outputs to MCAP (`record.*` parameters, std_srvs/SetBool `~/record`):
+inputs from subscriptions of their own that never wait for the model, with every lost message
+counted (`leadscrew_ros.input_recording`); on start, reports (or recovers) its own bags cut off
+by an earlier crash. `squeak_node --help` lists the parameters and topics.
 The physics lives in `leadscrew_ros.model`, the recompute policy in `leadscrew_ros.live`, the
 recording in `leadscrew_ros.recorder`.
 """
@@ -12,10 +15,13 @@ recording in `leadscrew_ros.recorder`.
 from __future__ import annotations
 
 import math
+import re
 import signal
 import sys
+import threading
 import time
 from dataclasses import fields
+from pathlib import Path
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -24,19 +30,24 @@ from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescr
 from rclpy.exceptions import ParameterException
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
                        qos_profile_sensor_data)
 from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import SetBool
 
+from .input_recording import InputRecording
 from .live import Level, LivePredictor, LiveSettings, Status
+from .logfile import RECOVER_HINT, LogError, cut_off_bags, recover_bag
 from .model import ParameterError, Prediction, ScrewParameters, SqueakModel
+from .model.display import exact
 from .model.parameters import FORMULATIONS
-from .recorder import COMPRESSIONS, Recorder, RecordSettings
+from .recorder import COMPRESSIONS, Recorder, RecordSettings, ensure_directory
 from .ros_env import confine_to_localhost
 
 NODE_NAME = "squeak_predictor"
@@ -70,10 +81,10 @@ NODE_PARAMETERS: dict[str, tuple] = {
                                      False),
     "hardware_id": ("leadscrew", "", "hardware_id of the diagnostic status", None, True),
     "input_queue_depth": (5, "1", "queue depth of the input subscriptions", (1, 1000), True),
-    "record.enabled": (False, "", "record inputs and outputs to MCAP (also ~/record)", None,
-                       False),
-    "record.directory": (".", "", "directory that receives one squeak_<UTC time> bag per "
-                         "recording; must exist", None, False),
+    "record.enabled": (False, "", "record inputs and outputs to MCAP (also ~/record); a set "
+                       "is rejected with the reason when recording cannot start", None, False),
+    "record.directory": (".", "", "directory that receives one [<namespace>_]squeak_<UTC "
+                         "wall-clock time> bag per recording; created if missing", None, False),
     "record.split_size_mb": (512.0, "MB", "start a new file beyond this size (0: never)",
                              (0.0, 1e6), False),
     "record.split_duration_s": (600.0, "s", "start a new file after this long (0: never)",
@@ -82,9 +93,34 @@ NODE_PARAMETERS: dict[str, tuple] = {
                            False),
     "record.flush_period_s": (0.5, "s", "hand recorded data to the OS this often: the most a "
                               "killed process loses", (0.05, 10.0), False),
+    "record.queue_depth": (10000, "1", "DDS history of each input recording subscription: "
+                           "messages held while the process is busy", (1, 1000000), False),
+    "record.auto_recover": (False, "", "on start, recover this node's bags cut off by a crash "
+                            "in record.directory (else only reported)", None, True),
 }
 LIVE_FIELDS = {f.name for f in fields(LiveSettings)}
 RECORD_PREFIX = "record."
+NOT_RECORD_SETTINGS = {"record.enabled", "record.auto_recover"}   # record.* of the node itself
+INPUTS = {"motor_speed": Float64, "axial_load": Float64, "nut_position": Float64,
+          "joint_states": JointState}
+
+
+def parameter_specs():
+    """(name, default, unit, description, bounds, read_only, extra) of every parameter the
+    node declares: the ScrewParameters fields, then NODE_PARAMETERS."""
+    for f in fields(ScrewParameters):
+        md = f.metadata
+        extra = f"one of: {', '.join(FORMULATIONS)}" if f.name == "formulation" else (
+            "open bound" if md.get("lo_open") or md.get("hi_open") else "")
+        bounds = None if md.get("lo") is None else (md["lo"], md["hi"])
+        yield f.name, f.default, md["unit"], md["description"], bounds, False, extra
+    for name, (default, unit, description, bounds, read_only) in NODE_PARAMETERS.items():
+        yield name, default, unit, description, bounds, read_only, ""
+
+
+def bag_prefix(namespace: str) -> str:
+    """Bag name prefix of a node in `namespace`: '/seat_left' -> 'seat_left_squeak'."""
+    return "_".join([p for p in namespace.split("/") if p] + ["squeak"])
 
 
 def _descriptor(name: str, default, unit: str, description: str, bounds, read_only: bool,
@@ -106,7 +142,9 @@ class SqueakPredictorNode(Node):
         self._declare_parameters()
         self.live = LivePredictor(SqueakModel(self._screw_parameters({})),
                                   self._live_settings({}))
-        self.recorder = Recorder(self._record_settings({}))
+        self.recorder = Recorder(self._record_settings({}), bag_prefix(self.get_namespace()),
+                                 clock=self._now_ns)
+        self._input_recording: InputRecording | None = None
         self.latched: dict[str, object] = {}          # topic -> last message published on it
         self._published: tuple | None = None          # verdict of the last /diagnostics
         self._last_diagnostics = -math.inf
@@ -121,16 +159,19 @@ class SqueakPredictorNode(Node):
         pub_events = PublisherEventCallbacks(use_default_callbacks=False)
 
         def subscribe(msg_type, topic, callback):
-            sub = self.create_subscription(msg_type, topic, lambda msg: callback(msg, sub),
-                                           sensor, event_callbacks=sub_events)
+            sub = self.create_subscription(msg_type, topic, callback, sensor,
+                                           event_callbacks=sub_events)
+            self._inputs[sub.topic_name] = msg_type
+
+        self._inputs: dict[str, type] = {}     # fully qualified input topic -> message class
 
         def publisher(msg_type, topic):
             return self.create_publisher(msg_type, topic, LATCHED, event_callbacks=pub_events)
 
-        subscribe(Float64, "motor_speed", self._on_speed)
-        subscribe(Float64, "axial_load", self._on_load)
-        subscribe(Float64, "nut_position", self._on_nut_position)
-        subscribe(JointState, "joint_states", self._on_joint_states)
+        for topic, callback in (("motor_speed", self._on_speed), ("axial_load", self._on_load),
+                                ("nut_position", self._on_nut_position),
+                                ("joint_states", self._on_joint_states)):
+            subscribe(INPUTS[topic], topic, callback)
         self.risk_pub = publisher(Float64, "squeak/risk")
         self.frequencies_pub = publisher(Float64MultiArray, "squeak/unstable_frequencies")
         self.active_pub = publisher(Bool, "squeak/active")
@@ -142,30 +183,32 @@ class SqueakPredictorNode(Node):
         self.add_post_set_parameters_callback(self._apply_parameters)
         # Housekeeping (staleness, bad-input verdict, periodic diagnostics) at a fixed slow
         # rate; the rate-limit timer runs only while an input waits for the rate limit.
-        self.create_timer(HOUSEKEEPING_PERIOD_S, self._housekeeping)
+        # Steady clock: with use_sim_time a paused /clock must not stop flushing, splitting,
+        # staleness and diagnostics (they measure wall time, time.monotonic).
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(HOUSEKEEPING_PERIOD_S, self._housekeeping, clock=self._steady)
         self._rate_timer = self._create_rate_timer()
         self.create_service(SetBool, "~/record", self._on_record_service)
+        self._crash_recovery = CrashRecovery(self.get_parameter("record.directory").value,
+                                             self.recorder.name)
+        if self._crash_recovery.bags and self.get_parameter("record.auto_recover").value:
+            self._crash_recovery.start()
         if self.get_parameter("record.enabled").value:
             self._set_recording(True)
+            if not self.recorder.active:      # the parameter says what happens: not recording
+                self.set_parameters([Parameter("record.enabled", value=False)])
         self._publish_diagnostics(time.monotonic())
 
     def destroy_node(self) -> None:
         self.live.close()                     # the background safe-speed search ends too
-        self.recorder.stop()                  # summary, index and footer: a clean file
+        self._stop_recording()                # summary, index and footer: a clean file
+        self._crash_recovery.join()
         super().destroy_node()
 
     # ---------------------------------------------------------------- parameters
     def _declare_parameters(self) -> None:
-        for f in fields(ScrewParameters):
-            md = f.metadata
-            extra = f"one of: {', '.join(FORMULATIONS)}" if f.name == "formulation" else (
-                "open bound" if md.get("lo_open") or md.get("hi_open") else "")
-            bounds = None if md.get("lo") is None else (md["lo"], md["hi"])
-            self.declare_parameter(f.name, f.default, _descriptor(
-                f.name, f.default, md["unit"], md["description"], bounds, False, extra))
-        for name, (default, unit, description, bounds, read_only) in NODE_PARAMETERS.items():
-            self.declare_parameter(name, default, _descriptor(name, default, unit, description,
-                                                              bounds, read_only))
+        for name, default, *spec in parameter_specs():
+            self.declare_parameter(name, default, _descriptor(name, default, *spec))
 
     def _values(self, changes: dict) -> dict:
         return {**{p.name: p.value for p in self.get_parameters(
@@ -182,16 +225,22 @@ class SqueakPredictorNode(Node):
     def _record_settings(self, changes: dict) -> RecordSettings:
         values = self._values(changes)
         return RecordSettings(**{k[len(RECORD_PREFIX):]: v for k, v in values.items()
-                                 if k.startswith(RECORD_PREFIX) and k != "record.enabled"})
+                                 if k.startswith(RECORD_PREFIX) and k not in NOT_RECORD_SETTINGS})
 
     def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        """The new set as a whole must make a valid model and recorder; else nothing changes."""
+        """The new set as a whole must make a valid model and recorder, and a recording it
+        asks for must be able to start; else nothing changes."""
         changes = {p.name: p.value for p in params}
         try:
             self._screw_parameters(changes)
-            self._record_settings(changes)
+            settings = self._record_settings(changes)
+            if self._values(changes)["record.enabled"] and any(
+                    n.startswith(RECORD_PREFIX) for n in changes):
+                ensure_directory(settings.directory)          # mkdir -p, writable
         except (ParameterError, TypeError, ValueError) as exc:
             return SetParametersResult(successful=False, reason=str(exc))
+        except OSError as exc:
+            return SetParametersResult(successful=False, reason=exc.strerror or str(exc))
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
@@ -207,63 +256,69 @@ class SqueakPredictorNode(Node):
         if any(n.startswith(RECORD_PREFIX) for n in names):
             settings = self._record_settings({})
             if settings != self.recorder.settings:      # takes effect with a new bag
-                self.recorder.stop()
-                self.recorder = Recorder(settings)
+                self._stop_recording()
+                self.recorder = Recorder(settings, self.recorder.name, clock=self._now_ns)
             self._set_recording(self.get_parameter("record.enabled").value)
 
     def _create_rate_timer(self):
-        timer = self.create_timer(1.0 / self.live.settings.max_rate_hz, self._on_rate_timer)
+        timer = self.create_timer(1.0 / self.live.settings.max_rate_hz, self._on_rate_timer,
+                                  clock=self._steady)
         timer.cancel()
         return timer
 
     # ---------------------------------------------------------------- recording
+    def _now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
+
     def _set_recording(self, on: bool) -> None:
         if on and not self.recorder.active:
-            now_ns = self.get_clock().now().nanoseconds
-            if self.recorder.start(now_ns):
+            # Bags are named and split by the wall clock; log times are the node's clock
+            if self.recorder.start(topics=tuple(self._inputs)):
                 self.get_logger().info(f"recording to {self.recorder.bag}")
                 for topic, msg in self.latched.items():   # a bag starts with the current state,
-                    self.recorder.write(topic, msg, now_ns)   # as a latched subscriber gets it
+                    self.recorder.write(topic, msg)       # as a latched subscriber gets it
+                self._input_recording = InputRecording(self, self._inputs, self.recorder)
             else:
                 self.get_logger().error(f"recording failed: {self.recorder.error}")
         elif not on and self.recorder.active:
-            self.recorder.stop()
+            self._stop_recording()
             self.get_logger().info(f"recording stopped: {self.recorder.bag}")
         # /diagnostics follows within a housekeeping period: the verdict includes recording
+
+    def _stop_recording(self) -> None:
+        """Inputs first (their thread ends), then the file is finished."""
+        if self._input_recording is not None:
+            self._input_recording.stop()
+            self._input_recording = None
+        self.recorder.stop()
 
     def _on_record_service(self, request: SetBool.Request, response: SetBool.Response
                            ) -> SetBool.Response:
         """Start (data=true) or stop recording; `record.enabled` follows."""
-        self.set_parameters([Parameter("record.enabled", value=bool(request.data))])
-        response.success = self.recorder.active == request.data
+        [result] = self.set_parameters([Parameter("record.enabled", value=bool(request.data))])
+        response.success = result.successful and self.recorder.active == request.data
         response.message = (str(self.recorder.path) if self.recorder.active else
+                            (result.reason if not result.successful else "") or
                             self.recorder.error or f"stopped; last bag: {self.recorder.bag}")
         return response
-
-    def _record(self, topic: str, msg) -> None:
-        if self.recorder.active:
-            self.recorder.write(topic, msg, self.get_clock().now().nanoseconds)
 
     def _publish(self, publisher, msg) -> None:
         publisher.publish(msg)
         self.latched[publisher.topic_name] = msg
-        self._record(publisher.topic_name, msg)
+        if self.recorder.active:                  # inputs are recorded by InputRecording
+            self.recorder.write(publisher.topic_name, msg)
 
     # ---------------------------------------------------------------- inputs
-    def _on_speed(self, msg: Float64, sub) -> None:
-        self._record(sub.topic_name, msg)
+    def _on_speed(self, msg: Float64) -> None:
         self._input(self.live.set_speed(msg.data, time.monotonic()))
 
-    def _on_load(self, msg: Float64, sub) -> None:
-        self._record(sub.topic_name, msg)
+    def _on_load(self, msg: Float64) -> None:
         self._input(self.live.set_load(msg.data, time.monotonic()))
 
-    def _on_nut_position(self, msg: Float64, sub) -> None:
-        self._record(sub.topic_name, msg)
+    def _on_nut_position(self, msg: Float64) -> None:
         self._input(self.live.set_nut_position(msg.data, time.monotonic()))
 
-    def _on_joint_states(self, msg: JointState, sub) -> None:
-        self._record(sub.topic_name, msg)
+    def _on_joint_states(self, msg: JointState) -> None:
         joint = self.get_parameter("joint_name").value
         if not joint or joint not in msg.name:
             return
@@ -296,7 +351,7 @@ class SqueakPredictorNode(Node):
             self._rate_timer.cancel()
 
     def _housekeeping(self) -> None:
-        self.recorder.tick(self.get_clock().now().nanoseconds)
+        self.recorder.tick()                  # flush and split by the wall clock
         now = time.monotonic()
         if self.live.poll_advice():          # a background safe-speed search has finished
             self._publish_safe_speed()
@@ -307,7 +362,8 @@ class SqueakPredictorNode(Node):
 
     def _verdict(self, status: Status) -> tuple:
         """What /diagnostics says: republished when it changes."""
-        return status.level, status.message, self.recorder.active, self.recorder.error
+        return (status.level, status.message, self.recorder.active, self.recorder.error,
+                self.recorder.lost > 0, self._crash_recovery.state)
 
     def _recompute(self, now: float) -> None:
         p = self.live.update(now)
@@ -337,7 +393,8 @@ class SqueakPredictorNode(Node):
         msg.header.stamp = self.get_clock().now().to_msg()
         hardware_id = self.get_parameter("hardware_id").value
         msg.status = [DiagnosticStatus(
-            level=bytes([int(status.level)]), name=f"{self.get_name()}: squeak prediction",
+            level=bytes([int(status.level)]),
+            name=f"{self.get_fully_qualified_name()}: squeak prediction",
             message=status.message, hardware_id=hardware_id,
             values=[KeyValue(key=k, value=v) for k, v in status.values.items()]),
             self._recording_status(hardware_id)]
@@ -345,18 +402,95 @@ class SqueakPredictorNode(Node):
         self._published, self._last_diagnostics = self._verdict(status), now
 
     def _recording_status(self, hardware_id: str) -> DiagnosticStatus:
-        r = self.recorder
+        """ERROR when recording failed, WARN when input messages were lost or bags of an
+        earlier run are cut off, else OK; the counts as key-values."""
+        r, crash = self.recorder, self._crash_recovery
         if r.error:
-            level, message = Level.ERROR, r.error
+            level, parts = Level.ERROR, [r.error]
         elif r.active:
-            level, message = Level.OK, f"recording to {r.path}"
+            level, parts = Level.OK, [f"recording to {r.path}"]
         else:
-            level, message = Level.OK, "not recording"
+            level, parts = Level.OK, ["not recording"]
         values = {"bag": str(r.bag or ""), "files": str(len(r.files)),
-                  "messages": str(r.messages)}
-        return DiagnosticStatus(level=bytes([int(level)]), name=f"{self.get_name()}: recording",
-                                message=message, hardware_id=hardware_id,
+                  "messages": str(r.messages), "lost": str(r.lost)}
+        losses = {t: loss for t, loss in list(r.losses.items()) if loss.lost}
+        for topic, loss in r.losses.items():
+            values[f"lost {topic}"] = str(loss.lost)
+        if losses:
+            level = max(level, Level.WARN)
+            parts.append(f"{r.lost} input message(s) lost before recording (" + ", ".join(
+                f"{t} {loss.lost}" for t, loss in losses.items()) + ")")
+        if crash.message:
+            level = max(level, crash.level)
+            parts.append(crash.message)
+            values["cut_off_bags"] = " ".join(str(b) for b in crash.pending)
+        return DiagnosticStatus(level=bytes([int(level)]),
+                                name=f"{self.get_fully_qualified_name()}: recording",
+                                message="; ".join(parts), hardware_id=hardware_id,
                                 values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+
+class CrashRecovery:
+    """This node's bags in the record directory that an earlier crash cut off (no
+    metadata.yaml, or a file without footer): reported, and recovered in place by `start`
+    (`logfile.recover_bag`, on a thread of its own: a large bag takes a while)."""
+
+    def __init__(self, directory: str, prefix: str):
+        own = re.compile(re.escape(prefix) + r"_\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d_\d{3}(_\d+)?$")
+        self.bags = [b for b in cut_off_bags(Path(directory).expanduser())
+                     if b.is_dir() and own.match(b.name)]
+        self.recovered: list[Path] = []
+        self.failed: dict[Path, str] = {}
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._recover, daemon=True,
+                                        name="cut-off bag recovery")
+        self._thread.start()
+
+    def join(self) -> None:
+        if self._thread is not None:
+            self._thread.join()
+
+    def _recover(self) -> None:
+        for bag in self.bags:
+            try:
+                recover_bag(bag)
+                self.recovered.append(bag)
+            except (LogError, OSError) as exc:
+                self.failed[bag] = str(exc)
+
+    @property
+    def pending(self) -> list[Path]:
+        """Cut-off bags not recovered (yet)."""
+        return [b for b in self.bags if b not in self.recovered]
+
+    @property
+    def state(self) -> tuple:
+        return len(self.bags), len(self.recovered), len(self.failed)
+
+    @property
+    def level(self) -> Level:
+        return Level.WARN if self.pending else Level.OK
+
+    @property
+    def message(self) -> str:
+        """'' when there is nothing to say."""
+        parts = []
+        if self.recovered:
+            parts.append(f"recovered {len(self.recovered)} cut-off bag(s) of an earlier run: "
+                         + ", ".join(str(b) for b in self.recovered))
+        running = self._thread is not None and self._thread.is_alive()
+        waiting = [b for b in self.pending if b not in self.failed]
+        if waiting and running:
+            parts.append(f"recovering {len(waiting)} cut-off bag(s) of an earlier run")
+        elif self.pending:
+            parts.append(f"{len(self.pending)} bag(s) of an earlier run cut off (crash?): "
+                         + ", ".join(str(b) for b in self.pending) + "; run `"
+                         + f"{RECOVER_HINT} BAGDIR` on each"
+                         + "".join(f" ({self.failed[b]})" for b in self.pending
+                                   if b in self.failed))
+        return "; ".join(parts)
 
 
 def frequencies_message(p: Prediction) -> Float64MultiArray:
@@ -380,8 +514,53 @@ def modes_message(p: Prediction) -> Float64MultiArray:
     return msg
 
 
+def usage() -> str:
+    """`squeak_node --help`: how to run it, its topics and every parameter with unit, default
+    and range."""
+    lines = [
+        "usage: squeak_node [-h] [--ros-args [-r __ns:=/NAMESPACE] [-p NAME:=VALUE] "
+        "[--params-file FILE] ...]",
+        "",
+        __doc__.splitlines()[0].replace("`", ""),
+        "",
+        "Subscribes (sensor-data QoS, relative to the namespace):",
+        "  motor_speed (std_msgs/Float64) [rad/s], axial_load (std_msgs/Float64) [N],",
+        "  nut_position (std_msgs/Float64) [m], joint_states (sensor_msgs/JointState, joint "
+        "`joint_name`)",
+        "Publishes (reliable, transient local, depth 1):",
+        "  squeak/risk (Float64) [1], squeak/unstable_frequencies (Float64MultiArray) [Hz],",
+        "  squeak/active (Bool), squeak/modes (Float64MultiArray), squeak/safe_speed (Float64) "
+        "[rad/s],",
+        "  /diagnostics (diagnostic_msgs/DiagnosticArray: '<node>: squeak prediction', "
+        "'<node>: recording')",
+        "Service: ~/record (std_srvs/SetBool) starts or stops recording",
+        "",
+        "Parameters (name [unit] = default, range: description):"]
+    for name, default, unit, description, bounds, read_only, extra in parameter_specs():
+        text = f"  {name}{f' [{unit}]' if unit else ''} = " + (
+            exact(default) if isinstance(default, float) else repr(default))
+        if bounds is not None:
+            text += f", {exact(bounds[0])}..{exact(bounds[1])}"
+        notes = "; ".join(n for n in (extra, "read-only: set at start-up" if read_only else "")
+                          if n)
+        lines.append(f"{text}: {description}" + (f" ({notes})" if notes else ""))
+    lines += ["", "Example: squeak_node --ros-args -r __ns:=/seat_left --params-file "
+              "config/leadscrew.yaml -p record.enabled:=true",
+              "(config/leadscrew.yaml is keyed `/**:`, so it applies in any namespace)"]
+    return "\n".join(lines)
+
+
 def main(args: list[str] | None = None) -> int:
-    """Run the node until SIGINT/SIGTERM; exit 0 on a clean shutdown, 2 on bad parameters."""
+    """Run the node until SIGINT/SIGTERM; exit 0 on a clean shutdown, 2 on bad parameters or
+    arguments; `-h`/`--help` prints `usage()` and exits 0."""
+    own_args = remove_ros_args(sys.argv if args is None else args)[1:]
+    if {"-h", "--help"} & set(own_args):
+        print(usage())
+        return 0
+    if own_args:
+        print(f"{NODE_NAME}: error: unrecognized arguments: {' '.join(own_args)} (ROS "
+              "arguments go after --ros-args; see --help)", file=sys.stderr)
+        return 2
     confine_to_localhost()
     # SIGINT/SIGTERM only set `stop`; the loop ends between callbacks. rclpy's own handlers
     # shut the context down from another thread (a publish in flight then fails with "context

@@ -12,6 +12,7 @@ from leadscrew_ros.model.parameters import ScrewParameters, field_names
 from leadscrew_ros.node import NODE_PARAMETERS
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "leadscrew.yaml"
+KEY = "/**"
 FIELDS = {f.name: f for f in fields(ScrewParameters)}
 # name -> (default, type name) for every parameter the node declares
 DEFAULTS = {**{f.name: (f.default, f.type) for f in fields(ScrewParameters)},
@@ -32,9 +33,9 @@ def _flat(tree: dict, prefix: str = "") -> dict:
 
 def _params(path: Path = CONFIG) -> dict:
     doc = yaml.safe_load(path.read_text())
-    assert list(doc) == ["squeak_predictor"]
-    assert list(doc["squeak_predictor"]) == ["ros__parameters"]
-    return _flat(doc["squeak_predictor"]["ros__parameters"])
+    assert list(doc) == [KEY]            # any namespace, any node name
+    assert list(doc[KEY]) == ["ros__parameters"]
+    return _flat(doc[KEY]["ros__parameters"])
 
 
 def _same(value, default, typ: str) -> bool:
@@ -134,7 +135,7 @@ def test_node_takes_every_value_from_the_file(tmp_path):
                "max_rate_hz": 50.0, "stale_timeout_s": 2.5, "joint_name": "screw_joint",
                "hardware_id": "screw_7", "input_queue_depth": 7,
                "record.split_duration_s": 30.0, "record.compression": "lz4"}
-    doc = {"squeak_predictor": {"ros__parameters": {**_params(), **changed}}}
+    doc = {KEY: {"ros__parameters": {**_params(), **changed}}}
     path = tmp_path / "changed.yaml"
     path.write_text(yaml.safe_dump(doc))
     values = _node_with_params_file(path)

@@ -108,7 +108,7 @@ class Ros:
         self.executor.add_node(self.node)
         return self.node
 
-    def spin_until(self, condition, timeout: float = 2.0, what: str = "condition") -> None:
+    def spin_until(self, condition, timeout: float = 10.0, what: str = "condition") -> None:
         deadline = time.monotonic() + timeout
         while not condition():
             if time.monotonic() > deadline:
@@ -121,7 +121,7 @@ class Ros:
         for _ in range(rounds):
             self.executor.spin_once(timeout_sec=0.0)
 
-    def publisher(self, topic: str, timeout: float = 2.0):
+    def publisher(self, topic: str, timeout: float = 10.0):
         if topic not in self.pubs:
             pub = self.probe.create_publisher(INPUTS[topic], topic, 10)
             self.spin_until(lambda: pub.get_subscription_count() > 0, timeout,
@@ -133,13 +133,13 @@ class Ros:
         msg = value if isinstance(value, JointState) else Float64(data=float(value))
         self.publisher(topic).publish(msg)
 
-    def wait_for(self, topic: str, predicate, timeout: float = 2.0):
+    def wait_for(self, topic: str, predicate, timeout: float = 10.0):
         """The latest message on an output topic, once it satisfies `predicate`."""
         self.spin_until(lambda: topic in self.latest and predicate(self.latest[topic]),
                         timeout, f"a matching message on {topic}")
         return self.latest[topic]
 
-    def status(self, predicate, timeout: float = 2.0) -> DiagnosticStatus:
+    def status(self, predicate, timeout: float = 10.0) -> DiagnosticStatus:
         return self.wait_for("/diagnostics", lambda m: predicate(m.status[0]),
                              timeout).status[0]
 
@@ -191,7 +191,7 @@ def test_topics_live_in_the_namespace(ros):
     # before any input: nothing predicted, diagnostics say so
     status = ros.status(lambda s: True)
     assert status.level == bytes([Level.STALE]) and "motor_speed" in status.message
-    assert status.name == f"{NODE_NAME}: squeak prediction"
+    assert status.name == f"{ros.ns}/{NODE_NAME}: squeak prediction"   # fully qualified
     ros.drain()
     assert ros.count["squeak/risk"] == 0
 

@@ -1,17 +1,21 @@
 """MCAP recording by the squeak_predictor node: round trip through three independent readers,
-the ~/record service, splitting, compression, disk errors, and crash safety (SIGKILL/SIGTERM of
-a node process). Uses the launch-free `Ros` world of test_node.py."""
+the ~/record service, splitting, compression, record directories (created, or the set
+rejected), completeness under load and loss counting, sim time, cut-off bags reported on start,
+and crash safety (SIGKILL/SIGTERM of a node process). Uses the launch-free `Ros` world of
+test_node.py."""
 
 from __future__ import annotations
 
 import array
 import contextlib
 import dataclasses
+import json
 import math
 import os
 import resource
 import signal
 import subprocess
+import sys
 import time
 import uuid
 from pathlib import Path
@@ -27,6 +31,7 @@ from mcap_ros2.decoder import DecoderFactory
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
+from rosgraph_msgs.msg import Clock
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import Stores, get_typestore
 from sensor_msgs.msg import JointState
@@ -35,7 +40,8 @@ from std_srvs.srv import SetBool
 
 from leadscrew_ros import msgdefs
 from leadscrew_ros.logfile import LogError, inspect, is_complete, log_files, read_log, recover
-from leadscrew_ros.recorder import Recorder, RecordSettings
+from leadscrew_ros.live import Level
+from leadscrew_ros.recorder import LOST_BY_TOPIC_KEY, LOST_KEY, Recorder, RecordSettings, TopicLoss
 from leadscrew_ros.serialization import cdr_payload
 from test_node import COLLECT, LOAD, SQUEAK, Ros, at, node_command, wait_initialised
 from test_demo import stop as stop_processes
@@ -118,6 +124,7 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
     ros.executor.remove_node(node)
     ros.node = None
     expected = latched + sent + published
+    inputs = {t for t, _ in sent}
     assert {t for t, _ in published} >= {f"{ros.ns}/squeak/risk", f"{ros.ns}/squeak/modes",
                                          f"{ros.ns}/squeak/unstable_frequencies",
                                          f"{ros.ns}/squeak/active", "/diagnostics"}
@@ -143,8 +150,11 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
         assert all(name == msgdefs.type_name(want[0]) for name, _ in got)
         times = [m.log_time for _, m in got]
         assert times == sorted(times)
-        for (_, m), w in zip(got, want):                  # publish_time = header stamp
-            stamp = getattr(getattr(w, "header", None), "stamp", None)
+        for (_, m), w in zip(got, want):
+            if topic in inputs:          # as rosbag2: the publisher's send time (same clock)
+                assert 0 <= m.log_time - m.publish_time < 2e9
+                continue
+            stamp = getattr(getattr(w, "header", None), "stamp", None)  # outputs: header stamp
             assert m.publish_time == (stamp.sec * 10**9 + stamp.nanosec if stamp is not None
                                       else m.log_time)
 
@@ -344,25 +354,69 @@ def recording_status(ros: Ros, predicate, timeout: float = 3.0):
     return found[0]
 
 
-def test_missing_or_unwritable_directory_is_an_error_and_predictions_continue(ros, tmp_path):
+def test_a_missing_record_directory_is_created(ros, tmp_path):
+    """Like `ros2 bag record -o`: mkdir -p, at start-up and when enabled later."""
     missing = tmp_path / "no" / "such" / "dir"
     node = ros.start(**{"record.enabled": True, "record.directory": str(missing)})
-    status = recording_status(ros, lambda s: s.level == b"\x02")
-    assert str(missing) in status.message and "does not exist" in status.message
+    assert node.recorder.active and node.recorder.bag.parent == missing
+    status = recording_status(ros, lambda s: s.message.startswith("recording to"))
+    assert status.level == b"\x00"
+    later = tmp_path / "later" / "bags"
+    assert node.set_parameters([Parameter("record.directory", value=str(later))])[0].successful
+    assert node.recorder.active and node.recorder.bag.parent == later
+
+
+def unusable_directories(tmp_path: Path) -> dict[str, Path]:
+    """Directories no recording can use, and why."""
+    plain = tmp_path / "plain_file"
+    plain.write_text("not a directory")
+    return {"proc": Path("/proc/leadscrew_bags"), "proc itself": Path("/proc"),
+            "under a plain file": plain / "bags", "a plain file": plain,
+            # root ignores file modes; the kernel's sysfs refuses anyone
+            "read-only": Path("/sys/kernel") if os.geteuid() == 0 else Path("/")}
+
+
+def test_enabling_a_recording_that_cannot_start_is_rejected_with_the_reason(ros, tmp_path):
+    good = tmp_path / "good"
+    node = ros.start(**{"record.directory": str(good)})
+    client = ros.probe.create_client(SetBool, f"{ros.ns}/squeak_predictor/record")
+    ros.spin_until(client.service_is_ready, 5.0, "the ~/record service")
+    for what, bad in unusable_directories(tmp_path).items():
+        # enabling with a bad directory: the whole set is rejected, nothing records
+        result = node.set_parameters_atomically([Parameter("record.directory", value=str(bad)),
+                                                 Parameter("record.enabled", value=True)])
+        assert not result.successful, what
+        assert str(bad) in result.reason and "cannot record" in result.reason, (what, result)
+        assert node.get_parameter("record.enabled").value is False, what
+        assert node.get_parameter("record.directory").value == str(good)
+        assert not node.recorder.active
+        # a bad directory while not recording is just a setting; the service then refuses
+        assert node.set_parameters([Parameter("record.directory", value=str(bad))])[0].successful
+        future = client.call_async(SetBool.Request(data=True))
+        ros.spin_until(future.done, 5.0, "the service response")
+        assert not future.result().success and str(bad) in future.result().message, what
+        assert node.get_parameter("record.enabled").value is False, what
+        # recording: moving it to a bad directory is rejected, the bag goes on
+        assert node.set_parameters([Parameter("record.directory", value=str(good))])[0].successful
+        assert node.set_parameters([Parameter("record.enabled", value=True)])[0].successful
+        bag = node.recorder.bag
+        result = node.set_parameters([Parameter("record.directory", value=str(bad))])[0]
+        assert not result.successful and str(bad) in result.reason, what
+        assert node.recorder.active and node.recorder.bag == bag
+        assert node.set_parameters([Parameter("record.enabled", value=False)])[0].successful
     at(ros, SQUEAK)                                      # still predicting
+
+
+def test_start_up_with_an_unusable_directory_is_an_error_and_the_parameter_reads_false(
+        ros, tmp_path):
+    bad = unusable_directories(tmp_path)["under a plain file"]
+    node = ros.start(**{"record.enabled": True, "record.directory": str(bad)})
+    status = recording_status(ros, lambda s: s.level == b"\x02")
+    assert str(bad) in status.message and "Not a directory" in status.message, status.message
+    assert node.get_parameter("record.enabled").value is False
     assert not node.recorder.active
-    # A directory this process may not write to. Root ignores file modes; the kernel's own
-    # sysfs refuses anyone.
-    if os.geteuid() == 0:
-        readonly = Path("/sys/kernel")
-    else:
-        readonly = tmp_path / "readonly"
-        readonly.mkdir(mode=0o555)
-    node.set_parameters([Parameter("record.directory", value=str(readonly))])
-    status = recording_status(ros, lambda s: str(readonly) in s.message)
-    assert status.level == b"\x02", status.message
     assert "recording" not in ros.latest["/diagnostics"].status[0].message  # prediction status
-    at(ros, 40.0)
+    at(ros, SQUEAK)                                      # still predicting
 
 
 # ----------------------------------------------------------------------------- processes
@@ -514,3 +568,190 @@ def test_disk_full_stops_the_recording_with_an_error_and_predictions_continue(tm
     bag = next(directory.iterdir())
     info = inspect(log_files(bag)[0])                   # what was written before stays readable
     assert info.messages > 0
+
+
+# ----------------------------------------------------------------------------- completeness
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_recording.py"
+
+
+def bench_recording(tmp_path: Path, *args: str) -> dict:
+    """benchmarks/bench_recording.py for 3 s (node and publisher processes): its raw numbers."""
+    out = tmp_path / f"bench{len(list(tmp_path.glob('bench*')))}.json"
+    proc = subprocess.run([sys.executable, str(BENCH), "--seconds", "3", "--conditions",
+                           "quiet", "--json", str(out), *args], capture_output=True, text=True,
+                          timeout=240, env=dict(os.environ))
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    print(proc.stdout)
+    return json.loads(out.read_text())["new:quiet"]
+
+
+def test_three_inputs_at_1_khz_from_another_process_are_all_recorded_or_counted(tmp_path):
+    """3 topics x 1 kHz x 3 s into a recording node process: what the bag holds plus what the
+    node counted as lost is exactly what was sent, per topic; and the deep recording queue
+    on its own thread keeps (measured 100 %, also with the other core busy; the old code in
+    the model's executor: 44 %) nearly everything even on a loaded machine."""
+    r = bench_recording(tmp_path)
+    for topic, t in r["topics"].items():
+        assert t["recorded"] + t["lost"] == t["sent"], (topic, t)
+        assert t["duplicates"] == 0
+    assert r["sent"] >= 3 * 3000
+    assert r["completeness"] >= 0.99, r
+
+
+def test_messages_lost_to_a_stopped_node_are_counted_exactly(tmp_path):
+    """A node process stopped (SIGSTOP) for 0.5 s mid-burst with a 10-deep recording queue
+    certainly loses messages: each is counted."""
+    r = bench_recording(tmp_path, "--queue-depth", "10", "--pause-s", "0.5")
+    assert r["lost"] >= 1000, r
+    for topic, t in r["topics"].items():
+        assert t["recorded"] + t["lost"] == t["sent"], (topic, t)
+
+
+def test_topic_loss_counts_sequence_gaps_of_one_publisher():
+    loss = TopicLoss()
+    for seq in (1, 2, 3, 7, 8, 20):            # 4..6 and 9..19 missing
+        loss.received(seq, lambda: 1)
+    assert loss.sequence_gaps == 14 and loss.lost == 14
+    loss.received(1, lambda: 1)                 # a new publisher starts at 1: nothing lost
+    loss.received(2, lambda: 1)
+    assert loss.lost == 14
+    loss.dds_lost = 20                          # DDS events are a subset of the gaps...
+    assert loss.lost == 20                      # ...unless they saw more (the larger counts)
+    several = TopicLoss()
+    for seq in (1, 1, 2, 2, 5):                 # two publishers interleave: no gap counting
+        several.received(seq, lambda: 2)
+    several.dds_lost = 3
+    assert not several.sequence_checked and several.lost == 3
+    assert TopicLoss().as_dict() == {"lost": 0, "sequence_gaps": 0, "dds_lost": 0,
+                                     "sequence_checked": True}
+
+
+def test_lost_inputs_are_in_the_recording_diagnostic_and_the_metadata(ros, tmp_path):
+    """While the recorder is busy (its lock held: the recording thread waits) the 5-deep DDS
+    queue of the recording subscription overflows; the gap shows at the next message."""
+    node = ros.start(**{"record.enabled": True, "record.directory": str(tmp_path),
+                        "record.queue_depth": 5})
+    pub = ros.publisher("axial_load")
+    ros.spin_until(lambda: pub.get_subscription_count() >= 2, 5.0, "the recording reader")
+    recorded = lambda: node.recorder._topics.get(pub.topic_name)   # noqa: E731
+    sent = 0
+    while not recorded():                       # the recording reader has matched us
+        pub.publish(Float64(data=LOAD))
+        sent += 1
+        ros.spin_until(lambda: True)
+        time.sleep(0.01)
+    with node.recorder._lock:
+        for i in range(300):
+            pub.publish(Float64(data=LOAD + 0.001 * i))
+        sent += 300
+        time.sleep(0.2)
+    pub.publish(Float64(data=LOAD))
+    sent += 1
+    loss = node.recorder.losses[pub.topic_name]
+    ros.spin_until(lambda: recorded().count + loss.lost == sent, 5.0, "the loss count")
+    assert loss.lost >= 300 - 5 - 1, loss
+    status = recording_status(ros, lambda s: s.level == bytes([Level.WARN]))
+    values = {kv.key: kv.value for kv in status.values}
+    assert f"{loss.lost} input message(s) lost" in status.message, status.message
+    assert f"{pub.topic_name} {loss.lost}" in status.message
+    assert values["lost"] == str(loss.lost) and values[f"lost {pub.topic_name}"] == str(loss.lost)
+    bag = node.recorder.bag
+    assert node.set_parameters([Parameter("record.enabled", value=False)])[0].successful
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    custom = meta["custom_data"]
+    assert custom[LOST_KEY] == str(loss.lost)
+    assert json.loads(custom[LOST_BY_TOPIC_KEY])[pub.topic_name]["lost"] == loss.lost
+    [topic] = [t for t in meta["topics_with_message_count"]
+               if t["topic_metadata"]["name"] == pub.topic_name]
+    assert topic["message_count"] + loss.lost == sent
+
+
+# ----------------------------------------------------------------------------- sim time
+def test_sim_time_bags_are_named_and_split_by_wall_clock_with_sim_log_times(ros, tmp_path):
+    """No /clock yet, a /clock jump and a paused /clock: names by the wall clock (unique), no
+    split by the jump, log times in sim time, off/on while paused works."""
+    clock = ros.probe.create_publisher(Clock, "/clock", 10)
+
+    def tick(sim_s: float) -> None:
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = int(sim_s), int(round(sim_s % 1 * 1e9))
+        clock.publish(msg)
+
+    node = ros.start(use_sim_time=True, **{"record.directory": str(tmp_path),
+                                           "record.split_duration_s": 30.0})
+    year = time.gmtime().tm_year
+    assert node.get_clock().now().nanoseconds == 0          # no /clock yet
+    assert node.set_parameters([Parameter("record.enabled", value=True)])[0].successful
+    first = node.recorder.bag
+    assert first.name.startswith(f"{ros.ns[1:]}_squeak_{year}_"), first.name
+    ros.spin_until(lambda: clock.get_subscription_count() > 0, 5.0, "the /clock subscriber")
+    tick(100.0)
+    ros.spin_until(lambda: node.get_clock().now().nanoseconds == 100 * 10**9, 5.0, "sim time")
+    at(ros, SQUEAK)
+    tick(1_000_000.0)                                        # jump: 11.6 days of sim time
+    ros.spin_until(lambda: node.get_clock().now().nanoseconds == 10**15, 5.0, "the jump")
+    at(ros, 40.0)
+    ros.drain()
+    assert len(node.recorder.files) == 1                     # split by wall clock only
+    bags = [first]
+    for _ in range(3):                                       # paused clock: off, on, off...
+        assert node.set_parameters([Parameter("record.enabled", value=False)])[0].successful
+        assert node.set_parameters([Parameter("record.enabled", value=True)])[0].successful
+        assert node.recorder.active, node.recorder.error
+        bags.append(node.recorder.bag)
+    assert node.set_parameters([Parameter("record.enabled", value=False)])[0].successful
+    assert len(set(bags)) == len(bags) and all(b.name.startswith(
+        f"{ros.ns[1:]}_squeak_{year}_") for b in bags), bags
+    times = [m.log_time_ns for m in read_log(first)]
+    assert min(times) == 0 and max(times) == 10**15          # the node's clock, as rosbag2
+    assert 100 * 10**9 in times
+    for bag in bags[1:]:                                     # the latched state, at paused time
+        assert {m.log_time_ns for m in read_log(bag)} == {10**15}
+
+
+def test_bag_names_are_unique_within_a_millisecond(tmp_path):
+    bags = []
+    for _ in range(5):
+        rec = Recorder(RecordSettings(directory=str(tmp_path)), name="seat_left_squeak")
+        assert rec.start(), rec.error
+        rec.stop()
+        bags.append(rec.bag)
+    assert len(set(bags)) == 5 and all((b / "metadata.yaml").is_file() for b in bags)
+
+
+# ----------------------------------------------------------------------------- crash
+def test_cut_off_bags_of_an_earlier_run_are_reported_on_start_and_auto_recovered(tmp_path, ns):
+    """SIGKILL a recording node; the next node in the same namespace and directory reports the
+    cut-off bag (WARN, the recover command); with record.auto_recover it recovers it. Another
+    namespace's bag in the same directory is left alone."""
+    with answering_node(tmp_path, ns) as (proc, directory, feed):
+        feed.run(0.5)
+        proc.kill()
+        proc.wait(timeout=10)
+    [cut] = list(directory.iterdir())
+    other = directory / "seat_right_squeak_2025_01_01-00_00_00_000"
+    other.mkdir()
+    (other / f"{other.name}_0.mcap").write_bytes(b"\x89MCAP0\r\n")     # cut off, not ours
+    r = Ros()
+    r.ns = ns
+    try:
+        r.hardware_id = f"hw_{ns[2:]}"
+        node = r.start(**{"record.directory": str(directory)})
+        status = recording_status(r, lambda s: s.level == bytes([Level.WARN]))
+        assert str(cut) in status.message and "leadscrew-squeak recover BAGDIR" in \
+            status.message, status.message
+        assert str(other) not in status.message
+        values = {kv.key: kv.value for kv in status.values}
+        assert values["cut_off_bags"] == str(cut)
+        assert not (cut / "metadata.yaml").exists()           # only reported
+        node.destroy_node()
+        r.executor.remove_node(node)
+        node = r.start(**{"record.directory": str(directory), "record.auto_recover": True})
+        status = recording_status(r, lambda s: "recovered 1 cut-off bag" in s.message, 20.0)
+        assert status.level == bytes([Level.OK]) and str(cut) in status.message
+        assert (cut / "metadata.yaml").is_file()
+        with RosbagsReader(cut) as reader:
+            assert reader.message_count > 0
+        assert not (other / "metadata.yaml").exists()
+    finally:
+        r.close()
