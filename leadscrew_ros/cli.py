@@ -27,12 +27,18 @@ from .logfile import (LogError, LogInfo, bag_of, cut_off_bags, inspect, log_file
 from .model.parameters import (FORMULATIONS, ParameterError, ScrewParameters, field_info,
                                field_names)
 from .model.predictor import OperatingPointError, Prediction, SqueakModel
-from .model.sweep import MapResult, SweepResult, axis_names, check_axis, sweep
+from .model.display import exact
+from .model.sweep import (MAX_MEMORY_BYTES, MAX_POINTS, REFERENCE_STATE_SIZE, MapResult,
+                          SweepResult, axis_names, check_axis, sweep, sweep_work)
 from .timeline import InputSettings
 
 PROG = "leadscrew-squeak"
 SPEED_AXIS = "speed_rad_s"
 MAX_COUNT = 100_000          # points per range axis (a map is COUNT_x * COUNT_y eigenproblems)
+WORK_LIMITS = (f"At most {MAX_POINTS} points (fewer for a model with more modes: the limit "
+               f"scales with ({REFERENCE_STATE_SIZE} / state size)^3) and about "
+               f"{MAX_MEMORY_BYTES / 1e9:g} GB; a larger request is refused before it starts. "
+               f"Progress on a terminal; Ctrl-C stops (exit 130).")
 
 
 class CliError(Exception):
@@ -80,6 +86,8 @@ def parse_range(text: str, what: str) -> np.ndarray:
         raise CliError(f"{what}: COUNT must be between 2 and {MAX_COUNT}, got {count}")
     if start == stop:
         raise CliError(f"{what}: START and STOP must differ")
+    if not math.isfinite(stop - start):
+        raise CliError(f"{what}: START {exact(start)} and STOP {exact(stop)} are too far apart")
     return np.linspace(start, stop, count)
 
 
@@ -280,7 +288,10 @@ def _sweep_axis(args: argparse.Namespace) -> tuple[str, np.ndarray, float | None
 def cmd_sweep(args: argparse.Namespace) -> int:
     model = build_model(args)
     axis, values, speed, load = _sweep_axis(args)
-    result = sweep(model, axis, values, speed, load)
+    sweep_work(model, axis, values).check()             # before a progress bar shows
+    from .progress import progress_bar
+    with progress_bar(len(values), "sweep") as update:
+        result = sweep(model, axis, values, speed, load, progress=update)
     if args.json:
         print_json(result.as_dict())
     elif args.csv:
@@ -543,7 +554,8 @@ def build_parser() -> Parser:
     p.add_argument("--json", action="store_true", help="print Prediction.as_dict() as JSON")
     p.set_defaults(run=cmd_predict)
 
-    p = sub.add_parser("sweep", parents=common, help="predictions along one axis")
+    p = sub.add_parser("sweep", parents=common, help="predictions along one axis",
+                       epilog=WORK_LIMITS)
     p.add_argument("--speed", metavar="START:STOP:COUNT | RAD_S",
                    help="speed range of a speed sweep, or the fixed speed of another sweep "
                         "(default 20 rad/s)")
@@ -558,7 +570,8 @@ def build_parser() -> Parser:
     p.add_argument("--plot", metavar="FILE.png", help="plot growth rates vs the axis")
     p.set_defaults(run=cmd_sweep)
 
-    p = sub.add_parser("map", parents=common, help="2-D stability map with refined boundary")
+    p = sub.add_parser("map", parents=common, help="2-D stability map with refined boundary",
+                       epilog=WORK_LIMITS)
     p.add_argument("--x", required=True, metavar="NAME:START:STOP:COUNT", help="x axis")
     p.add_argument("--y", required=True, metavar="NAME:START:STOP:COUNT", help="y axis")
     p.add_argument("--speed", type=finite, metavar="RAD_S",
@@ -569,7 +582,8 @@ def build_parser() -> Parser:
     p.add_argument("--plot", metavar="FILE.png", help="filled contour of the growth rate")
     p.set_defaults(run=cmd_map)
 
-    p = sub.add_parser("figures", parents=common, help="the paper's Figs. 4-11 and summary.txt")
+    p = sub.add_parser("figures", parents=common, help="the paper's Figs. 4-11 and summary.txt",
+                       epilog=WORK_LIMITS.replace("points", "points in all", 1))
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--quick", action="store_true", help="coarse grids (a few seconds)")
     p.set_defaults(run=cmd_figures)
@@ -700,6 +714,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except SystemExit as exc:    # --help
         return exc.code if isinstance(exc.code, int) else 0
+    except MemoryError:          # beyond the up-front estimates: still one line, no traceback
+        print(f"{PROG}: error: out of memory; use fewer points", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130

@@ -26,8 +26,8 @@ from scipy.optimize import linear_sum_assignment  # noqa: E402
 from .model.friction import friction_coefficient, sliding_speed  # noqa: E402
 from .model.parameters import ScrewParameters, field_info  # noqa: E402
 from .model.predictor import Prediction, SqueakModel  # noqa: E402
-from .model.sweep import (REFERENCE_SPEED_RAD_S, MapResult, SweepResult,  # noqa: E402
-                          stability_map, sweep)
+from .model.sweep import (REFERENCE_SPEED_RAD_S, MapResult, SweepResult, Work,  # noqa: E402
+                          map_work, stability_map, sweep, sweep_work)
 from .progress import progress_bar  # noqa: E402
 
 GROWTH_LABEL = r"growth rate Re($\lambda$) [1/s]"
@@ -489,7 +489,8 @@ def _grid(axis: str, lo: float, hi: float, n: int) -> np.ndarray:
 def run_map(model: SqueakModel, x_axis: str, x: np.ndarray, y_axis: str, y: np.ndarray,
             speed_rad_s: float | None = None, load_n: float | None = None,
             desc: str = "map") -> MapResult:
-    """`stability_map` with a progress bar over the grid points."""
+    """`stability_map` with a progress bar over the grid points (after the work check)."""
+    map_work(model, x_axis, x, y_axis, y).check()
     with progress_bar(x.size * y.size, desc) as update:
         return stability_map(model, x_axis, x, y_axis, y, speed_rad_s, load_n, progress=update)
 
@@ -549,6 +550,16 @@ class FigureSet:
         plot_map(result, path, title, dpi=self.grids.dpi)
         return spec.describe(result, self.model.params)
 
+    def work(self) -> Work:
+        """All the predictions of the figures, as one batch (checked before the first)."""
+        speeds = sweep_work(self.model, "speed_rad_s", np.zeros(self.grids.sweep_points))
+        maps = [map_work(self.model, s.x_axis, np.zeros(self.grids.map_x), s.y_axis,
+                         np.zeros(self.grids.map_y)) for s in MAPS]
+        return Work(f"figures: {len(maps)} maps of {self.grids.map_x} x {self.grids.map_y} and "
+                    f"a sweep of {self.grids.sweep_points}",
+                    speeds.points + sum(m.points for m in maps), speeds.state_size,
+                    speeds.bytes_per_point, "use --quick or fewer modes")
+
     def jobs(self) -> dict[str, Callable[[Path], str]]:
         """File name -> function that draws it and returns its summary sentence."""
         jobs = {FRICTION_FILE: self.friction, GROWTH_FILE: self.growth,
@@ -569,9 +580,11 @@ def _header(params: ScrewParameters) -> str:
 
 
 def make_figures(model: SqueakModel, out: Path, quick: bool = False) -> str:
-    """Write the eight PNGs and summary.txt into `out`; return the summary text."""
-    out.mkdir(parents=True, exist_ok=True)
+    """Write the eight PNGs and summary.txt into `out`; return the summary text. Raises
+    WorkSizeError, before anything is written, if the model is too large for the grids."""
     figures = FigureSet(model, out, QUICK if quick else FULL)
+    figures.work().check()
+    out.mkdir(parents=True, exist_ok=True)
     lines = [_header(model.params)]
     jobs = figures.jobs()
     with progress_bar(len(jobs), "figures", unit="fig", leave=True) as update:

@@ -1,15 +1,30 @@
 """The `leadscrew-squeak` command line, called in-process through `main(argv)`."""
 
+import contextlib
 import csv
+import fcntl
 import io
 import json
+import os
+import pty
+import select
+import signal
+import struct
 import subprocess
 import sys
+import termios
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from leadscrew_ros.cli import main, parse_range
+from leadscrew_ros.cli import MAX_COUNT, CliError, main, parse_range
+from leadscrew_ros.model import ScrewParameters, SqueakModel
+from leadscrew_ros.model.sweep import (MAX_MEMORY_BYTES, MAX_POINTS, map_work, stability_map,
+                                       sweep, sweep_work)
 
 REPO = Path(__file__).resolve().parents[1]
 TABLE2_HZ = [224, 898, 2020, 2654, 3592, 5612, 7961, 8082]
@@ -219,3 +234,144 @@ def test_map_text_summary(capsys):
     code, out, _ = run(capsys, "map", "--x", "radius_m:0.004:0.008:3",
                        "--y", "load_n:0:400:3", "--speed", "20")
     assert code == 0 and "unstable fraction" in out and "boundary points" in out
+
+
+# ----------------------------------------------------------------------------- work size
+HUGE = {
+    "map 1e5 x 1e5": (["map", "--x", "speed_rad_s:1:100:100000", "--y", "load_n:5:600:100000"],
+                      "map of 100000 x 100000 = 1e+10 points (about 2500 GB) exceeds the limit "
+                      "of 1e+06 points; use fewer points"),
+    "map 5000 x 5000": (["map", "--x", "speed_rad_s:1:100:5000", "--y", "load_n:5:600:5000"],
+                        "map of 5000 x 5000 = 2.5e+07 points (about 6.3 GB) exceeds the limit "
+                        "of 1e+06 points; use fewer points"),
+    "map just past the limit": (["map", "--x", "speed_rad_s:1:100:1001", "--y",
+                                 "load_n:5:600:1000"], "= 1.001e+06 points (about 0.34 GB) exceeds the "
+                                                      "limit of 1e+06 points"),
+    "map of a 40 + 40 mode model": (["map", "--x", "speed_rad_s:1:100:100", "--y",
+                                     "load_n:5:600:100", "--param", "n_bending=40", "--param",
+                                     "n_torsion=40"],
+                                    "exceeds the limit of 3374 points for a model of 240 states"),
+    "map over the mode count": (["map", "--x", "n_bending:1:40:40", "--y",
+                                 "load_n:5:600:1000"], "for a model of 172 states"),
+    "sweep of a 40 + 40 mode model": (["sweep", "--speed", "1:100:100000", "--param",
+                                       "n_bending=40", "--param", "n_torsion=40"],
+                                      "sweep of 100000 speed_rad_s values = 100000 points"),
+    "figures of a 40 + 40 mode model": (["figures", "--out", "{tmp}/figs", "--param",
+                                         "n_bending=40", "--param", "n_torsion=40"],
+                                        "use --quick or fewer modes"),
+}
+
+
+@pytest.mark.parametrize("argv, message", HUGE.values(), ids=HUGE.keys())
+def test_too_much_work_is_refused_up_front_in_one_line(capsys, tmp_path, argv, message):
+    t0 = time.monotonic()
+    code, out, err = run(capsys, *(a.format(tmp=tmp_path) for a in argv))
+    assert (code, out) == (2, "")
+    assert err.count("\n") == 1 and err.startswith("leadscrew-squeak: error: "), err
+    assert message in err and "Traceback" not in err
+    assert time.monotonic() - t0 < 30          # refused, not attempted (a 1e6-point map: minutes)
+    assert not (tmp_path / "figs").exists()
+
+
+def test_work_limits_are_in_the_help(capsys):
+    for command in ("map", "sweep", "figures"):
+        code, out, _ = run(capsys, command, "--help")
+        assert code == 0 and f"At most {MAX_POINTS} points" in " ".join(out.split())
+        assert "Ctrl-C" in out
+
+
+def test_the_largest_accepted_work_is_within_the_memory_limit():
+    model = SqueakModel(ScrewParameters())
+    for work in (map_work(model, "speed_rad_s", np.zeros(1000), "load_n", np.zeros(1000)),
+                 sweep_work(model, "speed_rad_s", np.zeros(100_000))):
+        work.check()
+        assert work.memory_bytes() <= MAX_MEMORY_BYTES
+
+
+COUNTS = st.one_of(st.integers(-10, 10**12).map(str), st.sampled_from(
+    ["nan", "inf", "-inf", "", "1e3", "2.5", " ", "0x10", "1_000", "١٢"]),
+    st.text(max_size=6))
+ENDS = st.one_of(st.floats(allow_nan=True, allow_infinity=True).map(repr),
+                 st.sampled_from(["1e308", "-1e308", "nan", "", "x"]))
+
+
+@settings(max_examples=300, deadline=None)
+@given(start=ENDS, stop=ENDS, count=COUNTS)
+def test_range_specs_give_finite_values_or_one_error(start, stop, count):
+    text = f"{start}:{stop}:{count}"
+    try:
+        values = parse_range(text, "argument --x")
+    except CliError as exc:
+        assert str(exc).startswith("argument --x") and "\n" not in str(exc)
+        return
+    assert 2 <= len(values) <= 100_000 == MAX_COUNT
+    assert np.all(np.isfinite(values)) and values[0] == float(start) and \
+        values[-1] == float(stop)
+    assert np.all(np.diff(values) > 0) or np.all(np.diff(values) < 0)
+
+
+@settings(max_examples=100, deadline=None)
+@given(nx=COUNTS, ny=st.integers(-5, 10**7).map(str))
+def test_map_axis_counts_never_crash_the_cli(nx, ny):
+    """Counts 0, negative, huge, NaN, text: exit 2 with one line (no MemoryError, no traceback)
+    unless the grid is small enough to compute, which is then not attempted here."""
+    with contextlib.suppress(ValueError):
+        if 2 <= int(nx) <= MAX_COUNT and 2 <= int(ny) <= MAX_COUNT and \
+                int(nx) * int(ny) <= MAX_POINTS:
+            return
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()) as out:
+        code = main(["map", "--x", f"speed_rad_s:1:100:{nx}", "--y", f"load_n:5:600:{ny}"])
+    assert code == 2 and out.getvalue() == ""
+    assert err.getvalue().count("\n") == 1, err.getvalue()
+    assert err.getvalue().startswith("leadscrew-squeak: error: argument --") or \
+        "exceeds the limit" in err.getvalue()
+
+
+def test_a_long_map_shows_progress_on_a_terminal_and_stops_cleanly_on_ctrl_c():
+    """stderr on a pseudo-terminal: the progress bar shows; SIGINT then ends the run with exit
+    130 and one line, no traceback, well before the 1e6-point map could finish."""
+    leader, follower = pty.openpty()
+    fcntl.ioctl(follower, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 80, 0, 0))  # 80 columns
+    proc = subprocess.Popen([sys.executable, "-m", "leadscrew_ros.cli", "map", "--x",
+                             "speed_rad_s:1:100:1000", "--y", "load_n:5:600:1000"],
+                            stdout=subprocess.PIPE, stderr=follower, cwd=REPO)
+    os.close(follower)
+    seen = b""
+    try:
+        deadline = time.monotonic() + 120
+        while b"pt/s" not in seen and b"pt]" not in seen:
+            assert time.monotonic() < deadline and proc.poll() is None, seen
+            if select.select([leader], [], [], 1.0)[0]:
+                seen += os.read(leader, 4096)
+        proc.send_signal(signal.SIGINT)
+        code = proc.wait(timeout=60)
+        while select.select([leader], [], [], 0.5)[0]:
+            try:
+                chunk = os.read(leader, 4096)
+            except OSError:                 # the child closed the terminal
+                break
+            if not chunk:
+                break
+            seen += chunk
+    finally:
+        proc.kill()
+        proc.wait()
+        proc.stdout.close()
+        os.close(leader)
+    text = seen.decode(errors="replace")
+    assert code == 130, text
+    assert "map:" in text and "leadscrew-squeak: interrupted" in text
+    assert "Traceback" not in text and proc.stdout.closed
+
+
+def test_progress_counts_every_point_once_valid_or_not():
+    model = SqueakModel(ScrewParameters())
+    done = []
+    radii = np.array([-0.001, 0.004, 0.005, 0.0, 0.006])          # two invalid radii
+    sweep(model, "radius_m", radii, progress=done.append)
+    assert sum(done) == radii.size
+    done.clear()
+    stability_map(model, "radius_m", radii, "speed_rad_s", np.linspace(1.0, 1e6, 4),
+                  progress=done.append)                           # 1e6 rad/s: invalid too
+    assert sum(done) == radii.size * 4

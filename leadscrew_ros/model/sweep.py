@@ -4,6 +4,10 @@ boundaries refined by root finding (brentq on the largest squeak growth rate).
 An axis is the speed (`speed_rad_s`), the load (`load_n`) or any numeric `ScrewParameters`
 field. Points that share all parameter values are solved in one batched eigenproblem; only a
 change of a geometry field (R, z_o, beta, ...) re-integrates the contact.
+
+Work is bounded up front (`Work.check`): a map or sweep may hold at most `MAX_POINTS` points
+(fewer for models with more modes: an eigen-solve costs ~ state size cubed) and need at most
+about `MAX_MEMORY_BYTES`; a larger request is a one-line `WorkSizeError` before any work.
 """
 
 from __future__ import annotations
@@ -15,13 +19,95 @@ from typing import Callable, Iterable
 import numpy as np
 from scipy.optimize import brentq
 
+from .display import exact
 from .parameters import ParameterError, field_info, field_names
 from .predictor import VALID, Prediction, SqueakModel
 from .stability import max_divergence_rate, max_growth_rate
 
 OPERATING_AXES = ("speed_rad_s", "load_n")
 REFERENCE_SPEED_RAD_S = 20.0        # fixed speed of the paper's Figs. 9 and 10
-_CHUNK = 1024                       # points per batched eigen-solve (~10 MB of state matrices)
+_CHUNK = 1024                       # points per batched eigen-solve at the reference size
+REFERENCE_STATE_SIZE = 36           # state size of the default model (6 bending + 6 torsion)
+MAX_POINTS = 1_000_000              # points of one map or sweep at the reference state size
+MAX_MEMORY_BYTES = 2_000_000_000   # estimated peak memory of one map or sweep
+_MAP_POINT_BYTES = 250              # result arrays, JSON output (measured: ~40 held, ~200 JSON)
+_PREDICTION_BYTES_PER_STATE = 85    # a sweep's Prediction per point (~3 kB at 36 states)
+
+
+class WorkSizeError(ParameterError):
+    """A map or sweep too large to compute (one line: size, limit, what to do)."""
+
+
+@dataclass(frozen=True)
+class Work:
+    """The size of a batch of predictions, checked against the limits before it starts."""
+
+    what: str                       # 'map of 100 x 200', 'sweep of 500 radius_m values'
+    points: int
+    state_size: int                 # 2 x (2 n_bending + n_torsion)
+    bytes_per_point: float
+    remedy: str = "use fewer points"
+
+    @property
+    def point_limit(self) -> int:
+        """MAX_POINTS scaled by the cost of one eigen-solve relative to the default model."""
+        scale = (REFERENCE_STATE_SIZE / self.state_size) ** 3
+        return max(1, min(MAX_POINTS, int(MAX_POINTS * scale)))
+
+    def memory_bytes(self, points: int | None = None) -> float:
+        n = self.points if points is None else points
+        chunk = _chunk_points(self.state_size) * self.state_size ** 2 * 16 * 4   # eig workspace
+        return n * self.bytes_per_point + chunk
+
+    def check(self) -> None:
+        """Raise WorkSizeError if the work exceeds the point or memory limit."""
+        limit = self.point_limit
+        if self.points > limit:
+            per_model = (f" for a model of {self.state_size} states ({exact(MAX_POINTS)} at "
+                         f"the default {REFERENCE_STATE_SIZE})" if limit < MAX_POINTS else "")
+            raise WorkSizeError(
+                f"{self.what} = {exact(self.points)} points (about {_gb(self.memory_bytes())}) "
+                f"exceeds the limit of {exact(limit)} points{per_model}; {self.remedy}")
+        if self.memory_bytes() > MAX_MEMORY_BYTES:
+            raise WorkSizeError(
+                f"{self.what} = {exact(self.points)} points needs about "
+                f"{_gb(self.memory_bytes())}, more than the limit of "
+                f"{_gb(MAX_MEMORY_BYTES)}; {self.remedy}")
+
+
+def _gb(n_bytes: float) -> str:
+    return f"{exact(float(f'{n_bytes / 1e9:.2g}'))} GB"
+
+
+def _chunk_points(state_size: int) -> int:
+    """Points per batched eigen-solve: about the work (and Ctrl-C latency) of _CHUNK points of
+    the default model, whatever the number of modes."""
+    return max(1, _CHUNK * REFERENCE_STATE_SIZE ** 3 // state_size ** 3)
+
+
+def _state_size(model: SqueakModel, axes: dict[str, np.ndarray]) -> int:
+    """Largest state size on the axes: 2 (2 n_bending + n_torsion), the mode counts taken at
+    their largest valid value where an axis varies them."""
+    n = {}
+    for name in ("n_bending", "n_torsion"):
+        values = np.asarray(axes.get(name, getattr(model.params, name)), float)
+        valid = values[(values >= field_info(name)["lo"]) & (values <= field_info(name)["hi"])]
+        n[name] = int(round(valid.max())) if valid.size else getattr(model.params, name)
+    return 2 * (2 * n["n_bending"] + n["n_torsion"])
+
+
+def map_work(model: SqueakModel, x_axis: str, x: np.ndarray, y_axis: str, y: np.ndarray
+             ) -> Work:
+    """The work of `stability_map` on the grid x times y."""
+    return Work(f"map of {len(x)} x {len(y)}", len(x) * len(y),
+                _state_size(model, {x_axis: x, y_axis: y}), _MAP_POINT_BYTES)
+
+
+def sweep_work(model: SqueakModel, axis: str, values: np.ndarray) -> Work:
+    """The work of `sweep` along `values`."""
+    size = _state_size(model, {axis: values})
+    return Work(f"sweep of {len(values)} {axis} values", len(values), size,
+                _PREDICTION_BYTES_PER_STATE * size)
 
 
 def axis_names() -> list[str]:
@@ -79,18 +165,21 @@ def growth_field(model: SqueakModel, speed_rad_s, load_n,
         raise ParameterError("sweep values must be finite numbers")
     growth, freq, diverge = (np.full(speeds.size, np.nan) for _ in range(3))
     for sub, idx in _point_models(model, dict(zip(params, columns)), speeds.size):
-        if sub is None:
+        ok = idx[:0] if sub is None else idx[sub.validity_code(speeds[idx], loads[idx]) == VALID]
+        if progress and ok.size < idx.size:
+            progress(idx.size - ok.size)                 # invalid points: done at once
+        if not ok.size:
             continue
-        ok = idx[sub.validity_code(speeds[idx], loads[idx]) == VALID]
-        for start in range(0, ok.size, _CHUNK):
-            part = ok[start:start + _CHUNK]
+        chunk = _chunk_points(2 * sub.geometry.n)
+        for start in range(0, ok.size, chunk):
+            part = ok[start:start + chunk]
             lam = np.linalg.eigvals(sub.geometry.state_matrices(speeds[part], loads[part]))
             growth[part] = max_growth_rate(lam)
             peak = np.argmax(np.where(lam.imag > 0, lam.real, -np.inf), axis=-1)
             freq[part] = np.take_along_axis(lam.imag, peak[:, None], -1)[:, 0] / (2 * math.pi)
             diverge[part] = max_divergence_rate(lam)
-        if progress:
-            progress(idx.size)
+            if progress:
+                progress(part.size)
     valid = np.isfinite(growth)
     return GrowthField(*(a.reshape(shape) for a in (growth, valid, freq, diverge)))
 
@@ -172,18 +261,29 @@ def unstable_intervals(values: np.ndarray, growth: np.ndarray, boundaries: list[
 
 
 def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = None,
-          load_n: float | None = None) -> SweepResult:
-    """Predictions along one axis (batched), with refined stability boundaries and bands."""
+          load_n: float | None = None, progress: Callable[[int], None] | None = None
+          ) -> SweepResult:
+    """Predictions along one axis (batched), with refined stability boundaries and bands;
+    `progress(n)` is called as points are done. Raises WorkSizeError for too many points."""
     check_axis(axis)
     values = np.asarray(values, float)
+    sweep_work(model, axis, values).check()
     fixed = _fixed(model, speed_rad_s, load_n)
     fixed.pop(axis, None)
     if axis in OPERATING_AXES:
         point = dict(fixed, **{axis: values})
-        predictions = model.predict_many(point["speed_rad_s"], point["load_n"])
+        speeds, loads = np.broadcast_arrays(point["speed_rad_s"], point["load_n"])
+        predictions, chunk = [], _chunk_points(2 * model.geometry.n)
+        for start in range(0, values.size, chunk):
+            part = slice(start, start + chunk)
+            predictions += model.predict_many(speeds[part], loads[part])
+            if progress:
+                progress(len(speeds[part]))
     else:
         predictions = []
         for v in values.tolist():
+            if progress:
+                progress(1)
             try:
                 sub = model.with_params(**{axis: _native(axis, v)})
             except ParameterError as exc:
@@ -228,6 +328,7 @@ def stability_map(model: SqueakModel, x_axis: str, x, y_axis: str, y,
     if x_axis == y_axis:
         raise ParameterError("map axes must differ")
     x, y = np.asarray(x, float), np.asarray(y, float)
+    map_work(model, x_axis, x, y_axis, y).check()
     fixed = _fixed(model, speed_rad_s, load_n)
     for a in (x_axis, y_axis):
         fixed.pop(a, None)
