@@ -32,6 +32,7 @@ setup(
         "mcap-ros2-support",
         "zstandard",             # MCAP chunk compression, read and written directly
         "lz4",
+        "threadpoolctl",         # the node's eigen-solves run single-threaded (live.py)
     ],
     extras_require={
         "test": [

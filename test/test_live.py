@@ -1,17 +1,22 @@
 """LivePredictor (the node's recompute policy) without ROS: deadbands, rate limit, coalescing,
 input validation, validity, staleness, the diagnostic verdict and safe-speed advice.
 
-Time is the `now` argument (monotonic seconds): nothing here sleeps."""
+Time is the `now` argument (monotonic seconds): nothing here sleeps. The background advice
+search is held and released with events, never timed."""
 
 import math
+import threading
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from leadscrew_ros.live import Level, LivePredictor, LiveSettings
+from leadscrew_ros import live as live_module
+from leadscrew_ros.live import LatestWorker, Level, LivePredictor, LiveSettings, Superseded
 from leadscrew_ros.model import Prediction, SqueakModel
-from leadscrew_ros.model.advice import speed_bands
+from leadscrew_ros.model.advice import _BAND_POINTS, _SCAN_BATCH, EDGE_RTOL, band_around, speed_bands
+from leadscrew_ros.model.sweep import growth_field
 
 MODEL = SqueakModel()                        # Table 1; unstable band ~0.81..55.2 rad/s at 200 N
 LOAD = 200.0
@@ -299,6 +304,277 @@ def test_safe_speed_of_a_squeaking_point_is_outside_the_band(speed):
         assert not lo <= abs(safe) <= hi
     check = MODEL.predict(safe, LOAD)
     assert check.valid and check.stable
+
+
+def full_search_safe_speed(model: SqueakModel, load: float, speed: float,
+                           margin: float = 0.05) -> float:
+    """The advice of the former synchronous path: every band (speed_bands), then the nearer
+    edge of the one containing the speed, moved out by the margin, within the valid range."""
+    w = abs(speed)
+    for lo, hi in speed_bands(model, load, speed):
+        if lo <= w <= hi:
+            options = [v for v in (lo * (1 - margin), hi * (1 + margin))
+                       if model.params.min_speed_rad_s <= v < model.critical_speed_rad_s]
+            return math.copysign(min(options, key=lambda v: abs(v - w)), speed) if options else 0.0
+    return speed
+
+
+POINTS = [(20.0, 200.0), (-20.0, 200.0), (3.0, 200.0), (50.0, 200.0), (-50.0, 200.0),
+          (20.0, 600.0), (-20.0, 600.0), (1.0, 50.0), (20.0, 50.0), (-20.0, -200.0)]
+
+
+@pytest.mark.parametrize("formulation", ["paper", "consistent"])
+@pytest.mark.parametrize("speed, load", POINTS)
+def test_band_search_gives_the_advice_of_the_full_search(formulation, speed, load):
+    """Same safe speed as the full search within that search's own tolerance (brentq xtol =
+    1e-6 of the grid span, 1.4e-3 rad/s, moved by the margin), and band_around's edges are
+    exact to EDGE_RTOL: the growth rate changes sign across them."""
+    model = MODEL.with_params(formulation=formulation)
+    p = model.predict(speed, load)
+    if not p.valid or p.stable:
+        assert band_around(model, load, speed) is None
+        return
+    band = band_around(model, load, speed)
+    lowest, highest = model.params.min_speed_rad_s, model.critical_speed_rad_s
+    new = band.safe_speed(speed, lowest, highest, 0.05)
+    old = full_search_safe_speed(model, load, speed)
+    assert new == pytest.approx(old, abs=1e-6 * (highest - lowest) * 1.05)
+    for edge, end in ((band.low_rad_s, band.below), (band.high_rad_s, band.above)):
+        if end == "edge":
+            g = growth_field(model, math.copysign(1.0, speed) * edge * np.array(
+                [1 - 2 * EDGE_RTOL, 1 + 2 * EDGE_RTOL]), load).max_growth_rate
+            assert g[0] * g[1] < 0, (edge, g)
+    check = model.predict(new, load)
+    assert new == 0.0 or (check.valid and check.stable)
+
+
+def test_band_search_of_40_modes_matches_at_table_1():
+    model = MODEL.with_params(n_bending=40, n_torsion=40)
+    band = band_around(model, LOAD, SQUEAK)
+    safe = band.safe_speed(SQUEAK, model.params.min_speed_rad_s, model.critical_speed_rad_s)
+    span = model.critical_speed_rad_s - model.params.min_speed_rad_s
+    assert safe == pytest.approx(full_search_safe_speed(model, LOAD, SQUEAK),
+                                 abs=1e-6 * span * 1.05)
+
+
+@pytest.fixture
+def solves(monkeypatch):
+    """Counts the matrices whose eigenvalues are computed."""
+    count = [0]
+    eigvals = np.linalg.eigvals
+
+    def counted(a):
+        count[0] += a.shape[0] if a.ndim == 3 else 1
+        return eigvals(a)
+
+    monkeypatch.setattr(np.linalg, "eigvals", counted)
+    return count
+
+
+@pytest.mark.parametrize("speed, most", [(SQUEAK, 0.6), (50.0, 0.25), (1.0, 0.25)])
+def test_band_search_solves_a_bounded_fraction_of_the_full_search(solves, speed, most):
+    """The full search solves its 64-point grid and refines every band edge; band_around only
+    the grid points between the speed and the edge that decides, and refines only that one."""
+    speed_bands(MODEL, LOAD, speed)
+    full, solves[0] = solves[0], 0
+    band_around(MODEL, LOAD, speed)
+    assert solves[0] <= most * full, (solves[0], full)
+    assert solves[0] <= 1 + _BAND_POINTS + _SCAN_BATCH + 2 * 60
+
+
+# ----------------------------------------------------------------------------- rate vs cost
+def test_recomputes_leave_the_executor_half_its_time():
+    """With 40/40 modes a prediction takes milliseconds: the next recompute waits at least two
+    prediction times from the start of the last one, whatever max_rate_hz allows."""
+    lp = LivePredictor(MODEL.with_params(n_bending=40, n_torsion=40),
+                       LiveSettings(max_rate_hz=10000.0))
+    lp.set_speed(STABLE, 0.0)
+    lp.set_load(LOAD, 0.0)
+    lp.update(0.0)
+    lp.set_speed(STABLE + 5.0, 0.0)
+    assert not lp.due(0.0005)          # 10 kHz allows it; a 240x240 eig takes > 0.25 ms
+    assert lp.due(10.0)
+    small = at(STABLE, max_rate_hz=100.0)      # 6/6 modes: well under 5 ms, the rate rules
+    small.set_speed(STABLE + 5.0, 0.0)
+    assert small.due(0.01)
+
+
+# ----------------------------------------------------------------------------- background
+def wait_until(condition, timeout: float = 30.0) -> None:
+    done = threading.Event()
+    deadline = threading.Timer(timeout, done.set)
+    deadline.start()
+    try:
+        while not condition():
+            assert not done.wait(0.001), "timed out"
+    finally:
+        deadline.cancel()
+
+
+def worker_threads() -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if t.name == "squeak-advice"]
+
+
+def test_worker_runs_a_job_and_ends_its_thread():
+    w, go = LatestWorker(), threading.Event()
+    ident = w.submit(lambda checkpoint: go.wait() and "band")
+    assert w.busy and w.take() is None                      # pending
+    [thread] = worker_threads()
+    assert thread.daemon                                    # never keeps the process alive
+    go.set()
+    assert w.wait(30.0) and not w.busy
+    assert w.take() == (ident, "band", None) and w.take() is None   # ready, once
+    wait_until(lambda: not thread.is_alive())               # idle: no thread left
+
+
+def test_worker_latest_request_wins():
+    w = LatestWorker()
+    first_started, release, log = threading.Event(), threading.Event(), []
+
+    def first(checkpoint):
+        first_started.set()
+        release.wait(30.0)
+        try:
+            checkpoint()                                    # stale by now: abandoned here
+        except Superseded:
+            log.append("first abandoned")
+            raise
+        log.append("first finished")
+
+    def job(name):
+        def run(checkpoint):
+            checkpoint()
+            log.append(name)
+            return name
+        return run
+
+    w.submit(first)
+    assert first_started.wait(30.0)
+    w.submit(job("second"))                                 # waits; then replaced by
+    last = w.submit(job("third"))                           # the third: no queue
+    release.set()
+    assert w.wait(30.0)
+    assert w.take() == (last, "third", None)
+    assert log == ["first abandoned", "third"]
+
+
+def test_worker_reports_errors_and_stops_on_close():
+    w = LatestWorker()
+    ident = w.submit(lambda checkpoint: 1 / 0)
+    assert w.wait(30.0)
+    done = w.take()
+    assert done[0] == ident and isinstance(done[2], ZeroDivisionError)
+    spinning, stopped = threading.Event(), threading.Event()
+
+    def endless(checkpoint):
+        spinning.set()
+        try:
+            while True:
+                checkpoint()
+        finally:
+            stopped.set()
+
+    w.submit(endless)
+    assert spinning.wait(30.0)
+    w.close(timeout=30.0)
+    assert stopped.is_set() and not worker_threads()
+    w.submit(lambda checkpoint: "late")                     # closed: nothing runs any more
+    assert not w.busy and not worker_threads() and w.take() is None
+
+
+@pytest.fixture
+def gate(monkeypatch):
+    """Holds every advice search until `gate.set()`; records the (load, speed) searched."""
+    go, searched = threading.Event(), []
+    search = live_module.band_around
+
+    def held(model, load, speed, margin, checkpoint=None):
+        searched.append((load, speed))
+        assert go.wait(30.0)
+        return search(model, load, speed, margin, checkpoint=checkpoint)
+
+    monkeypatch.setattr(live_module, "band_around", held)
+    go.searched = searched
+    return go
+
+
+def test_advice_is_kept_until_the_new_one_is_ready(gate):
+    gate.set()
+    lp = at(STABLE)
+    assert lp.safe_speed_rad_s == STABLE and not lp.advice_pending
+    gate.clear()
+    lp.set_speed(SQUEAK, 1.0)
+    lp.update(1.0)                                          # returns at once: search held
+    assert lp.advice_pending and lp.safe_speed_rad_s == STABLE
+    assert lp.status(1.0).values["safe_speed_pending"] == "true"
+    assert not lp.poll_advice() and lp.safe_speed_rad_s == STABLE
+    gate.set()
+    wait_until(lambda: lp.poll_advice())
+    assert not lp.advice_pending
+    assert lp.safe_speed_rad_s == pytest.approx(full_search_safe_speed(MODEL, LOAD, SQUEAK),
+                                                abs=2e-3)
+    assert lp.status(1.0).values["safe_speed_pending"] == "false"
+    lp.set_speed(SQUEAK - 1.0, 2.0)       # same band and bin, decided by what is known of it
+    lp.update(2.0)
+    assert not lp.advice_pending and gate.searched == [(LOAD, SQUEAK)]
+    assert lp.safe_speed_rad_s == pytest.approx(
+        full_search_safe_speed(MODEL, LOAD, SQUEAK - 1.0), abs=2e-3)
+
+
+def test_advice_is_for_the_latest_bin(gate):
+    lp = live()
+    lp.set_speed(SQUEAK, 0.0)
+    for i, load in enumerate([LOAD, 300.0, 450.0]):         # three 5 % load bins
+        lp.set_load(load, float(i))
+        lp.update(float(i))
+        assert lp.advice_pending and lp.safe_speed_rad_s is None
+    gate.set()
+    assert lp.wait_for_advice(timeout=30.0)
+    assert lp.safe_speed_rad_s == pytest.approx(full_search_safe_speed(MODEL, 450.0, SQUEAK),
+                                                abs=2e-3)
+    assert 1 <= len(gate.searched) <= 3 and gate.searched[-1] == (450.0, SQUEAK)
+
+
+def test_a_squeak_free_point_cancels_the_search(gate):
+    lp = live()
+    lp.set_speed(SQUEAK, 0.0)
+    lp.set_load(LOAD, 0.0)
+    lp.update(0.0)
+    assert lp.advice_pending
+    lp.set_speed(STABLE, 1.0)
+    lp.update(1.0)
+    assert not lp.advice_pending and lp.safe_speed_rad_s == STABLE
+    gate.set()
+    assert lp.wait_for_advice(timeout=30.0) and lp.safe_speed_rad_s == STABLE
+
+
+def test_a_failed_search_keeps_the_last_advice(monkeypatch):
+    lp = at(STABLE)
+
+    def broken(*args, **kwargs):
+        raise np.linalg.LinAlgError("Eigenvalues did not converge")
+
+    monkeypatch.setattr(live_module, "band_around", broken)
+    lp.set_speed(SQUEAK, 1.0)
+    lp.update(1.0)
+    assert lp.wait_for_advice(timeout=30.0)
+    assert lp.safe_speed_rad_s == STABLE
+    assert "did not converge" in lp.status(1.0).values["safe_speed_error"]
+    lp.set_speed(SQUEAK + 1.0, 2.0)                         # no retry within the bin
+    lp.update(2.0)
+    assert not lp.advice_pending
+
+
+def test_close_stops_the_search(gate):
+    lp = live()
+    lp.set_speed(SQUEAK, 0.0)
+    lp.set_load(LOAD, 0.0)
+    lp.update(0.0)
+    assert lp.advice_pending and worker_threads()
+    lp.close()                                              # the held search is abandoned
+    gate.set()
+    wait_until(lambda: not worker_threads())
+    assert not lp.advice_pending and lp.wait_for_advice(timeout=1.0)
 
 
 # ----------------------------------------------------------------------------- hypothesis

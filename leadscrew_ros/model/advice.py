@@ -19,7 +19,7 @@ from .predictor import SqueakModel
 from .sweep import growth_field, refine_crossings, unstable_intervals
 
 _BAND_POINTS = 64          # log-spaced speeds between min_speed and the critical speed
-_SCAN_BATCH = 4            # grid points per side in one batched eigen-solve of `band_around`
+_SCAN_BATCH = 8            # grid points per batched eigen-solve of `band_around`'s scan
 EDGE_RTOL = 1e-7           # relative tolerance of an edge refined by `band_around`
 _MAX_REFINE = 60           # brentq iterations per edge (bisection needs < 25 at EDGE_RTOL)
 
@@ -98,11 +98,12 @@ def band_around(model: SqueakModel, load_n: float, speed_rad_s: float, margin: f
     squeak-free or outside the model's validity.
 
     Both sides are scanned outward from the speed on the log grid of `speed_bands` (same
-    spacing), `_SCAN_BATCH` points per side per batched solve; a side stops at its first
-    squeak-free point (edge refined to `EDGE_RTOL` with brentq), at invalid ground or at the
-    grid end, or as soon as it can no longer offer the nearer candidate. At most
-    `_BAND_POINTS + 2 * _SCAN_BATCH` scan points and 2 refinements. `checkpoint` is called
-    before every eigen-solve; it may raise to abandon the search."""
+    spacing), nearest candidate first: each batched solve takes the `_SCAN_BATCH` points whose
+    safe-speed candidate would be nearest. A side stops at its first squeak-free point (edge
+    refined to `EDGE_RTOL` with brentq), at invalid ground or the grid end, or as soon as it
+    can no longer offer the nearer candidate. At most `_BAND_POINTS + _SCAN_BATCH` scan points
+    and 2 refinements. `checkpoint` is called before every eigen-solve; it may raise to abandon
+    the search."""
     sign, w = math.copysign(1.0, speed_rad_s), abs(speed_rad_s)
     lowest, highest = _grid_ends(model)
     step = (highest / lowest) ** (1 / (_BAND_POINTS - 1))
@@ -115,18 +116,34 @@ def band_around(model: SqueakModel, load_n: float, speed_rad_s: float, margin: f
     if not growth(w) > 0:                             # NaN (invalid) compares False too
         return None
     band = Band(w, w, "unknown", "unknown")
-    while sides := band._options(w, lowest, highest, margin)[1]:
-        points = [_next_points(band, s, step, lowest, highest) for s in sides]
+    while True:
+        best, sides = band._options(w, lowest, highest, margin)
+        if not sides:
+            return band
+        # A side's points, each with the distance its candidate would have if the edge were
+        # just before it; beyond what can still win only the first is needed (to learn that
+        # the band goes on), and nothing beyond the batch's nearest.
+        farthest = {"below": highest - w, "above": w - lowest}   # option of the other side
+        points, reach = [], []
+        for s in sides:
+            x = _next_points(band, s, step, lowest, highest)
+            r = np.abs(x * (1 - margin if s == "below" else 1 + margin) - w)
+            limit = (abs(best - w) if best is not None else farthest[s] if len(sides) > 1
+                     else math.inf)
+            keep = np.searchsorted(r, limit) + 1          # r grows outward
+            points.append(x[:keep])
+            reach.append(r[:keep])
+        cut = np.sort(np.concatenate(reach))[:_SCAN_BATCH][-1]
+        points = [x[r <= cut] for x, r in zip(points, reach)]
         g = growth(np.concatenate(points))
         for s, x, start in zip(sides, points, np.cumsum([0] + [len(x) for x in points])):
             band = _extend(band, s, x, g[start:start + len(x)], lowest, highest, growth)
-    return band
 
 
 def _next_points(band: Band, side: str, step: float, lowest: float, highest: float
                  ) -> np.ndarray:
     """The next scan points beyond one end of the band, ending at the grid end."""
-    k = np.arange(1, _SCAN_BATCH + 1)
+    k = np.arange(1, _SCAN_BATCH + 1)                 # enough for a batch of one side
     if side == "below":
         x = band.low_rad_s / step ** k
         return np.append(x[x > lowest], lowest)[:_SCAN_BATCH]
