@@ -355,14 +355,18 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         raise CliError(f"argument --rate: must be in (0, {MAX_RATE_HZ:g}] Hz, got {args.rate:g}")
     try:
         return run_simulator(profile, rate_hz=args.rate, loop=args.loop,
-                             joint_name=args.joint_name, wait_for_subscriber=not args.no_wait)
-    except RuntimeError as exc:
+                             joint_name=args.joint_name, wait_for_subscriber=not args.no_wait,
+                             ros_args=args.ros_args)
+    except (ValueError, RuntimeError) as exc:     # bad --ros-args; rclpy could not start
         raise CliError(str(exc)) from None
 
 
 # ----------------------------------------------------------------------------- logs
 REPLAY_INPUTS = [f.name for f in fields(InputSettings)]    # = option dests, node parameters
-LIVE_OPTIONS = ("rate", "loop", "start_offset", "topics", "remap", "no_wait")
+LIVE_OPTIONS = ("rate", "loop", "start_offset", "topics", "remap", "no_wait", "ros_args")
+ROS_COMMANDS = ("simulate", "replay")      # the ones that start a ROS node (replay: --publish)
+ROS_ARGS_HELP = ("ROS arguments follow --ros-args, as for any ROS executable (up to --): "
+                 "namespace (-r __ns:=/seat_left), remaps (-r OLD:=NEW), parameters, log level")
 
 
 def _topic(name: str) -> str:
@@ -402,7 +406,8 @@ def _publish(args: argparse.Namespace) -> int:
                     start_offset_s=0.0 if args.start_offset is None else args.start_offset,
                     topics=[_topic(t) for t in args.topics] if args.topics else None,
                     remap=_parse_remap(args.remap), progress=not args.quiet,
-                    wait_for_subscriber_s=0.0 if args.no_wait else WAIT_FOR_SUBSCRIBER_S)
+                    wait_for_subscriber_s=0.0 if args.no_wait else WAIT_FOR_SUBSCRIBER_S,
+                    ros_args=args.ros_args)
     except (ValueError, RuntimeError) as exc:    # bad arguments; rclpy could not start
         raise CliError(str(exc)) from None
     return 0
@@ -598,7 +603,10 @@ def build_parser() -> Parser:
     p.set_defaults(run=cmd_demo)
 
     p = sub.add_parser("simulate", help="publish a simulated power-seat stroke for a separately "
-                                        "started squeak_node (same ROS_DOMAIN_ID)")
+                                        "started squeak_node (same ROS_DOMAIN_ID)",
+                       usage="%(prog)s [options] [--ros-args ...]",
+                       epilog=ROS_ARGS_HELP + "; e.g. --ros-args -r __ns:=/seat_left publishes "
+                                              "/seat_left/motor_speed, ...")
     _duration_option(p)
     p.add_argument("--rate", type=finite, default=100.0, metavar="HZ",
                    help="publishing rate [Hz] (default 100)")
@@ -668,9 +676,12 @@ def build_parser() -> Parser:
     g.add_argument("--topics", nargs="+", metavar="T",
                    help="publish exactly these topics (default: the predictor's inputs)")
     g.add_argument("--remap", action="append", default=[], metavar="OLD:=NEW",
-                   help="publish topic OLD on NEW (repeatable)")
+                   help="publish log topic OLD on NEW (repeatable; a relative NEW is in the "
+                        "node's namespace)")
     g.add_argument("--no-wait", action="store_true",
                    help="start at once instead of waiting (up to 5 s) for a subscriber")
+    p.epilog = (ROS_ARGS_HELP + " (with --publish; in a namespace other than / the log's inputs "
+                                "are published in it: --ros-args -r __ns:=/seat_right)")
     p.set_defaults(run=cmd_replay)
 
     p = sub.add_parser(
@@ -694,6 +705,23 @@ def build_parser() -> Parser:
     return parser
 
 
+def split_ros_args(argv: Sequence[str]) -> tuple[list[str], list[str]]:
+    """(the program's arguments, the ROS arguments): every `--ros-args` section up to `--` or
+    the end, as rcl delimits them (the `--` itself belongs to neither)."""
+    ours: list[str] = []
+    ros: list[str] = []
+    inside = False
+    for arg in argv:
+        if arg == "--ros-args":
+            inside = True
+            ros.append(arg)
+        elif inside and arg == "--":
+            inside = False
+        else:
+            (ros if inside else ours).append(arg)
+    return ours, ros
+
+
 def _one_line(message: str) -> str:
     return " ".join(str(message).split())
 
@@ -702,7 +730,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit code (0 ok, 2 bad input, 130 interrupted, 141 closed
     pipe)."""
     try:
-        args = build_parser().parse_args(argv)
+        ours, ros_args = split_ros_args(sys.argv[1:] if argv is None else list(argv))
+        args = build_parser().parse_args(ours)
+        args.ros_args = ros_args
+        if ros_args and args.command not in ROS_COMMANDS:
+            raise CliError(f"{args.command} takes no --ros-args (only "
+                           f"{' and '.join(ROS_COMMANDS)} --publish do)")
         run: Callable[[argparse.Namespace], int] = args.run
         return run(args)
     except BrokenPipeError:      # `... | head`: the reader left; stay quiet like other tools

@@ -18,9 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.logging import LoggingSeverity
 from rclpy.node import Node
@@ -31,12 +29,13 @@ from std_msgs.msg import Bool, Float64, Float64MultiArray
 from .logfile import LogError, inspect, log_files
 from .node import LATCHED, SqueakPredictorNode
 from .recorder import Recorder
-from .ros_env import StopSignals, close, confine_to_localhost
+from .ros_env import StopSignals, close, confine_to_localhost, init_context
 from .simulator import (ActuatorSimulator, ActuatorState, StrokeProfile,
                         expected_squeak)
 
 START_TIMEOUT_S = 10.0       # the simulator waits this long for the predictor's subscription
 TAIL_S = 0.3                 # keep spinning after the stroke so the last outputs arrive
+DRAIN_TIMEOUT_S = 10.0       # longest wait for the recording to hold every stroke sample
 SPIN_STEP_S = 0.01
 STATUS_MODES = 3             # squeak modes named in the status line
 
@@ -167,8 +166,20 @@ def _short(message: str) -> str:
     return message.removeprefix("no prediction: ").split(":")[0][:60]
 
 
+def _recorded(recorder: Recorder, sim: ActuatorSimulator) -> bool:
+    """Every sample the simulator published is in the recording or counted lost (the
+    recording thread may still be writing the last ones); True when not recording."""
+    if not recorder.active:
+        return True
+    for pub in (sim.speed_pub, sim.load_pub, sim.nut_pub):
+        loss = recorder.losses.get(pub.topic_name)
+        if recorder.count(pub.topic_name) + (loss.lost if loss else 0) < sim.published:
+            return False
+    return True
+
+
 def summary(profile: StrokeProfile, r: SqueakRecord, elapsed_s: float, finished: bool,
-            expected_s: float | None) -> str:
+            expected_s: float | None, published: int = 0) -> str:
     d = profile.duration_s
     loads = [profile.state(t).load_n for t in [d * i / 200 for i in range(201)]]
     lines = [f"summary of the {d:g} s stroke (0 -> {profile.peak_speed_rad_s:g} rad/s -> 0, "
@@ -191,6 +202,8 @@ def summary(profile: StrokeProfile, r: SqueakRecord, elapsed_s: float, finished:
                                              f"{r.max_risk:.2f}"))
     lines.append(f"  predictions:        {r.predictions}"
                  + (f" (node recomputes: {r.recomputes})" if r.recomputes else ""))
+    lines.append(f"  simulator:          {published} samples published (motor_speed, "
+                 f"axial_load, nut_position each)")
     return "\n".join(lines)
 
 
@@ -233,8 +246,7 @@ def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float 
     confine_to_localhost(private_domain=True)
     tty = out.isatty()
     with StopSignals() as stop:
-        ctx = Context()
-        rclpy.init(context=ctx)
+        ctx = init_context()                  # not sys.argv: the CLI's options are not rcl's
         nodes: list[Node] = []
         executor = monitor = sim = predictor = None
         width, stopped = 0, time.monotonic()
@@ -277,7 +289,9 @@ def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float 
                     next_status += 1.0 / status_hz
                 if sim.done and done_at is None:
                     done_at = now
-                if done_at is not None and now - done_at >= TAIL_S:
+                if done_at is not None and now - done_at >= TAIL_S and (
+                        _recorded(predictor.recorder, sim)
+                        or now - done_at >= DRAIN_TIMEOUT_S):
                     break
         finally:
             stopped = time.monotonic()
@@ -292,7 +306,7 @@ def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float 
             times, flags = expected_squeak(profile)
             expected = float(flags.mean() * profile.duration_s)
         print(summary(profile, monitor.record, sim.elapsed_s if sim else 0.0, finished,
-                      expected), file=out, flush=True)
+                      expected, sim.published if sim else 0), file=out, flush=True)
     if predictor is not None and record_dir is not None:
         print(recording_summary(predictor.recorder), file=out, flush=True)
     if finished:

@@ -369,6 +369,7 @@ def _rewrite(src: Path | str, dst: Path | str,
         raise LogError(dst, "recovery output must differ from its input")
     info = LogInfo(src)
     try:
+        dst.parent.mkdir(parents=True, exist_ok=True)          # like `replay --out DIR`
         with open(dst, "wb") as out:
             writer = Writer(out, compression=compression)
             writer.start(profile="ros2", library="leadscrew_ros recover")

@@ -164,6 +164,12 @@ class Recorder:
     def messages(self) -> int:
         return sum(f.messages for f in self.files)
 
+    def count(self, topic: str) -> int:
+        """Messages of `topic` written in this recording so far."""
+        with self._lock:
+            t = self._topics.get(topic)
+            return 0 if t is None else t.count
+
     @property
     def lost(self) -> int:
         """Messages of this recording counted as lost before they reached the recorder."""

@@ -9,6 +9,11 @@ Memory stays bounded by one chunk, whatever the log's size: the whole selection 
 once, strictly (every file complete, every selected payload deserializable as its type), and
 then streamed file by file a second time while publishing. Nothing is published from a log
 that fails the first pass.
+
+ROS arguments (`--ros-args -r __ns:=/seat_right -r OLD:=NEW ...`) configure the replay node as
+any ROS executable's: in a namespace other than the root the log's inputs are published in it,
+out of the namespace they were recorded in (`/seat_left/motor_speed` -> `/seat_right/
+motor_speed`); rcl's remaps apply on top of that and of `remap`.
 """
 
 from __future__ import annotations
@@ -19,12 +24,10 @@ import os
 import shutil
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Sequence
 
-import rclpy
-from rclpy.context import Context
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidTopicNameException
 from rclpy.node import Node
@@ -34,14 +37,11 @@ from rclpy.serialization import deserialize_message
 from rclpy.validate_full_topic_name import validate_full_topic_name
 
 from .logfile import LogError, LogInfo, LogMessage, Topic, read_messages
-from .ros_env import StopSignals, close, confine_to_localhost
+from .ros_env import StopSignals, close, confine_to_localhost, init_context
+from .timeline import INPUTS, resolve
+from .timeline import is_input as _is_input     # the offline replay's rule, shared
 
 NODE_NAME = "log_replay"
-# The predictor's inputs (base name -> the type it subscribes with).
-INPUTS = {"motor_speed": "std_msgs/msg/Float64", "axial_load": "std_msgs/msg/Float64",
-          "nut_position": "std_msgs/msg/Float64", "joint_states": "sensor_msgs/msg/JointState"}
-# Namespaces of the node's and the replay's own outputs: never republished by default.
-OWN_NAMESPACES = {"squeak", "replay"}
 # Reliable + transient local is at least what any subscriber can request, so every subscriber
 # matches (the predictor's best-effort inputs as well as a reliable, latched recorder). The depth
 # bounds what a slow reliable reader can still catch up on, and what a late latched one receives.
@@ -71,6 +71,7 @@ class _Plan:
     files: list[Path]
     outputs: dict[str, str]          # log topic -> topic it is published on
     classes: dict[str, type]         # log topic -> message class
+    topics: dict[str, Topic]         # every topic of the log
     origin_ns: int                   # log start + start offset: schedule time 0
     end_ns: int                      # last message of the log (any topic)
 
@@ -82,18 +83,22 @@ class _Plan:
 def publish_log(paths: list[Path], *, rate: float = 1.0, loop: bool = False,
                 start_offset_s: float = 0.0, topics: list[str] | None = None,
                 remap: dict[str, str] | None = None, progress: bool = True,
-                wait_for_subscriber_s: float = WAIT_FOR_SUBSCRIBER_S) -> int:
+                wait_for_subscriber_s: float = WAIT_FOR_SUBSCRIBER_S,
+                ros_args: Sequence[str] = ()) -> int:
     """Publish the log's messages (`paths`: its files in order) in real time / `rate`.
 
     Selection: `topics` (exactly those), or by default the predictor's input topics in the log
     (`/motor_speed`, `/axial_load`, `/nut_position`, `/joint_states`, or a topic of the input's
     type whose name ends so, e.g. `/robot/motor_speed`; never `/squeak/*`, `/replay/*`).
-    `remap` maps log topics to the topics to publish on. `start_offset_s` skips that much of the
+    `remap` maps log topics to the topics to publish on (a relative target in the node's
+    namespace). `ros_args` (`--ros-args ...`) go to rcl: namespace (the inputs move into it),
+    remaps, logging; never the process's argv. `start_offset_s` skips that much of the
     log from its first message; `loop` repeats until SIGINT/SIGTERM. Publishing starts when a
     subscriber matched, or after `wait_for_subscriber_s` (0: at once, the simulator's
     --no-wait).
 
-    Returns the number of messages published. Raises ValueError for bad arguments and LogError
+    Returns the number of messages published. Raises ValueError for bad arguments (ROS ones
+    included) and LogError
     for an unreadable log, both before anything is published, and `Interrupted` when a replay
     without `loop` was stopped by a signal before its end."""
     paths = [Path(p) for p in paths]
@@ -103,14 +108,15 @@ def publish_log(paths: list[Path], *, rate: float = 1.0, loop: bool = False,
         raise ValueError("cannot loop a log whose messages all have the same time")
     confine_to_localhost()
     with StopSignals() as stop:
-        ctx = Context()
-        rclpy.init(context=ctx)
+        ctx = init_context(ros_args)
         node, player = None, None
         try:
             node = Node(NODE_NAME, context=ctx, start_parameter_services=False)
+            plan = replace(plan, outputs=_outputs(plan.topics, plan.classes, remap or {},
+                                                  node.get_namespace()))
             pubs = {t: node.create_publisher(plan.classes[t], out, QOS)
                     for t, out in plan.outputs.items()}
-            _announce(plan, rate, loop)
+            _announce(plan, pubs, rate, loop)
             _wait_for_subscriber(list(pubs.values()), wait_for_subscriber_s, stop)
             status = _Status(progress and sys.stderr.isatty(), plan.span_ns / 1e9, rate, loop)
             player = _Player(plan, pubs, rate, loop, stop, status)
@@ -146,6 +152,16 @@ def _check_arguments(paths: list[Path], rate: float, start_offset_s: float,
         _topic_name(target, "remap target")
 
 
+def _in_namespace(topic: Topic, namespace: str) -> str:
+    """Where the replay node in `namespace` publishes a log topic: in the root namespace under
+    its recorded name; elsewhere an input moves out of the namespace it was recorded in
+    (`/seat_left/motor_speed` -> `<namespace>/motor_speed`), any other topic goes under it."""
+    if namespace == "/":
+        return topic.name
+    recorded = topic.name.rsplit("/", 1)[0] if _is_input(topic) else ""
+    return namespace.rstrip("/") + topic.name[len(recorded):]
+
+
 def _topic_name(name: str, what: str) -> str:
     """`name` as an absolute ROS topic name (a relative one is relative to the root namespace,
     where the replay node lives); ValueError if it is not a valid name."""
@@ -156,14 +172,6 @@ def _topic_name(name: str, what: str) -> str:
         problem = str(exc).splitlines()[0].removeprefix("Invalid topic name: ").rstrip(":")
         raise ValueError(f"{what} {name!r} is not a valid ROS topic name: {problem}") from None
     return full
-
-
-def _is_input(topic: Topic) -> bool:
-    """A predictor input: by name, or a topic of the input's type named `.../<input>`."""
-    *namespaces, base = topic.name.split("/")
-    if base not in INPUTS or OWN_NAMESPACES.intersection(namespaces):
-        return False
-    return topic.name == "/" + base or topic.type_name == INPUTS[base]
 
 
 def _plan(paths: list[Path], start_offset_s: float, topics: list[str] | None,
@@ -197,15 +205,18 @@ def _plan(paths: list[Path], start_offset_s: float, topics: list[str] | None,
     if scan.last_selected_ns < origin_ns:
         raise ValueError(f"start offset {start_offset_s:g} s skips every message to publish "
                          f"(the last is at {(scan.last_selected_ns - scan.first_ns) / 1e9:.3f} s)")
-    return _Plan(list(paths), _outputs(scan.classes, remap), scan.classes, origin_ns,
-                 scan.last_ns)
+    return _Plan(list(paths), _outputs(scan.topics, scan.classes, remap), scan.classes,
+                 scan.topics, origin_ns, scan.last_ns)
 
 
-def _outputs(classes: dict[str, type], remap: dict[str, str]) -> dict[str, str]:
-    """Log topic -> published topic; one log topic per published topic."""
-    full = {_topic_name(k, "remapped topic"): _topic_name(v, "remap target")
+def _outputs(topics: dict[str, Topic], classes: dict[str, type], remap: dict[str, str],
+             namespace: str = "/") -> dict[str, str]:
+    """Log topic -> published topic, for a node in `namespace`; one log topic per published
+    topic."""
+    full = {_topic_name(k, "remapped topic"): _topic_name(resolve(v, namespace), "remap target")
             for k, v in remap.items()}
-    outputs, sources = {t: full.get(t, t) for t in classes}, {}
+    outputs = {t: full.get(t) or _in_namespace(topics[t], namespace) for t in classes}
+    sources: dict[str, str] = {}
     for t, out in outputs.items():
         _topic_name(out, "topic")                   # a foreign log's name may not be valid ROS
         if out in sources:
@@ -269,8 +280,10 @@ def _check_payload(path: Path, m: LogMessage, cls: type) -> None:
 
 
 # ----------------------------------------------------------------------------- publishing
-def _announce(plan: _Plan, rate: float, loop: bool) -> None:
-    names = ", ".join(t if out == t else f"{t} -> {out}" for t, out in plan.outputs.items())
+def _announce(plan: _Plan, pubs: dict[str, Publisher], rate: float, loop: bool) -> None:
+    """One line: what is published where (as rcl resolved the names, its remaps included)."""
+    names = ", ".join(t if p.topic_name == t else f"{t} -> {p.topic_name}"
+                      for t, p in pubs.items())
     files = plan.files
     where = files[0] if len(files) == 1 else f"{files[0].parent} ({len(files)} files)"
     print(f"replaying {where}: {plan.span_ns / 1e9:.3f} s of log on {names} at rate {rate:g}"

@@ -1,5 +1,5 @@
 """Process plumbing for anything in this package that starts rclpy: environment defaults,
-signals and an orderly teardown.
+ROS arguments, signals and an orderly teardown.
 
 DDS discovery stays on loopback unless the user explicitly chooses otherwise
 (`ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET` to talk to another machine). Must run before
@@ -10,9 +10,17 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
+import tempfile
 import threading
+from contextlib import contextmanager
+from typing import Iterator, Sequence
 
 import rclpy
+from rclpy.context import Context
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+PROGRAM = "leadscrew-squeak"
 
 
 def confine_to_localhost(private_domain: bool = False) -> None:
@@ -21,6 +29,46 @@ def confine_to_localhost(private_domain: bool = False) -> None:
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     if private_domain:
         os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 100 + 101))
+
+
+def init_context(ros_args: Sequence[str] = ()) -> Context:
+    """A new Context, initialised with exactly `ros_args` (`--ros-args -r __ns:=/seat_left
+    -p name:=value ...`), never with sys.argv: rcl would read the program's own options (it
+    warns about `--remap OLD:=NEW` as a deprecated remap rule). Raises ValueError with one
+    line (rcl's own log lines about the failure are dropped) for arguments rcl rejects."""
+    ctx = Context()
+    with _stderr_captured() as captured:
+        try:
+            rclpy.init(context=ctx, args=[PROGRAM, *ros_args])
+            problem = ""
+        except _rclpy.UnknownROSArgsError as exc:
+            problem = f"unknown ROS arguments {exc}"        # "['--bogus', '-x']"
+        except _rclpy.RCLError as exc:
+            problem = str(exc).removeprefix("failed to initialize rcl: ").split(". Error:")[0]
+    if not problem:
+        sys.stderr.write(captured[0])                # warnings of a successful init stay
+        return ctx
+    warnings = [line.split("]: ", 1)[-1] for line in captured[0].splitlines()
+                if line.startswith("[WARN]")]
+    raise ValueError(f"--ros-args: {' '.join(problem.split())}"
+                     + "".join(f" ({w.strip()})" for w in warnings))
+
+
+@contextmanager
+def _stderr_captured() -> Iterator[list[str]]:
+    """Redirect file descriptor 2 (where rcutils logs) into a temporary file; the yielded list
+    receives what was written, on exit."""
+    sys.stderr.flush()
+    saved, text = os.dup(2), []
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield text
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            text.append(tmp.read().decode(errors="replace"))
 
 
 def close(ctx, executor, nodes) -> None:

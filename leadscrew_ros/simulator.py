@@ -22,11 +22,9 @@ import os
 import sys
 import time
 from dataclasses import dataclass
-from typing import NamedTuple, TextIO
+from typing import NamedTuple, Sequence, TextIO
 
 import numpy as np
-import rclpy
-from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -34,7 +32,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from .model import ScrewParameters, SqueakModel
-from .ros_env import StopSignals, close, confine_to_localhost
+from .ros_env import StopSignals, close, confine_to_localhost, init_context
 
 # Phases as fractions of the stroke duration: rest, ramp up, hold, ramp down, rest.
 REST_START, RAMP, HOLD, REST_END = 0.05, 0.36, 0.08, 0.15
@@ -212,7 +210,7 @@ class ActuatorSimulator(Node):
         if self.done:
             return
         if self.started_at is None:
-            if self.wait_for_subscriber and self.speed_pub.get_subscription_count() == 0:
+            if self.wait_for_subscriber and not self._subscribers_matched():
                 return
             self.started_at = time.monotonic()
         t = self.elapsed_s
@@ -221,6 +219,12 @@ class ActuatorSimulator(Node):
         if finished:
             self.done = True
             self._timer.cancel()
+
+    def _subscribers_matched(self) -> bool:
+        """Something subscribes to motor_speed, and every subscription the graph knows of has
+        matched (one shown but not yet matched would miss the first samples: a recorder's)."""
+        matched = self.speed_pub.get_subscription_count()
+        return matched > 0 and matched >= self.count_subscribers(self.speed_pub.topic_name)
 
     def publish(self, s: ActuatorState) -> None:
         self.speed_pub.publish(Float64(data=float(s.speed_rad_s)))
@@ -237,9 +241,11 @@ class ActuatorSimulator(Node):
 
 def run_simulator(profile: StrokeProfile | None = None, rate_hz: float = 100.0,
                   loop: bool = False, joint_name: str = "", wait_for_subscriber: bool = True,
-                  out: TextIO | None = None) -> int:
+                  out: TextIO | None = None, ros_args: Sequence[str] = ()) -> int:
     """`leadscrew-squeak simulate`: publish the stroke on the user's ROS_DOMAIN_ID (loopback
-    discovery unless chosen otherwise) for a separately started predictor node.
+    discovery unless chosen otherwise) for a separately started predictor node. `ros_args`
+    (`--ros-args -r __ns:=/seat_left ...`) configure the node as any ROS executable's
+    (ValueError if rcl rejects them); the topics are relative, so a namespace prefixes them.
 
     Returns 0 when the stroke is done (or, with `loop`, when stopped by SIGINT/SIGTERM), else
     128 + the signal number (130 SIGINT, 143 SIGTERM) when stopped before the end."""
@@ -247,8 +253,7 @@ def run_simulator(profile: StrokeProfile | None = None, rate_hz: float = 100.0,
     profile = profile or StrokeProfile()
     confine_to_localhost()
     with StopSignals() as stop:
-        ctx = Context()
-        rclpy.init(context=ctx)
+        ctx = init_context(ros_args)
         node = executor = None
         try:
             node = ActuatorSimulator(profile, rate_hz=rate_hz, loop=loop,
@@ -256,8 +261,8 @@ def run_simulator(profile: StrokeProfile | None = None, rate_hz: float = 100.0,
                                      wait_for_subscriber=wait_for_subscriber, context=ctx)
             executor = SingleThreadedExecutor(context=ctx)
             executor.add_node(node)
-            topics = ", ".join(t for t in ("motor_speed", "axial_load", "nut_position",
-                                           "joint_states" if joint_name else "") if t)
+            topics = ", ".join(p.topic_name for p in (node.speed_pub, node.load_pub,
+                                                      node.nut_pub, node.joint_pub) if p)
             print(f"simulating a {profile.duration_s:g} s stroke (0 -> "
                   f"{profile.peak_speed_rad_s:g} rad/s -> 0, nut "
                   f"{profile.start_nut_position_m:.3f} -> {profile.end_nut_position_m:.3f} m)"
@@ -265,7 +270,8 @@ def run_simulator(profile: StrokeProfile | None = None, rate_hz: float = 100.0,
                   f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')})", file=out,
                   flush=True)
             if wait_for_subscriber:
-                print("waiting for a subscriber on motor_speed ...", file=out, flush=True)
+                print(f"waiting for a subscriber on {node.speed_pub.topic_name} ...", file=out,
+                      flush=True)
             announced = False
             while not node.done and not stop.signum:
                 executor.spin_once(timeout_sec=0.02)

@@ -21,7 +21,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from leadscrew_ros.cli import MAX_COUNT, CliError, main, parse_range
+from leadscrew_ros.cli import MAX_COUNT, CliError, main, parse_range, split_ros_args
 from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.model.sweep import (MAX_MEMORY_BYTES, MAX_POINTS, map_work, stability_map,
                                        sweep, sweep_work)
@@ -153,6 +153,8 @@ BAD = {
     "sweep without range": ["sweep"],
     "sweep axis without values": ["sweep", "--axis", "radius_m"],
     "sweep json and csv": ["sweep", "--speed", "1:2:3", "--json", "--csv"],
+    "ros args for predict": ["predict", "--speed", "20", "--ros-args", "-r", "__ns:=/a"],
+    "ros args offline": ["replay", "x.mcap", "--ros-args", "-r", "__ns:=/a"],
 }
 
 
@@ -375,3 +377,11 @@ def test_progress_counts_every_point_once_valid_or_not():
     stability_map(model, "radius_m", radii, "speed_rad_s", np.linspace(1.0, 1e6, 4),
                   progress=done.append)                           # 1e6 rad/s: invalid too
     assert sum(done) == radii.size * 4
+
+
+def test_ros_args_are_split_off_as_rcl_delimits_them():
+    assert split_ros_args(["simulate", "--loop", "--ros-args", "-r", "__ns:=/a", "--", "--rate",
+                           "5", "--ros-args", "-p", "x:=1"]) == (
+        ["simulate", "--loop", "--rate", "5"], ["--ros-args", "-r", "__ns:=/a", "--ros-args",
+                                                "-p", "x:=1"])
+    assert split_ros_args(["map", "--x", "a:=b"]) == (["map", "--x", "a:=b"], [])

@@ -28,6 +28,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
@@ -38,6 +39,7 @@ from leadscrew_ros.logfile import LogError, log_files, read_log
 from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.node import SqueakPredictorNode
 from leadscrew_ros.recorder import Recorder, RecordSettings
+from leadscrew_ros import replay_live
 from leadscrew_ros.replay_live import publish_log
 
 T0 = 1_700_000_000_000_000_000            # log time of the first message [ns]
@@ -191,16 +193,28 @@ def test_default_selection_republishes_the_inputs_unchanged_and_in_order(log, co
 
 
 @pytest.mark.parametrize("rate", [2.0, 8.0])
-def test_timing_follows_the_log_divided_by_rate(log, collector, rate):
+def test_timing_follows_the_log_divided_by_rate(log, collector, rate, monkeypatch):
+    """The schedule, taken in the replay's thread (free of delivery latency): due times at the
+    log's spacing / rate from one start (no drift, deterministic), each message published at or
+    after its due time (deterministic), and typically on time (a generous bound: busy machine).
+    """
+    dues, published = [], []
+    wait_until, publish = replay_live._Player._wait_until, Publisher.publish
+    monkeypatch.setattr(replay_live._Player, "_wait_until",
+                        lambda self, due: (dues.append(due), wait_until(self, due))[1])
+    monkeypatch.setattr(Publisher, "publish", lambda self, msg: (
+        self.topic_name == "/motor_speed" and published.append(time.monotonic()),
+        publish(self, msg))[1])
     c = collector({"/motor_speed": Float64})
-    replay(c, log, rate=rate, topics=["/motor_speed"])
-    arrivals = [t for t, _ in c.got["/motor_speed"]]
-    assert len(arrivals) == STEPS
-    duration = arrivals[-1] - arrivals[0]
-    assert duration == pytest.approx(SPAN_S / rate, abs=0.03 + 0.03 * SPAN_S / rate)
-    # each message at its own due time: no drift along the replay
-    late = sorted(abs(t - arrivals[0] - i * STEP_NS / 1e9 / rate) for i, t in enumerate(arrivals))
-    assert late[int(0.9 * len(late))] < 0.02, late[-10:]
+    r = replay(c, log, rate=rate, topics=["/motor_speed"])
+    assert c.messages("/motor_speed") == expected(log, "/motor_speed")
+    assert len(published) == len(dues) == STEPS == r.result
+    step_s = STEP_NS / 1e9 / rate
+    assert [d - dues[0] for d in dues] == pytest.approx([i * step_s for i in range(STEPS)],
+                                                        abs=1e-6)
+    late = [t - d for t, d in zip(published, dues)]
+    assert min(late) >= 0.0
+    assert sorted(late)[len(late) // 2] < 0.05, late
 
 
 def test_start_offset_skips_the_beginning(log, collector):
@@ -455,3 +469,52 @@ def test_unreadable_logs_raise_log_error_before_anything_starts(log, tmp_path, n
     with pytest.raises(LogError, match=match) as exc:
         publish_log(files)
     assert "\n" not in str(exc.value)
+
+
+# ----------------------------------------------------------------------------- ROS arguments
+def test_ros_args_namespace_moves_the_inputs_into_it_and_rcl_remaps_apply(log, collector):
+    """`--ros-args -r __ns:=/seat_right`: every input is published in the namespace, out of the
+    one it was recorded in (/robot/nut_position too); an rcl remap applies on top, and our
+    remap's relative target resolves in the namespace."""
+    seat = ns()
+    topics = {f"{seat}/{name}": TYPES[f"/{name}"] for name in ("axial_load", "joint_states")}
+    topics.update({f"{seat}/nut_position": Float64, f"{seat}/speed": Float64,
+                   "/motor_speed": Float64, f"{seat}/motor_speed": Float64})
+    c = collector(topics)
+    r = replay(c, log, rate=20.0, remap={"/motor_speed": "speed"},
+               ros_args=["--ros-args", "-r", f"__ns:={seat}", "-r",
+                         f"{seat}/axial_load:={seat}/load_remapped"])
+    assert c.messages(f"{seat}/speed") == expected(log, "/motor_speed")
+    assert c.messages(f"{seat}/nut_position") == expected(log, "/robot/nut_position")
+    assert c.messages(f"{seat}/joint_states") == expected(log, "/joint_states")
+    assert c.got[f"{seat}/axial_load"] == []                 # remapped by rcl
+    assert c.got["/motor_speed"] == [] and c.got[f"{seat}/motor_speed"] == []
+    assert r.result == len(INPUTS) * STEPS
+
+
+@pytest.mark.parametrize("ros_args, problem", [
+    (["--ros-args", "-r", "__ns:=seat"], "Couldn't parse remap rule: '-r __ns:=seat'"),
+    (["--ros-args", "--bogus"], "unknown ROS arguments ['--bogus']"),
+])
+def test_bad_ros_args_are_one_line(log, capfd, ros_args, problem):
+    with pytest.raises(ValueError) as exc:
+        publish_log(log, ros_args=ros_args, wait_for_subscriber_s=0.0)
+    assert str(exc.value).startswith("--ros-args: ") and problem in str(exc.value)
+    assert "\n" not in str(exc.value)
+    out, err = capfd.readouterr()
+    assert "[ERROR]" not in err and "[WARN]" not in err          # rcl's own lines dropped
+
+
+def test_cli_remap_is_ours_not_a_deprecated_rcl_rule(log, tmp_path):
+    """rcl used to read the process's argv and warn about `/motor_speed:=/x` as a deprecated
+    remap rule; --ros-args after `replay --publish` reach rcl, the rest does not."""
+    seat = ns()
+    run = subprocess.run(
+        [sys.executable, "-m", "leadscrew_ros.cli", "replay", str(log[0].parent), "--publish",
+         "--no-wait", "--rate", "50", "--topics", "/motor_speed", "--remap",
+         f"/motor_speed:={seat}/x", "--ros-args", "-r", f"__ns:={seat}", "--log-level", "warn"],
+        capture_output=True, text=True, timeout=60, env=dict(os.environ))
+    assert run.returncode == 0, run.stderr
+    assert run.stderr == "", run.stderr                   # no rcl warning, no traceback
+    assert f"/motor_speed -> {seat}/x" in run.stdout
+    assert f"replay done: {STEPS} messages" in run.stdout
