@@ -19,8 +19,6 @@ thrash (measured with 40/40 modes on 2 cores: a 240x240 `eig` takes 21 ms single
 from __future__ import annotations
 
 import math
-import os
-import sys
 import threading
 import time
 from dataclasses import dataclass, field
@@ -98,11 +96,9 @@ class LatestWorker:
     grows. rclpy-free.
 
     The thread starts with a request and ends when nothing is left to do, so an idle worker
-    holds no thread; it is a daemon and never keeps the process alive. On Linux it runs at a
-    lower priority (`nice`), so that on a busy machine the thread that submits (the node's
-    executor) gets the CPU first."""
-
-    NICE = 19
+    holds no thread; it is a daemon and never keeps the process alive. It runs at the normal
+    priority: a lower one (nice) starved it while it held the GIL on a busy machine, and the
+    executor waited for the GIL (measured: 3.7 s without a prediction)."""
 
     def __init__(self, name: str = "squeak-advice"):
         self._name = name
@@ -169,9 +165,6 @@ class LatestWorker:
             raise Superseded
 
     def _run(self) -> None:
-        if sys.platform == "linux":         # per thread on Linux (elsewhere: the process)
-            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(),
-                           os.getpriority(os.PRIO_PROCESS, 0) + self.NICE)
         while True:
             with self._cv:
                 if self._waiting is None:
