@@ -535,11 +535,14 @@ def test_cli_publish_calls_publish_log(bag, monkeypatch, capsys):
     assert kwargs == dict(rate=4.0, loop=True, start_offset_s=1.5,
                           topics=["/motor_speed", "/axial_load"],
                           remap={"/motor_speed": "/seat/motor_speed"}, progress=False,
-                          wait_for_subscriber_s=0.0)
+                          wait_for_subscriber_s=0.0, ros_args=[])
     calls.clear()
     assert cli(capsys, "replay", bag, "--publish")[0] == 0
     assert calls[0][1] == dict(rate=1.0, loop=False, start_offset_s=0.0, topics=None, remap={},
-                               progress=True, wait_for_subscriber_s=5.0)
+                               progress=True, wait_for_subscriber_s=5.0, ros_args=[])
+    calls.clear()
+    assert cli(capsys, "replay", bag, "--publish", "--ros-args", "-r", "__ns:=/seat")[0] == 0
+    assert calls[0][1]["ros_args"] == ["--ros-args", "-r", "__ns:=/seat"]
 
     def refuse(paths, **kwargs):
         raise ValueError("rate must be a finite number > 0")
