@@ -197,7 +197,10 @@ def _single_threaded_blas() -> None:
 
 
 class LivePredictor:
-    def __init__(self, model: SqueakModel, settings: LiveSettings = LiveSettings()):
+    def __init__(self, model: SqueakModel, settings: LiveSettings = LiveSettings(),
+                 clock: Callable[[], float] = time.perf_counter):
+        """`clock` (seconds) times each prediction for the recompute interval; the `now`
+        arguments are the policy's time."""
         _single_threaded_blas()
         self.model = model
         self._nut_model = model                        # model at the nut position in use
@@ -209,6 +212,7 @@ class LivePredictor:
         self.recomputes = 0
         self._computed_at: tuple[float, float, float] | None = None  # speed, load, nut
         self._last_update = -math.inf
+        self._clock = clock
         self._cost_s = 0.0                             # how long the last prediction took
         self._input_errors: dict[str, str] = {}        # input -> why its latest value was
                                                        # rejected, until a good one arrives
@@ -284,12 +288,16 @@ class LivePredictor:
             return False
         return self._computed_at is None or moved(point, self._computed_at, self.settings)
 
+    @property
+    def min_interval_s(self) -> float:
+        """Shortest time from one recompute's start to the next: 1 / max_rate_hz, and at least
+        _MAX_DUTY_RATIO times the last prediction (with 40/40 modes one takes 20-80 ms: back to
+        back they would leave parameter services and diagnostics no room)."""
+        return max(1.0 / self.settings.max_rate_hz, _MAX_DUTY_RATIO * self._cost_s)
+
     def due(self, now: float) -> bool:
-        """A change is waiting and the rate limit allows a recompute now: max_rate_hz, and at
-        most half of the time spent recomputing (with 40/40 modes a prediction takes 20-80 ms:
-        back to back they would leave parameter services and diagnostics no room)."""
-        interval = max(1.0 / self.settings.max_rate_hz, _MAX_DUTY_RATIO * self._cost_s)
-        return self.changed() and now - self._last_update >= interval
+        """A change is waiting and the rate limit allows a recompute now."""
+        return self.changed() and now - self._last_update >= self.min_interval_s
 
     def update(self, now: float) -> Prediction | None:
         """Recompute at the latest inputs. Returns the new prediction, or None when the point
@@ -303,9 +311,9 @@ class LivePredictor:
         model = self._model_at(nut)
         if model is None:
             return None
-        start = time.perf_counter()
+        start = self._clock()
         p = model.predict(speed, load)
-        self._cost_s = time.perf_counter() - start
+        self._cost_s = self._clock() - start
         self._validity = p.reason
         if not p.valid:
             return None

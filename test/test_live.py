@@ -24,7 +24,8 @@ SQUEAK, STABLE, NEAR_EDGE = 20.0, 100.0, 55.5  # rad/s: squeak / risk ~0.02 / st
 
 
 def live(**settings) -> LivePredictor:
-    return LivePredictor(MODEL, LiveSettings(**settings))
+    """A predictor whose predictions take no time (the `now` arguments are all the time)."""
+    return LivePredictor(MODEL, LiveSettings(**settings), clock=lambda: 0.0)
 
 
 def at(speed: float, load: float = LOAD, now: float = 0.0, **settings) -> LivePredictor:
@@ -384,19 +385,30 @@ def test_band_search_solves_a_bounded_fraction_of_the_full_search(solves, speed,
 
 # ----------------------------------------------------------------------------- rate vs cost
 def test_recomputes_leave_the_executor_half_its_time():
-    """With 40/40 modes a prediction takes milliseconds: the next recompute waits at least two
-    prediction times from the start of the last one, whatever max_rate_hz allows."""
+    """A prediction that takes 30 ms (with 40/40 modes one takes 20-80 ms): the next recompute
+    starts at least two prediction times after the start of the last one, whatever
+    max_rate_hz allows."""
+    ticks = iter([0.0, 0.03, 1.0, 1.001])          # the clock around each prediction
+    lp = LivePredictor(MODEL, LiveSettings(max_rate_hz=1000.0), clock=lambda: next(ticks))
+    lp.set_speed(STABLE, 0.0)
+    lp.set_load(LOAD, 0.0)
+    lp.update(0.0)                                  # took 30 ms
+    assert lp.min_interval_s == pytest.approx(0.06)
+    lp.set_speed(STABLE + 5.0, 0.0)
+    assert not lp.due(0.0599) and lp.due(0.06)
+    lp.update(0.06)                                 # took 1 ms: the rate limit rules again
+    assert lp.min_interval_s == pytest.approx(0.002)
+    lp.set_speed(STABLE + 10.0, 0.06)
+    assert not lp.due(0.0615) and lp.due(0.062)
+
+
+def test_a_real_40_mode_prediction_sets_the_interval():
     lp = LivePredictor(MODEL.with_params(n_bending=40, n_torsion=40),
                        LiveSettings(max_rate_hz=10000.0))
     lp.set_speed(STABLE, 0.0)
     lp.set_load(LOAD, 0.0)
     lp.update(0.0)
-    lp.set_speed(STABLE + 5.0, 0.0)
-    assert not lp.due(0.0005)          # 10 kHz allows it; a 240x240 eig takes > 0.25 ms
-    assert lp.due(10.0)
-    small = at(STABLE, max_rate_hz=100.0)      # 6/6 modes: well under 5 ms, the rate rules
-    small.set_speed(STABLE + 5.0, 0.0)
-    assert small.due(0.01)
+    assert lp.min_interval_s > 0.0005               # a 240x240 eig takes > 0.25 ms
 
 
 # ----------------------------------------------------------------------------- background

@@ -156,8 +156,8 @@ def _stall_run(n_modes, duration_s, count_searches, ns, stats) -> StallStats:
         return stats
     finally:
         stop.set()
-        if spinner is not None:
-            spinner.join(timeout=10.0)
+        if spinner is not None:         # ends after the current callback (minutes on old code)
+            spinner.join(timeout=120.0)
         for n in (driver, node):
             if n is not None:
                 n.destroy_node()
