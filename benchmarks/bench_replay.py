@@ -1,6 +1,8 @@
-"""Benchmark of the offline replay: throughput on a generated 1-hour, 100 Hz log.
+"""Benchmark of the offline replay: throughput on a generated 1-hour, 100 Hz log, and peak
+memory against log length.
 
     .venv/bin/python benchmarks/bench_replay.py [--hours H] [--workers N] [--report] [--json OUT.json]
+    .venv/bin/python benchmarks/bench_replay.py --rss [--minutes 10 60] [--rate HZ] [--src DIR]
 
 The log is a seat-adjuster duty cycle (`synthetic_log.DutyCycle`: a 12 s stroke every minute,
 alternating direction, small sensor noise) on /motor_speed, /axial_load (std_msgs/Float64) and
@@ -8,6 +10,12 @@ alternating direction, small sensor noise) on /motor_speed, /axial_load (std_msg
 generated once and cached in the temp directory (`--regenerate` to rebuild). One run of
 `replay.replay` (default parameters and deadbands) is timed; the ratio is log duration / wall
 time. Prints a Markdown table and an environment line. Target: >= 100x real time.
+
+`--rss`: for each log length (default 10 and 60 minutes), one replay with the report (QUICK
+grids) in a fresh child process; its peak resident memory (VmHWM of /proc/self/status, the
+replaying process; the prediction workers' peak from RUSAGE_CHILDREN) is printed. Streaming
+means equal peaks (target: within 20 %). `--src DIR` runs the child with the package from
+another checkout (e.g. `git worktree add /tmp/old f76cdbf`), on the same cached logs.
 """
 
 from __future__ import annotations
@@ -19,6 +27,7 @@ import json
 import os
 import platform
 import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -31,6 +40,24 @@ from leadscrew_ros.replay import ReplaySettings, replay
 from leadscrew_ros.synthetic_log import DutyCycle, write_log
 
 TARGET_X_REAL_TIME = 100.0
+TARGET_RSS_RATIO = 1.2
+# Runs in the child: replay + report, then the peak memory of this process and its workers.
+_CHILD = """
+import json, resource, sys, time
+from pathlib import Path
+from leadscrew_ros.model import SqueakModel
+from leadscrew_ros.replay import ReplaySettings, replay
+from leadscrew_ros.report import QUICK, write_report
+bag, out, workers = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3])
+model, t0 = SqueakModel(), time.perf_counter()
+result = replay(bag, model, out, ReplaySettings(workers=workers, progress=False))
+write_report(result, model, out, QUICK)
+status = dict(line.split(":", 1) for line in open("/proc/self/status"))
+print(json.dumps(dict(
+    peak_mb=int(status["VmHWM"].split()[0]) / 1024, wall_s=time.perf_counter() - t0,
+    workers_peak_mb=resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024,
+    messages=result.messages, predictions=result.predictions)))
+"""
 
 
 def cached_log(cycle: DutyCycle, regenerate: bool) -> tuple[Path, float]:
@@ -91,6 +118,48 @@ def table(res: dict) -> str:
     return f"{head}\n{body}\n\n{envline}"
 
 
+def peak_rss(bag: Path, workers: int, src: str | None) -> dict:
+    """Replay + report of `bag` in a fresh child process: its peak memory and wall time."""
+    env = dict(os.environ)        # the child runs in `out`: `-c` puts its cwd first on the path
+    if src:
+        env["PYTHONPATH"] = str(Path(src).resolve())
+    with tempfile.TemporaryDirectory(prefix="bench_replay_rss_") as out:
+        done = subprocess.run([sys.executable, "-c", _CHILD, str(bag), out, str(workers)],
+                              env=env, cwd=out, capture_output=True, text=True)
+    if done.returncode:
+        raise SystemExit(f"replay of {bag} failed:\n{done.stderr[-3000:]}")
+    return json.loads(done.stdout.splitlines()[-1])
+
+
+def rss_table(rows: list[dict], src: str | None) -> str:
+    lines = ["| log | messages | file size | peak RSS (replaying process) | "
+             "peak RSS (a worker) | wall (replay + report) |", "|---|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r['minutes']:g} min at {r['rate_hz']:g} Hz | {r['messages']:,} | "
+                     f"{r['log_mb']:.0f} MB | {r['peak_mb']:.0f} MB | "
+                     f"{r['workers_peak_mb']:.0f} MB | {r['wall_s']:.0f} s |")
+    ratio = rows[-1]["peak_mb"] / rows[0]["peak_mb"]
+    lines.append(f"\npeak ratio longest / shortest: **{ratio:.2f}** (target ≤ "
+                 f"{TARGET_RSS_RATIO:g}: {'met' if ratio <= TARGET_RSS_RATIO else 'MISSED'}); "
+                 f"package from {src or 'this checkout'}")
+    return "\n".join(lines)
+
+
+def rss_main(args: argparse.Namespace) -> int:
+    rows = []
+    for minutes in args.minutes:
+        cycle = DutyCycle(duration_s=minutes * 60.0, rate_hz=args.rate)
+        bag, _ = cached_log(cycle, args.regenerate)
+        row = dict(minutes=minutes, rate_hz=args.rate, log_mb=size_mb(bag))
+        row.update(peak_rss(bag, args.workers, args.src))
+        rows.append(row)
+        print(f"{minutes:g} min: {row['peak_mb']:.0f} MB", file=sys.stderr, flush=True)
+    print(rss_table(rows, args.src))
+    if args.json:
+        Path(args.json).write_text(json.dumps(dict(env=environment(), rows=rows), indent=1))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, default=1.0, help="log duration (default 1 h)")
@@ -100,7 +169,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--report", action="store_true", help="also time the PNG report")
     ap.add_argument("--regenerate", action="store_true", help="rebuild the cached log")
     ap.add_argument("--json", metavar="OUT.json", help="also write the raw numbers here")
+    ap.add_argument("--rss", action="store_true",
+                    help="peak memory of replay + report vs log length instead")
+    ap.add_argument("--minutes", type=float, nargs="+", default=[10.0, 60.0],
+                    help="log lengths of --rss (default 10 60)")
+    ap.add_argument("--src", metavar="DIR", help="--rss: import leadscrew_ros from this checkout")
     args = ap.parse_args(argv)
+    if args.rss:
+        return rss_main(args)
     cycle = DutyCycle(duration_s=args.hours * 3600.0, rate_hz=args.rate)
     res = dict(env=environment(), hours=args.hours, rate_hz=args.rate, workers=args.workers)
     bag, res["generate_s"] = cached_log(cycle, args.regenerate)

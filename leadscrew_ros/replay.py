@@ -59,6 +59,7 @@ _SEGMENT_MESSAGES = 20_000     # a segment without predictions is written at thi
 # Messages held while their predictions are computed (~250 bytes each): enough to read on
 # through a rest while the workers solve the stroke before it.
 _IN_FLIGHT_MESSAGES = 250_000
+_CHUNK_BYTES = 1 << 20         # annotated MCAP chunk: buffered until this size, then compressed
 EPISODES_KEPT = 1000           # episodes kept in the result (all of them in episodes.json)
 _FREQUENCIES_KEPT = 512        # frequencies per mode and episode kept for its median
 _NAME = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
@@ -239,7 +240,7 @@ class _AnnotatedWriter:
     """Original channels copied as they are, plus the prediction topics under `namespace`."""
 
     def __init__(self, fh: BinaryIO, namespace: str):
-        self.writer = Writer(fh, compression=CompressionType.ZSTD)
+        self.writer = Writer(fh, compression=CompressionType.ZSTD, chunk_size=_CHUNK_BYTES)
         self.writer.start(profile="ros2", library="leadscrew_ros replay")
         self._schemas: dict[tuple[str, str, str], int] = {}
         self._channels: dict[int, tuple[Topic, int]] = {}        # id(topic) -> topic, channel
@@ -342,10 +343,10 @@ class _Episodes:
     """Squeak episodes from the predictions in log order. An episode starts at the first
     prediction with squeak (not stable) and ends at the next recompute that is stable or
     outside validity (motor at rest: no squeak), or at the end of the log. Each ended episode
-    is written to `sink` (a JSON list); the first `keep` stay in `kept`."""
+    is written to `sink` (a JSON list); the first EPISODES_KEPT stay in `kept`."""
 
-    def __init__(self, sink: TextIO, keep: int = EPISODES_KEPT) -> None:
-        self.sink, self.keep = sink, keep
+    def __init__(self, sink: TextIO) -> None:
+        self.sink, self.keep = sink, EPISODES_KEPT
         self.kept: list[Episode] = []
         self.open: Episode | None = None
         self.count, self.time_in_squeak_s = 0, 0.0
@@ -378,7 +379,8 @@ class _Episodes:
             json_safe(e.as_dict()), indent=1, allow_nan=False), " "))
         self.count += 1
         self.time_in_squeak_s += e.end_s - e.start_s
-        if len(self.kept) < self.keep:
+        if len(self.kept) < self.keep:      # with each mode's median only: a few hundred bytes
+            e.frequencies = dict(zip(e.modes, ([hz] for hz in e.frequencies_hz)))
             self.kept.append(e)
 
     def close(self, end_s: float) -> None:
@@ -477,8 +479,7 @@ def _namespaces(source: LogSource, settings: ReplaySettings) -> tuple[str, str]:
     topics are predictor inputs (as `replay --publish` selects them)."""
     ns = settings.namespace
     if ns is None:
-        found = input_namespaces(log_topics(source).values()) if settings.inputs.relative \
-            else []
+        found = input_namespaces(log_topics(source).values(), settings.inputs)
         if len(found) > 1:
             raise LogError(source.path, f"predictor inputs in several namespaces "
                                         f"({', '.join(found)}); choose one with --namespace NS")

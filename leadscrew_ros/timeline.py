@@ -51,17 +51,29 @@ OWN_NAMESPACES = {"squeak", "replay"}
 TOPIC_FIELDS = ("speed_topic", "load_topic", "nut_topic", "joint_states_topic")
 
 
+def matches(topic: Topic, relative: str, type_name: str) -> str | None:
+    """The namespace in which `topic` is the relative input name `relative` ('/' for the
+    root), or None: the root name whatever its type (a wrong type is reported when read),
+    elsewhere only with the input's type, never under the outputs' namespaces."""
+    if topic.name == "/" + relative:
+        return "/"
+    namespace = topic.name[:-len(relative) - 1]
+    if not (topic.name.endswith("/" + relative) and namespace and topic.type_name == type_name):
+        return None
+    return None if OWN_NAMESPACES.intersection(namespace.split("/")) else namespace
+
+
 def is_input(topic: Topic) -> bool:
     """A predictor input: by name, or a topic of the input's type named `.../<input>`."""
-    *namespaces, base = topic.name.split("/")
-    if base not in INPUTS or OWN_NAMESPACES.intersection(namespaces):
-        return False
-    return topic.name == "/" + base or topic.type_name == INPUTS[base]
+    return any(matches(topic, base, type_name) for base, type_name in INPUTS.items())
 
 
-def input_namespaces(topics: Iterable[Topic]) -> list[str]:
-    """The namespaces holding predictor inputs ('/' for the root), sorted."""
-    return sorted({t.name.rsplit("/", 1)[0] or "/" for t in topics if is_input(t)})
+def input_namespaces(topics: Iterable[Topic], settings: InputSettings) -> list[str]:
+    """The namespaces in which some relative input topic of `settings` exists, sorted."""
+    needs = [(getattr(settings, f), type_name) for f, type_name in zip(TOPIC_FIELDS, (
+        FLOAT64, FLOAT64, FLOAT64, JOINT_STATE)) if not getattr(settings, f).startswith("/")]
+    return sorted({ns for t in topics for rel, type_name in needs
+                   if (ns := matches(t, rel, type_name)) is not None})
 
 
 def resolve(name: str, namespace: str) -> str:
@@ -108,11 +120,6 @@ class InputSettings:
     @property
     def topics(self) -> tuple[str, str, str, str]:
         return tuple(getattr(self, f) for f in TOPIC_FIELDS)
-
-    @property
-    def relative(self) -> bool:
-        """Some input topic depends on the namespace."""
-        return not all(t.startswith("/") for t in self.topics)
 
     def resolved(self, namespace: str) -> InputSettings:
         """These settings with every topic name absolute, resolved in `namespace`."""
