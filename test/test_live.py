@@ -15,7 +15,8 @@ from hypothesis import strategies as st
 from leadscrew_ros import live as live_module
 from leadscrew_ros.live import LatestWorker, Level, LivePredictor, LiveSettings, Superseded
 from leadscrew_ros.model import Prediction, SqueakModel
-from leadscrew_ros.model.advice import _BAND_POINTS, _SCAN_BATCH, EDGE_RTOL, band_around, speed_bands
+from leadscrew_ros.model.advice import (_BAND_POINTS, _MAX_REFINE, _SCAN_BATCH, EDGE_RTOL,
+                                         band_around, speed_bands)
 from leadscrew_ros.model.sweep import growth_field
 
 MODEL = SqueakModel()                        # Table 1; unstable band ~0.81..55.2 rad/s at 200 N
@@ -380,7 +381,7 @@ def test_band_search_solves_a_bounded_fraction_of_the_full_search(solves, speed,
     full, solves[0] = solves[0], 0
     band_around(MODEL, LOAD, speed)
     assert solves[0] <= most * full, (solves[0], full)
-    assert solves[0] <= 1 + _BAND_POINTS + _SCAN_BATCH + 2 * 60
+    assert solves[0] <= 1 + _BAND_POINTS + _SCAN_BATCH + 2 * _MAX_REFINE
 
 
 # ----------------------------------------------------------------------------- rate vs cost
