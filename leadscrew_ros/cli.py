@@ -396,9 +396,15 @@ def _parse_remap(items: list[str]) -> dict[str, str]:
     return remap
 
 
+OFFLINE_OPTIONS = ("out", "no_report", "namespace", "out_namespace", "nominal_load_n")
+
+
 def _publish(args: argparse.Namespace) -> int:
-    if args.out is not None or args.no_report:
-        raise CliError("--out and --no-report are for the offline replay, not --publish")
+    given = [o for o in OFFLINE_OPTIONS if getattr(args, o) not in (None, False)]
+    if given:
+        option = {"nominal_load_n": "load"}.get(given[0], given[0])
+        raise CliError(f"--{option.replace('_', '-')} is for the offline replay, not --publish "
+                       f"(the namespace of --publish is --ros-args -r __ns:=NS)")
     from .replay_live import WAIT_FOR_SUBSCRIBER_S, publish_log
     try:
         publish_log(log_files(args.log), rate=1.0 if args.rate is None else args.rate,

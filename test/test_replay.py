@@ -505,7 +505,10 @@ def test_cli_info(bag, capsys):
 @pytest.mark.parametrize("argv, problem", [
     (["--rate", "2"], "--rate needs --publish"),
     (["--loop"], "--loop needs --publish"),
-    (["--publish", "--out", "x"], "--out and --no-report are for the offline replay"),
+    (["--publish", "--out", "x"], "--out is for the offline replay, not --publish"),
+    (["--publish", "--load", "200"], "--load is for the offline replay, not --publish"),
+    (["--publish", "--namespace", "/a"], "--namespace is for the offline replay"),
+    (["--publish", "--out-namespace", "/a"], "--out-namespace is for the offline replay"),
     (["--publish", "--remap", "speed"], "expected OLD:=NEW"),
     (["--speed-deadband", "-1"], "speed_deadband_rad_s must be a finite number >= 0"),
     (["--namespace", "/bad name"], "namespace must be a ROS name"),
