@@ -359,7 +359,8 @@ class LivePredictor:
                 return self._set_advice(safe)
         if key == self._failed or (self._search is not None and self._search[1] == key):
             return                # a search of this bin is under way: re-checked when it ends
-        job = partial(band_around, model, p.load_n, p.speed_rad_s, margin)
+        known = next((b for b in self._bands.get(key, ()) if b.contains(p.speed_rad_s)), None)
+        job = partial(band_around, model, p.load_n, p.speed_rad_s, margin, known=known)
         self._search = (self._worker.submit(lambda checkpoint: job(checkpoint=checkpoint)),
                         key)
 
@@ -379,7 +380,9 @@ class LivePredictor:
         if error is not None:     # keep the last advice; no retry within this bin
             self._failed, self._advice_error = key, f"safe-speed search failed: {error}"
         elif band is not None:    # None: not squeak-free by growth (divergence): speed itself
-            self._bands = {key: ([band] + self._bands.get(key, []))[:_BANDS_KEPT]}
+            others = [b for b in self._bands.get(key, ())      # minus the one it extends
+                      if not band.low_rad_s <= b.low_rad_s <= b.high_rad_s <= band.high_rad_s]
+            self._bands = {key: ([band] + others)[:_BANDS_KEPT]}
             self._advice_error = ""
         return True
 

@@ -63,6 +63,7 @@ _CHUNK_BYTES = 1 << 20         # annotated MCAP chunk: buffered until this size,
 EPISODES_KEPT = 1000           # episodes kept in the result (all of them in episodes.json)
 _FREQUENCIES_KEPT = 512        # frequencies per mode and episode kept for its median
 _NAME = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
+MAX_WORKERS = 64               # prediction processes (each ~170 MB): more only thrash a machine
 
 
 @dataclass(frozen=True)
@@ -77,8 +78,8 @@ class ReplaySettings:
         for what, ns in (("namespace", self.namespace), ("output namespace", self.out_namespace)):
             if ns is not None and ns != "/" and not _NAME.fullmatch(ns):
                 raise ValueError(f"{what} must be a ROS name like /seat_left, got {ns!r}")
-        if self.workers < 0:
-            raise ValueError(f"workers must be >= 0, got {self.workers}")
+        if not 0 <= self.workers <= MAX_WORKERS:
+            raise ValueError(f"workers must be in [0, {MAX_WORKERS}], got {self.workers}")
 
 
 @dataclass

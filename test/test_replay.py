@@ -514,7 +514,8 @@ def test_cli_info(bag, capsys):
     (["--namespace", "/bad name"], "namespace must be a ROS name"),
     (["--out-namespace", "/bad name"], "output namespace must be a ROS name"),
     (["--load", "1e8"], "nominal load 1e+08 N is not a finite number within ±1e+07 N"),
-    (["--workers", "-1"], "workers must be >= 0"),
+    (["--workers", "-1"], "workers must be in [0, 64], got -1"),
+    (["--workers", "100000"], "workers must be in [0, 64], got 100000"),
     (["--load-topic", "motor_speed"], "input topics must be distinct"),
     (["--speed-deadband", "nan"], "is not a finite number"),
 ])

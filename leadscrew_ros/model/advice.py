@@ -92,7 +92,8 @@ class Band:
 
 
 def band_around(model: SqueakModel, load_n: float, speed_rad_s: float, margin: float = 0.05,
-                checkpoint: Callable[[], None] | None = None) -> Band | None:
+                checkpoint: Callable[[], None] | None = None, known: Band | None = None
+                ) -> Band | None:
     """The squeak band containing `speed_rad_s` at this load, searched just far enough that
     `Band.safe_speed` at this speed (and `margin`) is decided; None when the speed is
     squeak-free or outside the model's validity.
@@ -103,7 +104,8 @@ def band_around(model: SqueakModel, load_n: float, speed_rad_s: float, margin: f
     refined to `EDGE_RTOL` with brentq), at invalid ground or the grid end, or as soon as it
     can no longer offer the nearer candidate. At most `_BAND_POINTS + _SCAN_BATCH` scan points
     and 2 refinements. `checkpoint` is called before every eigen-solve; it may raise to abandon
-    the search."""
+    the search. `known`, a band found earlier that contains the speed, is extended rather than
+    searched again (a speed jittering inside a band then settles after a few searches)."""
     sign, w = math.copysign(1.0, speed_rad_s), abs(speed_rad_s)
     lowest, highest = _grid_ends(model)
     step = (highest / lowest) ** (1 / (_BAND_POINTS - 1))
@@ -113,9 +115,12 @@ def band_around(model: SqueakModel, load_n: float, speed_rad_s: float, margin: f
             checkpoint()
         return growth_field(model, sign * np.asarray(x, float), load_n).max_growth_rate
 
-    if not growth(w) > 0:                             # NaN (invalid) compares False too
+    if known is not None and known.contains(w):
+        band = known
+    elif not growth(w) > 0:                           # NaN (invalid) compares False too
         return None
-    band = Band(w, w, "unknown", "unknown")
+    else:
+        band = Band(w, w, "unknown", "unknown")
     while True:
         best, sides = band._options(w, lowest, highest, margin)
         if not sides:
