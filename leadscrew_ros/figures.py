@@ -12,26 +12,29 @@ from collections import Counter
 from dataclasses import dataclass, field
 from functools import cached_property, partial
 from pathlib import Path
-from typing import Callable, NamedTuple, Sequence
+from typing import TYPE_CHECKING, Callable, NamedTuple, Sequence
 
-import matplotlib
+import numpy as np
+from scipy.optimize import linear_sum_assignment
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.colors import ListedColormap, TwoSlopeNorm  # noqa: E402
-from matplotlib.patches import Patch  # noqa: E402
-from scipy.optimize import linear_sum_assignment  # noqa: E402
+from .model.friction import friction_coefficient, sliding_speed
+from .model.parameters import ScrewParameters, field_info
+from .model.predictor import Prediction, SqueakModel
+from .model.sweep import (REFERENCE_SPEED_RAD_S, MapResult, SweepResult, Work,
+                          _native, map_work, stability_map, sweep, sweep_work)
+from .progress import progress_bar
 
-from .model.friction import friction_coefficient, sliding_speed  # noqa: E402
-from .model.parameters import ScrewParameters, field_info  # noqa: E402
-from .model.predictor import Prediction, SqueakModel  # noqa: E402
-from .model.sweep import (REFERENCE_SPEED_RAD_S, MapResult, SweepResult, Work,  # noqa: E402
-                          map_work, stability_map, sweep, sweep_work)
-from .progress import progress_bar  # noqa: E402
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.colors import Colormap
+    from matplotlib.figure import Figure
+
+# matplotlib is imported where a figure is drawn, never at import: importing this module
+# (e.g. `map --json`) neither loads matplotlib nor selects a backend. Figures are made with
+# matplotlib.figure.Figure, which renders PNGs without pyplot or any GUI backend.
 
 GROWTH_LABEL = r"growth rate Re($\lambda$) [1/s]"
-Overlay = Callable[[plt.Axes], list]     # draws on a finished plot, returns legend handles
+Overlay = Callable[["Axes"], list]     # draws on a finished plot, returns legend handles
 
 
 class Display(NamedTuple):
@@ -91,19 +94,23 @@ def _scale_axis(ax, which: str, values: np.ndarray) -> None:
         getattr(ax, f"set_{which}scale")("log")
 
 
-def _stability_cmap() -> ListedColormap:
+def stability_cmap() -> "Colormap":
     """Blues below zero, reds above, with a visible step at zero (the stability boundary)."""
-    return ListedColormap(np.vstack([plt.get_cmap("Blues_r")(np.linspace(0.0, 0.7, 128)),
-                                     plt.get_cmap("Reds")(np.linspace(0.3, 1.0, 128))]),
+    from matplotlib import colormaps
+    from matplotlib.colors import ListedColormap
+    return ListedColormap(np.vstack([colormaps["Blues_r"](np.linspace(0.0, 0.7, 128)),
+                                     colormaps["Reds"](np.linspace(0.3, 1.0, 128))]),
                           name="stability")
 
 
-STABILITY_CMAP = _stability_cmap()
+def new_figure(**kwargs) -> "Figure":
+    """A figure that is not registered with pyplot (no backend, nothing to close)."""
+    from matplotlib.figure import Figure
+    return Figure(**kwargs)
 
 
-def _save(fig, path: Path, dpi: int) -> None:
+def _save(fig: "Figure", path: Path, dpi: int) -> None:
     fig.savefig(path, dpi=dpi)
-    plt.close(fig)
 
 
 # --------------------------------------------------------------------------- mode tracking
@@ -126,6 +133,21 @@ class Branch:
     @property
     def typical_frequency_hz(self) -> float:
         return float(np.nanmedian(self.frequency_hz))
+
+    @property
+    def squeaks(self) -> np.ndarray:
+        """Where the branch is unstable (Re > 0)."""
+        return np.nan_to_num(self.growth, nan=-1.0) > 0
+
+    @property
+    def squeak_frequency_hz(self) -> float:
+        """Median frequency where the branch is unstable; NaN if it never is."""
+        return float(np.median(self.frequency_hz[self.squeaks])) if self.squeaks.any() else math.nan
+
+    @property
+    def squeak_text(self) -> str:
+        """'B1y 224 Hz': the one wording of a squeak mode in plots and summaries."""
+        return f"{self.label} {self.squeak_frequency_hz:.0f} Hz"
 
 
 def _eigenvalues(p: Prediction) -> np.ndarray:
@@ -166,7 +188,8 @@ def plot_sweep(result: SweepResult, path: Path, title: str = "", top: int = 6,
     x = result.values * k
     branches = sorted(sorted(track_modes(result.predictions), key=lambda b: -b.peak_growth)[:top],
                       key=lambda b: b.typical_frequency_hz)
-    fig, ax = plt.subplots(figsize=(7.5, 4.8), constrained_layout=True)
+    fig = new_figure(figsize=(7.5, 4.8), layout="constrained")
+    ax = fig.subplots()
     ax.plot(x, result.max_growth_rate, color="0.75", lw=5, label=r"largest Re($\lambda$)")
     for b in branches:
         ax.plot(x, b.growth, lw=1.4, label=f"{b.label} ({b.typical_frequency_hz:.4g} Hz)")
@@ -193,19 +216,23 @@ def plot_map(result: MapResult, path: Path, title: str = "", dpi: int = 120,
     """Filled contour of the largest growth rate (red: squeak, blue: stable), the zero contour,
     the root-refined boundary points, and hatching where the model is not valid; `overlay`
     draws more (in display units) and returns its legend handles."""
+    from matplotlib.colors import TwoSlopeNorm
+    from matplotlib.patches import Patch
     kx, ky = axis_display(result.x_axis).factor, axis_display(result.y_axis).factor
     x, y, g = result.x * kx, result.y * ky, np.ma.masked_invalid(result.field.max_growth_rate)
-    fig, ax = plt.subplots(figsize=(7, 5.2), constrained_layout=True)
+    cmap = stability_cmap()
+    fig = new_figure(figsize=(7, 5.2), layout="constrained")
+    ax = fig.subplots()
     if g.count():
         lo, hi = min(float(g.min()), -1e-6), max(float(g.max()), 1e-6)
         levels = np.concatenate([np.linspace(lo, 0, 12)[:-1], np.linspace(0, hi, 16)])
-        cs = ax.contourf(x, y, g, levels=levels, cmap=STABILITY_CMAP,
+        cs = ax.contourf(x, y, g, levels=levels, cmap=cmap,
                          norm=TwoSlopeNorm(0, lo, hi))
         fig.colorbar(cs, ax=ax, label=r"largest growth rate Re($\lambda$) [1/s]")
         if lo < 0 < hi and g.count() > 3:
             ax.contour(x, y, g, levels=[0.0], colors="k", linewidths=1.2)
-    handles = [Patch(facecolor=STABILITY_CMAP(0.8), label="unstable (squeak)"),
-               Patch(facecolor=STABILITY_CMAP(0.2), label="stable")]
+    handles = [Patch(facecolor=cmap(0.8), label="unstable (squeak)"),
+               Patch(facecolor=cmap(0.2), label="stable")]
     invalid = ~result.field.valid
     if invalid.any():
         ax.contourf(x, y, invalid.astype(float), levels=[0.5, 1.5], colors="none",
@@ -243,16 +270,18 @@ def plot_frequencies(result: SweepResult, path: Path, title: str = "", dpi: int 
                      overlay: Overlay | None = None) -> None:
     """Frequency of every oscillatory mode along the axis: thin line, thick where Re > 0;
     `overlay` draws more (in display units) and returns its legend handles."""
+    from matplotlib.lines import Line2D
     k = axis_display(result.axis).factor
     x = result.values * k
-    fig, ax = plt.subplots(figsize=(7.5, 5.2), constrained_layout=True)
+    fig = new_figure(figsize=(7.5, 5.2), layout="constrained")
+    ax = fig.subplots()
     for b in track_modes(result.predictions):
         ax.plot(x, b.frequency_hz, color="0.25", lw=0.8)
-        squeak = np.where(b.growth > 0, b.frequency_hz, np.nan)
-        if np.isfinite(squeak).any():
+        squeak = np.where(b.squeaks, b.frequency_hz, np.nan)
+        if b.squeaks.any():
             ax.plot(x, squeak, color="tab:red", lw=4, solid_capstyle="butt")
-            i = int(np.nanargmax(np.where(b.growth > 0, b.growth, np.nan)))
-            ax.annotate(f"{b.label} {squeak[i]:.0f} Hz", (x[i], squeak[i]),
+            i = int(np.nanargmax(np.where(b.squeaks, b.growth, np.nan)))
+            ax.annotate(b.squeak_text, (x[i], squeak[i]),
                         xytext=(4, 6), textcoords="offset points", color="tab:red",
                         fontsize=9, fontweight="bold")
     _scale_axis(ax, "x", result.values)
@@ -261,66 +290,166 @@ def plot_frequencies(result: SweepResult, path: Path, title: str = "", dpi: int 
     ax.set_ylabel("frequency Im($\\lambda$)/2$\\pi$ [Hz]")
     ax.set_title(title or "Mode frequencies; thick: Re($\\lambda$) > 0 (squeak)")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(handles=[plt.Line2D([], [], color="0.25", lw=0.8, label=r"Re($\lambda$) $\leq$ 0"),
-                       plt.Line2D([], [], color="tab:red", lw=4,
-                                  label=r"Re($\lambda$) > 0 (squeak)")]
+    ax.legend(handles=[Line2D([], [], color="0.25", lw=0.8, label=r"Re($\lambda$) $\leq$ 0"),
+                       Line2D([], [], color="tab:red", lw=4,
+                              label=r"Re($\lambda$) > 0 (squeak)")]
               + (overlay(ax) if overlay is not None else []), fontsize=8)
     _save(fig, path, dpi)
 
 
 # --------------------------------------------------------------------------- data summaries
-def _envelope(values: np.ndarray, growth: np.ndarray, roots: list[float]) -> tuple[float, float]:
-    """Lowest and highest value of the unstable part of one grid line: refined roots, plus grid
-    points that are unstable at the grid edge or next to an invalid point. NaN if stable."""
-    unstable = np.nan_to_num(growth, nan=-1.0) > 0
-    if not unstable.any():
-        return math.nan, math.nan
-    ok = np.concatenate([[False], np.isfinite(growth), [False]])
-    ends = list(roots) + values[unstable & ~(ok[:-2] & ok[2:])].tolist()
-    return min(ends), max(ends)
+BOUNDARY, VALIDITY, GRID = "boundary", "validity", "grid"
 
 
-def envelopes(result: MapResult, along: str) -> np.ndarray:
-    """(n, 2): lowest and highest unstable value along `along` ('x' or 'y') on each grid line
-    across it (each column for 'y', each row for 'x'); NaN where the line is stable."""
+@dataclass(frozen=True)
+class Limit:
+    """Where the model's validity ends along an axis (NaN: not known, e.g. a load axis)."""
+
+    value: float = math.nan
+    name: str = ""
+
+
+@dataclass(frozen=True)
+class Edge:
+    """One end of a squeak band on a grid line. BOUNDARY: a root refined between a stable and
+    an unstable valid grid point; VALIDITY: the last unstable grid point before the model stops
+    being valid (`limit` says where it stops; the band may reach it); GRID: the unstable end of
+    the grid (squeak may continue beyond it)."""
+
+    value: float
+    kind: str
+    limit: Limit = Limit()
+
+    def text(self, axis: str, upper: bool) -> str:
+        value = fmt(axis, self.value)
+        if self.kind == BOUNDARY:
+            return value
+        if self.kind == GRID:
+            return f"{'>=' if upper else '<='} {value} (grid edge)"
+        where = (f"; validity ends at {self.limit.name} {fmt(axis, self.limit.value)}"
+                 if math.isfinite(self.limit.value) else "")
+        return f"{value} ({'last' if upper else 'first'} valid grid point{where})"
+
+
+Band = tuple[Edge, Edge]
+
+
+def band_text(axis: str, band: Band) -> str:
+    """'1.8-423 rad/s', or with the kind of each end that is not a refined boundary."""
+    lo, hi = band
+    if lo.kind == hi.kind == BOUNDARY:
+        return f"{fmt(axis, lo.value).split()[0]}-{fmt(axis, hi.value)}"
+    return f"{lo.text(axis, False)} to {hi.text(axis, True)}"
+
+
+def line_bands(values: np.ndarray, growth: np.ndarray, roots: Sequence[float],
+               limits: Callable[[], tuple[Limit, Limit]] = lambda: (Limit(), Limit())
+               ) -> list[Band]:
+    """Every squeak band of one grid line (growth NaN where the model is not valid), in order.
+    `roots` are the refined sign changes on the line; `limits()` gives the lower and upper
+    validity limits along the axis (called only when a band ends at an invalid point or at
+    a grid end: a grid end at or beyond a limit is a VALIDITY edge)."""
+    unstable, valid, n = np.nan_to_num(growth, nan=-1.0) > 0, np.isfinite(growth), len(values)
+    known: list[tuple[Limit, Limit]] = []
+
+    def limit(upper: bool) -> Limit:
+        if not known:
+            known.append(limits())
+        return known[0][upper]
+
+    def edge(i: int, upper: bool) -> Edge:
+        j, v = i + (1 if upper else -1), float(values[i])
+        if 0 <= j < n and valid[j]:
+            a, b = sorted((float(values[j]), v))
+            return Edge(next(r for r in roots if a <= r <= b), BOUNDARY)
+        lim = limit(upper)
+        beyond = 0 <= j < n or (v >= lim.value if upper else v <= lim.value)
+        return Edge(v, VALIDITY, lim) if beyond else Edge(v, GRID)
+
+    bands, i = [], 0
+    while i < n:
+        if unstable[i]:
+            k = i
+            while k + 1 < n and unstable[k + 1]:
+                k += 1
+            bands.append((edge(i, False), edge(k, True)))
+            i = k
+        i += 1
+    return bands
+
+
+def _speed_limits(params: ScrewParameters, axis: str, value: float) -> tuple[Limit, Limit]:
+    """min_speed_rad_s and the first critical speed of the model at `axis` = `value`."""
+    name = "axial_load_n" if axis == "load_n" else axis
+    model = SqueakModel(params.with_(**{name: _native(name, value)}))
+    return (Limit(params.min_speed_rad_s, "min_speed_rad_s"),
+            Limit(model.critical_speed_rad_s, "the first critical speed"))
+
+
+def map_bands(result: MapResult, along: str, params: ScrewParameters) -> list[list[Band]]:
+    """The squeak bands along `along` ('x' or 'y') on each grid line across it (each column
+    for 'y', each row for 'x'); validity limits are known along a speed axis."""
     g, pts = result.field.max_growth_rate, result.boundary
-    if along == "y":
-        rows = [_envelope(result.y, g[:, i], [r for xv, r in pts if xv == v])
-                for i, v in enumerate(result.x.tolist())]
-    else:
-        rows = [_envelope(result.x, g[j], [r for r, yv in pts if yv == v])
-                for j, v in enumerate(result.y.tolist())]
-    return np.array(rows, float).reshape(-1, 2)
+    axis, values, across, lines = ((result.y_axis, result.y, result.x_axis, g.T) if along == "y"
+                                   else (result.x_axis, result.x, result.y_axis, g))
+    out = []
+    for k, v in enumerate((result.x if along == "y" else result.y).tolist()):
+        roots = [p[1] if along == "y" else p[0] for p in pts if p[0 if along == "y" else 1] == v]
+        limits = ((lambda v=v: _speed_limits(params, across, v)) if axis == "speed_rad_s"
+                  else (lambda: (Limit(), Limit())))
+        out.append(line_bands(values, lines[k], roots, limits))
+    return out
 
 
-def _bound_text(axis: str, v: float, grid_end: float) -> str:
-    if not math.isfinite(v):
-        return "none (no squeak)"
-    return (">= " if v >= grid_end else "") + fmt(axis, v)
+def _bound(bands: list[Band], upper: bool) -> Edge | None:
+    """The highest (upper) or lowest end of all the bands of a line; None if it is stable."""
+    return (bands[-1][1] if upper else bands[0][0]) if bands else None
 
 
-def _trend(what: str, bound: np.ndarray, bound_axis: str, grid_end: float,
-           x_axis: str, x: np.ndarray) -> str:
+def _bound_text(axis: str, edge: Edge | None, upper: bool) -> str:
+    return "none (no squeak)" if edge is None else edge.text(axis, upper)
+
+
+def _bands_text(axis: str, bands: list[Band]) -> str:
+    return " and ".join(band_text(axis, b) for b in bands) or "no squeak"
+
+
+def _trend(what: str, bands: list[list[Band]], upper: bool, axis: str, x_axis: str,
+           x: np.ndarray) -> str:
     """'<what> falls from A at R = 2 mm to B at R = 10 mm'."""
-    a, b = bound[0], bound[-1]
-    verb = "goes" if not np.isfinite([a, b]).all() else (
-        "falls" if a > b else "rises" if a < b else "stays")
-    return (f"{what} {verb} from {_bound_text(bound_axis, a, grid_end)} at {at(x_axis, x[0])} "
-            f"to {_bound_text(bound_axis, b, grid_end)} at {at(x_axis, x[-1])}")
+    a, b = _bound(bands[0], upper), _bound(bands[-1], upper)
+    verb = "goes" if a is None or b is None else (
+        "falls" if a.value > b.value else "rises" if a.value < b.value else "stays")
+    return (f"{what} {verb} from {_bound_text(axis, a, upper)} at {at(x_axis, x[0])} "
+            f"to {_bound_text(axis, b, upper)} at {at(x_axis, x[-1])}")
 
 
-def _extreme(what: str, bound: np.ndarray, bound_axis: str, grid_end: float,
-             x_axis: str, x: np.ndarray, largest: bool, params: ScrewParameters) -> str:
+def _extreme(what: str, bands: list[list[Band]], upper: bool, largest: bool, axis: str,
+             x_axis: str, x: np.ndarray, params: ScrewParameters) -> str:
     """'<what> is largest, A, at R = 2 mm' (with the nut centre for a nut-location axis)."""
-    if not np.isfinite(bound).any():
+    ends = np.array([math.nan if e is None else e.value
+                     for e in (_bound(b, upper) for b in bands)])
+    if not np.isfinite(ends).any():
         return f"{what}: none on the grid (no squeak)"
-    i = int(np.nanargmax(bound) if largest else np.nanargmin(bound))
+    i = int(np.nanargmax(ends) if largest else np.nanargmin(ends))
     note = ""
     if x_axis == "nut_position_m":
         note = (f" (nut centre z_o + b/2 = {fmt(x_axis, x[i] + params.nut_length_m / 2)}; "
                 f"screw centre L/2 = {fmt(x_axis, params.length_m / 2)})")
     return (f"{what} is {'largest' if largest else 'smallest'}, "
-            f"{_bound_text(bound_axis, bound[i], grid_end)}, at {at(x_axis, x[i])}{note}")
+            f"{_bound_text(axis, _bound(bands[i], upper), upper)}, at {at(x_axis, x[i])}{note}")
+
+
+def _ends(bands: list[list[Band]], axis: str, x_axis: str, x: np.ndarray) -> str:
+    """Every band at both ends of the grid."""
+    return (f"squeak bands at {at(x_axis, x[0])}: {_bands_text(axis, bands[0])}; "
+            f"at {at(x_axis, x[-1])}: {_bands_text(axis, bands[-1])}")
+
+
+def _several(bands: list[list[Band]], axis: str, x_axis: str, x: np.ndarray) -> str:
+    """Every band of every line that has more than one."""
+    lines = [f"{at(x_axis, v)} ({_bands_text(axis, b)})" for v, b in zip(x, bands) if len(b) > 1]
+    return ("more than one band at " + ", ".join(lines)) if lines else "one band at most per line"
 
 
 def _peak(result: MapResult) -> str:
@@ -334,43 +463,43 @@ def _peak(result: MapResult) -> str:
             f"(growth {g[j, i]:.1f} 1/s)")
 
 
-def _nominal(result: MapResult, env: np.ndarray, params: ScrewParameters) -> str:
-    """The unstable y-range on the grid column nearest the nominal parameter value."""
+def _nominal(result: MapResult, bands: list[list[Band]], params: ScrewParameters) -> str:
+    """Every squeak band on the grid column nearest the nominal parameter value."""
     nominal = getattr(params, "axial_load_n" if result.x_axis == "load_n" else result.x_axis)
     i = int(np.argmin(np.abs(result.x - nominal)))
-    lo, hi = env[i]
-    span = "no squeak" if math.isnan(lo) else (
-        f"squeak for {_bound_text(result.y_axis, lo, math.inf)} to "
-        f"{_bound_text(result.y_axis, hi, float(result.y[-1]))}")
-    return f"nearest the nominal value, at {at(result.x_axis, result.x[i])}: {span}"
+    return (f"nearest the nominal value, at {at(result.x_axis, result.x[i])}: "
+            f"{_bands_text(result.y_axis, bands[i])}")
 
 
 def describe_speed_map(result: MapResult, params: ScrewParameters) -> str:
-    """Figs. 6-8: the unstable speed band for each parameter value (columns)."""
-    env, top = envelopes(result, "y"), float(result.y[-1])
-    args = ("speed_rad_s", top, result.x_axis, result.x)
-    return (f"{_trend('upper speed bound of squeak', env[:, 1], *args)}; "
-            f"{_trend('lower speed bound', env[:, 0], *args)}; "
-            f"{_extreme('upper speed bound', env[:, 1], *args, True, params)}; "
-            f"{_nominal(result, env, params)}; {_peak(result)}.")
+    """Figs. 6-8: every unstable speed band for each parameter value (columns)."""
+    bands = map_bands(result, "y", params)
+    args = ("speed_rad_s", result.x_axis, result.x)
+    return (f"{_ends(bands, *args)}; "
+            f"{_trend('upper speed bound of squeak', bands, True, *args)}; "
+            f"{_trend('lower speed bound', bands, False, *args)}; "
+            f"{_extreme('upper speed bound', bands, True, True, *args, params)}; "
+            f"{_several(bands, *args)}; "
+            f"{_nominal(result, bands, params)}; {_peak(result)}.")
 
 
 def describe_load_speed_map(result: MapResult, params: ScrewParameters) -> str:
     """Fig. 7: also the load below which no speed squeaks (rows)."""
-    low = envelopes(result, "x")[:, 0]
-    lowest = _extreme("lowest unstable load", low, "load_n", math.inf, "speed_rad_s", result.y,
-                      False, params)
+    rows = map_bands(result, "x", params)
+    lowest = _extreme("lowest unstable load", rows, False, False, "load_n", "speed_rad_s",
+                      result.y, params)
     return f"{describe_speed_map(result, params)} Lower load bound of squeak: {lowest}."
 
 
 def describe_load_map(result: MapResult, params: ScrewParameters) -> str:
     """Figs. 9-10: the lowest unstable load for each parameter value at a fixed speed."""
-    env = envelopes(result, "y")
-    args = ("load_n", float(result.y[-1]), result.x_axis, result.x)
+    bands = map_bands(result, "y", params)
+    args = ("load_n", result.x_axis, result.x)
     return (f"at {_fixed_text(result.fixed)}: "
-            f"{_trend('lowest unstable load', env[:, 0], *args)}; "
-            f"{_extreme('lowest unstable load', env[:, 0], *args, False, params)}; "
-            f"{_nominal(result, env, params)}; {_peak(result)}.")
+            f"{_trend('lowest unstable load', bands, False, *args)}; "
+            f"{_extreme('lowest unstable load', bands, False, False, *args, params)}; "
+            f"{_several(bands, *args)}; "
+            f"{_nominal(result, bands, params)}; {_peak(result)}.")
 
 
 def describe_speed_sweep(result: SweepResult) -> str:
@@ -379,12 +508,7 @@ def describe_speed_sweep(result: SweepResult) -> str:
     if not np.isfinite(g).any():
         return "no valid point in the sweep."
     bands = ", ".join(f"{lo:.3g}-{hi:.3g} rad/s" for lo, hi in result.unstable_bands) or "none"
-    freqs: dict[str, list[float]] = {}
-    for p in result.predictions:
-        for m in p.squeak_modes:
-            freqs.setdefault(m.label, []).append(m.frequency_hz)
-    modes = ", ".join(f"{lab} {np.median(f):.0f} Hz" for lab, f in
-                      sorted(freqs.items(), key=lambda kv: np.median(kv[1]))) or "none"
+    modes = ", ".join(b.squeak_text for b in squeak_branches(result)) or "none"
     i = int(np.nanargmax(g))
     return (f"unstable band {bands} (refined boundaries; stable elsewhere on "
             f"{fmt('speed_rad_s', result.values[0])}-{fmt('speed_rad_s', result.values[-1])}); "
@@ -394,16 +518,17 @@ def describe_speed_sweep(result: SweepResult) -> str:
 
 def describe_frequencies(result: SweepResult) -> str:
     """Fig. 11: which mode frequencies are thick (Re > 0) and over which speeds."""
-    branches = track_modes(result.predictions)
-    parts = []
-    for b in sorted(branches, key=lambda b: b.typical_frequency_hz):
-        unstable = b.growth > 0
-        if unstable.any():
-            v = result.values[unstable]
-            parts.append(f"{b.label} at {np.median(b.frequency_hz[unstable]):.0f} Hz for "
-                         f"{v.min():.3g}-{fmt('speed_rad_s', v.max())}")
+    branches, squeak = track_modes(result.predictions), squeak_branches(result)
+    parts = [f"{b.squeak_text} for {result.values[b.squeaks].min():.3g}-"
+             f"{fmt('speed_rad_s', result.values[b.squeaks].max())}" for b in squeak]
     return (f"thick (squeak) lines: {'; '.join(parts) or 'none'}; all other "
             f"{len(branches) - len(parts)} traced mode branches stay at Re <= 0.")
+
+
+def squeak_branches(result: SweepResult) -> list[Branch]:
+    """The traced branches that are unstable somewhere, by squeak frequency."""
+    return sorted((b for b in track_modes(result.predictions) if b.squeaks.any()),
+                  key=lambda b: b.squeak_frequency_hz)
 
 
 def describe_friction(p: ScrewParameters, v: np.ndarray, mu: np.ndarray) -> str:
@@ -513,7 +638,8 @@ class FigureSet:
         p = self.model.params
         v = np.linspace(0.0, float(sliding_speed(p, SWEEP_SPEEDS_RAD_S[1])), 400)
         mu = friction_coefficient(p, v)
-        fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
+        fig = new_figure(figsize=(7, 4.5), layout="constrained")
+        ax = fig.subplots()
         ax.plot(v, mu, lw=2, label=r"$\mu = \mu_k + (\mu_s - \mu_k)\,e^{-d|V_c|}$ (12)")
         for value, name in ((p.mu_static, r"$\mu_s$"), (p.mu_kinetic, r"$\mu_k$")):
             ax.axhline(value, color="0.5", ls=":", lw=1)

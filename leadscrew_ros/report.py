@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .figures import plot_frequencies, plot_map, plt
+from .figures import new_figure, plot_frequencies, plot_map
 from .model import SqueakModel
 from .model.sweep import stability_map, sweep
 from .replay import ReplayResult
@@ -70,8 +70,8 @@ def plot_timeline(result: ReplayResult, path: Path, grids: ReportGrids) -> None:
     panels = [(0, "speed [rad/s]", 1.0), (1, "axial load [N]", 1.0)]
     if tl.nut_measured:
         panels.append((2, "nut position [mm]", 1e3))
-    fig, axes = plt.subplots(len(panels) + 1, 1, figsize=(10, 2.1 * (len(panels) + 1) + 0.2),
-                             sharex=True, constrained_layout=True)
+    fig = new_figure(figsize=(10, 2.1 * (len(panels) + 1) + 0.2), layout="constrained")
+    axes = fig.subplots(len(panels) + 1, 1, sharex=True)
     for ax, (k, label, factor) in zip(axes, panels):
         ax.fill_between(t, lo[:, k] * factor, hi[:, k] * factor, step="mid", color="tab:blue",
                         edgecolor="tab:blue", lw=0.7)
@@ -100,7 +100,6 @@ def plot_timeline(result: ReplayResult, path: Path, grids: ReportGrids) -> None:
     axes[0].set_title(f"Replay of {result.log.name}: {result.episode_count} squeak episodes "
                       f"(shaded), {result.time_in_squeak_s:.1f} s in squeak{nut}", fontsize=10)
     fig.savefig(path, dpi=grids.dpi)
-    plt.close(fig)
 
 
 def nut_bands(nuts: np.ndarray) -> np.ndarray:
