@@ -521,8 +521,8 @@ def describe_frequencies(result: SweepResult) -> str:
     branches, squeak = track_modes(result.predictions), squeak_branches(result)
     parts = [f"{b.squeak_text} for {result.values[b.squeaks].min():.3g}-"
              f"{fmt('speed_rad_s', result.values[b.squeaks].max())}" for b in squeak]
-    return (f"thick (squeak) lines: {'; '.join(parts) or 'none'}; all other "
-            f"{len(branches) - len(parts)} traced mode branches stay at Re <= 0.")
+    return (f"thick (squeak) lines (unstable sweep grid points): {'; '.join(parts) or 'none'}; "
+            f"all other {len(branches) - len(parts)} traced mode branches stay at Re <= 0.")
 
 
 def squeak_branches(result: SweepResult) -> list[Branch]:
