@@ -75,3 +75,8 @@ def test_lowest_unstable_load_against_nut_position(models):
     assert (np.diff(consistent)[z[1:] > 0.09] < 0).all()
     # paper: squeak is easiest with the nut near the centre
     assert 0.10 <= z[np.argmin(paper)] <= 0.14 and paper.min() < paper[0] / 5
+
+
+def test_readme_carries_the_tool_row(models):
+    readme = (Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
+    assert band_table.table_row(models) in readme.splitlines()
