@@ -2,8 +2,10 @@
 and sensor_msgs/JointState (XCDR1 as Fast CDR and rosbags write it, either byte order).
 
 Log data is untrusted, so every length and count is checked against the payload before it is
-used and any malformation raises ValueError. (rclpy's `deserialize_message` is not used on log
-data: on corrupt bytes it leaves rcutils error state behind.) Bytes after the last field are
+used and any malformation raises ValueError. (The offline replay never hands log data to
+rclpy's `deserialize_message`, which leaves rcutils error state behind on corrupt bytes;
+`replay --publish` does, once per payload in its up-front check, and never sends a payload that
+fails it.) Bytes after the last field are
 ignored: Fast CDR may pad a payload.
 """
 

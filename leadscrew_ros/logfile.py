@@ -32,8 +32,8 @@ from mcap.writer import CompressionType, Writer
 from .bagmeta import METADATA, BagStats, FileStats, TopicStats
 
 MAGIC = b"\x89MCAP0\r\n"
-OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_DATA_END = (
-    0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x0F)
+OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = (
+    0x01, 0x02, 0x03, 0x04, 0x05, 0x06)
 _FOOTER_LEN = 20                      # summary_start u64, summary_offset_start u64, crc u32
 _MAX_INFLATION = 1000                 # a larger uncompressed/compressed ratio means corruption
 _RECORD = struct.Struct("<BQ")

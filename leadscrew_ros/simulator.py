@@ -34,8 +34,9 @@ from std_msgs.msg import Float64
 from .model import ScrewParameters, SqueakModel
 from .ros_env import StopSignals, close, confine_to_localhost, init_context
 
-# Phases as fractions of the stroke duration: rest, ramp up, hold, ramp down, rest.
-REST_START, RAMP, HOLD, REST_END = 0.05, 0.36, 0.08, 0.15
+# Phases as fractions of the stroke duration: rest, ramp up, hold, ramp down (RAMP again), and
+# rest for the remaining 0.15.
+REST_START, RAMP, HOLD = 0.05, 0.36, 0.08
 SPRING_SHARE = 0.8           # share of the load range that follows the travel (the rest: occupant)
 NODE_NAME = "actuator_simulator"
 MAX_RATE_HZ = 10_000.0

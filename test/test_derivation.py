@@ -1,5 +1,5 @@
 """The `consistent` kernels equal the symbolic linearisation of tools/derive_consistent.py, and
-the printed appendix (`paper`) differs from it exactly where README and NOTES.md say."""
+the printed appendix (`paper`) differs from it exactly where the README (Two formulations) says."""
 
 import importlib.util
 import math
@@ -75,7 +75,7 @@ def test_paper_kernels_differ_from_first_principles_only_in_w3_and_w5qdot():
     sb2 = math.sin(beta) ** 2
     s, c = np.sin(theta), np.cos(theta)
     X, Y, T = 0, 1, 2
-    # W3: [y y] lost sin^2(theta), [0 0] lost R^2, [x y] and [y x] differ (NOTES.md).
+    # W3: [y y] lost sin^2(theta), [0 0] lost R^2, [x y] and [y x] differ (README, Two formulations).
     np.testing.assert_allclose(consistent["W3"][Y, Y] - paper["W3"][Y, Y], s ** 2, atol=1e-15)
     np.testing.assert_allclose(paper["W3"][T, T] / consistent["W3"][T, T], 1 / R ** 2)
     assert not np.allclose(paper["W3"][X, Y], consistent["W3"][X, Y])
@@ -86,4 +86,5 @@ def test_paper_kernels_differ_from_first_principles_only_in_w3_and_w5qdot():
         np.testing.assert_allclose(paper["W5qdot"][a, b], -consistent["W5qdot"][a, b], atol=1e-15)
     for a, b in ((Y, Y), (X, Y), (X, T), (Y, T), (T, Y), (T, T)):
         np.testing.assert_allclose(paper["W5qdot"][a, b], consistent["W5qdot"][a, b], atol=1e-15)
-    assert sb2 > 0
+    # the printed W3 [y y] keeps only the thread's share, cos^2(theta) sin^2(beta)
+    np.testing.assert_allclose(paper["W3"][Y, Y], c ** 2 * sb2, atol=1e-15)

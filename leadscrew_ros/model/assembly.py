@@ -20,7 +20,7 @@ from .parameters import ScrewParameters
 
 
 def gyroscopic_unit(basis: ModalBasis) -> np.ndarray:
-    """G / Omega (A.2): rho * integral over the section of r dr dtheta = rho A (reading 5), so
+    """G / Omega (A.2): rho * integral over the section of r dr dtheta = rho A (the section integral of (A.2) is the area), so
     with mass-normalised shapes G couples B_nx and B_ny by -+2 Omega."""
     same_order = basis.order[:, None] == basis.order[None, :]
     xy = (basis.kind[:, None] == KIND_X) & (basis.kind[None, :] == KIND_Y) & same_order

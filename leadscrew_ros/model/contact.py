@@ -3,7 +3,7 @@
 The nut touches the screw along the helix z = R tan(beta) theta, theta in
 [alpha_o, alpha_o + alpha] (A.9); over ~22 turns the integrands oscillate, so the integrals use
 composite Gauss-Legendre quadrature with a fixed number of nodes per turn (its convergence is
-tested in test/test_contact.py).
+tested in test/test_model_contact.py).
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ def sliding_speed(p: ScrewParameters, speed_rad_s):
 
 
 def mu_o(p: ScrewParameters, speed_rad_s):
-    """Friction coefficient at the steady sliding speed (A.10, NOTES.md reading 4)."""
+    """Friction coefficient at the steady sliding speed (A.10, at |Vc| = R |Omega| / cos(beta); README "Physics")."""
     return friction_coefficient(p, sliding_speed(p, speed_rad_s))
 
 

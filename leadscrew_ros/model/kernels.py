@@ -32,7 +32,6 @@ from .friction import gamma, mu_o
 from .modes import KIND_T, KIND_X, KIND_Y
 from .parameters import ScrewParameters
 
-MATRICES = ("W1", "W2", "W3", "W4", "W5q", "W5qdot")
 X, Y, T = KIND_X, KIND_Y, KIND_T
 
 
@@ -44,7 +43,7 @@ def _blocks(n: int, entries: dict[tuple[int, int], np.ndarray]) -> np.ndarray:
 
 
 def paper_kernels(theta: np.ndarray, beta: float, radius_m: float) -> dict[str, np.ndarray]:
-    """Appendix A as printed (NOTES.md readings 2-3), each (3, 3, len(theta))."""
+    """Appendix A as printed ((A.3)-(A.8), the second "W5q" read as the matrix of qdot; README "Two formulations"), each (3, 3, len(theta))."""
     s, c, n = np.sin(theta), np.cos(theta), len(theta)
     sb2, cb2, R = np.sin(beta) ** 2, np.cos(beta) ** 2, radius_m
     return {

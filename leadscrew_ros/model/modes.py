@@ -1,5 +1,5 @@
 """Modal basis of the uncoupled screw: mass-normalised bending (hinged-hinged, x and y) and
-torsion (clamped-free) modes, eqs. (21)-(26) with the amplitudes of NOTES.md reading 1."""
+torsion (clamped-free) modes, eqs. (21)-(26) mass-normalised against the energies (15)-(17)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ from .parameters import ScrewParameters
 
 # Mode kinds, used to pick the block [Phi_i^a Phi_j^b] a kernel entry belongs to.
 KIND_X, KIND_Y, KIND_T = 0, 1, 2
-KIND_NAMES = ("x", "y", "0")
 
 
 @dataclass(frozen=True)

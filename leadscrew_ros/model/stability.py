@@ -1,4 +1,4 @@
-"""Eigen-analysis of (27): squeak (flutter) modes, divergence, labels (NOTES.md reading 6)."""
+"""Eigen-analysis of (27): squeak (flutter) modes, divergence, labels (README "Sign conventions, validity, risk")."""
 
 from __future__ import annotations
 
