@@ -1,4 +1,4 @@
-"""The paper's claims (its abstract, Sections 4-5 and Figs. 5-11), each its own test of the `paper` formulation at Table 1."""
+"""The paper's claims (the trends it reports), each its own test of the `paper` formulation at Table 1."""
 
 import numpy as np
 import pytest
