@@ -577,7 +577,7 @@ class MapSpec:
 
 def _nut_range(p: ScrewParameters) -> tuple[float, float]:
     """z_o from 0 to L - b (the nut stays on the screw)."""
-    return 0.0, p.length_m - p.nut_length_m
+    return 0.0, p.nut_travel_m
 
 
 def _radius_range(p: ScrewParameters) -> tuple[float, float]:

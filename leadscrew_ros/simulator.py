@@ -61,8 +61,8 @@ class StrokeProfile:
     load_min_n: float = 120.0
     load_max_n: float = 350.0
     start_nut_position_m: float = 0.02
-    lead_m_per_rad: float = _DEFAULTS.radius_m * math.tan(_DEFAULTS.helix_angle_rad)
-    max_nut_position_m: float = _DEFAULTS.length_m - _DEFAULTS.nut_length_m       # L - b
+    lead_m_per_rad: float = _DEFAULTS.lead_per_rad_m
+    max_nut_position_m: float = _DEFAULTS.nut_travel_m
     # Screw angle 0 <-> this nut position (the node's `nut_position_at_zero_angle_m` default),
     # so that joint_states and nut_position describe the same nut.
     nut_position_at_zero_angle_m: float = 0.15
@@ -70,8 +70,8 @@ class StrokeProfile:
     @classmethod
     def for_params(cls, params: ScrewParameters, **changes) -> "StrokeProfile":
         """A profile for this screw: lead R tan(beta) and travel limit L - b from `params`."""
-        return cls(lead_m_per_rad=params.radius_m * math.tan(params.helix_angle_rad),
-                   max_nut_position_m=params.length_m - params.nut_length_m, **changes)
+        return cls(lead_m_per_rad=params.lead_per_rad_m,
+                   max_nut_position_m=params.nut_travel_m, **changes)
 
     def __post_init__(self) -> None:
         for name in ("duration_s", "peak_speed_rad_s", "lead_m_per_rad"):

@@ -85,3 +85,16 @@ def test_state_matrix_is_eq_27_in_first_order_form():
     batch = m.geometry.state_matrices(np.array([20.0, 5.0]), np.array([200.0, 80.0]))
     np.testing.assert_allclose(batch[0], A, rtol=1e-12, atol=1e-9)
     np.testing.assert_allclose(batch[1], m.state_matrix(5.0, 80.0), rtol=1e-12, atol=1e-9)
+
+
+def test_lead_and_travel_are_the_helix_and_the_screw_less_the_nut():
+    """The derived quantities every layer uses: the helix advances 2 pi R tan(beta) per turn,
+    so the contact spans alpha = b / (R tan(beta)) rad from alpha_o = z_o / (R tan(beta));
+    the nut can travel to L - b."""
+    p = ScrewParameters(radius_m=0.006, helix_angle_rad=0.1, nut_position_m=0.05,
+                        nut_length_m=0.04, length_m=0.25)
+    assert p.lead_per_rad_m == pytest.approx(0.006 * math.tan(0.1), rel=1e-15)
+    assert p.nut_travel_m == pytest.approx(0.21, rel=1e-15)
+    alpha_o, alpha = contact_angles(p)
+    assert alpha_o * p.lead_per_rad_m == pytest.approx(0.05, rel=1e-14)
+    assert alpha * p.lead_per_rad_m == pytest.approx(0.04, rel=1e-14)

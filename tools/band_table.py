@@ -109,7 +109,7 @@ def nut_trend(model: SqueakModel, points: int = NUT_POINTS) -> str:
     """The lowest unstable load against z_o: its ends, its smallest value and every interior
     local minimum (a nut position where squeak is easier than on both sides)."""
     p = model.params
-    z = np.linspace(0.0, p.length_m - p.nut_length_m, points)
+    z = np.linspace(0.0, p.nut_travel_m, points)
     load = lowest_unstable_load(model, z)
     step = np.diff(load)
     shape = ("falls monotonically" if (step < 0).all() else

@@ -31,8 +31,7 @@ class ContactIntegrals:
 
 def contact_angles(p: ScrewParameters) -> tuple[float, float]:
     """(alpha_o, alpha): helix angles of the nut start and the contact length (A.9)."""
-    lead_per_rad = p.radius_m * math.tan(p.helix_angle_rad)
-    return p.nut_position_m / lead_per_rad, p.nut_length_m / lead_per_rad
+    return p.nut_position_m / p.lead_per_rad_m, p.nut_length_m / p.lead_per_rad_m
 
 
 def helix_quadrature(start: float, span: float, nodes_per_turn: int) -> tuple[np.ndarray, np.ndarray]:
@@ -66,6 +65,5 @@ def contact_integrals(p: ScrewParameters, basis: ModalBasis,
     alpha_o, alpha = contact_angles(p)
     theta, weights = helix_quadrature(alpha_o, alpha, nodes_per_turn or p.quadrature_nodes_per_turn)
     kernels = KERNELS[p.formulation](theta, p.helix_angle_rad, p.radius_m)
-    unit = integrate_kernels(basis, kernels, theta, weights,
-                             p.radius_m * math.tan(p.helix_angle_rad))
+    unit = integrate_kernels(basis, kernels, theta, weights, p.lead_per_rad_m)
     return ContactIntegrals(alpha_o=alpha_o, alpha=alpha, theta=theta, weights=weights, unit=unit)

@@ -76,6 +76,17 @@ class ScrewParameters:
     def n_modes(self) -> int:
         return 2 * self.n_bending + self.n_torsion
 
+    @property
+    def lead_per_rad_m(self) -> float:
+        """Axial advance of the contact helix per radian of screw angle, R tan(beta) [m/rad]
+        (z = R tan(beta) theta, (A.9))."""
+        return self.radius_m * math.tan(self.helix_angle_rad)
+
+    @property
+    def nut_travel_m(self) -> float:
+        """Largest nut position z_o with the nut on the screw, L - b [m]."""
+        return self.length_m - self.nut_length_m
+
     def with_(self, **changes: Any) -> "ScrewParameters":
         """Copy with some fields changed (validated)."""
         unknown = set(changes) - set(field_names())
@@ -155,7 +166,7 @@ def validate(p: ScrewParameters) -> None:
     if p.mu_kinetic > p.mu_static:
         raise ParameterError(f"mu_kinetic = {exact(p.mu_kinetic)} exceeds mu_static = "
                              f"{exact(p.mu_static)}: need mu_static >= mu_kinetic >= 0")
-    turns = p.nut_length_m / (2 * math.pi * p.radius_m * math.tan(p.helix_angle_rad))
+    turns = p.nut_length_m / (2 * math.pi * p.lead_per_rad_m)
     if turns > MAX_CONTACT_TURNS:
         raise ParameterError(
             f"the nut spans {turns:.3g} thread turns (nut_length_m / lead); at most "
