@@ -26,7 +26,10 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from std_msgs.msg import Bool, Float64, Float64MultiArray
 
+from .live import (KEY_RECOMPUTES, KEY_SPEED, KEY_SQUEAK_FREQUENCIES, KEY_VALID, KEY_VALIDITY,
+                   Level)
 from .logfile import LogError, inspect, log_files
+from .model import Validity
 from .node import LATCHED, SqueakPredictorNode
 from .recorder import Recorder
 from .ros_env import StopSignals, close, confine_to_localhost, init_context
@@ -52,7 +55,8 @@ class SqueakRecord:
     squeak_modes: list[tuple[str, float]] = field(default_factory=list)   # latest, (label, Hz)
     safe_speed: float | None = None
     valid: bool = False                            # latest diagnostics: a prediction holds
-    message: str = ""
+    level: Level = Level.STALE                     # latest diagnostics: the verdict
+    validity: Validity | None = None               # latest diagnostics: at the latest point
     recomputes: str = ""
     squeak_time_s: float = 0.0
     squeak_since: float | None = None              # monotonic time squeak started
@@ -114,13 +118,14 @@ class SqueakMonitor(Node):
             return
         status, r = msg.status[0], self.record
         values = {kv.key: kv.value for kv in status.values}
-        r.valid, r.message = values.get("valid") == "true", status.message
-        r.recomputes = values.get("recomputes", r.recomputes)
-        squeak = r.valid and bool(values.get("squeak_frequencies_hz"))
+        r.valid, r.level = values.get(KEY_VALID) == "true", Level(status.level[0])
+        r.validity = Validity.__members__.get(values.get(KEY_VALIDITY, ""))
+        r.recomputes = values.get(KEY_RECOMPUTES, r.recomputes)
+        squeak = r.valid and bool(values.get(KEY_SQUEAK_FREQUENCIES))
         self.set_squeak(squeak, time.monotonic())
         if squeak:
             try:
-                w = abs(float(values["speed_rad_s"]))
+                w = abs(float(values[KEY_SPEED]))
             except (KeyError, ValueError):
                 return
             r.speed_range = [min(r.speed_range[0], w), max(r.speed_range[1], w)] \
@@ -143,7 +148,7 @@ def status_line(t: float, s: ActuatorState | None, r: SqueakRecord) -> str:
     head = (f"t {t:5.1f} s {s.speed_rad_s:6.1f} rad/s {s.load_n:4.0f} N nut "
             f"{s.nut_position_m:.3f} m" if s else f"t {t:5.1f} s  waiting for the predictor")
     if not r.valid or r.risk is None:
-        why = _short(r.message) if not r.valid and r.message else ""
+        why = _why_not(r) if not r.valid else ""
         return f"{head} | no prediction" + (f" ({why})" if why else " yet")
     safe = "" if r.safe_speed is None else f" safe {r.safe_speed:5.1f} rad/s"
     line = f"{head} | {'SQUEAK' if r.active else 'ok':<6} risk {r.risk:.2f}{safe}"
@@ -155,15 +160,15 @@ def status_line(t: float, s: ActuatorState | None, r: SqueakRecord) -> str:
     return line
 
 
-def _short(message: str) -> str:
-    """The predictor's diagnostic message, shortened for the status line."""
-    if "below min_speed" in message:
-        return "too slow for the sliding model"
-    if message.startswith("waiting for the first prediction"):
-        return ""
-    if message.startswith("no fresh input"):
+def _why_not(r: SqueakRecord) -> str:
+    """Why the latest diagnostics give no prediction, in a few words ('' before the first)."""
+    if r.validity not in (None, Validity.OK):
+        return r.validity.label
+    if r.level == Level.ERROR:
+        return "invalid input"
+    if r.level == Level.STALE and r.risk is not None:
         return "waiting for inputs"
-    return message.removeprefix("no prediction: ").split(":")[0][:60]
+    return ""
 
 
 def _recorded(recorder: Recorder, sim: ActuatorSimulator) -> bool:

@@ -28,7 +28,7 @@ from typing import Callable
 
 from threadpoolctl import threadpool_limits
 
-from .model import OperatingPointError, ParameterError, Prediction, SqueakModel
+from .model import OperatingPointError, ParameterError, Prediction, SqueakModel, Validity
 from .model.advice import Band, band_around
 from .model.predictor import check_operating_point
 
@@ -37,6 +37,21 @@ _LOAD_BIN = 0.05          # relative load bin of the cached squeak bands (safe-s
 _NUT_BIN_M = 0.005        # nut position bin of the cached squeak bands
 _BANDS_KEPT = 4           # bands kept for the current bin (speeds moving around within it)
 _MAX_DUTY_RATIO = 2.0     # recomputes start at least this many prediction times apart
+
+# Key names of the squeak-prediction diagnostic status (`LivePredictor.status`).
+KEY_SPEED = "speed_rad_s"
+KEY_LOAD = "load_n"
+KEY_NUT_POSITION = "nut_position_m"
+KEY_FORMULATION = "formulation"
+KEY_VALID = "valid"                      # "true" when the latest point has a prediction
+KEY_VALIDITY = "validity"                # Validity name of the latest point ('' before one)
+KEY_RISK = "risk"
+KEY_MAX_GROWTH_RATE = "max_growth_rate_1_s"
+KEY_SQUEAK_FREQUENCIES = "squeak_frequencies_hz"
+KEY_SAFE_SPEED = "safe_speed_rad_s"
+KEY_SAFE_SPEED_PENDING = "safe_speed_pending"
+KEY_SAFE_SPEED_ERROR = "safe_speed_error"
+KEY_RECOMPUTES = "recomputes"
 
 
 class Level(IntEnum):
@@ -216,7 +231,8 @@ class LivePredictor:
         self._cost_s = 0.0                             # how long the last prediction took
         self._input_errors: dict[str, str] = {}        # input -> why its latest value was
                                                        # rejected, until a good one arrives
-        self._validity = ""                            # why the latest point has no prediction
+        self._validity: Validity | None = None         # verdict at the latest point
+        self._invalid_reason = ""                      # why it has no prediction
         self._bands: dict[tuple, list[Band]] = {}       # one bin: bands found in it
         self._advised: tuple[SqueakModel, Prediction] | None = None  # what advice is for
         self._search: tuple[int, tuple] | None = None   # background request: id, bin key
@@ -314,7 +330,7 @@ class LivePredictor:
         start = self._clock()
         p = model.predict(speed, load)
         self._cost_s = self._clock() - start
-        self._validity = p.reason
+        self._validity, self._invalid_reason = p.validity, p.reason
         if not p.valid:
             return None
         self.prediction = p
@@ -329,7 +345,8 @@ class LivePredictor:
         try:                            # geometry is cached: a revisited position is free
             self._nut_model = self.model.with_params(nut_position_m=nut)
         except ParameterError as exc:
-            self._validity = f"nut position {nut:g} m: {exc}"
+            self._validity = Validity.PARAMETERS_REJECTED
+            self._invalid_reason = f"nut position {nut:g} m: {exc}"
             return None
         return self._nut_model
 
@@ -416,20 +433,22 @@ class LivePredictor:
     # ---------------------------------------------------------------- verdict
     def status(self, now: float) -> Status:
         i, s, p = self.inputs, self.settings, self.prediction
+        valid = p is not None and self._validity in (None, Validity.OK)
         values = {
-            "speed_rad_s": _fmt(i.speed_rad_s), "load_n": _fmt(i.load_n),
-            "nut_position_m": _fmt(self.model.params.nut_position_m if i.nut_position_m is None
+            KEY_SPEED: _fmt(i.speed_rad_s), KEY_LOAD: _fmt(i.load_n),
+            KEY_NUT_POSITION: _fmt(self.model.params.nut_position_m if i.nut_position_m is None
                                    else i.nut_position_m),
-            "formulation": self.model.params.formulation,
-            "valid": str(p is not None and not self._validity).lower(),
-            "risk": _fmt(p.risk if p else None),
-            "max_growth_rate_1_s": _fmt(p.max_growth_rate if p else None),
-            "squeak_frequencies_hz": ", ".join(f"{f:.1f}" for f in p.unstable_frequencies_hz)
+            KEY_FORMULATION: self.model.params.formulation,
+            KEY_VALID: str(valid).lower(),
+            KEY_VALIDITY: "" if self._validity is None else self._validity.name,
+            KEY_RISK: _fmt(p.risk if p else None),
+            KEY_MAX_GROWTH_RATE: _fmt(p.max_growth_rate if p else None),
+            KEY_SQUEAK_FREQUENCIES: ", ".join(f"{f:.1f}" for f in p.unstable_frequencies_hz)
             if p else "",
-            "safe_speed_rad_s": _fmt(self.safe_speed_rad_s),
-            "safe_speed_pending": str(self.advice_pending).lower(),
-            "safe_speed_error": self._advice_error,
-            "recomputes": str(self.recomputes),
+            KEY_SAFE_SPEED: _fmt(self.safe_speed_rad_s),
+            KEY_SAFE_SPEED_PENDING: str(self.advice_pending).lower(),
+            KEY_SAFE_SPEED_ERROR: self._advice_error,
+            KEY_RECOMPUTES: str(self.recomputes),
         }
         if self._input_errors:
             errors = "; ".join(self._input_errors.values())
@@ -439,8 +458,8 @@ class LivePredictor:
         if stale:
             return Status(Level.STALE, f"no fresh input on {', '.join(stale)} for more than "
                                        f"{s.stale_timeout_s:g} s", values)
-        if self._validity:
-            return Status(Level.WARN, f"no prediction: {self._validity}", values)
+        if self._validity not in (None, Validity.OK):
+            return Status(Level.WARN, f"no prediction: {self._invalid_reason}", values)
         if p is None:
             return Status(Level.STALE, "waiting for the first prediction", values)
         if not p.stable:

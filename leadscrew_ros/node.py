@@ -8,8 +8,9 @@ Records inputs and outputs to MCAP (`record.*` parameters, std_srvs/SetBool `~/r
 inputs from subscriptions of their own that never wait for the model, with every lost message
 counted (`leadscrew_ros.input_recording`); on start, reports (or recovers) its own bags cut off
 by an earlier crash. `squeak_node --help` lists the parameters and topics.
-The physics lives in `leadscrew_ros.model`, the recompute policy in `leadscrew_ros.live`, the
-recording in `leadscrew_ros.recorder`.
+The physics lives in `leadscrew_ros.model`, the recompute policy and the prediction verdict in
+`leadscrew_ros.live`, the recording in `leadscrew_ros.recorder`, the /diagnostics updater and the
+recording verdict in `leadscrew_ros.diagnostics`.
 """
 
 from __future__ import annotations
@@ -24,7 +25,6 @@ from dataclasses import fields
 from pathlib import Path
 
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 from rclpy.exceptions import ParameterException
@@ -41,8 +41,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import SetBool
 
+from .diagnostics import PREDICTION_TASK, RECORDING_TASK, Updater, recording_status, status_task
 from .input_recording import InputRecording
-from .live import Level, LivePredictor, LiveSettings, Status
+from .live import Level, LivePredictor, LiveSettings
 from .logfile import RECOVER_HINT, LogError, cut_off_bags, recover_bag
 from .model import ParameterError, Prediction, ScrewParameters, SqueakModel
 from .model.display import exact
@@ -146,8 +147,7 @@ class SqueakPredictorNode(Node):
                                  clock=self._now_ns)
         self._input_recording: InputRecording | None = None
         self.latched: dict[str, object] = {}          # topic -> last message published on it
-        self._published: tuple | None = None          # verdict of the last /diagnostics
-        self._last_diagnostics = -math.inf
+        self._diagnosed: tuple | None = None          # verdict of the last forced /diagnostics
 
         depth = self.get_parameter("input_queue_depth").value
         sensor = QoSProfile(depth=depth, reliability=qos_profile_sensor_data.reliability,
@@ -177,7 +177,14 @@ class SqueakPredictorNode(Node):
         self.active_pub = publisher(Bool, "squeak/active")
         self.modes_pub = publisher(Float64MultiArray, "squeak/modes")
         self.safe_speed_pub = publisher(Float64, "squeak/safe_speed")
-        self.diagnostics_pub = publisher(DiagnosticArray, "/diagnostics")
+        self.diagnostics = Updater(
+            self, LATCHED, self.get_parameter("diagnostics_period_s").value,
+            self.get_parameter("hardware_id").value,
+            publish=lambda pub, msg: self._publish(pub, msg), event_callbacks=pub_events)
+        self._status = self.live.status(time.monotonic())   # what the prediction task says
+        self.diagnostics.add(PREDICTION_TASK, status_task(lambda: self._status))
+        self.diagnostics.add(RECORDING_TASK, lambda stat: recording_status(
+            stat, self.recorder, self._crash_recovery))
 
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -197,7 +204,7 @@ class SqueakPredictorNode(Node):
             self._set_recording(True)
             if not self.recorder.active:      # the parameter says what happens: not recording
                 self.set_parameters([Parameter("record.enabled", value=False)])
-        self._publish_diagnostics(time.monotonic())
+        self._diagnose(time.monotonic(), periodic=True)
 
     def destroy_node(self) -> None:
         self.live.close()                     # the background safe-speed search ends too
@@ -253,6 +260,8 @@ class SqueakPredictorNode(Node):
                 self.destroy_timer(self._rate_timer)
                 self._rate_timer = self._create_rate_timer()
             self._recompute(time.monotonic())
+        if "diagnostics_period_s" in names:
+            self.diagnostics.period_s = self.get_parameter("diagnostics_period_s").value
         if any(n.startswith(RECORD_PREFIX) for n in names):
             settings = self._record_settings({})
             if settings != self.recorder.settings:      # takes effect with a new bag
@@ -355,25 +364,26 @@ class SqueakPredictorNode(Node):
         now = time.monotonic()
         if self.live.poll_advice():          # a background safe-speed search has finished
             self._publish_safe_speed()
-        status = self.live.status(now)
-        if (now - self._last_diagnostics >= self.get_parameter("diagnostics_period_s").value
-                or self._verdict(status) != self._published):  # e.g. bad input, input went stale
-            self._publish_diagnostics(now, status)
+        self._diagnose(now, periodic=True)        # e.g. bad input, input went stale
 
-    def _verdict(self, status: Status) -> tuple:
-        """What /diagnostics says: republished when it changes."""
-        return (status.level, status.message, self.recorder.active, self.recorder.error,
-                self.recorder.lost > 0, self._crash_recovery.state)
+    def _diagnose(self, now: float, periodic: bool) -> None:
+        """/diagnostics at once when the verdict changed, else (`periodic`) on its period."""
+        self._status = self.live.status(now)
+        verdict = (self._status.level, self._status.message, self.recorder.active,
+                   self.recorder.error, self.recorder.lost > 0, self._crash_recovery.state)
+        if verdict != self._diagnosed:
+            self.diagnostics.force_update()
+            self._diagnosed = verdict
+        elif periodic:
+            self.diagnostics.update()
 
     def _recompute(self, now: float) -> None:
         p = self.live.update(now)
-        status = self.live.status(now)
-        if p is None:                        # outside validity: keep the last good outputs
-            self.get_logger().warning(status.message, throttle_duration_sec=2.0)
-        else:
+        if p is not None:                    # else outside validity: keep the last outputs
             self._publish_prediction(p)
-        if self._verdict(status) != self._published:  # else the housekeeping period covers it
-            self._publish_diagnostics(now, status)
+        self._diagnose(now, periodic=False)  # else the housekeeping period covers it
+        if p is None:
+            self.get_logger().warning(self._status.message, throttle_duration_sec=2.0)
 
     def _publish_prediction(self, p: Prediction) -> None:
         self._publish(self.risk_pub, Float64(data=float(p.risk)))
@@ -386,48 +396,6 @@ class SqueakPredictorNode(Node):
     def _publish_safe_speed(self) -> None:
         if self.live.safe_speed_rad_s is not None:
             self._publish(self.safe_speed_pub, Float64(data=float(self.live.safe_speed_rad_s)))
-
-    def _publish_diagnostics(self, now: float, status: Status | None = None) -> None:
-        status = self.live.status(now) if status is None else status
-        msg = DiagnosticArray()
-        msg.header.stamp = self.get_clock().now().to_msg()
-        hardware_id = self.get_parameter("hardware_id").value
-        msg.status = [DiagnosticStatus(
-            level=bytes([int(status.level)]),
-            name=f"{self.get_fully_qualified_name()}: squeak prediction",
-            message=status.message, hardware_id=hardware_id,
-            values=[KeyValue(key=k, value=v) for k, v in status.values.items()]),
-            self._recording_status(hardware_id)]
-        self._publish(self.diagnostics_pub, msg)
-        self._published, self._last_diagnostics = self._verdict(status), now
-
-    def _recording_status(self, hardware_id: str) -> DiagnosticStatus:
-        """ERROR when recording failed, WARN when input messages were lost or bags of an
-        earlier run are cut off, else OK; the counts as key-values."""
-        r, crash = self.recorder, self._crash_recovery
-        if r.error:
-            level, parts = Level.ERROR, [r.error]
-        elif r.active:
-            level, parts = Level.OK, [f"recording to {r.path}"]
-        else:
-            level, parts = Level.OK, ["not recording"]
-        values = {"bag": str(r.bag or ""), "files": str(len(r.files)),
-                  "messages": str(r.messages), "lost": str(r.lost)}
-        losses = {t: loss for t, loss in list(r.losses.items()) if loss.lost}
-        for topic, loss in r.losses.items():
-            values[f"lost {topic}"] = str(loss.lost)
-        if losses:
-            level = max(level, Level.WARN)
-            parts.append(f"{r.lost} input message(s) lost before recording (" + ", ".join(
-                f"{t} {loss.lost}" for t, loss in losses.items()) + ")")
-        if crash.message:
-            level = max(level, crash.level)
-            parts.append(crash.message)
-            values["cut_off_bags"] = " ".join(str(b) for b in crash.pending)
-        return DiagnosticStatus(level=bytes([int(level)]),
-                                name=f"{self.get_fully_qualified_name()}: recording",
-                                message="; ".join(parts), hardware_id=hardware_id,
-                                values=[KeyValue(key=k, value=v) for k, v in values.items()])
 
 
 class CrashRecovery:

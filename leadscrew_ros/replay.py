@@ -44,7 +44,6 @@ from .jsonsafe import json_safe
 from .logfile import LogError, LogMessage, Topic
 from .logsource import LogSource, log_topics, open_log
 from .model import Prediction, SqueakModel
-from .model.predictor import SELF_LOCKING, SUPERCRITICAL, TOO_SLOW
 from .node import frequencies_message, modes_message
 from .progress import progress_bar
 from .serialization import cdr_payload
@@ -162,7 +161,7 @@ class ReplayResult:
     inputs: Counter                   # input messages per topic
     recomputes: int                   # operating points that moved beyond the deadbands
     predictions: int                  # recomputes with a prediction (valid points)
-    no_prediction: Counter            # recomputes outside validity, by reason
+    no_prediction: Counter            # recomputes outside validity, by Validity.label
     rejected: Counter                 # input values not taken, by reason
     ignored: Counter                  # joint_states messages without the joint
     episodes: list[Episode]           # the first EPISODES_KEPT
@@ -412,7 +411,7 @@ class _Run:
     def __init__(self, model: SqueakModel, inputs: InputSettings, workers: int,
                  out: _AnnotatedWriter, episodes: TextIO,
                  progress: Callable[[int], None] | None):
-        self.model, self.out, self.progress = model, out, progress
+        self.out, self.progress = out, progress
         self.timeline = Timeline(model.params, inputs)
         self.solver = _Solver(model, workers)
         self.plot, self.episodes = PlotData(), _Episodes(episodes)
@@ -467,7 +466,7 @@ class _Run:
                     self.out.prediction(job.log_time_ns, p)
                     self.predictions += 1
                 else:
-                    self.no_prediction[_short_reason(self.model, p)] += 1
+                    self.no_prediction[p.validity.label] += 1
                 self.plot.add(t, job, p)
                 self.episodes.add(t, p)
                 job, p = next(jobs, (None, None))
@@ -543,16 +542,6 @@ def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
     (out_dir / "summary.txt").write_text(result.summary_text() + "\n", encoding="utf-8")
     result.outputs = [annotated, episodes, out_dir / "summary.json", out_dir / "summary.txt"]
     return result
-
-
-def _short_reason(model: SqueakModel, p: Prediction) -> str:
-    """Why a recompute has no prediction, without the numbers (a counter key)."""
-    return _VALIDITY.get(int(model.validity_code(p.speed_rad_s, p.load_n)), p.reason)
-
-
-_VALIDITY = {TOO_SLOW: "speed below min_speed_rad_s",
-             SUPERCRITICAL: "speed at or above the first critical speed",
-             SELF_LOCKING: "overhauling load on a self-locking thread"}
 
 
 def _check_inputs(log: Path, timeline: Timeline, counts: dict[str, int]) -> None:

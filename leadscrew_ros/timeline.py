@@ -35,7 +35,7 @@ from .cdr import decode_float64, decode_joint_state
 from .decimation import Envelope
 from .live import LiveSettings, moved
 from .logfile import LogMessage, Topic
-from .model import ParameterError, Prediction, ScrewParameters, SqueakModel
+from .model import ParameterError, Prediction, ScrewParameters, SqueakModel, Validity
 from .model.display import exact
 from .model.parameters import field_info
 
@@ -329,7 +329,8 @@ def predict_jobs(params: ScrewParameters, speeds: np.ndarray, loads: np.ndarray,
         idx = np.flatnonzero(inverse == k)
         model = _model_at(params, nut)
         if model is None:
-            preds = [Prediction(float(speeds[i]), float(loads[i]), params.formulation, False,
+            preds = [Prediction(float(speeds[i]), float(loads[i]), params.formulation,
+                                Validity.PARAMETERS_REJECTED,
                                 f"nut position {exact(nut)} m is not allowed by the parameters")
                      for i in idx]
         else:

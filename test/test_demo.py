@@ -22,7 +22,11 @@ from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64
 
+from leadscrew_ros.demo import SqueakMonitor, status_line
+from leadscrew_ros.diagnostics import DiagnosticStatusWrapper, status_task
+from leadscrew_ros.live import KEY_VALIDITY, LivePredictor
 from leadscrew_ros.logfile import inspect, log_files, read_log
+from leadscrew_ros.model import SqueakModel, Validity
 from leadscrew_ros.recorder import LOST_BY_TOPIC_KEY
 from leadscrew_ros.node import LATCHED
 
@@ -234,3 +238,29 @@ def test_simulate_drives_a_separately_started_node(tmp_path):
     assert min(probe.risks) < 0.5, probe.risks                   # and not at the peak
     assert node_code == 0, (node_out, node_err)
     assert "Traceback" not in node_err
+
+
+@pytest.mark.parametrize("speed, words", [(0.1, "speed below min_speed_rad_s"),
+                                          (5000.0, "speed at or above the first critical")])
+def test_the_monitor_takes_validity_from_its_key_not_from_the_message(speed, words):
+    """The status line says why there is no prediction from the validity key of /diagnostics;
+    the wording of the status message plays no part."""
+    lp = LivePredictor(SqueakModel())
+    lp.set_speed(speed, 0.0)
+    lp.set_load(200.0, 0.0)
+    lp.update(0.0)
+    stat = status_task(lambda: lp.status(0.0))(DiagnosticStatusWrapper())
+    assert stat.values[KEY_VALIDITY] != Validity.OK.name
+    stat.message = "no prediction: reworded"
+    ctx = Context()
+    rclpy.init(context=ctx)
+    try:
+        monitor = SqueakMonitor(context=ctx)
+        monitor._on_diagnostics(DiagnosticArray(status=[stat.to_msg()]))
+        r = monitor.record
+        assert not r.valid and r.validity is Validity[stat.values[KEY_VALIDITY]]
+        assert r.validity.label.startswith(words)
+        assert status_line(1.0, None, r).endswith(f"| no prediction ({r.validity.label})")
+        monitor.destroy_node()
+    finally:
+        rclpy.shutdown(context=ctx)

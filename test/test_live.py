@@ -13,8 +13,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from leadscrew_ros import live as live_module
-from leadscrew_ros.live import LatestWorker, Level, LivePredictor, LiveSettings, Superseded
-from leadscrew_ros.model import Prediction, SqueakModel
+from leadscrew_ros.live import (KEY_NUT_POSITION, KEY_RISK, KEY_SAFE_SPEED_ERROR,
+                                KEY_SAFE_SPEED_PENDING, KEY_SQUEAK_FREQUENCIES, KEY_VALID,
+                                KEY_VALIDITY, LatestWorker, Level, LivePredictor, LiveSettings,
+                                Superseded)
+from leadscrew_ros.model import Prediction, SqueakModel, Validity
 from leadscrew_ros.model.advice import (_BAND_POINTS, _MAX_REFINE, _SCAN_BATCH, EDGE_RTOL,
                                          band_around, speed_bands)
 from leadscrew_ros.model.sweep import growth_field
@@ -182,10 +185,11 @@ def test_an_input_error_lasts_until_that_input_is_good_again():
 
 
 # ----------------------------------------------------------------------------- validity
-@pytest.mark.parametrize("speed, words", [(0.1, "below min_speed_rad_s"),
-                                          (-0.1, "below min_speed_rad_s"),
-                                          (5000.0, "critical speed")])
-def test_outside_validity_keeps_the_last_good_prediction(speed, words):
+@pytest.mark.parametrize("speed, words, validity", [
+    (0.1, "below min_speed_rad_s", Validity.BELOW_MIN_SPEED),
+    (-0.1, "below min_speed_rad_s", Validity.BELOW_MIN_SPEED),
+    (5000.0, "critical speed", Validity.AT_CRITICAL_SPEED)])
+def test_outside_validity_keeps_the_last_good_prediction(speed, words, validity):
     lp = at(SQUEAK)
     good, safe = lp.prediction, lp.safe_speed_rad_s
     lp.set_speed(speed, 1.0)
@@ -196,7 +200,7 @@ def test_outside_validity_keeps_the_last_good_prediction(speed, words):
     assert status.level == Level.WARN
     assert status.message.startswith("no prediction: outside the model's validity")
     assert words in status.message
-    assert status.values["valid"] == "false"
+    assert status.values[KEY_VALID] == "false" and status.values[KEY_VALIDITY] == validity.name
     assert not lp.due(1.5)                     # no retry until the point moves
     lp.set_speed(STABLE, 2.0)                  # back inside: a new prediction, verdict OK
     lp.set_load(LOAD, 2.0)
@@ -226,8 +230,9 @@ def test_squeak_is_error():
     status = lp.status(0.0)
     assert status.level == Level.ERROR
     assert status.message == "squeak predicted: B1y 224 Hz, B2y 898 Hz"
-    assert status.values["risk"] == "1" and status.values["valid"] == "true"
-    assert status.values["squeak_frequencies_hz"] == "224.3, 897.9"
+    assert status.values[KEY_RISK] == "1" and status.values[KEY_VALID] == "true"
+    assert status.values[KEY_VALIDITY] == Validity.OK.name
+    assert status.values[KEY_SQUEAK_FREQUENCIES] == "224.3, 897.9"
 
 
 def test_stable_but_risk_above_threshold_is_warn():
@@ -260,7 +265,7 @@ def test_nut_movement_beyond_the_deadband_changes_the_prediction():
     assert near_end.max_growth_rate == pytest.approx(expected[0.02], rel=1e-9)
     assert middle.max_growth_rate == pytest.approx(expected[0.12], rel=1e-9)
     assert abs(near_end.max_growth_rate - middle.max_growth_rate) > 10.0   # 44.6 vs 81.8 1/s
-    assert lp.status(2.0).values["nut_position_m"] == "0.12"
+    assert lp.status(2.0).values[KEY_NUT_POSITION] == "0.12"
 
 
 def test_contact_is_reintegrated_only_beyond_the_nut_deadband():
@@ -540,14 +545,14 @@ def test_advice_is_kept_until_the_new_one_is_ready(gate):
     lp.set_speed(SQUEAK, 1.0)
     lp.update(1.0)                                          # returns at once: search held
     assert lp.advice_pending and lp.safe_speed_rad_s == STABLE
-    assert lp.status(1.0).values["safe_speed_pending"] == "true"
+    assert lp.status(1.0).values[KEY_SAFE_SPEED_PENDING] == "true"
     assert not lp.poll_advice() and lp.safe_speed_rad_s == STABLE
     gate.set()
     wait_until(lambda: lp.poll_advice())
     assert not lp.advice_pending
     assert lp.safe_speed_rad_s == pytest.approx(full_search_safe_speed(MODEL, LOAD, SQUEAK),
                                                 abs=2e-3)
-    assert lp.status(1.0).values["safe_speed_pending"] == "false"
+    assert lp.status(1.0).values[KEY_SAFE_SPEED_PENDING] == "false"
     lp.set_speed(SQUEAK - 1.0, 2.0)       # same band and bin, decided by what is known of it
     lp.update(2.0)
     assert not lp.advice_pending and gate.searched == [(LOAD, SQUEAK)]
@@ -593,7 +598,7 @@ def test_a_failed_search_keeps_the_last_advice(monkeypatch):
     lp.update(1.0)
     assert lp.wait_for_advice(timeout=30.0)
     assert lp.safe_speed_rad_s == STABLE
-    assert "did not converge" in lp.status(1.0).values["safe_speed_error"]
+    assert "did not converge" in lp.status(1.0).values[KEY_SAFE_SPEED_ERROR]
     lp.set_speed(SQUEAK + 1.0, 2.0)                         # no retry within the bin
     lp.update(2.0)
     assert not lp.advice_pending

@@ -8,7 +8,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from leadscrew_ros.model import (OperatingPointError, ParameterError, ScrewParameters,
-                                 SqueakModel)
+                                 SqueakModel, Validity)
+from leadscrew_ros.model.sweep import sweep
 from leadscrew_ros.model.parameters import MAX_CONTACT_TURNS, field_info, field_names
 
 
@@ -59,6 +60,53 @@ def test_outside_validity_gives_reason_not_number(speed):
     assert p.risk is None and p.stable is None and p.max_growth_rate is None and not p.modes
     d = p.as_dict()
     assert d["valid"] is False and d["risk"] is None
+
+
+# A thread that self-locks: mu_o tan(beta) = 1.56 >= 1 (consistent formulation only).
+SELF_LOCKING = dict(formulation="consistent", mu_static=1.0, mu_kinetic=1.0, helix_angle_rad=1.0)
+
+
+@pytest.mark.parametrize("changes, speed, load, validity", [
+    ({}, 20.0, 200.0, Validity.OK),
+    ({}, 0.1, 200.0, Validity.BELOW_MIN_SPEED),
+    ({}, -0.2, 200.0, Validity.BELOW_MIN_SPEED),
+    ({}, 1410.6, 200.0, Validity.AT_CRITICAL_SPEED),
+    ({}, -3000.0, 200.0, Validity.AT_CRITICAL_SPEED),
+    (SELF_LOCKING, 20.0, -200.0, Validity.SELF_LOCKING),     # overhauling load
+    (SELF_LOCKING, -20.0, 200.0, Validity.SELF_LOCKING),
+    (SELF_LOCKING, 20.0, 200.0, Validity.OK),                # driving load: sliding
+    ({**SELF_LOCKING, "formulation": "paper"}, 20.0, -200.0, Validity.OK),
+])
+def test_the_model_sets_the_validity_of_each_point(changes, speed, load, validity):
+    m = SqueakModel(ScrewParameters(**changes))
+    p = m.predict(speed, load)
+    assert p.validity is validity and p.valid == (validity is Validity.OK)
+    assert bool(p.reason) == (validity is not Validity.OK)
+    assert int(m.validity_code(speed, load)) == validity
+    (q,) = m.predict_many([speed], [load])                   # the batched path agrees
+    assert q.validity is validity and q.reason == p.reason
+
+
+def test_a_failed_eigen_solve_is_its_own_validity(monkeypatch):
+    def broken(_matrix):
+        raise np.linalg.LinAlgError("Eigenvalues did not converge")
+
+    monkeypatch.setattr(np.linalg, "eig", broken)
+    p = SqueakModel().predict(20.0, 200.0)
+    assert p.validity is Validity.SOLVER_FAILED and not p.valid and p.risk is None
+    assert "did not converge" in p.reason
+
+
+def test_parameters_not_allowed_at_a_sweep_point_are_their_own_validity():
+    r = sweep(SqueakModel(), "nut_position_m", [0.1, 0.3], speed_rad_s=20.0)
+    assert [p.validity for p in r.predictions] == [Validity.OK, Validity.PARAMETERS_REJECTED]
+
+
+def test_every_validity_has_a_short_name_and_a_sentence():
+    labels = [v.label for v in Validity]
+    assert len(set(labels)) == len(labels)
+    for v in Validity:
+        assert v.label and len(v.label) <= 50 and len(v.sentence) > len(v.label)
 
 
 @pytest.mark.parametrize("formulation", ["paper", "consistent"])

@@ -31,8 +31,9 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray
 
-from leadscrew_ros.live import Level
-from leadscrew_ros.model import SqueakModel
+from leadscrew_ros.live import (KEY_FORMULATION, KEY_NUT_POSITION, KEY_RISK, KEY_SPEED,
+                                KEY_VALIDITY, Level)
+from leadscrew_ros.model import SqueakModel, Validity
 from leadscrew_ros.model.advice import speed_bands
 from leadscrew_ros.node import MODE_COLUMNS, NODE_NAME, SqueakPredictorNode, modes_message
 
@@ -221,7 +222,7 @@ def test_table1_squeak_at_20_rad_s(ros):
     status = ros.status(lambda s: s.level == bytes([Level.ERROR]))
     assert status.message == "squeak predicted: B1y 224 Hz, B2y 898 Hz"
     values = {kv.key: kv.value for kv in status.values}
-    assert values["risk"] == "1" and values["formulation"] == "paper"
+    assert values[KEY_RISK] == "1" and values[KEY_FORMULATION] == "paper"
 
 
 def test_high_speed_outside_the_band_is_quiet(ros):
@@ -245,7 +246,7 @@ def test_nut_position_topic_changes_the_prediction(ros):
     modes = ros.wait_for("squeak/modes", lambda m: growth(m) != middle)
     assert growth(modes) == pytest.approx(expected, rel=1e-9)
     assert abs(growth(modes) - middle) > 10.0                     # 44.6 vs 73.6 1/s
-    status = ros.status(lambda s: {kv.key: kv.value for kv in s.values}["nut_position_m"]
+    status = ros.status(lambda s: {kv.key: kv.value for kv in s.values}[KEY_NUT_POSITION]
                         == "0.02")
     assert status.level == bytes([Level.ERROR])                   # still squeaking
 
@@ -265,8 +266,8 @@ def test_joint_states_give_speed_and_nut_travel(ros):
     assert ros.count["squeak/modes"] == 1        # one prediction, at the new speed AND position
     status = ros.status(lambda s: s.message.startswith("squeak predicted"))
     values = {kv.key: kv.value for kv in status.values}
-    assert float(values["speed_rad_s"]) == SQUEAK
-    assert float(values["nut_position_m"]) == pytest.approx(0.02, abs=1e-6)
+    assert float(values[KEY_SPEED]) == SQUEAK
+    assert float(values[KEY_NUT_POSITION]) == pytest.approx(0.02, abs=1e-6)
 
 
 # ----------------------------------------------------------------------------- safe speed
@@ -341,7 +342,7 @@ def test_accepted_parameter_is_applied_and_republished(ros):
     core = MODEL.with_params(formulation="consistent").predict(SQUEAK, LOAD)
     assert list(freqs.data) == pytest.approx(core.unstable_frequencies_hz, rel=1e-9)
     assert node.live.model.params.formulation == "consistent"
-    status = ros.status(lambda s: {kv.key: kv.value for kv in s.values}["formulation"]
+    status = ros.status(lambda s: {kv.key: kv.value for kv in s.values}[KEY_FORMULATION]
                         == "consistent")
     assert status.message.startswith("squeak predicted: T1 2654 Hz")
     # a node setting: a new rate limit re-creates the rate-limit timer
@@ -412,6 +413,8 @@ def test_outside_validity_warns_and_keeps_the_last_prediction(ros):
     ros.send("motor_speed", 5000.0)
     status = ros.status(lambda s: s.level == bytes([Level.WARN]))
     assert status.message.startswith("no prediction: outside the model's validity")
+    assert {kv.key: kv.value for kv in status.values}[KEY_VALIDITY] == \
+        Validity.AT_CRITICAL_SPEED.name
     ros.drain()
     assert {t: n for t, n in ros.count.items() if t != "/diagnostics"} == published
 

@@ -3,9 +3,9 @@
 from .assembly import Geometry, SystemMatrices, build_geometry
 from .modes import ModalBasis, modal_basis
 from .parameters import FORMULATIONS, ParameterError, ScrewParameters, field_names
-from .predictor import OperatingPointError, Prediction, SqueakModel
+from .predictor import OperatingPointError, Prediction, SqueakModel, Validity
 from .stability import ModeResult
 
 __all__ = ["FORMULATIONS", "Geometry", "ModalBasis", "ModeResult", "OperatingPointError",
            "ParameterError", "Prediction", "ScrewParameters", "SqueakModel", "SystemMatrices",
-           "build_geometry", "field_names", "modal_basis"]
+           "Validity", "build_geometry", "field_names", "modal_basis"]

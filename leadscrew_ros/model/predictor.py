@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import IntEnum
 from functools import cached_property
 from typing import Any
 
@@ -19,7 +20,53 @@ from .stability import ModeResult, classify
 _LOAD_LIMIT_N = field_info("axial_load_n")["hi"]
 
 
-VALID, TOO_SLOW, SUPERCRITICAL, SELF_LOCKING = range(4)
+class Validity(IntEnum):
+    """Whether the model's linearisation holds at an operating point, and if not, why.
+
+    An IntEnum so that the vectorised `SqueakModel.validity_code` arrays compare with it.
+    Each member has a `label` (a short name: a counter key, a status-line note) and a
+    `sentence` (what it means); `Prediction.reason` is the sentence for one point, with its
+    numbers.
+    """
+
+    OK = 0
+    BELOW_MIN_SPEED = 1
+    AT_CRITICAL_SPEED = 2
+    SELF_LOCKING = 3
+    SOLVER_FAILED = 4
+    PARAMETERS_REJECTED = 5
+
+    @property
+    def label(self) -> str:
+        """Short name, e.g. 'speed below min_speed_rad_s'."""
+        return _VALIDITY_TEXT[self][0]
+
+    @property
+    def sentence(self) -> str:
+        """What the verdict means, without numbers."""
+        return _VALIDITY_TEXT[self][1]
+
+
+_VALIDITY_TEXT = {
+    Validity.OK: ("valid", "the sliding linearisation holds at this operating point"),
+    Validity.BELOW_MIN_SPEED: (
+        "speed below min_speed_rad_s",
+        "near stick the sliding linearisation does not hold; a nonlinear analysis is needed"),
+    Validity.AT_CRITICAL_SPEED: (
+        "speed at or above the first critical speed",
+        "the model holds below the first critical speed, where the backward whirl of the "
+        "lowest mode reaches zero frequency"),
+    Validity.SELF_LOCKING: (
+        "overhauling load on a self-locking thread",
+        "with mu_o tan(beta) >= 1 an overhauling load gives no steady sliding: the thread "
+        "self-locks"),
+    Validity.SOLVER_FAILED: (
+        "eigen-solver failed",
+        "LAPACK did not converge at this operating point: no number is given"),
+    Validity.PARAMETERS_REJECTED: (
+        "parameters not allowed at this point",
+        "the parameters at this point (e.g. the nut position) do not make a valid screw"),
+}
 
 
 class OperatingPointError(ValueError):
@@ -31,11 +78,16 @@ class Prediction:
     speed_rad_s: float
     load_n: float
     formulation: str
-    valid: bool
+    validity: Validity
     reason: str                          # why the point is outside validity ("" when valid)
     modes: tuple[ModeResult, ...] = ()   # oscillatory modes, growth rate descending
     divergence_rates: tuple[float, ...] = ()
     risk: float | None = None
+
+    @property
+    def valid(self) -> bool:
+        """The linearisation holds: modes and risk are given."""
+        return self.validity is Validity.OK
 
     @property
     def stable(self) -> bool | None:
@@ -106,31 +158,35 @@ class SqueakModel:
         return SqueakModel(self.params.with_(**changes))
 
     def validity_code(self, speed_rad_s, load_n) -> np.ndarray:
-        """Vectorised validity (NOTES.md reading 7): VALID, or why the linearisation fails."""
+        """Vectorised validity: `Validity` codes (Validity.OK where the linearisation holds)."""
         p = self.params
         w = np.abs(np.asarray(speed_rad_s, float))
-        code = np.where(w < p.min_speed_rad_s, TOO_SLOW,
-                        np.where(w >= self.critical_speed_rad_s, SUPERCRITICAL, VALID))
+        code = np.where(w < p.min_speed_rad_s, Validity.BELOW_MIN_SPEED,
+                        np.where(w >= self.critical_speed_rad_s, Validity.AT_CRITICAL_SPEED,
+                                 Validity.OK))
         if p.formulation == "consistent":      # overhauling load on a self-locking thread
             locks = ((np.sign(speed_rad_s) * np.sign(load_n) < 0)
                      & (mu_o(p, w) * math.tan(p.helix_angle_rad) >= 1))
-            code = np.where((code == VALID) & locks, SELF_LOCKING, code)
+            code = np.where((code == Validity.OK) & locks, Validity.SELF_LOCKING, code)
         return code
 
-    def validity(self, speed_rad_s: float, load_n: float) -> str:
-        """'' when the linearisation holds at this point, else the reason in words."""
-        code = int(self.validity_code(speed_rad_s, load_n))
-        if code == VALID:
-            return ""
+    def validity(self, speed_rad_s: float, load_n: float) -> tuple[Validity, str]:
+        """The verdict at this point and, when the linearisation fails, why in words with the
+        numbers ('' when it holds)."""
+        code = Validity(int(self.validity_code(speed_rad_s, load_n)))
         w, p = abs(speed_rad_s), self.params
-        return {
-            TOO_SLOW: (f"outside the model's validity: |speed| = {w:g} rad/s is below "
-                       f"min_speed_rad_s = {p.min_speed_rad_s:g} rad/s (near stick the sliding "
-                       "linearisation does not hold; a nonlinear analysis is needed)"),
-            SUPERCRITICAL: (f"outside the model's validity: |speed| = {w:g} rad/s is not below "
-                            f"the first critical speed {self.critical_speed_rad_s:.1f} rad/s"),
-            SELF_LOCKING: ("outside the model's validity: overhauling load with "
-                           "mu_o tan(beta) >= 1 (no steady sliding, the thread self-locks)"),
+        return code, {
+            Validity.OK: "",
+            Validity.BELOW_MIN_SPEED: (
+                f"outside the model's validity: |speed| = {w:g} rad/s is below "
+                f"min_speed_rad_s = {p.min_speed_rad_s:g} rad/s (near stick the sliding "
+                "linearisation does not hold; a nonlinear analysis is needed)"),
+            Validity.AT_CRITICAL_SPEED: (
+                f"outside the model's validity: |speed| = {w:g} rad/s is not below the first "
+                f"critical speed {self.critical_speed_rad_s:.1f} rad/s"),
+            Validity.SELF_LOCKING: (
+                "outside the model's validity: overhauling load with mu_o tan(beta) >= 1 (no "
+                "steady sliding, the thread self-locks)"),
         }[code]
 
     def state_matrix(self, speed_rad_s: float, load_n: float) -> np.ndarray:
@@ -141,13 +197,13 @@ class SqueakModel:
         """Squeak prediction at one operating point (speed in rad/s, axial load in N)."""
         speed, load = check_operating_point(
             speed_rad_s, self.params.axial_load_n if load_n is None else load_n)
-        reason = self.validity(speed, load)
-        if reason:
-            return Prediction(speed, load, self.params.formulation, False, reason)
+        validity, reason = self.validity(speed, load)
+        if validity is not Validity.OK:
+            return Prediction(speed, load, self.params.formulation, validity, reason)
         try:
             lam, vec = np.linalg.eig(self.state_matrix(speed, load))
         except np.linalg.LinAlgError as exc:          # LAPACK gave up: say so, no number
-            return Prediction(speed, load, self.params.formulation, False,
+            return Prediction(speed, load, self.params.formulation, Validity.SOLVER_FAILED,
                               f"eigen-solver failed at this operating point: {exc}")
         return self._prediction(speed, load, lam, vec)
 
@@ -156,9 +212,10 @@ class SqueakModel:
         speeds, loads = (a.ravel() for a in np.broadcast_arrays(
             np.asarray(speeds_rad_s, float), np.asarray(loads_n, float)))
         points = [check_operating_point(s, f) for s, f in zip(speeds.tolist(), loads.tolist())]
-        reasons = [self.validity(s, f) for s, f in points]
-        ok = [i for i, r in enumerate(reasons) if not r]
-        out = [Prediction(s, f, self.params.formulation, False, r) for (s, f), r in zip(points, reasons)]
+        verdicts = [self.validity(s, f) for s, f in points]
+        ok = [i for i, (v, _) in enumerate(verdicts) if v is Validity.OK]
+        out = [Prediction(s, f, self.params.formulation, *v)
+               for (s, f), v in zip(points, verdicts)]
         if ok:
             lam, vec = np.linalg.eig(self.geometry.state_matrices(speeds[ok], loads[ok]))
             for k, i in enumerate(ok):
@@ -168,5 +225,5 @@ class SqueakModel:
     def _prediction(self, speed: float, load: float, lam: np.ndarray, vec: np.ndarray) -> Prediction:
         modes, divergence = classify(lam, vec, self.labels)
         zeta = min((m.damping_ratio for m in modes), default=math.inf)
-        return Prediction(speed, load, self.params.formulation, True, "", modes, divergence,
+        return Prediction(speed, load, self.params.formulation, Validity.OK, "", modes, divergence,
                           squeak_risk(zeta, self.params.risk_damping_scale))

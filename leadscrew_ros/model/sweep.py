@@ -21,7 +21,7 @@ from scipy.optimize import brentq
 
 from .display import exact
 from .parameters import ParameterError, field_info, field_names
-from .predictor import VALID, Prediction, SqueakModel
+from .predictor import Prediction, SqueakModel, Validity
 from .stability import max_divergence_rate, max_growth_rate
 
 OPERATING_AXES = ("speed_rad_s", "load_n")
@@ -165,7 +165,8 @@ def growth_field(model: SqueakModel, speed_rad_s, load_n,
         raise ParameterError("sweep values must be finite numbers")
     growth, freq, diverge = (np.full(speeds.size, np.nan) for _ in range(3))
     for sub, idx in _point_models(model, dict(zip(params, columns)), speeds.size):
-        ok = idx[:0] if sub is None else idx[sub.validity_code(speeds[idx], loads[idx]) == VALID]
+        ok = idx[:0] if sub is None else \
+            idx[sub.validity_code(speeds[idx], loads[idx]) == Validity.OK]
         if progress and ok.size < idx.size:
             progress(idx.size - ok.size)                 # invalid points: done at once
         if not ok.size:
@@ -288,7 +289,8 @@ def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = Non
                 sub = model.with_params(**{axis: _native(axis, v)})
             except ParameterError as exc:
                 predictions.append(Prediction(fixed["speed_rad_s"], fixed["load_n"],
-                                              model.params.formulation, False, str(exc)))
+                                              model.params.formulation,
+                                              Validity.PARAMETERS_REJECTED, str(exc)))
                 continue
             predictions.append(sub.predict(fixed["speed_rad_s"], fixed["load_n"]))
     growth = np.array([p.max_growth_rate if p.valid else np.nan for p in predictions])

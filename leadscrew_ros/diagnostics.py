@@ -1,0 +1,147 @@
+"""/diagnostics in the shape of ROS diagnostic_updater (no wheel of it exists for these Python
+ROS wheels): an `Updater` owns the publisher, the period and the hardware id; each task fills a
+`DiagnosticStatusWrapper` (`task(stat) -> stat`); `update()` publishes when the period has
+passed, `force_update()` at once (on a change of verdict). Status names carry the node's fully
+qualified name: '/ns/squeak_predictor: squeak prediction'.
+
+The squeak-prediction status is decided rclpy-free by `LivePredictor.status`; the recording
+status by `recording_status` below, from the recorder and the crash recovery.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Callable
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.qos import QoSProfile
+
+from .live import Level, Status
+
+if TYPE_CHECKING:
+    from .node import CrashRecovery
+    from .recorder import Recorder
+
+TOPIC = "/diagnostics"
+PREDICTION_TASK = "squeak prediction"
+RECORDING_TASK = "recording"
+
+# Key names of the recording status.
+KEY_BAG = "bag"
+KEY_FILES = "files"
+KEY_MESSAGES = "messages"
+KEY_LOST = "lost"
+KEY_CUT_OFF_BAGS = "cut_off_bags"
+
+
+def key_lost_on(topic: str) -> str:
+    """Key of the count of input messages lost on one topic."""
+    return f"{KEY_LOST} {topic}"
+
+
+@dataclass
+class DiagnosticStatusWrapper:
+    """One status as a task fills it (diagnostic_updater's DiagnosticStatusWrapper)."""
+
+    name: str = ""
+    hardware_id: str = ""
+    level: Level = Level.OK
+    message: str = ""
+    values: dict[str, str] = field(default_factory=dict)
+
+    def summary(self, level: Level, message: str) -> None:
+        self.level, self.message = Level(level), message
+
+    def merge_summary(self, level: Level, message: str) -> None:
+        """Raise the level to `level` if higher; append `message` ('; ')."""
+        self.level = max(self.level, Level(level))
+        self.message = "; ".join(m for m in (self.message, message) if m)
+
+    def add(self, key: str, value: object) -> None:
+        self.values[key] = str(value)
+
+    def to_msg(self) -> DiagnosticStatus:
+        return DiagnosticStatus(level=bytes([int(self.level)]), name=self.name,
+                                message=self.message, hardware_id=self.hardware_id,
+                                values=[KeyValue(key=k, value=v) for k, v in self.values.items()])
+
+
+Task = Callable[[DiagnosticStatusWrapper], DiagnosticStatusWrapper]
+
+
+class Updater:
+    """Publishes one DiagnosticArray with a status per task, in the order the tasks were
+    added. `publish(publisher, msg)` (optional) publishes instead of `publisher.publish(msg)`
+    (the node also latches and records its outputs)."""
+
+    def __init__(self, node: Node, qos: QoSProfile, period_s: float = 1.0,
+                 hardware_id: str = "", clock: Callable[[], float] = time.monotonic,
+                 publish: Callable[[Publisher, DiagnosticArray], None] | None = None,
+                 **publisher_kwargs):
+        self.node, self.period_s, self.hardware_id = node, period_s, hardware_id
+        self.publisher = node.create_publisher(DiagnosticArray, TOPIC, qos, **publisher_kwargs)
+        self._clock = clock
+        self._publish = publish or (lambda publisher, msg: publisher.publish(msg))
+        self._tasks: list[tuple[str, Task]] = []
+        self._last = -float("inf")                  # clock time of the last publication
+        self.published = 0
+
+    def add(self, name: str, task: Task) -> None:
+        self._tasks.append((name, task))
+
+    def update(self) -> bool:
+        """Publish if `period_s` passed since the last publication; True if it did."""
+        if self._clock() - self._last < self.period_s:
+            return False
+        self.force_update()
+        return True
+
+    def force_update(self) -> None:
+        """Run every task and publish now."""
+        prefix = self.node.get_fully_qualified_name()
+        msg = DiagnosticArray()
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.status = [task(DiagnosticStatusWrapper(f"{prefix}: {name}", self.hardware_id)
+                           ).to_msg() for name, task in self._tasks]
+        self._publish(self.publisher, msg)
+        self._last = self._clock()
+        self.published += 1
+
+
+def status_task(status: Callable[[], Status]) -> Task:
+    """A task that reports a `Status` (e.g. `LivePredictor.status`'s verdict)."""
+    def run(stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:
+        s = status()
+        stat.summary(s.level, s.message)
+        for key, value in s.values.items():
+            stat.add(key, value)
+        return stat
+    return run
+
+
+def recording_status(stat: DiagnosticStatusWrapper, recorder: Recorder,
+                     crash: CrashRecovery) -> DiagnosticStatusWrapper:
+    """ERROR when recording failed, WARN when input messages were lost or bags of an earlier
+    run are cut off, else OK; the counts as key-values."""
+    r = recorder
+    if r.error:
+        stat.summary(Level.ERROR, r.error)
+    else:
+        stat.summary(Level.OK, f"recording to {r.path}" if r.active else "not recording")
+    stat.add(KEY_BAG, r.bag or "")
+    stat.add(KEY_FILES, len(r.files))
+    stat.add(KEY_MESSAGES, r.messages)
+    stat.add(KEY_LOST, r.lost)
+    losses = {t: loss for t, loss in list(r.losses.items()) if loss.lost}
+    for topic, loss in r.losses.items():
+        stat.add(key_lost_on(topic), loss.lost)
+    if losses:
+        stat.merge_summary(Level.WARN, f"{r.lost} input message(s) lost before recording ("
+                           + ", ".join(f"{t} {loss.lost}" for t, loss in losses.items()) + ")")
+    if crash.message:
+        stat.merge_summary(crash.level, crash.message)
+        stat.add(KEY_CUT_OFF_BAGS, " ".join(str(b) for b in crash.pending))
+    return stat

@@ -1,0 +1,247 @@
+"""The /diagnostics updater (diagnostic_updater's shape) in-process: period, force_update,
+task order, hardware id and names; the recording status it publishes for the node.
+
+Each test has its own rclpy Context and namespace (the pattern of test_node.py); time is a
+fake clock, so the period is tested without sleeping.
+"""
+
+from __future__ import annotations
+
+import time
+import uuid
+from types import SimpleNamespace
+
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from leadscrew_ros.diagnostics import (KEY_BAG, KEY_CUT_OFF_BAGS, KEY_FILES, KEY_LOST,
+                                       KEY_MESSAGES, PREDICTION_TASK, RECORDING_TASK, TOPIC,
+                                       DiagnosticStatusWrapper, Updater, key_lost_on,
+                                       recording_status, status_task)
+from leadscrew_ros.live import Level, Status
+from leadscrew_ros.node import LATCHED, NODE_NAME
+from test_node import SQUEAK, Ros, at
+
+COLLECT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class FakeClock:
+    def __init__(self):
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+class World:
+    """A node with an Updater and a probe that collects this test's /diagnostics."""
+
+    def __init__(self):
+        self.ns = f"/t{uuid.uuid4().hex}"
+        self.hardware_id = f"hw_{self.ns[2:]}"
+        self.ctx = Context()
+        rclpy.init(context=self.ctx)
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.node = Node("watched", context=self.ctx, namespace=self.ns)
+        self.probe = Node("probe", context=self.ctx, namespace=self.ns)
+        for n in (self.node, self.probe):
+            self.executor.add_node(n)
+        self.received: list[DiagnosticArray] = []
+        self.probe.create_subscription(DiagnosticArray, TOPIC, self._on, COLLECT)
+        self.clock = FakeClock()
+        self.seen: list[tuple[str, DiagnosticArray]] = []
+        self.updater = Updater(self.node, LATCHED, period_s=1.0, hardware_id=self.hardware_id,
+                               clock=self.clock, publish=self._publish)
+        self.spin_until(lambda: self.updater.publisher.get_subscription_count() > 0)
+
+    def _publish(self, publisher, msg: DiagnosticArray) -> None:
+        self.seen.append((publisher.topic_name, msg))
+        publisher.publish(msg)
+
+    def _on(self, msg: DiagnosticArray) -> None:
+        if any(s.hardware_id == self.hardware_id for s in msg.status):
+            self.received.append(msg)
+
+    def spin_until(self, condition, timeout: float = 10.0) -> None:
+        deadline = time.monotonic() + timeout
+        while not condition():
+            assert time.monotonic() < deadline, "timeout"
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def arrived(self, n: int) -> list[DiagnosticArray]:
+        """Wait for n arrays in all, then check that no more come."""
+        self.spin_until(lambda: len(self.received) >= n)
+        for _ in range(5):
+            self.executor.spin_once(timeout_sec=0.0)
+        assert len(self.received) == n
+        return self.received
+
+    def close(self) -> None:
+        try:
+            for n in (self.node, self.probe):
+                n.destroy_node()
+            self.executor.shutdown(timeout_sec=1.0)
+        finally:
+            rclpy.shutdown(context=self.ctx)
+
+
+@pytest.fixture
+def world():
+    w = World()
+    try:
+        yield w
+    finally:
+        w.close()
+
+
+def level(status) -> Level:
+    return Level(status.level[0])
+
+
+def test_tasks_fill_named_statuses_in_order_with_the_hardware_id(world):
+    calls = []
+
+    def first(stat):
+        calls.append("first")
+        stat.summary(Level.WARN, "first says")
+        stat.add("count", 3)
+        return stat
+
+    def second(stat):
+        calls.append("second")
+        stat.summary(Level.OK, "second says")
+        return stat
+
+    world.updater.add("alpha task", first)
+    world.updater.add("beta task", second)
+    world.updater.force_update()
+    [msg] = world.arrived(1)
+    assert calls == ["first", "second"]
+    fqn = f"{world.ns}/watched"
+    assert [s.name for s in msg.status] == [f"{fqn}: alpha task", f"{fqn}: beta task"]
+    assert {s.hardware_id for s in msg.status} == {world.hardware_id}
+    assert [(level(s), s.message) for s in msg.status] == [(Level.WARN, "first says"),
+                                                            (Level.OK, "second says")]
+    assert [(kv.key, kv.value) for kv in msg.status[0].values] == [("count", "3")]
+    assert msg.header.stamp.sec > 0
+    assert world.seen == [(TOPIC, world.seen[0][1])] and world.seen[0][1].status == msg.status
+
+
+def test_update_publishes_once_per_period(world):
+    world.updater.add("t", lambda stat: stat)
+    assert world.updater.update()                  # nothing published yet: due at once
+    assert not world.updater.update()              # same instant
+    world.clock.t += 0.999
+    assert not world.updater.update()
+    world.clock.t += 0.001
+    assert world.updater.update()
+    world.updater.period_s = 5.0                   # a new period applies from now on
+    world.clock.t += 4.0
+    assert not world.updater.update()
+    world.clock.t += 1.0
+    assert world.updater.update()
+    world.arrived(3)
+    assert world.updater.published == 3
+
+
+def test_force_update_publishes_now_and_restarts_the_period(world):
+    world.updater.add("t", lambda stat: stat)
+    assert world.updater.update()
+    world.clock.t += 0.5
+    world.updater.force_update()                   # e.g. the verdict changed
+    world.clock.t += 0.9
+    assert not world.updater.update()              # the period counts from the forced one
+    world.clock.t += 0.1
+    assert world.updater.update()
+    world.arrived(3)
+
+
+def test_status_task_reports_a_status():
+    status = Status(Level.STALE, "no fresh input", {"a": "1", "b": ""})
+    stat = status_task(lambda: status)(DiagnosticStatusWrapper("n", "hw"))
+    msg = stat.to_msg()
+    assert (level(msg), msg.message, msg.name, msg.hardware_id) == (
+        Level.STALE, "no fresh input", "n", "hw")
+    assert [(kv.key, kv.value) for kv in msg.values] == [("a", "1"), ("b", "")]
+
+
+def test_merge_summary_keeps_the_worst_level_and_every_message():
+    stat = DiagnosticStatusWrapper()
+    stat.summary(Level.WARN, "one")
+    stat.merge_summary(Level.OK, "two")
+    assert (stat.level, stat.message) == (Level.WARN, "one; two")
+    stat.merge_summary(Level.ERROR, "three")
+    assert (stat.level, stat.message) == (Level.ERROR, "one; two; three")
+
+
+def recorder(**changes):
+    r = dict(error="", active=False, path=None, bag=None, files=[], messages=0, lost=0,
+             losses={})
+    return SimpleNamespace(**{**r, **changes})
+
+
+NO_CRASH = SimpleNamespace(message="", level=Level.OK, pending=[])
+
+
+@pytest.mark.parametrize("rec, crash, expected_level, words", [
+    (recorder(), NO_CRASH, Level.OK, "not recording"),
+    (recorder(active=True, path="/d/b_0.mcap", bag="/d/b"), NO_CRASH, Level.OK,
+     "recording to /d/b_0.mcap"),
+    (recorder(error="disk full"), NO_CRASH, Level.ERROR, "disk full"),
+    (recorder(active=True, path="p", lost=3,
+              losses={"/a": SimpleNamespace(lost=3), "/b": SimpleNamespace(lost=0)}),
+     NO_CRASH, Level.WARN, "recording to p; 3 input message(s) lost before recording (/a 3)"),
+    (recorder(error="disk full"), SimpleNamespace(message="1 bag(s) cut off", level=Level.WARN,
+                                                  pending=["/d/x", "/d/y"]),
+     Level.ERROR, "disk full; 1 bag(s) cut off"),
+])
+def test_recording_status(rec, crash, expected_level, words):
+    stat = recording_status(DiagnosticStatusWrapper(), rec, crash)
+    assert stat.level == expected_level and stat.message == words
+    assert list(stat.values)[:4] == [KEY_BAG, KEY_FILES, KEY_MESSAGES, KEY_LOST]
+    assert stat.values[KEY_LOST] == str(rec.lost)
+    for topic, loss in rec.losses.items():
+        assert stat.values[key_lost_on(topic)] == str(loss.lost)
+    assert stat.values.get(KEY_CUT_OFF_BAGS) == (" ".join(crash.pending) if crash.message
+                                                 else None)
+
+
+@pytest.fixture
+def ros():
+    r = Ros()
+    try:
+        yield r
+    finally:
+        r.close()
+
+
+def test_the_node_forces_diagnostics_on_a_change_of_verdict_only(ros):
+    """With a period of a minute, a new verdict is published at once and nothing else."""
+    node = ros.start(diagnostics_period_s=60.0, stale_timeout_s=3600.0)
+    assert node.diagnostics.period_s == 60.0
+    first = ros.status(lambda s: True)
+    assert [s.name for s in ros.latest["/diagnostics"].status] == [
+        f"{ros.ns}/{NODE_NAME}: {PREDICTION_TASK}", f"{ros.ns}/{NODE_NAME}: {RECORDING_TASK}"]
+    assert level(first) == Level.STALE
+    at(ros, SQUEAK)                                  # a squeak verdict, well within a period
+    assert level(ros.status(lambda s: s.message.startswith("squeak predicted"))) == Level.ERROR
+    ros.drain()
+    published = node.diagnostics.published
+    assert ros.count["/diagnostics"] == published
+    for _ in range(3):                               # the same point again: the same verdict
+        ros.send("motor_speed", SQUEAK)
+        ros.drain()
+    deadline = time.monotonic() + 0.5                # ten housekeeping periods
+    while time.monotonic() < deadline:
+        ros.executor.spin_once(timeout_sec=0.01)
+    assert node.diagnostics.published == published == ros.count["/diagnostics"]
+    [result] = node.set_parameters([Parameter("diagnostics_period_s", value=0.05)])
+    assert result.successful and node.diagnostics.period_s == 0.05
+    ros.spin_until(lambda: ros.count["/diagnostics"] >= published + 3, what="periodic updates")
