@@ -236,6 +236,7 @@ class LivePredictor:
         self._bands: dict[tuple, list[Band]] = {}       # one bin: bands found in it
         self._advised: tuple[SqueakModel, Prediction] | None = None  # what advice is for
         self._search: tuple[int, tuple] | None = None   # background request: id, bin key
+        self._pending = False                           # latest prediction waits for it
         self._failed: tuple | None = None               # bin whose search raised
         self._advice_error = ""
         self._worker = LatestWorker()
@@ -289,6 +290,7 @@ class LivePredictor:
         self._computed_at, self._bands = None, {}
         self._worker.cancel()
         self._search = self._failed = None
+        self._pending = False
 
     def _operating_point(self) -> tuple[float, float, float] | None:
         i = self.inputs
@@ -355,7 +357,7 @@ class LivePredictor:
     def advice_pending(self) -> bool:
         """A background search for the latest prediction's advice is under way; until it
         ends `safe_speed_rad_s` is the previous advice."""
-        return self._search is not None
+        return self._pending
 
     def _advise(self, model: SqueakModel, p: Prediction) -> None:
         """Advice for the latest prediction: at once when the point is squeak-free or a band
@@ -363,7 +365,7 @@ class LivePredictor:
         self._collect()
         self._advised = (model, p)
         if p.stable:
-            return self._set_advice(p.speed_rad_s)
+            return self._set_advice(p.speed_rad_s, None)
         lowest, highest = model.params.min_speed_rad_s, model.critical_speed_rad_s
         margin = self.settings.safe_speed_margin
         # Band edges move slowly with load and nut position: reuse them within a bin.
@@ -373,17 +375,23 @@ class LivePredictor:
         for band in self._bands.get(key, ()):
             safe = band.safe_speed(p.speed_rad_s, lowest, highest, margin)
             if safe is not None:
-                return self._set_advice(safe)
-        if key == self._failed or (self._search is not None and self._search[1] == key):
+                return self._set_advice(safe, key)
+        if key == self._failed:   # keep the last advice; no retry within this bin
+            self._pending = False
+            return
+        self._pending = True
+        if self._search is not None and self._search[1] == key:
             return                # a search of this bin is under way: re-checked when it ends
         known = next((b for b in self._bands.get(key, ()) if b.contains(p.speed_rad_s)), None)
         job = partial(band_around, model, p.load_n, p.speed_rad_s, margin, known=known)
         self._search = (self._worker.submit(lambda checkpoint: job(checkpoint=checkpoint)),
                         key)
 
-    def _set_advice(self, safe_speed_rad_s: float) -> None:
-        self.safe_speed_rad_s = safe_speed_rad_s
-        if self._search is not None:                  # the search is for an older point
+    def _set_advice(self, safe_speed_rad_s: float, key: tuple | None) -> None:
+        """Advice decided now; a search of another bin is stale and cancelled, one of this
+        bin goes on (it extends the band: the next speeds in it are then decided at once)."""
+        self.safe_speed_rad_s, self._pending = safe_speed_rad_s, False
+        if self._search is not None and self._search[1] != key:
             self._worker.cancel()
             self._search = None
 
@@ -406,10 +414,11 @@ class LivePredictor:
     def poll_advice(self) -> bool:
         """Pick up a finished background search without blocking; True when the latest
         prediction got its advice from it (publish `safe_speed_rad_s` then)."""
+        waiting = self._pending
         if not self._collect() or self._advised is None:
             return False
         self._advise(*self._advised)      # the speed may have moved on: maybe search again
-        return not self.advice_pending
+        return waiting and not self._pending
 
     def wait_for_advice(self, timeout: float | None = None) -> bool:
         """Block until the latest prediction's advice is ready (synchronous callers, tests);
@@ -420,7 +429,7 @@ class LivePredictor:
             if not self._worker.wait(remaining):
                 return False
             if not self._collect():       # nothing came back (closed worker): stop waiting
-                self._search = None
+                self._search, self._pending = None, False
             elif self._advised is not None:
                 self._advise(*self._advised)
         return True
@@ -428,7 +437,7 @@ class LivePredictor:
     def close(self) -> None:
         """Stop the background search (the owner is shutting down)."""
         self._worker.close()
-        self._search = None
+        self._search, self._pending = None, False
 
     # ---------------------------------------------------------------- verdict
     def status(self, now: float) -> Status:

@@ -205,7 +205,9 @@ def test_backwards_and_repeated_log_times_are_counted_and_never_drawn(tmp_path):
 
 def test_the_nut_is_drawn_only_when_measured(tmp_path, monkeypatch):
     figures = []
-    monkeypatch.setattr(report.plt, "close", figures.append)
+    new_figure = report.new_figure
+    monkeypatch.setattr(report, "new_figure",
+                        lambda **kw: figures.append(new_figure(**kw)) or figures[-1])
     s = 1_000_000_000
     plain = write_mcap(tmp_path / "plain.mcap", [
         f64("/motor_speed", 20.0 + k, k * s) for k in range(5)] + [f64("/axial_load", 200.0, 1)])
