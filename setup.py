@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Packaging for leadscrew_ros (ament_python): works with colcon and with plain pip."""
 
 from glob import glob

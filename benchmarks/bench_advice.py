@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Benchmark of safe-speed advice: the band search offline, and the node's responsiveness.
 
     .venv/bin/python benchmarks/bench_advice.py [--quick] [--no-node] [--json OUT.json]

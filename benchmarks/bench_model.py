@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Benchmark of the squeak model core against bare LAPACK eigen-solves, all in one run.
 
     .venv/bin/python benchmarks/bench_model.py [--quick] [--json OUT.json]

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Benchmark of the ROS 2 node `squeak_predictor`: input-to-output latency and CPU use.
 
     .venv/bin/python benchmarks/bench_node.py [--quick] [--json OUT.json] [--profile]

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Recording completeness: 3 input topics at 1 kHz from another process into a recording node.
 
 A node process (`squeak_node`, record.enabled) records motor_speed, axial_load and

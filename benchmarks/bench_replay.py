@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Benchmark of the offline replay: throughput on a generated 1-hour, 100 Hz log, and peak
 memory against log length.
 

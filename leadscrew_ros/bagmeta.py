@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """rosbag2 `metadata.yaml` of a bag directory: written by the recorder and by `recover`.
 
 `ros2 bag info/play` and rosbags need it to open a bag directory; rosbag2 regenerates it with

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Small, defensive decoders of the CDR payloads the replay reads from logs: std_msgs/Float64
 and sensor_msgs/JointState (XCDR1 as Fast CDR and rosbags write it, either byte order).
 

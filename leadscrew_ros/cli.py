@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """`leadscrew-squeak`: squeak predictions, sweeps, stability maps and the paper's figures; the
 ROS 2 demo (`demo`: predictor node + actuator simulator) and the simulator alone (`simulate`);
 MCAP logs: offline replay (`replay`), playback (`replay --publish`), `recover` and `info`.

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Bounded-memory series for the plots of long replays.
 
 A replay streams millions of messages; what it keeps for its report must not grow with the log:

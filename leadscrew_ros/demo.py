@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """`leadscrew-squeak demo`: the squeak predictor node driven by the actuator simulator.
 
 One process, one rclpy Context, one single-threaded executor with three nodes: the predictor

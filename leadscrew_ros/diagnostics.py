@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """/diagnostics in the shape of ROS diagnostic_updater (no wheel of it exists for these Python
 ROS wheels): an `Updater` owns the publisher, the period and the hardware id; each task fills a
 `DiagnosticStatusWrapper` (`task(stat) -> stat`); `update()` publishes when the period has

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Plots of sweeps and stability maps, and the paper's Figs. 4-11 with a computed summary.
 
 `plot_sweep` and `plot_map` are shared by the `figures` command and by `sweep --plot` /

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Recording of the node's inputs from DDS readers of their own, on a thread of their own.
 
 The model's subscriptions keep a short queue (the newest input is what matters) and wait while a

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """JSON output without NaN/inf (strict JSON readers reject them) or numpy types."""
 
 from __future__ import annotations

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Live prediction logic of the node, free of rclpy: input checks, deadbands, rate limit,
 coalescing, last good state, staleness and the diagnostic verdict.
 

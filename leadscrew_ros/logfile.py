@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Reading ROS 2 MCAP logs (ours, rosbag2's, rosbags') defensively, and recovering cut-off files.
 
 Records are parsed sequentially from a memory map, so a damaged length can never make the

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The log an offline replay reads: MCAP files (`logfile`) or rosbag2's sqlite3 storage (.db3,
 the default before Iron), as one stream of `LogMessage`s in file order.
 

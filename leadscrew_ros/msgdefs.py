@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Complete ROS 2 message definitions (`ros2msg` schema text) from the installed packages.
 
 rosbag2 stores, per topic, the type's .msg text followed by every type it uses, each after a

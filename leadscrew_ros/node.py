@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """ROS 2 node `squeak_predictor`: live squeak prediction beside an actuator controller.
 
 Subscribes (sensor-data QoS): motor_speed (std_msgs/Float64, rad/s), axial_load (Float64, N),

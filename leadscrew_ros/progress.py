@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Progress bars on stderr (tqdm) for the command-line tools.
 
 `disable=None` lets tqdm switch itself off when stderr is not a terminal, so piped or captured

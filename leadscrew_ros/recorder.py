@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """MCAP recorder in rosbag2's layout, split by size and duration, safe against crashes.
 
 Each recording is a rosbag2 bag directory `<directory>/<name>_<UTC wall-clock start>/` holding

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Offline replay of a log: the node's predictions recomputed for the whole log.
 
 read the log (`logsource`: MCAP via `logfile`, or rosbag2 sqlite3 .db3; strict: a damaged or

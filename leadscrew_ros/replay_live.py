@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """`leadscrew-squeak replay LOG --publish`: republish a recorded log's inputs live, so that a
 running squeak_predictor node (or anything else) behaves as it did in the field.
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """PNG report of a replay: the run over time, and its trajectory on the stability maps.
 
 - `timeline.png`: speed, load, nut position (only when the log has a nut input: a nut topic

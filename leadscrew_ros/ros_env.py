@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Process plumbing for anything in this package that starts rclpy: environment defaults,
 ROS arguments, signals and an orderly teardown.
 

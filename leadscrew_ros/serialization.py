@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Exact CDR payloads of ROS messages for logs.
 
 Fast CDR (through `rclpy.serialization`) leaves alignment padding unwritten, so stray process

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Actuator simulator: a power-seat adjuster stroke that drives the squeak predictor node.
 
 `StrokeProfile` is the pure, deterministic part (no rclpy in it): motor speed, axial load, nut

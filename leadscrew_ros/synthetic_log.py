@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Synthetic input logs: hours of power-seat strokes as the robot would record them.
 
 A duty cycle of seat strokes (`simulator.StrokeProfile`, alternately forwards and backwards, the

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Operating-point timeline of a replayed log: input messages -> latest speed, load and nut
 position -> recompute decisions with the node's deadbands -> batched predictions.
 

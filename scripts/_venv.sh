@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Sourced by scripts/run-*.sh: make .venv (in the repo root) and install the package into it.
 # The pip step is skipped while .venv/.installed-<sha256 of setup.py> exists, so reruns are fast;
 # editing setup.py (dependencies, entry points) changes the hash and reinstalls.

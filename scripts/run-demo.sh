@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # README set-up command: create .venv if needed, install, run the demo.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # README set-up command: create .venv if needed, install, run the test suite.
 # Extra arguments go to pytest, e.g. scripts/run-tests.sh test/test_config.py -x
 set -euo pipefail

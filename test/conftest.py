@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Test-session environment: keep any ROS 2 traffic on loopback and on a private domain.
 
 Set at import time (before any test imports rclpy); values already in the environment win,

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The `paper` formulation against Appendix A as printed, entry by entry.
 
 test/data/appendix_a_printed.json holds (A.3)-(A.8) transcribed once from the paper: each

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """tools/band_table.py: the per-mode squeak ranges and the nut-position trend of the README.
 
 The README's numbers are printed by the tool; here the tool's numbers are checked against the

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """CDR decoders of the replay (`leadscrew_ros.cdr`) against rclpy's and rosbags' serializers;
 malformed payloads raise ValueError and nothing else."""
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The `leadscrew-squeak` command line, called in-process through `main(argv)`."""
 
 import contextlib

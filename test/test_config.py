@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """config/leadscrew.yaml holds every parameter of the node (ScrewParameters fields and
 node.NODE_PARAMETERS) with its default, typed for ROS."""
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The demo (`leadscrew-squeak demo`) and the simulator driving a separately started node, as
 subprocesses with the venv's python and the parent's environment (loopback discovery), each on a
 ROS_DOMAIN_ID of its own (201..230: clear of conftest's per-process domains 1..200)."""

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The `consistent` kernels equal the symbolic linearisation of tools/derive_consistent.py, and
 the printed appendix (`paper`) differs from it exactly where the README (Two formulations) says."""
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The /diagnostics updater (diagnostic_updater's shape) in-process: period, force_update,
 task order, hardware id and names; the recording status it publishes for the node.
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """`leadscrew-squeak figures --quick` and the helpers that turn data into summary sentences."""
 
 import re

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """LivePredictor (the node's recompute policy) without ROS: deadbands, rate limit, coalescing,
 input validation, validity, staleness, the diagnostic verdict and safe-speed advice.
 

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Fuzzing the log path: truncated and bit-flipped MCAP files (zstd, lz4 and uncompressed
 chunks, and unchunked) never crash or hang `replay`, `info` or `recover`: each run ends, within a
 deadline, either successfully or with exit code 2 and one line naming the file. A truncated

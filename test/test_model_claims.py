@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The paper's claims (the trends it reports), each its own test of the `paper` formulation at Table 1."""
 
 import numpy as np

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Contact integrals: quadrature convergence, computed once per geometry, operating-point scaling."""
 
 import math

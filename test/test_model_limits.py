@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Limits with known answers and convergence in the number of modes."""
 
 import numpy as np

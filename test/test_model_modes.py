@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Modal basis: Table 2 of the paper, mass normalisation, labels, gyroscopic coupling (A.2)."""
 
 import numpy as np

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Sweeps and maps: batched results equal single predictions; boundaries are refined roots."""
 
 import numpy as np

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Input validation: clear errors naming field, value and range; valid input never gives NaN."""
 
 import math

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The squeak_predictor node over loopback DDS, launch-free.
 
 Each test gets its own rclpy Context, a unique namespace for the node and the probe, and one

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Several seats side by side: the shipped parameter file applies in any namespace (through
 rcl's own `--params-file` handling), nodes in /seat_left and /seat_right publish distinct
 diagnostic status names and record distinct bags, and `squeak_node --help` prints usage."""

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The node never stalls its executor on safe-speed advice (issue 8).
 
 With 40/40 modes one band search costs up to a second or more; it used to run inside the

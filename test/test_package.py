@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Packaging: the pure model stays free of rclpy, package.xml is sound, colcon builds and installs."""
 
 import json
@@ -105,3 +106,19 @@ def test_installed_console_script_runs(colcon_install, tmp_path):
     modes = json.loads(r.stdout)["modes"]
     assert modes and all({"label", "frequency_hz"} <= set(m) for m in modes)
     assert modes[0]["frequency_hz"] == pytest.approx(224.0, rel=0.005)
+
+
+def test_license_and_an_spdx_line_in_every_source_file():
+    """Apache-2.0 as package.xml and setup.py say: the LICENSE text, a changelog in the ROS
+    format, and an SPDX line within the first lines of every tracked source file."""
+    assert "Apache License" in (REPO / "LICENSE").read_text()
+    assert "Version 2.0, January 2004" in (REPO / "LICENSE").read_text()
+    changelog = (REPO / "CHANGELOG.rst").read_text().splitlines()
+    assert changelog[1] == f"Changelog for package {PACKAGE}" and "Forthcoming" in changelog
+    tracked = _run(["git", "ls-files"], cwd=REPO).stdout.split()
+    sources = [f for f in tracked if f.endswith((".py", ".sh", ".yaml", ".cfg"))
+               or f == ".ci/run"]
+    assert len(sources) > 50, sources
+    missing = [f for f in sources if "SPDX-License-Identifier: Apache-2.0" not in
+               "".join((REPO / f).read_text().splitlines(keepends=True)[:3])]
+    assert missing == [], missing

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """MCAP recording by the squeak_predictor node: round trip through three independent readers,
 the ~/record service, splitting, compression, record directories (created, or the set
 rejected), completeness under load and loss counting, sim time, cut-off bags reported on start,

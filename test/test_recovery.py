@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Crash recovery closes the loop: `leadscrew-squeak recover BAGDIR|FILE` (`logfile.recover_bag`)
 leaves a bag that rosbags, the mcap reader and `replay` open; in place, verified, idempotent.
 The crash is a real SIGKILL of a recording node process (test_recording's helpers)."""

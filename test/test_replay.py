@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Offline replay of MCAP logs (`leadscrew_ros.replay`, `leadscrew-squeak replay/recover/info`).
 
 Logs come from our Recorder (`synthetic_log`), from rosbags' rosbag2 writer (an independent

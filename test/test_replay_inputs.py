@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Offline replay of the logs real robots leave (issue 8): namespaced inputs, JointState-only
 logs with a nominal load, rosbag2 sqlite3 (.db3) storage, empty topics, log times that go
 backwards or repeat, a nut that travels, values just past a limit, and memory that does not

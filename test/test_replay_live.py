@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Live replay (`replay LOG --publish`): a recorded log republished over loopback DDS.
 
 Launch-free: `publish_log` runs in a background thread (own rclpy Context) or in a child process

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The actuator simulator: the stroke profile (pure) and the ROS 2 node that publishes it."""
 
 import math

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Numbers for the README: per-mode squeak speed ranges and the nut-position trend.
 
     .venv/bin/python tools/band_table.py

@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: Apache-2.0
 """Symbolic first-principles linearisation of the contact friction (the `consistent` formulation).
 
 Starts from the paper's kinematics and friction law, not from the printed appendix:

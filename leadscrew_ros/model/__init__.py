@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Pure model of friction-induced squeak in lead screws (numpy/scipy only, never rclpy)."""
 
 from .assembly import Geometry, SystemMatrices, build_geometry

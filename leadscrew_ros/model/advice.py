@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Controller advice: the squeak-free speed nearest to the current one (same direction).
 
 `speed_bands` is the full search: every squeak band in one direction, on a log grid over the

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Matrices of the linearised equations of motion (27), precomputed once per geometry.
 
     qdd + (C + G + W3 + W4 + W5qdot) qd + ([omega^2] - Omega^2 I + W1 + W2 + W5q) q = 0   (27)

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Contact integrals over the thread helix, computed once per geometry.
 
 The nut touches the screw along the helix z = R tan(beta) theta, theta in

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Numbers in messages: short, yet never rounded onto the limit they violate."""
 
 from __future__ import annotations

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Velocity-dependent friction law (12) and its values at steady sliding (A.10, A.11)."""
 
 from __future__ import annotations

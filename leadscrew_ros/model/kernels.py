@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Contact kernels of the friction matrices W1..W5 for the two formulations.
 
 Every friction matrix of eq. (27) has the form

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Modal basis of the uncoupled screw: mass-normalised bending (hinged-hinged, x and y) and
 torsion (clamped-free) modes, eqs. (21)-(26) mass-normalised against the energies (15)-(17)."""
 

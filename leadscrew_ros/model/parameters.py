@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Model parameters in SI units; defaults are Table 1 of the paper plus the friction law of Fig. 4.
 
 Every field carries metadata (unit, allowed range, description, whether it changes the geometry)

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """The squeak predictor: geometry once, then one small eigenproblem per operating point."""
 
 from __future__ import annotations

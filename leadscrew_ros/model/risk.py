@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Squeak risk: one monotone number in [0, 1] from the least-stable oscillatory mode.
 
     risk = 1                              if zeta_min <= 0   (a squeak mode exists)

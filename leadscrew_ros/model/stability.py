@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Eigen-analysis of (27): squeak (flutter) modes, divergence, labels (README "Sign conventions, validity, risk")."""
 
 from __future__ import annotations

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 """Parameter sweeps and stability maps, batched over operating points, with stability
 boundaries refined by root finding (brentq on the largest squeak growth rate).
 
