@@ -27,7 +27,7 @@ from leadscrew_ros.diagnostics import (KEY_BAG, KEY_CUT_OFF_BAGS, KEY_FILES, KEY
                                        recording_status, status_task)
 from leadscrew_ros.live import Level, Status
 from leadscrew_ros.node import LATCHED, NODE_NAME
-from test_node import SQUEAK, Ros, at
+from test_node import SQUEAK, at, ros  # noqa: F401  (ros: fixture)
 
 COLLECT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -214,13 +214,6 @@ def test_recording_status(rec, crash, expected_level, words):
                                                  else None)
 
 
-@pytest.fixture
-def ros():
-    r = Ros()
-    try:
-        yield r
-    finally:
-        r.close()
 
 
 def test_the_node_forces_diagnostics_on_a_change_of_verdict_only(ros):
