@@ -31,6 +31,7 @@ from threadpoolctl import threadpool_limits
 
 from .model import OperatingPointError, ParameterError, Prediction, SqueakModel, Validity
 from .model.advice import Band, band_around
+from .model.display import exact
 from .model.predictor import check_operating_point
 
 
@@ -257,9 +258,9 @@ class LivePredictor:
             z = float(value)                                        # type: ignore[arg-type]
         except (TypeError, ValueError, OverflowError):             # OverflowError: huge int
             return self._reject("nut", f"nut position {value!r} is not a number")
-        if not (math.isfinite(z) and 0.0 <= z <= p.length_m - p.nut_length_m):
-            return self._reject("nut", f"nut position {z:g} m is off the screw: allowed "
-                                       f"[0, {p.length_m - p.nut_length_m:g}] m (z_o + b <= L)")
+        if not (math.isfinite(z) and 0.0 <= z <= p.nut_travel_m):
+            return self._reject("nut", f"nut position {exact(z)} m is off the screw: allowed "
+                                       f"[0, {exact(p.nut_travel_m)}] m (z_o + b <= L)")
         self.inputs.nut_position_m = z
         self._input_errors.pop("nut", None)
         return ""

@@ -16,7 +16,6 @@ recording verdict in `leadscrew_ros.diagnostics`.
 
 from __future__ import annotations
 
-import math
 import re
 import signal
 import sys
@@ -337,9 +336,8 @@ class SqueakPredictorNode(Node):
         if i < len(msg.velocity):
             errors.append(self.live.set_speed(msg.velocity[i], now))
         if i < len(msg.position):
-            p = self.live.model.params
-            lead = p.radius_m * math.tan(p.helix_angle_rad)              # m per radian
-            z = self.get_parameter("nut_position_at_zero_angle_m").value + msg.position[i] * lead
+            z = (self.get_parameter("nut_position_at_zero_angle_m").value
+                 + msg.position[i] * self.live.model.params.lead_per_rad_m)
             errors.append(self.live.set_nut_position(z, now))
         self._input("; ".join(e for e in errors if e), now)
 

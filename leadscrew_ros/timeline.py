@@ -149,8 +149,8 @@ class Timeline:
 
     def __init__(self, params: ScrewParameters, settings: InputSettings = InputSettings()):
         self.settings = settings = settings.resolved("/")
-        self.lead_m_per_rad = params.radius_m * math.tan(params.helix_angle_rad)
-        self.nut_max_m = params.length_m - params.nut_length_m
+        self.lead_m_per_rad = params.lead_per_rad_m
+        self.nut_max_m = params.nut_travel_m
         self.speed: float | None = None
         self.load: float | None = settings.nominal_load_n
         self.nut = params.nut_position_m                   # until a nut input arrives
