@@ -35,7 +35,11 @@ class ScrewParameters:
     """Lead screw, nut contact and friction parameters (Table 1, SI units).
 
     Fields marked ``geometry=True`` in their metadata change the modal basis or the contact
-    integrals; the others only rescale precomputed matrices.
+    integrals; the others only rescale precomputed matrices. Construction validates every field
+    and the cross-field constraints (`validate`) and raises `ParameterError` on a bad value.
+
+    The Attributes section below is generated from the field metadata (unit, description,
+    allowed range, default), so it cannot drift from the fields.
     """
 
     radius_m: float = _p(0.005, "m", "effective screw radius R", 1e-4, 0.5)
@@ -75,6 +79,7 @@ class ScrewParameters:
 
     @property
     def n_modes(self) -> int:
+        """Number of modal coordinates N = 2 n_bending + n_torsion (the state has 2N)."""
         return 2 * self.n_bending + self.n_torsion
 
     @property
@@ -89,7 +94,24 @@ class ScrewParameters:
         return self.length_m - self.nut_length_m
 
     def with_(self, **changes: Any) -> "ScrewParameters":
-        """Copy with some fields changed (validated)."""
+        """Copy with some fields changed (validated).
+
+        Parameters
+        ----------
+        **changes
+            Field names and new values, each in the field's unit (see Attributes); strings
+            such as CLI arguments are converted to the field's type.
+
+        Returns
+        -------
+        ScrewParameters
+            A new, validated parameter set.
+
+        Raises
+        ------
+        ParameterError
+            A name is not a field, or a value is of the wrong type or out of range.
+        """
         unknown = set(changes) - set(field_names())
         if unknown:
             raise ParameterError(f"unknown parameter(s): {', '.join(sorted(unknown))}; "
@@ -97,12 +119,40 @@ class ScrewParameters:
         return replace(self, **{k: coerce(k, v) for k, v in changes.items()})
 
     def geometry_only(self) -> "ScrewParameters":
-        """These parameters with every non-geometry field at its default (a cache key)."""
+        """These parameters with every non-geometry field at its default (a cache key).
+
+        Returns
+        -------
+        ScrewParameters
+            A copy whose non-geometry fields hold their defaults.
+        """
         return replace(self, **{f.name: f.default for f in fields(self)
                                 if not f.metadata["geometry"]})
 
     def as_dict(self) -> dict[str, Any]:
+        """The fields as a plain dict.
+
+        Returns
+        -------
+        dict[str, Any]
+            Field name to value, in the field's unit.
+        """
         return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+def _attributes_section() -> str:
+    """Numpydoc Attributes section of `ScrewParameters`, one entry per field from its metadata."""
+    lines = ["", "    Attributes", "    ----------"]
+    for f in fields(ScrewParameters):
+        md = f.metadata
+        unit = {"": "", "1": " (dimensionless)"}.get(md["unit"], f" [{md['unit']}]")
+        allowed = (f"allowed {_range_text(md).removesuffix(' 1')}" if md["lo"] is not None
+                   else f"one of {', '.join(FORMULATIONS)}")
+        default = f"{f.default:g}" if isinstance(f.default, float) else repr(f.default)
+        lines += [f"    {f.name} : {f.type}",
+                  f"        {md['description'][0].upper()}{md['description'][1:]}{unit}.",
+                  f"        Default {default}, {allowed}."]
+    return "\n".join(lines) + "\n"
 
 
 def field_names() -> list[str]:
@@ -137,6 +187,10 @@ def _range_text(md: dict[str, Any]) -> str:
     lo = "(" if md["lo_open"] else "["
     hi = ")" if md["hi_open"] else "]"
     return f"{lo}{md['lo']:g}, {md['hi']:g}{hi} {md['unit']}".rstrip()
+
+
+ScrewParameters.__doc__ = ((ScrewParameters.__doc__ or "").rstrip() + "\n"
+                           + _attributes_section())
 
 
 def validate(p: ScrewParameters) -> None:

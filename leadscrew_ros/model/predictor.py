@@ -76,6 +76,28 @@ class OperatingPointError(ValueError):
 
 @dataclass(frozen=True)
 class Prediction:
+    """The squeak verdict at one operating point (from `SqueakModel.predict`).
+
+    Attributes
+    ----------
+    speed_rad_s : float
+        Screw speed Omega [rad/s] (signed).
+    load_n : float
+        Axial load F_z [N] (signed).
+    formulation : str
+        Kernel formulation used, 'paper' or 'consistent'.
+    validity : Validity
+        Whether the linearisation holds here; `Validity.OK` when it does.
+    reason : str
+        Why the point is outside validity, with its numbers; '' when valid.
+    modes : tuple of ModeResult
+        Oscillatory modes, growth rate descending; empty when not valid.
+    divergence_rates : tuple of float
+        Real eigenvalues > 0 (non-oscillatory growth, not squeak) [1/s], descending.
+    risk : float or None
+        Squeak risk in [0, 1] from the lowest modal damping ratio; None when not valid.
+    """
+
     speed_rad_s: float
     load_n: float
     formulation: str
@@ -92,24 +114,35 @@ class Prediction:
 
     @property
     def stable(self) -> bool | None:
+        """No squeak mode and no divergence; None when the point is not valid."""
         if not self.valid:
             return None
         return not self.divergence_rates and not any(m.unstable for m in self.modes)
 
     @property
     def squeak_modes(self) -> tuple[ModeResult, ...]:
+        """The unstable oscillatory modes (squeak), most unstable first."""
         return tuple(m for m in self.modes if m.unstable)
 
     @property
     def unstable_frequencies_hz(self) -> list[float]:
-        """Squeak frequencies, most unstable first."""
+        """Squeak frequencies [Hz], most unstable first."""
         return [m.frequency_hz for m in self.squeak_modes]
 
     @property
     def max_growth_rate(self) -> float | None:
+        """Largest Re(lambda) of the oscillatory modes [1/s] (> 0: squeak); None when not
+        valid or without oscillatory modes."""
         return self.modes[0].growth_rate if self.valid and self.modes else None
 
     def as_dict(self) -> dict[str, Any]:
+        """JSON-ready summary.
+
+        Returns
+        -------
+        dict[str, Any]
+            The fields and derived properties, in the same units; modes as dicts.
+        """
         return {"speed_rad_s": self.speed_rad_s, "load_n": self.load_n,
                 "formulation": self.formulation, "valid": self.valid, "reason": self.reason,
                 "stable": self.stable, "risk": self.risk,
@@ -120,7 +153,26 @@ class Prediction:
 
 
 def check_operating_point(speed_rad_s: Any, load_n: Any) -> tuple[float, float]:
-    """Reject values that are not finite real numbers of sane magnitude."""
+    """Reject values that are not finite real numbers of sane magnitude.
+
+    Parameters
+    ----------
+    speed_rad_s : float
+        Screw speed [rad/s].
+    load_n : float
+        Axial load [N]; its magnitude may not exceed the upper limit of
+        `ScrewParameters.axial_load_n`.
+
+    Returns
+    -------
+    tuple of float
+        ``(speed_rad_s, load_n)`` as Python floats.
+
+    Raises
+    ------
+    OperatingPointError
+        A value is not a real number, not finite, or the load is implausibly large.
+    """
     out = []
     for name, unit, v in (("speed", "rad/s", speed_rad_s), ("load", "N", load_n)):
         if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
@@ -139,7 +191,20 @@ def check_operating_point(speed_rad_s: Any, load_n: Any) -> tuple[float, float]:
 
 
 class SqueakModel:
-    """Precomputes modes and contact integrals for one parameter set; `predict` is cheap."""
+    """Precomputes modes and contact integrals for one parameter set; `predict` is cheap.
+
+    Parameters
+    ----------
+    params : ScrewParameters, optional
+        Screw, contact and friction parameters (SI units); the defaults (Table 1) when None.
+
+    Attributes
+    ----------
+    params : ScrewParameters
+        The parameters of this model.
+    geometry : Geometry
+        Modal basis and precomputed contact integrals.
+    """
 
     def __init__(self, params: ScrewParameters | None = None):
         self.geometry = build_geometry(params or ScrewParameters())
@@ -147,19 +212,51 @@ class SqueakModel:
 
     @property
     def labels(self) -> tuple[str, ...]:
+        """Names of the modal coordinates, e.g. 'B1x', 'B1y', 'T1' (N entries)."""
         return self.geometry.basis.labels
 
     @cached_property
     def critical_speed_rad_s(self) -> float:
-        """First critical speed: the backward whirl of the lowest mode reaches zero frequency."""
+        """First critical speed [rad/s]: the backward whirl of the lowest mode reaches zero
+        frequency; the model holds below it."""
         return float(self.geometry.basis.omega_rad_s.min())
 
     def with_params(self, **changes: Any) -> "SqueakModel":
-        """A model with changed parameters, re-integrating only if the geometry changed."""
+        """A model with changed parameters, re-integrating only if the geometry changed.
+
+        Parameters
+        ----------
+        **changes
+            `ScrewParameters` field names and new values, each in the field's unit.
+
+        Returns
+        -------
+        SqueakModel
+            A model for the changed parameters.
+
+        Raises
+        ------
+        ParameterError
+            An unknown field or a value out of its allowed range.
+        """
         return SqueakModel(self.params.with_(**changes))
 
     def validity_code(self, speed_rad_s, load_n) -> np.ndarray:
-        """Vectorised validity: `Validity` codes (Validity.OK where the linearisation holds)."""
+        """Vectorised validity: `Validity` codes (Validity.OK where the linearisation holds).
+
+        Parameters
+        ----------
+        speed_rad_s : array_like
+            Screw speeds [rad/s].
+        load_n : array_like
+            Axial loads [N], broadcast against `speed_rad_s`.
+
+        Returns
+        -------
+        numpy.ndarray
+            Integer `Validity` codes of the broadcast shape (SOLVER_FAILED and
+            PARAMETERS_REJECTED never occur here: they need a solve or a parameter change).
+        """
         p = self.params
         w = np.abs(np.asarray(speed_rad_s, float))
         code = np.where(w < p.min_speed_rad_s, Validity.BELOW_MIN_SPEED,
@@ -172,8 +269,22 @@ class SqueakModel:
         return code
 
     def validity(self, speed_rad_s: float, load_n: float) -> tuple[Validity, str]:
-        """The verdict at this point and, when the linearisation fails, why in words with the
-        numbers ('' when it holds)."""
+        """The verdict at this point and, when the linearisation fails, why.
+
+        Parameters
+        ----------
+        speed_rad_s : float
+            Screw speed [rad/s].
+        load_n : float
+            Axial load [N].
+
+        Returns
+        -------
+        validity : Validity
+            The verdict.
+        reason : str
+            Why the linearisation fails, in words with the numbers; '' when it holds.
+        """
         code = Validity(int(self.validity_code(speed_rad_s, load_n)))
         w, p = abs(speed_rad_s), self.params
         return code, {
@@ -191,11 +302,43 @@ class SqueakModel:
         }[code]
 
     def state_matrix(self, speed_rad_s: float, load_n: float) -> np.ndarray:
-        """State matrix of (27) at one operating point (2N x 2N)."""
+        """State matrix of (27) at one operating point.
+
+        Parameters
+        ----------
+        speed_rad_s : float
+            Screw speed [rad/s].
+        load_n : float
+            Axial load [N].
+
+        Returns
+        -------
+        numpy.ndarray
+            The 2N x 2N state matrix; its eigenvalues lambda [1/s] give the modes.
+        """
         return self.geometry.state_matrices(speed_rad_s, load_n)
 
     def predict(self, speed_rad_s: float, load_n: float | None = None) -> Prediction:
-        """Squeak prediction at one operating point (speed in rad/s, axial load in N)."""
+        """Squeak prediction at one operating point.
+
+        Parameters
+        ----------
+        speed_rad_s : float
+            Screw speed Omega [rad/s] (signed).
+        load_n : float, optional
+            Axial load F_z [N] (signed); `params.axial_load_n` when None.
+
+        Returns
+        -------
+        Prediction
+            Modes, stability and risk, or the validity verdict and its reason when the
+            linearisation does not hold (then no numbers are given).
+
+        Raises
+        ------
+        OperatingPointError
+            Speed or load is not a finite real number of plausible magnitude.
+        """
         speed, load = check_operating_point(
             speed_rad_s, self.params.axial_load_n if load_n is None else load_n)
         validity, reason = self.validity(speed, load)
@@ -209,7 +352,25 @@ class SqueakModel:
         return self._prediction(speed, load, lam, vec)
 
     def predict_many(self, speeds_rad_s, loads_n) -> list[Prediction]:
-        """Predictions at many operating points (broadcast) with one batched eigen-solve."""
+        """Predictions at many operating points with one batched eigen-solve.
+
+        Parameters
+        ----------
+        speeds_rad_s : array_like
+            Screw speeds [rad/s].
+        loads_n : array_like
+            Axial loads [N], broadcast against `speeds_rad_s`.
+
+        Returns
+        -------
+        list of Prediction
+            One prediction per point of the broadcast, flattened in C order.
+
+        Raises
+        ------
+        OperatingPointError
+            Any speed or load is not a finite real number of plausible magnitude.
+        """
         speeds, loads = (a.ravel() for a in np.broadcast_arrays(
             np.asarray(speeds_rad_s, float), np.asarray(loads_n, float)))
         points = [check_operating_point(s, f) for s, f in zip(speeds.tolist(), loads.tolist())]

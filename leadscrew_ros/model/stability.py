@@ -14,7 +14,21 @@ _GROWTH_TOL = 1e-10
 
 
 class ModeResult(NamedTuple):
-    """One oscillatory eigenpair (a NamedTuple: built per mode on the live path, so cheap)."""
+    """One oscillatory eigenpair (a NamedTuple: built per mode on the live path, so cheap).
+
+    Attributes
+    ----------
+    label : str
+        Dominant modal coordinate, e.g. 'B1y'.
+    frequency_hz : float
+        Frequency |Im(lambda)| / 2 pi [Hz].
+    growth_rate : float
+        Re(lambda) [1/s]; > 0 grows (squeak).
+    damping_ratio : float
+        -Re(lambda) / |lambda| (dimensionless); < 0 when unstable.
+    unstable : bool
+        Squeak: Re(lambda) > 0 with Im(lambda) != 0.
+    """
 
     label: str               # dominant modal coordinate, e.g. "B1y"
     frequency_hz: float      # |Im(lambda)| / 2 pi
@@ -23,6 +37,13 @@ class ModeResult(NamedTuple):
     unstable: bool           # squeak: Re > 0 with Im != 0
 
     def as_dict(self) -> dict:
+        """The fields as a dict.
+
+        Returns
+        -------
+        dict
+            Field name to value, units as in Attributes.
+        """
         return self._asdict()
 
 

@@ -123,13 +123,26 @@ def check_axis(name: str) -> None:
 
 @dataclass(frozen=True)
 class GrowthField:
-    """Largest squeak growth rate (1/s) on a set of points; NaN where the model is not valid."""
+    """Largest squeak growth rate on a set of points; NaN where the model is not valid.
+
+    All arrays have the shape of the broadcast points.
+
+    Attributes
+    ----------
+    max_growth_rate : numpy.ndarray
+        Largest Re(lambda) of the oscillatory modes [1/s] (> 0: squeak); NaN where invalid.
+    valid : numpy.ndarray
+        Boolean: the linearisation holds and the parameters are allowed at the point.
+    peak_frequency_hz : numpy.ndarray
+        Frequency of the most unstable oscillatory mode [Hz]; NaN where invalid.
+    divergence_rate : numpy.ndarray
+        Largest real eigenvalue > 0 (divergence, not squeak) [1/s]; 0 where none, NaN where
+        invalid.
+    """
 
     max_growth_rate: np.ndarray
     valid: np.ndarray
-    # Frequency (Hz) of the most unstable oscillatory mode, NaN where invalid.
     peak_frequency_hz: np.ndarray
-    # Largest real eigenvalue > 0 (divergence, not squeak), 0 where none, NaN where invalid.
     divergence_rate: np.ndarray
 
 
@@ -156,8 +169,34 @@ def _native(name: str, value: float):
 
 def growth_field(model: SqueakModel, speed_rad_s, load_n,
                  progress: Callable[[int], None] | None = None, **params) -> GrowthField:
-    """Largest squeak growth rate at every point of the broadcast of all given arrays
-    (speed in rad/s, load in N, any numeric parameter fields by name)."""
+    """Largest squeak growth rate at every point of the broadcast of all given arrays.
+
+    Points that share all parameter values are solved in one batched eigenproblem.
+
+    Parameters
+    ----------
+    model : SqueakModel
+        The model; its parameters hold wherever `params` does not override them.
+    speed_rad_s : array_like
+        Screw speeds [rad/s].
+    load_n : array_like
+        Axial loads [N].
+    progress : callable, optional
+        Called with the number of points just finished (invalid points at once).
+    **params
+        Numeric `ScrewParameters` fields by name, arrays in the field's unit; all arrays
+        broadcast together.
+
+    Returns
+    -------
+    GrowthField
+        Growth rate, validity, peak frequency and divergence rate, of the broadcast shape.
+
+    Raises
+    ------
+    ParameterError
+        A value is not finite, or a name is not a `ScrewParameters` field.
+    """
     arrays = np.broadcast_arrays(np.asarray(speed_rad_s, float), np.asarray(load_n, float),
                                  *(np.asarray(v, float) for v in params.values()))
     shape = arrays[0].shape
@@ -196,8 +235,24 @@ def _scalar_growth(model: SqueakModel, fixed: dict[str, float], axis: str) -> Ca
 
 def refine_crossings(f: Callable[[float], float], x: np.ndarray, g: np.ndarray,
                      rtol: float = 1e-9) -> list[float]:
-    """Roots of f between consecutive grid points where g changes sign (both valid);
-    `rtol` is relative to the grid span."""
+    """Roots of f between consecutive grid points where g changes sign (both valid).
+
+    Parameters
+    ----------
+    f : callable
+        Scalar growth rate [1/s] as a function of the axis value (in the axis unit).
+    x : numpy.ndarray
+        Grid along the axis, in the axis unit.
+    g : numpy.ndarray
+        ``f`` on the grid [1/s]; NaN where invalid (no root is sought next to NaN).
+    rtol : float, optional
+        Root tolerance relative to the grid span (dimensionless).
+
+    Returns
+    -------
+    list of float
+        The refined roots (stability boundaries) in the axis unit, in grid order.
+    """
     roots, xtol = [], rtol * float(np.ptp(x)) if len(x) > 1 else 0.0
     for i in range(len(x) - 1):
         a, b = g[i], g[i + 1]
@@ -213,18 +268,47 @@ def _fixed(model: SqueakModel, speed_rad_s: float | None, load_n: float | None) 
 
 @dataclass(frozen=True)
 class SweepResult:
+    """Predictions along one axis with refined stability boundaries (from `sweep`).
+
+    Attributes
+    ----------
+    axis : str
+        Swept quantity: 'speed_rad_s', 'load_n' or a numeric `ScrewParameters` field.
+    values : numpy.ndarray
+        Axis values, in the axis unit (rad/s, N or the field's unit).
+    fixed : dict[str, float]
+        The operating point held fixed: 'speed_rad_s' [rad/s] and/or 'load_n' [N] (the
+        swept one left out).
+    predictions : list of Prediction
+        One prediction per value.
+    boundaries : list of float
+        Stability boundaries on the axis refined by root finding, in the axis unit.
+    unstable_bands : list of tuple of float
+        ``(start, end)`` intervals with squeak, in the axis unit; each end is a refined
+        boundary or, at the edge of validity or of the grid, a grid point.
+    """
+
     axis: str
     values: np.ndarray
     fixed: dict[str, float]
     predictions: list[Prediction]
-    boundaries: list[float]                          # refined stability boundaries on the axis
+    boundaries: list[float]
     unstable_bands: list[tuple[float, float]] = field(default_factory=list)
 
     @property
     def max_growth_rate(self) -> np.ndarray:
+        """Largest squeak growth rate per value [1/s]; NaN where not valid."""
         return np.array([p.max_growth_rate if p.valid else np.nan for p in self.predictions])
 
     def as_dict(self) -> dict:
+        """JSON-ready result.
+
+        Returns
+        -------
+        dict
+            Axis values, validity, growth rates [1/s], risk, squeak modes and frequencies
+            [Hz], boundaries and bands (keyed with the axis unit, e.g. ``unstable_bands_rad_s``).
+        """
         return {
             "axis": self.axis, self.axis: self.values.tolist(), "fixed": self.fixed,
             "valid": [p.valid for p in self.predictions],
@@ -248,7 +332,22 @@ def _unit_suffix(axis: str) -> str:
 
 def unstable_intervals(values: np.ndarray, growth: np.ndarray, boundaries: list[float]
                        ) -> list[tuple[float, float]]:
-    """Intervals of the axis with squeak, closed by refined boundaries or the grid ends."""
+    """Intervals of the axis with squeak, closed by refined boundaries or the grid ends.
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        Grid along the axis, in the axis unit.
+    growth : numpy.ndarray
+        Largest squeak growth rate on the grid [1/s]; NaN where invalid.
+    boundaries : list of float
+        Refined roots from `refine_crossings` on the same grid, in the axis unit.
+
+    Returns
+    -------
+    list of tuple of float
+        ``(start, end)`` of every unstable interval, in the axis unit.
+    """
     bands, start, roots = [], None, iter(boundaries)
     for i, g in enumerate(growth):
         unstable = bool(np.isfinite(g) and g > 0)
@@ -265,8 +364,36 @@ def unstable_intervals(values: np.ndarray, growth: np.ndarray, boundaries: list[
 def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = None,
           load_n: float | None = None, progress: Callable[[int], None] | None = None
           ) -> SweepResult:
-    """Predictions along one axis (batched), with refined stability boundaries and bands;
-    `progress(n)` is called as points are done. Raises WorkSizeError for too many points."""
+    """Predictions along one axis (batched), with refined stability boundaries and bands.
+
+    Parameters
+    ----------
+    model : SqueakModel
+        The model; its parameters hold except the swept one.
+    axis : str
+        'speed_rad_s', 'load_n' or a numeric `ScrewParameters` field.
+    values : array_like
+        Axis values, in the axis unit (rad/s, N or the field's unit).
+    speed_rad_s : float, optional
+        Fixed screw speed [rad/s] when not swept; `REFERENCE_SPEED_RAD_S` (20 rad/s) when
+        None.
+    load_n : float, optional
+        Fixed axial load [N] when not swept; `params.axial_load_n` when None.
+    progress : callable, optional
+        Called with the number of points just finished.
+
+    Returns
+    -------
+    SweepResult
+        Predictions, refined boundaries and unstable bands along the axis.
+
+    Raises
+    ------
+    ParameterError
+        `axis` is not sweepable.
+    WorkSizeError
+        Too many points or too much memory, before any work.
+    """
     check_axis(axis)
     values = np.asarray(values, float)
     sweep_work(model, axis, values).check()
@@ -302,15 +429,45 @@ def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = Non
 
 @dataclass(frozen=True)
 class MapResult:
+    """Squeak growth rate on a 2-D grid with its refined zero contour (from `stability_map`).
+
+    Attributes
+    ----------
+    x_axis : str
+        Quantity along x: 'speed_rad_s', 'load_n' or a numeric `ScrewParameters` field.
+    x : numpy.ndarray
+        Grid along x, in the x-axis unit.
+    y_axis : str
+        Quantity along y, as `x_axis`.
+    y : numpy.ndarray
+        Grid along y, in the y-axis unit.
+    fixed : dict[str, float]
+        The operating point held fixed: 'speed_rad_s' [rad/s] and/or 'load_n' [N] (the
+        mapped ones left out).
+    field : GrowthField
+        Arrays of shape (len(y), len(x)).
+    boundary : list of tuple of float
+        ``(x, y)`` points on the stability boundary, refined along rows and columns, in the
+        axis units.
+    """
+
     x_axis: str
     x: np.ndarray
     y_axis: str
     y: np.ndarray
     fixed: dict[str, float]
-    field: GrowthField                               # arrays of shape (len(y), len(x))
-    boundary: list[tuple[float, float]]              # refined (x, y) points on the boundary
+    field: GrowthField
+    boundary: list[tuple[float, float]]
 
     def as_dict(self) -> dict:
+        """JSON-ready result.
+
+        Returns
+        -------
+        dict
+            Axes, fixed point, growth rate [1/s] (None where invalid), unstable and
+            divergence masks (row per y value) and the boundary points.
+        """
         g = self.field.max_growth_rate
         return {"x_axis": self.x_axis, "x": self.x.tolist(), "y_axis": self.y_axis,
                 "y": self.y.tolist(), "fixed": self.fixed,
@@ -325,7 +482,40 @@ def stability_map(model: SqueakModel, x_axis: str, x, y_axis: str, y,
                   speed_rad_s: float | None = None, load_n: float | None = None,
                   progress: Callable[[int], None] | None = None) -> MapResult:
     """Largest squeak growth rate on a 2-D grid and its zero contour refined along rows and
-    columns by root finding."""
+    columns by root finding.
+
+    Parameters
+    ----------
+    model : SqueakModel
+        The model; its parameters hold except the mapped ones.
+    x_axis : str
+        Quantity along x: 'speed_rad_s', 'load_n' or a numeric `ScrewParameters` field.
+    x : array_like
+        Grid along x, in the x-axis unit.
+    y_axis : str
+        Quantity along y (different from `x_axis`).
+    y : array_like
+        Grid along y, in the y-axis unit.
+    speed_rad_s : float, optional
+        Fixed screw speed [rad/s] when not an axis; `REFERENCE_SPEED_RAD_S` (20 rad/s) when
+        None.
+    load_n : float, optional
+        Fixed axial load [N] when not an axis; `params.axial_load_n` when None.
+    progress : callable, optional
+        Called with the number of grid points just finished.
+
+    Returns
+    -------
+    MapResult
+        The growth field on the grid and the refined boundary points.
+
+    Raises
+    ------
+    ParameterError
+        An axis is not sweepable, or the two axes are the same.
+    WorkSizeError
+        Too many points or too much memory, before any work.
+    """
     for a in (x_axis, y_axis):
         check_axis(a)
     if x_axis == y_axis:
