@@ -735,7 +735,9 @@ def _one_line(message: str) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit code (0 ok, 2 bad input, 130 interrupted, 141 closed
-    pipe)."""
+    pipe). The long-running ROS commands (demo, simulate, replay --publish) return 0 when
+    stopped by SIGINT/SIGTERM (`ros_env.StopSignals.exit_status`); 130 is Ctrl-C of the others
+    or a second Ctrl-C."""
     try:
         ours, ros_args = split_ros_args(sys.argv[1:] if argv is None else list(argv))
         args = build_parser().parse_args(ours)

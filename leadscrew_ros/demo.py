@@ -238,8 +238,8 @@ def recording_summary(recorder: Recorder) -> str:
 # ----------------------------------------------------------------------------- run
 def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float = 4.0,
              out: TextIO | None = None, record_dir: Path | None = None) -> int:
-    """Run predictor + simulator + monitor for one stroke; 0 when done, 128 + the signal number
-    on SIGINT (130) or SIGTERM (143), with the summary so far. The predictor records into a
+    """Run predictor + simulator + monitor for one stroke; 0 when done, and 0 after SIGINT or
+    SIGTERM too, with the summary so far and `StopSignals.exit_status`'s line on stderr. The predictor records into a
     bag in `record_dir` (created; None: no recording). A bad duration raises ProfileError
     before anything starts; RuntimeError if rclpy or the discovery fails."""
     out = out or sys.stdout
@@ -315,7 +315,4 @@ def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float 
                       expected, sim.published if sim else 0), file=out, flush=True)
     if predictor is not None and record_dir is not None:
         print(recording_summary(predictor.recorder), file=out, flush=True)
-    if finished:
-        return 0
-    print("leadscrew-squeak: interrupted", file=sys.stderr)
-    return 128 + stop.signum
+    return 0 if finished else stop.exit_status()

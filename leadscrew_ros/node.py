@@ -17,7 +17,6 @@ recording verdict in `leadscrew_ros.diagnostics`.
 from __future__ import annotations
 
 import re
-import signal
 import sys
 import threading
 import time
@@ -49,7 +48,7 @@ from .model import ParameterError, Prediction, ScrewParameters, SqueakModel
 from .model.display import exact
 from .model.parameters import FORMULATIONS
 from .recorder import COMPRESSIONS, Recorder, RecordSettings, ensure_directory
-from .ros_env import confine_to_localhost
+from .ros_env import StopSignals, confine_to_localhost
 
 NODE_NAME = "squeak_predictor"
 MODE_COLUMNS = ("frequency_hz", "growth_rate", "damping_ratio")
@@ -518,8 +517,10 @@ def usage() -> str:
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the node until SIGINT/SIGTERM; exit 0 on a clean shutdown, 2 on bad parameters or
-    arguments; `-h`/`--help` prints `usage()` and exits 0."""
+    """Run the node until SIGINT/SIGTERM; exit 0 on that requested shutdown (with the line
+    `squeak_predictor: stopped by SIGTERM` or `... SIGINT` on stderr, as every long-running
+    command: `ros_env.StopSignals.exit_status`), 2 on bad parameters or arguments;
+    `-h`/`--help` prints `usage()` and exits 0."""
     own_args = remove_ros_args(sys.argv if args is None else args)[1:]
     if {"-h", "--help"} & set(own_args):
         print(usage())
@@ -529,28 +530,27 @@ def main(args: list[str] | None = None) -> int:
               "arguments go after --ros-args; see --help)", file=sys.stderr)
         return 2
     confine_to_localhost()
-    # SIGINT/SIGTERM only set `stop`; the loop ends between callbacks. rclpy's own handlers
-    # shut the context down from another thread (a publish in flight then fails with "context
-    # is invalid", exit 1 with a traceback) or raise KeyboardInterrupt inside any callback.
-    stop: list[int] = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda signum, _frame: stop.append(signum))
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
-        node = SqueakPredictorNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        while not stop:
-            executor.spin_once(timeout_sec=0.1)    # stops after the current callback
-    except (ParameterError, ParameterException) as exc:
-        print(f"{NODE_NAME}: error: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    # SIGINT/SIGTERM only set `stop.signum`; the loop ends between callbacks. rclpy's own
+    # handlers shut the context down from another thread (a publish in flight then fails with
+    # "context is invalid", exit 1 with a traceback) or raise KeyboardInterrupt inside any
+    # callback.
+    with StopSignals() as stop:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        node = None
+        try:
+            node = SqueakPredictorNode()
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+            while not stop.signum:
+                executor.spin_once(timeout_sec=0.1)    # stops after the current callback
+        except (ParameterError, ParameterException) as exc:
+            print(f"{NODE_NAME}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+            return 2
+        finally:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+    return stop.exit_status(NODE_NAME)
 
 
 if __name__ == "__main__":

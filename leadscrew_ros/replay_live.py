@@ -56,15 +56,6 @@ SLICE_S = 0.05                # longest sleep without looking at the stop flag
 STATUS_PERIOD_S = 0.25
 
 
-class Interrupted(KeyboardInterrupt):
-    """A replay without `loop` stopped by SIGINT/SIGTERM before its end (after a clean
-    shutdown). A KeyboardInterrupt, so the CLI reports it as one line and exits 130."""
-
-    def __init__(self, signum: int, published: int):
-        super().__init__(f"interrupted by signal {signum} after {published} messages")
-        self.signum, self.published = signum, published
-
-
 @dataclass(frozen=True)
 class _Plan:
     """What to publish, checked against the whole log."""
@@ -98,10 +89,10 @@ def publish_log(paths: list[Path], *, rate: float = 1.0, loop: bool = False,
     subscriber matched, or after `wait_for_subscriber_s` (0: at once, the simulator's
     --no-wait).
 
-    Returns the number of messages published. Raises ValueError for bad arguments (ROS ones
-    included) and LogError
-    for an unreadable log, both before anything is published, and `Interrupted` when a replay
-    without `loop` was stopped by a signal before its end."""
+    Returns the number of messages published, also when stopped by SIGINT/SIGTERM (looped or
+    before its end: `StopSignals.exit_status` writes its line on stderr). Raises ValueError for
+    bad arguments (ROS ones included) and LogError for an unreadable log, both before anything
+    is published."""
     paths = [Path(p) for p in paths]
     _check_arguments(paths, rate, start_offset_s, remap, wait_for_subscriber_s)
     plan = _plan(paths, start_offset_s, topics, remap or {})
@@ -132,9 +123,8 @@ def publish_log(paths: list[Path], *, rate: float = 1.0, loop: bool = False,
         return published
     passes = f" ({player.passes} passes)" if player is not None and loop else ""
     print(f"replay stopped: {published} messages published{passes}", flush=True)
-    if loop:
-        return published
-    raise Interrupted(stop.signum, published)
+    stop.exit_status()
+    return published
 
 
 # ----------------------------------------------------------------------------- checks

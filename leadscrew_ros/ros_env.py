@@ -87,8 +87,14 @@ class StopSignals:
     """Context manager: SIGINT and SIGTERM set `signum` instead of interrupting, so a spin loop
     can end cleanly between two callbacks (with a non-default Context rclpy installs no signal
     handlers: SIGTERM would kill the process, SIGINT raise anywhere). A second signal of the
-    same kind acts as usual. Handlers are restored on exit; outside the main thread nothing is
-    installed."""
+    same kind acts as usual (SIGINT: KeyboardInterrupt, exit 130; SIGTERM: killed by it).
+    Handlers are restored on exit; outside the main thread nothing is installed.
+
+    The one rule for how every long-running ROS command (`squeak_node`, `demo`, `simulate`,
+    `replay --publish`) ends, applied by `exit_status`: a requested shutdown is a success.
+    SIGINT and SIGTERM alike give exit status 0 and one line on stderr,
+    `<program>: stopped by SIGINT` / `<program>: stopped by SIGTERM`; stdout keeps the
+    command's own output (its summary so far)."""
 
     def __enter__(self) -> "StopSignals":
         self.signum = 0
@@ -109,3 +115,11 @@ class StopSignals:
     def __exit__(self, *exc) -> None:
         for sig, old in self._old.items():
             signal.signal(sig, old)
+
+    def exit_status(self, program: str = PROGRAM) -> int:
+        """The exit status of a command that ran until now: 0. After a stop signal, first
+        write `<program>: stopped by SIGTERM` (or SIGINT) on stderr."""
+        if self.signum:
+            print(f"{program}: stopped by {signal.Signals(self.signum).name}", file=sys.stderr,
+                  flush=True)
+        return 0

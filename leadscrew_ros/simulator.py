@@ -249,8 +249,8 @@ def run_simulator(profile: StrokeProfile | None = None, rate_hz: float = 100.0,
     (`--ros-args -r __ns:=/seat_left ...`) configure the node as any ROS executable's
     (ValueError if rcl rejects them); the topics are relative, so a namespace prefixes them.
 
-    Returns 0 when the stroke is done (or, with `loop`, when stopped by SIGINT/SIGTERM), else
-    128 + the signal number (130 SIGINT, 143 SIGTERM) when stopped before the end."""
+    Returns 0: when the stroke is done, and when stopped by SIGINT/SIGTERM (with or without
+    `loop`; `StopSignals.exit_status` writes its line on stderr)."""
     out = out or sys.stdout
     profile = profile or StrokeProfile()
     confine_to_localhost()
@@ -289,8 +289,5 @@ def run_simulator(profile: StrokeProfile | None = None, rate_hz: float = 100.0,
     if node is not None and node.done:
         print(f"stroke done: {published} samples published", file=out, flush=True)
         return 0
-    if loop:
-        print(f"stopped: {published} samples published", file=out, flush=True)
-        return 0
-    print("leadscrew-squeak: interrupted", file=sys.stderr)
-    return 128 + stop.signum
+    print(f"stopped: {published} samples published", file=out, flush=True)
+    return stop.exit_status()

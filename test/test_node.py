@@ -588,6 +588,7 @@ def test_node_processes_answer_and_exit_cleanly_on_sigterm_and_sigint(tmp_path):
             print(f"{sig.name} node process stderr:\n{stderr}")   # shown in full on failure
             assert child["proc"].returncode == 0, (sig, stderr)
             assert "Traceback" not in stderr, sig
+            assert stderr.splitlines()[-1] == f"{NODE_NAME}: stopped by {sig.name}", sig
     finally:
         for child in children.values():
             stop(child["proc"])
