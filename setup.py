@@ -50,7 +50,7 @@ setup(
     entry_points={
         "console_scripts": [
             "leadscrew-squeak = leadscrew_ros.cli:main",
-            "squeak_node = leadscrew_ros.node:main",
+            "squeak_node = leadscrew_ros.ros.node:main",
         ],
     },
 )

@@ -58,9 +58,9 @@ from rclpy.event_handler import (PublisherEventCallbacks,  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data                        # noqa: E402
 from std_msgs.msg import Float64                                     # noqa: E402
 
-from leadscrew_ros.logfile import inspect, log_files                  # noqa: E402
+from leadscrew_ros.bag.logfile import inspect, log_files                  # noqa: E402
 from leadscrew_ros.model import SqueakModel                          # noqa: E402
-from leadscrew_ros.node import LATCHED, SqueakPredictorNode          # noqa: E402
+from leadscrew_ros.ros.node import LATCHED, SqueakPredictorNode          # noqa: E402
 
 TARGET_INPROCESS_P99_MS = 2.0
 LOAD_N = 200.0                 # fixed axial load; squeak band at this load ~0.8..55 rad/s
@@ -301,13 +301,13 @@ def bench_in_process(cfg: dict, domain: int, profile: bool = False,
 
 # ---------------------------------------------------------------- child process
 class ChildNode:
-    """`python -m leadscrew_ros.node` with the parent's environment plus the phase's domain."""
+    """`python -m leadscrew_ros.ros.node` with the parent's environment plus the phase's domain."""
 
     def __init__(self, domain: int, ros_args: list[str]):
         env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                    ROS_DOMAIN_ID=str(domain))
         self.log = tempfile.TemporaryFile()
-        cmd = [sys.executable, "-m", "leadscrew_ros.node"]
+        cmd = [sys.executable, "-m", "leadscrew_ros.ros.node"]
         if ros_args:
             cmd += ["--ros-args", *ros_args]
         self.proc = subprocess.Popen(cmd, env=env, stdout=self.log, stderr=subprocess.STDOUT)

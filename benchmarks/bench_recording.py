@@ -95,7 +95,7 @@ def count_bag(bag: Path) -> dict:
     from rclpy.serialization import deserialize_message
     from std_msgs.msg import Float64
 
-    from leadscrew_ros.logfile import read_log
+    from leadscrew_ros.bag.logfile import read_log
 
     indexes: dict[str, list[int]] = {f"{NS}/{t}": [] for t in ENCODING}
     for m in read_log(bag):
@@ -122,7 +122,7 @@ def run(seconds: float, rate_hz: float, hog: bool, tree: Path, workdir: Path,
     env.setdefault("ROS_LOG_DIR", str(workdir / "log"))
     bags.mkdir(parents=True)
     node = subprocess.Popen(
-        [sys.executable, "-m", "leadscrew_ros.node", "--ros-args", "-r", f"__ns:={NS}",
+        [sys.executable, "-m", "leadscrew_ros.ros.node", "--ros-args", "-r", f"__ns:={NS}",
          "-p", "record.enabled:=true", "-p", f"record.directory:={bags}",
          *(["-p", f"record.queue_depth:={queue_depth}"] if queue_depth else [])],
         cwd=tree, env=env, stdout=subprocess.DEVNULL, stderr=open(workdir / "node.err", "w"))

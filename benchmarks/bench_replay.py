@@ -37,8 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from leadscrew_ros.model import SqueakModel
-from leadscrew_ros.replay import ReplaySettings, replay
-from leadscrew_ros.synthetic_log import DutyCycle, write_log
+from leadscrew_ros.review.replay import ReplaySettings, replay
+from leadscrew_ros.bag.synthetic import DutyCycle, write_log
 
 TARGET_X_REAL_TIME = 100.0
 TARGET_RSS_RATIO = 1.2
@@ -47,8 +47,8 @@ _CHILD = """
 import json, resource, sys, time
 from pathlib import Path
 from leadscrew_ros.model import SqueakModel
-from leadscrew_ros.replay import ReplaySettings, replay
-from leadscrew_ros.report import QUICK, write_report
+from leadscrew_ros.review.replay import ReplaySettings, replay
+from leadscrew_ros.review.report import QUICK, write_report
 bag, out, workers = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3])
 model, t0 = SqueakModel(), time.perf_counter()
 result = replay(bag, model, out, ReplaySettings(workers=workers, progress=False))
@@ -188,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
         res["replay"] = result.summary()
         res["annotated_mb"] = size_mb(result.annotated)
         if args.report:
-            from leadscrew_ros.report import write_report
+            from leadscrew_ros.review.report import write_report
             t0 = time.perf_counter()
             write_report(result, model, Path(out))
             res["report_s"] = time.perf_counter() - t0

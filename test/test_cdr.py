@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: Apache-2.0
-"""CDR decoders of the replay (`leadscrew_ros.cdr`) against rclpy's and rosbags' serializers;
+"""CDR decoders of the replay (`leadscrew_ros.bag.cdr`) against rclpy's and rosbags' serializers;
 malformed payloads raise ValueError and nothing else."""
 
 import math
@@ -12,8 +12,8 @@ from rosbags.typesys import Stores, get_typestore
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from leadscrew_ros.cdr import decode_float64, decode_joint_state
-from leadscrew_ros.serialization import cdr_payload
+from leadscrew_ros.bag.cdr import decode_float64, decode_joint_state
+from leadscrew_ros.ros.serialization import cdr_payload
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 FLOATS = st.floats(allow_nan=False, width=64)

@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from leadscrew_ros.model.parameters import ScrewParameters, field_names
-from leadscrew_ros.node import NODE_PARAMETERS
+from leadscrew_ros.ros.node import NODE_PARAMETERS
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "leadscrew.yaml"
 KEY = "/**"
@@ -108,7 +108,7 @@ def _node_with_params_file(path: Path) -> dict:
     import rclpy
     from rclpy.context import Context
 
-    from leadscrew_ros.node import SqueakPredictorNode
+    from leadscrew_ros.ros.node import SqueakPredictorNode
 
     ctx = Context()
     rclpy.init(context=ctx, args=["--ros-args", "--params-file", str(path)])

@@ -23,13 +23,13 @@ from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64
 
-from leadscrew_ros.demo import SqueakMonitor, status_line
-from leadscrew_ros.diagnostics import DiagnosticStatusWrapper, status_task
-from leadscrew_ros.live import KEY_VALIDITY, LivePredictor
-from leadscrew_ros.logfile import inspect, log_files, read_log
+from leadscrew_ros.ros.demo import SqueakMonitor, status_line
+from leadscrew_ros.ros.diagnostics import DiagnosticStatusWrapper, status_task
+from leadscrew_ros.live.predictor import KEY_VALIDITY, LivePredictor
+from leadscrew_ros.bag.logfile import inspect, log_files, read_log
 from leadscrew_ros.model import SqueakModel, Validity
-from leadscrew_ros.recorder import LOST_BY_TOPIC_KEY
-from leadscrew_ros.node import LATCHED
+from leadscrew_ros.bag.recorder import LOST_BY_TOPIC_KEY
+from leadscrew_ros.ros.node import LATCHED
 
 REPO = Path(__file__).resolve().parents[1]
 CLI = [sys.executable, "-m", "leadscrew_ros.cli"]
@@ -213,7 +213,7 @@ def test_simulate_drives_a_separately_started_node(tmp_path):
         probe = RiskProbe(context=ctx)
         executor = SingleThreadedExecutor(context=ctx)
         executor.add_node(probe)
-        node = start([sys.executable, "-m", "leadscrew_ros.node"], dom, tmp_path, "node")
+        node = start([sys.executable, "-m", "leadscrew_ros.ros.node"], dom, tmp_path, "node")
         assert spin_until(executor, lambda: probe.diagnostics or node.poll() is not None, 30)
         assert node.poll() is None and probe.risks == [], output(node)
         sim = start(CLI + ["simulate", "--duration", "3", "--joint-name", "screw"], dom,

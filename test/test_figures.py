@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from leadscrew_ros.cli import main
-from leadscrew_ros import figures
-from leadscrew_ros.figures import (BOUNDARY, FIGURE_FILES, GRID, VALIDITY, Limit,
+from leadscrew_ros.cli import figures
+from leadscrew_ros.cli.figures import (BOUNDARY, FIGURE_FILES, GRID, VALIDITY, Limit,
                                    describe_frequencies, describe_speed_map, line_bands,
                                    plot_frequencies, squeak_branches, track_modes)
 from leadscrew_ros.model import SqueakModel
@@ -144,7 +144,7 @@ def test_fig11_label_and_summary_give_the_same_frequency(monkeypatch, tmp_path):
 
 def test_map_json_and_import_do_not_load_matplotlib():
     code = ("import sys, io, contextlib\n"
-            "import leadscrew_ros.figures\n"
+            "import leadscrew_ros.cli.figures\n"
             "from leadscrew_ros.cli import main\n"
             "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
             "    rc = main(['map', '--x', 'radius_m:0.004:0.006:3', '--y', 'speed_rad_s:5:50:3',"

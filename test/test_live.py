@@ -13,8 +13,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from leadscrew_ros import live as live_module
-from leadscrew_ros.live import (KEY_NUT_POSITION, KEY_RISK, KEY_SAFE_SPEED_ERROR,
+from leadscrew_ros.live import predictor as live_module
+from leadscrew_ros.live.predictor import (KEY_NUT_POSITION, KEY_RISK, KEY_SAFE_SPEED_ERROR,
                                 KEY_SAFE_SPEED_PENDING, KEY_SQUEAK_FREQUENCIES, KEY_VALID,
                                 KEY_VALIDITY, LatestWorker, Level, LivePredictor, LiveSettings,
                                 Superseded)

@@ -14,9 +14,9 @@ from hypothesis import strategies as st
 from mcap.writer import Writer
 
 from leadscrew_ros.cli import main
-from leadscrew_ros.logfile import LogError, read_messages
-from leadscrew_ros.simulator import StrokeProfile
-from leadscrew_ros.synthetic_log import DutyCycle, write_log
+from leadscrew_ros.bag.logfile import LogError, read_messages
+from leadscrew_ros.live.profile import StrokeProfile
+from leadscrew_ros.bag.synthetic import DutyCycle, write_log
 
 CYCLE = DutyCycle(duration_s=4.0, rate_hz=20.0, rest_s=0.5, stroke=StrokeProfile(duration_s=3.0))
 LAYOUTS = ("zstd", "lz4", "none", "unchunked")

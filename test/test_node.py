@@ -32,11 +32,11 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray
 
-from leadscrew_ros.live import (KEY_FORMULATION, KEY_NUT_POSITION, KEY_RISK, KEY_SPEED,
+from leadscrew_ros.live.predictor import (KEY_FORMULATION, KEY_NUT_POSITION, KEY_RISK, KEY_SPEED,
                                 KEY_VALIDITY, Level)
 from leadscrew_ros.model import SqueakModel, Validity
 from leadscrew_ros.model.advice import speed_bands
-from leadscrew_ros.node import MODE_COLUMNS, NODE_NAME, SqueakPredictorNode, modes_message
+from leadscrew_ros.ros.node import MODE_COLUMNS, NODE_NAME, SqueakPredictorNode, modes_message
 
 MODEL = SqueakModel()                      # Table 1: squeak band ~0.81..55.2 rad/s at 200 N
 LOAD, SQUEAK, STABLE = 200.0, 20.0, 100.0
@@ -500,7 +500,7 @@ def test_destroy_node_does_not_hang(ros):
 # ----------------------------------------------------------------------------- process
 def node_command() -> list[str]:
     script = Path(sys.executable).with_name("squeak_node")
-    return [str(script)] if script.exists() else [sys.executable, "-m", "leadscrew_ros.node"]
+    return [str(script)] if script.exists() else [sys.executable, "-m", "leadscrew_ros.ros.node"]
 
 
 def stop(proc: subprocess.Popen) -> None:

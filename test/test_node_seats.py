@@ -18,7 +18,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from leadscrew_ros.node import NODE_NAME, NODE_PARAMETERS, SqueakPredictorNode
+from leadscrew_ros.ros.node import NODE_NAME, NODE_PARAMETERS, SqueakPredictorNode
 from test_node import COLLECT, node_command
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "leadscrew.yaml"

@@ -39,11 +39,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 from std_srvs.srv import SetBool
 
-from leadscrew_ros import msgdefs
-from leadscrew_ros.logfile import LogError, inspect, is_complete, log_files, read_log, recover
-from leadscrew_ros.live import Level
-from leadscrew_ros.recorder import LOST_BY_TOPIC_KEY, LOST_KEY, Recorder, RecordSettings, TopicLoss
-from leadscrew_ros.serialization import cdr_payload
+from leadscrew_ros.bag import msgdefs
+from leadscrew_ros.bag.logfile import LogError, inspect, is_complete, log_files, read_log, recover
+from leadscrew_ros.live.predictor import Level
+from leadscrew_ros.bag.recorder import LOST_BY_TOPIC_KEY, LOST_KEY, Recorder, RecordSettings, TopicLoss
+from leadscrew_ros.ros.serialization import cdr_payload
 from test_node import COLLECT, LOAD, SQUEAK, Ros, at, node_command, wait_initialised
 from test_demo import stop as stop_processes
 

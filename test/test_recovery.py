@@ -14,9 +14,9 @@ from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
 from leadscrew_ros.cli import main
-from leadscrew_ros.logfile import (LogError, cut_off_bags, inspect, is_complete, log_files,
+from leadscrew_ros.bag.logfile import (LogError, cut_off_bags, inspect, is_complete, log_files,
                                    read_log, read_messages, recover_bag)
-from leadscrew_ros.synthetic_log import DutyCycle, write_log
+from leadscrew_ros.bag.synthetic import DutyCycle, write_log
 from test_recording import answering_node, ns  # noqa: F401  (ns: fixture)
 
 CYCLE = DutyCycle(duration_s=30.0, rest_s=5.0)       # 3 topics at 100 Hz: 9000 messages

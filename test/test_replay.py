@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Offline replay of MCAP logs (`leadscrew_ros.replay`, `leadscrew-squeak replay/recover/info`).
+"""Offline replay of MCAP logs (`leadscrew_ros.review.replay`, `leadscrew-squeak replay/recover/info`).
 
 Logs come from our Recorder (`synthetic_log`), from rosbags' rosbag2 writer (an independent
 producer) and from hand-written MCAP files. Predictions are checked against the core
@@ -25,15 +25,15 @@ from rosbags.rosbag2 import Writer as RosbagsWriter
 from rosbags.typesys import Stores, get_typestore
 from std_msgs.msg import Float64
 
-from leadscrew_ros import msgdefs
+from leadscrew_ros.bag import msgdefs
 from leadscrew_ros.cli import main
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.serialization import cdr_payload
-from leadscrew_ros.replay import OUTPUT_TOPICS, ReplaySettings, replay
-from leadscrew_ros.report import QUICK, write_report
-from leadscrew_ros.simulator import StrokeProfile
-from leadscrew_ros.synthetic_log import DutyCycle, write_log
-from leadscrew_ros.timeline import InputSettings
+from leadscrew_ros.ros.serialization import cdr_payload
+from leadscrew_ros.review.replay import OUTPUT_TOPICS, ReplaySettings, replay
+from leadscrew_ros.review.report import QUICK, write_report
+from leadscrew_ros.live.profile import StrokeProfile
+from leadscrew_ros.bag.synthetic import DutyCycle, write_log
+from leadscrew_ros.review.timeline import InputSettings
 
 PARAMS = ScrewParameters()
 LEAD = PARAMS.radius_m * math.tan(PARAMS.helix_angle_rad)
@@ -217,7 +217,7 @@ def test_zero_deadbands_give_the_core_prediction_at_every_input(short_log, tmp_p
 
 
 def test_input_defaults_are_the_nodes():
-    from leadscrew_ros.node import NODE_PARAMETERS
+    from leadscrew_ros.ros.node import NODE_PARAMETERS
     s = InputSettings()
     for name in ("speed_deadband_rad_s", "load_deadband_n", "nut_deadband_m",
                  "nut_position_at_zero_angle_m"):
@@ -278,8 +278,8 @@ def test_a_dead_worker_is_replaced_by_solving_here():
     from concurrent.futures import Future
     from concurrent.futures.process import BrokenProcessPool
 
-    from leadscrew_ros.replay import _Segment
-    from leadscrew_ros.timeline import predict_jobs
+    from leadscrew_ros.review.replay import _Segment
+    from leadscrew_ros.review.timeline import predict_jobs
     args = (PARAMS, np.array([20.0]), np.array([200.0]), np.array([PARAMS.nut_position_m]))
     future = Future()
     future.set_exception(BrokenProcessPool("killed"))
@@ -527,10 +527,10 @@ def test_cli_replay_bad_options(bag, tmp_path, capsys, argv, problem):
 
 def test_cli_publish_calls_publish_log(bag, monkeypatch, capsys):
     calls = []
-    fake = types.ModuleType("leadscrew_ros.replay_live")
+    fake = types.ModuleType("leadscrew_ros.ros.replay_live")
     fake.publish_log = lambda paths, **kwargs: calls.append((paths, kwargs)) or 7
     fake.WAIT_FOR_SUBSCRIBER_S = 5.0
-    monkeypatch.setitem(sys.modules, "leadscrew_ros.replay_live", fake)
+    monkeypatch.setitem(sys.modules, "leadscrew_ros.ros.replay_live", fake)
     code, _, err = cli(capsys, "replay", bag, "--publish", "--rate", "4", "--loop",
                        "--start-offset", "1.5", "--topics", "motor_speed", "/axial_load",
                        "--remap", "motor_speed:=/seat/motor_speed", "--no-wait", "--quiet")

@@ -21,14 +21,16 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as RosbagsWriter
 from test_replay import EXACT, TYPESTORE, cli, decoded, f64, run_replay, write_mcap
 
-from leadscrew_ros import msgdefs, replay as replay_module
-from leadscrew_ros import report, replay_live, timeline
-from leadscrew_ros.decimation import Envelope, Reservoir
+from leadscrew_ros.bag import msgdefs
+from leadscrew_ros.review import replay as replay_module
+from leadscrew_ros.review import report, timeline
+from leadscrew_ros.ros import replay_live
+from leadscrew_ros.review.decimation import Envelope, Reservoir
 from leadscrew_ros.model import SqueakModel
-from leadscrew_ros.replay import ReplaySettings, replay
-from leadscrew_ros.simulator import StrokeProfile
-from leadscrew_ros.synthetic_log import DutyCycle, samples, write_log
-from leadscrew_ros.timeline import InputSettings
+from leadscrew_ros.review.replay import ReplaySettings, replay
+from leadscrew_ros.live.profile import StrokeProfile
+from leadscrew_ros.bag.synthetic import DutyCycle, samples, write_log
+from leadscrew_ros.review.timeline import InputSettings
 
 T0 = 1_700_000_000_000_000_000
 

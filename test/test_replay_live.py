@@ -35,13 +35,13 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 
-from leadscrew_ros import msgdefs
-from leadscrew_ros.logfile import LogError, log_files, read_log
+from leadscrew_ros.bag import msgdefs
+from leadscrew_ros.bag.logfile import LogError, log_files, read_log
 from leadscrew_ros.model import SqueakModel
-from leadscrew_ros.node import SqueakPredictorNode
-from leadscrew_ros.recorder import Recorder, RecordSettings
-from leadscrew_ros import replay_live
-from leadscrew_ros.replay_live import publish_log
+from leadscrew_ros.ros.node import SqueakPredictorNode
+from leadscrew_ros.bag.recorder import Recorder, RecordSettings
+from leadscrew_ros.ros import replay_live
+from leadscrew_ros.ros.replay_live import publish_log
 
 T0 = 1_700_000_000_000_000_000            # log time of the first message [ns]
 STEP_NS, STEPS = 20_000_000, 100            # 50 Hz for 2 s
@@ -296,8 +296,8 @@ def test_end_to_end_the_predictor_node_answers_a_replayed_log(log, collector):
 # ----------------------------------------------------------------------------- signals
 CHILD = """
 import sys
-from leadscrew_ros.logfile import log_files
-from leadscrew_ros.replay_live import publish_log
+from leadscrew_ros.bag.logfile import log_files
+from leadscrew_ros.ros.replay_live import publish_log
 n = publish_log(log_files(sys.argv[1]), rate=float(sys.argv[2]), loop=sys.argv[3] == "loop",
                 topics=["/motor_speed"], remap={"/motor_speed": sys.argv[4]})
 print(f"RETURNED {n}")

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from leadscrew_ros.node import NODE_NAME
-from leadscrew_ros.synthetic_log import DutyCycle, write_log
+from leadscrew_ros.ros.node import NODE_NAME
+from leadscrew_ros.bag.synthetic import DutyCycle, write_log
 from test_demo import CLI, domain, output, start, stop
 from test_node import node_command, wait_initialised
 

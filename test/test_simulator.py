@@ -18,8 +18,8 @@ from std_msgs.msg import Float64
 
 from leadscrew_ros.cli import main
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.simulator import (ActuatorSimulator, ProfileError, StrokeProfile,
-                                     expected_squeak, state)
+from leadscrew_ros.live.profile import ProfileError, StrokeProfile, expected_squeak, state
+from leadscrew_ros.ros.simulator import ActuatorSimulator
 
 PARAMS = ScrewParameters()
 LEAD = PARAMS.radius_m * math.tan(PARAMS.helix_angle_rad)          # 0.437 mm/rad
@@ -215,7 +215,7 @@ def test_joint_states_describe_the_same_nut_as_nut_position():
     simulator's nut: the screw angle follows the node's nut_position_at_zero_angle_m."""
     from rclpy.parameter import Parameter
 
-    from leadscrew_ros.node import SqueakPredictorNode
+    from leadscrew_ros.ros.node import SqueakPredictorNode
 
     ns = "/joint_" + uuid.uuid4().hex[:8]
     profile = StrokeProfile(duration_s=1.0)

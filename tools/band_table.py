@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from leadscrew_ros.figures import fmt, track_modes
+from leadscrew_ros.cli.figures import fmt, track_modes
 from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.model.sweep import REFERENCE_SPEED_RAD_S, sweep
 

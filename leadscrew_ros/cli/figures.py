@@ -18,12 +18,12 @@ from typing import TYPE_CHECKING, Callable, NamedTuple, Sequence
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .model.friction import friction_coefficient, sliding_speed
-from .model.parameters import ScrewParameters, field_info
-from .model.predictor import Prediction, SqueakModel
-from .model.sweep import (REFERENCE_SPEED_RAD_S, MapResult, SweepResult, Work,
+from ..model.friction import friction_coefficient, sliding_speed
+from ..model.parameters import ScrewParameters, field_info
+from ..model.predictor import Prediction, SqueakModel
+from ..model.sweep import (REFERENCE_SPEED_RAD_S, MapResult, SweepResult, Work,
                           _native, map_work, stability_map, sweep, sweep_work)
-from .progress import progress_bar
+from ..review.progress import progress_bar
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes

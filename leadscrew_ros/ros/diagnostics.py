@@ -20,11 +20,11 @@ from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
 
-from .live import Level, Status
+from ..live.predictor import Level, Status
 
 if TYPE_CHECKING:
     from .node import CrashRecovery
-    from .recorder import Recorder
+    from ..bag.recorder import Recorder
 
 TOPIC = "/diagnostics"
 PREDICTION_TASK = "squeak prediction"

@@ -39,15 +39,15 @@ import numpy as np
 from mcap.writer import CompressionType, Writer
 from std_msgs.msg import Bool, Float64, Float64MultiArray
 
-from . import msgdefs
+from ..bag import msgdefs
 from .decimation import Envelope, Reservoir
 from .jsonsafe import json_safe
-from .logfile import LogError, LogMessage, Topic
-from .logsource import LogSource, log_topics, open_log
-from .model import Prediction, SqueakModel
-from .node import frequencies_message, modes_message
+from ..bag.logfile import LogError, LogMessage, Topic
+from ..bag.logsource import LogSource, log_topics, open_log
+from ..model import Prediction, SqueakModel
+from ..ros.node import frequencies_message, modes_message
 from .progress import progress_bar
-from .serialization import cdr_payload
+from ..ros.serialization import cdr_payload
 from .timeline import (InputError, InputSettings, Job, Timeline, input_namespaces,
                        predict_jobs)
 

@@ -32,13 +32,13 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from .cdr import decode_float64, decode_joint_state
+from ..bag.cdr import decode_float64, decode_joint_state
 from .decimation import Envelope
-from .live import LiveSettings, moved
-from .logfile import LogMessage, Topic
-from .model import ParameterError, Prediction, ScrewParameters, SqueakModel, Validity
-from .model.display import exact
-from .model.parameters import field_info
+from ..live.predictor import LiveSettings, moved
+from ..bag.logfile import LogMessage, Topic
+from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel, Validity
+from ..model.display import exact
+from ..model.parameters import field_info
 
 FLOAT64, JOINT_STATE = "std_msgs/msg/Float64", "sensor_msgs/msg/JointState"
 NUT_POSITION_AT_ZERO_ANGLE_M = 0.15          # the node's parameter default

@@ -23,8 +23,8 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.subscription import Subscription
 
-from . import msgdefs
-from .recorder import Recorder, TopicLoss
+from ..bag import msgdefs
+from ..bag.recorder import Recorder, TopicLoss
 
 _SPIN_TIMEOUT_S = 0.1
 

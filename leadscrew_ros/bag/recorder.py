@@ -37,7 +37,7 @@ from mcap.writer import CompressionType, Writer
 
 from . import msgdefs
 from .bagmeta import METADATA, BagStats, FileStats, TopicStats
-from .serialization import cdr_payload
+from ..ros.serialization import cdr_payload
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}

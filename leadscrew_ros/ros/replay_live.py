@@ -37,10 +37,10 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 from rclpy.validate_full_topic_name import validate_full_topic_name
 
-from .logfile import LogError, LogInfo, LogMessage, Topic, read_messages
-from .ros_env import StopSignals, close, confine_to_localhost, init_context
-from .timeline import INPUTS, resolve
-from .timeline import is_input as _is_input     # the offline replay's rule, shared
+from ..bag.logfile import LogError, LogInfo, LogMessage, Topic, read_messages
+from .env import StopSignals, close, confine_to_localhost, init_context
+from ..review.timeline import INPUTS, resolve
+from ..review.timeline import is_input as _is_input     # the offline replay's rule, shared
 
 NODE_NAME = "log_replay"
 # Reliable + transient local is at least what any subscriber can request, so every subscriber

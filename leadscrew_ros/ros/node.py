@@ -7,11 +7,11 @@ Publishes (reliable, transient local, depth 1): squeak/risk, squeak/unstable_fre
 squeak/active, squeak/modes, squeak/safe_speed and /diagnostics.
 Records inputs and outputs to MCAP (`record.*` parameters, std_srvs/SetBool `~/record`):
 inputs from subscriptions of their own that never wait for the model, with every lost message
-counted (`leadscrew_ros.input_recording`); on start, reports (or recovers) its own bags cut off
+counted (`leadscrew_ros.ros.input_recording`); on start, reports (or recovers) its own bags cut off
 by an earlier crash. `squeak_node --help` lists the parameters and topics.
 The physics lives in `leadscrew_ros.model`, the recompute policy and the prediction verdict in
-`leadscrew_ros.live`, the recording in `leadscrew_ros.recorder`, the /diagnostics updater and the
-recording verdict in `leadscrew_ros.diagnostics`.
+`leadscrew_ros.live.predictor`, the recording in `leadscrew_ros.bag.recorder`, the /diagnostics updater and the
+recording verdict in `leadscrew_ros.ros.diagnostics`.
 """
 
 from __future__ import annotations
@@ -42,13 +42,13 @@ from std_srvs.srv import SetBool
 
 from .diagnostics import PREDICTION_TASK, RECORDING_TASK, Updater, recording_status, status_task
 from .input_recording import InputRecording
-from .live import Level, LivePredictor, LiveSettings
-from .logfile import RECOVER_HINT, LogError, cut_off_bags, recover_bag
-from .model import ParameterError, Prediction, ScrewParameters, SqueakModel
-from .model.display import exact
-from .model.parameters import FORMULATIONS
-from .recorder import COMPRESSIONS, Recorder, RecordSettings, ensure_directory
-from .ros_env import StopSignals, confine_to_localhost
+from ..live.predictor import Level, LivePredictor, LiveSettings
+from ..bag.logfile import RECOVER_HINT, LogError, cut_off_bags, recover_bag
+from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel
+from ..model.display import exact
+from ..model.parameters import FORMULATIONS
+from ..bag.recorder import COMPRESSIONS, Recorder, RecordSettings, ensure_directory
+from .env import StopSignals, confine_to_localhost
 
 NODE_NAME = "squeak_predictor"
 MODE_COLUMNS = ("frequency_hz", "growth_rate", "damping_ratio")

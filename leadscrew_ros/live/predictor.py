@@ -29,10 +29,10 @@ from typing import Callable
 
 from threadpoolctl import threadpool_limits
 
-from .model import OperatingPointError, ParameterError, Prediction, SqueakModel, Validity
-from .model.advice import Band, band_around
-from .model.display import exact
-from .model.predictor import check_operating_point
+from ..model import OperatingPointError, ParameterError, Prediction, SqueakModel, Validity
+from ..model.advice import Band, band_around
+from ..model.display import exact
+from ..model.predictor import check_operating_point
 
 
 _LOAD_BIN = 0.05          # relative load bin of the cached squeak bands (safe-speed advice)

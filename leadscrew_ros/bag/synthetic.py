@@ -19,7 +19,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from .recorder import Recorder, RecordSettings
-from .simulator import StrokeProfile
+from ..live.profile import StrokeProfile
 
 SPEED_TOPIC, LOAD_TOPIC = "/motor_speed", "/axial_load"
 JOINT_STATES_TOPIC, NUT_TOPIC = "/joint_states", "/nut_position"

@@ -22,16 +22,16 @@ from typing import Any, Callable, NoReturn, Sequence
 import numpy as np
 import yaml
 
-from .jsonsafe import json_safe
-from .logfile import (LogError, LogInfo, bag_of, cut_off_bags, inspect, log_files, recover,
+from ..review.jsonsafe import json_safe
+from ..bag.logfile import (LogError, LogInfo, bag_of, cut_off_bags, inspect, log_files, recover,
                       recover_bag)
-from .model.parameters import (FORMULATIONS, ParameterError, ScrewParameters, field_info,
+from ..model.parameters import (FORMULATIONS, ParameterError, ScrewParameters, field_info,
                                field_names)
-from .model.predictor import OperatingPointError, Prediction, SqueakModel
-from .model.display import exact
-from .model.sweep import (MAX_MEMORY_BYTES, MAX_POINTS, REFERENCE_STATE_SIZE, MapResult,
+from ..model.predictor import OperatingPointError, Prediction, SqueakModel
+from ..model.display import exact
+from ..model.sweep import (MAX_MEMORY_BYTES, MAX_POINTS, REFERENCE_STATE_SIZE, MapResult,
                           SweepResult, axis_names, check_axis, sweep, sweep_work)
-from .timeline import InputSettings
+from ..review.timeline import InputSettings
 
 PROG = "leadscrew-squeak"
 SPEED_AXIS = "speed_rad_s"
@@ -290,7 +290,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     model = build_model(args)
     axis, values, speed, load = _sweep_axis(args)
     sweep_work(model, axis, values).check()             # before a progress bar shows
-    from .progress import progress_bar
+    from ..review.progress import progress_bar
     with progress_bar(len(values), "sweep") as update:
         result = sweep(model, axis, values, speed, load, progress=update)
     if args.json:
@@ -332,7 +332,7 @@ def cmd_figures(args: argparse.Namespace) -> int:
 
 def _stroke(duration_s: float | None):
     """The simulator's stroke profile (imports rclpy: only for demo and simulate)."""
-    from .simulator import ProfileError, StrokeProfile
+    from ..live.profile import ProfileError, StrokeProfile
     try:
         return StrokeProfile() if duration_s is None else StrokeProfile(duration_s=duration_s)
     except ProfileError as exc:
@@ -341,7 +341,7 @@ def _stroke(duration_s: float | None):
 
 def cmd_demo(args: argparse.Namespace) -> int:
     profile = _stroke(args.duration)
-    from .demo import run_demo
+    from ..ros.demo import run_demo
     try:
         return run_demo(profile.duration_s,
                         record_dir=None if args.no_record else Path(args.record_dir))
@@ -351,7 +351,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 def cmd_simulate(args: argparse.Namespace) -> int:
     profile = _stroke(args.duration)
-    from .simulator import MAX_RATE_HZ, run_simulator
+    from ..ros.simulator import MAX_RATE_HZ, run_simulator
     if not 0 < args.rate <= MAX_RATE_HZ:
         raise CliError(f"argument --rate: must be in (0, {MAX_RATE_HZ:g}] Hz, got {args.rate:g}")
     try:
@@ -406,7 +406,7 @@ def _publish(args: argparse.Namespace) -> int:
         option = {"nominal_load_n": "load"}.get(given[0], given[0])
         raise CliError(f"--{option.replace('_', '-')} is for the offline replay, not --publish "
                        f"(the namespace of --publish is --ros-args -r __ns:=NS)")
-    from .replay_live import WAIT_FOR_SUBSCRIBER_S, publish_log
+    from ..ros.replay_live import WAIT_FOR_SUBSCRIBER_S, publish_log
     try:
         publish_log(log_files(args.log), rate=1.0 if args.rate is None else args.rate,
                     loop=args.loop,
@@ -430,7 +430,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         raise CliError("argument --episodes: must be >= 0")
     model = build_model(args)
     inputs = _replay_inputs(args)
-    from .replay import ReplaySettings, log_name, replay
+    from ..review.replay import ReplaySettings, log_name, replay
     try:
         settings = ReplaySettings(
             inputs, namespace=args.namespace and _topic(args.namespace),
@@ -441,7 +441,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path(f"{log_name(Path(args.log))}_replay")
     result = replay(args.log, model, out, settings)
     if not args.no_report:
-        from .report import write_report
+        from ..review.report import write_report
         result.outputs += write_report(result, model, out)
     if not args.quiet:
         print(result.summary_text())
@@ -762,7 +762,3 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -27,15 +27,15 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from std_msgs.msg import Bool, Float64, Float64MultiArray
 
-from .live import (KEY_RECOMPUTES, KEY_SPEED, KEY_SQUEAK_FREQUENCIES, KEY_VALID, KEY_VALIDITY,
+from ..live.predictor import (KEY_RECOMPUTES, KEY_SPEED, KEY_SQUEAK_FREQUENCIES, KEY_VALID, KEY_VALIDITY,
                    Level)
-from .logfile import LogError, inspect, log_files
-from .model import Validity
+from ..bag.logfile import LogError, inspect, log_files
+from ..model import Validity
 from .node import LATCHED, SqueakPredictorNode
-from .recorder import Recorder
-from .ros_env import StopSignals, close, confine_to_localhost, init_context
-from .simulator import (ActuatorSimulator, ActuatorState, StrokeProfile,
-                        expected_squeak)
+from ..bag.recorder import Recorder
+from .env import StopSignals, close, confine_to_localhost, init_context
+from ..live.profile import ActuatorState, StrokeProfile, expected_squeak
+from .simulator import ActuatorSimulator
 
 START_TIMEOUT_S = 10.0       # the simulator waits this long for the predictor's subscription
 TAIL_S = 0.3                 # keep spinning after the stroke so the last outputs arrive

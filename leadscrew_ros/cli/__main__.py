@@ -1,0 +1,8 @@
+# SPDX-License-Identifier: Apache-2.0
+"""`python -m leadscrew_ros.cli`: the `leadscrew-squeak` command."""
+
+import sys
+
+from . import main
+
+sys.exit(main())

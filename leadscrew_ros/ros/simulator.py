@@ -1,0 +1,145 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Actuator simulator: the ROS 2 node that publishes a seat stroke (`live.profile.StrokeProfile`)
+on the predictor's input topics: std_msgs/Float64 `motor_speed` [rad/s], `axial_load` [N],
+`nut_position` [m]; optionally sensor_msgs/JointState `joint_states`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from typing import Sequence, TextIO
+
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+from ..live.profile import ActuatorState, ProfileError, StrokeProfile
+from .env import StopSignals, close, confine_to_localhost, init_context
+
+NODE_NAME = "actuator_simulator"
+MAX_RATE_HZ = 10_000.0
+
+
+class ActuatorSimulator(Node):
+    """Publishes `profile` at `rate_hz` on motor_speed, axial_load, nut_position (Float64) and,
+    with a `joint_name`, joint_states (one joint: position = screw angle, velocity = speed).
+
+    The stroke clock starts at the first tick, or with `wait_for_subscriber` when something
+    subscribes to motor_speed. Time is wall-clock time since then, so a late tick shifts no
+    sample. After the stroke the end state (at rest) is published once more and `done` turns
+    True; with `loop` the stroke repeats, back and forth, until the node is destroyed."""
+
+    def __init__(self, profile: StrokeProfile | None = None, rate_hz: float = 100.0,
+                 loop: bool = False, joint_name: str = "", wait_for_subscriber: bool = False,
+                 **kwargs):
+        if not (math.isfinite(rate_hz) and 0 < rate_hz <= MAX_RATE_HZ):
+            raise ProfileError(f"rate_hz must be in (0, {MAX_RATE_HZ:g}] Hz, got {rate_hz!r}")
+        super().__init__(kwargs.pop("node_name", NODE_NAME), **kwargs)
+        self.profile = profile or StrokeProfile()
+        self.loop, self.joint_name = loop, joint_name
+        self.wait_for_subscriber = wait_for_subscriber
+        self.started_at: float | None = None           # time.monotonic() of t = 0
+        self.done = False
+        self.published = 0
+        self.last_state: ActuatorState | None = None
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.speed_pub = self.create_publisher(Float64, "motor_speed", qos)
+        self.load_pub = self.create_publisher(Float64, "axial_load", qos)
+        self.nut_pub = self.create_publisher(Float64, "nut_position", qos)
+        self.joint_pub = (self.create_publisher(JointState, "joint_states", qos)
+                          if joint_name else None)
+        self._timer = self.create_timer(1.0 / rate_hz, self._tick)
+
+    @property
+    def elapsed_s(self) -> float:
+        """Stroke time so far (0 before the start)."""
+        return 0.0 if self.started_at is None else time.monotonic() - self.started_at
+
+    def _tick(self) -> None:
+        if self.done:
+            return
+        if self.started_at is None:
+            if self.wait_for_subscriber and not self._subscribers_matched():
+                return
+            self.started_at = time.monotonic()
+        t = self.elapsed_s
+        finished = not self.loop and t >= self.profile.duration_s
+        self.publish(self.profile.state(self.profile.duration_s if finished else t, self.loop))
+        if finished:
+            self.done = True
+            self._timer.cancel()
+
+    def _subscribers_matched(self) -> bool:
+        """Something subscribes to motor_speed, and every subscription the graph knows of has
+        matched (one shown but not yet matched would miss the first samples: a recorder's)."""
+        matched = self.speed_pub.get_subscription_count()
+        return matched > 0 and matched >= self.count_subscribers(self.speed_pub.topic_name)
+
+    def publish(self, s: ActuatorState) -> None:
+        self.speed_pub.publish(Float64(data=float(s.speed_rad_s)))
+        self.load_pub.publish(Float64(data=float(s.load_n)))
+        self.nut_pub.publish(Float64(data=float(s.nut_position_m)))
+        if self.joint_pub is not None:
+            msg = JointState(name=[self.joint_name], position=[float(s.screw_angle_rad)],
+                             velocity=[float(s.speed_rad_s)])
+            msg.header.stamp = self.get_clock().now().to_msg()
+            self.joint_pub.publish(msg)
+        self.last_state = s
+        self.published += 1
+
+
+def run_simulator(profile: StrokeProfile | None = None, rate_hz: float = 100.0,
+                  loop: bool = False, joint_name: str = "", wait_for_subscriber: bool = True,
+                  out: TextIO | None = None, ros_args: Sequence[str] = ()) -> int:
+    """`leadscrew-squeak simulate`: publish the stroke on the user's ROS_DOMAIN_ID (loopback
+    discovery unless chosen otherwise) for a separately started predictor node. `ros_args`
+    (`--ros-args -r __ns:=/seat_left ...`) configure the node as any ROS executable's
+    (ValueError if rcl rejects them); the topics are relative, so a namespace prefixes them.
+
+    Returns 0: when the stroke is done, and when stopped by SIGINT/SIGTERM (with or without
+    `loop`; `StopSignals.exit_status` writes its line on stderr)."""
+    out = out or sys.stdout
+    profile = profile or StrokeProfile()
+    confine_to_localhost()
+    with StopSignals() as stop:
+        ctx = init_context(ros_args)
+        node = executor = None
+        try:
+            node = ActuatorSimulator(profile, rate_hz=rate_hz, loop=loop,
+                                     joint_name=joint_name,
+                                     wait_for_subscriber=wait_for_subscriber, context=ctx)
+            executor = SingleThreadedExecutor(context=ctx)
+            executor.add_node(node)
+            topics = ", ".join(p.topic_name for p in (node.speed_pub, node.load_pub,
+                                                      node.nut_pub, node.joint_pub) if p)
+            print(f"simulating a {profile.duration_s:g} s stroke (0 -> "
+                  f"{profile.peak_speed_rad_s:g} rad/s -> 0, nut "
+                  f"{profile.start_nut_position_m:.3f} -> {profile.end_nut_position_m:.3f} m)"
+                  f"{', looped back and forth' if loop else ''} at {rate_hz:g} Hz on {topics} "
+                  f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')})", file=out,
+                  flush=True)
+            if wait_for_subscriber:
+                print(f"waiting for a subscriber on {node.speed_pub.topic_name} ...", file=out,
+                      flush=True)
+            announced = False
+            while not node.done and not stop.signum:
+                executor.spin_once(timeout_sec=0.02)
+                if node.started_at is not None and not announced:
+                    print("stroke started", file=out, flush=True)
+                    announced = True
+            linger = time.monotonic() + 0.3       # let the last samples reach the subscribers
+            while node.done and not stop.signum and time.monotonic() < linger:
+                executor.spin_once(timeout_sec=0.02)
+        finally:
+            close(ctx, executor, [node] if node is not None else [])
+    published = node.published if node is not None else 0
+    if node is not None and node.done:
+        print(f"stroke done: {published} samples published", file=out, flush=True)
+        return 0
+    print(f"stopped: {published} samples published", file=out, flush=True)
+    return stop.exit_status()
