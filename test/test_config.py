@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
 """config/leadscrew.yaml holds every parameter of the node (ScrewParameters fields and
-node.NODE_PARAMETERS) with its default, typed for ROS."""
+the live and joint settings, node.NODE_PARAMETERS) with its default, typed for ROS."""
 
 import math
 from dataclasses import fields
@@ -10,14 +10,13 @@ import pytest
 import yaml
 
 from leadscrew_ros.model.parameters import ScrewParameters, field_names
-from leadscrew_ros.ros.node import NODE_PARAMETERS
+from leadscrew_ros.ros.node import PARAMETER_NAMES, parameter_specs
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "leadscrew.yaml"
 KEY = "/**"
 FIELDS = {f.name: f for f in fields(ScrewParameters)}
 # name -> (default, type name) for every parameter the node declares
-DEFAULTS = {**{f.name: (f.default, f.type) for f in fields(ScrewParameters)},
-            **{name: (spec[0], type(spec[0]).__name__) for name, spec in NODE_PARAMETERS.items()}}
+DEFAULTS = {name: (default, type(default).__name__) for name, default, *_ in parameter_specs()}
 
 
 def _flat(tree: dict, prefix: str = "") -> dict:
@@ -46,12 +45,12 @@ def _same(value, default, typ: str) -> bool:
 
 
 def test_node_parameter_types_are_plain():
-    assert set(FIELDS).isdisjoint(NODE_PARAMETERS)
+    assert len(set(PARAMETER_NAMES)) == len(PARAMETER_NAMES)
     assert {t for _, t in DEFAULTS.values()} <= {"float", "int", "str", "bool"}
 
 
 def test_keys_are_the_dataclass_fields_and_the_node_parameters():
-    assert set(_params()) == set(field_names()) | set(NODE_PARAMETERS)
+    assert set(_params()) == set(PARAMETER_NAMES) >= set(field_names())
 
 
 @pytest.mark.parametrize("name", list(DEFAULTS))

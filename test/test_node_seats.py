@@ -18,7 +18,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from leadscrew_ros.ros.node import NODE_NAME, NODE_PARAMETERS, SqueakPredictorNode
+from leadscrew_ros.ros.node import NODE_NAME, PARAMETER_NAMES, SqueakPredictorNode
 from test_node import COLLECT, node_command
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "leadscrew.yaml"
@@ -33,7 +33,7 @@ def node_with_ros_args(args: list[str]) -> dict:
         node = SqueakPredictorNode(context=ctx)
         try:
             return {"namespace": node.get_namespace(),
-                    **{p.name: p.value for p in node.get_parameters(list(NODE_PARAMETERS))},
+                    **{p.name: p.value for p in node.get_parameters(PARAMETER_NAMES)},
                     "radius_m": node.get_parameter("radius_m").value}
         finally:
             node.destroy_node()

@@ -217,11 +217,12 @@ def test_zero_deadbands_give_the_core_prediction_at_every_input(short_log, tmp_p
 
 
 def test_input_defaults_are_the_nodes():
-    from leadscrew_ros.ros.node import NODE_PARAMETERS
+    from leadscrew_ros.ros.node import parameter_specs
+    defaults = {name: default for name, default, *_ in parameter_specs()}
     s = InputSettings()
     for name in ("speed_deadband_rad_s", "load_deadband_n", "nut_deadband_m",
                  "nut_position_at_zero_angle_m"):
-        assert getattr(s, name) == NODE_PARAMETERS[name][0], name
+        assert getattr(s, name) == defaults[name], name
     assert StrokeProfile().nut_position_at_zero_angle_m == s.nut_position_at_zero_angle_m
 
 

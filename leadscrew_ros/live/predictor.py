@@ -33,6 +33,7 @@ from ..model import OperatingPointError, ParameterError, Prediction, SqueakModel
 from ..model.advice import Band, band_around
 from ..model.display import exact
 from ..model.predictor import check_operating_point
+from .settings import LiveSettings
 
 
 _LOAD_BIN = 0.05          # relative load bin of the cached squeak bands (safe-speed advice)
@@ -63,17 +64,6 @@ class Level(IntEnum):
     WARN = 1
     ERROR = 2
     STALE = 3
-
-
-@dataclass(frozen=True)
-class LiveSettings:
-    speed_deadband_rad_s: float = 0.1
-    load_deadband_n: float = 1.0
-    nut_deadband_m: float = 0.0005
-    max_rate_hz: float = 100.0
-    risk_warn_threshold: float = 0.5
-    stale_timeout_s: float = 1.0
-    safe_speed_margin: float = 0.05
 
 
 def moved(point: tuple[float, float, float], last: tuple[float, float, float],

@@ -21,6 +21,7 @@ from typing import NamedTuple, Sequence
 import numpy as np
 
 from ..model import ScrewParameters, SqueakModel
+from .settings import JointSettings
 
 # Phases as fractions of the stroke duration: rest, ramp up, hold, ramp down (RAMP again), and
 # rest for the remaining 0.15.
@@ -51,7 +52,7 @@ class StrokeProfile:
     max_nut_position_m: float = _DEFAULTS.nut_travel_m
     # Screw angle 0 <-> this nut position (the node's `nut_position_at_zero_angle_m` default),
     # so that joint_states and nut_position describe the same nut.
-    nut_position_at_zero_angle_m: float = 0.15
+    nut_position_at_zero_angle_m: float = JointSettings.nut_position_at_zero_angle_m
 
     @classmethod
     def for_params(cls, params: ScrewParameters, **changes) -> "StrokeProfile":

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 from .display import exact
+from .fields import check_value, range_text, setting
 
 FORMULATIONS = ("paper", "consistent")
 MAX_CONTACT_TURNS = 5000      # bounds the helix quadrature (nodes = turns * nodes per turn)
@@ -25,9 +26,9 @@ class ParameterError(ValueError):
 def _p(default: Any, unit: str, description: str, lo: float | None = None,
        hi: float | None = None, lo_open: bool = False, hi_open: bool = False,
        geometry: bool = True) -> Any:
-    return field(default=default, metadata=dict(
-        unit=unit, description=description, lo=lo, hi=hi, lo_open=lo_open, hi_open=hi_open,
-        geometry=geometry))
+    choices = FORMULATIONS if isinstance(default, str) else ()
+    return setting(default, unit, description, lo, hi, lo_open=lo_open, hi_open=hi_open,
+                   choices=choices, geometry=geometry)
 
 
 @dataclass(frozen=True)
@@ -146,7 +147,7 @@ def _attributes_section() -> str:
     for f in fields(ScrewParameters):
         md = f.metadata
         unit = {"": "", "1": " (dimensionless)"}.get(md["unit"], f" [{md['unit']}]")
-        allowed = (f"allowed {_range_text(md).removesuffix(' 1')}" if md["lo"] is not None
+        allowed = (f"allowed {range_text(md).removesuffix(' 1')}" if md["lo"] is not None
                    else f"one of {', '.join(FORMULATIONS)}")
         default = f"{f.default:g}" if isinstance(f.default, float) else repr(f.default)
         lines += [f"    {f.name} : {f.type}",
@@ -183,12 +184,6 @@ def coerce(name: str, value: Any) -> Any:
         raise ParameterError(f"{name} = {value!r} is not a valid {typ}") from None
 
 
-def _range_text(md: dict[str, Any]) -> str:
-    lo = "(" if md["lo_open"] else "["
-    hi = ")" if md["hi_open"] else "]"
-    return f"{lo}{md['lo']:g}, {md['hi']:g}{hi} {md['unit']}".rstrip()
-
-
 ScrewParameters.__doc__ = ((ScrewParameters.__doc__ or "").rstrip() + "\n"
                            + _attributes_section())
 
@@ -196,23 +191,9 @@ ScrewParameters.__doc__ = ((ScrewParameters.__doc__ or "").rstrip() + "\n"
 def validate(p: ScrewParameters) -> None:
     """Check every field and the cross-field constraints; raise ParameterError naming the field."""
     for f in fields(p):
-        v, md = getattr(p, f.name), f.metadata
-        if f.name == "formulation":
-            if v not in FORMULATIONS:
-                raise ParameterError(f"formulation = {v!r} is not allowed; "
-                                     f"choose one of {', '.join(FORMULATIONS)}")
-            continue
-        expected = int if f.type == "int" else float
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or (
-                expected is int and not isinstance(v, int)):
-            raise ParameterError(f"{f.name} = {v!r} must be a {f.type}")
-        if not math.isfinite(v):
-            raise ParameterError(f"{f.name} = {v} must be finite, allowed {_range_text(md)}")
-        too_low = v <= md["lo"] if md["lo_open"] else v < md["lo"]
-        too_high = v >= md["hi"] if md["hi_open"] else v > md["hi"]
-        if too_low or too_high:
-            raise ParameterError(f"{f.name} = {exact(v)} is out of range, allowed "
-                                 f"{_range_text(md)}")
+        reason = check_value(f.name, getattr(p, f.name), f)
+        if reason:
+            raise ParameterError(reason)
     if p.nut_position_m + p.nut_length_m > p.length_m:
         raise ParameterError(
             f"nut_position_m + nut_length_m = {exact(p.nut_position_m + p.nut_length_m)} m "

@@ -34,14 +34,14 @@ import numpy as np
 
 from ..bag.cdr import decode_float64, decode_joint_state
 from .decimation import Envelope
-from ..live.predictor import LiveSettings, moved
+from ..live.predictor import moved
+from ..live.settings import JointSettings, LiveSettings
 from ..bag.logfile import LogMessage, Topic
 from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel, Validity
 from ..model.display import exact
 from ..model.parameters import field_info
 
 FLOAT64, JOINT_STATE = "std_msgs/msg/Float64", "sensor_msgs/msg/JointState"
-NUT_POSITION_AT_ZERO_ANGLE_M = 0.15          # the node's parameter default
 _MODEL_CACHE = 1024                          # nut positions kept per process (~60 kB each)
 _LOAD_LIMIT_N = field_info("axial_load_n")["hi"]    # as the node's input check
 # The predictor's inputs (base name -> the type it subscribes with).
@@ -96,7 +96,7 @@ class InputSettings:
     nut_topic: str = "nut_position"                     # std_msgs/Float64, m
     joint_states_topic: str = "joint_states"            # sensor_msgs/JointState
     joint_name: str = ""                # '' : the joint of single-joint messages
-    nut_position_at_zero_angle_m: float = NUT_POSITION_AT_ZERO_ANGLE_M
+    nut_position_at_zero_angle_m: float = JointSettings.nut_position_at_zero_angle_m
     speed_deadband_rad_s: float = LiveSettings.speed_deadband_rad_s
     load_deadband_n: float = LiveSettings.load_deadband_n
     nut_deadband_m: float = LiveSettings.nut_deadband_m

@@ -42,11 +42,11 @@ from std_srvs.srv import SetBool
 
 from .diagnostics import PREDICTION_TASK, RECORDING_TASK, Updater, recording_status, status_task
 from .input_recording import InputRecording
-from ..live.predictor import Level, LivePredictor, LiveSettings
+from ..live.predictor import Level, LivePredictor
+from ..live.settings import JointSettings, LiveSettings
 from ..bag.logfile import RECOVER_HINT, LogError, cut_off_bags, recover_bag
 from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel
 from ..model.display import exact
-from ..model.parameters import FORMULATIONS
 from ..bag.recorder import COMPRESSIONS, Recorder, RecordSettings, ensure_directory
 from .env import StopSignals, confine_to_localhost
 
@@ -59,26 +59,8 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
 
 # The node's own parameters: name -> (default, unit, description, (lo, hi) or None, read_only).
 NODE_PARAMETERS: dict[str, tuple] = {
-    "speed_deadband_rad_s": (0.1, "rad/s", "recompute when the speed moved more than this",
-                             (0.0, 1000.0), False),
-    "load_deadband_n": (1.0, "N", "recompute when the load moved more than this",
-                        (0.0, 1e5), False),
-    "nut_deadband_m": (0.0005, "m", "re-integrate the contact when the nut moved more than "
-                       "this", (0.0, 1.0), False),
-    "max_rate_hz": (100.0, "Hz", "maximum recompute rate (bursts are coalesced)",
-                    (0.1, 10000.0), False),
-    "risk_warn_threshold": (0.5, "1", "diagnostic WARN above this squeak risk", (0.0, 1.0),
-                            False),
-    "stale_timeout_s": (1.0, "s", "diagnostic STALE when speed or load is older than this",
-                        (0.01, 3600.0), False),
     "diagnostics_period_s": (1.0, "s", "period of /diagnostics when nothing changes",
                              (0.05, 60.0), False),
-    "safe_speed_margin": (0.05, "1", "relative distance kept from a squeak band edge by "
-                          "squeak/safe_speed", (0.0, 0.5), False),
-    "joint_name": ("", "", "screw joint in joint_states ('' ignores joint_states)", None, False),
-    "nut_position_at_zero_angle_m": (0.15, "m", "nut position when the screw joint angle is 0; "
-                                     "the nut travels R tan(beta) per radian", (-100.0, 100.0),
-                                     False),
     "hardware_id": ("leadscrew", "", "hardware_id of the diagnostic status", None, True),
     "input_queue_depth": (5, "1", "queue depth of the input subscriptions", (1, 1000), True),
     "record.enabled": (False, "", "record inputs and outputs to MCAP (also ~/record); a set "
@@ -107,15 +89,20 @@ INPUTS = {"motor_speed": Float64, "axial_load": Float64, "nut_position": Float64
 
 def parameter_specs():
     """(name, default, unit, description, bounds, read_only, extra) of every parameter the
-    node declares: the ScrewParameters fields, then NODE_PARAMETERS."""
-    for f in fields(ScrewParameters):
-        md = f.metadata
-        extra = f"one of: {', '.join(FORMULATIONS)}" if f.name == "formulation" else (
-            "open bound" if md.get("lo_open") or md.get("hi_open") else "")
-        bounds = None if md.get("lo") is None else (md["lo"], md["hi"])
-        yield f.name, f.default, md["unit"], md["description"], bounds, False, extra
+    node declares: the ScrewParameters, LiveSettings and JointSettings fields (from their
+    metadata), then NODE_PARAMETERS."""
+    for cls in (ScrewParameters, LiveSettings, JointSettings):
+        for f in fields(cls):
+            md = f.metadata
+            extra = f"one of: {', '.join(md['choices'])}" if md["choices"] else (
+                "open bound" if md["lo_open"] or md["hi_open"] else "")
+            bounds = None if md["lo"] is None else (md["lo"], md["hi"])
+            yield f.name, f.default, md["unit"], md["description"], bounds, md["read_only"], extra
     for name, (default, unit, description, bounds, read_only) in NODE_PARAMETERS.items():
         yield name, default, unit, description, bounds, read_only, ""
+
+
+PARAMETER_NAMES = [spec[0] for spec in parameter_specs()]
 
 
 def bag_prefix(namespace: str) -> str:
@@ -218,7 +205,7 @@ class SqueakPredictorNode(Node):
 
     def _values(self, changes: dict) -> dict:
         return {**{p.name: p.value for p in self.get_parameters(
-            [f.name for f in fields(ScrewParameters)] + list(NODE_PARAMETERS))}, **changes}
+            PARAMETER_NAMES)}, **changes}
 
     def _screw_parameters(self, changes: dict) -> ScrewParameters:
         values = self._values(changes)

@@ -1,0 +1,52 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Settings of the live predictor, declared once: default, unit, range and description are the
+field metadata (`model.fields.setting`), from which the node's parameter descriptors, the YAML
+config, the replay's CLI help and the README tables are made.
+
+`LiveSettings` is the recompute policy and the verdict; `JointSettings` says how a
+sensor_msgs/JointState maps to speed and nut position. The node and the offline replay use both.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..model.fields import check, setting
+
+
+@dataclass(frozen=True)
+class LiveSettings:
+    """When to recompute and what the verdict says (SI units; see the field metadata)."""
+
+    speed_deadband_rad_s: float = setting(
+        0.1, "rad/s", "recompute when the speed moved more than this", 0.0, 1000.0)
+    load_deadband_n: float = setting(
+        1.0, "N", "recompute when the load moved more than this", 0.0, 1e5)
+    nut_deadband_m: float = setting(
+        0.0005, "m", "re-integrate the contact when the nut moved more than this", 0.0, 1.0)
+    max_rate_hz: float = setting(
+        100.0, "Hz", "maximum recompute rate (bursts are coalesced)", 0.1, 10000.0)
+    risk_warn_threshold: float = setting(
+        0.5, "1", "diagnostic WARN above this squeak risk", 0.0, 1.0)
+    stale_timeout_s: float = setting(
+        1.0, "s", "diagnostic STALE when speed or load is older than this", 0.01, 3600.0)
+    safe_speed_margin: float = setting(
+        0.05, "1", "relative distance kept from a squeak band edge by squeak/safe_speed",
+        0.0, 0.5)
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+@dataclass(frozen=True)
+class JointSettings:
+    """Which joint of sensor_msgs/JointState is the screw, and where the nut is at angle 0."""
+
+    joint_name: str = setting(
+        "", "", "screw joint in joint_states ('' ignores joint_states)")
+    nut_position_at_zero_angle_m: float = setting(
+        0.15, "m", "nut position when the screw joint angle is 0; the nut travels "
+        "R tan(beta) per radian", -100.0, 100.0)
+
+    def __post_init__(self) -> None:
+        check(self)

@@ -1,0 +1,96 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Settings declared once: a dataclass field carries its default, unit, allowed range and
+description in its metadata, and everything else (validation, ROS parameter descriptors, YAML,
+CLI help, README tables) is derived from there.
+
+`setting` declares such a field; `check` validates an instance against it. Ranges are closed
+unless `lo_open` / `hi_open`; `choices` lists the allowed strings of a text setting.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import MISSING, Field, field, fields
+from typing import Any
+
+from .display import exact
+
+
+def setting(default: Any, unit: str, description: str, lo: float | None = None,
+            hi: float | None = None, *, lo_open: bool = False, hi_open: bool = False,
+            choices: tuple[str, ...] = (), read_only: bool = False, **extra: Any) -> Any:
+    """A dataclass field with its metadata.
+
+    Parameters
+    ----------
+    default : bool, int, float or str
+        Default value; its type is the setting's type.
+    unit : str
+        SI unit ('1' dimensionless, '' for text and flags).
+    description : str
+        One line, lower case, no final full stop.
+    lo, hi : float, optional
+        Allowed range (both or neither).
+    lo_open, hi_open : bool
+        Exclude the bound.
+    choices : tuple of str
+        Allowed values of a text setting (empty: any non-empty text is checked by the owner).
+    read_only : bool
+        Takes effect only at start-up (a ROS parameter that cannot be set later).
+    **extra
+        More metadata for the owner (e.g. ``geometry`` of a model parameter).
+
+    Returns
+    -------
+    dataclasses.Field
+    """
+    return field(default=default, metadata=dict(
+        unit=unit, description=description, lo=lo, hi=hi, lo_open=lo_open, hi_open=hi_open,
+        choices=tuple(choices), read_only=read_only, **extra))
+
+
+def info(f: Field) -> dict[str, Any]:
+    """A field's metadata with its default and type name."""
+    return dict(f.metadata, default=None if f.default is MISSING else f.default,
+                type=type(f.default).__name__)
+
+
+def range_text(md: dict[str, Any]) -> str:
+    """'[lo, hi] unit' with open bounds as parentheses."""
+    lo = "(" if md["lo_open"] else "["
+    hi = ")" if md["hi_open"] else "]"
+    return f"{lo}{md['lo']:g}, {md['hi']:g}{hi} {md['unit']}".rstrip()
+
+
+def check_value(name: str, value: Any, f: Field) -> str:
+    """'' when `value` is allowed for field `f`, else a one-line reason naming `name`."""
+    md, default = f.metadata, f.default
+    if isinstance(default, str):
+        if not isinstance(value, str):
+            return f"{name} = {value!r} must be text"
+        if md["choices"] and value not in md["choices"]:
+            return f"{name} = {value!r} is not allowed; choose one of {', '.join(md['choices'])}"
+        return ""
+    if isinstance(default, bool):
+        return "" if isinstance(value, bool) else f"{name} = {value!r} must be true or false"
+    kind = "int" if isinstance(default, int) else "float"
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or (
+            kind == "int" and not isinstance(value, int)):
+        return f"{name} = {value!r} must be a{'n' if kind == 'int' else ''} {kind}"
+    if md["lo"] is None:
+        return ""
+    if not math.isfinite(value):
+        return f"{name} = {value} must be finite, allowed {range_text(md)}"
+    too_low = value <= md["lo"] if md["lo_open"] else value < md["lo"]
+    too_high = value >= md["hi"] if md["hi_open"] else value > md["hi"]
+    if too_low or too_high:
+        return f"{name} = {exact(value)} is out of range, allowed {range_text(md)}"
+    return ""
+
+
+def check(obj: Any, error: type[Exception] = ValueError, prefix: str = "") -> None:
+    """Raise `error` with the first field of dataclass `obj` whose value is not allowed."""
+    for f in fields(obj):
+        reason = check_value(prefix + f.name, getattr(obj, f.name), f)
+        if reason:
+            raise error(reason)
