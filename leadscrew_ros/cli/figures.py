@@ -9,6 +9,7 @@ writes fig04..fig11 PNGs and `summary.txt`, whose sentences are computed from th
 
 from __future__ import annotations
 
+import argparse
 import math
 from dataclasses import dataclass
 from functools import cached_property, partial
@@ -26,6 +27,7 @@ from ..model.tracking import Branch, track_modes
 from ..review.plots import (at, axis_display, axis_label, fixed_text, fmt, new_figure,
                             plot_frequencies, plot_map, save_figure, scale_axis)
 from ..review.progress import progress_bar
+from .args import WORK_LIMITS, Parser, build_model
 
 GROWTH_LABEL = r"growth rate Re($\lambda$) [1/s]"
 
@@ -490,3 +492,17 @@ def make_figures(model: SqueakModel, out: Path, quick: bool = False) -> str:
     (out / "summary.txt").write_text(summary, encoding="utf-8")
     return summary
 
+
+# --------------------------------------------------------------------------- the command
+def cmd_figures(args: argparse.Namespace) -> int:
+    print(make_figures(build_model(args), Path(args.out), quick=args.quick), end="")
+    return 0
+
+
+def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
+    """Add `figures` to `sub`; `common`: the model options."""
+    p = sub.add_parser("figures", parents=common, help="the paper's Figs. 4-11 and summary.txt",
+                       epilog=WORK_LIMITS.replace("points", "points in all", 1))
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    p.add_argument("--quick", action="store_true", help="coarse grids (a few seconds)")
+    p.set_defaults(run=cmd_figures)
