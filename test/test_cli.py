@@ -22,7 +22,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from leadscrew_ros.cli import MAX_COUNT, CliError, main, parse_range, split_ros_args
+from leadscrew_ros.cli import CliError, main, split_ros_args
+from leadscrew_ros.cli.args import MAX_COUNT, parse_range
 from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.model.sweep import (MAX_MEMORY_BYTES, MAX_POINTS, map_work, stability_map,
                                        sweep, sweep_work)
@@ -182,6 +183,22 @@ def test_module_entry_point_reports_error_without_traceback():
     assert r.returncode == 2
     assert "Traceback" not in r.stderr
     assert len(r.stderr.splitlines()) == 1 and "error" in r.stderr
+
+
+def test_model_commands_load_neither_rclpy_nor_matplotlib_nor_the_ros_layer():
+    """Every command group adds its parser at start-up: that must stay cheap and ROS-free."""
+    code = ("import contextlib, io, sys\n"
+            "from leadscrew_ros.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+            "    codes = [main([c, '--help']) for c in ('demo', 'simulate', 'replay')]\n"
+            "    codes.append(main(['predict', '--speed', '20', '--json']))\n"
+            "assert codes == [0, 0, 0, 0] and out.getvalue().rstrip().endswith('}'), codes\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in "
+            "('rclpy', 'matplotlib') or m.startswith('leadscrew_ros.ros')))\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "[]"
 
 
 # ----------------------------------------------------------------------------- sweep

@@ -12,7 +12,7 @@ import re
 
 import pytest
 
-from leadscrew_ros.model import parameters, predictor, stability, sweep
+from leadscrew_ros.model import parameters, predictor, stability, sweep, tracking
 from leadscrew_ros.model.parameters import ScrewParameters, field_info, field_names
 
 FUNCTIONS = [
@@ -36,14 +36,17 @@ FUNCTIONS = [
     sweep.unstable_intervals,
     sweep.SweepResult.as_dict,
     sweep.MapResult.as_dict,
+    tracking.track_modes,
 ]
 RECORDS = [ScrewParameters, predictor.Prediction, stability.ModeResult, sweep.GrowthField,
-           sweep.SweepResult, sweep.MapResult]
+           sweep.SweepResult, sweep.MapResult, tracking.Branch]
 PROPERTIES = [(predictor.SqueakModel, ("labels", "critical_speed_rad_s")),
               (predictor.Prediction, ("valid", "stable", "squeak_modes",
                                       "unstable_frequencies_hz", "max_growth_rate")),
               (ScrewParameters, ("n_modes", "lead_per_rad_m", "nut_travel_m")),
-              (sweep.SweepResult, ("max_growth_rate",))]
+              (sweep.SweepResult, ("max_growth_rate",)),
+              (tracking.Branch, ("label", "peak_growth", "typical_frequency_hz", "squeaks",
+                                  "squeak_frequency_hz", "squeak_text"))]
 
 
 def sections(doc: str | None) -> dict[str, list[str]]:
@@ -143,6 +146,7 @@ def test_the_public_api_is_covered():
     for module, names in ((predictor, ("SqueakModel", "check_operating_point")),
                           (sweep, ("sweep", "stability_map", "growth_field", "refine_crossings",
                                    "unstable_intervals", "SweepResult", "MapResult")),
+                          (tracking, ("track_modes", "Branch")),
                           (parameters, ("ScrewParameters",))):
         for name in names:
             obj = getattr(module, name)

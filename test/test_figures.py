@@ -12,10 +12,13 @@ import pytest
 from leadscrew_ros.cli import main
 from leadscrew_ros.cli import figures
 from leadscrew_ros.cli.figures import (BOUNDARY, FIGURE_FILES, GRID, VALIDITY, Limit,
-                                   describe_frequencies, describe_speed_map, line_bands,
-                                   plot_frequencies, squeak_branches, track_modes)
+                                       describe_frequencies, describe_speed_map, line_bands,
+                                       squeak_branches)
 from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.model.sweep import stability_map, sweep
+from leadscrew_ros.model.tracking import track_modes
+from leadscrew_ros.review import plots
+from leadscrew_ros.review.plots import plot_frequencies
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -130,7 +133,7 @@ def test_lower_bound_at_10mm_is_the_validity_limit_not_a_boundary(radius_columns
 def test_fig11_label_and_summary_give_the_same_frequency(monkeypatch, tmp_path):
     result = sweep(SqueakModel(), "speed_rad_s", np.geomspace(0.5, 120, 120))
     figs = []
-    monkeypatch.setattr(figures, "_save", lambda fig, path, dpi: figs.append(fig))
+    monkeypatch.setattr(plots, "save_figure", lambda fig, path, dpi: figs.append(fig))
     plot_frequencies(result, tmp_path / "f.png")
     labels = sorted(t.get_text() for t in figs[0].axes[0].texts)
     branches = squeak_branches(result)
@@ -155,6 +158,19 @@ def test_map_json_and_import_do_not_load_matplotlib():
                          timeout=300)
     assert run.returncode == 0, run.stderr
     assert run.stdout.strip() == "[]"
+
+
+def test_the_report_plots_do_not_import_the_cli():
+    code = ("import sys\n"
+            "import leadscrew_ros.review.plots\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('rclpy', 'matplotlib')"
+            " or m.startswith(('leadscrew_ros.cli', 'leadscrew_ros.ros'))))\n"
+            "import leadscrew_ros.review.report\n"
+            "print(sorted(m for m in sys.modules if m.startswith('leadscrew_ros.cli')))\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["[]", "[]"]
 
 
 def test_track_modes_follows_continuous_branches():

@@ -1,186 +1,38 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Plots of sweeps and stability maps, and the paper's Figs. 4-11 with a computed summary.
+"""`leadscrew-squeak figures`: the paper's Figs. 4-11 with a computed summary; and the sweep plot.
 
-`plot_sweep` and `plot_map` are shared by the `figures` command and by `sweep --plot` /
-`map --plot` of the CLI. `make_figures` writes fig04..fig11 PNGs and `summary.txt`, whose
-sentences are computed from the plotted data (nothing is hard-coded).
+`plot_sweep` is shared by the `figures` command and `sweep --plot`; the map and frequency
+plots (`review.plots`) are shared with `map --plot` and the replay report. `make_figures`
+writes fig04..fig11 PNGs and `summary.txt`, whose sentences are computed from the plotted data
+(nothing is hard-coded). Importing this module does not import matplotlib (`map --json`).
 """
 
 from __future__ import annotations
 
+import argparse
 import math
-from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property, partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, NamedTuple, Sequence
+from typing import Callable, Sequence
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from ..model.friction import friction_coefficient, sliding_speed
-from ..model.parameters import ScrewParameters, field_info
-from ..model.predictor import Prediction, SqueakModel
+from ..model.parameters import ScrewParameters
+from ..model.predictor import SqueakModel
 from ..model.sweep import (REFERENCE_SPEED_RAD_S, MapResult, SweepResult, Work,
                           _native, map_work, stability_map, sweep, sweep_work)
+from ..model.tracking import Branch, track_modes
+from ..review.plots import (at, axis_display, axis_label, fixed_text, fmt, new_figure,
+                            plot_frequencies, plot_map, save_figure, scale_axis)
 from ..review.progress import progress_bar
-
-if TYPE_CHECKING:
-    from matplotlib.axes import Axes
-    from matplotlib.colors import Colormap
-    from matplotlib.figure import Figure
-
-# matplotlib is imported where a figure is drawn, never at import: importing this module
-# (e.g. `map --json`) neither loads matplotlib nor selects a backend. Figures are made with
-# matplotlib.figure.Figure, which renders PNGs without pyplot or any GUI backend.
+from .args import WORK_LIMITS, Parser, build_model
 
 GROWTH_LABEL = r"growth rate Re($\lambda$) [1/s]"
-Overlay = Callable[["Axes"], list]     # draws on a finished plot, returns legend handles
 
 
-class Display(NamedTuple):
-    label: str      # axis label (matplotlib mathtext)
-    symbol: str     # plain-text symbol for summary.txt
-    unit: str       # display unit
-    factor: float   # SI value * factor = display value
-
-
-_DISPLAY = {
-    "speed_rad_s": Display(r"rotation speed $\Omega$", "Omega", "rad/s", 1.0),
-    "load_n": Display("axial load $F_z$", "F_z", "N", 1.0),
-    "axial_load_n": Display("axial load $F_z$", "F_z", "N", 1.0),
-    "radius_m": Display("effective radius $R$", "R", "mm", 1e3),
-    "nut_position_m": Display("nut location $z_o$", "z_o", "mm", 1e3),
-    "nut_length_m": Display("nut length $b$", "b", "mm", 1e3),
-    "length_m": Display("screw length $L$", "L", "mm", 1e3),
-    "thread_height_m": Display("thread height $h$", "h", "mm", 1e3),
-    "helix_angle_rad": Display(r"helix angle $\beta$", "beta", "deg", 180.0 / math.pi),
-}
-
-
-def axis_display(name: str) -> Display:
-    """How a sweep axis is labelled and in which unit it is shown."""
-    if name in _DISPLAY:
-        return _DISPLAY[name]
-    info = field_info(name)
-    return Display(info["description"], name, info["unit"] or "1", 1.0)
-
-
-def axis_label(name: str) -> str:
-    d = axis_display(name)
-    return f"{d.label} [{d.unit}]"
-
-
-def fmt(name: str, value: float) -> str:
-    """A value of an axis in its display unit, e.g. `5 mm`, `20.3 rad/s`."""
-    d = axis_display(name)
-    return f"{value * d.factor:.3g} {d.unit}" if math.isfinite(value) else "n/a"
-
-
-def at(name: str, value: float) -> str:
-    """`R = 5 mm`."""
-    return f"{axis_display(name).symbol} = {fmt(name, value)}"
-
-
-def _is_geometric(values: np.ndarray) -> bool:
-    """True for a geomspace grid (plotted on a log axis)."""
-    if len(values) < 3 or np.any(values <= 0):
-        return False
-    step = np.diff(np.log(values))
-    return bool(np.allclose(step, step[0], rtol=1e-6) and values[-1] / values[0] > 20)
-
-
-def _scale_axis(ax, which: str, values: np.ndarray) -> None:
-    if _is_geometric(values):
-        getattr(ax, f"set_{which}scale")("log")
-
-
-def stability_cmap() -> "Colormap":
-    """Blues below zero, reds above, with a visible step at zero (the stability boundary)."""
-    from matplotlib import colormaps
-    from matplotlib.colors import ListedColormap
-    return ListedColormap(np.vstack([colormaps["Blues_r"](np.linspace(0.0, 0.7, 128)),
-                                     colormaps["Reds"](np.linspace(0.3, 1.0, 128))]),
-                          name="stability")
-
-
-def new_figure(**kwargs) -> "Figure":
-    """A figure that is not registered with pyplot (no backend, nothing to close)."""
-    from matplotlib.figure import Figure
-    return Figure(**kwargs)
-
-
-def _save(fig: "Figure", path: Path, dpi: int) -> None:
-    fig.savefig(path, dpi=dpi)
-
-
-# --------------------------------------------------------------------------- mode tracking
-@dataclass
-class Branch:
-    """One oscillatory mode followed along a sweep; NaN where it does not exist."""
-
-    growth: np.ndarray                 # Re(lambda), 1/s
-    frequency_hz: np.ndarray           # Im(lambda) / 2 pi
-    labels: Counter = field(default_factory=Counter)
-
-    @property
-    def label(self) -> str:
-        return self.labels.most_common(1)[0][0]
-
-    @property
-    def peak_growth(self) -> float:
-        return float(np.nanmax(self.growth))
-
-    @property
-    def typical_frequency_hz(self) -> float:
-        return float(np.nanmedian(self.frequency_hz))
-
-    @property
-    def squeaks(self) -> np.ndarray:
-        """Where the branch is unstable (Re > 0)."""
-        return np.nan_to_num(self.growth, nan=-1.0) > 0
-
-    @property
-    def squeak_frequency_hz(self) -> float:
-        """Median frequency where the branch is unstable; NaN if it never is."""
-        return float(np.median(self.frequency_hz[self.squeaks])) if self.squeaks.any() else math.nan
-
-    @property
-    def squeak_text(self) -> str:
-        """'B1y 224 Hz': the one wording of a squeak mode in plots and summaries."""
-        return f"{self.label} {self.squeak_frequency_hz:.0f} Hz"
-
-
-def _eigenvalues(p: Prediction) -> np.ndarray:
-    return np.array([complex(m.growth_rate, 2 * math.pi * m.frequency_hz) for m in p.modes])
-
-
-def track_modes(predictions: Sequence[Prediction], max_jump: float = 0.15) -> list[Branch]:
-    """Follow the oscillatory eigenvalues from point to point by nearest-neighbour assignment
-    (relative distance below `max_jump`); a mode that appears or has jumped starts a branch.
-    Labels alone cannot do this: the dominant coordinate of a whirl pair is ambiguous."""
-    size, branches, alive, last = len(predictions), [], [], np.empty(0, complex)
-    for i, p in enumerate(predictions):
-        lam = _eigenvalues(p)
-        owner = [-1] * len(lam)
-        if len(last) and len(lam):
-            cost = np.abs(last[:, None] - lam[None, :]) / np.maximum(
-                np.abs(last)[:, None], np.abs(lam)[None, :])
-            for r, c in zip(*linear_sum_assignment(cost)):
-                if cost[r, c] < max_jump:
-                    owner[c] = alive[r]
-        for j, m in enumerate(p.modes):
-            if owner[j] < 0:
-                branches.append(Branch(np.full(size, np.nan), np.full(size, np.nan)))
-                owner[j] = len(branches) - 1
-            b = branches[owner[j]]
-            b.growth[i], b.frequency_hz[i] = m.growth_rate, m.frequency_hz
-            b.labels[m.label] += 1
-        alive, last = owner, lam
-    return branches
-
-
-# --------------------------------------------------------------------------- shared plots
+# --------------------------------------------------------------------------- sweep plot
 def plot_sweep(result: SweepResult, path: Path, title: str = "", top: int = 6,
                dpi: int = 120) -> None:
     """Largest growth rate and Re(lambda) of the `top` least stable modes along the axis, with
@@ -198,7 +50,7 @@ def plot_sweep(result: SweepResult, path: Path, title: str = "", top: int = 6,
         ax.axvspan(lo * k, hi * k, color="tab:red", alpha=0.12,
                    label="unstable (squeak)" if i == 0 else None)
     ax.axhline(0.0, color="k", lw=0.8)
-    _scale_axis(ax, "x", result.values)
+    scale_axis(ax, "x", result.values)
     shown = np.concatenate([result.max_growth_rate] + [b.growth for b in branches])
     if np.isfinite(shown).any():
         hi = max(float(np.nanmax(shown)), 1.0)
@@ -206,96 +58,14 @@ def plot_sweep(result: SweepResult, path: Path, title: str = "", top: int = 6,
     ax.set_xlabel(axis_label(result.axis))
     ax.set_ylabel(GROWTH_LABEL)
     ax.set_title(title or f"Squeak propensity vs {axis_display(result.axis).label}\n"
-                          f"({_fixed_text(result.fixed)}; {_formulation(result)} formulation)")
+                          f"({fixed_text(result.fixed)}; {_formulation(result)} formulation)")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    _save(fig, path, dpi)
-
-
-def plot_map(result: MapResult, path: Path, title: str = "", dpi: int = 120,
-             formulation: str = "", overlay: Overlay | None = None) -> None:
-    """Filled contour of the largest growth rate (red: squeak, blue: stable), the zero contour,
-    the root-refined boundary points, and hatching where the model is not valid; `overlay`
-    draws more (in display units) and returns its legend handles."""
-    from matplotlib.colors import TwoSlopeNorm
-    from matplotlib.patches import Patch
-    kx, ky = axis_display(result.x_axis).factor, axis_display(result.y_axis).factor
-    x, y, g = result.x * kx, result.y * ky, np.ma.masked_invalid(result.field.max_growth_rate)
-    cmap = stability_cmap()
-    fig = new_figure(figsize=(7, 5.2), layout="constrained")
-    ax = fig.subplots()
-    if g.count():
-        lo, hi = min(float(g.min()), -1e-6), max(float(g.max()), 1e-6)
-        levels = np.concatenate([np.linspace(lo, 0, 12)[:-1], np.linspace(0, hi, 16)])
-        cs = ax.contourf(x, y, g, levels=levels, cmap=cmap,
-                         norm=TwoSlopeNorm(0, lo, hi))
-        fig.colorbar(cs, ax=ax, label=r"largest growth rate Re($\lambda$) [1/s]")
-        if lo < 0 < hi and g.count() > 3:
-            ax.contour(x, y, g, levels=[0.0], colors="k", linewidths=1.2)
-    handles = [Patch(facecolor=cmap(0.8), label="unstable (squeak)"),
-               Patch(facecolor=cmap(0.2), label="stable")]
-    invalid = ~result.field.valid
-    if invalid.any():
-        ax.contourf(x, y, invalid.astype(float), levels=[0.5, 1.5], colors="none",
-                    hatches=["///"])
-        handles.append(Patch(facecolor="white", edgecolor="0.3", hatch="///",
-                             label="outside model validity"))
-    if result.boundary:
-        bx, by = np.array(result.boundary).T
-        handles += ax.plot(bx * kx, by * ky, "k.", ms=3, label="stability boundary (refined)")
-    if overlay is not None:
-        handles += overlay(ax)
-    _scale_axis(ax, "x", result.x)
-    _scale_axis(ax, "y", result.y)
-    ax.set_xlim(x[0], x[-1])
-    ax.set_ylim(y[0], y[-1])
-    ax.set_xlabel(axis_label(result.x_axis))
-    ax.set_ylabel(axis_label(result.y_axis))
-    default = "; ".join(filter(None, (_fixed_text(result.fixed),
-                                      formulation and f"{formulation} formulation")))
-    ax.set_title(title or f"Stability map ({default})", fontsize=10)
-    fig.legend(handles=handles, fontsize=8, loc="outside lower center",
-               ncols=min(len(handles), 4))
-    _save(fig, path, dpi)
-
-
-def _fixed_text(fixed: dict[str, float]) -> str:
-    return ", ".join(at(n, v) for n, v in fixed.items())
+    save_figure(fig, path, dpi)
 
 
 def _formulation(result: SweepResult) -> str:
     return result.predictions[0].formulation if result.predictions else "?"
-
-
-def plot_frequencies(result: SweepResult, path: Path, title: str = "", dpi: int = 120,
-                     overlay: Overlay | None = None) -> None:
-    """Frequency of every oscillatory mode along the axis: thin line, thick where Re > 0;
-    `overlay` draws more (in display units) and returns its legend handles."""
-    from matplotlib.lines import Line2D
-    k = axis_display(result.axis).factor
-    x = result.values * k
-    fig = new_figure(figsize=(7.5, 5.2), layout="constrained")
-    ax = fig.subplots()
-    for b in track_modes(result.predictions):
-        ax.plot(x, b.frequency_hz, color="0.25", lw=0.8)
-        squeak = np.where(b.squeaks, b.frequency_hz, np.nan)
-        if b.squeaks.any():
-            ax.plot(x, squeak, color="tab:red", lw=4, solid_capstyle="butt")
-            i = int(np.nanargmax(np.where(b.squeaks, b.growth, np.nan)))
-            ax.annotate(b.squeak_text, (x[i], squeak[i]),
-                        xytext=(4, 6), textcoords="offset points", color="tab:red",
-                        fontsize=9, fontweight="bold")
-    _scale_axis(ax, "x", result.values)
-    ax.set_yscale("log")
-    ax.set_xlabel(axis_label(result.axis))
-    ax.set_ylabel("frequency Im($\\lambda$)/2$\\pi$ [Hz]")
-    ax.set_title(title or "Mode frequencies; thick: Re($\\lambda$) > 0 (squeak)")
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(handles=[Line2D([], [], color="0.25", lw=0.8, label=r"Re($\lambda$) $\leq$ 0"),
-                       Line2D([], [], color="tab:red", lw=4,
-                              label=r"Re($\lambda$) > 0 (squeak)")]
-              + (overlay(ax) if overlay is not None else []), fontsize=8)
-    _save(fig, path, dpi)
 
 
 # --------------------------------------------------------------------------- data summaries
@@ -496,7 +266,7 @@ def describe_load_map(result: MapResult, params: ScrewParameters) -> str:
     """Figs. 9-10: the lowest unstable load for each parameter value at a fixed speed."""
     bands = map_bands(result, "y", params)
     args = ("load_n", result.x_axis, result.x)
-    return (f"at {_fixed_text(result.fixed)}: "
+    return (f"at {fixed_text(result.fixed)}: "
             f"{_trend('lowest unstable load', bands, False, *args)}; "
             f"{_extreme('lowest unstable load', bands, False, False, *args, params)}; "
             f"{_several(bands, *args)}; "
@@ -654,7 +424,7 @@ class FigureSet:
         ax.set_title(f"Fig. 4: friction-velocity curve ($d$ = {p.friction_decay_s_m:g} s/m)")
         ax.grid(alpha=0.3)
         ax.legend()
-        _save(fig, path, self.grids.dpi)
+        save_figure(fig, path, self.grids.dpi)
         return describe_friction(p, v, mu)
 
     def growth(self, path: Path) -> str:
@@ -673,7 +443,7 @@ class FigureSet:
         y = _grid(spec.y_axis, *spec.y_range, self.grids.map_y)
         result = run_map(self.model, spec.x_axis, x, spec.y_axis, y, spec.speed_rad_s,
                          desc=spec.file.split("_")[0])
-        title = self._title("\n".join(filter(None, (spec.title, _fixed_text(result.fixed)))))
+        title = self._title("\n".join(filter(None, (spec.title, fixed_text(result.fixed)))))
         plot_map(result, path, title, dpi=self.grids.dpi)
         return spec.describe(result, self.model.params)
 
@@ -721,3 +491,18 @@ def make_figures(model: SqueakModel, out: Path, quick: bool = False) -> str:
     summary = "\n".join(lines) + "\n"
     (out / "summary.txt").write_text(summary, encoding="utf-8")
     return summary
+
+
+# --------------------------------------------------------------------------- the command
+def cmd_figures(args: argparse.Namespace) -> int:
+    print(make_figures(build_model(args), Path(args.out), quick=args.quick), end="")
+    return 0
+
+
+def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
+    """Add `figures` to `sub`; `common`: the model options."""
+    p = sub.add_parser("figures", parents=common, help="the paper's Figs. 4-11 and summary.txt",
+                       epilog=WORK_LIMITS.replace("points", "points in all", 1))
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    p.add_argument("--quick", action="store_true", help="coarse grids (a few seconds)")
+    p.set_defaults(run=cmd_figures)

@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cli.figures import new_figure, plot_frequencies, plot_map
 from ..model import SqueakModel
 from ..model.sweep import stability_map, sweep
+from .plots import new_figure, plot_frequencies, plot_map
 from .replay import ReplayResult
 
 TIMELINE_FILE = "timeline.png"
