@@ -39,7 +39,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 from std_srvs.srv import SetBool
 
-from leadscrew_ros.bag import cdr, messages, msgdefs
+from leadscrew_ros.bag import cdr, msgdefs
+from leadscrew_ros.bag.messages import OUTPUT_TYPES, RISK
 from leadscrew_ros.ros.node import OUTPUT_CLASSES
 from leadscrew_ros.bag.logfile import LogError, inspect, is_complete, log_files, read_log, recover
 from leadscrew_ros.live.predictor import Level
@@ -194,7 +195,7 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
 
 
 def test_recorded_outputs_are_the_bytes_a_raw_subscriber_receives(ros, tmp_path):
-    received: dict[str, list[bytes]] = {t: [] for t in messages.OUTPUT_TYPES}
+    received: dict[str, list[bytes]] = {t: [] for t in OUTPUT_TYPES}
     for topic in received:                    # subscribed before the node exists: every message
         ros.probe.create_subscription(OUTPUT_CLASSES[topic], topic, received[topic].append,
                                       COLLECT, raw=True)
@@ -209,7 +210,7 @@ def test_recorded_outputs_are_the_bytes_a_raw_subscriber_receives(ros, tmp_path)
     ros.executor.remove_node(node)
     ros.node = None
     recorded = {t: [m.data for m in read_log(bag) if m.topic.name == names[t]] for t in received}
-    assert len(recorded[messages.RISK]) >= 2 and all(recorded.values()), recorded
+    assert len(recorded[RISK]) >= 2 and all(recorded.values()), recorded
     assert recorded == received
 
 

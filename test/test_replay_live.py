@@ -300,7 +300,6 @@ CHILD = """
 import sys
 from leadscrew_ros.bag.logfile import log_files
 from leadscrew_ros.ros.replay_live import publish_log
-from cdr_reference import write_message
 n = publish_log(log_files(sys.argv[1]), rate=float(sys.argv[2]), loop=sys.argv[3] == "loop",
                 topics=["/motor_speed"], remap={"/motor_speed": sys.argv[4]})
 print(f"RETURNED {n}")
