@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: Apache-2.0
 """The predictor's output messages (`leadscrew_ros.bag.messages`): byte for byte the rclpy
 messages of the documented layout, squeak/modes decoded back, malformed layouts refused; the
-demo's monitor decodes them; bag/ and review/ import without any ROS package."""
+demo's monitor decodes them; model/, live/, bag/ and review/ import and encode the outputs
+with their schemas without any ROS package."""
 
 from __future__ import annotations
 
@@ -114,6 +115,10 @@ def test_bag_and_review_import_without_any_ros_package():
         "    pkg = importlib.import_module(f'leadscrew_ros.{layer}')\n"
         "    for m in pkgutil.iter_modules(pkg.__path__):\n"
         "        importlib.import_module(f'leadscrew_ros.{layer}.{m.name}')\n"
+        "from leadscrew_ros.bag import messages, msgdefs\n"
+        "from leadscrew_ros.model import SqueakModel\n"
+        "assert all(msgdefs.definition(t) for t in messages.OUTPUT_TYPES.values())\n"
+        "assert messages.prediction_payloads(SqueakModel().predict(20.0, 200.0))\n"
         "print('ok')\n")
     done = subprocess.run([sys.executable, "-c", blocker], capture_output=True, text=True,
                           timeout=300)
