@@ -26,6 +26,7 @@ from std_msgs.msg import Float64
 from leadscrew_ros.ros.demo import SqueakMonitor, status_line
 from leadscrew_ros.ros.diagnostics import DiagnosticStatusWrapper, status_task
 from leadscrew_ros.live.predictor import KEY_VALIDITY, LivePredictor
+from leadscrew_ros.bag.cdr import encode_diagnostic_array
 from leadscrew_ros.bag.logfile import inspect, log_files, read_log
 from leadscrew_ros.model import SqueakModel, Validity
 from leadscrew_ros.bag.recorder import LOST_BY_TOPIC_KEY
@@ -257,7 +258,8 @@ def test_the_monitor_takes_validity_from_its_key_not_from_the_message(speed, wor
     rclpy.init(context=ctx)
     try:
         monitor = SqueakMonitor(context=ctx)
-        monitor._on_diagnostics(DiagnosticArray(status=[stat.to_msg()]))
+        monitor._on_diagnostics(deserialize_message(
+            encode_diagnostic_array(0, (stat.to_data(),)), DiagnosticArray))
         r = monitor.record
         assert not r.valid and r.validity is Validity[stat.values[KEY_VALIDITY]]
         assert r.validity.label.startswith(words)

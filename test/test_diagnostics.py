@@ -20,6 +20,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 
 from leadscrew_ros.ros.diagnostics import (KEY_BAG, KEY_CUT_OFF_BAGS, KEY_FILES, KEY_LOST,
                                        KEY_MESSAGES, PREDICTION_TASK, RECORDING_TASK, TOPIC,
@@ -57,14 +58,14 @@ class World:
         self.received: list[DiagnosticArray] = []
         self.probe.create_subscription(DiagnosticArray, TOPIC, self._on, COLLECT)
         self.clock = FakeClock()
-        self.seen: list[tuple[str, DiagnosticArray]] = []
+        self.seen: list[tuple[str, bytes, int]] = []     # topic, CDR payload, stamp [ns]
         self.updater = Updater(self.node, LATCHED, period_s=1.0, hardware_id=self.hardware_id,
                                clock=self.clock, publish=self._publish)
         self.spin_until(lambda: self.updater.publisher.get_subscription_count() > 0)
 
-    def _publish(self, publisher, msg: DiagnosticArray) -> None:
-        self.seen.append((publisher.topic_name, msg))
-        publisher.publish(msg)
+    def _publish(self, publisher, data: bytes, stamp_ns: int) -> None:
+        self.seen.append((publisher.topic_name, data, stamp_ns))
+        publisher.publish(data)
 
     def _on(self, msg: DiagnosticArray) -> None:
         if any(s.hardware_id == self.hardware_id for s in msg.status):
@@ -132,7 +133,9 @@ def test_tasks_fill_named_statuses_in_order_with_the_hardware_id(world):
                                                             (Level.OK, "second says")]
     assert [(kv.key, kv.value) for kv in msg.status[0].values] == [("count", "3")]
     assert msg.header.stamp.sec > 0
-    assert world.seen == [(TOPIC, world.seen[0][1])] and world.seen[0][1].status == msg.status
+    [(topic, data, stamp_ns)] = world.seen
+    assert topic == TOPIC and deserialize_message(data, DiagnosticArray) == msg
+    assert stamp_ns == msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
 
 
 def test_update_publishes_once_per_period(world):
@@ -167,10 +170,8 @@ def test_force_update_publishes_now_and_restarts_the_period(world):
 def test_status_task_reports_a_status():
     status = Status(Level.STALE, "no fresh input", {"a": "1", "b": ""})
     stat = status_task(lambda: status)(DiagnosticStatusWrapper("n", "hw"))
-    msg = stat.to_msg()
-    assert (level(msg), msg.message, msg.name, msg.hardware_id) == (
-        Level.STALE, "no fresh input", "n", "hw")
-    assert [(kv.key, kv.value) for kv in msg.values] == [("a", "1"), ("b", "")]
+    assert stat.to_data() == (int(Level.STALE), "n", "no fresh input", "hw",
+                              (("a", "1"), ("b", "")))
 
 
 def test_merge_summary_keeps_the_worst_level_and_every_message():

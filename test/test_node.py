@@ -29,6 +29,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray
 
@@ -36,7 +37,8 @@ from leadscrew_ros.live.predictor import (KEY_FORMULATION, KEY_NUT_POSITION, KEY
                                 KEY_VALIDITY, Level)
 from leadscrew_ros.model import SqueakModel, Validity
 from leadscrew_ros.model.advice import speed_bands
-from leadscrew_ros.ros.node import MODE_COLUMNS, NODE_NAME, SqueakPredictorNode, modes_message
+from leadscrew_ros.bag.messages import MODE_COLUMNS, modes_payload
+from leadscrew_ros.ros.node import NODE_NAME, SqueakPredictorNode
 
 MODEL = SqueakModel()                      # Table 1: squeak band ~0.81..55.2 rad/s at 200 N
 LOAD, SQUEAK, STABLE = 200.0, 20.0, 100.0
@@ -178,6 +180,11 @@ def at(ros: Ros, speed: float, load: float = LOAD):
     return core
 
 
+def modes_data(p) -> list[float]:
+    """The values of the squeak/modes message of a prediction."""
+    return list(deserialize_message(modes_payload(p), Float64MultiArray).data)
+
+
 def growth(modes: Float64MultiArray) -> float:
     """Largest growth rate in a squeak/modes message (row 0, column growth_rate)."""
     return modes.data[MODE_COLUMNS.index("growth_rate")]
@@ -218,7 +225,7 @@ def test_table1_squeak_at_20_rad_s(ros):
     assert dims[1].label == ",".join(MODE_COLUMNS) and dims[1].size == 3
     assert dims[0].size == len(labels) and dims[0].size * dims[1].size == len(modes.data)
     assert dims[0].stride == len(modes.data) and dims[1].stride == 3
-    assert list(modes.data) == pytest.approx(list(modes_message(core).data), rel=1e-9)
+    assert list(modes.data) == pytest.approx(list(modes_data(core)), rel=1e-9)
 
     status = ros.status(lambda s: s.level == bytes([Level.ERROR]))
     assert status.message == "squeak predicted: B1y 224 Hz, B2y 898 Hz"
@@ -262,7 +269,7 @@ def test_joint_states_give_speed_and_nut_travel(ros):
     ros.send("joint_states", JointState(name=["wheel", "screw"], position=[1.0, angle],
                                         velocity=[STABLE, SQUEAK]))
     modes = ros.wait_for("squeak/modes", lambda m: True)
-    assert list(modes.data) == pytest.approx(list(modes_message(expected).data), rel=1e-9)
+    assert list(modes.data) == pytest.approx(list(modes_data(expected)), rel=1e-9)
     ros.drain()
     assert ros.count["squeak/modes"] == 1        # one prediction, at the new speed AND position
     status = ros.status(lambda s: s.message.startswith("squeak predicted"))

@@ -39,12 +39,14 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 from std_srvs.srv import SetBool
 
-from leadscrew_ros.bag import msgdefs
+from leadscrew_ros.bag import cdr, msgdefs
+from leadscrew_ros.bag.messages import OUTPUT_TYPES, RISK
+from leadscrew_ros.ros.node import OUTPUT_CLASSES
 from leadscrew_ros.bag.logfile import LogError, inspect, is_complete, log_files, read_log, recover
 from leadscrew_ros.live.predictor import Level
 from leadscrew_ros.bag.recorder import LOST_BY_TOPIC_KEY, LOST_KEY, Recorder, RecordSettings, TopicLoss
-from leadscrew_ros.ros.serialization import cdr_payload
-from test_node import COLLECT, LOAD, SQUEAK, Ros, at, node_command, wait_initialised
+from cdr_reference import cdr_payload
+from test_node import COLLECT, LOAD, SQUEAK, STABLE, Ros, at, node_command, wait_initialised
 from test_demo import stop as stop_processes
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
@@ -80,11 +82,14 @@ def plain(value):
     return value
 
 
-def spy_publications(node) -> list[tuple[str, object]]:
-    """Every (topic, message) the node publishes from now on."""
+def spy_publications(node) -> list[tuple[str, bytes, int | None]]:
+    """Every (topic, CDR payload, publish time or None) the node publishes from now on."""
     published, publish = [], node._publish
-    node._publish = lambda pub, msg: (published.append((pub.topic_name, msg)),
-                                      publish(pub, msg))
+
+    def spy(pub, data: bytes, publish_time_ns: int | None = None) -> None:
+        published.append((pub.topic_name, data, publish_time_ns))
+        publish(pub, data, publish_time_ns)
+    node._publish = spy
     return published
 
 
@@ -115,18 +120,22 @@ def drive(ros: Ros, node) -> list[tuple[str, object]]:
 
 def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
     node = ros.start(**{"record.directory": str(tmp_path), "joint_name": "screw"})
-    latched = list(node.latched.items())       # a new bag starts with these (/diagnostics)
-    assert [t for t, _ in latched] == ["/diagnostics"]
+    # a new bag starts with these (/diagnostics)
+    latched = [(t, m.data, m.publish_time_ns) for t, m in node.latched.items()]
+    assert [t for t, *_ in latched] == ["/diagnostics"]
     published = spy_publications(node)
+    classes = {p.topic_name: p.msg_type for p in [*node.output_pubs.values(),
+                                                  node.diagnostics.publisher]}
     assert node.set_parameters([Parameter("record.enabled", value=True)])[0].successful
     sent = drive(ros, node)
     bag = node.recorder.bag
     node.destroy_node()                                   # closes the file cleanly
     ros.executor.remove_node(node)
     ros.node = None
-    expected = latched + sent + published
+    outputs = latched + published                # (topic, bytes, publish time)
+    expected = [(t, deserialize_message(d, classes[t])) for t, d, _ in outputs] + sent
     inputs = {t for t, _ in sent}
-    assert {t for t, _ in published} >= {f"{ros.ns}/squeak/risk", f"{ros.ns}/squeak/modes",
+    assert {t for t, *_ in published} >= {f"{ros.ns}/squeak/risk", f"{ros.ns}/squeak/modes",
                                          f"{ros.ns}/squeak/unstable_frequencies",
                                          f"{ros.ns}/squeak/active", "/diagnostics"}
     files = log_files(bag)
@@ -151,13 +160,15 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
         assert all(name == msgdefs.type_name(want[0]) for name, _ in got)
         times = [m.log_time for _, m in got]
         assert times == sorted(times)
-        for (_, m), w in zip(got, want):
-            if topic in inputs:          # as rosbag2: the publisher's send time (same clock)
-                assert 0 <= m.log_time - m.publish_time < 2e9
-                continue
+        if topic in inputs:              # as rosbag2: the publisher's send time (same clock)
+            assert all(0 <= m.log_time - m.publish_time < 2e9 for _, m in got)
+            continue
+        sent_out = [(d, pt) for t, d, pt in outputs if t == topic]
+        assert [m.data for _, m in got] == [d for d, _ in sent_out], topic   # the same bytes
+        for (_, m), w, (_, pt) in zip(got, want, sent_out):
             stamp = getattr(getattr(w, "header", None), "stamp", None)  # outputs: header stamp
-            assert m.publish_time == (stamp.sec * 10**9 + stamp.nanosec if stamp is not None
-                                      else m.log_time)
+            assert pt == (None if stamp is None else stamp.sec * 10**9 + stamp.nanosec)
+            assert m.publish_time == (m.log_time if pt is None else pt)
 
     # 2. mcap-ros2-support's dynamic decoder (from the schema text alone)
     decoded: dict[str, list] = {}
@@ -181,6 +192,26 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
     assert set(from_rosbags) == {t for t, _ in expected}
     for topic in from_rosbags:
         assert from_rosbags[topic] == [plain(m) for t, m in expected if t == topic], topic
+
+
+def test_recorded_outputs_are_the_bytes_a_raw_subscriber_receives(ros, tmp_path):
+    received: dict[str, list[bytes]] = {t: [] for t in OUTPUT_TYPES}
+    for topic in received:                    # subscribed before the node exists: every message
+        ros.probe.create_subscription(OUTPUT_CLASSES[topic], topic, received[topic].append,
+                                      COLLECT, raw=True)
+    node = ros.start(**{"record.enabled": True, "record.directory": str(tmp_path)})
+    at(ros, SQUEAK)
+    at(ros, STABLE)
+    names = {t: f"{ros.ns}/{t}" for t in received}
+    ros.spin_until(lambda: all(len(received[t]) == node.recorder.count(names[t])
+                               for t in received), what="every recorded output")
+    bag = node.recorder.bag
+    node.destroy_node()
+    ros.executor.remove_node(node)
+    ros.node = None
+    recorded = {t: [m.data for m in read_log(bag) if m.topic.name == names[t]] for t in received}
+    assert len(recorded[RISK]) >= 2 and all(recorded.values()), recorded
+    assert recorded == received
 
 
 def test_message_definitions_come_from_the_installed_packages_with_every_dependency():
@@ -306,7 +337,8 @@ def test_compression_setting_reaches_the_chunks(tmp_path, compression, chunk):
     rec = Recorder(RecordSettings(directory=str(tmp_path), compression=compression))
     assert rec.start(time.time_ns())
     for i in range(200):
-        rec.write("/motor_speed", Float64(data=float(i)), time.time_ns())
+        rec.write_serialized("/motor_speed", cdr.FLOAT64, cdr.encode_float64(float(i)),
+                             time.time_ns())
     rec.stop()
     with open(log_files(rec.bag)[0], "rb") as f:
         indexes = make_reader(f).get_summary().chunk_indexes

@@ -28,8 +28,9 @@ from std_msgs.msg import Float64
 from leadscrew_ros.bag import msgdefs
 from leadscrew_ros.cli import main
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.ros.serialization import cdr_payload
-from leadscrew_ros.review.replay import OUTPUT_TOPICS, ReplaySettings, replay
+from cdr_reference import cdr_payload
+from leadscrew_ros.bag.messages import PREDICTION_TOPICS
+from leadscrew_ros.review.replay import ReplaySettings, replay
 from leadscrew_ros.review.report import QUICK, write_report
 from leadscrew_ros.live.profile import StrokeProfile
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
@@ -40,7 +41,7 @@ LEAD = PARAMS.radius_m * math.tan(PARAMS.helix_angle_rad)
 CYCLE = DutyCycle(duration_s=30.0, rate_hz=50.0, rest_s=3.0)      # two strokes, back and forth
 SHORT = DutyCycle(duration_s=12.5, rate_hz=25.0, rest_s=0.5)      # one stroke
 EXACT = dict(speed_deadband_rad_s=0.0, load_deadband_n=0.0, nut_deadband_m=0.0)
-OUT_NAMES = [f"/replay/squeak/{name}" for name in OUTPUT_TOPICS]
+OUT_NAMES = [f"/replay/{topic}" for topic in PREDICTION_TOPICS]
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
 

@@ -42,6 +42,7 @@ from leadscrew_ros.ros.node import SqueakPredictorNode
 from leadscrew_ros.bag.recorder import Recorder, RecordSettings
 from leadscrew_ros.ros import replay_live
 from leadscrew_ros.ros.replay_live import publish_log
+from cdr_reference import write_message
 
 T0 = 1_700_000_000_000_000_000            # log time of the first message [ns]
 STEP_NS, STEPS = 20_000_000, 100            # 50 Hz for 2 s
@@ -70,17 +71,18 @@ def record(directory: Path, steps: int = STEPS, split_s: float = 1.0) -> list[Pa
     assert rec.start(T0), rec.error
     for i in range(steps):
         t = T0 + i * STEP_NS
-        rec.write("/motor_speed", Float64(data=speed(i)), t)
-        rec.write("/axial_load", Float64(data=load(i)), t)
+        write_message(rec, "/motor_speed", Float64(data=speed(i)), t)
+        write_message(rec, "/axial_load", Float64(data=load(i)), t)
         joint = JointState(name=["screw"], position=[0.01 * i], velocity=[speed(i)])
         joint.header.stamp.sec, joint.header.stamp.nanosec = divmod(t, 1_000_000_000)
-        rec.write("/joint_states", joint, t)
-        rec.write("/robot/nut_position", Float64(data=0.05 + 1e-4 * i), t)
-        rec.write("/replay/motor_speed", Float64(data=-1.0), t)        # not an input
-        rec.write("/other/motor_speed", String(data="x"), t)          # wrong type
+        write_message(rec, "/joint_states", joint, t)
+        write_message(rec, "/robot/nut_position", Float64(data=0.05 + 1e-4 * i), t)
+        write_message(rec, "/replay/motor_speed", Float64(data=-1.0), t)       # not an input
+        write_message(rec, "/other/motor_speed", String(data="x"), t)         # wrong type
         if i % 5 == 0:
-            rec.write("/squeak/risk", Float64(data=0.5), t)
-            rec.write("/diagnostics", DiagnosticArray(status=[DiagnosticStatus(name="n")]), t)
+            write_message(rec, "/squeak/risk", Float64(data=0.5), t)
+            write_message(rec, "/diagnostics",
+                          DiagnosticArray(status=[DiagnosticStatus(name="n")]), t)
         rec.tick(t)
     rec.stop()
     assert not rec.error, rec.error
@@ -461,7 +463,7 @@ def test_unreadable_logs_raise_log_error_before_anything_starts(log, tmp_path, n
     elif damage == "only outputs":
         rec = Recorder(RecordSettings(directory=str(tmp_path)))
         rec.start(T0)
-        rec.write("/squeak/risk", Float64(data=0.1), T0)
+        write_message(rec, "/squeak/risk", Float64(data=0.1), T0)
         rec.stop()
         files = log_files(rec.bag)
     with pytest.raises(LogError, match=match) as exc:

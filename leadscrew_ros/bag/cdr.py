@@ -1,6 +1,13 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Small, defensive decoders of the CDR payloads the replay reads from logs: std_msgs/Float64
-and sensor_msgs/JointState (XCDR1 as Fast CDR and rosbags write it, either byte order).
+"""Small CDR codec of the few message types the package reads and writes, without rclpy.
+
+Decoders (std_msgs/Float64, Bool, Float64MultiArray and sensor_msgs/JointState; XCDR1 as Fast
+CDR and rosbags write it, either byte order) for what the replay reads from logs and the demo's
+monitor receives. Encoders (the same types and diagnostic_msgs/DiagnosticArray) for what the
+node publishes and records, the replay annotates and the synthetic logs hold: XCDR1 little
+endian, alignment counted from the end of the 4-byte encapsulation header, padding zero and
+no unused tail, byte for byte the payload Fast CDR writes with its padding zeroed and its
+slack cut (test/cdr_reference.py checks this against rclpy's serializer).
 
 Log data is untrusted, so every length and count is checked against the payload before it is
 used and any malformation raises ValueError. (The offline replay never hands log data to
@@ -20,6 +27,13 @@ _HEADER = 4                                                # encapsulation kind 
 _U32 = {e: struct.Struct(e + "I") for e in "<>"}
 _F64 = {e: struct.Struct(e + "d") for e in "<>"}
 _STAMP = {e: struct.Struct(e + "iI") for e in "<>"}
+_LE_HEADER = b"\x00\x01\x00\x00"                          # CDR_LE, no options
+
+# 'pkg/msg/Type' of the types this module knows.
+FLOAT64, BOOL = "std_msgs/msg/Float64", "std_msgs/msg/Bool"
+FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
+JOINT_STATE = "sensor_msgs/msg/JointState"
+DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
 
 
 class JointStateData(NamedTuple):
@@ -29,6 +43,30 @@ class JointStateData(NamedTuple):
     position: tuple[float, ...]
     velocity: tuple[float, ...]
     effort: tuple[float, ...]
+
+
+class Dimension(NamedTuple):
+    """std_msgs/MultiArrayDimension."""
+
+    label: str
+    size: int
+    stride: int
+
+
+class Float64MultiArrayData(NamedTuple):
+    dim: tuple[Dimension, ...]
+    data_offset: int
+    data: tuple[float, ...]
+
+
+class DiagnosticStatusData(NamedTuple):
+    """diagnostic_msgs/DiagnosticStatus: `values` are (key, value) pairs."""
+
+    level: int
+    name: str
+    message: str
+    hardware_id: str
+    values: tuple[tuple[str, str], ...] = ()
 
 
 def _endian(data: bytes) -> str:
@@ -46,6 +84,15 @@ def decode_float64(data: bytes) -> float:
     if len(data) < _HEADER + 8:
         raise ValueError(f"Float64 payload of {len(data)} bytes, expected 12")
     return _F64[endian].unpack_from(data, _HEADER)[0]
+
+
+def decode_bool(data: bytes) -> bool:
+    """std_msgs/Bool: the value (a byte other than 0 or 1 is malformed)."""
+    _endian(data)
+    _check(data, _HEADER + 1)
+    if data[_HEADER] > 1:
+        raise ValueError(f"Bool payload holds {data[_HEADER]}, not 0 or 1")
+    return bool(data[_HEADER])
 
 
 def _aligned(pos: int, align: int) -> int:
@@ -104,3 +151,131 @@ def decode_joint_state(data: bytes) -> JointStateData:
     effort, _ = _float64s(data, pos, endian)
     return JointStateData(sec * 1_000_000_000 + nanosec, frame_id, tuple(names), position,
                           velocity, effort)
+
+
+def decode_float64_multi_array(data: bytes) -> Float64MultiArrayData:
+    """std_msgs/Float64MultiArray: layout dimensions, data offset and data."""
+    endian = _endian(data)
+    count, pos = _count(data, _HEADER, endian, 13)     # string (5 bytes at least), 2 x u32
+    dims = []
+    for _ in range(count):
+        label, pos = _string(data, pos, endian)
+        pos = _aligned(pos, 4)
+        _check(data, pos + 8)
+        size, stride = struct.unpack_from(endian + "II", data, pos)
+        dims.append(Dimension(label, size, stride))
+        pos += 8
+    pos = _aligned(pos, 4)
+    _check(data, pos + 4)
+    (offset,) = _U32[endian].unpack_from(data, pos)
+    values, _ = _float64s(data, pos + 4, endian)
+    return Float64MultiArrayData(tuple(dims), offset, values)
+
+
+# ---------------------------------------------------------------------- encoders
+class _Encoder:
+    """Appends XCDR1 little-endian fields to a payload; a value out of its field's range
+    raises ValueError."""
+
+    def __init__(self) -> None:
+        self.out = bytearray(_LE_HEADER)
+
+    def _align(self, size: int) -> None:
+        self.out += bytes(-(len(self.out) - _HEADER) % size)
+
+    def _pack(self, fmt: str, size: int, *values) -> None:
+        self._align(size)
+        try:
+            self.out += struct.pack("<" + fmt, *values)
+        except struct.error as exc:
+            raise ValueError(f"{values} does not fit CDR '{fmt}': {exc}") from None
+
+    def octet(self, value: int) -> None:
+        self._pack("B", 1, value)
+
+    def u32(self, value: int) -> None:
+        self._pack("I", 4, value)
+
+    def f64(self, value: float) -> None:
+        self._pack("d", 8, value)
+
+    def string(self, value: str) -> None:
+        raw = value.encode("utf-8")                # surrogates: UnicodeEncodeError
+        if b"\x00" in raw:
+            raise ValueError(f"string {value!r} holds a NUL, which ends a CDR string")
+        self.u32(len(raw) + 1)
+        self.out += raw + b"\x00"
+
+    def strings(self, values) -> None:
+        self.u32(len(values))
+        for v in values:
+            self.string(v)
+
+    def f64s(self, values) -> None:
+        """A float64 sequence (an empty one is not aligned for its elements, as Fast CDR)."""
+        self.u32(len(values))
+        if len(values):
+            self._pack(f"{len(values)}d", 8, *values)
+
+    def header(self, stamp_ns: int, frame_id: str) -> None:
+        """std_msgs/Header: stamp (builtin_interfaces/Time: int32 s, uint32 ns) and frame."""
+        self._pack("iI", 4, *divmod(stamp_ns, 1_000_000_000))
+        self.string(frame_id)
+
+    def payload(self) -> bytes:
+        return bytes(self.out)
+
+
+def encode_float64(value: float) -> bytes:
+    """std_msgs/Float64."""
+    e = _Encoder()
+    e.f64(value)
+    return e.payload()
+
+
+def encode_bool(value: bool) -> bytes:
+    """std_msgs/Bool."""
+    e = _Encoder()
+    e.octet(1 if value else 0)
+    return e.payload()
+
+
+def encode_float64_multi_array(dim: tuple[Dimension, ...], data, data_offset: int = 0
+                               ) -> bytes:
+    """std_msgs/Float64MultiArray of layout dimensions `dim` and values `data`."""
+    e = _Encoder()
+    e.u32(len(dim))
+    for d in dim:
+        e.string(d.label)
+        e.u32(d.size)
+        e.u32(d.stride)
+    e.u32(data_offset)
+    e.f64s(data)
+    return e.payload()
+
+
+def encode_joint_state(msg: JointStateData) -> bytes:
+    """sensor_msgs/JointState."""
+    e = _Encoder()
+    e.header(msg.stamp_ns, msg.frame_id)
+    e.strings(msg.name)
+    for values in (msg.position, msg.velocity, msg.effort):
+        e.f64s(values)
+    return e.payload()
+
+
+def encode_diagnostic_array(stamp_ns: int, status: tuple[DiagnosticStatusData, ...],
+                            frame_id: str = "") -> bytes:
+    """diagnostic_msgs/DiagnosticArray stamped `stamp_ns` [ns since the epoch]."""
+    e = _Encoder()
+    e.header(stamp_ns, frame_id)
+    e.u32(len(status))
+    for s in status:
+        e.octet(s.level)
+        for text in (s.name, s.message, s.hardware_id):
+            e.string(text)
+        e.u32(len(s.values))
+        for key, value in s.values:
+            e.string(key)
+            e.string(value)
+    return e.payload()

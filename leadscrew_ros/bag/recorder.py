@@ -7,7 +7,8 @@ Each recording is a rosbag2 bag directory `<directory>/<name>_<UTC wall-clock st
 millisecond); each message's log time is whatever the caller gives (the node's clock, which may
 be sim time, as rosbag2 does). Files use profile `ros2`, one channel per topic, `ros2msg`
 schemas with the complete definition from the installed message packages (`msgdefs`) and `cdr`
-payloads, from a message (`write`) or serialized by the caller (`write_serialized`).
+payloads serialized by the caller (`write_serialized`: bytes as received from DDS, or from the
+encoders of `cdr`).
 
 Thread safe: the node's input recording thread and its model thread write concurrently.
 Messages the recorder never got are counted per topic (`TopicLoss`: gaps in the publishers'
@@ -37,7 +38,6 @@ from mcap.writer import CompressionType, Writer
 
 from . import msgdefs
 from .bagmeta import METADATA, BagStats, FileStats, TopicStats
-from ..ros.serialization import cdr_payload
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}
@@ -136,7 +136,7 @@ class _Topic:
 
 @dataclass
 class Recorder:
-    """Writes ROS messages to a split MCAP bag. Call `tick` periodically (flush and split)."""
+    """Writes serialized ROS messages to a split MCAP bag. Call `tick` periodically (flush and split)."""
 
     settings: RecordSettings = field(default_factory=RecordSettings)
     name: str = "squeak"                 # bag directory prefix (the node adds its namespace)
@@ -200,18 +200,6 @@ class Recorder:
                 return
             self._close(finish=True)
             self._write_metadata()
-
-    def write(self, topic: str, msg, log_time_ns: int | None = None,
-              publish_time_ns: int | None = None) -> None:
-        """Record one ROS message (publish_time defaults to the header stamp, else log_time)."""
-        if not self.active:
-            return
-        if publish_time_ns is None:
-            stamp = getattr(getattr(msg, "header", None), "stamp", None)
-            if stamp is not None:
-                publish_time_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
-        self.write_serialized(topic, msgdefs.type_name(msg), cdr_payload(msg), log_time_ns,
-                              publish_time_ns)
 
     def write_serialized(self, topic: str, type_name: str, data: bytes,
                          log_time_ns: int | None = None, publish_time_ns: int | None = None

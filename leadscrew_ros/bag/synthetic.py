@@ -15,9 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64
 
+from .cdr import FLOAT64, JOINT_STATE, JointStateData, encode_float64, encode_joint_state
 from .recorder import Recorder, RecordSettings
 from ..live.profile import StrokeProfile
 
@@ -89,14 +88,15 @@ def write_log(cycle: DutyCycle, directory: Path | str, split_duration_s: float =
     for now, speed, load, nut, angle in zip(times.tolist(), s.speed_rad_s.tolist(),
                                             s.load_n.tolist(), s.nut_position_m.tolist(),
                                             s.screw_angle_rad.tolist()):
-        rec.write(SPEED_TOPIC, Float64(data=speed), now)
-        rec.write(LOAD_TOPIC, Float64(data=load), now + _TOPIC_OFFSET_NS)
-        joint = JointState(name=[cycle.joint_name], position=[angle], velocity=[speed])
-        stamp = now + 2 * _TOPIC_OFFSET_NS
-        joint.header.stamp.sec, joint.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
-        rec.write(JOINT_STATES_TOPIC, joint, stamp)
+        rec.write_serialized(SPEED_TOPIC, FLOAT64, encode_float64(speed), now)
+        rec.write_serialized(LOAD_TOPIC, FLOAT64, encode_float64(load), now + _TOPIC_OFFSET_NS)
+        stamp = now + 2 * _TOPIC_OFFSET_NS          # publish time: the header stamp
+        joint = JointStateData(stamp, "", (cycle.joint_name,), (angle,), (speed,), ())
+        rec.write_serialized(JOINT_STATES_TOPIC, JOINT_STATE, encode_joint_state(joint), stamp,
+                             stamp)
         if cycle.nut_position_topic:
-            rec.write(NUT_TOPIC, Float64(data=nut), now + 3 * _TOPIC_OFFSET_NS)
+            rec.write_serialized(NUT_TOPIC, FLOAT64, encode_float64(nut),
+                                 now + 3 * _TOPIC_OFFSET_NS)
         rec.tick(now)
     rec.stop()
     if rec.error:

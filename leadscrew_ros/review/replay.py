@@ -37,23 +37,18 @@ from typing import Any, BinaryIO, Callable, TextIO
 
 import numpy as np
 from mcap.writer import CompressionType, Writer
-from std_msgs.msg import Bool, Float64, Float64MultiArray
 
-from ..bag import msgdefs
+from ..bag import messages, msgdefs
 from .decimation import Envelope, Reservoir
 from .jsonsafe import json_safe
 from ..bag.logfile import LogError, LogMessage, Topic
 from ..bag.logsource import LogSource, log_topics, open_log
 from ..model import Prediction, SqueakModel
-from ..ros.node import frequencies_message, modes_message
 from .progress import progress_bar
-from ..ros.serialization import cdr_payload
 from .timeline import (InputError, InputSettings, Job, Timeline, input_namespaces,
                        predict_jobs)
 
 DEFAULT_NAMESPACE = "/replay"
-OUTPUT_TOPICS = {"risk": Float64, "unstable_frequencies": Float64MultiArray, "active": Bool,
-                 "modes": Float64MultiArray}
 _BATCH_JOBS = 256              # predictions per batched solve (one worker task)
 _SEGMENT_MESSAGES = 20_000     # a segment without predictions is written at this size
 # Messages held while their predictions are computed (~250 bytes each): enough to read on
@@ -246,10 +241,10 @@ class _AnnotatedWriter:
         self._schemas: dict[tuple[str, str, str], int] = {}
         self._channels: dict[int, tuple[Topic, int]] = {}        # id(topic) -> topic, channel
         self._by_value: dict[tuple, int] = {}
-        self._outputs = {name: self._channel(Topic(
-            f"{namespace}/squeak/{name}", msgdefs.type_name(t), "ros2msg",
-            msgdefs.definition(msgdefs.type_name(t)), "cdr", {"offered_qos_profiles": ""}))
-            for name, t in OUTPUT_TOPICS.items()}
+        self._outputs = {topic: self._channel(Topic(
+            f"{namespace}/{topic}", messages.OUTPUT_TYPES[topic], "ros2msg",
+            msgdefs.definition(messages.OUTPUT_TYPES[topic]), "cdr",
+            {"offered_qos_profiles": ""})) for topic in messages.PREDICTION_TOPICS}
         self._sequence = Counter()
 
     def _channel(self, t: Topic) -> int:
@@ -271,13 +266,10 @@ class _AnnotatedWriter:
         self.writer.add_message(entry[1], m.log_time_ns, m.data, m.publish_time_ns, m.sequence)
 
     def prediction(self, log_time_ns: int, p: Prediction) -> None:
-        for name, msg in (("risk", Float64(data=float(p.risk))),
-                          ("unstable_frequencies", frequencies_message(p)),
-                          ("active", Bool(data=not p.stable)),
-                          ("modes", modes_message(p))):
-            self.writer.add_message(self._outputs[name], log_time_ns, cdr_payload(msg),
-                                    log_time_ns, self._sequence[name])
-            self._sequence[name] += 1
+        for topic, data in messages.prediction_payloads(p):
+            self.writer.add_message(self._outputs[topic], log_time_ns, data, log_time_ns,
+                                    self._sequence[topic])
+            self._sequence[topic] += 1
 
     def finish(self) -> None:
         self.writer.finish()

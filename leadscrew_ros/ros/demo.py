@@ -25,13 +25,13 @@ from rclpy.logging import LoggingSeverity
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
-from std_msgs.msg import Bool, Float64, Float64MultiArray
 
 from ..live.predictor import (KEY_RECOMPUTES, KEY_SPEED, KEY_SQUEAK_FREQUENCIES, KEY_VALID, KEY_VALIDITY,
                    Level)
+from ..bag import cdr, messages
 from ..bag.logfile import LogError, inspect, log_files
 from ..model import Validity
-from .node import LATCHED, SqueakPredictorNode
+from .node import LATCHED, OUTPUT_CLASSES, SqueakPredictorNode
 from ..bag.recorder import Recorder
 from .env import StopSignals, close, confine_to_localhost, init_context
 from ..live.profile import ActuatorState, StrokeProfile, expected_squeak
@@ -63,6 +63,7 @@ class SqueakRecord:
     squeak_since: float | None = None              # monotonic time squeak started
     speed_range: list[float] = field(default_factory=list)               # [min, max] |rad/s|
     frequency_range: dict[str, list[float]] = field(default_factory=dict)  # label -> [lo, hi]
+    malformed: int = 0                             # output messages that did not decode
 
 
 class SqueakMonitor(Node):
@@ -71,7 +72,10 @@ class SqueakMonitor(Node):
 
     Time in squeak and the squeak speeds come from /diagnostics, which the predictor publishes
     after every recompute with the inputs used, the validity and the squeak frequencies: squeak
-    counts while the latest diagnostics say the prediction is valid and lists frequencies."""
+    counts while the latest diagnostics say the prediction is valid and lists frequencies.
+    The squeak/* outputs arrive serialized and are decoded by `bag.messages`' codec, the one
+    the predictor encodes them with; a payload that does not decode is counted (`malformed`)
+    and otherwise ignored."""
 
     def __init__(self, **kwargs):
         super().__init__("squeak_monitor", **kwargs)
@@ -79,36 +83,43 @@ class SqueakMonitor(Node):
         qos = QoSProfile(depth=100, reliability=LATCHED.reliability,
                          durability=LATCHED.durability, history=LATCHED.history)
         self.record = SqueakRecord()
-        self.create_subscription(Float64, "squeak/risk", self._on_risk, qos)
-        self.create_subscription(Float64MultiArray, "squeak/unstable_frequencies",
-                                 self._on_frequencies, qos)
-        self.create_subscription(Bool, "squeak/active", self._on_active, qos)
-        self.create_subscription(Float64MultiArray, "squeak/modes", self._on_modes, qos)
-        self.create_subscription(Float64, "squeak/safe_speed", self._on_safe_speed, qos)
+        for topic, callback in ((messages.RISK, self._on_risk),
+                                (messages.FREQUENCIES, self._on_frequencies),
+                                (messages.ACTIVE, self._on_active),
+                                (messages.MODES, self._on_modes),
+                                (messages.SAFE_SPEED, self._on_safe_speed)):
+            self.create_subscription(OUTPUT_CLASSES[topic], topic, self._decoding(callback),
+                                     qos, raw=True)
         self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, qos)
 
-    def _on_risk(self, msg: Float64) -> None:
-        r = self.record
+    def _decoding(self, callback):
+        """`callback(data)`, with a payload it cannot decode counted and dropped."""
+        def run(data: bytes) -> None:
+            try:
+                callback(data)
+            except ValueError:
+                self.record.malformed += 1
+        return run
+
+    def _on_risk(self, data: bytes) -> None:
+        r, risk = self.record, cdr.decode_float64(data)
         r.predictions += 1
-        r.risk = msg.data
-        r.max_risk = msg.data if r.max_risk is None else max(r.max_risk, msg.data)
+        r.risk = risk
+        r.max_risk = risk if r.max_risk is None else max(r.max_risk, risk)
 
-    def _on_frequencies(self, msg: Float64MultiArray) -> None:
-        self.record.frequencies = list(msg.data)
+    def _on_frequencies(self, data: bytes) -> None:
+        self.record.frequencies = list(cdr.decode_float64_multi_array(data).data)
 
-    def _on_active(self, msg: Bool) -> None:
-        self.record.active = msg.data
+    def _on_active(self, data: bytes) -> None:
+        self.record.active = cdr.decode_bool(data)
 
-    def _on_safe_speed(self, msg: Float64) -> None:
-        self.record.safe_speed = msg.data
+    def _on_safe_speed(self, data: bytes) -> None:
+        self.record.safe_speed = cdr.decode_float64(data)
 
-    def _on_modes(self, msg: Float64MultiArray) -> None:
-        """Rows (frequency_hz, growth_rate, damping_ratio); labels in dim[0].label."""
-        if not msg.layout.dim:
-            return
-        labels = msg.layout.dim[0].label.partition(":")[2].split(",")
-        rows = [msg.data[i:i + 3] for i in range(0, len(msg.data), 3)]
-        squeak = [(label, row[0]) for label, row in zip(labels, rows) if row[1] > 0]
+    def _on_modes(self, data: bytes) -> None:
+        """The squeaking modes (growth rate > 0): labels and frequencies."""
+        squeak = [(m.label, m.frequency_hz) for m in messages.decode_modes(data)
+                  if m.growth_rate > 0]
         self.record.squeak_modes = squeak
         for label, f in squeak:
             lo_hi = self.record.frequency_range.setdefault(label, [f, f])

@@ -3,7 +3,8 @@
 ROS wheels): an `Updater` owns the publisher, the period and the hardware id; each task fills a
 `DiagnosticStatusWrapper` (`task(stat) -> stat`); `update()` publishes when the period has
 passed, `force_update()` at once (on a change of verdict). Status names carry the node's fully
-qualified name: '/ns/squeak_predictor: squeak prediction'.
+qualified name: '/ns/squeak_predictor: squeak prediction'. The array is published (and handed
+to the node for recording) as the CDR bytes of `bag.cdr.encode_diagnostic_array`.
 
 The squeak-prediction status is decided rclpy-free by `LivePredictor.status`; the recording
 status by `recording_status` below, from the recorder and the crash recovery.
@@ -15,11 +16,12 @@ import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Callable
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
 
+from ..bag.cdr import DiagnosticStatusData, encode_diagnostic_array
 from ..live.predictor import Level, Status
 
 if TYPE_CHECKING:
@@ -64,10 +66,10 @@ class DiagnosticStatusWrapper:
     def add(self, key: str, value: object) -> None:
         self.values[key] = str(value)
 
-    def to_msg(self) -> DiagnosticStatus:
-        return DiagnosticStatus(level=bytes([int(self.level)]), name=self.name,
-                                message=self.message, hardware_id=self.hardware_id,
-                                values=[KeyValue(key=k, value=v) for k, v in self.values.items()])
+    def to_data(self) -> DiagnosticStatusData:
+        """The status as `bag.cdr` encodes it."""
+        return DiagnosticStatusData(int(self.level), self.name, self.message, self.hardware_id,
+                                    tuple(self.values.items()))
 
 
 Task = Callable[[DiagnosticStatusWrapper], DiagnosticStatusWrapper]
@@ -75,17 +77,18 @@ Task = Callable[[DiagnosticStatusWrapper], DiagnosticStatusWrapper]
 
 class Updater:
     """Publishes one DiagnosticArray with a status per task, in the order the tasks were
-    added. `publish(publisher, msg)` (optional) publishes instead of `publisher.publish(msg)`
-    (the node also latches and records its outputs)."""
+    added. `publish(publisher, data, stamp_ns)` (optional) publishes the CDR payload `data`
+    stamped `stamp_ns` [ns] instead of `publisher.publish(data)` (the node also latches and
+    records its outputs)."""
 
     def __init__(self, node: Node, qos: QoSProfile, period_s: float = 1.0,
                  hardware_id: str = "", clock: Callable[[], float] = time.monotonic,
-                 publish: Callable[[Publisher, DiagnosticArray], None] | None = None,
+                 publish: Callable[[Publisher, bytes, int], None] | None = None,
                  **publisher_kwargs):
         self.node, self.period_s, self.hardware_id = node, period_s, hardware_id
         self.publisher = node.create_publisher(DiagnosticArray, TOPIC, qos, **publisher_kwargs)
         self._clock = clock
-        self._publish = publish or (lambda publisher, msg: publisher.publish(msg))
+        self._publish = publish or (lambda publisher, data, stamp_ns: publisher.publish(data))
         self._tasks: list[tuple[str, Task]] = []
         self._last = -float("inf")                  # clock time of the last publication
         self.published = 0
@@ -103,11 +106,10 @@ class Updater:
     def force_update(self) -> None:
         """Run every task and publish now."""
         prefix = self.node.get_fully_qualified_name()
-        msg = DiagnosticArray()
-        msg.header.stamp = self.node.get_clock().now().to_msg()
-        msg.status = [task(DiagnosticStatusWrapper(f"{prefix}: {name}", self.hardware_id)
-                           ).to_msg() for name, task in self._tasks]
-        self._publish(self.publisher, msg)
+        stamp_ns = self.node.get_clock().now().nanoseconds
+        status = tuple(task(DiagnosticStatusWrapper(f"{prefix}: {name}", self.hardware_id)
+                            ).to_data() for name, task in self._tasks)
+        self._publish(self.publisher, encode_diagnostic_array(stamp_ns, status), stamp_ns)
         self._last = self._clock()
         self.published += 1
 

@@ -22,6 +22,7 @@ import threading
 import time
 from dataclasses import fields
 from pathlib import Path
+from typing import NamedTuple
 
 import rclpy
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -37,13 +38,14 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityP
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, Float64, Float64MultiArray, MultiArrayDimension
+from std_msgs.msg import Bool, Float64, Float64MultiArray
 from std_srvs.srv import SetBool
 
 from .diagnostics import PREDICTION_TASK, RECORDING_TASK, Updater, recording_status, status_task
 from .input_recording import InputRecording
 from ..live.predictor import Level, LivePredictor
 from ..live.settings import JointSettings, LiveSettings
+from ..bag import messages, msgdefs
 from ..bag.logfile import RECOVER_HINT, LogError, cut_off_bags, recover_bag
 from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel
 from ..model.display import exact
@@ -51,8 +53,10 @@ from ..bag.recorder import COMPRESSIONS, Recorder, RecordSettings, ensure_direct
 from .env import StopSignals, confine_to_localhost
 
 NODE_NAME = "squeak_predictor"
-MODE_COLUMNS = ("frequency_hz", "growth_rate", "damping_ratio")
 HOUSEKEEPING_PERIOD_S = 0.05
+# Output topic (`bag.messages`) -> rclpy class of its type (the payloads are CDR bytes).
+OUTPUT_CLASSES = {topic: {msgdefs.type_name(c): c for c in (Float64, Float64MultiArray, Bool)
+                          }[type_name] for topic, type_name in messages.OUTPUT_TYPES.items()}
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      history=HistoryPolicy.KEEP_LAST)
@@ -132,7 +136,7 @@ class SqueakPredictorNode(Node):
         self.recorder = Recorder(self._record_settings({}), bag_prefix(self.get_namespace()),
                                  clock=self._now_ns)
         self._input_recording: InputRecording | None = None
-        self.latched: dict[str, object] = {}          # topic -> last message published on it
+        self.latched: dict[str, Latched] = {}         # topic -> last message published on it
         self._diagnosed: tuple | None = None          # verdict of the last forced /diagnostics
 
         depth = self.get_parameter("input_queue_depth").value
@@ -158,15 +162,12 @@ class SqueakPredictorNode(Node):
                                 ("nut_position", self._on_nut_position),
                                 ("joint_states", self._on_joint_states)):
             subscribe(INPUTS[topic], topic, callback)
-        self.risk_pub = publisher(Float64, "squeak/risk")
-        self.frequencies_pub = publisher(Float64MultiArray, "squeak/unstable_frequencies")
-        self.active_pub = publisher(Bool, "squeak/active")
-        self.modes_pub = publisher(Float64MultiArray, "squeak/modes")
-        self.safe_speed_pub = publisher(Float64, "squeak/safe_speed")
+        self.output_pubs = {topic: publisher(cls, topic) for topic, cls in OUTPUT_CLASSES.items()}
         self.diagnostics = Updater(
             self, LATCHED, self.get_parameter("diagnostics_period_s").value,
             self.get_parameter("hardware_id").value,
-            publish=lambda pub, msg: self._publish(pub, msg), event_callbacks=pub_events)
+            publish=lambda pub, data, stamp_ns: self._publish(pub, data, stamp_ns),
+            event_callbacks=pub_events)
         self._status = self.live.status(time.monotonic())   # what the prediction task says
         self.diagnostics.add(PREDICTION_TASK, status_task(lambda: self._status))
         self.diagnostics.add(RECORDING_TASK, lambda stat: recording_status(
@@ -270,8 +271,9 @@ class SqueakPredictorNode(Node):
             # Bags are named and split by the wall clock; log times are the node's clock
             if self.recorder.start(topics=tuple(self._inputs)):
                 self.get_logger().info(f"recording to {self.recorder.bag}")
-                for topic, msg in self.latched.items():   # a bag starts with the current state,
-                    self.recorder.write(topic, msg)       # as a latched subscriber gets it
+                for topic, m in self.latched.items():     # a bag starts with the current state,
+                    self.recorder.write_serialized(       # as a latched subscriber gets it
+                        topic, m.type_name, m.data, publish_time_ns=m.publish_time_ns)
                 self._input_recording = InputRecording(self, self._inputs, self.recorder)
             else:
                 self.get_logger().error(f"recording failed: {self.recorder.error}")
@@ -297,11 +299,15 @@ class SqueakPredictorNode(Node):
                             self.recorder.error or f"stopped; last bag: {self.recorder.bag}")
         return response
 
-    def _publish(self, publisher, msg) -> None:
-        publisher.publish(msg)
-        self.latched[publisher.topic_name] = msg
+    def _publish(self, publisher, data: bytes, publish_time_ns: int | None = None) -> None:
+        """Publish a CDR payload, latch it and record the same bytes (publish time: the
+        message's header stamp if it has one, else the log time)."""
+        publisher.publish(data)                   # bytes: published as serialized
+        latched = Latched(msgdefs.type_name(publisher.msg_type), data, publish_time_ns)
+        self.latched[publisher.topic_name] = latched
         if self.recorder.active:                  # inputs are recorded by InputRecording
-            self.recorder.write(publisher.topic_name, msg)
+            self.recorder.write_serialized(publisher.topic_name, latched.type_name, data,
+                                           publish_time_ns=publish_time_ns)
 
     # ---------------------------------------------------------------- inputs
     def _on_speed(self, msg: Float64) -> None:
@@ -371,16 +377,23 @@ class SqueakPredictorNode(Node):
             self.get_logger().warning(self._status.message, throttle_duration_sec=2.0)
 
     def _publish_prediction(self, p: Prediction) -> None:
-        self._publish(self.risk_pub, Float64(data=float(p.risk)))
-        self._publish(self.frequencies_pub, frequencies_message(p))
-        self._publish(self.active_pub, Bool(data=not p.stable))
-        self._publish(self.modes_pub, modes_message(p))
+        for topic, data in messages.prediction_payloads(p):
+            self._publish(self.output_pubs[topic], data)
         if not self.live.advice_pending:     # else the last advice stays until the new one
             self._publish_safe_speed()
 
     def _publish_safe_speed(self) -> None:
         if self.live.safe_speed_rad_s is not None:
-            self._publish(self.safe_speed_pub, Float64(data=float(self.live.safe_speed_rad_s)))
+            self._publish(self.output_pubs[messages.SAFE_SPEED],
+                          messages.safe_speed_payload(self.live.safe_speed_rad_s))
+
+
+class Latched(NamedTuple):
+    """The last message published on an output topic, as a new bag starts with it."""
+
+    type_name: str                      # 'pkg/msg/Type'
+    data: bytes                         # CDR payload
+    publish_time_ns: int | None         # header stamp, None: the log time
 
 
 class CrashRecovery:
@@ -444,27 +457,6 @@ class CrashRecovery:
                          + "".join(f" ({self.failed[b]})" for b in self.pending
                                    if b in self.failed))
         return "; ".join(parts)
-
-
-def frequencies_message(p: Prediction) -> Float64MultiArray:
-    """Squeak frequencies [Hz], most unstable first."""
-    msg = Float64MultiArray(data=p.unstable_frequencies_hz)
-    msg.layout.dim = [MultiArrayDimension(label="frequency_hz", size=len(msg.data),
-                                          stride=len(msg.data))]
-    return msg
-
-
-def modes_message(p: Prediction) -> Float64MultiArray:
-    """Rows = oscillatory modes (growth rate descending), columns = MODE_COLUMNS; the row
-    dimension's label lists the mode labels."""
-    msg = Float64MultiArray(data=[v for m in p.modes for v in
-                                  (m.frequency_hz, m.growth_rate, m.damping_ratio)])
-    rows, cols = len(p.modes), len(MODE_COLUMNS)
-    msg.layout.dim = [
-        MultiArrayDimension(label="modes:" + ",".join(m.label for m in p.modes), size=rows,
-                            stride=rows * cols),
-        MultiArrayDimension(label=",".join(MODE_COLUMNS), size=cols, stride=cols)]
-    return msg
 
 
 def usage() -> str:

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Exact CDR payloads of ROS messages for logs.
+"""Test helper: the reference CDR payloads of rclpy messages that `leadscrew_ros.bag.cdr`'s
+encoders must reproduce byte for byte, and `write_message` to record an rclpy message.
 
 Fast CDR (through `rclpy.serialization`) leaves alignment padding unwritten, so stray process
 memory lands in a log and one message serializes to different bytes; and it sizes the buffer
@@ -14,6 +15,8 @@ from __future__ import annotations
 import functools
 
 from rclpy.serialization import serialize_message
+
+from leadscrew_ros.bag import msgdefs
 
 _BASIC_SIZE = {"boolean": 1, "octet": 1, "char": 1, "int8": 1, "uint8": 1, "int16": 2,
                "uint16": 2, "int32": 4, "uint32": 4, "float": 4, "int64": 8, "uint64": 8,
@@ -110,3 +113,15 @@ def _value(value, kind: int, element, pos: int, gaps: list) -> int:
     for v in value:
         pos = _value(v, item_kind, item, pos, gaps)
     return pos
+
+
+def write_message(recorder, topic: str, msg, log_time_ns: int | None = None,
+                  publish_time_ns: int | None = None) -> None:
+    """Record an rclpy message with `Recorder.write_serialized` (publish time defaults to the
+    header stamp, else the log time, as the node records its outputs)."""
+    if publish_time_ns is None:
+        stamp = getattr(getattr(msg, "header", None), "stamp", None)
+        if stamp is not None:
+            publish_time_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+    recorder.write_serialized(topic, msgdefs.type_name(msg), cdr_payload(msg), log_time_ns,
+                              publish_time_ns)
