@@ -217,8 +217,8 @@ def test_zero_deadbands_give_the_core_prediction_at_every_input(short_log, tmp_p
 
 
 def test_input_defaults_are_the_nodes():
-    from leadscrew_ros.ros.node import parameter_specs
-    defaults = {name: default for name, default, *_ in parameter_specs()}
+    from leadscrew_ros.ros.parameters import PARAMETERS
+    defaults = {s.name: s.default for s in PARAMETERS}
     s = InputSettings()
     for name in ("speed_deadband_rad_s", "load_deadband_n", "nut_deadband_m",
                  "nut_position_at_zero_angle_m"):
