@@ -152,7 +152,8 @@ def help_lines() -> list[str]:
         text = f"  {spec.name}{f' [{unit}]' if unit else ''} = " + (
             exact(default) if isinstance(default, float) else repr(default))
         if md["lo"] is not None:
-            text += f", {exact(md['lo'])}..{exact(md['hi'])}"
+            text += ", " + "..".join(str(b) if isinstance(b, int) else exact(b)
+                                     for b in (md["lo"], md["hi"]))
         notes = "; ".join(n for n in (constraints(spec),
                                       READ_ONLY_NOTE if md["read_only"] else "") if n)
         lines.append(f"{text}: {md['description']}" + (f" ({notes})" if notes else ""))
