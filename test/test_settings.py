@@ -12,11 +12,12 @@ from dataclasses import fields
 from pathlib import Path
 
 import pytest
+import yaml
 
 from leadscrew_ros.bag.recorder import RecordSettings
 from leadscrew_ros.model.fields import default_text, range_text
 from leadscrew_ros.ros.parameters import (GROUPS, PARAMETERS, NodeSettings, RecordingControl,
-                                          build, descriptor)
+                                          build, descriptor, yaml_value)
 
 ROOT = Path(__file__).resolve().parents[1]
 SPECS = {s.name: s for s in PARAMETERS}
@@ -148,3 +149,12 @@ def test_tables_list_every_node_setting_once():
     own = [s.name for s in PARAMETERS if s.group.cls.__module__ != "leadscrew_ros.model.parameters"]
     assert listed == own
     assert param_tables.main(["bogus"]) == 2
+
+
+@pytest.mark.parametrize("value", [1e-05, 2.5e-07, 1e+20, 0.1, 207e9, -3.0, 0.0])
+def test_yaml_floats_read_back_as_the_same_float(value):
+    """PyYAML (YAML 1.1) reads '1e-05' as text: the generated file writes '1.0e-05'."""
+    text = yaml_value(value)
+    assert "." in text.partition("e")[0]
+    read = yaml.safe_load(f"x: {text}")["x"]
+    assert isinstance(read, float) and read == value, text
