@@ -5,6 +5,7 @@ there (config/leadscrew.yaml: test_config.py; `squeak_node --help`: test_node_se
 
 import importlib.util
 import math
+import os
 import re
 import subprocess
 import sys
@@ -87,6 +88,21 @@ def test_build_names_the_parameter_with_its_prefix():
         build(RecordSettings, {**values, "record.split_size_mb": -1.0})
     with pytest.raises(ValueError, match="directory must not be empty"):
         build(RecordSettings, {**values, "record.directory": ""})
+
+
+@pytest.mark.parametrize("parameter, reason", [
+    ("formulation:=foo", "formulation = 'foo' is not allowed; choose one of paper, consistent"),
+    ("record.compression:=gzip", "record.compression = 'gzip' is not allowed"),
+    ("record.directory:=''", "directory must not be empty"),
+])
+def test_node_refuses_to_start_with_a_bad_parameter(parameter, reason):
+    """Exit 2 with the reason on one line (no traceback), whichever settings class says no."""
+    from test_node import node_command
+    proc = subprocess.run([*node_command(), "--ros-args", "-p", parameter], capture_output=True,
+                          text=True, timeout=120, env=dict(os.environ))
+    assert proc.returncode == 2, proc.stderr
+    [line] = proc.stderr.strip().splitlines()
+    assert line.startswith(f"squeak_predictor: error: {reason}"), line
 
 
 # ----------------------------------------------------------------------------- ROS descriptors

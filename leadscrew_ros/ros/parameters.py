@@ -20,7 +20,7 @@ from ..bag.recorder import RecordSettings
 from ..live.settings import JointSettings, LiveSettings
 from ..model.display import exact
 from ..model.fields import check, check_value, range_text, setting
-from ..model.parameters import ScrewParameters
+from ..model.parameters import ParameterError, ScrewParameters
 
 READ_ONLY_NOTE = "read-only: set at start-up"
 
@@ -109,13 +109,23 @@ def names_of(cls: type) -> set[str]:
 
 def build(cls: type, values: dict[str, Any]) -> Any:
     """Settings dataclass `cls` from parameter values (name -> value, every parameter of
-    `cls` present); ValueError (or the class's own subclass of it) names the parameter."""
+    `cls` present).
+
+    Raises
+    ------
+    ParameterError
+        A value is not allowed (the reason names the parameter), or the class's own checks
+        (e.g. cross-field) fail: what the node reports for any bad parameter.
+    """
     own = [s for s in PARAMETERS if s.group.cls is cls]
     for s in own:                         # full parameter names in the reason
         reason = check_value(s.name, values[s.name], s.field)
         if reason:
-            raise ValueError(reason)
-    return cls(**{s.field.name: values[s.name] for s in own})
+            raise ParameterError(reason)
+    try:
+        return cls(**{s.field.name: values[s.name] for s in own})
+    except ValueError as exc:             # e.g. an empty record.directory, z_o + b > L
+        raise ParameterError(str(exc)) from None
 
 
 def constraints(spec: Spec) -> str:
