@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
-"""config/leadscrew.yaml holds every parameter of the node (ScrewParameters fields and
-the live and joint settings, node.NODE_PARAMETERS) with its default, typed for ROS."""
+"""config/leadscrew.yaml holds every parameter of the node (the fields of the settings
+dataclasses in ros.parameters.GROUPS) with its default, typed for ROS; it is the text that
+tools/gen_config.py generates from the field metadata."""
 
 import math
 from dataclasses import fields
@@ -10,13 +11,13 @@ import pytest
 import yaml
 
 from leadscrew_ros.model.parameters import ScrewParameters, field_names
-from leadscrew_ros.ros.node import PARAMETER_NAMES, parameter_specs
+from leadscrew_ros.ros.parameters import GROUPS, PARAMETER_NAMES, PARAMETERS, config_yaml
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "leadscrew.yaml"
 KEY = "/**"
 FIELDS = {f.name: f for f in fields(ScrewParameters)}
 # name -> (default, type name) for every parameter the node declares
-DEFAULTS = {name: (default, type(default).__name__) for name, default, *_ in parameter_specs()}
+DEFAULTS = {s.name: (s.default, type(s.default).__name__) for s in PARAMETERS}
 
 
 def _flat(tree: dict, prefix: str = "") -> dict:
@@ -42,6 +43,29 @@ def _same(value, default, typ: str) -> bool:
     if typ == "float":
         return math.isclose(value, default, rel_tol=1e-12, abs_tol=0.0)
     return value == default
+
+
+def test_file_is_the_generated_text():
+    assert CONFIG.read_text() == config_yaml(), "run tools/gen_config.py"
+
+
+def test_generator_tool_checks_and_writes(tmp_path, monkeypatch):
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(
+        "gen_config", Path(__file__).resolve().parents[1] / "tools" / "gen_config.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    assert tool.main(["--check"]) == 0
+    monkeypatch.setattr(tool, "CONFIG", tmp_path / "leadscrew.yaml")
+    assert tool.main(["--check"]) == 1                   # missing
+    assert tool.main([]) == 0
+    assert tool.CONFIG.read_text() == config_yaml()
+    tool.CONFIG.write_text(config_yaml().replace("0.005", "0.006", 1))
+    assert tool.main(["--check"]) == 1                   # edited by hand
+
+
+def test_every_settings_field_is_a_parameter():
+    assert PARAMETER_NAMES == [g.prefix + f.name for g in GROUPS for f in fields(g.cls)]
 
 
 def test_node_parameter_types_are_plain():

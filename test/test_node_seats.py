@@ -18,7 +18,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from leadscrew_ros.ros.node import NODE_NAME, PARAMETER_NAMES, SqueakPredictorNode
+from leadscrew_ros.ros.node import NODE_NAME, SqueakPredictorNode
+from leadscrew_ros.ros.parameters import PARAMETER_NAMES
 from test_node import COLLECT, node_command
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "leadscrew.yaml"

@@ -11,7 +11,6 @@ import array
 import contextlib
 import dataclasses
 import json
-import math
 import os
 import resource
 import signal
@@ -349,8 +348,12 @@ def test_compression_setting_reaches_the_chunks(tmp_path, compression, chunk):
 @given(size=st.floats(), duration=st.floats(), flush=st.floats(),
        compression=st.sampled_from(["zstd", "lz4", "none", "gzip", "", "ZSTD"]))
 def test_record_settings_accept_exactly_the_valid_values(size, duration, flush, compression):
-    valid = (math.isfinite(size) and size >= 0 and math.isfinite(duration) and duration >= 0
-             and 0 < flush <= 10 and compression in ("zstd", "lz4", "none"))
+    def within(name, value):          # the range in the field metadata, closed at both ends
+        md = RecordSettings.__dataclass_fields__[name].metadata
+        return md["lo"] <= value <= md["hi"]
+
+    valid = (within("split_size_mb", size) and within("split_duration_s", duration)
+             and within("flush_period_s", flush) and compression in ("zstd", "lz4", "none"))
     try:
         RecordSettings(split_size_mb=size, split_duration_s=duration, flush_period_s=flush,
                        compression=compression)

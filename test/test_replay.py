@@ -218,8 +218,8 @@ def test_zero_deadbands_give_the_core_prediction_at_every_input(short_log, tmp_p
 
 
 def test_input_defaults_are_the_nodes():
-    from leadscrew_ros.ros.node import parameter_specs
-    defaults = {name: default for name, default, *_ in parameter_specs()}
+    from leadscrew_ros.ros.parameters import PARAMETERS
+    defaults = {s.name: s.default for s in PARAMETERS}
     s = InputSettings()
     for name in ("speed_deadband_rad_s", "load_deadband_n", "nut_deadband_m",
                  "nut_position_at_zero_angle_m"):
@@ -513,7 +513,9 @@ def test_cli_info(bag, capsys):
     (["--publish", "--namespace", "/a"], "--namespace is for the offline replay"),
     (["--publish", "--out-namespace", "/a"], "--out-namespace is for the offline replay"),
     (["--publish", "--remap", "speed"], "expected OLD:=NEW"),
-    (["--speed-deadband", "-1"], "speed_deadband_rad_s must be a finite number >= 0"),
+    (["--speed-deadband", "-1"], "speed_deadband_rad_s = -1 is out of range, allowed [0, 1000]"),
+    (["--speed-deadband", "1001"], "speed_deadband_rad_s = 1001 is out of range"),  # the node's
+    (["--nut-position-at-zero-angle", "-101"], "nut_position_at_zero_angle_m = -101 is out"),
     (["--namespace", "/bad name"], "namespace must be a ROS name"),
     (["--out-namespace", "/bad name"], "output namespace must be a ROS name"),
     (["--load", "1e8"], "nominal load 1e+08 N is not a finite number within ±1e+07 N"),

@@ -38,11 +38,11 @@ from mcap.writer import CompressionType, Writer
 
 from . import msgdefs
 from .bagmeta import METADATA, BagStats, FileStats, TopicStats
+from ..model.fields import check, setting
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}
 _CHUNK_BYTES = 4 << 20         # chunks are closed by the flush period long before this size
-_MAX_QUEUE_DEPTH = 1_000_000
 LOST_KEY, LOST_BY_TOPIC_KEY = "lost_messages", "lost_messages_by_topic"   # metadata custom_data
 
 
@@ -62,28 +62,28 @@ def ensure_directory(directory: str) -> Path:
 
 @dataclass(frozen=True)
 class RecordSettings:
-    directory: str = "."
-    split_size_mb: float = 512.0          # 0: no split by size
-    split_duration_s: float = 600.0       # 0: no split by duration
-    compression: str = "zstd"
-    flush_period_s: float = 0.5           # bound of the data lost to SIGKILL
-    queue_depth: int = 10000              # DDS history of each input recording subscription
+    """How a recording is written (SI units; default, unit, range and description are the
+    field metadata, from which the node's `record.*` parameters are made)."""
+
+    directory: str = setting(
+        ".", "", "directory that receives one [<namespace>_]squeak_<UTC wall-clock time> bag "
+        "per recording; created if missing (mkdir -p)")
+    split_size_mb: float = setting(
+        512.0, "MB", "start a new file beyond this size (0: never)", 0.0, 1e6)
+    split_duration_s: float = setting(
+        600.0, "s", "start a new file after this long (0: never)", 0.0, 1e7)
+    compression: str = setting("zstd", "", "chunk compression", choices=tuple(COMPRESSIONS))
+    flush_period_s: float = setting(
+        0.5, "s", "hand recorded data to the OS this often: the most a killed process loses",
+        0.05, 10.0)
+    queue_depth: int = setting(
+        10000, "1", "DDS history of each input recording subscription: messages held per "
+        "topic while the process is busy (10 s at 1 kHz)", 1, 1_000_000)
 
     def __post_init__(self):
-        if self.compression not in COMPRESSIONS:
-            raise ValueError(f"compression must be one of {', '.join(COMPRESSIONS)}, "
-                             f"not {self.compression!r}")
+        check(self)
         if not self.directory:
             raise ValueError("directory must not be empty")
-        for name in ("split_size_mb", "split_duration_s"):
-            value = getattr(self, name)
-            if not value >= 0.0 or value == float("inf"):
-                raise ValueError(f"{name} must be finite and >= 0, not {value}")
-        if not 0.0 < self.flush_period_s <= 10.0:
-            raise ValueError(f"flush_period_s must be in (0, 10], not {self.flush_period_s}")
-        if not 1 <= self.queue_depth <= _MAX_QUEUE_DEPTH:
-            raise ValueError(f"queue_depth must be in [1, {_MAX_QUEUE_DEPTH}], not "
-                             f"{self.queue_depth}")
 
 
 @dataclass

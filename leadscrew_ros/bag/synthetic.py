@@ -74,8 +74,9 @@ def samples(cycle: DutyCycle) -> Samples:
                    p.nut_position_at_zero_angle_m + angle * p.lead_m_per_rad, angle)
 
 
-def write_log(cycle: DutyCycle, directory: Path | str, split_duration_s: float = 600.0,
-              compression: str = "zstd") -> Path:
+def write_log(cycle: DutyCycle, directory: Path | str,
+              split_duration_s: float = RecordSettings.split_duration_s,
+              compression: str = RecordSettings.compression) -> Path:
     """Record `cycle` into a new bag directory under `directory` (created if needed); returns
     the bag directory."""
     s = samples(cycle)

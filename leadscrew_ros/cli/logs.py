@@ -10,16 +10,26 @@ from pathlib import Path
 
 from ..bag.logfile import (LogInfo, bag_of, cut_off_bags, inspect, log_files, recover,
                            recover_bag)
+from ..live.settings import JointSettings, LiveSettings
+from ..model.fields import check_value, help_text
 from ..review.timeline import InputSettings
 from .args import (PROG, ROS_ARGS_HELP, CliError, Parser, build_model, finite, print_json,
                    yaml_parameters)
 
 REPLAY_INPUTS = [f.name for f in fields(InputSettings)]    # = option dests, node parameters
+# The node's settings that replay options mirror: their metadata gives the help and the range
+REPLAY_SETTINGS = {f.name: f for cls in (LiveSettings, JointSettings) for f in fields(cls)
+                   if f.name in REPLAY_INPUTS}
 LIVE_OPTIONS = ("rate", "loop", "start_offset", "topics", "remap", "no_wait", "ros_args")
 
 
 def _topic(name: str) -> str:
     return name if name.startswith("/") else "/" + name
+
+
+def _setting_help(name: str) -> str:
+    """argparse help of the replay option that sets node setting `name` (from its metadata)."""
+    return help_text(REPLAY_SETTINGS[name]).replace("%", "%%")
 
 
 def _replay_inputs(args: argparse.Namespace) -> InputSettings:
@@ -29,6 +39,10 @@ def _replay_inputs(args: argparse.Namespace) -> InputSettings:
     values = {name: values[name] for name in REPLAY_INPUTS if name in values}
     values.update({name: getattr(args, name) for name in REPLAY_INPUTS
                    if getattr(args, name) is not None})
+    reasons = [check_value(name, values[name], f) for name, f in REPLAY_SETTINGS.items()
+               if name in values]                     # the node's ranges hold here too
+    if any(reasons):
+        raise CliError(f"replay inputs: {next(r for r in reasons if r)}")
     try:
         return InputSettings(**values)
     except (TypeError, ValueError) as exc:
@@ -193,20 +207,15 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
                                                         "(default nut_position)")
     g.add_argument("--joint-states-topic", metavar="TOPIC",
                    help="sensor_msgs/JointState (default joint_states)")
-    g.add_argument("--joint-name", metavar="NAME", help="screw joint in the JointState messages "
-                   "(default: the joint of single-joint messages)")
+    g.add_argument("--joint-name", metavar="NAME", help=_setting_help("joint_name"))
     g.add_argument("--nut-position-at-zero-angle", dest="nut_position_at_zero_angle_m",
-                   type=finite, metavar="M",
-                   help="nut position [m] at screw angle 0 (default 0.15)")
+                   type=finite, metavar="M", help=_setting_help("nut_position_at_zero_angle_m"))
     g.add_argument("--speed-deadband", dest="speed_deadband_rad_s", type=finite,
-                   metavar="RAD_S",
-                   help="recompute when the speed moved more than this (default 0.1; 0: every "
-                        "input)")
+                   metavar="RAD_S", help=_setting_help("speed_deadband_rad_s"))
     g.add_argument("--load-deadband", dest="load_deadband_n", type=finite, metavar="N",
-                   help="recompute when the load moved more than this (default 1)")
+                   help=_setting_help("load_deadband_n"))
     g.add_argument("--nut-deadband", dest="nut_deadband_m", type=finite, metavar="M",
-                   help="recompute and re-integrate the contact when the nut moved more than "
-                        "this (default 0.0005)")
+                   help=_setting_help("nut_deadband_m"))
     g = p.add_argument_group("offline replay")
     g.add_argument("--namespace", metavar="NS",
                    help="namespace of the input topics, as a node's __ns (default: the one "

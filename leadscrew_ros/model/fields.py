@@ -55,11 +55,15 @@ def info(f: Field) -> dict[str, Any]:
                 type=type(f.default).__name__)
 
 
+def _bound(value: float) -> str:
+    return str(value) if isinstance(value, int) else f"{value:g}"    # 1000000, not 1e+06
+
+
 def range_text(md: dict[str, Any]) -> str:
     """'[lo, hi] unit' with open bounds as parentheses."""
     lo = "(" if md["lo_open"] else "["
     hi = ")" if md["hi_open"] else "]"
-    return f"{lo}{md['lo']:g}, {md['hi']:g}{hi} {md['unit']}".rstrip()
+    return f"{lo}{_bound(md['lo'])}, {_bound(md['hi'])}{hi} {md['unit']}".rstrip()
 
 
 def check_value(name: str, value: Any, f: Field) -> str:
@@ -84,7 +88,8 @@ def check_value(name: str, value: Any, f: Field) -> str:
     too_low = value <= md["lo"] if md["lo_open"] else value < md["lo"]
     too_high = value >= md["hi"] if md["hi_open"] else value > md["hi"]
     if too_low or too_high:
-        return f"{name} = {exact(value)} is out of range, allowed {range_text(md)}"
+        shown = value if isinstance(value, int) else exact(value)
+        return f"{name} = {shown} is out of range, allowed {range_text(md)}"
     return ""
 
 
@@ -94,3 +99,36 @@ def check(obj: Any, error: type[Exception] = ValueError, prefix: str = "") -> No
         reason = check_value(prefix + f.name, getattr(obj, f.name), f)
         if reason:
             raise error(reason)
+
+
+def default_text(f: Field) -> str:
+    """A field's default as a user types it: 0.15, 100, paper, '' for empty text."""
+    default = f.default
+    if isinstance(default, bool):
+        return str(default).lower()
+    if isinstance(default, float):
+        return exact(default)
+    return str(default) if default != "" else "''"
+
+
+def help_text(f: Field, description: str | None = None) -> str:
+    """Command-line help of an option that sets field `f`: description, unit, default, range.
+
+    Parameters
+    ----------
+    f : dataclasses.Field
+        A field declared with `setting`.
+    description : str, optional
+        Replaces the field's description (what the option means in its command).
+
+    Returns
+    -------
+    str
+        E.g. 'recompute when the speed moved more than this [rad/s] (default 0.1, allowed
+        [0, 1000])'.
+    """
+    md = f.metadata
+    unit = f" [{md['unit']}]" if md["unit"] not in ("", "1") else ""
+    allowed = (f", one of {', '.join(md['choices'])}" if md["choices"] else
+               f", allowed {range_text({**md, 'unit': ''})}" if md["lo"] is not None else "")
+    return f"{description or md['description']}{unit} (default {default_text(f)}{allowed})"

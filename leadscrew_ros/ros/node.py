@@ -20,13 +20,11 @@ import re
 import sys
 import threading
 import time
-from dataclasses import fields
 from pathlib import Path
 from typing import NamedTuple
 
 import rclpy
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                SetParametersResult)
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.exceptions import ParameterException
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
@@ -43,13 +41,14 @@ from std_srvs.srv import SetBool
 
 from .diagnostics import PREDICTION_TASK, RECORDING_TASK, Updater, recording_status, status_task
 from .input_recording import InputRecording
+from .parameters import (GROUPS, PARAMETER_NAMES, PARAMETERS, NodeSettings, RecordingControl,
+                         build, descriptor, help_lines, names_of)
 from ..live.predictor import Level, LivePredictor
 from ..live.settings import JointSettings, LiveSettings
 from ..bag import messages, msgdefs
 from ..bag.logfile import RECOVER_HINT, LogError, cut_off_bags, recover_bag
 from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel
-from ..model.display import exact
-from ..bag.recorder import COMPRESSIONS, Recorder, RecordSettings, ensure_directory
+from ..bag.recorder import Recorder, RecordSettings, ensure_directory
 from .env import StopSignals, confine_to_localhost
 
 NODE_NAME = "squeak_predictor"
@@ -61,70 +60,13 @@ LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      history=HistoryPolicy.KEEP_LAST)
 
-# The node's own parameters: name -> (default, unit, description, (lo, hi) or None, read_only).
-NODE_PARAMETERS: dict[str, tuple] = {
-    "diagnostics_period_s": (1.0, "s", "period of /diagnostics when nothing changes",
-                             (0.05, 60.0), False),
-    "hardware_id": ("leadscrew", "", "hardware_id of the diagnostic status", None, True),
-    "input_queue_depth": (5, "1", "queue depth of the input subscriptions", (1, 1000), True),
-    "record.enabled": (False, "", "record inputs and outputs to MCAP (also ~/record); a set "
-                       "is rejected with the reason when recording cannot start", None, False),
-    "record.directory": (".", "", "directory that receives one [<namespace>_]squeak_<UTC "
-                         "wall-clock time> bag per recording; created if missing", None, False),
-    "record.split_size_mb": (512.0, "MB", "start a new file beyond this size (0: never)",
-                             (0.0, 1e6), False),
-    "record.split_duration_s": (600.0, "s", "start a new file after this long (0: never)",
-                                (0.0, 1e7), False),
-    "record.compression": ("zstd", "", f"chunk compression: {' | '.join(COMPRESSIONS)}", None,
-                           False),
-    "record.flush_period_s": (0.5, "s", "hand recorded data to the OS this often: the most a "
-                              "killed process loses", (0.05, 10.0), False),
-    "record.queue_depth": (10000, "1", "DDS history of each input recording subscription: "
-                           "messages held while the process is busy", (1, 1000000), False),
-    "record.auto_recover": (False, "", "on start, recover this node's bags cut off by a crash "
-                            "in record.directory (else only reported)", None, True),
-}
-LIVE_FIELDS = {f.name for f in fields(LiveSettings)}
-RECORD_PREFIX = "record."
-NOT_RECORD_SETTINGS = {"record.enabled", "record.auto_recover"}   # record.* of the node itself
 INPUTS = {"motor_speed": Float64, "axial_load": Float64, "nut_position": Float64,
           "joint_states": JointState}
-
-
-def parameter_specs():
-    """(name, default, unit, description, bounds, read_only, extra) of every parameter the
-    node declares: the ScrewParameters, LiveSettings and JointSettings fields (from their
-    metadata), then NODE_PARAMETERS."""
-    for cls in (ScrewParameters, LiveSettings, JointSettings):
-        for f in fields(cls):
-            md = f.metadata
-            extra = f"one of: {', '.join(md['choices'])}" if md["choices"] else (
-                "open bound" if md["lo_open"] or md["hi_open"] else "")
-            bounds = None if md["lo"] is None else (md["lo"], md["hi"])
-            yield f.name, f.default, md["unit"], md["description"], bounds, md["read_only"], extra
-    for name, (default, unit, description, bounds, read_only) in NODE_PARAMETERS.items():
-        yield name, default, unit, description, bounds, read_only, ""
-
-
-PARAMETER_NAMES = [spec[0] for spec in parameter_specs()]
 
 
 def bag_prefix(namespace: str) -> str:
     """Bag name prefix of a node in `namespace`: '/seat_left' -> 'seat_left_squeak'."""
     return "_".join([p for p in namespace.split("/") if p] + ["squeak"])
-
-
-def _descriptor(name: str, default, unit: str, description: str, bounds, read_only: bool,
-                extra: str = "") -> ParameterDescriptor:
-    d = ParameterDescriptor(name=name, description=f"{description} [{unit}]" if unit else
-                            description, read_only=read_only, additional_constraints=extra)
-    if bounds is not None and isinstance(default, float):
-        d.floating_point_range = [FloatingPointRange(from_value=float(bounds[0]),
-                                                     to_value=float(bounds[1]))]
-    elif bounds is not None and isinstance(default, int):
-        d.integer_range = [IntegerRange(from_value=int(bounds[0]), to_value=int(bounds[1]),
-                                        step=1)]
-    return d
 
 
 class SqueakPredictorNode(Node):
@@ -133,14 +75,16 @@ class SqueakPredictorNode(Node):
         self._declare_parameters()
         self.live = LivePredictor(SqueakModel(self._screw_parameters({})),
                                   self._live_settings({}))
+        self.joint = self._settings(JointSettings, {})
         self.recorder = Recorder(self._record_settings({}), bag_prefix(self.get_namespace()),
                                  clock=self._now_ns)
+        own, control = self._settings(NodeSettings, {}), self._settings(RecordingControl, {})
         self._input_recording: InputRecording | None = None
         self.latched: dict[str, Latched] = {}         # topic -> last message published on it
         self._diagnosed: tuple | None = None          # verdict of the last forced /diagnostics
 
-        depth = self.get_parameter("input_queue_depth").value
-        sensor = QoSProfile(depth=depth, reliability=qos_profile_sensor_data.reliability,
+        sensor = QoSProfile(depth=own.input_queue_depth,
+                            reliability=qos_profile_sensor_data.reliability,
                             durability=qos_profile_sensor_data.durability)
         # Best-effort inputs and reliable transient-local outputs match every peer's QoS, so
         # the default QoS-event handlers could never fire; without them each executor cycle
@@ -164,8 +108,7 @@ class SqueakPredictorNode(Node):
             subscribe(INPUTS[topic], topic, callback)
         self.output_pubs = {topic: publisher(cls, topic) for topic, cls in OUTPUT_CLASSES.items()}
         self.diagnostics = Updater(
-            self, LATCHED, self.get_parameter("diagnostics_period_s").value,
-            self.get_parameter("hardware_id").value,
+            self, LATCHED, own.diagnostics_period_s, own.hardware_id,
             publish=lambda pub, data, stamp_ns: self._publish(pub, data, stamp_ns),
             event_callbacks=pub_events)
         self._status = self.live.status(time.monotonic())   # what the prediction task says
@@ -183,11 +126,11 @@ class SqueakPredictorNode(Node):
         self.create_timer(HOUSEKEEPING_PERIOD_S, self._housekeeping, clock=self._steady)
         self._rate_timer = self._create_rate_timer()
         self.create_service(SetBool, "~/record", self._on_record_service)
-        self._crash_recovery = CrashRecovery(self.get_parameter("record.directory").value,
+        self._crash_recovery = CrashRecovery(self.recorder.settings.directory,
                                              self.recorder.name)
-        if self._crash_recovery.bags and self.get_parameter("record.auto_recover").value:
+        if self._crash_recovery.bags and control.auto_recover:
             self._crash_recovery.start()
-        if self.get_parameter("record.enabled").value:
+        if control.enabled:
             self._set_recording(True)
             if not self.recorder.active:      # the parameter says what happens: not recording
                 self.set_parameters([Parameter("record.enabled", value=False)])
@@ -201,36 +144,37 @@ class SqueakPredictorNode(Node):
 
     # ---------------------------------------------------------------- parameters
     def _declare_parameters(self) -> None:
-        for name, default, *spec in parameter_specs():
-            self.declare_parameter(name, default, _descriptor(name, default, *spec))
+        for spec in PARAMETERS:
+            self.declare_parameter(spec.name, spec.default, descriptor(spec))
 
     def _values(self, changes: dict) -> dict:
         return {**{p.name: p.value for p in self.get_parameters(
             PARAMETER_NAMES)}, **changes}
 
+    def _settings(self, cls: type, changes: dict):
+        """Settings dataclass `cls` from the current parameters with `changes` applied."""
+        return build(cls, self._values(changes))
+
     def _screw_parameters(self, changes: dict) -> ScrewParameters:
-        values = self._values(changes)
-        return ScrewParameters(**{f.name: values[f.name] for f in fields(ScrewParameters)})
+        return self._settings(ScrewParameters, changes)
 
     def _live_settings(self, changes: dict) -> LiveSettings:
-        values = self._values(changes)
-        return LiveSettings(**{k: values[k] for k in LIVE_FIELDS})
+        return self._settings(LiveSettings, changes)
 
     def _record_settings(self, changes: dict) -> RecordSettings:
-        values = self._values(changes)
-        return RecordSettings(**{k[len(RECORD_PREFIX):]: v for k, v in values.items()
-                                 if k.startswith(RECORD_PREFIX) and k not in NOT_RECORD_SETTINGS})
+        return self._settings(RecordSettings, changes)
 
     def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        """The new set as a whole must make a valid model and recorder, and a recording it
-        asks for must be able to start; else nothing changes."""
+        """The new set as a whole must make valid settings (model, recorder, ...), and a
+        recording it asks for must be able to start; else nothing changes."""
         changes = {p.name: p.value for p in params}
         try:
-            self._screw_parameters(changes)
-            settings = self._record_settings(changes)
-            if self._values(changes)["record.enabled"] and any(
-                    n.startswith(RECORD_PREFIX) for n in changes):
-                ensure_directory(settings.directory)          # mkdir -p, writable
+            values = self._values(changes)
+            for group in GROUPS:
+                build(group.cls, values)
+            recording = names_of(RecordSettings) | names_of(RecordingControl)
+            if values["record.enabled"] and recording & set(changes):
+                ensure_directory(values["record.directory"])          # mkdir -p, writable
         except (ParameterError, TypeError, ValueError) as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         except OSError as exc:
@@ -239,17 +183,19 @@ class SqueakPredictorNode(Node):
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
         names = {p.name for p in params}
-        if names & ({f.name for f in fields(ScrewParameters)} | LIVE_FIELDS):
-            model_changed = bool(names & set(ScrewParameters.__dataclass_fields__))
+        if names & (names_of(ScrewParameters) | names_of(LiveSettings)):
+            model_changed = bool(names & names_of(ScrewParameters))
             model = SqueakModel(self._screw_parameters({})) if model_changed else self.live.model
             self.live.set_model(model, self._live_settings({}))
             if "max_rate_hz" in names:
                 self.destroy_timer(self._rate_timer)
                 self._rate_timer = self._create_rate_timer()
             self._recompute(time.monotonic())
-        if "diagnostics_period_s" in names:
-            self.diagnostics.period_s = self.get_parameter("diagnostics_period_s").value
-        if any(n.startswith(RECORD_PREFIX) for n in names):
+        if names & names_of(JointSettings):
+            self.joint = self._settings(JointSettings, {})
+        if names & names_of(NodeSettings):
+            self.diagnostics.period_s = self._settings(NodeSettings, {}).diagnostics_period_s
+        if names & (names_of(RecordSettings) | names_of(RecordingControl)):
             settings = self._record_settings({})
             if settings != self.recorder.settings:      # takes effect with a new bag
                 self._stop_recording()
@@ -320,7 +266,7 @@ class SqueakPredictorNode(Node):
         self._input(self.live.set_nut_position(msg.data, time.monotonic()))
 
     def _on_joint_states(self, msg: JointState) -> None:
-        joint = self.get_parameter("joint_name").value
+        joint = self.joint.joint_name
         if not joint or joint not in msg.name:
             return
         i, now = msg.name.index(joint), time.monotonic()
@@ -328,7 +274,7 @@ class SqueakPredictorNode(Node):
         if i < len(msg.velocity):
             errors.append(self.live.set_speed(msg.velocity[i], now))
         if i < len(msg.position):
-            z = (self.get_parameter("nut_position_at_zero_angle_m").value
+            z = (self.joint.nut_position_at_zero_angle_m
                  + msg.position[i] * self.live.model.params.lead_per_rad_m)
             errors.append(self.live.set_nut_position(z, now))
         self._input("; ".join(e for e in errors if e), now)
@@ -480,15 +426,7 @@ def usage() -> str:
         "'<node>: recording')",
         "Service: ~/record (std_srvs/SetBool) starts or stops recording",
         "",
-        "Parameters (name [unit] = default, range: description):"]
-    for name, default, unit, description, bounds, read_only, extra in parameter_specs():
-        text = f"  {name}{f' [{unit}]' if unit else ''} = " + (
-            exact(default) if isinstance(default, float) else repr(default))
-        if bounds is not None:
-            text += f", {exact(bounds[0])}..{exact(bounds[1])}"
-        notes = "; ".join(n for n in (extra, "read-only: set at start-up" if read_only else "")
-                          if n)
-        lines.append(f"{text}: {description}" + (f" ({notes})" if notes else ""))
+        "Parameters (name [unit] = default, range: description):", *help_lines()]
     lines += ["", "Example: squeak_node --ros-args -r __ns:=/seat_left --params-file "
               "config/leadscrew.yaml -p record.enabled:=true",
               "(config/leadscrew.yaml is keyed `/**:`, so it applies in any namespace)"]

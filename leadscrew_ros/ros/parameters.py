@@ -1,0 +1,229 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The parameters of the node `squeak_predictor`, made from the settings' field metadata.
+
+Every parameter is a field of one settings dataclass (`model.fields.setting`: default, unit,
+range, description, read-only); `GROUPS` orders the dataclasses and gives each its name prefix.
+From that one table come the ROS parameter descriptors (`descriptor`), the dataclasses built
+from parameter values (`build`), the parameter lines of `squeak_node --help` (`help_lines`)
+and config/leadscrew.yaml (`config_yaml`, written by tools/gen_config.py).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import Field, dataclass, fields
+from typing import Any, Iterator, NamedTuple
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
+from ..bag.recorder import RecordSettings
+from ..live.settings import JointSettings, LiveSettings
+from ..model.display import exact
+from ..model.fields import check, check_value, range_text, setting
+from ..model.parameters import ParameterError, ScrewParameters
+
+READ_ONLY_NOTE = "read-only: set at start-up"
+
+
+@dataclass(frozen=True)
+class NodeSettings:
+    """The node's own settings: diagnostics and input subscriptions."""
+
+    diagnostics_period_s: float = setting(
+        1.0, "s", "period of /diagnostics when nothing changes", 0.05, 60.0)
+    hardware_id: str = setting(
+        "leadscrew", "", "hardware_id of the diagnostic status", read_only=True)
+    input_queue_depth: int = setting(
+        5, "1", "queue depth of the input subscriptions", 1, 1000, read_only=True)
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+@dataclass(frozen=True)
+class RecordingControl:
+    """Whether the node records (`RecordSettings` say how) and what it does with bags an
+    earlier crash cut off."""
+
+    enabled: bool = setting(
+        False, "", "record inputs and outputs to MCAP while true (also ~/record); a set is "
+        "rejected with the reason when recording cannot start")
+    auto_recover: bool = setting(
+        False, "", "on start, recover this node's bags cut off by a crash in record.directory "
+        "(else only reported)", read_only=True)
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+class Group(NamedTuple):
+    """Settings dataclass `cls` whose fields are the parameters `prefix` + field name."""
+
+    cls: type
+    prefix: str
+    title: str            # one line: what these parameters are (YAML comment)
+
+
+GROUPS = (
+    Group(ScrewParameters, "", "model: Table 1 of the paper, the friction law of Fig. 4, mode "
+          "counts, formulation"),
+    Group(LiveSettings, "", "node: recompute policy and verdict"),
+    Group(JointSettings, "", "node: joint_states mapping"),
+    Group(NodeSettings, "", "node: diagnostics and inputs"),
+    Group(RecordingControl, "record.", "node: MCAP recording (also ~/record)"),
+    Group(RecordSettings, "record.", "node: MCAP recording, one bag per recording"),
+)
+
+
+class Spec(NamedTuple):
+    """One parameter: its full name, its field and the group it belongs to."""
+
+    name: str
+    field: Field
+    group: Group
+
+    @property
+    def default(self) -> Any:
+        return self.field.default
+
+    @property
+    def md(self) -> Any:
+        return self.field.metadata
+
+
+def specs(groups: tuple[Group, ...] = GROUPS) -> Iterator[Spec]:
+    """Every parameter of `groups`, in declaration order."""
+    for group in groups:
+        for f in fields(group.cls):
+            yield Spec(group.prefix + f.name, f, group)
+
+
+PARAMETERS = tuple(specs())
+PARAMETER_NAMES = [s.name for s in PARAMETERS]
+
+
+def names_of(cls: type) -> set[str]:
+    """Parameter names of the fields of settings dataclass `cls`."""
+    return {s.name for s in PARAMETERS if s.group.cls is cls}
+
+
+def build(cls: type, values: dict[str, Any]) -> Any:
+    """Settings dataclass `cls` from parameter values (name -> value, every parameter of
+    `cls` present).
+
+    Raises
+    ------
+    ParameterError
+        A value is not allowed (the reason names the parameter), or the class's own checks
+        (e.g. cross-field) fail: what the node reports for any bad parameter.
+    """
+    own = [s for s in PARAMETERS if s.group.cls is cls]
+    for s in own:                         # full parameter names in the reason
+        reason = check_value(s.name, values[s.name], s.field)
+        if reason:
+            raise ParameterError(reason)
+    try:
+        return cls(**{s.field.name: values[s.name] for s in own})
+    except ValueError as exc:             # e.g. an empty record.directory, z_o + b > L
+        raise ParameterError(str(exc)) from None
+
+
+def constraints(spec: Spec) -> str:
+    """What a ParameterDescriptor's ranges cannot say: the choices, or an open bound."""
+    md = spec.md
+    if md["choices"]:
+        return f"one of: {', '.join(md['choices'])}"
+    if md["lo_open"] or md["hi_open"]:
+        return f"allowed {range_text(md)}"
+    return ""
+
+
+def descriptor(spec: Spec) -> ParameterDescriptor:
+    """ROS descriptor of a parameter: description with unit, range, read-only."""
+    md, default = spec.md, spec.default
+    d = ParameterDescriptor(
+        name=spec.name, description=f"{md['description']} [{md['unit']}]" if md["unit"] else
+        md["description"], read_only=md["read_only"], additional_constraints=constraints(spec))
+    if md["lo"] is not None and isinstance(default, float):
+        d.floating_point_range = [FloatingPointRange(from_value=float(md["lo"]),
+                                                     to_value=float(md["hi"]))]
+    elif md["lo"] is not None and isinstance(default, int):
+        d.integer_range = [IntegerRange(from_value=int(md["lo"]), to_value=int(md["hi"]),
+                                        step=1)]
+    return d
+
+
+def help_lines() -> list[str]:
+    """The parameter lines of `squeak_node --help`: name [unit] = default, range: description
+    (constraints; read-only)."""
+    lines = []
+    for spec in PARAMETERS:
+        md, default, unit = spec.md, spec.default, spec.md["unit"]
+        text = f"  {spec.name}{f' [{unit}]' if unit else ''} = " + (
+            exact(default) if isinstance(default, float) else repr(default))
+        if md["lo"] is not None:
+            text += ", " + "..".join(str(b) if isinstance(b, int) else exact(b)
+                                     for b in (md["lo"], md["hi"]))
+        notes = "; ".join(n for n in (constraints(spec),
+                                      READ_ONLY_NOTE if md["read_only"] else "") if n)
+        lines.append(f"{text}: {md['description']}" + (f" ({notes})" if notes else ""))
+    return lines
+
+
+def yaml_value(value: Any) -> str:
+    """A default as YAML that PyYAML and rcl read back with its type: floats always with a
+    decimal point (ROS rejects an integer YAML value for a double parameter; YAML 1.1 reads
+    '1e-05' as text)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        text = repr(value)
+        mantissa, e, exponent = text.partition("e")
+        return text if "." in mantissa or not e else f"{mantissa}.0e{exponent}"
+    if isinstance(value, str):
+        return json.dumps(value)
+    return str(value)
+
+
+def yaml_comment(spec: Spec) -> str:
+    """'[unit] description; allowed range or choices (read-only ...)' of a YAML entry."""
+    md = spec.md
+    text = f"[{md['unit'] or '-'}] {md['description']}"
+    if md["choices"]:
+        text += f"; one of {' | '.join(md['choices'])}"
+    elif md["lo"] is not None:
+        text += f"; allowed {range_text({**md, 'unit': ''})}"     # the unit leads the comment
+    return text + (f" ({READ_ONLY_NOTE})" if md["read_only"] else "")
+
+
+CONFIG_HEADER = """\
+# SPDX-License-Identifier: Apache-2.0
+# Default parameters of the squeak predictor node, in SI units, generated by
+# tools/gen_config.py from the settings' field metadata (leadscrew_ros.ros.parameters.GROUPS):
+# do not edit, change the metadata and run the tool; test/test_config.py checks it is current.
+# Floats are written with a decimal point: ROS rejects an integer YAML value for a double
+# parameter.
+# Keyed `/**:` so that it applies to the node in any namespace and under any name, e.g.
+#   squeak_node --ros-args -r __ns:=/seat_left --params-file config/leadscrew.yaml
+# (a key `squeak_predictor:` would match only a node in the root namespace, silently).
+/**:
+  ros__parameters:
+"""
+COMMENT_COLUMN = 40
+
+
+def config_yaml() -> str:
+    """config/leadscrew.yaml: every parameter with its default, `record.*` as a nested
+    `record:` mapping, a comment with unit, description and range per entry."""
+    lines, nested = [], None
+    for group in GROUPS:
+        prefix = group.prefix.rstrip(".")
+        indent = "      " if prefix else "    "
+        if prefix and prefix != nested:
+            lines.append(f"    {prefix}:")
+            nested = prefix
+        lines.append(f"{indent}# --- {group.title}")
+        for spec in specs((group,)):
+            entry = f"{indent}{spec.field.name}: {yaml_value(spec.default)}"
+            lines.append(f"{entry.ljust(COMMENT_COLUMN - 2)}  # {yaml_comment(spec)}")
+    return CONFIG_HEADER + "\n".join(lines) + "\n"
