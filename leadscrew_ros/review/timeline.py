@@ -36,7 +36,8 @@ from .decimation import Envelope
 from ..live.rules import InputRules, Outcome
 from ..live.settings import JointSettings, LiveSettings
 from ..bag.logfile import LogMessage, Topic
-from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel, Validity
+from ..model import (OperatingPointError, ParameterError, Prediction, ScrewParameters,
+                     SqueakModel, Validity)
 from ..model.display import exact
 from ..model.predictor import check_operating_point
 
@@ -107,7 +108,10 @@ class InputSettings:
                 or len(set(topics)) < len(topics):
             raise ValueError(f"input topics must be distinct names, got {', '.join(topics)}")
         if self.nominal_load_n is not None:
-            check_operating_point(0.0, self.nominal_load_n)      # OperatingPointError: ValueError
+            try:
+                check_operating_point(0.0, self.nominal_load_n)
+            except OperatingPointError as exc:
+                raise ValueError(f"nominal {exc}") from None
         self.live, self.joints                                    # their checks raise ValueError
 
     @property
