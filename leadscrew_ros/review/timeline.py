@@ -112,7 +112,7 @@ class InputSettings:
                 check_operating_point(0.0, self.nominal_load_n)
             except OperatingPointError as exc:
                 raise ValueError(f"nominal {exc}") from None
-        self.live, self.joints                                    # their checks raise ValueError
+        _ = self.live, self.joints          # built to be checked: their ranges raise ValueError
 
     @property
     def live(self) -> LiveSettings:
