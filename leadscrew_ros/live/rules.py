@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Sequence
 
 from ..model import OperatingPointError, ScrewParameters
@@ -88,11 +88,11 @@ class Inputs:
 
 @dataclass(frozen=True)
 class JointReading:
-    """A JointState read for the screw joint: its speed [rad/s] and nut position [m] (None if
-    the message lacks them), or why the message is ignored."""
+    """A JointState read for the screw joint: 'speed' [rad/s] and 'nut' [m] as far as the
+    message has them (unchecked; the nut is the angle itself if that is not a number), or why
+    the message is ignored."""
 
-    speed_rad_s: object = None               # as in the message: the speed check takes it
-    nut_position_m: object = None            # the angle itself if that is not a number
+    values: dict[str, object]
     ignored: str = ""
 
 
@@ -137,19 +137,21 @@ def read_joint_state(names: Sequence[str], positions: Sequence[float],
     """
     name = joints.joint_name
     if not name:
-        return JointReading(ignored="joint_name not set")
+        return JointReading({}, "joint_name not set")
     try:
         i = list(names).index(name)
     except (TypeError, ValueError):
-        return JointReading(ignored=f"no joint {name!r}")
-    speed = velocities[i] if i < len(velocities) else None
-    angle = positions[i] if i < len(positions) else None
-    if speed is None and angle is None:
-        return JointReading(ignored=f"joint {name!r} without position or velocity")
-    nut = angle
-    if angle is not None and (theta := _real(angle)) is not None:   # else the check names it
-        nut = joints.nut_position_at_zero_angle_m + theta * lead_per_rad_m
-    return JointReading(speed, nut)
+        return JointReading({}, f"no joint {name!r}")
+    values = {}
+    if i < len(velocities):
+        values["speed"] = velocities[i]
+    if i < len(positions):
+        theta = _real(positions[i])
+        values["nut"] = positions[i] if theta is None else (    # else the nut check names it
+            joints.nut_position_at_zero_angle_m + theta * lead_per_rad_m)
+    if not values:
+        return JointReading({}, f"joint {name!r} without position or velocity")
+    return JointReading(values)
 
 
 def _is_real(value: object) -> bool:
@@ -251,9 +253,8 @@ class InputRules:
                                    self.params.lead_per_rad_m)
         if reading.ignored:
             return Outcome(ignored=reading.ignored)
-        outcomes = ([self.set_speed(reading.speed_rad_s)] if reading.speed_rad_s is not None
-                    else []) + ([self.set_nut_position(reading.nut_position_m)]
-                                if reading.nut_position_m is not None else [])
+        setters = {"speed": self.set_speed, "nut": self.set_nut_position}
+        outcomes = [setters[kind](value) for kind, value in reading.values.items()]
         return Outcome(tuple(k for o in outcomes for k in o.taken),
                        tuple(r for o in outcomes for r in o.rejected))
 
