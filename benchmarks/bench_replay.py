@@ -9,7 +9,8 @@ The log is a seat-adjuster duty cycle (`synthetic_log.DutyCycle`: a 12 s stroke 
 alternating direction, small sensor noise) on /motor_speed, /axial_load (std_msgs/Float64) and
 /joint_states (sensor_msgs/JointState), recorded by our `Recorder` (zstd, 10-minute splits). It is
 generated once and cached in the temp directory (`--regenerate` to rebuild). One run of
-`replay.replay` (default parameters and deadbands) is timed; the ratio is log duration / wall
+`replay.replay` (default parameters and deadbands, the log's screw joint as `joint_name`) is
+timed; the ratio is log duration / wall
 time. Prints a Markdown table and an environment line. Target: >= 100x real time.
 
 `--rss`: for each log length (default 10 and 60 minutes), one replay with the report (QUICK
@@ -39,6 +40,7 @@ import numpy as np
 from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.review.replay import ReplaySettings, replay
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
+from leadscrew_ros.review.timeline import InputSettings
 
 TARGET_X_REAL_TIME = 100.0
 TARGET_RSS_RATIO = 1.2
@@ -47,11 +49,14 @@ _CHILD = """
 import json, resource, sys, time
 from pathlib import Path
 from leadscrew_ros.model import SqueakModel
+from leadscrew_ros.bag.synthetic import DutyCycle
 from leadscrew_ros.review.replay import ReplaySettings, replay
 from leadscrew_ros.review.report import QUICK, write_report
+from leadscrew_ros.review.timeline import InputSettings
 bag, out, workers = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3])
 model, t0 = SqueakModel(), time.perf_counter()
-result = replay(bag, model, out, ReplaySettings(workers=workers, progress=False))
+result = replay(bag, model, out, ReplaySettings(InputSettings(joint_name=DutyCycle().joint_name),
+                                                workers=workers, progress=False))
 write_report(result, model, out, QUICK)
 status = dict(line.split(":", 1) for line in open("/proc/self/status"))
 print(json.dumps(dict(
@@ -184,7 +189,8 @@ def main(argv: list[str] | None = None) -> int:
     res["files"], res["log_mb"] = len(list(bag.glob("*.mcap"))), size_mb(bag)
     model = SqueakModel()
     with tempfile.TemporaryDirectory(prefix="bench_replay_") as out:
-        result = replay(bag, model, out, ReplaySettings(workers=args.workers, progress=False))
+        result = replay(bag, model, out, ReplaySettings(
+            InputSettings(joint_name=cycle.joint_name), workers=args.workers, progress=False))
         res["replay"] = result.summary()
         res["annotated_mb"] = size_mb(result.annotated)
         if args.report:

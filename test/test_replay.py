@@ -73,7 +73,7 @@ def short_log(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def replayed(bag, tmp_path_factory):
-    return run_replay(bag, tmp_path_factory.mktemp("out"))
+    return run_replay(bag, tmp_path_factory.mktemp("out"), joint_name=CYCLE.joint_name)
 
 
 def decoded(path: Path, topics=None):
@@ -94,7 +94,8 @@ def plain(messages):
 # ----------------------------------------------------------------------------- the oracle
 def expected_recomputes(messages, joint="", nut_zero=0.15):
     """The node's rule with zero deadbands, rebuilt independently: after every input message
-    that changed the point (speed and load known), (index, log time, speed, load, nut)."""
+    that changed the point (speed and load known), (index, log time, speed, load, nut).
+    joint_states count only with a `joint` (as the node's joint_name)."""
     speed = load = None
     nut, last, out = PARAMS.nut_position_m, None, []
     for i, (topic, t, _, _, _, msg) in enumerate(messages):
@@ -104,8 +105,8 @@ def expected_recomputes(messages, joint="", nut_zero=0.15):
             load = msg.data
         elif topic == "/nut_position":
             nut = msg.data
-        elif topic == "/joint_states":
-            k = msg.name.index(joint) if joint else 0
+        elif topic == "/joint_states" and joint:
+            k = msg.name.index(joint)
             speed, nut = msg.velocity[k], nut_zero + msg.position[k] * LEAD
         else:
             continue
@@ -203,8 +204,8 @@ def test_replay_of_a_recorded_log(replayed, bag):
 
 
 def test_zero_deadbands_give_the_core_prediction_at_every_input(short_log, tmp_path):
-    r = run_replay(short_log, tmp_path, **EXACT)
-    seen = check_against_core(r.annotated)
+    r = run_replay(short_log, tmp_path, joint_name=SHORT.joint_name, **EXACT)
+    seen = check_against_core(r.annotated, joint=SHORT.joint_name)
     assert r.recomputes == len(seen) and r.predictions == sum(p.valid for _, p in seen)
     assert r.predictions > 100
     # Episodes are exactly the intervals where the core says unstable.
@@ -261,7 +262,7 @@ def test_split_directory_is_read_in_order(tmp_path, replayed):
     bag = write_log(CYCLE, tmp_path / "split", split_duration_s=2.5)
     files = list(bag.glob("*.mcap"))
     assert len(files) == 12              # `_10` sorts before `_2` by name: ordered by index
-    r = run_replay(bag, tmp_path / "out")
+    r = run_replay(bag, tmp_path / "out", joint_name=CYCLE.joint_name)
     assert r.files == sorted(files, key=lambda p: int(p.stem.rsplit("_", 1)[1]))
     assert (r.messages, r.predictions, r.recomputes) == (
         replayed.messages, replayed.predictions, replayed.recomputes)
@@ -270,8 +271,8 @@ def test_split_directory_is_read_in_order(tmp_path, replayed):
 
 def test_prediction_workers_give_the_same_log(tmp_path, bag):
     """Long logs solve in spawned worker processes: same predictions as in-process."""
-    a = run_replay(bag, tmp_path / "a", workers=0, **EXACT)
-    b = run_replay(bag, tmp_path / "b", workers=2, **EXACT)
+    a = run_replay(bag, tmp_path / "a", workers=0, joint_name=CYCLE.joint_name, **EXACT)
+    b = run_replay(bag, tmp_path / "b", workers=2, joint_name=CYCLE.joint_name, **EXACT)
     assert a.predictions > 4 * 256          # several batches: the pool starts
     assert plain(decoded(a.annotated)) == plain(decoded(b.annotated))
 
@@ -346,11 +347,23 @@ def test_joint_states_with_several_joints_need_a_joint_name(tmp_path, capsys):
     assert not list((tmp_path / "out").glob("*.mcap*"))       # no half-written output
 
 
-def test_single_joint_is_used_without_a_name(tmp_path):
+def test_joint_states_without_a_joint_name_are_ignored(tmp_path, capsys):
+    """joint_name '' ignores joint_states, as the node does, even with a single joint; the
+    error and the summary say how to use them."""
     log = rosbags_log(tmp_path / "rosbags_bag", ["screw"], samples=40)
-    r = run_replay(log, tmp_path / "out", **EXACT)
+    code, out, err = cli(capsys, "replay", log, "--out", tmp_path / "x", "--quiet")
+    assert code == 2 and len(err.splitlines()) == 1
+    assert ("40 x /joint_states: joint_name not set; use --joint-name (joints screw)"
+            in err)
+    r = run_replay(log, tmp_path / "load", load_topic="/unused", nominal_load_n=200.0,
+                   speed_topic="/axial_load")          # a speed from elsewhere: a summary
+    assert dict(r.ignored) == {"/joint_states: joint_name not set; use --joint-name": 40}
+    text = (tmp_path / "load" / "summary.txt").read_text()
+    assert ("ignored inputs: 40 x /joint_states: joint_name not set; use --joint-name "
+            "(first: joints screw)") in text
+    r = run_replay(log, tmp_path / "out", joint_name="screw", **EXACT)
     assert r.predictions > 0 and not r.ignored
-    check_against_core(r.annotated)
+    check_against_core(r.annotated, joint="screw")
 
 
 # ----------------------------------------------------------------------------- bad values
@@ -518,7 +531,7 @@ def test_cli_info(bag, capsys):
     (["--nut-position-at-zero-angle", "-101"], "nut_position_at_zero_angle_m = -101 is out"),
     (["--namespace", "/bad name"], "namespace must be a ROS name"),
     (["--out-namespace", "/bad name"], "output namespace must be a ROS name"),
-    (["--load", "1e8"], "nominal load 1e+08 N is not a finite number within ±1e+07 N"),
+    (["--load", "1e8"], "nominal load = 1e+08 N exceeds the plausible magnitude 1e+07 N"),
     (["--workers", "-1"], "workers must be in [0, 64], got -1"),
     (["--workers", "100000"], "workers must be in [0, 64], got 100000"),
     (["--load-topic", "motor_speed"], "input topics must be distinct"),

@@ -69,7 +69,8 @@ def risks(annotated, topic="/replay/squeak/risk"):
 # ----------------------------------------------------------------------------- namespaces
 def test_inputs_in_one_namespace_are_found_without_topic_options(tmp_path, capsys):
     log = stroke_bag(tmp_path / "bag", namespaces=("/seat_left",))
-    code, out, err = cli(capsys, "replay", log, "--out", tmp_path / "out", "--no-report")
+    code, out, err = cli(capsys, "replay", log, "--out", tmp_path / "out", "--no-report",
+                         "--joint-name", "screw")
     assert code == 0, err
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["input_messages"] == {"/seat_left/joint_states": 80,
@@ -86,14 +87,14 @@ def test_inputs_in_several_namespaces_ask_for_one(tmp_path, capsys):
     assert code == 2 and out == "" and len(err.splitlines()) == 1
     assert "several namespaces (/seat_left, /seat_right)" in err and "--namespace NS" in err
     code, out, err = cli(capsys, "replay", log, "--out", tmp_path / "out", "--quiet",
-                         "--no-report", "--namespace", "seat_right")
+                         "--no-report", "--namespace", "seat_right", "--joint-name", "screw")
     assert code == 0, err
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert set(summary["input_messages"]) == {"/seat_right/joint_states",
                                               "/seat_right/axial_load"}
     # an absolute topic option is taken as it is, whatever the namespace
     r = run_replay(log, tmp_path / "abs", load_topic="/seat_left/axial_load",
-                   joint_states_topic="/seat_left/joint_states")
+                   joint_states_topic="/seat_left/joint_states", joint_name="screw")
     assert set(r.inputs) == {"/seat_left/joint_states", "/seat_left/axial_load"}
 
 
@@ -115,21 +116,22 @@ def test_offline_and_live_replay_share_the_input_rule():
 # ----------------------------------------------------------------------------- nominal load
 def test_joint_states_only_log_takes_a_nominal_load(tmp_path, capsys):
     log = stroke_bag(tmp_path / "bag", load=False)
-    code, out, err = cli(capsys, "replay", log, "--out", tmp_path / "x", "--quiet")
+    code, out, err = cli(capsys, "replay", log, "--out", tmp_path / "x", "--quiet",
+                         "--joint-name", "screw")
     assert code == 2 and len(err.splitlines()) == 1
     assert "no axial load" in err and "--load N" in err
     # --load N is a load published once before the log: the same predictions as a log
     # with one load message at its start
-    a = run_replay(log, tmp_path / "a", nominal_load_n=250.0, **EXACT)
+    a = run_replay(log, tmp_path / "a", nominal_load_n=250.0, joint_name="screw", **EXACT)
     once = tmp_path / "once.mcap"
     messages = [(m[0], "sensor_msgs/msg/JointState", m[4], m[1]) for m in decoded(
         next(log.glob("*.mcap")))]
     write_mcap(once, [f64("/axial_load", 250.0, T0 - 1)] + messages)
-    b = run_replay(once, tmp_path / "b", **EXACT)
+    b = run_replay(once, tmp_path / "b", joint_name="screw", **EXACT)
     assert a.predictions == b.predictions > 20
     assert risks(a.annotated) == risks(b.annotated)
     code, out, err = cli(capsys, "replay", log, "--out", tmp_path / "c", "--quiet",
-                         "--no-report", "--load", "250")
+                         "--no-report", "--load", "250", "--joint-name", "screw")
     assert code == 0, err
 
 
@@ -138,14 +140,15 @@ def test_sqlite3_bag_replays_like_its_mcap_twin(tmp_path, capsys):
     mcap_bag = stroke_bag(tmp_path / "mcap_bag")
     db3_bag = stroke_bag(tmp_path / "db3_bag", storage=StoragePlugin.SQLITE3)
     (db3,) = db3_bag.glob("*.db3")
-    a = run_replay(mcap_bag, tmp_path / "a", **EXACT)
-    b = run_replay(db3_bag, tmp_path / "b", **EXACT)
+    a = run_replay(mcap_bag, tmp_path / "a", joint_name="screw", **EXACT)
+    b = run_replay(db3_bag, tmp_path / "b", joint_name="screw", **EXACT)
     assert b.files == [db3] and b.messages == a.messages == 160
     assert risks(a.annotated) == risks(b.annotated) and a.predictions > 20
     # the originals are copied with their definitions (as stored, or installed before Iron)
     with sqlite3.connect(db3) as con:
         con.execute("DROP TABLE IF EXISTS message_definitions")
-    code, _, err = cli(capsys, "replay", db3, "--out", tmp_path / "c", "--quiet", "--no-report")
+    code, _, err = cli(capsys, "replay", db3, "--out", tmp_path / "c", "--quiet", "--no-report",
+                       "--joint-name", "screw")
     assert code == 0, err
     from mcap.reader import make_reader
     with open(tmp_path / "c" / f"{db3.stem}.annotated.mcap", "rb") as f:
@@ -222,7 +225,8 @@ def test_the_nut_is_drawn_only_when_measured(tmp_path, monkeypatch):
     assert "no nut input" in figures[-1].axes[0].get_title()
 
     cycle = DutyCycle(duration_s=6.0, rate_hz=25.0, rest_s=1.0)
-    r = run_replay(write_log(cycle, tmp_path / "bag"), tmp_path / "b")
+    r = run_replay(write_log(cycle, tmp_path / "bag"), tmp_path / "b",
+                   joint_name=cycle.joint_name)
     _, lo, hi, _, _ = r.timeline.trace.series()
     # from the first joint state on, no default 150 mm before it (a spike at the start)
     first = samples(cycle).nut_position_m[0]
@@ -236,8 +240,9 @@ def test_a_travelling_nut_is_mapped_per_band(tmp_path):
     assert len(report.nut_bands(np.array([0.1, 0.104]))) == 2          # one band
     assert len(report.nut_bands(np.linspace(0.02, 0.07, 9))) == 3      # 50 mm: two bands
     assert len(report.nut_bands(np.linspace(0.02, 0.22, 9))) == 5      # 200 mm: four
-    r = run_replay(write_log(DutyCycle(duration_s=30.0, rate_hz=20.0, rest_s=2.0),
-                             tmp_path / "bag"), tmp_path / "out")
+    cycle = DutyCycle(duration_s=30.0, rate_hz=20.0, rest_s=2.0)
+    r = run_replay(write_log(cycle, tmp_path / "bag"), tmp_path / "out",
+                   joint_name=cycle.joint_name)
     nuts = r.plot.points.sample()[:, 2]
     assert nuts.max() - nuts.min() > 0.1
     paths = report.write_report(r, SqueakModel(), tmp_path / "out", report.QUICK)
@@ -252,9 +257,11 @@ def test_rejected_values_print_past_their_limit(tmp_path):
         f64("/nut_position", 0.2400001, 2 * s), f64("/axial_load", 200.0, 3 * s)])
     r = run_replay(log, tmp_path / "out")
     text = (tmp_path / "out" / "summary.txt").read_text()
-    assert "1 x load beyond 1e+07 N (first: 1.0000001e+07 N exceeds 1e+07 N)" in text
+    # the example is the node's own message (live.rules)
+    assert ("1 x load beyond 1e+07 N (first: load = 1.0000001e+07 N exceeds the plausible "
+            "magnitude 1e+07 N)") in text
     assert ("1 x nut position off the screw [0, 0.24] m (first: nut position 0.2400001 m is "
-            "off the screw [0, 0.24])") in text
+            "off the screw: allowed [0, 0.24] m (z_o + b <= L))") in text
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["rejected_examples"] \
         == r.timeline.rejected_example
 

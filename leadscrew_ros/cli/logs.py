@@ -11,7 +11,7 @@ from pathlib import Path
 from ..bag.logfile import (LogInfo, bag_of, cut_off_bags, inspect, log_files, recover,
                            recover_bag)
 from ..live.settings import JointSettings, LiveSettings
-from ..model.fields import check_value, help_text
+from ..model.fields import help_text
 from ..review.timeline import InputSettings
 from .args import (PROG, ROS_ARGS_HELP, CliError, Parser, build_model, finite, print_json,
                    yaml_parameters)
@@ -39,10 +39,6 @@ def _replay_inputs(args: argparse.Namespace) -> InputSettings:
     values = {name: values[name] for name in REPLAY_INPUTS if name in values}
     values.update({name: getattr(args, name) for name in REPLAY_INPUTS
                    if getattr(args, name) is not None})
-    reasons = [check_value(name, values[name], f) for name, f in REPLAY_SETTINGS.items()
-               if name in values]                     # the node's ranges hold here too
-    if any(reasons):
-        raise CliError(f"replay inputs: {next(r for r in reasons if r)}")
     try:
         return InputSettings(**values)
     except (TypeError, ValueError) as exc:

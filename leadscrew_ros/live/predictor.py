@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Live prediction logic of the node, free of rclpy: input checks, deadbands, rate limit,
-coalescing, last good state, staleness and the diagnostic verdict.
+"""Live prediction logic of the node, free of rclpy: rate limit, coalescing, last good state,
+staleness and the diagnostic verdict around the input rules (`live.rules`: input checks,
+JointState mapping, deadbands, contact re-integration; shared with the offline replay).
 
 The node feeds it the latest inputs and asks `due(now)`; bursts are coalesced because only the
 latest value of each input is kept and one recompute serves all of them.
@@ -29,11 +30,10 @@ from typing import Callable
 
 from threadpoolctl import threadpool_limits
 
-from ..model import OperatingPointError, ParameterError, Prediction, SqueakModel, Validity
+from ..model import ParameterError, Prediction, SqueakModel, Validity
 from ..model.advice import Band, band_around
-from ..model.display import exact
-from ..model.predictor import check_operating_point
-from .settings import LiveSettings
+from .rules import InputRules, Inputs, Outcome
+from .settings import JointSettings, LiveSettings
 
 
 _LOAD_BIN = 0.05          # relative load bin of the cached squeak bands (safe-speed advice)
@@ -64,26 +64,6 @@ class Level(IntEnum):
     WARN = 1
     ERROR = 2
     STALE = 3
-
-
-def moved(point: tuple[float, float, float], last: tuple[float, float, float],
-          deadbands) -> bool:
-    """(speed, load, nut) moved beyond a deadband from `last` (deadbands: any object with
-    speed_deadband_rad_s, load_deadband_n, nut_deadband_m)."""
-    limits = (deadbands.speed_deadband_rad_s, deadbands.load_deadband_n,
-              deadbands.nut_deadband_m)
-    return any(abs(a - b) > lim for a, b, lim in zip(point, last, limits))
-
-
-@dataclass
-class Inputs:
-    """Latest accepted value of each input and when it arrived (monotonic seconds)."""
-
-    speed_rad_s: float | None = None
-    load_n: float | None = None
-    nut_position_m: float | None = None
-    speed_time: float = -math.inf
-    load_time: float = -math.inf
 
 
 @dataclass(frozen=True)
@@ -205,24 +185,23 @@ def _single_threaded_blas() -> None:
 
 class LivePredictor:
     def __init__(self, model: SqueakModel, settings: LiveSettings = LiveSettings(),
-                 clock: Callable[[], float] = time.perf_counter):
+                 clock: Callable[[], float] = time.perf_counter,
+                 joints: JointSettings = JointSettings()):
         """`clock` (seconds) times each prediction for the recompute interval; the `now`
-        arguments are the policy's time."""
+        arguments are the policy's time. `joints`: the screw joint of JointState inputs."""
         _single_threaded_blas()
         self.model = model
-        self._nut_model = model                        # model at the nut position in use
+        self._nut_model = model                        # model at the contact's nut position
         self.settings = settings
-        self.inputs = Inputs()
+        self.rules = InputRules(model.params, settings, joints)
+        self._arrived = {"speed": -math.inf, "load": -math.inf}  # input -> when last taken
         self.prediction: Prediction | None = None        # last good (valid) prediction
         self.safe_speed_rad_s: float | None = None      # last advice, kept while a new one
         #                                                   is searched in the background
         self.recomputes = 0
-        self._computed_at: tuple[float, float, float] | None = None  # speed, load, nut
         self._last_update = -math.inf
         self._clock = clock
         self._cost_s = 0.0                             # how long the last prediction took
-        self._input_errors: dict[str, str] = {}        # input -> why its latest value was
-                                                       # rejected, until a good one arrives
         self._validity: Validity | None = None         # verdict at the latest point
         self._invalid_reason = ""                      # why it has no prediction
         self._bands: dict[tuple, list[Band]] = {}       # one bin: bands found in it
@@ -234,69 +213,51 @@ class LivePredictor:
         self._worker = LatestWorker()
 
     # ---------------------------------------------------------------- inputs
+    @property
+    def inputs(self) -> Inputs:
+        """The latest value taken of each input."""
+        return self.rules.inputs
+
     def set_speed(self, value: object, now: float) -> str:
-        """Accept a speed (rad/s); returns '' or why it was rejected."""
-        return self._accept("speed", value, now)
+        """Take a speed [rad/s] arrived at `now`; returns '' or why it was rejected."""
+        return self._arrive(self.rules.set_speed(value), now).error
 
     def set_load(self, value: object, now: float) -> str:
-        return self._accept("load", value, now)
+        """Take an axial load [N] arrived at `now`; returns '' or why it was rejected."""
+        return self._arrive(self.rules.set_load(value), now).error
 
     def set_nut_position(self, value: object, now: float) -> str:
-        """Nut position z_o along the screw (m), 0 <= z_o <= L - b."""
-        p = self.model.params
-        try:
-            z = float(value)                                        # type: ignore[arg-type]
-        except (TypeError, ValueError, OverflowError):             # OverflowError: huge int
-            return self._reject("nut", f"nut position {value!r} is not a number")
-        if not (math.isfinite(z) and 0.0 <= z <= p.nut_travel_m):
-            return self._reject("nut", f"nut position {exact(z)} m is off the screw: allowed "
-                                       f"[0, {exact(p.nut_travel_m)}] m (z_o + b <= L)")
-        self.inputs.nut_position_m = z
-        self._input_errors.pop("nut", None)
-        return ""
+        """Take a nut position z_o [m], 0 <= z_o <= L - b; returns '' or why it was rejected."""
+        return self._arrive(self.rules.set_nut_position(value), now).error
 
-    def _accept(self, kind: str, value: object, now: float) -> str:
-        try:
-            if kind == "speed":
-                v, _ = check_operating_point(value, 0.0)
-            else:
-                _, v = check_operating_point(0.0, value)
-        except OperatingPointError as exc:
-            return self._reject(kind, str(exc))
-        if kind == "speed":
-            self.inputs.speed_rad_s, self.inputs.speed_time = v, now
-        else:
-            self.inputs.load_n, self.inputs.load_time = v, now
-        self._input_errors.pop(kind, None)
-        return ""
+    def set_joint_state(self, names, positions, velocities, now: float,
+                        joints: JointSettings | None = None) -> Outcome:
+        """Take the screw joint's speed and nut position of a JointState arrived at `now`
+        (`rules.InputRules.set_joint_state`); `joints` first replaces the joint settings."""
+        if joints is not None:
+            self.rules.joints = joints
+        return self._arrive(self.rules.set_joint_state(names, positions, velocities), now)
 
-    def _reject(self, kind: str, reason: str) -> str:
-        self._input_errors[kind] = reason
-        return reason
+    def _arrive(self, outcome: Outcome, now: float) -> Outcome:
+        for kind in outcome.taken:
+            if kind in self._arrived:
+                self._arrived[kind] = now
+        return outcome
 
     # ---------------------------------------------------------------- model
     def set_model(self, model: SqueakModel, settings: LiveSettings | None = None) -> None:
         """New parameters: the next `due` is true and recomputes with them."""
         self.model, self.settings = model, settings or self.settings
         self._nut_model = model
-        self._computed_at, self._bands = None, {}
+        self.rules.reset(model.params, self.settings)
+        self._bands = {}
         self._worker.cancel()
         self._search = self._failed = None
         self._pending = False
 
-    def _operating_point(self) -> tuple[float, float, float] | None:
-        i = self.inputs
-        if i.speed_rad_s is None or i.load_n is None:
-            return None
-        nut = self.model.params.nut_position_m if i.nut_position_m is None else i.nut_position_m
-        return i.speed_rad_s, i.load_n, nut
-
     def changed(self) -> bool:
         """The operating point moved beyond a deadband since the last recompute."""
-        point = self._operating_point()
-        if point is None:
-            return False
-        return self._computed_at is None or moved(point, self._computed_at, self.settings)
+        return self.rules.changed()
 
     @property
     def min_interval_s(self) -> float:
@@ -312,13 +273,13 @@ class LivePredictor:
     def update(self, now: float) -> Prediction | None:
         """Recompute at the latest inputs. Returns the new prediction, or None when the point
         is outside the model's validity (the last good prediction is kept)."""
-        point = self._operating_point()
-        if point is None:
+        computed = self.rules.compute()
+        if computed is None:
             return None
-        speed, load, nut = point
-        self._computed_at, self._last_update = point, now
+        (speed, load, _), contact_nut_m = computed
+        self._last_update = now
         self.recomputes += 1
-        model = self._model_at(nut)
+        model = self._model_at(contact_nut_m)
         if model is None:
             return None
         start = self._clock()
@@ -332,9 +293,9 @@ class LivePredictor:
         return p
 
     def _model_at(self, nut: float) -> SqueakModel | None:
-        """The model with the contact at the nut; rebuilt (contact re-integrated) only when the
-        nut moved more than nut_deadband_m from where the current one was built."""
-        if abs(nut - self._nut_model.params.nut_position_m) <= self.settings.nut_deadband_m:
+        """The model with the contact at `nut` (the rules move it only beyond nut_deadband_m);
+        rebuilt only when that moved."""
+        if nut == self._nut_model.params.nut_position_m:
             return self._nut_model
         try:                            # geometry is cached: a revisited position is free
             self._nut_model = self.model.with_params(nut_position_m=nut)
@@ -434,11 +395,11 @@ class LivePredictor:
     # ---------------------------------------------------------------- verdict
     def status(self, now: float) -> Status:
         i, s, p = self.inputs, self.settings, self.prediction
+        arrived = self._arrived
         valid = p is not None and self._validity in (None, Validity.OK)
         values = {
             KEY_SPEED: _fmt(i.speed_rad_s), KEY_LOAD: _fmt(i.load_n),
-            KEY_NUT_POSITION: _fmt(self.model.params.nut_position_m if i.nut_position_m is None
-                                   else i.nut_position_m),
+            KEY_NUT_POSITION: _fmt(self.rules.nut_position_m),
             KEY_FORMULATION: self.model.params.formulation,
             KEY_VALID: str(valid).lower(),
             KEY_VALIDITY: "" if self._validity is None else self._validity.name,
@@ -451,11 +412,11 @@ class LivePredictor:
             KEY_SAFE_SPEED_ERROR: self._advice_error,
             KEY_RECOMPUTES: str(self.recomputes),
         }
-        if self._input_errors:
-            errors = "; ".join(self._input_errors.values())
+        if self.rules.errors:
+            errors = "; ".join(r.message for r in self.rules.errors.values())
             return Status(Level.ERROR, f"invalid input: {errors}", values)
-        stale = [n for n, t in (("motor_speed", i.speed_time), ("axial_load", i.load_time))
-                 if now - t > s.stale_timeout_s]
+        stale = [n for n, t in (("motor_speed", arrived["speed"]),
+                                ("axial_load", arrived["load"])) if now - t > s.stale_timeout_s]
         if stale:
             return Status(Level.STALE, f"no fresh input on {', '.join(stale)} for more than "
                                        f"{s.stale_timeout_s:g} s", values)

@@ -40,7 +40,14 @@ class LiveSettings:
 
 @dataclass(frozen=True)
 class JointSettings:
-    """Which joint of sensor_msgs/JointState is the screw, and where the nut is at angle 0."""
+    """Which joint of sensor_msgs/JointState is the screw, and where the nut is at angle 0.
+
+    An empty `joint_name` (the default) ignores joint_states altogether, in the node and in the
+    offline replay alike (which counts them as ignored): using a JointState is an explicit
+    opt-in, so one from another driver never moves the operating point. With a name, the
+    joint's velocity is the speed and its angle theta gives the nut position
+    `nut_position_at_zero_angle_m + theta * ScrewParameters.lead_per_rad_m` (`live.rules`).
+    """
 
     joint_name: str = setting(
         "", "", "screw joint in joint_states ('' ignores joint_states)")

@@ -159,7 +159,7 @@ class ReplayResult:
     predictions: int                  # recomputes with a prediction (valid points)
     no_prediction: Counter            # recomputes outside validity, by Validity.label
     rejected: Counter                 # input values not taken, by reason
-    ignored: Counter                  # joint_states messages without the joint
+    ignored: Counter                  # joint_states messages ignored (no joint_name, no joint)
     episodes: list[Episode]           # the first EPISODES_KEPT
     episode_count: int                # all of them (in episodes.json)
     time_in_squeak_s: float
@@ -193,7 +193,9 @@ class ReplayResult:
                 "recomputes": self.recomputes, "predictions": self.predictions,
                 "no_prediction": dict(self.no_prediction), "rejected_inputs": dict(self.rejected),
                 "rejected_examples": dict(self.timeline.rejected_example),
-                "ignored_inputs": dict(self.ignored), "episodes": self.episode_count,
+                "ignored_inputs": dict(self.ignored),
+                "ignored_examples": dict(self.timeline.ignored_example),
+                "episodes": self.episode_count,
                 "time_in_squeak_s": self.time_in_squeak_s,
                 "namespace": self.namespace, "out_namespace": self.out_namespace,
                 "log_time": {"backwards": dict(self.timeline.backwards),
@@ -213,7 +215,7 @@ class ReplayResult:
                  f"recomputes: {self.recomputes} ({self.predictions} with a prediction)",
                  f"squeak episodes: {self.episode_count}, time in squeak "
                  f"{self.time_in_squeak_s:.2f} s ({100 * s['squeak_share']:.1f} % of the log)"]
-        examples = self.timeline.rejected_example
+        examples = {**self.timeline.rejected_example, **self.timeline.ignored_example}
         for title, counts in (("no prediction (outside the model's validity)", self.no_prediction),
                               ("rejected inputs", self.rejected), ("ignored inputs", self.ignored)):
             lines += [f"{title}: {n} x {reason}"
@@ -561,8 +563,10 @@ def _check_inputs(log: Path, timeline: Timeline, counts: dict[str, int]) -> None
             "--joint-name or --namespace")
     if timeline.load is None and timeline.speed is not None:
         hint = f"for a log without load give a nominal load with --load N, or {hint}"
+    ignored = "".join(f"; {n} x {reason} ({timeline.ignored_example[reason]})"
+                      for reason, n in sorted(timeline.ignored.items()))
     raise LogError(log, f"no {' and no '.join(parts)} in the log (its topics: "
-                        f"{listed or 'none'}); {hint}")
+                        f"{listed or 'none'}){ignored}; {hint}")
 
 
 def _write_json(path: Path, obj: Any) -> None:

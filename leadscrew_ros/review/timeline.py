@@ -2,15 +2,14 @@
 """Operating-point timeline of a replayed log: input messages -> latest speed, load and nut
 position -> recompute decisions with the node's deadbands -> batched predictions.
 
-rclpy-free (prediction workers import it). The rules follow the node (`live.py`, `node.py`):
-a rejected value (NaN, inf, |F_z| > 1e7 N, nut off the screw) keeps the previous one; nothing
-is predicted before both a speed and a load are known (`nominal_load_n`: a load known from the
-start, as a load published once to the node); the nut defaults to the model's `nut_position_m`; a JointState sets the speed from the joint's velocity and the nut from its
-angle, `nut_position_at_zero_angle_m + angle * R tan(beta)`, and counts as one input. A
-recompute happens when the point moved beyond a deadband from the last recomputed one (offline
-there is no rate limit); the contact is re-integrated only when the nut moved more than the nut
-deadband from where it was last integrated (geometries are cached per process, so positions
-that strokes revisit, e.g. on an encoder's grid, cost nothing the second time).
+rclpy-free (prediction workers import it). The input rules are the node's own
+(`live.rules.InputRules`): which values are taken, the JointState mapping (joint_states are
+ignored unless `joint_name` is set, and counted as ignored), the operating point, the deadbands
+and where the contact is integrated. `nominal_load_n` is a load known from the start, as a load
+published once to the node. Offline there is no rate limit: every input that moves the point
+beyond a deadband recomputes, as the node does when each input is processed before the next
+(geometries are cached per process, so nut positions that strokes revisit, e.g. on an encoder's
+grid, cost nothing the second time).
 
 Topics are found as `replay --publish` finds them (`is_input`): relative input names (the
 defaults `motor_speed`, ...) resolve in a namespace, as a node's do under `__ns`; the log's
@@ -34,16 +33,16 @@ import numpy as np
 
 from ..bag.cdr import decode_float64, decode_joint_state
 from .decimation import Envelope
-from ..live.predictor import moved
+from ..live.rules import InputRules, Outcome
 from ..live.settings import JointSettings, LiveSettings
 from ..bag.logfile import LogMessage, Topic
-from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel, Validity
+from ..model import (OperatingPointError, ParameterError, Prediction, ScrewParameters,
+                     SqueakModel, Validity)
 from ..model.display import exact
-from ..model.parameters import field_info
+from ..model.predictor import check_operating_point
 
 FLOAT64, JOINT_STATE = "std_msgs/msg/Float64", "sensor_msgs/msg/JointState"
 _MODEL_CACHE = 1024                          # nut positions kept per process (~60 kB each)
-_LOAD_LIMIT_N = field_info("axial_load_n")["hi"]    # as the node's input check
 # The predictor's inputs (base name -> the type it subscribes with).
 INPUTS = {"motor_speed": FLOAT64, "axial_load": FLOAT64, "nut_position": FLOAT64,
           "joint_states": JOINT_STATE}
@@ -88,14 +87,15 @@ class InputError(ValueError):
 
 @dataclass(frozen=True)
 class InputSettings:
-    """Where the inputs are in the log and when to recompute (node parameter names in SI)."""
+    """Where the inputs are in the log and when to recompute: node parameter names, defaults
+    and checks from `LiveSettings` and `JointSettings` (`live` and `joints`)."""
 
     # Relative names resolve in the input namespace (`resolved`), absolute ones stay.
     speed_topic: str = "motor_speed"                    # std_msgs/Float64, rad/s
     load_topic: str = "axial_load"                      # std_msgs/Float64, N
     nut_topic: str = "nut_position"                     # std_msgs/Float64, m
     joint_states_topic: str = "joint_states"            # sensor_msgs/JointState
-    joint_name: str = ""                # '' : the joint of single-joint messages
+    joint_name: str = JointSettings.joint_name        # '': joint_states are ignored
     nut_position_at_zero_angle_m: float = JointSettings.nut_position_at_zero_angle_m
     speed_deadband_rad_s: float = LiveSettings.speed_deadband_rad_s
     load_deadband_n: float = LiveSettings.load_deadband_n
@@ -107,16 +107,24 @@ class InputSettings:
         if not all(t.strip("/") and " " not in t for t in topics) \
                 or len(set(topics)) < len(topics):
             raise ValueError(f"input topics must be distinct names, got {', '.join(topics)}")
-        if self.nominal_load_n is not None and not (
-                math.isfinite(self.nominal_load_n) and abs(self.nominal_load_n) <= _LOAD_LIMIT_N):
-            raise ValueError(f"nominal load {exact(self.nominal_load_n)} N is not a finite "
-                             f"number within ±{exact(_LOAD_LIMIT_N)} N")
-        for name in ("speed_deadband_rad_s", "load_deadband_n", "nut_deadband_m"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
-        if not math.isfinite(self.nut_position_at_zero_angle_m):
-            raise ValueError("nut_position_at_zero_angle_m must be finite")
+        if self.nominal_load_n is not None:
+            try:
+                check_operating_point(0.0, self.nominal_load_n)
+            except OperatingPointError as exc:
+                raise ValueError(f"nominal {exc}") from None
+        _ = self.live, self.joints          # built to be checked: their ranges raise ValueError
+
+    @property
+    def live(self) -> LiveSettings:
+        """The deadbands (the node's other settings at their defaults)."""
+        return LiveSettings(speed_deadband_rad_s=self.speed_deadband_rad_s,
+                            load_deadband_n=self.load_deadband_n,
+                            nut_deadband_m=self.nut_deadband_m)
+
+    @property
+    def joints(self) -> JointSettings:
+        return JointSettings(joint_name=self.joint_name,
+                             nut_position_at_zero_angle_m=self.nut_position_at_zero_angle_m)
 
     @property
     def topics(self) -> tuple[str, str, str, str]:
@@ -149,18 +157,14 @@ class Timeline:
 
     def __init__(self, params: ScrewParameters, settings: InputSettings = InputSettings()):
         self.settings = settings = settings.resolved("/")
-        self.lead_m_per_rad = params.lead_per_rad_m
-        self.nut_max_m = params.nut_travel_m
-        self.speed: float | None = None
-        self.load: float | None = settings.nominal_load_n
-        self.nut = params.nut_position_m                   # until a nut input arrives
-        self.nut_measured = False                          # a nut input was taken
-        self._model_nut_m = params.nut_position_m          # where the contact is integrated
-        self._computed_at: tuple[float, float, float] | None = None
+        self.rules = InputRules(params, settings.live, settings.joints)
+        if settings.nominal_load_n is not None:
+            self.rules.set_load(settings.nominal_load_n)
         self.inputs: Counter[str] = Counter()              # accepted-or-not input messages
         self.rejected: Counter[str] = Counter()            # values not taken, by reason
-        self.rejected_example: dict[str, str] = {}         # reason -> its first value
-        self.ignored: Counter[str] = Counter()             # messages without the joint
+        self.rejected_example: dict[str, str] = {}         # reason -> its first message
+        self.ignored: Counter[str] = Counter()             # messages ignored, by reason
+        self.ignored_example: dict[str, str] = {}          # reason -> the first one's joints
         self.backwards: Counter[str] = Counter()           # stale inputs (not applied), by topic
         self.backwards_max_s = 0.0                         # largest step back in log time
         self.duplicates: Counter[str] = Counter()          # same log time as the previous
@@ -175,6 +179,25 @@ class Timeline:
             settings.nut_topic: (FLOAT64, self._on_nut),
             settings.joint_states_topic: (JOINT_STATE, self._on_joint_states)}
         self._handlers: dict[tuple[str, str], Callable[[bytes], bool] | None] = {}
+
+    @property
+    def speed(self) -> float | None:
+        """The latest speed taken [rad/s]."""
+        return self.rules.inputs.speed_rad_s
+
+    @property
+    def load(self) -> float | None:
+        """The latest load taken [N]."""
+        return self.rules.inputs.load_n
+
+    @property
+    def nut(self) -> float:
+        """The nut position in use [m] (the parameters' until a nut input was taken)."""
+        return self.rules.nut_position_m
+
+    @property
+    def nut_measured(self) -> bool:
+        return self.rules.nut_measured
 
     @property
     def topics(self) -> list[str]:
@@ -209,7 +232,7 @@ class Timeline:
         try:
             accepted = handler(m.data)
         except ValueError:
-            self._reject(f"{name}: undecodable payload", "")
+            self.rejected[f"{name}: undecodable payload"] += 1
             accepted = False
         nan = math.nan
         self.trace.add(self.seconds(self.now_ns), nan if self.speed is None else self.speed,
@@ -225,79 +248,39 @@ class Timeline:
             raise InputError(f"topic {topic} is {type_name}, expected {route[0]}")
         return route[1]
 
-    def _reject(self, reason: str, example: str) -> bool:
-        self.rejected[reason] += 1
-        if example:
-            self.rejected_example.setdefault(reason, example)
-        return False
+    def _count(self, outcome: Outcome) -> bool:
+        """Count the values a message had rejected; True when a recompute decision follows."""
+        for r in outcome.rejected:
+            self.rejected[r.reason] += 1
+            self.rejected_example.setdefault(r.reason, r.message)
+        return outcome.applies
 
     def _on_speed(self, data: bytes) -> bool:
-        return self._set_speed(decode_float64(data))
+        return self._count(self.rules.set_speed(decode_float64(data)))
 
     def _on_load(self, data: bytes) -> bool:
-        value = decode_float64(data)
-        if not math.isfinite(value):
-            return self._reject("load not finite", f"load {exact(value)} N")
-        if abs(value) > _LOAD_LIMIT_N:
-            return self._reject(f"load beyond {exact(_LOAD_LIMIT_N)} N",
-                                f"{exact(value)} N exceeds {exact(_LOAD_LIMIT_N)} N")
-        self.load = value
-        return True
+        return self._count(self.rules.set_load(decode_float64(data)))
 
     def _on_nut(self, data: bytes) -> bool:
-        return self._set_nut(decode_float64(data))
+        return self._count(self.rules.set_nut_position(decode_float64(data)))
 
     def _on_joint_states(self, data: bytes) -> bool:
         js = decode_joint_state(data)
-        name = self.settings.joint_name
-        if name:
-            if name not in js.name:
-                self.ignored[f"joint_states without joint {name!r}"] += 1
-                return False
-            i = js.name.index(name)
-        elif len(js.name) == 1:
-            i = 0
-        else:
-            self.ignored[f"joint_states with {len(js.name)} joints and no --joint-name"] += 1
-            return False
-        # Both first, then one recompute decision, none if a value was rejected (as the node).
-        taken = []
-        if i < len(js.velocity):
-            taken.append(self._set_speed(js.velocity[i]))
-        if i < len(js.position):
-            taken.append(self._set_nut(self.settings.nut_position_at_zero_angle_m
-                                       + js.position[i] * self.lead_m_per_rad))
-        return bool(taken) and all(taken)
-
-    def _set_speed(self, value: float) -> bool:
-        if not math.isfinite(value):
-            return self._reject("speed not finite", f"speed {exact(value)} rad/s")
-        self.speed = value
-        return True
-
-    def _set_nut(self, value: float) -> bool:
-        if not (math.isfinite(value) and 0.0 <= value <= self.nut_max_m):
-            screw = f"[0, {exact(self.nut_max_m)}]"
-            return self._reject(f"nut position off the screw {screw} m",
-                                f"nut position {exact(value)} m is off the screw {screw}")
-        self.nut, self.nut_measured = value, True
-        return True
+        outcome = self.rules.set_joint_state(js.name, js.position, js.velocity)
+        if outcome.ignored:
+            hint = "" if self.settings.joint_name else "; use --joint-name"
+            reason = f"{self.settings.joint_states_topic}: {outcome.ignored}{hint}"
+            self.ignored[reason] += 1
+            self.ignored_example.setdefault(reason, f"joints {', '.join(js.name) or 'none'}")
+        return self._count(outcome)
 
     # ------------------------------------------------------------------ coalescing
     def _recompute(self, index: int, log_time_ns: int) -> Job | None:
-        if self.speed is None or self.load is None:
+        if not self.rules.changed():
             return None
-        point = (self.speed, self.load, self.nut)
-        if self._computed_at is not None and not moved(point, self._computed_at, self.settings):
-            return None
-        self._computed_at = point
+        point, contact_nut_m = self.rules.compute()
         self.recomputes += 1
-        return Job(index, log_time_ns, self.now_ns, *point, self._model_nut(point[2]))
-
-    def _model_nut(self, nut: float) -> float:
-        if abs(nut - self._model_nut_m) > self.settings.nut_deadband_m:
-            self._model_nut_m = nut
-        return self._model_nut_m
+        return Job(index, log_time_ns, self.now_ns, *point, contact_nut_m)
 
 
 # ---------------------------------------------------------------------- predictions

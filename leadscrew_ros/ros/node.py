@@ -266,18 +266,13 @@ class SqueakPredictorNode(Node):
         self._input(self.live.set_nut_position(msg.data, time.monotonic()))
 
     def _on_joint_states(self, msg: JointState) -> None:
-        joint = self.joint.joint_name
-        if not joint or joint not in msg.name:
-            return
-        i, now = msg.name.index(joint), time.monotonic()
-        errors = []                     # both inputs first: one recompute at the new point
-        if i < len(msg.velocity):
-            errors.append(self.live.set_speed(msg.velocity[i], now))
-        if i < len(msg.position):
-            z = (self.joint.nut_position_at_zero_angle_m
-                 + msg.position[i] * self.live.model.params.lead_per_rad_m)
-            errors.append(self.live.set_nut_position(z, now))
-        self._input("; ".join(e for e in errors if e), now)
+        """The screw joint's speed and nut position (`live.rules`: ignored while joint_name is
+        '' or without that joint), then one recompute decision."""
+        now = time.monotonic()
+        outcome = self.live.set_joint_state(msg.name, msg.position, msg.velocity, now,
+                                            self.joint)
+        if not outcome.ignored:
+            self._input(outcome.error, now)
 
     def _input(self, error: str, now: float | None = None) -> None:
         now = time.monotonic() if now is None else now

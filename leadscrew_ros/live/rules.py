@@ -1,0 +1,296 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The input rules of the live node and of the offline replay, in one place: which values are
+taken, how a sensor_msgs/JointState maps to speed and nut position, what the operating point
+is, when it moved beyond a deadband, and at which nut position the contact is integrated.
+
+`LivePredictor` (the node) adds arrival times, the rate limit, staleness, the verdict and the
+advice; the replay's `Timeline` adds log-time ordering, counters and the trace. Both hold one
+`InputRules` and feed it every message in the order they take them, so the same message stream
+gives the same recomputes at the same points.
+
+Rules:
+
+- Speed [rad/s] and load [N]: a real number, finite, the load within the upper limit of
+  `ScrewParameters.axial_load_n` (`model.predictor.check_operating_point`).
+- Nut position z_o [m]: a real number with 0 <= z_o <= `ScrewParameters.nut_travel_m`.
+- A rejected value is not taken: the previous good one stays, and the rejection gives a
+  one-line message with the value (`model.display.exact`: never rounded onto the limit) and a
+  short reason without the value (the replay counts rejections by it).
+- JointState: taken only when `JointSettings.joint_name` is set and the message has that
+  joint. An empty `joint_name` ignores joint_states altogether, in the node and in the replay
+  alike: using it is an explicit opt-in, so a JointState from another driver (a wheel, an arm)
+  never moves the operating point. The joint's velocity is the speed, its angle theta the nut
+  position `nut_position_at_zero_angle_m + theta * ScrewParameters.lead_per_rad_m`; a message
+  shorter than the joint's index in `velocity` or `position` gives only what it has. Both
+  values are taken first, then one recompute decision follows, none if either was rejected.
+- Operating point (speed, load, nut): none until both a speed and a load were taken; the nut
+  is `ScrewParameters.nut_position_m` until a nut input was taken.
+- A recompute is due when the point moved more than a deadband (`LiveSettings`) from the point
+  last computed, or when none was computed yet; the contact is re-integrated only when the nut
+  moved more than `nut_deadband_m` from where it was last integrated.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass
+from typing import Sequence
+
+from ..model import OperatingPointError, ScrewParameters
+from ..model.display import exact
+from ..model.parameters import field_info
+from ..model.predictor import check_operating_point
+from .settings import JointSettings, LiveSettings
+
+# As check_operating_point: the upper limit of the axial_load_n field (for the reason text).
+_LOAD_LIMIT_N = field_info("axial_load_n")["hi"]
+
+Point = tuple[float, float, float]          # speed [rad/s], load [N], nut position [m]
+
+
+@dataclass(frozen=True)
+class Rejection:
+    """A value not taken: `reason` is short and without the value (counted by it), `message`
+    one line with the exact value."""
+
+    reason: str
+    message: str
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What one input message did."""
+
+    taken: tuple[str, ...] = ()              # inputs taken: 'speed', 'load', 'nut'
+    rejected: tuple[Rejection, ...] = ()     # values not taken
+    ignored: str = ""                        # why the whole message was ignored, else ''
+
+    @property
+    def error(self) -> str:
+        """The rejections' messages in one line ('' if none)."""
+        return "; ".join(r.message for r in self.rejected)
+
+    @property
+    def applies(self) -> bool:
+        """Something was taken and nothing rejected: a recompute decision follows."""
+        return bool(self.taken) and not self.rejected
+
+
+@dataclass
+class Inputs:
+    """The latest value taken of each input (None until one was)."""
+
+    speed_rad_s: float | None = None
+    load_n: float | None = None
+    nut_position_m: float | None = None
+
+
+@dataclass(frozen=True)
+class JointReading:
+    """A JointState read for the screw joint: 'speed' [rad/s] and 'nut' [m] as far as the
+    message has them (unchecked; the nut is the angle itself if that is not a number), or why
+    the message is ignored."""
+
+    values: dict[str, object]
+    ignored: str = ""
+
+
+def moved(point: Point, last: Point, deadbands: LiveSettings) -> bool:
+    """`point` moved beyond a deadband of `deadbands` from `last`.
+
+    Parameters
+    ----------
+    point, last : tuple of float
+        (speed [rad/s], load [N], nut position [m]).
+    deadbands : LiveSettings
+        Its speed_deadband_rad_s, load_deadband_n and nut_deadband_m.
+
+    Returns
+    -------
+    bool
+    """
+    limits = (deadbands.speed_deadband_rad_s, deadbands.load_deadband_n,
+              deadbands.nut_deadband_m)
+    return any(abs(a - b) > lim for a, b, lim in zip(point, last, limits))
+
+
+def read_joint_state(names: Sequence[str], positions: Sequence[float],
+                     velocities: Sequence[float], joints: JointSettings,
+                     lead_per_rad_m: float) -> JointReading:
+    """The screw joint's speed and nut position in a JointState (see the module docstring).
+
+    Parameters
+    ----------
+    names, positions, velocities : sequence
+        The message's fields (angles [rad], angular velocities [rad/s]).
+    joints : JointSettings
+        The screw joint's name ('' ignores every message) and the nut position at angle 0.
+    lead_per_rad_m : float
+        Nut travel per screw radian [m/rad].
+
+    Returns
+    -------
+    JointReading
+        Values are returned as they are (not checked): the caller takes them through its
+        checks.
+    """
+    name = joints.joint_name
+    if not name:
+        return JointReading({}, "joint_name not set")
+    try:
+        i = list(names).index(name)
+    except (TypeError, ValueError):
+        return JointReading({}, f"no joint {name!r}")
+    values = {}
+    if i < len(velocities):
+        values["speed"] = velocities[i]
+    if i < len(positions):
+        theta = _real(positions[i])
+        values["nut"] = positions[i] if theta is None else (    # else the nut check names it
+            joints.nut_position_at_zero_angle_m + theta * lead_per_rad_m)
+    if not values:
+        return JointReading({}, f"joint {name!r} without position or velocity")
+    return JointReading(values)
+
+
+def _is_real(value: object) -> bool:
+    """A real number, not a bool (numpy scalars included)."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def _real(value: object) -> float | None:
+    """`value` as a float if it is a real number (not a bool) within the float range, else
+    None."""
+    if not _is_real(value):
+        return None
+    try:
+        return float(value)
+    except OverflowError:                                      # an int beyond the float range
+        return None
+
+
+class InputRules:
+    """Latest accepted inputs, the point last computed and where the contact is integrated.
+
+    Parameters
+    ----------
+    params : ScrewParameters
+        Nut travel, lead per radian and the default nut position.
+    live : LiveSettings
+        The deadbands.
+    joints : JointSettings
+        The screw joint of JointState messages (may be replaced at any time: the node reads it
+        from its parameters).
+    """
+
+    def __init__(self, params: ScrewParameters, live: LiveSettings = LiveSettings(),
+                 joints: JointSettings = JointSettings()):
+        self.params, self.live, self.joints = params, live, joints
+        self.inputs = Inputs()
+        self.errors: dict[str, Rejection] = {}          # input -> its latest value's rejection,
+        #                                                 until a good value arrives
+        self.computed_at: Point | None = None           # the point last computed
+        self.contact_nut_m = params.nut_position_m      # where the contact is integrated
+
+    def reset(self, params: ScrewParameters, live: LiveSettings) -> None:
+        """New parameters or settings: the next point is computed whatever it is, with the
+        contact at the parameters' nut position until the nut moves beyond the deadband."""
+        self.params, self.live = params, live
+        self.computed_at, self.contact_nut_m = None, params.nut_position_m
+
+    # ---------------------------------------------------------------- single values
+    def set_speed(self, value: object) -> Outcome:
+        """Take a speed [rad/s]."""
+        return self._operating_value("speed", value)
+
+    def set_load(self, value: object) -> Outcome:
+        """Take an axial load [N]."""
+        return self._operating_value("load", value)
+
+    def set_nut_position(self, value: object) -> Outcome:
+        """Take a nut position z_o [m], 0 <= z_o <= nut_travel_m."""
+        z, travel = _real(value), self.params.nut_travel_m
+        if z is None:
+            return self._reject("nut", Rejection(
+                "nut position not a number", f"nut position {value!r} is not a number"))
+        if not (math.isfinite(z) and 0.0 <= z <= travel):
+            return self._reject("nut", Rejection(
+                f"nut position off the screw [0, {exact(travel)}] m",
+                f"nut position {exact(z)} m is off the screw: allowed [0, {exact(travel)}] m "
+                f"(z_o + b <= L)"))
+        self.inputs.nut_position_m = z
+        return self._taken("nut")
+
+    def _operating_value(self, kind: str, value: object) -> Outcome:
+        try:
+            if kind == "speed":
+                self.inputs.speed_rad_s, _ = check_operating_point(value, 0.0)
+            else:
+                _, self.inputs.load_n = check_operating_point(0.0, value)
+        except OperatingPointError as exc:
+            v = _real(value)                     # None also for an int beyond the floats
+            reason = (f"{kind} not a number" if not _is_real(value) else
+                      f"{kind} not finite" if v is None or not math.isfinite(v) else
+                      f"load beyond {exact(_LOAD_LIMIT_N)} N")
+            return self._reject(kind, Rejection(reason, str(exc)))
+        return self._taken(kind)
+
+    def _taken(self, kind: str) -> Outcome:
+        self.errors.pop(kind, None)
+        return Outcome(taken=(kind,))
+
+    def _reject(self, kind: str, rejection: Rejection) -> Outcome:
+        self.errors[kind] = rejection
+        return Outcome(rejected=(rejection,))
+
+    # ---------------------------------------------------------------- JointState
+    def set_joint_state(self, names: Sequence[str], positions: Sequence[float],
+                        velocities: Sequence[float]) -> Outcome:
+        """Take the screw joint's speed and nut position (both before any recompute decision);
+        ignored without `joints.joint_name` or without that joint."""
+        reading = read_joint_state(names, positions, velocities, self.joints,
+                                   self.params.lead_per_rad_m)
+        if reading.ignored:
+            return Outcome(ignored=reading.ignored)
+        setters = {"speed": self.set_speed, "nut": self.set_nut_position}
+        outcomes = [setters[kind](value) for kind, value in reading.values.items()]
+        return Outcome(tuple(k for o in outcomes for k in o.taken),
+                       tuple(r for o in outcomes for r in o.rejected))
+
+    # ---------------------------------------------------------------- operating point
+    @property
+    def nut_measured(self) -> bool:
+        """A nut input was taken (else the nut is the parameters' nut_position_m)."""
+        return self.inputs.nut_position_m is not None
+
+    @property
+    def nut_position_m(self) -> float:
+        """The nut position in use [m]: the latest taken, else the parameters' one."""
+        nut = self.inputs.nut_position_m
+        return self.params.nut_position_m if nut is None else nut
+
+    def point(self) -> Point | None:
+        """(speed, load, nut) at the latest inputs, None before a speed and a load."""
+        i = self.inputs
+        if i.speed_rad_s is None or i.load_n is None:
+            return None
+        return i.speed_rad_s, i.load_n, self.nut_position_m
+
+    def changed(self) -> bool:
+        """There is a point and it moved beyond a deadband since the last `compute` (or none
+        was computed yet)."""
+        point = self.point()
+        return point is not None and (self.computed_at is None
+                                      or moved(point, self.computed_at, self.live))
+
+    def compute(self) -> tuple[Point, float] | None:
+        """Mark the current point as computed; returns it and the nut position [m] the contact
+        is integrated at for it (moved only beyond nut_deadband_m), or None without a point."""
+        point = self.point()
+        if point is None:
+            return None
+        self.computed_at = point
+        if abs(point[2] - self.contact_nut_m) > self.live.nut_deadband_m:
+            self.contact_nut_m = point[2]
+        return point, self.contact_nut_m

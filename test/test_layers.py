@@ -1,0 +1,119 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The package's layers: imports flow one way (model -> live -> bag -> review -> ros -> cli),
+and the four lower layers import with rclpy and every ROS message package unavailable."""
+
+import ast
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+PACKAGE = REPO / "leadscrew_ros"
+LAYERS = ("model", "live", "bag", "review", "ros", "cli")
+ROS_FREE = LAYERS[:4]
+# What a module of a ROS-free layer may not import, directly or through a dependency.
+ROS_MODULES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "sensor_msgs",
+               "diagnostic_msgs", "std_srvs", "geometry_msgs", "rosidl_runtime_py",
+               "rosidl_parser", "rpyutils")
+
+
+def _modules(layer: str) -> list[str]:
+    return sorted(".".join(p.relative_to(REPO).with_suffix("").parts).removesuffix(".__init__")
+                  for p in (PACKAGE / layer).rglob("*.py"))
+
+
+def _imports(path: Path) -> list[tuple[int, str]]:
+    """(line, absolute module) of every import in the file, at any depth (functions,
+    TYPE_CHECKING blocks included)."""
+    module = ".".join(path.relative_to(REPO).with_suffix("").parts)
+    package = module.rsplit(".", 1)[0] if path.name != "__init__.py" else \
+        module.removesuffix(".__init__")
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                target = f"{base}.{node.module}" if node.module else base
+                names = [f"{target}.{a.name}" for a in node.names] if not node.module else []
+                out += [(node.lineno, n) for n in names or [target]]
+            else:
+                out.append((node.lineno, node.module or ""))
+    return sorted(out)
+
+
+def _layer(module: str) -> str | None:
+    parts = module.split(".")
+    return parts[1] if parts[0] == "leadscrew_ros" and len(parts) > 1 and \
+        parts[1] in LAYERS else None
+
+
+def violations(path: Path) -> list[str]:
+    """Imports of `path` that reach a layer above its own."""
+    own = _layer(".".join(path.relative_to(REPO).with_suffix("").parts))
+    found = []
+    for line, target in _imports(path):
+        layer = _layer(target)
+        if own and layer and LAYERS.index(layer) > LAYERS.index(own):
+            found.append(f"{path.relative_to(REPO)}:{line}: {own} imports {target}")
+        if own in ROS_FREE and target.split(".")[0] in ROS_MODULES:
+            found.append(f"{path.relative_to(REPO)}:{line}: {own} imports {target}")
+    return found
+
+
+def test_every_module_is_in_a_layer():
+    top = sorted(p.name for p in PACKAGE.glob("*.py"))
+    assert top == ["__init__.py"]
+    assert sorted(p.name for p in PACKAGE.iterdir() if p.is_dir() and p.name != "__pycache__") \
+        == sorted(LAYERS)
+
+
+def test_imports_flow_one_way():
+    found = [v for p in sorted(PACKAGE.rglob("*.py")) for v in violations(p)]
+    assert not found, "\n".join(found)
+
+
+def test_the_direction_check_sees_a_violation(tmp_path, monkeypatch):
+    """The check above can fail: an upward import, relative or absolute, inside a function."""
+    fake = tmp_path / "leadscrew_ros" / "bag"
+    fake.mkdir(parents=True)
+    (fake / "x.py").write_text("def f():\n    from ..ros.node import main\n"
+                               "import leadscrew_ros.review.replay\nfrom .cdr import y\n"
+                               "from std_msgs.msg import Float64\n")
+    monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
+    assert violations(fake / "x.py") == [
+        "leadscrew_ros/bag/x.py:2: bag imports leadscrew_ros.ros.node",
+        "leadscrew_ros/bag/x.py:3: bag imports leadscrew_ros.review.replay",
+        "leadscrew_ros/bag/x.py:5: bag imports std_msgs.msg"]
+
+
+BLOCKER = f"""
+import importlib, importlib.abc, sys
+class Block(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name.split('.')[0] in {ROS_MODULES!r}:
+            raise ImportError('blocked for this test: ' + name)
+sys.meta_path.insert(0, Block())
+"""
+
+
+@pytest.mark.parametrize("layer", ROS_FREE)
+def test_layer_imports_without_ros(layer):
+    modules = _modules(layer)
+    assert len(modules) >= 3, modules
+    code = BLOCKER + (f"for n in {modules!r}: importlib.import_module(n)\n"
+                      "print(len([m for m in sys.modules if m.startswith('leadscrew_ros')]))\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True,
+                       env=os.environ.copy(), timeout=120)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_the_blocker_blocks():
+    r = subprocess.run([sys.executable, "-c", BLOCKER + "import leadscrew_ros.ros.node\n"],
+                       cwd=REPO, capture_output=True, text=True, env=os.environ.copy(),
+                       timeout=120)
+    assert r.returncode != 0 and "blocked for this test: rclpy" in r.stderr
