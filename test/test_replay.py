@@ -491,7 +491,7 @@ def test_cli_truncated_log_then_recover_then_replay(short_log, tmp_path, capsys)
     recovered = tmp_path / "elsewhere.mcap"
     code, out, err = cli(capsys, "recover", cut, "-o", recovered)
     assert code == 0, err
-    assert out.startswith(f"recovered ") and str(recovered) in out
+    assert out.startswith("recovered ") and str(recovered) in out
     assert "damage: " in out and "/joint_states" in out and "time span: " in out
     n = int(out.split()[1])
     assert 0 < n < 3 * SHORT.samples

@@ -10,7 +10,6 @@ by our synthetic-log recorder.
 
 import gc
 import json
-import math
 import sqlite3
 import tracemalloc
 

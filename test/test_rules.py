@@ -26,7 +26,7 @@ from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.model.parameters import field_info
 from leadscrew_ros.review.replay import ReplaySettings, replay
 from leadscrew_ros.review.timeline import InputSettings, Timeline, predict_jobs
-from leadscrew_ros.ros.serialization import cdr_payload
+from cdr_reference import cdr_payload
 from test_node import Ros
 
 PARAMS = ScrewParameters()

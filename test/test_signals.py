@@ -7,7 +7,6 @@ Each runs as a process of its own on this test's private domain over loopback DD
 from __future__ import annotations
 
 import signal
-import sys
 import time
 from pathlib import Path
 

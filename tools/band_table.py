@@ -65,7 +65,7 @@ def _refine(model: SqueakModel, load: float, a: float, lam_a: complex, b: float,
         if (lam.real > 0) == (lam_a.real > 0):
             a, lam_a = mid, lam
         else:
-            b, lam_b = mid, lam
+            b = mid
     return math.sqrt(a * b)
 
 

@@ -25,7 +25,7 @@ from ..bag.cdr import DiagnosticStatusData, encode_diagnostic_array
 from ..live.predictor import Level, Status
 
 if TYPE_CHECKING:
-    from .node import CrashRecovery
+    from ..bag.crash_recovery import CrashRecovery
     from ..bag.recorder import Recorder
 
 TOPIC = "/diagnostics"
