@@ -117,3 +117,25 @@ def test_the_blocker_blocks():
                        cwd=REPO, capture_output=True, text=True, env=os.environ.copy(),
                        timeout=120)
     assert r.returncode != 0 and "blocked for this test: rclpy" in r.stderr
+
+
+def _layout_block() -> str:
+    readme = (REPO / "README.md").read_text()
+    section = readme[readme.index("## Layout\n"):]
+    return section.split("```\nleadscrew_ros/\n", 1)[1].split("\n```", 1)[0]
+
+
+def test_readme_layout_lists_every_module_in_its_layer():
+    """The README's tree names every module under its layer, and nothing that is not there."""
+    listed, layer = set(), None
+    for line in _layout_block().splitlines():
+        name = line.split()[0] if line.strip() else ""
+        if line.startswith("  ") and not line.startswith("    ") and name.endswith("/"):
+            layer = name.rstrip("/")
+        elif line.startswith("    ") and name.endswith(".py"):
+            listed.add(f"{layer}/{name}")
+        elif line and not line.startswith(" "):
+            break                                  # tools/, config/ ...: outside the package
+    actual = {str(p.relative_to(PACKAGE)) for p in PACKAGE.glob("*/*.py")
+              if p.name != "__init__.py" or p.parent.name == "cli"}
+    assert listed == actual
