@@ -53,8 +53,7 @@ from rclpy.context import Context                                    # noqa: E40
 from rclpy.executors import SingleThreadedExecutor                   # noqa: E402
 from rclpy.node import Node                                          # noqa: E402
 from rclpy.parameter import Parameter                                # noqa: E402
-from rclpy.event_handler import (PublisherEventCallbacks,  # noqa: E402
-                                 SubscriptionEventCallbacks)
+from rclpy.event_handler import (PublisherEventCallbacks, # noqa: E402 SubscriptionEventCallbacks)
 from rclpy.qos import qos_profile_sensor_data                        # noqa: E402
 from std_msgs.msg import Float64                                     # noqa: E402
 

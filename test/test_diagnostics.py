@@ -23,9 +23,9 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
 from leadscrew_ros.ros.diagnostics import (KEY_BAG, KEY_CUT_OFF_BAGS, KEY_FILES, KEY_LOST,
-                                       KEY_MESSAGES, PREDICTION_TASK, RECORDING_TASK, TOPIC,
-                                       DiagnosticStatusWrapper, Updater, key_lost_on,
-                                       recording_status, status_task)
+                                           KEY_MESSAGES, PREDICTION_TASK, RECORDING_TASK, TOPIC,
+                                           DiagnosticStatusWrapper, Updater, key_lost_on,
+                                           recording_status, status_task)
 from leadscrew_ros.live.predictor import Level, Status
 from leadscrew_ros.ros.node import LATCHED, NODE_NAME
 from test_node import SQUEAK, at, ros  # noqa: F401  (ros: fixture)

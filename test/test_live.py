@@ -15,12 +15,12 @@ from hypothesis import strategies as st
 
 from leadscrew_ros.live import predictor as live_module
 from leadscrew_ros.live.predictor import (KEY_NUT_POSITION, KEY_RISK, KEY_SAFE_SPEED_ERROR,
-                                KEY_SAFE_SPEED_PENDING, KEY_SQUEAK_FREQUENCIES, KEY_VALID,
-                                KEY_VALIDITY, LatestWorker, Level, LivePredictor, LiveSettings,
-                                Superseded)
+                                          KEY_SAFE_SPEED_PENDING, KEY_SQUEAK_FREQUENCIES, KEY_VALID,
+                                          KEY_VALIDITY, LatestWorker, Level, LivePredictor,
+                                          LiveSettings, Superseded)
 from leadscrew_ros.model import Prediction, SqueakModel, Validity
 from leadscrew_ros.model.advice import (_BAND_POINTS, _MAX_REFINE, _SCAN_BATCH, EDGE_RTOL,
-                                         band_around, speed_bands)
+                                        band_around, speed_bands)
 from leadscrew_ros.model.sweep import growth_field
 
 MODEL = SqueakModel()                        # Table 1; unstable band ~0.81..55.2 rad/s at 200 N

@@ -8,8 +8,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from leadscrew_ros.model import (OperatingPointError, ParameterError, ScrewParameters,
-                                 SqueakModel, Validity)
+from leadscrew_ros.model import (OperatingPointError, ParameterError, ScrewParameters, SqueakModel,
+                                 Validity)
 from leadscrew_ros.model.sweep import sweep
 from leadscrew_ros.model.parameters import MAX_CONTACT_TURNS, field_info, field_names
 

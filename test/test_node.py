@@ -34,7 +34,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray
 
 from leadscrew_ros.live.predictor import (KEY_FORMULATION, KEY_NUT_POSITION, KEY_RISK, KEY_SPEED,
-                                KEY_VALIDITY, Level)
+                                          KEY_VALIDITY, Level)
 from leadscrew_ros.model import SqueakModel, Validity
 from leadscrew_ros.model.advice import speed_bands
 from leadscrew_ros.bag.messages import MODE_COLUMNS, modes_payload

@@ -43,7 +43,8 @@ from leadscrew_ros.bag.messages import OUTPUT_TYPES, RISK
 from leadscrew_ros.ros.node import OUTPUT_CLASSES
 from leadscrew_ros.bag.logfile import LogError, inspect, is_complete, log_files, read_log, recover
 from leadscrew_ros.live.predictor import Level
-from leadscrew_ros.bag.recorder import LOST_BY_TOPIC_KEY, LOST_KEY, Recorder, RecordSettings, TopicLoss
+from leadscrew_ros.bag.recorder import (LOST_BY_TOPIC_KEY, LOST_KEY, Recorder, RecordSettings,
+                                        TopicLoss)
 from cdr_reference import cdr_payload
 from test_node import COLLECT, LOAD, SQUEAK, STABLE, Ros, at, node_command, wait_initialised
 from test_demo import stop as stop_processes

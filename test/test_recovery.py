@@ -15,7 +15,7 @@ from rosbags.highlevel import AnyReader
 
 from leadscrew_ros.cli import main
 from leadscrew_ros.bag.logfile import (LogError, cut_off_bags, inspect, is_complete, log_files,
-                                   read_log, read_messages, recover_bag)
+                                       read_log, read_messages, recover_bag)
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
 from test_recording import answering_node, ns  # noqa: F401  (ns: fixture)
 

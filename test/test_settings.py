@@ -17,8 +17,8 @@ import yaml
 
 from leadscrew_ros.bag.recorder import RecordSettings
 from leadscrew_ros.model.fields import default_text, range_text
-from leadscrew_ros.ros.parameters import (GROUPS, PARAMETERS, NodeSettings, RecordingControl,
-                                          build, descriptor, yaml_value)
+from leadscrew_ros.ros.parameters import (GROUPS, PARAMETERS, NodeSettings, RecordingControl, build,
+                                          descriptor, yaml_value)
 
 ROOT = Path(__file__).resolve().parents[1]
 SPECS = {s.name: s for s in PARAMETERS}

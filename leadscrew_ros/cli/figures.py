@@ -21,8 +21,8 @@ import numpy as np
 from ..model.friction import friction_coefficient, sliding_speed
 from ..model.parameters import ScrewParameters
 from ..model.predictor import SqueakModel
-from ..model.sweep import (REFERENCE_SPEED_RAD_S, MapResult, SweepResult, Work,
-                          _native, map_work, stability_map, sweep, sweep_work)
+from ..model.sweep import (REFERENCE_SPEED_RAD_S, MapResult, SweepResult, Work, _native, map_work,
+                           stability_map, sweep, sweep_work)
 from ..model.tracking import Branch, track_modes
 from ..review.plots import (at, axis_display, axis_label, fixed_text, fmt, new_figure,
                             plot_frequencies, plot_map, save_figure, scale_axis)

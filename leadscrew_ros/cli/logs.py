@@ -8,8 +8,7 @@ import argparse
 from dataclasses import fields
 from pathlib import Path
 
-from ..bag.logfile import (LogInfo, bag_of, cut_off_bags, inspect, log_files, recover,
-                           recover_bag)
+from ..bag.logfile import (LogInfo, bag_of, cut_off_bags, inspect, log_files, recover, recover_bag)
 from ..live.settings import JointSettings, LiveSettings
 from ..model.fields import help_text
 from ..review.timeline import InputSettings

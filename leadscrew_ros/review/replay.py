@@ -45,8 +45,7 @@ from ..bag.logfile import LogError, LogMessage, Topic
 from ..bag.logsource import LogSource, log_topics, open_log
 from ..model import Prediction, SqueakModel
 from .progress import progress_bar
-from .timeline import (InputError, InputSettings, Job, Timeline, input_namespaces,
-                       predict_jobs)
+from .timeline import (InputError, InputSettings, Job, Timeline, input_namespaces, predict_jobs)
 
 DEFAULT_NAMESPACE = "/replay"
 _BATCH_JOBS = 256              # predictions per batched solve (one worker task)

@@ -36,8 +36,8 @@ from .decimation import Envelope
 from ..live.rules import InputRules, Outcome
 from ..live.settings import JointSettings, LiveSettings
 from ..bag.logfile import LogMessage, Topic
-from ..model import (OperatingPointError, ParameterError, Prediction, ScrewParameters,
-                     SqueakModel, Validity)
+from ..model import (OperatingPointError, ParameterError, Prediction, ScrewParameters, SqueakModel,
+                     Validity)
 from ..model.display import exact
 from ..model.predictor import check_operating_point
 

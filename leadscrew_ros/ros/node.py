@@ -7,11 +7,12 @@ Publishes (reliable, transient local, depth 1): squeak/risk, squeak/unstable_fre
 squeak/active, squeak/modes, squeak/safe_speed and /diagnostics.
 Records inputs and outputs to MCAP (`record.*` parameters, std_srvs/SetBool `~/record`):
 inputs from subscriptions of their own that never wait for the model, with every lost message
-counted (`leadscrew_ros.ros.input_recording`); on start, reports (or recovers) its own bags cut off
-by an earlier crash. `squeak_node --help` lists the parameters and topics.
-The physics lives in `leadscrew_ros.model`, the recompute policy and the prediction verdict in
-`leadscrew_ros.live.predictor`, the recording in `leadscrew_ros.bag.recorder`, the /diagnostics updater and the
-recording verdict in `leadscrew_ros.ros.diagnostics`.
+counted (`ros.input_recording`); outputs as the CDR bytes it publishes (`bag.messages`); on
+start, reports (or recovers) its own bags cut off by an earlier crash (`bag.crash_recovery`).
+`squeak_node --help` lists the parameters and topics. The physics lives in `model`, the input
+rules in `live.rules`, the recompute policy and the verdict in `live.predictor`, the parameter
+table in `ros.parameters`, the /diagnostics updater and the recording verdict in
+`ros.diagnostics`: this class wires them and keeps its callbacks short.
 """
 
 from __future__ import annotations
@@ -38,8 +39,8 @@ from std_srvs.srv import SetBool
 
 from .diagnostics import PREDICTION_TASK, RECORDING_TASK, Updater, recording_status, status_task
 from .input_recording import InputRecording
-from .parameters import (GROUPS, PARAMETER_NAMES, PARAMETERS, NodeSettings, RecordingControl,
-                         build, descriptor, help_lines, names_of)
+from .parameters import (GROUPS, PARAMETER_NAMES, PARAMETERS, NodeSettings, RecordingControl, build,
+                         descriptor, help_lines, names_of)
 from ..live.predictor import LivePredictor
 from ..live.settings import JointSettings, LiveSettings
 from ..bag import messages, msgdefs
