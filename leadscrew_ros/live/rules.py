@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 from ..model import OperatingPointError, ScrewParameters
 from ..model.display import exact
@@ -58,9 +58,8 @@ class Rejection:
     message: str
 
 
-@dataclass(frozen=True)
-class Outcome:
-    """What one input message did."""
+class Outcome(NamedTuple):
+    """What one input message did (a NamedTuple: one per input message, so cheap)."""
 
     taken: tuple[str, ...] = ()              # inputs taken: 'speed', 'load', 'nut'
     rejected: tuple[Rejection, ...] = ()     # values not taken
@@ -75,6 +74,9 @@ class Outcome:
     def applies(self) -> bool:
         """Something was taken and nothing rejected: a recompute decision follows."""
         return bool(self.taken) and not self.rejected
+
+
+_TAKEN = {kind: Outcome(taken=(kind,)) for kind in ("speed", "load", "nut")}
 
 
 @dataclass
@@ -110,9 +112,9 @@ def moved(point: Point, last: Point, deadbands: LiveSettings) -> bool:
     -------
     bool
     """
-    limits = (deadbands.speed_deadband_rad_s, deadbands.load_deadband_n,
-              deadbands.nut_deadband_m)
-    return any(abs(a - b) > lim for a, b, lim in zip(point, last, limits))
+    return (abs(point[0] - last[0]) > deadbands.speed_deadband_rad_s
+            or abs(point[1] - last[1]) > deadbands.load_deadband_n
+            or abs(point[2] - last[2]) > deadbands.nut_deadband_m)
 
 
 def read_joint_state(names: Sequence[str], positions: Sequence[float],
@@ -237,8 +239,9 @@ class InputRules:
         return self._taken(kind)
 
     def _taken(self, kind: str) -> Outcome:
-        self.errors.pop(kind, None)
-        return Outcome(taken=(kind,))
+        if self.errors:
+            self.errors.pop(kind, None)
+        return _TAKEN[kind]
 
     def _reject(self, kind: str, rejection: Rejection) -> Outcome:
         self.errors[kind] = rejection

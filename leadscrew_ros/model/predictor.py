@@ -173,6 +173,9 @@ def check_operating_point(speed_rad_s: Any, load_n: Any) -> tuple[float, float]:
     OperatingPointError
         A value is not a real number, not finite, or the load is implausibly large.
     """
+    if (type(speed_rad_s) is float and type(load_n) is float and math.isfinite(speed_rad_s)
+            and abs(load_n) <= _LOAD_LIMIT_N):          # the common case, per input message
+        return speed_rad_s, load_n
     out = []
     for name, unit, v in (("speed", "rad/s", speed_rad_s), ("load", "N", load_n)):
         if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):

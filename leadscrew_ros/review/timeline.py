@@ -234,10 +234,10 @@ class Timeline:
         except ValueError:
             self.rejected[f"{name}: undecodable payload"] += 1
             accepted = False
-        nan = math.nan
-        self.trace.add(self.seconds(self.now_ns), nan if self.speed is None else self.speed,
-                       nan if self.load is None else self.load,
-                       self.nut if self.nut_measured else nan)
+        i, nan = self.rules.inputs, math.nan
+        self.trace.add(self.seconds(self.now_ns), nan if i.speed_rad_s is None else i.speed_rad_s,
+                       nan if i.load_n is None else i.load_n,
+                       nan if i.nut_position_m is None else i.nut_position_m)
         return self._recompute(index, m.log_time_ns) if accepted else None
 
     def _handler(self, topic: str, type_name: str) -> Callable[[bytes], bool] | None:
