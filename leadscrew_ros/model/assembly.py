@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
+from types import SimpleNamespace
+from typing import Mapping
 
 import numpy as np
 
@@ -72,13 +74,23 @@ class Geometry:
         a[n + np.arange(n), n + np.arange(n)] = -2 * self.params.modal_damping * om    # (A.1)
         return a
 
-    def state_matrices(self, speed_rad_s, load_n) -> np.ndarray:
+    def state_matrices(self, speed_rad_s, load_n, scattered: Mapping[str, np.ndarray] | None
+                       = None) -> np.ndarray:
         """First-order state matrices [[0, I], [-K, -D]] of (27) for arrays of operating points
-        (broadcast), shape (..., 2N, 2N). One matrix product rescales all precomputed parts."""
+        (broadcast), shape (..., 2N, 2N). One matrix product rescales all precomputed parts.
+
+        `scattered` gives arrays of non-geometry parameters (friction, damping; broadcast with
+        the operating points) that replace the nominal values: they enter only through the
+        scale factors and the damping diagonal, so samples of them cost one product each."""
         speed = np.asarray(speed_rad_s, float)
-        s = scales(self.params, speed, load_n, self.contact.alpha)
+        if scattered:                          # one matrix per sample, whatever varies
+            speed = np.broadcast_to(speed, np.broadcast_shapes(
+                speed.shape, *(np.shape(v) for v in scattered.values())))
+        params = self.params if not scattered else SimpleNamespace(
+            **{**self.params.as_dict(), **scattered})
+        s = scales(params, speed, load_n, self.contact.alpha)
         parts = (s["W1"], s["W5q"], s["W3"], s["W5qdot"], speed)
-        coef = (np.array(parts) if speed.ndim == 0 and np.ndim(load_n) == 0
+        coef = (np.array(parts) if all(np.ndim(x) == 0 for x in parts)
                 else np.stack(np.broadcast_arrays(*parts), axis=-1))
         n = self.n
         # einsum, not @: a BLAS matmul here wakes OpenBLAS threads that keep spinning on the
@@ -90,7 +102,16 @@ class Geometry:
         out[..., n:, :] -= lower
         flat = out.reshape(out.shape[:-2] + (4 * n * n,))                    # a view
         flat[..., self._k_diagonal] += (speed ** 2)[..., None]               # -Omega^2 I in K
+        if scattered and "modal_damping" in scattered:                       # (A.1)
+            extra = np.asarray(scattered["modal_damping"], float) - self.params.modal_damping
+            flat[..., self._d_diagonal] -= 2 * extra[..., None] * self.basis.omega_rad_s
         return out
+
+    @cached_property
+    def _d_diagonal(self) -> np.ndarray:
+        """Flat indices of the diagonal of the D block of a 2N x 2N state matrix."""
+        n = self.n
+        return (n + np.arange(n)) * (2 * n) + n + np.arange(n)
 
     @cached_property
     def _k_diagonal(self) -> np.ndarray:

@@ -7,6 +7,7 @@ import math
 from dataclasses import dataclass
 from enum import IntEnum
 from functools import cached_property
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -244,7 +245,8 @@ class SqueakModel:
         """
         return SqueakModel(self.params.with_(**changes))
 
-    def validity_code(self, speed_rad_s, load_n) -> np.ndarray:
+    def validity_code(self, speed_rad_s, load_n, scattered: dict | None = None
+                      ) -> np.ndarray:
         """Vectorised validity: `Validity` codes (Validity.OK where the linearisation holds).
 
         Parameters
@@ -253,6 +255,9 @@ class SqueakModel:
             Screw speeds [rad/s].
         load_n : array_like
             Axial loads [N], broadcast against `speed_rad_s`.
+        scattered : dict of str to array_like, optional
+            Non-geometry parameter values replacing the nominal ones (broadcast), as in
+            `Geometry.state_matrices`.
 
         Returns
         -------
@@ -261,13 +266,14 @@ class SqueakModel:
             PARAMETERS_REJECTED never occur here: they need a solve or a parameter change).
         """
         p = self.params
+        friction = SimpleNamespace(**{**p.as_dict(), **scattered}) if scattered else p
         w = np.abs(np.asarray(speed_rad_s, float))
         code = np.where(w < p.min_speed_rad_s, Validity.BELOW_MIN_SPEED,
                         np.where(w >= self.critical_speed_rad_s, Validity.AT_CRITICAL_SPEED,
                                  Validity.OK))
         if p.formulation == "consistent":      # overhauling load on a self-locking thread
             locks = ((np.sign(speed_rad_s) * np.sign(load_n) < 0)
-                     & (mu_o(p, w) * math.tan(p.helix_angle_rad) >= 1))
+                     & (mu_o(friction, w) * math.tan(p.helix_angle_rad) >= 1))
             code = np.where((code == Validity.OK) & locks, Validity.SELF_LOCKING, code)
         return code
 

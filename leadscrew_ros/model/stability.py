@@ -52,6 +52,12 @@ def oscillatory_mask(eigvals: np.ndarray) -> np.ndarray:
     return eigvals.imag > _IMAG_TOL * np.abs(eigvals)
 
 
+def unstable_mask(eigvals: np.ndarray) -> np.ndarray:
+    """Squeak eigenvalues: oscillatory with Re(lambda) > 0, by the thresholds of `classify`."""
+    mag = np.abs(eigvals)
+    return (eigvals.imag > _IMAG_TOL * mag) & (eigvals.real > _GROWTH_TOL * mag)
+
+
 def max_growth_rate(eigvals: np.ndarray) -> np.ndarray:
     """Largest Re(lambda) over the oscillatory eigenvalues, along the last axis (1/s)."""
     return np.where(oscillatory_mask(eigvals), eigvals.real, -np.inf).max(axis=-1)

@@ -1,0 +1,118 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Probability of squeak over the unit-to-unit scatter of the parameters (`scatter`).
+
+    P(squeak) = probability that some oscillatory eigenvalue of (27) has Re(lambda) > 0
+
+at one speed, load and nut position. `monte_carlo` is the reference estimator: scrambled Sobol
+samples in independent replicates (standard error from their spread). Friction and damping do
+not change the geometry: a sample only rescales the precomputed matrices
+(`Geometry.state_matrices(..., scattered=)`), so thousands of samples cost one batched
+eigenvalue solve. A sample counts as squeaking exactly when `SqueakModel(sample).predict` would
+list a squeak mode (same thresholds; a sample outside the model's validity, e.g. self-locking,
+does not squeak).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .parameters import field_info
+from .predictor import SqueakModel, Validity, check_operating_point
+from .scatter import Samples
+from .stability import unstable_mask
+
+
+@dataclass(frozen=True)
+class ProbabilityEstimate:
+    """P(squeak) at one operating point.
+
+    Attributes
+    ----------
+    probability : float
+        Estimated probability of squeak, in [0, 1].
+    stderr : float or None
+        Standard error of `probability` (None: not sampled, e.g. no scatter).
+    count : int
+        Samples used (0: not sampled).
+    """
+
+    probability: float
+    stderr: float | None
+    count: int
+
+
+def _geometry_free(samples: Samples) -> bool:
+    return not any(field_info(n)["geometry"] for n in samples.scatter.names)
+
+
+def squeaks(model: SqueakModel, speed_rad_s: float, load_n: float,
+            values: dict[str, np.ndarray]) -> np.ndarray:
+    """Whether each sample of non-geometry parameters squeaks at this operating point.
+
+    Parameters
+    ----------
+    model : SqueakModel
+        The nominal model (its geometry is shared by every sample).
+    speed_rad_s, load_n : float
+        Operating point [rad/s], [N].
+    values : dict of str to numpy.ndarray
+        Sampled parameter values (non-geometry fields), all of one shape.
+
+    Returns
+    -------
+    numpy.ndarray of bool
+        True where the sample has a squeak mode, in the shape of the values.
+    """
+    shape = np.broadcast_shapes(*(np.shape(v) for v in values.values()))
+    flat = {k: np.broadcast_to(v, shape).ravel() for k, v in values.items()}
+    valid = model.validity_code(np.full(len(next(iter(flat.values()))), speed_rad_s), load_n,
+                                scattered=flat) == Validity.OK
+    out = np.zeros(valid.shape, bool)
+    if valid.any():
+        sub = {k: v[valid] for k, v in flat.items()}
+        lam = np.linalg.eigvals(model.geometry.state_matrices(speed_rad_s, load_n, sub))
+        out[valid] = unstable_mask(lam).any(axis=-1)
+    return out.reshape(shape)
+
+
+def monte_carlo(model: SqueakModel, speed_rad_s: float, load_n: float,
+                samples: Samples) -> ProbabilityEstimate | None:
+    """Reference estimate of P(squeak) over `samples` (from `scatter.draw`).
+
+    Parameters
+    ----------
+    model : SqueakModel
+        The nominal model; `samples` must scatter non-geometry parameters only.
+    speed_rad_s, load_n : float
+        Operating point [rad/s], [N].
+    samples : Samples
+        Scatter samples in replicates.
+
+    Returns
+    -------
+    ProbabilityEstimate or None
+        None when the nominal operating point is outside the model's validity.
+
+    Raises
+    ------
+    OperatingPointError
+        Speed or load is not a finite number of plausible magnitude.
+    ValueError
+        The samples scatter a geometry parameter.
+    """
+    speed, load = check_operating_point(speed_rad_s, load_n)
+    if model.validity(speed, load)[0] is not Validity.OK:
+        return None
+    if not _geometry_free(samples):
+        raise ValueError("monte_carlo scatters friction and damping only; geometry scatter "
+                         "needs a model per sample")
+    if not samples.scatter.names:
+        p = model.predict(speed, load)
+        return ProbabilityEstimate(float(bool(p.squeak_modes)), None, 0)
+    hits = squeaks(model, speed, load, samples.values)              # (replicates, per)
+    per_replicate = hits.mean(axis=1)
+    stderr = float(per_replicate.std(ddof=1) / math.sqrt(len(per_replicate)))
+    return ProbabilityEstimate(float(hits.mean()), stderr, hits.size)
