@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from leadscrew_ros.model import ParameterError, ScrewParameters, SqueakModel
-from leadscrew_ros.model.probability import monte_carlo, squeaks
+from leadscrew_ros.model.probability import linearised, monte_carlo, squeaks
 from leadscrew_ros.model.scatter import DEFAULT_SCATTER, Scatter, draw, scatterable, valid_mask
 
 MODEL = SqueakModel()
@@ -128,9 +128,45 @@ def test_geometry_scatter_is_refused_by_the_fast_estimator():
                           st.floats(0.0, 1.0), max_size=4),
        speed=st.floats(-500.0, 500.0), load=st.floats(-1e4, 1e4))
 def test_probability_is_a_probability(sd, speed, load):
-    e = monte_carlo(MODEL, speed, load, draw(MODEL.params, Scatter(sd), 64, seed=0))
+    samples = draw(MODEL.params, Scatter(sd), 64, seed=0)
     valid = MODEL.validity(speed, load)[0].name == "OK"
-    assert (e is None) == (not valid)
-    if e is not None:
-        assert 0.0 <= e.probability <= 1.0 and not math.isnan(e.probability)
-        assert e.stderr is None or (math.isfinite(e.stderr) and e.stderr >= 0)
+    for e in (monte_carlo(MODEL, speed, load, samples), linearised(MODEL, speed, load, samples)):
+        assert (e is None) == (not valid)
+        if e is not None:
+            assert 0.0 <= e.probability <= 1.0 and not math.isnan(e.probability)
+            assert e.stderr is None or (math.isfinite(e.stderr) and e.stderr >= 0)
+
+
+FAST_GRID_SPEEDS = (5.0, 20.0, 40.0, 50.0, 55.0, 60.0, 70.0, -40.0)     # band, both edges
+FAST_GRID_LOADS = (50.0, 200.0, 600.0)
+
+
+@pytest.mark.parametrize("formulation", ["paper", "consistent"])
+def test_fast_estimator_is_within_0_03_of_the_reference(formulation):
+    """The live estimator on 1024 samples against Monte Carlo on 2048 other samples over a
+    speed x load grid that crosses the band edges."""
+    model = MODEL if formulation == "paper" else CONSISTENT
+    ref = draw(model.params, Scatter(), 2048, seed=11)
+    live = draw(model.params, Scatter(), 1024, seed=12)
+    errors, inside = [], 0
+    for load in FAST_GRID_LOADS:
+        for speed in FAST_GRID_SPEEDS:
+            mc, fast = monte_carlo(model, speed, load, ref), linearised(model, speed, load, live)
+            assert (mc is None) == (fast is None)
+            if mc is not None:
+                errors.append(abs(fast.probability - mc.probability))
+                inside += 0.05 < mc.probability < 0.95
+    assert max(errors) <= 0.03 and inside >= 4          # several points near an edge
+
+
+def test_fast_estimator_on_the_same_samples_is_nearly_exact():
+    s = draw(MODEL.params, Scatter(), 4096)
+    for speed in (50.0, 55.0, 60.0):
+        assert linearised(MODEL, speed, 200.0, s).probability == pytest.approx(
+            monte_carlo(MODEL, speed, 200.0, s).probability, abs=0.005)
+
+
+def test_fast_estimator_with_zero_scatter_is_the_nominal_verdict():
+    for speed in (20.0, 60.0, -30.0):
+        e = linearised(MODEL, speed, 200.0, draw(MODEL.params, Scatter({}), 64))
+        assert e.probability == float(bool(MODEL.predict(speed, 200.0).squeak_modes))

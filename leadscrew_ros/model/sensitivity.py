@@ -88,15 +88,78 @@ def _scale_derivatives(model: SqueakModel, speed: float, load: float) -> dict[st
     return out
 
 
-def least_stable(model: SqueakModel, speed_rad_s: float, load_n: float
-                 ) -> tuple[complex, np.ndarray, np.ndarray, np.ndarray]:
-    """The least-stable oscillatory eigenvalue, its right and left eigenvectors, and A."""
-    a = model.state_matrix(speed_rad_s, load_n)
-    lam, right = np.linalg.eig(a)
-    left = np.linalg.inv(right).conj().T              # columns: left eigenvectors, y_i^H x_j = d_ij
-    osc = np.flatnonzero(oscillatory_mask(lam))
-    k = osc[np.argmax(lam.real[osc])]
-    return complex(lam[k]), right[:, k], left[:, k], a
+class EigenPairs:
+    """The oscillatory eigenvalues (Im > 0) of A at one operating point with their right and
+    left eigenvectors (y_i^H x_i = 1), and first-order rates of change of the eigenvalues."""
+
+    def __init__(self, model: SqueakModel, speed: float, load: float):
+        self.model, self.speed, self.load = model, speed, load
+        lam, right = np.linalg.eig(model.state_matrix(speed, load))
+        osc = np.flatnonzero(oscillatory_mask(lam))
+        self.lam, self.x = lam[osc], right[:, osc]
+        self.y_h = np.linalg.inv(right)[osc]           # rows y_i^H
+        n = model.geometry.n
+        self._units = model.geometry.lower_half_units.reshape(-1, n, 2 * n)
+
+    def coefficient_rate(self, dc) -> np.ndarray:
+        """d lambda for a change `dc` of the coefficient vector (W1, W5q, W3, W5qdot, Omega)
+        of `Geometry.state_matrices` (dA = -[0; sum_k dc_k U_k])."""
+        n = self.model.geometry.n
+        d_lower = np.einsum("k,kij->ij", np.asarray(dc, float), self._units)
+        return -np.einsum("ij,ji->i", self.y_h[:, n:], d_lower @ self.x)
+
+    def damping_rate(self) -> np.ndarray:
+        """d lambda / d xi of the modal damping ratio (A.1): dA = -2 diag(omega) in D."""
+        n, om = self.model.geometry.n, self.model.geometry.basis.omega_rad_s
+        return np.einsum("ij,ji->i", self.y_h[:, n:], -2 * om[:, None] * self.x[n:])
+
+    def speed_rate_of_stiffness(self) -> np.ndarray:
+        """d lambda / d Omega of the -Omega^2 I term of K alone: dA = 2 Omega I in A's K block."""
+        n = self.model.geometry.n
+        return 2 * self.speed * np.einsum("ij,ji->i", self.y_h[:, n:], self.x[:n])
+
+    def matrix_rate(self, da: np.ndarray) -> np.ndarray:
+        """d lambda for a change `da` of the whole state matrix."""
+        return np.einsum("ij,ji->i", self.y_h, da @ self.x)
+
+
+def mode_derivatives(model: SqueakModel, speed: float, load: float, geometry: bool = True
+                     ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Oscillatory eigenvalues (Im > 0) and d lambda / d ln p of each, per parameter.
+
+    Parameters
+    ----------
+    model : SqueakModel
+        The model at the nominal parameters.
+    speed, load : float
+        A valid operating point [rad/s], [N].
+    geometry : bool
+        Also the geometry parameters (two geometries each).
+
+    Returns
+    -------
+    lam : numpy.ndarray
+        Oscillatory eigenvalues [1/s], shape (M,).
+    derivatives : dict of str to numpy.ndarray
+        Parameter -> d lambda / d ln p [1/s], complex, shape (M,).
+    """
+    pairs, p = EigenPairs(model, speed, load), model.params
+    out = {}
+    for name, dc in _scale_derivatives(model, speed, load).items():
+        dl = pairs.coefficient_rate(dc)
+        if name == "speed_rad_s":
+            dl = dl + pairs.speed_rate_of_stiffness()
+        value = speed if name == "speed_rad_s" else load if name == "load_n" else \
+            getattr(p, name)
+        out[name] = value * dl
+    out["modal_damping"] = p.modal_damping * pairs.damping_rate()
+    if geometry:
+        for name in GEOMETRY:
+            h = _GEOMETRY_STEP * getattr(p, name)
+            hi, lo = (model.with_params(**{name: getattr(p, name) + s}).state_matrix(speed, load)
+                      for s in (h, -h))
+            out[name] = getattr(p, name) * pairs.matrix_rate((hi - lo) / (2 * h))
+    return pairs.lam, out
 
 
 def sensitivities(model: SqueakModel, speed_rad_s: float, load_n: float,
@@ -121,31 +184,7 @@ def sensitivities(model: SqueakModel, speed_rad_s: float, load_n: float,
     speed, load = check_operating_point(speed_rad_s, load_n)
     if model.validity(speed, load)[0] is not Validity.OK:
         return None
-    lam, x, y, a = least_stable(model, speed, load)
-    geo, n = model.geometry, model.geometry.n
-    units = geo.lower_half_units.reshape(-1, n, 2 * n)
-
-    def rate(d_lower: np.ndarray) -> complex:         # y^H dA x with dA = [0; -d_lower]
-        return complex(-(y[n:].conj() @ (d_lower @ x)))
-
-    p = model.params
-    out = {}
-    for name, dc in _scale_derivatives(model, speed, load).items():
-        d_lower = np.einsum("k,kij->ij", dc, units)
-        dl = rate(d_lower)
-        if name == "speed_rad_s":                     # -Omega^2 I in K: dA/dOmega += 2 Omega
-            dl += complex(2 * speed * (y[n:].conj() @ x[:n]))
-        value = speed if name == "speed_rad_s" else load if name == "load_n" else \
-            getattr(p, name)
-        out[name] = value * dl.real
-    om = geo.basis.omega_rad_s                          # (A.1): d(-2 xi omega)/d ln xi
-    out["modal_damping"] = complex(y[n:].conj() @ (-2 * p.modal_damping * om * x[n:])).real
-    if geometry:
-        for name in GEOMETRY:
-            h = _GEOMETRY_STEP * getattr(p, name)
-            hi, lo = (model.with_params(**{name: getattr(p, name) + s}).state_matrix(speed, load)
-                      for s in (h, -h))
-            da = (hi - lo) / (2 * h)
-            out[name] = getattr(p, name) * complex(y.conj() @ (da @ x)).real
-    return Sensitivity(lam, out)
-
+    lam, derivatives = mode_derivatives(model, speed, load, geometry)
+    k = int(np.argmax(lam.real))
+    return Sensitivity(complex(lam[k]), {name: float(d[k].real)
+                                         for name, d in derivatives.items()})
