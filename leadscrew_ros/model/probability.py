@@ -56,6 +56,12 @@ class ProbabilityEstimate:
     count: int
 
 
+def _values(model: SqueakModel, samples: Samples) -> dict[str, np.ndarray]:
+    """The samples' parameter values around this model's parameters (the scatter is relative,
+    so a changed nominal value moves every sample with it)."""
+    return samples.scatter.values(model.params, samples.u)
+
+
 def _geometry_free(samples: Samples) -> bool:
     return not any(field_info(n)["geometry"] for n in samples.scatter.names)
 
@@ -124,7 +130,7 @@ def monte_carlo(model: SqueakModel, speed_rad_s: float, load_n: float,
     if not samples.scatter.names:
         p = model.predict(speed, load)
         return ProbabilityEstimate(float(bool(p.squeak_modes)), None, 0)
-    return _from_hits(squeaks(model, speed, load, samples.values))      # (replicates, per)
+    return _from_hits(squeaks(model, speed, load, _values(model, samples)))      # (replicates, per)
 
 
 def _from_hits(hits: np.ndarray) -> ProbabilityEstimate:
@@ -177,7 +183,7 @@ def linearised(model: SqueakModel, speed_rad_s: float, load_n: float,
     rates = np.stack([pairs.coefficient_rate([sign, 0, 1 / w, 0, 0]).real,
                       pairs.coefficient_rate([0, speed, 0, 1, 0]).real,
                       pairs.damping_rate().real])                       # (3, M)
-    values = {k: v.ravel() for k, v in samples.values.items()}
+    values = {k: v.ravel() for k, v in _values(model, samples).items()}
     nominal = scales(p, speed, load, alpha)
     sampled = scales(SimpleNamespace(**{**p.as_dict(), **values}), speed, load, alpha)
     count = samples.count

@@ -1,0 +1,102 @@
+# SPDX-License-Identifier: Apache-2.0
+"""What to change: design and operating parameters ranked by how much a 10 % change in the
+favourable direction lowers P(squeak), each with the new P computed (not extrapolated).
+
+Both directions of each parameter are evaluated with the fast estimator
+(`probability.linearised`) on the same samples, the geometry rebuilt where the parameter changes
+it; the favourable direction is the one with the lower P. A change that leaves the valid
+parameter domain or the model's validity is not offered.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .parameters import ParameterError
+from .predictor import SqueakModel
+from .probability import linearised
+from .scatter import Samples
+
+DESIGN = ("radius_m", "helix_angle_rad", "nut_position_m", "nut_length_m", "modal_damping")
+OPERATING = ("speed_rad_s", "load_n")
+STEP = 0.10                                   # relative change offered
+_WORDS = {"radius_m": "the radius", "helix_angle_rad": "the helix angle",
+          "nut_position_m": "the nut position", "nut_length_m": "the nut length",
+          "modal_damping": "the damping", "speed_rad_s": "|speed|", "load_n": "|load|"}
+
+
+@dataclass(frozen=True)
+class Countermeasure:
+    """One parameter changed by `STEP` in its favourable direction.
+
+    Attributes
+    ----------
+    name : str
+        `ScrewParameters` field, or 'speed_rad_s' / 'load_n'.
+    factor : float
+        Multiplier of the parameter (1 + STEP or 1 - STEP).
+    probability : float
+        P(squeak) after the change.
+    """
+
+    name: str
+    factor: float
+    probability: float
+
+    @property
+    def text(self) -> str:
+        """'raise the radius' / 'lower the nut position'."""
+        return f"{'raise' if self.factor > 1 else 'lower'} {_WORDS[self.name]}"
+
+
+def countermeasures(model: SqueakModel, speed_rad_s: float, load_n: float,
+                    samples: Samples) -> tuple[float, list[Countermeasure]] | None:
+    """P(squeak) now, and the changes that lower it, most effective first.
+
+    Parameters
+    ----------
+    model : SqueakModel
+        The nominal model.
+    speed_rad_s, load_n : float
+        Operating point [rad/s], [N].
+    samples : Samples
+        Scatter samples (friction and damping), shared by every evaluation.
+
+    Returns
+    -------
+    tuple of (float, list of Countermeasure) or None
+        None outside the model's validity; else the current P and the changes with a lower P,
+        sorted by the new P (ascending).
+    """
+    now = linearised(model, speed_rad_s, load_n, samples)
+    if now is None:
+        return None
+    found = []
+    for name in DESIGN + OPERATING:
+        best = None
+        for factor in (1 + STEP, 1 - STEP):
+            speed, load, changed = speed_rad_s, load_n, model
+            try:
+                if name == "speed_rad_s":
+                    speed = speed_rad_s * factor
+                elif name == "load_n":
+                    load = load_n * factor
+                else:
+                    changed = model.with_params(**{name: getattr(model.params, name) * factor})
+            except ParameterError:
+                continue
+            e = linearised(changed, speed, load, samples)
+            if e is not None and e.probability < now.probability and (
+                    best is None or e.probability < best.probability):
+                best = Countermeasure(name, factor, e.probability)
+        if best is not None:
+            found.append(best)
+    return now.probability, sorted(found, key=lambda c: (c.probability, c.name))
+
+
+def advice_text(probability: float, measures: list[Countermeasure], top: int = 2) -> str:
+    """One line: 'P(squeak) 0.13: lower |speed| or raise the damping'."""
+    head = f"P(squeak) {probability:.2f}"
+    if not measures:
+        return head + (": no 10 % change of one parameter lowers it" if probability > 0 else "")
+    return f"{head}: " + " or ".join(m.text for m in measures[:top])

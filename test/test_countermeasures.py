@@ -1,0 +1,63 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Countermeasures: ranked 10 % changes with the new P(squeak) computed."""
+
+import pytest
+
+from leadscrew_ros.model import ScrewParameters, SqueakModel
+from leadscrew_ros.model.countermeasures import (DESIGN, OPERATING, STEP, Countermeasure,
+                                                 advice_text, countermeasures)
+from leadscrew_ros.model.probability import linearised
+from leadscrew_ros.model.scatter import Scatter, draw
+
+MODEL = SqueakModel()
+SAMPLES = draw(MODEL.params, Scatter(), 1024)
+
+
+def test_changes_are_ranked_and_each_new_probability_is_computed():
+    now, found = countermeasures(MODEL, 55.0, 200.0, SAMPLES)
+    assert now == linearised(MODEL, 55.0, 200.0, SAMPLES).probability
+    assert [c.probability for c in found] == sorted(c.probability for c in found)
+    assert all(c.probability < now for c in found) and len(found) >= 4
+    assert {c.name for c in found} <= set(DESIGN + OPERATING)
+    for c in found:
+        assert c.factor in (1 + STEP, 1 - STEP)
+        if c.name in DESIGN:
+            changed = MODEL.with_params(**{c.name: getattr(MODEL.params, c.name) * c.factor})
+            assert c.probability == linearised(changed, 55.0, 200.0, SAMPLES).probability
+        else:
+            speed, load = (55.0 * c.factor, 200.0) if c.name == "speed_rad_s" else \
+                (55.0, 200.0 * c.factor)
+            assert c.probability == linearised(MODEL, speed, load, SAMPLES).probability
+
+
+def test_more_damping_lowers_the_probability_near_an_edge():
+    """The damping scatter is relative: a 10 % higher nominal damping moves every sample."""
+    now, found = countermeasures(MODEL, 60.0, 200.0, SAMPLES)
+    damping = {c.name: c for c in found}["modal_damping"]
+    assert damping.factor == 1 + STEP and damping.probability < now
+
+
+def test_a_change_off_the_valid_domain_is_not_offered():
+    """With the nut 5 mm from the end of its travel, +10 % would put it off the screw."""
+    model = SqueakModel(ScrewParameters(nut_position_m=0.235))
+    _, found = countermeasures(model, 50.0, 200.0, draw(model.params, Scatter(), 256))
+    nut = [c for c in found if c.name == "nut_position_m"]
+    assert all(c.factor == 1 - STEP for c in nut)
+
+
+def test_outside_validity_there_is_no_advice():
+    assert countermeasures(MODEL, 0.1, 200.0, SAMPLES) is None
+
+
+def test_advice_is_one_line():
+    found = [Countermeasure("radius_m", 1.1, 0.01), Countermeasure("speed_rad_s", 0.9, 0.05)]
+    assert advice_text(0.114, found) == "P(squeak) 0.11: raise the radius or lower |speed|"
+    assert advice_text(0.0, []) == "P(squeak) 0.00"
+    assert advice_text(0.5, []) == "P(squeak) 0.50: no 10 % change of one parameter lowers it"
+
+
+@pytest.mark.parametrize("formulation, speed", [("paper", 60.0), ("consistent", 49.0)])
+def test_the_radius_is_the_strongest_lever_at_table_1(formulation, speed):
+    model = SqueakModel(ScrewParameters(formulation=formulation))
+    _, found = countermeasures(model, speed, 200.0, draw(model.params, Scatter(), 1024))
+    assert found[0].name == "radius_m" and found[0].factor == 1 + STEP
