@@ -62,8 +62,17 @@ def _values(model: SqueakModel, samples: Samples) -> dict[str, np.ndarray]:
     return samples.scatter.values(model.params, samples.u)
 
 
-def _geometry_free(samples: Samples) -> bool:
-    return not any(field_info(n)["geometry"] for n in samples.scatter.names)
+def _operating_point(model: SqueakModel, speed_rad_s: float, load_n: float,
+                     samples: Samples) -> tuple[float, float] | None:
+    """The checked point, None outside the model's validity; geometry scatter is refused (the
+    estimators rescale one geometry)."""
+    speed, load = check_operating_point(speed_rad_s, load_n)
+    if model.validity(speed, load)[0] is not Validity.OK:
+        return None
+    if any(field_info(n)["geometry"] for n in samples.scatter.names):
+        raise ValueError("the estimators scatter friction and damping only; geometry scatter "
+                         "needs a model per sample")
+    return speed, load
 
 
 def squeaks(model: SqueakModel, speed_rad_s: float, load_n: float,
@@ -121,16 +130,14 @@ def monte_carlo(model: SqueakModel, speed_rad_s: float, load_n: float,
     ValueError
         The samples scatter a geometry parameter.
     """
-    speed, load = check_operating_point(speed_rad_s, load_n)
-    if model.validity(speed, load)[0] is not Validity.OK:
+    point = _operating_point(model, speed_rad_s, load_n, samples)
+    if point is None:
         return None
-    if not _geometry_free(samples):
-        raise ValueError("monte_carlo scatters friction and damping only; geometry scatter "
-                         "needs a model per sample")
+    speed, load = point
     if not samples.scatter.names:
         p = model.predict(speed, load)
         return ProbabilityEstimate(float(bool(p.squeak_modes)), None, 0)
-    return _from_hits(squeaks(model, speed, load, _values(model, samples)))      # (replicates, per)
+    return _from_hits(squeaks(model, speed, load, _values(model, samples)))
 
 
 def _from_hits(hits: np.ndarray) -> ProbabilityEstimate:
@@ -167,11 +174,10 @@ def linearised(model: SqueakModel, speed_rad_s: float, load_n: float,
     ValueError
         The samples scatter a geometry parameter.
     """
-    speed, load = check_operating_point(speed_rad_s, load_n)
-    if model.validity(speed, load)[0] is not Validity.OK:
+    point = _operating_point(model, speed_rad_s, load_n, samples)
+    if point is None:
         return None
-    if not _geometry_free(samples):
-        raise ValueError("linearised scatters friction and damping only")
+    speed, load = point
     pairs = EigenPairs(model, speed, load)
     if not samples.scatter.names:
         growing = pairs.lam.real > 0
