@@ -97,16 +97,23 @@ def consistent_kernels(theta: np.ndarray, beta: float, radius_m: float) -> dict[
 KERNELS = {"paper": paper_kernels, "consistent": consistent_kernels}
 
 
+def thread_factors(p: ScrewParameters, mu_o_value, speed_rad_s, load_n):
+    """(c_f, c_5, d c / d mu_o) of the module docstring: the factors of the friction level and
+    slope terms, and their derivative with respect to mu_o (the same for both; 0 for paper)."""
+    tb = np.tan(p.helix_angle_rad)
+    if p.formulation == "paper":
+        return 1.0, 1.0 - tb ** 2, 0.0
+    flank = np.where(load_n == 0, 1.0, np.sign(load_n)) * np.sign(speed_rad_s)   # (9)
+    c = 1.0 / (1.0 + flank * mu_o_value * tb)
+    return c, c, -flank * tb * c * c
+
+
 def scales(p: ScrewParameters, speed_rad_s, load_n, alpha: float) -> dict[str, np.ndarray]:
     """Scalar factors of W1..W5qdot at operating points (broadcast over speed and load)."""
     speed = np.asarray(speed_rad_s, dtype=float)
     load = np.abs(np.asarray(load_n, dtype=float))
     m0, g = mu_o(p, speed), gamma(p, speed)
-    if p.formulation == "paper":
-        c_f, c_5 = 1.0, 1.0 - np.tan(p.helix_angle_rad) ** 2
-    else:
-        flank = np.where(load_n == 0, 1.0, np.sign(load_n)) * np.sign(speed)
-        c_f = c_5 = 1.0 / (1.0 + flank * m0 * np.tan(p.helix_angle_rad))
+    c_f, c_5, _ = thread_factors(p, m0, speed, load_n)
     level = m0 * load / (alpha * p.radius_m) * c_f
     slope = g * load / alpha * c_5
     return {"W1": np.sign(speed) * level, "W2": np.sign(speed) * level,

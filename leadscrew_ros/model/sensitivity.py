@@ -25,7 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .friction import sliding_speed
+from .friction import gamma, mu_o, sliding_speed
+from .kernels import scales, thread_factors
 from .predictor import SqueakModel, Validity, check_operating_point
 from .stability import oscillatory_mask
 
@@ -56,23 +57,19 @@ def _scale_derivatives(model: SqueakModel, speed: float, load: float) -> dict[st
     `Geometry.state_matrices`, for the friction parameters, speed and load."""
     p, alpha = model.params, model.geometry.contact.alpha
     ms, mk, d = p.mu_static, p.mu_kinetic, p.friction_decay_s_m
-    cb, tb = math.cos(p.helix_angle_rad), math.tan(p.helix_angle_rad)
+    cb = math.cos(p.helix_angle_rad)
     v = float(sliding_speed(p, speed))
     dv_dw = p.radius_m * math.copysign(1.0, speed) / cb                    # d|Vc|/dOmega
     e = math.exp(-d * v)
-    m0, g = mk + (ms - mk) * e, -(ms - mk) * d * e * cb                    # (12), (A.11)
+    m0, g = float(mu_o(p, speed)), float(gamma(p, speed))                  # (12), (A.11)
     # (d mu_o, d gamma) per parameter: the friction law differentiated
     dm = {"mu_static": (e, -d * e * cb), "mu_kinetic": (1 - e, d * e * cb),
           "friction_decay_s_m": (-(ms - mk) * v * e, -(ms - mk) * cb * e * (1 - d * v)),
           "speed_rad_s": (-(ms - mk) * d * e * dv_dw, (ms - mk) * d * d * e * cb * dv_dw)}
     f = abs(load)
-    if p.formulation == "paper":
-        c_f, c_5, dc = 1.0, 1.0 - tb * tb, 0.0
-    else:
-        flank = (1.0 if load == 0 else math.copysign(1.0, load)) * math.copysign(1.0, speed)
-        c_f = c_5 = 1.0 / (1.0 + flank * m0 * tb)
-        dc = -flank * tb * c_f * c_f                                       # d c / d mu_o
-    level, slope = m0 * f / (alpha * p.radius_m) * c_f, g * f / alpha * c_5
+    c_f, c_5, dc = (float(c) for c in thread_factors(p, m0, speed, load))
+    s = scales(p, speed, load, alpha)
+    level, slope = float(s["W3"]) * abs(speed), float(s["W5qdot"])
     sgn, w = math.copysign(1.0, speed), abs(speed)
 
     def coef(d_level, d_slope, d_speed=0.0):

@@ -54,8 +54,7 @@ def oscillatory_mask(eigvals: np.ndarray) -> np.ndarray:
 
 def unstable_mask(eigvals: np.ndarray) -> np.ndarray:
     """Squeak eigenvalues: oscillatory with Re(lambda) > 0, by the thresholds of `classify`."""
-    mag = np.abs(eigvals)
-    return (eigvals.imag > _IMAG_TOL * mag) & (eigvals.real > _GROWTH_TOL * mag)
+    return oscillatory_mask(eigvals) & (eigvals.real > _GROWTH_TOL * np.abs(eigvals))
 
 
 def max_growth_rate(eigvals: np.ndarray) -> np.ndarray:
