@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 
 from leadscrew_ros.model import ParameterError, SqueakModel
-from leadscrew_ros.model.risk import squeak_risk
 from leadscrew_ros.model.sweep import growth_field, stability_map, sweep
 
 
@@ -78,20 +77,14 @@ def test_map_boundary_points_are_roots_and_grid_matches(model):
     assert len(d["max_growth_rate"]) == 10 and len(d["boundary"]) == len(m.boundary)
 
 
-def test_risk_is_monotone_and_documented():
-    z = np.array([-0.1, 0.0, 1e-4, 1e-3, 3e-3, 1e-2, 0.5])
-    r = squeak_risk(z, 1e-3)
-    assert r[0] == r[1] == 1.0
-    assert np.all(np.diff(r[1:]) < 0) and r[-1] >= 0.0
-    assert r[3] == pytest.approx(np.exp(-1)) and r[4] == pytest.approx(0.0498, abs=1e-4)
-
-
-def test_risk_tracks_least_stable_mode(model):
-    inside, edge, outside = model.predict(20.0), model.predict(54.0), model.predict(100.0)
-    assert inside.risk == 1.0 and edge.risk == 1.0
-    assert 0.0 < outside.risk < 1.0
-    near = model.predict(60.0)
-    assert outside.risk < near.risk < 1.0                   # closer to the band: higher risk
+def test_probability_and_margin_track_the_band(model):
+    """Deep in the band P is 1, far outside 0, near the upper edge in between; the margin
+    (least damping ratio) is negative exactly where a mode squeaks."""
+    inside, near, outside = model.predict(20.0), model.predict(55.0), model.predict(100.0)
+    assert inside.probability > 0.99 and outside.probability == 0.0
+    assert 0.1 < near.probability < 0.9
+    assert inside.margin < 0 < outside.margin
+    assert near.margin == min(m.damping_ratio for m in near.modes)
 
 
 def test_divergence_is_reported_separately_from_squeak(model):

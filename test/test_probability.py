@@ -118,9 +118,30 @@ def test_probability_grows_with_the_scatter_near_an_edge():
     assert p == sorted(p) and p[0] < 0.01 and p[-1] > 0.2
 
 
-def test_geometry_scatter_is_refused_by_the_fast_estimator():
-    with pytest.raises(ValueError, match="geometry"):
-        monte_carlo(MODEL, 50.0, 200.0, draw(MODEL.params, Scatter({"radius_m": 0.01}), 64))
+@pytest.mark.parametrize("speed, sd", [(57.0, {"radius_m": 0.01}),
+                                       (52.0, {"nut_position_m": 0.1, "mu_kinetic": 0.05})])
+def test_geometry_scatter_fast_estimator_follows_the_model_per_sample(speed, sd):
+    """A scattered geometry field: the reference builds a model per sample; the fast estimator
+    expands A to first order in it (a difference of two geometries) on the same samples."""
+    s = draw(MODEL.params, Scatter(sd), 256, seed=5)
+    mc, fast = monte_carlo(MODEL, speed, 200.0, s), linearised(MODEL, speed, 200.0, s)
+    assert 0.02 < mc.probability < 0.98                      # near the band edge
+    assert fast.probability == pytest.approx(mc.probability, abs=0.03)
+
+
+def test_prediction_carries_the_fast_probability():
+    """`predict` shares its eigen-solve with the estimator: the same number as `linearised`
+    on the model's own samples; with no scatter it is the nominal verdict, stderr None."""
+    for speed in (50.0, 55.0, 60.0, -57.0):
+        p = MODEL.predict(speed, 200.0)
+        e = linearised(MODEL, speed, 200.0, MODEL.samples)
+        assert (p.probability, p.probability_stderr) == (e.probability, e.stderr)
+        none = MODEL.with_scatter(Scatter({})).predict(speed, 200.0)
+        assert none.probability == float(bool(none.squeak_modes))
+        assert none.probability_stderr is None
+    assert MODEL.samples.count == 1024
+    assert MODEL.predict(60.0, 200.0).margin == pytest.approx(
+        min(m.damping_ratio for m in MODEL.predict(60.0, 200.0).modes))
 
 
 @settings(max_examples=25, deadline=None)

@@ -38,7 +38,7 @@ class Mode(NamedTuple):
 def prediction_payloads(p: Prediction) -> tuple[tuple[str, bytes], ...]:
     """(topic, CDR payload) of every topic in `PREDICTION_TOPICS` for a valid prediction, in
     that order."""
-    return ((RISK, cdr.encode_float64(float(p.risk))),
+    return ((RISK, cdr.encode_float64(float(p.probability))),
             (FREQUENCIES, frequencies_payload(p)),
             (ACTIVE, cdr.encode_bool(not p.stable)),
             (MODES, modes_payload(p)))

@@ -39,11 +39,11 @@ def prediction_text(p: Prediction, top: int = 5) -> str:
     if not p.valid:
         return f"{head}\nno prediction: {p.reason}"
     if p.stable:
-        verdict = f"stable: no squeak (risk {p.risk:.3f})"
+        verdict = f"stable: no squeak (P(squeak) {p.probability:.3f})"
     else:
         squeak = ", ".join(f"{m.label} {m.frequency_hz:.1f} Hz (Re {m.growth_rate:+.2f} 1/s)"
                            for m in p.squeak_modes) or "none"
-        verdict = f"UNSTABLE: squeak predicted (risk {p.risk:.3f}); squeak modes: {squeak}"
+        verdict = f"UNSTABLE: squeak predicted (P(squeak) {p.probability:.3f}); squeak modes: {squeak}"
     lines = [head, verdict]
     if p.divergence_rates:
         lines.append("divergence (real eigenvalues > 0): "
@@ -62,10 +62,10 @@ def _cell(value: float | None) -> str:
 
 def write_sweep_csv(result: SweepResult) -> None:
     out = csv.writer(sys.stdout, lineterminator="\n")
-    out.writerow([result.axis, "valid", "max_growth_rate", "risk", "unstable_modes",
+    out.writerow([result.axis, "valid", "max_growth_rate", "probability", "unstable_modes",
                   "unstable_frequencies_hz"])
     for value, p in zip(result.values.tolist(), result.predictions):
-        out.writerow([repr(value), p.valid, _cell(p.max_growth_rate), _cell(p.risk),
+        out.writerow([repr(value), p.valid, _cell(p.max_growth_rate), _cell(p.probability),
                       _unstable_labels(p), ";".join(f"{f:.6g}" for f in p.unstable_frequencies_hz)])
 
 

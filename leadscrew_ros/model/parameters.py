@@ -72,8 +72,6 @@ class ScrewParameters:
     min_speed_rad_s: float = _p(0.5, "rad/s", "lowest |speed| at which the sliding "
                                 "linearisation is trusted", 0.0, 1e4, lo_open=True,
                                 geometry=False)
-    risk_damping_scale: float = _p(1.0e-3, "1", "damping ratio at which squeak risk is 1/e",
-                                   0.0, 1.0, lo_open=True, geometry=False)
 
     def __post_init__(self) -> None:
         validate(self)

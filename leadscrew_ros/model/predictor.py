@@ -16,8 +16,9 @@ from .assembly import build_geometry
 from .display import exact
 from .friction import mu_o
 from .parameters import ScrewParameters, field_info
-from .risk import squeak_risk
-from .stability import ModeResult, classify
+from .perturbation import EigenPairs, FirstOrderProbability, estimate
+from .scatter import LIVE_SAMPLES, Scatter, Samples, check_count, samples_for
+from .stability import Eigen, ModeResult, classify, eig_both
 
 _LOAD_LIMIT_N = field_info("axial_load_n")["hi"]
 
@@ -95,8 +96,12 @@ class Prediction:
         Oscillatory modes, growth rate descending; empty when not valid.
     divergence_rates : tuple of float
         Real eigenvalues > 0 (non-oscillatory growth, not squeak) [1/s], descending.
-    risk : float or None
-        Squeak risk in [0, 1] from the lowest modal damping ratio; None when not valid.
+    probability : float or None
+        P(squeak) in [0, 1]: the probability over the model's parameter scatter that some
+        oscillatory mode grows (`perturbation.FirstOrderProbability`); exactly the nominal
+        verdict (0 or 1) without scatter; None when not valid.
+    probability_stderr : float or None
+        Standard error of `probability` from its sample replicates; None when not sampled.
     """
 
     speed_rad_s: float
@@ -106,11 +111,12 @@ class Prediction:
     reason: str                          # why the point is outside validity ("" when valid)
     modes: tuple[ModeResult, ...] = ()   # oscillatory modes, growth rate descending
     divergence_rates: tuple[float, ...] = ()
-    risk: float | None = None
+    probability: float | None = None
+    probability_stderr: float | None = None
 
     @property
     def valid(self) -> bool:
-        """The linearisation holds: modes and risk are given."""
+        """The linearisation holds: modes and probability are given."""
         return self.validity is Validity.OK
 
     @property
@@ -136,6 +142,13 @@ class Prediction:
         valid or without oscillatory modes."""
         return self.modes[0].growth_rate if self.valid and self.modes else None
 
+    @property
+    def margin(self) -> float | None:
+        """Least damping ratio -Re(lambda)/|lambda| of the oscillatory modes (dimensionless):
+        the deterministic stability margin, negative when a mode squeaks; None when not valid
+        or without oscillatory modes."""
+        return min(m.damping_ratio for m in self.modes) if self.valid and self.modes else None
+
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready summary.
 
@@ -146,7 +159,8 @@ class Prediction:
         """
         return {"speed_rad_s": self.speed_rad_s, "load_n": self.load_n,
                 "formulation": self.formulation, "valid": self.valid, "reason": self.reason,
-                "stable": self.stable, "risk": self.risk,
+                "stable": self.stable, "probability": self.probability,
+                "probability_stderr": self.probability_stderr, "margin": self.margin,
                 "max_growth_rate": self.max_growth_rate,
                 "unstable_frequencies_hz": self.unstable_frequencies_hz,
                 "divergence_rates": list(self.divergence_rates),
@@ -201,18 +215,39 @@ class SqueakModel:
     ----------
     params : ScrewParameters, optional
         Screw, contact and friction parameters (SI units); the defaults (Table 1) when None.
+    scatter : Scatter, optional
+        Unit-to-unit scatter of the parameters behind `Prediction.probability`; the default
+        scatter (`scatter.DEFAULT_SCATTER`) when None, ``Scatter({})`` for none.
+    samples : int
+        Scatter samples of the probability (`scatter.REPLICATES` times a power of 2).
 
     Attributes
     ----------
     params : ScrewParameters
         The parameters of this model.
+    scatter : Scatter
+        The scatter of the probability.
     geometry : Geometry
         Modal basis and precomputed contact integrals.
     """
 
-    def __init__(self, params: ScrewParameters | None = None):
+    def __init__(self, params: ScrewParameters | None = None, scatter: Scatter | None = None,
+                 samples: int = LIVE_SAMPLES):
         self.geometry = build_geometry(params or ScrewParameters())
         self.params = self.geometry.params
+        self.scatter = Scatter() if scatter is None else scatter
+        self.sample_count = check_count(samples)
+
+    @cached_property
+    def samples(self) -> Samples:
+        """The scatter samples around these parameters (points shared between models)."""
+        return samples_for(self.params, self.scatter, self.sample_count)
+
+    @cached_property
+    def _probability(self) -> FirstOrderProbability | None:
+        if not self.scatter.names:
+            return None
+        return FirstOrderProbability(self.params, self.geometry, self.samples)
 
     @property
     def labels(self) -> tuple[str, ...]:
@@ -243,7 +278,12 @@ class SqueakModel:
         ParameterError
             An unknown field or a value out of its allowed range.
         """
-        return SqueakModel(self.params.with_(**changes))
+        return SqueakModel(self.params.with_(**changes), self.scatter, self.sample_count)
+
+    def with_scatter(self, scatter: Scatter, samples: int | None = None) -> "SqueakModel":
+        """This model with another scatter (and sample count); the geometry is reused."""
+        return SqueakModel(self.params, scatter,
+                           self.sample_count if samples is None else samples)
 
     def validity_code(self, speed_rad_s, load_n, scattered: dict | None = None
                       ) -> np.ndarray:
@@ -340,7 +380,7 @@ class SqueakModel:
         Returns
         -------
         Prediction
-            Modes, stability and risk, or the validity verdict and its reason when the
+            Modes, stability and probability, or the validity verdict and its reason when the
             linearisation does not hold (then no numbers are given).
 
         Raises
@@ -354,14 +394,14 @@ class SqueakModel:
         if validity is not Validity.OK:
             return Prediction(speed, load, self.params.formulation, validity, reason)
         try:
-            lam, vec = np.linalg.eig(self.state_matrix(speed, load))
+            eigen = eig_both(self.state_matrix(speed, load))
         except np.linalg.LinAlgError as exc:          # LAPACK gave up: say so, no number
             return Prediction(speed, load, self.params.formulation, Validity.SOLVER_FAILED,
                               f"eigen-solver failed at this operating point: {exc}")
-        return self._prediction(speed, load, lam, vec)
+        return self._prediction(speed, load, eigen)
 
     def predict_many(self, speeds_rad_s, loads_n) -> list[Prediction]:
-        """Predictions at many operating points with one batched eigen-solve.
+        """Predictions at many operating points: one batched rescale, then an eigen-solve each.
 
         Parameters
         ----------
@@ -388,13 +428,18 @@ class SqueakModel:
         out = [Prediction(s, f, self.params.formulation, *v)
                for (s, f), v in zip(points, verdicts)]
         if ok:
-            lam, vec = np.linalg.eig(self.geometry.state_matrices(speeds[ok], loads[ok]))
+            matrices = self.geometry.state_matrices(speeds[ok], loads[ok])
             for k, i in enumerate(ok):
-                out[i] = self._prediction(*points[i], lam[k], vec[k])
+                out[i] = self._prediction(*points[i], eig_both(matrices[k]))
         return out
 
-    def _prediction(self, speed: float, load: float, lam: np.ndarray, vec: np.ndarray) -> Prediction:
-        modes, divergence = classify(lam, vec, self.labels)
-        zeta = min((m.damping_ratio for m in modes), default=math.inf)
-        return Prediction(speed, load, self.params.formulation, Validity.OK, "", modes, divergence,
-                          squeak_risk(zeta, self.params.risk_damping_scale))
+    def _prediction(self, speed: float, load: float, eigen: Eigen) -> Prediction:
+        modes, divergence = classify(eigen, self.labels)
+        squeak = any(m.unstable for m in modes)
+        if self._probability is None:
+            probability, stderr = float(squeak), None
+        else:           # the same eigen-solve gives the first-order expansion
+            probability, stderr = estimate(self._probability.hits(
+                EigenPairs(self.geometry, speed, eigen), load))
+        return Prediction(speed, load, self.params.formulation, Validity.OK, "", modes,
+                          divergence, probability, stderr)

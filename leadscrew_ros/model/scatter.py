@@ -18,14 +18,16 @@ estimate over them has a standard error from the spread of the replicates.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
-from types import MappingProxyType
+from dataclasses import dataclass, field, fields, make_dataclass
+from functools import lru_cache
+from types import MappingProxyType, SimpleNamespace
 from typing import Mapping
 
 import numpy as np
 from scipy.special import ndtri
 from scipy.stats import qmc
 
+from .fields import check, setting
 from .parameters import ParameterError, ScrewParameters
 
 LOG_NORMAL = frozenset({"modal_damping"})       # positive, with a spread of a factor
@@ -33,10 +35,17 @@ DEFAULT_SCATTER = MappingProxyType({"mu_static": 0.05, "mu_kinetic": 0.05,
                                     "friction_decay_s_m": 0.10, "modal_damping": 0.35})
 # Fields that are operating conditions or switches, not properties of a drive.
 NOT_SCATTERED = frozenset({"axial_load_n", "n_bending", "n_torsion", "formulation",
-                           "quadrature_nodes_per_turn", "min_speed_rad_s",
-                           "risk_damping_scale"})
+                           "quadrature_nodes_per_turn", "min_speed_rad_s"})
 MAX_SCATTER = 1.0                               # relative SD (or SD of ln) at most
+REPLICATES = 8                                  # independent scramblings per estimate
+LIVE_SAMPLES = 1024                             # samples of the live estimate (default)
 _MAX_REDRAW_ROUNDS = 20
+# The cross-field rules of ScrewParameters that a sample must keep (`valid_mask`).
+_RULES = ((("mu_static", "mu_kinetic"), lambda get: get("mu_static") >= get("mu_kinetic")),
+          (("nut_position_m", "nut_length_m", "length_m"),
+           lambda get: get("nut_position_m") + get("nut_length_m") <= get("length_m")),
+          (("thread_height_m", "radius_m"),
+           lambda get: get("thread_height_m") < get("radius_m")))
 
 
 def scatterable() -> tuple[str, ...]:
@@ -119,9 +128,9 @@ def valid_mask(nominal: ScrewParameters, values: Mapping[str, np.ndarray]) -> np
     def get(name):
         return values.get(name, getattr(nominal, name))
 
-    ok &= get("mu_static") >= get("mu_kinetic")
-    ok &= get("nut_position_m") + get("nut_length_m") <= get("length_m")
-    ok &= get("thread_height_m") < get("radius_m")
+    for names, rule in _RULES:
+        if set(names) & set(values):
+            ok &= rule(get)
     return ok
 
 
@@ -150,7 +159,8 @@ class Samples:
         return self.u.shape[0] * self.u.shape[1]
 
 
-def draw(nominal: ScrewParameters, scatter: Scatter, count: int = 4096, replicates: int = 8,
+def draw(nominal: ScrewParameters, scatter: Scatter, count: int = 4096,
+         replicates: int = REPLICATES,
          seed: int = 0) -> Samples:
     """Samples of the scatter around `nominal`.
 
@@ -176,13 +186,7 @@ def draw(nominal: ScrewParameters, scatter: Scatter, count: int = 4096, replicat
     ParameterError
         A bad count or replicates, or the valid domain is (almost) never hit.
     """
-    if isinstance(count, bool) or not isinstance(count, int) or isinstance(
-            replicates, bool) or not isinstance(replicates, int) or replicates < 2:
-        raise ParameterError("count and replicates must be integers, replicates >= 2")
-    per = count // replicates
-    if per < 1 or per * replicates != count or per & (per - 1):
-        raise ParameterError(f"count = {count} must be replicates ({replicates}) times a power "
-                             "of 2")
+    per = check_count(count, replicates) // replicates
     dim = max(len(scatter.names), 1)
     rng = np.random.default_rng(seed)
     u = np.stack([ndtri(qmc.Sobol(dim, scramble=True, seed=rng).random(per))
@@ -201,3 +205,71 @@ def draw(nominal: ScrewParameters, scatter: Scatter, count: int = 4096, replicat
                              f"({int(bad.sum())} of {count} samples after "
                              f"{_MAX_REDRAW_ROUNDS} redraws)")
     return Samples(scatter, u, values, redrawn)
+
+
+def check_count(count: object, replicates: int = REPLICATES) -> int:
+    """`count` if it is a valid number of samples (replicates times a power of 2), else
+    ParameterError with the reason."""
+    if isinstance(count, bool) or not isinstance(count, int) or isinstance(
+            replicates, bool) or not isinstance(replicates, int) or replicates < 2:
+        raise ParameterError("count and replicates must be integers, replicates >= 2")
+    per = count // replicates
+    if per < 1 or per * replicates != count or per & (per - 1):
+        raise ParameterError(f"count = {count} must be replicates ({replicates}) times a power "
+                             "of 2")
+    return count
+
+
+def samples_for(nominal: ScrewParameters, scatter: Scatter, count: int = LIVE_SAMPLES,
+                seed: int = 0) -> Samples:
+    """`draw(nominal, scatter, count, REPLICATES, seed)`, with the standard-normal points
+    cached: they depend on the nominal values only through the valid domain, so a model
+    rebuilt for a new nut position or load reuses them (values are recomputed around it)."""
+    involved = set(scatter.names)
+    for names, _ in _RULES:
+        if involved & set(names):
+            involved |= set(names)
+    key = tuple((n, getattr(nominal, n)) for n in sorted(involved))
+    u, redrawn = _points(scatter, count, seed, key)
+    return Samples(scatter, u, scatter.values(nominal, u), redrawn)
+
+
+@lru_cache(maxsize=64)
+def _points(scatter: Scatter, count: int, seed: int, key: tuple) -> tuple[np.ndarray, int]:
+    """Points of `draw` whose domain is given by the nominal values in `key`."""
+    s = draw(SimpleNamespace(**dict(key)), scatter, count, REPLICATES, seed)
+    s.u.setflags(write=False)
+    return s.u, s.redrawn
+
+
+def _settings_class() -> type:
+    """ScatterSettings: one field per scatterable parameter (default: DEFAULT_SCATTER, else 0)
+    and the live sample count, each with its metadata (ROS parameters `scatter.<name>`)."""
+    spec = [(name, float, setting(
+        DEFAULT_SCATTER.get(name, 0.0), "1",
+        f"{'SD of ln' if name in LOG_NORMAL else 'relative SD of'} {name} from unit to unit "
+        "(0: fixed)", 0.0, MAX_SCATTER)) for name in scatterable()]
+    spec.append(("samples", int, setting(
+        LIVE_SAMPLES, "1", f"scatter samples of the live P(squeak) ({REPLICATES} replicates "
+        "of a power of 2)", 16, 65536)))
+
+    def post_init(self) -> None:
+        check(self, ParameterError, "scatter.")
+        try:
+            check_count(self.samples)
+        except ParameterError as exc:
+            raise ParameterError(f"scatter.samples = {self.samples}: {exc}") from None
+
+    def scatter(self) -> Scatter:
+        """The scatter these settings give (the SDs > 0)."""
+        return Scatter({n: getattr(self, n) for n in scatterable()})
+
+    return make_dataclass("ScatterSettings", spec, frozen=True, namespace={
+        "__post_init__": post_init, "scatter": property(scatter),
+        "__module__": __name__,
+        "__doc__": "Unit-to-unit scatter of the parameters (`Scatter`) and the live sample "
+                   "count,\n    declared with field metadata (ROS parameters "
+                   "`scatter.<name>`)."})
+
+
+ScatterSettings = _settings_class()

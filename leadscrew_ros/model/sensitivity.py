@@ -27,12 +27,11 @@ import numpy as np
 
 from .friction import gamma, mu_o, sliding_speed
 from .kernels import scales, thread_factors
+from .perturbation import EigenPairs, geometry_derivative
 from .predictor import SqueakModel, Validity, check_operating_point
-from .stability import oscillatory_mask
 
 FRICTION = ("mu_static", "mu_kinetic", "friction_decay_s_m")
 GEOMETRY = ("radius_m", "helix_angle_rad", "nut_position_m", "nut_length_m")
-_GEOMETRY_STEP = 1e-6          # relative step of the state-matrix difference
 
 
 @dataclass(frozen=True)
@@ -85,41 +84,6 @@ def _scale_derivatives(model: SqueakModel, speed: float, load: float) -> dict[st
     return out
 
 
-class EigenPairs:
-    """The oscillatory eigenvalues (Im > 0) of A at one operating point with their right and
-    left eigenvectors (y_i^H x_i = 1), and first-order rates of change of the eigenvalues."""
-
-    def __init__(self, model: SqueakModel, speed: float, load: float):
-        self.model, self.speed, self.load = model, speed, load
-        lam, right = np.linalg.eig(model.state_matrix(speed, load))
-        osc = np.flatnonzero(oscillatory_mask(lam))
-        self.lam, self.x = lam[osc], right[:, osc]
-        self.y_h = np.linalg.inv(right)[osc]           # rows y_i^H
-        n = model.geometry.n
-        self._units = model.geometry.lower_half_units.reshape(-1, n, 2 * n)
-
-    def coefficient_rate(self, dc) -> np.ndarray:
-        """d lambda for a change `dc` of the coefficient vector (W1, W5q, W3, W5qdot, Omega)
-        of `Geometry.state_matrices` (dA = -[0; sum_k dc_k U_k])."""
-        n = self.model.geometry.n
-        d_lower = np.einsum("k,kij->ij", np.asarray(dc, float), self._units)
-        return -np.einsum("ij,ji->i", self.y_h[:, n:], d_lower @ self.x)
-
-    def damping_rate(self) -> np.ndarray:
-        """d lambda / d xi of the modal damping ratio (A.1): dA = -2 diag(omega) in D."""
-        n, om = self.model.geometry.n, self.model.geometry.basis.omega_rad_s
-        return np.einsum("ij,ji->i", self.y_h[:, n:], -2 * om[:, None] * self.x[n:])
-
-    def speed_rate_of_stiffness(self) -> np.ndarray:
-        """d lambda / d Omega of the -Omega^2 I term of K alone: dA = 2 Omega I in A's K block."""
-        n = self.model.geometry.n
-        return 2 * self.speed * np.einsum("ij,ji->i", self.y_h[:, n:], self.x[:n])
-
-    def matrix_rate(self, da: np.ndarray) -> np.ndarray:
-        """d lambda for a change `da` of the whole state matrix."""
-        return np.einsum("ij,ji->i", self.y_h, da @ self.x)
-
-
 def mode_derivatives(model: SqueakModel, speed: float, load: float, geometry: bool = True
                      ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Oscillatory eigenvalues (Im > 0) and d lambda / d ln p of each, per parameter.
@@ -140,7 +104,7 @@ def mode_derivatives(model: SqueakModel, speed: float, load: float, geometry: bo
     derivatives : dict of str to numpy.ndarray
         Parameter -> d lambda / d ln p [1/s], complex, shape (M,).
     """
-    pairs, p = EigenPairs(model, speed, load), model.params
+    pairs, p = EigenPairs.solve(model.geometry, speed, load), model.params
     out = {}
     for name, dc in _scale_derivatives(model, speed, load).items():
         dl = pairs.coefficient_rate(dc)
@@ -152,10 +116,8 @@ def mode_derivatives(model: SqueakModel, speed: float, load: float, geometry: bo
     out["modal_damping"] = p.modal_damping * pairs.damping_rate()
     if geometry:
         for name in GEOMETRY:
-            h = _GEOMETRY_STEP * getattr(p, name)
-            hi, lo = (model.with_params(**{name: getattr(p, name) + s}).state_matrix(speed, load)
-                      for s in (h, -h))
-            out[name] = getattr(p, name) * pairs.matrix_rate((hi - lo) / (2 * h))
+            out[name] = getattr(p, name) * pairs.matrix_rate(
+                geometry_derivative(p, name, speed, load))
     return pairs.lam, out
 
 

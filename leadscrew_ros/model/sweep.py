@@ -313,7 +313,7 @@ class SweepResult:
             "axis": self.axis, self.axis: self.values.tolist(), "fixed": self.fixed,
             "valid": [p.valid for p in self.predictions],
             "max_growth_rate": [None if math.isnan(g) else g for g in self.max_growth_rate],
-            "risk": [p.risk for p in self.predictions],
+            "probability": [p.probability for p in self.predictions],
             "unstable_modes": [[m.label for m in p.squeak_modes] for p in self.predictions],
             "unstable_frequencies_hz": [p.unstable_frequencies_hz for p in self.predictions],
             "stability_boundaries": self.boundaries,

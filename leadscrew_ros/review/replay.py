@@ -137,7 +137,7 @@ class PlotData:
 
     def add(self, t: float, job: Job, p: Prediction) -> None:
         squeak = p.valid and not p.stable
-        self.risk.add(t, p.risk if p.valid else math.nan, float(squeak))
+        self.risk.add(t, p.probability if p.valid else math.nan, float(squeak))
         if p.valid:
             self.points.add(p.speed_rad_s, p.load_n, job.nut_position_m, float(squeak))
         for hz in p.unstable_frequencies_hz:
