@@ -3,7 +3,10 @@
 them), the demo's monitor (decodes them) and the replay (annotates a log with them).
 
 Topics (relative to the predictor's namespace) and types:
-squeak/risk (std_msgs/Float64) [1], squeak/unstable_frequencies (std_msgs/Float64MultiArray)
+squeak/risk (std_msgs/Float64) [1]: P(squeak) over the parameter scatter
+(`Prediction.probability`), squeak/margin (std_msgs/Float64) [1]: the least damping ratio of the
+oscillatory modes at the nominal parameters (negative when a mode squeaks; +inf without an
+oscillatory mode), squeak/unstable_frequencies (std_msgs/Float64MultiArray)
 [Hz, most unstable first], squeak/active (std_msgs/Bool), squeak/modes (Float64MultiArray: one
 row per oscillatory mode, growth rate descending, columns `MODE_COLUMNS`; the row dimension's
 label is 'modes:' followed by the mode labels, comma separated) and squeak/safe_speed
@@ -12,16 +15,18 @@ label is 'modes:' followed by the mode labels, comma separated) and squeak/safe_
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 from . import cdr
 from ..model import Prediction
 
-RISK, FREQUENCIES, ACTIVE = "squeak/risk", "squeak/unstable_frequencies", "squeak/active"
+RISK, MARGIN = "squeak/risk", "squeak/margin"
+FREQUENCIES, ACTIVE = "squeak/unstable_frequencies", "squeak/active"
 MODES, SAFE_SPEED = "squeak/modes", "squeak/safe_speed"
-OUTPUT_TYPES = {RISK: cdr.FLOAT64, FREQUENCIES: cdr.FLOAT64_MULTI_ARRAY, ACTIVE: cdr.BOOL,
-                MODES: cdr.FLOAT64_MULTI_ARRAY, SAFE_SPEED: cdr.FLOAT64}
-PREDICTION_TOPICS = (RISK, FREQUENCIES, ACTIVE, MODES)      # what one prediction publishes
+OUTPUT_TYPES = {RISK: cdr.FLOAT64, MARGIN: cdr.FLOAT64, FREQUENCIES: cdr.FLOAT64_MULTI_ARRAY,
+                ACTIVE: cdr.BOOL, MODES: cdr.FLOAT64_MULTI_ARRAY, SAFE_SPEED: cdr.FLOAT64}
+PREDICTION_TOPICS = (RISK, MARGIN, FREQUENCIES, ACTIVE, MODES)   # one prediction publishes
 MODE_COLUMNS = ("frequency_hz", "growth_rate", "damping_ratio")
 MODES_PREFIX = "modes:"                                     # of the row dimension's label
 
@@ -39,6 +44,7 @@ def prediction_payloads(p: Prediction) -> tuple[tuple[str, bytes], ...]:
     """(topic, CDR payload) of every topic in `PREDICTION_TOPICS` for a valid prediction, in
     that order."""
     return ((RISK, cdr.encode_float64(float(p.probability))),
+            (MARGIN, cdr.encode_float64(math.inf if p.margin is None else float(p.margin))),
             (FREQUENCIES, frequencies_payload(p)),
             (ACTIVE, cdr.encode_bool(not p.stable)),
             (MODES, modes_payload(p)))

@@ -26,8 +26,13 @@ class LiveSettings:
         0.0005, "m", "re-integrate the contact when the nut moved more than this", 0.0, 1.0)
     max_rate_hz: float = setting(
         100.0, "Hz", "maximum recompute rate (bursts are coalesced)", 0.1, 10000.0)
-    risk_warn_threshold: float = setting(
-        0.5, "1", "diagnostic WARN above this squeak risk", 0.0, 1.0)
+    warn_probability: float = setting(
+        0.1, "1", "diagnostic WARN at or above this P(squeak)", 0.0, 1.0)
+    error_probability: float = setting(
+        0.5, "1", "diagnostic ERROR at or above this P(squeak)", 0.0, 1.0)
+    safe_probability: float = setting(
+        0.01, "1", "squeak/safe_speed: nearest speed whose P(squeak) is below this", 0.0, 1.0,
+        lo_open=True)
     stale_timeout_s: float = setting(
         1.0, "s", "diagnostic STALE when speed or load is older than this", 0.01, 3600.0)
     safe_speed_margin: float = setting(
@@ -36,6 +41,9 @@ class LiveSettings:
 
     def __post_init__(self) -> None:
         check(self)
+        if self.warn_probability > self.error_probability:
+            raise ValueError(f"warn_probability = {self.warn_probability:g} exceeds "
+                             f"error_probability = {self.error_probability:g}")
 
 
 @dataclass(frozen=True)
