@@ -59,20 +59,21 @@ class Eigen(NamedTuple):
         Indices into `lam` of the oscillatory eigenvalues (`oscillatory_mask`, Im > 0).
     right, left : numpy.ndarray
         Columns x_i (A x_i = lam_i x_i) and u_i (u_i^H A = lam_i u_i^H) of lam[osc], unit
-        2-norm, as `numpy.linalg.eig` gives the right ones.
+        2-norm, as `numpy.linalg.eig` gives the right ones; `left` None when not computed.
     """
 
     lam: np.ndarray
     osc: np.ndarray
     right: np.ndarray
-    left: np.ndarray
+    left: np.ndarray | None
 
 
-def eig_both(a: np.ndarray) -> Eigen:
+def eig_both(a: np.ndarray, left: bool = True) -> Eigen:
     """Eigenvalues with right and left eigenvectors of a real matrix (LAPACK dgeev): the
     prediction and the first-order probability share this one solve (the left vectors cost
     ~10 % more; an inverse of the right ones cost three times that). Only the oscillatory
-    modes' vectors are unpacked: the rest are never used.
+    modes' vectors are unpacked: the rest are never used. `left` False skips the left
+    vectors (`Eigen.left` is then None).
 
     Raises
     ------
@@ -81,12 +82,13 @@ def eig_both(a: np.ndarray) -> Eigen:
     """
     if not np.isfinite(a).all():
         raise np.linalg.LinAlgError("the state matrix is not finite")
-    wr, wi, vl, vr, info = lapack.dgeev(a, compute_vl=1, compute_vr=1)
+    wr, wi, vl, vr, info = lapack.dgeev(a, compute_vl=int(left), compute_vr=1)
     if info != 0:
         raise np.linalg.LinAlgError(f"LAPACK dgeev did not converge (info {info})")
     lam = wr + 1j * wi
     osc = np.flatnonzero(oscillatory_mask(lam))   # first of a pair: re, im in two columns
-    return Eigen(lam, osc, vr[:, osc] + 1j * vr[:, osc + 1], vl[:, osc] + 1j * vl[:, osc + 1])
+    return Eigen(lam, osc, vr[:, osc] + 1j * vr[:, osc + 1],
+                 vl[:, osc] + 1j * vl[:, osc + 1] if left else None)
 
 
 def oscillatory_mask(eigvals: np.ndarray) -> np.ndarray:
