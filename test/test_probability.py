@@ -164,6 +164,27 @@ def test_probability_is_a_probability(sd, speed, load):
             assert e.stderr is None or (math.isfinite(e.stderr) and e.stderr >= 0)
 
 
+@settings(max_examples=30, deadline=None)
+@given(sd=st.dictionaries(st.sampled_from(scatterable()), st.floats(0.0, 0.3), max_size=4),
+       speed=st.floats(-2000.0, 2000.0), load=st.floats(-1e5, 1e5))
+def test_any_scatter_setting_gives_a_probability_or_a_clear_error(sd, speed, load):
+    """Random scatter of any scatterable field (geometry too) through `predict`: a P in
+    [0, 1] with a finite stderr, or a one-line ParameterError (too many geometry fields, a
+    domain the samples cannot stay in)."""
+    try:
+        model = MODEL.with_scatter(Scatter(sd), 64)
+        p = model.predict(speed, load)
+    except ParameterError as exc:
+        assert "\n" not in str(exc) and str(exc)
+        return
+    if p.valid:
+        assert 0.0 <= p.probability <= 1.0
+        assert p.probability_stderr is None or (math.isfinite(p.probability_stderr)
+                                                and p.probability_stderr >= 0)
+    else:
+        assert p.probability is None
+
+
 FAST_GRID_SPEEDS = (5.0, 20.0, 40.0, 50.0, 55.0, 60.0, 70.0, -40.0)     # band, both edges
 FAST_GRID_LOADS = (50.0, 200.0, 600.0)
 

@@ -225,7 +225,8 @@ class FirstOrderProbability:
             cell = np.clip(np.searchsorted(axis, x, side="right") - 1, 0, per - 2)
             axes.append(axis)
             cells.append(cell)
-            fractions.append((x - axis[cell]) / (axis[1] - axis[0]))
+            step = axis[1] - axis[0]                    # 0 for a vanishing scatter
+            fractions.append((x - axis[cell]) / step if step > 0 else np.zeros_like(x))
         grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(fields))
         expansions = []
         for point in grid:
