@@ -86,7 +86,8 @@ def eig_both(a: np.ndarray, left: bool = True) -> Eigen:
     if info != 0:
         raise np.linalg.LinAlgError(f"LAPACK dgeev did not converge (info {info})")
     lam = wr + 1j * wi
-    osc = np.flatnonzero(oscillatory_mask(lam))   # first of a pair: re, im in two columns
+    osc = np.flatnonzero(wi > _IMAG_TOL * np.abs(lam))  # oscillatory_mask; the first of a
+    #                                                     pair: re, im in two columns
     return Eigen(lam, osc, vr[:, osc] + 1j * vr[:, osc + 1],
                  vl[:, osc] + 1j * vl[:, osc + 1] if left else None)
 
@@ -121,15 +122,15 @@ def classify(eigen: Eigen, labels: tuple[str, ...]
     of the state eigenvector; the basis is mass-normalised so amplitudes are comparable).
     """
     eigvals = eigen.lam
+    lam = eigvals[eigen.osc]
+    order = np.argsort(-lam.real, kind="stable")
+    lam = lam[order]
+    dominant = np.abs(eigen.right[:len(labels), order]).argmax(axis=0).tolist()
+    two_pi = 2 * math.pi
+    modes = tuple(ModeResult(labels[d], i / two_pi, r, -r / g, r > GROWTH_TOL * g)
+                  for d, r, i, g in zip(dominant, lam.real.tolist(), lam.imag.tolist(),
+                                        np.abs(lam).tolist()))
     mag = np.abs(eigvals)
-    order = np.argsort(-eigvals.real[eigen.osc], kind="stable")
-    osc = eigen.osc[order]
-    lam, mag_osc = eigvals[osc], mag[osc]
-    dominant = np.abs(eigen.right[:len(labels), order]).argmax(axis=0)
-    growth = lam.real > GROWTH_TOL * mag_osc
-    modes = tuple(map(ModeResult, [labels[d] for d in dominant.tolist()],
-                      (lam.imag / (2 * math.pi)).tolist(), lam.real.tolist(),
-                      (-lam.real / mag_osc).tolist(), growth.tolist()))
     real = eigvals.real[(np.abs(eigvals.imag) <= _IMAG_TOL * mag)
                         & (eigvals.real > GROWTH_TOL * mag)]
     divergence = tuple(sorted(real.tolist(), reverse=True))
