@@ -1,6 +1,13 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The model commands: `modes` (natural frequencies), `predict` (one operating point), `sweep`
-(one axis) and `map` (two axes, with the refined stability boundary)."""
+"""The model commands: `modes` (natural frequencies), `predict` (one operating point, with
+P(squeak) over the scatter, its sensitivities and countermeasures), `sweep` (one axis) and `map`
+(two axes, with the refined stability boundary and, with --probability, iso-P contours).
+
+Which P(squeak) is which: `predict` reports the reference estimate (`probability.monte_carlo`,
+`REFERENCE_SAMPLES` samples, with its standard error) as `probability`, and the fast first-order
+estimate the node publishes (`Prediction.probability`, --samples samples) as
+`probability_live`; sweeps, maps and figures use the fast one at every point.
+"""
 
 from __future__ import annotations
 
@@ -12,11 +19,19 @@ from pathlib import Path
 
 import numpy as np
 
+from ..model.countermeasures import STEP, advice_text, countermeasures
 from ..model.parameters import field_info
-from ..model.predictor import Prediction
+from ..model.predictor import Prediction, SqueakModel
+from ..model.probability import monte_carlo
+from ..model.scatter import samples_for
+from ..model.sensitivity import sensitivities
 from ..model.sweep import MapResult, SweepResult, axis_names, check_axis, sweep, sweep_work
 from .args import (SPEED_AXIS, WORK_LIMITS, CliError, Parser, build_model, finite, finite_float,
                    parse_axis_spec, parse_range, print_json)
+
+
+REFERENCE_SAMPLES = 4096     # Monte Carlo samples of predict's `probability`
+SENSITIVITIES_SHOWN = 4      # largest growth-rate sensitivities in the text output
 
 
 def axis_unit(name: str) -> str:
@@ -33,18 +48,59 @@ def _mode_table(prediction: Prediction, count: int) -> list[str]:
     return lines
 
 
-def prediction_text(p: Prediction, top: int = 5) -> str:
+def assess(model: SqueakModel, p: Prediction) -> dict:
+    """What `predict` adds to `Prediction.as_dict()` at a valid point (None values when not
+    valid): the reference P(squeak) over REFERENCE_SAMPLES scatter samples and its standard
+    error (None without scatter: the nominal 0/1 verdict), the fast estimate, the growth-rate
+    sensitivities d Re(lambda) / d ln p [1/s] of the least stable mode keyed by parameter, and
+    the countermeasures (10 % changes ranked by the P they leave, computed with the fast
+    estimator on the same samples)."""
+    out = {"probability": None, "probability_stderr": None, "probability_samples": 0,
+           "probability_live": p.probability, "sensitivities": None, "countermeasures": None}
+    if not p.valid:
+        return out
+    samples = samples_for(model.params, model.scatter, REFERENCE_SAMPLES)
+    reference = monte_carlo(model, p.speed_rad_s, p.load_n, samples)
+    sensitivity = sensitivities(model, p.speed_rad_s, p.load_n)
+    found = countermeasures(model, p.speed_rad_s, p.load_n, samples)
+    out.update(probability=reference.probability, probability_stderr=reference.stderr,
+               probability_samples=reference.count,
+               sensitivities=sensitivity.growth_per_log,
+               countermeasures=[{"parameter": c.name,
+                                 "change": STEP if c.factor > 1 else -STEP,
+                                 "probability": c.probability, "advice": c.text}
+                                for c in found[1]])
+    return out
+
+
+def probability_line(p: Prediction, extra: dict) -> str:
+    """'P(squeak) 0.13 ± 0.003: raise the radius or raise |speed|' (`countermeasures.advice_text`
+    with the standard error)."""
+    from ..model.countermeasures import Countermeasure
+    measures = [Countermeasure(c["parameter"], 1 + c["change"], c["probability"])
+                for c in extra["countermeasures"]]
+    head, sep, rest = advice_text(extra["probability"], measures).partition(":")
+    if extra["probability_stderr"] is not None:
+        head += f" ± {extra['probability_stderr']:.1g}"
+    return head + sep + rest
+
+
+def prediction_text(p: Prediction, extra: dict, top: int = 5) -> str:
+    """The text output of `predict`; `extra` from `assess`."""
     head = (f"speed {p.speed_rad_s:g} rad/s, load {p.load_n:g} N, "
             f"{p.formulation} formulation")
     if not p.valid:
         return f"{head}\nno prediction: {p.reason}"
     if p.stable:
-        verdict = f"stable: no squeak (P(squeak) {p.probability:.3f})"
+        verdict = "stable at the nominal parameters: no squeak"
     else:
         squeak = ", ".join(f"{m.label} {m.frequency_hz:.1f} Hz (Re {m.growth_rate:+.2f} 1/s)"
                            for m in p.squeak_modes) or "none"
-        verdict = f"UNSTABLE: squeak predicted (P(squeak) {p.probability:.3f}); squeak modes: {squeak}"
-    lines = [head, verdict]
+        verdict = f"UNSTABLE at the nominal parameters: squeak predicted; squeak modes: {squeak}"
+    lines = [head, verdict, probability_line(p, extra)]
+    largest = sorted(extra["sensitivities"].items(), key=lambda kv: -abs(kv[1]))
+    lines.append("growth rate d Re(lambda) / d ln p [1/s]: " + ", ".join(
+        f"{name} {value:+.3g}" for name, value in largest[:SENSITIVITIES_SHOWN]))
     if p.divergence_rates:
         lines.append("divergence (real eigenvalues > 0): "
                      + ", ".join(f"{r:.4g} 1/s" for r in p.divergence_rates))
@@ -62,14 +118,26 @@ def _cell(value: float | None) -> str:
 
 def write_sweep_csv(result: SweepResult) -> None:
     out = csv.writer(sys.stdout, lineterminator="\n")
-    out.writerow([result.axis, "valid", "max_growth_rate", "probability", "unstable_modes",
-                  "unstable_frequencies_hz"])
+    out.writerow([result.axis, "valid", "max_growth_rate", "probability", "probability_stderr",
+                  "unstable_modes", "unstable_frequencies_hz"])
     for value, p in zip(result.values.tolist(), result.predictions):
         out.writerow([repr(value), p.valid, _cell(p.max_growth_rate), _cell(p.probability),
-                      _unstable_labels(p), ";".join(f"{f:.6g}" for f in p.unstable_frequencies_hz)])
+                      _cell(p.probability_stderr), _unstable_labels(p),
+                      ";".join(f"{f:.6g}" for f in p.unstable_frequencies_hz)])
 
 
-def sweep_text(result: SweepResult) -> str:
+def _percent(level: float) -> str:
+    return f"{100 * level:g} %"
+
+
+def crossings_text(crossings: dict[float, list], unit: str) -> str:
+    """'P(squeak) crosses 1 % at 65.4, 10 % at 60.6, 50 % at 54.6, 90 % nowhere [rad/s]'."""
+    return "P(squeak) crosses " + ", ".join(
+        f"{_percent(level)} at {', '.join(f'{v:.4g}' for v in values)}" if values else
+        f"{_percent(level)} nowhere" for level, values in crossings.items()) + f" [{unit}]"
+
+
+def sweep_text(result: SweepResult, probability: bool = False) -> str:
     unit, g = axis_unit(result.axis), result.max_growth_rate
     fixed = ", ".join(f"{k} = {v:g} {axis_unit(k)}" for k, v in result.fixed.items())
     n_valid = int(np.isfinite(g).sum())
@@ -88,6 +156,12 @@ def sweep_text(result: SweepResult) -> str:
                      f"{result.values[i]:g} {unit}"
                      + (f" (squeak modes {_unstable_labels(p).replace(';', ', ')})"
                         if p.squeak_modes else ""))
+    if probability and n_valid:
+        prob = result.probability
+        i = int(np.nanargmax(prob))
+        lines += [crossings_text(result.probability_crossings(), unit),
+                  f"largest P(squeak) {prob[i]:.3g} at {result.axis} = {result.values[i]:g} "
+                  f"{unit}"]
     reasons = {p.reason for p in result.predictions if not p.valid}
     lines += [f"invalid: {r}" for r in sorted(reasons)]
     return "\n".join(lines)
@@ -100,7 +174,7 @@ def map_text(result: MapResult) -> str:
     lines = [f"stability map: x = {result.x_axis} [{axis_unit(result.x_axis)}] "
              f"{result.x[0]:g}..{result.x[-1]:g} ({len(result.x)}), y = {result.y_axis} "
              f"[{axis_unit(result.y_axis)}] {result.y[0]:g}..{result.y[-1]:g} "
-             f"({len(result.y)}); fixed {fixed}",
+             f"({len(result.y)})" + (f"; fixed {fixed}" if fixed else ""),
              f"valid points: {int(valid.sum())}/{g.size}"]
     if valid.any():
         j, i = np.unravel_index(np.nanargmax(g), g.shape)
@@ -108,6 +182,10 @@ def map_text(result: MapResult) -> str:
                   f"largest growth rate {g[j, i]:.4g} 1/s at {result.x_axis} = {result.x[i]:g}, "
                   f"{result.y_axis} = {result.y[j]:g}"]
     lines.append(f"refined boundary points: {len(result.boundary)}")
+    if result.probability is not None:
+        lines.append("iso-P(squeak) points: " + ", ".join(
+            f"{_percent(level)}: {len(points)}"
+            for level, points in result.probability_contours().items()))
     return "\n".join(lines)
 
 
@@ -126,11 +204,13 @@ def cmd_modes(args: argparse.Namespace) -> int:
 
 
 def cmd_predict(args: argparse.Namespace) -> int:
-    p = build_model(args).predict(args.speed, args.load)
+    model = build_model(args)
+    p = model.predict(args.speed, args.load)
+    extra = assess(model, p)
     if args.json:
-        print_json(p.as_dict())
+        print_json({**p.as_dict(), **extra})
     else:
-        print(prediction_text(p))
+        print(prediction_text(p, extra))
     return 0
 
 
@@ -164,10 +244,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     elif args.csv:
         write_sweep_csv(result)
     else:
-        print(sweep_text(result))
+        print(sweep_text(result, args.probability))
     if args.plot:
         from .figures import plot_sweep
-        plot_sweep(result, Path(args.plot))
+        plot_sweep(result, Path(args.plot), probability=args.probability)
     return 0
 
 
@@ -180,14 +260,16 @@ def cmd_map(args: argparse.Namespace) -> int:
         if value is not None and name in (x_axis, y_axis):
             raise CliError(f"{option} cannot be combined with a {name} map axis")
     from .figures import run_map
-    result = run_map(model, x_axis, x, y_axis, y, args.speed, args.load)
+    result = run_map(model, x_axis, x, y_axis, y, args.speed, args.load,
+                     probability=args.probability)
     if args.json:
         print_json(result.as_dict())
     else:
         print(map_text(result))
     if args.plot:
-        from ..review.plots import plot_map
-        plot_map(result, Path(args.plot), formulation=model.params.formulation)
+        from ..review.plots import plot_map, probability_overlay
+        plot_map(result, Path(args.plot), formulation=model.params.formulation,
+                 overlay=probability_overlay(result) if args.probability else None)
     return 0
 
 
@@ -203,7 +285,13 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
                    help="rotation speed Omega [rad/s]")
     p.add_argument("--load", type=finite, metavar="N",
                    help="axial load F_z [N] (default: parameter axial_load_n)")
-    p.add_argument("--json", action="store_true", help="print Prediction.as_dict() as JSON")
+    p.add_argument("--json", action="store_true",
+                   help="print JSON: Prediction.as_dict() with probability = the reference "
+                        f"Monte Carlo P(squeak) over {REFERENCE_SAMPLES} scatter samples and "
+                        "probability_stderr (null without scatter), probability_live (the "
+                        "fast estimate the node publishes), sensitivities (d growth rate / "
+                        "d ln p [1/s] by parameter) and countermeasures (ranked, with the new "
+                        "P)")
     p.set_defaults(run=cmd_predict)
 
     p = sub.add_parser("sweep", parents=common, help="predictions along one axis",
@@ -220,6 +308,10 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     out.add_argument("--json", action="store_true", help="print SweepResult.as_dict() as JSON")
     out.add_argument("--csv", action="store_true", help="print one CSV row per point")
     p.add_argument("--plot", metavar="FILE.png", help="plot growth rates vs the axis")
+    p.add_argument("--probability", action="store_true",
+                   help="also where P(squeak) (the fast estimator, in every output) crosses "
+                        "1, 10, 50 and 90 %% (text; JSON always has probability_crossings), "
+                        "and P on a second axis of --plot")
     p.set_defaults(run=cmd_sweep)
 
     p = sub.add_parser("map", parents=common, help="2-D stability map with refined boundary",
@@ -232,4 +324,9 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
                    help="fixed axial load [N] (default axial_load_n)")
     p.add_argument("--json", action="store_true", help="print MapResult.as_dict() as JSON")
     p.add_argument("--plot", metavar="FILE.png", help="filled contour of the growth rate")
+    p.add_argument("--probability", action="store_true",
+                   help="also P(squeak) at every grid point (the fast estimator: about twice "
+                        "the work): in JSON probability, probability_stderr and "
+                        "probability_contours (points where P crosses 1, 10, 50 and 90 %%), "
+                        "iso-P lines and the 10-90 %% band in --plot")
     p.set_defaults(run=cmd_map)
