@@ -4,8 +4,8 @@ the P(squeak) band around its boundary (fig07p); and the sweep plot.
 
 `plot_sweep` is shared by the `figures` command and `sweep --plot`; the map and frequency
 plots (`review.plots`) are shared with `map --plot` and the replay report. `make_figures`
-writes fig04..fig11 and fig07p PNGs and `summary.txt`, whose sentences are computed from the plotted data
-(nothing is hard-coded). Importing this module does not import matplotlib (`map --json`).
+writes fig04..fig11 and fig07p PNGs and `summary.txt`, whose sentences are computed from the
+plotted data (nothing is hard-coded). Importing this module does not import matplotlib (`map --json`).
 """
 
 from __future__ import annotations

@@ -234,8 +234,18 @@ def probability_field(model: SqueakModel, speed_rad_s, load_n,
 
     Parameters
     ----------
-    model, speed_rad_s, load_n, progress, **params
-        As for `growth_field`.
+    model : SqueakModel
+        The model and its scatter; its parameters hold wherever `params` does not override
+        them.
+    speed_rad_s : array_like
+        Screw speeds [rad/s].
+    load_n : array_like
+        Axial loads [N].
+    progress : callable, optional
+        Called with the number of points just finished (invalid points at once).
+    **params
+        Numeric `ScrewParameters` fields by name, arrays in the field's unit; all arrays
+        broadcast together.
 
     Returns
     -------
@@ -376,8 +386,21 @@ class SweepResult:
         """P(squeak) per value (`Prediction.probability`); NaN where not valid."""
         return np.array([p.probability if p.valid else np.nan for p in self.predictions])
 
-    def probability_crossings(self, levels=PROBABILITY_LEVELS) -> dict[float, list[float]]:
-        """Level -> axis values where P(squeak) crosses it (linear between grid points)."""
+    def probability_crossings(self, levels: Iterable[float] = PROBABILITY_LEVELS
+                              ) -> dict[float, list[float]]:
+        """Where P(squeak) crosses each level along the axis (`level_crossings`).
+
+        Parameters
+        ----------
+        levels : iterable of float
+            Probabilities in [0, 1]; default 1, 10, 50 and 90 %.
+
+        Returns
+        -------
+        dict of float to list of float
+            Level -> axis values of its crossings (linear between grid points), in the axis
+            unit.
+        """
         return {level: level_crossings(self.values, self.probability, level)
                 for level in levels}
 
@@ -552,10 +575,21 @@ class MapResult:
     probability: np.ndarray | None = None
     probability_stderr: np.ndarray | None = None
 
-    def probability_contours(self, levels=PROBABILITY_LEVELS
+    def probability_contours(self, levels: Iterable[float] = PROBABILITY_LEVELS
                              ) -> dict[float, list[tuple[float, float]]]:
-        """Level -> ``(x, y)`` points where P(squeak) crosses it, interpolated linearly along
-        the rows and the columns of the grid (empty without `probability`)."""
+        """Points of the iso-P(squeak) contours.
+
+        Parameters
+        ----------
+        levels : iterable of float
+            Probabilities in [0, 1]; default 1, 10, 50 and 90 %.
+
+        Returns
+        -------
+        dict of float to list of tuple of float
+            Level -> ``(x, y)`` points (axis units) where P crosses it, interpolated linearly
+            along the rows, then the columns of the grid; empty lists without `probability`.
+        """
         out: dict[float, list[tuple[float, float]]] = {}
         for level in levels:
             points: list[tuple[float, float]] = []
