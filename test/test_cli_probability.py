@@ -186,8 +186,11 @@ def test_scatter_help_comes_from_the_field_metadata():
 
 
 # ----------------------------------------------------------------------------- sweep, map
-def test_sweep_probability_falls_across_the_upper_band_edge():
-    d = run_json("sweep", "--speed", "50:70:21", "--load", "200", "--probability")
+def test_sweep_probability_falls_across_the_upper_band_edge(tmp_path):
+    png = tmp_path / "s.png"
+    d = run_json("sweep", "--speed", "50:70:21", "--load", "200", "--probability", "--plot",
+                 str(png))
+    assert png.read_bytes().startswith(b"\x89PNG")
     prob = np.array(d["probability"])
     assert prob[0] > 0.7 and prob[-1] < 0.01
     assert np.all(np.diff(prob) <= 0.02)                # monotone up to sampling noise

@@ -158,9 +158,10 @@ def _scatter_value(item: str) -> tuple[str, float]:
     if not sep or not name:
         raise CliError(f"--scatter: expected NAME=SD or {NO_SCATTER}, got {item!r}")
     if name not in estimable():
-        why = ("a geometry parameter: the probability estimators hold the geometry fixed"
+        why = ("a geometry parameter, which the probability estimators hold fixed"
                if name in scatterable() else "not a parameter that can scatter")
-        raise CliError(f"--scatter {name}: {why}; one of {', '.join(estimable())}")
+        raise CliError(f"--scatter {name}: {why}; NAME is one of {', '.join(estimable())} "
+                       f"or {NO_SCATTER}")
     try:
         return name, float(text)
     except ValueError:
@@ -206,8 +207,8 @@ def scatter_settings(args: argparse.Namespace, file_values: dict[str, Any] | Non
         settings = _settings(dict(values, samples=args.samples), "--samples")
     geometry = [n for n in settings.scatter.names if n not in estimable()]
     if geometry:
-        raise CliError(f"--params-file: scatter.{geometry[0]} is a geometry parameter: the "
-                       f"probability estimators hold the geometry fixed; scatter one of "
+        raise CliError(f"--params-file: {SCATTER_PREFIX}{geometry[0]} is a geometry parameter, "
+                       f"which the probability estimators hold fixed; scatter one of "
                        f"{', '.join(estimable())}")
     return settings
 

@@ -156,6 +156,9 @@ def plot_map(result: MapResult, path: Path, title: str = "", dpi: int = 120,
     save_figure(fig, path, dpi)
 
 
+_LEVEL_STYLES = ("dotted", "dashed", "solid", "dashdot")   # of the PROBABILITY_LEVELS lines
+
+
 def probability_overlay(result: MapResult, band: tuple[float, float] = (0.1, 0.9)
                         ) -> Overlay:
     """Draws the iso-P(squeak) lines `PROBABILITY_LEVELS` (1, 10, 50, 90 %) of a map computed
@@ -171,14 +174,12 @@ def probability_overlay(result: MapResult, band: tuple[float, float] = (0.1, 0.9
         x, y, p = result.x * kx, result.y * ky, np.ma.masked_invalid(prob)
         ax.contourf(x, y, p, levels=list(band), colors="none", hatches=["..."])
         lines = ax.contour(x, y, p, levels=list(PROBABILITY_LEVELS), colors="k",
-                           linestyles=["dotted", "dashed", "solid", "dashdot"],
-                           linewidths=1.0)
-        ax.clabel(lines, fmt=lambda v: f"{100 * v:.0f} %", fontsize=7)
+                           linestyles=_LEVEL_STYLES, linewidths=1.0)
+        ax.clabel(lines, fmt=lambda v: f"{100 * v:g} %", fontsize=7)
         return [Patch(facecolor="none", edgecolor="0.3", hatch="...",
-                      label=f"P(squeak) {100 * band[0]:.0f}-{100 * band[1]:.0f} %"),
-                Line2D([], [], color="k", lw=1.0, ls="dashed",
-                       label="iso-P(squeak) " + ", ".join(f"{100 * v:.0f}"
-                                                          for v in PROBABILITY_LEVELS) + " %")]
+                      label=f"P(squeak) {100 * band[0]:g}-{100 * band[1]:g} %")] + [
+            Line2D([], [], color="k", lw=1.0, ls=style, label=f"P = {100 * level:g} %")
+            for level, style in zip(PROBABILITY_LEVELS, _LEVEL_STYLES)]
     return draw
 
 
