@@ -15,16 +15,17 @@ import argparse
 import csv
 import math
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..model.countermeasures import STEP, advice_text, countermeasures
+from ..model.countermeasures import STEP, Countermeasure, advice_text, countermeasures
 from ..model.parameters import field_info
 from ..model.predictor import Prediction, SqueakModel
-from ..model.probability import monte_carlo
+from ..model.probability import ProbabilityEstimate, monte_carlo
 from ..model.scatter import samples_for
-from ..model.sensitivity import sensitivities
+from ..model.sensitivity import Sensitivity, sensitivities
 from ..model.sweep import MapResult, SweepResult, axis_names, check_axis, sweep, sweep_work
 from .args import (SPEED_AXIS, WORK_LIMITS, CliError, Parser, build_model, finite, finite_float,
                    parse_axis_spec, parse_range, print_json)
@@ -48,44 +49,63 @@ def _mode_table(prediction: Prediction, count: int) -> list[str]:
     return lines
 
 
-def assess(model: SqueakModel, p: Prediction) -> dict:
-    """What `predict` adds to `Prediction.as_dict()` at a valid point (None values when not
-    valid): the reference P(squeak) over REFERENCE_SAMPLES scatter samples and its standard
-    error (None without scatter: the nominal 0/1 verdict), the fast estimate, the growth-rate
-    sensitivities d Re(lambda) / d ln p [1/s] of the least stable mode keyed by parameter, and
-    the countermeasures (10 % changes ranked by the P they leave, computed with the fast
-    estimator on the same samples)."""
-    out = {"probability": None, "probability_stderr": None, "probability_samples": 0,
-           "probability_live": p.probability, "sensitivities": None, "countermeasures": None}
+@dataclass(frozen=True)
+class Assessment:
+    """What `predict` adds to the prediction at one operating point (`assess`).
+
+    Attributes
+    ----------
+    reference : ProbabilityEstimate or None
+        Reference P(squeak) (Monte Carlo over REFERENCE_SAMPLES scatter samples) and its
+        standard error (None without scatter); None outside validity.
+    live : float or None
+        The fast estimate of `Prediction.probability` (what the node publishes).
+    sensitivity : Sensitivity or None
+        Growth-rate sensitivities d Re(lambda) / d ln p [1/s] of the least stable mode.
+    measures : list of Countermeasure or None
+        10 % changes that lower P, most effective first, each with the new P (fast estimator
+        on the reference samples).
+    """
+
+    reference: ProbabilityEstimate | None
+    live: float | None
+    sensitivity: Sensitivity | None = None
+    measures: list[Countermeasure] | None = None
+
+    def as_dict(self) -> dict:
+        """The keys `predict --json` adds to `Prediction.as_dict()`."""
+        ref, sens = self.reference, self.sensitivity
+        return {"probability": None if ref is None else ref.probability,
+                "probability_stderr": None if ref is None else ref.stderr,
+                "probability_samples": 0 if ref is None else ref.count,
+                "probability_live": self.live,
+                "sensitivities": None if sens is None else sens.growth_per_log,
+                "countermeasures": None if self.measures is None else [
+                    {"parameter": c.name, "change": STEP if c.factor > 1 else -STEP,
+                     "probability": c.probability, "advice": c.text} for c in self.measures]}
+
+    def line(self) -> str:
+        """'P(squeak) 0.13 ± 0.003: raise the radius or raise |speed|' (`advice_text` with
+        the standard error); '' outside validity."""
+        if self.reference is None:
+            return ""
+        head, sep, rest = advice_text(self.reference.probability, self.measures).partition(":")
+        if self.reference.stderr is not None:
+            head += f" ± {self.reference.stderr:.1g}"
+        return head + sep + rest
+
+
+def assess(model: SqueakModel, p: Prediction) -> Assessment:
+    """The reference P(squeak), sensitivities and countermeasures at the point of `p`."""
     if not p.valid:
-        return out
+        return Assessment(None, p.probability)
     samples = samples_for(model.params, model.scatter, REFERENCE_SAMPLES)
-    reference = monte_carlo(model, p.speed_rad_s, p.load_n, samples)
-    sensitivity = sensitivities(model, p.speed_rad_s, p.load_n)
     found = countermeasures(model, p.speed_rad_s, p.load_n, samples)
-    out.update(probability=reference.probability, probability_stderr=reference.stderr,
-               probability_samples=reference.count,
-               sensitivities=sensitivity.growth_per_log,
-               countermeasures=[{"parameter": c.name,
-                                 "change": STEP if c.factor > 1 else -STEP,
-                                 "probability": c.probability, "advice": c.text}
-                                for c in found[1]])
-    return out
+    return Assessment(monte_carlo(model, p.speed_rad_s, p.load_n, samples), p.probability,
+                      sensitivities(model, p.speed_rad_s, p.load_n), found and found[1])
 
 
-def probability_line(p: Prediction, extra: dict) -> str:
-    """'P(squeak) 0.13 ± 0.003: raise the radius or raise |speed|' (`countermeasures.advice_text`
-    with the standard error)."""
-    from ..model.countermeasures import Countermeasure
-    measures = [Countermeasure(c["parameter"], 1 + c["change"], c["probability"])
-                for c in extra["countermeasures"]]
-    head, sep, rest = advice_text(extra["probability"], measures).partition(":")
-    if extra["probability_stderr"] is not None:
-        head += f" ± {extra['probability_stderr']:.1g}"
-    return head + sep + rest
-
-
-def prediction_text(p: Prediction, extra: dict, top: int = 5) -> str:
+def prediction_text(p: Prediction, extra: Assessment, top: int = 5) -> str:
     """The text output of `predict`; `extra` from `assess`."""
     head = (f"speed {p.speed_rad_s:g} rad/s, load {p.load_n:g} N, "
             f"{p.formulation} formulation")
@@ -97,8 +117,8 @@ def prediction_text(p: Prediction, extra: dict, top: int = 5) -> str:
         squeak = ", ".join(f"{m.label} {m.frequency_hz:.1f} Hz (Re {m.growth_rate:+.2f} 1/s)"
                            for m in p.squeak_modes) or "none"
         verdict = f"UNSTABLE at the nominal parameters: squeak predicted; squeak modes: {squeak}"
-    lines = [head, verdict, probability_line(p, extra)]
-    largest = sorted(extra["sensitivities"].items(), key=lambda kv: -abs(kv[1]))
+    lines = [head, verdict, extra.line()]
+    largest = sorted(extra.sensitivity.growth_per_log.items(), key=lambda kv: -abs(kv[1]))
     lines.append("growth rate d Re(lambda) / d ln p [1/s]: " + ", ".join(
         f"{name} {value:+.3g}" for name, value in largest[:SENSITIVITIES_SHOWN]))
     if p.divergence_rates:
@@ -208,7 +228,7 @@ def cmd_predict(args: argparse.Namespace) -> int:
     p = model.predict(args.speed, args.load)
     extra = assess(model, p)
     if args.json:
-        print_json({**p.as_dict(), **extra})
+        print_json({**p.as_dict(), **extra.as_dict()})
     else:
         print(prediction_text(p, extra))
     return 0
