@@ -142,16 +142,22 @@ class _Expansion:
         f = abs(load) / self.geometry.contact.alpha
         return m0 * (c_f * f / p.radius_m), g * (c_5 * f)
 
+    def nominal_level_slope(self, speed: float, load: float) -> tuple[float, float]:
+        """`level_slope` at the nominal friction parameters (floats)."""
+        p = self.params
+        dm = p.mu_static - p.mu_kinetic
+        level, slope = self.level_slope(p.mu_kinetic, dm, p.friction_decay_s_m,
+                                        dm * p.friction_decay_s_m, speed, load)
+        return float(level), float(slope)
+
     def margins(self, pairs: EigenPairs, load: float, friction: tuple, change: np.ndarray,
                 reach_damping: float, prune: bool = True) -> np.ndarray:
         """Per sample, the largest expanded growth rate beyond the squeak threshold over the
         modes [1/s] (> 0: squeak). `change` (3, count) holds the damping-ratio changes in row
         2; rows 0 and 1 are filled here. `prune` leaves out the modes that cannot reach the
         threshold (then -inf where none can): right for the sign, not for interpolation."""
-        p, speed, n = self.params, pairs.speed, self.geometry.n
-        dm = p.mu_static - p.mu_kinetic
-        level0, slope0 = self.level_slope(p.mu_kinetic, dm, p.friction_decay_s_m,
-                                          dm * p.friction_decay_s_m, speed, load)
+        speed, n = pairs.speed, self.geometry.n
+        level0, slope0 = self.nominal_level_slope(speed, load)
         level, slope = self.level_slope(*friction, speed, load)
         np.subtract(level, level0, out=change[0])
         np.subtract(slope, slope0, out=change[1])
@@ -243,6 +249,14 @@ class FirstOrderProbability:
             weight = np.prod([f if b else 1 - f for f, b in zip(fractions, bits)], axis=0)
             corners.append((index, weight))
         return expansions, corners
+
+    def nominal_level_slope(self, speed: float, load: float) -> tuple[float, float]:
+        """`level_slope` at the nominal friction parameters (floats)."""
+        p = self.params
+        dm = p.mu_static - p.mu_kinetic
+        level, slope = self.level_slope(p.mu_kinetic, dm, p.friction_decay_s_m,
+                                        dm * p.friction_decay_s_m, speed, load)
+        return float(level), float(slope)
 
     def margins(self, pairs: EigenPairs, load: float) -> np.ndarray:
         """Per sample, the largest growth rate beyond the squeak threshold over the modes

@@ -80,7 +80,7 @@ def eig_both(a: np.ndarray, left: bool = True) -> Eigen:
     numpy.linalg.LinAlgError
         A is not finite or LAPACK did not converge.
     """
-    if not np.isfinite(a).all():
+    if not math.isfinite(a.sum()):                  # NaN or inf anywhere
         raise np.linalg.LinAlgError("the state matrix is not finite")
     wr, wi, vl, vr, info = lapack.dgeev(a, compute_vl=int(left), compute_vr=1)
     if info != 0:
