@@ -18,8 +18,9 @@ import yaml
 
 from ..model.display import exact
 from ..model.fields import default_text, help_text, range_text
-from ..model.parameters import (FORMULATIONS, ParameterError, ScrewParameters, field_info,
+from ..model.parameters import (FORMULATIONS, ParameterError, ScrewParameters,
                                 field_names)
+from ..model.perturbation import MAX_GEOMETRY_FIELDS, geometry_fields
 from ..model.predictor import SqueakModel
 from ..model.scatter import LOG_NORMAL, REPLICATES, ScatterSettings, scatterable
 from ..model.sweep import MAX_MEMORY_BYTES, MAX_POINTS, REFERENCE_STATE_SIZE, check_axis
@@ -145,23 +146,15 @@ def yaml_parameters(path: str) -> dict[str, Any]:
     return _ros_parameters(yaml.safe_load(Path(path).read_text(encoding="utf-8")))
 
 
-def estimable() -> tuple[str, ...]:
-    """The parameters whose scatter the probability estimators take: those that leave the
-    geometry (modes, contact integrals) unchanged: friction and damping."""
-    return tuple(n for n in scatterable() if not field_info(n)["geometry"])
-
-
 def _scatter_value(item: str) -> tuple[str, float]:
     """`NAME=SD` of --scatter -> (name, SD), the name checked, the number parsed (its range
     is checked by ScatterSettings)."""
     name, sep, text = (part.strip() for part in item.partition("="))
     if not sep or not name:
         raise CliError(f"--scatter: expected NAME=SD or {NO_SCATTER}, got {item!r}")
-    if name not in estimable():
-        why = ("a geometry parameter, which the probability estimators hold fixed"
-               if name in scatterable() else "not a parameter that can scatter")
-        raise CliError(f"--scatter {name}: {why}; NAME is one of {', '.join(estimable())} "
-                       f"or {NO_SCATTER}")
+    if name not in scatterable():
+        raise CliError(f"--scatter {name}: not a parameter that can scatter; NAME is one of "
+                       f"{', '.join(scatterable())} or {NO_SCATTER}")
     try:
         return name, float(text)
     except ValueError:
@@ -170,7 +163,9 @@ def _scatter_value(item: str) -> tuple[str, float]:
 
 def _settings(values: dict[str, Any], what: str) -> ScatterSettings:
     try:
-        return ScatterSettings(**values)
+        settings = ScatterSettings(**values)
+        geometry_fields(settings.scatter)          # more than the live estimate takes
+        return settings
     except ParameterError as exc:
         raise CliError(f"{what}: {exc}") from None
 
@@ -205,11 +200,6 @@ def scatter_settings(args: argparse.Namespace, file_values: dict[str, Any] | Non
     settings = _settings(values, "--scatter")
     if args.samples is not None:
         settings = _settings(dict(values, samples=args.samples), "--samples")
-    geometry = [n for n in settings.scatter.names if n not in estimable()]
-    if geometry:
-        raise CliError(f"--params-file: {SCATTER_PREFIX}{geometry[0]} is a geometry parameter, "
-                       f"which the probability estimators hold fixed; scatter one of "
-                       f"{', '.join(estimable())}")
     return settings
 
 
@@ -232,15 +222,14 @@ def build_model(args: argparse.Namespace) -> SqueakModel:
 def _scatter_help() -> str:
     """--scatter help from the ScatterSettings field metadata (defaults, range)."""
     info = {f.name: f for f in fields(ScatterSettings)}
-    on = [f"{n} {default_text(info[n])}" for n in estimable() if info[n].default]
-    off = [n for n in estimable() if not info[n].default]
-    allowed = range_text({**info[estimable()[0]].metadata, "unit": ""})
+    on = [f"{n} {default_text(info[n])}" for n in scatterable() if info[n].default]
+    allowed = range_text({**info[scatterable()[0]].metadata, "unit": ""})
     return (f"unit-to-unit scatter of one parameter behind P(squeak) (repeatable): NAME=SD, "
             f"the relative standard deviation (for {', '.join(sorted(LOG_NORMAL))} the SD of "
             f"its logarithm), allowed {allowed}; 0 switches one off, '{NO_SCATTER}' every one "
-            f"(then P is the nominal 0/1 verdict). Defaults: {', '.join(on)}"
-            + (f", {', '.join(off)} 0" if off else "")
-            + f"; as the ROS parameters {SCATTER_PREFIX}<NAME> of --params-file")
+            f"(then P is the nominal 0/1 verdict). Defaults: {', '.join(on)}, every other 0. "
+            f"NAME is any of {', '.join(scatterable())} (at most {MAX_GEOMETRY_FIELDS} "
+            f"geometry fields); as the ROS parameters {SCATTER_PREFIX}<NAME> of --params-file")
 
 
 def common_parser() -> Parser:
