@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from leadscrew_ros.cli import main
 from leadscrew_ros.cli.figures import describe_probability_band
 from leadscrew_ros.model import SqueakModel
-from leadscrew_ros.model.countermeasures import DESIGN, OPERATING, STEP
+from leadscrew_ros.model.countermeasures import DESIGN, FRICTION, OPERATING, STEP
 from leadscrew_ros.model.scatter import DEFAULT_SCATTER, LOG_NORMAL
 from leadscrew_ros.model.sweep import PROBABILITY_LEVELS, stability_map
 
@@ -65,7 +65,7 @@ def test_predict_countermeasures_are_ranked_and_lower_p(at_60):
     assert found and [c["probability"] for c in found] == sorted(c["probability"]
                                                                  for c in found)
     for c in found:
-        assert c["parameter"] in DESIGN + OPERATING and abs(c["change"]) == STEP
+        assert c["parameter"] in DESIGN + FRICTION + OPERATING and abs(c["change"]) == STEP
         assert 0 <= c["probability"] < at_60["probability_live"]
     assert found[0]["parameter"] == "radius_m" and found[0]["change"] == STEP
     assert found[0]["probability"] < 0.01

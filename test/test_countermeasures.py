@@ -4,8 +4,9 @@
 import pytest
 
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.model.countermeasures import (DESIGN, OPERATING, STEP, Countermeasure,
-                                                 advice_text, countermeasures)
+from leadscrew_ros.model.countermeasures import (DESIGN, FRICTION, OPERATING, STEP,
+                                                 Countermeasure, advice_text, changed_by,
+                                                 countermeasures)
 from leadscrew_ros.model.probability import linearised
 from leadscrew_ros.model.scatter import Scatter, draw
 
@@ -18,16 +19,28 @@ def test_changes_are_ranked_and_each_new_probability_is_computed():
     assert now == linearised(MODEL, 55.0, 200.0, SAMPLES).probability
     assert [c.probability for c in found] == sorted(c.probability for c in found)
     assert all(c.probability < now for c in found) and len(found) >= 4
-    assert {c.name for c in found} <= set(DESIGN + OPERATING)
+    assert {c.name for c in found} <= set(DESIGN + FRICTION + OPERATING)
     for c in found:
         assert c.factor in (1 + STEP, 1 - STEP)
-        if c.name in DESIGN:
-            changed = MODEL.with_params(**{c.name: getattr(MODEL.params, c.name) * c.factor})
-            assert c.probability == linearised(changed, 55.0, 200.0, SAMPLES).probability
-        else:
-            speed, load = (55.0 * c.factor, 200.0) if c.name == "speed_rad_s" else \
-                (55.0, 200.0 * c.factor)
-            assert c.probability == linearised(MODEL, speed, load, SAMPLES).probability
+        model, speed, load = changed_by(MODEL, 55.0, 200.0, c.name, c.factor)
+        assert c.probability == linearised(model, speed, load, SAMPLES).probability
+
+
+def test_each_lever_changes_what_it_says():
+    p = MODEL.params
+    drop = changed_by(MODEL, 55.0, 200.0, "friction_drop", 0.9)[0].params
+    assert drop.mu_kinetic == p.mu_kinetic
+    assert drop.mu_static - drop.mu_kinetic == pytest.approx(0.9 * (p.mu_static - p.mu_kinetic))
+    assert changed_by(MODEL, 55.0, 200.0, "speed_rad_s", 1.1)[1:] == (55.0 * 1.1, 200.0)
+    assert changed_by(MODEL, 55.0, 200.0, "load_n", 0.9)[1:] == (55.0, 200.0 * 0.9)
+    assert changed_by(MODEL, 55.0, 200.0, "radius_m", 1.1)[0].params.radius_m == \
+        pytest.approx(1.1 * p.radius_m)
+
+
+def test_a_smaller_stribeck_drop_lowers_the_probability_near_an_edge():
+    now, found = countermeasures(MODEL, 57.0, 200.0, SAMPLES)
+    drop = {c.name: c for c in found}["friction_drop"]
+    assert drop.factor == 1 - STEP and drop.probability < now - 0.01
 
 
 def test_more_damping_lowers_the_probability_near_an_edge():
@@ -50,10 +63,13 @@ def test_outside_validity_there_is_no_advice():
 
 
 def test_advice_is_one_line():
-    found = [Countermeasure("radius_m", 1.1, 0.01), Countermeasure("speed_rad_s", 0.9, 0.05)]
-    assert advice_text(0.114, found) == "P(squeak) 0.11: raise the radius or lower |speed|"
+    found = [Countermeasure("radius_m", 1.1, 0.01), Countermeasure("friction_drop", 0.9, 0.05),
+             Countermeasure("speed_rad_s", 0.9, 0.06)]
+    assert advice_text(0.114, found) == "P(squeak) 0.11: raise the radius or lower mu_s - mu_k"
     assert advice_text(0.0, []) == "P(squeak) 0.00"
-    assert advice_text(0.5, []) == "P(squeak) 0.50: no 10 % change of one parameter lowers it"
+    assert advice_text(0.5, []) == \
+        "P(squeak) 0.50: no 10 % change of one parameter lowers it by 0.01"
+    assert advice_text(0.995, [Countermeasure("radius_m", 1.1, 0.99)]).endswith("by 0.01")
 
 
 @pytest.mark.parametrize("formulation, speed", [("paper", 60.0), ("consistent", 49.0)])

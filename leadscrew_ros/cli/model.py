@@ -85,7 +85,7 @@ class Assessment:
                      "probability": c.probability, "advice": c.text} for c in self.measures]}
 
     def line(self) -> str:
-        """'P(squeak) 0.13 ± 0.003: raise the radius or raise |speed|' (`advice_text` with
+        """'P(squeak) 0.13 ± 0.003: raise the radius or raise the speed' (`advice_text` with
         the standard error); '' outside validity."""
         if self.reference is None:
             return ""

@@ -5,7 +5,9 @@ favourable direction lowers P(squeak), each with the new P computed (not extrapo
 Both directions of each parameter are evaluated with the fast estimator
 (`probability.linearised`) on the same samples, the geometry rebuilt where the parameter changes
 it; the favourable direction is the one with the lower P. A change that leaves the valid
-parameter domain or the model's validity is not offered.
+parameter domain or the model's validity is not offered. Besides the design and operating
+parameters, the friction of the pairing (grease, coating): the Stribeck drop mu_s - mu_k
+('friction_drop', mu_k held) and the decay constant d.
 """
 
 from __future__ import annotations
@@ -18,11 +20,15 @@ from .probability import linearised
 from .scatter import Samples
 
 DESIGN = ("radius_m", "helix_angle_rad", "nut_position_m", "nut_length_m", "modal_damping")
+FRICTION = ("friction_drop", "friction_decay_s_m")
 OPERATING = ("speed_rad_s", "load_n")
 STEP = 0.10                                   # relative change offered
+MIN_DROP = 0.01                               # the advice line names changes that gain this
 _WORDS = {"radius_m": "the radius", "helix_angle_rad": "the helix angle",
           "nut_position_m": "the nut position", "nut_length_m": "the nut length",
-          "modal_damping": "the damping", "speed_rad_s": "|speed|", "load_n": "|load|"}
+          "modal_damping": "the damping", "friction_drop": "mu_s - mu_k",
+          "friction_decay_s_m": "the friction decay d", "speed_rad_s": "the speed",
+          "load_n": "the load"}
 
 
 @dataclass(frozen=True)
@@ -32,7 +38,8 @@ class Countermeasure:
     Attributes
     ----------
     name : str
-        `ScrewParameters` field, or 'speed_rad_s' / 'load_n'.
+        `ScrewParameters` field, 'friction_drop' (mu_s - mu_k), or 'speed_rad_s' / 'load_n'
+        (their magnitude).
     factor : float
         Multiplier of the parameter (1 + STEP or 1 - STEP).
     probability : float
@@ -72,17 +79,11 @@ def countermeasures(model: SqueakModel, speed_rad_s: float, load_n: float,
     if now is None:
         return None
     found = []
-    for name in DESIGN + OPERATING:
+    for name in DESIGN + FRICTION + OPERATING:
         best = None
         for factor in (1 + STEP, 1 - STEP):
-            speed, load, changed = speed_rad_s, load_n, model
             try:
-                if name == "speed_rad_s":
-                    speed = speed_rad_s * factor
-                elif name == "load_n":
-                    load = load_n * factor
-                else:
-                    changed = model.with_params(**{name: getattr(model.params, name) * factor})
+                changed, speed, load = changed_by(model, speed_rad_s, load_n, name, factor)
             except ParameterError:
                 continue
             e = linearised(changed, speed, load, samples)
@@ -94,9 +95,32 @@ def countermeasures(model: SqueakModel, speed_rad_s: float, load_n: float,
     return now.probability, sorted(found, key=lambda c: (c.probability, c.name))
 
 
+def changed_by(model: SqueakModel, speed_rad_s: float, load_n: float, name: str,
+               factor: float) -> tuple[SqueakModel, float, float]:
+    """The model and operating point with parameter `name` multiplied by `factor`.
+
+    Raises
+    ------
+    ParameterError
+        The change leaves the valid parameter domain.
+    """
+    p = model.params
+    if name == "speed_rad_s":
+        return model, speed_rad_s * factor, load_n
+    if name == "load_n":
+        return model, speed_rad_s, load_n * factor
+    if name == "friction_drop":
+        return (model.with_params(mu_static=p.mu_kinetic + factor * (p.mu_static - p.mu_kinetic)),
+                speed_rad_s, load_n)
+    return model.with_params(**{name: getattr(p, name) * factor}), speed_rad_s, load_n
+
+
 def advice_text(probability: float, measures: list[Countermeasure], top: int = 2) -> str:
-    """One line: 'P(squeak) 0.13: lower |speed| or raise the damping'."""
+    """One line: 'P(squeak) 0.13: lower the speed or raise the damping', naming the `top`
+    changes that lower P by at least MIN_DROP."""
     head = f"P(squeak) {probability:.2f}"
-    if not measures:
-        return head + (": no 10 % change of one parameter lowers it" if probability > 0 else "")
-    return f"{head}: " + " or ".join(m.text for m in measures[:top])
+    useful = [m for m in measures if probability - m.probability >= MIN_DROP][:top]
+    if not useful:
+        return head + (f": no 10 % change of one parameter lowers it by {MIN_DROP:g}"
+                       if probability > 0 else "")
+    return f"{head}: " + " or ".join(m.text for m in useful)
