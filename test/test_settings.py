@@ -56,7 +56,7 @@ def test_record_settings_limits_mean_what_the_descriptions_say():
     (dict(directory=""), "directory must not be empty"),
     (dict(compression="gzip"), "compression = 'gzip' is not allowed; choose one of zstd, lz4, "
                                "none"),
-    (dict(queue_depth=0), "queue_depth = 0 is out of range, allowed [1, 1000000] 1"),
+    (dict(queue_depth=0), "queue_depth = 0 is out of range, allowed [1, 1000000]"),
     (dict(queue_depth=1_000_001), "queue_depth = 1000001 is out of range"),
     (dict(queue_depth=5.0), "queue_depth = 5.0 must be an int"),
     (dict(flush_period_s=0.0), "flush_period_s = 0 is out of range, allowed [0.05, 10] s"),

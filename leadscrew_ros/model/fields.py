@@ -60,10 +60,11 @@ def _bound(value: float) -> str:
 
 
 def range_text(md: dict[str, Any]) -> str:
-    """'[lo, hi] unit' with open bounds as parentheses."""
+    """'[lo, hi] unit' with open bounds as parentheses (no unit for dimensionless '1')."""
     lo = "(" if md["lo_open"] else "["
     hi = ")" if md["hi_open"] else "]"
-    return f"{lo}{_bound(md['lo'])}, {_bound(md['hi'])}{hi} {md['unit']}".rstrip()
+    unit = "" if md["unit"] == "1" else md["unit"]
+    return f"{lo}{_bound(md['lo'])}, {_bound(md['hi'])}{hi} {unit}".rstrip()
 
 
 def check_value(name: str, value: Any, f: Field) -> str:

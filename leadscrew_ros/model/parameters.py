@@ -145,7 +145,7 @@ def _attributes_section() -> str:
     for f in fields(ScrewParameters):
         md = f.metadata
         unit = {"": "", "1": " (dimensionless)"}.get(md["unit"], f" [{md['unit']}]")
-        allowed = (f"allowed {range_text(md).removesuffix(' 1')}" if md["lo"] is not None
+        allowed = (f"allowed {range_text(md)}" if md["lo"] is not None
                    else f"one of {', '.join(FORMULATIONS)}")
         default = f"{f.default:g}" if isinstance(f.default, float) else repr(f.default)
         lines += [f"    {f.name} : {f.type}",
