@@ -218,3 +218,14 @@ def test_fast_estimator_with_zero_scatter_is_the_nominal_verdict():
     for speed in (20.0, 60.0, -30.0):
         e = linearised(MODEL, speed, 200.0, draw(MODEL.params, Scatter({}), 64))
         assert e.probability == float(bool(MODEL.predict(speed, 200.0).squeak_modes))
+
+
+def test_predict_is_thread_safe():
+    """Two threads predicting on one model (the node's executor and its background safe-speed
+    search) get the numbers one thread gets."""
+    from concurrent.futures import ThreadPoolExecutor
+    speeds = [50.0, 55.0, 57.0, 60.0] * 25
+    alone = [MODEL.predict(s, 200.0).probability for s in speeds]
+    with ThreadPoolExecutor(2) as pool:
+        for _ in range(3):
+            assert list(pool.map(lambda s: MODEL.predict(s, 200.0).probability, speeds)) == alone

@@ -150,13 +150,15 @@ class _Expansion:
                                         dm * p.friction_decay_s_m, speed, load)
         return float(level), float(slope)
 
-    def margins(self, pairs: EigenPairs, load: float, friction: tuple, change: np.ndarray,
+    def margins(self, pairs: EigenPairs, load: float, friction: tuple, damping: np.ndarray,
                 reach_damping: float, prune: bool = True) -> np.ndarray:
         """Per sample, the largest expanded growth rate beyond the squeak threshold over the
-        modes [1/s] (> 0: squeak). `change` (3, count) holds the damping-ratio changes in row
-        2; rows 0 and 1 are filled here. `prune` leaves out the modes that cannot reach the
-        threshold (then -inf where none can): right for the sign, not for interpolation."""
+        modes [1/s] (> 0: squeak); `damping` holds the samples' damping-ratio changes. `prune`
+        leaves out the modes that cannot reach the threshold (then -inf where none can):
+        right for the sign, not for interpolation. Thread-safe: nothing shared is written."""
         speed, n = pairs.speed, self.geometry.n
+        change = np.empty((3, len(damping)))               # level, slope, damping ratio
+        change[2] = damping
         level0, slope0 = self.nominal_level_slope(speed, load)
         level, slope = self.level_slope(*friction, speed, load)
         np.subtract(level, level0, out=change[0])
@@ -211,10 +213,9 @@ class FirstOrderProbability:
         ms, mk, d = (np.broadcast_to(values.get(k, getattr(params, k)), (count,))
                      for k in ("mu_static", "mu_kinetic", "friction_decay_s_m"))
         self._friction = (mk, ms - mk, d, (ms - mk) * d)
-        self._change = np.zeros((3, count))                # level, slope, damping ratio
-        self._change[2] = values.get("modal_damping", params.modal_damping) \
-            - params.modal_damping
-        self._reach_damping = float(np.abs(self._change[2]).max())
+        self._damping = np.broadcast_to(values.get("modal_damping", params.modal_damping)
+                                        - params.modal_damping, (count,))
+        self._reach_damping = float(np.abs(self._damping).max())
         self._shape = samples.u.shape[:2]
         self._nominal = _Expansion(geometry)
         fields = geometry_fields(scatter)
@@ -262,7 +263,7 @@ class FirstOrderProbability:
         """Per sample, the largest growth rate beyond the squeak threshold over the modes
         [1/s] (> 0: squeak), shape (count,); `pairs` is the nominal eigen-solve."""
         if self._nodes is None:
-            return self._nominal.margins(pairs, load, self._friction, self._change,
+            return self._nominal.margins(pairs, load, self._friction, self._damping,
                                          self._reach_damping)
         expansions, corners = self._nodes
         speed, at = pairs.speed, []
@@ -271,7 +272,7 @@ class FirstOrderProbability:
                 at.append(np.full(self.samples.count, _OUTSIDE))   # not valid: no squeak
                 continue
             node_pairs = EigenPairs.solve(e.geometry, speed, load)
-            at.append(e.margins(node_pairs, load, self._friction, self._change,
+            at.append(e.margins(node_pairs, load, self._friction, self._damping,
                                 self._reach_damping, prune=False))
         at = np.array(at)
         columns = np.arange(self.samples.count)
