@@ -166,6 +166,8 @@ def test_the_replay_predicts_with_the_models_scatter(log, tmp_path):
         assert summary["scatter"] == dict(scatter.sd)
         assert summary["scatter_samples"] == samples
     assert set(risk) == {0.0, 1.0}            # no scatter: the nominal verdict
+    assert "scatter: mu_kinetic 0.1 (relative SD), 64 samples" in (
+        tmp_path / "64" / "summary.txt").read_text()
     assert "scatter: none" in (tmp_path / "1024" / "summary.txt").read_text()
 
 

@@ -272,9 +272,10 @@ class ReplayResult:
         """One line: the scatter P(squeak) is taken over."""
         if not self.scatter:
             return "scatter: none (P(squeak) is the nominal verdict, 0 or 1)"
+        log_normal = [name for name in self.scatter if name in LOG_NORMAL]
         return ("scatter: " + ", ".join(f"{name} {sd:g}" for name, sd in self.scatter.items())
-                + f" (relative SD; SD of ln for {', '.join(sorted(LOG_NORMAL))}), "
-                  f"{self.scatter_samples} samples")
+                + " (relative SD" + (f"; SD of ln for {', '.join(log_normal)}" if log_normal
+                                     else "") + f"), {self.scatter_samples} samples")
 
     def summary_text(self) -> str:
         lines = [f"replay of {self.log}: {len(self.files)} file(s), {self.messages} messages "
