@@ -579,7 +579,9 @@ def _namespaces(source: LogSource, settings: ReplaySettings) -> tuple[str, str]:
 def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
            settings: ReplaySettings = ReplaySettings()) -> ReplayResult:
     """Replay `log` (an MCAP or .db3 file, or a bag directory of split files) offline into
-    `out_dir`."""
+    `out_dir`, predicting with `model`: its parameters, and its scatter and sample count for
+    P(squeak) (e.g. `SqueakModel(params, scatter_settings.scatter, scatter_settings.samples)`,
+    as the node builds it)."""
     t0 = time.perf_counter()
     log, out_dir = Path(log), Path(out_dir)
     source = open_log(log)
