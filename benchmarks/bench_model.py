@@ -30,8 +30,8 @@ import scipy
 from leadscrew_ros.model import SqueakModel, assembly
 from leadscrew_ros.model.contact import contact_integrals
 from leadscrew_ros.model.modes import modal_basis
-from leadscrew_ros.model.risk import squeak_risk
-from leadscrew_ros.model.stability import classify
+from leadscrew_ros.model.scatter import Scatter
+from leadscrew_ros.model.stability import classify, eig_both
 from leadscrew_ros.model.sweep import _CHUNK, growth_field
 
 TARGET_POINT_RATIO = 1.5     # predict / bare eig
@@ -79,11 +79,13 @@ def operating_points(n: int = 16) -> list[tuple[float, float]]:
 
 def bench_point(model: SqueakModel, rounds: int, loops: int) -> dict:
     """Per operating point: full `predict` vs bare `eig` of the pre-built state matrix, plus
-    the two model-side pieces (rescale, labels + risk) to show where the overhead goes."""
+    the two model-side pieces (rescale, labels) to show where the overhead goes. Without scatter:
+    the probability's share is benchmarks/bench_probability.py."""
+    model = model.with_scatter(Scatter({}))
     points = operating_points()
     mats = [model.state_matrix(s, f) for s, f in points]
-    eigs = [np.linalg.eig(a) for a in mats]
-    labels, scale = model.labels, model.params.risk_damping_scale
+    eigs = [eig_both(a) for a in mats]
+    labels = model.labels
 
     def predict():
         for _ in range(loops):
@@ -100,15 +102,14 @@ def bench_point(model: SqueakModel, rounds: int, loops: int) -> dict:
             for s, f in points:
                 model.state_matrix(s, f)
 
-    def label_risk():
+    def label():
         for _ in range(loops):
-            for lam, vec in eigs:
-                modes, _ = classify(lam, vec, labels)
-                squeak_risk(min((m.damping_ratio for m in modes), default=np.inf), scale)
+            for eigen in eigs:
+                classify(eigen, labels)
 
     calls = loops * len(points)
     raw, _ = interleaved(dict(predict=predict, eig=eig, rescale=rescale,
-                              label_risk=label_risk), rounds)
+                              label=label), rounds)
     us = {k: [t / calls * 1e6 for t in v] for k, v in raw.items()}
     return dict(points=points, calls_per_sample=calls, samples_us=us,
                 median_us={k: median(v) for k, v in us.items()},
@@ -196,12 +197,12 @@ def table(res: dict) -> str:
     u, pps, ms = pt["median_us"], mp["median_points_per_s"], geo["median_ms"]
     g = "×".join(map(str, mp["grid"]))
     rows = [
-        ("1 per point", f"`predict` (rescale + eig + labels + risk), {len(pt['points'])} "
+        ("1 per point", f"`predict` without scatter (rescale + eig + labels), {len(pt['points'])} "
          "points cycled", f"{u['predict']:.1f} µs", f"bare `eig` {u['eig']:.1f} µs",
          f"{pt['ratio']:.2f}×", verdict(pt["ratio"], TARGET_POINT_RATIO)),
         ("", "… of which rescale (`state_matrix`, timed alone)", f"{u['rescale']:.1f} µs", "", "", ""),
-        ("", "… of which labels + risk (`classify`, `squeak_risk`, timed alone)",
-         f"{u['label_risk']:.1f} µs", "", "", ""),
+        ("", "… of which labels (`classify`, timed alone)",
+         f"{u['label']:.1f} µs", "", "", ""),
         ("2 map", f"`growth_field` {g} speed×load", f"{pps['map']:,.0f} pts/s",
          f"bare `eigvals` (chunks of {mp['chunk']}) {pps['eigvals']:,.0f} pts/s",
          f"{mp['ratio']:.2f}×", verdict(mp["ratio"], TARGET_MAP_RATIO)),

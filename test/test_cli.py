@@ -30,8 +30,12 @@ from leadscrew_ros.model.sweep import (MAX_MEMORY_BYTES, MAX_POINTS, map_work, s
 
 REPO = Path(__file__).resolve().parents[1]
 TABLE2_HZ = [224, 898, 2020, 2654, 3592, 5612, 7961, 8082]
-PREDICTION_KEYS = {"speed_rad_s", "load_n", "formulation", "valid", "reason", "stable", "risk",
+PREDICTION_KEYS = {"speed_rad_s", "load_n", "formulation", "valid", "reason", "stable",
+                   "probability", "probability_stderr", "probability_samples",
+                   "probability_live", "margin", "sensitivities", "countermeasures",
                    "max_growth_rate", "unstable_frequencies_hz", "divergence_rates", "modes"}
+NO_SCATTER = ["--scatter", "mu_static=0", "--scatter", "mu_kinetic=0", "--scatter",
+              "friction_decay_s_m=0", "--scatter", "modal_damping=0"]
 MODE_KEYS = {"label", "frequency_hz", "growth_rate", "damping_ratio", "unstable"}
 
 
@@ -79,7 +83,9 @@ def test_modes_follow_params(capsys):
 def test_predict_json_squeaks_at_20_rad_s(capsys):
     d = run_json(capsys, "predict", "--speed", "20", "--load", "200")
     assert set(d) == PREDICTION_KEYS
-    assert d["valid"] is True and d["stable"] is False and d["risk"] == 1
+    assert d["valid"] is True and d["stable"] is False and d["margin"] < 0
+    # deep in the band: (almost) every drive of the scatter squeaks
+    assert d["probability"] > 0.99 and d["probability_live"] > 0.99
     assert d["formulation"] == "paper" and d["speed_rad_s"] == 20 and d["load_n"] == 200
     f = sorted(d["unstable_frequencies_hz"])
     assert len(f) == 2 and close(f[0], 224, 0.01) and close(f[1], 898, 0.01)
@@ -100,7 +106,8 @@ def test_predict_text_summary(capsys):
 
 def test_predict_outside_validity(capsys):
     d = run_json(capsys, "predict", "--speed", "0.1")
-    assert d["valid"] is False and d["risk"] is None and d["stable"] is None
+    assert d["valid"] is False and d["probability"] is None and d["stable"] is None
+    assert d["probability_stderr"] is d["sensitivities"] is d["countermeasures"] is None
     assert "validity" in d["reason"] and d["modes"] == []
     code, out, err = run(capsys, "predict", "--speed", "0.1")
     assert code == 0 and "validity" in out and err == ""
@@ -216,10 +223,16 @@ def test_sweep_csv_parses(capsys):
     code, out, _ = run(capsys, "sweep", "--speed", "0.5:120:25", "--csv")
     rows = list(csv.DictReader(io.StringIO(out)))
     assert code == 0 and len(rows) == 25
-    assert list(rows[0]) == ["speed_rad_s", "valid", "max_growth_rate", "risk",
-                             "unstable_modes", "unstable_frequencies_hz"]
+    assert list(rows[0]) == ["speed_rad_s", "valid", "max_growth_rate", "probability",
+                             "probability_stderr", "unstable_modes", "unstable_frequencies_hz"]
     unstable = [r for r in rows if float(r["max_growth_rate"]) > 0]
-    assert unstable and all(r["unstable_modes"] and r["risk"] == "1" for r in unstable)
+    assert unstable and all(r["unstable_modes"] for r in unstable)
+    # P(squeak) over the scatter: ~1 well inside the band, ~0 well above it
+    for r in rows:
+        g, prob = float(r["max_growth_rate"]), float(r["probability"])
+        assert 0 <= prob <= 1
+        assert prob > 0.95 if g > 20 else prob < 0.01 if float(r["speed_rad_s"]) > 70 else \
+            True, r
     assert all(any(close(float(f), 224, 0.01) for f in r["unstable_frequencies_hz"].split(";"))
                for r in unstable)
 

@@ -35,7 +35,11 @@ FUNCTIONS = [
     sweep.refine_crossings,
     sweep.unstable_intervals,
     sweep.SweepResult.as_dict,
+    sweep.SweepResult.probability_crossings,
     sweep.MapResult.as_dict,
+    sweep.MapResult.probability_contours,
+    sweep.probability_field,
+    sweep.level_crossings,
     tracking.track_modes,
 ]
 RECORDS = [ScrewParameters, predictor.Prediction, stability.ModeResult, sweep.GrowthField,
@@ -44,7 +48,7 @@ PROPERTIES = [(predictor.SqueakModel, ("labels", "critical_speed_rad_s")),
               (predictor.Prediction, ("valid", "stable", "squeak_modes",
                                       "unstable_frequencies_hz", "max_growth_rate")),
               (ScrewParameters, ("n_modes", "lead_per_rad_m", "nut_travel_m")),
-              (sweep.SweepResult, ("max_growth_rate",)),
+              (sweep.SweepResult, ("max_growth_rate", "probability")),
               (tracking.Branch, ("label", "peak_growth", "typical_frequency_hz", "squeaks",
                                   "squeak_frequency_hz", "squeak_text"))]
 
@@ -145,7 +149,8 @@ def test_the_public_api_is_covered():
     covered = {f.__qualname__ for f in FUNCTIONS}
     for module, names in ((predictor, ("SqueakModel", "check_operating_point")),
                           (sweep, ("sweep", "stability_map", "growth_field", "refine_crossings",
-                                   "unstable_intervals", "SweepResult", "MapResult")),
+                                   "unstable_intervals", "probability_field", "level_crossings",
+                                   "SweepResult", "MapResult")),
                           (tracking, ("track_modes", "Branch")),
                           (parameters, ("ScrewParameters",))):
         for name in names:

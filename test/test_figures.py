@@ -31,10 +31,10 @@ def quick_figures(tmp_path_factory):
     return out, code, time.perf_counter() - start
 
 
-def test_quick_figures_writes_eight_pngs(quick_figures):
+def test_quick_figures_writes_nine_pngs(quick_figures):
     out, code, seconds = quick_figures
     assert code == 0
-    assert len(FIGURE_FILES) == 8
+    assert len(FIGURE_FILES) == 9 and "fig07p_speed_load_probability.png" in FIGURE_FILES
     for name in FIGURE_FILES:
         data = (out / name).read_bytes()
         assert data.startswith(PNG_MAGIC) and len(data) > 5000, name

@@ -90,7 +90,7 @@ def test_the_model_sets_the_validity_of_each_point(changes, speed, load, validit
 
 
 def test_a_failed_eigen_solve_is_its_own_validity(monkeypatch):
-    def broken(_matrix):
+    def broken(_matrix, _left=True):
         raise np.linalg.LinAlgError("Eigenvalues did not converge")
 
     monkeypatch.setattr(predictor, "eig_both", broken)

@@ -129,6 +129,12 @@ def test_geometry_scatter_fast_estimator_follows_the_model_per_sample(speed, sd)
     assert fast.probability == pytest.approx(mc.probability, abs=0.03)
 
 
+def test_more_geometry_fields_than_the_live_estimate_takes_is_one_clear_error():
+    sd = {"radius_m": 0.01, "nut_position_m": 0.01, "helix_angle_rad": 0.01}
+    with pytest.raises(ParameterError, match="3 geometry fields scatter"):
+        MODEL.with_scatter(Scatter(sd), 64)
+
+
 def test_prediction_carries_the_fast_probability():
     """`predict` shares its eigen-solve with the estimator: the same number as `linearised`
     on the model's own samples; with no scatter it is the nominal verdict, stderr None."""
@@ -156,6 +162,27 @@ def test_probability_is_a_probability(sd, speed, load):
         if e is not None:
             assert 0.0 <= e.probability <= 1.0 and not math.isnan(e.probability)
             assert e.stderr is None or (math.isfinite(e.stderr) and e.stderr >= 0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(sd=st.dictionaries(st.sampled_from(scatterable()), st.floats(0.0, 0.3), max_size=4),
+       speed=st.floats(-2000.0, 2000.0), load=st.floats(-1e5, 1e5))
+def test_any_scatter_setting_gives_a_probability_or_a_clear_error(sd, speed, load):
+    """Random scatter of any scatterable field (geometry too) through `predict`: a P in
+    [0, 1] with a finite stderr, or a one-line ParameterError (too many geometry fields, a
+    domain the samples cannot stay in)."""
+    try:
+        model = MODEL.with_scatter(Scatter(sd), 64)
+        p = model.predict(speed, load)
+    except ParameterError as exc:
+        assert "\n" not in str(exc) and str(exc)
+        return
+    if p.valid:
+        assert 0.0 <= p.probability <= 1.0
+        assert p.probability_stderr is None or (math.isfinite(p.probability_stderr)
+                                                and p.probability_stderr >= 0)
+    else:
+        assert p.probability is None
 
 
 FAST_GRID_SPEEDS = (5.0, 20.0, 40.0, 50.0, 55.0, 60.0, 70.0, -40.0)     # band, both edges

@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
 """What the command groups share: the error type and parser class, argument types (finite
-numbers, ranges, map axes), the model-parameter options and the model they build, JSON output.
+numbers, ranges, map axes), the model-parameter and scatter options and the model they build,
+JSON output.
 """
 
 from __future__ import annotations
@@ -8,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from dataclasses import fields
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -15,8 +17,12 @@ import numpy as np
 import yaml
 
 from ..model.display import exact
-from ..model.parameters import FORMULATIONS, ScrewParameters, field_names
+from ..model.fields import default_text, help_text, range_text
+from ..model.parameters import (FORMULATIONS, ParameterError, ScrewParameters,
+                                field_names)
+from ..model.perturbation import MAX_GEOMETRY_FIELDS, geometry_fields
 from ..model.predictor import SqueakModel
+from ..model.scatter import LOG_NORMAL, REPLICATES, ScatterSettings, scatterable
 from ..model.sweep import MAX_MEMORY_BYTES, MAX_POINTS, REFERENCE_STATE_SIZE, check_axis
 from ..review.jsonsafe import json_safe
 
@@ -27,6 +33,8 @@ WORK_LIMITS = (f"At most {MAX_POINTS} points (fewer for a model with more modes:
                f"scales with ({REFERENCE_STATE_SIZE} / state size)^3) and about "
                f"{MAX_MEMORY_BYTES / 1e9:g} GB; a larger request is refused before it starts. "
                f"Progress on a terminal; Ctrl-C stops (exit 130).")
+SCATTER_PREFIX = "scatter."   # ROS parameters and params-file keys of ScatterSettings
+NO_SCATTER = "none"          # --scatter none: every scatter 0 (the nominal 0/1 verdict)
 ROS_ARGS_HELP = ("ROS arguments follow --ros-args, as for any ROS executable (up to --): "
                  "namespace (-r __ns:=/seat_left), remaps (-r OLD:=NEW), parameters, log level")
 
@@ -103,8 +111,18 @@ def _ros_parameters(node: Any) -> dict[str, Any]:
     return found
 
 
-def read_params_file(path: str) -> dict[str, Any]:
-    """ScrewParameters fields from a ROS parameter file (other keys are ignored)."""
+def _flat(values: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested parameter mappings as dotted ROS names: {'scatter': {'mu_static': x}} ->
+    {'scatter.mu_static': x}."""
+    out: dict[str, Any] = {}
+    for key, value in values.items():
+        name = f"{prefix}{key}"
+        out.update(_flat(value, name + ".") if isinstance(value, dict) else {name: value})
+    return out
+
+
+def _file_parameters(path: str) -> dict[str, Any]:
+    """Every `ros__parameters` value of a ROS parameter file, nested names dotted."""
     try:
         doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
     except OSError as exc:
@@ -115,7 +133,12 @@ def read_params_file(path: str) -> dict[str, Any]:
     values = _ros_parameters(doc)
     if not values:
         raise CliError(f"--params-file: {path} has no '<node>: ros__parameters:' section")
-    return {k: v for k, v in values.items() if k in field_names()}
+    return _flat(values)
+
+
+def read_params_file(path: str) -> dict[str, Any]:
+    """ScrewParameters fields from a ROS parameter file (other keys are ignored)."""
+    return {k: v for k, v in _file_parameters(path).items() if k in field_names()}
 
 
 def yaml_parameters(path: str) -> dict[str, Any]:
@@ -123,9 +146,68 @@ def yaml_parameters(path: str) -> dict[str, Any]:
     return _ros_parameters(yaml.safe_load(Path(path).read_text(encoding="utf-8")))
 
 
+def _scatter_value(item: str) -> tuple[str, float]:
+    """`NAME=SD` of --scatter -> (name, SD), the name checked, the number parsed (its range
+    is checked by ScatterSettings)."""
+    name, sep, text = (part.strip() for part in item.partition("="))
+    if not sep or not name:
+        raise CliError(f"--scatter: expected NAME=SD or {NO_SCATTER}, got {item!r}")
+    if name not in scatterable():
+        raise CliError(f"--scatter {name}: not a parameter that can scatter; NAME is one of "
+                       f"{', '.join(scatterable())} or {NO_SCATTER}")
+    try:
+        return name, float(text)
+    except ValueError:
+        raise CliError(f"--scatter {name}: {text!r} is not a number") from None
+
+
+def _settings(values: dict[str, Any], what: str) -> ScatterSettings:
+    try:
+        settings = ScatterSettings(**values)
+        geometry_fields(settings.scatter)          # more than the live estimate takes
+        return settings
+    except ParameterError as exc:
+        raise CliError(f"{what}: {exc}") from None
+
+
+def scatter_settings(args: argparse.Namespace, file_values: dict[str, Any] | None = None
+                     ) -> ScatterSettings:
+    """The scatter of P(squeak): defaults <- `scatter.<name>` / `scatter.samples` of
+    --params-file (`file_values`: its parameters, dotted) <- --scatter NAME=SD and --scatter
+    none, in command-line order <- --samples; validated by ScatterSettings.
+
+    Raises
+    ------
+    CliError
+        An unknown or geometry name, a value that is not a number or out of its range.
+    """
+    known = {f.name for f in fields(ScatterSettings)}
+    values: dict[str, Any] = {}
+    for key, value in (file_values or {}).items():
+        if key.startswith(SCATTER_PREFIX):
+            name = key[len(SCATTER_PREFIX):]
+            if name not in known:
+                raise CliError(f"--params-file: {key} is not a scatter setting; one of "
+                               f"{', '.join(SCATTER_PREFIX + n for n in sorted(known))}")
+            values[name] = value
+    _settings(values, "--params-file")
+    for item in args.scatter:
+        if item.strip() == NO_SCATTER:
+            values.update(dict.fromkeys(scatterable(), 0.0))
+        else:
+            name, sd = _scatter_value(item)
+            values[name] = sd
+    settings = _settings(values, "--scatter")
+    if args.samples is not None:
+        settings = _settings(dict(values, samples=args.samples), "--samples")
+    return settings
+
+
 def build_model(args: argparse.Namespace) -> SqueakModel:
-    """Defaults <- --params-file <- --param NAME=VALUE <- --formulation (validated together)."""
-    changes: dict[str, Any] = read_params_file(args.params_file) if args.params_file else {}
+    """Defaults <- --params-file <- --param NAME=VALUE <- --formulation (validated together),
+    with the scatter of `scatter_settings`."""
+    file_values = _file_parameters(args.params_file) if args.params_file else {}
+    changes: dict[str, Any] = {k: v for k, v in file_values.items() if k in field_names()}
     for item in args.param:
         name, sep, value = item.partition("=")
         if not sep or not name:
@@ -133,7 +215,21 @@ def build_model(args: argparse.Namespace) -> SqueakModel:
         changes[name.strip()] = value.strip()
     if args.formulation:
         changes["formulation"] = args.formulation
-    return SqueakModel(ScrewParameters().with_(**changes))
+    settings = scatter_settings(args, file_values)
+    return SqueakModel(ScrewParameters().with_(**changes), settings.scatter, settings.samples)
+
+
+def _scatter_help() -> str:
+    """--scatter help from the ScatterSettings field metadata (defaults, range)."""
+    info = {f.name: f for f in fields(ScatterSettings)}
+    on = [f"{n} {default_text(info[n])}" for n in scatterable() if info[n].default]
+    allowed = range_text({**info[scatterable()[0]].metadata, "unit": ""})
+    return (f"unit-to-unit scatter of one parameter behind P(squeak) (repeatable): NAME=SD, "
+            f"the relative standard deviation (for {', '.join(sorted(LOG_NORMAL))} the SD of "
+            f"its logarithm), allowed {allowed}; 0 switches one off, '{NO_SCATTER}' every one "
+            f"(then P is the nominal 0/1 verdict). Defaults: {', '.join(on)}, every other 0. "
+            f"NAME is any of {', '.join(scatterable())} (at most {MAX_GEOMETRY_FIELDS} "
+            f"geometry fields); as the ROS parameters {SCATTER_PREFIX}<NAME> of --params-file")
 
 
 def common_parser() -> Parser:
@@ -147,7 +243,14 @@ def common_parser() -> Parser:
                             "the first-principles linearisation (consistent)")
     group.add_argument("--params-file", metavar="FILE.yaml",
                        help="ROS parameter file (<node>: ros__parameters: {...}); keys that are "
-                            "not model parameters are ignored")
+                            "not model parameters or scatter.<NAME> are ignored")
+    group = common.add_argument_group("scatter of P(squeak)")
+    group.add_argument("--scatter", action="append", default=[], metavar="NAME=SD",
+                       help=_scatter_help())
+    samples = next(f for f in fields(ScatterSettings) if f.name == "samples")
+    group.add_argument("--samples", type=int, metavar="N", help=help_text(
+        samples, f"scatter samples of the fast P(squeak) estimator (sweeps, maps, figures, "
+                 f"replay, predict's probability_live): {REPLICATES} times a power of 2"))
     return common
 
 

@@ -1,17 +1,18 @@
 # SPDX-License-Identifier: Apache-2.0
-"""`leadscrew-squeak figures`: the paper's Figs. 4-11 with a computed summary; and the sweep plot.
+"""`leadscrew-squeak figures`: the paper's Figs. 4-11 with a computed summary, Fig. 7 again with
+the P(squeak) band around its boundary (fig07p); and the sweep plot.
 
 `plot_sweep` is shared by the `figures` command and `sweep --plot`; the map and frequency
 plots (`review.plots`) are shared with `map --plot` and the replay report. `make_figures`
-writes fig04..fig11 PNGs and `summary.txt`, whose sentences are computed from the plotted data
-(nothing is hard-coded). Importing this module does not import matplotlib (`map --json`).
+writes fig04..fig11 and fig07p PNGs and `summary.txt`, whose sentences are computed from the
+plotted data (nothing is hard-coded). Importing this module does not import matplotlib (`map --json`).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property, partial
 from pathlib import Path
 from typing import Callable, Sequence
@@ -21,11 +22,13 @@ import numpy as np
 from ..model.friction import friction_coefficient, sliding_speed
 from ..model.parameters import ScrewParameters
 from ..model.predictor import SqueakModel
-from ..model.sweep import (REFERENCE_SPEED_RAD_S, MapResult, SweepResult, Work, _native, map_work,
-                           stability_map, sweep, sweep_work)
+from ..model.sweep import (PROBABILITY_LEVELS, REFERENCE_SPEED_RAD_S, MapResult, SweepResult,
+                           Work, _native, level_crossings, map_work, stability_map, sweep,
+                           sweep_work)
 from ..model.tracking import Branch, track_modes
 from ..review.plots import (at, axis_display, axis_label, fixed_text, fmt, new_figure,
-                            plot_frequencies, plot_map, save_figure, scale_axis)
+                            plot_frequencies, plot_map, probability_overlay, save_figure,
+                            scale_axis)
 from ..review.progress import progress_bar
 from .args import WORK_LIMITS, Parser, build_model
 
@@ -34,9 +37,10 @@ GROWTH_LABEL = r"growth rate Re($\lambda$) [1/s]"
 
 # --------------------------------------------------------------------------- sweep plot
 def plot_sweep(result: SweepResult, path: Path, title: str = "", top: int = 6,
-               dpi: int = 120) -> None:
+               dpi: int = 120, probability: bool = False) -> None:
     """Largest growth rate and Re(lambda) of the `top` least stable modes along the axis, with
-    the unstable bands shaded (the paper's Fig. 5 for a speed sweep)."""
+    the unstable bands shaded (the paper's Fig. 5 for a speed sweep); with `probability`,
+    P(squeak) on a second y axis."""
     k = axis_display(result.axis).factor
     x = result.values * k
     branches = sorted(sorted(track_modes(result.predictions), key=lambda b: -b.peak_growth)[:top],
@@ -60,7 +64,15 @@ def plot_sweep(result: SweepResult, path: Path, title: str = "", top: int = 6,
     ax.set_title(title or f"Squeak propensity vs {axis_display(result.axis).label}\n"
                           f"({fixed_text(result.fixed)}; {_formulation(result)} formulation)")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    handles, anchor = ax.get_legend_handles_labels()[0], 1.01
+    if probability:
+        twin = ax.twinx()
+        handles += twin.plot(x, result.probability, color="k", ls="--", lw=1.6,
+                             label="P(squeak) (right axis)")
+        twin.set_ylim(-0.02, 1.02)
+        twin.set_ylabel("P(squeak) over the scatter")
+        anchor = 1.12
+    ax.legend(handles=handles, fontsize=8, loc="upper left", bbox_to_anchor=(anchor, 1.0))
     save_figure(fig, path, dpi)
 
 
@@ -273,6 +285,30 @@ def describe_load_map(result: MapResult, params: ScrewParameters) -> str:
             f"{_nominal(result, bands, params)}; {_peak(result)}.")
 
 
+def describe_probability_band(result: MapResult, params: ScrewParameters) -> str:
+    """Fig. 7 with P: where P(squeak) crosses each level on the load column nearest the
+    nominal load, next to the nominal boundary there."""
+    i = int(np.argmin(np.abs(result.x - params.axial_load_n)))
+    column = result.probability[:, i]
+    roots = sorted(p[1] for p in result.boundary if p[0] == result.x[i])
+    parts = [f"{100 * level:g} % at " + (", ".join(fmt("speed_rad_s", v) for v in found)
+                                          or "none")
+             for level in PROBABILITY_LEVELS
+             for found in [level_crossings(result.y, column, level)]]
+    bound = ", ".join(fmt("speed_rad_s", r) for r in roots) or "none on the grid"
+    return (f"at {at(result.x_axis, result.x[i])} (nearest the nominal load) P(squeak) "
+            f"crosses {'; '.join(parts)}; nominal stability boundary {bound}; "
+            f"{_probability_share(result)}.")
+
+
+def _probability_share(result: MapResult) -> str:
+    prob = result.probability[np.isfinite(result.probability)]
+    if not prob.size:
+        return "no valid point on the grid"
+    band = np.mean((prob > 0.1) & (prob < 0.9))
+    return f"{100 * band:.0f} % of the valid grid has 10 % < P < 90 %"
+
+
 def describe_speed_sweep(result: SweepResult) -> str:
     """Fig. 5: band, peak and squeak modes."""
     g = result.max_growth_rate
@@ -330,6 +366,7 @@ LOAD_RANGE_N = (0.0, 600.0)
 FRICTION_FILE = "fig04_friction.png"
 GROWTH_FILE = "fig05_growth_vs_speed.png"
 FREQUENCY_FILE = "fig11_frequency_vs_speed.png"
+PROBABILITY_FILE = "fig07p_speed_load_probability.png"
 
 
 @dataclass(frozen=True)
@@ -344,6 +381,7 @@ class MapSpec:
     y_range: tuple[float, float]
     speed_rad_s: float | None
     describe: Callable[[MapResult, ScrewParameters], str]
+    probability: bool = False       # also P on the grid (shared with fig07p)
 
 
 def _nut_range(p: ScrewParameters) -> tuple[float, float]:
@@ -365,7 +403,7 @@ MAPS = (
             describe_speed_map),
     MapSpec("fig07_speed_load.png", "Fig. 7: stability boundary, speed vs axial load",
             "load_n", _load_range, "speed_rad_s", (0.5, 200.0), None,
-            describe_load_speed_map),
+            describe_load_speed_map, probability=True),
     MapSpec("fig08_speed_location.png", "Fig. 8: stability boundary, speed vs nut location",
             "nut_position_m", _nut_range, "speed_rad_s", (0.5, 200.0), None, describe_speed_map),
     MapSpec("fig09_load_radius.png", "Fig. 9: stability boundary, axial load vs effective radius",
@@ -384,11 +422,13 @@ def _grid(axis: str, lo: float, hi: float, n: int) -> np.ndarray:
 
 def run_map(model: SqueakModel, x_axis: str, x: np.ndarray, y_axis: str, y: np.ndarray,
             speed_rad_s: float | None = None, load_n: float | None = None,
-            desc: str = "map") -> MapResult:
-    """`stability_map` with a progress bar over the grid points (after the work check)."""
+            desc: str = "map", probability: bool = False) -> MapResult:
+    """`stability_map` with a progress bar over the grid points (after the work check); with
+    `probability` the bar counts each point twice (growth rate, then P)."""
     map_work(model, x_axis, x, y_axis, y).check()
-    with progress_bar(x.size * y.size, desc) as update:
-        return stability_map(model, x_axis, x, y_axis, y, speed_rad_s, load_n, progress=update)
+    with progress_bar(x.size * y.size * (2 if probability else 1), desc) as update:
+        return stability_map(model, x_axis, x, y_axis, y, speed_rad_s, load_n, progress=update,
+                             probability=probability)
 
 
 @dataclass
@@ -396,6 +436,7 @@ class FigureSet:
     model: SqueakModel
     out: Path
     grids: Grids
+    maps: dict[str, MapResult] = field(default_factory=dict)   # by file: fig07p reuses Fig. 7
 
     def _title(self, text: str) -> str:
         return f"{text}\n({self.model.params.formulation} formulation)"
@@ -438,20 +479,38 @@ class FigureSet:
                                      r"(thick: Re($\lambda$) > 0)"), dpi=self.grids.dpi)
         return describe_frequencies(self.speed_sweep)
 
+    def map(self, spec: MapSpec) -> MapResult:
+        if spec.file not in self.maps:
+            x = _grid(spec.x_axis, *spec.x_range(self.model.params), self.grids.map_x)
+            y = _grid(spec.y_axis, *spec.y_range, self.grids.map_y)
+            self.maps[spec.file] = run_map(self.model, spec.x_axis, x, spec.y_axis, y,
+                                           spec.speed_rad_s, desc=spec.file.split("_")[0],
+                                           probability=spec.probability)
+        return self.maps[spec.file]
+
     def stability(self, spec: MapSpec, path: Path) -> str:
-        x = _grid(spec.x_axis, *spec.x_range(self.model.params), self.grids.map_x)
-        y = _grid(spec.y_axis, *spec.y_range, self.grids.map_y)
-        result = run_map(self.model, spec.x_axis, x, spec.y_axis, y, spec.speed_rad_s,
-                         desc=spec.file.split("_")[0])
+        result = self.map(spec)
         title = self._title("\n".join(filter(None, (spec.title, fixed_text(result.fixed)))))
         plot_map(result, path, title, dpi=self.grids.dpi)
         return spec.describe(result, self.model.params)
+
+    def probability_band(self, path: Path) -> str:
+        """Fig. 7 with the iso-P(squeak) lines and the 10-90 % band over the default scatter
+        (or --scatter)."""
+        spec = next(s for s in MAPS if s.probability)
+        result = self.map(spec)
+        scatter = ", ".join(f"{k} {v:g}" for k, v in self.model.scatter.sd.items()) or "none"
+        title = self._title(f"{spec.title}, with P(squeak) over the scatter\n(scatter: "
+                            f"{scatter})")
+        plot_map(result, path, title, dpi=self.grids.dpi, overlay=probability_overlay(result))
+        return describe_probability_band(result, self.model.params)
 
     def work(self) -> Work:
         """All the predictions of the figures, as one batch (checked before the first)."""
         speeds = sweep_work(self.model, "speed_rad_s", np.zeros(self.grids.sweep_points))
         maps = [map_work(self.model, s.x_axis, np.zeros(self.grids.map_x), s.y_axis,
-                         np.zeros(self.grids.map_y)) for s in MAPS]
+                         np.zeros(self.grids.map_y))
+                for s in MAPS for _ in range(2 if s.probability else 1)]   # P: one more
         return Work(f"figures: {len(maps)} maps of {self.grids.map_x} x {self.grids.map_y} and "
                     f"a sweep of {self.grids.sweep_points}",
                     speeds.points + sum(m.points for m in maps), speeds.state_size,
@@ -460,12 +519,14 @@ class FigureSet:
     def jobs(self) -> dict[str, Callable[[Path], str]]:
         """File name -> function that draws it and returns its summary sentence."""
         jobs = {FRICTION_FILE: self.friction, GROWTH_FILE: self.growth,
-                FREQUENCY_FILE: self.frequencies}
+                FREQUENCY_FILE: self.frequencies, PROBABILITY_FILE: self.probability_band}
         jobs.update({s.file: partial(self.stability, s) for s in MAPS})
         return {name: jobs[name] for name in FIGURE_FILES}
 
 
-FIGURE_FILES = (FRICTION_FILE, GROWTH_FILE, *(s.file for s in MAPS), FREQUENCY_FILE)
+FIGURE_FILES = (FRICTION_FILE, GROWTH_FILE,
+                *(f for s in MAPS for f in (s.file, PROBABILITY_FILE)[:1 + s.probability]),
+                FREQUENCY_FILE)
 
 
 def _header(params: ScrewParameters) -> str:
@@ -477,7 +538,7 @@ def _header(params: ScrewParameters) -> str:
 
 
 def make_figures(model: SqueakModel, out: Path, quick: bool = False) -> str:
-    """Write the eight PNGs and summary.txt into `out`; return the summary text. Raises
+    """Write the nine PNGs and summary.txt into `out`; return the summary text. Raises
     WorkSizeError, before anything is written, if the model is too large for the grids."""
     figures = FigureSet(model, out, QUICK if quick else FULL)
     figures.work().check()
@@ -501,7 +562,8 @@ def cmd_figures(args: argparse.Namespace) -> int:
 
 def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     """Add `figures` to `sub`; `common`: the model options."""
-    p = sub.add_parser("figures", parents=common, help="the paper's Figs. 4-11 and summary.txt",
+    p = sub.add_parser("figures", parents=common, help="the paper's Figs. 4-11, Fig. 7 with the "
+                                                 "P(squeak) band, and summary.txt",
                        epilog=WORK_LIMITS.replace("points", "points in all", 1))
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--quick", action="store_true", help="coarse grids (a few seconds)")

@@ -1,6 +1,13 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The model commands: `modes` (natural frequencies), `predict` (one operating point), `sweep`
-(one axis) and `map` (two axes, with the refined stability boundary)."""
+"""The model commands: `modes` (natural frequencies), `predict` (one operating point, with
+P(squeak) over the scatter, its sensitivities and countermeasures), `sweep` (one axis) and `map`
+(two axes, with the refined stability boundary and, with --probability, iso-P contours).
+
+Which P(squeak) is which: `predict` reports the reference estimate (`probability.monte_carlo`,
+`REFERENCE_SAMPLES` samples, with its standard error) as `probability`, and the fast first-order
+estimate the node publishes (`Prediction.probability`, --samples samples) as
+`probability_live`; sweeps, maps and figures use the fast one at every point.
+"""
 
 from __future__ import annotations
 
@@ -8,15 +15,24 @@ import argparse
 import csv
 import math
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from ..model.countermeasures import STEP, Countermeasure, advice_text, countermeasures
 from ..model.parameters import field_info
-from ..model.predictor import Prediction
+from ..model.predictor import Prediction, SqueakModel
+from ..model.probability import ProbabilityEstimate, monte_carlo
+from ..model.scatter import samples_for
+from ..model.sensitivity import Sensitivity, sensitivities
 from ..model.sweep import MapResult, SweepResult, axis_names, check_axis, sweep, sweep_work
 from .args import (SPEED_AXIS, WORK_LIMITS, CliError, Parser, build_model, finite, finite_float,
                    parse_axis_spec, parse_range, print_json)
+
+
+REFERENCE_SAMPLES = 4096     # Monte Carlo samples of predict's `probability`
+SENSITIVITIES_SHOWN = 4      # largest growth-rate sensitivities in the text output
 
 
 def axis_unit(name: str) -> str:
@@ -33,18 +49,78 @@ def _mode_table(prediction: Prediction, count: int) -> list[str]:
     return lines
 
 
-def prediction_text(p: Prediction, top: int = 5) -> str:
+@dataclass(frozen=True)
+class Assessment:
+    """What `predict` adds to the prediction at one operating point (`assess`).
+
+    Attributes
+    ----------
+    reference : ProbabilityEstimate or None
+        Reference P(squeak) (Monte Carlo over REFERENCE_SAMPLES scatter samples) and its
+        standard error (None without scatter); None outside validity.
+    live : float or None
+        The fast estimate of `Prediction.probability` (what the node publishes).
+    sensitivity : Sensitivity or None
+        Growth-rate sensitivities d Re(lambda) / d ln p [1/s] of the least stable mode.
+    measures : list of Countermeasure or None
+        10 % changes that lower P, most effective first, each with the new P (fast estimator
+        on the reference samples).
+    """
+
+    reference: ProbabilityEstimate | None
+    live: float | None
+    sensitivity: Sensitivity | None = None
+    measures: list[Countermeasure] | None = None
+
+    def as_dict(self) -> dict:
+        """The keys `predict --json` adds to `Prediction.as_dict()`."""
+        ref, sens = self.reference, self.sensitivity
+        return {"probability": None if ref is None else ref.probability,
+                "probability_stderr": None if ref is None else ref.stderr,
+                "probability_samples": 0 if ref is None else ref.count,
+                "probability_live": self.live,
+                "sensitivities": None if sens is None else sens.growth_per_log,
+                "countermeasures": None if self.measures is None else [
+                    {"parameter": c.name, "change": STEP if c.factor > 1 else -STEP,
+                     "probability": c.probability, "advice": c.text} for c in self.measures]}
+
+    def line(self) -> str:
+        """'P(squeak) 0.13 ± 0.003: raise the radius or raise |speed|' (`advice_text` with
+        the standard error); '' outside validity."""
+        if self.reference is None:
+            return ""
+        head, sep, rest = advice_text(self.reference.probability, self.measures).partition(":")
+        if self.reference.stderr is not None:
+            head += f" ± {self.reference.stderr:.1g}"
+        return head + sep + rest
+
+
+def assess(model: SqueakModel, p: Prediction) -> Assessment:
+    """The reference P(squeak), sensitivities and countermeasures at the point of `p`."""
+    if not p.valid:
+        return Assessment(None, p.probability)
+    samples = samples_for(model.params, model.scatter, REFERENCE_SAMPLES)
+    found = countermeasures(model, p.speed_rad_s, p.load_n, samples)
+    return Assessment(monte_carlo(model, p.speed_rad_s, p.load_n, samples), p.probability,
+                      sensitivities(model, p.speed_rad_s, p.load_n), found and found[1])
+
+
+def prediction_text(p: Prediction, extra: Assessment, top: int = 5) -> str:
+    """The text output of `predict`; `extra` from `assess`."""
     head = (f"speed {p.speed_rad_s:g} rad/s, load {p.load_n:g} N, "
             f"{p.formulation} formulation")
     if not p.valid:
         return f"{head}\nno prediction: {p.reason}"
     if p.stable:
-        verdict = f"stable: no squeak (P(squeak) {p.probability:.3f})"
+        verdict = "stable at the nominal parameters: no squeak"
     else:
         squeak = ", ".join(f"{m.label} {m.frequency_hz:.1f} Hz (Re {m.growth_rate:+.2f} 1/s)"
                            for m in p.squeak_modes) or "none"
-        verdict = f"UNSTABLE: squeak predicted (P(squeak) {p.probability:.3f}); squeak modes: {squeak}"
-    lines = [head, verdict]
+        verdict = f"UNSTABLE at the nominal parameters: squeak predicted; squeak modes: {squeak}"
+    lines = [head, verdict, extra.line()]
+    largest = sorted(extra.sensitivity.growth_per_log.items(), key=lambda kv: -abs(kv[1]))
+    lines.append("growth rate d Re(lambda) / d ln p [1/s]: " + ", ".join(
+        f"{name} {value:+.3g}" for name, value in largest[:SENSITIVITIES_SHOWN]))
     if p.divergence_rates:
         lines.append("divergence (real eigenvalues > 0): "
                      + ", ".join(f"{r:.4g} 1/s" for r in p.divergence_rates))
@@ -62,14 +138,26 @@ def _cell(value: float | None) -> str:
 
 def write_sweep_csv(result: SweepResult) -> None:
     out = csv.writer(sys.stdout, lineterminator="\n")
-    out.writerow([result.axis, "valid", "max_growth_rate", "probability", "unstable_modes",
-                  "unstable_frequencies_hz"])
+    out.writerow([result.axis, "valid", "max_growth_rate", "probability", "probability_stderr",
+                  "unstable_modes", "unstable_frequencies_hz"])
     for value, p in zip(result.values.tolist(), result.predictions):
         out.writerow([repr(value), p.valid, _cell(p.max_growth_rate), _cell(p.probability),
-                      _unstable_labels(p), ";".join(f"{f:.6g}" for f in p.unstable_frequencies_hz)])
+                      _cell(p.probability_stderr), _unstable_labels(p),
+                      ";".join(f"{f:.6g}" for f in p.unstable_frequencies_hz)])
 
 
-def sweep_text(result: SweepResult) -> str:
+def _percent(level: float) -> str:
+    return f"{100 * level:g} %"
+
+
+def crossings_text(crossings: dict[float, list], unit: str) -> str:
+    """'P(squeak) crosses 1 % at 65.4, 10 % at 60.6, 50 % at 54.6, 90 % nowhere [rad/s]'."""
+    return "P(squeak) crosses " + ", ".join(
+        f"{_percent(level)} at {', '.join(f'{v:.4g}' for v in values)}" if values else
+        f"{_percent(level)} nowhere" for level, values in crossings.items()) + f" [{unit}]"
+
+
+def sweep_text(result: SweepResult, probability: bool = False) -> str:
     unit, g = axis_unit(result.axis), result.max_growth_rate
     fixed = ", ".join(f"{k} = {v:g} {axis_unit(k)}" for k, v in result.fixed.items())
     n_valid = int(np.isfinite(g).sum())
@@ -88,6 +176,12 @@ def sweep_text(result: SweepResult) -> str:
                      f"{result.values[i]:g} {unit}"
                      + (f" (squeak modes {_unstable_labels(p).replace(';', ', ')})"
                         if p.squeak_modes else ""))
+    if probability and n_valid:
+        prob = result.probability
+        i = int(np.nanargmax(prob))
+        lines += [crossings_text(result.probability_crossings(), unit),
+                  f"largest P(squeak) {prob[i]:.3g} at {result.axis} = {result.values[i]:g} "
+                  f"{unit}"]
     reasons = {p.reason for p in result.predictions if not p.valid}
     lines += [f"invalid: {r}" for r in sorted(reasons)]
     return "\n".join(lines)
@@ -100,7 +194,7 @@ def map_text(result: MapResult) -> str:
     lines = [f"stability map: x = {result.x_axis} [{axis_unit(result.x_axis)}] "
              f"{result.x[0]:g}..{result.x[-1]:g} ({len(result.x)}), y = {result.y_axis} "
              f"[{axis_unit(result.y_axis)}] {result.y[0]:g}..{result.y[-1]:g} "
-             f"({len(result.y)}); fixed {fixed}",
+             f"({len(result.y)})" + (f"; fixed {fixed}" if fixed else ""),
              f"valid points: {int(valid.sum())}/{g.size}"]
     if valid.any():
         j, i = np.unravel_index(np.nanargmax(g), g.shape)
@@ -108,6 +202,10 @@ def map_text(result: MapResult) -> str:
                   f"largest growth rate {g[j, i]:.4g} 1/s at {result.x_axis} = {result.x[i]:g}, "
                   f"{result.y_axis} = {result.y[j]:g}"]
     lines.append(f"refined boundary points: {len(result.boundary)}")
+    if result.probability is not None:
+        lines.append("iso-P(squeak) points: " + ", ".join(
+            f"{_percent(level)}: {len(points)}"
+            for level, points in result.probability_contours().items()))
     return "\n".join(lines)
 
 
@@ -126,11 +224,13 @@ def cmd_modes(args: argparse.Namespace) -> int:
 
 
 def cmd_predict(args: argparse.Namespace) -> int:
-    p = build_model(args).predict(args.speed, args.load)
+    model = build_model(args)
+    p = model.predict(args.speed, args.load)
+    extra = assess(model, p)
     if args.json:
-        print_json(p.as_dict())
+        print_json({**p.as_dict(), **extra.as_dict()})
     else:
-        print(prediction_text(p))
+        print(prediction_text(p, extra))
     return 0
 
 
@@ -164,10 +264,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     elif args.csv:
         write_sweep_csv(result)
     else:
-        print(sweep_text(result))
+        print(sweep_text(result, args.probability))
     if args.plot:
         from .figures import plot_sweep
-        plot_sweep(result, Path(args.plot))
+        plot_sweep(result, Path(args.plot), probability=args.probability)
     return 0
 
 
@@ -180,14 +280,16 @@ def cmd_map(args: argparse.Namespace) -> int:
         if value is not None and name in (x_axis, y_axis):
             raise CliError(f"{option} cannot be combined with a {name} map axis")
     from .figures import run_map
-    result = run_map(model, x_axis, x, y_axis, y, args.speed, args.load)
+    result = run_map(model, x_axis, x, y_axis, y, args.speed, args.load,
+                     probability=args.probability)
     if args.json:
         print_json(result.as_dict())
     else:
         print(map_text(result))
     if args.plot:
-        from ..review.plots import plot_map
-        plot_map(result, Path(args.plot), formulation=model.params.formulation)
+        from ..review.plots import plot_map, probability_overlay
+        plot_map(result, Path(args.plot), formulation=model.params.formulation,
+                 overlay=probability_overlay(result) if args.probability else None)
     return 0
 
 
@@ -203,7 +305,13 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
                    help="rotation speed Omega [rad/s]")
     p.add_argument("--load", type=finite, metavar="N",
                    help="axial load F_z [N] (default: parameter axial_load_n)")
-    p.add_argument("--json", action="store_true", help="print Prediction.as_dict() as JSON")
+    p.add_argument("--json", action="store_true",
+                   help="print JSON: Prediction.as_dict() with probability = the reference "
+                        f"Monte Carlo P(squeak) over {REFERENCE_SAMPLES} scatter samples and "
+                        "probability_stderr (null without scatter), probability_live (the "
+                        "fast estimate the node publishes), sensitivities (d growth rate / "
+                        "d ln p [1/s] by parameter) and countermeasures (ranked, with the new "
+                        "P)")
     p.set_defaults(run=cmd_predict)
 
     p = sub.add_parser("sweep", parents=common, help="predictions along one axis",
@@ -220,6 +328,10 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     out.add_argument("--json", action="store_true", help="print SweepResult.as_dict() as JSON")
     out.add_argument("--csv", action="store_true", help="print one CSV row per point")
     p.add_argument("--plot", metavar="FILE.png", help="plot growth rates vs the axis")
+    p.add_argument("--probability", action="store_true",
+                   help="also where P(squeak) (the fast estimator, in every output) crosses "
+                        "1, 10, 50 and 90 %% (text; JSON always has probability_crossings), "
+                        "and P on a second axis of --plot")
     p.set_defaults(run=cmd_sweep)
 
     p = sub.add_parser("map", parents=common, help="2-D stability map with refined boundary",
@@ -232,4 +344,9 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
                    help="fixed axial load [N] (default axial_load_n)")
     p.add_argument("--json", action="store_true", help="print MapResult.as_dict() as JSON")
     p.add_argument("--plot", metavar="FILE.png", help="filled contour of the growth rate")
+    p.add_argument("--probability", action="store_true",
+                   help="also P(squeak) at every grid point (the fast estimator: about twice "
+                        "the work): in JSON probability, probability_stderr and "
+                        "probability_contours (points where P crosses 1, 10, 50 and 90 %%), "
+                        "iso-P lines and the 10-90 %% band in --plot")
     p.set_defaults(run=cmd_map)

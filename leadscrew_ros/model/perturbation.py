@@ -15,9 +15,9 @@ l = mu_o |F_z| c_f / (alpha R) (W1-W4), the friction slope s = gamma |F_z| c_5 /
 the damping ratio xi; A is affine in them (`kernels.scales`). Each oscillatory eigenvalue is
 expanded to first order in them while l, s and xi of every sample are computed exactly (the
 friction law is the nonlinear part). A scattered geometry parameter (radius, nut position, ...)
-enters through the derivative of A by a central difference of two geometries (built once per
-parameter set), to first order in the parameter. P is the share of samples in which some mode's
-expanded growth rate exceeds the squeak threshold of `stability.unstable_mask`, so the modes'
+is not first order at all (it moves the modes' coupling): the expansion is made at a few node
+geometries and interpolated between them (`FirstOrderProbability`). P is the share of samples
+in which some mode's expanded growth rate exceeds the squeak threshold of `stability.unstable_mask`, so the modes'
 correlation (one friction scatter drives them all) is kept.
 """
 
@@ -30,11 +30,14 @@ import numpy as np
 
 from .assembly import Geometry, build_geometry
 from .kernels import thread_factors
-from .parameters import ScrewParameters, field_info
-from .scatter import Samples
+from .parameters import ParameterError, ScrewParameters, field_info
+from .scatter import Samples, Scatter
 from .stability import GROWTH_TOL, Eigen, eig_both
 
 GEOMETRY_STEP = 1e-6          # relative step of a state-matrix difference in a geometry field
+MAX_GEOMETRY_FIELDS = 2       # scattered geometry fields the live estimate takes
+GEOMETRY_NODES = {1: 7, 2: 5}  # node geometries per scattered geometry field
+_OUTSIDE = -1e30              # margin of a node without a prediction (counts as no squeak)
 
 
 class EigenPairs:
@@ -98,43 +101,38 @@ def geometry_derivative(params: ScrewParameters, name: str, speed: float, load: 
     return (hi - lo) / (2 * h)
 
 
-class FirstOrderProbability:
-    """P(squeak) over scatter samples from one eigen-solve (see the module docstring).
+def geometry_fields(scatter: Scatter) -> list[str]:
+    """The scattered geometry fields, checked against what the live estimate takes.
 
-    Parameters
-    ----------
-    params : ScrewParameters
-        Nominal parameters (the scatter is relative to them).
-    geometry : Geometry
-        The geometry of `params` (modes and contact integrals).
-    samples : Samples
-        Scatter samples in replicates (`scatter.draw`).
+    Raises
+    ------
+    ParameterError
+        More than `MAX_GEOMETRY_FIELDS` geometry fields scatter.
     """
+    fields = [k for k in scatter.names if field_info(k)["geometry"]]
+    if len(fields) > MAX_GEOMETRY_FIELDS:
+        raise ParameterError(
+            f"{len(fields)} geometry fields scatter ({', '.join(fields)}); the live "
+            f"estimate takes at most {MAX_GEOMETRY_FIELDS} (probability.monte_carlo "
+            "takes any)")
+    return fields
 
-    def __init__(self, params: ScrewParameters, geometry: Geometry, samples: Samples):
-        self.params, self.geometry, self.samples = params, geometry, samples
-        count, n = samples.count, geometry.n
-        values = {k: v.ravel() for k, v in samples.scatter.values(params, samples.u).items()}
-        self.geometry_fields = tuple(k for k in values if field_info(k)["geometry"])
-        if self.geometry_fields:
-            raise ValueError("geometry scatter: see FirstOrderProbability")
-        ms, mk, d = (np.broadcast_to(values.get(k, getattr(params, k)), (count,))
-                     for k in ("mu_static", "mu_kinetic", "friction_decay_s_m"))
-        self._friction = (mk, ms - mk, d, (ms - mk) * d)
-        self._change = np.zeros((3, count))                # level, slope, damping ratio
-        self._change[2] = values.get("modal_damping", params.modal_damping) \
-            - params.modal_damping
-        self._reach_damping = float(np.abs(self._change[2]).max())
-        # dA per unit coefficient (W1, W5q, W3, W5qdot) and per unit of xi, lower half
+
+class _Expansion:
+    """First-order growth of the oscillatory modes in the friction level, slope and damping
+    ratio around one geometry's eigen-solve."""
+
+    def __init__(self, geometry: Geometry):
+        self.geometry, self.params, n = geometry, geometry.params, geometry.n
         damping = np.zeros((n, 2 * n))
         damping[np.arange(n), n + np.arange(n)] = -2 * geometry.basis.omega_rad_s   # (A.1)
-        self._units = np.concatenate([-geometry.lower_half_units[:4].reshape(4 * n, 2 * n),
-                                      damping])           # dA = -[0; U_k], [0; damping]
-        self._shape = samples.u.shape[:2]
+        # dA per unit coefficient (W1, W5q, W3, W5qdot) and per unit of xi, lower half
+        self.units = np.concatenate([-geometry.lower_half_units[:4].reshape(4 * n, 2 * n),
+                                     damping])            # dA = -[0; U_k], [0; damping]
 
-    def _level_slope(self, mk, dm, d, dm_d, speed: float, load: float) -> tuple:
+    def level_slope(self, mk, dm, d, dm_d, speed: float, load: float) -> tuple:
         """Friction level l and slope s of `kernels.scales` (arrays or floats; dm = mu_s -
-        mu_k): l = mu_o |F_z| c_f / (alpha R), s = gamma |F_z| c_5 / alpha."""
+        mu_k, dm_d = dm d): l = mu_o |F_z| c_f / (alpha R), s = gamma |F_z| c_5 / alpha."""
         p = self.params
         cb = math.cos(p.helix_angle_rad)
         v = p.radius_m * abs(speed) / cb                                    # (11)
@@ -144,31 +142,140 @@ class FirstOrderProbability:
         f = abs(load) / self.geometry.contact.alpha
         return m0 * (c_f * f / p.radius_m), g * (c_5 * f)
 
-    def margins(self, pairs: EigenPairs, load: float) -> np.ndarray:
-        """Per sample, the largest growth rate beyond the squeak threshold over the modes by
-        the expansion [1/s] (> 0: squeak; -inf: no mode can reach it), shape (count,)."""
-        p, speed, n = self.params, pairs.speed, self.geometry.n
-        level0, slope0 = self._level_slope(p.mu_kinetic, p.mu_static - p.mu_kinetic,
-                                           p.friction_decay_s_m, (p.mu_static - p.mu_kinetic)
-                                           * p.friction_decay_s_m, speed, load)
-        level, slope = self._level_slope(*self._friction, speed, load)
-        change = self._change
+    def nominal_level_slope(self, speed: float, load: float) -> tuple[float, float]:
+        """`level_slope` at the nominal friction parameters (floats)."""
+        p = self.params
+        dm = p.mu_static - p.mu_kinetic
+        level, slope = self.level_slope(p.mu_kinetic, dm, p.friction_decay_s_m,
+                                        dm * p.friction_decay_s_m, speed, load)
+        return float(level), float(slope)
+
+    def margins(self, pairs: EigenPairs, load: float, friction: tuple, change: np.ndarray,
+                reach_damping: float, prune: bool = True) -> np.ndarray:
+        """Per sample, the largest expanded growth rate beyond the squeak threshold over the
+        modes [1/s] (> 0: squeak). `change` (3, count) holds the damping-ratio changes in row
+        2; rows 0 and 1 are filled here. `prune` leaves out the modes that cannot reach the
+        threshold (then -inf where none can): right for the sign, not for interpolation."""
+        speed, n = pairs.speed, self.geometry.n
+        level0, slope0 = self.nominal_level_slope(speed, load)
+        level, slope = self.level_slope(*friction, speed, load)
         np.subtract(level, level0, out=change[0])
         np.subtract(slope, slope0, out=change[1])
         # d lambda per unit coefficient: y^H dA x over the lower half of A (one product)
         r = np.einsum("ij,kji->ki", pairs.y_h[:, n:],
-                      (self._units @ pairs.x).reshape(5, n, -1)).real
+                      (self.units @ pairs.x).reshape(5, n, -1)).real
         # level l: W1 = sign l, W3 = l / |Omega|; slope s: W5q = Omega s, W5qdot = s
         rates = np.stack([math.copysign(1.0, speed) * r[0] + r[2] / abs(speed),
                           speed * r[1] + r[3], r[4]])                  # (3, M)
         threshold = GROWTH_TOL * np.abs(pairs.lam) - pairs.lam.real    # growth beyond it
-        reach = [abs(level - level0).max(), abs(slope - slope0).max(), self._reach_damping]
-        candidates = np.flatnonzero(np.dot(reach, np.abs(rates)) > threshold)
+        reach = [abs(change[0]).max(), abs(change[1]).max(), reach_damping]
+        candidates = (np.flatnonzero(np.dot(reach, np.abs(rates)) > threshold) if prune
+                      else np.arange(len(threshold)))
         if not len(candidates):                                        # no mode can reach it
             return np.full(change.shape[1], -np.inf)
         growth = rates[:, candidates].T @ change                       # (Mc, count)
         growth -= threshold[candidates, None]
         return growth.max(axis=0)
+
+
+class FirstOrderProbability:
+    """P(squeak) over scatter samples (see the module docstring).
+
+    Without geometry scatter one eigen-solve serves every sample (the caller's). A scattered
+    geometry field moves the modes and their coupling far beyond first order (1 % of radius
+    shifts a mode by ~14 rad/s, enough to open or close the coupling that squeaks), so each
+    of at most `MAX_GEOMETRY_FIELDS` such fields gets `GEOMETRY_NODES` geometries spanning the
+    samples' range; at each node the friction and damping expansion gives every sample's
+    margin, interpolated (multi-)linearly between the nodes at the sample's coordinates. That
+    costs one eigen-solve per node (7, or 5 x 5 for two fields) per operating point.
+
+    Parameters
+    ----------
+    params : ScrewParameters
+        Nominal parameters (the scatter is relative to them).
+    geometry : Geometry
+        The geometry of `params` (modes and contact integrals).
+    samples : Samples
+        Scatter samples in replicates (`scatter.draw`).
+
+    Raises
+    ------
+    ParameterError
+        More than `MAX_GEOMETRY_FIELDS` geometry fields scatter.
+    """
+
+    def __init__(self, params: ScrewParameters, geometry: Geometry, samples: Samples):
+        self.params, self.samples = params, samples
+        count, scatter = samples.count, samples.scatter
+        values = {k: v.ravel() for k, v in scatter.values(params, samples.u).items()}
+        ms, mk, d = (np.broadcast_to(values.get(k, getattr(params, k)), (count,))
+                     for k in ("mu_static", "mu_kinetic", "friction_decay_s_m"))
+        self._friction = (mk, ms - mk, d, (ms - mk) * d)
+        self._change = np.zeros((3, count))                # level, slope, damping ratio
+        self._change[2] = values.get("modal_damping", params.modal_damping) \
+            - params.modal_damping
+        self._reach_damping = float(np.abs(self._change[2]).max())
+        self._shape = samples.u.shape[:2]
+        self._nominal = _Expansion(geometry)
+        fields = geometry_fields(scatter)
+        self._nodes = self._geometry_nodes(fields, values) if fields else None
+
+    def _geometry_nodes(self, fields: list[str], values: dict) -> tuple:
+        """Node geometries on a grid over the samples' range of each geometry field, and
+        every sample's cell and weights in it."""
+        per = GEOMETRY_NODES[len(fields)]
+        axes, cells, fractions = [], [], []
+        for name in fields:
+            x = values[name]
+            axis = np.linspace(x.min(), x.max(), per)
+            cell = np.clip(np.searchsorted(axis, x, side="right") - 1, 0, per - 2)
+            axes.append(axis)
+            cells.append(cell)
+            step = axis[1] - axis[0]                    # 0 for a vanishing scatter
+            fractions.append((x - axis[cell]) / step if step > 0 else np.zeros_like(x))
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(fields))
+        expansions = []
+        for point in grid:
+            try:            # a corner of two fields may leave the valid domain: no node
+                node = self.params.with_(**dict(zip(fields, point.tolist())))
+                expansions.append(_Expansion(build_geometry(node)))
+            except ParameterError:
+                expansions.append(None)
+        # multilinear interpolation: 2^d corners, each a flat node index and a weight
+        corners = []
+        for bits in np.ndindex(*(2,) * len(fields)):
+            index = np.ravel_multi_index([c + b for c, b in zip(cells, bits)],
+                                         (per,) * len(fields))
+            weight = np.prod([f if b else 1 - f for f, b in zip(fractions, bits)], axis=0)
+            corners.append((index, weight))
+        return expansions, corners
+
+    def nominal_level_slope(self, speed: float, load: float) -> tuple[float, float]:
+        """`level_slope` at the nominal friction parameters (floats)."""
+        p = self.params
+        dm = p.mu_static - p.mu_kinetic
+        level, slope = self.level_slope(p.mu_kinetic, dm, p.friction_decay_s_m,
+                                        dm * p.friction_decay_s_m, speed, load)
+        return float(level), float(slope)
+
+    def margins(self, pairs: EigenPairs, load: float) -> np.ndarray:
+        """Per sample, the largest growth rate beyond the squeak threshold over the modes
+        [1/s] (> 0: squeak), shape (count,); `pairs` is the nominal eigen-solve."""
+        if self._nodes is None:
+            return self._nominal.margins(pairs, load, self._friction, self._change,
+                                         self._reach_damping)
+        expansions, corners = self._nodes
+        speed, at = pairs.speed, []
+        for e in expansions:
+            if e is None or abs(speed) >= e.geometry.basis.omega_rad_s.min():
+                at.append(np.full(self.samples.count, _OUTSIDE))   # not valid: no squeak
+                continue
+            node_pairs = EigenPairs.solve(e.geometry, speed, load)
+            at.append(e.margins(node_pairs, load, self._friction, self._change,
+                                self._reach_damping, prune=False))
+        at = np.array(at)
+        columns = np.arange(self.samples.count)
+        return sum(w * at[index, columns] for index, w in corners)
 
     def hits(self, pairs: EigenPairs, load: float) -> np.ndarray:
         """Whether each sample squeaks at the operating point of `pairs`, by the expansion;

@@ -59,34 +59,37 @@ class Eigen(NamedTuple):
         Indices into `lam` of the oscillatory eigenvalues (`oscillatory_mask`, Im > 0).
     right, left : numpy.ndarray
         Columns x_i (A x_i = lam_i x_i) and u_i (u_i^H A = lam_i u_i^H) of lam[osc], unit
-        2-norm, as `numpy.linalg.eig` gives the right ones.
+        2-norm, as `numpy.linalg.eig` gives the right ones; `left` None when not computed.
     """
 
     lam: np.ndarray
     osc: np.ndarray
     right: np.ndarray
-    left: np.ndarray
+    left: np.ndarray | None
 
 
-def eig_both(a: np.ndarray) -> Eigen:
+def eig_both(a: np.ndarray, left: bool = True) -> Eigen:
     """Eigenvalues with right and left eigenvectors of a real matrix (LAPACK dgeev): the
     prediction and the first-order probability share this one solve (the left vectors cost
     ~10 % more; an inverse of the right ones cost three times that). Only the oscillatory
-    modes' vectors are unpacked: the rest are never used.
+    modes' vectors are unpacked: the rest are never used. `left` False skips the left
+    vectors (`Eigen.left` is then None).
 
     Raises
     ------
     numpy.linalg.LinAlgError
         A is not finite or LAPACK did not converge.
     """
-    if not np.isfinite(a).all():
+    if not math.isfinite(a.sum()):                  # NaN or inf anywhere
         raise np.linalg.LinAlgError("the state matrix is not finite")
-    wr, wi, vl, vr, info = lapack.dgeev(a, compute_vl=1, compute_vr=1)
+    wr, wi, vl, vr, info = lapack.dgeev(a, compute_vl=int(left), compute_vr=1)
     if info != 0:
         raise np.linalg.LinAlgError(f"LAPACK dgeev did not converge (info {info})")
     lam = wr + 1j * wi
-    osc = np.flatnonzero(oscillatory_mask(lam))   # first of a pair: re, im in two columns
-    return Eigen(lam, osc, vr[:, osc] + 1j * vr[:, osc + 1], vl[:, osc] + 1j * vl[:, osc + 1])
+    osc = np.flatnonzero(wi > _IMAG_TOL * np.abs(lam))  # oscillatory_mask; the first of a
+    #                                                     pair: re, im in two columns
+    return Eigen(lam, osc, vr[:, osc] + 1j * vr[:, osc + 1],
+                 vl[:, osc] + 1j * vl[:, osc + 1] if left else None)
 
 
 def oscillatory_mask(eigvals: np.ndarray) -> np.ndarray:
@@ -119,15 +122,15 @@ def classify(eigen: Eigen, labels: tuple[str, ...]
     of the state eigenvector; the basis is mass-normalised so amplitudes are comparable).
     """
     eigvals = eigen.lam
+    lam = eigvals[eigen.osc]
+    order = np.argsort(-lam.real, kind="stable")
+    lam = lam[order]
+    dominant = np.abs(eigen.right[:len(labels), order]).argmax(axis=0).tolist()
+    two_pi = 2 * math.pi
+    modes = tuple(ModeResult(labels[d], i / two_pi, r, -r / g, r > GROWTH_TOL * g)
+                  for d, r, i, g in zip(dominant, lam.real.tolist(), lam.imag.tolist(),
+                                        np.abs(lam).tolist()))
     mag = np.abs(eigvals)
-    order = np.argsort(-eigvals.real[eigen.osc], kind="stable")
-    osc = eigen.osc[order]
-    lam, mag_osc = eigvals[osc], mag[osc]
-    dominant = np.abs(eigen.right[:len(labels), order]).argmax(axis=0)
-    growth = lam.real > GROWTH_TOL * mag_osc
-    modes = tuple(map(ModeResult, [labels[d] for d in dominant.tolist()],
-                      (lam.imag / (2 * math.pi)).tolist(), lam.real.tolist(),
-                      (-lam.real / mag_osc).tolist(), growth.tolist()))
     real = eigvals.real[(np.abs(eigvals.imag) <= _IMAG_TOL * mag)
                         & (eigvals.real > GROWTH_TOL * mag)]
     divergence = tuple(sorted(real.tolist(), reverse=True))

@@ -27,6 +27,7 @@ from .stability import max_divergence_rate, max_growth_rate
 
 OPERATING_AXES = ("speed_rad_s", "load_n")
 REFERENCE_SPEED_RAD_S = 20.0        # fixed speed of the paper's Figs. 9 and 10
+PROBABILITY_LEVELS = (0.01, 0.1, 0.5, 0.9)    # iso-P(squeak) contours and crossings
 _CHUNK = 1024                       # points per batched eigen-solve at the reference size
 REFERENCE_STATE_SIZE = 36           # state size of the default model (6 bending + 6 torsion)
 MAX_POINTS = 1_000_000              # points of one map or sweep at the reference state size
@@ -225,6 +226,86 @@ def growth_field(model: SqueakModel, speed_rad_s, load_n,
     return GrowthField(*(a.reshape(shape) for a in (growth, valid, freq, diverge)))
 
 
+def probability_field(model: SqueakModel, speed_rad_s, load_n,
+                      progress: Callable[[int], None] | None = None, **params
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """P(squeak) (`Prediction.probability`: the fast estimator over the model's scatter) at
+    every point of the broadcast of all given arrays.
+
+    Parameters
+    ----------
+    model : SqueakModel
+        The model and its scatter; its parameters hold wherever `params` does not override
+        them.
+    speed_rad_s : array_like
+        Screw speeds [rad/s].
+    load_n : array_like
+        Axial loads [N].
+    progress : callable, optional
+        Called with the number of points just finished (invalid points at once).
+    **params
+        Numeric `ScrewParameters` fields by name, arrays in the field's unit; all arrays
+        broadcast together.
+
+    Returns
+    -------
+    probability, stderr : numpy.ndarray
+        P in [0, 1] and its standard error, of the broadcast shape; NaN where the model is not
+        valid (stderr also NaN where not sampled, i.e. without scatter).
+    """
+    arrays = np.broadcast_arrays(np.asarray(speed_rad_s, float), np.asarray(load_n, float),
+                                 *(np.asarray(v, float) for v in params.values()))
+    shape = arrays[0].shape
+    speeds, loads, *columns = (a.ravel() for a in arrays)
+    prob, stderr = np.full(speeds.size, np.nan), np.full(speeds.size, np.nan)
+    for sub, idx in _point_models(model, dict(zip(params, columns)), speeds.size):
+        if sub is None:                                  # parameters rejected: NaN
+            if progress:
+                progress(idx.size)
+            continue
+        chunk = _chunk_points(2 * sub.geometry.n)
+        for start in range(0, idx.size, chunk):
+            part = idx[start:start + chunk]
+            for i, p in zip(part.tolist(), sub.predict_many(speeds[part], loads[part])):
+                if p.valid:
+                    prob[i] = p.probability
+                    stderr[i] = np.nan if p.probability_stderr is None else p.probability_stderr
+            if progress:
+                progress(part.size)
+    return prob.reshape(shape), stderr.reshape(shape)
+
+
+def level_crossings(x: np.ndarray, values: np.ndarray, level: float) -> list[float]:
+    """Where `values` on the grid `x` cross `level`, interpolated linearly between
+    consecutive valid grid points (NaN: not valid, no crossing next to it).
+
+    Parameters
+    ----------
+    x : numpy.ndarray
+        Grid along an axis, in the axis unit.
+    values : numpy.ndarray
+        A quantity on the grid, e.g. P(squeak); NaN where invalid.
+    level : float
+        The level, in the quantity's unit.
+
+    Returns
+    -------
+    list of float
+        The crossings in the axis unit, in grid order.
+    """
+    out = []
+    for i in range(len(x) - 1):
+        a, b = values[i], values[i + 1]
+        if np.isfinite(a) and np.isfinite(b) and (a > level) != (b > level):
+            out.append(float(x[i] + (level - a) / (b - a) * (x[i + 1] - x[i])))
+    return out
+
+
+def _levels_key(level: float) -> str:
+    """JSON key of a probability level: 0.1 -> '0.1'."""
+    return f"{level:g}"
+
+
 def _scalar_growth(model: SqueakModel, fixed: dict[str, float], axis: str) -> Callable[[float], float]:
     def f(x: float) -> float:
         point = dict(fixed, **{axis: x})
@@ -300,20 +381,48 @@ class SweepResult:
         """Largest squeak growth rate per value [1/s]; NaN where not valid."""
         return np.array([p.max_growth_rate if p.valid else np.nan for p in self.predictions])
 
+    @property
+    def probability(self) -> np.ndarray:
+        """P(squeak) per value (`Prediction.probability`); NaN where not valid."""
+        return np.array([p.probability if p.valid else np.nan for p in self.predictions])
+
+    def probability_crossings(self, levels: Iterable[float] = PROBABILITY_LEVELS
+                              ) -> dict[float, list[float]]:
+        """Where P(squeak) crosses each level along the axis (`level_crossings`).
+
+        Parameters
+        ----------
+        levels : iterable of float
+            Probabilities in [0, 1]; default 1, 10, 50 and 90 %.
+
+        Returns
+        -------
+        dict of float to list of float
+            Level -> axis values of its crossings (linear between grid points), in the axis
+            unit.
+        """
+        return {level: level_crossings(self.values, self.probability, level)
+                for level in levels}
+
     def as_dict(self) -> dict:
         """JSON-ready result.
 
         Returns
         -------
         dict
-            Axis values, validity, growth rates [1/s], risk, squeak modes and frequencies
-            [Hz], boundaries and bands (keyed with the axis unit, e.g. ``unstable_bands_rad_s``).
+            Axis values, validity, growth rates [1/s], P(squeak) and its standard error,
+            squeak modes and frequencies [Hz], boundaries and bands (keyed with the axis unit,
+            e.g. ``unstable_bands_rad_s``), and where P crosses 1, 10, 50 and 90 %
+            (``probability_crossings``, keyed '0.01', ...).
         """
         return {
             "axis": self.axis, self.axis: self.values.tolist(), "fixed": self.fixed,
             "valid": [p.valid for p in self.predictions],
             "max_growth_rate": [None if math.isnan(g) else g for g in self.max_growth_rate],
             "probability": [p.probability for p in self.predictions],
+            "probability_stderr": [p.probability_stderr for p in self.predictions],
+            "probability_crossings": {_levels_key(k): v
+                                      for k, v in self.probability_crossings().items()},
             "unstable_modes": [[m.label for m in p.squeak_modes] for p in self.predictions],
             "unstable_frequencies_hz": [p.unstable_frequencies_hz for p in self.predictions],
             "stability_boundaries": self.boundaries,
@@ -449,6 +558,11 @@ class MapResult:
     boundary : list of tuple of float
         ``(x, y)`` points on the stability boundary, refined along rows and columns, in the
         axis units.
+    probability : numpy.ndarray or None
+        P(squeak) on the grid, shape (len(y), len(x)), NaN where invalid; None when not
+        computed.
+    probability_stderr : numpy.ndarray or None
+        Its standard error (NaN where not sampled); None when not computed.
     """
 
     x_axis: str
@@ -458,6 +572,36 @@ class MapResult:
     fixed: dict[str, float]
     field: GrowthField
     boundary: list[tuple[float, float]]
+    probability: np.ndarray | None = None
+    probability_stderr: np.ndarray | None = None
+
+    def probability_contours(self, levels: Iterable[float] = PROBABILITY_LEVELS
+                             ) -> dict[float, list[tuple[float, float]]]:
+        """Points of the iso-P(squeak) contours.
+
+        Parameters
+        ----------
+        levels : iterable of float
+            Probabilities in [0, 1]; default 1, 10, 50 and 90 %.
+
+        Returns
+        -------
+        dict of float to list of tuple of float
+            Level -> ``(x, y)`` points (axis units) where P crosses it, interpolated linearly
+            along the rows, then the columns of the grid; empty lists without `probability`.
+        """
+        out: dict[float, list[tuple[float, float]]] = {}
+        for level in levels:
+            points: list[tuple[float, float]] = []
+            if self.probability is not None:
+                for j, yv in enumerate(self.y.tolist()):
+                    points += [(c, yv) for c in level_crossings(self.x, self.probability[j],
+                                                                level)]
+                for i, xv in enumerate(self.x.tolist()):
+                    points += [(xv, c) for c in level_crossings(self.y, self.probability[:, i],
+                                                                level)]
+            out[level] = points
+        return out
 
     def as_dict(self) -> dict:
         """JSON-ready result.
@@ -466,21 +610,34 @@ class MapResult:
         -------
         dict
             Axes, fixed point, growth rate [1/s] (None where invalid), unstable and
-            divergence masks (row per y value) and the boundary points.
+            divergence masks (row per y value) and the boundary points; with the probability,
+            P(squeak) and its standard error on the grid (None where invalid or not sampled)
+            and ``probability_contours``: level ('0.01', '0.1', '0.5', '0.9') -> ``[x, y]``
+            points where P crosses it.
         """
         g = self.field.max_growth_rate
+        extra = {} if self.probability is None else {
+            "probability": _grid_list(self.probability),
+            "probability_stderr": _grid_list(self.probability_stderr),
+            "probability_contours": {_levels_key(k): [list(p) for p in v]
+                                     for k, v in self.probability_contours().items()}}
         return {"x_axis": self.x_axis, "x": self.x.tolist(), "y_axis": self.y_axis,
                 "y": self.y.tolist(), "fixed": self.fixed,
-                "max_growth_rate": [[None if math.isnan(v) else v for v in row]
-                                    for row in g.tolist()],
+                "max_growth_rate": _grid_list(g),
                 "unstable": (np.nan_to_num(g, nan=-1.0) > 0).tolist(),
                 "divergence": (np.nan_to_num(self.field.divergence_rate) > 0).tolist(),
-                "boundary": [list(p) for p in self.boundary]}
+                "boundary": [list(p) for p in self.boundary], **extra}
+
+
+def _grid_list(a: np.ndarray) -> list[list[float | None]]:
+    """Rows of a grid as lists, None for NaN."""
+    return [[None if math.isnan(v) else v for v in row] for row in a.tolist()]
 
 
 def stability_map(model: SqueakModel, x_axis: str, x, y_axis: str, y,
                   speed_rad_s: float | None = None, load_n: float | None = None,
-                  progress: Callable[[int], None] | None = None) -> MapResult:
+                  progress: Callable[[int], None] | None = None,
+                  probability: bool = False) -> MapResult:
     """Largest squeak growth rate on a 2-D grid and its zero contour refined along rows and
     columns by root finding.
 
@@ -502,12 +659,15 @@ def stability_map(model: SqueakModel, x_axis: str, x, y_axis: str, y,
     load_n : float, optional
         Fixed axial load [N] when not an axis; `params.axial_load_n` when None.
     progress : callable, optional
-        Called with the number of grid points just finished.
+        Called with the number of grid points just finished (twice per point with
+        `probability`).
+    probability : bool
+        Also P(squeak) on the grid (`probability_field`: a prediction per point).
 
     Returns
     -------
     MapResult
-        The growth field on the grid and the refined boundary points.
+        The growth field on the grid and the refined boundary points (and P).
 
     Raises
     ------
@@ -536,4 +696,6 @@ def stability_map(model: SqueakModel, x_axis: str, x, y_axis: str, y,
     for i, xv in enumerate(x.tolist()):
         f = _scalar_growth(model, dict(fixed, **{x_axis: xv}), y_axis)
         boundary += [(xv, r) for r in refine_crossings(f, y, g[:, i])]
-    return MapResult(x_axis, x, y_axis, y, fixed, gf, boundary)
+    prob = probability_field(model, speed, load, progress=progress, **grid) \
+        if probability else (None, None)
+    return MapResult(x_axis, x, y_axis, y, fixed, gf, boundary, *prob)

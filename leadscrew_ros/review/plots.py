@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Callable, NamedTuple
 import numpy as np
 
 from ..model.parameters import field_info
-from ..model.sweep import MapResult, SweepResult
+from ..model.sweep import PROBABILITY_LEVELS, MapResult, SweepResult
 from ..model.tracking import track_modes
 
 if TYPE_CHECKING:
@@ -154,6 +154,33 @@ def plot_map(result: MapResult, path: Path, title: str = "", dpi: int = 120,
     fig.legend(handles=handles, fontsize=8, loc="outside lower center",
                ncols=min(len(handles), 4))
     save_figure(fig, path, dpi)
+
+
+_LEVEL_STYLES = ("dotted", "dashed", "solid", "dashdot")   # of the PROBABILITY_LEVELS lines
+
+
+def probability_overlay(result: MapResult, band: tuple[float, float] = (0.1, 0.9)
+                        ) -> Overlay:
+    """Draws the iso-P(squeak) lines `PROBABILITY_LEVELS` (1, 10, 50, 90 %) of a map computed
+    with the probability, labelled in percent, and shades the band between the `band` levels
+    (where a drive squeaks or not depending on its scatter); for `plot_map`'s `overlay`."""
+    def draw(ax: "Axes") -> list:
+        from matplotlib.lines import Line2D
+        from matplotlib.patches import Patch
+        prob = result.probability
+        if prob is None or np.isfinite(prob).sum() < 4 or np.nanmax(prob) == np.nanmin(prob):
+            return []
+        kx, ky = axis_display(result.x_axis).factor, axis_display(result.y_axis).factor
+        x, y, p = result.x * kx, result.y * ky, np.ma.masked_invalid(prob)
+        ax.contourf(x, y, p, levels=list(band), colors="none", hatches=["..."])
+        lines = ax.contour(x, y, p, levels=list(PROBABILITY_LEVELS), colors="k",
+                           linestyles=_LEVEL_STYLES, linewidths=1.0)
+        ax.clabel(lines, fmt=lambda v: f"{100 * v:g} %", fontsize=7)
+        return [Patch(facecolor="none", edgecolor="0.3", hatch="...",
+                      label=f"P(squeak) {100 * band[0]:g}-{100 * band[1]:g} %")] + [
+            Line2D([], [], color="k", lw=1.0, ls=style, label=f"P = {100 * level:g} %")
+            for level, style in zip(PROBABILITY_LEVELS, _LEVEL_STYLES)]
+    return draw
 
 
 def fixed_text(fixed: dict[str, float]) -> str:
