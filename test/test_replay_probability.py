@@ -240,3 +240,26 @@ def test_report_draws_p_squeak_with_the_thresholds(log, tmp_path, monkeypatch):
     assert (peak.get_xdata()[0], peak.get_ydata()[0]) == (r.probability.peak_t_s,
                                                           r.probability.peak)
     assert math.isclose(r.probability.peak_t_s, 4.0)
+
+
+def test_cli_scatter_options_reach_the_replay(log, tmp_path, capsys):
+    """--scatter / --samples (and scatter.* of --params-file) build the replay's model as they
+    build every model command's: the summary names that scatter and P follows it."""
+    path, starts = log
+    code, _, err = cli(capsys, "replay", path, "--out", tmp_path / "a", "--no-report",
+                       "--quiet", "--scatter", "none")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert summary["scatter"] == {} and summary["peak_probability"] == 1.0
+    risk = {m[5].data for m in decoded(tmp_path / "a" / "dwell.annotated.mcap",
+                                       topics=[f"/replay/{RISK}"])}
+    assert risk == {0.0, 1.0}
+    code, _, err = cli(capsys, "replay", path, "--out", tmp_path / "b", "--no-report",
+                       "--quiet", "--scatter", "mu_kinetic=0.1", "--samples", "64")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "b" / "summary.json").read_text())
+    assert summary["scatter"]["mu_kinetic"] == 0.1 and summary["scatter_samples"] == 64
+    model = SqueakModel(scatter=Scatter(summary["scatter"]), samples=64)
+    want = [p.probability for p in (model.predict(s, LOAD_N) for _, s in starts) if p.valid]
+    assert [m[5].data for m in decoded(tmp_path / "b" / "dwell.annotated.mcap",
+                                       topics=[f"/replay/{RISK}"])] == want
