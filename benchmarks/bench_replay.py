@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from leadscrew_ros.bag.messages import PREDICTION_TOPICS
 from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.review.replay import ReplaySettings, replay
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
@@ -106,12 +107,17 @@ def table(res: dict) -> str:
          "validity", f"{r['recomputes']:,} = {r['recomputes'] / sum(r['input_messages'].values()):.1%} "
                      "of inputs"),
         ("squeak", f"{r['episodes']} episodes", f"{r['time_in_squeak_s']:.0f} s in squeak"),
+        (f"P(squeak) (default scatter, {r['scatter_samples']} samples)",
+         f"peak {r['peak_probability']:.3f}",
+         f"{r['time_above_warn_s']:.0f} s >= WARN {r['warn_probability']:g}, "
+         f"{r['time_above_error_s']:.0f} s >= ERROR {r['error_probability']:g}"),
         ("wall time (replay: read, predict, write annotated MCAP + episodes)",
          f"{res['workers']} prediction worker(s)", f"{r['wall_s']:.1f} s"),
         ("throughput", "log duration / wall time",
          f"**{ratio:.0f}× real time** (target ≥ {TARGET_X_REAL_TIME:g}×: "
          f"{'met' if ratio >= TARGET_X_REAL_TIME else 'MISSED'})"),
-        ("annotated MCAP", "originals + 4 prediction topics", f"{res['annotated_mb']:.1f} MB"),
+        ("annotated MCAP", f"originals + {len(PREDICTION_TOPICS)} prediction topics",
+         f"{res['annotated_mb']:.1f} MB"),
     ]
     if "report_s" in res:
         rows.append(("report (PNG plots, not in the ratio)", "", f"{res['report_s']:.1f} s"))

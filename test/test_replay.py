@@ -146,8 +146,12 @@ def check_against_core(annotated: Path, joint="", nut_zero=0.15):
         assert all(g[1] == g[2] == t for g in group)
         # right after the triggering input in file order
         assert position[id(group[0])] > position[id(originals[i])]
-        risk, freqs, active, modes = (g[5] for g in group)
-        assert risk.data == pytest.approx(p.risk, rel=1e-12, abs=1e-300)
+        risk, margin, freqs, active, modes = (g[5] for g in group)
+        # squeak/risk is P(squeak) over the model's scatter, the core's number exactly (a
+        # share of the scatter samples); squeak/margin the least damping ratio
+        assert risk.data == p.probability and 0.0 <= risk.data <= 1.0
+        assert margin.data == pytest.approx(p.margin, rel=1e-12, abs=1e-15)
+        assert (margin.data < 0) == any(m.unstable for m in p.modes)
         assert list(freqs.data) == pytest.approx(p.unstable_frequencies_hz, rel=1e-12)
         assert active.data == (not p.stable)
         labels = modes.layout.dim[0].label.removeprefix("modes:").split(",")
@@ -200,6 +204,14 @@ def test_replay_of_a_recorded_log(replayed, bag):
     summary = json.loads((r.out_dir / "summary.json").read_text())
     assert summary["predictions"] == r.predictions and summary["episodes"] == len(episodes)
     assert summary["time_in_squeak_s"] == pytest.approx(sum(e["duration_s"] for e in episodes))
+    # P(squeak): peaks near 1 in the band; at or above WARN in every episode and around them
+    for e in episodes:
+        assert 0.9 < e["peak_probability"] <= 1.0
+        assert e["start_s"] <= e["peak_probability_t_s"] < e["end_s"]
+        assert 0 < e["time_above_error_s"] <= e["time_above_warn_s"] <= e["duration_s"] + 1e-9
+    assert summary["peak_probability"] == max(e["peak_probability"] for e in episodes)
+    assert summary["time_above_warn_s"] > sum(e["time_above_warn_s"] for e in episodes)
+    assert (summary["warn_probability"], summary["error_probability"]) == (0.1, 0.5)
     assert (r.out_dir / "summary.txt").read_text().startswith("replay of ")
 
 
@@ -208,6 +220,9 @@ def test_zero_deadbands_give_the_core_prediction_at_every_input(short_log, tmp_p
     seen = check_against_core(r.annotated, joint=SHORT.joint_name)
     assert r.recomputes == len(seen) and r.predictions == sum(p.valid for _, p in seen)
     assert r.predictions > 100
+    probabilities = [p.probability for _, p in seen if p.valid]
+    assert min(probabilities) == 0.0 and max(probabilities) > 0.98   # fast; in the band
+    assert any(0.2 < q < 0.8 for q in probabilities)                 # near a band edge
     # Episodes are exactly the intervals where the core says unstable.
     expected = intervals(seen, r.start_ns, r.duration_s)
     assert len(expected) >= 1
@@ -216,6 +231,7 @@ def test_zero_deadbands_give_the_core_prediction_at_every_input(short_log, tmp_p
         inside = [p for t, p in seen if e.start_s <= (t - r.start_ns) / 1e9 < e.end_s]
         assert set(e.modes) == {m.label for p in inside for m in p.squeak_modes}
         assert e.peak_growth_rate == max(p.max_growth_rate for p in inside)
+        assert e.probability.peak == max(p.probability for p in inside)
 
 
 def test_input_defaults_are_the_nodes():
@@ -282,8 +298,9 @@ def test_a_dead_worker_is_replaced_by_solving_here():
     from concurrent.futures.process import BrokenProcessPool
 
     from leadscrew_ros.review.replay import _Segment
-    from leadscrew_ros.review.timeline import predict_jobs
-    args = (PARAMS, np.array([20.0]), np.array([200.0]), np.array([PARAMS.nut_position_m]))
+    from leadscrew_ros.review.timeline import ModelSpec, predict_jobs
+    args = (ModelSpec.of(SqueakModel()), np.array([20.0]), np.array([200.0]),
+            np.array([PARAMS.nut_position_m]))
     future = Future()
     future.set_exception(BrokenProcessPool("killed"))
     (p,) = _Segment(predictions=future, args=args).result()
@@ -408,9 +425,9 @@ def test_invalid_inputs_are_counted_never_predicted(tmp_path):
                                      "speed at or above the first critical speed": 1}
     (p,) = decoded(r.annotated, topics=["/replay/squeak/risk"])
     assert p[1] == 3 * s and math.isfinite(p[5].data)
-    t, lo, _, _, count = r.plot.risk.series()     # seconds from the first message
+    t, lo, _, _, count = r.plot.probability.series()     # seconds from the first message
     (k,) = np.flatnonzero(np.isfinite(lo[:, 0]))
-    assert abs(t[k] - 2.0) <= r.plot.risk.bin_s and count.sum() == r.recomputes
+    assert abs(t[k] - 2.0) <= r.plot.probability.bin_s and count.sum() == r.recomputes
 
 
 def test_wrong_input_type_is_a_one_line_error(tmp_path, capsys):

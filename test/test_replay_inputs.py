@@ -220,7 +220,7 @@ def test_the_nut_is_drawn_only_when_measured(tmp_path, monkeypatch):
     assert not r.timeline.nut_measured and np.isnan(r.timeline.trace.series()[1][:, 2]).all()
     report.plot_timeline(r, tmp_path / "a.png", report.QUICK)
     assert [ax.get_ylabel() for ax in figures[-1].axes] == [
-        "speed [rad/s]", "axial load [N]", "squeak risk [0..1]"]
+        "speed [rad/s]", "axial load [N]", "P(squeak)"]
     assert "no nut input" in figures[-1].axes[0].get_title()
 
     cycle = DutyCycle(duration_s=6.0, rate_hz=25.0, rest_s=1.0)

@@ -25,7 +25,7 @@ from leadscrew_ros.live.settings import JointSettings, LiveSettings
 from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.model.parameters import field_info
 from leadscrew_ros.review.replay import ReplaySettings, replay
-from leadscrew_ros.review.timeline import InputSettings, Timeline, predict_jobs
+from leadscrew_ros.review.timeline import InputSettings, ModelSpec, Timeline, predict_jobs
 from cdr_reference import cdr_payload
 from test_node import Ros
 
@@ -283,7 +283,7 @@ def timeline_predictions(stream) -> tuple[list, Timeline]:
                       k)
         if job is not None:
             jobs.append(job)
-    preds = predict_jobs(PARAMS, *(np.array([getattr(j, f) for j in jobs]) for f in
+    preds = predict_jobs(ModelSpec.of(SqueakModel(PARAMS)), *(np.array([getattr(j, f) for j in jobs]) for f in
                                    ("speed_rad_s", "load_n", "model_nut_m"))) if jobs else []
     return preds, tl
 

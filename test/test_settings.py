@@ -129,7 +129,9 @@ def test_descriptors_carry_the_metadata():
 # ----------------------------------------------------------------------------- replay --help
 REPLAY_OPTIONS = {"--speed-deadband": "speed_deadband_rad_s", "--load-deadband": "load_deadband_n",
                   "--nut-deadband": "nut_deadband_m", "--joint-name": "joint_name",
-                  "--nut-position-at-zero-angle": "nut_position_at_zero_angle_m"}
+                  "--nut-position-at-zero-angle": "nut_position_at_zero_angle_m",
+                  "--warn-probability": "warn_probability",
+                  "--error-probability": "error_probability"}
 
 
 def test_replay_help_shows_the_settings_defaults_and_ranges():

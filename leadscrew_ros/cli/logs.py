@@ -26,9 +26,10 @@ def _topic(name: str) -> str:
     return name if name.startswith("/") else "/" + name
 
 
-def _setting_help(name: str) -> str:
-    """argparse help of the replay option that sets node setting `name` (from its metadata)."""
-    return help_text(REPLAY_SETTINGS[name]).replace("%", "%%")
+def _setting_help(name: str, description: str | None = None) -> str:
+    """argparse help of the replay option that sets node setting `name` (from its metadata;
+    `description` replaces the node's)."""
+    return help_text(REPLAY_SETTINGS[name], description).replace("%", "%%")
 
 
 def _replay_inputs(args: argparse.Namespace) -> InputSettings:
@@ -54,7 +55,8 @@ def _parse_remap(items: list[str]) -> dict[str, str]:
     return remap
 
 
-OFFLINE_OPTIONS = ("out", "no_report", "namespace", "out_namespace", "nominal_load_n")
+OFFLINE_OPTIONS = ("out", "no_report", "namespace", "out_namespace", "nominal_load_n",
+                   "warn_probability", "error_probability")
 
 
 def _publish(args: argparse.Namespace) -> int:
@@ -103,8 +105,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(result.summary_text())
         for e in result.episodes[:args.episodes]:
-            print(f"  squeak {e.start_s:10.2f} - {e.end_s:10.2f} s  peak growth "
-                  f"{e.peak_growth_rate:7.1f} 1/s  "
+            print(f"  squeak {e.start_s:10.2f} - {e.end_s:10.2f} s  peak P(squeak) "
+                  f"{e.probability.peak:.3f}  peak growth {e.peak_growth_rate:7.1f} 1/s  "
                   + ", ".join(f"{m} {f:.0f} Hz" for m, f in zip(e.modes, e.frequencies_hz)))
         if result.episode_count > args.episodes:
             print(f"  ... {result.episode_count - args.episodes} more in episodes.json")
@@ -211,6 +213,15 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
                    help=_setting_help("load_deadband_n"))
     g.add_argument("--nut-deadband", dest="nut_deadband_m", type=finite, metavar="M",
                    help=_setting_help("nut_deadband_m"))
+    g = p.add_argument_group("P(squeak) thresholds (the node's; summary, episodes and report "
+                             "give the time at or above them)")
+    g.add_argument("--warn-probability", dest="warn_probability", type=finite, metavar="P",
+                   help=_setting_help("warn_probability", "time at or above this P(squeak) "
+                                      "is counted as WARN (the node's diagnostic WARN)"))
+    g.add_argument("--error-probability", dest="error_probability", type=finite, metavar="P",
+                   help=_setting_help("error_probability", "time at or above this "
+                                      "P(squeak) is counted as ERROR (the node's diagnostic "
+                                      "ERROR)"))
     g = p.add_argument_group("offline replay")
     g.add_argument("--namespace", metavar="NS",
                    help="namespace of the input topics, as a node's __ns (default: the one "

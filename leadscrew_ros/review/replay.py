@@ -4,11 +4,18 @@
 read the log (`logsource`: MCAP via `logfile`, or rosbag2 sqlite3 .db3; strict: a damaged or
 foreign file is a one-line `LogError`) -> input topics resolved in the log's input namespace
 (`timeline.is_input`, as `replay --publish` selects them) ->
-operating-point timeline with the node's deadbands (`timeline`) -> batched predictions, in
-worker processes for long logs -> squeak episodes -> `<log>.annotated.mcap`: every original
-message copied verbatim (channel, schema, times, sequence, bytes) plus the predictions on
-`<out namespace>/squeak/{risk,unstable_frequencies,active,modes}` with the node's types, each at
-the log time of the input that triggered it; `episodes.json`, `summary.json` and `summary.txt`.
+operating-point timeline with the node's deadbands (`timeline`) -> batched predictions with
+the model's parameters and scatter (`timeline.ModelSpec`), in worker processes for long logs
+-> squeak episodes and P(squeak) over time -> `<log>.annotated.mcap`: every original message
+copied verbatim (channel, schema, times, sequence, bytes) plus the predictions on
+`<out namespace>/squeak/{risk,margin,unstable_frequencies,active,modes}` with the node's types
+(`bag.messages.PREDICTION_TOPICS`; squeak/risk is P(squeak)), each at the log time of the input
+that triggered it; `episodes.json`, `summary.json` and `summary.txt`.
+
+P(squeak) over time is the node's: a recompute's probability holds until the next recompute
+(none outside validity), and to the end of the log after the last one. Peak probability and
+the time at or above the WARN and ERROR probabilities (`LiveSettings.warn_probability`,
+`error_probability`, given in `InputSettings`) are counted over the log and per episode.
 
 Memory does not grow with the log: messages stream through in segments (a segment is written
 once its predictions are back, reading overlaps with the eigen-solves, at most
@@ -44,8 +51,10 @@ from .jsonsafe import json_safe
 from ..bag.logfile import LogError, LogMessage, Topic
 from ..bag.logsource import LogSource, log_topics, open_log
 from ..model import Prediction, SqueakModel
+from ..model.scatter import LOG_NORMAL
 from .progress import progress_bar
-from .timeline import (InputError, InputSettings, Job, Timeline, input_namespaces, predict_jobs)
+from .timeline import (InputError, InputSettings, Job, ModelSpec, Timeline, input_namespaces,
+                       predict_jobs)
 
 DEFAULT_NAMESPACE = "/replay"
 _BATCH_JOBS = 256              # predictions per batched solve (one worker task)
@@ -77,8 +86,37 @@ class ReplaySettings:
 
 
 @dataclass
+class ProbabilityTime:
+    """P(squeak) as published over an interval: its peak and the time it was at or above the
+    WARN and ERROR probabilities (seconds; times from the log's first message)."""
+
+    peak: float | None = None             # max P(squeak) [1]; None without a prediction
+    peak_t_s: float | None = None         # when it was first reached
+    above_warn_s: float = 0.0             # P >= warn_probability
+    above_error_s: float = 0.0            # P >= error_probability
+
+    def sample(self, t_s: float, probability: float) -> None:
+        """A recompute's probability at time `t_s`."""
+        if self.peak is None or probability > self.peak:
+            self.peak, self.peak_t_s = probability, t_s
+
+    def hold(self, probability: float, duration_s: float, warn: float, error: float) -> None:
+        """`probability` held for `duration_s`."""
+        if probability >= warn:
+            self.above_warn_s += duration_s
+        if probability >= error:
+            self.above_error_s += duration_s
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"peak_probability": self.peak, "peak_probability_t_s": self.peak_t_s,
+                "time_above_warn_s": self.above_warn_s,
+                "time_above_error_s": self.above_error_s}
+
+
+@dataclass
 class Episode:
-    """A contiguous interval with squeak predicted (seconds from the log's first message)."""
+    """A contiguous interval with squeak predicted at the nominal parameters (as squeak/active;
+    seconds from the log's first message), and its P(squeak)."""
 
     start_s: float
     end_s: float
@@ -86,6 +124,7 @@ class Episode:
     speed_range_rad_s: tuple[float, float]
     load_range_n: tuple[float, float]
     predictions: int
+    probability: ProbabilityTime = field(default_factory=ProbabilityTime)
     # mode -> Hz seen: every `stride`-th value, at most _FREQUENCIES_KEPT (bounded memory)
     frequencies: dict[str, list[float]] = field(default_factory=dict)
     _strides: Counter = field(default_factory=Counter, repr=False, compare=False)
@@ -121,15 +160,16 @@ class Episode:
                 "speed_min_rad_s": self.speed_range_rad_s[0],
                 "speed_max_rad_s": self.speed_range_rad_s[1],
                 "load_min_n": self.load_range_n[0], "load_max_n": self.load_range_n[1],
-                "predictions": self.predictions}
+                "predictions": self.predictions, **self.probability.as_dict()}
 
 
 @dataclass
 class PlotData:
     """What the report draws, in constant memory (seconds from the log's first message)."""
 
-    # Per recompute: risk (NaN without prediction) and squeak (1/0), binned over time.
-    risk: Envelope = field(default_factory=lambda: Envelope(2))
+    # Per recompute: P(squeak) (NaN without prediction) and squeak at the nominal parameters
+    # (1/0), binned over time.
+    probability: Envelope = field(default_factory=lambda: Envelope(2))
     # Valid predictions: speed, load, nut position, squeak (1/0); a uniform sample.
     points: Reservoir = field(default_factory=lambda: Reservoir(4))
     # Squeak frequencies: speed, load, nut position, frequency [Hz]; a uniform sample.
@@ -137,7 +177,7 @@ class PlotData:
 
     def add(self, t: float, job: Job, p: Prediction) -> None:
         squeak = p.valid and not p.stable
-        self.risk.add(t, p.probability if p.valid else math.nan, float(squeak))
+        self.probability.add(t, p.probability if p.valid else math.nan, float(squeak))
         if p.valid:
             self.points.add(p.speed_rad_s, p.load_n, job.nut_position_m, float(squeak))
         for hz in p.unstable_frequencies_hz:
@@ -162,10 +202,15 @@ class ReplayResult:
     episodes: list[Episode]           # the first EPISODES_KEPT
     episode_count: int                # all of them (in episodes.json)
     time_in_squeak_s: float
+    probability: ProbabilityTime      # over the whole log
     plot: PlotData
     timeline: Timeline                # counters, and the inputs over time (binned)
     namespace: str = "/"              # of the inputs
     out_namespace: str = DEFAULT_NAMESPACE
+    warn_probability: float = InputSettings.warn_probability
+    error_probability: float = InputSettings.error_probability
+    scatter: dict[str, float] = field(default_factory=dict)   # Scatter.sd of P(squeak)
+    scatter_samples: int = 0
     wall_s: float = math.nan
     outputs: list[Path] = field(default_factory=list)
 
@@ -196,24 +241,52 @@ class ReplayResult:
                 "ignored_examples": dict(self.timeline.ignored_example),
                 "episodes": self.episode_count,
                 "time_in_squeak_s": self.time_in_squeak_s,
+                **self.probability.as_dict(),
+                "warn_probability": self.warn_probability,
+                "error_probability": self.error_probability,
+                "scatter": self.scatter, "scatter_samples": self.scatter_samples,
                 "namespace": self.namespace, "out_namespace": self.out_namespace,
                 "log_time": {"backwards": dict(self.timeline.backwards),
                              "backwards_max_s": self.timeline.backwards_max_s,
                              "duplicates": dict(self.timeline.duplicates)},
                 "warnings": self.warnings,
-                "squeak_share": self.time_in_squeak_s / self.duration_s
-                if self.duration_s > 0 else 0.0,
+                "squeak_share": self._share(self.time_in_squeak_s),
+                "warn_share": self._share(self.probability.above_warn_s),
                 "wall_s": self.wall_s, "x_real_time": self.x_real_time}
 
+    def _share(self, seconds: float) -> float:
+        """`seconds` as a share of the log's duration."""
+        return seconds / self.duration_s if self.duration_s > 0 else 0.0
+
+    def probability_text(self) -> str:
+        """One line: peak P(squeak) and the time at or above WARN and ERROR."""
+        pt = self.probability
+        if pt.peak is None:
+            return "P(squeak): no prediction"
+        return (f"P(squeak): peak {pt.peak:.3f} at {pt.peak_t_s:.2f} s; >= WARN "
+                f"{self.warn_probability:g} for {pt.above_warn_s:.2f} s "
+                f"({100 * self._share(pt.above_warn_s):.1f} % of the log), >= ERROR "
+                f"{self.error_probability:g} for {pt.above_error_s:.2f} s")
+
+    def scatter_text(self) -> str:
+        """One line: the scatter P(squeak) is taken over."""
+        if not self.scatter:
+            return "scatter: none (P(squeak) is the nominal verdict, 0 or 1)"
+        log_normal = [name for name in self.scatter if name in LOG_NORMAL]
+        return ("scatter: " + ", ".join(f"{name} {sd:g}" for name, sd in self.scatter.items())
+                + " (relative SD" + (f"; SD of ln for {', '.join(log_normal)}" if log_normal
+                                     else "") + f"), {self.scatter_samples} samples")
+
     def summary_text(self) -> str:
-        s = self.summary()
         lines = [f"replay of {self.log}: {len(self.files)} file(s), {self.messages} messages "
                  f"over {self.duration_s:.1f} s",
                  "input messages: " + (", ".join(f"{k} {v}" for k, v in self.inputs.items())
                                        or "none"),
                  f"recomputes: {self.recomputes} ({self.predictions} with a prediction)",
                  f"squeak episodes: {self.episode_count}, time in squeak "
-                 f"{self.time_in_squeak_s:.2f} s ({100 * s['squeak_share']:.1f} % of the log)"]
+                 f"{self.time_in_squeak_s:.2f} s ({100 * self._share(self.time_in_squeak_s):.1f}"
+                 " % of the log)",
+                 self.probability_text(), self.scatter_text()]
         examples = {**self.timeline.rejected_example, **self.timeline.ignored_example}
         for title, counts in (("no prediction (outside the model's validity)", self.no_prediction),
                               ("rejected inputs", self.rejected), ("ignored inputs", self.ignored)):
@@ -301,7 +374,7 @@ class _Solver:
     log) in `workers` spawned processes, while this one reads and writes."""
 
     def __init__(self, model: SqueakModel, workers: int):
-        self.params, self.workers = model.params, workers
+        self.spec, self.workers = ModelSpec.of(model), workers
         self.batches = 0
         self.pool: ProcessPoolExecutor | None = None
 
@@ -309,7 +382,7 @@ class _Solver:
         if not seg.jobs:
             seg.predictions = []
             return
-        seg.args = (self.params, *(np.array([getattr(j, f) for j in seg.jobs]) for f in
+        seg.args = (self.spec, *(np.array([getattr(j, f) for j in seg.jobs]) for f in
                                    ("speed_rad_s", "load_n", "model_nut_m")))
         self.batches += 1
         if self.workers and self.batches > 1 and self.pool is None:
@@ -334,19 +407,36 @@ class _Solver:
 
 # ---------------------------------------------------------------------- episodes
 class _Episodes:
-    """Squeak episodes from the predictions in log order. An episode starts at the first
-    prediction with squeak (not stable) and ends at the next recompute that is stable or
-    outside validity (motor at rest: no squeak), or at the end of the log. Each ended episode
-    is written to `sink` (a JSON list); the first EPISODES_KEPT stay in `kept`."""
+    """Squeak episodes and P(squeak) over time from the predictions in log order.
 
-    def __init__(self, sink: TextIO) -> None:
+    An episode starts at the first prediction with squeak (not stable) and ends at the next
+    recompute that is stable or outside validity (motor at rest: no squeak), or at the end of
+    the log. Each ended episode is written to `sink` (a JSON list); the first EPISODES_KEPT
+    stay in `kept`. A valid recompute's P(squeak) holds until the next recompute or the end of
+    the log, and counts towards the log's `probability` and the open episode's."""
+
+    def __init__(self, sink: TextIO, warn_probability: float, error_probability: float) -> None:
         self.sink, self.keep = sink, EPISODES_KEPT
+        self.thresholds = (warn_probability, error_probability)
         self.kept: list[Episode] = []
         self.open: Episode | None = None
         self.count, self.time_in_squeak_s = 0, 0.0
+        self.probability = ProbabilityTime()
+        self._held: tuple[float, float] | None = None      # (since [s], P) of the last recompute
         sink.write("[")
 
+    def _hold(self, t: float) -> None:
+        """The held probability, from its recompute to `t`."""
+        if self._held is not None:
+            since, probability = self._held
+            for pt in [self.probability] + ([self.open.probability] if self.open else []):
+                pt.hold(probability, t - since, *self.thresholds)
+
     def add(self, t: float, p: Prediction) -> None:
+        self._hold(t)
+        self._held = (t, p.probability) if p.valid else None
+        if p.valid:
+            self.probability.sample(t, p.probability)
         squeak = p.valid and not p.stable
         e = self.open
         if not squeak:
@@ -363,6 +453,7 @@ class _Episodes:
                                max(e.speed_range_rad_s[1], p.speed_rad_s))
         e.load_range_n = (min(e.load_range_n[0], p.load_n), max(e.load_range_n[1], p.load_n))
         e.predictions += 1
+        e.probability.sample(t, p.probability)
         for m in p.squeak_modes:
             e.add_frequency(m.label, m.frequency_hz)
 
@@ -378,6 +469,8 @@ class _Episodes:
             self.kept.append(e)
 
     def close(self, end_s: float) -> None:
+        self._hold(end_s)
+        self._held = None
         if self.open is not None:
             self._end(end_s)
         self.sink.write("\n]\n")
@@ -408,7 +501,8 @@ class _Run:
         self.out, self.progress = out, progress
         self.timeline = Timeline(model.params, inputs)
         self.solver = _Solver(model, workers)
-        self.plot, self.episodes = PlotData(), _Episodes(episodes)
+        self.plot = PlotData()
+        self.episodes = _Episodes(episodes, inputs.warn_probability, inputs.error_probability)
         self.no_prediction: Counter[str] = Counter()
         self.messages = self.predictions = 0
         self.start_ns, self.end_ns = None, None
@@ -485,7 +579,9 @@ def _namespaces(source: LogSource, settings: ReplaySettings) -> tuple[str, str]:
 def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
            settings: ReplaySettings = ReplaySettings()) -> ReplayResult:
     """Replay `log` (an MCAP or .db3 file, or a bag directory of split files) offline into
-    `out_dir`."""
+    `out_dir`, predicting with `model`: its parameters, and its scatter and sample count for
+    P(squeak) (e.g. `SqueakModel(params, scatter_settings.scatter, scatter_settings.samples)`,
+    as the node builds it)."""
     t0 = time.perf_counter()
     log, out_dir = Path(log), Path(out_dir)
     source = open_log(log)
@@ -529,8 +625,10 @@ def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
         inputs=tl.inputs, recomputes=tl.recomputes, predictions=run.predictions,
         no_prediction=run.no_prediction, rejected=tl.rejected, ignored=tl.ignored,
         episodes=run.episodes.kept, episode_count=run.episodes.count,
-        time_in_squeak_s=run.episodes.time_in_squeak_s, plot=run.plot, timeline=tl,
-        namespace=namespace, out_namespace=out_namespace)
+        time_in_squeak_s=run.episodes.time_in_squeak_s, probability=run.episodes.probability,
+        plot=run.plot, timeline=tl, namespace=namespace, out_namespace=out_namespace,
+        warn_probability=inputs.warn_probability, error_probability=inputs.error_probability,
+        scatter=dict(model.scatter.sd), scatter_samples=model.sample_count)
     result.wall_s = time.perf_counter() - t0
     _write_json(out_dir / "summary.json", result.summary())
     (out_dir / "summary.txt").write_text(result.summary_text() + "\n", encoding="utf-8")

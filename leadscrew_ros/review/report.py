@@ -2,9 +2,12 @@
 """PNG report of a replay: the run over time, and its trajectory on the stability maps.
 
 - `timeline.png`: speed, load, nut position (only when the log has a nut input: a nut topic
-  or joint positions) and squeak risk over time, squeak shaded. Drawn from the replay's binned
-  series (`decimation.Envelope`: min-max band per bin), so an hour-long log is as readable and
-  as cheap as a minute;
+  or joint positions) and P(squeak) over time, squeak at the nominal parameters shaded; the
+  P(squeak) panel has the WARN and ERROR probabilities as dashed lines, bars under the curve
+  where P was at or above them and the peak marked, with their numbers (exact, from the
+  replay) in its title.
+  Drawn from the replay's binned series (`decimation.Envelope`: min-max band per bin), so an
+  hour-long log is as readable and as cheap as a minute;
 - `map_speed_load.png`: the run's operating points (a fixed-size sample) on the speed-load
   stability map (the paper's Fig. 7), squeak predictions highlighted. When the nut travels
   (more than `NUT_BAND_MIN_M`), the points are split into 2-4 nut-position bands: the map is
@@ -32,6 +35,8 @@ TIMELINE_FILE = "timeline.png"
 MAP_FILE = "map_speed_load.png"
 FREQUENCY_FILE = "frequency_vs_speed.png"
 SQUEAK_COLOR = "orange"
+WARN_COLOR, ERROR_COLOR = "goldenrod", "tab:red"
+BAR_HEIGHT = 0.07            # P(squeak) panel: the P >= WARN / ERROR bars under the curve
 NUT_BAND_MIN_M = 0.01        # nut travel below this: one map at the median nut position
 NUT_BAND_M = 0.025           # band width aimed at, 2 to 4 bands
 BAND_COLORS = ("tab:blue", "tab:green", "tab:purple", "tab:brown")
@@ -59,15 +64,71 @@ def _held(last: np.ndarray, count: np.ndarray) -> np.ndarray:
     return out
 
 
+def _filled(lo: np.ndarray, hi: np.ndarray, last: np.ndarray,
+            count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A binned series' (lo, hi) with empty bins holding the last value before them (`_held`),
+    so that a log sampled more sparsely than the bins is drawn as a line, not as dots."""
+    held = _held(last, count)
+    empty = count[:, None] == 0
+    return np.where(empty, held, lo), np.fmax(np.where(empty, held, hi), held)
+
+
 def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
     """(first, last) index of each run of True."""
     edges = np.diff(np.r_[0, flags.astype(np.int8), 0])
     return list(zip(np.flatnonzero(edges == 1).tolist(), (np.flatnonzero(edges == -1) - 1).tolist()))
 
 
+def _probability_panel(result: ReplayResult, axes) -> None:
+    """P(squeak) over time on the last of `axes`, with the WARN and ERROR probabilities
+    (dashed) and bars under the curve where P was at or above them; squeak at the nominal
+    parameters shaded on all of `axes`."""
+    ax = axes[-1]
+    envelope = result.plot.probability
+    t, lo, hi, last, count = envelope.series()
+    lo, hi = _filled(lo, hi, last, count)
+    half = envelope.bin_s / 2
+    thresholds = ((result.warn_probability, "WARN", WARN_COLOR),
+                  (result.error_probability, "ERROR", ERROR_COLOR))
+    ylim = (-0.05 - BAR_HEIGHT * len(thresholds), 1.05)
+
+    def fraction(y: float) -> float:             # of the axes' height
+        return (y - ylim[0]) / (ylim[1] - ylim[0])
+
+    handles = []
+    if t.size:
+        handles.append(ax.fill_between(t, lo[:, 0], hi[:, 0], step="mid", color="tab:blue",
+                                       edgecolor="tab:blue", lw=0.8, label="P(squeak)"))
+        for k, (a, b) in enumerate(_runs(np.nan_to_num(hi[:, 1]) > 0)):
+            for other in axes:
+                span = other.axvspan(t[a] - half, t[b] + half, color=SQUEAK_COLOR, alpha=0.3,
+                                     lw=0, label="squeak (nominal)")
+            handles += [span] if k == 0 else []
+        for i, (level, name, color) in enumerate(thresholds):
+            bottom = ylim[0] + BAR_HEIGHT * i
+            for k, (a, b) in enumerate(_runs(np.nan_to_num(hi[:, 0], nan=-1.0) >= level)):
+                span = ax.axvspan(t[a] - half, t[b] + half, fraction(bottom + 0.1 * BAR_HEIGHT),
+                                  fraction(bottom + 0.9 * BAR_HEIGHT), color=color, lw=0,
+                                  label=f"P >= {name}")
+                handles += [span] if k == 0 else []
+    for level, name, color in thresholds:
+        handles.append(ax.axhline(level, color=color, ls="--", lw=1.0,
+                                  label=f"{name} {level:g}"))
+    pt = result.probability
+    if pt.peak is not None:
+        handles += ax.plot([pt.peak_t_s], [pt.peak], "v", color="k", ms=5, label="peak")
+    ax.set_ylim(*ylim)
+    ax.set_yticks([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
+    ax.set_ylabel("P(squeak)")
+    ax.set_title(result.probability_text(), fontsize=9)
+    ax.legend(handles=handles, loc="center left", bbox_to_anchor=(1.005, 0.5), fontsize=7)
+    ax.set_xlabel("time since the log's first message [s]")
+
+
 def plot_timeline(result: ReplayResult, path: Path, grids: ReportGrids) -> None:
     tl = result.timeline
-    t, lo, hi, _, _ = tl.trace.series()
+    t, lo, hi, last, count = tl.trace.series()
+    lo, hi = _filled(lo, hi, last, count)         # an input value holds until the next
     panels = [(0, "speed [rad/s]", 1.0), (1, "axial load [N]", 1.0)]
     if tl.nut_measured:
         panels.append((2, "nut position [mm]", 1e3))
@@ -77,23 +138,7 @@ def plot_timeline(result: ReplayResult, path: Path, grids: ReportGrids) -> None:
         ax.fill_between(t, lo[:, k] * factor, hi[:, k] * factor, step="mid", color="tab:blue",
                         edgecolor="tab:blue", lw=0.7)
         ax.set_ylabel(label)
-    rt, rlo, rhi, rlast, rcount = result.plot.risk.series()
-    risk = axes[-1]
-    if rt.size:
-        # The published risk holds until the next prediction: empty bins take the last one.
-        held = _held(rlast, rcount)
-        rlo = np.where(rcount[:, None] > 0, rlo, held)
-        rhi = np.where(rcount[:, None] > 0, rhi, held)
-        risk.fill_between(rt, rlo[:, 0], rhi[:, 0], step="mid", color="tab:red",
-                          edgecolor="tab:red", lw=0.8)
-        squeak = np.nan_to_num(np.fmax(rhi[:, 1], held[:, 1])) > 0
-        half = result.plot.risk.bin_s / 2
-        for a, b in _runs(squeak):
-            for ax in axes:
-                ax.axvspan(rt[a] - half, rt[b] + half, color=SQUEAK_COLOR, alpha=0.3, lw=0)
-    risk.set_ylim(-0.05, 1.05)
-    risk.set_ylabel("squeak risk [0..1]")
-    risk.set_xlabel("time since the log's first message [s]")
+    _probability_panel(result, axes)
     for ax in axes:
         ax.grid(alpha=0.3)
     nut = "" if tl.nut_measured else (

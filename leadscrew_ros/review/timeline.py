@@ -9,7 +9,8 @@ and where the contact is integrated. `nominal_load_n` is a load known from the s
 published once to the node. Offline there is no rate limit: every input that moves the point
 beyond a deadband recomputes, as the node does when each input is processed before the next
 (geometries are cached per process, so nut positions that strokes revisit, e.g. on an encoder's
-grid, cost nothing the second time).
+grid, cost nothing the second time). Predictions use the replay model's parameters, scatter and
+sample count (`ModelSpec`), so P(squeak) is the node's for the same settings.
 
 Topics are found as `replay --publish` finds them (`is_input`): relative input names (the
 defaults `motor_speed`, ...) resolve in a namespace, as a node's do under `__ns`; the log's
@@ -40,6 +41,7 @@ from ..model import (OperatingPointError, ParameterError, Prediction, ScrewParam
                      Validity)
 from ..model.display import exact
 from ..model.predictor import check_operating_point
+from ..model.scatter import Scatter
 
 FLOAT64, JOINT_STATE = "std_msgs/msg/Float64", "sensor_msgs/msg/JointState"
 _MODEL_CACHE = 1024                          # nut positions kept per process (~60 kB each)
@@ -87,8 +89,9 @@ class InputError(ValueError):
 
 @dataclass(frozen=True)
 class InputSettings:
-    """Where the inputs are in the log and when to recompute: node parameter names, defaults
-    and checks from `LiveSettings` and `JointSettings` (`live` and `joints`)."""
+    """Where the inputs are in the log, when to recompute and the verdict's P(squeak)
+    thresholds: node parameter names, defaults and checks from `LiveSettings` and
+    `JointSettings` (`live` and `joints`)."""
 
     # Relative names resolve in the input namespace (`resolved`), absolute ones stay.
     speed_topic: str = "motor_speed"                    # std_msgs/Float64, rad/s
@@ -100,6 +103,8 @@ class InputSettings:
     speed_deadband_rad_s: float = LiveSettings.speed_deadband_rad_s
     load_deadband_n: float = LiveSettings.load_deadband_n
     nut_deadband_m: float = LiveSettings.nut_deadband_m
+    warn_probability: float = LiveSettings.warn_probability     # time above WARN, the report
+    error_probability: float = LiveSettings.error_probability   # time above ERROR, the report
     nominal_load_n: float | None = None   # load from the start (a log without load topic)
 
     def __post_init__(self) -> None:
@@ -116,10 +121,13 @@ class InputSettings:
 
     @property
     def live(self) -> LiveSettings:
-        """The deadbands (the node's other settings at their defaults)."""
+        """The deadbands and the WARN / ERROR probabilities (the node's other settings at
+        their defaults)."""
         return LiveSettings(speed_deadband_rad_s=self.speed_deadband_rad_s,
                             load_deadband_n=self.load_deadband_n,
-                            nut_deadband_m=self.nut_deadband_m)
+                            nut_deadband_m=self.nut_deadband_m,
+                            warn_probability=self.warn_probability,
+                            error_probability=self.error_probability)
 
     @property
     def joints(self) -> JointSettings:
@@ -284,17 +292,49 @@ class Timeline:
 
 
 # ---------------------------------------------------------------------- predictions
-_models: OrderedDict[tuple[ScrewParameters, float], SqueakModel | None] = OrderedDict()
+@dataclass(frozen=True)
+class ModelSpec:
+    """What the predictions are made with: the parameters, the scatter behind P(squeak) and
+    its sample count; hashable and picklable (it goes to the worker processes), unlike the
+    model it is taken from.
+
+    Attributes
+    ----------
+    params : ScrewParameters
+        The nominal parameters (the nut position is the job's).
+    scatter : tuple of (str, float)
+        `Scatter.sd` items: parameter name -> relative SD (SD of ln for log-normal ones).
+    samples : int
+        Scatter samples of each P(squeak).
+    """
+
+    params: ScrewParameters
+    scatter: tuple[tuple[str, float], ...]
+    samples: int
+
+    @classmethod
+    def of(cls, model: SqueakModel) -> ModelSpec:
+        """The spec of `model`: a replay predicts with its parameters and scatter."""
+        return cls(model.params, tuple(model.scatter.sd.items()), model.sample_count)
+
+    def at(self, nut_position_m: float) -> SqueakModel:
+        """The model with the contact integrated at `nut_position_m`; ParameterError if the
+        parameters reject that position."""
+        return SqueakModel(self.params.with_(nut_position_m=nut_position_m),
+                           Scatter(dict(self.scatter)), self.samples)
 
 
-def _model_at(params: ScrewParameters, nut: float) -> SqueakModel | None:
+_models: OrderedDict[tuple[ModelSpec, float], SqueakModel | None] = OrderedDict()
+
+
+def _model_at(spec: ModelSpec, nut: float) -> SqueakModel | None:
     """The model with the contact at `nut` (None if the parameters reject it), cached."""
-    key = (params, nut)
+    key = (spec, nut)
     if key in _models:
         _models.move_to_end(key)
         return _models[key]
     try:
-        model = SqueakModel(params.with_(nut_position_m=nut))
+        model = spec.at(nut)
     except ParameterError:
         model = None
     _models[key] = model
@@ -303,7 +343,7 @@ def _model_at(params: ScrewParameters, nut: float) -> SqueakModel | None:
     return model
 
 
-def predict_jobs(params: ScrewParameters, speeds: np.ndarray, loads: np.ndarray,
+def predict_jobs(spec: ModelSpec, speeds: np.ndarray, loads: np.ndarray,
                  model_nuts: np.ndarray) -> list[Prediction]:
     """Predictions at the jobs' operating points: one batched eigen-solve per nut position.
     Outside validity a prediction has `valid=False` and the reason."""
@@ -311,9 +351,9 @@ def predict_jobs(params: ScrewParameters, speeds: np.ndarray, loads: np.ndarray,
     nuts, inverse = np.unique(model_nuts, return_inverse=True)
     for k, nut in enumerate(nuts.tolist()):
         idx = np.flatnonzero(inverse == k)
-        model = _model_at(params, nut)
+        model = _model_at(spec, nut)
         if model is None:
-            preds = [Prediction(float(speeds[i]), float(loads[i]), params.formulation,
+            preds = [Prediction(float(speeds[i]), float(loads[i]), spec.params.formulation,
                                 Validity.PARAMETERS_REJECTED,
                                 f"nut position {exact(nut)} m is not allowed by the parameters")
                      for i in idx]
