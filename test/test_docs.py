@@ -18,6 +18,7 @@ from leadscrew_ros.model.parameters import ScrewParameters, field_info, field_na
 FUNCTIONS = [
     predictor.SqueakModel,                  # the class docstring documents __init__
     predictor.SqueakModel.with_params,
+    predictor.SqueakModel.with_scatter,
     predictor.SqueakModel.validity_code,
     predictor.SqueakModel.validity,
     predictor.SqueakModel.state_matrix,

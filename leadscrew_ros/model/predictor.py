@@ -287,7 +287,25 @@ class SqueakModel:
         return SqueakModel(self.params.with_(**changes), self.scatter, self.sample_count)
 
     def with_scatter(self, scatter: Scatter, samples: int | None = None) -> "SqueakModel":
-        """This model with another scatter (and sample count); the geometry is reused."""
+        """This model with another scatter (and sample count); the geometry is reused.
+
+        Parameters
+        ----------
+        scatter : Scatter
+            The unit-to-unit scatter behind `Prediction.probability`.
+        samples : int, optional
+            Scatter samples; this model's count when None.
+
+        Returns
+        -------
+        SqueakModel
+            A model with the same parameters and geometry.
+
+        Raises
+        ------
+        ParameterError
+            A bad sample count, or more geometry fields scatter than the live estimate takes.
+        """
         return SqueakModel(self.params, scatter,
                            self.sample_count if samples is None else samples)
 

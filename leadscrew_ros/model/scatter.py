@@ -87,6 +87,9 @@ class Scatter:
     def __hash__(self) -> int:
         return hash(tuple(self.sd.items()))
 
+    def __reduce__(self):                     # a mappingproxy does not pickle; a dict does
+        return (Scatter, (dict(self.sd),))
+
     def __eq__(self, other: object) -> bool:
         return isinstance(other, Scatter) and dict(self.sd) == dict(other.sd)
 
