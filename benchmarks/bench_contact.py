@@ -1,0 +1,102 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Benchmark of a new nut position (whole model rebuild) against a bare LAPACK eigen-solve.
+
+    .venv/bin/python benchmarks/bench_contact.py [--rounds N] [--calls N]
+
+A new nut position is `SqueakModel(params.with_(nut_position_m=z))` with a nut position never
+seen before (so no cached geometry for it: the contact integrals are computed, the modal
+basis of the screw is reused). It is compared with a bare `numpy.linalg.eig` of the model's
+state matrix (Table 1 defaults, 6/6 modes: 36x36, 200 N, 20 rad/s; target <= 0.5x, issue 11),
+and so are its parts: `contact.contact_integrals` alone and `params.with_` alone. The 20/20
+and 40/40 rows give the same at more modes (against `eig` of their 120x120 and 240x240 state
+matrices). The calls alternate within each round (order reversed every other round); each
+ratio is the median of the per-round ratios.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from itertools import count
+from statistics import median
+
+import numpy as np
+
+from leadscrew_ros.model import ScrewParameters, SqueakModel, modal_basis
+from leadscrew_ros.model.contact import contact_integrals
+
+SPEED_RAD_S, LOAD_N = 20.0, 200.0
+TARGET = 0.5
+
+
+def _time(fn, calls: int) -> float:
+    start = time.perf_counter()
+    for _ in range(calls):
+        fn()
+    return (time.perf_counter() - start) / calls
+
+
+def cases(modes: int, calls: int) -> dict:
+    """The functions timed at `modes` bending and torsion orders, keyed by row name."""
+    params = ScrewParameters(n_bending=modes, n_torsion=modes)
+    model = SqueakModel(params)
+    a = model.state_matrix(SPEED_RAD_S, LOAD_N)
+    basis = modal_basis(params)
+    fresh = count()              # a nut position never seen before at every call
+    span = params.nut_travel_m / (1 << 40)
+
+    def rebuild():
+        SqueakModel(params.with_(nut_position_m=next(fresh) * span))
+
+    def contact():
+        contact_integrals(params.with_(nut_position_m=next(fresh) * span), basis)
+
+    return dict(eig=lambda: np.linalg.eig(a), rebuild=rebuild, contact=contact,
+                with_=lambda: params.with_(nut_position_m=next(fresh) * span))
+
+
+def run(modes: int, rounds: int, calls: int) -> dict[str, float]:
+    """Median seconds per call of each case and the median per-round ratios to `eig`."""
+    fns = cases(modes, calls)
+    for fn in fns.values():                               # warm up
+        _time(fn, max(1, calls // 10))
+    samples: dict[str, list[float]] = {k: [] for k in fns}
+    for r in range(rounds):
+        for name in (list(fns) if r % 2 == 0 else list(fns)[::-1]):
+            samples[name].append(_time(fns[name], calls))
+    out = {k: median(v) for k, v in samples.items()}
+    for k in ("rebuild", "contact", "with_"):
+        out[k + "_ratio"] = median(x / e for x, e in zip(samples[k], samples["eig"]))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rounds", type=int, default=15, help="alternating rounds (default 15)")
+    ap.add_argument("--calls", type=int, default=200, help="calls per round at 6/6 modes "
+                    "(default 200; fewer at more modes)")
+    args = ap.parse_args(argv)
+    load0 = os.getloadavg()[0]
+    start = time.perf_counter()
+    res = {m: run(m, args.rounds, max(2, args.calls // (m // 6) ** 2)) for m in (6, 20, 40)}
+    print("| modes (state) | measure | time | bare `eig` | ratio (median of rounds) |")
+    print("|---|---|---:|---:|---:|")
+    for m, r in res.items():
+        e = f"{r['eig'] * 1e6:,.0f} µs"
+        target = f" (target ≤ {TARGET}×)" if m == 6 else ""
+        print(f"| {m}/{m} ({4 * m + 2 * m}×{4 * m + 2 * m}) | new nut position: "
+              f"`SqueakModel(params.with_(nut_position_m=…))` | {r['rebuild'] * 1e6:,.0f} µs "
+              f"| {e} | {r['rebuild_ratio']:.2f}×{target} |")
+        print(f"| | … of which `contact_integrals` (timed alone) | {r['contact'] * 1e6:,.0f} µs "
+              f"| | {r['contact_ratio']:.2f}× |")
+        print(f"| | … of which `params.with_` (timed alone) | {r['with_'] * 1e6:,.0f} µs | | "
+              f"{r['with__ratio']:.2f}× |")
+    print(f"\n{args.rounds} rounds of {args.calls} calls (6/6); Table 1, {LOAD_N:g} N, "
+          f"{SPEED_RAD_S:g} rad/s, paper; {os.cpu_count()} CPUs; load avg {load0:.2f} → "
+          f"{os.getloadavg()[0]:.2f}; {time.perf_counter() - start:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
