@@ -173,10 +173,10 @@ def _geometry_of(key: _Key) -> Geometry:
     params = key.params
     screw = _screw_of(_Key(params, _SCREW_FIELDS))
     contact = screw.helix.integrals(params.nut_position_m, params.nut_length_m)
-    pairs = contact.exponentials.shape[1]
-    table = np.empty(len(screw.kernels) * 9 * pairs + 1)
+    e = contact.exponentials
+    table = np.empty(len(screw.kernels) * e.shape[1] + 1)
     table[-1] = 0.0
-    screw.helix.table(contact.exponentials, screw.kernels, out=table[:-1].reshape(-1, pairs))
+    screw.helix.table(e, screw.kernels, out=table[:-1].reshape(len(screw.kernels), -1))
     halves = np.empty((5, screw.G_half.size))
     np.take(table, screw.index, out=halves[:4])
     halves[4] = screw.G_half
@@ -188,12 +188,14 @@ def _geometry_of(key: _Key) -> Geometry:
 def _screw_of(key: _Key) -> _Screw:
     basis = modal_basis(key.params)
     helix = helix_contact(key.params, basis)
-    n, size = basis.n, 9 * len(helix.wavenumber) ** 2          # one matrix's table
-    rows = np.arange(4)[:, None, None] * size + helix.index    # (4, N, N)
+    n, w = basis.n, len(MATRICES)
+    kernels = (_HALVES @ helix.kernels.reshape(w, -1)).reshape(4 * 9, -1)
+    size = 9 * len(helix.wavenumber) ** 2                      # one matrix's table
+    rows = np.arange(4)[:, None, None] * size + helix.index               # (4, N, N)
     index = np.full((4, n, 2 * n), 4 * size)                   # the 0 at the end of the table
     index[~_DAMPING_ROW, :, :n] = rows[~_DAMPING_ROW]
     index[_DAMPING_ROW, :, n:] = rows[_DAMPING_ROW]
     G_unit = gyroscopic_unit(basis)
-    return _Screw(basis=basis, helix=helix, G_unit=G_unit, kernels=_HALVES @ helix.kernels,
+    return _Screw(basis=basis, helix=helix, G_unit=G_unit, kernels=kernels,
                   index=index.reshape(4, -1),
                   G_half=np.hstack((np.zeros_like(G_unit), G_unit)).ravel())

@@ -23,6 +23,7 @@ test/test_model_contact.py compares with adaptive quadrature.
 
 from __future__ import annotations
 
+import cmath
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -32,7 +33,7 @@ from .kernels import HARMONICS, MATRICES, kernel_harmonics
 from .modes import ModalBasis
 from .parameters import ScrewParameters
 
-_TAYLOR = 0.1          # |x| below which sinc(x) takes its series (truncation error < 3e-18)
+_DIRECT = 0.1          # |x| = |omega alpha / 2| below which sin(x) / x is taken directly
 _M = len(HARMONICS)
 
 
@@ -41,10 +42,10 @@ def contact_angles(p: ScrewParameters) -> tuple[float, float]:
     return p.nut_position_m / p.lead_per_rad_m, p.nut_length_m / p.lead_per_rad_m
 
 
-def _sinc_series(x: np.ndarray) -> np.ndarray:
-    """sin(x) / x for |x| < _TAYLOR."""
-    x2 = x * x
-    return 1 - x2 / 6 * (1 - x2 / 20 * (1 - x2 / 42 * (1 - x2 / 72)))
+def _harmonics(angle: float) -> np.ndarray:
+    """e^{i m angle} for m in HARMONICS, shape (M, 1)."""
+    one, two = cmath.exp(1j * angle), cmath.exp(2j * angle)
+    return np.array([[two.conjugate()], [one.conjugate()], [1.0], [one], [two]])
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,49 +53,62 @@ class HelixContact:
     """What the contact integrals need from the screw, its modes and the kernels: everything
     but the nut (position and length), precomputed once per screw (`helix_contact`).
 
-    U is the number of distinct (wavenumber, amplitude) pairs of the N modes (x and y bending
-    modes share theirs), M = len(HARMONICS)."""
+    The terms are laid out (M, 2, P): M = len(HARMONICS), the two frequencies omega^- (sign
+    +1) and omega^+ (sign -1), and P = U * U pairs of the U distinct (wavenumber, amplitude)
+    of the N modes (x and y bending modes share theirs)."""
 
     lead_per_rad_m: float          # R tan(beta), m/rad
     wavenumber: np.ndarray         # (U,) distinct k of the mode shapes, rad/m
-    omega: np.ndarray              # (M, 2, U, U) omega_m^-+ of the pairs, 1/rad
-    weight: np.ndarray             # (M, 2, U, U) +-A_i A_j / omega (0 where omega = 0)
-    half_amplitude: np.ndarray     # (2, U, U) +-A_i A_j / 2
-    kernels: np.ndarray            # (len(MATRICES), 9 * 2M): Re c_m, -Im c_m of each block
-    index: np.ndarray              # (N, N) column of mode pair (I, J) in a table row
-    abs_omega: np.ndarray = field(init=False)
+    weight: np.ndarray             # (M, 2P) sign A_i A_j / omega (0 where omega = 0)
+    level: np.ndarray              # (M, 2P) sign A_i A_j where omega = 0, else 0
+    near: np.ndarray               # flat indices of the other terms by ascending |omega|
+    near_omega: np.ndarray         # their omega, 1/rad
+    near_amplitude: np.ndarray     # their sign A_i A_j
+    kernels: np.ndarray            # (len(MATRICES) * 9, 4M): Re c_m, -Im c_m of each block
+    index: np.ndarray              # (N, N) entry of mode pair (I, J) in one matrix's table
+    near_abs: np.ndarray = field(init=False)
+    near_out: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "abs_omega", np.abs(self.omega))
+        object.__setattr__(self, "near_abs", np.abs(self.near_omega))
+        pairs = len(self.wavenumber) ** 2                   # (M, 2P) index -> (M, 2, 2, P)
+        m, rest = np.divmod(self.near, 2 * pairs)
+        object.__setattr__(self, "near_out", m * 4 * pairs + rest // pairs * 2 * pairs
+                           + rest % pairs)
 
     def integrals(self, nut_position_m: float, nut_length_m: float) -> ContactIntegrals:
         """The contact integrals of a nut at z_o = `nut_position_m` of length b =
         `nut_length_m` [m]."""
-        lead, k = self.lead_per_rad_m, self.wavenumber
+        lead, u = self.lead_per_rad_m, len(self.wavenumber)
         alpha_o, alpha = nut_position_m / lead, nut_length_m / lead
-        half = nut_length_m / 2
-        z = nut_position_m + half
-        # e^{-+i k z_c}, e^{-+i k b/2} per mode, then per pair e^{i (k_i -+ k_j) (z_c, b/2)}
-        single = np.exp(np.multiply.outer((-1j * z, 1j * z, -1j * half, 1j * half), k))
-        single = single.reshape(2, 2, -1)
-        pair = single[:, 1, None, :, None] * single[:, :, None, :]             # (2, 2, U, U)
-        thread = np.exp(np.multiply.outer(1j * HARMONICS, (alpha_o, alpha / 2)))   # (M, 2)
-        turn = thread[:, 1, None, None, None]                           # e^{i m alpha / 2}
-        sin_x = (turn * pair[1]).imag                                   # sin(omega alpha / 2)
-        phase = (thread[:, 0, None, None, None] * turn) * pair[0]       # e^{i omega theta_c}
-        f = phase * (sin_x * self.weight)                               # A A F(omega) / 2
-        small = np.flatnonzero(self.abs_omega < _TAYLOR / (alpha / 2))
-        f.flat[small] = (phase.flat[small] * alpha * self.half_amplitude.flat[small % f[0].size]
-                         * _sinc_series(self.omega.flat[small] * (alpha / 2)))
-        both = f.sum(axis=1).reshape(_M, -1)                            # F^- - F^+
+        z, half, h = nut_position_m + nut_length_m / 2, nut_length_m / 2, alpha / 2
+        # e^{i k_i x} e^{-+i k_j x} for x = z_c and b / 2 (rows of `single`: -z, z, -b/2, b/2)
+        single = np.exp(np.multiply.outer((-1j * z, 1j * z, -1j * half, 1j * half),
+                                          self.wavenumber))
+        pq = (single[1::2, None, :, None] * single.reshape(2, 2, 1, u)).reshape(2, 1, -1)
+        turn = _harmonics(h)                                             # e^{i m alpha / 2}
+        sin_x = (turn * pq[1]).imag                                      # sin(omega alpha / 2)
+        phase = (_harmonics(alpha_o) * turn) * pq[0]                     # e^{i omega theta_c}
+        g = (sin_x * self.weight + h * self.level).reshape(_M, 2, -1)
+        # sign A A F(omega) / 2 = phase g, stored (M, 2 signs, Re / Im, P)
+        out = np.empty((_M, 2, 2, u * u))
+        np.multiply(phase.real.reshape(g.shape), g, out=out[:, :, 0])
+        np.multiply(phase.imag.reshape(g.shape), g, out=out[:, :, 1])
+        n = np.searchsorted(self.near_abs, _DIRECT / h)
+        if n:                                    # sin from the split loses digits near 0
+            x = self.near_omega[:n] * h
+            f = phase.take(self.near[:n]) * (h * self.near_amplitude[:n]) * (np.sin(x) / x)
+            out.put(self.near_out[:n], f.real)
+            out.put(self.near_out[:n] + u * u, f.imag)
         return ContactIntegrals(alpha_o=alpha_o, alpha=alpha, helix=self,
-                                exponentials=np.concatenate((both.real, both.imag)))
+                                exponentials=out.reshape(4 * _M, -1))
 
     def table(self, exponentials: np.ndarray, kernels: np.ndarray,
               out: np.ndarray | None = None) -> np.ndarray:
-        """Every kind block (a, b) of every matrix over the distinct pairs: Re sum_m c_m E_m,
-        (len(kernels) * 9, U * U), written to `out` when given."""
-        return np.matmul(kernels.reshape(-1, 2 * _M), exponentials, out=out)
+        """Every kind block (a, b) of every matrix of `kernels` (rows: combinations of the
+        rows of `self.kernels`) over the distinct pairs, Re sum_m c_m A A (F^- - F^+) / 2:
+        (rows of `kernels`, U * U), written to `out` when given."""
+        return np.matmul(kernels, exponentials, out=out)
 
 
 @dataclass(frozen=True, eq=False)
@@ -105,14 +119,14 @@ class ContactIntegrals:
     alpha_o: float                 # rad, start angle of the contact (A.9)
     alpha: float                   # rad, contact angle b / (R tan beta)
     helix: HelixContact
-    exponentials: np.ndarray       # (2M, U * U) Re, Im of A_i A_j (F(omega^-) - F(omega^+)) / 2
+    exponentials: np.ndarray       # (4M, P) sign A_i A_j F(omega) / 2: rows m, sign, Re / Im
 
     @cached_property
     def unit(self) -> dict[str, np.ndarray]:
         """W1..W5qdot with unit scale factor (N x N)."""
         helix = self.helix
-        table = helix.table(self.exponentials, helix.kernels)
-        return dict(zip(MATRICES, table.reshape(len(MATRICES), -1)[:, helix.index]))
+        table = helix.table(self.exponentials, helix.kernels).reshape(len(MATRICES), -1)
+        return {w: table[i, helix.index] for i, w in enumerate(MATRICES)}
 
 
 def helix_contact(p: ScrewParameters, basis: ModalBasis) -> HelixContact:
@@ -121,20 +135,25 @@ def helix_contact(p: ScrewParameters, basis: ModalBasis) -> HelixContact:
                                return_inverse=True)
     pick = pick.ravel()
     k, amp = distinct.T
-    u = len(k)
-    lead = p.lead_per_rad_m
-    sign = np.array([1.0, -1.0])[:, None, None]                          # F^- - F^+
-    omega = HARMONICS[:, None, None, None] + lead * np.stack(
-        (k[:, None] - k[None, :], k[:, None] + k[None, :]))
-    amp2 = sign * np.outer(amp, amp)
+    u, lead = len(k), p.lead_per_rad_m
+    pairs = np.stack((k[:, None] - k[None, :], k[:, None] + k[None, :])).reshape(1, 2, -1)
+    omega = (HARMONICS[:, None, None] + lead * pairs).reshape(_M, -1)         # (M, 2P)
+    amp2 = np.broadcast_to((np.outer(amp, amp).ravel() * np.array([[1.0], [-1.0]])).ravel(),
+                           omega.shape)                                      # F^- - F^+
+    zero = omega == 0
     with np.errstate(divide="ignore"):
-        weight = np.where(omega == 0, 0.0, amp2 / omega)
+        weight = np.where(zero, 0.0, amp2 / omega)
+    near = np.flatnonzero(~zero)
+    near = near[np.argsort(np.abs(omega.ravel()[near]), kind="stable")]
     c = kernel_harmonics(p.formulation, p.helix_angle_rad, p.radius_m)   # (W, 3, 3, M)
-    kernels = np.concatenate((c.real, -c.imag), axis=-1).reshape(len(MATRICES), -1)
-    block = 3 * basis.kind[:, None] + basis.kind[None, :]
-    return HelixContact(lead_per_rad_m=lead, wavenumber=k, omega=omega, weight=weight,
-                        half_amplitude=amp2 / 2, kernels=kernels,
-                        index=block * u * u + pick[:, None] * u + pick[None, :])
+    c = np.stack((c.real, -c.imag), -1).reshape(len(MATRICES) * 9, _M, 1, 2)
+    kernels = np.broadcast_to(c, c.shape[:2] + (2, 2)).reshape(len(MATRICES) * 9, -1)
+    return HelixContact(
+        lead_per_rad_m=lead, wavenumber=k, weight=weight, level=np.where(zero, amp2, 0.0),
+        near=near, near_omega=omega.ravel()[near], near_amplitude=amp2.ravel()[near],
+        kernels=kernels,
+        index=(3 * basis.kind[:, None] + basis.kind[None, :]) * u * u
+        + pick[:, None] * u + pick[None, :])
 
 
 def contact_integrals(p: ScrewParameters, basis: ModalBasis) -> ContactIntegrals:
