@@ -165,7 +165,8 @@ class _Screw:
 def build_geometry(params: ScrewParameters) -> Geometry:
     """Geometry for these parameters; cached per geometry (sweeps revisit them), and the modal
     basis and kernels per screw (a new nut position only integrates the contact)."""
-    return replace(_geometry_of(_Key(params, _GEOMETRY_FIELDS)), params=params)
+    geometry = _geometry_of(_Key(params, _GEOMETRY_FIELDS))
+    return geometry if geometry.params is params else replace(geometry, params=params)
 
 
 @lru_cache(maxsize=256)
