@@ -29,6 +29,7 @@ def test_contact_angles_match_notes():
 GEOMETRIES = {
     "table 1": {},
     "0.4 turn at the start": dict(nut_position_m=0.0, nut_length_m=0.0011),
+    "1 mm at the far end": dict(nut_position_m=0.299, nut_length_m=0.001),
     "1e-6 m nut": dict(nut_position_m=0.1, nut_length_m=1e-6),
     "182 turns at 1 deg, far end": dict(helix_angle_rad=math.radians(1.0), nut_position_m=0.2,
                                         nut_length_m=0.0999, n_bending=8, n_torsion=8),
