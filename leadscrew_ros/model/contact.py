@@ -14,11 +14,18 @@ cos((k_i + k_j) z)) / 2 each integral is
 over the contact, theta_c = alpha_o + alpha / 2 its middle. The phase omega theta_c is taken
 apart into the thread's m alpha_o + m alpha / 2 (exact multiples of the angles) and the modes'
 (k_i -+ k_j) z_c (z_c = z_o + b / 2: at most a few hundred rad), and sin(omega alpha / 2)
-likewise, so the rounding error does not grow with the number of turns to the nut; sinc takes
-its Taylor series near 0. The terms depend on the pair (i, j) only through the two distinct
-wavenumbers and on the kinds of the two modes only through c_m, so a table of every kind block
-(a, b) over the distinct wavenumbers (one small matrix product) holds every entry.
-test/test_model_contact.py compares with adaptive quadrature.
+likewise, so the rounding error does not grow with the number of turns to the nut. Where
+omega alpha / 2 is near 0 (omega = 0 or a resonance of thread and mode), whose split loses
+digits, sin(x) / x is taken directly. The terms depend on the pair (i, j) only through the two
+distinct wavenumbers and on the kinds of the two modes only through c_m, so a table of every
+kind block (a, b) over the distinct wavenumbers (one small matrix product) holds every entry.
+
+test/test_model_contact.py compares with adaptive quadrature: within 1e-12 of each matrix's
+largest entry. One limit: where the mode shapes are small over the whole contact (k z << 1,
+a nut within about a millimetre of an end of the screw), the exponentials that make up
+sin(k_i z) sin(k_j z) cancel, and the error relative to the largest entry grows like
+eps / (k_max d)^2, d the nut's reach from that end (1e-13 at d = 1 mm with 6/6 modes, 1e-11
+at 0.1 mm); it stays at eps of A^2 alpha in absolute terms.
 """
 
 from __future__ import annotations
