@@ -4,20 +4,22 @@
     qdd + (C + G + W3 + W4 + W5qdot) qd + ([omega^2] - Omega^2 I + W1 + W2 + W5q) q = 0   (27)
 
 `Geometry` holds everything that depends on geometry and material only; an operating point
-(speed, load, friction and damping values) only rescales its matrices.
+(speed, load, friction and damping values) only rescales its matrices. What does not depend on
+the nut (modal basis, kernels, gyroscopic matrix) is cached per screw, so a new nut position
+costs only the closed-form contact integrals.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from functools import cached_property, lru_cache
 from types import SimpleNamespace
 from typing import Mapping
 
 import numpy as np
 
-from .contact import ContactIntegrals, contact_integrals
-from .kernels import scales
+from .contact import ContactIntegrals, HelixContact, helix_contact
+from .kernels import MATRICES, scales
 from .modes import KIND_X, KIND_Y, ModalBasis, modal_basis
 from .parameters import ScrewParameters
 
@@ -120,20 +122,81 @@ class Geometry:
         return (n + np.arange(n)) * (2 * n) + np.arange(n)
 
 
+_GEOMETRY_FIELDS = tuple(f.name for f in fields(ScrewParameters) if f.metadata["geometry"])
+_SCREW_FIELDS = tuple(n for n in _GEOMETRY_FIELDS if n not in ("nut_position_m", "nut_length_m"))
+
+
+class _Key:
+    """Cache key: `params`, hashed and compared by some of its fields only."""
+
+    __slots__ = ("params", "_values", "_hash")
+
+    def __init__(self, params: ScrewParameters, names: tuple[str, ...]):
+        self.params = params
+        self._values = tuple([getattr(params, n) for n in names])
+        self._hash = hash(self._values)
+
+    def __hash__(self) -> int:
+        return self._hash
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, _Key) and self._values == other._values
+
+
+# The contact rows of lower_half_units: [W1 + W2 | 0], [W5q | 0], [0 | W3 + W4], [0 | W5qdot]
+# (sums of the matrices of MATRICES that share a scale factor), then [0 | G].
+_HALVES = np.array([[w in ("W1", "W2"), w == "W5q", w in ("W3", "W4"), w == "W5qdot"]
+                    for w in MATRICES], float).T                        # (4, len(MATRICES))
+_DAMPING_ROW = np.array([False, False, True, True])
+
+
+@dataclass(frozen=True, eq=False)
+class _Screw:
+    """The part of a geometry that does not depend on the nut."""
+
+    basis: ModalBasis
+    helix: HelixContact
+    G_unit: np.ndarray
+    kernels: np.ndarray        # helix kernels of the four contact rows of lower_half_units
+    index: np.ndarray          # (4, N * 2N) their entries in the helix table; 0 at the end
+    G_half: np.ndarray         # (N * 2N,) the last row of lower_half_units
+
+
 def build_geometry(params: ScrewParameters) -> Geometry:
-    """Geometry for these parameters; integrals are cached per geometry (sweeps revisit them)."""
-    return replace(_geometry_of(params.geometry_only()), params=params)
+    """Geometry for these parameters; cached per geometry (sweeps revisit them), and the modal
+    basis and kernels per screw (a new nut position only integrates the contact)."""
+    geometry = _geometry_of(_Key(params, _GEOMETRY_FIELDS))
+    return geometry if geometry.params is params else replace(geometry, params=params)
 
 
 @lru_cache(maxsize=256)
-def _geometry_of(params: ScrewParameters) -> Geometry:
-    basis = modal_basis(params)
-    contact = contact_integrals(params, basis)
-    u = contact.unit
+def _geometry_of(key: _Key) -> Geometry:
+    params = key.params
+    screw = _screw_of(_Key(params, _SCREW_FIELDS))
+    contact = screw.helix.integrals(params.nut_position_m, params.nut_length_m)
+    e = contact.exponentials
+    table = np.empty(len(screw.kernels) * e.shape[1] + 1)
+    table[-1] = 0.0
+    screw.helix.table(e, screw.kernels, out=table[:-1].reshape(len(screw.kernels), -1))
+    halves = np.empty((5, screw.G_half.size))
+    np.take(table, screw.index, out=halves[:4])
+    halves[4] = screw.G_half
+    return Geometry(params=params, basis=screw.basis, contact=contact, G_unit=screw.G_unit,
+                    lower_half_units=halves)
+
+
+@lru_cache(maxsize=32)
+def _screw_of(key: _Key) -> _Screw:
+    basis = modal_basis(key.params)
+    helix = helix_contact(key.params, basis)
+    n, w = basis.n, len(MATRICES)
+    kernels = (_HALVES @ helix.kernels.reshape(w, -1)).reshape(4 * 9, -1)
+    size = 9 * len(helix.wavenumber) ** 2                      # one matrix's table
+    rows = np.arange(4)[:, None, None] * size + helix.index               # (4, N, N)
+    index = np.full((4, n, 2 * n), 4 * size)                   # the 0 at the end of the table
+    index[~_DAMPING_ROW, :, :n] = rows[~_DAMPING_ROW]
+    index[_DAMPING_ROW, :, n:] = rows[_DAMPING_ROW]
     G_unit = gyroscopic_unit(basis)
-    zero = np.zeros_like(G_unit)
-    halves = [np.hstack(pair) for pair in (
-        (u["W1"] + u["W2"], zero), (u["W5q"], zero), (zero, u["W3"] + u["W4"]),
-        (zero, u["W5qdot"]), (zero, G_unit))]
-    return Geometry(params=params, basis=basis, contact=contact, G_unit=G_unit,
-                    lower_half_units=np.stack([h.ravel() for h in halves]))
+    return _Screw(basis=basis, helix=helix, G_unit=G_unit, kernels=kernels,
+                  index=index.reshape(4, -1),
+                  G_half=np.hstack((np.zeros_like(G_unit), G_unit)).ravel())

@@ -23,6 +23,10 @@ consistent: c_f = c_5 = 1 / (1 + s mu_o tan(beta)), s = sign(Omega F_z)   (9) wi
 Reverse rotation and the other flank follow from the linearisation of (10): the matrices that
 multiply Omega in the derivation (G, W1, W2, W5q) change sign with Omega, the others depend on
 |Omega|; the normal traction is constant, so only |F_z| enters.
+
+Every kernel entry is a product of at most two of sin(theta), cos(theta) and constants: a
+trigonometric polynomial of degree 2, k_ab(theta) = sum_{m=-2..2} c_m e^{i m theta}.
+`kernel_harmonics` gives the c_m, with which `contact` integrates in closed form.
 """
 
 from __future__ import annotations
@@ -45,7 +49,13 @@ def _blocks(n: int, entries: dict[tuple[int, int], np.ndarray]) -> np.ndarray:
 
 def paper_kernels(theta: np.ndarray, beta: float, radius_m: float) -> dict[str, np.ndarray]:
     """Appendix A as printed ((A.3)-(A.8), the second "W5q" read as the matrix of qdot; README "Two formulations"), each (3, 3, len(theta))."""
-    s, c, n = np.sin(theta), np.cos(theta), len(theta)
+    return _paper(np.sin(theta), np.cos(theta), beta, radius_m)
+
+
+def _paper(s: np.ndarray, c: np.ndarray, beta: float, radius_m: float
+           ) -> dict[str, np.ndarray]:
+    """`paper_kernels` as polynomials in s = sin(theta), c = cos(theta)."""
+    n = len(s)
     sb2, cb2, R = np.sin(beta) ** 2, np.cos(beta) ** 2, radius_m
     return {
         "W1": _blocks(n, {(X, X): s * c * cb2, (X, Y): -(c ** 2 + s ** 2 * sb2),      # (A.3)
@@ -73,17 +83,26 @@ def consistent_kernels(theta: np.ndarray, beta: float, radius_m: float) -> dict[
     e = cos(beta) e_theta + sin(beta) k. Linearising f = -mu N_o Vc/|Vc| gives the kernels
     w_a.(I - e e)(k x w_b) (W1, W2), w_a.(I - e e) w_b (W3, W4), (e.w_a)(e.k x w_b)/cos^2 beta
     (W5q) and (e.w_a)(e.w_b)/cos^2 beta (W5qdot). tools/derive_consistent.py re-derives them
-    symbolically and a test compares.
+    symbolically and a test compares. The components are taken in the frame (e_r, e_theta, k)
+    of the contact point, where k x (u_r, u_theta, u_z) = (-u_theta, u_r, 0), and
+    I - e e = e_r e_r + f f with f = -sin(beta) e_theta + cos(beta) k: no small difference of
+    large terms at small beta, and each kernel a polynomial of degree 2 in sin, cos theta.
     """
-    s, c, n = np.sin(theta), np.cos(theta), len(theta)
-    zero, one = np.zeros(n), np.ones(n)
+    return _consistent(np.sin(theta), np.cos(theta), beta, radius_m)
+
+
+def _consistent(s: np.ndarray, c: np.ndarray, beta: float, radius_m: float
+                ) -> dict[str, np.ndarray]:
+    """`consistent_kernels` as polynomials in s = sin(theta), c = cos(theta)."""
+    zero, r = np.zeros(len(s)), np.full(len(s), radius_m)
     sb, cb = np.sin(beta), np.cos(beta)
-    w = np.array([[one, zero, zero], [zero, one, zero], [-radius_m * s, radius_m * c, zero]])
-    kw = np.array([[zero, one, zero], [-one, zero, zero], [-radius_m * c, -radius_m * s, zero]])
-    e = np.array([-cb * s, cb * c, np.full(n, sb)])                     # (3, n)
-    ew, ekw = np.einsum("vn,avn->an", e, w), np.einsum("vn,avn->an", e, kw)
-    proj_kw = np.einsum("avn,bvn->abn", w, kw) - ew[:, None] * ekw[None, :]
-    proj_w = np.einsum("avn,bvn->abn", w, w) - ew[:, None] * ew[None, :]
+    # i = c e_r - s e_theta, j = s e_r + c e_theta, R e_theta; rows a, components (r, theta, z)
+    w = np.array([[c, -s, zero], [s, c, zero], [zero, r, zero]])
+    kw = np.array([[s, c, zero], [-c, s, zero], [-r, zero, zero]])          # k x w_a
+    ew, ekw = cb * w[:, 1] + sb * w[:, 2], cb * kw[:, 1] + sb * kw[:, 2]    # e . w_a
+    fw, fkw = cb * w[:, 2] - sb * w[:, 1], cb * kw[:, 2] - sb * kw[:, 1]    # f . w_a
+    proj_kw = w[:, None, 0] * kw[None, :, 0] + fw[:, None] * fkw[None, :]
+    proj_w = w[:, None, 0] * w[None, :, 0] + fw[:, None] * fw[None, :]
     bend = np.zeros((3, 3, 1), bool)
     bend[:2, :2] = bend[T, T] = True                                     # W1/W3 vs W2/W4 split
     return {
@@ -95,6 +114,46 @@ def consistent_kernels(theta: np.ndarray, beta: float, radius_m: float) -> dict[
 
 
 KERNELS = {"paper": paper_kernels, "consistent": consistent_kernels}
+MATRICES = ("W1", "W2", "W3", "W4", "W5q", "W5qdot")
+HARMONICS = np.arange(-2, 3)          # m of e^{i m theta}: every kernel has degree <= 2
+_POLYNOMIALS = {"paper": _paper, "consistent": _consistent}
+# (s, c) where a polynomial of degree 2 in s and c is sampled to find its six coefficients;
+# 0 and +-1 keep the products in the kernels exact
+_S, _C = np.array([(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1), (1, 1)], float).T
+
+
+def kernel_harmonics(formulation: str, beta: float, radius_m: float) -> np.ndarray:
+    """Fourier coefficients of the kernels: k_ab(theta) = sum_m c[w, a, b, m] e^{i m theta}.
+
+    Every kernel is a polynomial of degree 2 in s = sin(theta) and c = cos(theta),
+    p00 + p10 s + p01 c + p20 s^2 + p11 s c + p02 c^2; its values at six points (s, c) give
+    the p (exactly: the points make the kernels' products exact), and s^2 = (1 - cos 2 theta)
+    / 2, s c = sin(2 theta) / 2, c^2 = (1 + cos 2 theta) / 2 the harmonics. A test checks
+    them against the kernels at arbitrary theta.
+
+    Parameters
+    ----------
+    formulation : str
+        'paper' or 'consistent' (`KERNELS`).
+    beta : float
+        Helix angle [rad].
+    radius_m : float
+        Screw radius R [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        Complex, shape (len(MATRICES), 3, 3, len(HARMONICS)): c for m = -2..2 (HARMONICS)
+        of every matrix W in MATRICES order and block (a, b), in the kernel's unit.
+    """
+    k = _POLYNOMIALS[formulation](_S, _C, beta, radius_m)
+    v = np.moveaxis(np.stack([k[name] for name in MATRICES]), -1, 0)       # (6, W, 3, 3)
+    p00 = v[0]
+    p10, p20 = (v[1] - v[2]) / 2, (v[1] + v[2]) / 2 - p00
+    p01, p02 = (v[3] - v[4]) / 2, (v[3] + v[4]) / 2 - p00
+    p11 = v[5] - p00 - p10 - p01 - p20 - p02
+    c1, c2 = (p01 - 1j * p10) / 2, (p02 - p20 - 1j * p11) / 4          # a cos + b sin
+    return np.stack([c2.conj(), c1.conj(), p00 + (p20 + p02) / 2 + 0j, c1, c2], axis=-1)
 
 
 def thread_factors(p: ScrewParameters, mu_o_value, speed_rad_s, load_n):

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
-from typing import Any
+from typing import Any, Iterable
 
 from .display import exact
 from .fields import check_value, range_text, setting
@@ -111,11 +111,15 @@ class ScrewParameters:
         ParameterError
             A name is not a field, or a value is of the wrong type or out of range.
         """
-        unknown = set(changes) - set(field_names())
+        unknown = changes.keys() - _FIELD_BY_NAME.keys()
         if unknown:
             raise ParameterError(f"unknown parameter(s): {', '.join(sorted(unknown))}; "
                                  f"known: {', '.join(field_names())}")
-        return replace(self, **{k: coerce(k, v) for k, v in changes.items()})
+        values = {k: coerce(k, v) for k, v in changes.items()}
+        new = object.__new__(ScrewParameters)       # `replace`, checking only the changed
+        new.__dict__.update(self.__dict__, **values)    # fields: the others were valid in self
+        validate(new, values)
+        return new
 
     def geometry_only(self) -> "ScrewParameters":
         """These parameters with every non-geometry field at its default (a cache key).
@@ -154,20 +158,30 @@ def _attributes_section() -> str:
     return "\n".join(lines) + "\n"
 
 
+_FIELDS = fields(ScrewParameters)
+_FIELD_BY_NAME = {f.name: f for f in _FIELDS}
+
+
 def field_names() -> list[str]:
-    return [f.name for f in fields(ScrewParameters)]
+    return list(_FIELD_BY_NAME)
+
+
+def _field(name: str):
+    try:
+        return _FIELD_BY_NAME[name]
+    except (KeyError, TypeError):
+        raise ParameterError(f"unknown parameter {name!r}; known: "
+                             f"{', '.join(field_names())}") from None
 
 
 def field_info(name: str) -> dict[str, Any]:
-    for f in fields(ScrewParameters):
-        if f.name == name:
-            return dict(f.metadata, default=f.default, type=f.type)
-    raise ParameterError(f"unknown parameter {name!r}; known: {', '.join(field_names())}")
+    f = _field(name)
+    return dict(f.metadata, default=f.default, type=f.type)
 
 
 def coerce(name: str, value: Any) -> Any:
     """Convert a value (e.g. a CLI string) to the field's type, with a clear error."""
-    typ = field_info(name)["type"]
+    typ = _field(name).type
     try:
         if typ == "int":
             if isinstance(value, float) and not value.is_integer():
@@ -186,9 +200,10 @@ ScrewParameters.__doc__ = ((ScrewParameters.__doc__ or "").rstrip() + "\n"
                            + _attributes_section())
 
 
-def validate(p: ScrewParameters) -> None:
-    """Check every field and the cross-field constraints; raise ParameterError naming the field."""
-    for f in fields(p):
+def validate(p: ScrewParameters, changed: Iterable[str] | None = None) -> None:
+    """Check every field (only those named in `changed` when given: the others are known to be
+    valid) and the cross-field constraints; raise ParameterError naming the field."""
+    for f in _FIELDS if changed is None else map(_FIELD_BY_NAME.__getitem__, changed):
         reason = check_value(f.name, getattr(p, f.name), f)
         if reason:
             raise ParameterError(reason)
