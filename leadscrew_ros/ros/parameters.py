@@ -21,6 +21,7 @@ from ..live.settings import JointSettings, LiveSettings
 from ..model.display import exact
 from ..model.fields import check, check_value, range_text, setting
 from ..model.parameters import ParameterError, ScrewParameters
+from ..model.scatter import ScatterSettings
 
 READ_ONLY_NOTE = "read-only: set at start-up"
 
@@ -67,6 +68,8 @@ class Group(NamedTuple):
 GROUPS = (
     Group(ScrewParameters, "", "model: Table 1 of the paper, the friction law of Fig. 4, mode "
           "counts, formulation"),
+    Group(ScatterSettings, "scatter.", "model: unit-to-unit scatter of the parameters behind "
+          "P(squeak) (squeak/risk); 0 switches one off"),
     Group(LiveSettings, "", "node: recompute policy and verdict"),
     Group(JointSettings, "", "node: joint_states mapping"),
     Group(NodeSettings, "", "node: diagnostics and inputs"),
