@@ -68,11 +68,11 @@ class Group(NamedTuple):
 GROUPS = (
     Group(ScrewParameters, "", "model: Table 1 of the paper, the friction law of Fig. 4, mode "
           "counts, formulation"),
-    Group(ScatterSettings, "scatter.", "model: unit-to-unit scatter of the parameters behind "
-          "P(squeak) (squeak/risk); 0 switches one off"),
     Group(LiveSettings, "", "node: recompute policy and verdict"),
     Group(JointSettings, "", "node: joint_states mapping"),
     Group(NodeSettings, "", "node: diagnostics and inputs"),
+    Group(ScatterSettings, "scatter.", "model: unit-to-unit scatter of the parameters behind "
+          "P(squeak) (squeak/risk); 0 switches one off"),
     Group(RecordingControl, "record.", "node: MCAP recording (also ~/record)"),
     Group(RecordSettings, "record.", "node: MCAP recording, one bag per recording"),
 )
