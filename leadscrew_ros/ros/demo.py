@@ -272,9 +272,9 @@ def recording_summary(recorder: Recorder) -> str:
 def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float = 4.0,
              out: TextIO | None = None, record_dir: Path | None = None) -> int:
     """Run predictor + simulator + monitor for one stroke; 0 when done, and 0 after SIGINT or
-    SIGTERM too, with the summary so far and `StopSignals.exit_status`'s line on stderr. The predictor records into a
-    bag in `record_dir` (created; None: no recording). A bad duration raises ProfileError
-    before anything starts; RuntimeError if rclpy or the discovery fails."""
+    SIGTERM too, with the summary so far and `StopSignals.exit_status`'s line on stderr. The
+    predictor records into a bag in `record_dir` (created; None: no recording). A bad duration
+    raises ProfileError before anything starts; RuntimeError if rclpy or the discovery fails."""
     out = out or sys.stdout
     profile = StrokeProfile(duration_s=duration_s)
     recording = []
