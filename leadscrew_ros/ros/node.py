@@ -370,8 +370,8 @@ def usage() -> str:
         "  squeak/risk (Float64) [1]: P(squeak) over the scatter (scatter.*),",
         "  squeak/margin (Float64) [1]: least damping ratio, < 0 when a nominal mode squeaks,",
         "  squeak/unstable_frequencies (Float64MultiArray) [Hz], squeak/active (Bool),",
-        "  squeak/modes (Float64MultiArray), squeak/safe_speed (Float64) [rad/s]: nearest "
-        "speed with P(squeak) < safe_probability,",
+        "  squeak/modes (Float64MultiArray),",
+        "  squeak/safe_speed (Float64) [rad/s]: nearest speed with P(squeak) < safe_probability,",
         "  /diagnostics (diagnostic_msgs/DiagnosticArray: '<node>: squeak prediction', "
         "'<node>: recording')",
         "Service: ~/record (std_srvs/SetBool) starts or stops recording",
