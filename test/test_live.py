@@ -391,6 +391,16 @@ def test_a_nominally_stable_speed_near_the_band_is_advised_to_where_p_is_safe(sp
     assert MODEL.predict(with_margin, LOAD).probability < SAFE
 
 
+def test_safe_probability_sets_the_band():
+    """At 58 rad/s P is 0.24: safe for safe_probability 0.3, inside the band for 0.2 (whose
+    edge lies where P drops below 0.2, before 60 rad/s where P is 0.12)."""
+    assert at(58.0, safe_probability=0.3).safe_speed_rad_s == 58.0
+    safe = at(58.0, safe_probability=0.2, safe_speed_margin=0.0).safe_speed_rad_s
+    assert 58.0 < safe < 60.0
+    assert MODEL.predict(safe, LOAD).probability < 0.2
+    assert MODEL.predict(safe * (1 - 3 * EDGE_RTOL), LOAD).probability >= 0.2
+
+
 def full_search_safe_speed(model: SqueakModel, load: float, speed: float,
                            margin: float = 0.05) -> float:
     """The advice of the former synchronous path: every band (speed_bands), then the nearer
