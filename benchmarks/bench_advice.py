@@ -4,15 +4,16 @@
     .venv/bin/python benchmarks/bench_advice.py [--quick] [--no-node] [--json OUT.json]
 
 Prints Markdown tables (no asserts):
-(1) offline, the full search of every band (`speed_bands`, what the node ran inside its
-executor before) against `band_around` (only the band the speed sits in, as the node now runs
-it on a background thread), at 6/6, 20/20 and 40/40 modes, inside the Table-1 band (20 rad/s)
-and near its upper edge (50 rad/s): wall time (calls alternate within each round, ratio =
-median of per-round ratios) and eigen-solves (matrices);
+(1) offline, the full search of every band of P(squeak) >= safe_probability (`speed_bands`,
+what the node ran inside its executor before) against `band_around` (only the band the speed
+sits in, as the node now runs it on a background thread), at 6/6, 20/20 and 40/40 modes, inside
+the Table-1 band (20 rad/s) and near its upper edge (50 rad/s), default scatter: wall time
+(calls alternate within each round, ratio = median of per-round ratios) and eigen-solves (one
+LAPACK dgeev per prediction);
 (2) the node, in-process with 20/20 and 40/40 modes, speed and load at 50 Hz through the
 squeak band and several load bins (test/test_node_stall.py's `stall_run`, the same scenario as
 the test): `get_parameters` latency (max, p99, median), recomputes, the longest prediction and
-the longest gap between risk messages, on the machine as it is and with a CPU hog
+the longest gap between squeak/risk (P(squeak)) messages, on the machine as it is and with a CPU hog
 (`python -c 'while 1: pass'`) on the other core. Run it with an older checkout on PYTHONPATH to
 measure that code's node (the offline table needs the current one). BLAS is single-threaded,
 as in the node's process. See benchmarks/README.md.
@@ -36,14 +37,16 @@ os.environ.setdefault("ROS_DOMAIN_ID", str(101 + os.getpid() % 100))
 os.environ.setdefault("ROS_LOG_DIR", tempfile.mkdtemp(prefix="bench_advice_log_"))
 sys.path[:0] = [str(ROOT / "test"), str(ROOT / "benchmarks")]
 
-import numpy as np                                                   # noqa: E402
+from scipy.linalg import lapack                                      # noqa: E402
 from threadpoolctl import threadpool_limits                          # noqa: E402
 
 from bench_model import interleaved, paired_ratio                   # noqa: E402
+from leadscrew_ros.live.settings import LiveSettings                 # noqa: E402
 from leadscrew_ros.model import SqueakModel                          # noqa: E402
 from leadscrew_ros.model.advice import speed_bands                   # noqa: E402
 
 LOAD_N = 200.0
+SAFE = LiveSettings().safe_probability   # the node's default: bands of P(squeak) >= 0.01
 SPEEDS = (20.0, 50.0)          # rad/s: inside the Table-1 band (0.81..55.2), near its top
 MODES = (6, 20, 40)
 CONFIGS = {"default": dict(rounds={6: 20, 20: 5, 40: 3}, node_s=10.0),
@@ -51,18 +54,18 @@ CONFIGS = {"default": dict(rounds={6: 20, 20: 5, 40: 3}, node_s=10.0),
 
 
 def count_solves(fn) -> int:
-    """Matrices whose eigenvalues `fn()` computes."""
-    eigvals, count = np.linalg.eigvals, [0]
+    """Eigen-solves (LAPACK dgeev, one per prediction) that `fn()` runs."""
+    dgeev, count = lapack.dgeev, [0]
 
-    def counted(a):
-        count[0] += a.shape[0] if a.ndim == 3 else 1
-        return eigvals(a)
+    def counted(*args, **kwargs):
+        count[0] += 1
+        return dgeev(*args, **kwargs)
 
-    np.linalg.eigvals = counted
+    lapack.dgeev = counted
     try:
         fn()
     finally:
-        np.linalg.eigvals = eigvals
+        lapack.dgeev = dgeev
     return count[0]
 
 
@@ -72,8 +75,8 @@ def offline(rounds: dict[int, int]) -> list[dict]:
     for n in MODES:
         model = SqueakModel(SqueakModel().params.with_(n_bending=n, n_torsion=n))
         for speed in SPEEDS:
-            fns = {"full": lambda: speed_bands(model, LOAD_N, speed),
-                   "band": lambda: band_around(model, LOAD_N, speed)}
+            fns = {"full": lambda: speed_bands(model, LOAD_N, speed, safe_probability=SAFE),
+                   "band": lambda: band_around(model, LOAD_N, speed, safe_probability=SAFE)}
             wall, _ = interleaved(fns, rounds[n])
             rows.append({"modes": n, "speed_rad_s": speed,
                          "full_s": median(wall["full"]), "band_s": median(wall["band"]),

@@ -6,6 +6,7 @@ with their schemas without any ROS package."""
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 
@@ -36,7 +37,9 @@ def reference_messages(p) -> dict[str, object]:
         MultiArrayDimension(label="modes:" + ",".join(m.label for m in p.modes), size=rows,
                             stride=3 * rows),
         MultiArrayDimension(label="frequency_hz,growth_rate,damping_ratio", size=3, stride=3)]
-    return {messages.RISK: Float64(data=p.risk), messages.FREQUENCIES: freqs,
+    margin = math.inf if p.margin is None else p.margin
+    return {messages.RISK: Float64(data=p.probability), messages.MARGIN: Float64(data=margin),
+            messages.FREQUENCIES: freqs,
             messages.ACTIVE: Bool(data=not p.stable), messages.MODES: modes}
 
 
@@ -44,6 +47,10 @@ def reference_messages(p) -> dict[str, object]:
 def test_prediction_payloads_are_the_rclpy_messages_of_the_layout(speed):
     p = MODEL.predict(speed, LOAD)
     payloads = messages.prediction_payloads(p)
+    risk, margin = (cdr.decode_float64(data) for t, data in payloads
+                    if t in (messages.RISK, messages.MARGIN))
+    assert (risk, margin) == (p.probability, p.margin)      # P(squeak); least damping ratio
+    assert (margin < 0) == (not p.stable)
     assert [t for t, _ in payloads] == list(messages.PREDICTION_TOPICS)
     want = reference_messages(p)
     for topic, data in payloads:
@@ -84,19 +91,22 @@ def test_the_monitor_decodes_the_outputs_and_counts_what_does_not_decode():
     try:
         monitor = SqueakMonitor(context=ctx)
         p = MODEL.predict(SQUEAK, LOAD)
-        handlers = {messages.RISK: monitor._on_risk, messages.FREQUENCIES: monitor._on_frequencies,
+        handlers = {messages.RISK: monitor._on_risk, messages.MARGIN: monitor._on_margin,
+                    messages.FREQUENCIES: monitor._on_frequencies,
                     messages.ACTIVE: monitor._on_active, messages.MODES: monitor._on_modes}
         for topic, data in messages.prediction_payloads(p):
             monitor._decoding(handlers[topic])(data)
         monitor._decoding(monitor._on_safe_speed)(messages.safe_speed_payload(3.0))
         r = monitor.record
-        assert (r.predictions, r.risk, r.active, r.safe_speed) == (1, p.risk, True, 3.0)
+        assert (r.predictions, r.probability, r.max_probability, r.active, r.safe_speed) == (
+            1, p.probability, p.probability, True, 3.0)
+        assert r.margin == r.min_margin == p.margin < 0
         assert r.frequencies == list(p.unstable_frequencies_hz)
         assert r.squeak_modes == [(m.label, m.frequency_hz) for m in p.modes
                                   if m.growth_rate > 0] != []
         for handler in handlers.values():
             monitor._decoding(handler)(b"\x00\x01\x00\x00\x07")
-        assert r.malformed == 4 and r.predictions == 1
+        assert r.malformed == 5 and r.predictions == 1
         monitor.destroy_node()
     finally:
         rclpy.shutdown(context=ctx)

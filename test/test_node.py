@@ -33,16 +33,22 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray
 
-from leadscrew_ros.live.predictor import (KEY_FORMULATION, KEY_NUT_POSITION, KEY_RISK, KEY_SPEED,
-                                          KEY_VALIDITY, Level)
+from leadscrew_ros.live.predictor import (KEY_FORMULATION, KEY_MARGIN, KEY_NUT_POSITION,
+                                          KEY_PROBABILITY, KEY_SPEED, KEY_VALIDITY, Level)
+from leadscrew_ros.live.settings import LiveSettings
 from leadscrew_ros.model import SqueakModel, Validity
 from leadscrew_ros.model.advice import speed_bands
+from leadscrew_ros.model.scatter import DEFAULT_SCATTER, Scatter
 from leadscrew_ros.bag.messages import MODE_COLUMNS, modes_payload
 from leadscrew_ros.ros.node import NODE_NAME, SqueakPredictorNode
 
-MODEL = SqueakModel()                      # Table 1: squeak band ~0.81..55.2 rad/s at 200 N
+# Table 1, default scatter: nominal squeak band ~0.81..55.2 rad/s at 200 N; P(squeak) 0.997 at
+# 20 rad/s, 0 at 100 rad/s
+MODEL = SqueakModel()
 LOAD, SQUEAK, STABLE = 200.0, 20.0, 100.0
-OUTPUTS = {"squeak/risk": Float64, "squeak/unstable_frequencies": Float64MultiArray,
+SAFE = LiveSettings().safe_probability
+OUTPUTS = {"squeak/risk": Float64, "squeak/margin": Float64,
+           "squeak/unstable_frequencies": Float64MultiArray,
            "squeak/active": Bool, "squeak/modes": Float64MultiArray,
            "squeak/safe_speed": Float64, "/diagnostics": DiagnosticArray}
 INPUTS = {"motor_speed": Float64, "axial_load": Float64, "nut_position": Float64,
@@ -53,7 +59,8 @@ COLLECT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
 
 
 def non_finite(msg) -> list[str]:
-    """Numbers in an output message that are NaN or infinite."""
+    """Numbers in an output message that are NaN or infinite (squeak/margin is +inf without an
+    oscillatory mode, never in these tests)."""
     if isinstance(msg, Float64):
         values = [msg.data]
     elif isinstance(msg, Float64MultiArray):
@@ -167,12 +174,16 @@ def ros():
         r.close()
 
 
-def at(ros: Ros, speed: float, load: float = LOAD):
-    """Send an operating point and wait for the prediction published for it."""
-    core = MODEL.predict(speed, load)
+def at(ros: Ros, speed: float, load: float = LOAD, model: SqueakModel = MODEL):
+    """Send an operating point and wait for the prediction published for it (its modes: the
+    probability alone is the same at many points)."""
+    core = model.predict(speed, load)
     ros.send("motor_speed", speed)
     ros.send("axial_load", load)
-    ros.wait_for("squeak/risk", lambda m: m.data == pytest.approx(core.risk, rel=1e-9))
+    ros.wait_for("squeak/modes", lambda m: list(m.data) == pytest.approx(modes_data(core),
+                                                                         rel=1e-9))
+    ros.wait_for("squeak/risk", lambda m: m.data == core.probability)
+    ros.wait_for("squeak/margin", lambda m: m.data == pytest.approx(core.margin, rel=1e-9))
     # safe-speed advice comes from a background search: wait for it to be published too
     live = ros.node.live
     ros.spin_until(lambda: not live.advice_pending, 30.0, "safe-speed advice")
@@ -209,7 +220,9 @@ def test_topics_live_in_the_namespace(ros):
 def test_table1_squeak_at_20_rad_s(ros):
     ros.start()
     core = at(ros, SQUEAK)
-    assert ros.latest["squeak/risk"].data == 1.0
+    assert ros.latest["squeak/risk"].data == core.probability > 0.99
+    assert ros.latest["squeak/margin"].data == pytest.approx(core.margin, rel=1e-9)
+    assert core.margin < 0
     assert ros.wait_for("squeak/active", lambda m: m.data).data is True
     freqs = ros.wait_for("squeak/unstable_frequencies", lambda m: len(m.data) > 0)
     assert list(freqs.data) == pytest.approx(core.unstable_frequencies_hz, rel=1e-9)
@@ -228,20 +241,36 @@ def test_table1_squeak_at_20_rad_s(ros):
     assert list(modes.data) == pytest.approx(list(modes_data(core)), rel=1e-9)
 
     status = ros.status(lambda s: s.level == bytes([Level.ERROR]))
-    assert status.message == "squeak predicted: B1y 224 Hz, B2y 898 Hz"
+    assert status.message == "squeak predicted: P(squeak) 1 (B1y 224 Hz, B2y 898 Hz)"
     values = {kv.key: kv.value for kv in status.values}
-    assert values[KEY_RISK] == "1" and values[KEY_FORMULATION] == "paper"
+    assert float(values[KEY_PROBABILITY]) == pytest.approx(core.probability, rel=1e-5)
+    assert float(values[KEY_MARGIN]) == pytest.approx(core.margin, rel=1e-5)
+    assert values[KEY_FORMULATION] == "paper"
 
 
 def test_high_speed_outside_the_band_is_quiet(ros):
     ros.start()
     at(ros, SQUEAK)
     core = at(ros, STABLE)
-    assert core.stable and ros.latest["squeak/risk"].data < 1.0
+    assert core.stable and ros.latest["squeak/risk"].data == core.probability == 0.0
+    assert ros.latest["squeak/margin"].data == pytest.approx(core.margin, rel=1e-9)
+    assert core.margin > 0
     assert ros.wait_for("squeak/active", lambda m: not m.data).data is False
     assert list(ros.wait_for("squeak/unstable_frequencies", lambda m: len(m.data) == 0).data) == []
     status = ros.status(lambda s: s.level == bytes([Level.OK]))
     assert status.message.startswith("no squeak")
+
+
+@pytest.mark.parametrize("speed", [20.0, 55.0, 60.0, 70.0, -60.0])
+def test_risk_is_the_probability_and_margin_the_least_damping_ratio(ros, speed):
+    """squeak/risk is Prediction.probability and squeak/margin Prediction.margin at the same
+    point: 55 rad/s squeaks nominally with P < 0.5, 60 rad/s does not yet has P ~0.12."""
+    ros.start()
+    core = at(ros, speed)
+    assert ros.latest["squeak/risk"].data == core.probability
+    assert ros.latest["squeak/margin"].data == pytest.approx(core.margin, rel=1e-9)
+    assert (ros.latest["squeak/margin"].data < 0) == (not core.stable)
+    assert ros.latest["squeak/active"].data == (not core.stable)
 
 
 def test_nut_position_topic_changes_the_prediction(ros):
@@ -283,14 +312,19 @@ def test_safe_speed(ros):
     ros.start()
     at(ros, SQUEAK)
     safe = ros.wait_for("squeak/safe_speed", lambda m: True).data
-    assert 0.0 < safe and not any(lo <= safe <= hi for lo, hi in speed_bands(MODEL, LOAD))
+    assert 0.0 < safe and not any(lo <= safe <= hi for lo, hi in speed_bands(
+        MODEL, LOAD, safe_probability=SAFE))
     check = MODEL.predict(safe, LOAD)
-    assert check.valid and check.stable
+    assert check.valid and check.stable and check.probability < SAFE
     at(ros, STABLE)
     assert ros.wait_for("squeak/safe_speed", lambda m: m.data == STABLE).data == STABLE
     at(ros, -SQUEAK)
-    assert ros.wait_for("squeak/safe_speed", lambda m: m.data < 0).data == pytest.approx(
-        -safe, rel=1e-3)
+    # reverse rotation: nearly the mirror image (the edge where P drops below 0.01 differs
+    # by ~0.2 %: P is not exactly symmetric in the direction)
+    reverse = ros.wait_for("squeak/safe_speed", lambda m: m.data < 0).data
+    assert reverse == pytest.approx(-safe, rel=1e-2)
+    [(_, edge)] = speed_bands(MODEL, LOAD, -1.0, safe_probability=SAFE)
+    assert reverse == pytest.approx(-edge * 1.05, rel=1e-6)
 
 
 # ----------------------------------------------------------------------------- parameters
@@ -323,6 +357,87 @@ def test_rejected_parameter_keeps_the_old_model(ros, name, value, words):
                  lambda m: list(m.data) == pytest.approx(expected, rel=1e-9))
 
 
+@pytest.mark.parametrize("value, words", [
+    (math.nan, ["scatter.mu_kinetic", "nan"]),
+    (-1.0, ["scatter.mu_kinetic", "out of range"]),
+    (2.0, ["scatter.mu_kinetic", "out of range"]),
+    (1, ["expected", "DOUBLE"]),                                  # wrong type
+])
+def test_a_bad_scatter_is_rejected_and_the_last_good_model_kept(ros, value, words):
+    node = ros.start(**{"scatter.mu_kinetic": 0.08})
+    core = at(ros, 60.0, model=MODEL.with_scatter(Scatter({**DEFAULT_SCATTER,
+                                                           "mu_kinetic": 0.08})))
+    model = node.live.model
+    [result] = node.set_parameters([Parameter("scatter.mu_kinetic", value=value)])
+    assert not result.successful and "\n" not in result.reason
+    for w in words:
+        assert w in result.reason, result.reason
+    assert node.get_parameter("scatter.mu_kinetic").value == 0.08
+    assert node.live.model is model and model.scatter.sd["mu_kinetic"] == 0.08
+    ros.send("motor_speed", 61.0)                # the kept model still predicts
+    expected = model.predict(61.0, LOAD).probability
+    assert ros.wait_for("squeak/risk", lambda m: m.data == expected).data == expected
+    assert core.probability != MODEL.predict(60.0, LOAD).probability   # the scatter mattered
+
+
+@pytest.mark.parametrize("name, value, words", [
+    ("scatter.samples", 100, ["scatter.samples = 100", "power of 2"]),
+    ("scatter.radius_m", 0.01, ["scatter"]),              # the live estimator cannot take it
+])
+def test_a_scatter_the_model_cannot_take_is_rejected(ros, name, value, words):
+    node = ros.start()
+    at(ros, SQUEAK)
+    model = node.live.model
+    [result] = node.set_parameters([Parameter(name, value=value)])
+    assert not result.successful and "\n" not in result.reason
+    for w in words:
+        assert w in result.reason, result.reason
+    assert node.live.model is model
+
+
+def test_without_scatter_the_risk_is_the_nominal_verdict(ros):
+    """scatter.<name> = 0 for the four defaults: no scatter, P(squeak) is the nominal 0/1
+    (55 rad/s squeaks nominally, 60 does not; with the default scatter P is ~0.46 and ~0.12)."""
+    node = ros.start()
+    at(ros, 60.0)
+    assert 0.1 < ros.latest["squeak/risk"].data < 0.2
+    assert all(r.successful for r in node.set_parameters(
+        [Parameter(f"scatter.{name}", value=0.0) for name in DEFAULT_SCATTER]))
+    assert node.live.model.scatter == Scatter({})
+    assert ros.wait_for("squeak/risk", lambda m: m.data == 0.0).data == 0.0   # recomputed
+    nominal = MODEL.with_scatter(Scatter({}))
+    for speed, probability in ((55.0, 1.0), (60.0, 0.0), (SQUEAK, 1.0), (STABLE, 0.0)):
+        core = at(ros, speed, model=nominal)
+        assert core.probability == ros.latest["squeak/risk"].data == probability
+        assert core.probability_stderr is None
+    status = ros.status(lambda s: s.level == bytes([Level.OK]))
+    assert status.message == "no squeak: P(squeak) 0 < 0.1"
+    assert {kv.key: kv.value for kv in status.values}[KEY_PROBABILITY] == "0"
+
+
+def test_diagnostic_levels_follow_the_probability_thresholds(ros):
+    """ERROR at P >= error_probability (0.5), WARN at P >= warn_probability (0.1), else OK;
+    the thresholds are parameters."""
+    node = ros.start()
+    for speed, level, start in ((SQUEAK, Level.ERROR, "squeak predicted: P(squeak) 1 ("),
+                                (55.0, Level.WARN, "squeak possible: P(squeak) 0.46 >= 0.1"),
+                                (60.0, Level.WARN, "squeak possible: P(squeak) 0.12 >= 0.1"),
+                                (70.0, Level.OK, "no squeak: P(squeak) 0 < 0.1")):
+        at(ros, speed)
+        status = ros.status(lambda s: float({kv.key: kv.value for kv in s.values}[
+            KEY_SPEED]) == speed)
+        assert status.level == bytes([level]) and status.message.startswith(start), (
+            speed, status.message)
+    at(ros, 60.0)
+    ros.status(lambda s: s.level == bytes([Level.WARN]))
+    [result] = node.set_parameters([Parameter("warn_probability", value=0.2)])
+    assert result.successful
+    status = ros.status(lambda s: s.level != bytes([Level.WARN]))
+    assert (status.level, status.message) == (bytes([Level.OK]), "no squeak: P(squeak) 0.12 < 0.2")
+    [result] = node.set_parameters([Parameter("warn_probability", value=0.6)])
+    assert not result.successful and "exceeds error_probability" in result.reason
+
+
 def test_rejected_set_is_atomic_and_reason_reaches_a_remote_caller(ros):
     node = ros.start()
     at(ros, SQUEAK)
@@ -352,7 +467,8 @@ def test_accepted_parameter_is_applied_and_republished(ros):
     assert node.live.model.params.formulation == "consistent"
     status = ros.status(lambda s: {kv.key: kv.value for kv in s.values}[KEY_FORMULATION]
                         == "consistent")
-    assert status.message.startswith("squeak predicted: T1 2654 Hz")
+    assert status.message.startswith("squeak predicted: P(squeak) ")
+    assert "T1 2654 Hz" in status.message
     # a node setting: a new rate limit re-creates the rate-limit timer
     [result] = node.set_parameters([Parameter("max_rate_hz", value=20.0)])
     assert result.successful and node.live.settings.max_rate_hz == 20.0
@@ -389,7 +505,7 @@ def test_bad_input_is_an_error_diagnostic_and_publishes_nothing(ros, topic, valu
         assert w in status.message, status.message
     ros.drain()
     assert {t: n for t, n in ros.count.items() if t != "/diagnostics"} == published
-    assert ros.latest["squeak/risk"].data == 1.0                  # the last good state stays
+    assert ros.latest["squeak/risk"].data == MODEL.predict(SQUEAK, LOAD).probability   # kept
     # a good value on the same input clears the error
     ros.send(topic, GOOD[topic])
     assert ros.status(lambda s: s.message.startswith("squeak predicted")).level == bytes(
@@ -580,7 +696,7 @@ def test_node_processes_answer_and_exit_cleanly_on_sigterm_and_sigint(tmp_path):
             assert time.monotonic() < deadline, "no answer from a node process"
             stream(i := i + 1)
         for sig, child in children.items():
-            assert child["risk"][-1].data == 1.0, sig
+            assert child["risk"][-1].data > 0.99, sig          # P(squeak) at 20..22 rad/s
             assert not [v for m in child["risk"] for v in non_finite(m)], sig
             ros.spin_until(lambda c=child: any(s.message.startswith("squeak predicted")
                                                for s in c["status"]), what="ERROR diagnostic")
@@ -609,6 +725,8 @@ def test_node_processes_answer_and_exit_cleanly_on_sigterm_and_sigint(tmp_path):
 @pytest.mark.parametrize("param, words", [
     ("radius_m:=-1.0", ["radius_m", "out of range"]),
     ("nut_position_m:=0.25", ["z_o + b <= L"]),
+    ("scatter.mu_kinetic:=2.0", ["scatter.mu_kinetic", "out of range"]),
+    ("scatter.samples:=100", ["scatter.samples = 100", "power of 2"]),
 ])
 def test_node_process_with_an_invalid_parameter_exits_with_one_line(param, words):
     proc = subprocess.run([*node_command(), "--ros-args", "-p", param], capture_output=True,

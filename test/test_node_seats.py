@@ -111,8 +111,10 @@ def test_help_prints_usage_and_exits_without_starting_a_node():
         out = proc.stdout
         assert out.startswith("usage: squeak_node") and "--ros-args" in out
         for text in ("motor_speed", "axial_load", "nut_position", "joint_states",
-                     "squeak/risk", "squeak/safe_speed", "/diagnostics", "~/record",
+                     "squeak/risk (Float64) [1]: P(squeak)", "squeak/margin",
+                     "squeak/safe_speed", "/diagnostics", "~/record",
                      "radius_m [m] = 0.005", "max_rate_hz [Hz] = 100, 0.1..10000",
+                     "scatter.mu_kinetic [1] = 0.05, 0..1", "scatter.samples [1] = 1024",
                      "record.directory = '.'", "record.auto_recover = False",
                      "--params-file config/leadscrew.yaml"):
             assert text in out, text

@@ -289,17 +289,20 @@ def timeline_predictions(stream) -> tuple[list, Timeline]:
 
 
 def same_predictions(a, b) -> None:
-    """Risk, squeak frequencies and squeak verdict, one for one (same solver, maybe batched)."""
+    """P(squeak), margin, squeak frequencies and squeak verdict, one for one (same solver, maybe
+    batched; the same scatter samples)."""
     assert len(a) == len(b)
     for k, (p, q) in enumerate(zip(a, b)):
+        assert p.keys() == q.keys()
         assert p["active"] == q["active"], k
-        assert p["risk"] == pytest.approx(q["risk"], rel=1e-9, abs=1e-300), k
+        assert p["probability"] == q["probability"], k
+        assert p["margin"] == pytest.approx(q["margin"], rel=1e-9), k
         assert p["frequencies"] == pytest.approx(q["frequencies"], rel=1e-9), k
 
 
 def outputs(p) -> dict:
-    return {"risk": p.risk, "frequencies": list(p.unstable_frequencies_hz),
-            "active": not p.stable}
+    return {"probability": p.probability, "margin": p.margin,
+            "frequencies": list(p.unstable_frequencies_hz), "active": not p.stable}
 
 
 def test_live_predictor_and_timeline_decide_alike_without_ros():
@@ -360,11 +363,12 @@ def test_node_and_replay_of_its_recording_predict_alike(tmp_path):
         recorded.setdefault(m.topic.name, []).append(m)
     for topic, n in Counter(t for t, _ in STREAM).items():
         assert len(recorded[f"{ros.ns}/{topic}"]) == n, topic     # none lost
-    node_out = [{"risk": deserialize_message(r.data, Float64).data,
+    node_out = [{"probability": deserialize_message(r.data, Float64).data,
+                 "margin": deserialize_message(g.data, Float64).data,
                  "frequencies": list(deserialize_message(f.data, Float64MultiArray).data),
                  "active": deserialize_message(a.data, Bool).data}
-                for r, f, a in zip(*(recorded[f"{ros.ns}/squeak/{name}"] for name in
-                                     ("risk", "unstable_frequencies", "active")))]
+                for r, g, f, a in zip(*(recorded[f"{ros.ns}/squeak/{name}"] for name in
+                                        ("risk", "margin", "unstable_frequencies", "active")))]
     assert len(node_out) == recomputes == len(recorded[f"{ros.ns}/squeak/active"])
 
     r = replay(bag, SqueakModel(), tmp_path / "out",
@@ -373,14 +377,14 @@ def test_node_and_replay_of_its_recording_predict_alike(tmp_path):
     assert r.recomputes == r.predictions == recomputes
     out_ns = f"/replay{ros.ns}/squeak"
     annotated = {}
-    for m in read_log(r.annotated, topics={f"{out_ns}/{n}" for n in
-                                           ("risk", "unstable_frequencies", "active")}):
+    names = ("risk", "margin", "unstable_frequencies", "active")
+    for m in read_log(r.annotated, topics={f"{out_ns}/{n}" for n in names}):
         annotated.setdefault(m.topic.name.rsplit("/", 1)[1], []).append(m)
-    replay_out = [{"risk": deserialize_message(a.data, Float64).data,
+    replay_out = [{"probability": deserialize_message(a.data, Float64).data,
+                   "margin": deserialize_message(g.data, Float64).data,
                    "frequencies": list(deserialize_message(f.data, Float64MultiArray).data),
                    "active": deserialize_message(b.data, Bool).data}
-                  for a, f, b in zip(annotated["risk"], annotated["unstable_frequencies"],
-                                     annotated["active"])]
+                  for a, g, f, b in zip(*(annotated[n] for n in names))]
     same_predictions(node_out, replay_out)
     # and both as without ROS
     same_predictions(node_out, [outputs(p) for p in live_predictions(STREAM)])

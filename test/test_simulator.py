@@ -54,12 +54,13 @@ def test_speed_ramps_through_and_beyond_the_squeak_band_and_back():
     # The model (paper formulation, Table 1) squeaks on the way up and on the way down ...
     model = SqueakModel()
     verdicts = {x: model.predict(*p.state(x)[:2]) for x in (2.0, 3.0, 7.5, 8.5)}
-    assert all(v.valid and not v.stable for v in verdicts.values()), verdicts
+    assert all(v.valid and not v.stable and v.probability > 0.5 for v in verdicts.values()), \
+        verdicts
     assert any(abs(f - 224.3) < 2 for v in verdicts.values() for f in v.unstable_frequencies_hz)
-    # ... and not at the peak speed, beyond the band, at any load of the stroke.
+    # ... and not at the peak speed, beyond the band, at any load of the stroke: P(squeak) ~0.
     for x in t[speed == speed.max()][::50]:
         v = model.predict(*p.state(x)[:2])
-        assert v.valid and v.stable, (x, v.risk)
+        assert v.valid and v.stable and v.probability < 0.01, (x, v.probability)
 
 
 def test_expected_squeak_along_the_stroke():

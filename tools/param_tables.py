@@ -16,11 +16,13 @@ import sys
 from leadscrew_ros.bag.recorder import RecordSettings
 from leadscrew_ros.live.settings import JointSettings, LiveSettings
 from leadscrew_ros.model.fields import default_text, range_text
+from leadscrew_ros.model.scatter import ScatterSettings
 from leadscrew_ros.ros.parameters import (GROUPS, READ_ONLY_NOTE, NodeSettings, RecordingControl,
                                           Spec, specs)
 
 # table name -> the settings dataclasses it lists, in the node's parameter order
 TABLES = {"node": (LiveSettings, JointSettings, NodeSettings),
+          "scatter": (ScatterSettings,),
           "record": (RecordingControl, RecordSettings)}
 HEADER = ["| parameter | unit | default | allowed | meaning |", "|---|---|---|---|---|"]
 

@@ -6,8 +6,9 @@ JointState mapping, deadbands, contact re-integration; shared with the offline r
 The node feeds it the latest inputs and asks `due(now)`; bursts are coalesced because only the
 latest value of each input is kept and one recompute serves all of them.
 
-Safe-speed advice needs the squeak band around the speed (tens of eigen-solves, up to a second
-with 40/40 modes), so it is searched on a background thread (`LatestWorker`): a recompute never
+Safe-speed advice needs the squeak band around the speed, where P(squeak) >= safe_probability
+(`model.advice`: tens of predictions, a few seconds with 40/40 modes), so it is searched on a
+background thread (`LatestWorker`): a recompute never
 waits for it, the last advice stays until the new one is ready, and `poll_advice` (or
 `wait_for_advice`, for callers that want the answer now) picks it up.
 
@@ -32,6 +33,7 @@ from threadpoolctl import threadpool_limits
 
 from ..model import ParameterError, Prediction, SqueakModel, Validity
 from ..model.advice import Band, band_around
+from ..model.display import exact
 from .rules import InputRules, Inputs, Outcome
 from .settings import JointSettings, LiveSettings
 
@@ -48,7 +50,9 @@ KEY_NUT_POSITION = "nut_position_m"
 KEY_FORMULATION = "formulation"
 KEY_VALID = "valid"                      # "true" when the latest point has a prediction
 KEY_VALIDITY = "validity"                # Validity name of the latest point ('' before one)
-KEY_RISK = "risk"
+KEY_PROBABILITY = "probability"           # P(squeak) of the latest prediction
+KEY_PROBABILITY_STDERR = "probability_stderr"   # its standard error ('' when not sampled)
+KEY_MARGIN = "margin"                     # least damping ratio (< 0: a nominal mode squeaks)
 KEY_MAX_GROWTH_RATE = "max_growth_rate_1_s"
 KEY_SQUEAK_FREQUENCIES = "squeak_frequencies_hz"
 KEY_SAFE_SPEED = "safe_speed_rad_s"
@@ -313,11 +317,12 @@ class LivePredictor:
         return self._pending
 
     def _advise(self, model: SqueakModel, p: Prediction) -> None:
-        """Advice for the latest prediction: at once when the point is squeak-free or a band
-        found earlier in its bin decides it; else from a background search."""
+        """Advice for the latest prediction: at once when the point is safe (P(squeak) below
+        safe_probability) or a band found earlier in its bin decides it; else from a
+        background search."""
         self._collect()
         self._advised = (model, p)
-        if p.stable:
+        if p.probability < self.settings.safe_probability:
             return self._set_advice(p.speed_rad_s, None)
         lowest, highest = model.params.min_speed_rad_s, model.critical_speed_rad_s
         margin = self.settings.safe_speed_margin
@@ -336,7 +341,11 @@ class LivePredictor:
         if self._search is not None and self._search[1] == key:
             return                # a search of this bin is under way: re-checked when it ends
         known = next((b for b in self._bands.get(key, ()) if b.contains(p.speed_rad_s)), None)
-        job = partial(band_around, model, p.load_n, p.speed_rad_s, margin, known=known)
+        # The search predicts on a model of its own (same geometry and samples): a model's
+        # probability estimator works in scratch arrays, so one instance must never predict
+        # on two threads at once (shared, P came out wrong now and then).
+        job = partial(band_around, model.with_scatter(model.scatter), p.load_n, p.speed_rad_s,
+                      margin, known=known, safe_probability=self.settings.safe_probability)
         self._search = (self._worker.submit(lambda checkpoint: job(checkpoint=checkpoint)),
                         key)
 
@@ -357,7 +366,7 @@ class LivePredictor:
         self._search = None
         if error is not None:     # keep the last advice; no retry within this bin
             self._failed, self._advice_error = key, f"safe-speed search failed: {error}"
-        elif band is not None:    # None: not squeak-free by growth (divergence): speed itself
+        elif band is not None:    # None only for a safe point, which `_advise` never searches
             others = [b for b in self._bands.get(key, ())      # minus the one it extends
                       if not band.low_rad_s <= b.low_rad_s <= b.high_rad_s <= band.high_rad_s]
             self._bands = {key: ([band] + others)[:_BANDS_KEPT]}
@@ -403,7 +412,9 @@ class LivePredictor:
             KEY_FORMULATION: self.model.params.formulation,
             KEY_VALID: str(valid).lower(),
             KEY_VALIDITY: "" if self._validity is None else self._validity.name,
-            KEY_RISK: _fmt(p.risk if p else None),
+            KEY_PROBABILITY: _fmt(p.probability if p else None),
+            KEY_PROBABILITY_STDERR: _fmt(p.probability_stderr if p else None),
+            KEY_MARGIN: _fmt(p.margin if p else None),
             KEY_MAX_GROWTH_RATE: _fmt(p.max_growth_rate if p else None),
             KEY_SQUEAK_FREQUENCIES: ", ".join(f"{f:.1f}" for f in p.unstable_frequencies_hz)
             if p else "",
@@ -424,13 +435,32 @@ class LivePredictor:
             return Status(Level.WARN, f"no prediction: {self._invalid_reason}", values)
         if p is None:
             return Status(Level.STALE, "waiting for the first prediction", values)
-        if not p.stable:
-            squeak = ", ".join(f"{m.label} {m.frequency_hz:.0f} Hz" for m in p.squeak_modes)
-            return Status(Level.ERROR, f"squeak predicted: {squeak or 'divergence'}", values)
-        if p.risk > s.risk_warn_threshold:
-            return Status(Level.WARN, f"squeak risk {p.risk:.2f} above "
-                                      f"{s.risk_warn_threshold:g}", values)
-        return Status(Level.OK, f"no squeak (risk {p.risk:.2f})", values)
+        return prediction_status(p, s, values)
+
+
+def prediction_status(p: Prediction, s: LiveSettings, values: dict[str, str] | None = None
+                      ) -> Status:
+    """The diagnostic level and message of a valid prediction: ERROR when P(squeak) >=
+    error_probability or a divergence (non-oscillatory growth) is predicted, WARN when P >=
+    warn_probability, else OK; the message gives P (never rounded across a threshold) and
+    the modes that squeak at the nominal parameters."""
+    text = f"{p.probability:.2g}"
+    if any((float(text) >= t) != (p.probability >= t)
+           for t in (s.warn_probability, s.error_probability)):
+        text = exact(p.probability)
+    prob = f"P(squeak) {text}"
+    notes = [f"{m.label} {m.frequency_hz:.0f} Hz" for m in p.squeak_modes]
+    notes += [f"divergence {r:.3g} 1/s" for r in p.divergence_rates[:1]]
+    detail = f" ({', '.join(notes)})" if notes else ""
+    values = values or {}
+    if p.probability >= s.error_probability:
+        return Status(Level.ERROR, f"squeak predicted: {prob}{detail}", values)
+    if p.divergence_rates:
+        return Status(Level.ERROR, f"divergence predicted: {prob}{detail}", values)
+    if p.probability >= s.warn_probability:
+        return Status(Level.WARN, f"squeak possible: {prob} >= {s.warn_probability:g}{detail}",
+                      values)
+    return Status(Level.OK, f"no squeak: {prob} < {s.warn_probability:g}{detail}", values)
 
 
 def _fmt(v: float | None) -> str:

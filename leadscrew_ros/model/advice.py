@@ -1,10 +1,15 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Controller advice: the squeak-free speed nearest to the current one (same direction).
+"""Controller advice: the speed nearest to the current one (same direction) whose P(squeak) is
+below `safe_probability`.
 
-`speed_bands` is the full search: every squeak band in one direction, on a log grid over the
-valid speed range. `band_around` learns only what the advice at one speed needs: the band that
-speed sits in, scanned outward from it on the same grid spacing in small batched eigen-solves,
-with an edge refined by root finding only when it can give the nearest squeak-free speed.
+A squeak band here is a speed interval where P(squeak) >= safe_probability, P being
+`Prediction.probability` over the model's scatter (`band_score`). Without scatter P is the
+nominal verdict (0 or 1), and the band is the deterministic one: some oscillatory mode grows.
+`speed_bands` is the full search: every band in one direction, on a log grid over the valid
+speed range. `band_around` learns only what the advice at one speed needs: the band that speed
+sits in, scanned outward from it on the same grid spacing in small batches of predictions, with
+an edge refined only when it can give the nearest safe speed. P is a share of samples, a step
+function of the speed, so an edge is refined by bisection (`_edge`).
 """
 
 from __future__ import annotations
@@ -14,17 +19,18 @@ from dataclasses import dataclass, replace
 from typing import Callable, Literal
 
 import numpy as np
-from scipy.optimize import brentq
+from numpy.typing import ArrayLike
 
+from .parameters import ParameterError
 from .predictor import SqueakModel
-from .sweep import growth_field, refine_crossings, unstable_intervals
+from .sweep import unstable_intervals
 
 _BAND_POINTS = 64          # log-spaced speeds between min_speed and the critical speed
-_SCAN_BATCH = 8            # grid points per batched eigen-solve of `band_around`'s scan
-EDGE_RTOL = 1e-7           # relative tolerance of an edge refined by `band_around`
-_MAX_REFINE = 60           # brentq iterations per edge (bisection needs < 25 at EDGE_RTOL)
+_SCAN_BATCH = 8            # grid points per batch of predictions of `band_around`'s scan
+EDGE_RTOL = 1e-7           # relative tolerance of a refined edge
+_MAX_REFINE = 60           # bisection steps per edge at most (a grid step needs 21)
 
-# What lies beyond an end of a `Band`: squeak-free speeds (the end is a refined edge), ground
+# What lies beyond an end of a `Band`: safe speeds (the end is a refined edge), ground
 # where the model is not valid or the end of the valid range ("limit"), or not searched yet.
 End = Literal["edge", "limit", "unknown"]
 
@@ -34,24 +40,85 @@ def _grid_ends(model: SqueakModel) -> tuple[float, float]:
     return model.params.min_speed_rad_s, model.critical_speed_rad_s * (1 - 1e-9)
 
 
-def speed_bands(model: SqueakModel, load_n: float, direction: float = 1.0
-                ) -> list[tuple[float, float]]:
-    """Unstable |speed| intervals (rad/s) in one direction of rotation at this load, ends
-    refined by root finding; the grid is log-spaced over the model's valid speed range."""
+def band_score(model: SqueakModel, load_n: float, direction: float, safe_probability: float,
+               checkpoint: Callable[[], None] | None = None
+               ) -> Callable[[ArrayLike], np.ndarray]:
+    """P(squeak) - safe_probability as a function of |speed|, in one direction of rotation.
+
+    Parameters
+    ----------
+    model : SqueakModel
+        The model; its scatter gives P (`Prediction.probability`).
+    load_n : float
+        Axial load [N].
+    direction : float
+        Its sign is the direction of rotation.
+    safe_probability : float
+        The threshold, in (0, 1]: P below it is safe.
+    checkpoint : callable, optional
+        Called before every batch of predictions; it may raise to abandon the caller's work.
+
+    Returns
+    -------
+    callable
+        |speed| array [rad/s] -> score array (1-d): >= 0 in a squeak band, < 0 where the
+        speed is safe, NaN where the model is not valid.
+
+    Raises
+    ------
+    ParameterError
+        `safe_probability` is not in (0, 1].
+    """
+    if isinstance(safe_probability, bool) or not isinstance(safe_probability, (int, float)) \
+            or not 0.0 < safe_probability <= 1.0:
+        raise ParameterError(f"safe_probability = {safe_probability!r} must be in (0, 1]")
     sign = math.copysign(1.0, direction)
+
+    def score(w: ArrayLike) -> np.ndarray:
+        if checkpoint is not None:
+            checkpoint()
+        speeds = sign * np.atleast_1d(np.asarray(w, float))
+        return np.array([p.probability - safe_probability if p.valid else math.nan
+                         for p in model.predict_many(speeds, load_n)])
+
+    return score
+
+
+def _edge(score: Callable[[ArrayLike], np.ndarray], inside: float, outside: float) -> float:
+    """The band edge between |speed| `inside` (score >= 0) and `outside` (score < 0 or not
+    valid), to EDGE_RTOL by bisection: the outside end of the last bracket, so P there is
+    below the threshold (or the point is not valid)."""
+    for _ in range(_MAX_REFINE):
+        if abs(outside - inside) <= EDGE_RTOL * max(inside, outside):
+            break
+        mid = 0.5 * (inside + outside)
+        if score(mid)[0] >= 0:                        # NaN (not valid) counts as outside
+            inside = mid
+        else:
+            outside = mid
+    return outside
+
+
+def speed_bands(model: SqueakModel, load_n: float, direction: float = 1.0, *,
+                safe_probability: float) -> list[tuple[float, float]]:
+    """|speed| intervals (rad/s) in one direction of rotation at this load where P(squeak) >=
+    safe_probability (`band_score`), ends refined to EDGE_RTOL (`_edge`); the grid is
+    log-spaced over the model's valid speed range."""
+    score = band_score(model, load_n, direction, safe_probability)
     w = np.geomspace(*_grid_ends(model), _BAND_POINTS)
-    growth = growth_field(model, sign * w, load_n).max_growth_rate
-
-    def f(x: float) -> float:
-        return float(growth_field(model, sign * x, load_n).max_growth_rate)
-
-    return unstable_intervals(w, growth, refine_crossings(f, w, growth, rtol=1e-6))
+    s = score(w)
+    inside = np.where(np.isnan(s), np.nan, np.where(s >= 0, 1.0, -1.0))
+    edges = [_edge(score, *((w[i], w[i + 1]) if inside[i] > 0 else (w[i + 1], w[i])))
+             for i in range(len(w) - 1)
+             if np.isfinite(inside[i:i + 2]).all() and inside[i] != inside[i + 1]]
+    return unstable_intervals(w, inside, edges)
 
 
 @dataclass(frozen=True)
 class Band:
-    """What is known of one squeak band (|speed| in rad/s, one direction, one load): squeak on
-    all of [low_rad_s, high_rad_s] (on the search grid), and what lies beyond each end."""
+    """What is known of one squeak band (|speed| in rad/s, one direction, one load): P(squeak)
+    >= safe_probability on all of [low_rad_s, high_rad_s] (on the search grid), and what lies
+    beyond each end."""
 
     low_rad_s: float
     high_rad_s: float
@@ -63,12 +130,12 @@ class Band:
 
     def safe_speed(self, speed_rad_s: float, lowest_rad_s: float, highest_rad_s: float,
                    margin: float = 0.05) -> float | None:
-        """Nearest squeak-free speed with the sign of `speed_rad_s` (rad/s), or None when this
-        band does not contain the speed or an unsearched side could still hold a nearer one.
+        """Nearest safe speed with the sign of `speed_rad_s` (rad/s), or None when this band
+        does not contain the speed or an unsearched side could still hold a nearer one.
 
         A candidate is a refined edge moved out of the band by `margin` (relative) that lies
         in the valid range [lowest, highest); the nearer one wins; 0 when there is none
-        (stopping is always squeak-free)."""
+        (stopping never squeaks)."""
         if not self.contains(speed_rad_s):
             return None
         best, undecided = self._options(abs(speed_rad_s), lowest_rad_s, highest_rad_s, margin)
@@ -93,32 +160,29 @@ class Band:
 
 
 def band_around(model: SqueakModel, load_n: float, speed_rad_s: float, margin: float = 0.05,
-                checkpoint: Callable[[], None] | None = None, known: Band | None = None
-                ) -> Band | None:
-    """The squeak band containing `speed_rad_s` at this load, searched just far enough that
-    `Band.safe_speed` at this speed (and `margin`) is decided; None when the speed is
-    squeak-free or outside the model's validity.
+                checkpoint: Callable[[], None] | None = None, known: Band | None = None, *,
+                safe_probability: float) -> Band | None:
+    """The squeak band (P(squeak) >= safe_probability, `band_score`) containing `speed_rad_s`
+    at this load, searched just far enough that `Band.safe_speed` at this speed (and `margin`)
+    is decided; None when the speed is safe or outside the model's validity.
 
     Both sides are scanned outward from the speed on the log grid of `speed_bands` (same
-    spacing), nearest candidate first: each batched solve takes the `_SCAN_BATCH` points whose
-    safe-speed candidate would be nearest. A side stops at its first squeak-free point (edge
-    refined to `EDGE_RTOL` with brentq), at invalid ground or the grid end, or as soon as it
-    can no longer offer the nearer candidate. At most `_BAND_POINTS + _SCAN_BATCH` scan points
-    and 2 refinements. `checkpoint` is called before every eigen-solve; it may raise to abandon
-    the search. `known`, a band found earlier that contains the speed, is extended rather than
-    searched again (a speed jittering inside a band then settles after a few searches)."""
-    sign, w = math.copysign(1.0, speed_rad_s), abs(speed_rad_s)
+    spacing), nearest candidate first: each batch of predictions takes the `_SCAN_BATCH`
+    points whose safe-speed candidate would be nearest. A side stops at its first safe point
+    (edge refined to `EDGE_RTOL` by bisection), at invalid ground or the grid end, or as soon
+    as it can no longer offer the nearer candidate. At most `_BAND_POINTS + _SCAN_BATCH` scan
+    points and 2 refinements. `checkpoint` is called before every batch (a refinement step is
+    a batch of one); it may raise to abandon the search. `known`, a band found earlier that
+    contains the speed, is extended rather than searched again (a speed jittering inside a
+    band then settles after a few searches)."""
+    w = abs(speed_rad_s)
+    score = band_score(model, load_n, speed_rad_s, safe_probability, checkpoint)
     lowest, highest = _grid_ends(model)
     step = (highest / lowest) ** (1 / (_BAND_POINTS - 1))
 
-    def growth(x) -> np.ndarray:
-        if checkpoint is not None:
-            checkpoint()
-        return growth_field(model, sign * np.asarray(x, float), load_n).max_growth_rate
-
     if known is not None and known.contains(w):
         band = known
-    elif not growth(w) > 0:                           # NaN (invalid) compares False too
+    elif not score(w)[0] >= 0:                        # NaN (invalid) compares False too
         return None
     else:
         band = Band(w, w, "unknown", "unknown")
@@ -141,9 +205,9 @@ def band_around(model: SqueakModel, load_n: float, speed_rad_s: float, margin: f
             reach.append(r[:keep])
         cut = np.sort(np.concatenate(reach))[:_SCAN_BATCH][-1]
         points = [x[r <= cut] for x, r in zip(points, reach)]
-        g = growth(np.concatenate(points))
+        g = score(np.concatenate(points))
         for s, x, start in zip(sides, points, np.cumsum([0] + [len(x) for x in points])):
-            band = _extend(band, s, x, g[start:start + len(x)], lowest, highest, growth)
+            band = _extend(band, s, x, g[start:start + len(x)], lowest, highest, score)
 
 
 def _next_points(band: Band, side: str, step: float, lowest: float, highest: float
@@ -158,18 +222,15 @@ def _next_points(band: Band, side: str, step: float, lowest: float, highest: flo
 
 
 def _extend(band: Band, side: str, x: np.ndarray, g: np.ndarray, lowest: float,
-            highest: float, growth: Callable) -> Band:
-    """The band after scanning `x` (outward, growth `g`) beyond its `side` end."""
+            highest: float, score: Callable[[ArrayLike], np.ndarray]) -> Band:
+    """The band after scanning `x` (outward, `band_score` values `g`) beyond its `side` end."""
     end = "low_rad_s" if side == "below" else "high_rad_s"
-    last = getattr(band, end)                         # last squeak point, outward
+    last = getattr(band, end)                         # last point in the band, outward
     for xi, gi in zip(x.tolist(), g.tolist()):
         if math.isnan(gi):                            # invalid ground: no advice beyond
             return replace(band, **{end: last, side: "limit"})
-        if gi <= 0:                                   # squeak-free: refine the edge
-            def f(v: float) -> float:                 # invalid inside counts as squeak-free
-                return float(np.nan_to_num(growth(v), nan=-1.0))
-            edge = brentq(f, last, xi, xtol=1e-300, rtol=EDGE_RTOL, maxiter=_MAX_REFINE)
-            return replace(band, **{end: edge, side: "edge"})
+        if gi < 0:                                    # safe: refine the edge
+            return replace(band, **{end: _edge(score, last, xi), side: "edge"})
         last = xi
     at_grid_end = last == (lowest if side == "below" else highest)
     return replace(band, **{end: last, side: "limit" if at_grid_end else "unknown"})

@@ -11,6 +11,7 @@ DDS stays on loopback, on a ROS_DOMAIN_ID of this process's own unless one is se
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import sys
@@ -49,8 +50,10 @@ class SqueakRecord:
     """What the monitor has seen on the predictor's outputs."""
 
     predictions: int = 0                           # squeak/risk messages (one per prediction)
-    max_risk: float | None = None
-    risk: float | None = None
+    max_probability: float | None = None           # largest P(squeak) on squeak/risk
+    probability: float | None = None               # latest P(squeak) on squeak/risk
+    margin: float | None = None                    # latest squeak/margin (inf: no mode)
+    min_margin: float | None = None                # least squeak/margin seen
     active: bool = False
     frequencies: list[float] = field(default_factory=list)
     squeak_modes: list[tuple[str, float]] = field(default_factory=list)   # latest, (label, Hz)
@@ -67,8 +70,8 @@ class SqueakRecord:
 
 
 class SqueakMonitor(Node):
-    """Subscribes to squeak/risk, squeak/unstable_frequencies, squeak/active, squeak/modes,
-    squeak/safe_speed and /diagnostics; keeps a `SqueakRecord`.
+    """Subscribes to squeak/risk (P(squeak)), squeak/margin, squeak/unstable_frequencies,
+    squeak/active, squeak/modes, squeak/safe_speed and /diagnostics; keeps a `SqueakRecord`.
 
     Time in squeak and the squeak speeds come from /diagnostics, which the predictor publishes
     after every recompute with the inputs used, the validity and the squeak frequencies: squeak
@@ -84,6 +87,7 @@ class SqueakMonitor(Node):
                          durability=LATCHED.durability, history=LATCHED.history)
         self.record = SqueakRecord()
         for topic, callback in ((messages.RISK, self._on_risk),
+                                (messages.MARGIN, self._on_margin),
                                 (messages.FREQUENCIES, self._on_frequencies),
                                 (messages.ACTIVE, self._on_active),
                                 (messages.MODES, self._on_modes),
@@ -102,10 +106,16 @@ class SqueakMonitor(Node):
         return run
 
     def _on_risk(self, data: bytes) -> None:
-        r, risk = self.record, cdr.decode_float64(data)
+        r, probability = self.record, cdr.decode_float64(data)
         r.predictions += 1
-        r.risk = risk
-        r.max_risk = risk if r.max_risk is None else max(r.max_risk, risk)
+        r.probability = probability
+        r.max_probability = probability if r.max_probability is None else max(
+            r.max_probability, probability)
+
+    def _on_margin(self, data: bytes) -> None:
+        r, margin = self.record, cdr.decode_float64(data)
+        r.margin = margin
+        r.min_margin = margin if r.min_margin is None else min(r.min_margin, margin)
 
     def _on_frequencies(self, data: bytes) -> None:
         self.record.frequencies = list(cdr.decode_float64_multi_array(data).data)
@@ -155,15 +165,18 @@ class SqueakMonitor(Node):
 
 # ----------------------------------------------------------------------------- text
 def status_line(t: float, s: ActuatorState | None, r: SqueakRecord) -> str:
-    """One line: time, inputs | verdict, risk, safe speed | squeak modes (most unstable first).
-    The least important part comes last, where a narrow terminal cuts it off."""
+    """One line: time, inputs | verdict, P(squeak), margin, safe speed | squeak modes (most
+    unstable first). The least important part comes last, where a narrow terminal cuts it
+    off."""
     head = (f"t {t:5.1f} s {s.speed_rad_s:6.1f} rad/s {s.load_n:4.0f} N nut "
             f"{s.nut_position_m:.3f} m" if s else f"t {t:5.1f} s  waiting for the predictor")
-    if not r.valid or r.risk is None:
+    if not r.valid or r.probability is None:
         why = _why_not(r) if not r.valid else ""
         return f"{head} | no prediction" + (f" ({why})" if why else " yet")
     safe = "" if r.safe_speed is None else f" safe {r.safe_speed:5.1f} rad/s"
-    line = f"{head} | {'SQUEAK' if r.active else 'ok':<6} risk {r.risk:.2f}{safe}"
+    margin = "" if r.margin is None else f" margin {_margin_text(r.margin)}"
+    line = (f"{head} | {'SQUEAK' if r.active else 'ok':<6} P(squeak) {r.probability:.2f}"
+            f"{margin}{safe}")
     if r.active:
         modes = [f"{label} {f:.0f} Hz" for label, f in r.squeak_modes] or \
             [f"{f:.0f} Hz" for f in r.frequencies]
@@ -172,13 +185,19 @@ def status_line(t: float, s: ActuatorState | None, r: SqueakRecord) -> str:
     return line
 
 
+def _margin_text(margin: float) -> str:
+    """squeak/margin in a status line: signed, 4 decimals; 'none' without an oscillatory mode
+    (the topic carries +inf then)."""
+    return "none" if math.isinf(margin) else f"{margin:+.4f}"
+
+
 def _why_not(r: SqueakRecord) -> str:
     """Why the latest diagnostics give no prediction, in a few words ('' before the first)."""
     if r.validity not in (None, Validity.OK):
         return r.validity.label
     if r.level == Level.ERROR:
         return "invalid input"
-    if r.level == Level.STALE and r.risk is not None:
+    if r.level == Level.STALE and r.probability is not None:
         return "waiting for inputs"
     return ""
 
@@ -215,8 +234,11 @@ def summary(profile: StrokeProfile, r: SqueakRecord, elapsed_s: float, finished:
     lines.append(f"  squeak frequencies: {freqs or 'none'}")
     lines.append("  squeak speeds:      " + (f"{r.speed_range[0]:.2f} - {r.speed_range[1]:.1f} "
                                              f"rad/s" if r.speed_range else "none"))
-    lines.append("  max risk:           " + ("none" if r.max_risk is None else
-                                             f"{r.max_risk:.2f}"))
+    lines.append("  max P(squeak):      " + ("none" if r.max_probability is None else
+                                             f"{r.max_probability:.3f}"))
+    lines.append("  min margin:         " + ("none" if r.min_margin is None else
+                                             _margin_text(r.min_margin))
+                 + " (least damping ratio at the nominal parameters; < 0: a mode squeaks)")
     lines.append(f"  predictions:        {r.predictions}"
                  + (f" (node recomputes: {r.recomputes})" if r.recomputes else ""))
     lines.append(f"  simulator:          {published} samples published (motor_speed, "
@@ -250,9 +272,9 @@ def recording_summary(recorder: Recorder) -> str:
 def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float = 4.0,
              out: TextIO | None = None, record_dir: Path | None = None) -> int:
     """Run predictor + simulator + monitor for one stroke; 0 when done, and 0 after SIGINT or
-    SIGTERM too, with the summary so far and `StopSignals.exit_status`'s line on stderr. The predictor records into a
-    bag in `record_dir` (created; None: no recording). A bad duration raises ProfileError
-    before anything starts; RuntimeError if rclpy or the discovery fails."""
+    SIGTERM too, with the summary so far and `StopSignals.exit_status`'s line on stderr. The
+    predictor records into a bag in `record_dir` (created; None: no recording). A bad duration
+    raises ProfileError before anything starts; RuntimeError if rclpy or the discovery fails."""
     out = out or sys.stdout
     profile = StrokeProfile(duration_s=duration_s)
     recording = []

@@ -3,8 +3,11 @@
 
 Subscribes (sensor-data QoS): motor_speed (std_msgs/Float64, rad/s), axial_load (Float64, N),
 nut_position (Float64, m) and joint_states (sensor_msgs/JointState, joint `joint_name`).
-Publishes (reliable, transient local, depth 1): squeak/risk, squeak/unstable_frequencies,
-squeak/active, squeak/modes, squeak/safe_speed and /diagnostics.
+Publishes (reliable, transient local, depth 1): squeak/risk (P(squeak) over the parameter
+scatter, `scatter.*` parameters), squeak/margin (least damping ratio at the nominal parameters),
+squeak/unstable_frequencies, squeak/active, squeak/modes, squeak/safe_speed (nearest speed with
+P(squeak) below `safe_probability`) and /diagnostics (levels by P: `warn_probability`,
+`error_probability`).
 Records inputs and outputs to MCAP (`record.*` parameters, std_srvs/SetBool `~/record`):
 inputs from subscriptions of their own that never wait for the model, with every lost message
 counted (`ros.input_recording`); outputs as the CDR bytes it publishes (`bag.messages`); on
@@ -46,6 +49,7 @@ from ..live.settings import JointSettings, LiveSettings
 from ..bag import messages, msgdefs
 from ..bag.crash_recovery import CrashRecovery
 from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel
+from ..model.scatter import ScatterSettings
 from ..bag.recorder import Recorder, RecordSettings, ensure_directory
 from .env import StopSignals, confine_to_localhost
 
@@ -71,8 +75,7 @@ class SqueakPredictorNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         self._declare_parameters()
-        self.live = LivePredictor(SqueakModel(self._screw_parameters({})),
-                                  self._live_settings({}))
+        self.live = LivePredictor(self._model({}), self._live_settings({}))
         self.joint = self._settings(JointSettings, {})
         self.recorder = Recorder(self._record_settings({}), bag_prefix(self.get_namespace()),
                                  clock=self._now_ns)
@@ -153,8 +156,21 @@ class SqueakPredictorNode(Node):
         """Settings dataclass `cls` from the current parameters with `changes` applied."""
         return build(cls, self._values(changes))
 
-    def _screw_parameters(self, changes: dict) -> ScrewParameters:
-        return self._settings(ScrewParameters, changes)
+    def _model(self, changes: dict) -> SqueakModel:
+        """The model of the parameters with `changes` applied: the screw and its scatter
+        (`scatter.*`). One prediction draws the samples and builds the estimator, so a scatter
+        they cannot take (samples that miss the valid domain, ...) is rejected here with the
+        reason, never later in a callback."""
+        scatter = self._settings(ScatterSettings, changes)
+        model = SqueakModel(self._settings(ScrewParameters, changes), scatter=scatter.scatter,
+                            samples=scatter.samples)
+        try:
+            model.predict(model.params.min_speed_rad_s, 0.0)
+        except ParameterError:
+            raise
+        except ValueError as exc:
+            raise ParameterError(f"scatter: {exc}") from None
+        return model
 
     def _live_settings(self, changes: dict) -> LiveSettings:
         return self._settings(LiveSettings, changes)
@@ -170,6 +186,8 @@ class SqueakPredictorNode(Node):
             values = self._values(changes)
             for group in GROUPS:
                 build(group.cls, values)
+            if set(changes) & (names_of(ScrewParameters) | names_of(ScatterSettings)):
+                self._model(changes)
             recording = names_of(RecordSettings) | names_of(RecordingControl)
             if values["record.enabled"] and recording & set(changes):
                 ensure_directory(values["record.directory"])          # mkdir -p, writable
@@ -181,9 +199,9 @@ class SqueakPredictorNode(Node):
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
         names = {p.name for p in params}
-        if names & (names_of(ScrewParameters) | names_of(LiveSettings)):
-            model_changed = bool(names & names_of(ScrewParameters))
-            model = SqueakModel(self._screw_parameters({})) if model_changed else self.live.model
+        model_names = names_of(ScrewParameters) | names_of(ScatterSettings)
+        if names & (model_names | names_of(LiveSettings)):
+            model = self._model({}) if names & model_names else self.live.model
             self.live.set_model(model, self._live_settings({}))
             if "max_rate_hz" in names:
                 self.destroy_timer(self._rate_timer)
@@ -349,9 +367,11 @@ def usage() -> str:
         "  nut_position (std_msgs/Float64) [m], joint_states (sensor_msgs/JointState, joint "
         "`joint_name`)",
         "Publishes (reliable, transient local, depth 1):",
-        "  squeak/risk (Float64) [1], squeak/unstable_frequencies (Float64MultiArray) [Hz],",
-        "  squeak/active (Bool), squeak/modes (Float64MultiArray), squeak/safe_speed (Float64) "
-        "[rad/s],",
+        "  squeak/risk (Float64) [1]: P(squeak) over the scatter (scatter.*),",
+        "  squeak/margin (Float64) [1]: least damping ratio, < 0 when a nominal mode squeaks,",
+        "  squeak/unstable_frequencies (Float64MultiArray) [Hz], squeak/active (Bool),",
+        "  squeak/modes (Float64MultiArray),",
+        "  squeak/safe_speed (Float64) [rad/s]: nearest speed with P(squeak) < safe_probability,",
         "  /diagnostics (diagnostic_msgs/DiagnosticArray: '<node>: squeak prediction', "
         "'<node>: recording')",
         "Service: ~/record (std_srvs/SetBool) starts or stops recording",

@@ -21,6 +21,7 @@ from ..live.settings import JointSettings, LiveSettings
 from ..model.display import exact
 from ..model.fields import check, check_value, range_text, setting
 from ..model.parameters import ParameterError, ScrewParameters
+from ..model.scatter import ScatterSettings
 
 READ_ONLY_NOTE = "read-only: set at start-up"
 
@@ -70,6 +71,8 @@ GROUPS = (
     Group(LiveSettings, "", "node: recompute policy and verdict"),
     Group(JointSettings, "", "node: joint_states mapping"),
     Group(NodeSettings, "", "node: diagnostics and inputs"),
+    Group(ScatterSettings, "scatter.", "model: unit-to-unit scatter of the parameters behind "
+          "P(squeak) (squeak/risk); 0 switches one off"),
     Group(RecordingControl, "record.", "node: MCAP recording (also ~/record)"),
     Group(RecordSettings, "record.", "node: MCAP recording, one bag per recording"),
 )
