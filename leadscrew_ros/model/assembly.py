@@ -84,6 +84,8 @@ class Geometry:
         `scattered` gives arrays of non-geometry parameters (friction, damping; broadcast with
         the operating points) that replace the nominal values: they enter only through the
         scale factors and the damping diagonal, so samples of them cost one product each."""
+        if not scattered and np.ndim(speed_rad_s) == 0 and np.ndim(load_n) == 0:
+            return self._state_matrix(float(speed_rad_s), float(load_n))
         speed = np.asarray(speed_rad_s, float)
         if scattered:                          # one matrix per sample, whatever varies
             speed = np.broadcast_to(speed, np.broadcast_shapes(
@@ -107,6 +109,17 @@ class Geometry:
         if scattered and "modal_damping" in scattered:                       # (A.1)
             extra = np.asarray(scattered["modal_damping"], float) - self.params.modal_damping
             flat[..., self._d_diagonal] -= 2 * extra[..., None] * self.basis.omega_rad_s
+        return out
+
+    def _state_matrix(self, speed: float, load: float) -> np.ndarray:
+        """`state_matrices` at one operating point: the same operations without broadcasting
+        (a live prediction's share of the cost)."""
+        s = scales(self.params, speed, load, self.contact.alpha)
+        coef = np.array((s["W1"], s["W5q"], s["W3"], s["W5qdot"], speed))
+        n = self.n
+        out = self._template.copy()
+        out[n:, :] -= np.einsum("k,kj->j", coef, self.lower_half_units).reshape(n, 2 * n)
+        out.reshape(-1)[self._k_diagonal] += speed ** 2                      # -Omega^2 I in K
         return out
 
     @cached_property
