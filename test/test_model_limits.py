@@ -55,12 +55,3 @@ def test_converged_in_number_of_modes(formulation):
     assert [m.label for m in pa.squeak_modes] == [m.label for m in pb.squeak_modes]
     np.testing.assert_allclose([m.growth_rate for m in pa.squeak_modes],
                                [m.growth_rate for m in pb.squeak_modes], rtol=1e-3)
-
-
-def test_converged_in_quadrature_nodes():
-    coarse = SqueakModel(ScrewParameters(quadrature_nodes_per_turn=32))
-    fine = SqueakModel(ScrewParameters(quadrature_nodes_per_turn=128))
-    for speed in (2.0, 20.0, 50.0):
-        a, b = coarse.predict(speed), fine.predict(speed)
-        np.testing.assert_allclose([m.growth_rate for m in a.modes],
-                                   [m.growth_rate for m in b.modes], rtol=1e-8, atol=1e-8)

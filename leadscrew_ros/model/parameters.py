@@ -16,7 +16,7 @@ from .display import exact
 from .fields import check_value, range_text, setting
 
 FORMULATIONS = ("paper", "consistent")
-MAX_CONTACT_TURNS = 5000      # bounds the helix quadrature (nodes = turns * nodes per turn)
+MAX_CONTACT_TURNS = 5000      # longest nut accepted, in thread turns
 
 
 class ParameterError(ValueError):
@@ -67,8 +67,6 @@ class ScrewParameters:
     n_torsion: int = _p(6, "1", "torsion orders", 1, 40)
     formulation: str = _p("paper", "", "Appendix A as printed ('paper') or first-principles "
                           "linearisation ('consistent')")
-    quadrature_nodes_per_turn: int = _p(32, "1", "Gauss-Legendre nodes per thread turn for "
-                                        "the contact integrals", 8, 1024)
     min_speed_rad_s: float = _p(0.5, "rad/s", "lowest |speed| at which the sliding "
                                 "linearisation is trusted", 0.0, 1e4, lo_open=True,
                                 geometry=False)

@@ -35,7 +35,7 @@ DEFAULT_SCATTER = MappingProxyType({"mu_static": 0.05, "mu_kinetic": 0.05,
                                     "friction_decay_s_m": 0.10, "modal_damping": 0.35})
 # Fields that are operating conditions or switches, not properties of a drive.
 NOT_SCATTERED = frozenset({"axial_load_n", "n_bending", "n_torsion", "formulation",
-                           "quadrature_nodes_per_turn", "min_speed_rad_s"})
+                           "min_speed_rad_s"})
 MAX_SCATTER = 1.0                               # relative SD (or SD of ln) at most
 REPLICATES = 8                                  # independent scramblings per estimate
 LIVE_SAMPLES = 1024                             # samples of the live estimate (default)
