@@ -28,6 +28,8 @@ _U32 = {e: struct.Struct(e + "I") for e in "<>"}
 _F64 = {e: struct.Struct(e + "d") for e in "<>"}
 _STAMP = {e: struct.Struct(e + "iI") for e in "<>"}
 _LE_HEADER = b"\x00\x01\x00\x00"                          # CDR_LE, no options
+_F64_LE = struct.Struct("<d")
+_BOOL_PAYLOADS = {False: _LE_HEADER + b"\x00", True: _LE_HEADER + b"\x01"}
 
 # 'pkg/msg/Type' of the types this module knows.
 FLOAT64, BOOL = "std_msgs/msg/Float64", "std_msgs/msg/Bool"
@@ -227,17 +229,16 @@ class _Encoder:
 
 
 def encode_float64(value: float) -> bytes:
-    """std_msgs/Float64."""
-    e = _Encoder()
-    e.f64(value)
-    return e.payload()
+    """std_msgs/Float64 (the value right after the header: already aligned)."""
+    try:
+        return _LE_HEADER + _F64_LE.pack(value)
+    except struct.error as exc:
+        raise ValueError(f"{value!r} does not fit CDR 'd': {exc}") from None
 
 
 def encode_bool(value: bool) -> bytes:
     """std_msgs/Bool."""
-    e = _Encoder()
-    e.octet(1 if value else 0)
-    return e.payload()
+    return _BOOL_PAYLOADS[bool(value)]
 
 
 def encode_float64_multi_array(dim: tuple[Dimension, ...], data, data_offset: int = 0

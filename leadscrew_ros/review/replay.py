@@ -43,9 +43,8 @@ from pathlib import Path
 from typing import Any, BinaryIO, Callable, TextIO
 
 import numpy as np
-from mcap.writer import CompressionType, Writer
-
 from ..bag import messages, msgdefs
+from ..bag.mcapout import McapOut
 from .decimation import Envelope, Reservoir
 from .jsonsafe import json_safe
 from ..bag.logfile import LogError, LogMessage, Topic
@@ -62,7 +61,6 @@ _SEGMENT_MESSAGES = 20_000     # a segment without predictions is written at thi
 # Messages held while their predictions are computed (~250 bytes each): enough to read on
 # through a rest while the workers solve the stroke before it.
 _IN_FLIGHT_MESSAGES = 250_000
-_CHUNK_BYTES = 1 << 20         # annotated MCAP chunk: buffered until this size, then compressed
 EPISODES_KEPT = 1000           # episodes kept in the result (all of them in episodes.json)
 _FREQUENCIES_KEPT = 512        # frequencies per mode and episode kept for its median
 _NAME = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
@@ -310,8 +308,7 @@ class _AnnotatedWriter:
     """Original channels copied as they are, plus the prediction topics under `namespace`."""
 
     def __init__(self, fh: BinaryIO, namespace: str):
-        self.writer = Writer(fh, compression=CompressionType.ZSTD, chunk_size=_CHUNK_BYTES)
-        self.writer.start(profile="ros2", library="leadscrew_ros replay")
+        self.writer = McapOut(fh, "ros2", "leadscrew_ros replay")
         self._schemas: dict[tuple[str, str, str], int] = {}
         self._channels: dict[int, tuple[Topic, int]] = {}        # id(topic) -> topic, channel
         self._by_value: dict[tuple, int] = {}
