@@ -1,23 +1,34 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Benchmark of the offline replay: throughput on a generated 1-hour, 100 Hz log, and peak
-memory against log length.
+"""Benchmark of the offline replay: throughput and CPU time on two generated 100 Hz logs, and
+peak memory against log length.
 
-    .venv/bin/python benchmarks/bench_replay.py [--hours H] [--workers N] [--report] [--json OUT.json]
+    .venv/bin/python benchmarks/bench_replay.py [--cases duty dense] [--hours H] [--minutes M]
+        [--workers N] [--rounds R] [--src DIR] [--report] [--json OUT.json]
     .venv/bin/python benchmarks/bench_replay.py --rss [--minutes 10 60] [--rate HZ] [--src DIR]
 
-The log is a seat-adjuster duty cycle (`synthetic_log.DutyCycle`: a 12 s stroke every minute,
-alternating direction, small sensor noise) on /motor_speed, /axial_load (std_msgs/Float64) and
-/joint_states (sensor_msgs/JointState), recorded by our `Recorder` (zstd, 10-minute splits). It is
-generated once and cached in the temp directory (`--regenerate` to rebuild). One run of
-`replay.replay` (default parameters and deadbands, the log's screw joint as `joint_name`) is
-timed; the ratio is log duration / wall
-time. Prints a Markdown table and an environment line. Target: >= 100x real time.
+Two logs (`synthetic.DutyCycle`, small sensor noise, recorded by our `Recorder`: zstd, 10-minute
+splits, on /motor_speed, /axial_load (std_msgs/Float64) and /joint_states
+(sensor_msgs/JointState)):
+- `duty`: a seat-adjuster duty cycle of `--hours` (default 1 h): a 12 s stroke every minute,
+  alternating direction;
+- `dense`: `--minutes` (default 10) of back-to-back 12 s strokes with no rest between them and
+  the nut position also published (/nut_position, every sample): the operating point and the
+  nut move at almost every message.
+Each is generated once and cached in the temp directory (`--regenerate` to rebuild). One
+`replay.replay` per case and round (default parameters and deadbands, the log's screw joint as
+`joint_name`) runs in a fresh child process; the ratio is log duration / wall time, and the CPU
+time (the replaying process and its prediction workers, user + system) is given per log hour.
+`--src DIR` also runs every case with the package of another checkout (e.g. `git archive` of the
+old commit), interleaved with this one round by round, on the same cached logs. Prints a
+Markdown table and an environment line (machine load at start and end). Target: >= 100x real
+time for both logs.
 
-`--rss`: for each log length (default 10 and 60 minutes), one replay with the report (QUICK
-grids) in a fresh child process; its peak resident memory (VmHWM of /proc/self/status, the
-replaying process; the prediction workers' peak from RUSAGE_CHILDREN) is printed. Streaming
-means equal peaks (target: within 20 %). `--src DIR` runs the child with the package from
-another checkout (e.g. `git worktree add /tmp/old f76cdbf`), on the same cached logs.
+`--rss`: for each log length (default 10 and 60 minutes of the duty cycle), one replay with the
+report (QUICK grids) in a fresh child process; its peak resident memory (VmHWM of
+/proc/self/status, the replaying process; the prediction workers' peak from RUSAGE_CHILDREN) is
+printed. Streaming means equal peaks (target: within 20 %). `--src DIR` runs the child with the
+package from another checkout (e.g. `git worktree add /tmp/old f76cdbf`), on the same cached
+logs.
 """
 
 from __future__ import annotations
@@ -37,14 +48,38 @@ from pathlib import Path
 
 import numpy as np
 
-from leadscrew_ros.bag.messages import PREDICTION_TOPICS
-from leadscrew_ros.model import SqueakModel
-from leadscrew_ros.review.replay import ReplaySettings, replay
+from leadscrew_ros.review.replay import ReplaySettings
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
-from leadscrew_ros.review.timeline import InputSettings
 
 TARGET_X_REAL_TIME = 100.0
 TARGET_RSS_RATIO = 1.2
+# Runs in the child: one replay (+ the report if asked); wall and CPU time of the replay.
+_THROUGHPUT_CHILD = """
+import json, resource, sys, time
+from pathlib import Path
+from leadscrew_ros.model import SqueakModel
+from leadscrew_ros.review.replay import ReplaySettings, replay
+from leadscrew_ros.review.timeline import InputSettings
+bag, out, workers, joint, report = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3]), \\
+    sys.argv[4], sys.argv[5] == "1"
+def cpu(who):
+    u = resource.getrusage(who)
+    return u.ru_utime + u.ru_stime
+model = SqueakModel()
+c0, w0, t0 = cpu(resource.RUSAGE_SELF), cpu(resource.RUSAGE_CHILDREN), time.perf_counter()
+result = replay(bag, model, out, ReplaySettings(InputSettings(joint_name=joint),
+                                                workers=workers, progress=False))
+wall = time.perf_counter() - t0
+main, workers = cpu(resource.RUSAGE_SELF) - c0, cpu(resource.RUSAGE_CHILDREN) - w0
+res = dict(summary=result.summary(), wall_s=wall, cpu_s=main + workers, cpu_main_s=main,
+           annotated_mb=result.annotated.stat().st_size / 1e6)
+if report:
+    from leadscrew_ros.review.report import write_report
+    t0 = time.perf_counter()
+    write_report(result, model, out)
+    res["report_s"] = time.perf_counter() - t0
+print(json.dumps(res))
+"""
 # Runs in the child: replay + report, then the peak memory of this process and its workers.
 _CHILD = """
 import json, resource, sys, time
@@ -94,40 +129,63 @@ def environment() -> dict:
                 load_avg_1min_start=os.getloadavg()[0])
 
 
+CASES = {
+    "duty": "duty cycle (12 s stroke every minute)",
+    "dense": "back-to-back strokes, nut position published",
+}
+
+
+def cycle_of(case: str, args: argparse.Namespace) -> DutyCycle:
+    """The generated log of `case`."""
+    if case == "duty":
+        return DutyCycle(duration_s=args.hours * 3600.0, rate_hz=args.rate)
+    return DutyCycle(duration_s=args.minutes[0] * 60.0, rate_hz=args.rate, rest_s=0.0,
+                     nut_position_topic=True)
+
+
+def run_replay(bag: Path, cycle: DutyCycle, workers: int, src: str | None,
+               report: bool) -> dict:
+    """One replay of `bag` in a fresh child process (the package of `src` if given)."""
+    env = dict(os.environ)        # the child runs in `out`: `-c` puts its cwd first on the path
+    if src:
+        env["PYTHONPATH"] = str(Path(src).resolve())
+    with tempfile.TemporaryDirectory(prefix="bench_replay_") as out:
+        done = subprocess.run([sys.executable, "-c", _THROUGHPUT_CHILD, str(bag), out,
+                               str(workers), cycle.joint_name, "1" if report else "0"],
+                              env=env, cwd=out, capture_output=True, text=True)
+    if done.returncode:
+        raise SystemExit(f"replay of {bag} failed:\n{done.stderr[-3000:]}")
+    return json.loads(done.stdout.splitlines()[-1])
+
+
 def table(res: dict) -> str:
-    r, env = res["replay"], res["env"]
-    ratio = r["x_real_time"]
-    rows = [
-        ("log", f"{res['hours']:g} h at {res['rate_hz']:g} Hz, {res['files']} files "
-                f"(zstd), {res['log_mb']:.1f} MB", f"{r['messages']:,} messages"),
-        ("inputs", ", ".join(f"{k} {v:,}" for k, v in r["input_messages"].items()),
-         f"{sum(r['input_messages'].values()):,}"),
-        ("recomputes (deadbands 0.1 rad/s, 1 N, 0.5 mm)",
-         f"{r['predictions']:,} predictions + {sum(r['no_prediction'].values()):,} outside "
-         "validity", f"{r['recomputes']:,} = {r['recomputes'] / sum(r['input_messages'].values()):.1%} "
-                     "of inputs"),
-        ("squeak", f"{r['episodes']} episodes", f"{r['time_in_squeak_s']:.0f} s in squeak"),
-        (f"P(squeak) (default scatter, {r['scatter_samples']} samples)",
-         f"peak {r['peak_probability']:.3f}",
-         f"{r['time_above_warn_s']:.0f} s >= WARN {r['warn_probability']:g}, "
-         f"{r['time_above_error_s']:.0f} s >= ERROR {r['error_probability']:g}"),
-        ("wall time (replay: read, predict, write annotated MCAP + episodes)",
-         f"{res['workers']} prediction worker(s)", f"{r['wall_s']:.1f} s"),
-        ("throughput", "log duration / wall time",
-         f"**{ratio:.0f}× real time** (target ≥ {TARGET_X_REAL_TIME:g}×: "
-         f"{'met' if ratio >= TARGET_X_REAL_TIME else 'MISSED'})"),
-        ("annotated MCAP", f"originals + {len(PREDICTION_TOPICS)} prediction topics",
-         f"{res['annotated_mb']:.1f} MB"),
-    ]
-    if "report_s" in res:
-        rows.append(("report (PNG plots, not in the ratio)", "", f"{res['report_s']:.1f} s"))
-    head = "| | | |\n|---|---|---:|"
-    body = "\n".join("| " + " | ".join(row) + " |" for row in rows)
+    """One row per case and package: medians over the rounds."""
+    env, head = res["env"], ("| log | package | messages | predictions | annotated MCAP | "
+                             "wall | x real time | CPU-s per log hour (replaying process "
+                             "+ workers) |\n|---|---|---:|---:|---:|---:|---:|---:|")
+    lines = [head]
+    for case, c in res["cases"].items():
+        for label, runs in c["runs"].items():
+            r = runs[0]["summary"]
+            wall = float(np.median([x["wall_s"] for x in runs]))
+            cpu = float(np.median([x["cpu_s"] for x in runs]))
+            main = float(np.median([x["cpu_main_s"] for x in runs]))
+            per_hour = 3600.0 / r["duration_s"]
+            ratio = r["duration_s"] / wall
+            lines.append(
+                f"| {CASES[case]}: {c['duration_s'] / 60:g} min at {res['rate_hz']:g} Hz, "
+                f"{c['log_mb']:.1f} MB | {label} | {r['messages']:,} | {r['predictions']:,} "
+                f"({r['recomputes'] / sum(r['input_messages'].values()):.0%} of inputs) | "
+                f"{runs[0]['annotated_mb']:.1f} MB | {wall:.1f} s | **{ratio:.0f}×** "
+                f"({'met' if ratio >= TARGET_X_REAL_TIME else 'MISSED'}) | "
+                f"{cpu * per_hour:.0f} s ({main * per_hour:.0f} + "
+                f"{(cpu - main) * per_hour:.0f}) |")
     envline = (f"{env['date']} · Python {env['python']} · numpy {env['numpy']} · "
                f"{env['cpu_count']} CPUs ({env['machine']}) · load avg "
-               f"{env['load_avg_1min_start']:.2f} → {env['load_avg_1min_end']:.2f} · log "
-               + ("cached" if not res["generate_s"] else f"generated in {res['generate_s']:.0f} s"))
-    return f"{head}\n{body}\n\n{envline}"
+               f"{env['load_avg_1min_start']:.2f} → {env['load_avg_1min_end']:.2f} · "
+               f"{res['workers']} prediction worker(s) · median of {res['rounds']} round(s), "
+               f"packages interleaved · target ≥ {TARGET_X_REAL_TIME:g}× real time")
+    return f"{lines[0]}\n" + "\n".join(lines[1:]) + f"\n\n{envline}"
 
 
 def peak_rss(bag: Path, workers: int, src: str | None) -> dict:
@@ -174,38 +232,49 @@ def rss_main(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--hours", type=float, default=1.0, help="log duration (default 1 h)")
+    ap.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES),
+                    help="logs to replay (default: both)")
+    ap.add_argument("--hours", type=float, default=1.0, help="duty log duration (default 1 h)")
     ap.add_argument("--rate", type=float, default=100.0, help="sample rate [Hz] (default 100)")
     ap.add_argument("--workers", type=int, default=ReplaySettings().workers,
                     help="prediction worker processes (default %(default)s; 0: one process)")
+    ap.add_argument("--rounds", type=int, default=1, help="replays per case and package")
     ap.add_argument("--report", action="store_true", help="also time the PNG report")
     ap.add_argument("--regenerate", action="store_true", help="rebuild the cached log")
     ap.add_argument("--json", metavar="OUT.json", help="also write the raw numbers here")
     ap.add_argument("--rss", action="store_true",
                     help="peak memory of replay + report vs log length instead")
-    ap.add_argument("--minutes", type=float, nargs="+", default=[10.0, 60.0],
-                    help="log lengths of --rss (default 10 60)")
-    ap.add_argument("--src", metavar="DIR", help="--rss: import leadscrew_ros from this checkout")
+    ap.add_argument("--minutes", type=float, nargs="+", default=None,
+                    help="dense log duration (default 10) / log lengths of --rss (10 60)")
+    ap.add_argument("--src", metavar="DIR",
+                    help="also replay with the package of this checkout (--rss: instead)")
     args = ap.parse_args(argv)
     if args.rss:
+        args.minutes = args.minutes or [10.0, 60.0]
         return rss_main(args)
-    cycle = DutyCycle(duration_s=args.hours * 3600.0, rate_hz=args.rate)
-    res = dict(env=environment(), hours=args.hours, rate_hz=args.rate, workers=args.workers)
-    bag, res["generate_s"] = cached_log(cycle, args.regenerate)
-    res["files"], res["log_mb"] = len(list(bag.glob("*.mcap"))), size_mb(bag)
-    model = SqueakModel()
-    with tempfile.TemporaryDirectory(prefix="bench_replay_") as out:
-        result = replay(bag, model, out, ReplaySettings(
-            InputSettings(joint_name=cycle.joint_name), workers=args.workers, progress=False))
-        res["replay"] = result.summary()
-        res["annotated_mb"] = size_mb(result.annotated)
-        if args.report:
-            from leadscrew_ros.review.report import write_report
-            t0 = time.perf_counter()
-            write_report(result, model, Path(out))
-            res["report_s"] = time.perf_counter() - t0
+    args.minutes = args.minutes or [10.0]
+    packages = {"this checkout": None, **({args.src: args.src} if args.src else {})}
+    res = dict(env=environment(), rate_hz=args.rate, workers=args.workers, rounds=args.rounds,
+               cases={})
+    for case in args.cases:
+        cycle = cycle_of(case, args)
+        bag, generate_s = cached_log(cycle, args.regenerate)
+        res["cases"][case] = dict(duration_s=cycle.duration_s, generate_s=generate_s,
+                                  log_mb=size_mb(bag), runs={label: [] for label in packages})
+    for _ in range(args.rounds):
+        for case in args.cases:
+            cycle = cycle_of(case, args)
+            bag, _ = cached_log(cycle, False)
+            for label, src in packages.items():
+                run = run_replay(bag, cycle, args.workers, src, args.report)
+                res["cases"][case]["runs"][label].append(run)
+                print(f"{case} ({label}): {run['wall_s']:.1f} s", file=sys.stderr, flush=True)
     res["env"]["load_avg_1min_end"] = os.getloadavg()[0]
     print(table(res))
+    if args.report:
+        for case, c in res["cases"].items():
+            for label, runs in c["runs"].items():
+                print(f"report of {case} ({label}): {runs[0]['report_s']:.1f} s")
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=1))
     return 0

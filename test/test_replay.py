@@ -297,14 +297,16 @@ def test_a_dead_worker_is_replaced_by_solving_here():
     from concurrent.futures import Future
     from concurrent.futures.process import BrokenProcessPool
 
+    from leadscrew_ros.bag.messages import prediction_payloads
     from leadscrew_ros.review.replay import _Segment
     from leadscrew_ros.review.timeline import ModelSpec, predict_jobs
     args = (ModelSpec.of(SqueakModel()), np.array([20.0]), np.array([200.0]),
             np.array([PARAMS.nut_position_m]))
     future = Future()
     future.set_exception(BrokenProcessPool("killed"))
-    (p,) = _Segment(predictions=future, args=args).result()
+    (p,), (payloads,) = _Segment(solved=future, args=args).result()
     assert p == predict_jobs(*args)[0] == SqueakModel().predict(20.0, 200.0)
+    assert payloads == tuple(data for _, data in prediction_payloads(p))
 
 
 def test_output_directory_must_not_be_the_log_directory(bag, capsys):

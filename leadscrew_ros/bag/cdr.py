@@ -28,6 +28,9 @@ _U32 = {e: struct.Struct(e + "I") for e in "<>"}
 _F64 = {e: struct.Struct(e + "d") for e in "<>"}
 _STAMP = {e: struct.Struct(e + "iI") for e in "<>"}
 _LE_HEADER = b"\x00\x01\x00\x00"                          # CDR_LE, no options
+_F64_LE, _U32_LE, _TWO_U32_LE = struct.Struct("<d"), struct.Struct("<I"), struct.Struct("<II")
+_PAD = [bytes(n) for n in range(9)]                       # NUL, alignment padding
+_BOOL_PAYLOADS = {False: _LE_HEADER + b"\x00", True: _LE_HEADER + b"\x01"}
 
 # 'pkg/msg/Type' of the types this module knows.
 FLOAT64, BOOL = "std_msgs/msg/Float64", "std_msgs/msg/Bool"
@@ -227,31 +230,40 @@ class _Encoder:
 
 
 def encode_float64(value: float) -> bytes:
-    """std_msgs/Float64."""
-    e = _Encoder()
-    e.f64(value)
-    return e.payload()
+    """std_msgs/Float64 (the value right after the header: already aligned)."""
+    try:
+        return _LE_HEADER + _F64_LE.pack(value)
+    except struct.error as exc:
+        raise ValueError(f"{value!r} does not fit CDR 'd': {exc}") from None
 
 
 def encode_bool(value: bool) -> bytes:
     """std_msgs/Bool."""
-    e = _Encoder()
-    e.octet(1 if value else 0)
-    return e.payload()
+    return _BOOL_PAYLOADS[bool(value)]
 
 
 def encode_float64_multi_array(dim: tuple[Dimension, ...], data, data_offset: int = 0
                                ) -> bytes:
-    """std_msgs/Float64MultiArray of layout dimensions `dim` and values `data`."""
-    e = _Encoder()
-    e.u32(len(dim))
-    for d in dim:
-        e.string(d.label)
-        e.u32(d.size)
-        e.u32(d.stride)
-    e.u32(data_offset)
-    e.f64s(data)
-    return e.payload()
+    """std_msgs/Float64MultiArray of layout dimensions `dim` and values `data` (written
+    directly: every prediction publishes two)."""
+    out = bytearray(_LE_HEADER)
+    try:
+        out += _U32_LE.pack(len(dim))
+        for d in dim:                  # label, size, stride: ends 4-aligned
+            raw = d.label.encode("utf-8")
+            if b"\x00" in raw:
+                raise ValueError(f"string {d.label!r} holds a NUL, which ends a CDR string")
+            out += _U32_LE.pack(len(raw) + 1)
+            out += raw
+            out += _PAD[1 + -(len(raw) + 1) % 4]          # the NUL and the padding
+            out += _TWO_U32_LE.pack(d.size, d.stride)
+        out += _TWO_U32_LE.pack(data_offset, len(data))
+        if len(data):
+            out += _PAD[-(len(out) - _HEADER) % 8]
+            out += struct.pack(f"<{len(data)}d", *data)
+    except struct.error as exc:
+        raise ValueError(f"a Float64MultiArray field does not fit CDR: {exc}") from None
+    return bytes(out)
 
 
 def encode_joint_state(msg: JointStateData) -> bytes:

@@ -11,6 +11,7 @@ from pathlib import Path
 from ..bag.logfile import (LogInfo, bag_of, cut_off_bags, inspect, log_files, recover, recover_bag)
 from ..live.settings import JointSettings, LiveSettings
 from ..model.fields import help_text
+from ..review.replay import ReplaySettings
 from ..review.timeline import InputSettings
 from .args import (PROG, ROS_ARGS_HELP, CliError, Parser, build_model, finite, print_json,
                    yaml_parameters)
@@ -89,7 +90,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         raise CliError("argument --episodes: must be >= 0")
     model = build_model(args)
     inputs = _replay_inputs(args)
-    from ..review.replay import ReplaySettings, log_name, replay
+    from ..review.replay import log_name, replay
     try:
         settings = ReplaySettings(
             inputs, namespace=args.namespace and _topic(args.namespace),
@@ -232,8 +233,9 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     g.add_argument("--load", dest="nominal_load_n", type=finite, metavar="N",
                    help="nominal axial load [N] from the start, for a log without load topic "
                         "(a load topic in the log overrides it)")
-    g.add_argument("--workers", type=int, default=1, metavar="N",
-                   help="prediction processes for long logs (default 1; 0: one process)")
+    g.add_argument("--workers", type=int, default=ReplaySettings.workers, metavar="N",
+                   help="prediction processes for long logs (default %(default)s; 0: one "
+                        "process)")
     g.add_argument("--no-report", action="store_true", help="skip the PNG report")
     g.add_argument("--episodes", type=int, default=10, metavar="N",
                    help="squeak episodes listed on stdout (default 10)")

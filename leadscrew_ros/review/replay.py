@@ -43,9 +43,8 @@ from pathlib import Path
 from typing import Any, BinaryIO, Callable, TextIO
 
 import numpy as np
-from mcap.writer import CompressionType, Writer
-
 from ..bag import messages, msgdefs
+from ..bag.mcapout import CHUNK_BYTES, McapOut
 from .decimation import Envelope, Reservoir
 from .jsonsafe import json_safe
 from ..bag.logfile import LogError, LogMessage, Topic
@@ -62,7 +61,7 @@ _SEGMENT_MESSAGES = 20_000     # a segment without predictions is written at thi
 # Messages held while their predictions are computed (~250 bytes each): enough to read on
 # through a rest while the workers solve the stroke before it.
 _IN_FLIGHT_MESSAGES = 250_000
-_CHUNK_BYTES = 1 << 20         # annotated MCAP chunk: buffered until this size, then compressed
+_CHUNK_BYTES = CHUNK_BYTES     # annotated MCAP chunk: buffered until this size, then compressed
 EPISODES_KEPT = 1000           # episodes kept in the result (all of them in episodes.json)
 _FREQUENCIES_KEPT = 512        # frequencies per mode and episode kept for its median
 _NAME = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
@@ -74,7 +73,10 @@ class ReplaySettings:
     inputs: InputSettings = field(default_factory=InputSettings)
     namespace: str | None = None      # of the inputs; None: the log's single input namespace
     out_namespace: str | None = None  # of the predictions; None: /replay + input namespace
-    workers: int = 1          # prediction processes for long logs (0: all in this process)
+    # Prediction processes for long logs (0: all in this process). Two: on a 2-core machine a
+    # log whose nut moves at every message keeps both busy solving while this process reads and
+    # writes; where reading is the bottleneck (a log mostly at rest) the second one idles.
+    workers: int = 2
     progress: bool = True     # progress bar on stderr (a terminal only)
 
     def __post_init__(self) -> None:
@@ -306,20 +308,22 @@ def log_name(path: Path) -> str:
 
 
 # ---------------------------------------------------------------------- the annotated log
+Payloads = tuple[bytes, ...]      # of `messages.PREDICTION_TOPICS`, in that order
+
+
 class _AnnotatedWriter:
     """Original channels copied as they are, plus the prediction topics under `namespace`."""
 
     def __init__(self, fh: BinaryIO, namespace: str):
-        self.writer = Writer(fh, compression=CompressionType.ZSTD, chunk_size=_CHUNK_BYTES)
-        self.writer.start(profile="ros2", library="leadscrew_ros replay")
+        self.writer = McapOut(fh, "ros2", "leadscrew_ros replay", _CHUNK_BYTES)
         self._schemas: dict[tuple[str, str, str], int] = {}
         self._channels: dict[int, tuple[Topic, int]] = {}        # id(topic) -> topic, channel
         self._by_value: dict[tuple, int] = {}
-        self._outputs = {topic: self._channel(Topic(
+        self._outputs = [self._channel(Topic(
             f"{namespace}/{topic}", messages.OUTPUT_TYPES[topic], "ros2msg",
             msgdefs.definition(messages.OUTPUT_TYPES[topic]), "cdr",
-            {"offered_qos_profiles": ""})) for topic in messages.PREDICTION_TOPICS}
-        self._sequence = Counter()
+            {"offered_qos_profiles": ""})) for topic in messages.PREDICTION_TOPICS]
+        self._sequence = -1           # of the predictions: 0, 1, ... on every topic
 
     def _channel(self, t: Topic) -> int:
         key = (t.name, t.stored_schema_name, t.schema_encoding, t.schema, t.message_encoding,
@@ -339,34 +343,45 @@ class _AnnotatedWriter:
             entry = self._channels[id(m.topic)] = (m.topic, self._channel(m.topic))
         self.writer.add_message(entry[1], m.log_time_ns, m.data, m.publish_time_ns, m.sequence)
 
-    def prediction(self, log_time_ns: int, p: Prediction) -> None:
-        for topic, data in messages.prediction_payloads(p):
-            self.writer.add_message(self._outputs[topic], log_time_ns, data, log_time_ns,
-                                    self._sequence[topic])
-            self._sequence[topic] += 1
+    def prediction(self, log_time_ns: int, payloads: Payloads) -> None:
+        """One prediction: `payloads` of `messages.PREDICTION_TOPICS`, in that order."""
+        self._sequence += 1
+        add = self.writer.add_message
+        for channel, data in zip(self._outputs, payloads):
+            add(channel, log_time_ns, data, log_time_ns, self._sequence)
 
     def finish(self) -> None:
         self.writer.finish()
 
 
 # ---------------------------------------------------------------------- predictions
+def solve(spec: ModelSpec, speeds: np.ndarray, loads: np.ndarray, model_nuts: np.ndarray
+          ) -> tuple[list[Prediction], list[Payloads | None]]:
+    """`predict_jobs` and the valid predictions' CDR payloads (None outside validity),
+    encoded where they are solved: in a worker, the replaying process only copies bytes."""
+    predictions = predict_jobs(spec, speeds, loads, model_nuts)
+    return predictions, [tuple(data for _, data in messages.prediction_payloads(p))
+                         if p.valid else None for p in predictions]
+
+
 @dataclass
 class _Segment:
     messages: list[LogMessage] = field(default_factory=list)
     jobs: list[Job] = field(default_factory=list)
-    predictions: Future | list[Prediction] | None = None
-    args: tuple = ()                  # of predict_jobs
+    solved: Future | tuple[list[Prediction], list[Payloads | None]] | None = None
+    args: tuple = ()                  # of solve
 
     def done(self) -> bool:
-        return not isinstance(self.predictions, Future) or self.predictions.done()
+        return not isinstance(self.solved, Future) or self.solved.done()
 
-    def result(self) -> list[Prediction]:
-        if isinstance(self.predictions, Future):
+    def result(self) -> tuple[list[Prediction], list[Payloads | None]]:
+        """The predictions of the jobs and their payloads."""
+        if isinstance(self.solved, Future):
             try:
-                self.predictions = self.predictions.result()
+                self.solved = self.solved.result()
             except BrokenProcessPool:      # a worker died (killed, out of memory): solve here
-                self.predictions = predict_jobs(*self.args)
-        return self.predictions
+                self.solved = solve(*self.args)
+        return self.solved
 
 
 class _Solver:
@@ -380,7 +395,7 @@ class _Solver:
 
     def submit(self, seg: _Segment) -> None:
         if not seg.jobs:
-            seg.predictions = []
+            seg.solved = [], []
             return
         seg.args = (self.spec, *(np.array([getattr(j, f) for j in seg.jobs]) for f in
                                    ("speed_rad_s", "load_n", "model_nut_m")))
@@ -393,12 +408,12 @@ class _Solver:
                 initializer=partial(signal.signal, signal.SIGINT, signal.SIG_IGN))
         if self.pool is not None:
             try:
-                seg.predictions = self.pool.submit(predict_jobs, *seg.args)
+                seg.solved = self.pool.submit(solve, *seg.args)
                 return
             except BrokenProcessPool:
                 self.pool.shutdown(wait=False)
                 self.pool, self.workers = None, 0
-        seg.predictions = predict_jobs(*seg.args)
+        seg.solved = solve(*seg.args)
 
     def close(self) -> None:
         if self.pool is not None:
@@ -544,20 +559,20 @@ class _Run:
 
     def _write(self, seg: _Segment) -> None:
         self.held -= len(seg.messages)
-        jobs = iter(zip(seg.jobs, seg.result()))
-        job, p = next(jobs, (None, None))
+        jobs = iter(zip(seg.jobs, *seg.result()))
+        job, p, payloads = next(jobs, (None, None, None))
         for i, m in enumerate(seg.messages):
             self.out.original(m)
             if job is not None and job.index == i:
                 t = (job.clock_ns - self.start_ns) / 1e9
                 if p.valid:
-                    self.out.prediction(job.log_time_ns, p)
+                    self.out.prediction(job.log_time_ns, payloads)
                     self.predictions += 1
                 else:
                     self.no_prediction[p.validity.label] += 1
                 self.plot.add(t, job, p)
                 self.episodes.add(t, p)
-                job, p = next(jobs, (None, None))
+                job, p, payloads = next(jobs, (None, None, None))
         if self.progress is not None:
             self.progress(len(seg.messages))
 

@@ -1,0 +1,171 @@
+# SPDX-License-Identifier: Apache-2.0
+"""A lean chunked MCAP writer for many small messages (the replay's annotated log).
+
+The file is laid out as `mcap.writer.Writer` lays it out with its defaults (header; schemas,
+channels and messages in zstd chunks, each followed by its message indexes; data end; a summary
+with the schemas, channels, statistics, chunk indexes and summary offsets; footer, CRCs of
+chunks and summary), so every MCAP reader reads it the same way. What differs is the cost per
+message: a message is one `struct` pack appended to the chunk buffer (no record objects), and
+the message indexes and statistics are built per chunk, not per message.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from collections import defaultdict
+from typing import BinaryIO
+
+import zstandard
+from mcap.data_stream import RecordBuilder
+from mcap.opcode import Opcode
+from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Schema,
+                          Statistics, SummaryOffset)
+from mcap.writer import MCAP0_MAGIC
+
+CHUNK_BYTES = 1 << 20          # a chunk is compressed once its messages reach this size
+ZSTD_LEVEL = 1                 # chunks of small CDR messages: level 1 is ~2x level 3's speed
+# Message record: opcode, record length, channel id, sequence, log time, publish time.
+_MESSAGE = struct.Struct("<BQHIQQ")
+_MESSAGE_FIELDS = 2 + 4 + 8 + 8
+_INDEX_HEAD = struct.Struct("<BQHI")     # message index: opcode, length, channel, bytes
+
+
+class McapOut:
+    """Writes an MCAP file to `stream` (a binary file opened for writing; not closed here).
+
+    Parameters
+    ----------
+    stream : BinaryIO
+        Where the file goes, from its start.
+    profile, library : str
+        The header's profile (e.g. 'ros2') and writing library.
+    chunk_bytes : int
+        Uncompressed chunk size [bytes] at which a chunk is written.
+    """
+
+    def __init__(self, stream: BinaryIO, profile: str, library: str,
+                 chunk_bytes: int = CHUNK_BYTES):
+        self.stream, self.chunk_bytes = stream, chunk_bytes
+        self._zstd = zstandard.ZstdCompressor(level=ZSTD_LEVEL)
+        self.schemas: list[Schema] = []
+        self.channels: list[Channel] = []
+        self._chunk = bytearray()
+        self._index: defaultdict[int, list[int]] = defaultdict(list)   # channel -> t, offset
+        self._start, self._end = None, 0
+        self._chunk_indexes: list[ChunkIndex] = []
+        self._counts: defaultdict[int, int] = defaultdict(int)
+        self._first, self._last = None, 0
+        stream.write(MCAP0_MAGIC)
+        self._write(Header(profile, library))
+
+    def _write(self, *records) -> int:
+        """Write `records` at the end of the file; returns their length [bytes]."""
+        rb = RecordBuilder()
+        for r in records:
+            r.write(rb)
+        data = rb.end()
+        self.stream.write(data)
+        return len(data)
+
+    def _record(self, record) -> None:
+        """A schema or channel record, into the chunk (as `mcap.writer.Writer` does)."""
+        rb = RecordBuilder()
+        record.write(rb)
+        self._chunk += rb.end()
+
+    def register_schema(self, name: str, encoding: str, data: bytes) -> int:
+        """A new schema; returns its id (1, 2, ...)."""
+        schema = Schema(id=len(self.schemas) + 1, name=name, encoding=encoding, data=data)
+        self.schemas.append(schema)
+        self._record(schema)
+        return schema.id
+
+    def register_channel(self, topic: str, message_encoding: str, schema_id: int,
+                         metadata: dict[str, str]) -> int:
+        """A new channel; returns its id (1, 2, ...)."""
+        channel = Channel(id=len(self.channels) + 1, topic=topic,
+                          message_encoding=message_encoding, schema_id=schema_id,
+                          metadata=dict(metadata))
+        self.channels.append(channel)
+        self._record(channel)
+        return channel.id
+
+    def add_message(self, channel_id: int, log_time_ns: int, data: bytes,
+                    publish_time_ns: int, sequence: int) -> None:
+        """One message; the chunk is written once it is `chunk_bytes` long."""
+        chunk = self._chunk
+        index = self._index[channel_id]
+        index.append(log_time_ns)
+        index.append(len(chunk))
+        chunk += _MESSAGE.pack(Opcode.MESSAGE, _MESSAGE_FIELDS + len(data), channel_id,
+                               sequence, log_time_ns, publish_time_ns)
+        chunk += data
+        if self._start is None or log_time_ns < self._start:
+            self._start = log_time_ns
+        if log_time_ns > self._end:
+            self._end = log_time_ns
+        if len(chunk) >= self.chunk_bytes:
+            self._finish_chunk()
+
+    def _finish_chunk(self) -> None:
+        if not self._index:            # no message yet: schemas and channels wait
+            return
+        data = bytes(self._chunk)
+        compressed = self._zstd.compress(data)
+        start = self.stream.tell()
+        length = self._write(Chunk(
+            message_start_time=self._start, message_end_time=self._end,
+            uncompressed_size=len(data), uncompressed_crc=zlib.crc32(data), compression="zstd",
+            data=compressed))
+        offsets, index = {}, bytearray()
+        for channel_id, entries in self._index.items():
+            offsets[channel_id] = start + length + len(index)
+            body = struct.pack(f"<{len(entries)}Q", *entries)
+            index += _INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + len(body), channel_id,
+                                      len(body))
+            index += body
+            self._counts[channel_id] += len(entries) // 2
+        self.stream.write(index)
+        self._chunk_indexes.append(ChunkIndex(
+            message_start_time=self._start, message_end_time=self._end,
+            chunk_start_offset=start, chunk_length=length, message_index_offsets=offsets,
+            message_index_length=len(index), compression="zstd",
+            compressed_size=len(compressed), uncompressed_size=len(data)))
+        self._first = self._start if self._first is None else min(self._first, self._start)
+        self._last = max(self._last, self._end)
+        self._chunk.clear()
+        self._index.clear()
+        self._start, self._end = None, 0
+
+    def finish(self) -> None:
+        """The last chunk, the summary and the footer."""
+        self._finish_chunk()           # schemas and channels after it: in the summary only
+        self._write(DataEnd(0))
+        summary_start = self.stream.tell()
+        rb, offsets = RecordBuilder(), []
+        stats = Statistics(
+            message_count=sum(self._counts.values()), schema_count=len(self.schemas),
+            channel_count=len(self.channels), attachment_count=0, metadata_count=0,
+            chunk_count=len(self._chunk_indexes), message_start_time=self._first or 0,
+            message_end_time=self._last, channel_message_counts=dict(self._counts))
+        for opcode, group in ((Opcode.SCHEMA, self.schemas), (Opcode.CHANNEL, self.channels),
+                              (Opcode.STATISTICS, [stats]),
+                              (Opcode.CHUNK_INDEX, self._chunk_indexes),
+                              (Opcode.ATTACHMENT_INDEX, []), (Opcode.METADATA_INDEX, [])):
+            group_start = rb.count
+            for record in group:
+                record.write(rb)
+            offsets.append(SummaryOffset(group_opcode=opcode,
+                                         group_start=summary_start + group_start,
+                                         group_length=rb.count - group_start))
+        offset_start = summary_start + rb.count
+        for o in offsets:
+            o.write(rb)
+        summary = rb.end()
+        crc = zlib.crc32(struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, offset_start),
+                         zlib.crc32(summary))
+        self.stream.write(summary)
+        self._write(Footer(summary_start=summary_start, summary_offset_start=offset_start,
+                           summary_crc=crc))
+        self.stream.write(MCAP0_MAGIC)
