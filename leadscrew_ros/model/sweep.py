@@ -336,7 +336,8 @@ def find_roots(f: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray
     lo, hi : numpy.ndarray
         Ends of the brackets, in the unit of x.
     f_lo, f_hi : numpy.ndarray
-        The functions at the ends; of opposite signs (or zero) in every bracket.
+        The functions at the ends; of opposite signs, or one of them zero (that end is the
+        root).
     xtol : numpy.ndarray
         Absolute tolerance per bracket, in the unit of x: a bracket ends narrower than
         ``xtol + 4 eps |x|``.
@@ -345,8 +346,8 @@ def find_roots(f: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray
     -------
     numpy.ndarray
         Per bracket the root of the straight line through the ends of the last bracket
-        (within it: far closer to the root than its width when f is smooth); where `f` is NaN
-        inside a bracket, the end with the smaller ``|f|`` found before.
+        (within it: far closer to the root than its width when f is smooth); where an end is
+        a root, or `f` is NaN inside the bracket, the end with the smaller ``|f|``.
     """
     x1, x2, f1, f2 = (np.array(v, float) for v in (lo, hi, f_lo, f_hi))
     x3, f3 = x2.copy(), f2.copy()
@@ -355,7 +356,7 @@ def find_roots(f: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.where(f1 != f2, f1 / (f1 - f2), 0.5)                   # regula falsi first
         tl = np.zeros_like(x1)
-        active = np.flatnonzero((f1 != 0) & (f2 != 0))
+        active = np.flatnonzero(np.sign(f1) * np.sign(f2) < 0)
         while active.size:
             c = active
             step = np.clip(t[c], tl[c], 1 - tl[c])
@@ -383,7 +384,8 @@ def find_roots(f: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray
             t[c] = np.where(use, t_iqi, 0.5)
             active = c
         inside = x1 + np.where(f1 != f2, f1 / (f1 - f2), 0.0) * (x2 - x1)
-    return np.where(f1 == 0, x1, np.where(f2 == 0, x2, inside))
+    ends = np.where(np.abs(f1) <= np.abs(f2), x1, x2)
+    return np.where(np.sign(f1) * np.sign(f2) < 0, inside, ends)
 
 
 def _crossings(g: np.ndarray) -> np.ndarray:
