@@ -616,7 +616,7 @@ def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = Non
                 continue
             predictions.append(sub.predict(fixed["speed_rad_s"], fixed["load_n"]))
     growth = np.array([p.max_growth_rate if p.valid else np.nan for p in predictions])
-    f = _growth_at(model, fixed, (axis,), np.zeros((1, 1)), np.zeros(1, int))
+    f = _growth_at(model, fixed, (axis,), np.zeros((1, 1)), np.zeros(1, int))  # one cell
     boundaries = refine_crossings(lambda v: f(v, np.zeros(v.size, int)), values, growth)
     return SweepResult(axis, values, fixed, predictions, boundaries,
                        unstable_intervals(values, growth, boundaries))
