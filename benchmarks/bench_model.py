@@ -32,10 +32,11 @@ from leadscrew_ros.model.contact import contact_integrals
 from leadscrew_ros.model.modes import modal_basis
 from leadscrew_ros.model.scatter import Scatter
 from leadscrew_ros.model.stability import classify, eig_both
-from leadscrew_ros.model.sweep import _CHUNK, growth_field
+from leadscrew_ros.model.sweep import _CHUNK, growth_field, stability_map
 
 TARGET_POINT_RATIO = 1.5     # predict / bare eig
 TARGET_MAP_RATIO = 1.2       # growth_field / bare eigvals, per point
+TARGET_REFINED_MAP_RATIO = 1.1   # stability_map (grid + refined boundary) / bare eigvals
 
 # Work per benchmark: default run ~70 s, --quick ~5 s (2-core machine).
 CONFIGS = {
@@ -125,8 +126,9 @@ def naive_state_matrix(model: SqueakModel, speed: float, load: float) -> np.ndar
 
 
 def bench_map(model: SqueakModel, grid: int, rounds: int, naive_points: int) -> dict:
-    """points/s of growth_field on a grid x grid speed x load map vs bare batched eigvals on
-    the same matrices (pre-built in growth_field's chunks) vs a naive per-point assembly."""
+    """points/s of growth_field on a grid x grid speed x load map, and of stability_map (the
+    same grid plus its refined stability boundary), vs bare batched eigvals on the same
+    matrices (pre-built in growth_field's chunks) vs a naive per-point assembly."""
     speed = np.linspace(1.0, 100.0, grid)
     load = np.linspace(10.0, 600.0, grid)
     s_flat, f_flat = (a.ravel() for a in np.broadcast_arrays(speed[None, :], load[:, None]))
@@ -142,6 +144,12 @@ def bench_map(model: SqueakModel, grid: int, rounds: int, naive_points: int) -> 
     def map_():
         growth_field(model, speed[None, :], load[:, None])
 
+    boundary_points = []
+
+    def refined():
+        boundary_points[:] = [len(stability_map(model, "speed_rad_s", speed, "load_n",
+                                                load).boundary)]
+
     def eigvals():
         for a in chunks:
             np.linalg.eigvals(a)
@@ -152,14 +160,19 @@ def bench_map(model: SqueakModel, grid: int, rounds: int, naive_points: int) -> 
 
     growth_field(model, speed[None, :8], load[:8, None])     # warm up on a small map only
     np.linalg.eigvals(chunks[0])
-    raw, cpu = interleaved(dict(map=map_, eigvals=eigvals, naive=naive), rounds, warmup=0)
-    n = {"map": s_flat.size, "eigvals": s_flat.size, "naive": naive_points}
+    stability_map(model, "speed_rad_s", speed[:8], "load_n", load[:8])
+    raw, cpu = interleaved(dict(map=map_, refined=refined, eigvals=eigvals, naive=naive),
+                           rounds, warmup=0)
+    n = {"map": s_flat.size, "refined": s_flat.size, "eigvals": s_flat.size,
+         "naive": naive_points}
     pps = {k: [n[k] / t for t in v] for k, v in raw.items()}
     med = {k: median(v) for k, v in pps.items()}
     return dict(grid=[grid, grid], points=s_flat.size, chunk=_CHUNK, naive_points=naive_points,
                 samples_s=raw, samples_points_per_s=pps, median_points_per_s=med,
                 samples_cpu_s=cpu, cpu_per_wall={k: paired_ratio(cpu[k], raw[k]) for k in raw},
                 ratio=paired_ratio(raw["map"], raw["eigvals"]),
+                boundary_points=boundary_points[0],
+                refined_ratio=paired_ratio(raw["refined"], raw["eigvals"]),
                 speedup_over_naive=med["map"] / med["naive"])
 
 
@@ -212,6 +225,10 @@ def table(res: dict) -> str:
         ("2 map", f"`growth_field` {g} speed×load", f"{pps['map']:,.0f} pts/s",
          f"bare `eigvals` (chunks of {mp['chunk']}) {pps['eigvals']:,.0f} pts/s",
          f"{mp['ratio']:.2f}×", verdict(mp["ratio"], TARGET_MAP_RATIO)),
+        ("", f"`stability_map` {g} speed×load: grid + refined boundary "
+         f"({mp['boundary_points']} points)", f"{pps['refined']:,.0f} pts/s",
+         f"bare `eigvals` {pps['eigvals']:,.0f} pts/s", f"{mp['refined_ratio']:.2f}×",
+         verdict(mp["refined_ratio"], TARGET_REFINED_MAP_RATIO)),
         ("", "CPU time / wall time of the map (1 = one busy thread; ~2 = an idle BLAS "
          "worker thread spinning on the second core)", f"{mp['cpu_per_wall']['map']:.2f}",
          f"bare `eigvals` {mp['cpu_per_wall']['eigvals']:.2f}", "", ""),
@@ -244,7 +261,8 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     model = SqueakModel()
     res = dict(mode=mode, config=cfg, env=environment(), n_modes=model.params.n_modes,
-               targets=dict(point_ratio=TARGET_POINT_RATIO, map_ratio=TARGET_MAP_RATIO))
+               targets=dict(point_ratio=TARGET_POINT_RATIO, map_ratio=TARGET_MAP_RATIO,
+                            refined_map_ratio=TARGET_REFINED_MAP_RATIO))
     res["point"] = bench_point(model, cfg["point_rounds"], cfg["point_loops"])
     res["map"] = bench_map(model, cfg["map_grid"], cfg["map_rounds"], cfg["naive_points"])
     res["geometry"] = bench_geometry(model, cfg["geometry_rounds"])

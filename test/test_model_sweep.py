@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from leadscrew_ros.model import ParameterError, SqueakModel
-from leadscrew_ros.model.sweep import growth_field, stability_map, sweep
+from leadscrew_ros.model import sweep as sweep_module
+from leadscrew_ros.model.sweep import find_roots, growth_field, stability_map, sweep
 
 
 @pytest.fixture(scope="module")
@@ -97,3 +98,40 @@ def test_divergence_is_reported_separately_from_squeak(model):
     assert gf.divergence_rate[0] == pytest.approx(p.divergence_rates[0], rel=1e-9)
     q = small.predict(20.0, 50.0)
     assert gf.divergence_rate[1] == pytest.approx(max(q.divergence_rates, default=0.0), rel=1e-9)
+
+
+def test_find_roots_solves_all_brackets_together():
+    """Different functions per bracket, one batched call per iteration: smooth roots to the
+    tolerance and far below it, a root at an end, and NaN inside a bracket (no crash, an end)."""
+    c = np.array([2.0, 3.0, 10.0, 0.125, 7.0])
+    calls = []
+
+    def f(x, cells):
+        calls.append(cells.size)
+        y = x ** 3 - c[cells]
+        return np.where(cells == 4, np.nan, y)
+
+    lo, hi = np.array([0.0, 1.0, 2.0, 0.5, 0.0]), np.array([2.0, 2.0, 3.0, 1.0, 2.0])
+    roots = find_roots(f, lo, hi, lo ** 3 - c, hi ** 3 - c, np.full(5, 1e-9))
+    np.testing.assert_allclose(roots[:4], np.cbrt(c[:4]), rtol=1e-12)
+    assert roots[3] == lo[3]                                         # f = 0 at an end
+    assert roots[4] in (0.0, 2.0)                                    # undefined inside
+    assert len(calls) <= 12 and calls[0] == 4                        # batched over brackets
+
+
+def test_map_boundary_is_refined_in_a_few_batched_calls(model, monkeypatch):
+    """The whole boundary (rows and columns) costs a few growth_field calls, not one per
+    root, and its points are as exact as a scalar root finder's."""
+    calls = []
+    real = sweep_module.growth_field
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(sweep_module, "growth_field", counting)
+    m = stability_map(model, "speed_rad_s", np.linspace(1.0, 100.0, 30), "load_n",
+                      np.linspace(10.0, 600.0, 30))
+    assert len(m.boundary) > 40 and len(calls) <= 10
+    x, y = np.array(m.boundary).T
+    assert np.abs(real(model, x, y).max_growth_rate).max() < 1e-8

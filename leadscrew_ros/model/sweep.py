@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
 """Parameter sweeps and stability maps, batched over operating points, with stability
-boundaries refined by root finding (brentq on the largest squeak growth rate).
+boundaries refined by root finding on the largest squeak growth rate, batched over all the
+sign changes of the grid (`find_roots`).
 
 An axis is the speed (`speed_rad_s`), the load (`load_n`) or any numeric `ScrewParameters`
 field. Points that share all parameter values are solved in one batched eigenproblem; only a
@@ -18,7 +19,6 @@ from dataclasses import dataclass, field
 from typing import Callable, Iterable
 
 import numpy as np
-from scipy.optimize import brentq
 
 from .display import exact
 from .parameters import ParameterError, field_info, field_names
@@ -28,6 +28,7 @@ from .stability import max_divergence_rate, max_growth_rate
 OPERATING_AXES = ("speed_rad_s", "load_n")
 REFERENCE_SPEED_RAD_S = 20.0        # fixed speed of the paper's Figs. 9 and 10
 PROBABILITY_LEVELS = (0.01, 0.1, 0.5, 0.9)    # iso-P(squeak) contours and crossings
+ROOT_RTOL = 1e-9                    # stability boundaries: tolerance relative to the grid span
 _CHUNK = 1024                       # points per batched eigen-solve at the reference size
 REFERENCE_STATE_SIZE = 36           # state size of the default model (6 bending + 6 torsion)
 MAX_POINTS = 1_000_000              # points of one map or sweep at the reference state size
@@ -306,22 +307,103 @@ def _levels_key(level: float) -> str:
     return f"{level:g}"
 
 
-def _scalar_growth(model: SqueakModel, fixed: dict[str, float], axis: str) -> Callable[[float], float]:
-    def f(x: float) -> float:
-        point = dict(fixed, **{axis: x})
+def _growth_at(model: SqueakModel, fixed: dict[str, float], axes: tuple[str, ...],
+               coords: np.ndarray, vary: np.ndarray
+               ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """Growth rate [1/s] of cells as one batched function for `find_roots`: cell c sits at
+    `coords[c]` on `axes`, its axis `vary[c]` set to the trial value."""
+    def f(values: np.ndarray, cells: np.ndarray) -> np.ndarray:
+        at = coords[cells].copy()
+        at[np.arange(cells.size), vary[cells]] = values
+        point = dict(fixed, **{a: at[:, k] for k, a in enumerate(axes)})
         speed, load = point.pop("speed_rad_s"), point.pop("load_n")
-        return float(growth_field(model, speed, load, **point).max_growth_rate)
+        return growth_field(model, speed, load, **point).max_growth_rate
     return f
 
 
-def refine_crossings(f: Callable[[float], float], x: np.ndarray, g: np.ndarray,
-                     rtol: float = 1e-9) -> list[float]:
-    """Roots of f between consecutive grid points where g changes sign (both valid).
+def find_roots(f: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray,
+               hi: np.ndarray, f_lo: np.ndarray, f_hi: np.ndarray, xtol: np.ndarray
+               ) -> np.ndarray:
+    """Roots of many bracketed scalar functions at once (Chandrupatla's method: inverse
+    quadratic interpolation, bisection when it would be slow), one batched call of `f` per
+    iteration over the brackets not yet converged.
 
     Parameters
     ----------
     f : callable
-        Scalar growth rate [1/s] as a function of the axis value (in the axis unit).
+        ``f(x, cells)``: the functions of the brackets `cells` (indices) at `x`, both arrays
+        of the same length; NaN where a function is undefined.
+    lo, hi : numpy.ndarray
+        Ends of the brackets, in the unit of x.
+    f_lo, f_hi : numpy.ndarray
+        The functions at the ends; of opposite signs, or one of them zero (that end is the
+        root).
+    xtol : numpy.ndarray
+        Absolute tolerance per bracket, in the unit of x: a bracket ends narrower than
+        ``xtol + 4 eps |x|``.
+
+    Returns
+    -------
+    numpy.ndarray
+        Per bracket the root of the straight line through the ends of the last bracket
+        (within it: far closer to the root than its width when f is smooth); where an end is
+        a root, or `f` is NaN inside the bracket, the end with the smaller ``|f|``.
+    """
+    x1, x2, f1, f2 = (np.array(v, float) for v in (lo, hi, f_lo, f_hi))
+    x3, f3 = x2.copy(), f2.copy()
+    half_tol = 0.5 * np.broadcast_to(np.asarray(xtol, float), x1.shape)
+    eps2 = 2 * np.finfo(float).eps
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(f1 != f2, f1 / (f1 - f2), 0.5)                   # regula falsi first
+        tl = np.zeros_like(x1)
+        active = np.flatnonzero(np.sign(f1) * np.sign(f2) < 0)
+        while active.size:
+            c = active
+            step = np.clip(t[c], tl[c], 1 - tl[c])
+            xt = x1[c] + step * (x2[c] - x1[c])
+            ft = f(xt, c)
+            bad = c[~np.isfinite(ft)]                  # undefined inside: stop at the best end
+            better = np.abs(f1[bad]) <= np.abs(f2[bad])
+            x1[bad] = x2[bad] = np.where(better, x1[bad], x2[bad])
+            f1[bad] = f2[bad] = np.where(better, f1[bad], f2[bad])
+            ok = np.isfinite(ft)
+            c, xt, ft = c[ok], xt[ok], ft[ok]
+            same = np.sign(ft) == np.sign(f1[c])
+            x3[c], f3[c] = np.where(same, x1[c], x2[c]), np.where(same, f1[c], f2[c])
+            x2[c], f2[c] = np.where(same, x2[c], x1[c]), np.where(same, f2[c], f1[c])
+            x1[c], f1[c] = xt, ft
+            best = np.where(np.abs(f1[c]) < np.abs(f2[c]), x1[c], x2[c])
+            tl[c] = (eps2 * np.abs(best) + half_tol[c]) / np.abs(x2[c] - x1[c])
+            c = c[(f1[c] != 0) & (tl[c] <= 0.5)]
+            xi = (x1[c] - x2[c]) / (x3[c] - x2[c])
+            phi = (f1[c] - f2[c]) / (f3[c] - f2[c])
+            t_iqi = (f1[c] / (f2[c] - f1[c]) * f3[c] / (f2[c] - f3[c])
+                     + (x3[c] - x1[c]) / (x2[c] - x1[c]) * f1[c] / (f3[c] - f1[c])
+                     * f2[c] / (f3[c] - f2[c]))
+            use = (phi ** 2 < xi) & ((1 - phi) ** 2 < 1 - xi) & np.isfinite(t_iqi)
+            t[c] = np.where(use, t_iqi, 0.5)
+            active = c
+        inside = x1 + np.where(f1 != f2, f1 / (f1 - f2), 0.0) * (x2 - x1)
+    ends = np.where(np.abs(f1) <= np.abs(f2), x1, x2)
+    return np.where(np.sign(f1) * np.sign(f2) < 0, inside, ends)
+
+
+def _crossings(g: np.ndarray) -> np.ndarray:
+    """Indices i (along the last axis, with the leading indices first) where g changes sign
+    between i and i + 1, both finite; in row-major order."""
+    a, b = g[..., :-1], g[..., 1:]
+    return np.argwhere(np.isfinite(a) & np.isfinite(b) & ((a > 0) != (b > 0)))
+
+
+def refine_crossings(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, g: np.ndarray,
+                     rtol: float = ROOT_RTOL) -> list[float]:
+    """Roots of f between consecutive grid points where g changes sign (both valid), all
+    refined together (`find_roots`: one call of f per iteration).
+
+    Parameters
+    ----------
+    f : callable
+        Growth rate [1/s] at an array of axis values (in the axis unit), of the same shape.
     x : numpy.ndarray
         Grid along the axis, in the axis unit.
     g : numpy.ndarray
@@ -334,12 +416,15 @@ def refine_crossings(f: Callable[[float], float], x: np.ndarray, g: np.ndarray,
     list of float
         The refined roots (stability boundaries) in the axis unit, in grid order.
     """
-    roots, xtol = [], rtol * float(np.ptp(x)) if len(x) > 1 else 0.0
-    for i in range(len(x) - 1):
-        a, b = g[i], g[i + 1]
-        if np.isfinite(a) and np.isfinite(b) and (a > 0) != (b > 0):
-            roots.append(brentq(f, x[i], x[i + 1], xtol=xtol, rtol=1e-12))
-    return roots
+    x, g = np.asarray(x, float), np.asarray(g, float)
+    i = _crossings(g)[:, 0]
+    return find_roots(lambda values, cells: f(values), x[i], x[i + 1], g[i], g[i + 1],
+                      _xtol(x, rtol)).tolist()
+
+
+def _xtol(x: np.ndarray, rtol: float) -> float:
+    """Absolute root tolerance on a grid: `rtol` times its span."""
+    return rtol * float(np.ptp(x)) if len(x) > 1 else 0.0
 
 
 def _fixed(model: SqueakModel, speed_rad_s: float | None, load_n: float | None) -> dict[str, float]:
@@ -531,9 +616,32 @@ def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = Non
                 continue
             predictions.append(sub.predict(fixed["speed_rad_s"], fixed["load_n"]))
     growth = np.array([p.max_growth_rate if p.valid else np.nan for p in predictions])
-    boundaries = refine_crossings(_scalar_growth(model, fixed, axis), values, growth)
+    f = _growth_at(model, fixed, (axis,), np.zeros((1, 1)), np.zeros(1, int))  # one cell
+    boundaries = refine_crossings(lambda v: f(v, np.zeros(v.size, int)), values, growth)
     return SweepResult(axis, values, fixed, predictions, boundaries,
                        unstable_intervals(values, growth, boundaries))
+
+
+def _refined_boundary(model: SqueakModel, fixed: dict[str, float],
+                      x_axis: tuple[str, np.ndarray], y_axis: tuple[str, np.ndarray],
+                      g: np.ndarray) -> list[tuple[float, float]]:
+    """Zero contour of the growth rate `g` (len(y) x len(x)) refined along the rows, then the
+    columns, all in one `find_roots`: ``(x, y)`` points in the axis units, in grid order."""
+    (xa, x), (ya, y) = x_axis, y_axis
+    rows, cols = _crossings(g), _crossings(g.T)                   # (j, i), (i, j)
+    coords = np.concatenate([np.column_stack([x[rows[:, 1]], y[rows[:, 0]]]),
+                             np.column_stack([x[cols[:, 0]], y[cols[:, 1]]])])
+    vary = np.repeat([0, 1], [len(rows), len(cols)])
+    j, i = rows.T
+    ci, cj = cols.T
+    roots = find_roots(
+        _growth_at(model, fixed, (xa, ya), coords, vary),
+        np.concatenate([x[i], y[cj]]), np.concatenate([x[i + 1], y[cj + 1]]),
+        np.concatenate([g[j, i], g[cj, ci]]), np.concatenate([g[j, i + 1], g[cj + 1, ci]]),
+        np.repeat([_xtol(x, ROOT_RTOL), _xtol(y, ROOT_RTOL)], [len(rows), len(cols)]))
+    return [(r, yv) if k == 0 else (xv, r)
+            for k, r, xv, yv in zip(vary.tolist(), roots.tolist(), coords[:, 0].tolist(),
+                                    coords[:, 1].tolist())]
 
 
 @dataclass(frozen=True)
@@ -689,13 +797,7 @@ def stability_map(model: SqueakModel, x_axis: str, x, y_axis: str, y,
     speed, load = grid.pop("speed_rad_s"), grid.pop("load_n")
     gf = growth_field(model, speed, load, progress=progress, **grid)
     g = gf.max_growth_rate
-    boundary = []
-    for j, yv in enumerate(y.tolist()):
-        f = _scalar_growth(model, dict(fixed, **{y_axis: yv}), x_axis)
-        boundary += [(r, yv) for r in refine_crossings(f, x, g[j])]
-    for i, xv in enumerate(x.tolist()):
-        f = _scalar_growth(model, dict(fixed, **{x_axis: xv}), y_axis)
-        boundary += [(xv, r) for r in refine_crossings(f, y, g[:, i])]
+    boundary = _refined_boundary(model, fixed, (x_axis, x), (y_axis, y), g)
     prob = probability_field(model, speed, load, progress=progress, **grid) \
         if probability else (None, None)
     return MapResult(x_axis, x, y_axis, y, fixed, gf, boundary, *prob)

@@ -1,0 +1,105 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Quick regression guard: the benchmarks' key ratios in one short run (~10 s on 2 cores).
+
+    .venv/bin/python benchmarks/quick.py
+
+Prints one Markdown table of ratios (each measured in this run against a bare LAPACK
+eigen-solve, or the log duration over the wall time for the replay) with the target of the
+full benchmark it stands for, and the machine load (1-minute load average at start and end).
+The ratios come from the full benchmarks' own functions at smaller sizes: `bench_point` and
+`bench_map` (48x48) of bench_model.py, `live_update_ratio` of bench_probability.py, `run` of
+bench_contact.py (6/6 modes), and `replay` of a 2-minute duty-cycle log.
+Nothing is asserted: a missed target prints "MISSED" and the exit code stays 0, so a
+slowdown shows in every CI log (.ci/run) without failing it; only a crash fails. The runs
+are short and the machine may be busy: read a MISSED against the load, then run the full
+benchmark (its name is in the table) before concluding anything.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import time
+from statistics import median
+
+import bench_contact
+import bench_model
+import bench_probability
+import bench_replay
+
+from leadscrew_ros.bag.synthetic import DutyCycle
+from leadscrew_ros.model import SqueakModel
+from leadscrew_ros.model.scatter import Scatter
+from leadscrew_ros.review.replay import ReplaySettings, replay
+from leadscrew_ros.review.timeline import InputSettings
+
+MAP_GRID = 48                # speed x load points per side (the full benchmark: 200)
+REPLAY_LOG_S = 120.0         # the duty-cycle log of bench_replay.py, shortened
+REPLAY_ROUNDS = 1
+
+
+def replay_ratio(duration_s: float, rounds: int) -> float:
+    """Log duration over the median wall time of `replay` of a duty-cycle log (generated once
+    and cached, as bench_replay.py does; one process: no worker start-up in so short a
+    log)."""
+    cycle = DutyCycle(duration_s=duration_s)
+    bag, _ = bench_replay.cached_log(cycle, regenerate=False)
+    model, walls = SqueakModel(), []
+    for _ in range(rounds):
+        with tempfile.TemporaryDirectory(prefix="bench_quick_") as out:
+            t0 = time.perf_counter()
+            replay(bag, model, out, ReplaySettings(InputSettings(joint_name=cycle.joint_name),
+                                                   workers=0, progress=False))
+            walls.append(time.perf_counter() - t0)
+    return duration_s / median(walls)
+
+
+def rows() -> list[tuple[str, str, float, str, bool | None]]:
+    """(what, full benchmark, ratio, target text, met: None without a target) per
+    measurement."""
+    model = SqueakModel()
+    point = bench_model.bench_point(model, rounds=9, loops=2)
+    mp = bench_model.bench_map(model.with_scatter(Scatter({})), MAP_GRID, rounds=3,
+                               naive_points=4)
+    _, _, live = bench_probability.live_update_ratio(SqueakModel(), rounds=5, repeat=50)
+    contact = bench_contact.run(6, rounds=5, calls=30)
+    x_real_time = replay_ratio(REPLAY_LOG_S, REPLAY_ROUNDS)
+    le = "≤ {:g}×".format
+    return [
+        ("`predict` without scatter / bare `eig`", "bench_model.py 1", point["ratio"],
+         le(bench_model.TARGET_POINT_RATIO), point["ratio"] <= bench_model.TARGET_POINT_RATIO),
+        ("live update with P(squeak) (`predict`) / bare `eig`", "bench_probability.py", live,
+         le(bench_probability.TARGET_LIVE_RATIO), live <= bench_probability.TARGET_LIVE_RATIO),
+        (f"`growth_field` {MAP_GRID}×{MAP_GRID} map / bare batched `eigvals`",
+         "bench_model.py 2", mp["ratio"], le(bench_model.TARGET_MAP_RATIO),
+         mp["ratio"] <= bench_model.TARGET_MAP_RATIO),
+        (f"`stability_map` {MAP_GRID}×{MAP_GRID} (grid + refined boundary, "
+         f"{mp['boundary_points']} points) / bare batched `eigvals` (the target is for "
+         "200×200: a small grid has more boundary per point)", "bench_model.py 2",
+         mp["refined_ratio"], le(bench_model.TARGET_REFINED_MAP_RATIO),
+         mp["refined_ratio"] <= bench_model.TARGET_REFINED_MAP_RATIO),
+        ("new nut position (model rebuild) / bare `eig`", "bench_contact.py",
+         contact["rebuild_ratio"], le(bench_contact.TARGET),
+         contact["rebuild_ratio"] <= bench_contact.TARGET),
+        (f"replay of a {REPLAY_LOG_S:g} s duty-cycle log, one process: real time / wall time "
+         f"(opening and closing the bags dominate so short a log; the target ≥ "
+         f"{bench_replay.TARGET_X_REAL_TIME:g}× is for the 1 h log)", "bench_replay.py",
+         x_real_time, "–", None),
+    ]
+
+
+def main() -> int:
+    load0, t0 = os.getloadavg()[0], time.perf_counter()
+    table = rows()
+    print("| measure | full benchmark | ratio | target |\n|---|---|---:|---|")
+    for what, full, ratio, target, met in table:
+        verdict = "" if met is None else " met" if met else " MISSED"
+        print(f"| {what} | {full} | {ratio:.2f}× | {target}{verdict} |")
+    print(f"\nquick mode (ratios from this run; no assertions) · {os.cpu_count()} CPUs · load "
+          f"avg {load0:.2f} → {os.getloadavg()[0]:.2f} · {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
