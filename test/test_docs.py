@@ -34,6 +34,7 @@ FUNCTIONS = [
     sweep.stability_map,
     sweep.growth_field,
     sweep.refine_crossings,
+    sweep.find_roots,
     sweep.unstable_intervals,
     sweep.SweepResult.as_dict,
     sweep.SweepResult.probability_crossings,
@@ -151,6 +152,7 @@ def test_the_public_api_is_covered():
     for module, names in ((predictor, ("SqueakModel", "check_operating_point")),
                           (sweep, ("sweep", "stability_map", "growth_field", "refine_crossings",
                                    "unstable_intervals", "probability_field", "level_crossings",
+                                   "find_roots",
                                    "SweepResult", "MapResult")),
                           (tracking, ("track_modes", "Branch")),
                           (parameters, ("ScrewParameters",))):

@@ -333,11 +333,14 @@ def find_roots(f: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray
     f : callable
         ``f(x, cells)``: the functions of the brackets `cells` (indices) at `x`, both arrays
         of the same length; NaN where a function is undefined.
-    lo, hi : numpy.ndarray
-        Ends of the brackets, in the unit of x.
-    f_lo, f_hi : numpy.ndarray
-        The functions at the ends; of opposite signs, or one of them zero (that end is the
-        root).
+    lo : numpy.ndarray
+        Lower ends of the brackets, in the unit of x.
+    hi : numpy.ndarray
+        Upper ends of the brackets, in the unit of x.
+    f_lo : numpy.ndarray
+        The functions at `lo`; of the opposite sign to `f_hi`, or zero (that end is the root).
+    f_hi : numpy.ndarray
+        The functions at `hi`.
     xtol : numpy.ndarray
         Absolute tolerance per bracket, in the unit of x: a bracket ends narrower than
         ``xtol + 4 eps |x|``.
