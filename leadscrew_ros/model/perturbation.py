@@ -128,7 +128,7 @@ class _Expansion:
         damping[np.arange(n), n + np.arange(n)] = -2 * geometry.basis.omega_rad_s   # (A.1)
         # dA per unit coefficient (W1, W5q, W3, W5qdot) and per unit of xi, lower half
         self.units = np.concatenate([-geometry.lower_half_units[:4].reshape(4 * n, 2 * n),
-                                     damping])            # dA = -[0; U_k], [0; damping]
+                                     damping]).astype(complex)  # dA = -[0; U_k], [0; damping]
 
     def level_slope(self, mk, dm, d, dm_d, speed: float, load: float) -> tuple:
         """Friction level l and slope s of `kernels.scales` (arrays or floats; dm = mu_s -
@@ -167,8 +167,8 @@ class _Expansion:
         r = np.einsum("ij,kji->ki", pairs.y_h[:, n:],
                       (self.units @ pairs.x).reshape(5, n, -1)).real
         # level l: W1 = sign l, W3 = l / |Omega|; slope s: W5q = Omega s, W5qdot = s
-        rates = np.stack([math.copysign(1.0, speed) * r[0] + r[2] / abs(speed),
-                          speed * r[1] + r[3], r[4]])                  # (3, M)
+        rates = np.array([[math.copysign(1.0, speed), 0.0, 1.0 / abs(speed), 0.0, 0.0],
+                          [0.0, speed, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0]]) @ r  # (3, M)
         threshold = GROWTH_TOL * np.abs(pairs.lam) - pairs.lam.real    # growth beyond it
         reach = [abs(change[0]).max(), abs(change[1]).max(), reach_damping]
         candidates = (np.flatnonzero(np.dot(reach, np.abs(rates)) > threshold) if prune
