@@ -256,14 +256,6 @@ class FirstOrderProbability:
             corners.append((index, weight))
         return expansions, corners
 
-    def nominal_level_slope(self, speed: float, load: float) -> tuple[float, float]:
-        """`level_slope` at the nominal friction parameters (floats)."""
-        p = self.params
-        dm = p.mu_static - p.mu_kinetic
-        level, slope = self.level_slope(p.mu_kinetic, dm, p.friction_decay_s_m,
-                                        dm * p.friction_decay_s_m, speed, load)
-        return float(level), float(slope)
-
     def margins(self, pairs: EigenPairs, load: float) -> np.ndarray:
         """Per sample, the largest growth rate beyond the squeak threshold over the modes
         [1/s] (> 0: squeak), shape (count,); `pairs` is the nominal eigen-solve."""
