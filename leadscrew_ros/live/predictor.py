@@ -341,11 +341,9 @@ class LivePredictor:
         if self._search is not None and self._search[1] == key:
             return                # a search of this bin is under way: re-checked when it ends
         known = next((b for b in self._bands.get(key, ()) if b.contains(p.speed_rad_s)), None)
-        # The search predicts on a model of its own (same geometry and samples): a model's
-        # probability estimator works in scratch arrays, so one instance must never predict
-        # on two threads at once (shared, P came out wrong now and then).
-        job = partial(band_around, model.with_scatter(model.scatter), p.load_n, p.speed_rad_s,
-                      margin, known=known, safe_probability=self.settings.safe_probability)
+        # predict is thread-safe: the search shares the executor's model (and its samples)
+        job = partial(band_around, model, p.load_n, p.speed_rad_s, margin, known=known,
+                      safe_probability=self.settings.safe_probability)
         self._search = (self._worker.submit(lambda checkpoint: job(checkpoint=checkpoint)),
                         key)
 

@@ -19,13 +19,20 @@ def sliding_speed(p: ScrewParameters, speed_rad_s):
     return p.radius_m * np.abs(speed_rad_s) / np.cos(p.helix_angle_rad)
 
 
+def steady_friction(p: ScrewParameters, speed_rad_s) -> tuple:
+    """(mu_o, gamma) at the steady sliding speed |Vc| = R |Omega| / cos(beta) (A.10, A.11;
+    README "Physics"): the friction coefficient (12) there and the slope term
+    gamma = cos(beta) dmu/d|Vc| [s/m], from one exponential."""
+    d, drop = p.friction_decay_s_m, p.mu_static - p.mu_kinetic
+    e = np.exp(-d * sliding_speed(p, speed_rad_s))
+    return p.mu_kinetic + drop * e, -drop * d * e * np.cos(p.helix_angle_rad)
+
+
 def mu_o(p: ScrewParameters, speed_rad_s):
-    """Friction coefficient at the steady sliding speed (A.10, at |Vc| = R |Omega| / cos(beta); README "Physics")."""
-    return friction_coefficient(p, sliding_speed(p, speed_rad_s))
+    """Friction coefficient at the steady sliding speed (A.10)."""
+    return steady_friction(p, speed_rad_s)[0]
 
 
 def gamma(p: ScrewParameters, speed_rad_s):
     """Friction slope term gamma = cos(beta) dmu/d|Vc| at steady sliding, s/m  (A.11)."""
-    d = p.friction_decay_s_m
-    return (-(p.mu_static - p.mu_kinetic) * d * np.exp(-d * sliding_speed(p, speed_rad_s))
-            * np.cos(p.helix_angle_rad))
+    return steady_friction(p, speed_rad_s)[1]

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .friction import gamma, mu_o
+from .friction import steady_friction
 from .modes import KIND_T, KIND_X, KIND_Y
 from .parameters import ScrewParameters
 
@@ -167,14 +167,21 @@ def thread_factors(p: ScrewParameters, mu_o_value, speed_rad_s, load_n):
     return c, c, -flank * tb * c * c
 
 
+def level_slope(p: ScrewParameters, speed_rad_s, load_n, alpha: float) -> tuple:
+    """Friction level l = mu_o |F_z| c_f / (alpha R) (W1-W4) and friction slope
+    s = gamma |F_z| c_5 / alpha (W5), broadcast over speed, load and the fields of `p` (arrays
+    of scattered friction parameters too)."""
+    speed = np.asarray(speed_rad_s, dtype=float)
+    load = np.abs(np.asarray(load_n, dtype=float))
+    m0, g = steady_friction(p, speed)
+    c_f, c_5, _ = thread_factors(p, m0, speed, load_n)
+    return m0 * load / (alpha * p.radius_m) * c_f, g * load / alpha * c_5
+
+
 def scales(p: ScrewParameters, speed_rad_s, load_n, alpha: float) -> dict[str, np.ndarray]:
     """Scalar factors of W1..W5qdot at operating points (broadcast over speed and load)."""
     speed = np.asarray(speed_rad_s, dtype=float)
-    load = np.abs(np.asarray(load_n, dtype=float))
-    m0, g = mu_o(p, speed), gamma(p, speed)
-    c_f, c_5, _ = thread_factors(p, m0, speed, load_n)
-    level = m0 * load / (alpha * p.radius_m) * c_f
-    slope = g * load / alpha * c_5
+    level, slope = level_slope(p, speed, load_n, alpha)
     return {"W1": np.sign(speed) * level, "W2": np.sign(speed) * level,
             "W3": level / np.abs(speed), "W4": level / np.abs(speed),
             "W5q": speed * slope, "W5qdot": slope}

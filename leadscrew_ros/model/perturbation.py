@@ -17,19 +17,21 @@ expanded to first order in them while l, s and xi of every sample are computed e
 friction law is the nonlinear part). A scattered geometry parameter (radius, nut position, ...)
 is not first order at all (it moves the modes' coupling): the expansion is made at a few node
 geometries and interpolated between them (`FirstOrderProbability`). P is the share of samples
-in which some mode's expanded growth rate exceeds the squeak threshold of `stability.unstable_mask`, so the modes'
-correlation (one friction scatter drives them all) is kept.
+in which some mode's expanded growth rate exceeds the squeak threshold of
+`stability.unstable_mask`, so the modes' correlation (one friction scatter drives them all)
+is kept.
 """
 
 from __future__ import annotations
 
 import math
 from functools import cached_property
+from types import SimpleNamespace
 
 import numpy as np
 
 from .assembly import Geometry, build_geometry
-from .kernels import thread_factors
+from .kernels import level_slope
 from .parameters import ParameterError, ScrewParameters, field_info
 from .scatter import Samples, Scatter
 from .stability import GROWTH_TOL, Eigen, eig_both
@@ -120,37 +122,19 @@ def geometry_fields(scatter: Scatter) -> list[str]:
 
 class _Expansion:
     """First-order growth of the oscillatory modes in the friction level, slope and damping
-    ratio around one geometry's eigen-solve."""
+    ratio around one geometry's eigen-solve; `friction` holds the samples' friction
+    parameters (arrays), the rest of the parameters are the geometry's."""
 
-    def __init__(self, geometry: Geometry):
+    def __init__(self, geometry: Geometry, friction: dict[str, np.ndarray]):
         self.geometry, self.params, n = geometry, geometry.params, geometry.n
+        self.sampled = SimpleNamespace(**{**self.params.as_dict(), **friction})
         damping = np.zeros((n, 2 * n))
         damping[np.arange(n), n + np.arange(n)] = -2 * geometry.basis.omega_rad_s   # (A.1)
         # dA per unit coefficient (W1, W5q, W3, W5qdot) and per unit of xi, lower half
         self.units = np.concatenate([-geometry.lower_half_units[:4].reshape(4 * n, 2 * n),
                                      damping]).astype(complex)  # dA = -[0; U_k], [0; damping]
 
-    def level_slope(self, mk, dm, d, dm_d, speed: float, load: float) -> tuple:
-        """Friction level l and slope s of `kernels.scales` (arrays or floats; dm = mu_s -
-        mu_k, dm_d = dm d): l = mu_o |F_z| c_f / (alpha R), s = gamma |F_z| c_5 / alpha."""
-        p = self.params
-        cb = math.cos(p.helix_angle_rad)
-        v = p.radius_m * abs(speed) / cb                                    # (11)
-        e = np.exp(-v * d)
-        m0, g = mk + dm * e, -cb * dm_d * e                                 # (12), (A.11)
-        c_f, c_5, _ = thread_factors(p, m0, speed, load)
-        f = abs(load) / self.geometry.contact.alpha
-        return m0 * (c_f * f / p.radius_m), g * (c_5 * f)
-
-    def nominal_level_slope(self, speed: float, load: float) -> tuple[float, float]:
-        """`level_slope` at the nominal friction parameters (floats)."""
-        p = self.params
-        dm = p.mu_static - p.mu_kinetic
-        level, slope = self.level_slope(p.mu_kinetic, dm, p.friction_decay_s_m,
-                                        dm * p.friction_decay_s_m, speed, load)
-        return float(level), float(slope)
-
-    def margins(self, pairs: EigenPairs, load: float, friction: tuple, damping: np.ndarray,
+    def margins(self, pairs: EigenPairs, load: float, damping: np.ndarray,
                 reach_damping: float, prune: bool = True) -> np.ndarray:
         """Per sample, the largest expanded growth rate beyond the squeak threshold over the
         modes [1/s] (> 0: squeak); `damping` holds the samples' damping-ratio changes. `prune`
@@ -159,8 +143,9 @@ class _Expansion:
         speed, n = pairs.speed, self.geometry.n
         change = np.empty((3, len(damping)))               # level, slope, damping ratio
         change[2] = damping
-        level0, slope0 = self.nominal_level_slope(speed, load)
-        level, slope = self.level_slope(*friction, speed, load)
+        alpha = self.geometry.contact.alpha
+        level0, slope0 = level_slope(self.params, speed, load, alpha)
+        level, slope = level_slope(self.sampled, speed, load, alpha)
         np.subtract(level, level0, out=change[0])
         np.subtract(slope, slope0, out=change[1])
         # d lambda per unit coefficient: y^H dA x over the lower half of A (one product)
@@ -214,14 +199,13 @@ class FirstOrderProbability:
         self.params, self.samples = params, samples
         count, scatter = samples.count, samples.scatter
         values = {k: v.ravel() for k, v in scatter.values(params, samples.u).items()}
-        ms, mk, d = (np.broadcast_to(values.get(k, getattr(params, k)), (count,))
-                     for k in ("mu_static", "mu_kinetic", "friction_decay_s_m"))
-        self._friction = (mk, ms - mk, d, (ms - mk) * d)
+        self._friction = {k: np.broadcast_to(values.get(k, getattr(params, k)), (count,))
+                          for k in ("mu_static", "mu_kinetic", "friction_decay_s_m")}
         self._damping = np.broadcast_to(values.get("modal_damping", params.modal_damping)
                                         - params.modal_damping, (count,))
         self._reach_damping = float(np.abs(self._damping).max())
         self._shape = samples.u.shape[:2]
-        self._nominal = _Expansion(geometry)
+        self._nominal = _Expansion(geometry, self._friction)
         fields = geometry_fields(scatter)
         self._nodes = self._geometry_nodes(fields, values) if fields else None
 
@@ -244,7 +228,7 @@ class FirstOrderProbability:
         for point in grid:
             try:            # a corner of two fields may leave the valid domain: no node
                 node = self.params.with_(**dict(zip(fields, point.tolist())))
-                expansions.append(_Expansion(build_geometry(node)))
+                expansions.append(_Expansion(build_geometry(node), self._friction))
             except ParameterError:
                 expansions.append(None)
         # multilinear interpolation: 2^d corners, each a flat node index and a weight
@@ -260,8 +244,7 @@ class FirstOrderProbability:
         """Per sample, the largest growth rate beyond the squeak threshold over the modes
         [1/s] (> 0: squeak), shape (count,); `pairs` is the nominal eigen-solve."""
         if self._nodes is None:
-            return self._nominal.margins(pairs, load, self._friction, self._damping,
-                                         self._reach_damping)
+            return self._nominal.margins(pairs, load, self._damping, self._reach_damping)
         expansions, corners = self._nodes
         speed, at = pairs.speed, []
         for e in expansions:
@@ -269,8 +252,8 @@ class FirstOrderProbability:
                 at.append(np.full(self.samples.count, _OUTSIDE))   # not valid: no squeak
                 continue
             node_pairs = EigenPairs.solve(e.geometry, speed, load)
-            at.append(e.margins(node_pairs, load, self._friction, self._damping,
-                                self._reach_damping, prune=False))
+            at.append(e.margins(node_pairs, load, self._damping, self._reach_damping,
+                                prune=False))
         at = np.array(at)
         columns = np.arange(self.samples.count)
         return sum(w * at[index, columns] for index, w in corners)
