@@ -1,0 +1,101 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The `leadscrew_ros` MCAP Metadata record: what a recording was made with.
+
+A node's recording carries one Metadata record named `leadscrew_ros` (MCAP metadata is a
+string -> string map): the package version, the formulation, every model parameter, the
+scatter behind P(squeak), every node parameter, the hardware id and the unit id. A fleet review
+reads the unit id from it and, asked to, predicts each log with the log's own parameters.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from leadscrew_ros import __version__
+from leadscrew_ros.model.parameters import ParameterError, ScrewParameters, coerce
+
+RECORD_NAME = "leadscrew_ros"
+
+
+@dataclass(frozen=True)
+class LogMetadata:
+    """What a recording was made with.
+
+    Attributes
+    ----------
+    params : dict
+        Every `ScrewParameters` field (SI units) -> value, including `formulation`.
+    scatter : dict
+        Scattered parameter -> relative SD (`Scatter.sd`), and `samples` -> sample count.
+    node : dict
+        Every other node parameter (ROS name -> value).
+    unit_id : str
+        The drive's identity ('' when not set).
+    hardware_id : str
+        The node's diagnostics hardware id.
+    version : str
+        Package version that wrote the record.
+    """
+
+    params: dict[str, Any]
+    scatter: dict[str, float] = field(default_factory=dict)
+    node: dict[str, Any] = field(default_factory=dict)
+    unit_id: str = ""
+    hardware_id: str = ""
+    version: str = __version__
+
+    @property
+    def formulation(self) -> str:
+        return str(self.params.get("formulation", ""))
+
+    def record(self) -> dict[str, str]:
+        """The MCAP Metadata map (string values; dicts as JSON)."""
+        return {"package_version": self.version, "formulation": self.formulation,
+                "unit_id": self.unit_id, "hardware_id": self.hardware_id,
+                "model_parameters": json.dumps(self.params, sort_keys=True),
+                "scatter": json.dumps(self.scatter, sort_keys=True),
+                "node_parameters": json.dumps(self.node, sort_keys=True)}
+
+    @classmethod
+    def from_record(cls, record: Mapping[str, str]) -> LogMetadata:
+        """Parse a Metadata map; ValueError (one line) when it is not a valid record."""
+        try:
+            params = json.loads(record["model_parameters"])
+            scatter = json.loads(record.get("scatter", "{}"))
+            node = json.loads(record.get("node_parameters", "{}"))
+        except (KeyError, TypeError, json.JSONDecodeError) as exc:
+            raise ValueError(f"metadata '{RECORD_NAME}' is not readable: {exc}") from None
+        if not all(isinstance(d, dict) for d in (params, scatter, node)):
+            raise ValueError(f"metadata '{RECORD_NAME}': parameters are not JSON objects")
+        return cls(params, scatter, node, str(record.get("unit_id", "")),
+                   str(record.get("hardware_id", "")), str(record.get("package_version", "")))
+
+    def screw_parameters(self) -> ScrewParameters:
+        """The recorded model parameters (unknown names ignored: a newer writer); ParameterError
+        when a value is invalid."""
+        known = set(ScrewParameters.__dataclass_fields__)
+        values = {k: coerce(k, v) for k, v in self.params.items() if k in known}
+        try:
+            return ScrewParameters(**values)
+        except TypeError as exc:
+            raise ParameterError(f"recorded parameters: {exc}") from None
+
+
+def read(path: Path | str) -> LogMetadata | None:
+    """The `leadscrew_ros` record of one MCAP file, or None when it has none (a foreign or an
+    older recording). Raises ValueError when the record is there but unreadable, OSError
+    when the file cannot be read."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as stream:
+        try:
+            records = list(make_reader(stream).iter_metadata())
+        except Exception as exc:            # the mcap reader raises several unrelated types
+            raise ValueError(f"{Path(path).name}: metadata not readable: {exc}") from None
+    for rec in records:
+        if rec.name == RECORD_NAME:
+            return LogMetadata.from_record(rec.metadata)
+    return None
