@@ -84,7 +84,8 @@ class Geometry:
         `scattered` gives arrays of non-geometry parameters (friction, damping; broadcast with
         the operating points) that replace the nominal values: they enter only through the
         scale factors and the damping diagonal, so samples of them cost one product each."""
-        if not scattered and np.ndim(speed_rad_s) == 0 and np.ndim(load_n) == 0:
+        if not scattered and (type(speed_rad_s) is float and type(load_n) is float
+                              or np.ndim(speed_rad_s) == 0 and np.ndim(load_n) == 0):
             return self._state_matrix(float(speed_rad_s), float(load_n))
         speed = np.asarray(speed_rad_s, float)
         if scattered:                          # one matrix per sample, whatever varies

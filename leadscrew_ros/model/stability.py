@@ -57,22 +57,36 @@ class Eigen(NamedTuple):
         All eigenvalues [1/s].
     osc : numpy.ndarray
         Indices into `lam` of the oscillatory eigenvalues (`oscillatory_mask`, Im > 0).
-    right, left : numpy.ndarray
-        Columns x_i (A x_i = lam_i x_i) and u_i (u_i^H A = lam_i u_i^H) of lam[osc], unit
-        2-norm, as `numpy.linalg.eig` gives the right ones; `left` None when not computed.
+    vr : numpy.ndarray
+        LAPACK's packed right eigenvectors: the columns osc and osc + 1 are the real and
+        imaginary parts of the vector of lam[osc] (`right` unpacks them).
+    left : numpy.ndarray or None
+        Columns u_i (u_i^H A = lam_i u_i^H) of lam[osc], unit 2-norm; None when not computed.
     """
 
     lam: np.ndarray
     osc: np.ndarray
-    right: np.ndarray
+    vr: np.ndarray
     left: np.ndarray | None
+
+    @property
+    def right(self) -> np.ndarray:
+        """Columns x_i (A x_i = lam_i x_i) of lam[osc], unit 2-norm, as `numpy.linalg.eig`
+        gives them (unpacked on demand: a prediction without scatter needs only `dominant`)."""
+        return self.vr[:, self.osc] + 1j * self.vr[:, self.osc + 1]
+
+    def dominant(self, n: int) -> np.ndarray:
+        """Row of the largest |x_i| among the first `n` rows of each oscillatory vector
+        (|x|^2 from the packed parts: no complex copy)."""
+        re, im = self.vr[:n, self.osc], self.vr[:n, self.osc + 1]
+        return (re * re + im * im).argmax(axis=0)
 
 
 def eig_both(a: np.ndarray, left: bool = True) -> Eigen:
     """Eigenvalues with right and left eigenvectors of a real matrix (LAPACK dgeev): the
     prediction and the first-order probability share this one solve (the left vectors cost
     ~10 % more; an inverse of the right ones cost three times that). Only the oscillatory
-    modes' vectors are unpacked: the rest are never used. `left` False skips the left
+    modes' left vectors are unpacked: the rest are never used. `left` False skips the left
     vectors (`Eigen.left` is then None).
 
     Raises
@@ -88,8 +102,7 @@ def eig_both(a: np.ndarray, left: bool = True) -> Eigen:
     lam = wr + 1j * wi
     osc = np.flatnonzero(wi > _IMAG_TOL * np.abs(lam))  # oscillatory_mask; the first of a
     #                                                     pair: re, im in two columns
-    return Eigen(lam, osc, vr[:, osc] + 1j * vr[:, osc + 1],
-                 vl[:, osc] + 1j * vl[:, osc + 1] if left else None)
+    return Eigen(lam, osc, vr, vl[:, osc] + 1j * vl[:, osc + 1] if left else None)
 
 
 def oscillatory_mask(eigvals: np.ndarray) -> np.ndarray:
@@ -121,17 +134,18 @@ def classify(eigen: Eigen, labels: tuple[str, ...]
     A mode is labelled by its dominant modal coordinate (largest |q_i| in the displacement half
     of the state eigenvector; the basis is mass-normalised so amplitudes are comparable).
     """
-    eigvals = eigen.lam
-    lam = eigvals[eigen.osc]
+    eigvals, osc = eigen.lam, eigen.osc
+    lam = eigvals[osc]
     order = np.argsort(-lam.real, kind="stable")
     lam = lam[order]
-    dominant = np.abs(eigen.right[:len(labels), order]).argmax(axis=0).tolist()
     two_pi = 2 * math.pi
-    modes = tuple(ModeResult(labels[d], i / two_pi, r, -r / g, r > GROWTH_TOL * g)
-                  for d, r, i, g in zip(dominant, lam.real.tolist(), lam.imag.tolist(),
-                                        np.abs(lam).tolist()))
+    modes = [ModeResult(labels[d], i / two_pi, r, -r / g, r > GROWTH_TOL * g)
+             for d, r, i, g in zip(eigen.dominant(len(labels))[order].tolist(),
+                                   lam.real.tolist(), lam.imag.tolist(),
+                                   np.abs(lam).tolist())]
+    if eigvals.real.max() <= 0:                     # the common case: nothing grows
+        return tuple(modes), ()
     mag = np.abs(eigvals)
     real = eigvals.real[(np.abs(eigvals.imag) <= _IMAG_TOL * mag)
                         & (eigvals.real > GROWTH_TOL * mag)]
-    divergence = tuple(sorted(real.tolist(), reverse=True))
-    return modes, divergence
+    return tuple(modes), tuple(sorted(real.tolist(), reverse=True))
