@@ -229,3 +229,20 @@ def test_predict_is_thread_safe():
     with ThreadPoolExecutor(2) as pool:
         for _ in range(3):
             assert list(pool.map(lambda s: MODEL.predict(s, 200.0).probability, speeds)) == alone
+
+
+@pytest.mark.parametrize("scatter", [None, Scatter({"mu_static": 0.05, "radius_m": 0.01}),
+                                     Scatter({"nut_length_m": 0.05, "mu_kinetic": 0.05})])
+def test_moved_nut_shares_the_samples_and_predicts_as_a_new_model(scatter):
+    """with_params(nut_position_m=...) reuses the samples (and, without geometry scatter, the
+    per-sample friction) instead of drawing them again: the predictions are those of a model
+    built from scratch, bit for bit."""
+    base = SqueakModel(scatter=scatter, samples=256)
+    base.predict(50.0, 200.0)
+    for nut in (0.03, 0.0512, 0.08):
+        moved = base.with_params(nut_position_m=nut)
+        fresh = SqueakModel(base.params.with_(nut_position_m=nut), base.scatter, 256)
+        for speed, load in ((20.0, 200.0), (50.0, 200.0), (55.0, -150.0)):
+            assert moved.predict(speed, load) == fresh.predict(speed, load)
+    if "nut_length_m" not in base.scatter.names:
+        assert moved.samples is base.samples

@@ -24,6 +24,7 @@ is kept.
 
 from __future__ import annotations
 
+import copy
 import math
 from functools import cached_property
 from types import SimpleNamespace
@@ -208,6 +209,17 @@ class FirstOrderProbability:
         self._nominal = _Expansion(geometry, self._friction)
         fields = geometry_fields(scatter)
         self._nodes = self._geometry_nodes(fields, values) if fields else None
+
+    def with_geometry(self, params: ScrewParameters, geometry: Geometry
+                      ) -> FirstOrderProbability:
+        """The estimate for `params`, which differ from this one's only in geometry fields
+        that do not scatter (a moved nut): the samples' friction and damping are the same,
+        only the expansion is new. With scattered geometry the nodes move too: built anew."""
+        if self._nodes is not None:
+            return FirstOrderProbability(params, geometry, self.samples)
+        new = copy.copy(self)
+        new.params, new._nominal = params, _Expansion(geometry, self._friction)
+        return new
 
     def _geometry_nodes(self, fields: list[str], values: dict) -> tuple:
         """Node geometries on a grid over the samples' range of each geometry field, and

@@ -17,7 +17,7 @@ from .display import exact
 from .friction import mu_o
 from .parameters import ScrewParameters, field_info
 from .perturbation import EigenPairs, FirstOrderProbability, estimate, geometry_fields
-from .scatter import LIVE_SAMPLES, Scatter, Samples, check_count, samples_for
+from .scatter import LIVE_SAMPLES, Samples, Scatter, check_count, involved, samples_for
 from .stability import Eigen, ModeResult, classify, eig_both
 
 _LOAD_LIMIT_N = field_info("axial_load_n")["hi"]
@@ -284,7 +284,16 @@ class SqueakModel:
         ParameterError
             An unknown field or a value out of its allowed range.
         """
-        return SqueakModel(self.params.with_(**changes), self.scatter, self.sample_count)
+        model = SqueakModel(self.params.with_(**changes), self.scatter, self.sample_count)
+        if not (set(changes) & involved(self.scatter)) and "samples" in self.__dict__:
+            # the samples do not depend on the changed fields: share them (and, for geometry
+            # changes, the estimate's per-sample friction), a moved nut costs its contact only
+            model.samples = self.samples
+            if self._probability is not None and all(
+                    field_info(k)["geometry"] for k in changes):
+                model._probability = self._probability.with_geometry(model.params,
+                                                                     model.geometry)
+        return model
 
     def with_scatter(self, scatter: Scatter, samples: int | None = None) -> "SqueakModel":
         """This model with another scatter (and sample count); the geometry is reused.

@@ -228,13 +228,19 @@ def samples_for(nominal: ScrewParameters, scatter: Scatter, count: int = LIVE_SA
     """`draw(nominal, scatter, count, REPLICATES, seed)`, with the standard-normal points
     cached: they depend on the nominal values only through the valid domain, so a model
     rebuilt for a new nut position or load reuses them (values are recomputed around it)."""
-    involved = set(scatter.names)
-    for names, _ in _RULES:
-        if involved & set(names):
-            involved |= set(names)
-    key = tuple((n, getattr(nominal, n)) for n in sorted(involved))
+    key = tuple((n, getattr(nominal, n)) for n in sorted(involved(scatter)))
     u, redrawn = _points(scatter, count, seed, key)
     return Samples(scatter, u, scatter.values(nominal, u), redrawn)
+
+
+def involved(scatter: Scatter) -> set[str]:
+    """The fields the samples of `scatter` depend on: the scattered ones and those sharing a
+    validity rule with them (the domain); a model changed in other fields keeps its samples."""
+    names = set(scatter.names)
+    for rule, _ in _RULES:
+        if names & set(rule):
+            names |= set(rule)
+    return names
 
 
 @lru_cache(maxsize=64)

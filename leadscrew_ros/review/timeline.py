@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 from collections import Counter, OrderedDict
 from dataclasses import dataclass, replace
+from functools import lru_cache
 from typing import Callable, Iterable
 
 import numpy as np
@@ -320,8 +321,16 @@ class ModelSpec:
     def at(self, nut_position_m: float) -> SqueakModel:
         """The model with the contact integrated at `nut_position_m`; ParameterError if the
         parameters reject that position."""
-        return SqueakModel(self.params.with_(nut_position_m=nut_position_m),
-                           Scatter(dict(self.scatter)), self.samples)
+        return _spec_model(self).with_params(nut_position_m=nut_position_m)
+
+
+@lru_cache(maxsize=4)
+def _spec_model(spec: ModelSpec) -> SqueakModel:
+    """The model of a spec at its own nut position, whose samples the others share (kept
+    here, not on the spec: the spec is pickled to the workers)."""
+    model = SqueakModel(spec.params, Scatter(dict(spec.scatter)), spec.samples)
+    model.samples                        # drawn once: with_params passes them on
+    return model
 
 
 _models: OrderedDict[tuple[ModelSpec, float], SqueakModel | None] = OrderedDict()
