@@ -298,14 +298,17 @@ def test_a_dead_worker_is_replaced_by_solving_here():
     from concurrent.futures.process import BrokenProcessPool
 
     from leadscrew_ros.bag.messages import prediction_payloads
-    from leadscrew_ros.review.replay import _Segment
+    from leadscrew_ros.review.replay import Verdict, _Segment
     from leadscrew_ros.review.timeline import ModelSpec, predict_jobs
     args = (ModelSpec.of(SqueakModel()), np.array([20.0]), np.array([200.0]),
             np.array([PARAMS.nut_position_m]))
     future = Future()
     future.set_exception(BrokenProcessPool("killed"))
-    (p,), (payloads,) = _Segment(solved=future, args=args).result()
-    assert p == predict_jobs(*args)[0] == SqueakModel().predict(20.0, 200.0)
+    (v,), (payloads,) = _Segment(solved=future, args=args).result()
+    p = predict_jobs(*args)[0]
+    assert p == SqueakModel().predict(20.0, 200.0) and not p.stable
+    assert v == Verdict.of(p) and v.squeak == tuple((m.label, m.frequency_hz)
+                                                     for m in p.squeak_modes) != ()
     assert payloads == tuple(data for _, data in prediction_payloads(p))
 
 

@@ -40,7 +40,7 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
-from typing import Any, BinaryIO, Callable, TextIO
+from typing import Any, BinaryIO, Callable, NamedTuple, TextIO
 
 import numpy as np
 from ..bag import messages, msgdefs
@@ -49,7 +49,7 @@ from .decimation import Envelope, Reservoir
 from .jsonsafe import json_safe
 from ..bag.logfile import LogError, LogMessage, Topic
 from ..bag.logsource import LogSource, log_topics, open_log
-from ..model import Prediction, SqueakModel
+from ..model import Prediction, SqueakModel, Validity
 from ..model.scatter import LOG_NORMAL
 from .progress import progress_bar
 from .timeline import (InputError, InputSettings, Job, ModelSpec, Timeline, input_namespaces,
@@ -177,12 +177,12 @@ class PlotData:
     # Squeak frequencies: speed, load, nut position, frequency [Hz]; a uniform sample.
     squeak: Reservoir = field(default_factory=lambda: Reservoir(4))
 
-    def add(self, t: float, job: Job, p: Prediction) -> None:
+    def add(self, t: float, job: Job, p: Verdict) -> None:
         squeak = p.valid and not p.stable
         self.probability.add(t, p.probability if p.valid else math.nan, float(squeak))
         if p.valid:
             self.points.add(p.speed_rad_s, p.load_n, job.nut_position_m, float(squeak))
-        for hz in p.unstable_frequencies_hz:
+        for _, hz in p.squeak:
             self.squeak.add(p.speed_rad_s, p.load_n, job.nut_position_m, hz)
 
 
@@ -355,27 +355,73 @@ class _AnnotatedWriter:
 
 
 # ---------------------------------------------------------------------- predictions
+class Verdict(NamedTuple):
+    """What the replaying process keeps of a prediction (episodes, plots, counts): small, as
+    it crosses from the workers for every recompute; the full prediction goes into the
+    annotated MCAP as its CDR payloads.
+
+    Attributes
+    ----------
+    speed_rad_s, load_n : float
+        The operating point [rad/s], [N].
+    validity : Validity
+        Whether the linearisation holds (the rest is empty or None when not).
+    probability : float or None
+        P(squeak).
+    max_growth_rate : float or None
+        Largest Re(lambda) of the oscillatory modes [1/s].
+    divergence_rates : tuple of float
+        Real eigenvalues > 0 [1/s].
+    squeak : tuple of (str, float)
+        The squeak modes, most unstable first: label and frequency [Hz].
+    """
+
+    speed_rad_s: float
+    load_n: float
+    validity: Validity
+    probability: float | None
+    max_growth_rate: float | None
+    divergence_rates: tuple[float, ...]
+    squeak: tuple[tuple[str, float], ...]
+
+    @classmethod
+    def of(cls, p: Prediction) -> Verdict:
+        return cls(p.speed_rad_s, p.load_n, p.validity, p.probability, p.max_growth_rate,
+                   p.divergence_rates, tuple((m.label, m.frequency_hz) for m in p.squeak_modes))
+
+    @property
+    def valid(self) -> bool:
+        return self.validity is Validity.OK
+
+    @property
+    def stable(self) -> bool:
+        """No squeak mode and no divergence (False outside validity: not a verdict)."""
+        return self.valid and not self.squeak and not self.divergence_rates
+
+
 def solve(spec: ModelSpec, speeds: np.ndarray, loads: np.ndarray, model_nuts: np.ndarray
-          ) -> tuple[list[Prediction], list[Payloads | None]]:
-    """`predict_jobs` and the valid predictions' CDR payloads (None outside validity),
-    encoded where they are solved: in a worker, the replaying process only copies bytes."""
+          ) -> tuple[list[Verdict], list[Payloads | None]]:
+    """`predict_jobs` as verdicts and the valid predictions' CDR payloads (None outside
+    validity), encoded where they are solved: in a worker, the replaying process only copies
+    bytes."""
     predictions = predict_jobs(spec, speeds, loads, model_nuts)
-    return predictions, [tuple(data for _, data in messages.prediction_payloads(p))
-                         if p.valid else None for p in predictions]
+    return [Verdict.of(p) for p in predictions], [
+        tuple(data for _, data in messages.prediction_payloads(p)) if p.valid else None
+        for p in predictions]
 
 
 @dataclass
 class _Segment:
     messages: list[LogMessage] = field(default_factory=list)
     jobs: list[Job] = field(default_factory=list)
-    solved: Future | tuple[list[Prediction], list[Payloads | None]] | None = None
+    solved: Future | tuple[list[Verdict], list[Payloads | None]] | None = None
     args: tuple = ()                  # of solve
 
     def done(self) -> bool:
         return not isinstance(self.solved, Future) or self.solved.done()
 
-    def result(self) -> tuple[list[Prediction], list[Payloads | None]]:
-        """The predictions of the jobs and their payloads."""
+    def result(self) -> tuple[list[Verdict], list[Payloads | None]]:
+        """The verdicts of the jobs and their payloads."""
         if isinstance(self.solved, Future):
             try:
                 self.solved = self.solved.result()
@@ -447,7 +493,7 @@ class _Episodes:
             for pt in [self.probability] + ([self.open.probability] if self.open else []):
                 pt.hold(probability, t - since, *self.thresholds)
 
-    def add(self, t: float, p: Prediction) -> None:
+    def add(self, t: float, p: Verdict) -> None:
         self._hold(t)
         self._held = (t, p.probability) if p.valid else None
         if p.valid:
@@ -469,8 +515,8 @@ class _Episodes:
         e.load_range_n = (min(e.load_range_n[0], p.load_n), max(e.load_range_n[1], p.load_n))
         e.predictions += 1
         e.probability.sample(t, p.probability)
-        for m in p.squeak_modes:
-            e.add_frequency(m.label, m.frequency_hz)
+        for label, hz in p.squeak:
+            e.add_frequency(label, hz)
 
     def _end(self, t: float) -> None:
         e, self.open = self.open, None
