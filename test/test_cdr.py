@@ -287,3 +287,17 @@ def test_random_bytes_decode_as_bool_or_multi_array_or_raise_value_error(data):
             decode(data)
         except ValueError:
             pass
+
+
+def test_joint_state_stream_with_repeated_and_changing_names():
+    """Names repeated from the previous message are taken without parsing them again: a
+    stream that repeats, extends, shortens and swaps them decodes as each message alone."""
+    stream = [(["screw"], [1.0], [2.0]), (["screw"], [3.0], [4.0]),
+              (["screw", "x"], [5.0, 6.0], []),
+              (["screw"], [7.0], [8.0]), (["scre"], [9.0], []), (["screw"], [], [1.5])]
+    for names, position, velocity in stream * 2:
+        d = decode_joint_state(cdr_payload(joint_state(names, position, velocity, [])))
+        assert (d.name, d.position, d.velocity) == (tuple(names), tuple(position),
+                                                    tuple(velocity))
+    big = rosbags_joint_state(False, ["screw"], [1.0], [2.0])
+    assert decode_joint_state(big).position == (1.0,)

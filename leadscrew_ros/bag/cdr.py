@@ -138,22 +138,33 @@ def _float64s(data: bytes, pos: int, endian: str) -> tuple[tuple[float, ...], in
     return struct.unpack_from(f"{endian}{n}d", data, pos), pos + 8 * n
 
 
+# The frame and joint names of the last JointState decoded: (endian, their bytes, frame_id,
+# names, position after them). A stream repeats them in every message, so a message whose
+# bytes there are the same skips parsing them (one tuple, replaced whole: thread-safe).
+_names_seen: tuple[str, bytes, str, tuple[str, ...], int] = ("", b"", "", (), 0)
+
+
 def decode_joint_state(data: bytes) -> JointStateData:
     """sensor_msgs/JointState: header stamp and frame, joint names, position, velocity, effort."""
+    global _names_seen
     endian = _endian(data)
     _check(data, _HEADER + 8)
     sec, nanosec = _STAMP[endian].unpack_from(data, _HEADER)
-    frame_id, pos = _string(data, _HEADER + 8, endian)
-    count, pos = _count(data, pos, endian, 5)           # a string: u32 length + NUL at least
-    names = []
-    for _ in range(count):
-        name, pos = _string(data, pos, endian)
-        names.append(name)
+    seen_endian, seen, frame_id, names, pos = _names_seen
+    if endian != seen_endian or data[_HEADER + 8:pos] != seen:
+        frame_id, pos = _string(data, _HEADER + 8, endian)
+        count, pos = _count(data, pos, endian, 5)       # a string: u32 length + NUL at least
+        parsed = []
+        for _ in range(count):
+            name, pos = _string(data, pos, endian)
+            parsed.append(name)
+        names = tuple(parsed)
+        _names_seen = (endian, bytes(data[_HEADER + 8:pos]), frame_id, names, pos)
     position, pos = _float64s(data, pos, endian)
     velocity, pos = _float64s(data, pos, endian)
     effort, _ = _float64s(data, pos, endian)
-    return JointStateData(sec * 1_000_000_000 + nanosec, frame_id, tuple(names), position,
-                          velocity, effort)
+    return JointStateData(sec * 1_000_000_000 + nanosec, frame_id, names, position, velocity,
+                          effort)
 
 
 def decode_float64_multi_array(data: bytes) -> Float64MultiArrayData:
