@@ -662,17 +662,17 @@ def _metadata(result: ReplayResult, model: SqueakModel) -> dict[str, dict[str, s
     it has a readable one) and the replay's own record, with the unit and hardware ids of the
     input's."""
     try:
-        recorded = logmeta.read_record(result.files[0]) if result.files[0].suffix == \
-            ".mcap" else None
+        recorded = (logmeta.read_record(result.files[0]) if result.files[0].suffix == ".mcap"
+                    else None) or {}
     except (OSError, ValueError):       # the messages were read: a record is only a bonus
-        recorded = None
+        recorded = {}
     inputs = {f.name: getattr(result.timeline.settings, f.name)
               for f in fields(result.timeline.settings)}
     own = logmeta.LogMetadata(
         model.params.as_dict(), {**model.scatter.sd, "samples": model.sample_count},
         {**inputs, "log": str(result.log), "namespace": result.namespace,
          "out_namespace": result.out_namespace},
-        (recorded or {}).get("unit_id", ""), (recorded or {}).get("hardware_id", ""))
+        recorded.get("unit_id", ""), recorded.get("hardware_id", ""))
     return {**({logmeta.RECORD_NAME: recorded} if recorded else {}),
             logmeta.REPLAY_RECORD_NAME: own.record()}
 
