@@ -29,6 +29,7 @@ from leadscrew_ros.bag.mcapout import McapOut
 from leadscrew_ros.bag.messages import OUTPUT_TYPES, RISK
 from leadscrew_ros.bag.recorder import Recorder, RecordSettings
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
+from leadscrew_ros.cli import main
 from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.model.scatter import ScatterSettings
 from leadscrew_ros.review.replay import ReplaySettings, replay
@@ -228,13 +229,19 @@ def test_annotated_log_still_reads_with_every_message(reviewed):
     assert rosbags_counts(result.annotated) == counts
 
 
-def test_a_log_without_record_gets_only_the_replays(tmp_path):
+def test_replay_command_of_a_log_without_record(tmp_path):
+    """`replay --no-report`: the JSON outputs attached, only the replay's own record."""
     bag = write_log(DutyCycle(duration_s=3.0, rate_hz=10.0, rest_s=0.5), tmp_path / "log")
-    result = replay(bag, SqueakModel(), tmp_path / "out",
-                    ReplaySettings(InputSettings(joint_name=DutyCycle.joint_name), workers=0,
-                                   progress=False))
-    assert [name for name, _ in records(result.annotated)] == [logmeta.REPLAY_RECORD_NAME]
-    assert logmeta.read(result.annotated, logmeta.REPLAY_RECORD_NAME).unit_id == ""
+    out = tmp_path / "out"
+    assert main(["replay", str(bag), "--out", str(out), "--joint-name", DutyCycle.joint_name,
+                 "--workers", "0", "--no-report", "--quiet"]) == 0
+    (annotated,) = out.glob("*.annotated.mcap")
+    with open(annotated, "rb") as f:
+        attachments = {a.name: a.data for a in make_reader(f).iter_attachments()}
+    assert attachments == {name: (out / name).read_bytes()
+                           for name in ("episodes.json", "summary.json")}
+    assert [name for name, _ in records(annotated)] == [logmeta.REPLAY_RECORD_NAME]
+    assert logmeta.read(annotated, logmeta.REPLAY_RECORD_NAME).unit_id == ""
 
 
 def test_reopen_refuses_a_file_it_did_not_finish(tmp_path):
