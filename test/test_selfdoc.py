@@ -148,7 +148,7 @@ def test_every_file_gets_the_records_current_when_it_opens(tmp_path):
     assert rosbags_counts(rec.bag) == {"/x": 3}
 
 
-def test_recovery_of_a_cut_off_file_keeps_its_record(tmp_path):
+def test_a_cut_off_file_and_its_recovery_keep_the_record(tmp_path):
     record = log_metadata(default_values(unit_id="c")).record()
     rec = Recorder(RecordSettings(directory=str(tmp_path / "rec")),
                    metadata={logmeta.RECORD_NAME: record})
@@ -160,6 +160,7 @@ def test_recovery_of_a_cut_off_file_keeps_its_record(tmp_path):
     shutil.copy(rec.path, cut)                              # the file as a crash leaves it
     rec.stop()
     assert not is_complete(cut)
+    assert logmeta.read_record(cut) == record               # read from the start of the file
     info = recover(cut, tmp_path / "recovered.mcap")
     assert info.messages == 10 and info.metadata == {logmeta.RECORD_NAME: record}
     assert logmeta.read_record(tmp_path / "recovered.mcap") == record

@@ -90,15 +90,28 @@ class LogMetadata:
 
 def read_record(path: Path | str, name: str = RECORD_NAME) -> dict[str, str] | None:
     """The first Metadata record `name` of one MCAP file as it is stored (string -> string),
-    or None when it has none. Raises ValueError when the file's metadata cannot be read, OSError
-    when the file cannot be opened."""
+    or None when it has none. A file cut off by a crash (no summary) is read from its start as
+    far as it goes: the recorder writes the record right after the header. Raises ValueError
+    when the file's metadata cannot be read, OSError when the file cannot be opened."""
     from mcap.reader import make_reader
+    from mcap.records import Metadata
+    from mcap.stream_reader import StreamReader
 
     with open(path, "rb") as stream:
         try:
             records = list(make_reader(stream).iter_metadata())
         except Exception as exc:            # the mcap reader raises several unrelated types
-            raise ValueError(f"{Path(path).name}: metadata not readable: {exc}") from None
+            error = ValueError(f"{Path(path).name}: metadata not readable: {exc}")
+            stream.seek(0)
+            records = []
+            try:
+                for record in StreamReader(stream, emit_chunks=True).records:
+                    if isinstance(record, Metadata):
+                        records.append(record)
+            except Exception:               # where the cut-off file ends
+                pass
+            if not any(rec.name == name for rec in records):
+                raise error from None
     return next((dict(rec.metadata) for rec in records if rec.name == name), None)
 
 
