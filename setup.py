@@ -19,6 +19,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
+        (f"share/{PACKAGE}/foxglove", sorted(glob("foxglove/*.json"))),   # Foxglove layout
     ],
     python_requires=">=3.10",
     install_requires=[

@@ -16,7 +16,8 @@ PACKAGE = "leadscrew_ros"
 EXEC_DEPENDS = ["rclpy", "std_msgs", "sensor_msgs", "geometry_msgs", "diagnostic_msgs",
                 "std_srvs", "python3-numpy", "python3-scipy", "python3-matplotlib"]
 # What a colcon workspace needs of the source tree (no .venv, build outputs, tests or tools).
-SOURCE_ITEMS = ["package.xml", "setup.py", "setup.cfg", "resource", "config", PACKAGE]
+SOURCE_ITEMS = ["package.xml", "setup.py", "setup.cfg", "resource", "config", "foxglove",
+                PACKAGE]
 
 
 def _run(cmd, **kwargs):
@@ -64,6 +65,7 @@ def test_colcon_installs_share_files(colcon_install):
     share = colcon_install / "share"
     assert (share / PACKAGE / "package.xml").is_file()
     assert (share / PACKAGE / "config" / "leadscrew.yaml").is_file()
+    assert (share / PACKAGE / "foxglove" / "squeak_predictor.json").is_file()
     assert (share / "ament_index" / "resource_index" / "packages" / PACKAGE).is_file()
 
 

@@ -119,7 +119,7 @@ def test_descriptors_carry_the_metadata():
         if isinstance(spec.default, int) and md["lo"] is not None:
             assert len(d.integer_range) == 1 and not isinstance(spec.default, float)
     assert [s.name for s in PARAMETERS if s.md["read_only"]] == [
-        "hardware_id", "input_queue_depth", "record.auto_recover"]
+        "hardware_id", "unit_id", "input_queue_depth", "record.auto_recover"]
     assert descriptor(SPECS["record.compression"]).additional_constraints == (
         "one of: zstd, lz4, none")
     assert descriptor(SPECS["helix_angle_rad"]).additional_constraints == (

@@ -27,14 +27,14 @@ import lz4.frame
 import yaml
 import zstandard
 from mcap.data_stream import ReadDataStream
-from mcap.records import Channel, Header, Schema
+from mcap.records import Channel, Header, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
 from .bagmeta import METADATA, BagStats, FileStats, TopicStats
 
 MAGIC = b"\x89MCAP0\r\n"
-OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = (
-    0x01, 0x02, 0x03, 0x04, 0x05, 0x06)
+OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_METADATA = (
+    0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x0C)
 _FOOTER_LEN = 20                      # summary_start u64, summary_offset_start u64, crc u32
 _MAX_INFLATION = 1000                 # a larger uncompressed/compressed ratio means corruption
 _RECORD = struct.Struct("<BQ")
@@ -93,6 +93,8 @@ class LogInfo:
     complete: bool = False            # footer reached
     damage: str = ""                  # why reading stopped early ('' if it did not)
     cut_off: bool = False             # damage is only a missing tail: every byte before it read
+    # MCAP Metadata records read (e.g. `logmeta`'s), name -> string map; kept by `recover`
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
 
     @property
     def messages(self) -> int:
@@ -237,6 +239,9 @@ def _records(path: Path, buf, topics, strict: bool, info: LogInfo) -> Iterator[L
                         m = _message(rec, 0, len(rec), channels, info)
                         if m is not None:
                             yield m
+            elif op == OP_METADATA:
+                record = Metadata.read(_stream(buf, body, length))
+                info.metadata.setdefault(record.name, record.metadata)
             elif op == OP_FOOTER:
                 if buf[body + length:body + length + len(MAGIC)] != MAGIC:
                     raise _Damage("no closing magic after the footer")
@@ -383,6 +388,8 @@ def _rewrite(src: Path | str, dst: Path | str,
             for t in info.topics.values():             # channels that had no message yet
                 if t.name not in ids:
                     _register(writer, t)
+            for name, record in info.metadata.items():   # e.g. the `leadscrew_ros` record
+                writer.add_metadata(name, record)
             writer.finish()
             out.flush()
             os.fsync(out.fileno())

@@ -2,9 +2,12 @@
 """The `leadscrew_ros` MCAP Metadata record: what a recording was made with.
 
 A node's recording carries one Metadata record named `leadscrew_ros` (MCAP metadata is a
-string -> string map): the package version, the formulation, every model parameter, the
-scatter behind P(squeak), every node parameter, the hardware id and the unit id. A fleet review
-reads the unit id from it and, asked to, predicts each log with the log's own parameters.
+string -> string map) in every file: the package version, the formulation, every model
+parameter, the scatter behind P(squeak), every node parameter, the hardware id and the unit id,
+as they were when the file was opened (the node starts a new file when they change). A fleet
+review reads the unit id from it and, asked to, predicts each log with the log's own
+parameters. A replay's annotated log carries the input log's record unchanged and one named
+`leadscrew_ros.replay` with the same keys: the replay's model, scatter and input settings.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from leadscrew_ros import __version__
 from leadscrew_ros.model.parameters import ParameterError, ScrewParameters, coerce
 
 RECORD_NAME = "leadscrew_ros"
+REPLAY_RECORD_NAME = "leadscrew_ros.replay"
 
 
 @dataclass(frozen=True)
@@ -84,18 +88,36 @@ class LogMetadata:
             raise ParameterError(f"recorded parameters: {exc}") from None
 
 
-def read(path: Path | str) -> LogMetadata | None:
-    """The `leadscrew_ros` record of one MCAP file, or None when it has none (a foreign or an
-    older recording). Raises ValueError when the record is there but unreadable, OSError
-    when the file cannot be read."""
+def read_record(path: Path | str, name: str = RECORD_NAME) -> dict[str, str] | None:
+    """The first Metadata record `name` of one MCAP file as it is stored (string -> string),
+    or None when it has none. A file cut off by a crash (no summary) is read from its start as
+    far as it goes: the recorder writes the record right after the header. Raises ValueError
+    when the file's metadata cannot be read, OSError when the file cannot be opened."""
     from mcap.reader import make_reader
+    from mcap.records import Metadata
+    from mcap.stream_reader import StreamReader
 
     with open(path, "rb") as stream:
         try:
             records = list(make_reader(stream).iter_metadata())
         except Exception as exc:            # the mcap reader raises several unrelated types
-            raise ValueError(f"{Path(path).name}: metadata not readable: {exc}") from None
-    for rec in records:
-        if rec.name == RECORD_NAME:
-            return LogMetadata.from_record(rec.metadata)
-    return None
+            error = ValueError(f"{Path(path).name}: metadata not readable: {exc}")
+            stream.seek(0)
+            records = []
+            try:
+                for record in StreamReader(stream, emit_chunks=True).records:
+                    if isinstance(record, Metadata):
+                        records.append(record)
+            except Exception:               # where the cut-off file ends
+                pass
+            if not any(rec.name == name for rec in records):
+                raise error from None
+    return next((dict(rec.metadata) for rec in records if rec.name == name), None)
+
+
+def read(path: Path | str, name: str = RECORD_NAME) -> LogMetadata | None:
+    """The `leadscrew_ros` record (or another of its form, e.g. `REPLAY_RECORD_NAME`) of one
+    MCAP file, or None when it has none (a foreign or an older recording). Raises ValueError
+    when the record is there but unreadable, OSError when the file cannot be read."""
+    record = read_record(path, name)
+    return None if record is None else LogMetadata.from_record(record)

@@ -7,6 +7,10 @@ with the schemas, channels, statistics, chunk indexes and summary offsets; foote
 chunks and summary), so every MCAP reader reads it the same way. What differs is the cost per
 message: a message is one `struct` pack appended to the chunk buffer (no record objects), and
 the message indexes and statistics are built per chunk, not per message.
+
+Attachments and Metadata records (`add_attachment`, `add_metadata`) go after the chunks, with
+their indexes in the summary, so `mcap` readers list them; `reopen` takes a finished file back
+(summary read, file cut back to its data) to add more of them: the replay's report.
 """
 
 from __future__ import annotations
@@ -19,8 +23,10 @@ from typing import BinaryIO
 import zstandard
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
-from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Schema,
-                          Statistics, SummaryOffset)
+from mcap.reader import make_reader
+from mcap.records import (Attachment, AttachmentIndex, Channel, Chunk, ChunkIndex, DataEnd,
+                          Footer, Header, Metadata, MetadataIndex, Schema, Statistics,
+                          SummaryOffset)
 from mcap.writer import MCAP0_MAGIC
 
 CHUNK_BYTES = 1 << 20          # a chunk is compressed once its messages reach this size
@@ -29,6 +35,8 @@ ZSTD_LEVEL = 1                 # chunks of small CDR messages: level 1 is ~2x le
 _MESSAGE = struct.Struct("<BQHIQQ")
 _MESSAGE_FIELDS = 2 + 4 + 8 + 8
 _INDEX_HEAD = struct.Struct("<BQHI")     # message index: opcode, length, channel, bytes
+_FOOTER_TAIL = 1 + 8 + 20 + len(MCAP0_MAGIC)   # footer record and closing magic [bytes]
+_DATA_END_LENGTH = 1 + 8 + 4                   # data end record [bytes]
 
 
 class McapOut:
@@ -46,6 +54,11 @@ class McapOut:
 
     def __init__(self, stream: BinaryIO, profile: str, library: str,
                  chunk_bytes: int = CHUNK_BYTES):
+        self._setup(stream, chunk_bytes)
+        stream.write(MCAP0_MAGIC)
+        self._write(Header(profile, library))
+
+    def _setup(self, stream: BinaryIO, chunk_bytes: int) -> None:
         self.stream, self.chunk_bytes = stream, chunk_bytes
         self._zstd = zstandard.ZstdCompressor(level=ZSTD_LEVEL)
         self.schemas: list[Schema] = []
@@ -56,8 +69,55 @@ class McapOut:
         self._chunk_indexes: list[ChunkIndex] = []
         self._counts: defaultdict[int, int] = defaultdict(int)
         self._first, self._last = None, 0
-        stream.write(MCAP0_MAGIC)
-        self._write(Header(profile, library))
+        self._attachments: list[AttachmentIndex] = []
+        self._metadata: list[MetadataIndex] = []
+
+    @classmethod
+    def reopen(cls, stream: BinaryIO) -> McapOut:
+        """A file this class finished, taken back to add attachments and metadata.
+
+        Parameters
+        ----------
+        stream : BinaryIO
+            The file, opened for reading and writing ('r+b'). Its summary is read and the file
+            is cut back to the end of its data: it is whole again only after `finish`.
+
+        Returns
+        -------
+        McapOut
+            The writer, with the file's schemas, channels, chunks, attachments and metadata.
+
+        Raises
+        ------
+        ValueError
+            The file has no summary, or does not end its data where this class does.
+        """
+        try:
+            summary = make_reader(stream).get_summary()
+            stream.seek(stream.seek(0, 2) - _FOOTER_TAIL)
+            data_end = struct.unpack_from("<Q", stream.read(_FOOTER_TAIL), 9)[0] \
+                - _DATA_END_LENGTH
+            stream.seek(data_end)
+            finished = summary is not None and summary.statistics is not None and \
+                stream.read(1) == bytes([Opcode.DATA_END])
+        except Exception:               # the mcap reader raises several unrelated types
+            finished = False
+        if not finished:
+            raise ValueError("not an MCAP file finished by McapOut")
+        out = cls.__new__(cls)
+        out._setup(stream, CHUNK_BYTES)
+        out.schemas = [summary.schemas[i] for i in sorted(summary.schemas)]
+        out.channels = [summary.channels[i] for i in sorted(summary.channels)]
+        out._chunk_indexes = list(summary.chunk_indexes)
+        out._attachments = list(summary.attachment_indexes)
+        out._metadata = list(summary.metadata_indexes)
+        stats = summary.statistics
+        out._counts.update(stats.channel_message_counts)
+        if stats.chunk_count:
+            out._first, out._last = stats.message_start_time, stats.message_end_time
+        stream.seek(data_end)
+        stream.truncate()
+        return out
 
     def _write(self, *records) -> int:
         """Write `records` at the end of the file; returns their length [bytes]."""
@@ -108,6 +168,25 @@ class McapOut:
         if len(chunk) >= self.chunk_bytes:
             self._finish_chunk()
 
+    def add_attachment(self, name: str, media_type: str, data: bytes, log_time_ns: int,
+                       create_time_ns: int) -> None:
+        """One attachment (e.g. 'episodes.json', 'application/json'), after the messages so
+        far; times [ns] as MCAP defines them (log time: on the messages' clock)."""
+        self._finish_chunk()
+        offset = self.stream.tell()
+        length = self._write(Attachment(create_time=create_time_ns, log_time=log_time_ns,
+                                        name=name, media_type=media_type, data=data))
+        self._attachments.append(AttachmentIndex(
+            offset=offset, length=length, log_time=log_time_ns, create_time=create_time_ns,
+            data_size=len(data), name=name, media_type=media_type))
+
+    def add_metadata(self, name: str, metadata: dict[str, str]) -> None:
+        """One Metadata record (a string -> string map), after the messages so far."""
+        self._finish_chunk()
+        offset = self.stream.tell()
+        length = self._write(Metadata(name=name, metadata=dict(metadata)))
+        self._metadata.append(MetadataIndex(offset=offset, length=length, name=name))
+
     def _finish_chunk(self) -> None:
         if not self._index:            # no message yet: schemas and channels wait
             return
@@ -146,13 +225,15 @@ class McapOut:
         rb, offsets = RecordBuilder(), []
         stats = Statistics(
             message_count=sum(self._counts.values()), schema_count=len(self.schemas),
-            channel_count=len(self.channels), attachment_count=0, metadata_count=0,
+            channel_count=len(self.channels), attachment_count=len(self._attachments),
+            metadata_count=len(self._metadata),
             chunk_count=len(self._chunk_indexes), message_start_time=self._first or 0,
             message_end_time=self._last, channel_message_counts=dict(self._counts))
         for opcode, group in ((Opcode.SCHEMA, self.schemas), (Opcode.CHANNEL, self.channels),
                               (Opcode.STATISTICS, [stats]),
                               (Opcode.CHUNK_INDEX, self._chunk_indexes),
-                              (Opcode.ATTACHMENT_INDEX, []), (Opcode.METADATA_INDEX, [])):
+                              (Opcode.ATTACHMENT_INDEX, self._attachments),
+                              (Opcode.METADATA_INDEX, self._metadata)):
             group_start = rb.count
             for record in group:
                 record.write(rb)

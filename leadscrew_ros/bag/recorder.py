@@ -10,6 +10,11 @@ schemas with the complete definition from the installed message packages (`msgde
 payloads serialized by the caller (`write_serialized`: bytes as received from DDS, or from the
 encoders of `cdr`).
 
+Every file starts with the MCAP Metadata records in `metadata` (name -> string map; the node
+puts its `leadscrew_ros` record there, `logmeta`) as they are when the file is opened, so each
+split file describes itself; `split` starts the next file at once (the node does when its
+parameters change, so that a file's record holds for every message in it).
+
 Thread safe: the node's input recording thread and its model thread write concurrently.
 Messages the recorder never got are counted per topic (`TopicLoss`: gaps in the publishers'
 sequence numbers and DDS message-lost events) and stored in the bag's `metadata.yaml`
@@ -145,6 +150,8 @@ class Recorder:
     error: str = ""                      # why the last recording stopped on its own
     files: list[FileStats] = field(default_factory=list)
     losses: dict[str, TopicLoss] = field(default_factory=dict)   # topic -> what never arrived
+    # Metadata records written at the start of every file: name -> string map
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     _out: object = None
     _writer: Writer | None = None
     _topics: dict[str, _Topic] = field(default_factory=dict)
@@ -246,11 +253,21 @@ class Recorder:
                 self._fail(exc)
                 return
             if too_big or too_old:
-                self._close(finish=True)
-                if not self.error and self._open(now_ns):
-                    self._write_metadata()
+                self._split(now_ns)
+
+    def split(self, now_ns: int | None = None) -> None:
+        """Finish the current file and go on in the next one, which gets the `metadata` of now
+        (nothing when not recording). `now_ns` as for `tick`."""
+        with self._lock:
+            if self.active:
+                self._split(time.monotonic_ns() if now_ns is None else now_ns)
 
     # ------------------------------------------------------------------ files
+    def _split(self, now_ns: int) -> None:
+        self._close(finish=True)
+        if not self.error and self._open(now_ns):
+            self._write_metadata()
+
     def _open(self, now_ns: int) -> bool:
         path = self.bag / f"{self.bag.name}_{len(self.files)}.mcap"
         self.files.append(FileStats(path))
@@ -259,6 +276,8 @@ class Recorder:
             self._writer = Writer(self._out, chunk_size=_CHUNK_BYTES,
                                   compression=COMPRESSIONS[self.settings.compression])
             self._writer.start(profile="ros2", library="leadscrew_ros recorder")
+            for name, record in self.metadata.items():
+                self._writer.add_metadata(name, record)
             self._out.flush()
         except OSError as exc:
             self._fail(exc)

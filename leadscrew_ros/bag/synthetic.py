@@ -76,13 +76,16 @@ def samples(cycle: DutyCycle) -> Samples:
 
 def write_log(cycle: DutyCycle, directory: Path | str,
               split_duration_s: float = RecordSettings.split_duration_s,
-              compression: str = RecordSettings.compression) -> Path:
-    """Record `cycle` into a new bag directory under `directory` (created if needed); returns
-    the bag directory."""
+              compression: str = RecordSettings.compression,
+              metadata: dict[str, dict[str, str]] | None = None) -> Path:
+    """Record `cycle` into a new bag directory under `directory` (created if needed), with the
+    MCAP Metadata records `metadata` in every file (e.g. a `logmeta` record, as the node
+    writes); returns the bag directory."""
     s = samples(cycle)
     Path(directory).mkdir(parents=True, exist_ok=True)
     rec = Recorder(RecordSettings(directory=str(directory), split_size_mb=0.0,
-                                  split_duration_s=split_duration_s, compression=compression))
+                                  split_duration_s=split_duration_s, compression=compression),
+                   metadata=dict(metadata or {}))
     if not rec.start(cycle.start_ns):
         raise OSError(rec.error)
     times = cycle.start_ns + np.round(s.time_s * 1e9).astype(np.int64)

@@ -10,7 +10,11 @@ the model's parameters and scatter (`timeline.ModelSpec`), in worker processes f
 copied verbatim (channel, schema, times, sequence, bytes) plus the predictions on
 `<out namespace>/squeak/{risk,margin,unstable_frequencies,active,modes}` with the node's types
 (`bag.messages.PREDICTION_TOPICS`; squeak/risk is P(squeak)), each at the log time of the input
-that triggered it; `episodes.json`, `summary.json` and `summary.txt`.
+that triggered it; `episodes.json`, `summary.json` and `summary.txt`. Once they are written,
+the annotated log gets `episodes.json` and `summary.json` as MCAP Attachments (the report adds
+its PNGs: `attach`), the input log's `leadscrew_ros` metadata record (of its first file, as it
+is) and a `leadscrew_ros.replay` record of the replay's model, scatter and inputs (`logmeta`),
+so that one file holds the evidence.
 
 P(squeak) over time is the node's: a recompute's probability holds until the next recompute
 (none outside validity), and to the end of the log after the last one. Peak probability and
@@ -37,13 +41,13 @@ import time
 from collections import Counter, deque
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from functools import partial
 from pathlib import Path
 from typing import Any, BinaryIO, Callable, NamedTuple, TextIO
 
 import numpy as np
-from ..bag import messages, msgdefs
+from ..bag import logmeta, messages, msgdefs
 from ..bag.mcapout import CHUNK_BYTES, McapOut
 from .decimation import Envelope, Reservoir
 from .jsonsafe import json_safe
@@ -66,6 +70,7 @@ EPISODES_KEPT = 1000           # episodes kept in the result (all of them in epi
 _FREQUENCIES_KEPT = 512        # frequencies per mode and episode kept for its median
 _NAME = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
 MAX_WORKERS = 64               # prediction processes (each ~170 MB): more only thrash a machine
+MEDIA_TYPES = {".json": "application/json", ".png": "image/png"}   # of the attachments
 
 
 @dataclass(frozen=True)
@@ -694,7 +699,48 @@ def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
     _write_json(out_dir / "summary.json", result.summary())
     (out_dir / "summary.txt").write_text(result.summary_text() + "\n", encoding="utf-8")
     result.outputs = [annotated, episodes, out_dir / "summary.json", out_dir / "summary.txt"]
+    attach(result, [episodes, out_dir / "summary.json"], _metadata(result, model))
     return result
+
+
+def _metadata(result: ReplayResult, model: SqueakModel) -> dict[str, dict[str, str]]:
+    """The annotated log's metadata: the input's `leadscrew_ros` record (its first file's, if
+    it has a readable one) and the replay's own record, with the unit and hardware ids of the
+    input's."""
+    try:
+        recorded = (logmeta.read_record(result.files[0]) if result.files[0].suffix == ".mcap"
+                    else None) or {}
+    except (OSError, ValueError):       # the messages were read: a record is only a bonus
+        recorded = {}
+    inputs = {f.name: getattr(result.timeline.settings, f.name)
+              for f in fields(result.timeline.settings)}
+    own = logmeta.LogMetadata(
+        model.params.as_dict(), {**model.scatter.sd, "samples": model.sample_count},
+        {**inputs, "log": str(result.log), "namespace": result.namespace,
+         "out_namespace": result.out_namespace},
+        recorded.get("unit_id", ""), recorded.get("hardware_id", ""))
+    return {**({logmeta.RECORD_NAME: recorded} if recorded else {}),
+            logmeta.REPLAY_RECORD_NAME: own.record()}
+
+
+def attach(result: ReplayResult, paths: list[Path],
+           metadata: dict[str, dict[str, str]] | None = None) -> None:
+    """Add the files `paths` (.json, .png) to the replay's annotated log as MCAP Attachments
+    named as the files (log time: the log's last message), and the `metadata` records.
+
+    Only the end of the file is rewritten (`McapOut.reopen`); nothing per message. Raises
+    OSError when a file cannot be read or written, ValueError when the annotated log is not one
+    the replay finished.
+    """
+    end_ns, now_ns = result.start_ns + round(result.duration_s * 1e9), time.time_ns()
+    with open(result.annotated, "r+b") as fh:
+        out = McapOut.reopen(fh)
+        for path in paths:
+            out.add_attachment(path.name, MEDIA_TYPES[path.suffix], path.read_bytes(), end_ns,
+                               now_ns)
+        for name, record in (metadata or {}).items():
+            out.add_metadata(name, record)
+        out.finish()
 
 
 def _check_inputs(log: Path, timeline: Timeline, counts: dict[str, int]) -> None:

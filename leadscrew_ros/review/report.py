@@ -29,7 +29,7 @@ import numpy as np
 from ..model import SqueakModel
 from ..model.sweep import stability_map, sweep
 from .plots import new_figure, plot_frequencies, plot_map
-from .replay import ReplayResult
+from .replay import ReplayResult, attach
 
 TIMELINE_FILE = "timeline.png"
 MAP_FILE = "map_speed_load.png"
@@ -162,7 +162,8 @@ def nut_bands(nuts: np.ndarray) -> np.ndarray:
 
 def write_report(result: ReplayResult, model: SqueakModel, out: Path | str,
                  grids: ReportGrids = FULL) -> list[Path]:
-    """Write the three PNGs into `out`; returns their paths."""
+    """Write the three PNGs into `out` and attach them to the annotated log, if it is there
+    (`replay.attach`); returns their paths."""
     out = Path(out)
     paths = [out / TIMELINE_FILE, out / MAP_FILE, out / FREQUENCY_FILE]
     plot_timeline(result, paths[0], grids)
@@ -235,4 +236,6 @@ def write_report(result: ReplayResult, model: SqueakModel, out: Path | str,
                      f"(Fig. 11 style)\nload {median_load:.0f} N, nut {median_nut * 1e3:.0f} mm "
                      f"(medians of the run; points at their own load and nut)", grids.dpi,
                      overlay=squeak_points)
+    if result.annotated.exists():        # unless the caller removed it (summaries only)
+        attach(result, paths)
     return paths

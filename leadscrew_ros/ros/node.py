@@ -10,8 +10,10 @@ P(squeak) below `safe_probability`) and /diagnostics (levels by P: `warn_probabi
 `error_probability`).
 Records inputs and outputs to MCAP (`record.*` parameters, std_srvs/SetBool `~/record`):
 inputs from subscriptions of their own that never wait for the model, with every lost message
-counted (`ros.input_recording`); outputs as the CDR bytes it publishes (`bag.messages`); on
-start, reports (or recovers) its own bags cut off by an earlier crash (`bag.crash_recovery`).
+counted (`ros.input_recording`); outputs as the CDR bytes it publishes (`bag.messages`); every
+file begins with the `leadscrew_ros` metadata record of the parameters (`bag.logmeta`), and a
+parameter change while recording starts a new file with the new record; on start, reports (or
+recovers) its own bags cut off by an earlier crash (`bag.crash_recovery`).
 `squeak_node --help` lists the parameters and topics. The physics lives in `model`, the input
 rules in `live.rules`, the recompute policy and the verdict in `live.predictor`, the parameter
 table in `ros.parameters`, the /diagnostics updater and the recording verdict in
@@ -43,10 +45,10 @@ from std_srvs.srv import SetBool
 from .diagnostics import PREDICTION_TASK, RECORDING_TASK, Updater, recording_status, status_task
 from .input_recording import InputRecording
 from .parameters import (GROUPS, PARAMETER_NAMES, PARAMETERS, NodeSettings, RecordingControl, build,
-                         descriptor, help_lines, names_of)
+                         descriptor, help_lines, log_metadata, names_of)
 from ..live.predictor import LivePredictor
 from ..live.settings import JointSettings, LiveSettings
-from ..bag import messages, msgdefs
+from ..bag import logmeta, messages, msgdefs
 from ..bag.crash_recovery import CrashRecovery
 from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel
 from ..model.scatter import ScatterSettings
@@ -78,7 +80,7 @@ class SqueakPredictorNode(Node):
         self.live = LivePredictor(self._model({}), self._live_settings({}))
         self.joint = self._settings(JointSettings, {})
         self.recorder = Recorder(self._record_settings({}), bag_prefix(self.get_namespace()),
-                                 clock=self._now_ns)
+                                 clock=self._now_ns, metadata=self._metadata())
         own, control = self._settings(NodeSettings, {}), self._settings(RecordingControl, {})
         self._input_recording: InputRecording | None = None
         self.latched: dict[str, Latched] = {}         # topic -> last message published on it
@@ -197,8 +199,21 @@ class SqueakPredictorNode(Node):
             return SetParametersResult(successful=False, reason=exc.strerror or str(exc))
         return SetParametersResult(successful=True)
 
+    def _metadata(self) -> dict[str, dict[str, str]]:
+        """The recording's metadata records of the current parameters (`bag.logmeta`)."""
+        return {logmeta.RECORD_NAME: log_metadata(self._values({})).record()}
+
     def _apply_parameters(self, params: list[Parameter]) -> None:
         names = {p.name for p in params}
+        recording = names_of(RecordSettings) | names_of(RecordingControl)
+        new_bag = bool(names & recording) and self._record_settings({}) != self.recorder.settings
+        metadata = self._metadata()
+        if metadata != self.recorder.metadata:
+            self.recorder.metadata = metadata
+            # A recording that goes on continues in a new file with the new record, before
+            # the outputs of the new parameters (a new bag or a stop needs no split)
+            if not new_bag and self.get_parameter("record.enabled").value:
+                self.recorder.split()
         model_names = names_of(ScrewParameters) | names_of(ScatterSettings)
         if names & (model_names | names_of(LiveSettings)):
             model = self._model({}) if names & model_names else self.live.model
@@ -211,11 +226,11 @@ class SqueakPredictorNode(Node):
             self.joint = self._settings(JointSettings, {})
         if names & names_of(NodeSettings):
             self.diagnostics.period_s = self._settings(NodeSettings, {}).diagnostics_period_s
-        if names & (names_of(RecordSettings) | names_of(RecordingControl)):
-            settings = self._record_settings({})
-            if settings != self.recorder.settings:      # takes effect with a new bag
+        if names & recording:
+            if new_bag:                                 # new record settings: a new bag
                 self._stop_recording()
-                self.recorder = Recorder(settings, self.recorder.name, clock=self._now_ns)
+                self.recorder = Recorder(self._record_settings({}), self.recorder.name,
+                                         clock=self._now_ns, metadata=metadata)
             self._set_recording(self.get_parameter("record.enabled").value)
 
     def _create_rate_timer(self):

@@ -16,6 +16,7 @@ from typing import Any, Iterator, NamedTuple
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
+from ..bag.logmeta import LogMetadata
 from ..bag.recorder import RecordSettings
 from ..live.settings import JointSettings, LiveSettings
 from ..model.display import exact
@@ -28,12 +29,15 @@ READ_ONLY_NOTE = "read-only: set at start-up"
 
 @dataclass(frozen=True)
 class NodeSettings:
-    """The node's own settings: diagnostics and input subscriptions."""
+    """The node's own settings: diagnostics, identity and input subscriptions."""
 
     diagnostics_period_s: float = setting(
         1.0, "s", "period of /diagnostics when nothing changes", 0.05, 60.0)
     hardware_id: str = setting(
         "leadscrew", "", "hardware_id of the diagnostic status", read_only=True)
+    unit_id: str = setting(
+        "", "", "identity of this drive (e.g. its serial number) in every recording's "
+        "`leadscrew_ros` metadata record ('' when not set)", read_only=True)
     input_queue_depth: int = setting(
         5, "1", "queue depth of the input subscriptions", 1, 1000, read_only=True)
 
@@ -70,7 +74,7 @@ GROUPS = (
           "counts, formulation"),
     Group(LiveSettings, "", "node: recompute policy and verdict"),
     Group(JointSettings, "", "node: joint_states mapping"),
-    Group(NodeSettings, "", "node: diagnostics and inputs"),
+    Group(NodeSettings, "", "node: diagnostics, identity and inputs"),
     Group(ScatterSettings, "scatter.", "model: unit-to-unit scatter of the parameters behind "
           "P(squeak) (squeak/risk); 0 switches one off"),
     Group(RecordingControl, "record.", "node: MCAP recording (also ~/record)"),
@@ -129,6 +133,21 @@ def build(cls: type, values: dict[str, Any]) -> Any:
         return cls(**{s.field.name: values[s.name] for s in own})
     except ValueError as exc:             # e.g. an empty record.directory, z_o + b > L
         raise ParameterError(str(exc)) from None
+
+
+def log_metadata(values: dict[str, Any]) -> LogMetadata:
+    """The `leadscrew_ros` metadata record of a recording made with the parameter values
+    `values` (name -> value, every parameter): the model's (`ScrewParameters`, with the
+    formulation), the scatter's (`scatter.*` without the prefix, with `samples`) and the
+    node's own (every other parameter, by its ROS name), the hardware id and the unit id."""
+    model = {s.name: s.field.name for s in PARAMETERS if s.group.cls is ScrewParameters}
+    scatter = {s.name: s.field.name for s in PARAMETERS if s.group.cls is ScatterSettings}
+    return LogMetadata(
+        params={field: values[name] for name, field in model.items()},
+        scatter={field: values[name] for name, field in scatter.items()},
+        node={name: values[name] for name in PARAMETER_NAMES
+              if name not in model and name not in scatter},
+        unit_id=values["unit_id"], hardware_id=values["hardware_id"])
 
 
 def constraints(spec: Spec) -> str:
