@@ -188,6 +188,39 @@ def table(res: dict) -> str:
     return f"{lines[0]}\n" + "\n".join(lines[1:]) + f"\n\n{envline}"
 
 
+def solve_floor_us(rounds: int = 5, loops: int = 20) -> float:
+    """Median time [us] of the LAPACK eigen-solve every prediction needs (dgeev with left and
+    right vectors of a 36 x 36 state matrix, `stability.eig_both`), on 16 points of the
+    band: what a replay cannot go below without skipping predictions."""
+    from leadscrew_ros.model import SqueakModel
+    from leadscrew_ros.model.stability import eig_both
+    model = SqueakModel()
+    mats = [model.state_matrix(s, f) for s, f in zip(np.linspace(5.0, 100.0, 16),
+                                                      np.linspace(50.0, 400.0, 16))]
+    times = []
+    for _ in range(rounds):
+        t0 = time.perf_counter()
+        for _ in range(loops):
+            for a in mats:
+                eig_both(a)
+        times.append((time.perf_counter() - t0) / (loops * len(mats)) * 1e6)
+    return float(np.median(times))
+
+
+def floor_lines(res: dict, solve_us: float) -> str:
+    """Per log: x real time if both cores did nothing but the predictions' eigen-solves."""
+    cores = min(os.cpu_count() or 1, 2)
+    lines = [f"Floor (this run): one eigen-solve with left and right vectors takes {solve_us:.0f}"
+             f" us here; with {cores} cores doing nothing else a replay could reach at most"]
+    for case, c in res["cases"].items():
+        r = next(iter(c["runs"].values()))[0]["summary"]
+        cpu_s = r["predictions"] * solve_us * 1e-6
+        lines.append(f"- {CASES[case]}: {r['predictions']:,} solves = {cpu_s:.1f} CPU-s for "
+                     f"{r['duration_s']:.0f} s of log: "
+                     f"**{r['duration_s'] / (cpu_s / cores):.0f}× real time**")
+    return "\n".join(lines)
+
+
 def peak_rss(bag: Path, workers: int, src: str | None) -> dict:
     """Replay + report of `bag` in a fresh child process: its peak memory and wall time."""
     env = dict(os.environ)        # the child runs in `out`: `-c` puts its cwd first on the path
@@ -269,8 +302,12 @@ def main(argv: list[str] | None = None) -> int:
                 run = run_replay(bag, cycle, args.workers, src, args.report)
                 res["cases"][case]["runs"][label].append(run)
                 print(f"{case} ({label}): {run['wall_s']:.1f} s", file=sys.stderr, flush=True)
+    solve_us = solve_floor_us()
     res["env"]["load_avg_1min_end"] = os.getloadavg()[0]
+    res["solve_floor_us"] = solve_us
     print(table(res))
+    print()
+    print(floor_lines(res, solve_us))
     if args.report:
         for case, c in res["cases"].items():
             for label, runs in c["runs"].items():
