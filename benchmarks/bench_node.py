@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
 """Benchmark of the ROS 2 node `squeak_predictor`: input-to-output latency and CPU use.
 
-    .venv/bin/python benchmarks/bench_node.py [--quick] [--json OUT.json] [--profile]
+    .venv/bin/python benchmarks/bench_node.py [--quick] [--hog] [--json OUT.json] [--profile]
 
 Prints Markdown tables: (1) in-process latency, predictor node and probe node on one
 SingleThreadedExecutor (own Context), from just before a motor_speed publish to the receipt of
@@ -63,7 +63,8 @@ from leadscrew_ros.bag.logfile import inspect, log_files                  # noqa
 from leadscrew_ros.model import SqueakModel                          # noqa: E402
 from leadscrew_ros.ros.node import LATCHED, SqueakPredictorNode          # noqa: E402
 
-TARGET_INPROCESS_P99_MS = 2.0
+TARGET_INPROCESS_P99_MS = 1.0    # issue 11, quiet machine
+TARGET_CROSS_P99_MS = 1.5
 LOAD_N = 200.0                 # fixed axial load; squeak band at this load ~0.8..55 rad/s
 BAND_SPEED = 20.0              # in the band: prediction + safe-speed advice
 CLEAR_SPEED = 100.0            # outside the band (stable): prediction only
@@ -488,10 +489,9 @@ def table(res: dict) -> str:
                            "(prediction + safe-speed advice)"),
                           ("clear", f"{CLEAR_SPEED:g} ± 0.5 rad/s, no squeak (prediction only)")):
             r = res[key][run]
-            target = ""
-            if key == "in_process":
-                target = (f"p99 ≤ {TARGET_INPROCESS_P99_MS:g} ms "
-                          f"{'met' if r['p99_ms'] <= TARGET_INPROCESS_P99_MS else 'MISSED'}")
+            limit = TARGET_INPROCESS_P99_MS if key == "in_process" else TARGET_CROSS_P99_MS
+            target = (f"p99 ≤ {limit:g} ms {'met' if r['p99_ms'] <= limit else 'MISSED'}"
+                      + (" (target for a quiet machine)" if res["hog"] else ""))
             cold = (f"; first in-band input {fmt(r['first_warmup_ms'])} ms (builds the speed "
                     "bands)" if run == "band" else "")
             rows.append((label, what, fmt(r["p50_ms"], 3), fmt(r["p99_ms"], 3),
@@ -527,7 +527,9 @@ def table(res: dict) -> str:
                f"{env['cpu_count']} CPUs ({env['machine']}) · discovery "
                f"{env['discovery_range']}, domains {'/'.join(map(str, env['domains']))} · "
                f"load avg {env['load_avg_1min_start']:.2f} → {env['load_avg_1min_end']:.2f} · "
-               f"mode {res['mode']} · {res['wall_s']:.1f} s")
+               f"mode {res['mode']} · {res['wall_s']:.1f} s"
+               + (" · CPU hog: one busy-loop process (`python -c 'while True: pass'`) for the "
+                  "whole run" if res["hog"] else ""))
     exits = ", ".join(f"benchmark {n} exit {res[k]['child']['returncode']}"
                       + (" (SIGKILL)" if res[k]["child"]["killed"] else "")
                       for n, k in ((2, "cross_process"), (3, "cpu")))
@@ -564,12 +566,15 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller run (~20 s)")
     ap.add_argument("--json", metavar="OUT.json", help="also write the raw numbers here")
+    ap.add_argument("--hog", action="store_true",
+                    help="run everything with a busy-loop process keeping one core busy")
     ap.add_argument("--profile", action="store_true",
                     help="only profile the in-process measurement with cProfile")
     args = ap.parse_args(argv)
     faulthandler.dump_traceback_later(WATCHDOG_S, exit=True)
     mode = "quick" if args.quick else "default"
     cfg = CONFIGS[mode]
+    hog = (subprocess.Popen([sys.executable, "-c", "while True: pass"]) if args.hog else None)
     try:
         if args.profile:
             res = bench_in_process(cfg, DOMAINS[0], profile=True)
@@ -580,8 +585,9 @@ def main(argv: list[str] | None = None) -> int:
                       f"{r['max_ms']:.2f} ms (under cProfile)")
             return 0
         t0 = time.perf_counter()
-        res = dict(mode=mode, config=cfg, env=environment(),
-                   target_in_process_p99_ms=TARGET_INPROCESS_P99_MS)
+        res = dict(mode=mode, config=cfg, env=environment(), hog=args.hog,
+                   target_in_process_p99_ms=TARGET_INPROCESS_P99_MS,
+                   target_cross_process_p99_ms=TARGET_CROSS_P99_MS)
         res["in_process"] = bench_in_process(cfg, DOMAINS[0])
         res["cross_process"] = bench_cross_process(cfg, DOMAINS[1])
         res["cpu"] = bench_cpu(cfg, DOMAINS[2])
@@ -601,6 +607,9 @@ def main(argv: list[str] | None = None) -> int:
                 json.dump(res, fh, indent=1)
         return 0
     finally:
+        if hog is not None:
+            hog.kill()
+            hog.wait()
         faulthandler.cancel_dump_traceback_later()
         if _LOG_DIR:
             shutil.rmtree(_LOG_DIR, ignore_errors=True)
