@@ -20,6 +20,7 @@ goes. See benchmarks/README.md.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import cProfile
 import datetime
 import faulthandler
@@ -34,8 +35,10 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from importlib import metadata
+from unittest import mock
 
 # Loopback only and a private domain per phase, before anything starts the RMW.
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -61,7 +64,7 @@ from std_msgs.msg import Float64                                     # noqa: E40
 
 from leadscrew_ros.bag.logfile import inspect, log_files                  # noqa: E402
 from leadscrew_ros.model import SqueakModel                          # noqa: E402
-from leadscrew_ros.ros.node import LATCHED, SqueakPredictorNode          # noqa: E402
+from leadscrew_ros.ros.node import LATCHED, SqueakPredictorNode, make_executor  # noqa: E402
 
 TARGET_INPROCESS_P99_MS = 2.0
 LOAD_N = 200.0                 # fixed axial load; squeak band at this load ~0.8..55 rad/s
@@ -84,6 +87,18 @@ WATCHDOG_S = 600.0             # a Fast DDS hang ends the run with a traceback, 
 # so a node timer that is always ready (max_rate_hz 10000 -> 0.1 ms) starves every
 # subscription. Inputs are paced by probe timers, so this only bounds idle waits.
 SPIN_STEP_S = 0.05
+# The executor of the node and the probe: the node's own (`node.make_executor`, rclpy's
+# EventsExecutor) or rclpy's Python SingleThreadedExecutor (what the node used before).
+EXECUTORS = {"events": make_executor,
+             "single": lambda ctx: SingleThreadedExecutor(context=ctx)}
+EXECUTOR = "events"
+CHILD_MAIN = {
+    "events": "import sys; from leadscrew_ros.ros import node; sys.exit(node.main())",
+    "single": ("import sys; from rclpy.executors import SingleThreadedExecutor as S; "
+               "from leadscrew_ros.ros import node; "
+               "node.make_executor = lambda context=None: S(context=context); "
+               "sys.exit(node.main())"),
+}
 
 
 class Probe(Node):
@@ -269,6 +284,26 @@ def bag_stats(record_dir: str) -> dict:
 
 def bench_in_process(cfg: dict, domain: int, profile: bool = False,
                      record_dir: str | None = None) -> dict:
+    """Benchmark 1; `predict_ms` in the result: the wall time of every SqueakModel.predict
+    call during the run (the model's share of the round trip)."""
+    predict_ms: list[float] = []
+    predict = SqueakModel.predict
+
+    def timed(self, *args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return predict(self, *args, **kwargs)
+        finally:
+            if threading.current_thread() is threading.main_thread():   # not advice searches
+                predict_ms.append((time.perf_counter() - start) * 1e3)
+
+    with mock.patch.object(SqueakModel, "predict", timed):
+        res = _bench_in_process(cfg, domain, profile, record_dir)
+    res["predict_ms"] = predict_ms
+    return res
+
+
+def _bench_in_process(cfg: dict, domain: int, profile: bool, record_dir: str | None) -> dict:
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)
     node = probe = ex = None
@@ -277,7 +312,7 @@ def bench_in_process(cfg: dict, domain: int, profile: bool = False,
             Parameter(k, value=v) for k, v in
             {"max_rate_hz": 10000.0, **record_params(record_dir)}.items()])
         probe = Probe(ctx)
-        ex = SingleThreadedExecutor(context=ctx)
+        ex = EXECUTORS[EXECUTOR](ctx)
         ex.add_node(node)
         ex.add_node(probe)
         connect(ex, probe, CLEAR_SPEED)
@@ -312,7 +347,7 @@ class ChildNode:
         env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                    ROS_DOMAIN_ID=str(domain))
         self.log = tempfile.TemporaryFile()
-        cmd = [sys.executable, "-m", "leadscrew_ros.ros.node"]
+        cmd = [sys.executable, "-c", CHILD_MAIN[EXECUTOR]]
         if ros_args:
             cmd += ["--ros-args", *ros_args]
         self.proc = subprocess.Popen(cmd, env=env, stdout=self.log, stderr=subprocess.STDOUT)
@@ -350,7 +385,7 @@ def with_child(domain: int, ros_args: list[str], body) -> dict:
     res: dict = {}
     try:
         probe = Probe(ctx)
-        ex = SingleThreadedExecutor(context=ctx)
+        ex = EXECUTORS[EXECUTOR](ctx)
         ex.add_node(probe)
         res = body(ex, probe, child)
     finally:
@@ -560,12 +595,80 @@ def recording_table(res: dict) -> str:
             "|---|---|---|---|\n" + "\n".join("| " + " | ".join(r) + " |" for r in rows))
 
 
+# ---------------------------------------------------------------- executors compared
+class Hog:
+    """A CPU hog on the other core: `python3 -c 'while 1: pass'` as a child process pinned to
+    the last CPU (sched_setaffinity); the benchmark's processes may run on any CPU."""
+
+    CMD = [sys.executable, "-c", "while 1: pass"]
+
+    def __enter__(self) -> "Hog":
+        cpu = max(os.sched_getaffinity(0))
+        self.proc = subprocess.Popen(self.CMD, preexec_fn=lambda: os.sched_setaffinity(0, {cpu}))
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.proc.kill()
+        self.proc.wait()
+
+
+def compare_executors(cfg: dict, rounds: int) -> dict:
+    """Benchmarks 1 and 2 for each executor, quiet and with a CPU hog, in interleaved rounds
+    (every round runs every case once, so a change of machine load hits all of them). Each
+    case pools the band and the clear run's samples over the rounds."""
+    global EXECUTOR
+    cases = [(hog, ex, where) for hog in (False, True) for ex in ("single", "events")
+             for where in ("in_process", "cross_process")]
+    pooled: dict = {c: dict(ms=[], lost=0, predict_ms=[]) for c in cases}
+    k = 0
+    for _ in range(rounds):
+        for hog, ex, where in cases:
+            EXECUTOR = ex
+            domain = 101 + (os.getpid() + 7 * k) % 100
+            k += 1
+            with Hog() if hog else contextlib.nullcontext():
+                r = (bench_in_process(cfg, domain) if where == "in_process"
+                     else bench_cross_process(cfg, domain))
+            p = pooled[(hog, ex, where)]
+            for run in ("band", "clear"):
+                p["ms"] += r[run]["samples_ms"]
+                p["lost"] += r[run]["lost"]
+            p["predict_ms"] += r.get("predict_ms", [])
+    return pooled
+
+
+def compare_table(pooled: dict, load: tuple[float, float], rounds: int, cfg: dict) -> str:
+    rows = []
+    for (hog, ex, where), p in pooled.items():
+        q = percentiles(p["ms"])
+        share = ""
+        if p["predict_ms"]:
+            share = (f"predict p50 {np.percentile(p['predict_ms'], 50):.3f} ms = "
+                     f"{np.percentile(p['predict_ms'], 50) / q['p50_ms'] * 100:.0f} % of p50")
+        target = {"in_process": 1.0, "cross_process": 1.5}[where]
+        rows.append((where.replace("_", "-"), "EventsExecutor" if ex == "events" else
+                     "SingleThreadedExecutor", "CPU hog on the other core" if hog else "quiet",
+                     fmt(q["p50_ms"], 3), fmt(q["p99_ms"], 3), fmt(q["max_ms"], 2),
+                     f"{len(p['ms'])}, lost {p['lost']}",
+                     "" if hog else f"p99 ≤ {target:g} ms "
+                     f"{'met' if q['p99_ms'] <= target else 'MISSED'}", share))
+    head = ("| node | executor | machine | p50 ms | p99 ms | max ms | samples | target | "
+            "model |\n|---|---|---|---:|---:|---:|---|---|---|")
+    return (head + "\n" + "\n".join("| " + " | ".join(r) + " |" for r in rows)
+            + f"\n\nmotor_speed at {cfg['rate_hz']:g} Hz, {BAND_SPEED:g} and {CLEAR_SPEED:g}"
+            f" ± 0.5 rad/s pooled, {rounds} interleaved rounds; hog: `python3 -c 'while 1: pass'`"
+            f" pinned to CPU {max(os.sched_getaffinity(0))}; load avg {load[0]:.2f} → {load[1]:.2f}")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller run (~20 s)")
     ap.add_argument("--json", metavar="OUT.json", help="also write the raw numbers here")
     ap.add_argument("--profile", action="store_true",
                     help="only profile the in-process measurement with cProfile")
+    ap.add_argument("--compare", type=int, metavar="ROUNDS", default=0,
+                    help="only benchmarks 1 and 2: the node's EventsExecutor against rclpy's "
+                    "SingleThreadedExecutor, quiet and with a CPU hog, ROUNDS interleaved rounds")
     args = ap.parse_args(argv)
     faulthandler.dump_traceback_later(WATCHDOG_S, exit=True)
     mode = "quick" if args.quick else "default"
@@ -578,6 +681,14 @@ def main(argv: list[str] | None = None) -> int:
                 r = res[run]
                 print(f"{run}: p50 {r['p50_ms']:.3f} p99 {r['p99_ms']:.3f} max "
                       f"{r['max_ms']:.2f} ms (under cProfile)")
+            return 0
+        if args.compare:
+            load0 = os.getloadavg()[0]
+            pooled = compare_executors(cfg, args.compare)
+            print(compare_table(pooled, (load0, os.getloadavg()[0]), args.compare, cfg))
+            if args.json:
+                with open(args.json, "w") as fh:
+                    json.dump({" ".join(map(str, k)): v for k, v in pooled.items()}, fh)
             return 0
         t0 = time.perf_counter()
         res = dict(mode=mode, config=cfg, env=environment(),
