@@ -303,11 +303,13 @@ def test_recording_splits_by_duration_and_by_size(ros, tmp_path):
         while time.monotonic() < end:
             ros.publisher("motor_speed").publish(Float64(data=10.0 + i % 20))
             ros.publisher("axial_load").publish(Float64(data=LOAD))
-            # one executor cycle per input: the node's EventsExecutor handles one event per
-            # spin_once, in arrival order (timers have no priority), so fewer cycles than
-            # inputs would leave the housekeeping timer (which splits) ever further behind
-            for _ in range(2):
-                ros.executor.spin_once(timeout_sec=0.005)
+            # 5 ms of spinning per input pair: the node's EventsExecutor handles one event per
+            # spin_once, in arrival order (timers have no priority), so a probe that sent
+            # faster than the node handles would leave the housekeeping timer (which splits)
+            # ever further behind
+            pause = time.monotonic() + 0.005
+            while (left := pause - time.monotonic()) > 0:
+                ros.executor.spin_once(timeout_sec=left)
             i += 1
         bag = node.recorder.bag
         ros.remove(node)
