@@ -663,7 +663,8 @@ def compare_table(pooled: dict, load: tuple[float, float], rounds: int, cfg: dic
     return (head + "\n" + "\n".join("| " + " | ".join(r) + " |" for r in rows)
             + f"\n\nmotor_speed at {cfg['rate_hz']:g} Hz, {BAND_SPEED:g} and {CLEAR_SPEED:g}"
             f" ± 0.5 rad/s pooled, {rounds} interleaved rounds; hog: `python3 -c 'while 1: pass'`"
-            f" pinned to CPU {max(os.sched_getaffinity(0))}; load avg {load[0]:.2f} → {load[1]:.2f}")
+            f" pinned to CPU {max(os.sched_getaffinity(0))}; "
+            f"load avg {load[0]:.2f} → {load[1]:.2f}")
 
 
 def main(argv: list[str] | None = None) -> int:

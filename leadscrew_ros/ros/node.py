@@ -72,9 +72,24 @@ INPUTS = {"motor_speed": Float64, "axial_load": Float64, "nut_position": Float64
 def make_executor(context=None) -> Executor:
     """The executor the node runs on (`main`, the demo, the benchmarks and the tests).
 
-    rclpy's `EventsExecutor` (C++): one ready entity costs no wait-set rebuild in Python
-    (`SingleThreadedExecutor` rebuilds it every cycle, ~200 us, two cycles per input ->
-    squeak/risk round trip)."""
+    rclpy's `EventsExecutor` (C++): a ready input costs no wait-set rebuild in Python (the
+    `SingleThreadedExecutor` rebuilds it every cycle, ~200 us here, two cycles per
+    motor_speed -> squeak/risk round trip). What differs for a caller (rclpy 7.1.6): one event
+    per `spin_once`, first in first out, timers without priority; events already queued for a
+    node still run after `remove_node` (stop spinning, or drain, before destroying it);
+    callbacks taking message info are not supported (`ros.input_recording` keeps its own
+    `SingleThreadedExecutor` for that reason).
+
+    Parameters
+    ----------
+    context : rclpy.context.Context, optional
+        The context to spin; default: rclpy's default context.
+
+    Returns
+    -------
+    rclpy.executors.Executor
+        A new EventsExecutor (a C++ object with the Executor interface used here).
+    """
     return EventsExecutor(context=context)
 
 
