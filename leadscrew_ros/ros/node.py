@@ -22,6 +22,7 @@ table in `ros.parameters`, the /diagnostics updater and the recording verdict in
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from typing import NamedTuple
@@ -78,7 +79,8 @@ def make_executor(context=None) -> Executor:
     per `spin_once`, first in first out, timers without priority; events already queued for a
     node still run after `remove_node` (stop spinning, or drain, before destroying it);
     callbacks taking message info are not supported (`ros.input_recording` keeps its own
-    `SingleThreadedExecutor` for that reason).
+    `SingleThreadedExecutor` for that reason); it enables `faulthandler` on the process's
+    stderr.
 
     Parameters
     ----------
@@ -90,7 +92,10 @@ def make_executor(context=None) -> Executor:
     rclpy.executors.Executor
         A new EventsExecutor (a C++ object with the Executor interface used here).
     """
-    return EventsExecutor(context=context)
+    # EventsExecutor() calls faulthandler.enable(), which needs a sys.stderr with a file
+    # descriptor (not so under pytest's capsys, in a notebook, ...): give it the process's own
+    with contextlib.redirect_stderr(sys.__stderr__ or sys.stderr):
+        return EventsExecutor(context=context)
 
 
 def bag_prefix(namespace: str) -> str:
