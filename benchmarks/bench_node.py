@@ -1,10 +1,12 @@
 # SPDX-License-Identifier: Apache-2.0
 """Benchmark of the ROS 2 node `squeak_predictor`: input-to-output latency and CPU use.
 
-    .venv/bin/python benchmarks/bench_node.py [--quick] [--hog] [--json OUT.json] [--profile]
+    .venv/bin/python benchmarks/bench_node.py [--quick] [--json OUT.json] [--profile]
+    .venv/bin/python benchmarks/bench_node.py --quick --compare ROUNDS
 
 Prints Markdown tables: (1) in-process latency, predictor node and probe node on one
-SingleThreadedExecutor (own Context), from just before a motor_speed publish to the receipt of
+executor, the node's own (`node.make_executor`: rclpy's EventsExecutor), on an own Context,
+at 200 Hz, from just before a motor_speed publish to the receipt of
 squeak/risk (P(squeak)), in the squeak band (20 rad/s, also safe-speed advice) and outside it
 (100 rad/s);
 (2) the same with the node as a separate process; (3) the node process's CPU use while the probe
@@ -14,12 +16,16 @@ zstd, default flush period): benchmarks 1 and 3 again with the node recording, a
 wrote. DDS stays on loopback and on private ROS_DOMAIN_IDs (one per phase, derived from the PID,
 101..200), also for the child processes.
 `--profile` runs the in-process measurement once more under cProfile and prints where the time
-goes. See benchmarks/README.md.
+goes. `--compare ROUNDS` runs only benchmarks 1 and 2, for the EventsExecutor and for rclpy's
+SingleThreadedExecutor (node process and probe alike), quiet and with a CPU hog pinned to the
+other core, in interleaved rounds, with the share of `SqueakModel.predict` in the round trip.
+See benchmarks/README.md.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import cProfile
 import datetime
 import faulthandler
@@ -34,8 +40,10 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from importlib import metadata
+from unittest import mock
 
 # Loopback only and a private domain per phase, before anything starts the RMW.
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -61,10 +69,10 @@ from std_msgs.msg import Float64                                     # noqa: E40
 
 from leadscrew_ros.bag.logfile import inspect, log_files                  # noqa: E402
 from leadscrew_ros.model import SqueakModel                          # noqa: E402
-from leadscrew_ros.ros.node import LATCHED, SqueakPredictorNode          # noqa: E402
+from leadscrew_ros.ros.node import LATCHED, SqueakPredictorNode, make_executor  # noqa: E402
 
-TARGET_INPROCESS_P99_MS = 1.0    # issue 11, quiet machine
-TARGET_CROSS_P99_MS = 1.5
+TARGET_INPROCESS_P99_MS = 1.0        # issue 11, quiet machine, 200 Hz input
+TARGET_CROSS_PROCESS_P99_MS = 1.5
 LOAD_N = 200.0                 # fixed axial load; squeak band at this load ~0.8..55 rad/s
 BAND_SPEED = 20.0              # in the band: prediction + safe-speed advice
 CLEAR_SPEED = 100.0            # outside the band (stable): prediction only
@@ -85,6 +93,18 @@ WATCHDOG_S = 600.0             # a Fast DDS hang ends the run with a traceback, 
 # so a node timer that is always ready (max_rate_hz 10000 -> 0.1 ms) starves every
 # subscription. Inputs are paced by probe timers, so this only bounds idle waits.
 SPIN_STEP_S = 0.05
+# The executor of the node and the probe: the node's own (`node.make_executor`, rclpy's
+# EventsExecutor) or rclpy's Python SingleThreadedExecutor (what the node used before).
+EXECUTORS = {"events": make_executor,
+             "single": lambda ctx: SingleThreadedExecutor(context=ctx)}
+EXECUTOR = "events"
+CHILD_MAIN = {
+    "events": "import sys; from leadscrew_ros.ros import node; sys.exit(node.main())",
+    "single": ("import sys; from rclpy.executors import SingleThreadedExecutor as S; "
+               "from leadscrew_ros.ros import node; "
+               "node.make_executor = lambda context=None: S(context=context); "
+               "sys.exit(node.main())"),
+}
 
 
 class Probe(Node):
@@ -270,6 +290,26 @@ def bag_stats(record_dir: str) -> dict:
 
 def bench_in_process(cfg: dict, domain: int, profile: bool = False,
                      record_dir: str | None = None) -> dict:
+    """Benchmark 1; `predict_ms` in the result: the wall time of every SqueakModel.predict
+    call during the run (the model's share of the round trip)."""
+    predict_ms: list[float] = []
+    predict = SqueakModel.predict
+
+    def timed(self, *args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return predict(self, *args, **kwargs)
+        finally:
+            if threading.current_thread() is threading.main_thread():   # not advice searches
+                predict_ms.append((time.perf_counter() - start) * 1e3)
+
+    with mock.patch.object(SqueakModel, "predict", timed):
+        res = _bench_in_process(cfg, domain, profile, record_dir)
+    res["predict_ms"] = predict_ms
+    return res
+
+
+def _bench_in_process(cfg: dict, domain: int, profile: bool, record_dir: str | None) -> dict:
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain)
     node = probe = ex = None
@@ -278,7 +318,7 @@ def bench_in_process(cfg: dict, domain: int, profile: bool = False,
             Parameter(k, value=v) for k, v in
             {"max_rate_hz": 10000.0, **record_params(record_dir)}.items()])
         probe = Probe(ctx)
-        ex = SingleThreadedExecutor(context=ctx)
+        ex = EXECUTORS[EXECUTOR](ctx)
         ex.add_node(node)
         ex.add_node(probe)
         connect(ex, probe, CLEAR_SPEED)
@@ -313,7 +353,7 @@ class ChildNode:
         env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                    ROS_DOMAIN_ID=str(domain))
         self.log = tempfile.TemporaryFile()
-        cmd = [sys.executable, "-m", "leadscrew_ros.ros.node"]
+        cmd = [sys.executable, "-c", CHILD_MAIN[EXECUTOR]]
         if ros_args:
             cmd += ["--ros-args", *ros_args]
         self.proc = subprocess.Popen(cmd, env=env, stdout=self.log, stderr=subprocess.STDOUT)
@@ -351,7 +391,7 @@ def with_child(domain: int, ros_args: list[str], body) -> dict:
     res: dict = {}
     try:
         probe = Probe(ctx)
-        ex = SingleThreadedExecutor(context=ctx)
+        ex = EXECUTORS[EXECUTOR](ctx)
         ex.add_node(probe)
         res = body(ex, probe, child)
     finally:
@@ -489,9 +529,9 @@ def table(res: dict) -> str:
                            "(prediction + safe-speed advice)"),
                           ("clear", f"{CLEAR_SPEED:g} ± 0.5 rad/s, no squeak (prediction only)")):
             r = res[key][run]
-            limit = TARGET_INPROCESS_P99_MS if key == "in_process" else TARGET_CROSS_P99_MS
-            target = (f"p99 ≤ {limit:g} ms {'met' if r['p99_ms'] <= limit else 'MISSED'}"
-                      + (" (target for a quiet machine)" if res["hog"] else ""))
+            limit = (TARGET_INPROCESS_P99_MS if key == "in_process"
+                     else TARGET_CROSS_PROCESS_P99_MS)
+            target = f"p99 ≤ {limit:g} ms {'met' if r['p99_ms'] <= limit else 'MISSED'}"
             cold = (f"; first in-band input {fmt(r['first_warmup_ms'])} ms (builds the speed "
                     "bands)" if run == "band" else "")
             rows.append((label, what, fmt(r["p50_ms"], 3), fmt(r["p99_ms"], 3),
@@ -527,9 +567,7 @@ def table(res: dict) -> str:
                f"{env['cpu_count']} CPUs ({env['machine']}) · discovery "
                f"{env['discovery_range']}, domains {'/'.join(map(str, env['domains']))} · "
                f"load avg {env['load_avg_1min_start']:.2f} → {env['load_avg_1min_end']:.2f} · "
-               f"mode {res['mode']} · {res['wall_s']:.1f} s"
-               + (" · CPU hog: one busy-loop process (`python -c 'while True: pass'`) for the "
-                  "whole run" if res["hog"] else ""))
+               f"mode {res['mode']} · {res['wall_s']:.1f} s")
     exits = ", ".join(f"benchmark {n} exit {res[k]['child']['returncode']}"
                       + (" (SIGKILL)" if res[k]["child"]["killed"] else "")
                       for n, k in ((2, "cross_process"), (3, "cpu")))
@@ -562,19 +600,86 @@ def recording_table(res: dict) -> str:
             "|---|---|---|---|\n" + "\n".join("| " + " | ".join(r) + " |" for r in rows))
 
 
+# ---------------------------------------------------------------- executors compared
+class Hog:
+    """A CPU hog on the other core: `python3 -c 'while 1: pass'` as a child process pinned to
+    the last CPU (sched_setaffinity); the benchmark's processes may run on any CPU."""
+
+    CMD = [sys.executable, "-c", "while 1: pass"]
+
+    def __enter__(self) -> "Hog":
+        cpu = max(os.sched_getaffinity(0))
+        self.proc = subprocess.Popen(self.CMD, preexec_fn=lambda: os.sched_setaffinity(0, {cpu}))
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.proc.kill()
+        self.proc.wait()
+
+
+def compare_executors(cfg: dict, rounds: int) -> dict:
+    """Benchmarks 1 and 2 for each executor, quiet and with a CPU hog, in interleaved rounds
+    (every round runs every case once, so a change of machine load hits all of them). Each
+    case pools the band and the clear run's samples over the rounds."""
+    global EXECUTOR
+    cases = [(hog, ex, where) for hog in (False, True) for ex in ("single", "events")
+             for where in ("in_process", "cross_process")]
+    pooled: dict = {c: dict(ms=[], lost=0, predict_ms=[]) for c in cases}
+    k = 0
+    for _ in range(rounds):
+        for hog, ex, where in cases:
+            EXECUTOR = ex
+            domain = 101 + (os.getpid() + 7 * k) % 100
+            k += 1
+            with Hog() if hog else contextlib.nullcontext():
+                r = (bench_in_process(cfg, domain) if where == "in_process"
+                     else bench_cross_process(cfg, domain))
+            p = pooled[(hog, ex, where)]
+            for run in ("band", "clear"):
+                p["ms"] += r[run]["samples_ms"]
+                p["lost"] += r[run]["lost"]
+            p["predict_ms"] += r.get("predict_ms", [])
+    return pooled
+
+
+def compare_table(pooled: dict, load: tuple[float, float], rounds: int, cfg: dict) -> str:
+    rows = []
+    for (hog, ex, where), p in pooled.items():
+        q = percentiles(p["ms"])
+        share = ""
+        if p["predict_ms"]:
+            share = (f"predict p50 {np.percentile(p['predict_ms'], 50):.3f} ms = "
+                     f"{np.percentile(p['predict_ms'], 50) / q['p50_ms'] * 100:.0f} % of p50")
+        target = {"in_process": TARGET_INPROCESS_P99_MS,
+                  "cross_process": TARGET_CROSS_PROCESS_P99_MS}[where]
+        rows.append((where.replace("_", "-"), "EventsExecutor" if ex == "events" else
+                     "SingleThreadedExecutor", "CPU hog on the other core" if hog else "quiet",
+                     fmt(q["p50_ms"], 3), fmt(q["p99_ms"], 3), fmt(q["max_ms"], 2),
+                     f"{len(p['ms'])}, lost {p['lost']}",
+                     "" if hog else f"p99 ≤ {target:g} ms "
+                     f"{'met' if q['p99_ms'] <= target else 'MISSED'}", share))
+    head = ("| node | executor | machine | p50 ms | p99 ms | max ms | samples | target | "
+            "model |\n|---|---|---|---:|---:|---:|---|---|---|")
+    return (head + "\n" + "\n".join("| " + " | ".join(r) + " |" for r in rows)
+            + f"\n\nmotor_speed at {cfg['rate_hz']:g} Hz, {BAND_SPEED:g} and {CLEAR_SPEED:g}"
+            f" ± 0.5 rad/s pooled, {rounds} interleaved rounds; hog: `python3 -c 'while 1: pass'`"
+            f" pinned to CPU {max(os.sched_getaffinity(0))}; "
+            f"load avg {load[0]:.2f} → {load[1]:.2f}")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller run (~20 s)")
     ap.add_argument("--json", metavar="OUT.json", help="also write the raw numbers here")
-    ap.add_argument("--hog", action="store_true",
-                    help="run everything with a busy-loop process keeping one core busy")
     ap.add_argument("--profile", action="store_true",
                     help="only profile the in-process measurement with cProfile")
+    ap.add_argument("--compare", type=int, metavar="ROUNDS", default=0,
+                    help="only benchmarks 1 and 2: the node's EventsExecutor against rclpy's "
+                    "SingleThreadedExecutor, quiet and with a CPU hog, ROUNDS interleaved rounds")
     args = ap.parse_args(argv)
     faulthandler.dump_traceback_later(WATCHDOG_S, exit=True)
     mode = "quick" if args.quick else "default"
     cfg = CONFIGS[mode]
-    hog = (subprocess.Popen([sys.executable, "-c", "while True: pass"]) if args.hog else None)
     try:
         if args.profile:
             res = bench_in_process(cfg, DOMAINS[0], profile=True)
@@ -584,10 +689,17 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{run}: p50 {r['p50_ms']:.3f} p99 {r['p99_ms']:.3f} max "
                       f"{r['max_ms']:.2f} ms (under cProfile)")
             return 0
+        if args.compare:
+            load0 = os.getloadavg()[0]
+            pooled = compare_executors(cfg, args.compare)
+            print(compare_table(pooled, (load0, os.getloadavg()[0]), args.compare, cfg))
+            if args.json:
+                with open(args.json, "w") as fh:
+                    json.dump({" ".join(map(str, k)): v for k, v in pooled.items()}, fh)
+            return 0
         t0 = time.perf_counter()
-        res = dict(mode=mode, config=cfg, env=environment(), hog=args.hog,
-                   target_in_process_p99_ms=TARGET_INPROCESS_P99_MS,
-                   target_cross_process_p99_ms=TARGET_CROSS_P99_MS)
+        res = dict(mode=mode, config=cfg, env=environment(),
+                   target_in_process_p99_ms=TARGET_INPROCESS_P99_MS)
         res["in_process"] = bench_in_process(cfg, DOMAINS[0])
         res["cross_process"] = bench_cross_process(cfg, DOMAINS[1])
         res["cpu"] = bench_cpu(cfg, DOMAINS[2])
@@ -607,9 +719,6 @@ def main(argv: list[str] | None = None) -> int:
                 json.dump(res, fh, indent=1)
         return 0
     finally:
-        if hog is not None:
-            hog.kill()
-            hog.wait()
         faulthandler.cancel_dump_traceback_later()
         if _LOG_DIR:
             shutil.rmtree(_LOG_DIR, ignore_errors=True)

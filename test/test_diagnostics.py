@@ -16,7 +16,6 @@ import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -27,7 +26,7 @@ from leadscrew_ros.ros.diagnostics import (KEY_BAG, KEY_CUT_OFF_BAGS, KEY_FILES,
                                            DiagnosticStatusWrapper, Updater, key_lost_on,
                                            recording_status, status_task)
 from leadscrew_ros.live.predictor import Level, Status
-from leadscrew_ros.ros.node import LATCHED, NODE_NAME
+from leadscrew_ros.ros.node import LATCHED, NODE_NAME, make_executor
 from test_node import SQUEAK, at, ros  # noqa: F401  (ros: fixture)
 
 COLLECT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
@@ -50,7 +49,7 @@ class World:
         self.hardware_id = f"hw_{self.ns[2:]}"
         self.ctx = Context()
         rclpy.init(context=self.ctx)
-        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor = make_executor(self.ctx)      # the squeak_predictor node's executor
         self.node = Node("watched", context=self.ctx, namespace=self.ns)
         self.probe = Node("probe", context=self.ctx, namespace=self.ns)
         for n in (self.node, self.probe):

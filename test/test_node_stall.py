@@ -31,7 +31,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
 
 from leadscrew_ros.model import SqueakModel
-from leadscrew_ros.ros.node import SqueakPredictorNode
+from leadscrew_ros.ros.node import SqueakPredictorNode, make_executor
 from test_node import COLLECT
 
 RATE_HZ = 50.0
@@ -67,7 +67,7 @@ class StallStats:
         return max(b - a for a, b in zip(t, t[1:]))
 
 
-def _spin(executor: SingleThreadedExecutor, stop: threading.Event) -> None:
+def _spin(executor, stop: threading.Event) -> None:
     while not stop.is_set():
         executor.spin_once(timeout_sec=0.05)
 
@@ -94,7 +94,7 @@ def _stall_run(n_modes, duration_s, count_searches, ns, stats) -> StallStats:
     ctx = Context()
     rclpy.init(context=ctx)
     stop = threading.Event()
-    node_executor = SingleThreadedExecutor(context=ctx)
+    node_executor = make_executor(ctx)           # the node's own, as in squeak_node
     executor = SingleThreadedExecutor(context=ctx)
     node = driver = spinner = None
     try:

@@ -129,8 +129,7 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
     assert node.set_parameters([Parameter("record.enabled", value=True)])[0].successful
     sent = drive(ros, node)
     bag = node.recorder.bag
-    node.destroy_node()                                   # closes the file cleanly
-    ros.executor.remove_node(node)
+    ros.remove(node)                                   # closes the file cleanly
     ros.node = None
     outputs = latched + published                # (topic, bytes, publish time)
     expected = [(t, deserialize_message(d, classes[t])) for t, d, _ in outputs] + sent
@@ -206,8 +205,7 @@ def test_recorded_outputs_are_the_bytes_a_raw_subscriber_receives(ros, tmp_path)
     ros.spin_until(lambda: all(len(received[t]) == node.recorder.count(names[t])
                                for t in received), what="every recorded output")
     bag = node.recorder.bag
-    node.destroy_node()
-    ros.executor.remove_node(node)
+    ros.remove(node)
     ros.node = None
     recorded = {t: [m.data for m in read_log(bag) if m.topic.name == names[t]] for t in received}
     assert len(recorded[RISK]) >= 2 and all(recorded.values()), recorded
@@ -305,11 +303,16 @@ def test_recording_splits_by_duration_and_by_size(ros, tmp_path):
         while time.monotonic() < end:
             ros.publisher("motor_speed").publish(Float64(data=10.0 + i % 20))
             ros.publisher("axial_load").publish(Float64(data=LOAD))
-            ros.executor.spin_once(timeout_sec=0.005)
+            # 5 ms of spinning per input pair: the node's EventsExecutor handles one event per
+            # spin_once, in arrival order (timers have no priority), so a probe that sent
+            # faster than the node handles would leave the housekeeping timer (which splits)
+            # ever further behind
+            pause = time.monotonic() + 0.005
+            while (left := pause - time.monotonic()) > 0:
+                ros.executor.spin_once(timeout_sec=left)
             i += 1
         bag = node.recorder.bag
-        node.destroy_node()
-        ros.executor.remove_node(node)
+        ros.remove(node)
         ros.node = None
         files = log_files(bag)
         assert len(files) >= 3, (split, files)
@@ -781,8 +784,7 @@ def test_cut_off_bags_of_an_earlier_run_are_reported_on_start_and_auto_recovered
         values = {kv.key: kv.value for kv in status.values}
         assert values["cut_off_bags"] == str(cut)
         assert not (cut / "metadata.yaml").exists()           # only reported
-        node.destroy_node()
-        r.executor.remove_node(node)
+        r.remove(node)
         node = r.start(**{"record.directory": str(directory), "record.auto_recover": True})
         status = recording_status(r, lambda s: "recovered 1 cut-off bag" in s.message, 20.0)
         assert status.level == bytes([Level.OK]) and str(cut) in status.message

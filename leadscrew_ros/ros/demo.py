@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import TextIO
 
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.logging import LoggingSeverity
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -32,7 +31,7 @@ from ..live.predictor import (KEY_RECOMPUTES, KEY_SPEED, KEY_SQUEAK_FREQUENCIES,
 from ..bag import cdr, messages
 from ..bag.logfile import LogError, inspect, log_files
 from ..model import Validity
-from .node import LATCHED, OUTPUT_CLASSES, SqueakPredictorNode
+from .node import LATCHED, OUTPUT_CLASSES, SqueakPredictorNode, make_executor
 from ..bag.recorder import Recorder
 from .env import StopSignals, close, confine_to_localhost, init_context
 from ..live.profile import ActuatorState, StrokeProfile, expected_squeak
@@ -302,7 +301,7 @@ def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float 
             sim = ActuatorSimulator(profile, rate_hz=rate_hz, wait_for_subscriber=True,
                                     context=ctx)
             nodes.append(sim)
-            executor = SingleThreadedExecutor(context=ctx)
+            executor = make_executor(ctx)
             for node in nodes:
                 executor.add_node(node)
             print(f"leadscrew_ros demo: squeak predictor + simulated power-seat stroke "
