@@ -49,7 +49,7 @@ def test_analytic_jacobian_matches_finite_differences(sliding):
     all but `sliding` of the tangential sliding at the nut, so that |Vc| falls to the axial
     floor R Omega tan(beta) = 4.4e-5 m/s, below v_eps = 1e-4 m/s."""
     speed, load, v_eps = 0.1, 200.0, 1e-4
-    basis = kept_basis(build_geometry(CONSISTENT).basis, 7)
+    basis, _ = kept_basis(build_geometry(CONSISTENT).basis, 7)
     friction = HelixFriction(CONSISTENT, basis, speed, load, v_eps, 16)
     rng = np.random.default_rng(1)
     q = rng.standard_normal(basis.n) * 1e-9

@@ -5,13 +5,15 @@ the squeak as a WAV file and a plot of the time history and spectrogram.
 
 The simulated force is the nonlinear friction of `model.friction_force`, whose linearisation is
 the `consistent` formulation whatever --formulation says; --formulation picks the eigenvalue
-the text output compares with (JSON has both).
+the text output compares with (JSON has both). The eigenvalues are those of the full model
+(all modes of the parameters), also when --modes keeps fewer in the simulation.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import time
 from dataclasses import fields
 from pathlib import Path
 
@@ -26,6 +28,7 @@ from .args import CliError, Parser, build_model, finite, print_json
 WAV_RATE_HZ = 48000
 WAV_FULL_SCALE = 32767          # int16 code of the largest |surface velocity|
 _SETTINGS = {f.name: f for f in fields(TransientSettings)}
+_OPTIONS = ("duration_s", "modes", "regularisation_m_s", "seed")    # the settings with options
 
 
 def audio(run: TransientResult) -> tuple[np.ndarray, float]:
@@ -83,11 +86,14 @@ def _text(args, result: TransientAnalysis, linear: dict, elapsed: str) -> str:
              f"linear regime ({fit.start_s * 1e3:.1f}-{fit.end_s * 1e3:.1f} ms): {fit.mode} "
              f"{fit.frequency_hz:.2f} Hz, growth {fit.growth_rate:+.2f} 1/s"]
     chosen = linear[args.shown]
-    if chosen.get("growth_rate") is None:
+    if chosen["growth_rate"] is None:
         lines.append(f"{args.shown} eigenvalue: none ({chosen['reason']})")
     else:
+        top = chosen["most_unstable"]
         lines.append(f"{args.shown} eigenvalue of {chosen['mode']}: "
-                     f"{chosen['frequency_hz']:.2f} Hz, growth {chosen['growth_rate']:+.2f} 1/s")
+                     f"{chosen['frequency_hz']:.2f} Hz, growth {chosen['growth_rate']:+.2f} 1/s; "
+                     f"least stable {top['mode']} {top['frequency_hz']:.2f} Hz, growth "
+                     f"{top['growth_rate']:+.2f} 1/s")
     if cycle is not None:
         harm = ", ".join(f"{k}: {v:.0f} dB" for k, v in cycle.harmonics_db.items())
         lines += [f"limit cycle after {cycle.time_to_saturation_s * 1e3:.1f} ms: surface "
@@ -100,7 +106,6 @@ def _text(args, result: TransientAnalysis, linear: dict, elapsed: str) -> str:
 
 
 def cmd_transient(args: argparse.Namespace) -> int:
-    import time
     model = build_model(args)
     params: ScrewParameters = model.params
     args.load_n = params.axial_load_n if args.load is None else args.load
@@ -132,9 +137,6 @@ def cmd_transient(args: argparse.Namespace) -> int:
         print(_text(args, result, linear, f"simulated {settings.duration_s:g} s in "
                                           f"{elapsed:.1f} s"))
     return 0
-
-
-_OPTIONS = ("duration_s", "modes", "regularisation_m_s", "seed")
 
 
 def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:

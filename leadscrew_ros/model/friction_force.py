@@ -43,9 +43,12 @@ _SERIES_BELOW = 1e-2     # |V| / v_eps below which tanh(x) / x and its derivativ
 def _direction_factors(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(tanh(x) / x, x d/dx (tanh(x) / x)) for x = |V| / v_eps >= 0, with their series near 0
     (the closed forms cancel there)."""
+    th = np.tanh(x)
     small = x < _SERIES_BELOW
-    xs = np.where(small, 1.0, x)                  # no 0 / 0 in the discarded branch
-    th = np.tanh(xs)
+    if not small.any():                       # sliding: the common case, no series
+        a = th / x
+        return a, (1 - th * th) - a
+    xs = np.where(small, 1.0, x)              # no 0 / 0 in the discarded branch
     a = np.where(small, 1 - x * x / 3 + 2 * x ** 4 / 15, th / xs)
     b = np.where(small, -2 * x * x / 3 + 8 * x ** 4 / 15, (1 - th * th) - th / xs)
     return a, b
@@ -94,6 +97,7 @@ class HelixFriction:
         n_modes = basis.n
         self._w_flat = self.w.reshape(n_modes, -1)
         self._kw_flat = self.kw.reshape(n_modes, -1)
+        self._state_velocity = np.vstack((self.speed * self._kw_flat, self._w_flat))   # (2N, 3P)
         self._ww = (self.w * self.weight).reshape(n_modes, -1)             # quadrature applied
         beta = params.helix_angle_rad
         self.v0 = r * self.speed * np.array([0.0, 1.0, math.tan(beta)])
@@ -108,24 +112,29 @@ class HelixFriction:
 
         Parameters
         ----------
-        q, qdot : numpy.ndarray
-            Modal coordinates and their rates, (N,).
+        q : numpy.ndarray
+            Modal coordinates, (N,).
+        qdot : numpy.ndarray
+            Their rates, (N,).
 
         Returns
         -------
         numpy.ndarray
             Vc, (3, P).
         """
-        v = self.speed * (q @ self._kw_flat) + qdot @ self._w_flat
+        v = np.concatenate((q, qdot)) @ self._state_velocity
         return v.reshape(3, -1) + self.v0[:, None]
 
-    def force(self, q: np.ndarray, qdot: np.ndarray, jacobian: bool = False):
+    def force(self, q: np.ndarray, qdot: np.ndarray, jacobian: bool = False
+              ) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Generalised friction forces Q (N,) and, with `jacobian`, dQ/dq and dQ/dqdot (N, N).
 
         Parameters
         ----------
-        q, qdot : numpy.ndarray
-            Modal coordinates and their rates, (N,).
+        q : numpy.ndarray
+            Modal coordinates, (N,).
+        qdot : numpy.ndarray
+            Their rates, (N,).
         jacobian : bool
             Also return the two Jacobians.
 

@@ -9,8 +9,8 @@ M = I (mass-normalised modes), C = diag(2 xi omega) (A.1), G the gyroscopic coup
 Q the friction of the nut over the contact helix at the actual contact velocity. Steady
 sliding is the static equilibrium q* of ([omega^2] - Omega^2 I) q* = Q(q*, 0) (the screw
 twisted and bent by the steady friction; Newton from q = 0); the run starts there plus a
-seeded random perturbation of every modal coordinate and rate, so the simulation itself
-shows which mode grows. The state integrated is the deviation from q*.
+seeded random perturbation of every modal coordinate and rate (each mode's contribution to the
+contact velocity of the same size), so the simulation itself shows which mode grows. The state integrated is the deviation from q*.
 
 Integrator: scipy's LSODA (Adams while the problem is not stiff, BDF with the analytic
 Jacobian when it turns stiff; Radau IIA or DOP853 selectable). The system is stiff: the highest
@@ -105,16 +105,20 @@ class TransientResult:
 
     Attributes
     ----------
-    speed_rad_s, load_n : float
-        Operating point Omega [rad/s], F_z [N].
+    speed_rad_s : float
+        Screw speed Omega [rad/s].
+    load_n : float
+        Axial load F_z [N].
     labels : tuple of str
         Labels of the modes kept.
     omega_rad_s : numpy.ndarray
         Their natural frequencies [rad/s].
     time_s : numpy.ndarray
         Sample times [s], (T,).
-    q, qdot : numpy.ndarray
-        Modal coordinates and rates, deviation from steady sliding, (T, N).
+    q : numpy.ndarray
+        Modal coordinates, deviation from steady sliding, (T, N).
+    qdot : numpy.ndarray
+        Their rates, (T, N).
     q_static : numpy.ndarray
         Steady sliding q* (the static deflection under the steady friction), (N,).
     lateral_m : numpy.ndarray
@@ -151,14 +155,16 @@ class TransientResult:
     evaluations: int
 
 
-def kept_basis(basis: ModalBasis, modes: int) -> ModalBasis:
-    """The `modes` lowest-frequency modes of `basis` in basis order (all when 0)."""
-    if modes == 0 or modes >= basis.n:
-        return basis
-    keep = np.sort(np.argsort(basis.omega_rad_s, kind="stable")[:modes])
+def kept_basis(basis: ModalBasis, modes: int) -> tuple[ModalBasis, np.ndarray]:
+    """The `modes` lowest-frequency modes of `basis` in basis order (all when 0), and their
+    indices in `basis`."""
+    keep = (np.arange(basis.n) if modes == 0 or modes >= basis.n else
+            np.sort(np.argsort(basis.omega_rad_s, kind="stable")[:modes]))
+    if len(keep) == basis.n:
+        return basis, keep
     return replace(basis, labels=tuple(basis.labels[i] for i in keep),
                    **{f.name: getattr(basis, f.name)[keep] for f in fields(basis)
-                      if f.name != "labels"})
+                      if f.name != "labels"}), keep
 
 
 class ModalEquations:
@@ -168,15 +174,17 @@ class ModalEquations:
     ----------
     params : ScrewParameters
         Screw, nut and friction.
-    speed_rad_s, load_n : float
-        Operating point [rad/s], [N].
+    speed_rad_s : float
+        Screw speed Omega [rad/s].
+    load_n : float
+        Axial load F_z [N].
     settings : TransientSettings
         Modes kept, regularisation and quadrature.
     """
 
     def __init__(self, params: ScrewParameters, speed_rad_s: float, load_n: float,
                  settings: TransientSettings):
-        self.basis = kept_basis(modal_basis(params), settings.modes)
+        self.basis, self.keep = kept_basis(modal_basis(params), settings.modes)
         self.friction = HelixFriction(params, self.basis, speed_rad_s, load_n,
                                       settings.regularisation_m_s, settings.points_per_turn)
         om, n = self.basis.omega_rad_s, self.basis.n
@@ -279,9 +287,10 @@ def simulate(params: ScrewParameters, speed_rad_s: float, load_n: float,
     eq = ModalEquations(params, speed_rad_s, load_n, settings)
     n, om = eq.n, eq.basis.omega_rad_s
     sliding = params.radius_m * abs(speed_rad_s) / math.cos(params.helix_angle_rad)
-    rng = np.random.default_rng(settings.seed)
     scale = settings.perturbation * sliding / eq.modal_velocity_scale()
-    y0 = np.concatenate((rng.standard_normal(n) * scale / om, rng.standard_normal(n) * scale))
+    # drawn for every mode of the basis, so a mode starts the same whichever modes are kept
+    draw = np.random.default_rng(settings.seed).standard_normal((2, params.n_modes))
+    y0 = np.concatenate((draw[0, eq.keep] * scale / om, draw[1, eq.keep] * scale))
     count = int(round(settings.duration_s * settings.sample_rate_hz)) + 1
     t = np.arange(count) / settings.sample_rate_hz
     atol = np.concatenate((scale / om, scale)) * (ATOL_PER_RTOL * settings.rtol)

@@ -10,9 +10,9 @@ undamped mode, so no envelope detector is needed.
   and the vibration velocity at the nut centre there reaches 1 % of the steady sliding speed
   (the friction nonlinearity engaged), saturated at a_sat = the median of a over the last
   fifth; otherwise `growing` or `decaying` by the trend of a over the last fifth.
-- Linear fit: in the linear regime (a below 1 % of a_sat; without a limit cycle, the
-  vibration velocity at the nut centre below 1e-4 of the steady sliding speed, or the whole
-  run if it never is), over its second half (where the other eigenmodes have decayed or fallen
+- Linear fit: in the linear regime (a below 1 % of a_sat; in a growing run, the vibration
+  velocity at the nut centre below 1e-4 of the steady sliding speed; in a decaying run, a
+  above 1e-3 of its start; the whole run if that never ends), over its second half (where the other eigenmodes have decayed or fallen
   behind), the modal coordinate with the largest RMS displacement (the labelling rule of
   `stability.classify`) is fitted by least squares with one exponentially growing sinusoid
   e^{sigma t} (a cos(w t) + b sin(w t)): growth sigma [1/s], frequency w / 2 pi [Hz]. The fit
@@ -43,6 +43,8 @@ TAIL = 0.2                  # last fraction of the run that decides the regime
 STEADY_CHANGE = 0.1         # limit cycle: the amplitude changes less over the tail
 ENGAGED_FRACTION = 0.01     # ... and the vibration velocity is at least this fraction of
 #                             the steady sliding speed (the friction nonlinearity engaged)
+DECAY_FLOOR = 1e-3          # a decaying run is fitted while a stays above this fraction of
+#                             its start (the integrator's absolute tolerance is 1e-6 of it)
 MIN_FIT_SAMPLES = 64        # fewest samples of the linear fit window
 HARMONICS = range(2, 7)
 _PAD = 8                    # zero padding of the spectra
@@ -60,8 +62,10 @@ class LinearFit:
         Fitted frequency [Hz].
     mode : str
         Label of the modal coordinate fitted (largest RMS displacement).
-    start_s, end_s : float
-        Fit window [s].
+    start_s : float
+        Start of the fit window [s].
+    end_s : float
+        Its end [s].
     residual : float
         RMS residual over RMS signal of the fit (dimensionless).
     """
@@ -225,8 +229,10 @@ def analyse(run: TransientResult) -> TransientAnalysis:
     a_sat = float(np.median(a[tail]))
     if regime == "limit cycle":
         linear = a < LINEAR_FRACTION * a_sat
-    else:
+    elif regime == "growing":
         linear = vibration < LINEAR_FRACTION * ENGAGED_FRACTION * run.steady_sliding_m_s
+    else:                                # down to where the integrator's tolerance shows
+        linear = a >= DECAY_FLOOR * a[0]
     end = int(np.argmin(linear)) if linear[0] and not linear.all() else len(t)
     end = max(end, min(len(t), MIN_FIT_SAMPLES))
     window = slice(end // 2, end)
@@ -264,8 +270,10 @@ def linear_counterparts(params: ScrewParameters, speed_rad_s: float, load_n: flo
     ----------
     params : ScrewParameters
         The parameters of the run (its formulation is replaced by each in turn).
-    speed_rad_s, load_n : float
-        Operating point [rad/s], [N].
+    speed_rad_s : float
+        Screw speed Omega [rad/s].
+    load_n : float
+        Axial load F_z [N].
     fit : LinearFit
         The run's linear fit.
 
