@@ -75,7 +75,8 @@ def run_20_200():
 
 def test_linear_regime_grows_at_the_consistent_eigenvalue(run_20_200):
     """The fit sees T1 grow at the `consistent` eigenvalue (measured: within 1e-5 in growth
-    and 1e-7 in frequency); the `paper` formulation predicts B1y instead."""
+    and 1e-7 in frequency, where the tests asks 2 % and 0.5 %); the `paper` formulation
+    predicts B1y instead, which does not grow in the simulation."""
     fit = analyse(run_20_200).linear_fit
     consistent = SqueakModel(CONSISTENT, Scatter({})).predict(20.0, 200.0).modes[0]
     assert fit.mode == consistent.label == "T1"
@@ -121,22 +122,23 @@ def test_without_load_only_modal_damping_acts():
 
 
 def test_limit_cycle_changes_little_when_the_regularisation_is_halved():
-    """At 0.2 rad/s, where |Vc| >= R Omega tan(beta) = 8.7e-5 m/s is below v_eps = 1e-4 m/s
-    (the regularisation acts), a perturbation of the order of the sliding speed: the motion
-    after it changes little with v_eps halved; and at (2 rad/s, 200 N), a limit cycle, it does
-    not change at all (|Vc| stays far above v_eps)."""
+    """At 0.2 rad/s, where the floor |Vc| >= R Omega tan(beta) = 8.7e-5 m/s is below v_eps =
+    1e-4 m/s (the regularisation acts while the perturbation, of the order of the sliding
+    speed, lasts): the motion after it changes by less than 1e-3 with v_eps halved (measured
+    1.4e-4); at (2 rad/s, 200 N), a limit cycle, |Vc| stays above 8.7 v_eps and the limit
+    cycle changes by less than 1e-6 (measured: not in the printed digits)."""
     def after(v_eps, speed, **kw):
         s = TransientSettings(modes=7, regularisation_m_s=v_eps, **kw)
         return analyse(simulate(ScrewParameters(), speed, 200.0, s))
 
     slow = [after(v, 0.2, duration_s=0.01, perturbation=1.0) for v in (1e-4, 5e-5)]
     late = [np.median(r.amplitude[-100:]) for r in slow]
-    assert late[1] == pytest.approx(late[0], rel=0.05)
+    assert late[1] == pytest.approx(late[0], rel=1e-3)
     fast = [after(v, 2.0, duration_s=0.04, perturbation=1e-3) for v in (1e-4, 5e-5)]
     assert [r.regime for r in fast] == ["limit cycle"] * 2
     a, b = (r.limit_cycle for r in fast)
-    assert b.surface_velocity_m_s == pytest.approx(a.surface_velocity_m_s, rel=1e-3)
-    assert b.torsion_rad == pytest.approx(a.torsion_rad, rel=1e-3)
+    assert b.surface_velocity_m_s == pytest.approx(a.surface_velocity_m_s, rel=1e-6)
+    assert b.torsion_rad == pytest.approx(a.torsion_rad, rel=1e-6)
 
 
 def test_static_deflection_balances_the_steady_friction():
@@ -185,10 +187,10 @@ def test_cli_bad_arguments_exit_2_with_one_line(capsys, argv):
     assert err.startswith("leadscrew-squeak: error:") and err.count("\n") == 1
 
 
-def test_cli_json_keys_and_wav(capsys, tmp_path):
-    wav = tmp_path / "s.wav"
+def test_cli_json_keys_wav_and_plot(capsys, tmp_path):
+    wav, png = tmp_path / "s.wav", tmp_path / "t.png"
     code = main(["transient", "--speed", "20", "--load", "200", "--duration", "0.01",
-                 "--modes", "7", "--wav", str(wav), "--json"])
+                 "--modes", "7", "--wav", str(wav), "--plot", str(png), "--json"])
     out, err = capsys.readouterr()
     assert code == 0, err
     doc = json.loads(out)
@@ -200,6 +202,7 @@ def test_cli_json_keys_and_wav(capsys, tmp_path):
     assert doc["limit_cycle"] is None and doc["regime"] == "growing"
     assert doc["wav"]["rate_hz"] == 48000 and doc["wav"]["full_scale_m_s"] > 0
     assert wavfile.read(wav)[0] == 48000
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_cli_below_min_speed_still_simulates(capsys):
