@@ -18,7 +18,7 @@ from leadscrew_ros.cli.transient import WAV_RATE_HZ, audio, write_wav
 from leadscrew_ros.model.assembly import build_geometry
 from leadscrew_ros.model.friction_force import HelixFriction
 from leadscrew_ros.model.parameters import ParameterError, ScrewParameters
-from leadscrew_ros.model.predictor import SqueakModel
+from leadscrew_ros.model.predictor import OperatingPointError, SqueakModel
 from leadscrew_ros.model.scatter import Scatter
 from leadscrew_ros.model.transient import (ModalEquations, TransientSettings, kept_basis,
                                            simulate)
@@ -167,8 +167,14 @@ def test_settings_reject_with_the_reason():
         TransientSettings(duration_s=-1.0)
     with pytest.raises(ParameterError, match="method"):
         TransientSettings(method="Euler")
+    with pytest.raises(ParameterError, match="samples"):
+        TransientSettings(duration_s=1e-3)                # 96 samples: too few to analyse
+    with pytest.raises(ParameterError, match="perturbation"):
+        TransientSettings(perturbation=0.0)
     with pytest.raises(ParameterError, match="speed = 0"):
         simulate(ScrewParameters(), 0.0, 200.0)
+    with pytest.raises(OperatingPointError, match="load"):
+        simulate(ScrewParameters(), 20.0, math.inf)
 
 
 @pytest.mark.parametrize("argv", [
@@ -180,6 +186,8 @@ def test_settings_reject_with_the_reason():
     ["transient", "--speed", "20", "--modes", "two"],
     ["transient", "--speed", "20", "--formulation", "bogus"],
     ["transient", "--speed", "20", "--wav", "/no/such/dir/x.wav"],
+    ["transient", "--speed", "20", "--duration", "0.001"],
+    ["transient", "--speed", "20", "--load", "1e9"],
 ])
 def test_cli_bad_arguments_exit_2_with_one_line(capsys, argv):
     assert main(argv) == 2

@@ -46,9 +46,11 @@ from .fields import check, setting
 from .friction_force import HelixFriction
 from .modes import KIND_T, KIND_X, KIND_Y, ModalBasis, modal_basis
 from .parameters import ParameterError, ScrewParameters
+from .predictor import check_operating_point
 
 METHODS = ("LSODA", "Radau", "DOP853")
 ATOL_PER_RTOL = 100      # absolute tolerance of each state: 100 rtol times its start size
+MIN_SAMPLES, MAX_SAMPLES = 256, 2_000_000    # stored samples of a run
 STEPS_PER_PERIOD = 8     # largest step: this fraction of the period of the highest mode kept
 
 
@@ -81,14 +83,14 @@ class TransientSettings:
         with the analytic Jacobian as the problem turns stiff), Radau or DOP853.
     """
 
-    duration_s: float = setting(0.2, "s", "simulated time", 0.0, 100.0, lo_open=True)
+    duration_s: float = setting(0.2, "s", "simulated time", 0.0, 10.0, lo_open=True)
     sample_rate_hz: int = setting(96000, "Hz", "rate of the stored samples", 1000, 1000000)
     modes: int = setting(0, "1", "keep the K lowest-frequency modes (0: all)", 0, 1000)
     regularisation_m_s: float = setting(1e-5, "m/s", "width v_eps of the tanh regularisation "
                                         "of the friction direction near zero sliding speed",
                                         0.0, 1.0, lo_open=True)
     perturbation: float = setting(1e-6, "1", "initial perturbation of every mode, as a "
-                                  "fraction of the steady sliding speed", 0.0, 10.0)
+                                  "fraction of the steady sliding speed", 0.0, 10.0, lo_open=True)
     seed: int = setting(0, "1", "seed of the initial perturbation", 0, 2 ** 31 - 1)
     points_per_turn: int = setting(16, "1", "Gauss-Legendre points per thread turn of the "
                                    "contact integral", 4, 64)
@@ -97,6 +99,11 @@ class TransientSettings:
 
     def __post_init__(self) -> None:
         check(self, ParameterError)
+        samples = self.duration_s * self.sample_rate_hz
+        if not MIN_SAMPLES <= samples <= MAX_SAMPLES:
+            raise ParameterError(
+                f"duration_s * sample_rate_hz = {samples:.6g} samples: between {MIN_SAMPLES} "
+                f"and {MAX_SAMPLES} are allowed (at most a few hundred MB of modal coordinates)")
 
 
 @dataclass(frozen=True)
@@ -201,7 +208,11 @@ class ModalEquations:
         q, zero = np.zeros(self.n), np.zeros(self.n)
         for _ in range(50):
             force, jq, _ = self.friction.force(q, zero, jacobian=True)
-            step = np.linalg.solve(self.stiffness - jq, force - self.stiffness @ q)
+            try:
+                step = np.linalg.solve(self.stiffness - jq, force - self.stiffness @ q)
+            except np.linalg.LinAlgError:
+                raise ParameterError("no steady sliding: the static stiffness is singular "
+                                     "(a critical speed)") from None
             q = q + step
             if np.abs(step).max() <= 1e-13 * max(np.abs(q).max(), 1e-300):
                 return q
@@ -275,13 +286,13 @@ def simulate(params: ScrewParameters, speed_rad_s: float, load_n: float,
 
     Raises
     ------
+    OperatingPointError
+        Speed or load not a finite number, or the load implausibly large.
     ParameterError
-        Zero or non-finite speed or load, or the integrator failed.
+        Zero speed, no steady sliding, or the integrator failed.
     """
     settings = settings or TransientSettings()
-    for name, value in (("speed", speed_rad_s), ("load", load_n)):
-        if not math.isfinite(value):
-            raise ParameterError(f"{name} = {value} is not finite")
+    speed_rad_s, load_n = check_operating_point(speed_rad_s, load_n)
     if speed_rad_s == 0:
         raise ParameterError("speed = 0: there is no steady sliding to start from")
     eq = ModalEquations(params, speed_rad_s, load_n, settings)
