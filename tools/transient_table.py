@@ -13,7 +13,10 @@ band of both formulations) and prints, as Markdown:
 2. the limit cycle of each run that saturates;
 3. the --modes effect at (20 rad/s, 200 N): 6, 12 and 18 modes;
 4. the run at 0.2 rad/s (below min_speed_rad_s): a small and a large perturbation, with the
-   least stable eigenvalue of the run's own linearisation and the lowest sliding speed.
+   least stable eigenvalue of the run's own linearisation and the lowest sliding speed;
+5. a diagnosis of the printed appendix (no simulation): the `paper` matrices with only the
+   torsion block of W3 multiplied by R^2 (the factor NOTES.md finds missing from
+   W3[Phi^0 Phi^0]), against `paper` and `consistent`: the least stable modes, and B1y.
 
 `--plot` also writes the time history and spectrogram of the (20 rad/s, 200 N) run.
 """
@@ -28,6 +31,8 @@ import numpy as np
 
 from leadscrew_ros.cli.transient import plot_transient
 from leadscrew_ros.model import ScrewParameters
+from leadscrew_ros.model.assembly import build_geometry
+from leadscrew_ros.model.modes import KIND_T
 from leadscrew_ros.model.transient import TransientSettings, simulate
 from leadscrew_ros.model.transient_analysis import analyse, linear_counterparts
 
@@ -40,6 +45,40 @@ SLOW_DURATION_S = 0.05
 def _run(params: ScrewParameters, speed: float, load: float, **settings):
     run = simulate(params, speed, load, TransientSettings(**settings))
     return run, analyse(run)
+
+
+def _oscillatory(stiffness: np.ndarray, damping: np.ndarray) -> np.ndarray:
+    """Eigenvalues with Im > 0 of qdd + D qd + K q = 0, least stable first."""
+    n = len(stiffness)
+    lam = np.linalg.eigvals(np.block([[np.zeros((n, n)), np.eye(n)], [-stiffness, -damping]]))
+    lam = lam[lam.imag > 0]
+    return lam[np.argsort(-lam.real)]
+
+
+def _show(lam: np.ndarray, count: int = 2) -> str:
+    return ", ".join(f"{x.real:+.1f} / {x.imag / (2 * math.pi):.1f}" for x in lam[:count])
+
+
+def appendix_rows(points) -> list[str]:
+    """Table 5: paper, paper with R^2 in W3[0,0], consistent (least stable two; B1y)."""
+    rows = []
+    for speed, load, _ in points:
+        out = {}
+        for name in ("paper", "consistent"):
+            g = build_geometry(ScrewParameters(formulation=name))
+            m = g.matrices(speed, load)
+            out[name] = _oscillatory(m.stiffness, m.damping)
+            if name == "paper":
+                torsion = np.ix_(g.basis.kind == KIND_T, g.basis.kind == KIND_T)
+                fixed = m.damping.copy()
+                fixed[torsion] += (g.params.radius_m ** 2 - 1) * m.W["W3"][torsion]
+                out["fixed"] = _oscillatory(m.stiffness, fixed)
+        near = {k: v[np.argmin(np.abs(v.imag / (2 * math.pi) - 224.0))] for k, v in out.items()}
+        rows.append(f"| {speed:g} rad/s, {load:g} N | {_show(out['paper'])} | "
+                    f"{_show(out['fixed'])} | {_show(out['consistent'])} | "
+                    f"{near['paper'].real:+.1f} / {near['fixed'].real:+.1f} / "
+                    f"{near['consistent'].real:+.1f} |")
+    return rows
 
 
 def _rel(a: float | None, b: float | None) -> str:
@@ -119,6 +158,11 @@ def main() -> None:
               f"{abs(top.imag) / (2 * math.pi):.3g} | "
               f"{result.amplitude[-1] / result.amplitude[0]:.2g} | "
               f"{run.sliding_speed_m_s.min():.3g} ({run.steady_sliding_m_s:.3g}) |")
+    print("\n| printed appendix | paper: least stable [1/s] / [Hz] | paper with R^2 in "
+          "W3[0,0] | consistent | growth of the 224 Hz mode (B1): paper / with R^2 / "
+          "consistent [1/s] |")
+    print("|---|---|---|---|---|")
+    print("\n".join(appendix_rows(POINTS)))
     if args.plot:
         run, result = runs[(20.0, 200.0)]
         plot_transient(run, result, args.plot, "20 rad/s, 200 N, Table 1, 18 modes: nonlinear "
