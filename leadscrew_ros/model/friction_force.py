@@ -83,22 +83,20 @@ class HelixFriction:
         x, w = np.polynomial.legendre.leggauss(points_per_turn)
         width = alpha / panels
         theta = (alpha_o + width * (np.arange(panels)[:, None] + (x + 1) / 2)).ravel()
-        self.theta = theta
-        self.weight = np.tile(w * width / 2, panels)
-        self.alpha = alpha
+        weight = np.tile(w * width / 2, panels)
         s, c, r = np.sin(theta), np.cos(theta), params.radius_m
         zero, rr = np.zeros_like(theta), np.full_like(theta, r)
         # w_a and k x w_a in (e_r, e_theta, k) per kind a (x, y, 0), as in kernels._consistent
         w_kind = np.array([[c, -s, zero], [s, c, zero], [zero, rr, zero]])
         kw_kind = np.array([[s, c, zero], [-c, s, zero], [-rr, zero, zero]])
         phi = basis.shapes(params.lead_per_rad_m * theta)                  # (N, P)
-        self.w = w_kind[basis.kind] * phi[:, None, :]                      # (N, 3, P)
-        self.kw = kw_kind[basis.kind] * phi[:, None, :]
+        w_modes = w_kind[basis.kind] * phi[:, None, :]         # (N, 3, P): w_a Phi_i per mode
         n_modes = basis.n
-        self._w_flat = self.w.reshape(n_modes, -1)
-        self._kw_flat = self.kw.reshape(n_modes, -1)
+        self._w_flat = w_modes.reshape(n_modes, -1)
+        self._kw_flat = (kw_kind[basis.kind] * phi[:, None, :]).reshape(n_modes, -1)
         self._state_velocity = np.vstack((self.speed * self._kw_flat, self._w_flat))   # (2N, 3P)
-        self._ww = (self.w * self.weight).reshape(n_modes, -1)             # quadrature applied
+        self._weighted = w_modes * weight                       # quadrature weights applied
+        self._ww = self._weighted.reshape(n_modes, -1)
         beta = params.helix_angle_rad
         self.v0 = r * self.speed * np.array([0.0, 1.0, math.tan(beta)])
         mu0, _ = steady_friction(params, self.speed)
@@ -162,5 +160,5 @@ class HelixFriction:
         radial = (dmu * speed * a + mu * b) / self.v_eps
         df = -self.normal_per_rad * (phi * np.eye(3)[:, :, None]
                                      + radial * e[:, None, :] * e[None, :, :])    # (3, 3, P)
-        left = np.einsum("icp,cdp->idp", self.w * self.weight, df).reshape(len(q), -1)
+        left = np.einsum("icp,cdp->idp", self._weighted, df).reshape(len(q), -1)
         return q_force, self.speed * (left @ self._kw_flat.T), left @ self._w_flat.T
