@@ -9,8 +9,9 @@ M = I (mass-normalised modes), C = diag(2 xi omega) (A.1), G the gyroscopic coup
 Q the friction of the nut over the contact helix at the actual contact velocity. Steady
 sliding is the static equilibrium q* of ([omega^2] - Omega^2 I) q* = Q(q*, 0) (the screw
 twisted and bent by the steady friction; Newton from q = 0); the run starts there plus a
-seeded random perturbation of every modal coordinate and rate (each mode's contribution to the
-contact velocity of the same size), so the simulation itself shows which mode grows. The state integrated is the deviation from q*.
+seeded random perturbation of every modal coordinate and rate (each mode's contribution to
+the contact velocity of the same size), so the simulation itself shows which mode grows. The
+state integrated is the deviation from q*.
 
 Integrator: scipy's LSODA (Adams while the problem is not stiff, BDF with the analytic
 Jacobian when it turns stiff; Radau IIA or DOP853 selectable). The system is stiff: the highest
@@ -25,8 +26,8 @@ erratic there).
 Stick: the kinematics (3)-(11) have no axial vibration, so the axial sliding component
 R Omega tan(beta) of Vc never changes and |Vc| >= R |Omega| tan(beta) (8.7e-3 m/s at
 20 rad/s, 8.7e-5 m/s at 0.2 rad/s with Table 1). The contact never sticks completely; the
-regularisation (v_eps 1e-5 m/s by default) acts only below |Omega| = v_eps / (R tan(beta))
-(0.023 rad/s with Table 1).
+regularisation (v_eps 1e-5 m/s by default) changes the force by more than 1e-6 only where
+|Vc| < 7.3 v_eps, so only below |Omega| = 7.3 v_eps / (R tan(beta)) (0.17 rad/s with Table 1).
 
 `modes` keeps the K lowest-frequency modes of the basis (the contact force and every matrix
 restricted to them).

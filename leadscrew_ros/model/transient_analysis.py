@@ -12,11 +12,12 @@ undamped mode, so no envelope detector is needed.
   fifth; otherwise `growing` or `decaying` by the trend of a over the last fifth.
 - Linear fit: in the linear regime (a below 1 % of a_sat; in a growing run, the vibration
   velocity at the nut centre below 1e-4 of the steady sliding speed; in a decaying run, a
-  above 1e-3 of its start; the whole run if that never ends), over its second half (where the other eigenmodes have decayed or fallen
-  behind), the modal coordinate with the largest RMS displacement (the labelling rule of
-  `stability.classify`) is fitted by least squares with one exponentially growing sinusoid
-  e^{sigma t} (a cos(w t) + b sin(w t)): growth sigma [1/s], frequency w / 2 pi [Hz]. The fit
-  uses no eigenvector of any formulation: it is an independent measurement of the run.
+  above 1e-3 of its start; the whole run if that never ends), over its second half (where
+  the other eigenmodes have decayed or fallen behind), the modal coordinate with the largest
+  RMS displacement (the labelling rule of `stability.classify`) is fitted by least squares
+  with one exponentially growing sinusoid e^{sigma t} (a cos(w t) + b sin(w t)): growth
+  sigma [1/s], frequency w / 2 pi [Hz]. The fit uses no eigenvector of any formulation: it
+  is an independent measurement of the run.
 - Limit cycle: over the second half of the run after saturation (a first reaches 90 % of
   a_sat): peak lateral displacement and torsion angle at the nut centre, peak and RMS surface
   velocity, the lowest sliding speed at the nut centre, and the spectrum of the tangential
