@@ -144,8 +144,8 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     p = sub.add_parser("transient", parents=common,
                        help="nonlinear time-domain simulation at one operating point")
     p.add_argument("--speed", type=finite, required=True, metavar="RAD_S",
-                   help="rotation speed Omega [rad/s], nonzero (also below min_speed_rad_s: "
-                        "stick-slip)")
+                   help="rotation speed Omega [rad/s], nonzero (also below min_speed_rad_s, "
+                        "where the linear model gives no eigenvalues)")
     p.add_argument("--load", type=finite, metavar="N",
                    help="axial load F_z [N] (default: parameter axial_load_n)")
     p.add_argument("--duration", dest="duration_s", type=finite, metavar="S",
