@@ -135,14 +135,16 @@ def main() -> None:
             print(_cycle_row(f"{speed:g} rad/s, {load:g} N (steady sliding "
                              f"{run.steady_sliding_m_s:.3g} m/s)", result))
     print("\n| modes at 20 rad/s, 200 N | regime | fit: mode growth [1/s] / frequency [Hz] | "
-          "saturation [ms] | surface velocity peak [m/s] | torsion [rad] | fundamental [Hz] |")
-    print("|---|---|---|---|---|---|---|")
+          "saturation [ms] | surface velocity peak [m/s] | torsion [rad] | fundamental [Hz] | "
+          "harmonics 3, 5 [dB] |")
+    print("|---|---|---|---|---|---|---|---|")
     for k in MODES:
         run, result = runs[(20.0, 200.0)] if k == 0 else _run(params, 20.0, 200.0, modes=k)
         fit, c = result.linear_fit, result.limit_cycle
-        tail = ("– | – | – | –" if c is None else
+        tail = ("– | – | – | – | –" if c is None else
                 f"{c.time_to_saturation_s * 1e3:.1f} | {c.surface_velocity_m_s:.3g} | "
-                f"{c.torsion_rad:.3g} | {c.fundamental_hz:.1f}")
+                f"{c.torsion_rad:.3g} | {c.fundamental_hz:.1f} | "
+                f"{c.harmonics_db['3']:.0f}, {c.harmonics_db['5']:.0f}")
         print(f"| {len(run.labels)} | {result.regime} | {fit.mode} {fit.growth_rate:+.2f} / "
               f"{fit.frequency_hz:.2f} | {tail} |")
     print(f"\n| 0.2 rad/s, 200 N, {SLOW_DURATION_S * 1e3:g} ms | regime | least stable "
