@@ -12,7 +12,8 @@ import re
 
 import pytest
 
-from leadscrew_ros.model import parameters, predictor, stability, sweep, tracking
+from leadscrew_ros.model import (friction_force, parameters, predictor, stability, sweep,
+                                 tracking, transient, transient_analysis)
 from leadscrew_ros.model.parameters import ScrewParameters, field_info, field_names
 
 FUNCTIONS = [
@@ -43,9 +44,20 @@ FUNCTIONS = [
     sweep.probability_field,
     sweep.level_crossings,
     tracking.track_modes,
+    friction_force.HelixFriction,
+    friction_force.HelixFriction.velocity,
+    friction_force.HelixFriction.force,
+    transient.ModalEquations,
+    transient.simulate,
+    transient_analysis.analyse,
+    transient_analysis.fit_growth,
+    transient_analysis.linear_counterparts,
+    transient_analysis.TransientAnalysis.as_dict,
 ]
 RECORDS = [ScrewParameters, predictor.Prediction, stability.ModeResult, sweep.GrowthField,
-           sweep.SweepResult, sweep.MapResult, tracking.Branch]
+           sweep.SweepResult, sweep.MapResult, tracking.Branch, transient.TransientSettings,
+           transient.TransientResult, transient_analysis.LinearFit,
+           transient_analysis.LimitCycle, transient_analysis.TransientAnalysis]
 PROPERTIES = [(predictor.SqueakModel, ("labels", "critical_speed_rad_s")),
               (predictor.Prediction, ("valid", "stable", "squeak_modes",
                                       "unstable_frequencies_hz", "max_growth_rate")),
