@@ -14,6 +14,7 @@ import pytest
 
 from leadscrew_ros.model import parameters, predictor, stability, sweep, tracking
 from leadscrew_ros.model.parameters import ScrewParameters, field_info, field_names
+from leadscrew_ros.review import fleet, fleetreport
 
 FUNCTIONS = [
     predictor.SqueakModel,                  # the class docstring documents __init__
@@ -43,9 +44,13 @@ FUNCTIONS = [
     sweep.probability_field,
     sweep.level_crossings,
     tracking.track_modes,
+    fleet.find_logs,                        # the fleet review's API
+    fleet.review_one,
+    fleet.review_logs,
+    fleetreport.write_fleet,
 ]
 RECORDS = [ScrewParameters, predictor.Prediction, stability.ModeResult, sweep.GrowthField,
-           sweep.SweepResult, sweep.MapResult, tracking.Branch]
+           sweep.SweepResult, sweep.MapResult, tracking.Branch, fleet.FleetSettings]
 PROPERTIES = [(predictor.SqueakModel, ("labels", "critical_speed_rad_s")),
               (predictor.Prediction, ("valid", "stable", "squeak_modes",
                                       "unstable_frequencies_hz", "max_growth_rate")),
