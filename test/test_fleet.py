@@ -188,6 +188,8 @@ def test_local_cluster_reviews_every_log_and_resumes(logs, expected, tmp_path):
     assert outputs == sorted(["episodes.json", "summary.json", "summary.txt",
                               f"{log_name(Path(ok['log']))}.annotated.mcap"])
     assert (out / "fleet.png").read_bytes().startswith(b"\x89PNG")
+    # the annotated logs in the output directory are not logs to review
+    assert find_logs([str(logs), str(out / "**" / "*.mcap")], skip=out) == find_logs([str(logs)])
     doc = json.loads((out / "fleet.json").read_text())
     assert (doc["ok"], doc["errors"], doc["reviewed"], doc["skipped"]) == (10, 2, 12, 0)
     assert doc["parameters"]["inputs"]["joint_name"] == JOINT

@@ -18,9 +18,9 @@ reviewed again by the next run into the same directory.
 Resume: `<out>/review-index.jsonl` holds one line per reviewed log (appended as each finishes,
 so an interrupted review keeps what it did): its path, output name, files' sizes and
 modification times, content hash (BLAKE2b of the files' bytes), parameters hash and its row.
-A log whose files' sizes and times are unchanged and whose parameters hash is the same is
-skipped without reading; one whose files changed in size or time is hashed in its task and
-skipped there if the content is the same.
+A log whose files' sizes and times are unchanged, whose parameters hash is the same and whose
+summary is still there is skipped without reading; one whose files changed in size or time is
+hashed in its task and skipped there if the content is the same.
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ import re
 import shutil
 import statistics
 import time
+import uuid
 from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -173,7 +174,8 @@ def find_logs(inputs: Iterable[str], skip: Path | str | None = None) -> list[Pat
         or .db3 file in them is one log) and glob patterns (``**`` matches folders at any
         depth).
     skip : path, optional
-        A folder not to search (the review's output directory).
+        A folder whose logs are left out (the review's output directory: its annotated logs
+        are not reviewed again).
 
     Returns
     -------
@@ -199,7 +201,8 @@ def find_logs(inputs: Iterable[str], skip: Path | str | None = None) -> list[Pat
                 raise LogError(m, "no such file or directory")
             # a split file stands for its bag: the splits are one log
             logs = _walk(m, skip) if m.is_dir() else [m.parent if _is_bag(m.parent) else m]
-            found.update(dict.fromkeys(p.resolve() for p in logs))
+            found.update(dict.fromkeys(p.resolve() for p in logs
+                                       if skip is None or not p.resolve().is_relative_to(skip)))
     return list(found)
 
 
@@ -457,13 +460,14 @@ def review_logs(logs: list[Path], out_dir: Path | str, settings: FleetSettings, 
     index_path = out / INDEX_FILE
     index = read_index(index_path)
     names = output_names(logs, {k: e["row"]["name"] for k, e in index.items()})
-    digest = settings.digest()
+    digest, run_id = settings.digest(), uuid.uuid4().hex[:8]
     rows: dict[str, dict[str, Any]] = {}
     points = _Points()
     todo: list[tuple[Path, str, list | None, str | None]] = []
     for log, name in zip(logs, names):
         entry = index.get(str(log))
-        usable = (entry is not None and entry["params"] == digest and not entry["retry"])
+        usable = (entry is not None and entry["params"] == digest and not entry["retry"]
+                  and (entry["row"]["status"] != "ok" or (out / name / "summary.json").exists()))
         stat = _stat_or_none(log)
         if usable and stat is not None and entry["stat"] == stat:
             rows[str(log)] = entry["row"]
@@ -479,12 +483,13 @@ def review_logs(logs: list[Path], out_dir: Path | str, settings: FleetSettings, 
     def submit(job) -> Any:
         log, name, _, known = job
         fut = client.submit(review_one, str(log), str(out), name, settings, known,
-                            key=f"review-{name}-{digest[:8]}", pure=False)
+                            key=f"review-{name}-{run_id}", pure=False)
         by_future[fut] = job
         return fut
 
-    with open(index_path, "a", encoding="utf-8") as index_file, \
-            progress_bar(len(todo) if progress else None, "review", unit="log") as bar:
+    bar_or_none = (progress_bar(len(todo), "review", unit="log") if progress
+                   else contextlib.nullcontext())
+    with open(index_path, "a", encoding="utf-8") as index_file, bar_or_none as bar:
         ac = as_completed([submit(j) for j in _take(pending, in_flight)])
         for fut in ac:
             log, name, stat, known = by_future.pop(fut)
@@ -506,7 +511,7 @@ def review_logs(logs: list[Path], out_dir: Path | str, settings: FleetSettings, 
                 {"params": digest, "stat": stat, "content": res["content"], "retry": retry,
                  "row": row, "points": res["points"]}), allow_nan=False) + "\n")
             index_file.flush()
-            if progress:
+            if bar is not None:
                 bar(1)
             for job in _take(pending, 1):
                 ac.add(submit(job))
