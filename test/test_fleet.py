@@ -174,6 +174,10 @@ def test_log_discovery_and_names(logs, tmp_path):
     assert len(find_logs([str(logs)], skip=logs / "line")) == 8
     names = output_names(found)
     assert names == output_names(list(reversed(found)))[::-1]     # the same in every order
+    # a name an earlier review gave another log in the same directory is not taken again
+    other = {"/elsewhere/station0": names[0]}
+    assert output_names(found[:1], other)[0].startswith(names[0] + "-")
+    assert output_names(found[:1], {str(found[0]): "kept"}) == ["kept"]
     with pytest.raises(fleet.LogError, match="matches"):
         find_logs([str(tmp_path / "*.mcap")])
     assert exit_status(0) == 0 and exit_status(1) == 11 and exit_status(500) == 110

@@ -35,6 +35,7 @@ import shutil
 import statistics
 import time
 import uuid
+from collections import Counter
 from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -207,14 +208,14 @@ def find_logs(inputs: Iterable[str], skip: Path | str | None = None) -> list[Pat
 
 
 def output_names(logs: list[Path], known: dict[str, str] | None = None) -> list[str]:
-    """Output directory name of each log: its `log_name`, or the name it had in an earlier
-    review (`known`: path -> name); a name that several logs share gets the first 8 hex
-    digits of a hash of the log's path appended (the same in every run)."""
+    """Output directory name of each log: the name it had in an earlier review into the same
+    directory (`known`: path -> name), else its `log_name`; a name that another log has (in
+    this run or in `known`) gets the first 8 hex digits of a hash of the log's path appended
+    (the same in every run)."""
     known = known or {}
     names = [known.get(str(p)) or log_name(p).strip(".") or "log" for p in logs]
-    counts: dict[str, int] = {}
-    for n in names:
-        counts[n] = counts.get(n, 0) + 1
+    this = {str(p) for p in logs}
+    counts = Counter(names) + Counter(n for path, n in known.items() if path not in this)
     return [n if counts[n] == 1 or str(p) in known else
             f"{n}-{hashlib.blake2b(str(p).encode(), digest_size=4).hexdigest()}"
             for p, n in zip(logs, names)]
