@@ -35,6 +35,7 @@ setup(
         "zstandard",             # MCAP chunk compression, read and written directly
         "lz4",
         "threadpoolctl",         # the node's eigen-solves run single-threaded (live.py)
+        "dask[distributed]",     # `review`: fleet review on a Dask cluster (review/fleet.py)
     ],
     extras_require={
         "test": [

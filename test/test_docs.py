@@ -15,6 +15,7 @@ import pytest
 from leadscrew_ros.model import (friction_force, parameters, predictor, stability, sweep,
                                  tracking, transient, transient_analysis)
 from leadscrew_ros.model.parameters import ScrewParameters, field_info, field_names
+from leadscrew_ros.review import fleet, fleetreport
 
 FUNCTIONS = [
     predictor.SqueakModel,                  # the class docstring documents __init__
@@ -53,11 +54,16 @@ FUNCTIONS = [
     transient_analysis.fit_growth,
     transient_analysis.linear_counterparts,
     transient_analysis.TransientAnalysis.as_dict,
+    fleet.find_logs,                        # the fleet review's API
+    fleet.review_one,
+    fleet.review_logs,
+    fleetreport.write_fleet,
 ]
 RECORDS = [ScrewParameters, predictor.Prediction, stability.ModeResult, sweep.GrowthField,
            sweep.SweepResult, sweep.MapResult, tracking.Branch, transient.TransientSettings,
            transient.TransientResult, transient_analysis.LinearFit,
-           transient_analysis.LimitCycle, transient_analysis.TransientAnalysis]
+           transient_analysis.LimitCycle, transient_analysis.TransientAnalysis,
+           fleet.FleetSettings]
 PROPERTIES = [(predictor.SqueakModel, ("labels", "critical_speed_rad_s")),
               (predictor.Prediction, ("valid", "stable", "squeak_modes",
                                       "unstable_frequencies_hz", "max_growth_rate")),

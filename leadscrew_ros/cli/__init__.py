@@ -2,15 +2,16 @@
 """`leadscrew-squeak`: squeak predictions, sweeps, stability maps and the paper's figures; the
 ROS 2 demo (`demo`: predictor node + actuator simulator) and the simulator alone (`simulate`);
 the nonlinear time-domain simulation (`transient`); MCAP logs: offline replay (`replay`),
-playback (`replay --publish`), `recover` and `info`.
+playback (`replay --publish`), `recover` and `info`; many logs on a Dask cluster (`review`).
 
 One module per command group holds its commands and adds their parsers: `model` (modes,
 predict, sweep, map), `transient` (the nonlinear time-domain simulation), `figures`, `ros`
-(demo, simulate), `logs` (replay, recover, info); `args` holds what they share. Heavy or ROS
-modules are imported only by the command that needs them.
+(demo, simulate), `logs` (replay, recover, info), `fleet` (review); `args` holds what they
+share. Heavy or ROS modules are imported only by the command that needs them.
 
 Every error a user can cause (bad option, invalid parameter or operating point, unreadable
-file) is reported as one line `leadscrew-squeak: error: <message>` with exit code 2.
+file) is reported as one line `leadscrew-squeak: error: <message>` with exit code 2
+(`review` returns 10 + the number of failed logs when some logs fail: `fleet.exit_status`).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from typing import Callable, Sequence
 from ..bag.logfile import LogError
 from ..model.parameters import ParameterError
 from ..model.predictor import OperatingPointError
-from . import figures, logs, model, ros, transient
+from . import figures, fleet, logs, model, ros, transient
 from .args import PROG, CliError, Parser, common_parser
 
 ROS_COMMANDS = ("simulate", "replay")      # the ones that start a ROS node (replay: --publish)
@@ -37,7 +38,7 @@ def build_parser() -> Parser:
                                            "(continuous model, eigenvalues of eq. 27).")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
                                 parser_class=Parser)
-    for group in (model, transient, figures, ros, logs):
+    for group in (model, transient, figures, ros, logs, fleet):
         group.add_parsers(sub, common)
     return parser
 

@@ -33,7 +33,7 @@ def _setting_help(name: str, description: str | None = None) -> str:
     return help_text(REPLAY_SETTINGS[name], description).replace("%", "%%")
 
 
-def _replay_inputs(args: argparse.Namespace) -> InputSettings:
+def replay_inputs(args: argparse.Namespace) -> InputSettings:
     """InputSettings: defaults <- node parameters of --params-file <- options. Topic names
     stay as given: relative ones resolve in the input namespace (--namespace, or the log's)."""
     values = yaml_parameters(args.params_file) if args.params_file else {}
@@ -89,7 +89,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if args.episodes < 0:
         raise CliError("argument --episodes: must be >= 0")
     model = build_model(args)
-    inputs = _replay_inputs(args)
+    inputs = replay_inputs(args)
     from ..review.replay import log_name, replay
     try:
         settings = ReplaySettings(
@@ -186,15 +186,10 @@ def cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
-    """Add `replay` (with the model options `common`), `recover` and `info` to `sub`."""
-    p = sub.add_parser("replay", parents=common,
-                       help="recompute the node's predictions for an MCAP log (offline, into "
-                            "--out), or play the log to ROS 2 topics (--publish)")
-    p.add_argument("log", metavar="LOG", help="MCAP file, or a directory of split .mcap files "
-                   "(offline also rosbag2 sqlite3 .db3)")
-    p.add_argument("--out", metavar="DIR", help="output directory (default ./<log name>_replay): "
-                   "<log name>.annotated.mcap, episodes.json, summary.json/.txt, PNG report")
+def add_input_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
+    """The input-topic, deadband, P(squeak)-threshold and namespace options of the offline
+    replay (also `review`'s; the dests of the first ones are the `InputSettings` fields, see
+    `replay_inputs`); returns the group 'offline replay' for a command's own options."""
     g = p.add_argument_group("inputs (defaults: the node's topics, relative names in the input "
                              "namespace; node parameters from --params-file)")
     g.add_argument("--speed-topic", metavar="TOPIC", help="std_msgs/Float64 speed [rad/s] "
@@ -233,10 +228,23 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     g.add_argument("--load", dest="nominal_load_n", type=finite, metavar="N",
                    help="nominal axial load [N] from the start, for a log without load topic "
                         "(a load topic in the log overrides it)")
+    g.add_argument("--no-report", action="store_true", help="skip the PNG report")
+    return g
+
+
+def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
+    """Add `replay` (with the model options `common`), `recover` and `info` to `sub`."""
+    p = sub.add_parser("replay", parents=common,
+                       help="recompute the node's predictions for an MCAP log (offline, into "
+                            "--out), or play the log to ROS 2 topics (--publish)")
+    p.add_argument("log", metavar="LOG", help="MCAP file, or a directory of split .mcap files "
+                   "(offline also rosbag2 sqlite3 .db3)")
+    p.add_argument("--out", metavar="DIR", help="output directory (default ./<log name>_replay): "
+                   "<log name>.annotated.mcap, episodes.json, summary.json/.txt, PNG report")
+    g = add_input_options(p)
     g.add_argument("--workers", type=int, default=ReplaySettings.workers, metavar="N",
                    help="prediction processes for long logs (default %(default)s; 0: one "
                         "process)")
-    g.add_argument("--no-report", action="store_true", help="skip the PNG report")
     g.add_argument("--episodes", type=int, default=10, metavar="N",
                    help="squeak episodes listed on stdout (default 10)")
     p.add_argument("--quiet", action="store_true", help="no progress and no summary")

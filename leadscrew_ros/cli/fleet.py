@@ -1,0 +1,114 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The fleet command: `review` (many logs, one offline replay each on a Dask cluster, one
+report).
+
+Exit status: 0 when every log was reviewed; 2 for a bad command line or input (nothing
+reviewed); otherwise FAILED_BASE + the number of logs that failed, at most FAILED_BASE +
+FAILED_CAP (11 = one failed log, ..., 110 = 100 or more): distinct from 2 and from the codes
+that shells and signals use (126 and up).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+from .args import CliError, Parser, build_model
+from .logs import REPLAY_INPUTS, _topic, add_input_options, replay_inputs
+
+FAILED_BASE = 10
+FAILED_CAP = 100
+_ERRORS_SHOWN = 10
+_MODEL_OPTIONS = ("param", "params_file", "formulation", "scatter", "samples")
+
+
+def exit_status(failed: int) -> int:
+    """The exit status of a review with `failed` error rows."""
+    return FAILED_BASE + min(failed, FAILED_CAP) if failed else 0
+
+
+def _settings(args: argparse.Namespace):
+    from ..review.fleet import FleetSettings
+    options = {name: getattr(args, name) for name in REPLAY_INPUTS
+               if getattr(args, name) is not None}
+    if args.use_log_params:
+        given = [o for o in _MODEL_OPTIONS if getattr(args, o) not in (None, [])]
+        if given:
+            raise CliError(f"--{given[0].replace('_', '-')} and --use-log-params exclude each "
+                           f"other (with it every log has its recorded parameters)")
+    model = build_model(args)
+    try:
+        return FleetSettings(model.params, dict(model.scatter.sd), model.sample_count,
+                             replay_inputs(args), options,
+                             args.namespace and _topic(args.namespace),
+                             args.out_namespace and _topic(args.out_namespace),
+                             use_log_params=args.use_log_params, report=not args.no_report,
+                             summary_only=args.summary_only)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+
+
+def cmd_review(args: argparse.Namespace) -> int:
+    if args.workers is not None and not 1 <= args.workers <= 1024:
+        raise CliError(f"argument --workers: must be in [1, 1024], got {args.workers}")
+    settings = _settings(args)
+    from ..review.fleet import cluster, find_logs, review_logs
+    from ..review.fleetreport import write_fleet
+    out = Path(args.out)
+    logs = find_logs(args.paths, skip=out)
+    if not logs:
+        raise CliError(f"no logs (.mcap, .db3, bag directories) in {' '.join(args.paths)}")
+    workers = args.workers or (None if args.scheduler else os.cpu_count() or 1)
+    with cluster(workers, args.scheduler) as client:
+        run = review_logs(logs, out, settings, client, progress=not args.quiet)
+    where = args.scheduler or f"LocalCluster of {workers} worker(s) on 127.0.0.1"
+    paths = write_fleet(run, out, {"inputs": args.paths, "out": str(out.resolve()),
+                                   "cluster": where, **settings.as_dict()})
+    if not args.quiet:
+        print(f"review of {len(run.rows)} logs on {where}: {run.reviewed} reviewed, "
+              f"{run.skipped} unchanged since the last review, {run.failed} failed "
+              f"({run.wall_s:.1f} s)")
+        errors = [r for r in run.rows if r["status"] != "ok"]
+        for r in errors[:_ERRORS_SHOWN]:
+            print(f"  error: {r['error']}")
+        if len(errors) > _ERRORS_SHOWN:
+            print(f"  ... {len(errors) - _ERRORS_SHOWN} more in {paths[0]}")
+        print("wrote: " + ", ".join(str(p) for p in paths))
+    return exit_status(run.failed)
+
+
+def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
+    """Add `review` (with the model options `common`) to `sub`."""
+    p = sub.add_parser(
+        "review", parents=common,
+        help="review many logs on a Dask cluster (one offline replay per log, as `replay`): "
+             "per-log outputs in DIR/<log name>/, fleet.csv, fleet.json, fleet.png; a re-run "
+             "skips unchanged logs")
+    p.add_argument("paths", nargs="+", metavar="PATH",
+                   help="log files (.mcap, .db3), bag directories, folders (searched "
+                        "recursively) or glob patterns (quote them; ** for any depth)")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="output directory: <log name>/ per log (the replay's outputs), "
+                        "fleet.csv, fleet.json, fleet.png and the resume index")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="N",
+                       help="Dask worker processes of a local cluster on 127.0.0.1, one "
+                            "thread each (default: one per core)")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="a running Dask scheduler, tcp://HOST:PORT (`dask scheduler`, "
+                            "`dask worker`); its workers must see the logs and DIR at the same "
+                            "paths and have leadscrew_ros installed")
+    g = add_input_options(p)
+    g.add_argument("--summary-only", action="store_true",
+                   help="keep only summary.json and summary.txt of each log (no annotated "
+                        "MCAP, episodes.json or report)")
+    g.add_argument("--use-log-params", action="store_true",
+                   help="each log with the model parameters, scatter and input settings of "
+                        "its leadscrew_ros metadata record (input options given here still "
+                        "apply); a log without the record is an error row")
+    p.add_argument("--quiet", action="store_true", help="no progress and no summary")
+    p.epilog = (f"Exit status: 0 every log reviewed; 2 bad command line; {FAILED_BASE} + the "
+                f"number of failed logs otherwise ({FAILED_BASE + FAILED_CAP}: "
+                f"{FAILED_CAP} or more).")
+    p.set_defaults(run=cmd_review)

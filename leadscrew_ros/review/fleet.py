@@ -1,0 +1,542 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Fleet review: many logs, each replayed offline as one Dask task, into one report.
+
+logs (files, bag directories, folders searched recursively, globs: `find_logs`) -> unique,
+deterministic output names (`output_names`) -> the resume index of the output directory skips
+the logs reviewed before with the same content and parameters -> one task per log on a Dask
+cluster (`cluster`: a `distributed.LocalCluster` on 127.0.0.1, one thread per worker process, or
+a running scheduler): `review_one` opens the log inside the task and runs the same
+`replay.replay` as the `replay` command (and its report) into `<out>/<name>/` -> results
+gathered as they finish with a bounded number in flight (the client's memory does not grow with
+the number of logs) -> `fleetreport`: fleet.csv, fleet.json, fleet.png.
+
+Failure isolation: every exception of a log's review is its error row (one line); a worker that
+dies takes its tasks with it, the scheduler runs them on another worker (up to its
+`distributed.scheduler.allowed-failures`), after that the log is an error row too and is
+reviewed again by the next run into the same directory.
+
+Resume: `<out>/review-index.jsonl` holds one line per reviewed log (appended as each finishes,
+so an interrupted review keeps what it did): its path, output name, files' sizes and
+modification times, content hash (BLAKE2b of the files' bytes), parameters hash and its row.
+A log whose files' sizes and times are unchanged, whose parameters hash is the same and whose
+summary is still there is skipped without reading; one whose files changed in size or time is
+hashed in its task and skipped there if the content is the same.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import glob
+import hashlib
+import json
+import math
+import re
+import shutil
+import statistics
+import time
+import uuid
+from collections import Counter
+from collections.abc import Iterable, Iterator
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import __version__
+from ..bag import logmeta
+from ..bag.logfile import LogError
+from ..bag.logsource import DB3, open_log
+from ..model import ScrewParameters, SqueakModel
+from ..model.scatter import LIVE_SAMPLES, Scatter
+from .decimation import Reservoir
+from .jsonsafe import json_safe
+from .progress import progress_bar
+from .replay import ReplaySettings, log_name, replay
+from .timeline import InputSettings
+
+INDEX_FILE = "review-index.jsonl"
+POINTS_PER_LOG = 64           # squeak points (speed, load, frequency) a log adds to fleet.png
+IN_FLIGHT_PER_THREAD = 2      # tasks submitted per worker thread ahead of the results
+MIN_IN_FLIGHT = 4
+_SUFFIXES = (".mcap", DB3)
+_GLOB = re.compile(r"[*?[]")
+_HASH_BLOCK = 1 << 20
+
+
+@dataclass(frozen=True)
+class FleetSettings:
+    """What every log of a review is replayed with.
+
+    Attributes
+    ----------
+    params : ScrewParameters
+        Model parameters for every log (unless `use_log_params`).
+    scatter : dict
+        Scattered parameter -> relative SD behind P(squeak).
+    samples : int
+        Scatter samples of P(squeak).
+    inputs : InputSettings
+        Input topics, deadbands and P(squeak) thresholds for every log.
+    input_options : dict
+        The `InputSettings` fields given on the command line: with `use_log_params` they
+        override the log's recorded node parameters.
+    namespace : str or None
+        Namespace of the inputs (None: each log's own).
+    out_namespace : str or None
+        Namespace of the predictions in the annotated logs.
+    use_log_params : bool
+        Each log with the model parameters, scatter and input settings of its `leadscrew_ros`
+        metadata record; a log without one is an error row.
+    report : bool
+        Write each log's PNG report.
+    summary_only : bool
+        Keep only summary.json and summary.txt of each log.
+    """
+
+    params: ScrewParameters = field(default_factory=ScrewParameters)
+    scatter: dict[str, float] = field(default_factory=lambda: dict(Scatter().sd))
+    samples: int = LIVE_SAMPLES
+    inputs: InputSettings = field(default_factory=InputSettings)
+    input_options: dict[str, Any] = field(default_factory=dict)
+    namespace: str | None = None
+    out_namespace: str | None = None
+    use_log_params: bool = False
+    report: bool = True
+    summary_only: bool = False
+
+    def __post_init__(self) -> None:
+        ReplaySettings(self.inputs, self.namespace, self.out_namespace)     # checks the names
+        Scatter(self.scatter)
+
+    def as_dict(self) -> dict[str, Any]:
+        """Everything the results depend on, JSON-ready (the run's parameters in fleet.json)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["params"] = self.params.as_dict()
+        out["inputs"] = asdict(self.inputs)
+        out["package_version"] = __version__
+        return json_safe(out)
+
+    def digest(self) -> str:
+        """Hash of `as_dict`: a review with another digest is not skipped."""
+        text = json.dumps(self.as_dict(), sort_keys=True, allow_nan=False)
+        return hashlib.blake2b(text.encode(), digest_size=16).hexdigest()
+
+    def model_for(self, meta: logmeta.LogMetadata | None, log: Path
+                  ) -> tuple[SqueakModel, InputSettings]:
+        """The model and input settings of one log (its own with `use_log_params`)."""
+        if not self.use_log_params:
+            return SqueakModel(self.params, Scatter(self.scatter), self.samples), self.inputs
+        if meta is None:
+            raise LogError(log, f"no '{logmeta.RECORD_NAME}' metadata record, so no recorded "
+                                f"parameters (review it without --use-log-params)")
+        scatter = dict(meta.scatter)
+        samples = int(scatter.pop("samples", self.samples))
+        known = {f.name for f in fields(InputSettings)}
+        recorded = {k: v for k, v in meta.node.items() if k in known}
+        try:
+            inputs = InputSettings(**{**recorded, **self.input_options})
+        except (TypeError, ValueError) as exc:
+            raise LogError(log, f"recorded input settings: {exc}") from None
+        return SqueakModel(meta.screw_parameters(), Scatter(scatter), samples), inputs
+
+
+# ---------------------------------------------------------------------- finding the logs
+def _is_bag(directory: Path) -> bool:
+    """A rosbag2-style bag: metadata.yaml, or log files all named `<directory>_<n>`."""
+    if (directory / "metadata.yaml").exists():
+        return True
+    files = [p for p in directory.iterdir() if p.suffix in _SUFFIXES and p.is_file()]
+    split = re.compile(re.escape(directory.name) + r"_\d+$")
+    return bool(files) and all(split.fullmatch(p.stem) for p in files)
+
+
+def _walk(directory: Path, skip: Path | None) -> Iterator[Path]:
+    if skip is not None and directory.resolve() == skip:
+        return
+    if _is_bag(directory):
+        yield directory
+        return
+    for p in sorted(directory.iterdir()):
+        if p.is_dir():
+            yield from _walk(p, skip)
+        elif p.suffix in _SUFFIXES:
+            yield p
+
+
+def find_logs(inputs: Iterable[str], skip: Path | str | None = None) -> list[Path]:
+    """The logs named by `inputs`.
+
+    Parameters
+    ----------
+    inputs : iterable of str
+        Log files (.mcap, .db3; a split file of a bag directory stands for its bag), bag
+        directories, folders (searched recursively: each bag directory and each loose .mcap
+        or .db3 file in them is one log) and glob patterns (``**`` matches folders at any
+        depth).
+    skip : path, optional
+        A folder whose logs are left out (the review's output directory: its annotated logs
+        are not reviewed again).
+
+    Returns
+    -------
+    list of Path
+        Absolute paths, each log once, in input order.
+
+    Raises
+    ------
+    LogError
+        An input that does not exist, a pattern that matches nothing.
+    """
+    skip = Path(skip).resolve() if skip is not None else None
+    found: dict[Path, None] = {}
+    for text in inputs:
+        if _GLOB.search(text) and not Path(text).exists():
+            matches = sorted(glob.glob(text, recursive=True))
+            if not matches:
+                raise LogError(text, "no file or folder matches this pattern")
+        else:
+            matches = [text]
+        for m in map(Path, matches):
+            if not m.exists():
+                raise LogError(m, "no such file or directory")
+            # a split file stands for its bag: the splits are one log
+            logs = _walk(m, skip) if m.is_dir() else [m.parent if _is_bag(m.parent) else m]
+            found.update(dict.fromkeys(p.resolve() for p in logs
+                                       if skip is None or not p.resolve().is_relative_to(skip)))
+    return list(found)
+
+
+def output_names(logs: list[Path], known: dict[str, str] | None = None) -> list[str]:
+    """Output directory name of each log: the name it had in an earlier review into the same
+    directory (`known`: path -> name), else its `log_name`; a name that another log has (in
+    this run or in `known`) gets the first 8 hex digits of a hash of the log's path appended
+    (the same in every run)."""
+    known = known or {}
+    names = [known.get(str(p)) or log_name(p).strip(".") or "log" for p in logs]
+    this = {str(p) for p in logs}
+    counts = Counter(names) + Counter(n for path, n in known.items() if path not in this)
+    return [n if counts[n] == 1 or str(p) in known else
+            f"{n}-{hashlib.blake2b(str(p).encode(), digest_size=4).hexdigest()}"
+            for p, n in zip(logs, names)]
+
+
+# ---------------------------------------------------------------------- one log: one task
+def log_files(log: Path) -> list[Path]:
+    """The files of a log (its split files for a bag directory), as the replay reads them."""
+    return open_log(log).files
+
+
+def stat_key(log: Path) -> list[list]:
+    """(name, size, modification time in ns) of each of the log's files: a quick change check."""
+    out = []
+    for f in log_files(log):
+        s = f.stat()
+        out.append([f.name, s.st_size, s.st_mtime_ns])
+    return out
+
+
+def content_hash(log: Path) -> str:
+    """BLAKE2b (128 bit) of the bytes of the log's files in split order, with their names."""
+    h = hashlib.blake2b(digest_size=16)
+    for f in log_files(log):
+        h.update(f.name.encode() + b"\0")
+        with open(f, "rb") as fh:
+            while block := fh.read(_HASH_BLOCK):
+                h.update(block)
+    return h.hexdigest()
+
+
+def _metadata(log: Path) -> logmeta.LogMetadata | None:
+    """The log's `leadscrew_ros` record (of its first MCAP file), None without one."""
+    first = log_files(log)[0]
+    return logmeta.read(first) if first.suffix == ".mcap" else None
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text if isinstance(exc, LogError) else f"{type(exc).__name__}: {text}"
+
+
+def _episodes(result) -> list[dict[str, Any]]:
+    """Every episode of a replay (the kept ones, or episodes.json when there are more)."""
+    if result.episode_count <= len(result.episodes):
+        return [e.as_dict() for e in result.episodes]
+    with open(result.out_dir / "episodes.json", encoding="utf-8") as fh:
+        return json.load(fh)
+
+
+def squeak_frequencies(episodes: list[dict[str, Any]]) -> list[float]:
+    """The log's distinct squeak frequencies [Hz]: per mode, the median of its episodes'
+    frequencies; ascending."""
+    by_mode: dict[str, list[float]] = {}
+    for e in episodes:
+        for mode, hz in zip(e["modes"], e["frequencies_hz"]):
+            by_mode.setdefault(mode, []).append(hz)
+    return sorted(statistics.median(v) for v in by_mode.values())
+
+
+def error_row(log: Path, name: str, error: str, unit_id: str | None = None) -> dict[str, Any]:
+    """The row of a log that could not be reviewed."""
+    return {"log": str(log), "name": name, "unit_id": unit_id or name, "status": "error",
+            "error": error}
+
+
+def _row(log: Path, name: str, unit_id: str, model: SqueakModel, result) -> dict[str, Any]:
+    s = result.summary()
+    episodes = _episodes(result)
+    growth = [e["peak_growth_rate"] for e in episodes if e["peak_growth_rate"] is not None
+              and math.isfinite(e["peak_growth_rate"])]
+    return {"log": str(log), "name": name, "unit_id": unit_id, "status": "ok", "error": "",
+            "duration_s": s["duration_s"], "time_in_squeak_s": s["time_in_squeak_s"],
+            "squeak_share": s["squeak_share"], "episodes": s["episodes"],
+            "peak_growth_rate": max(growth) if growth else None,
+            "squeak_frequencies_hz": squeak_frequencies(episodes),
+            "peak_probability": s["peak_probability"],
+            "time_above_warn_s": s["time_above_warn_s"],
+            "time_above_error_s": s["time_above_error_s"],
+            "messages": s["messages"], "predictions": s["predictions"],
+            "formulation": model.params.formulation, "wall_s": s["wall_s"]}
+
+
+def _points(result) -> list[list[float]]:
+    """At most POINTS_PER_LOG squeak points (speed [rad/s], load [N], frequency [Hz]), evenly
+    from the replay's sample, 4 significant digits."""
+    sample = result.plot.squeak.sample()
+    if not len(sample):
+        return []
+    pick = np.unique(np.linspace(0, len(sample) - 1, POINTS_PER_LOG).round().astype(int))
+    return [[float(f"{v:.4g}") for v in (row[0], row[1], row[3])] for row in sample[pick]]
+
+
+def review_one(log: str, out_dir: str, name: str, settings: FleetSettings,
+               known_hash: str | None = None) -> dict[str, Any]:
+    """Review one log (the body of a Dask task): the same replay as the `replay` command.
+
+    Parameters
+    ----------
+    log : str
+        The log (file or bag directory), opened here, on the worker.
+    out_dir : str
+        The review's output directory: the log's outputs go to `<out_dir>/<name>/`.
+    name : str
+        The log's output name (`output_names`).
+    settings : FleetSettings
+        Parameters and options of the review.
+    known_hash : str, optional
+        Content hash of the log in an earlier review with the same parameters: if the log
+        still has it, nothing is replayed.
+
+    Returns
+    -------
+    dict
+        ``content``: the content hash; ``unchanged``: True when skipped; ``row``: the log's
+        row in fleet.csv (status ``ok`` or ``error``, never an exception); ``points``: its
+        squeak points for fleet.png.
+    """
+    path, out = Path(log), Path(out_dir) / name
+    content, unit_id = None, None
+    try:
+        content = content_hash(path)
+        if known_hash == content:
+            return {"content": content, "unchanged": True}
+        meta = None
+        try:
+            meta = _metadata(path)
+        except ValueError:
+            if settings.use_log_params:
+                raise
+        unit_id = (meta.unit_id if meta is not None else "") or name
+        model, inputs = settings.model_for(meta, path)
+        shutil.rmtree(out, ignore_errors=True)        # outputs of an earlier review
+        result = replay(path, model, out, ReplaySettings(
+            inputs, settings.namespace, settings.out_namespace, workers=0, progress=False))
+        row = _row(path, name, unit_id, model, result)
+        if settings.summary_only:
+            for p in result.outputs[:2]:
+                p.unlink(missing_ok=True)
+        elif settings.report:
+            from .report import write_report
+            write_report(result, model, out)
+        return {"content": content, "row": row, "points": _points(result)}
+    except Exception as exc:           # any failure of this log is its error row
+        if out.is_dir() and not any(out.iterdir()):
+            out.rmdir()
+        return {"content": content, "row": error_row(path, name, _one_line(exc), unit_id),
+                "points": []}
+
+
+# ---------------------------------------------------------------------- the cluster
+@contextlib.contextmanager
+def cluster(workers: int | None = None, scheduler: str | None = None) -> Iterator[Any]:
+    """A Dask client: of a new `distributed.LocalCluster` (`workers` processes, default one
+    per core, one thread each, everything on 127.0.0.1, no dashboard), or connected to the
+    running scheduler at `scheduler` (``tcp://HOST:PORT``)."""
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        with Client(scheduler, timeout="30s") as client:
+            yield client
+        return
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                      host="127.0.0.1", dashboard_address=None) as local, \
+            Client(local) as client:
+        yield client
+
+
+# ---------------------------------------------------------------------- the index
+def read_index(path: Path) -> dict[str, dict[str, Any]]:
+    """Entries of a resume index by log path (the last line of a log wins; a torn last line
+    of an interrupted run is ignored)."""
+    entries: dict[str, dict[str, Any]] = {}
+    if not path.exists():
+        return entries
+    with open(path, encoding="utf-8") as fh:
+        for line in fh:
+            try:
+                entry = json.loads(line)
+                entries[entry["row"]["log"]] = entry
+            except (ValueError, KeyError, TypeError):
+                continue
+    return entries
+
+
+@dataclass
+class FleetRun:
+    """A finished review: the rows of the logs asked for and how they came about."""
+
+    rows: list[dict[str, Any]]
+    points: list[list[float]]       # squeak points (speed, load, Hz), a bounded sample
+    reviewed: int                    # logs replayed (or failed) in this run
+    skipped: int                     # unchanged since an earlier review: not replayed
+    wall_s: float = math.nan
+
+    @property
+    def failed(self) -> int:
+        """Logs with an error row."""
+        return sum(r["status"] != "ok" for r in self.rows)
+
+
+class _Points:
+    """A uniform sample of at most `size` squeak points of the fleet (bounded memory)."""
+
+    def __init__(self, size: int = 20_000):
+        self.sample = Reservoir(3, size)
+
+    def add(self, points: list[list[float]]) -> None:
+        for p in points:
+            self.sample.add(*p)
+
+    def rows(self) -> list[list[float]]:
+        return self.sample.sample().tolist()
+
+
+def review_logs(logs: list[Path], out_dir: Path | str, settings: FleetSettings, client: Any,
+                progress: bool = True) -> FleetRun:
+    """Review `logs` into `out_dir` on the Dask cluster of `client`.
+
+    Parameters
+    ----------
+    logs : list of Path
+        Logs (`find_logs`).
+    out_dir : path
+        Output directory: `<name>/` per log and the resume index (fleet outputs: `fleetreport`).
+    settings : FleetSettings
+        Parameters and options for every log.
+    client : distributed.Client
+        Client of the cluster that runs the tasks (`cluster`).
+    progress : bool
+        A progress bar counting logs on stderr (a terminal only).
+
+    Returns
+    -------
+    FleetRun
+        One row per log, in the order of `logs`.
+    """
+    from distributed import as_completed
+
+    t0 = time.perf_counter()
+    out = Path(out_dir).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    index_path = out / INDEX_FILE
+    index = read_index(index_path)
+    names = output_names(logs, {k: e["row"]["name"] for k, e in index.items()})
+    digest, run_id = settings.digest(), uuid.uuid4().hex[:8]
+    rows: dict[str, dict[str, Any]] = {}
+    points = _Points()
+    todo: list[tuple[Path, str, list | None, str | None]] = []
+    for log, name in zip(logs, names):
+        entry = index.get(str(log))
+        usable = (entry is not None and entry["params"] == digest and not entry["retry"]
+                  and (entry["row"]["status"] != "ok" or (out / name / "summary.json").exists()))
+        stat = _stat_or_none(log)
+        if usable and stat is not None and entry["stat"] == stat:
+            rows[str(log)] = entry["row"]
+            points.add(entry["points"])
+        else:
+            todo.append((log, name, stat, entry["content"] if usable else None))
+    skipped = len(logs) - len(todo)
+    threads = max(sum(client.nthreads().values()), 1)
+    in_flight = max(IN_FLIGHT_PER_THREAD * threads, MIN_IN_FLIGHT)
+    pending = iter(todo)
+    by_future: dict[Any, tuple[Path, str, list | None, str | None]] = {}
+
+    def submit(job) -> Any:
+        log, name, _, known = job
+        fut = client.submit(review_one, str(log), str(out), name, settings, known,
+                            key=f"review-{name}-{run_id}", pure=False)
+        by_future[fut] = job
+        return fut
+
+    bar_or_none = (progress_bar(len(todo), "review", unit="log") if progress
+                   else contextlib.nullcontext())
+    with open(index_path, "a", encoding="utf-8") as index_file, bar_or_none as bar:
+        ac = as_completed([submit(j) for j in _take(pending, in_flight)])
+        for fut in ac:
+            log, name, stat, known = by_future.pop(fut)
+            retry = False
+            try:
+                res = fut.result()
+            except Exception as exc:       # the task did not finish: workers died under it
+                res = {"content": known, "row": error_row(log, name, _one_line(exc)),
+                       "points": []}
+                retry = True
+            fut.release()
+            if res.get("unchanged"):
+                res = {**index[str(log)], "content": res["content"]}
+                skipped += 1
+            row = res["row"]
+            rows[str(log)] = row
+            points.add(res["points"])
+            index_file.write(json.dumps(json_safe(
+                {"params": digest, "stat": stat, "content": res["content"], "retry": retry,
+                 "row": row, "points": res["points"]}), allow_nan=False) + "\n")
+            index_file.flush()
+            if bar is not None:
+                bar(1)
+            for job in _take(pending, 1):
+                ac.add(submit(job))
+    _compact(index_path)
+    return FleetRun([rows[str(log)] for log in logs], points.rows(), len(logs) - skipped,
+                    skipped, time.perf_counter() - t0)
+
+
+def _take(it: Iterator, n: int) -> list:
+    return [x for _, x in zip(range(n), it)]
+
+
+def _stat_or_none(log: Path) -> list | None:
+    try:
+        return stat_key(log)
+    except (OSError, LogError):
+        return None
+
+
+def _compact(path: Path) -> None:
+    """Rewrite the index with one line per log."""
+    entries = read_index(path)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", encoding="utf-8") as fh:
+        for entry in entries.values():
+            fh.write(json.dumps(entry, allow_nan=False) + "\n")
+    tmp.replace(path)
