@@ -3,9 +3,10 @@
 
 Twelve generated logs: node-style bags of our Recorder (`synthetic.write_log`; two carry the
 `leadscrew_ros` metadata record, written here as the node will, two share a name in different
-folders), bags of rosbags' writer, one truncated and one foreign MCAP. Both damaged logs are
-error rows (the replay reads strictly: a cut-off recording needs `recover` first), the other ten
-rows carry the numbers of `replay` of the same log. The same table comes from a local cluster
+folders), bags of rosbags' writer, one cut off (as by a crash) and one foreign MCAP. The foreign
+log is an error row; the cut-off one is reviewed up to its last whole record (a copy mended as
+`recover` does, with a note), and its row, like the other ten, carries the numbers of `replay`
+of the same (mended) log. The same table comes from a local cluster
 of two workers, from an external `dask scheduler` with two `dask worker` processes, and from a
 run whose worker is killed in the middle; a second run into the same directory reviews nothing.
 """
@@ -27,6 +28,7 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from leadscrew_ros.bag import logmeta
+from leadscrew_ros.bag.logfile import recover
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
 from leadscrew_ros.cli import main
 from leadscrew_ros.cli.fleet import exit_status
@@ -111,16 +113,24 @@ def logs(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def expected(logs, tmp_path_factory):
-    """log path -> (replay summary, episodes) of `replay` itself, for the ten good logs."""
+    """log path -> (replay summary, episodes) of `replay` itself, for the eleven readable logs
+    (the cut-off one mended by `recover` first)."""
     out, model = tmp_path_factory.mktemp("single"), SqueakModel()
     found = {}
     for log in find_logs([str(logs)]):
-        if log.name in ("foreign.mcap",) or log.parent.name == "cut":
+        if log.name == "foreign.mcap":
             continue
+        key = str(log)
+        if log.parent.name == "cut":      # reviewed as `recover` leaves it: the whole messages
+            mended = out / "recovered" / log.name
+            mended.mkdir(parents=True)
+            for f in log.glob("*.mcap"):
+                recover(f, mended / f.name)
+            log = mended
         r = replay(log, model, out / str(len(found)), ReplaySettings(
             InputSettings(joint_name=JOINT), workers=0, progress=False))
-        found[str(log)] = (r.summary(), [e.as_dict() for e in r.episodes])
-    assert len(found) == 10
+        found[key] = (r.summary(), [e.as_dict() for e in r.episodes])
+    assert len(found) == 11
     return found
 
 
@@ -141,15 +151,18 @@ def check_table(out: Path, expected: dict) -> list[dict]:
     rows = table(out)
     assert len(rows) == 12
     bad = [r for r in rows if r["status"] == "error"]
-    assert sorted(Path(r["log"]).parent.name for r in bad) == ["cut", "fleet_logs0"]
-    assert "truncated" in next(r["error"] for r in bad if "/cut/" in r["log"])
+    assert [Path(r["log"]).name for r in bad] == ["foreign.mcap"]
+    cut = next(r for r in rows if "/cut/" in r["log"])
+    assert cut["status"] == "ok" and cut["note"].startswith("cut off (")
+    assert "whole messages before the cut" in cut["note"] and len(cut["note"].splitlines()) == 1
+    assert all(r["note"] == "" for r in rows if r is not cut)
     assert "foreign MCAP" in next(r["error"] for r in bad if r["log"].endswith("foreign.mcap"))
     assert all(len(r["error"].splitlines()) == 1 for r in bad)
     by_log = {r["log"]: r for r in rows}
     doc = {r["log"]: r for r in json.loads((out / "fleet.json").read_text())["rows"]}
     for log, (summary, episodes) in expected.items():
         row, exact = by_log[log], doc[log]
-        assert row["status"] == "ok" and row["error"] == ""
+        assert row["status"] == "ok" and row["error"] == "", (log, row["error"])
         for key in NUMBERS:
             assert exact[key] == summary[key], (log, key)
             assert float(row[key]) == summary[key], (log, key)
@@ -185,7 +198,7 @@ def test_log_discovery_and_names(logs, tmp_path):
 
 def test_local_cluster_reviews_every_log_and_resumes(logs, expected, tmp_path):
     out = tmp_path / "review"
-    assert review(logs, out, "--workers", 2, "--no-report") == exit_status(2)
+    assert review(logs, out, "--workers", 2, "--no-report") == exit_status(1)
     rows = check_table(out, expected)
     ok = next(r for r in rows if r["status"] == "ok")
     outputs = sorted(p.name for p in (out / ok["name"]).iterdir())
@@ -195,17 +208,17 @@ def test_local_cluster_reviews_every_log_and_resumes(logs, expected, tmp_path):
     # the annotated logs in the output directory are not logs to review
     assert find_logs([str(logs), str(out / "**" / "*.mcap")], skip=out) == find_logs([str(logs)])
     doc = json.loads((out / "fleet.json").read_text())
-    assert (doc["ok"], doc["errors"], doc["reviewed"], doc["skipped"]) == (10, 2, 12, 0)
+    assert (doc["ok"], doc["errors"], doc["reviewed"], doc["skipped"]) == (11, 1, 12, 0)
     assert doc["parameters"]["inputs"]["joint_name"] == JOINT
 
     # a re-run reviews nothing again (the failed logs fail the same way: not again either)
-    assert review(logs, out, "--workers", 2, "--no-report") == exit_status(2)
+    assert review(logs, out, "--workers", 2, "--no-report") == exit_status(1)
     doc = json.loads((out / "fleet.json").read_text())
     assert (doc["reviewed"], doc["skipped"]) == (0, 12)
     assert table(out) == [dict(r) for r in rows]
     # a touched log is hashed, found unchanged and not replayed; other parameters replay all
     os.utime(the_mcap(next((logs / "vehicles" / "seat-0042").iterdir())))
-    assert review(logs, out, "--workers", 1, "--no-report") == exit_status(2)
+    assert review(logs, out, "--workers", 1, "--no-report") == exit_status(1)
     doc = json.loads((out / "fleet.json").read_text())
     assert (doc["reviewed"], doc["skipped"]) == (0, 12)
     assert len((out / INDEX_FILE).read_text().splitlines()) == 12
@@ -295,7 +308,7 @@ def test_external_cluster_and_a_worker_killed_mid_run(logs, expected, external_c
 
     out = tmp_path / "external"
     assert review(logs, out, "--scheduler", external_cluster,
-                  "--no-report") == exit_status(2)
+                  "--no-report") == exit_status(1)
     reference = check_table(out, expected)
 
     # again into a new directory, and one worker process is killed once the first log is in
@@ -312,7 +325,7 @@ def test_external_cluster_and_a_worker_killed_mid_run(logs, expected, external_c
         os.kill(sorted(pids.values())[0], signal.SIGKILL)
     thread.join(timeout=600)
     assert not thread.is_alive()
-    assert result["code"] == exit_status(2)
+    assert result["code"] == exit_status(1)
     assert table(out) == reference
     check_table(out, expected)
     shutil.rmtree(out)

@@ -45,7 +45,7 @@ import numpy as np
 
 from .. import __version__
 from ..bag import logmeta
-from ..bag.logfile import LogError
+from ..bag.logfile import LogError, is_complete, recover
 from ..bag.logsource import DB3, open_log
 from ..model import ScrewParameters, SqueakModel
 from ..model.scatter import LIVE_SAMPLES, Scatter
@@ -56,6 +56,7 @@ from .replay import ReplaySettings, log_name, replay
 from .timeline import InputSettings
 
 INDEX_FILE = "review-index.jsonl"
+RECOVERED_DIR = "recovered"   # in a log's outputs: the readable copy of a cut-off recording
 POINTS_PER_LOG = 64           # squeak points (speed, load, frequency) a log adds to fleet.png
 IN_FLIGHT_PER_THREAD = 2      # tasks submitted per worker thread ahead of the results
 MIN_IN_FLIGHT = 4
@@ -299,6 +300,45 @@ def _row(log: Path, name: str, unit_id: str, model: SqueakModel, result) -> dict
             "formulation": model.params.formulation, "wall_s": s["wall_s"]}
 
 
+def recovered(log: Path, scratch: Path) -> tuple[Path, str]:
+    """The log to replay and a note: `log` itself when its MCAP files are whole; for a
+    recording cut off by a crash (no footer: the node or the machine died), a copy in
+    `scratch` with every cut-off file rewritten up to its last whole record, as `recover` does
+    (the input is never touched), and a note saying what was lost. Raises LogError when a
+    file holds nothing readable.
+
+    Parameters
+    ----------
+    log : Path
+        An MCAP or .db3 file, or a bag directory.
+    scratch : Path
+        Where the copy goes (created when needed).
+
+    Returns
+    -------
+    tuple of (Path, str)
+        The log to replay and '' or the note for the fleet row.
+    """
+    files = log_files(log)
+    cut = [f for f in files if f.suffix != DB3 and not is_complete(f)]
+    if not cut:
+        return log, ""
+    target = scratch / log.name
+    target.parent.mkdir(parents=True, exist_ok=True)
+    if log.is_dir():
+        target.mkdir()
+    infos = []
+    for f in files:
+        dst = target if log.is_file() else target / f.name
+        if f in cut:
+            infos.append(recover(f, dst))
+        else:
+            shutil.copyfile(f, dst)
+    lost = "; ".join(f"{i.path.name}: {i.damage or 'no footer'}" for i in infos)
+    return target, (f"cut off ({lost}): reviewed the {sum(i.messages for i in infos)} whole "
+                    f"messages before the cut; `leadscrew-squeak recover` mends the file")
+
+
 def _points(result) -> list[list[float]]:
     """At most POINTS_PER_LOG squeak points (speed [rad/s], load [N], frequency [Hz]), evenly
     from the replay's sample, 4 significant digits."""
@@ -349,12 +389,14 @@ def review_one(log: str, out_dir: str, name: str, settings: FleetSettings,
         unit_id = (meta.unit_id if meta is not None else "") or name
         model, inputs = settings.model_for(meta, path)
         shutil.rmtree(out, ignore_errors=True)        # outputs of an earlier review
-        result = replay(path, model, out, ReplaySettings(
+        whole, note = recovered(path, out / RECOVERED_DIR)
+        result = replay(whole, model, out, ReplaySettings(
             inputs, settings.namespace, settings.out_namespace, workers=0, progress=False))
-        row = _row(path, name, unit_id, model, result)
+        row = {**_row(path, name, unit_id, model, result), "note": note}
         if settings.summary_only:
             for p in result.outputs[:2]:
                 p.unlink(missing_ok=True)
+            shutil.rmtree(out / RECOVERED_DIR, ignore_errors=True)
         elif settings.report:
             from .report import write_report
             write_report(result, model, out)

@@ -19,7 +19,7 @@ from .fleet import FleetRun
 from .jsonsafe import json_safe
 
 CSV_FILE, JSON_FILE, PNG_FILE = "fleet.csv", "fleet.json", "fleet.png"
-COLUMNS = ["log", "unit_id", "status", "error", "duration_s", "time_in_squeak_s",
+COLUMNS = ["log", "unit_id", "status", "error", "note", "duration_s", "time_in_squeak_s",
            "squeak_share", "episodes", "peak_growth_rate", "squeak_frequencies_hz",
            "peak_probability", "time_above_warn_s", "time_above_error_s", "messages",
            "predictions", "formulation", "name", "wall_s"]
