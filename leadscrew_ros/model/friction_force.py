@@ -34,6 +34,7 @@ import numpy as np
 
 from .contact import contact_angles
 from .friction import friction_coefficient, steady_friction
+from .kernels import thread_factors
 from .modes import ModalBasis
 from .parameters import ScrewParameters
 
@@ -100,10 +101,9 @@ class HelixFriction:
         beta = params.helix_angle_rad
         self.v0 = r * self.speed * np.array([0.0, 1.0, math.tan(beta)])
         mu0, _ = steady_friction(params, self.speed)
-        flank = (1.0 if load_n == 0 else math.copysign(1.0, load_n)) * (
-            1.0 if self.speed == 0 else math.copysign(1.0, self.speed))
-        self.normal_per_rad = abs(load_n) / (alpha * math.cos(beta)
-                                             * (1 + flank * float(mu0) * math.tan(beta)))
+        # the loaded flank's factor 1 / (1 + s mu_o tan(beta)) of (9), as the linearisation has it
+        c, _, _ = thread_factors(params.with_(formulation="consistent"), mu0, self.speed, load_n)
+        self.normal_per_rad = abs(load_n) * float(c) / (alpha * math.cos(beta))
 
     def velocity(self, q: np.ndarray, qdot: np.ndarray) -> np.ndarray:
         """Contact velocity Vc at every quadrature point, (3, P) in (e_r, e_theta, k) [m/s].
