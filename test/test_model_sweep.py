@@ -135,3 +135,13 @@ def test_map_boundary_is_refined_in_a_few_batched_calls(model, monkeypatch):
     assert len(m.boundary) > 40 and len(calls) <= 10
     x, y = np.array(m.boundary).T
     assert np.abs(real(model, x, y).max_growth_rate).max() < 1e-8
+
+
+@pytest.mark.parametrize("field", [sweep_module.growth_field, sweep_module.probability_field])
+@pytest.mark.parametrize("bad", [dict(speed_rad_s=[20.0, np.nan]), dict(load_n=[200.0, np.inf]),
+                                 dict(radius_m=[0.005, np.nan])])
+def test_fields_refuse_non_finite_values_with_one_error(model, field, bad):
+    """Both fields take their points through one broadcast with one finiteness check."""
+    args = {"speed_rad_s": 20.0, "load_n": 200.0, **bad}
+    with pytest.raises(ParameterError, match="finite"):
+        field(model, args.pop("speed_rad_s"), args.pop("load_n"), **args)

@@ -169,6 +169,17 @@ def _native(name: str, value: float):
     return int(round(value)) if field_info(name)["type"] == "int" else float(value)
 
 
+def _flat_points(speed_rad_s, load_n, params: dict) -> tuple:
+    """The broadcast of speeds, loads and parameter arrays: its shape and each flattened
+    (parameter columns in the order of `params`); ParameterError if a value is not finite."""
+    arrays = np.broadcast_arrays(np.asarray(speed_rad_s, float), np.asarray(load_n, float),
+                                 *(np.asarray(v, float) for v in params.values()))
+    flat = [a.ravel() for a in arrays]
+    if not all(np.all(np.isfinite(a)) for a in flat):
+        raise ParameterError("sweep values must be finite numbers")
+    return arrays[0].shape, flat[0], flat[1], flat[2:]
+
+
 def growth_field(model: SqueakModel, speed_rad_s, load_n,
                  progress: Callable[[int], None] | None = None, **params) -> GrowthField:
     """Largest squeak growth rate at every point of the broadcast of all given arrays.
@@ -199,12 +210,7 @@ def growth_field(model: SqueakModel, speed_rad_s, load_n,
     ParameterError
         A value is not finite, or a name is not a `ScrewParameters` field.
     """
-    arrays = np.broadcast_arrays(np.asarray(speed_rad_s, float), np.asarray(load_n, float),
-                                 *(np.asarray(v, float) for v in params.values()))
-    shape = arrays[0].shape
-    speeds, loads, *columns = (a.ravel() for a in arrays)
-    if not all(np.all(np.isfinite(a)) for a in (speeds, loads, *columns)):
-        raise ParameterError("sweep values must be finite numbers")
+    shape, speeds, loads, columns = _flat_points(speed_rad_s, load_n, params)
     growth, freq, diverge = (np.full(speeds.size, np.nan) for _ in range(3))
     for sub, idx in _point_models(model, dict(zip(params, columns)), speeds.size):
         ok = idx[:0] if sub is None else \
@@ -253,11 +259,13 @@ def probability_field(model: SqueakModel, speed_rad_s, load_n,
     probability, stderr : numpy.ndarray
         P in [0, 1] and its standard error, of the broadcast shape; NaN where the model is not
         valid (stderr also NaN where not sampled, i.e. without scatter).
+
+    Raises
+    ------
+    ParameterError
+        A value is not finite, or a name is not a `ScrewParameters` field.
     """
-    arrays = np.broadcast_arrays(np.asarray(speed_rad_s, float), np.asarray(load_n, float),
-                                 *(np.asarray(v, float) for v in params.values()))
-    shape = arrays[0].shape
-    speeds, loads, *columns = (a.ravel() for a in arrays)
+    shape, speeds, loads, columns = _flat_points(speed_rad_s, load_n, params)
     prob, stderr = np.full(speeds.size, np.nan), np.full(speeds.size, np.nan)
     for sub, idx in _point_models(model, dict(zip(params, columns)), speeds.size):
         if sub is None:                                  # parameters rejected: NaN
