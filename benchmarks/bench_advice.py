@@ -43,7 +43,7 @@ from threadpoolctl import threadpool_limits                          # noqa: E40
 from bench_model import interleaved, paired_ratio                   # noqa: E402
 from leadscrew_ros.live.settings import LiveSettings                 # noqa: E402
 from leadscrew_ros.model import SqueakModel                          # noqa: E402
-from leadscrew_ros.model.advice import speed_bands                   # noqa: E402
+from leadscrew_ros.model.studies.advice import speed_bands                   # noqa: E402
 
 LOAD_N = 200.0
 SAFE = LiveSettings().safe_probability   # the node's default: bands of P(squeak) >= 0.01
@@ -70,7 +70,7 @@ def count_solves(fn) -> int:
 
 
 def offline(rounds: dict[int, int]) -> list[dict]:
-    from leadscrew_ros.model.advice import band_around
+    from leadscrew_ros.model.studies.advice import band_around
     rows = []
     for n in MODES:
         model = SqueakModel(SqueakModel().params.with_(n_bending=n, n_torsion=n))

@@ -27,7 +27,7 @@ from statistics import median
 import numpy as np
 
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.model.assembly import build_geometry
+from leadscrew_ros.model.physics.assembly import build_geometry
 
 SPEED_RAD_S, LOAD_N = 20.0, 200.0
 TARGET = 0.5

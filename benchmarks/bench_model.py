@@ -27,12 +27,13 @@ from typing import Callable
 import numpy as np
 import scipy
 
-from leadscrew_ros.model import SqueakModel, assembly
-from leadscrew_ros.model.contact import contact_integrals
-from leadscrew_ros.model.modes import modal_basis
-from leadscrew_ros.model.scatter import Scatter
-from leadscrew_ros.model.stability import classify, eig_both
-from leadscrew_ros.model.sweep import _CHUNK, growth_field, stability_map
+from leadscrew_ros.model import SqueakModel
+from leadscrew_ros.model.physics import assembly
+from leadscrew_ros.model.physics.contact import contact_integrals
+from leadscrew_ros.model.physics.modes import modal_basis
+from leadscrew_ros.model.uncertainty.scatter import Scatter
+from leadscrew_ros.model.physics.stability import classify, eig_both
+from leadscrew_ros.model.studies.sweep import _CHUNK, growth_field, stability_map
 
 TARGET_POINT_RATIO = 1.5     # predict / bare eig
 TARGET_MAP_RATIO = 1.2       # growth_field / bare eigvals, per point

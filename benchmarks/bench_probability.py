@@ -20,8 +20,8 @@ from statistics import median
 import numpy as np
 
 from leadscrew_ros.model import SqueakModel
-from leadscrew_ros.model.probability import monte_carlo
-from leadscrew_ros.model.scatter import Scatter, draw
+from leadscrew_ros.model.studies.probability import monte_carlo
+from leadscrew_ros.model.uncertainty.scatter import Scatter, draw
 
 SPEED_RAD_S, LOAD_N = 55.0, 200.0
 TARGET_LIVE_RATIO = 2.0      # a live update with P / bare eig (issue 10)

@@ -193,7 +193,7 @@ def solve_floor_us(rounds: int = 5, loops: int = 20) -> float:
     right vectors of a 36 x 36 state matrix, `stability.eig_both`), on 16 points of the
     band: what a replay cannot go below without skipping predictions."""
     from leadscrew_ros.model import SqueakModel
-    from leadscrew_ros.model.stability import eig_both
+    from leadscrew_ros.model.physics.stability import eig_both
     model = SqueakModel()
     mats = [model.state_matrix(s, f) for s, f in zip(np.linspace(5.0, 100.0, 16),
                                                       np.linspace(50.0, 400.0, 16))]

@@ -28,9 +28,9 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy  # noqa: E402
 
-from leadscrew_ros.model.parameters import ScrewParameters  # noqa: E402
-from leadscrew_ros.model.transient import TransientSettings, simulate  # noqa: E402
-from leadscrew_ros.model.transient_analysis import analyse  # noqa: E402
+from leadscrew_ros.model.physics.parameters import ScrewParameters  # noqa: E402
+from leadscrew_ros.model.nonlinear.transient import TransientSettings, simulate  # noqa: E402
+from leadscrew_ros.model.nonlinear.transient_analysis import analyse  # noqa: E402
 
 SPEED_RAD_S, LOAD_N = 20.0, 200.0
 TARGET_S = 60.0

@@ -30,7 +30,7 @@ import bench_replay
 
 from leadscrew_ros.bag.synthetic import DutyCycle
 from leadscrew_ros.model import SqueakModel
-from leadscrew_ros.model.scatter import Scatter
+from leadscrew_ros.model.uncertainty.scatter import Scatter
 from leadscrew_ros.review.replay import ReplaySettings, replay
 from leadscrew_ros.review.timeline import InputSettings
 

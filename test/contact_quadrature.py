@@ -1,16 +1,16 @@
 # SPDX-License-Identifier: Apache-2.0
 """Test-only reference for the contact integrals: composite Gauss-Legendre quadrature over the
-helix (the package's method before the closed form of `model.contact`), independent of
+helix (the package's method before the closed form of `model.physics.contact`), independent of
 `kernels.kernel_harmonics` and of the closed form: it samples the kernels and mode shapes."""
 
 import math
 
 import numpy as np
 
-from leadscrew_ros.model.contact import contact_angles
-from leadscrew_ros.model.kernels import KERNELS
-from leadscrew_ros.model.modes import ModalBasis
-from leadscrew_ros.model.parameters import ScrewParameters
+from leadscrew_ros.model.physics.contact import contact_angles
+from leadscrew_ros.model.physics.kernels import KERNELS
+from leadscrew_ros.model.physics.modes import ModalBasis
+from leadscrew_ros.model.physics.parameters import ScrewParameters
 
 PANEL_NODES = 8
 

@@ -3,7 +3,7 @@
 
 test/data/appendix_a_printed.json holds (A.3)-(A.8) transcribed once from the paper: each
 printed prefactor and every term of each integrand. The implemented friction matrix is
-scale(Omega, F_z) * kernel(theta) (model/kernels.py moves R and sin^2(beta) between the two),
+scale(Omega, F_z) * kernel(theta) (model/physics/kernels.py moves R and sin^2(beta) between the two),
 so the test compares scale * kernel with prefactor * printed term, for every (row, column)
 entry, at several theta, beta, R and operating points. Any changed sign or factor of one term
 (e.g. of sin^2(beta) in W3[x x], which moves the band edge by only 0.2 %) fails here.
@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from leadscrew_ros.model.friction import gamma, mu_o
-from leadscrew_ros.model.kernels import KERNELS, scales
-from leadscrew_ros.model.modes import KIND_T, KIND_X, KIND_Y
-from leadscrew_ros.model.parameters import ScrewParameters
+from leadscrew_ros.model.physics.friction import gamma, mu_o
+from leadscrew_ros.model.physics.kernels import KERNELS, scales
+from leadscrew_ros.model.physics.modes import KIND_T, KIND_X, KIND_Y
+from leadscrew_ros.model.physics.parameters import ScrewParameters
 
 PRINTED = json.loads((Path(__file__).parent / "data" / "appendix_a_printed.json")
                      .read_text(encoding="utf-8"))["matrices"]

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.model.sweep import sweep
+from leadscrew_ros.model.studies.sweep import sweep
 
 _spec = importlib.util.spec_from_file_location(
     "band_table", Path(__file__).parents[1] / "tools" / "band_table.py")

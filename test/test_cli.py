@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 from leadscrew_ros.cli import CliError, main, split_ros_args
 from leadscrew_ros.cli.args import MAX_COUNT, parse_range
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.model.sweep import (MAX_MEMORY_BYTES, MAX_POINTS, map_work, stability_map, sweep,
+from leadscrew_ros.model.studies.sweep import (MAX_MEMORY_BYTES, MAX_POINTS, map_work, stability_map, sweep,
                                        sweep_work)
 
 REPO = Path(__file__).resolve().parents[1]

@@ -15,9 +15,9 @@ from hypothesis import strategies as st
 from leadscrew_ros.cli import main
 from leadscrew_ros.cli.figures import describe_probability_band
 from leadscrew_ros.model import SqueakModel
-from leadscrew_ros.model.countermeasures import DESIGN, FRICTION, OPERATING, STEP
-from leadscrew_ros.model.scatter import DEFAULT_SCATTER, LOG_NORMAL
-from leadscrew_ros.model.sweep import PROBABILITY_LEVELS, stability_map
+from leadscrew_ros.model.studies.countermeasures import DESIGN, FRICTION, OPERATING, STEP
+from leadscrew_ros.model.uncertainty.scatter import DEFAULT_SCATTER, LOG_NORMAL
+from leadscrew_ros.model.studies.sweep import PROBABILITY_LEVELS, stability_map
 
 OFF = [a for name in DEFAULT_SCATTER for a in ("--scatter", f"{name}=0")]
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from leadscrew_ros.model.parameters import ScrewParameters, field_names
+from leadscrew_ros.model.physics.parameters import ScrewParameters, field_names
 from leadscrew_ros.ros.parameters import GROUPS, PARAMETER_NAMES, PARAMETERS, config_yaml
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "leadscrew.yaml"

@@ -4,11 +4,11 @@
 import pytest
 
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.model.countermeasures import (DESIGN, FRICTION, OPERATING, STEP,
+from leadscrew_ros.model.studies.countermeasures import (DESIGN, FRICTION, OPERATING, STEP,
                                                  Countermeasure, advice_text, changed_by,
                                                  countermeasures)
-from leadscrew_ros.model.probability import linearised
-from leadscrew_ros.model.scatter import Scatter, draw
+from leadscrew_ros.model.studies.probability import linearised
+from leadscrew_ros.model.uncertainty.scatter import Scatter, draw
 
 MODEL = SqueakModel()
 SAMPLES = draw(MODEL.params, Scatter(), 1024)

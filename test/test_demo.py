@@ -25,7 +25,8 @@ from std_msgs.msg import Float64
 
 from leadscrew_ros.ros.demo import SqueakMonitor, status_line
 from leadscrew_ros.ros.diagnostics import DiagnosticStatusWrapper, status_task
-from leadscrew_ros.live.predictor import KEY_VALIDITY, LivePredictor
+from leadscrew_ros.live.recompute import LivePredictor
+from leadscrew_ros.live.status import KEY_VALIDITY
 from leadscrew_ros.bag.cdr import encode_diagnostic_array
 from leadscrew_ros.bag.logfile import inspect, log_files, read_log
 from leadscrew_ros.model import SqueakModel, Validity

@@ -11,9 +11,9 @@ import pytest
 import sympy as sp
 
 from leadscrew_ros.model import ScrewParameters
-from leadscrew_ros.model.contact import contact_angles
-from leadscrew_ros.model.friction import mu_o, sliding_speed
-from leadscrew_ros.model.kernels import consistent_kernels, paper_kernels, scales
+from leadscrew_ros.model.physics.contact import contact_angles
+from leadscrew_ros.model.physics.friction import mu_o, sliding_speed
+from leadscrew_ros.model.physics.kernels import consistent_kernels, paper_kernels, scales
 
 _spec = importlib.util.spec_from_file_location(
     "derive_consistent", Path(__file__).parents[1] / "tools" / "derive_consistent.py")

@@ -25,7 +25,7 @@ from leadscrew_ros.ros.diagnostics import (KEY_BAG, KEY_CUT_OFF_BAGS, KEY_FILES,
                                            KEY_MESSAGES, PREDICTION_TASK, RECORDING_TASK, TOPIC,
                                            DiagnosticStatusWrapper, Updater, key_lost_on,
                                            recording_status, status_task)
-from leadscrew_ros.live.predictor import Level, Status
+from leadscrew_ros.live.status import Level, Status
 from leadscrew_ros.ros.node import LATCHED, NODE_NAME, make_executor
 from test_node import SQUEAK, at, ros  # noqa: F401  (ros: fixture)
 

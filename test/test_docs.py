@@ -12,22 +12,24 @@ import re
 
 import pytest
 
-from leadscrew_ros.model import (friction_force, parameters, predictor, stability, sweep,
-                                 tracking, transient, transient_analysis)
-from leadscrew_ros.model.parameters import ScrewParameters, field_info, field_names
+from leadscrew_ros.model import squeak_model
+from leadscrew_ros.model.nonlinear import friction_force, transient, transient_analysis
+from leadscrew_ros.model.physics import parameters, stability
+from leadscrew_ros.model.studies import sweep, tracking
+from leadscrew_ros.model.physics.parameters import ScrewParameters, field_info, field_names
 from leadscrew_ros.review import fleet, fleetreport
 
 FUNCTIONS = [
-    predictor.SqueakModel,                  # the class docstring documents __init__
-    predictor.SqueakModel.with_params,
-    predictor.SqueakModel.with_scatter,
-    predictor.SqueakModel.validity_code,
-    predictor.SqueakModel.validity,
-    predictor.SqueakModel.state_matrix,
-    predictor.SqueakModel.predict,
-    predictor.SqueakModel.predict_many,
-    predictor.Prediction.as_dict,
-    predictor.check_operating_point,
+    squeak_model.SqueakModel,                  # the class docstring documents __init__
+    squeak_model.SqueakModel.with_params,
+    squeak_model.SqueakModel.with_scatter,
+    squeak_model.SqueakModel.validity_code,
+    squeak_model.SqueakModel.validity,
+    squeak_model.SqueakModel.state_matrix,
+    squeak_model.SqueakModel.predict,
+    squeak_model.SqueakModel.predict_many,
+    squeak_model.Prediction.as_dict,
+    squeak_model.check_operating_point,
     ScrewParameters.with_,
     ScrewParameters.geometry_only,
     ScrewParameters.as_dict,
@@ -59,13 +61,13 @@ FUNCTIONS = [
     fleet.review_logs,
     fleetreport.write_fleet,
 ]
-RECORDS = [ScrewParameters, predictor.Prediction, stability.ModeResult, sweep.GrowthField,
+RECORDS = [ScrewParameters, squeak_model.Prediction, stability.ModeResult, sweep.GrowthField,
            sweep.SweepResult, sweep.MapResult, tracking.Branch, transient.TransientSettings,
            transient.TransientResult, transient_analysis.LinearFit,
            transient_analysis.LimitCycle, transient_analysis.TransientAnalysis,
            fleet.FleetSettings]
-PROPERTIES = [(predictor.SqueakModel, ("labels", "critical_speed_rad_s")),
-              (predictor.Prediction, ("valid", "stable", "squeak_modes",
+PROPERTIES = [(squeak_model.SqueakModel, ("labels", "critical_speed_rad_s")),
+              (squeak_model.Prediction, ("valid", "stable", "squeak_modes",
                                       "unstable_frequencies_hz", "max_growth_rate")),
               (ScrewParameters, ("n_modes", "lead_per_rad_m", "nut_travel_m")),
               (sweep.SweepResult, ("max_growth_rate", "probability")),
@@ -167,7 +169,7 @@ def test_properties_have_docstrings(owner, names):
 def test_the_public_api_is_covered():
     """A new public function or method of these modules must be added to the lists above."""
     covered = {f.__qualname__ for f in FUNCTIONS}
-    for module, names in ((predictor, ("SqueakModel", "check_operating_point")),
+    for module, names in ((squeak_model, ("SqueakModel", "check_operating_point")),
                           (sweep, ("sweep", "stability_map", "growth_field", "refine_crossings",
                                    "unstable_intervals", "probability_field", "level_crossings",
                                    "find_roots",

@@ -14,6 +14,8 @@ REPO = Path(__file__).resolve().parents[1]
 PACKAGE = REPO / "leadscrew_ros"
 LAYERS = ("model", "live", "bag", "review", "ros", "cli")
 ROS_FREE = LAYERS[:4]
+# Inside `model`, the same one-way rule between its sub-packages (squeak_model is a module).
+MODEL_PARTS = ("physics", "uncertainty", "squeak_model", "studies", "nonlinear")
 # What a module of a ROS-free layer may not import, directly or through a dependency.
 ROS_MODULES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "sensor_msgs",
                "diagnostic_msgs", "std_srvs", "geometry_msgs", "rosidl_runtime_py",
@@ -52,14 +54,25 @@ def _layer(module: str) -> str | None:
         parts[1] in LAYERS else None
 
 
+def _model_part(module: str) -> str | None:
+    """The sub-package (or `squeak_model`) of a module of `model`; None for `model` itself."""
+    parts = module.split(".")
+    return parts[2] if parts[:2] == ["leadscrew_ros", "model"] and len(parts) > 2 and \
+        parts[2] in MODEL_PARTS else None
+
+
 def violations(path: Path) -> list[str]:
-    """Imports of `path` that reach a layer above its own."""
-    own = _layer(".".join(path.relative_to(REPO).with_suffix("").parts))
+    """Imports of `path` that reach a layer above its own, or, inside `model`, a sub-package
+    above its own."""
+    module = ".".join(path.relative_to(REPO).with_suffix("").parts)
+    own, own_part = _layer(module), _model_part(module)
     found = []
     for line, target in _imports(path):
-        layer = _layer(target)
+        layer, part = _layer(target), _model_part(target)
         if own and layer and LAYERS.index(layer) > LAYERS.index(own):
             found.append(f"{path.relative_to(REPO)}:{line}: {own} imports {target}")
+        elif own_part and part and MODEL_PARTS.index(part) > MODEL_PARTS.index(own_part):
+            found.append(f"{path.relative_to(REPO)}:{line}: model.{own_part} imports {target}")
         if own in ROS_FREE and target.split(".")[0] in ROS_MODULES:
             found.append(f"{path.relative_to(REPO)}:{line}: {own} imports {target}")
     return found
@@ -89,6 +102,22 @@ def test_the_direction_check_sees_a_violation(tmp_path, monkeypatch):
         "leadscrew_ros/bag/x.py:2: bag imports leadscrew_ros.ros.node",
         "leadscrew_ros/bag/x.py:3: bag imports leadscrew_ros.review.replay",
         "leadscrew_ros/bag/x.py:5: bag imports std_msgs.msg"]
+
+
+def test_the_direction_check_sees_a_model_sub_package_violation(tmp_path, monkeypatch):
+    """Inside `model`: physics may not import the squeak model, the squeak model not a study."""
+    fake = tmp_path / "leadscrew_ros" / "model" / "physics"
+    fake.mkdir(parents=True)
+    (fake / "x.py").write_text("from ..squeak_model import SqueakModel\nfrom .kernels import k\n")
+    (fake.parent / "squeak_model.py").write_text("from .studies.sweep import sweep\n"
+                                                 "from .uncertainty.scatter import Scatter\n")
+    monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
+    assert violations(fake / "x.py") == [
+        "leadscrew_ros/model/physics/x.py:1: model.physics imports "
+        "leadscrew_ros.model.squeak_model"]
+    assert violations(fake.parent / "squeak_model.py") == [
+        "leadscrew_ros/model/squeak_model.py:1: model.squeak_model imports "
+        "leadscrew_ros.model.studies.sweep"]
 
 
 BLOCKER = f"""
@@ -126,16 +155,19 @@ def _layout_block() -> str:
 
 
 def test_readme_layout_lists_every_module_in_its_layer():
-    """The README's tree names every module under its layer, and nothing that is not there."""
-    listed, layer = set(), None
+    """The README's tree names every module under its layer (and sub-package), and nothing
+    that is not there."""
+    listed, stack = set(), []
     for line in _layout_block().splitlines():
-        name = line.split()[0] if line.strip() else ""
-        if line.startswith("  ") and not line.startswith("    ") and name.endswith("/"):
-            layer = name.rstrip("/")
-        elif line.startswith("    ") and name.endswith(".py"):
-            listed.add(f"{layer}/{name}")
-        elif line and not line.startswith(" "):
+        if not line.strip():
+            continue
+        depth, name = (len(line) - len(line.lstrip())) // 2, line.split()[0]
+        if depth == 0:
             break                                  # tools/, config/ ...: outside the package
-    actual = {str(p.relative_to(PACKAGE)) for p in PACKAGE.glob("*/*.py")
+        if name.endswith("/") or name.endswith(".py"):
+            stack = stack[:depth - 1] + [name.rstrip("/")]
+            if name.endswith(".py"):
+                listed.add("/".join(stack))
+    actual = {str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("*.py")
               if p.name != "__init__.py" or p.parent.name == "cli"}
     assert listed == actual

@@ -14,17 +14,17 @@ from scipy.linalg import lapack
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from leadscrew_ros.live import predictor as live_module
-from leadscrew_ros.live.predictor import (KEY_MARGIN, KEY_NUT_POSITION, KEY_PROBABILITY,
-                                          KEY_PROBABILITY_STDERR, KEY_SAFE_SPEED_ERROR,
-                                          KEY_SAFE_SPEED_PENDING, KEY_SQUEAK_FREQUENCIES, KEY_VALID,
-                                          KEY_VALIDITY, LatestWorker, Level, LivePredictor,
-                                          LiveSettings, Superseded, prediction_status)
+from leadscrew_ros.live import recompute as live_module
+from leadscrew_ros.live.recompute import LatestWorker, LivePredictor, LiveSettings, Superseded
+from leadscrew_ros.live.status import (KEY_MARGIN, KEY_NUT_POSITION, KEY_PROBABILITY,
+                                       KEY_PROBABILITY_STDERR, KEY_SAFE_SPEED_ERROR,
+                                       KEY_SAFE_SPEED_PENDING, KEY_SQUEAK_FREQUENCIES, KEY_VALID,
+                                       KEY_VALIDITY, Level, prediction_status)
 from leadscrew_ros.model import Prediction, SqueakModel, Validity
-from leadscrew_ros.model.advice import (_BAND_POINTS, _MAX_REFINE, _SCAN_BATCH, EDGE_RTOL,
+from leadscrew_ros.model.studies.advice import (_BAND_POINTS, _MAX_REFINE, _SCAN_BATCH, EDGE_RTOL,
                                         band_around, band_score, speed_bands)
-from leadscrew_ros.model.scatter import Scatter
-from leadscrew_ros.model.sweep import growth_field
+from leadscrew_ros.model.uncertainty.scatter import Scatter
+from leadscrew_ros.model.studies.sweep import growth_field
 
 # Table 1, 200 N, paper, default scatter: the nominal squeak band is ~0.81..55.2 rad/s; P(squeak)
 # is 0.997 at 20 rad/s, 0.43 at 55.5 (nominally stable), 0.12 at 60, 0.002 at 68, 0 from ~70 on.

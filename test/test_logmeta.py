@@ -5,7 +5,7 @@ import pytest
 from mcap.writer import Writer
 
 from leadscrew_ros.bag import logmeta
-from leadscrew_ros.model.parameters import ParameterError, ScrewParameters
+from leadscrew_ros.model.physics.parameters import ParameterError, ScrewParameters
 
 
 def _write(path, records):

@@ -11,9 +11,9 @@ from scipy.integrate import quad
 
 from contact_quadrature import quadrature_integrals
 from leadscrew_ros.model import ScrewParameters, SqueakModel, modal_basis
-from leadscrew_ros.model.contact import contact_angles, contact_integrals, helix_contact
-from leadscrew_ros.model.friction import gamma, mu_o
-from leadscrew_ros.model.kernels import HARMONICS, KERNELS, MATRICES, kernel_harmonics
+from leadscrew_ros.model.physics.contact import contact_angles, contact_integrals, helix_contact
+from leadscrew_ros.model.physics.friction import gamma, mu_o
+from leadscrew_ros.model.physics.kernels import HARMONICS, KERNELS, MATRICES, kernel_harmonics
 
 
 def test_contact_angles_match_notes():

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.model.sweep import sweep
+from leadscrew_ros.model.studies.sweep import sweep
 
 SPEEDS = np.linspace(0.5, 120, 60)
 

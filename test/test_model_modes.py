@@ -6,8 +6,8 @@ import pytest
 from scipy.integrate import quad
 
 from leadscrew_ros.model import ScrewParameters, modal_basis
-from leadscrew_ros.model.assembly import gyroscopic_unit
-from leadscrew_ros.model.modes import KIND_T
+from leadscrew_ros.model.physics.assembly import gyroscopic_unit
+from leadscrew_ros.model.physics.modes import KIND_T
 
 # Table 2: the uncoupled screw (Hz) and the mode(s) at each frequency.
 TABLE_2 = [(224, ("B1x", "B1y")), (898, ("B2x", "B2y")), (2020, ("B3x", "B3y")), (2654, ("T1",)),

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from leadscrew_ros.model import ParameterError, SqueakModel
-from leadscrew_ros.model import sweep as sweep_module
-from leadscrew_ros.model.sweep import find_roots, growth_field, stability_map, sweep
+from leadscrew_ros.model.studies import sweep as sweep_module
+from leadscrew_ros.model.studies.sweep import find_roots, growth_field, stability_map, sweep
 
 
 @pytest.fixture(scope="module")

@@ -10,9 +10,9 @@ from hypothesis import strategies as st
 
 from leadscrew_ros.model import (OperatingPointError, ParameterError, ScrewParameters, SqueakModel,
                                  Validity)
-from leadscrew_ros.model import predictor
-from leadscrew_ros.model.sweep import sweep
-from leadscrew_ros.model.parameters import MAX_CONTACT_TURNS, field_info, field_names
+from leadscrew_ros.model import squeak_model
+from leadscrew_ros.model.studies.sweep import sweep
+from leadscrew_ros.model.physics.parameters import MAX_CONTACT_TURNS, field_info, field_names
 
 
 @pytest.mark.parametrize("changes, words", [
@@ -93,7 +93,7 @@ def test_a_failed_eigen_solve_is_its_own_validity(monkeypatch):
     def broken(_matrix, _left=True):
         raise np.linalg.LinAlgError("Eigenvalues did not converge")
 
-    monkeypatch.setattr(predictor, "eig_both", broken)
+    monkeypatch.setattr(squeak_model, "eig_both", broken)
     p = SqueakModel().predict(20.0, 200.0)
     assert p.validity is Validity.SOLVER_FAILED and not p.valid and p.probability is None
     assert "did not converge" in p.reason

@@ -32,12 +32,12 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray
 
-from leadscrew_ros.live.predictor import (KEY_FORMULATION, KEY_MARGIN, KEY_NUT_POSITION,
-                                          KEY_PROBABILITY, KEY_SPEED, KEY_VALIDITY, Level)
+from leadscrew_ros.live.status import (KEY_FORMULATION, KEY_MARGIN, KEY_NUT_POSITION,
+                                       KEY_PROBABILITY, KEY_SPEED, KEY_VALIDITY, Level)
 from leadscrew_ros.live.settings import LiveSettings
 from leadscrew_ros.model import SqueakModel, Validity
-from leadscrew_ros.model.advice import speed_bands
-from leadscrew_ros.model.scatter import DEFAULT_SCATTER, Scatter
+from leadscrew_ros.model.studies.advice import speed_bands
+from leadscrew_ros.model.uncertainty.scatter import DEFAULT_SCATTER, Scatter
 from leadscrew_ros.bag.messages import MODE_COLUMNS, modes_payload
 from leadscrew_ros.ros.node import NODE_NAME, SqueakPredictorNode, make_executor
 

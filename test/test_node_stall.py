@@ -171,7 +171,7 @@ def test_parameters_and_predictions_never_wait_for_safe_speed_advice(monkeypatch
     """40/40 modes (one band search: up to ~1 s alone, more on a busy machine), speed and load
     at 50 Hz in and out of the squeak band through several load bins: get_parameters always
     answers within 0.2 s, every recompute publishes its risk and none waits for advice."""
-    from leadscrew_ros.live.predictor import LatestWorker  # here: stall_run runs on old code too
+    from leadscrew_ros.live.recompute import LatestWorker  # here: stall_run runs on old code too
 
     requests = []
     submit = LatestWorker.submit

@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from leadscrew_ros.model import ParameterError, ScrewParameters, SqueakModel
-from leadscrew_ros.model.probability import linearised, monte_carlo, squeaks
-from leadscrew_ros.model.scatter import DEFAULT_SCATTER, Scatter, draw, scatterable, valid_mask
+from leadscrew_ros.model.studies.probability import linearised, monte_carlo, squeaks
+from leadscrew_ros.model.uncertainty.scatter import DEFAULT_SCATTER, Scatter, draw, scatterable, valid_mask
 
 MODEL = SqueakModel()
 CONSISTENT = SqueakModel(ScrewParameters(formulation="consistent"))

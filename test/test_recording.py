@@ -42,7 +42,7 @@ from leadscrew_ros.bag import cdr, msgdefs
 from leadscrew_ros.bag.messages import OUTPUT_TYPES, RISK
 from leadscrew_ros.ros.node import OUTPUT_CLASSES
 from leadscrew_ros.bag.logfile import LogError, inspect, is_complete, log_files, read_log, recover
-from leadscrew_ros.live.predictor import Level
+from leadscrew_ros.live.status import Level
 from leadscrew_ros.bag.recorder import (LOST_BY_TOPIC_KEY, LOST_KEY, Recorder, RecordSettings,
                                         TopicLoss)
 from cdr_reference import cdr_payload

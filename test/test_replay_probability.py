@@ -23,7 +23,7 @@ from test_replay import TYPESTORE, cli, decoded, f64, write_mcap
 
 from leadscrew_ros.bag.messages import MARGIN, PREDICTION_TOPICS, RISK
 from leadscrew_ros.model import SqueakModel
-from leadscrew_ros.model.scatter import Scatter
+from leadscrew_ros.model.uncertainty.scatter import Scatter
 from leadscrew_ros.review import report
 from leadscrew_ros.review.replay import ReplaySettings, replay
 from leadscrew_ros.review.timeline import InputSettings, ModelSpec, predict_jobs

@@ -18,12 +18,12 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray
 
 from leadscrew_ros.bag.logfile import Topic, LogMessage, read_log
-from leadscrew_ros.live.predictor import LivePredictor
+from leadscrew_ros.live.recompute import LivePredictor
 from leadscrew_ros.live import rules as rules_module
 from leadscrew_ros.live.rules import InputRules, Outcome, moved, read_joint_state
 from leadscrew_ros.live.settings import JointSettings, LiveSettings
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.model.parameters import field_info
+from leadscrew_ros.model.physics.parameters import field_info
 from leadscrew_ros.review.replay import ReplaySettings, replay
 from leadscrew_ros.review.timeline import InputSettings, ModelSpec, Timeline, predict_jobs
 from cdr_reference import cdr_payload

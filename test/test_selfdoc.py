@@ -31,7 +31,7 @@ from leadscrew_ros.bag.recorder import Recorder, RecordSettings
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
 from leadscrew_ros.cli import main
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.model.scatter import ScatterSettings
+from leadscrew_ros.model.uncertainty.scatter import ScatterSettings
 from leadscrew_ros.review.replay import ReplaySettings, replay
 from leadscrew_ros.review.report import QUICK, write_report
 from leadscrew_ros.review.timeline import InputSettings

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.model.sensitivity import FRICTION, GEOMETRY, sensitivities
+from leadscrew_ros.model.studies.sensitivity import FRICTION, GEOMETRY, sensitivities
 
 NAMES = (*FRICTION, "modal_damping", "speed_rad_s", "load_n", *GEOMETRY)
 MODELS = {f: SqueakModel(ScrewParameters(formulation=f)) for f in ("paper", "consistent")}

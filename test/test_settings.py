@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from leadscrew_ros.bag.recorder import RecordSettings
-from leadscrew_ros.model.fields import default_text, range_text
+from leadscrew_ros.model.physics.metadata import default_text, range_text
 from leadscrew_ros.ros.parameters import (GROUPS, PARAMETERS, NodeSettings, RecordingControl, build,
                                           descriptor, yaml_value)
 
@@ -164,7 +164,7 @@ def test_readme_holds_the_rendered_table(name):
 def test_tables_list_every_node_setting_once():
     listed = [line.split("`")[1] for name in param_tables.TABLES
               for line in param_tables.table(name).splitlines()[2:]]
-    own = [s.name for s in PARAMETERS if s.group.cls.__module__ != "leadscrew_ros.model.parameters"]
+    own = [s.name for s in PARAMETERS if s.group.cls.__module__ != "leadscrew_ros.model.physics.parameters"]
     assert listed == own
     assert param_tables.main(["bogus"]) == 2
 

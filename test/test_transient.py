@@ -16,14 +16,14 @@ from scipy.io import wavfile
 
 from leadscrew_ros.cli import main
 from leadscrew_ros.cli.transient import WAV_RATE_HZ, audio, write_wav
-from leadscrew_ros.model.assembly import build_geometry
-from leadscrew_ros.model.friction_force import HelixFriction
-from leadscrew_ros.model.parameters import ParameterError, ScrewParameters
-from leadscrew_ros.model.predictor import OperatingPointError, SqueakModel
-from leadscrew_ros.model.scatter import Scatter
-from leadscrew_ros.model.transient import (ModalEquations, TransientSettings, kept_basis,
+from leadscrew_ros.model.physics.assembly import build_geometry
+from leadscrew_ros.model.nonlinear.friction_force import HelixFriction
+from leadscrew_ros.model.physics.parameters import ParameterError, ScrewParameters
+from leadscrew_ros.model.squeak_model import OperatingPointError, SqueakModel
+from leadscrew_ros.model.uncertainty.scatter import Scatter
+from leadscrew_ros.model.nonlinear.transient import (ModalEquations, TransientSettings, kept_basis,
                                            simulate)
-from leadscrew_ros.model.transient_analysis import analyse, fit_growth
+from leadscrew_ros.model.nonlinear.transient_analysis import analyse, fit_growth
 
 CONSISTENT = ScrewParameters(formulation="consistent")
 

@@ -7,7 +7,7 @@ prints, for both formulations at Table 1, the README rows computed from the mode
 
 - every oscillatory mode that is unstable somewhere below the first critical speed, with the
   speed range where it squeaks: the branch is followed along a fine geometric speed grid
-  (`model.tracking.track_modes`) and each of its sign changes refined by bisection on that branch
+  (`model.studies.tracking.track_modes`) and each of its sign changes refined by bisection on that branch
   (its eigenvalue is followed by continuation, so a crossing of another mode does not confuse
   it); an end at the grid start is marked as the validity limit min_speed_rad_s;
 - the lowest unstable load at the reference speed (Fig. 10's data, refined by root finding)
@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.model.sweep import REFERENCE_SPEED_RAD_S, sweep
-from leadscrew_ros.model.tracking import track_modes
+from leadscrew_ros.model.studies.sweep import REFERENCE_SPEED_RAD_S, sweep
+from leadscrew_ros.model.studies.tracking import track_modes
 from leadscrew_ros.review.plots import fmt
 
 FORMULATIONS = ("paper", "consistent")

@@ -15,8 +15,8 @@ import sys
 
 from leadscrew_ros.bag.recorder import RecordSettings
 from leadscrew_ros.live.settings import JointSettings, LiveSettings
-from leadscrew_ros.model.fields import default_text, range_text
-from leadscrew_ros.model.scatter import ScatterSettings
+from leadscrew_ros.model.physics.metadata import default_text, range_text
+from leadscrew_ros.model.uncertainty.scatter import ScatterSettings
 from leadscrew_ros.ros.parameters import (GROUPS, READ_ONLY_NOTE, NodeSettings, RecordingControl,
                                           Spec, specs)
 

@@ -13,8 +13,8 @@ between the two over the speed x load grid of test/test_probability.py, which as
 from __future__ import annotations
 
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.model.probability import monte_carlo
-from leadscrew_ros.model.scatter import Scatter, draw
+from leadscrew_ros.model.studies.probability import monte_carlo
+from leadscrew_ros.model.uncertainty.scatter import Scatter, draw
 
 LOAD_N = 200.0
 SPEEDS = {"paper": (20.0, 50.0, 55.0, 60.0, 70.0), "consistent": (20.0, 45.0, 49.0, 52.0, 55.0)}

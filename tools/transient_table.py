@@ -4,7 +4,7 @@
 
     .venv/bin/python tools/transient_table.py [--plot docs/transient.png]   # ~5 min on 2 cores
 
-Simulates the nonlinear equations (`model.transient`, Table 1, all 18 modes, default settings)
+Simulates the nonlinear equations (`model.nonlinear.transient`, Table 1, all 18 modes, default settings)
 at (20 rad/s, 200 N), (5 rad/s, 200 N), (40 rad/s, 300 N) and (60 rad/s, 200 N) (above the
 band of both formulations) and prints, as Markdown:
 
@@ -31,10 +31,10 @@ import numpy as np
 
 from leadscrew_ros.cli.transient import plot_transient
 from leadscrew_ros.model import ScrewParameters
-from leadscrew_ros.model.assembly import build_geometry
-from leadscrew_ros.model.modes import KIND_T
-from leadscrew_ros.model.transient import TransientSettings, simulate
-from leadscrew_ros.model.transient_analysis import analyse, linear_counterparts
+from leadscrew_ros.model.physics.assembly import build_geometry
+from leadscrew_ros.model.physics.modes import KIND_T
+from leadscrew_ros.model.nonlinear.transient import TransientSettings, simulate
+from leadscrew_ros.model.nonlinear.transient_analysis import analyse, linear_counterparts
 
 POINTS = ((20.0, 200.0, 0.2), (5.0, 200.0, 0.1), (40.0, 300.0, 0.35), (60.0, 200.0, 0.1))
 MODES = (6, 12, 0)

@@ -8,7 +8,7 @@ import re
 import threading
 from pathlib import Path
 
-from ..live.predictor import Level
+from ..live.status import Level
 from .logfile import RECOVER_HINT, LogError, cut_off_bags, recover_bag
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from leadscrew_ros import __version__
-from leadscrew_ros.model.parameters import ParameterError, ScrewParameters, coerce
+from leadscrew_ros.model.physics.parameters import ParameterError, ScrewParameters, coerce
 
 RECORD_NAME = "leadscrew_ros"
 REPLAY_RECORD_NAME = "leadscrew_ros.replay"

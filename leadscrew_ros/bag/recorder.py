@@ -43,7 +43,7 @@ from mcap.writer import CompressionType, Writer
 
 from . import msgdefs
 from .bagmeta import METADATA, BagStats, FileStats, TopicStats
-from ..model.fields import check, setting
+from ..model.physics.metadata import check, setting
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}

@@ -22,8 +22,8 @@ import sys
 from typing import Callable, Sequence
 
 from ..bag.logfile import LogError
-from ..model.parameters import ParameterError
-from ..model.predictor import OperatingPointError
+from ..model.physics.parameters import ParameterError
+from ..model.squeak_model import OperatingPointError
 from . import figures, fleet, logs, model, ros, transient
 from .args import PROG, CliError, Parser, common_parser
 

@@ -16,14 +16,14 @@ from typing import Any, NoReturn
 import numpy as np
 import yaml
 
-from ..model.display import exact
-from ..model.fields import default_text, help_text, range_text
-from ..model.parameters import (FORMULATIONS, ParameterError, ScrewParameters,
+from ..model.physics.display import exact
+from ..model.physics.metadata import default_text, help_text, range_text
+from ..model.physics.parameters import (FORMULATIONS, ParameterError, ScrewParameters,
                                 field_names)
-from ..model.perturbation import MAX_GEOMETRY_FIELDS, geometry_fields
-from ..model.predictor import SqueakModel
-from ..model.scatter import LOG_NORMAL, REPLICATES, ScatterSettings, scatterable
-from ..model.sweep import MAX_MEMORY_BYTES, MAX_POINTS, REFERENCE_STATE_SIZE, check_axis
+from ..model.uncertainty.perturbation import MAX_GEOMETRY_FIELDS, geometry_fields
+from ..model.squeak_model import SqueakModel
+from ..model.uncertainty.scatter import LOG_NORMAL, REPLICATES, ScatterSettings, scatterable
+from ..model.studies.sweep import MAX_MEMORY_BYTES, MAX_POINTS, REFERENCE_STATE_SIZE, check_axis
 from ..review.jsonsafe import json_safe
 
 PROG = "leadscrew-squeak"

@@ -19,13 +19,13 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..model.friction import friction_coefficient, sliding_speed
-from ..model.parameters import ScrewParameters
-from ..model.predictor import SqueakModel
-from ..model.sweep import (PROBABILITY_LEVELS, REFERENCE_SPEED_RAD_S, MapResult, SweepResult,
+from ..model.physics.friction import friction_coefficient, sliding_speed
+from ..model.physics.parameters import ScrewParameters
+from ..model.squeak_model import SqueakModel
+from ..model.studies.sweep import (PROBABILITY_LEVELS, REFERENCE_SPEED_RAD_S, MapResult, SweepResult,
                            Work, _native, level_crossings, map_work, stability_map, sweep,
                            sweep_work)
-from ..model.tracking import Branch, track_modes
+from ..model.studies.tracking import Branch, track_modes
 from ..review.plots import (at, axis_display, axis_label, fixed_text, fmt, new_figure,
                             plot_frequencies, plot_map, probability_overlay, save_figure,
                             scale_axis)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from ..bag.logfile import (LogInfo, bag_of, cut_off_bags, inspect, log_files, recover, recover_bag)
 from ..live.settings import JointSettings, LiveSettings
-from ..model.fields import help_text
+from ..model.physics.metadata import help_text
 from ..review.replay import ReplaySettings
 from ..review.timeline import InputSettings
 from .args import (PROG, ROS_ARGS_HELP, CliError, Parser, build_model, finite, print_json,

@@ -20,13 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model.countermeasures import STEP, Countermeasure, advice_text, countermeasures
-from ..model.parameters import field_info
-from ..model.predictor import Prediction, SqueakModel
-from ..model.probability import ProbabilityEstimate, monte_carlo
-from ..model.scatter import samples_for
-from ..model.sensitivity import Sensitivity, sensitivities
-from ..model.sweep import MapResult, SweepResult, axis_names, check_axis, sweep, sweep_work
+from ..model.studies.countermeasures import STEP, Countermeasure, advice_text, countermeasures
+from ..model.physics.parameters import field_info
+from ..model.squeak_model import Prediction, SqueakModel
+from ..model.studies.probability import ProbabilityEstimate, monte_carlo
+from ..model.uncertainty.scatter import samples_for
+from ..model.studies.sensitivity import Sensitivity, sensitivities
+from ..model.studies.sweep import MapResult, SweepResult, axis_names, check_axis, sweep, sweep_work
 from .args import (SPEED_AXIS, WORK_LIMITS, CliError, Parser, build_model, finite, finite_float,
                    parse_axis_spec, parse_range, print_json)
 

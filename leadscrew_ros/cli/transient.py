@@ -3,7 +3,7 @@
 growth fitted in the linear regime against both formulations' eigenvalues, the limit cycle,
 the squeak as a WAV file and a plot of the time history and spectrogram.
 
-The simulated force is the nonlinear friction of `model.friction_force`, whose linearisation is
+The simulated force is the nonlinear friction of `model.nonlinear.friction_force`, whose linearisation is
 the `consistent` formulation whatever --formulation says; --formulation picks the eigenvalue
 the text output compares with (JSON has both). The eigenvalues are those of the full model
 (all modes of the parameters), also when --modes keeps fewer in the simulation.
@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model.parameters import FORMULATIONS, ScrewParameters
-from ..model.transient import TransientResult, TransientSettings, simulate
-from ..model.transient_analysis import TransientAnalysis, analyse, linear_counterparts
-from ..model.fields import help_text
+from ..model.physics.parameters import FORMULATIONS, ScrewParameters
+from ..model.nonlinear.transient import TransientResult, TransientSettings, simulate
+from ..model.nonlinear.transient_analysis import TransientAnalysis, analyse, linear_counterparts
+from ..model.physics.metadata import help_text
 from .args import CliError, Parser, build_model, finite, print_json
 
 WAV_RATE_HZ = 48000

@@ -11,10 +11,10 @@ gives the same recomputes at the same points.
 Rules:
 
 - Speed [rad/s] and load [N]: a real number, finite, the load within the upper limit of
-  `ScrewParameters.axial_load_n` (`model.predictor.check_operating_point`).
+  `ScrewParameters.axial_load_n` (`model.squeak_model.check_operating_point`).
 - Nut position z_o [m]: a real number with 0 <= z_o <= `ScrewParameters.nut_travel_m`.
 - A rejected value is not taken: the previous good one stays, and the rejection gives a
-  one-line message with the value (`model.display.exact`: never rounded onto the limit) and a
+  one-line message with the value (`model.physics.display.exact`: never rounded onto the limit) and a
   short reason without the value (the replay counts rejections by it).
 - JointState: taken only when `JointSettings.joint_name` is set and the message has that
   joint. An empty `joint_name` ignores joint_states altogether, in the node and in the replay
@@ -38,9 +38,9 @@ from dataclasses import dataclass
 from typing import NamedTuple, Sequence
 
 from ..model import OperatingPointError, ScrewParameters
-from ..model.display import exact
-from ..model.parameters import field_info
-from ..model.predictor import check_operating_point
+from ..model.physics.display import exact
+from ..model.physics.parameters import field_info
+from ..model.squeak_model import check_operating_point
 from .settings import JointSettings, LiveSettings
 
 # As check_operating_point: the upper limit of the axial_load_n field (for the reason text).

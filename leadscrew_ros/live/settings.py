@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
 """Settings of the live predictor, declared once: default, unit, range and description are the
-field metadata (`model.fields.setting`), from which the node's parameter descriptors, the YAML
+field metadata (`model.physics.metadata.setting`), from which the node's parameter descriptors, the YAML
 config, the replay's CLI help and the README tables are made.
 
 `LiveSettings` is the recompute policy and the verdict; `JointSettings` says how a
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..model.fields import check, setting
+from ..model.physics.metadata import check, setting
 
 
 @dataclass(frozen=True)

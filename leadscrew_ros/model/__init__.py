@@ -1,11 +1,16 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Pure model of friction-induced squeak in lead screws (numpy/scipy only, never rclpy)."""
+"""Pure model of friction-induced squeak in lead screws (numpy/scipy only, never rclpy).
 
-from .assembly import Geometry, SystemMatrices, build_geometry
-from .modes import ModalBasis, modal_basis
-from .parameters import FORMULATIONS, ParameterError, ScrewParameters, field_names
-from .predictor import OperatingPointError, Prediction, SqueakModel, Validity
-from .stability import ModeResult
+Sub-packages, imports flowing one way: `physics` (parameters, modes, friction, contact,
+assembly, stability) -> `uncertainty` (scatter, the live P(squeak) estimator) ->
+`squeak_model` (`SqueakModel`: one operating point -> `Prediction`) -> `studies` (Monte Carlo
+reference, sensitivities, countermeasures, advice, sweeps and maps, mode tracking) ->
+`nonlinear` (the time-domain check).
+"""
+
+from .physics import (FORMULATIONS, Geometry, ModalBasis, ModeResult, ParameterError,
+                      ScrewParameters, SystemMatrices, build_geometry, field_names, modal_basis)
+from .squeak_model import OperatingPointError, Prediction, SqueakModel, Validity
 
 __all__ = ["FORMULATIONS", "Geometry", "ModalBasis", "ModeResult", "OperatingPointError",
            "ParameterError", "Prediction", "ScrewParameters", "SqueakModel", "SystemMatrices",

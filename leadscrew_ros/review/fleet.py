@@ -48,7 +48,7 @@ from ..bag import logmeta
 from ..bag.logfile import LogError, is_complete, recover
 from ..bag.logsource import DB3, open_log
 from ..model import ScrewParameters, SqueakModel
-from ..model.scatter import LIVE_SAMPLES, Scatter
+from ..model.uncertainty.scatter import LIVE_SAMPLES, Scatter
 from .decimation import Reservoir
 from .jsonsafe import json_safe
 from .progress import progress_bar

@@ -16,9 +16,9 @@ from typing import TYPE_CHECKING, Callable, NamedTuple
 
 import numpy as np
 
-from ..model.parameters import field_info
-from ..model.sweep import PROBABILITY_LEVELS, MapResult, SweepResult
-from ..model.tracking import track_modes
+from ..model.physics.parameters import field_info
+from ..model.studies.sweep import PROBABILITY_LEVELS, MapResult, SweepResult
+from ..model.studies.tracking import track_modes
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes

@@ -54,7 +54,7 @@ from .jsonsafe import json_safe
 from ..bag.logfile import LogError, LogMessage, Topic
 from ..bag.logsource import LogSource, log_topics, open_log
 from ..model import Prediction, SqueakModel, Validity
-from ..model.scatter import LOG_NORMAL
+from ..model.uncertainty.scatter import LOG_NORMAL
 from .progress import progress_bar
 from .timeline import (InputError, InputSettings, Job, ModelSpec, Timeline, input_namespaces,
                        predict_jobs)

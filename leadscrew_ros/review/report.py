@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..model import SqueakModel
-from ..model.sweep import stability_map, sweep
+from ..model.studies.sweep import stability_map, sweep
 from .plots import new_figure, plot_frequencies, plot_map
 from .replay import ReplayResult, attach
 

@@ -40,9 +40,9 @@ from ..live.settings import JointSettings, LiveSettings
 from ..bag.logfile import LogMessage, Topic
 from ..model import (OperatingPointError, ParameterError, Prediction, ScrewParameters, SqueakModel,
                      Validity)
-from ..model.display import exact
-from ..model.predictor import check_operating_point
-from ..model.scatter import Scatter
+from ..model.physics.display import exact
+from ..model.squeak_model import check_operating_point
+from ..model.uncertainty.scatter import Scatter
 
 FLOAT64, JOINT_STATE = "std_msgs/msg/Float64", "sensor_msgs/msg/JointState"
 _MODEL_CACHE = 1024                          # nut positions kept per process (~60 kB each)

@@ -26,8 +26,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 
-from ..live.predictor import (KEY_RECOMPUTES, KEY_SPEED, KEY_SQUEAK_FREQUENCIES, KEY_VALID,
-                              KEY_VALIDITY, Level)
+from ..live.status import (KEY_RECOMPUTES, KEY_SPEED, KEY_SQUEAK_FREQUENCIES, KEY_VALID,
+                           KEY_VALIDITY, Level)
 from ..bag import cdr, messages
 from ..bag.logfile import LogError, inspect, log_files
 from ..model import Validity

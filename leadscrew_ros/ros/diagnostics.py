@@ -22,7 +22,7 @@ from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
 
 from ..bag.cdr import DiagnosticStatusData, encode_diagnostic_array
-from ..live.predictor import Level, Status
+from ..live.status import Level, Status
 
 if TYPE_CHECKING:
     from ..bag.crash_recovery import CrashRecovery

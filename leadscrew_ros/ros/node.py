@@ -15,7 +15,7 @@ file begins with the `leadscrew_ros` metadata record of the parameters (`bag.log
 parameter change while recording starts a new file with the new record; on start, reports (or
 recovers) its own bags cut off by an earlier crash (`bag.crash_recovery`).
 `squeak_node --help` lists the parameters and topics. The physics lives in `model`, the input
-rules in `live.rules`, the recompute policy and the verdict in `live.predictor`, the parameter
+rules in `live.rules`, the recompute policy and the verdict in `live.recompute`, the parameter
 table in `ros.parameters`, the /diagnostics updater and the recording verdict in
 `ros.diagnostics`: this class wires them and keeps its callbacks short.
 """
@@ -48,12 +48,12 @@ from .diagnostics import PREDICTION_TASK, RECORDING_TASK, Updater, recording_sta
 from .input_recording import InputRecording
 from .parameters import (GROUPS, PARAMETER_NAMES, PARAMETERS, NodeSettings, RecordingControl, build,
                          descriptor, help_lines, log_metadata, names_of)
-from ..live.predictor import LivePredictor
+from ..live.recompute import LivePredictor
 from ..live.settings import JointSettings, LiveSettings
 from ..bag import logmeta, messages, msgdefs
 from ..bag.crash_recovery import CrashRecovery
 from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel
-from ..model.scatter import ScatterSettings
+from ..model.uncertainty.scatter import ScatterSettings
 from ..bag.recorder import Recorder, RecordSettings, ensure_directory
 from .env import StopSignals, confine_to_localhost
 

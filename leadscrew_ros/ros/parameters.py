@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
 """The parameters of the node `squeak_predictor`, made from the settings' field metadata.
 
-Every parameter is a field of one settings dataclass (`model.fields.setting`: default, unit,
+Every parameter is a field of one settings dataclass (`model.physics.metadata.setting`: default, unit,
 range, description, read-only); `GROUPS` orders the dataclasses and gives each its name prefix.
 From that one table come the ROS parameter descriptors (`descriptor`), the dataclasses built
 from parameter values (`build`), the parameter lines of `squeak_node --help` (`help_lines`)
@@ -19,10 +19,10 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from ..bag.logmeta import LogMetadata
 from ..bag.recorder import RecordSettings
 from ..live.settings import JointSettings, LiveSettings
-from ..model.display import exact
-from ..model.fields import check, check_value, range_text, setting
-from ..model.parameters import ParameterError, ScrewParameters
-from ..model.scatter import ScatterSettings
+from ..model.physics.display import exact
+from ..model.physics.metadata import check, check_value, range_text, setting
+from ..model.physics.parameters import ParameterError, ScrewParameters
+from ..model.uncertainty.scatter import ScatterSettings
 
 READ_ONLY_NOTE = "read-only: set at start-up"
 

@@ -26,11 +26,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .parameters import field_info
-from .perturbation import EigenPairs, FirstOrderProbability, estimate
-from .predictor import SqueakModel, Validity, check_operating_point
-from .scatter import Samples, Scatter
-from .stability import unstable_mask
+from ..physics.parameters import field_info
+from ..uncertainty.perturbation import EigenPairs, FirstOrderProbability, estimate
+from ..squeak_model import SqueakModel, Validity, check_operating_point
+from ..uncertainty.scatter import Samples, Scatter
+from ..physics.stability import unstable_mask
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from dataclasses import dataclass, fields, replace
 from typing import Any, Iterable
 
 from .display import exact
-from .fields import check_value, range_text, setting
+from .metadata import check_value, range_text, setting
 
 FORMULATIONS = ("paper", "consistent")
 MAX_CONTACT_TURNS = 5000      # longest nut accepted, in thread turns

@@ -32,11 +32,11 @@ import math
 
 import numpy as np
 
-from .contact import contact_angles
-from .friction import friction_coefficient, steady_friction
-from .kernels import thread_factors
-from .modes import ModalBasis
-from .parameters import ScrewParameters
+from ..physics.contact import contact_angles
+from ..physics.friction import friction_coefficient, steady_friction
+from ..physics.kernels import thread_factors
+from ..physics.modes import ModalBasis
+from ..physics.parameters import ScrewParameters
 
 _SERIES_BELOW = 1e-2     # |V| / v_eps below which tanh(x) / x and its derivative use series
 

@@ -25,10 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .friction import gamma, mu_o, sliding_speed
-from .kernels import scales, thread_factors
-from .perturbation import EigenPairs, geometry_derivative
-from .predictor import SqueakModel, Validity, check_operating_point
+from ..physics.friction import gamma, mu_o, sliding_speed
+from ..physics.kernels import scales, thread_factors
+from ..uncertainty.perturbation import EigenPairs, geometry_derivative
+from ..squeak_model import SqueakModel, Validity, check_operating_point
 
 FRICTION = ("mu_static", "mu_kinetic", "friction_decay_s_m")
 GEOMETRY = ("radius_m", "helix_angle_rad", "nut_position_m", "nut_length_m")

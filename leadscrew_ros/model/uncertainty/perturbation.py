@@ -31,11 +31,11 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .assembly import Geometry, build_geometry
-from .kernels import level_slope
-from .parameters import ParameterError, ScrewParameters, field_info
+from ..physics.assembly import Geometry, build_geometry
+from ..physics.kernels import level_slope
+from ..physics.parameters import ParameterError, ScrewParameters, field_info
 from .scatter import Samples, Scatter
-from .stability import GROWTH_TOL, Eigen, eig_both
+from ..physics.stability import GROWTH_TOL, Eigen, eig_both
 
 GEOMETRY_STEP = 1e-6          # relative step of a state-matrix difference in a geometry field
 MAX_GEOMETRY_FIELDS = 2       # scattered geometry fields the live estimate takes

@@ -33,9 +33,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from .parameters import FORMULATIONS, ScrewParameters
-from .predictor import SqueakModel
-from .scatter import Scatter
+from ..physics.parameters import FORMULATIONS, ScrewParameters
+from ..squeak_model import SqueakModel
+from ..uncertainty.scatter import Scatter
 from .transient import TransientResult
 
 LINEAR_FRACTION = 0.01      # linear regime: amplitude below this fraction of saturation

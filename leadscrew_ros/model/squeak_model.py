@@ -12,13 +12,13 @@ from typing import Any
 
 import numpy as np
 
-from .assembly import build_geometry
-from .display import exact
-from .friction import mu_o
-from .parameters import ScrewParameters, field_info
-from .perturbation import EigenPairs, FirstOrderProbability, estimate, geometry_fields
-from .scatter import LIVE_SAMPLES, Samples, Scatter, check_count, involved, samples_for
-from .stability import Eigen, ModeResult, classify, eig_both
+from .physics.assembly import build_geometry
+from .physics.display import exact
+from .physics.friction import mu_o
+from .physics.parameters import ScrewParameters, field_info
+from .uncertainty.perturbation import EigenPairs, FirstOrderProbability, estimate, geometry_fields
+from .uncertainty.scatter import LIVE_SAMPLES, Samples, Scatter, check_count, involved, samples_for
+from .physics.stability import Eigen, ModeResult, classify, eig_both
 
 _LOAD_LIMIT_N = field_info("axial_load_n")["hi"]
 

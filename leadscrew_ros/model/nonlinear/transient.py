@@ -41,13 +41,13 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .assembly import gyroscopic_unit
-from .contact import contact_angles
-from .fields import check, setting
+from ..physics.assembly import gyroscopic_unit
+from ..physics.contact import contact_angles
+from ..physics.metadata import check, setting
 from .friction_force import HelixFriction
-from .modes import KIND_T, KIND_X, KIND_Y, ModalBasis, modal_basis
-from .parameters import ParameterError, ScrewParameters
-from .predictor import check_operating_point
+from ..physics.modes import KIND_T, KIND_X, KIND_Y, ModalBasis, modal_basis
+from ..physics.parameters import ParameterError, ScrewParameters
+from ..squeak_model import check_operating_point
 
 METHODS = ("LSODA", "Radau", "DOP853")
 ATOL_PER_RTOL = 100      # absolute tolerance of each state: 100 rtol times its start size

@@ -7,7 +7,7 @@ The node feeds it the latest inputs and asks `due(now)`; bursts are coalesced be
 latest value of each input is kept and one recompute serves all of them.
 
 Safe-speed advice needs the squeak band around the speed, where P(squeak) >= safe_probability
-(`model.advice`: tens of predictions, a few seconds with 40/40 modes), so it is searched on a
+(`model.studies.advice`: tens of predictions, a few seconds with 40/40 modes), so it is searched on a
 background thread (`LatestWorker`): a recompute never
 waits for it, the last advice stays until the new one is ready, and `poll_advice` (or
 `wait_for_advice`, for callers that want the answer now) picks it up.
@@ -25,16 +25,19 @@ import math
 import threading
 import time
 from dataclasses import dataclass, field
-from enum import IntEnum
 from functools import partial
 from typing import Callable
 
 from threadpoolctl import threadpool_limits
 
 from ..model import ParameterError, Prediction, SqueakModel, Validity
-from ..model.advice import Band, band_around
-from ..model.display import exact
+from ..model.studies.advice import Band, band_around
 from .rules import InputRules, Inputs, Outcome
+from .status import (KEY_FORMULATION, KEY_LOAD, KEY_MARGIN, KEY_MAX_GROWTH_RATE, KEY_NUT_POSITION,
+                     KEY_PROBABILITY, KEY_PROBABILITY_STDERR, KEY_RECOMPUTES, KEY_SAFE_SPEED,
+                     KEY_SAFE_SPEED_ERROR, KEY_SAFE_SPEED_PENDING, KEY_SPEED,
+                     KEY_SQUEAK_FREQUENCIES, KEY_VALID, KEY_VALIDITY, Level, Status,
+                     prediction_status, value_text)
 from .settings import JointSettings, LiveSettings
 
 
@@ -42,40 +45,6 @@ _LOAD_BIN = 0.05          # relative load bin of the cached squeak bands (safe-s
 _NUT_BIN_M = 0.005        # nut position bin of the cached squeak bands
 _BANDS_KEPT = 4           # bands kept for the current bin (speeds moving around within it)
 _MAX_DUTY_RATIO = 2.0     # recomputes start at least this many prediction times apart
-
-# Key names of the squeak-prediction diagnostic status (`LivePredictor.status`).
-KEY_SPEED = "speed_rad_s"
-KEY_LOAD = "load_n"
-KEY_NUT_POSITION = "nut_position_m"
-KEY_FORMULATION = "formulation"
-KEY_VALID = "valid"                      # "true" when the latest point has a prediction
-KEY_VALIDITY = "validity"                # Validity name of the latest point ('' before one)
-KEY_PROBABILITY = "probability"           # P(squeak) of the latest prediction
-KEY_PROBABILITY_STDERR = "probability_stderr"   # its standard error ('' when not sampled)
-KEY_MARGIN = "margin"                     # least damping ratio (< 0: a nominal mode squeaks)
-KEY_MAX_GROWTH_RATE = "max_growth_rate_1_s"
-KEY_SQUEAK_FREQUENCIES = "squeak_frequencies_hz"
-KEY_SAFE_SPEED = "safe_speed_rad_s"
-KEY_SAFE_SPEED_PENDING = "safe_speed_pending"
-KEY_SAFE_SPEED_ERROR = "safe_speed_error"
-KEY_RECOMPUTES = "recomputes"
-
-
-class Level(IntEnum):
-    """diagnostic_msgs/DiagnosticStatus levels."""
-
-    OK = 0
-    WARN = 1
-    ERROR = 2
-    STALE = 3
-
-
-@dataclass(frozen=True)
-class Status:
-    level: Level
-    message: str
-    values: dict[str, str] = field(default_factory=dict)
-
 
 class Superseded(Exception):
     """Raised at a checkpoint of a background job that a newer request replaced."""
@@ -405,18 +374,18 @@ class LivePredictor:
         arrived = self._arrived
         valid = p is not None and self._validity in (None, Validity.OK)
         values = {
-            KEY_SPEED: _fmt(i.speed_rad_s), KEY_LOAD: _fmt(i.load_n),
-            KEY_NUT_POSITION: _fmt(self.rules.nut_position_m),
+            KEY_SPEED: value_text(i.speed_rad_s), KEY_LOAD: value_text(i.load_n),
+            KEY_NUT_POSITION: value_text(self.rules.nut_position_m),
             KEY_FORMULATION: self.model.params.formulation,
             KEY_VALID: str(valid).lower(),
             KEY_VALIDITY: "" if self._validity is None else self._validity.name,
-            KEY_PROBABILITY: _fmt(p.probability if p else None),
-            KEY_PROBABILITY_STDERR: _fmt(p.probability_stderr if p else None),
-            KEY_MARGIN: _fmt(p.margin if p else None),
-            KEY_MAX_GROWTH_RATE: _fmt(p.max_growth_rate if p else None),
+            KEY_PROBABILITY: value_text(p.probability if p else None),
+            KEY_PROBABILITY_STDERR: value_text(p.probability_stderr if p else None),
+            KEY_MARGIN: value_text(p.margin if p else None),
+            KEY_MAX_GROWTH_RATE: value_text(p.max_growth_rate if p else None),
             KEY_SQUEAK_FREQUENCIES: ", ".join(f"{f:.1f}" for f in p.unstable_frequencies_hz)
             if p else "",
-            KEY_SAFE_SPEED: _fmt(self.safe_speed_rad_s),
+            KEY_SAFE_SPEED: value_text(self.safe_speed_rad_s),
             KEY_SAFE_SPEED_PENDING: str(self.advice_pending).lower(),
             KEY_SAFE_SPEED_ERROR: self._advice_error,
             KEY_RECOMPUTES: str(self.recomputes),
@@ -434,32 +403,3 @@ class LivePredictor:
         if p is None:
             return Status(Level.STALE, "waiting for the first prediction", values)
         return prediction_status(p, s, values)
-
-
-def prediction_status(p: Prediction, s: LiveSettings, values: dict[str, str] | None = None
-                      ) -> Status:
-    """The diagnostic level and message of a valid prediction: ERROR when P(squeak) >=
-    error_probability or a divergence (non-oscillatory growth) is predicted, WARN when P >=
-    warn_probability, else OK; the message gives P (never rounded across a threshold) and
-    the modes that squeak at the nominal parameters."""
-    text = f"{p.probability:.2g}"
-    if any((float(text) >= t) != (p.probability >= t)
-           for t in (s.warn_probability, s.error_probability)):
-        text = exact(p.probability)
-    prob = f"P(squeak) {text}"
-    notes = [f"{m.label} {m.frequency_hz:.0f} Hz" for m in p.squeak_modes]
-    notes += [f"divergence {r:.3g} 1/s" for r in p.divergence_rates[:1]]
-    detail = f" ({', '.join(notes)})" if notes else ""
-    values = values or {}
-    if p.probability >= s.error_probability:
-        return Status(Level.ERROR, f"squeak predicted: {prob}{detail}", values)
-    if p.divergence_rates:
-        return Status(Level.ERROR, f"divergence predicted: {prob}{detail}", values)
-    if p.probability >= s.warn_probability:
-        return Status(Level.WARN, f"squeak possible: {prob} >= {s.warn_probability:g}{detail}",
-                      values)
-    return Status(Level.OK, f"no squeak: {prob} < {s.warn_probability:g}{detail}", values)
-
-
-def _fmt(v: float | None) -> str:
-    return "" if v is None else f"{v:.6g}"

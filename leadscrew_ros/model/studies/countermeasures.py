@@ -14,10 +14,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .parameters import ParameterError
-from .predictor import SqueakModel
+from ..physics.parameters import ParameterError
+from ..squeak_model import SqueakModel
 from .probability import linearised
-from .scatter import Samples
+from ..uncertainty.scatter import Samples
 
 DESIGN = ("radius_m", "helix_angle_rad", "nut_position_m", "nut_length_m", "modal_damping")
 FRICTION = ("friction_drop", "friction_decay_s_m")

@@ -21,8 +21,8 @@ from typing import Callable, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .parameters import ParameterError
-from .predictor import SqueakModel
+from ..physics.parameters import ParameterError
+from ..squeak_model import SqueakModel
 from .sweep import unstable_intervals
 
 _BAND_POINTS = 64          # log-spaced speeds between min_speed and the critical speed

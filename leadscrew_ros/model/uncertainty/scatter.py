@@ -27,8 +27,8 @@ import numpy as np
 from scipy.special import ndtri
 from scipy.stats import qmc
 
-from .fields import check, setting
-from .parameters import ParameterError, ScrewParameters
+from ..physics.metadata import check, setting
+from ..physics.parameters import ParameterError, ScrewParameters
 
 LOG_NORMAL = frozenset({"modal_damping"})       # positive, with a spread of a factor
 DEFAULT_SCATTER = MappingProxyType({"mu_static": 0.05, "mu_kinetic": 0.05,

@@ -20,10 +20,10 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from .display import exact
-from .parameters import ParameterError, field_info, field_names
-from .predictor import Prediction, SqueakModel, Validity
-from .stability import max_divergence_rate, max_growth_rate
+from ..physics.display import exact
+from ..physics.parameters import ParameterError, field_info, field_names
+from ..squeak_model import Prediction, SqueakModel, Validity
+from ..physics.stability import max_divergence_rate, max_growth_rate
 
 OPERATING_AXES = ("speed_rad_s", "load_n")
 REFERENCE_SPEED_RAD_S = 20.0        # fixed speed of the paper's Figs. 9 and 10

@@ -17,7 +17,7 @@ from typing import Sequence
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from .predictor import Prediction
+from ..squeak_model import Prediction
 
 
 @dataclass
