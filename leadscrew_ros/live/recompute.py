@@ -7,8 +7,8 @@ The node feeds it the latest inputs and asks `due(now)`; bursts are coalesced be
 latest value of each input is kept and one recompute serves all of them.
 
 Safe-speed advice needs the squeak band around the speed, where P(squeak) >= safe_probability
-(`model.studies.advice`: tens of predictions, a few seconds with 40/40 modes), so it is searched on a
-background thread (`LatestWorker`): a recompute never
+(`model.studies.advice`: tens of predictions, a few seconds with 40/40 modes), so it is searched on
+a background thread (`LatestWorker`): a recompute never
 waits for it, the last advice stays until the new one is ready, and `poll_advice` (or
 `wait_for_advice`, for callers that want the answer now) picks it up.
 
@@ -100,6 +100,7 @@ class LatestWorker:
 
     @property
     def busy(self) -> bool:
+        """True while a request waits or runs."""
         with self._cv:
             return self._waiting is not None or self._running
 
@@ -157,6 +158,8 @@ def _single_threaded_blas() -> None:
 
 
 class LivePredictor:
+    """The node's prediction policy: inputs in, recomputes when due, a verdict out."""
+
     def __init__(self, model: SqueakModel, settings: LiveSettings = LiveSettings(),
                  clock: Callable[[], float] = time.perf_counter,
                  joints: JointSettings = JointSettings()):
@@ -370,6 +373,7 @@ class LivePredictor:
 
     # ---------------------------------------------------------------- verdict
     def status(self, now: float) -> Status:
+        """The diagnostic status at time `now` (s): level, message and key values."""
         i, s, p = self.inputs, self.settings, self.prediction
         arrived = self._arrived
         valid = p is not None and self._validity in (None, Validity.OK)

@@ -14,8 +14,8 @@ Rules:
   `ScrewParameters.axial_load_n` (`model.squeak_model.check_operating_point`).
 - Nut position z_o [m]: a real number with 0 <= z_o <= `ScrewParameters.nut_travel_m`.
 - A rejected value is not taken: the previous good one stays, and the rejection gives a
-  one-line message with the value (`model.physics.display.exact`: never rounded onto the limit) and a
-  short reason without the value (the replay counts rejections by it).
+  one-line message with the value (`model.physics.display.exact`: never rounded onto the limit) and
+  a short reason without the value (the replay counts rejections by it).
 - JointState: taken only when `JointSettings.joint_name` is set and the message has that
   joint. An empty `joint_name` ignores joint_states altogether, in the node and in the replay
   alike: using it is an explicit opt-in, so a JointState from another driver (a wheel, an arm)
