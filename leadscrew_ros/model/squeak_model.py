@@ -296,7 +296,7 @@ class SqueakModel:
         return model
 
     def with_scatter(self, scatter: Scatter, samples: int | None = None) -> "SqueakModel":
-        """This model with another scatter (and sample count); the geometry is reused.
+        """A copy of this model with another scatter (and sample count); the geometry is reused.
 
         Parameters
         ----------
@@ -458,11 +458,11 @@ class SqueakModel:
         """
         speeds, loads = (a.ravel() for a in np.broadcast_arrays(
             np.asarray(speeds_rad_s, float), np.asarray(loads_n, float)))
-        points = [check_operating_point(s, f) for s, f in zip(speeds.tolist(), loads.tolist())]
+        points = [check_operating_point(s, f) for s, f in zip(speeds.tolist(), loads.tolist(), strict=True)]
         verdicts = [self.validity(s, f) for s, f in points]
         ok = [i for i, (v, _) in enumerate(verdicts) if v is Validity.OK]
         out = [Prediction(s, f, self.params.formulation, *v)
-               for (s, f), v in zip(points, verdicts)]
+               for (s, f), v in zip(points, verdicts, strict=True)]
         if ok:
             matrices = self.geometry.state_matrices(speeds[ok], loads[ok])
             left = self.scatter.names != ()               # the probability needs them

@@ -25,8 +25,8 @@ from .parameters import ScrewParameters
 
 
 def gyroscopic_unit(basis: ModalBasis) -> np.ndarray:
-    """G / Omega (A.2): rho * integral over the section of r dr dtheta = rho A (the section integral of (A.2) is the area), so
-    with mass-normalised shapes G couples B_nx and B_ny by -+2 Omega."""
+    """G / Omega (A.2): rho * integral over the section of r dr dtheta = rho A (the section integral
+    of (A.2) is the area), so with mass-normalised shapes G couples B_nx and B_ny by -+2 Omega."""
     same_order = basis.order[:, None] == basis.order[None, :]
     xy = (basis.kind[:, None] == KIND_X) & (basis.kind[None, :] == KIND_Y) & same_order
     return 2.0 * (xy.T.astype(float) - xy.astype(float))
@@ -45,6 +45,8 @@ class SystemMatrices:
 
 @dataclass(frozen=True)
 class Geometry:
+    """The speed- and load-independent parts of the model: basis, contact integrals, G."""
+
     params: ScrewParameters
     basis: ModalBasis
     contact: ContactIntegrals
@@ -54,9 +56,11 @@ class Geometry:
 
     @property
     def n(self) -> int:
+        """Number of modes N."""
         return self.basis.n
 
     def matrices(self, speed_rad_s: float, load_n: float) -> SystemMatrices:
+        """The system matrices of eq. (27) at a rotation speed [rad/s] and an axial load [N]."""
         s = scales(self.params, speed_rad_s, load_n, self.contact.alpha)
         W = {k: float(s[k]) * v for k, v in self.contact.unit.items()}
         om = self.basis.omega_rad_s

@@ -48,7 +48,8 @@ def _blocks(n: int, entries: dict[tuple[int, int], np.ndarray]) -> np.ndarray:
 
 
 def paper_kernels(theta: np.ndarray, beta: float, radius_m: float) -> dict[str, np.ndarray]:
-    """Appendix A as printed ((A.3)-(A.8), the second "W5q" read as the matrix of qdot; README "Two formulations"), each (3, 3, len(theta))."""
+    """Appendix A as printed ((A.3)-(A.8), the second "W5q" read as the matrix of qdot; README
+    "Two formulations"), each (3, 3, len(theta))."""
     return _paper(np.sin(theta), np.cos(theta), beta, radius_m)
 
 

@@ -161,6 +161,7 @@ _FIELD_BY_NAME = {f.name: f for f in _FIELDS}
 
 
 def field_names() -> list[str]:
+    """Names of the `ScrewParameters` fields, in declaration order."""
     return list(_FIELD_BY_NAME)
 
 
@@ -173,6 +174,7 @@ def _field(name: str):
 
 
 def field_info(name: str) -> dict[str, Any]:
+    """Metadata of field `name`: unit, range, help, with its default and type."""
     f = _field(name)
     return dict(f.metadata, default=f.default, type=f.type)
 

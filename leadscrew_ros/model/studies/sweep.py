@@ -58,6 +58,7 @@ class Work:
         return max(1, min(MAX_POINTS, int(MAX_POINTS * scale)))
 
     def memory_bytes(self, points: int | None = None) -> float:
+        """Memory [bytes] that `points` predictions take (default: this batch's)."""
         n = self.points if points is None else points
         chunk = _chunk_points(self.state_size) * self.state_size ** 2 * 16 * 4   # eig workspace
         return n * self.bytes_per_point + chunk
@@ -114,11 +115,13 @@ def sweep_work(model: SqueakModel, axis: str, values: np.ndarray) -> Work:
 
 
 def axis_names() -> list[str]:
+    """Names a sweep or map can vary: the operating axes, then numeric parameters."""
     return list(OPERATING_AXES) + [n for n in field_names()
                                     if field_info(n)["type"] in ("float", "int")]
 
 
 def check_axis(name: str) -> None:
+    """Raise ParameterError unless `name` is one of `axis_names()`."""
     if name not in axis_names():
         raise ParameterError(f"cannot sweep {name!r}; choose one of {', '.join(axis_names())}")
 
@@ -160,7 +163,7 @@ def _point_models(model: SqueakModel, params: dict[str, np.ndarray], size: int
     for k, row in enumerate(uniq):
         idx = np.flatnonzero(inverse.ravel() == k)
         try:
-            yield model.with_params(**{n: _native(n, v) for n, v in zip(names, row)}), idx
+            yield model.with_params(**{n: _native(n, v) for n, v in zip(names, row, strict=True)}), idx
         except ParameterError:
             yield None, idx
 
@@ -212,7 +215,7 @@ def growth_field(model: SqueakModel, speed_rad_s, load_n,
     """
     shape, speeds, loads, columns = _flat_points(speed_rad_s, load_n, params)
     growth, freq, diverge = (np.full(speeds.size, np.nan) for _ in range(3))
-    for sub, idx in _point_models(model, dict(zip(params, columns)), speeds.size):
+    for sub, idx in _point_models(model, dict(zip(params, columns, strict=True)), speeds.size):
         ok = idx[:0] if sub is None else \
             idx[sub.validity_code(speeds[idx], loads[idx]) == Validity.OK]
         if progress and ok.size < idx.size:
@@ -267,7 +270,7 @@ def probability_field(model: SqueakModel, speed_rad_s, load_n,
     """
     shape, speeds, loads, columns = _flat_points(speed_rad_s, load_n, params)
     prob, stderr = np.full(speeds.size, np.nan), np.full(speeds.size, np.nan)
-    for sub, idx in _point_models(model, dict(zip(params, columns)), speeds.size):
+    for sub, idx in _point_models(model, dict(zip(params, columns, strict=True)), speeds.size):
         if sub is None:                                  # parameters rejected: NaN
             if progress:
                 progress(idx.size)
@@ -275,7 +278,7 @@ def probability_field(model: SqueakModel, speed_rad_s, load_n,
         chunk = _chunk_points(2 * sub.geometry.n)
         for start in range(0, idx.size, chunk):
             part = idx[start:start + chunk]
-            for i, p in zip(part.tolist(), sub.predict_many(speeds[part], loads[part])):
+            for i, p in zip(part.tolist(), sub.predict_many(speeds[part], loads[part]), strict=True):
                 if p.valid:
                     prob[i] = p.probability
                     stderr[i] = np.nan if p.probability_stderr is None else p.probability_stderr
@@ -652,7 +655,7 @@ def _refined_boundary(model: SqueakModel, fixed: dict[str, float],
         np.repeat([_xtol(x, ROOT_RTOL), _xtol(y, ROOT_RTOL)], [len(rows), len(cols)]))
     return [(r, yv) if k == 0 else (xv, r)
             for k, r, xv, yv in zip(vary.tolist(), roots.tolist(), coords[:, 0].tolist(),
-                                    coords[:, 1].tolist())]
+                                    coords[:, 1].tolist(), strict=True)]
 
 
 @dataclass(frozen=True)

@@ -100,7 +100,7 @@ def track_modes(predictions: Sequence[Prediction], max_jump: float = 0.15) -> li
         if len(last) and len(lam):
             cost = np.abs(last[:, None] - lam[None, :]) / np.maximum(
                 np.abs(last)[:, None], np.abs(lam)[None, :])
-            for r, c in zip(*linear_sum_assignment(cost)):
+            for r, c in zip(*linear_sum_assignment(cost), strict=True):
                 if cost[r, c] < max_jump:
                     owner[c] = alive[r]
         for j, m in enumerate(p.modes):

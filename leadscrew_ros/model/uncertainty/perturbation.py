@@ -239,16 +239,16 @@ class FirstOrderProbability:
         expansions = []
         for point in grid:
             try:            # a corner of two fields may leave the valid domain: no node
-                node = self.params.with_(**dict(zip(fields, point.tolist())))
+                node = self.params.with_(**dict(zip(fields, point.tolist(), strict=True)))
                 expansions.append(_Expansion(build_geometry(node), self._friction))
             except ParameterError:
                 expansions.append(None)
         # multilinear interpolation: 2^d corners, each a flat node index and a weight
         corners = []
         for bits in np.ndindex(*(2,) * len(fields)):
-            index = np.ravel_multi_index([c + b for c, b in zip(cells, bits)],
+            index = np.ravel_multi_index([c + b for c, b in zip(cells, bits, strict=True)],
                                          (per,) * len(fields))
-            weight = np.prod([f if b else 1 - f for f, b in zip(fractions, bits)], axis=0)
+            weight = np.prod([f if b else 1 - f for f, b in zip(fractions, bits, strict=True)], axis=0)
             corners.append((index, weight))
         return expansions, corners
 

@@ -256,8 +256,8 @@ def _settings_class() -> type:
     and the live sample count, each with its metadata (ROS parameters `scatter.<name>`)."""
     spec = [(name, float, setting(
         DEFAULT_SCATTER.get(name, 0.0), "1",
-        f"{'SD of ln' if name in LOG_NORMAL else 'relative SD of'} {name} from unit to unit "
-        "(0: fixed)", 0.0, MAX_SCATTER)) for name in scatterable()]
+        f"{'SD of ln' if name in LOG_NORMAL else 'relative SD of'} {name} from unit "
+        "to unit (0: fixed)", 0.0, MAX_SCATTER)) for name in scatterable()]
     spec.append(("samples", int, setting(
         LIVE_SAMPLES, "1", f"scatter samples of the live P(squeak) ({REPLICATES} replicates "
         "of a power of 2)", 16, 65536)))
