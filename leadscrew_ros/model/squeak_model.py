@@ -11,6 +11,7 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .physics.assembly import build_geometry
 from .physics.display import exact
@@ -318,8 +319,8 @@ class SqueakModel:
         return SqueakModel(self.params, scatter,
                            self.sample_count if samples is None else samples)
 
-    def validity_code(self, speed_rad_s, load_n, scattered: dict | None = None
-                      ) -> np.ndarray:
+    def validity_code(self, speed_rad_s: ArrayLike, load_n: ArrayLike,
+                      scattered: dict | None = None) -> np.ndarray:
         """Vectorised validity: `Validity` codes (Validity.OK where the linearisation holds).
 
         Parameters
@@ -436,7 +437,7 @@ class SqueakModel:
                               f"eigen-solver failed at this operating point: {exc}")
         return self._prediction(speed, load, eigen)
 
-    def predict_many(self, speeds_rad_s, loads_n) -> list[Prediction]:
+    def predict_many(self, speeds_rad_s: ArrayLike, loads_n: ArrayLike) -> list[Prediction]:
         """Predictions at many operating points: one batched rescale, then an eigen-solve each.
 
         Parameters

@@ -14,9 +14,10 @@ from __future__ import annotations
 from dataclasses import dataclass, fields, replace
 from functools import cached_property, lru_cache
 from types import SimpleNamespace
-from typing import Mapping
+from typing import Mapping, cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .contact import ContactIntegrals, HelixContact, helix_contact
 from .kernels import MATRICES, scales
@@ -80,8 +81,8 @@ class Geometry:
         a[n + np.arange(n), n + np.arange(n)] = -2 * self.params.modal_damping * om    # (A.1)
         return a
 
-    def state_matrices(self, speed_rad_s, load_n, scattered: Mapping[str, np.ndarray] | None
-                       = None) -> np.ndarray:
+    def state_matrices(self, speed_rad_s: ArrayLike, load_n: ArrayLike,
+                       scattered: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
         """First-order state matrices [[0, I], [-K, -D]] of (27) for arrays of operating points
         (broadcast), shape (..., 2N, 2N). One matrix product rescales all precomputed parts.
 
@@ -90,7 +91,7 @@ class Geometry:
         scale factors and the damping diagonal, so samples of them cost one product each."""
         if not scattered and (type(speed_rad_s) is float and type(load_n) is float
                               or np.ndim(speed_rad_s) == 0 and np.ndim(load_n) == 0):
-            return self._state_matrix(float(speed_rad_s), float(load_n))
+            return self._state_matrix(float(cast(float, speed_rad_s)), float(cast(float, load_n)))
         speed = np.asarray(speed_rad_s, float)
         if scattered:                          # one matrix per sample, whatever varies
             speed = np.broadcast_to(speed, np.broadcast_shapes(

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Callable, Literal
+from typing import Any, Callable, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -78,7 +78,8 @@ def band_score(model: SqueakModel, load_n: float, direction: float, safe_probabi
         if checkpoint is not None:
             checkpoint()
         speeds = sign * np.atleast_1d(np.asarray(w, float))
-        return np.array([p.probability - safe_probability if p.valid else math.nan
+        return np.array([p.probability - safe_probability
+                         if p.valid and p.probability is not None else math.nan
                          for p in model.predict_many(speeds, load_n)])
 
     return score
@@ -231,7 +232,8 @@ def _extend(band: Band, side: str, x: np.ndarray, g: np.ndarray, lowest: float,
         if math.isnan(gi):                            # invalid ground: no advice beyond
             return replace(band, **{end: last, side: "limit"})
         if gi < 0:                                    # safe: refine the edge
-            return replace(band, **{end: _edge(score, last, xi), side: "edge"})
+            edge: dict[str, Any] = {end: _edge(score, last, xi), side: "edge"}
+            return replace(band, **edge)
         last = xi
     at_grid_end = last == (lowest if side == "below" else highest)
     return replace(band, **{end: last, side: "limit" if at_grid_end else "unknown"})

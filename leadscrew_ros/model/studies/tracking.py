@@ -93,7 +93,9 @@ def track_modes(predictions: Sequence[Prediction], max_jump: float = 0.15) -> li
         Every branch, in the order they start; together they hold each mode of each
         prediction exactly once.
     """
-    size, branches, alive, last = len(predictions), [], [], np.empty(0, complex)
+    size, last = len(predictions), np.empty(0, complex)
+    branches: list[Branch] = []
+    alive: list[int] = []                     # branch index of each mode of `last`
     for i, p in enumerate(predictions):
         lam = _eigenvalues(p)
         owner = [-1] * len(lam)
