@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -59,7 +59,7 @@ class StrokeProfile:
     nut_position_at_zero_angle_m: float = JointSettings.nut_position_at_zero_angle_m
 
     @classmethod
-    def for_params(cls, params: ScrewParameters, **changes) -> "StrokeProfile":
+    def for_params(cls, params: ScrewParameters, **changes: Any) -> "StrokeProfile":
         """A profile for this screw: lead R tan(beta) and travel limit L - b from `params`."""
         return cls(lead_m_per_rad=params.lead_per_rad_m,
                    max_nut_position_m=params.nut_travel_m, **changes)

@@ -26,7 +26,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Callable
+from typing import Callable, Sequence, cast
 
 from threadpoolctl import threadpool_limits
 
@@ -206,7 +206,8 @@ class LivePredictor:
         """Take a nut position z_o [m], 0 <= z_o <= L - b; returns '' or why it was rejected."""
         return self._arrive(self.rules.set_nut_position(value), now).error
 
-    def set_joint_state(self, names, positions, velocities, now: float,
+    def set_joint_state(self, names: Sequence[str], positions: Sequence[float],
+                        velocities: Sequence[float], now: float,
                         joints: JointSettings | None = None) -> Outcome:
         """Take the screw joint's speed and nut position of a JointState arrived at `now`
         (`rules.InputRules.set_joint_state`); `joints` first replaces the joint settings."""
@@ -294,6 +295,7 @@ class LivePredictor:
         background search."""
         self._collect()
         self._advised = (model, p)
+        assert p.probability is not None, "advice is for valid predictions"
         if p.probability < self.settings.safe_probability:
             return self._set_advice(p.speed_rad_s, None)
         lowest, highest = model.params.min_speed_rad_s, model.critical_speed_rad_s
@@ -332,7 +334,8 @@ class LivePredictor:
         done = self._worker.take()
         if done is None or self._search is None or done[0] != self._search[0]:
             return False
-        (_, band, error), key = done, self._search[1]
+        (_, found, error), key = done, self._search[1]
+        band = cast("Band | None", found)        # what the search (`band_around`) returns
         self._search = None
         if error is not None:     # keep the last advice; no retry within this bin
             self._failed, self._advice_error = key, f"safe-speed search failed: {error}"

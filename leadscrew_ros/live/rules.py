@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass
-from typing import NamedTuple, Sequence
+from typing import NamedTuple, Sequence, TypeGuard
 
 from ..model import OperatingPointError, ScrewParameters
 from ..model.physics.display import exact
@@ -144,7 +144,7 @@ def read_joint_state(names: Sequence[str], positions: Sequence[float],
         i = list(names).index(name)
     except (TypeError, ValueError):
         return JointReading({}, f"no joint {name!r}")
-    values = {}
+    values: dict[str, object] = {}
     if i < len(velocities):
         values["speed"] = velocities[i]
     if i < len(positions):
@@ -156,7 +156,7 @@ def read_joint_state(names: Sequence[str], positions: Sequence[float],
     return JointReading(values)
 
 
-def _is_real(value: object) -> bool:
+def _is_real(value: object) -> TypeGuard[numbers.Real]:
     """A real number, not a bool (numpy scalars included)."""
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
