@@ -15,6 +15,7 @@ setup(
     maintainer="leadscrew_ros maintainers",
     maintainer_email="maintainers@leadscrew-ros.example.org",
     packages=find_packages(exclude=["test", "test.*"]),
+    package_data={PACKAGE: ["py.typed"]},   # PEP 561: the package ships its type hints
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),

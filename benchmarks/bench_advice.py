@@ -75,8 +75,10 @@ def offline(rounds: dict[int, int]) -> list[dict]:
     for n in MODES:
         model = SqueakModel(SqueakModel().params.with_(n_bending=n, n_torsion=n))
         for speed in SPEEDS:
-            fns = {"full": lambda: speed_bands(model, LOAD_N, speed, safe_probability=SAFE),
-                   "band": lambda: band_around(model, LOAD_N, speed, safe_probability=SAFE)}
+            fns = {"full": lambda model=model, speed=speed: speed_bands(
+                       model, LOAD_N, speed, safe_probability=SAFE),
+                   "band": lambda model=model, speed=speed: band_around(
+                       model, LOAD_N, speed, safe_probability=SAFE)}
             wall, _ = interleaved(fns, rounds[n])
             rows.append({"modes": n, "speed_rad_s": speed,
                          "full_s": median(wall["full"]), "band_s": median(wall["band"]),

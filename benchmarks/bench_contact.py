@@ -7,9 +7,10 @@ A new nut position is `model.with_params(nut_position_m=z)` with a nut position 
 before, as the node and the replay move the nut: no cached geometry for it (the contact
 integrals are computed, the modal basis of the screw is reused), and the model is ready to
 predict with P(squeak) (the scatter samples and the estimator's per-sample friction are
-shared with `model`, which has predicted once; only the estimator's expansion is new). It is compared with a bare `numpy.linalg.eig` of the model's
-state matrix (Table 1 defaults, 6/6 modes: 36x36, 200 N, 20 rad/s; target <= 0.5x, issue 11),
-and so are its parts: the geometry (`assembly.build_geometry`) alone and `params.with_` alone.
+shared with `model`, which has predicted once; only the estimator's expansion is new). It is
+compared with a bare `numpy.linalg.eig` of the model's state matrix (Table 1 defaults, 6/6
+modes: 36x36, 200 N, 20 rad/s; target <= 0.5x, issue 11), and so are its parts: the geometry
+(`assembly.build_geometry`) alone and `params.with_` alone.
 The calls alternate within each round (order reversed every other round); each ratio is the
 median of the per-round ratios. The 20/20 and 40/40 rows give the times at more modes, without
 a ratio: a bare `eig` of their 120x120 and 240x240 state matrices runs on OpenBLAS threads and
@@ -79,7 +80,7 @@ def run(modes: int, rounds: int, calls: int) -> dict[str, float]:
     out = {k: median(v) for k, v in samples.items()}
     if "eig" in samples:
         for k in ("rebuild", "geometry", "with_"):
-            out[k + "_ratio"] = median(x / e for x, e in zip(samples[k], samples["eig"]))
+            out[k + "_ratio"] = median(x / e for x, e in zip(samples[k], samples["eig"], strict=True))
     return out
 
 

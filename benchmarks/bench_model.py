@@ -69,14 +69,14 @@ def interleaved(fns: dict[str, Callable[[], object]], rounds: int, warmup: int =
 
 def paired_ratio(a: list[float], b: list[float]) -> float:
     """Median over rounds of a/b (robust to the machine's load changing between rounds)."""
-    return median([x / y for x, y in zip(a, b)])
+    return median([x / y for x, y in zip(a, b, strict=True)])
 
 
 def operating_points(n: int = 16) -> list[tuple[float, float]]:
     """n distinct points, speeds 5..100 rad/s and loads 50..400 N in shuffled pairings."""
     speeds = np.linspace(5.0, 100.0, n)
     loads = np.linspace(50.0, 400.0, n)[np.random.default_rng(0).permutation(n)]
-    return list(zip(speeds.tolist(), loads.tolist()))
+    return list(zip(speeds.tolist(), loads.tolist(), strict=True))
 
 
 def bench_point(model: SqueakModel, rounds: int, loops: int) -> dict:
@@ -137,7 +137,7 @@ def bench_map(model: SqueakModel, grid: int, rounds: int, naive_points: int) -> 
     chunks = [model.geometry.state_matrices(s_flat[i:i + _CHUNK], f_flat[i:i + _CHUNK])
               for i in range(0, s_flat.size, _CHUNK)]
     pick = np.linspace(0, s_flat.size - 1, naive_points).astype(int)
-    naive_pts = list(zip(s_flat[pick].tolist(), f_flat[pick].tolist()))
+    naive_pts = list(zip(s_flat[pick].tolist(), f_flat[pick].tolist(), strict=True))
     s0, f0 = naive_pts[0]
     assert np.allclose(naive_state_matrix(model, s0, f0), model.state_matrix(s0, f0),
                        rtol=1e-9, atol=1e-6), "naive assembly must give the same matrix"

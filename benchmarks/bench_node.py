@@ -176,7 +176,7 @@ def connect(ex: SingleThreadedExecutor, probe: Probe, speed: float) -> None:
         probe.send(probe.load_pub, LOAD_N)
         spin_until(ex, lambda: False, 0.02)
         probe.send(probe.speed_pub, speed)
-        if spin_until(ex, lambda: len(probe.risks) > n, 0.2):
+        if spin_until(ex, lambda n=n: len(probe.risks) > n, 0.2):
             return
     raise RuntimeError("no squeak/risk came back from the node")
 

@@ -5,9 +5,10 @@
 
 (1) A live update with probability: `SqueakModel.predict` (modes, labels and P(squeak) from the
 first-order estimator on its 1024 default scatter samples, one LAPACK solve) against a bare
-`numpy.linalg.eig` of the same 36x36 state matrix (target <= 2, issue 10). (2) The Monte Carlo reference: samples per second of `probability.monte_carlo`
-(4096 samples) against bare batched `numpy.linalg.eigvals` of the same number of pre-built
-matrices. Table 1, 200 N, 55 rad/s (paper). The calls alternate within each round; ratios are
+`numpy.linalg.eig` of the same 36x36 state matrix (target <= 2, issue 10). (2) The Monte Carlo
+reference: samples per second of `probability.monte_carlo` (4096 samples) against bare batched
+`numpy.linalg.eigvals` of the same number of pre-built matrices. Table 1, 200 N, 55 rad/s
+(paper). The calls alternate within each round; ratios are
 medians of the per-round ratios.
 """
 
@@ -45,7 +46,7 @@ def live_update_ratio(model: SqueakModel, rounds: int, repeat: int = 200
     for _ in range(rounds):
         eig.append(_time(lambda: np.linalg.eig(a), repeat))
         update.append(_time(lambda: model.predict(SPEED_RAD_S, LOAD_N), repeat))
-    return median(update), median(eig), median(u / e for u, e in zip(update, eig))
+    return median(update), median(eig), median(u / e for u, e in zip(update, eig, strict=True))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -196,7 +196,7 @@ def solve_floor_us(rounds: int = 5, loops: int = 20) -> float:
     from leadscrew_ros.model.physics.stability import eig_both
     model = SqueakModel()
     mats = [model.state_matrix(s, f) for s, f in zip(np.linspace(5.0, 100.0, 16),
-                                                      np.linspace(50.0, 400.0, 16))]
+                                                      np.linspace(50.0, 400.0, 16), strict=True)]
     times = []
     for _ in range(rounds):
         t0 = time.perf_counter()

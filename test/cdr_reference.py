@@ -53,7 +53,7 @@ def _layout(cls) -> tuple | None:
     """((field, kind, element), ...) of a message class; None if a field is unsized."""
     try:
         return tuple((name, *_kind(slot)) for name, slot in
-                     zip(cls.get_fields_and_field_types(), cls.SLOT_TYPES))
+                     zip(cls.get_fields_and_field_types(), cls.SLOT_TYPES, strict=True))
     except _Unsized:
         return None
 

@@ -39,7 +39,7 @@ def quadrature_integrals(p: ScrewParameters, basis: ModalBasis, nodes_per_turn: 
     out = {}
     for name, k in kernels.items():
         m = np.zeros((basis.n, basis.n))
-        for a, b in zip(*np.nonzero(np.any(k != 0, axis=-1))):
+        for a, b in zip(*np.nonzero(np.any(k != 0, axis=-1)), strict=True):
             m[np.ix_(rows[a], rows[b])] = (weighted[rows[a]] * k[a, b]) @ shape[rows[b]].T
         out[name] = m
     return out

@@ -3,8 +3,8 @@
 
 test/data/appendix_a_printed.json holds (A.3)-(A.8) transcribed once from the paper: each
 printed prefactor and every term of each integrand. The implemented friction matrix is
-scale(Omega, F_z) * kernel(theta) (model/physics/kernels.py moves R and sin^2(beta) between the two),
-so the test compares scale * kernel with prefactor * printed term, for every (row, column)
+scale(Omega, F_z) * kernel(theta) (model/physics/kernels.py moves R and sin^2(beta) between the
+two), so the test compares scale * kernel with prefactor * printed term, for every (row, column)
 entry, at several theta, beta, R and operating points. Any changed sign or factor of one term
 (e.g. of sin^2(beta) in W3[x x], which moves the band edge by only 0.2 %) fails here.
 """

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The paper's claims (the trends it reports), each its own test of the `paper` formulation at Table 1."""
+"""The paper's claims (the trends it reports), each its own test of the `paper` formulation at
+Table 1."""
 
 import numpy as np
 import pytest
@@ -45,7 +46,7 @@ def test_squeak_modes_are_first_and_second_bending(model):
 
 def test_larger_radius_stabilises_and_lowers_the_upper_speed_bound(model):
     uppers = [_band(model, radius_m=r)[1] for r in (0.003, 0.004, 0.005, 0.007, 0.010)]
-    assert all(a > b for a, b in zip(uppers, uppers[1:])), uppers
+    assert all(a > b for a, b in zip(uppers, uppers[1:], strict=False)), uppers
     assert uppers[0] > 2 * uppers[-1]
     growth = [model.with_params(radius_m=r).predict(20.0).max_growth_rate
               for r in (0.004, 0.006, 0.008)]
@@ -82,7 +83,7 @@ def test_fig9_map_load_vs_radius_at_20_rad_s(model):
     unstable = m.field.max_growth_rate > 0
     # Smaller radius and larger load destabilise: the lowest unstable load rises with R.
     lowest = [m.y[np.argmax(col)] if col.any() else np.inf for col in unstable.T]
-    assert all(a <= b for a, b in zip(lowest, lowest[1:])) and lowest[0] < lowest[-1]
+    assert all(a <= b for a, b in zip(lowest, lowest[1:], strict=False)) and lowest[0] < lowest[-1]
     assert len(m.boundary) > 0
     for x, y in m.boundary[:5]:
         g = model.with_params(radius_m=x).predict(20.0, y).max_growth_rate

@@ -86,7 +86,7 @@ def _adaptive(p: ScrewParameters, basis, name: str, i: int, j: int, epsabs: floa
     edges = alpha_o + alpha * np.linspace(0, 1, math.ceil(alpha / (2 * math.pi)) + 1)
     pieces = [quad(integrand, lo, hi, epsabs=epsabs / math.sqrt(len(edges) - 1), epsrel=0,
                    limit=200)
-              for lo, hi in zip(edges[:-1], edges[1:])]
+              for lo, hi in zip(edges[:-1], edges[1:], strict=True)]
     return math.fsum(v for v, _ in pieces)
 
 
@@ -164,7 +164,8 @@ def test_geometry_is_computed_once_and_reused():
 
 
 def test_operating_point_only_rescales_matrices():
-    """W1, W2 ~ mu_o F; W3, W4 ~ mu_o F / Omega; W5q ~ F gamma Omega; W5qdot ~ F gamma; G ~ Omega."""
+    """W1, W2 ~ mu_o F; W3, W4 ~ mu_o F / Omega; W5q ~ F gamma Omega; W5qdot ~ F gamma; G ~
+    Omega."""
     m = SqueakModel()
     p = m.params
     a, b = m.geometry.matrices(10.0, 100.0), m.geometry.matrices(30.0, 250.0)

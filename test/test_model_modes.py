@@ -40,7 +40,7 @@ def test_shapes_are_mass_normalised(basis):
     for i in (0, 3, 11, 12, 17):
         mass = p.density_kg_m3 * (polar if basis.kind[i] == KIND_T else area)
         for j in (i, i + 2 if i + 2 < 18 and basis.kind[i + 2] == basis.kind[i] else i):
-            val = quad(lambda z: basis.shapes(np.array([z]))[i, 0] * basis.shapes(np.array([z]))[j, 0],
+            val = quad(lambda z, i=i, j=j: basis.shapes(np.array([z]))[i, 0] * basis.shapes(np.array([z]))[j, 0],
                        0, p.length_m, limit=200)[0]
             assert mass * val == pytest.approx(1.0 if i == j else 0.0, abs=1e-9)
 

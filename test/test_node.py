@@ -438,7 +438,7 @@ def test_diagnostic_levels_follow_the_probability_thresholds(ros):
                                 (60.0, Level.WARN, "squeak possible: P(squeak) 0.12 >= 0.1"),
                                 (70.0, Level.OK, "no squeak: P(squeak) 0 < 0.1")):
         at(ros, speed)
-        status = ros.status(lambda s: float({kv.key: kv.value for kv in s.values}[
+        status = ros.status(lambda s, speed=speed: float({kv.key: kv.value for kv in s.values}[
             KEY_SPEED]) == speed)
         assert status.level == bytes([level]) and status.message.startswith(start), (
             speed, status.message)
@@ -699,13 +699,13 @@ def test_node_processes_answer_and_exit_cleanly_on_sigterm_and_sigint(tmp_path):
         def stream(i: int) -> None:
             """Inputs are a best-effort stream, as from a sensor."""
             for child in children.values():
-                for pub, value in zip(child["pubs"], (SQUEAK + i % 3, LOAD)):
+                for pub, value in zip(child["pubs"], (SQUEAK + i % 3, LOAD), strict=True):
                     pub.publish(Float64(data=value))
             ros.executor.spin_once(timeout_sec=0.002)
 
         for child in children.values():
             for pub in child["pubs"]:
-                ros.spin_until(lambda: pub.get_subscription_count() > 0, 10.0,
+                ros.spin_until(lambda pub=pub: pub.get_subscription_count() > 0, 10.0,
                                f"the node process subscribing to {pub.topic_name}")
         # the node may not yet have matched our writer when ours has matched its reader:
         # keep streaming until both answer

@@ -64,7 +64,7 @@ class StallStats:
         """Longest time without a risk message while the stream ran."""
         start, end = self.stream_s
         t = [start] + [x for x in self.risk_times if start < x < end] + [end]
-        return max(b - a for a, b in zip(t, t[1:]))
+        return max(b - a for a, b in zip(t, t[1:], strict=False))
 
 
 def _spin(executor, stop: threading.Event) -> None:

@@ -164,7 +164,7 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
             continue
         sent_out = [(d, pt) for t, d, pt in outputs if t == topic]
         assert [m.data for _, m in got] == [d for d, _ in sent_out], topic   # the same bytes
-        for (_, m), w, (_, pt) in zip(got, want, sent_out):
+        for (_, m), w, (_, pt) in zip(got, want, sent_out, strict=True):
             stamp = getattr(getattr(w, "header", None), "stamp", None)  # outputs: header stamp
             assert pt == (None if stamp is None else stamp.sec * 10**9 + stamp.nanosec)
             assert m.publish_time == (m.log_time if pt is None else pt)
@@ -178,7 +178,7 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
     for topic in decoded:
         want = [plain(m) for t, m in expected if t == topic]
         assert len(decoded[topic]) == len(want)
-        for got, w in zip(decoded[topic], want):
+        for got, w in zip(decoded[topic], want, strict=True):
             assert got == w, (topic, got, w)
 
     # 3. rosbags, independent of both, reading the bag directory (metadata.yaml)

@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Offline replay of MCAP logs (`leadscrew_ros.review.replay`, `leadscrew-squeak replay/recover/info`).
+"""Offline replay of MCAP logs (`leadscrew_ros.review.replay`,
+`leadscrew-squeak replay/recover/info`).
 
 Logs come from our Recorder (`synthetic_log`), from rosbags' rosbag2 writer (an independent
 producer) and from hand-written MCAP files. Predictions are checked against the core

@@ -99,7 +99,9 @@ def test_inputs_in_several_namespaces_ask_for_one(tmp_path, capsys):
 
 def test_offline_and_live_replay_share_the_input_rule():
     assert replay_live._is_input is timeline.is_input
-    topic = lambda name, type_name: timeline.Topic(name, type_name, "ros2msg", "", "cdr", {})
+    def topic(name, type_name):
+        return timeline.Topic(name, type_name, "ros2msg", "", "cdr", {})
+
     topics = [topic("/motor_speed", "std_msgs/msg/Float32"),        # root: by name alone
               topic("/a/b/axial_load", "std_msgs/msg/Float64"),
               topic("/c/axial_load", "std_msgs/msg/String"),         # wrong type: not an input

@@ -215,7 +215,7 @@ def test_timing_follows_the_log_divided_by_rate(log, collector, rate, monkeypatc
     step_s = STEP_NS / 1e9 / rate
     assert [d - dues[0] for d in dues] == pytest.approx([i * step_s for i in range(STEPS)],
                                                         abs=1e-6)
-    late = [t - d for t, d in zip(published, dues)]
+    late = [t - d for t, d in zip(published, dues, strict=True)]
     assert min(late) >= 0.0
     assert sorted(late)[len(late) // 2] < 0.05, late
 
@@ -439,7 +439,7 @@ def foreign_mcap(path: Path, profile: str = "ros2", type_name: str = "std_msgs/m
 def test_unreadable_logs_raise_log_error_before_anything_starts(log, tmp_path, nothing_starts,
                                                                 damage, match):
     files = [tmp_path / f.name for f in log]
-    for src, dst in zip(log, files):
+    for src, dst in zip(log, files, strict=True):
         shutil.copy(src, dst)
     if damage == "truncated second file":
         with open(files[1], "r+b") as f:

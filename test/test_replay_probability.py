@@ -55,7 +55,7 @@ def expected(starts, model, end_s, warn, error):
     """P(squeak) as published, from the dwells: each dwell's P (None at rest) holds to the
     next dwell; episodes are the runs of nominally squeaking dwells."""
     dwells = []
-    for (t, speed), nxt in zip(starts, [s[0] for s in starts[1:]] + [end_s]):
+    for (t, speed), nxt in zip(starts, [s[0] for s in starts[1:]] + [end_s], strict=True):
         p = model.predict(speed, LOAD_N)
         dwells.append((t, nxt - t, p.probability if p.valid else None,
                        p.valid and not p.stable))
@@ -98,7 +98,7 @@ def test_peak_and_time_above_warn_match_the_dwells(log, tmp_path, warn, error):
     model = SqueakModel()
     r = run(path, tmp_path, warn_probability=warn, error_probability=error)
     overall, episodes, dwells = expected(starts, model, r.duration_s, warn, error)
-    p = {round(abs(speed)): q for (_, speed), (_, _, q, _) in zip(starts, dwells)}
+    p = {round(abs(speed)): q for (_, speed), (_, _, q, _) in zip(starts, dwells, strict=True)}
     # the dwells are where the issue says: P ~ 0.12, ~ 0.46 (nominally squeaking), ~ 1, 0
     assert 0.05 < p[60] < 0.2 and 0.3 < p[55] < 0.5 and p[20] > 0.95 and p[70] == 0.0
     assert p[0] is None and [d[3] for d in dwells] == [False, False, True, True, False, True,
@@ -110,7 +110,7 @@ def test_peak_and_time_above_warn_match_the_dwells(log, tmp_path, warn, error):
     assert summary["warn_share"] == pytest.approx(overall["time_above_warn_s"] / r.duration_s)
     got = json.loads((tmp_path / "episodes.json").read_text())
     assert len(got) == len(episodes) == 2
-    for g, e in zip(got, episodes):
+    for g, e in zip(got, episodes, strict=True):
         assert {k: g[k] for k in e} == approx(e)
         assert g["time_above_warn_s"] <= g["duration_s"] + 1e-12
     if (warn, error) == (0.1, 0.5):       # the numbers behind the assertions, spelled out

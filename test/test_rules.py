@@ -185,7 +185,7 @@ def test_bad_values_never_raise_and_keep_the_last_good_state(ops, joint_name):
             assert rejection.reason and rejection.message
             assert "\n" not in rejection.reason + rejection.message
         after = (r.inputs.speed_rad_s, r.inputs.load_n, r.inputs.nut_position_m)
-        for k, (name, old, new) in enumerate(zip(("speed", "load", "nut"), before, after)):
+        for name, old, new in zip(("speed", "load", "nut"), before, after, strict=True):
             if name not in outcome.taken:
                 assert new is old or new == old                      # nan never gets in
             else:
@@ -292,7 +292,7 @@ def same_predictions(a, b) -> None:
     """P(squeak), margin, squeak frequencies and squeak verdict, one for one (same solver, maybe
     batched; the same scatter samples)."""
     assert len(a) == len(b)
-    for k, (p, q) in enumerate(zip(a, b)):
+    for k, (p, q) in enumerate(zip(a, b, strict=True)):
         assert p.keys() == q.keys()
         assert p["active"] == q["active"], k
         assert p["probability"] == q["probability"], k
@@ -312,7 +312,7 @@ def test_live_predictor_and_timeline_decide_alike_without_ros():
     same_predictions([outputs(p) for p in live], [outputs(p) for p in offline])
     actives = [not p.stable for p in live]
     assert 14 <= len(live) <= 20 and actives.count(True) >= 5 and actives.count(False) >= 5
-    assert sum(a != b for a, b in zip(actives, actives[1:])) >= 8      # through the band
+    assert sum(a != b for a, b in zip(actives, actives[1:], strict=False)) >= 8      # through the band
     assert dict(tl.ignored) == {"/joint_states: no joint 'screw'": 1}
     assert dict(tl.rejected) == {"load not finite": 1, "load beyond 1e+07 N": 1,
                                  "speed not finite": 2, "nut position off the screw [0, 0.24] m": 2}
@@ -368,7 +368,7 @@ def test_node_and_replay_of_its_recording_predict_alike(tmp_path):
                  "frequencies": list(deserialize_message(f.data, Float64MultiArray).data),
                  "active": deserialize_message(a.data, Bool).data}
                 for r, g, f, a in zip(*(recorded[f"{ros.ns}/squeak/{name}"] for name in
-                                        ("risk", "margin", "unstable_frequencies", "active")))]
+                                        ("risk", "margin", "unstable_frequencies", "active")), strict=True)]
     assert len(node_out) == recomputes == len(recorded[f"{ros.ns}/squeak/active"])
 
     r = replay(bag, SqueakModel(), tmp_path / "out",
@@ -384,7 +384,7 @@ def test_node_and_replay_of_its_recording_predict_alike(tmp_path):
                    "margin": deserialize_message(g.data, Float64).data,
                    "frequencies": list(deserialize_message(f.data, Float64MultiArray).data),
                    "active": deserialize_message(b.data, Bool).data}
-                  for a, g, f, b in zip(*(annotated[n] for n in names))]
+                  for a, g, f, b in zip(*(annotated[n] for n in names), strict=True)]
     same_predictions(node_out, replay_out)
     # and both as without ROS
     same_predictions(node_out, [outputs(p) for p in live_predictions(STREAM)])
@@ -395,7 +395,7 @@ def test_node_and_replay_of_its_recording_predict_alike(tmp_path):
     times = [(m.log_time_ns - r.start_ns) / 1e9 for m in annotated["active"]]
     actives = [o["active"] for o in node_out]
     expected, start = [], None
-    for t, active in zip(times, actives):
+    for t, active in zip(times, actives, strict=True):
         if active and start is None:
             start = t
         elif not active and start is not None:

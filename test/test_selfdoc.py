@@ -101,7 +101,7 @@ def test_node_recording_describes_itself_in_every_file(ros, tmp_path):
     files = log_files(bag)
     assert len(files) == 2 and all(is_complete(f) for f in files)
     metas = [logmeta.read(f) for f in files]
-    for f, meta in zip(files, metas):
+    for f, meta in zip(files, metas, strict=True):
         assert [name for name, _ in records(f)] == [logmeta.RECORD_NAME]
         assert meta.unit_id == "seat-7" and meta.hardware_id == ros.hardware_id
         assert meta.version == __version__
@@ -191,7 +191,7 @@ def test_annotated_log_holds_the_review_as_attachments(reviewed):
         summary = reader.get_summary()
         attachments = list(reader.iter_attachments())
     assert [a.name for a in attachments] == [p.name for p in expected]
-    for a, path in zip(attachments, expected):
+    for a, path in zip(attachments, expected, strict=True):
         assert a.data == path.read_bytes(), a.name           # the same bytes as the files
         assert a.media_type == ("image/png" if path.suffix == ".png" else "application/json")
         assert a.log_time == result.start_ns + round(result.duration_s * 1e9)

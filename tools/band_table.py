@@ -7,8 +7,8 @@ prints, for both formulations at Table 1, the README rows computed from the mode
 
 - every oscillatory mode that is unstable somewhere below the first critical speed, with the
   speed range where it squeaks: the branch is followed along a fine geometric speed grid
-  (`model.studies.tracking.track_modes`) and each of its sign changes refined by bisection on that branch
-  (its eigenvalue is followed by continuation, so a crossing of another mode does not confuse
+  (`model.studies.tracking.track_modes`) and each of its sign changes refined by bisection on that
+  branch (its eigenvalue is followed by continuation, so a crossing of another mode does not confuse
   it); an end at the grid start is marked as the validity limit min_speed_rad_s;
 - the lowest unstable load at the reference speed (Fig. 10's data, refined by root finding)
   against the nut position z_o, and whether it falls or rises monotonically.
@@ -92,7 +92,7 @@ def mode_ranges(model: SqueakModel, points: int = SPEED_POINTS) -> list[ModeRang
             edges.insert(0, float(speeds[0]))
         if unstable[-1]:
             raise RuntimeError(f"branch {b.label} unstable up to the critical speed")
-        out.append(ModeRange(b.label, b.squeak_frequency_hz, list(zip(edges[::2], edges[1::2])),
+        out.append(ModeRange(b.label, b.squeak_frequency_hz, list(zip(edges[::2], edges[1::2], strict=True)),
                              bool(unstable[0])))
     return sorted(out, key=lambda r: r.frequency_hz)
 

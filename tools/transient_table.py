@@ -4,8 +4,8 @@
 
     .venv/bin/python tools/transient_table.py [--plot docs/transient.png]   # ~5 min on 2 cores
 
-Simulates the nonlinear equations (`model.nonlinear.transient`, Table 1, all 18 modes, default settings)
-at (20 rad/s, 200 N), (5 rad/s, 200 N), (40 rad/s, 300 N) and (60 rad/s, 200 N) (above the
+Simulates the nonlinear equations (`model.nonlinear.transient`, Table 1, all 18 modes, default
+settings) at (20 rad/s, 200 N), (5 rad/s, 200 N), (40 rad/s, 300 N) and (60 rad/s, 200 N) (above the
 band of both formulations) and prints, as Markdown:
 
 1. the growth rate and frequency fitted in the linear regime against the eigenvalue of the

@@ -26,6 +26,7 @@ class FileStats:
     messages: int = 0
 
     def add(self, log_time_ns: int) -> None:
+        """Count one message logged at `log_time_ns` [ns] in this file."""
         self.messages += 1
         self.start_ns = log_time_ns if self.start_ns is None else min(self.start_ns, log_time_ns)
         self.end_ns = log_time_ns if self.end_ns is None else max(self.end_ns, log_time_ns)
@@ -33,6 +34,8 @@ class FileStats:
 
 @dataclass
 class TopicStats:
+    """One topic of a bag: name, type, message count and offered QoS (metadata.yaml)."""
+
     name: str
     type_name: str              # 'pkg/msg/Type'
     count: int = 0
@@ -41,6 +44,8 @@ class TopicStats:
 
 @dataclass
 class BagStats:
+    """The files, topics and custom data of a bag, as its metadata.yaml lists them."""
+
     files: list[FileStats] = field(default_factory=list)
     topics: list[TopicStats] = field(default_factory=list)
     custom_data: dict[str, str] = field(default_factory=dict)

@@ -40,6 +40,8 @@ DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
 
 
 class JointStateData(NamedTuple):
+    """A decoded sensor_msgs/msg/JointState (header stamp in ns)."""
+
     stamp_ns: int
     frame_id: str
     name: tuple[str, ...]
@@ -57,6 +59,8 @@ class Dimension(NamedTuple):
 
 
 class Float64MultiArrayData(NamedTuple):
+    """A decoded std_msgs/msg/Float64MultiArray (layout and data)."""
+
     dim: tuple[Dimension, ...]
     data_offset: int
     data: tuple[float, ...]

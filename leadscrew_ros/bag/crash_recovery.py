@@ -13,7 +13,7 @@ from .logfile import RECOVER_HINT, LogError, cut_off_bags, recover_bag
 
 
 class CrashRecovery:
-    """This node's bags in the record directory that an earlier crash cut off (no
+    """The bags of this node in the record directory that an earlier crash cut off (no
     metadata.yaml, or a file without footer): reported, and recovered in place by `start`
     (`logfile.recover_bag`, on a thread of its own: a large bag takes a while)."""
 
@@ -26,11 +26,13 @@ class CrashRecovery:
         self._thread: threading.Thread | None = None
 
     def start(self) -> None:
+        """Recover the cut-off bags on a background thread."""
         self._thread = threading.Thread(target=self._recover, daemon=True,
                                         name="cut-off bag recovery")
         self._thread.start()
 
     def join(self) -> None:
+        """Wait for the recovery thread, if `start` started one."""
         if self._thread is not None:
             self._thread.join()
 
@@ -49,10 +51,12 @@ class CrashRecovery:
 
     @property
     def state(self) -> tuple:
+        """Counts of (cut-off, recovered, failed) bags."""
         return len(self.bags), len(self.recovered), len(self.failed)
 
     @property
     def level(self) -> Level:
+        """WARN while a bag is still cut off or being recovered, else OK."""
         return Level.WARN if self.pending else Level.OK
 
     @property

@@ -57,6 +57,8 @@ class LogError(Exception):
 
 @dataclass(frozen=True)
 class Topic:
+    """One channel of a log: topic name, message type, schema and encoding."""
+
     name: str
     type_name: str              # 'pkg/msg/Type'
     schema_encoding: str
@@ -67,11 +69,14 @@ class Topic:
 
     @property
     def stored_schema_name(self) -> str:
+        """The schema name stored in the file: `schema_name`, else the type name."""
         return self.schema_name or self.type_name
 
 
 @dataclass(frozen=True)
 class LogMessage:
+    """One message of a log: its topic, times [ns], sequence and serialized payload."""
+
     topic: Topic
     log_time_ns: int
     publish_time_ns: int
@@ -98,6 +103,7 @@ class LogInfo:
 
     @property
     def messages(self) -> int:
+        """Messages read, over all topics."""
         return sum(self.counts.values())
 
 
@@ -444,10 +450,12 @@ class BagRecovery:
 
     @property
     def changed(self) -> bool:
+        """True if the recovery rewrote a file or wrote the metadata."""
         return self.metadata_written or any(f.action != "complete" for f in self.files)
 
     @property
     def messages(self) -> int:
+        """Messages in the recovered files."""
         return sum(f.messages for f in self.files)
 
     def summary(self) -> str:
@@ -514,7 +522,7 @@ def recover_bag(path: Path | str) -> BagRecovery:
 def _restore_interrupted(directory: Path) -> None:
     """A recovery killed between its two renames left `<name>.mcap.broken` and the unverified
     `<name>.mcap.recovering` without `<name>.mcap`: put the original back, so this run starts
-    over from it. (A file set aside for want of messages has no `.recovering` and stays.)"""
+    over from it. A file set aside for want of messages has no `.recovering` and stays."""
     for rewrite in directory.glob("*.mcap" + _REWRITE_SUFFIX):
         original = rewrite.with_name(rewrite.name[:-len(_REWRITE_SUFFIX)])
         broken = original.with_name(original.name + BROKEN_SUFFIX)

@@ -53,6 +53,7 @@ class LogMetadata:
 
     @property
     def formulation(self) -> str:
+        """The parameter formulation recorded ('' if none)."""
         return str(self.params.get("formulation", ""))
 
     def record(self) -> dict[str, str]:

@@ -127,6 +127,7 @@ class TopicLoss:
         return max(self.sequence_gaps, self.dds_lost) if self.sequence_checked else self.dds_lost
 
     def as_dict(self) -> dict:
+        """The counts as a JSON-ready dict."""
         return {"lost": self.lost, "sequence_gaps": self.sequence_gaps,
                 "dds_lost": self.dds_lost, "sequence_checked": self.sequence_checked}
 
@@ -141,7 +142,8 @@ class _Topic:
 
 @dataclass
 class Recorder:
-    """Writes serialized ROS messages to a split MCAP bag. Call `tick` periodically (flush and split)."""
+    """Writes serialized ROS messages to a split MCAP bag. Call `tick` periodically (flush and
+    split)."""
 
     settings: RecordSettings = field(default_factory=RecordSettings)
     name: str = "squeak"                 # bag directory prefix (the node adds its namespace)
@@ -161,6 +163,7 @@ class Recorder:
 
     @property
     def active(self) -> bool:
+        """True while a recording is open."""
         return self._writer is not None
 
     @property
@@ -170,6 +173,7 @@ class Recorder:
 
     @property
     def messages(self) -> int:
+        """Messages written in this recording, over all files."""
         return sum(f.messages for f in self.files)
 
     def count(self, topic: str) -> int:

@@ -43,6 +43,7 @@ class DutyCycle:
 
     @property
     def samples(self) -> int:
+        """Number of input samples: duration times rate, rounded."""
         return int(round(self.duration_s * self.rate_hz))
 
 
@@ -58,6 +59,7 @@ class Samples:
 
 
 def samples(cycle: DutyCycle) -> Samples:
+    """The samples of a duty cycle: strokes to and fro with rests, noisy inputs, quantised angle."""
     p, rng = cycle.stroke, np.random.default_rng(cycle.seed)
     t = np.arange(cycle.samples) / cycle.rate_hz
     period = p.duration_s + cycle.rest_s
@@ -66,7 +68,7 @@ def samples(cycle: DutyCycle) -> Samples:
     # during the rest the stroke's end state holds.
     states = [p.state(s, loop=True) for s in
               (k * p.duration_s + np.minimum(t - k * period, p.duration_s)).tolist()]
-    speed, load, _, angle = (np.array(a) for a in zip(*states))
+    speed, load, _, angle = (np.array(a) for a in zip(*states, strict=True))
     step = 2 * np.pi / cycle.encoder_counts_per_rev
     angle = np.round(angle / step) * step
     return Samples(t, speed + rng.normal(0.0, cycle.speed_noise_rad_s, t.size),
@@ -91,7 +93,7 @@ def write_log(cycle: DutyCycle, directory: Path | str,
     times = cycle.start_ns + np.round(s.time_s * 1e9).astype(np.int64)
     for now, speed, load, nut, angle in zip(times.tolist(), s.speed_rad_s.tolist(),
                                             s.load_n.tolist(), s.nut_position_m.tolist(),
-                                            s.screw_angle_rad.tolist()):
+                                            s.screw_angle_rad.tolist(), strict=True):
         rec.write_serialized(SPEED_TOPIC, FLOAT64, encode_float64(speed), now)
         rec.write_serialized(LOAD_TOPIC, FLOAT64, encode_float64(load), now + _TOPIC_OFFSET_NS)
         stamp = now + 2 * _TOPIC_OFFSET_NS          # publish time: the header stamp

@@ -47,6 +47,7 @@ class Parser(argparse.ArgumentParser):
     """argparse that raises instead of printing usage and exiting, so `main` reports one line."""
 
     def error(self, message: str) -> NoReturn:
+        """Raise CliError with `message` instead of printing usage and exiting."""
         raise CliError(message)
 
 
@@ -75,7 +76,7 @@ def parse_range(text: str, what: str) -> np.ndarray:
     parts = text.split(":")
     if len(parts) != 3:
         raise CliError(f"{what}: expected START:STOP:COUNT, got {text!r}")
-    start, stop = (finite_float(p, f"{what} {name}") for p, name in zip(parts, ("START", "STOP")))
+    start, stop = (finite_float(p, f"{what} {name}") for p, name in zip(parts, ("START", "STOP"), strict=False))
     try:
         count = int(parts[2])
     except ValueError:

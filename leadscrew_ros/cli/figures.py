@@ -5,7 +5,8 @@ the P(squeak) band around its boundary (fig07p); and the sweep plot.
 `plot_sweep` is shared by the `figures` command and `sweep --plot`; the map and frequency
 plots (`review.plots`) are shared with `map --plot` and the replay report. `make_figures`
 writes fig04..fig11 and fig07p PNGs and `summary.txt`, whose sentences are computed from the
-plotted data (nothing is hard-coded). Importing this module does not import matplotlib (`map --json`).
+plotted data (nothing is hard-coded). Importing this module does not import matplotlib
+(`map --json`).
 """
 
 from __future__ import annotations
@@ -104,6 +105,7 @@ class Edge:
     limit: Limit = Limit()
 
     def text(self, axis: str, upper: bool) -> str:
+        """The edge as text on axis `axis`; `upper`: the band's upper end."""
         value = fmt(axis, self.value)
         if self.kind == BOUNDARY:
             return value
@@ -231,7 +233,7 @@ def _ends(bands: list[list[Band]], axis: str, x_axis: str, x: np.ndarray) -> str
 
 def _several(bands: list[list[Band]], axis: str, x_axis: str, x: np.ndarray) -> str:
     """Every band of every line that has more than one."""
-    lines = [f"{at(x_axis, v)} ({_bands_text(axis, b)})" for v, b in zip(x, bands) if len(b) > 1]
+    lines = [f"{at(x_axis, v)} ({_bands_text(axis, b)})" for v, b in zip(x, bands, strict=True) if len(b) > 1]
     return ("more than one band at " + ", ".join(lines)) if lines else "one band at most per line"
 
 
@@ -339,6 +341,7 @@ def squeak_branches(result: SweepResult) -> list[Branch]:
 
 
 def describe_friction(p: ScrewParameters, v: np.ndarray, mu: np.ndarray) -> str:
+    """The friction law `mu` over sliding speeds `v` [m/s] in words (Fig. 4)."""
     v_ref = float(sliding_speed(p, REFERENCE_SPEED_RAD_S))
     mu_ref = float(friction_coefficient(p, v_ref))
     slope = np.gradient(mu, v)
@@ -351,6 +354,8 @@ def describe_friction(p: ScrewParameters, v: np.ndarray, mu: np.ndarray) -> str:
 # --------------------------------------------------------------------------- the figure set
 @dataclass(frozen=True)
 class Grids:
+    """Grid sizes and resolution of the figures."""
+
     sweep_points: int
     map_x: int
     map_y: int
@@ -433,6 +438,8 @@ def run_map(model: SqueakModel, x_axis: str, x: np.ndarray, y_axis: str, y: np.n
 
 @dataclass
 class FigureSet:
+    """The paper's figures of one model, written to `out`; maps are computed once."""
+
     model: SqueakModel
     out: Path
     grids: Grids
@@ -443,10 +450,12 @@ class FigureSet:
 
     @cached_property
     def speed_sweep(self) -> SweepResult:
+        """The speed sweep behind Figs. 5 and 11, computed once."""
         speeds = np.geomspace(*SWEEP_SPEEDS_RAD_S, self.grids.sweep_points)
         return sweep(self.model, "speed_rad_s", speeds)
 
     def friction(self, path: Path) -> str:
+        """Draw the friction law (Fig. 4) to `path`; its description."""
         p = self.model.params
         v = np.linspace(0.0, float(sliding_speed(p, SWEEP_SPEEDS_RAD_S[1])), 400)
         mu = friction_coefficient(p, v)
@@ -469,17 +478,20 @@ class FigureSet:
         return describe_friction(p, v, mu)
 
     def growth(self, path: Path) -> str:
+        """Draw the growth rates against speed (Fig. 5) to `path`; their description."""
         plot_sweep(self.speed_sweep, path,
                    self._title("Fig. 5: squeak propensity vs rotation speed"), dpi=self.grids.dpi)
         return describe_speed_sweep(self.speed_sweep)
 
     def frequencies(self, path: Path) -> str:
+        """Draw the squeak frequencies against speed (Fig. 11) to `path`; their description."""
         plot_frequencies(self.speed_sweep, path,
                          self._title("Fig. 11: squeak frequencies vs rotation speed "
                                      r"(thick: Re($\lambda$) > 0)"), dpi=self.grids.dpi)
         return describe_frequencies(self.speed_sweep)
 
     def map(self, spec: MapSpec) -> MapResult:
+        """The stability map of `spec`, computed on first use."""
         if spec.file not in self.maps:
             x = _grid(spec.x_axis, *spec.x_range(self.model.params), self.grids.map_x)
             y = _grid(spec.y_axis, *spec.y_range, self.grids.map_y)
@@ -489,6 +501,7 @@ class FigureSet:
         return self.maps[spec.file]
 
     def stability(self, spec: MapSpec, path: Path) -> str:
+        """Draw the stability map of `spec` to `path`; its description."""
         result = self.map(spec)
         title = self._title("\n".join(filter(None, (spec.title, fixed_text(result.fixed)))))
         plot_map(result, path, title, dpi=self.grids.dpi)
@@ -556,6 +569,7 @@ def make_figures(model: SqueakModel, out: Path, quick: bool = False) -> str:
 
 # --------------------------------------------------------------------------- the command
 def cmd_figures(args: argparse.Namespace) -> int:
+    """`figures`: write the paper's figures; exit status."""
     print(make_figures(build_model(args), Path(args.out), quick=args.quick), end="")
     return 0
 

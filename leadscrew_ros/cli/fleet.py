@@ -50,6 +50,7 @@ def _settings(args: argparse.Namespace):
 
 
 def cmd_review(args: argparse.Namespace) -> int:
+    """`review`: replay a fleet's logs and write the fleet report; exit status."""
     if args.workers is not None and not 1 <= args.workers <= 1024:
         raise CliError(f"argument --workers: must be in [1, 1024], got {args.workers}")
     settings = _settings(args)

@@ -81,6 +81,7 @@ def _publish(args: argparse.Namespace) -> int:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
+    """`replay`: replay a log through the model (or publish it live); exit status."""
     if args.publish:
         return _publish(args)
     given = [o for o in LIVE_OPTIONS if getattr(args, o) not in (None, False, [])]
@@ -108,7 +109,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         for e in result.episodes[:args.episodes]:
             print(f"  squeak {e.start_s:10.2f} - {e.end_s:10.2f} s  peak P(squeak) "
                   f"{e.probability.peak:.3f}  peak growth {e.peak_growth_rate:7.1f} 1/s  "
-                  + ", ".join(f"{m} {f:.0f} Hz" for m, f in zip(e.modes, e.frequencies_hz)))
+                  + ", ".join(f"{m} {f:.0f} Hz" for m, f in zip(e.modes, e.frequencies_hz, strict=True)))
         if result.episode_count > args.episodes:
             print(f"  ... {result.episode_count - args.episodes} more in episodes.json")
         print("wrote: " + ", ".join(str(p) for p in result.outputs))
@@ -141,6 +142,7 @@ def _record_directory(path: Path) -> bool:
 
 
 def cmd_recover(args: argparse.Namespace) -> int:
+    """`recover`: repair a cut-off log or bag; exit status."""
     src = Path(args.log)
     if args.output:                      # a copy elsewhere; the input stays as it is
         if src.is_dir():
@@ -168,6 +170,7 @@ def cmd_recover(args: argparse.Namespace) -> int:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
+    """`info`: print what a log contains; exit status."""
     infos = [inspect(f) for f in log_files(args.log)]
     if args.json:
         print_json([{"file": str(i.path), "complete": i.complete, "damage": i.damage,

@@ -137,10 +137,11 @@ def _cell(value: float | None) -> str:
 
 
 def write_sweep_csv(result: SweepResult) -> None:
+    """Write a sweep's predictions to stdout as CSV."""
     out = csv.writer(sys.stdout, lineterminator="\n")
     out.writerow([result.axis, "valid", "max_growth_rate", "probability", "probability_stderr",
                   "unstable_modes", "unstable_frequencies_hz"])
-    for value, p in zip(result.values.tolist(), result.predictions):
+    for value, p in zip(result.values.tolist(), result.predictions, strict=True):
         out.writerow([repr(value), p.valid, _cell(p.max_growth_rate), _cell(p.probability),
                       _cell(p.probability_stderr), _unstable_labels(p),
                       ";".join(f"{f:.6g}" for f in p.unstable_frequencies_hz)])
@@ -158,6 +159,7 @@ def crossings_text(crossings: dict[float, list], unit: str) -> str:
 
 
 def sweep_text(result: SweepResult, probability: bool = False) -> str:
+    """A sweep as text: the grid, the unstable bands and boundaries (and P(squeak) levels)."""
     unit, g = axis_unit(result.axis), result.max_growth_rate
     fixed = ", ".join(f"{k} = {v:g} {axis_unit(k)}" for k, v in result.fixed.items())
     n_valid = int(np.isfinite(g).sum())
@@ -188,6 +190,7 @@ def sweep_text(result: SweepResult, probability: bool = False) -> str:
 
 
 def map_text(result: MapResult) -> str:
+    """A stability map as text: grid, valid and unstable points, boundary and iso-P counts."""
     g = result.field.max_growth_rate
     valid = np.isfinite(g)
     fixed = ", ".join(f"{k} = {v:g} {axis_unit(k)}" for k, v in result.fixed.items())
@@ -211,6 +214,7 @@ def map_text(result: MapResult) -> str:
 
 # ----------------------------------------------------------------------------- commands
 def cmd_modes(args: argparse.Namespace) -> int:
+    """`modes`: print the model's modes and frequencies; exit status."""
     basis = build_model(args).geometry.basis
     order = np.argsort(basis.frequency_hz, kind="stable")
     modes = [{"label": basis.labels[i], "frequency_hz": float(basis.frequency_hz[i])}
@@ -224,6 +228,7 @@ def cmd_modes(args: argparse.Namespace) -> int:
 
 
 def cmd_predict(args: argparse.Namespace) -> int:
+    """`predict`: print the prediction at one operating point; exit status."""
     model = build_model(args)
     p = model.predict(args.speed, args.load)
     extra = assess(model, p)
@@ -253,6 +258,7 @@ def _sweep_axis(args: argparse.Namespace) -> tuple[str, np.ndarray, float | None
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
+    """`sweep`: sweep one axis and print the result; exit status."""
     model = build_model(args)
     axis, values, speed, load = _sweep_axis(args)
     sweep_work(model, axis, values).check()             # before a progress bar shows
@@ -272,6 +278,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def cmd_map(args: argparse.Namespace) -> int:
+    """`map`: compute a stability map over two axes and print it; exit status."""
     model = build_model(args)
     x_axis, x = parse_axis_spec(args.x, "argument --x")
     y_axis, y = parse_axis_spec(args.y, "argument --y")

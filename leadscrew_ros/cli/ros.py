@@ -20,6 +20,7 @@ def _stroke(duration_s: float | None):
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    """`demo`: run the node against a simulated stroke; exit status."""
     profile = _stroke(args.duration)
     from ..ros.demo import run_demo
     try:
@@ -30,6 +31,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_simulate(args: argparse.Namespace) -> int:
+    """`simulate`: publish a simulated stroke as actuator inputs; exit status."""
     profile = _stroke(args.duration)
     from ..ros.simulator import MAX_RATE_HZ, run_simulator
     if not 0 < args.rate <= MAX_RATE_HZ:

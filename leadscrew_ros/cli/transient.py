@@ -3,9 +3,10 @@
 growth fitted in the linear regime against both formulations' eigenvalues, the limit cycle,
 the squeak as a WAV file and a plot of the time history and spectrogram.
 
-The simulated force is the nonlinear friction of `model.nonlinear.friction_force`, whose linearisation is
-the `consistent` formulation whatever --formulation says; --formulation picks the eigenvalue
-the text output compares with (JSON has both). The eigenvalues are those of the full model
+The simulated force is the nonlinear friction of `model.nonlinear.friction_force`, whose
+linearisation is the `consistent` formulation whatever --formulation says; --formulation picks
+the eigenvalue the text output compares with (JSON has both). The eigenvalues are those of the
+full model
 (all modes of the parameters), also when --modes keeps fewer in the simulation.
 """
 
@@ -106,6 +107,7 @@ def _text(args, result: TransientAnalysis, linear: dict, elapsed: str) -> str:
 
 
 def cmd_transient(args: argparse.Namespace) -> int:
+    """`transient`: simulate the nonlinear transient and analyse it; exit status."""
     model = build_model(args)
     params: ScrewParameters = model.params
     args.load_n = params.axial_load_n if args.load is None else args.load

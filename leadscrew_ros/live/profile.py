@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -35,6 +35,8 @@ class ProfileError(ValueError):
 
 
 class ActuatorState(NamedTuple):
+    """The actuator at one instant: screw speed, axial load, nut position, screw angle."""
+
     speed_rad_s: float
     load_n: float
     nut_position_m: float
@@ -43,6 +45,8 @@ class ActuatorState(NamedTuple):
 
 @dataclass(frozen=True)
 class StrokeProfile:
+    """A simulated stroke: speed up to `peak_speed_rad_s` and back, load in [min, max] [N]."""
+
     duration_s: float = 12.0
     peak_speed_rad_s: float = 120.0
     load_min_n: float = 120.0
@@ -55,7 +59,7 @@ class StrokeProfile:
     nut_position_at_zero_angle_m: float = JointSettings.nut_position_at_zero_angle_m
 
     @classmethod
-    def for_params(cls, params: ScrewParameters, **changes) -> "StrokeProfile":
+    def for_params(cls, params: ScrewParameters, **changes: Any) -> "StrokeProfile":
         """A profile for this screw: lead R tan(beta) and travel limit L - b from `params`."""
         return cls(lead_m_per_rad=params.lead_per_rad_m,
                    max_nut_position_m=params.nut_travel_m, **changes)
@@ -90,6 +94,7 @@ class StrokeProfile:
 
     @property
     def end_nut_position_m(self) -> float:
+        """Nut position at the end of the stroke [m]."""
         return self.start_nut_position_m + self.travel_m
 
     def _speed_fraction(self, tau: float) -> float:

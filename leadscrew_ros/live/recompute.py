@@ -7,8 +7,8 @@ The node feeds it the latest inputs and asks `due(now)`; bursts are coalesced be
 latest value of each input is kept and one recompute serves all of them.
 
 Safe-speed advice needs the squeak band around the speed, where P(squeak) >= safe_probability
-(`model.studies.advice`: tens of predictions, a few seconds with 40/40 modes), so it is searched on a
-background thread (`LatestWorker`): a recompute never
+(`model.studies.advice`: tens of predictions, a few seconds with 40/40 modes), so it is searched on
+a background thread (`LatestWorker`): a recompute never
 waits for it, the last advice stays until the new one is ready, and `poll_advice` (or
 `wait_for_advice`, for callers that want the answer now) picks it up.
 
@@ -26,7 +26,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Callable
+from typing import Callable, Sequence, cast
 
 from threadpoolctl import threadpool_limits
 
@@ -100,6 +100,7 @@ class LatestWorker:
 
     @property
     def busy(self) -> bool:
+        """True while a request waits or runs."""
         with self._cv:
             return self._waiting is not None or self._running
 
@@ -157,6 +158,8 @@ def _single_threaded_blas() -> None:
 
 
 class LivePredictor:
+    """The node's prediction policy: inputs in, recomputes when due, a verdict out."""
+
     def __init__(self, model: SqueakModel, settings: LiveSettings = LiveSettings(),
                  clock: Callable[[], float] = time.perf_counter,
                  joints: JointSettings = JointSettings()):
@@ -203,7 +206,8 @@ class LivePredictor:
         """Take a nut position z_o [m], 0 <= z_o <= L - b; returns '' or why it was rejected."""
         return self._arrive(self.rules.set_nut_position(value), now).error
 
-    def set_joint_state(self, names, positions, velocities, now: float,
+    def set_joint_state(self, names: Sequence[str], positions: Sequence[float],
+                        velocities: Sequence[float], now: float,
                         joints: JointSettings | None = None) -> Outcome:
         """Take the screw joint's speed and nut position of a JointState arrived at `now`
         (`rules.InputRules.set_joint_state`); `joints` first replaces the joint settings."""
@@ -291,6 +295,7 @@ class LivePredictor:
         background search."""
         self._collect()
         self._advised = (model, p)
+        assert p.probability is not None, "advice is for valid predictions"
         if p.probability < self.settings.safe_probability:
             return self._set_advice(p.speed_rad_s, None)
         lowest, highest = model.params.min_speed_rad_s, model.critical_speed_rad_s
@@ -329,7 +334,8 @@ class LivePredictor:
         done = self._worker.take()
         if done is None or self._search is None or done[0] != self._search[0]:
             return False
-        (_, band, error), key = done, self._search[1]
+        (_, found, error), key = done, self._search[1]
+        band = cast("Band | None", found)        # what the search (`band_around`) returns
         self._search = None
         if error is not None:     # keep the last advice; no retry within this bin
             self._failed, self._advice_error = key, f"safe-speed search failed: {error}"
@@ -370,6 +376,7 @@ class LivePredictor:
 
     # ---------------------------------------------------------------- verdict
     def status(self, now: float) -> Status:
+        """The diagnostic status at time `now` (s): level, message and key values."""
         i, s, p = self.inputs, self.settings, self.prediction
         arrived = self._arrived
         valid = p is not None and self._validity in (None, Validity.OK)

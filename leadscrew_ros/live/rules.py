@@ -14,8 +14,8 @@ Rules:
   `ScrewParameters.axial_load_n` (`model.squeak_model.check_operating_point`).
 - Nut position z_o [m]: a real number with 0 <= z_o <= `ScrewParameters.nut_travel_m`.
 - A rejected value is not taken: the previous good one stays, and the rejection gives a
-  one-line message with the value (`model.physics.display.exact`: never rounded onto the limit) and a
-  short reason without the value (the replay counts rejections by it).
+  one-line message with the value (`model.physics.display.exact`: never rounded onto the limit) and
+  a short reason without the value (the replay counts rejections by it).
 - JointState: taken only when `JointSettings.joint_name` is set and the message has that
   joint. An empty `joint_name` ignores joint_states altogether, in the node and in the replay
   alike: using it is an explicit opt-in, so a JointState from another driver (a wheel, an arm)
@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass
-from typing import NamedTuple, Sequence
+from typing import NamedTuple, Sequence, TypeGuard
 
 from ..model import OperatingPointError, ScrewParameters
 from ..model.physics.display import exact
@@ -144,7 +144,7 @@ def read_joint_state(names: Sequence[str], positions: Sequence[float],
         i = list(names).index(name)
     except (TypeError, ValueError):
         return JointReading({}, f"no joint {name!r}")
-    values = {}
+    values: dict[str, object] = {}
     if i < len(velocities):
         values["speed"] = velocities[i]
     if i < len(positions):
@@ -156,7 +156,7 @@ def read_joint_state(names: Sequence[str], positions: Sequence[float],
     return JointReading(values)
 
 
-def _is_real(value: object) -> bool:
+def _is_real(value: object) -> TypeGuard[numbers.Real]:
     """A real number, not a bool (numpy scalars included)."""
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
 

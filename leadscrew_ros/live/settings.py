@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
 """Settings of the live predictor, declared once: default, unit, range and description are the
-field metadata (`model.physics.metadata.setting`), from which the node's parameter descriptors, the YAML
-config, the replay's CLI help and the README tables are made.
+field metadata (`model.physics.metadata.setting`), from which the node's parameter descriptors, the
+YAML config, the replay's CLI help and the README tables are made.
 
 `LiveSettings` is the recompute policy and the verdict; `JointSettings` says how a
 sensor_msgs/JointState maps to speed and nut position. The node and the offline replay use both.

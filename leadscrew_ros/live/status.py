@@ -58,6 +58,7 @@ def prediction_status(p: Prediction, s: LiveSettings, values: dict[str, str] | N
     error_probability or a divergence (non-oscillatory growth) is predicted, WARN when P >=
     warn_probability, else OK; the message gives P (never rounded across a threshold) and
     the modes that squeak at the nominal parameters."""
+    assert p.probability is not None, "a valid prediction has its P(squeak)"
     text = f"{p.probability:.2g}"
     if any((float(text) >= t) != (p.probability >= t)
            for t in (s.warn_probability, s.error_probability)):

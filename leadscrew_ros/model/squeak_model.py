@@ -11,6 +11,7 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .physics.assembly import build_geometry
 from .physics.display import exact
@@ -296,7 +297,7 @@ class SqueakModel:
         return model
 
     def with_scatter(self, scatter: Scatter, samples: int | None = None) -> "SqueakModel":
-        """This model with another scatter (and sample count); the geometry is reused.
+        """A copy of this model with another scatter (and sample count); the geometry is reused.
 
         Parameters
         ----------
@@ -318,8 +319,8 @@ class SqueakModel:
         return SqueakModel(self.params, scatter,
                            self.sample_count if samples is None else samples)
 
-    def validity_code(self, speed_rad_s, load_n, scattered: dict | None = None
-                      ) -> np.ndarray:
+    def validity_code(self, speed_rad_s: ArrayLike, load_n: ArrayLike,
+                      scattered: dict | None = None) -> np.ndarray:
         """Vectorised validity: `Validity` codes (Validity.OK where the linearisation holds).
 
         Parameters
@@ -436,7 +437,7 @@ class SqueakModel:
                               f"eigen-solver failed at this operating point: {exc}")
         return self._prediction(speed, load, eigen)
 
-    def predict_many(self, speeds_rad_s, loads_n) -> list[Prediction]:
+    def predict_many(self, speeds_rad_s: ArrayLike, loads_n: ArrayLike) -> list[Prediction]:
         """Predictions at many operating points: one batched rescale, then an eigen-solve each.
 
         Parameters
@@ -458,11 +459,11 @@ class SqueakModel:
         """
         speeds, loads = (a.ravel() for a in np.broadcast_arrays(
             np.asarray(speeds_rad_s, float), np.asarray(loads_n, float)))
-        points = [check_operating_point(s, f) for s, f in zip(speeds.tolist(), loads.tolist())]
+        points = [check_operating_point(s, f) for s, f in zip(speeds.tolist(), loads.tolist(), strict=True)]
         verdicts = [self.validity(s, f) for s, f in points]
         ok = [i for i, (v, _) in enumerate(verdicts) if v is Validity.OK]
         out = [Prediction(s, f, self.params.formulation, *v)
-               for (s, f), v in zip(points, verdicts)]
+               for (s, f), v in zip(points, verdicts, strict=True)]
         if ok:
             matrices = self.geometry.state_matrices(speeds[ok], loads[ok])
             left = self.scatter.names != ()               # the probability needs them

@@ -36,12 +36,14 @@ class Envelope:
         self._t, self._values = array("d"), array("d")
 
     def add(self, t_s: float, *values: float) -> None:
+        """Add one sample at time `t_s` [s]: one value per channel."""
         self._t.append(t_s)
         self._values.extend(values)
         if len(self._t) >= _BUFFER:
             self.flush()
 
     def flush(self) -> None:
+        """Bin the buffered samples, merging bins while they outrun `max_bins`."""
         if not self._t:
             return
         t = np.frombuffer(self._t, float)
@@ -66,7 +68,7 @@ class Envelope:
         lo, hi, last = (a.reshape(half, 2, c) for a in (self.lo, self.hi, self.last))
         merged = (np.fmin(lo[:, 0], lo[:, 1]), np.fmax(hi[:, 0], hi[:, 1]),
                   np.where(self.count[1::2, None] > 0, last[:, 1], last[:, 0]))
-        for a, m in zip((self.lo, self.hi, self.last), merged):
+        for a, m in zip((self.lo, self.hi, self.last), merged, strict=True):
             a[:half], a[half:] = m, np.nan
         self.count[:half] = self.count[0::2] + self.count[1::2]
         self.count[half:] = 0
@@ -96,6 +98,7 @@ class Reservoir:
         self._rng = np.random.default_rng(seed)
 
     def add(self, *row: float) -> None:
+        """Offer one row to the sample (reservoir sampling)."""
         if self.seen < self.size:
             slot = self.seen
         else:
@@ -113,4 +116,5 @@ class Reservoir:
 
     @property
     def nbytes(self) -> int:
+        """Memory [bytes] of the kept rows."""
         return self.rows.nbytes + self.order.nbytes

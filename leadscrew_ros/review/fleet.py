@@ -219,7 +219,7 @@ def output_names(logs: list[Path], known: dict[str, str] | None = None) -> list[
     counts = Counter(names) + Counter(n for path, n in known.items() if path not in this)
     return [n if counts[n] == 1 or str(p) in known else
             f"{n}-{hashlib.blake2b(str(p).encode(), digest_size=4).hexdigest()}"
-            for p, n in zip(logs, names)]
+            for p, n in zip(logs, names, strict=True)]
 
 
 # ---------------------------------------------------------------------- one log: one task
@@ -272,7 +272,7 @@ def squeak_frequencies(episodes: list[dict[str, Any]]) -> list[float]:
     frequencies; ascending."""
     by_mode: dict[str, list[float]] = {}
     for e in episodes:
-        for mode, hz in zip(e["modes"], e["frequencies_hz"]):
+        for mode, hz in zip(e["modes"], e["frequencies_hz"], strict=True):
             by_mode.setdefault(mode, []).append(hz)
     return sorted(statistics.median(v) for v in by_mode.values())
 
@@ -507,7 +507,7 @@ def review_logs(logs: list[Path], out_dir: Path | str, settings: FleetSettings, 
     rows: dict[str, dict[str, Any]] = {}
     points = _Points()
     todo: list[tuple[Path, str, list | None, str | None]] = []
-    for log, name in zip(logs, names):
+    for log, name in zip(logs, names, strict=True):
         entry = index.get(str(log))
         usable = (entry is not None and entry["params"] == digest and not entry["retry"]
                   and (entry["row"]["status"] != "ok" or (out / name / "summary.json").exists()))
@@ -564,7 +564,7 @@ def review_logs(logs: list[Path], out_dir: Path | str, settings: FleetSettings, 
 
 
 def _take(it: Iterator, n: int) -> list:
-    return [x for _, x in zip(range(n), it)]
+    return [x for _, x in zip(range(n), it, strict=False)]
 
 
 def _stat_or_none(log: Path) -> list | None:

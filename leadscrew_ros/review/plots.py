@@ -179,7 +179,7 @@ def probability_overlay(result: MapResult, band: tuple[float, float] = (0.1, 0.9
         return [Patch(facecolor="none", edgecolor="0.3", hatch="...",
                       label=f"P(squeak) {100 * band[0]:g}-{100 * band[1]:g} %")] + [
             Line2D([], [], color="k", lw=1.0, ls=style, label=f"P = {100 * level:g} %")
-            for level, style in zip(PROBABILITY_LEVELS, _LEVEL_STYLES)]
+            for level, style in zip(PROBABILITY_LEVELS, _LEVEL_STYLES, strict=True)]
     return draw
 
 

@@ -75,6 +75,8 @@ MEDIA_TYPES = {".json": "application/json", ".png": "image/png"}   # of the atta
 
 @dataclass(frozen=True)
 class ReplaySettings:
+    """How to replay a log: input topics, namespaces, workers, thresholds."""
+
     inputs: InputSettings = field(default_factory=InputSettings)
     namespace: str | None = None      # of the inputs; None: the log's single input namespace
     out_namespace: str | None = None  # of the predictions; None: /replay + input namespace
@@ -115,6 +117,7 @@ class ProbabilityTime:
             self.above_error_s += duration_s
 
     def as_dict(self) -> dict[str, Any]:
+        """The figures as a JSON-ready dict (times in s)."""
         return {"peak_probability": self.peak, "peak_probability_t_s": self.peak_t_s,
                 "time_above_warn_s": self.above_warn_s,
                 "time_above_error_s": self.above_error_s}
@@ -160,6 +163,7 @@ class Episode:
         return [float(np.median(self.frequencies[label])) for label in self.modes]
 
     def as_dict(self) -> dict[str, Any]:
+        """The episode as a JSON-ready dict (times in s from the log's start)."""
         return {"start_s": self.start_s, "end_s": self.end_s,
                 "duration_s": self.end_s - self.start_s,
                 "frequencies_hz": self.frequencies_hz, "modes": self.modes,
@@ -183,6 +187,7 @@ class PlotData:
     squeak: Reservoir = field(default_factory=lambda: Reservoir(4))
 
     def add(self, t: float, job: Job, p: Verdict) -> None:
+        """Add the verdict `p` of `job`, predicted at `t` [s]."""
         squeak = p.valid and not p.stable
         self.probability.add(t, p.probability if p.valid else math.nan, float(squeak))
         if p.valid:
@@ -193,6 +198,8 @@ class PlotData:
 
 @dataclass
 class ReplayResult:
+    """What a replay found: files written, counts, P(squeak) over time and the episodes."""
+
     log: Path
     files: list[Path]
     out_dir: Path
@@ -238,6 +245,7 @@ class ReplayResult:
         return self.duration_s / self.wall_s if self.wall_s > 0 else math.inf
 
     def summary(self) -> dict[str, Any]:
+        """The replay's summary as a JSON-ready dict."""
         return {"log": str(self.log), "files": [str(f) for f in self.files],
                 "annotated": str(self.annotated), "duration_s": self.duration_s,
                 "messages": self.messages, "input_messages": dict(self.inputs),
@@ -285,6 +293,7 @@ class ReplayResult:
                                      else "") + f"), {self.scatter_samples} samples")
 
     def summary_text(self) -> str:
+        """The replay's summary as text, a few lines."""
         lines = [f"replay of {self.log}: {len(self.files)} file(s), {self.messages} messages "
                  f"over {self.duration_s:.1f} s",
                  "input messages: " + (", ".join(f"{k} {v}" for k, v in self.inputs.items())
@@ -352,7 +361,7 @@ class _AnnotatedWriter:
         """One prediction: `payloads` of `messages.PREDICTION_TOPICS`, in that order."""
         self._sequence += 1
         add = self.writer.add_message
-        for channel, data in zip(self._outputs, payloads):
+        for channel, data in zip(self._outputs, payloads, strict=True):
             add(channel, log_time_ns, data, log_time_ns, self._sequence)
 
     def finish(self) -> None:
@@ -391,11 +400,13 @@ class Verdict(NamedTuple):
 
     @classmethod
     def of(cls, p: Prediction) -> Verdict:
+        """The verdict kept of prediction `p`."""
         return cls(p.speed_rad_s, p.load_n, p.validity, p.probability, p.max_growth_rate,
                    p.divergence_rates, tuple((m.label, m.frequency_hz) for m in p.squeak_modes))
 
     @property
     def valid(self) -> bool:
+        """True if the prediction is valid (Validity.OK)."""
         return self.validity is Validity.OK
 
     @property
@@ -531,7 +542,7 @@ class _Episodes:
         self.count += 1
         self.time_in_squeak_s += e.end_s - e.start_s
         if len(self.kept) < self.keep:      # with each mode's median only: a few hundred bytes
-            e.frequencies = dict(zip(e.modes, ([hz] for hz in e.frequencies_hz)))
+            e.frequencies = dict(zip(e.modes, ([hz] for hz in e.frequencies_hz), strict=True))
             self.kept.append(e)
 
     def close(self, end_s: float) -> None:
@@ -610,7 +621,7 @@ class _Run:
 
     def _write(self, seg: _Segment) -> None:
         self.held -= len(seg.messages)
-        jobs = iter(zip(seg.jobs, *seg.result()))
+        jobs = iter(zip(seg.jobs, *seg.result(), strict=True))
         job, p, payloads = next(jobs, (None, None, None))
         for i, m in enumerate(seg.messages):
             self.out.original(m)
@@ -675,7 +686,7 @@ def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
                     raise LogError(f, str(exc)) from None
             run.finish()
         _check_inputs(log, run.timeline, source.counts)
-        for p, final in zip(partial, (annotated, episodes)):
+        for p, final in zip(partial, (annotated, episodes), strict=True):
             p.replace(final)
     except BaseException:
         for p in partial:

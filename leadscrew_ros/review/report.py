@@ -44,6 +44,8 @@ BAND_COLORS = ("tab:blue", "tab:green", "tab:purple", "tab:brown")
 
 @dataclass(frozen=True)
 class ReportGrids:
+    """Grid sizes and resolution of the report's figures."""
+
     map_loads: int
     map_speeds: int
     sweep_speeds: int
@@ -76,7 +78,7 @@ def _filled(lo: np.ndarray, hi: np.ndarray, last: np.ndarray,
 def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
     """(first, last) index of each run of True."""
     edges = np.diff(np.r_[0, flags.astype(np.int8), 0])
-    return list(zip(np.flatnonzero(edges == 1).tolist(), (np.flatnonzero(edges == -1) - 1).tolist()))
+    return list(zip(np.flatnonzero(edges == 1).tolist(), (np.flatnonzero(edges == -1) - 1).tolist(), strict=True))
 
 
 def _probability_panel(result: ReplayResult, axes) -> None:
@@ -126,6 +128,7 @@ def _probability_panel(result: ReplayResult, axes) -> None:
 
 
 def plot_timeline(result: ReplayResult, path: Path, grids: ReportGrids) -> None:
+    """Draw the inputs and P(squeak) over the log's time to `path`."""
     tl = result.timeline
     t, lo, hi, last, count = tl.trace.series()
     lo, hi = _filled(lo, hi, last, count)         # an input value holds until the next
@@ -134,7 +137,7 @@ def plot_timeline(result: ReplayResult, path: Path, grids: ReportGrids) -> None:
         panels.append((2, "nut position [mm]", 1e3))
     fig = new_figure(figsize=(10, 2.1 * (len(panels) + 1) + 0.2), layout="constrained")
     axes = fig.subplots(len(panels) + 1, 1, sharex=True)
-    for ax, (k, label, factor) in zip(axes, panels):
+    for ax, (k, label, factor) in zip(axes, panels, strict=False):
         ax.fill_between(t, lo[:, k] * factor, hi[:, k] * factor, step="mid", color="tab:blue",
                         edgecolor="tab:blue", lw=0.7)
         ax.set_ylabel(label)

@@ -74,7 +74,7 @@ def is_input(topic: Topic) -> bool:
 def input_namespaces(topics: Iterable[Topic], settings: InputSettings) -> list[str]:
     """The namespaces in which some relative input topic of `settings` exists, sorted."""
     needs = [(getattr(settings, f), type_name) for f, type_name in zip(TOPIC_FIELDS, (
-        FLOAT64, FLOAT64, FLOAT64, JOINT_STATE)) if not getattr(settings, f).startswith("/")]
+        FLOAT64, FLOAT64, FLOAT64, JOINT_STATE), strict=True) if not getattr(settings, f).startswith("/")]
     return sorted({ns for t in topics for rel, type_name in needs
                    if (ns := matches(t, rel, type_name)) is not None})
 
@@ -132,11 +132,13 @@ class InputSettings:
 
     @property
     def joints(self) -> JointSettings:
+        """The screw joint settings of JointState inputs."""
         return JointSettings(joint_name=self.joint_name,
                              nut_position_at_zero_angle_m=self.nut_position_at_zero_angle_m)
 
     @property
     def topics(self) -> tuple[str, str, str, str]:
+        """The four input topic names, in `TOPIC_FIELDS` order."""
         return tuple(getattr(self, f) for f in TOPIC_FIELDS)
 
     def resolved(self, namespace: str) -> InputSettings:
@@ -206,6 +208,7 @@ class Timeline:
 
     @property
     def nut_measured(self) -> bool:
+        """True if the nut position is measured (a nut or joint input)."""
         return self.rules.nut_measured
 
     @property
@@ -219,6 +222,7 @@ class Timeline:
 
     # ------------------------------------------------------------------ feeding
     def feed(self, m: LogMessage, index: int) -> Job | None:
+        """Feed message `m` (at `index` in the log); the point to recompute, if any."""
         if self.start_ns is None:
             self.start_ns = self.now_ns = m.log_time_ns
         self.now_ns = max(self.now_ns, m.log_time_ns)
@@ -329,7 +333,7 @@ def _spec_model(spec: ModelSpec) -> SqueakModel:
     """The model of a spec at its own nut position, whose samples the others share (kept
     here, not on the spec: the spec is pickled to the workers)."""
     model = SqueakModel(spec.params, Scatter(dict(spec.scatter)), spec.samples)
-    model.samples                        # drawn once: with_params passes them on
+    _ = model.samples                    # drawn once: with_params passes them on
     return model
 
 
@@ -368,6 +372,6 @@ def predict_jobs(spec: ModelSpec, speeds: np.ndarray, loads: np.ndarray,
                      for i in idx]
         else:
             preds = model.predict_many(speeds[idx], loads[idx])
-        for i, p in zip(idx.tolist(), preds):
+        for i, p in zip(idx.tolist(), preds, strict=True):
             out[i] = p
     return out

@@ -215,6 +215,7 @@ def _recorded(recorder: Recorder, sim: ActuatorSimulator) -> bool:
 
 def summary(profile: StrokeProfile, r: SqueakRecord, elapsed_s: float, finished: bool,
             expected_s: float | None, published: int = 0) -> str:
+    """The demo's closing summary: the stroke, what was predicted and published."""
     d = profile.duration_s
     loads = [profile.state(t).load_n for t in [d * i / 200 for i in range(201)]]
     lines = [f"summary of the {d:g} s stroke (0 -> {profile.peak_speed_rad_s:g} rad/s -> 0, "

@@ -56,6 +56,7 @@ class DiagnosticStatusWrapper:
     values: dict[str, str] = field(default_factory=dict)
 
     def summary(self, level: Level, message: str) -> None:
+        """Set the level and message of the status."""
         self.level, self.message = Level(level), message
 
     def merge_summary(self, level: Level, message: str) -> None:
@@ -64,6 +65,7 @@ class DiagnosticStatusWrapper:
         self.message = "; ".join(m for m in (self.message, message) if m)
 
     def add(self, key: str, value: object) -> None:
+        """Add the key-value pair (`value` as text)."""
         self.values[key] = str(value)
 
     def to_data(self) -> DiagnosticStatusData:
@@ -94,6 +96,7 @@ class Updater:
         self.published = 0
 
     def add(self, name: str, task: Task) -> None:
+        """Add a task that fills the status `name`."""
         self._tasks.append((name, task))
 
     def update(self) -> bool:

@@ -104,6 +104,8 @@ def bag_prefix(namespace: str) -> str:
 
 
 class SqueakPredictorNode(Node):
+    """The squeak predictor node: inputs in, P(squeak) and diagnostics out, recording."""
+
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         self._declare_parameters()
@@ -170,6 +172,7 @@ class SqueakPredictorNode(Node):
         self._diagnose(time.monotonic(), periodic=True)
 
     def destroy_node(self) -> None:
+        """Stop the predictor and the recording, then destroy the node."""
         self.live.close()                     # the background safe-speed search ends too
         self._stop_recording()                # summary, index and footer: a clean file
         self._crash_recovery.join()

@@ -1,8 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
 """The parameters of the node `squeak_predictor`, made from the settings' field metadata.
 
-Every parameter is a field of one settings dataclass (`model.physics.metadata.setting`: default, unit,
-range, description, read-only); `GROUPS` orders the dataclasses and gives each its name prefix.
+Every parameter is a field of one settings dataclass (`model.physics.metadata.setting`: default,
+unit, range, description, read-only); `GROUPS` orders the dataclasses and gives each its name
+prefix.
 From that one table come the ROS parameter descriptors (`descriptor`), the dataclasses built
 from parameter values (`build`), the parameter lines of `squeak_node --help` (`help_lines`)
 and config/leadscrew.yaml (`config_yaml`, written by tools/gen_config.py).
@@ -91,10 +92,12 @@ class Spec(NamedTuple):
 
     @property
     def default(self) -> Any:
+        """The parameter's default value."""
         return self.field.default
 
     @property
     def md(self) -> Any:
+        """The parameter field's metadata."""
         return self.field.metadata
 
 

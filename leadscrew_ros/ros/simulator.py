@@ -81,6 +81,7 @@ class ActuatorSimulator(Node):
         return matched > 0 and matched >= self.count_subscribers(self.speed_pub.topic_name)
 
     def publish(self, s: ActuatorState) -> None:
+        """Publish the actuator state `s` on the input topics."""
         self.speed_pub.publish(Float64(data=float(s.speed_rad_s)))
         self.load_pub.publish(Float64(data=float(s.load_n)))
         self.nut_pub.publish(Float64(data=float(s.nut_position_m)))

@@ -29,6 +29,7 @@ W1 + W2 + W5q and the damping W3 + W4 + W5qdot of the `consistent` formulation
 from __future__ import annotations
 
 import math
+from typing import Literal, overload
 
 import numpy as np
 
@@ -122,6 +123,14 @@ class HelixFriction:
         """
         v = np.concatenate((q, qdot)) @ self._state_velocity
         return v.reshape(3, -1) + self.v0[:, None]
+
+    @overload
+    def force(self, q: np.ndarray, qdot: np.ndarray, jacobian: Literal[False] = False
+              ) -> np.ndarray: ...
+
+    @overload
+    def force(self, q: np.ndarray, qdot: np.ndarray, jacobian: Literal[True]
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 
     def force(self, q: np.ndarray, qdot: np.ndarray, jacobian: bool = False
               ) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:

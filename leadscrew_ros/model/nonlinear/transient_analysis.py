@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -285,7 +286,7 @@ def linear_counterparts(params: ScrewParameters, speed_rad_s: float, load_n: flo
         {mode, frequency_hz, growth_rate} and reason ('' when valid; the rest None when the
         linear model refuses the point, e.g. below min_speed_rad_s).
     """
-    out = {}
+    out: dict[str, dict[str, Any]] = {}
     for name in FORMULATIONS:
         pred = SqueakModel(params.with_(formulation=name), Scatter({})).predict(
             speed_rad_s, load_n)

@@ -14,9 +14,10 @@ from __future__ import annotations
 from dataclasses import dataclass, fields, replace
 from functools import cached_property, lru_cache
 from types import SimpleNamespace
-from typing import Mapping
+from typing import Mapping, cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .contact import ContactIntegrals, HelixContact, helix_contact
 from .kernels import MATRICES, scales
@@ -25,8 +26,8 @@ from .parameters import ScrewParameters
 
 
 def gyroscopic_unit(basis: ModalBasis) -> np.ndarray:
-    """G / Omega (A.2): rho * integral over the section of r dr dtheta = rho A (the section integral of (A.2) is the area), so
-    with mass-normalised shapes G couples B_nx and B_ny by -+2 Omega."""
+    """G / Omega (A.2): rho * integral over the section of r dr dtheta = rho A (the section integral
+    of (A.2) is the area), so with mass-normalised shapes G couples B_nx and B_ny by -+2 Omega."""
     same_order = basis.order[:, None] == basis.order[None, :]
     xy = (basis.kind[:, None] == KIND_X) & (basis.kind[None, :] == KIND_Y) & same_order
     return 2.0 * (xy.T.astype(float) - xy.astype(float))
@@ -45,6 +46,8 @@ class SystemMatrices:
 
 @dataclass(frozen=True)
 class Geometry:
+    """The speed- and load-independent parts of the model: basis, contact integrals, G."""
+
     params: ScrewParameters
     basis: ModalBasis
     contact: ContactIntegrals
@@ -54,9 +57,11 @@ class Geometry:
 
     @property
     def n(self) -> int:
+        """Number of modes N."""
         return self.basis.n
 
     def matrices(self, speed_rad_s: float, load_n: float) -> SystemMatrices:
+        """The system matrices of eq. (27) at a rotation speed [rad/s] and an axial load [N]."""
         s = scales(self.params, speed_rad_s, load_n, self.contact.alpha)
         W = {k: float(s[k]) * v for k, v in self.contact.unit.items()}
         om = self.basis.omega_rad_s
@@ -76,8 +81,8 @@ class Geometry:
         a[n + np.arange(n), n + np.arange(n)] = -2 * self.params.modal_damping * om    # (A.1)
         return a
 
-    def state_matrices(self, speed_rad_s, load_n, scattered: Mapping[str, np.ndarray] | None
-                       = None) -> np.ndarray:
+    def state_matrices(self, speed_rad_s: ArrayLike, load_n: ArrayLike,
+                       scattered: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
         """First-order state matrices [[0, I], [-K, -D]] of (27) for arrays of operating points
         (broadcast), shape (..., 2N, 2N). One matrix product rescales all precomputed parts.
 
@@ -86,7 +91,7 @@ class Geometry:
         scale factors and the damping diagonal, so samples of them cost one product each."""
         if not scattered and (type(speed_rad_s) is float and type(load_n) is float
                               or np.ndim(speed_rad_s) == 0 and np.ndim(load_n) == 0):
-            return self._state_matrix(float(speed_rad_s), float(load_n))
+            return self._state_matrix(float(cast(float, speed_rad_s)), float(cast(float, load_n)))
         speed = np.asarray(speed_rad_s, float)
         if scattered:                          # one matrix per sample, whatever varies
             speed = np.broadcast_to(speed, np.broadcast_shapes(

@@ -4,22 +4,23 @@
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from .parameters import ScrewParameters
+from .parameters import ParamsLike
 
 
-def friction_coefficient(p: ScrewParameters, sliding_speed_m_s):
+def friction_coefficient(p: ParamsLike, sliding_speed_m_s: ArrayLike) -> np.ndarray:
     """mu(|Vc|) = mu_k + (mu_s - mu_k) exp(-d |Vc|)  (12)."""
     v = np.abs(sliding_speed_m_s)
     return p.mu_kinetic + (p.mu_static - p.mu_kinetic) * np.exp(-p.friction_decay_s_m * v)
 
 
-def sliding_speed(p: ScrewParameters, speed_rad_s):
+def sliding_speed(p: ParamsLike, speed_rad_s: ArrayLike) -> np.ndarray:
     """Steady contact sliding speed |Vc| = R |Omega| / cos(beta), m/s (from (4), (11))."""
     return p.radius_m * np.abs(speed_rad_s) / np.cos(p.helix_angle_rad)
 
 
-def steady_friction(p: ScrewParameters, speed_rad_s) -> tuple:
+def steady_friction(p: ParamsLike, speed_rad_s: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """(mu_o, gamma) at the steady sliding speed |Vc| = R |Omega| / cos(beta) (A.10, A.11;
     README "Physics"): the friction coefficient (12) there and the slope term
     gamma = cos(beta) dmu/d|Vc| [s/m], from one exponential."""
@@ -28,11 +29,11 @@ def steady_friction(p: ScrewParameters, speed_rad_s) -> tuple:
     return p.mu_kinetic + drop * e, -drop * d * e * np.cos(p.helix_angle_rad)
 
 
-def mu_o(p: ScrewParameters, speed_rad_s):
+def mu_o(p: ParamsLike, speed_rad_s: ArrayLike) -> np.ndarray:
     """Friction coefficient at the steady sliding speed (A.10)."""
     return steady_friction(p, speed_rad_s)[0]
 
 
-def gamma(p: ScrewParameters, speed_rad_s):
+def gamma(p: ParamsLike, speed_rad_s: ArrayLike) -> np.ndarray:
     """Friction slope term gamma = cos(beta) dmu/d|Vc| at steady sliding, s/m  (A.11)."""
     return steady_friction(p, speed_rad_s)[1]

@@ -31,11 +31,14 @@ trigonometric polynomial of degree 2, k_ab(theta) = sum_{m=-2..2} c_m e^{i m the
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .friction import steady_friction
 from .modes import KIND_T, KIND_X, KIND_Y
-from .parameters import ScrewParameters
+from .parameters import ParamsLike
 
 X, Y, T = KIND_X, KIND_Y, KIND_T
 
@@ -48,7 +51,8 @@ def _blocks(n: int, entries: dict[tuple[int, int], np.ndarray]) -> np.ndarray:
 
 
 def paper_kernels(theta: np.ndarray, beta: float, radius_m: float) -> dict[str, np.ndarray]:
-    """Appendix A as printed ((A.3)-(A.8), the second "W5q" read as the matrix of qdot; README "Two formulations"), each (3, 3, len(theta))."""
+    """Appendix A as printed ((A.3)-(A.8), the second "W5q" read as the matrix of qdot; README
+    "Two formulations"), each (3, 3, len(theta))."""
     return _paper(np.sin(theta), np.cos(theta), beta, radius_m)
 
 
@@ -156,7 +160,8 @@ def kernel_harmonics(formulation: str, beta: float, radius_m: float) -> np.ndarr
     return np.stack([c2.conj(), c1.conj(), p00 + (p20 + p02) / 2 + 0j, c1, c2], axis=-1)
 
 
-def thread_factors(p: ScrewParameters, mu_o_value, speed_rad_s, load_n):
+def thread_factors(p: ParamsLike, mu_o_value: ArrayLike, speed_rad_s: ArrayLike,
+                   load_n: ArrayLike) -> tuple[Any, Any, Any]:
     """(c_f, c_5, d c / d mu_o) of the module docstring: the factors of the friction level and
     slope terms, and their derivative with respect to mu_o (the same for both; 0 for paper)."""
     tb = np.tan(p.helix_angle_rad)
@@ -167,7 +172,8 @@ def thread_factors(p: ScrewParameters, mu_o_value, speed_rad_s, load_n):
     return c, c, -flank * tb * c * c
 
 
-def level_slope(p: ScrewParameters, speed_rad_s, load_n, alpha: float) -> tuple:
+def level_slope(p: ParamsLike, speed_rad_s: ArrayLike, load_n: ArrayLike, alpha: float
+                ) -> tuple[np.ndarray, np.ndarray]:
     """Friction level l = mu_o |F_z| c_f / (alpha R) (W1-W4) and friction slope
     s = gamma |F_z| c_5 / alpha (W5), broadcast over speed, load and the fields of `p` (arrays
     of scattered friction parameters too)."""
@@ -178,7 +184,8 @@ def level_slope(p: ScrewParameters, speed_rad_s, load_n, alpha: float) -> tuple:
     return m0 * load / (alpha * p.radius_m) * c_f, g * load / alpha * c_5
 
 
-def scales(p: ScrewParameters, speed_rad_s, load_n, alpha: float) -> dict[str, np.ndarray]:
+def scales(p: ParamsLike, speed_rad_s: ArrayLike, load_n: ArrayLike, alpha: float
+           ) -> dict[str, np.ndarray]:
     """Scalar factors of W1..W5qdot at operating points (broadcast over speed and load)."""
     speed = np.asarray(speed_rad_s, dtype=float)
     level, slope = level_slope(p, speed, load_n, alpha)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import MISSING, Field, field, fields
+from collections.abc import Mapping
 from typing import Any
 
 from .display import exact
@@ -59,7 +60,7 @@ def _bound(value: float) -> str:
     return str(value) if isinstance(value, int) else f"{value:g}"    # 1000000, not 1e+06
 
 
-def range_text(md: dict[str, Any]) -> str:
+def range_text(md: Mapping[str, Any]) -> str:
     """'[lo, hi] unit' with open bounds as parentheses (no unit for dimensionless '1')."""
     lo = "(" if md["lo_open"] else "["
     hi = ")" if md["hi_open"] else "]"

@@ -28,10 +28,12 @@ class ModalBasis:
 
     @property
     def n(self) -> int:
+        """Number of modes N."""
         return len(self.labels)
 
     @property
     def frequency_hz(self) -> np.ndarray:
+        """Natural frequencies [Hz] of the modes."""
         return self.omega_rad_s / (2 * math.pi)
 
     def shapes(self, z_m: np.ndarray) -> np.ndarray:
@@ -40,6 +42,7 @@ class ModalBasis:
 
 
 def modal_basis(p: ScrewParameters) -> ModalBasis:
+    """The assumed modes of a screw (bending and torsion), eqs. (24)-(26)."""
     area = math.pi * p.radius_m ** 2
     polar = math.pi * p.radius_m ** 4 / 2          # J = I_zz
     inertia = math.pi * p.radius_m ** 4 / 4        # I_xx = I_yy

@@ -9,8 +9,9 @@ table.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
-from typing import Any, Iterable
+from dataclasses import Field, dataclass, fields, replace
+from types import SimpleNamespace
+from typing import Any, Iterable, TypeAlias
 
 from .display import exact
 from .metadata import check_value, range_text, setting
@@ -127,8 +128,9 @@ class ScrewParameters:
         ScrewParameters
             A copy whose non-geometry fields hold their defaults.
         """
-        return replace(self, **{f.name: f.default for f in fields(self)
-                                if not f.metadata["geometry"]})
+        defaults: dict[str, Any] = {f.name: f.default for f in fields(self)
+                                    if not f.metadata["geometry"]}
+        return replace(self, **defaults)
 
     def as_dict(self) -> dict[str, Any]:
         """The fields as a plain dict.
@@ -157,14 +159,19 @@ def _attributes_section() -> str:
 
 
 _FIELDS = fields(ScrewParameters)
+
+# The parameters, or a namespace of their fields where some hold arrays of scattered values
+# (`uncertainty`'s samples): what the friction law and the kernels broadcast over.
+ParamsLike: TypeAlias = "ScrewParameters | SimpleNamespace"
 _FIELD_BY_NAME = {f.name: f for f in _FIELDS}
 
 
 def field_names() -> list[str]:
+    """Names of the `ScrewParameters` fields, in declaration order."""
     return list(_FIELD_BY_NAME)
 
 
-def _field(name: str):
+def _field(name: str) -> Field[Any]:
     try:
         return _FIELD_BY_NAME[name]
     except (KeyError, TypeError):
@@ -173,6 +180,7 @@ def _field(name: str):
 
 
 def field_info(name: str) -> dict[str, Any]:
+    """Metadata of field `name`: unit, range, help, with its default and type."""
     f = _field(name)
     return dict(f.metadata, default=f.default, type=f.type)
 

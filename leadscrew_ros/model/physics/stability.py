@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Eigen-analysis of (27): squeak (flutter) modes, divergence, labels (README "Sign conventions, validity, risk")."""
+"""Eigen-analysis of (27): squeak (flutter) modes, divergence, labels (README
+"Sign conventions, validity, risk")."""
 
 from __future__ import annotations
 
@@ -142,7 +143,7 @@ def classify(eigen: Eigen, labels: tuple[str, ...]
     modes = [ModeResult(labels[d], i / two_pi, r, -r / g, r > GROWTH_TOL * g)
              for d, r, i, g in zip(eigen.dominant(len(labels))[order].tolist(),
                                    lam.real.tolist(), lam.imag.tolist(),
-                                   np.abs(lam).tolist())]
+                                   np.abs(lam).tolist(), strict=True)]
     if eigvals.real.max() <= 0:                     # the common case: nothing grows
         return tuple(modes), ()
     mag = np.abs(eigvals)

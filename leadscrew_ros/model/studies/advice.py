@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Callable, Literal
+from typing import Any, Callable, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -78,7 +78,8 @@ def band_score(model: SqueakModel, load_n: float, direction: float, safe_probabi
         if checkpoint is not None:
             checkpoint()
         speeds = sign * np.atleast_1d(np.asarray(w, float))
-        return np.array([p.probability - safe_probability if p.valid else math.nan
+        return np.array([p.probability - safe_probability
+                         if p.valid and p.probability is not None else math.nan
                          for p in model.predict_many(speeds, load_n)])
 
     return score
@@ -126,6 +127,7 @@ class Band:
     above: End
 
     def contains(self, speed_rad_s: float) -> bool:
+        """True if |`speed_rad_s`| lies in the band."""
         return self.low_rad_s <= abs(speed_rad_s) <= self.high_rad_s
 
     def safe_speed(self, speed_rad_s: float, lowest_rad_s: float, highest_rad_s: float,
@@ -204,9 +206,9 @@ def band_around(model: SqueakModel, load_n: float, speed_rad_s: float, margin: f
             points.append(x[:keep])
             reach.append(r[:keep])
         cut = np.sort(np.concatenate(reach))[:_SCAN_BATCH][-1]
-        points = [x[r <= cut] for x, r in zip(points, reach)]
+        points = [x[r <= cut] for x, r in zip(points, reach, strict=True)]
         g = score(np.concatenate(points))
-        for s, x, start in zip(sides, points, np.cumsum([0] + [len(x) for x in points])):
+        for s, x, start in zip(sides, points, np.cumsum([0] + [len(x) for x in points]), strict=False):
             band = _extend(band, s, x, g[start:start + len(x)], lowest, highest, score)
 
 
@@ -226,11 +228,12 @@ def _extend(band: Band, side: str, x: np.ndarray, g: np.ndarray, lowest: float,
     """The band after scanning `x` (outward, `band_score` values `g`) beyond its `side` end."""
     end = "low_rad_s" if side == "below" else "high_rad_s"
     last = getattr(band, end)                         # last point in the band, outward
-    for xi, gi in zip(x.tolist(), g.tolist()):
+    for xi, gi in zip(x.tolist(), g.tolist(), strict=True):
         if math.isnan(gi):                            # invalid ground: no advice beyond
             return replace(band, **{end: last, side: "limit"})
         if gi < 0:                                    # safe: refine the edge
-            return replace(band, **{end: _edge(score, last, xi), side: "edge"})
+            edge: dict[str, Any] = {end: _edge(score, last, xi), side: "edge"}
+            return replace(band, **edge)
         last = xi
     at_grid_end = last == (lowest if side == "below" else highest)
     return replace(band, **{end: last, side: "limit" if at_grid_end else "unknown"})

@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable, Iterable
+from typing import Any, Callable, Iterable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..physics.display import exact
 from ..physics.parameters import ParameterError, field_info, field_names
@@ -58,6 +59,7 @@ class Work:
         return max(1, min(MAX_POINTS, int(MAX_POINTS * scale)))
 
     def memory_bytes(self, points: int | None = None) -> float:
+        """Memory [bytes] that `points` predictions take (default: this batch's)."""
         n = self.points if points is None else points
         chunk = _chunk_points(self.state_size) * self.state_size ** 2 * 16 * 4   # eig workspace
         return n * self.bytes_per_point + chunk
@@ -114,11 +116,13 @@ def sweep_work(model: SqueakModel, axis: str, values: np.ndarray) -> Work:
 
 
 def axis_names() -> list[str]:
+    """Names a sweep or map can vary: the operating axes, then numeric parameters."""
     return list(OPERATING_AXES) + [n for n in field_names()
                                     if field_info(n)["type"] in ("float", "int")]
 
 
 def check_axis(name: str) -> None:
+    """Raise ParameterError unless `name` is one of `axis_names()`."""
     if name not in axis_names():
         raise ParameterError(f"cannot sweep {name!r}; choose one of {', '.join(axis_names())}")
 
@@ -160,16 +164,16 @@ def _point_models(model: SqueakModel, params: dict[str, np.ndarray], size: int
     for k, row in enumerate(uniq):
         idx = np.flatnonzero(inverse.ravel() == k)
         try:
-            yield model.with_params(**{n: _native(n, v) for n, v in zip(names, row)}), idx
+            yield model.with_params(**{n: _native(n, v) for n, v in zip(names, row, strict=True)}), idx
         except ParameterError:
             yield None, idx
 
 
-def _native(name: str, value: float):
+def _native(name: str, value: float) -> int | float:
     return int(round(value)) if field_info(name)["type"] == "int" else float(value)
 
 
-def _flat_points(speed_rad_s, load_n, params: dict) -> tuple:
+def _flat_points(speed_rad_s: ArrayLike, load_n: ArrayLike, params: dict) -> tuple:
     """The broadcast of speeds, loads and parameter arrays: its shape and each flattened
     (parameter columns in the order of `params`); ParameterError if a value is not finite."""
     arrays = np.broadcast_arrays(np.asarray(speed_rad_s, float), np.asarray(load_n, float),
@@ -180,8 +184,9 @@ def _flat_points(speed_rad_s, load_n, params: dict) -> tuple:
     return arrays[0].shape, flat[0], flat[1], flat[2:]
 
 
-def growth_field(model: SqueakModel, speed_rad_s, load_n,
-                 progress: Callable[[int], None] | None = None, **params) -> GrowthField:
+def growth_field(model: SqueakModel, speed_rad_s: ArrayLike, load_n: ArrayLike,
+                 progress: Callable[[int], None] | None = None, **params: ArrayLike
+                 ) -> GrowthField:
     """Largest squeak growth rate at every point of the broadcast of all given arrays.
 
     Points that share all parameter values are solved in one batched eigenproblem.
@@ -212,13 +217,14 @@ def growth_field(model: SqueakModel, speed_rad_s, load_n,
     """
     shape, speeds, loads, columns = _flat_points(speed_rad_s, load_n, params)
     growth, freq, diverge = (np.full(speeds.size, np.nan) for _ in range(3))
-    for sub, idx in _point_models(model, dict(zip(params, columns)), speeds.size):
+    for sub, idx in _point_models(model, dict(zip(params, columns, strict=True)), speeds.size):
         ok = idx[:0] if sub is None else \
             idx[sub.validity_code(speeds[idx], loads[idx]) == Validity.OK]
         if progress and ok.size < idx.size:
             progress(idx.size - ok.size)                 # invalid points: done at once
         if not ok.size:
             continue
+        assert sub is not None                           # ok is empty when sub is None
         chunk = _chunk_points(2 * sub.geometry.n)
         for start in range(0, ok.size, chunk):
             part = ok[start:start + chunk]
@@ -233,8 +239,8 @@ def growth_field(model: SqueakModel, speed_rad_s, load_n,
     return GrowthField(*(a.reshape(shape) for a in (growth, valid, freq, diverge)))
 
 
-def probability_field(model: SqueakModel, speed_rad_s, load_n,
-                      progress: Callable[[int], None] | None = None, **params
+def probability_field(model: SqueakModel, speed_rad_s: ArrayLike, load_n: ArrayLike,
+                      progress: Callable[[int], None] | None = None, **params: ArrayLike
                       ) -> tuple[np.ndarray, np.ndarray]:
     """P(squeak) (`Prediction.probability`: the fast estimator over the model's scatter) at
     every point of the broadcast of all given arrays.
@@ -267,7 +273,7 @@ def probability_field(model: SqueakModel, speed_rad_s, load_n,
     """
     shape, speeds, loads, columns = _flat_points(speed_rad_s, load_n, params)
     prob, stderr = np.full(speeds.size, np.nan), np.full(speeds.size, np.nan)
-    for sub, idx in _point_models(model, dict(zip(params, columns)), speeds.size):
+    for sub, idx in _point_models(model, dict(zip(params, columns, strict=True)), speeds.size):
         if sub is None:                                  # parameters rejected: NaN
             if progress:
                 progress(idx.size)
@@ -275,7 +281,7 @@ def probability_field(model: SqueakModel, speed_rad_s, load_n,
         chunk = _chunk_points(2 * sub.geometry.n)
         for start in range(0, idx.size, chunk):
             part = idx[start:start + chunk]
-            for i, p in zip(part.tolist(), sub.predict_many(speeds[part], loads[part])):
+            for i, p in zip(part.tolist(), sub.predict_many(speeds[part], loads[part]), strict=True):
                 if p.valid:
                     prob[i] = p.probability
                     stderr[i] = np.nan if p.probability_stderr is None else p.probability_stderr
@@ -330,7 +336,7 @@ def _growth_at(model: SqueakModel, fixed: dict[str, float], axes: tuple[str, ...
 
 
 def find_roots(f: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray,
-               hi: np.ndarray, f_lo: np.ndarray, f_hi: np.ndarray, xtol: np.ndarray
+               hi: np.ndarray, f_lo: np.ndarray, f_hi: np.ndarray, xtol: np.ndarray | float
                ) -> np.ndarray:
     """Roots of many bracketed scalar functions at once (Chandrupatla's method: inverse
     quadratic interpolation, bisection when it would be slow), one batched call of `f` per
@@ -349,9 +355,9 @@ def find_roots(f: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray
         The functions at `lo`; of the opposite sign to `f_hi`, or zero (that end is the root).
     f_hi : numpy.ndarray
         The functions at `hi`.
-    xtol : numpy.ndarray
-        Absolute tolerance per bracket, in the unit of x: a bracket ends narrower than
-        ``xtol + 4 eps |x|``.
+    xtol : numpy.ndarray or float
+        Absolute tolerance per bracket (one for all: a float), in the unit of x: a bracket
+        ends narrower than ``xtol + 4 eps |x|``.
 
     Returns
     -------
@@ -566,7 +572,7 @@ def unstable_intervals(values: np.ndarray, growth: np.ndarray, boundaries: list[
     return bands
 
 
-def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = None,
+def sweep(model: SqueakModel, axis: str, values: ArrayLike, speed_rad_s: float | None = None,
           load_n: float | None = None, progress: Callable[[int], None] | None = None
           ) -> SweepResult:
     """Predictions along one axis (batched), with refined stability boundaries and bands.
@@ -605,7 +611,7 @@ def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = Non
     fixed = _fixed(model, speed_rad_s, load_n)
     fixed.pop(axis, None)
     if axis in OPERATING_AXES:
-        point = dict(fixed, **{axis: values})
+        point: dict[str, Any] = dict(fixed, **{axis: values})
         speeds, loads = np.broadcast_arrays(point["speed_rad_s"], point["load_n"])
         predictions, chunk = [], _chunk_points(2 * model.geometry.n)
         for start in range(0, values.size, chunk):
@@ -652,7 +658,7 @@ def _refined_boundary(model: SqueakModel, fixed: dict[str, float],
         np.repeat([_xtol(x, ROOT_RTOL), _xtol(y, ROOT_RTOL)], [len(rows), len(cols)]))
     return [(r, yv) if k == 0 else (xv, r)
             for k, r, xv, yv in zip(vary.tolist(), roots.tolist(), coords[:, 0].tolist(),
-                                    coords[:, 1].tolist())]
+                                    coords[:, 1].tolist(), strict=True)]
 
 
 @dataclass(frozen=True)
@@ -735,11 +741,14 @@ class MapResult:
             points where P crosses it.
         """
         g = self.field.max_growth_rate
-        extra = {} if self.probability is None else {
-            "probability": _grid_list(self.probability),
-            "probability_stderr": _grid_list(self.probability_stderr),
-            "probability_contours": {_levels_key(k): [list(p) for p in v]
-                                     for k, v in self.probability_contours().items()}}
+        extra: dict[str, Any] = {}
+        if self.probability is not None:
+            assert self.probability_stderr is not None       # a probability map sets both
+            extra = {
+                "probability": _grid_list(self.probability),
+                "probability_stderr": _grid_list(self.probability_stderr),
+                "probability_contours": {_levels_key(k): [list(p) for p in v]
+                                         for k, v in self.probability_contours().items()}}
         return {"x_axis": self.x_axis, "x": self.x.tolist(), "y_axis": self.y_axis,
                 "y": self.y.tolist(), "fixed": self.fixed,
                 "max_growth_rate": _grid_list(g),
@@ -753,7 +762,7 @@ def _grid_list(a: np.ndarray) -> list[list[float | None]]:
     return [[None if math.isnan(v) else v for v in row] for row in a.tolist()]
 
 
-def stability_map(model: SqueakModel, x_axis: str, x, y_axis: str, y,
+def stability_map(model: SqueakModel, x_axis: str, x: ArrayLike, y_axis: str, y: ArrayLike,
                   speed_rad_s: float | None = None, load_n: float | None = None,
                   progress: Callable[[int], None] | None = None,
                   probability: bool = False) -> MapResult:
@@ -804,7 +813,7 @@ def stability_map(model: SqueakModel, x_axis: str, x, y_axis: str, y,
     fixed = _fixed(model, speed_rad_s, load_n)
     for a in (x_axis, y_axis):
         fixed.pop(a, None)
-    grid = dict(fixed, **{x_axis: x[None, :], y_axis: y[:, None]})
+    grid: dict[str, Any] = dict(fixed, **{x_axis: x[None, :], y_axis: y[:, None]})
     speed, load = grid.pop("speed_rad_s"), grid.pop("load_n")
     gf = growth_field(model, speed, load, progress=progress, **grid)
     g = gf.max_growth_rate

@@ -93,14 +93,16 @@ def track_modes(predictions: Sequence[Prediction], max_jump: float = 0.15) -> li
         Every branch, in the order they start; together they hold each mode of each
         prediction exactly once.
     """
-    size, branches, alive, last = len(predictions), [], [], np.empty(0, complex)
+    size, last = len(predictions), np.empty(0, complex)
+    branches: list[Branch] = []
+    alive: list[int] = []                     # branch index of each mode of `last`
     for i, p in enumerate(predictions):
         lam = _eigenvalues(p)
         owner = [-1] * len(lam)
         if len(last) and len(lam):
             cost = np.abs(last[:, None] - lam[None, :]) / np.maximum(
                 np.abs(last)[:, None], np.abs(lam)[None, :])
-            for r, c in zip(*linear_sum_assignment(cost)):
+            for r, c in zip(*linear_sum_assignment(cost), strict=True):
                 if cost[r, c] < max_jump:
                     owner[c] = alive[r]
         for j, m in enumerate(p.modes):

@@ -30,6 +30,7 @@ from functools import cached_property
 from types import SimpleNamespace
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..physics.assembly import Geometry, build_geometry
 from ..physics.kernels import level_slope
@@ -59,6 +60,7 @@ class EigenPairs:
     def __init__(self, geometry: Geometry, speed: float, eigen: Eigen):
         self.geometry, self.speed = geometry, speed
         self.lam, self.x = eigen.lam[eigen.osc], eigen.right
+        assert eigen.left is not None, "the expansion needs the left vectors (eig_both)"
         y_h = eigen.left.conj().T
         self.y_h = y_h / np.einsum("ij,ji->i", y_h, self.x)[:, None]    # y_i^H x_i = 1
 
@@ -75,7 +77,7 @@ class EigenPairs:
         units = self.geometry.lower_half_units.reshape(-1, n, 2 * n)
         return -np.einsum("ij,kji->ki", self.y_h[:, n:], units @ self.x)
 
-    def coefficient_rate(self, dc) -> np.ndarray:
+    def coefficient_rate(self, dc: ArrayLike) -> np.ndarray:
         """d lambda for a change `dc` of the coefficient vector (W1, W5q, W3, W5qdot, Omega)."""
         return np.asarray(dc, float) @ self.unit_rates
 
@@ -236,19 +238,19 @@ class FirstOrderProbability:
             fractions.append(np.divide(x - axis[cell], step, out=np.zeros_like(x),
                                        where=step > 0))
         grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(fields))
-        expansions = []
+        expansions: list[_Expansion | None] = []
         for point in grid:
             try:            # a corner of two fields may leave the valid domain: no node
-                node = self.params.with_(**dict(zip(fields, point.tolist())))
+                node = self.params.with_(**dict(zip(fields, point.tolist(), strict=True)))
                 expansions.append(_Expansion(build_geometry(node), self._friction))
             except ParameterError:
                 expansions.append(None)
         # multilinear interpolation: 2^d corners, each a flat node index and a weight
         corners = []
         for bits in np.ndindex(*(2,) * len(fields)):
-            index = np.ravel_multi_index([c + b for c, b in zip(cells, bits)],
+            index = np.ravel_multi_index([c + b for c, b in zip(cells, bits, strict=True)],
                                          (per,) * len(fields))
-            weight = np.prod([f if b else 1 - f for f, b in zip(fractions, bits)], axis=0)
+            weight = np.prod([f if b else 1 - f for f, b in zip(fractions, bits, strict=True)], axis=0)
             corners.append((index, weight))
         return expansions, corners
 
@@ -258,17 +260,18 @@ class FirstOrderProbability:
         if self._nodes is None:
             return self._nominal.margins(pairs, load, self._damping, self._reach_damping)
         expansions, corners = self._nodes
-        speed, at = pairs.speed, []
+        speed, rows = pairs.speed, []
         for e in expansions:
             if e is None or abs(speed) >= e.geometry.basis.omega_rad_s.min():
-                at.append(np.full(self.samples.count, _OUTSIDE))   # not valid: no squeak
+                rows.append(np.full(self.samples.count, _OUTSIDE))   # not valid: no squeak
                 continue
             node_pairs = EigenPairs.solve(e.geometry, speed, load)
-            at.append(e.margins(node_pairs, load, self._damping, self._reach_damping,
-                                prune=False))
-        at = np.array(at)
+            rows.append(e.margins(node_pairs, load, self._damping, self._reach_damping,
+                                  prune=False))
+        at = np.array(rows)
         columns = np.arange(self.samples.count)
-        return sum(w * at[index, columns] for index, w in corners)
+        return sum((w * at[index, columns] for index, w in corners),
+                   np.zeros(self.samples.count))
 
     def hits(self, pairs: EigenPairs, load: float) -> np.ndarray:
         """Whether each sample squeaks at the operating point of `pairs`, by the expansion;

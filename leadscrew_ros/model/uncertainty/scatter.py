@@ -21,14 +21,14 @@ import math
 from dataclasses import dataclass, field, fields, make_dataclass
 from functools import lru_cache
 from types import MappingProxyType, SimpleNamespace
-from typing import Mapping
+from typing import Any, Mapping
 
 import numpy as np
 from scipy.special import ndtri
 from scipy.stats import qmc
 
 from ..physics.metadata import check, setting
-from ..physics.parameters import ParameterError, ScrewParameters
+from ..physics.parameters import ParameterError, ParamsLike, ScrewParameters
 
 LOG_NORMAL = frozenset({"modal_damping"})       # positive, with a spread of a factor
 DEFAULT_SCATTER = MappingProxyType({"mu_static": 0.05, "mu_kinetic": 0.05,
@@ -93,7 +93,7 @@ class Scatter:
     def __eq__(self, other: object) -> bool:
         return isinstance(other, Scatter) and dict(self.sd) == dict(other.sd)
 
-    def values(self, nominal: ScrewParameters, u: np.ndarray) -> dict[str, np.ndarray]:
+    def values(self, nominal: ParamsLike, u: np.ndarray) -> dict[str, np.ndarray]:
         """Parameter values at standard-normal points.
 
         Parameters
@@ -116,7 +116,7 @@ class Scatter:
         return out
 
 
-def valid_mask(nominal: ScrewParameters, values: Mapping[str, np.ndarray]) -> np.ndarray:
+def valid_mask(nominal: ParamsLike, values: Mapping[str, np.ndarray]) -> np.ndarray:
     """Samples inside the valid domain: each field within its range, mu_s >= mu_k, the nut on
     the screw (the cross-field rules of `ScrewParameters` for the scattered fields)."""
     shape = np.broadcast_shapes(*(np.shape(v) for v in values.values()))
@@ -162,7 +162,7 @@ class Samples:
         return self.u.shape[0] * self.u.shape[1]
 
 
-def draw(nominal: ScrewParameters, scatter: Scatter, count: int = 4096,
+def draw(nominal: ParamsLike, scatter: Scatter, count: int = 4096,
          replicates: int = REPLICATES,
          seed: int = 0) -> Samples:
     """Samples of the scatter around `nominal`.
@@ -254,22 +254,22 @@ def _points(scatter: Scatter, count: int, seed: int, key: tuple) -> tuple[np.nda
 def _settings_class() -> type:
     """ScatterSettings: one field per scatterable parameter (default: DEFAULT_SCATTER, else 0)
     and the live sample count, each with its metadata (ROS parameters `scatter.<name>`)."""
-    spec = [(name, float, setting(
+    spec: list[tuple[str, type, Any]] = [(name, float, setting(
         DEFAULT_SCATTER.get(name, 0.0), "1",
-        f"{'SD of ln' if name in LOG_NORMAL else 'relative SD of'} {name} from unit to unit "
-        "(0: fixed)", 0.0, MAX_SCATTER)) for name in scatterable()]
+        f"{'SD of ln' if name in LOG_NORMAL else 'relative SD of'} {name} from unit "
+        "to unit (0: fixed)", 0.0, MAX_SCATTER)) for name in scatterable()]
     spec.append(("samples", int, setting(
         LIVE_SAMPLES, "1", f"scatter samples of the live P(squeak) ({REPLICATES} replicates "
         "of a power of 2)", 16, 65536)))
 
-    def post_init(self) -> None:
+    def post_init(self: Any) -> None:
         check(self, ParameterError, "scatter.")
         try:
             check_count(self.samples)
         except ParameterError as exc:
             raise ParameterError(f"scatter.samples = {self.samples}: {exc}") from None
 
-    def scatter(self) -> Scatter:
+    def scatter(self: Any) -> Scatter:
         """The scatter these settings give (the SDs > 0)."""
         return Scatter({n: getattr(self, n) for n in scatterable()})
 
