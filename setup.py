@@ -48,6 +48,12 @@ setup(
             "colcon-ros",
             "rosbags",
         ],
+        "doc": [                 # the Sphinx documentation in doc/ (doc/development/documentation.md)
+            "sphinx",
+            "myst-parser",
+            "numpydoc",
+            "sphinx-rtd-theme",
+        ],
     },
     zip_safe=True,
     entry_points={

@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
 """The `consistent` kernels equal the symbolic linearisation of tools/derive_consistent.py, and
-the printed appendix (`paper`) differs from it exactly where the README (Two formulations) says."""
+the printed appendix (`paper`) differs from it exactly where doc/theory/formulations.md says."""
 
 import importlib.util
 import math
@@ -76,8 +76,8 @@ def test_paper_kernels_differ_from_first_principles_only_in_w3_and_w5qdot():
     sb2 = math.sin(beta) ** 2
     s, c = np.sin(theta), np.cos(theta)
     X, Y, T = 0, 1, 2
-    # W3: [y y] lost sin^2(theta), [0 0] lost R^2, [x y] and [y x] differ (README, Two
-    # formulations).
+    # W3: [y y] lost sin^2(theta), [0 0] lost R^2, [x y] and [y x] differ
+    # (doc/theory/formulations.md).
     np.testing.assert_allclose(consistent["W3"][Y, Y] - paper["W3"][Y, Y], s ** 2, atol=1e-15)
     np.testing.assert_allclose(paper["W3"][T, T] / consistent["W3"][T, T], 1 / R ** 2)
     assert not np.allclose(paper["W3"][X, Y], consistent["W3"][X, Y])

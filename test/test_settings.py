@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
 """Settings are declared once, in the dataclasses' field metadata: the node's parameter
-descriptors, the settings' validation, the replay's --help and the README tables come from
-there (config/leadscrew.yaml: test_config.py; `squeak_node --help`: test_node_seats.py)."""
+descriptors, the settings' validation, the replay's --help and the documentation's tables
+(rendered at build time by tools/param_tables.py) come from there (config/leadscrew.yaml: test_config.py; `squeak_node --help`: test_node_seats.py)."""
 
 import importlib.util
 import math
@@ -149,24 +149,55 @@ def test_replay_help_shows_the_settings_defaults_and_ranges():
     assert "(default 0.1, allowed [0, 1000])" in entries["--speed-deadband"]  # the numbers
 
 
-# ----------------------------------------------------------------------------- README tables
+# ----------------------------------------------------------------------------- doc tables
 param_tables = _tool("param_tables")
+DOC = ROOT / "doc"
 
 
-@pytest.mark.parametrize("name", list(param_tables.TABLES))
-def test_readme_holds_the_rendered_table(name):
-    table = param_tables.table(name)
-    assert table in (ROOT / "README.md").read_text(), (
-        f"README.md lacks the current {name} parameter table: paste the output of "
-        f"`.venv/bin/python tools/param_tables.py {name}`")
+def test_the_doc_build_writes_every_table(tmp_path):
+    """doc/conf.py calls `write` on builder-inited: one file per table, each the rendered table;
+    an unchanged table is not rewritten."""
+    paths = param_tables.write(tmp_path / "_generated")
+    names = [*param_tables.TABLES, param_tables.TOPIC_TABLE]
+    assert [p.name for p in paths] == [f"{n}.md" for n in names]
+    for name, path in zip(names, paths):
+        rendered = (param_tables.topic_table() if name == param_tables.TOPIC_TABLE
+                    else param_tables.table(name))
+        assert path.read_text(encoding="utf-8").endswith("\n\n" + rendered + "\n")
+    before = [p.stat().st_mtime_ns for p in paths]
+    os.utime(paths[0], ns=(1, 1))
+    param_tables.write(tmp_path / "_generated")
+    assert paths[0].stat().st_mtime_ns == 1 and [p.stat().st_mtime_ns for p in paths[1:]] == before[1:]
+    conf = (DOC / "conf.py").read_text(encoding="utf-8")
+    assert "builder-inited" in conf and '"reference" / "_generated"' in conf
+
+
+@pytest.mark.parametrize("name", [*param_tables.TABLES, param_tables.TOPIC_TABLE])
+def test_the_reference_pages_include_every_table(name):
+    include = "```{include} _generated/" + name + ".md\n```"
+    pages = "\n".join(p.read_text(encoding="utf-8") for p in (DOC / "reference").glob("*.md"))
+    assert include in pages, f"no page of doc/reference/ includes _generated/{name}.md"
 
 
 def test_tables_list_every_node_setting_once():
-    listed = [line.split("`")[1] for name in param_tables.TABLES
+    listed = [line.split("`")[1] for name in param_tables.NODE_TABLES
               for line in param_tables.table(name).splitlines()[2:]]
     own = [s.name for s in PARAMETERS if s.group.cls.__module__ != "leadscrew_ros.model.physics.parameters"]
     assert listed == own
+    model = [line.split("`")[1] for line in param_tables.table("model").splitlines()[2:]]
+    assert model == [s.name for s in PARAMETERS if s.group.cls is GROUPS[0].cls]
     assert param_tables.main(["bogus"]) == 2
+
+
+def test_topic_table_names_every_topic_of_the_node_with_its_type():
+    from leadscrew_ros.bag import messages
+    from leadscrew_ros.ros.node import INPUTS
+    rows = param_tables.topic_table().splitlines()[2:]
+    topics = [r.split("`")[1] for r in rows]
+    assert topics == list(param_tables.TOPICS)
+    assert set(topics) == set(INPUTS) | set(messages.OUTPUT_TYPES) | {"/diagnostics"}
+    assert "| `squeak/risk` | std_msgs/Float64 |" in rows[4]
+    assert "key-values speed_rad_s, load_n," in rows[-1] and "bag, files, messages, lost" in rows[-1]
 
 
 @pytest.mark.parametrize("value", [1e-05, 2.5e-07, 1e+20, 0.1, 207e9, -3.0, 0.0])

@@ -1,9 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Numbers for the README: per-mode squeak speed ranges and the nut-position trend.
+"""Numbers for doc/theory/formulations.md: per-mode squeak speed ranges and the nut-position trend.
 
     .venv/bin/python tools/band_table.py
 
-prints, for both formulations at Table 1, the README rows computed from the model:
+prints, for both formulations at Table 1, the page's rows computed from the model:
 
 - every oscillatory mode that is unstable somewhere below the first critical speed, with the
   speed range where it squeaks: the branch is followed along a fine geometric speed grid

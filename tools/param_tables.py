@@ -1,35 +1,99 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The README's parameter tables of the node, rendered from the settings' field metadata.
+"""The documentation's parameter and topic tables, rendered from the settings' field metadata.
 
     .venv/bin/python tools/param_tables.py            # prints every table
     .venv/bin/python tools/param_tables.py record     # prints one
+    .venv/bin/python tools/param_tables.py --write doc/reference/_generated   # what doc/conf.py does
 
-One markdown table per entry of `TABLES` (parameter, unit, default, allowed values, meaning);
-test/test_settings.py asserts each appears verbatim in README.md, so a changed default, range
-or description needs the table pasted again.
+One markdown table per entry of `TABLES` (parameter, unit, default, allowed values, meaning),
+and the node's topic table (`topic_table`: names and types from the code, QoS and meaning from
+`TOPICS`, the diagnostic key-values from the `KEY_*` constants). Nothing is pasted: the Sphinx
+build (doc/conf.py, on `builder-inited`) writes each table with `write` into
+doc/reference/_generated/<name>.md (git-ignored), which the pages include; test/test_settings.py
+checks that every table is rendered and included.
 """
 
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
+from leadscrew_ros.bag import messages
 from leadscrew_ros.bag.recorder import RecordSettings
+from leadscrew_ros.live import status
 from leadscrew_ros.live.settings import JointSettings, LiveSettings
+from leadscrew_ros.model.physics.parameters import ScrewParameters
 from leadscrew_ros.model.physics.metadata import default_text, range_text
 from leadscrew_ros.model.uncertainty.scatter import ScatterSettings
+from leadscrew_ros.bag.msgdefs import type_name
+from leadscrew_ros.ros import diagnostics
+from leadscrew_ros.ros.node import INPUTS
 from leadscrew_ros.ros.parameters import (GROUPS, READ_ONLY_NOTE, NodeSettings, RecordingControl,
                                           Spec, specs)
 
 # table name -> the settings dataclasses it lists, in the node's parameter order
 TABLES = {"node": (LiveSettings, JointSettings, NodeSettings),
           "scatter": (ScatterSettings,),
-          "record": (RecordingControl, RecordSettings)}
+          "record": (RecordingControl, RecordSettings),
+          "model": (ScrewParameters,)}
+NODE_TABLES = ("node", "scatter", "record")       # the node's own parameters, not the model's
 HEADER = ["| parameter | unit | default | allowed | meaning |", "|---|---|---|---|---|"]
+TOPIC_TABLE = "topics"                            # file name of `topic_table` in `write`
+
+SENSOR, LATCHED = "sensor data (best effort)", "reliable, transient local, depth 1"
+_PREDICTION = (f"`/squeak_predictor: {diagnostics.PREDICTION_TASK}`: OK (P(squeak) < `warn_probability`) / "
+               "WARN (P >= `warn_probability`, default 0.1; or no prediction: outside the "
+               "model's validity) / ERROR (P >= `error_probability`, default 0.5, or a "
+               "divergence predicted, or invalid input) / STALE (speed or load older than "
+               "`stale_timeout_s`); the message gives P(squeak) and the modes that squeak at "
+               "the nominal parameters, e.g. `squeak predicted: P(squeak) 1 (B1y 224 Hz, B2y "
+               "898 Hz)`, `squeak possible: P(squeak) 0.12 >= 0.1`, `no squeak: P(squeak) 0 < "
+               "0.1` (P is never rounded across a threshold); key-values {keys} (constants "
+               "`leadscrew_ros.live.status.KEY_*`; `validity` is the `Validity` name of the "
+               "latest point, `probability_stderr` '' when not sampled)")
+_RECORDING = (f"`/squeak_predictor: {diagnostics.RECORDING_TASK}`: OK (recording to PATH, or not "
+              "recording) / WARN (input messages lost before recording, with the counts; bags "
+              "of an earlier run cut off by a crash) / ERROR (the disk error, with the path), "
+              "with key-values {keys}, `lost <topic>` (constants "
+              "`leadscrew_ros.ros.diagnostics.KEY_*`)")
+# topic (relative to the node's namespace, as the code names it) -> (direction, QoS, meaning)
+TOPICS = {
+    "motor_speed": ("in", SENSOR, "screw speed, rad/s, sign = direction"),
+    "axial_load": ("in", "sensor data", "axial load, N (sign = loaded flank)"),
+    "nut_position": ("in, optional", "sensor data", "nut position z_o along the screw, m"),
+    "joint_states": ("in, optional", "sensor data", "joint `joint_name` only (`''`, the "
+                     "default, ignores joint_states): velocity = speed, position (screw angle) "
+                     "moves the nut by R tan(beta) per rad from `nut_position_at_zero_angle_m`"),
+    messages.RISK: ("out", LATCHED, "P(squeak) in [0, 1]: the probability over the unit-to-unit "
+                    "scatter (`scatter.*`) that some oscillatory mode grows at this speed, load "
+                    "and nut position (`Prediction.probability`, the live first-order "
+                    "estimator); exactly 0 or 1 (the nominal verdict) without scatter"),
+    messages.MARGIN: ("out", "same", "the deterministic stability margin at the nominal "
+                      "parameters: least damping ratio -Re(lambda)/|lambda| of the oscillatory "
+                      "modes (`Prediction.margin`), negative when a mode squeaks, +inf without "
+                      "an oscillatory mode"),
+    messages.FREQUENCIES: ("out", "same", "squeak frequencies, Hz, most unstable first"),
+    messages.ACTIVE: ("out", "same", "a squeak mode exists"),
+    messages.MODES: ("out", "same", "rows = oscillatory modes (labels in `layout.dim[0].label`), "
+                     "columns " + ", ".join(messages.MODE_COLUMNS)),
+    messages.SAFE_SPEED: ("out", "same", "nearest speed in the same direction whose P(squeak) is "
+                          "below `safe_probability` (default 0.01), at the current load and nut "
+                          "position, rad/s (the current speed when its P is already below it; 0 "
+                          "if no valid such speed exists in that direction)"),
+    diagnostics.TOPIC: ("out", "same", "two statuses, named by the node's fully qualified name. "
+                        "{prediction}; {recording}. Both come from a small updater in "
+                        "diagnostic_updater's shape (`leadscrew_ros/ros/diagnostics.py`: an "
+                        "`Updater` owns the publisher, the period and the hardware id; tasks "
+                        "fill a status; `update()` on the period, `force_update()` on a change "
+                        "of verdict)"),
+}
 
 
 def _cell(text: str) -> str:
-    """Markdown table cell text: '|' would end the cell, '<' start an HTML tag."""
-    return text.replace("|", "\\|").replace("<", "\\<")
+    """Markdown table cell text: '|' would end the cell, '<' start an HTML tag (outside code
+    spans; inside one a backslash would show)."""
+    parts = text.replace("|", "\\|").split("`")
+    return "`".join(p if i % 2 else p.replace("<", "\\<") for i, p in enumerate(parts))
 
 
 def row(spec: Spec) -> str:
@@ -49,8 +113,61 @@ def table(name: str) -> str:
     return "\n".join(HEADER + [row(s) for s in specs(groups)])
 
 
+def _keys(module) -> str:
+    """The diagnostic key names of `module`'s `KEY_*` constants, in their order."""
+    return ", ".join(v for k, v in vars(module).items() if k.startswith("KEY_"))
+
+
+def topic_types() -> dict[str, str]:
+    """Topic -> 'pkg/Type' of every topic the node subscribes to or publishes, from the code."""
+    named = {**{t: type_name(c) for t, c in INPUTS.items()}, **messages.OUTPUT_TYPES,
+             diagnostics.TOPIC: "diagnostic_msgs/msg/DiagnosticArray"}
+    return {t: n.replace("/msg/", "/") for t, n in named.items()}
+
+
+def topic_table() -> str:
+    """Markdown table of the node's topics (no trailing newline); every topic of the code needs
+    an entry in `TOPICS`, and `TOPICS` names no other."""
+    types = topic_types()
+    if set(types) != set(TOPICS):
+        raise ValueError(f"TOPICS and the node's topics differ: {sorted(set(types) ^ set(TOPICS))}")
+    rows = ["| topic | type | QoS | meaning |", "|---|---|---|---|"]
+    for topic, (direction, qos, meaning) in TOPICS.items():
+        meaning = meaning.format(prediction=_PREDICTION.format(keys=_keys(status)),
+                                 recording=_RECORDING.format(keys=_keys(diagnostics)))
+        name = f"`{topic}`" + (f" ({direction})" if direction != "out" else "")
+        rows.append("| " + " | ".join(_cell(c) for c in (name, types[topic], qos, meaning))
+                    + " |")
+    return "\n".join(rows)
+
+
+def write(directory: Path | str) -> list[Path]:
+    """Write every table as `directory/<name>.md` (and `topics.md`), creating `directory`;
+    a file whose text is unchanged is not rewritten (so Sphinx does not rebuild its pages).
+    Returns the paths."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    texts = {**{n: table(n) for n in TABLES}, TOPIC_TABLE: topic_table()}
+    paths = []
+    for name, text in texts.items():
+        path = directory / f"{name}.md"
+        text = ("<!-- generated by tools/param_tables.py from the settings' metadata: "
+                "do not edit -->\n\n" + text + "\n")
+        if not path.exists() or path.read_text(encoding="utf-8") != text:
+            path.write_text(text, encoding="utf-8")
+        paths.append(path)
+    return paths
+
+
 def main(argv: list[str] | None = None) -> int:
     names = sys.argv[1:] if argv is None else argv
+    if names[:1] == ["--write"] and len(names) == 2:
+        for path in write(names[1]):
+            print(path)
+        return 0
+    if names == [TOPIC_TABLE]:
+        print(topic_table())
+        return 0
     unknown = set(names) - set(TABLES)
     if unknown:
         print(f"unknown table(s) {', '.join(sorted(unknown))}; known: {', '.join(TABLES)}",

@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 # SPDX-License-Identifier: Apache-2.0
-"""Numbers for the README section "Nonlinear time-domain check" (issue 13).
+"""Numbers for the documentation page doc/theory/transient.md, "Nonlinear time-domain check" (issue 13).
 
-    .venv/bin/python tools/transient_table.py [--plot docs/transient.png]   # ~5 min on 2 cores
+    .venv/bin/python tools/transient_table.py [--plot [doc/images/transient.png]]   # ~5 min on 2 cores
 
 Simulates the nonlinear equations (`model.nonlinear.transient`, Table 1, all 18 modes, default
 settings) at (20 rad/s, 200 N), (5 rad/s, 200 N), (40 rad/s, 300 N) and (60 rad/s, 200 N) (above the
@@ -18,7 +18,8 @@ band of both formulations) and prints, as Markdown:
    torsion block of W3 multiplied by R^2 (the factor NOTES.md finds missing from
    W3[Phi^0 Phi^0]), against `paper` and `consistent`: the least stable modes, and B1y.
 
-`--plot` also writes the time history and spectrogram of the (20 rad/s, 200 N) run.
+`--plot` also writes the time history and spectrogram of the (20 rad/s, 200 N) run (default
+doc/images/transient.png, the figure of that page).
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from leadscrew_ros.model.nonlinear.transient_analysis import analyse, linear_cou
 
 POINTS = ((20.0, 200.0, 0.2), (5.0, 200.0, 0.1), (40.0, 300.0, 0.35), (60.0, 200.0, 0.1))
 MODES = (6, 12, 0)
+PLOT = Path(__file__).resolve().parents[1] / "doc" / "images" / "transient.png"
 SLOW = ((0.2, 200.0, 1e-6), (0.2, 200.0, 1.0))       # speed, load, perturbation
 SLOW_DURATION_S = 0.05
 
@@ -108,7 +110,8 @@ def _cycle_row(label: str, result) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--plot", type=Path, help="PNG of the (20 rad/s, 200 N) run")
+    parser.add_argument("--plot", type=Path, nargs="?", const=PLOT,
+                        help="PNG of the (20 rad/s, 200 N) run (default doc/images/transient.png)")
     args = parser.parse_args()
     params = ScrewParameters()
     runs = {}

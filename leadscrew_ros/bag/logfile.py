@@ -108,7 +108,7 @@ class LogInfo:
 
 
 def log_files(path: Path | str) -> list[Path]:
-    """The MCAP files of a log: the file itself, or a directory's *.mcap files in split order
+    """The MCAP files of a log: the file itself, or a directory's .mcap files in split order
     (rosbag2 and our recorder number splits `<name>_<index>.mcap`)."""
     path = Path(path)
     if path.is_dir():

@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
 """The log an offline replay reads: MCAP files (`logfile`) or rosbag2's sqlite3 storage (.db3,
-the default before Iron), as one stream of `LogMessage`s in file order.
+the default before Iron), as one stream of `LogMessage` records in file order.
 
 A .db3 file is read with Python's sqlite3 (read-only, immutable; no extra dependency): the
 `topics` table gives names, types and QoS, `messages` is read in insertion order (the order

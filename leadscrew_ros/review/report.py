@@ -15,6 +15,7 @@
   band is overlaid in that band's colour, with its points in the same colour;
 - `frequency_vs_speed.png`: the predicted squeak frequencies over the mode frequencies vs speed
   (the paper's Fig. 11), at the run's median nut position and load.
+
 Maps use |speed| and |load| (a negative speed is the screw turning the other way).
 """
 

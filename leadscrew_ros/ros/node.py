@@ -433,7 +433,7 @@ def usage() -> str:
 
 def main(args: list[str] | None = None) -> int:
     """Run the node until SIGINT/SIGTERM; exit 0 on that requested shutdown (with the line
-    `squeak_predictor: stopped by SIGTERM` or `... SIGINT` on stderr, as every long-running
+    `squeak_predictor: stopped by SIGTERM` (or SIGINT) on stderr, as every long-running
     command: `ros_env.StopSignals.exit_status`), 2 on bad parameters or arguments;
     `-h`/`--help` prints `usage()` and exits 0."""
     own_args = remove_ros_args(sys.argv if args is None else args)[1:]
