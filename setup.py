@@ -1,15 +1,22 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Packaging for leadscrew_ros (ament_python): works with colcon and with plain pip."""
+"""Packaging for leadscrew_ros (ament_python): works with colcon and with plain pip.
+The version is written once, in package.xml."""
 
+import xml.etree.ElementTree as ET
 from glob import glob
+from pathlib import Path
 
 from setuptools import find_packages, setup
 
 PACKAGE = "leadscrew_ros"
+HERE = Path(__file__).resolve().parent
+# package.xml is the one place of the version (ROS tools, bloom and catkin_prepare_release read
+# and bump it there); `leadscrew_ros.__version__` reads the installed metadata written from this.
+VERSION = ET.parse(HERE / "package.xml").getroot().findtext("version").strip()
 
 setup(
     name=PACKAGE,
-    version="0.1.0",
+    version=VERSION,
     description="Live prediction of friction-induced squeak in lead-screw drives (ROS 2)",
     license="Apache-2.0",
     maintainer="leadscrew_ros maintainers",

@@ -1,8 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Packaging: package.xml is sound, colcon builds and installs (the layers: test_layers.py)."""
+"""Packaging: package.xml is sound, the version is written once, colcon builds and installs
+(the layers: test_layers.py)."""
 
 import json
 import os
+import runpy
 import shutil
 import subprocess
 import sys
@@ -10,6 +12,8 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
+
+import leadscrew_ros
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = "leadscrew_ros"
@@ -24,6 +28,27 @@ def _run(cmd, **kwargs):
     """Run with the parent's environment (the ros-wheels bootstrapper needs it) and capture."""
     kwargs.setdefault("env", os.environ.copy())
     return subprocess.run(cmd, capture_output=True, text=True, **kwargs)
+
+
+def _setup_kwargs(monkeypatch) -> dict:
+    """What setup.py passes to setuptools.setup (run with setup() replaced: nothing is built)."""
+    captured: dict = {}
+    monkeypatch.chdir(REPO)
+    monkeypatch.setattr("setuptools.setup", lambda **kw: captured.update(kw))
+    runpy.run_path(str(REPO / "setup.py"), run_name="__main__")
+    return captured
+
+
+def test_the_version_is_written_once(monkeypatch):
+    """package.xml's version is setup.py's (the metadata) and leadscrew_ros.__version__ (the
+    installed copy's metadata: test_offline_install.py)."""
+    version = ET.parse(REPO / "package.xml").getroot().findtext("version")
+    r = _run([sys.executable, "setup.py", "--version"], cwd=REPO, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split()[-1] == version
+    assert _setup_kwargs(monkeypatch)["version"] == version == leadscrew_ros.__version__
+    for path in ("setup.py", "leadscrew_ros/__init__.py"):    # no second copy of the number
+        assert f'"{version}"' not in (REPO / path).read_text(), path
 
 
 def test_package_xml():
