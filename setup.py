@@ -22,6 +22,8 @@ setup(
     maintainer="leadscrew_ros maintainers",
     maintainer_email="maintainers@leadscrew-ros.example.org",
     packages=find_packages(exclude=["test", "test.*"]),
+    # Message definitions for logs written without ROS 2 (bag/msgdefs.py, tools/bundle_msgdefs.py)
+    package_data={f"{PACKAGE}.bag": ["jazzy_msgs/share/*/msg/*.msg"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
@@ -55,7 +57,7 @@ setup(
             "rosbags",
         ],
     },
-    zip_safe=True,
+    zip_safe=False,              # bag/msgdefs.py reads the bundled .msg files by path
     entry_points={
         "console_scripts": [
             "leadscrew-squeak = leadscrew_ros.cli:main",
