@@ -1,6 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
 """Packaging for leadscrew_ros (ament_python): works with colcon and with plain pip.
-The version is written once, in package.xml."""
+
+`pip install .` is the core: the model, the log tools (replay, info, recover), the fleet review
+and the figures, with no ROS 2 at all. `.[ros]` adds the ROS 2 Jazzy wheels that the node,
+`demo`, `simulate` and `replay --publish` need. The version is written once, in package.xml.
+"""
 
 import xml.etree.ElementTree as ET
 from glob import glob
@@ -13,6 +17,11 @@ HERE = Path(__file__).resolve().parent
 # package.xml is the one place of the version (ROS tools, bloom and catkin_prepare_release read
 # and bump it there); `leadscrew_ros.__version__` reads the installed metadata written from this.
 VERSION = ET.parse(HERE / "package.xml").getroot().findtext("version").strip()
+
+ROS = [                          # the node and everything that starts one; see package.xml
+    "ros-jazzy-rclpy[fastrtps]",
+    "ros-jazzy-common-interfaces",
+]
 
 setup(
     name=PACKAGE,
@@ -31,37 +40,40 @@ setup(
         (f"share/{PACKAGE}/foxglove", sorted(glob("foxglove/*.json"))),   # Foxglove layout
     ],
     python_requires=">=3.10",
+    # Keep in step with package.xml's <exec_depend>s (test_package.py checks both lists).
     install_requires=[
         "numpy",
         "scipy",
         "matplotlib",
         "tqdm",
         "pyyaml",
-        "ros-jazzy-rclpy[fastrtps]",
-        "ros-jazzy-common-interfaces",
         "mcap",
-        "mcap-ros2-support",
         "zstandard",             # MCAP chunk compression, read and written directly
         "lz4",
-        "threadpoolctl",         # the node's eigen-solves run single-threaded (live.py)
+        "threadpoolctl",         # eigen-solves run single-threaded (live/predictor.py)
         "dask[distributed]",     # `review`: fleet review on a Dask cluster (review/fleet.py)
     ],
     extras_require={
-        "test": [
+        "ros": ROS,
+        "test": ROS + [          # the suite tests the node too
             "pytest",
             "hypothesis",
             "sympy",
             "colcon-core",
             "colcon-common-extensions",
             "colcon-ros",
+            "mcap-ros2-support",     # an independent decoder of our logs (tests only)
             "rosbags",
         ],
+        # The Sphinx site in doc/ (`sphinx-build -W -b html doc doc/_build/html`).
+        "doc": ["sphinx", "myst-parser", "sphinx-rtd-theme"],
     },
     zip_safe=False,              # bag/msgdefs.py reads the bundled .msg files by path
     entry_points={
         "console_scripts": [
             "leadscrew-squeak = leadscrew_ros.cli:main",
-            "squeak_node = leadscrew_ros.ros.node:main",
+            # Through the CLI layer: without rclpy it says what to install, in one line.
+            "squeak_node = leadscrew_ros.cli.ros:squeak_node",
         ],
     },
 )
