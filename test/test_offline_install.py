@@ -122,8 +122,8 @@ def test_offline_commands_with_ros_blocked(blocked_env, tmp_path):
 
 
 def test_squeak_node_with_ros_blocked(blocked_env, tmp_path):
-    r = subprocess.run([sys.executable, "-c", "import sys; from leadscrew_ros.cli.ros import "
-                        "squeak_node; sys.exit(squeak_node())"], cwd=tmp_path,
+    code = "import sys; from leadscrew_ros.cli.ros import squeak_node; sys.exit(squeak_node())"
+    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path,
                        capture_output=True, text=True, env=blocked_env, timeout=120)
     assert (r.returncode, r.stdout, r.stderr) == (
         2, "", f"squeak_node: error: 'squeak_node' needs ROS 2 (rclpy): {INSTALL_ROS}\n")
