@@ -5,7 +5,7 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 source scripts/_venv.sh
-ensure_venv
+ensure_venv ros,test,doc
 
 # ROS 2 traffic stays on loopback, on a domain of our own, with logs in a temp dir.
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST

@@ -1,8 +1,11 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Packaging: package.xml is sound, colcon builds and installs (the layers: test_layers.py)."""
+"""Packaging: package.xml is sound and lists setup.py's dependencies, the version is written
+once, colcon builds and installs (the layers: test_layers.py; without ROS:
+test_offline_install.py)."""
 
 import json
 import os
+import runpy
 import shutil
 import subprocess
 import sys
@@ -10,6 +13,9 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
+import yaml
+
+import leadscrew_ros
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = "leadscrew_ros"
@@ -24,6 +30,57 @@ def _run(cmd, **kwargs):
     """Run with the parent's environment (the ros-wheels bootstrapper needs it) and capture."""
     kwargs.setdefault("env", os.environ.copy())
     return subprocess.run(cmd, capture_output=True, text=True, **kwargs)
+
+
+# setup.py's requirements -> their package.xml keys (rosdep keys; the ROS wheels -> ROS packages).
+ROSDEP_KEYS = {
+    "numpy": ["python3-numpy"], "scipy": ["python3-scipy"],
+    "matplotlib": ["python3-matplotlib"], "tqdm": ["python3-tqdm"], "pyyaml": ["python3-yaml"],
+    "mcap": ["python3-mcap-pip"], "zstandard": ["python3-zstandard"], "lz4": ["python3-lz4"],
+    "threadpoolctl": ["python3-threadpoolctl"],
+    "dask[distributed]": ["python3-dask", "python3-distributed"],
+    "ros-jazzy-rclpy[fastrtps]": ["rclpy"],
+    "ros-jazzy-common-interfaces": ["std_msgs", "sensor_msgs", "geometry_msgs",
+                                    "diagnostic_msgs", "std_srvs"],
+}
+
+
+def _setup_kwargs(monkeypatch) -> dict:
+    """What setup.py passes to setuptools.setup (run with setup() replaced: nothing is built)."""
+    captured: dict = {}
+    monkeypatch.chdir(REPO)
+    monkeypatch.setattr("setuptools.setup", lambda **kw: captured.update(kw))
+    runpy.run_path(str(REPO / "setup.py"), run_name="__main__")
+    return captured
+
+
+def test_the_version_is_written_once(monkeypatch):
+    """package.xml's version is setup.py's (the metadata) and leadscrew_ros.__version__ (the
+    installed copy's metadata: test_offline_install.py)."""
+    version = ET.parse(REPO / "package.xml").getroot().findtext("version")
+    r = _run([sys.executable, "setup.py", "--version"], cwd=REPO, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split()[-1] == version
+    assert _setup_kwargs(monkeypatch)["version"] == version == leadscrew_ros.__version__
+    for path in ("setup.py", "leadscrew_ros/__init__.py"):    # no second copy of the number
+        assert f'"{version}"' not in (REPO / path).read_text(), path
+
+
+def test_package_xml_lists_every_dependency_of_setup_py(monkeypatch):
+    kwargs = _setup_kwargs(monkeypatch)
+    root = ET.parse(REPO / "package.xml").getroot()
+    exec_depends = [e.text for e in root.findall("exec_depend")]
+    requires = kwargs["extras_require"]["ros"] + kwargs["install_requires"]
+    assert sorted(requires) == sorted(ROSDEP_KEYS)
+    assert exec_depends == [k for r in requires for k in ROSDEP_KEYS[r]]     # same order
+    # The core needs no ROS wheel; the test extra has them (the suite tests the node).
+    assert not [r for r in kwargs["install_requires"] if r.startswith("ros-")]
+    assert set(kwargs["extras_require"]["ros"]) <= set(kwargs["extras_require"]["test"])
+    assert {"sphinx", "myst-parser", "sphinx-rtd-theme"} <= set(kwargs["extras_require"]["doc"])
+    # Keys rosdistro lacks are defined in rosdep/leadscrew_ros.yaml, each with a real rule.
+    local = yaml.safe_load((REPO / "rosdep" / "leadscrew_ros.yaml").read_text())
+    assert set(local) <= set(exec_depends) and "python3-mcap-pip" in local
+    assert all(rules for rules in local.values())
 
 
 def test_package_xml():
@@ -67,6 +124,9 @@ def test_colcon_installs_share_files(colcon_install):
     assert (share / PACKAGE / "config" / "leadscrew.yaml").is_file()
     assert (share / PACKAGE / "foxglove" / "squeak_predictor.json").is_file()
     assert (share / "ament_index" / "resource_index" / "packages" / PACKAGE).is_file()
+    # package data: the bundled message definitions (bag/msgdefs.py)
+    assert [p.name for p in colcon_install.glob(
+        f"lib/python3*/site-packages/{PACKAGE}/bag/jazzy_msgs/share/std_msgs/msg/Float64.msg")]
 
 
 def _installed_env(colcon_install):

@@ -4,6 +4,12 @@
 rosbag2 stores, per topic, the type's .msg text followed by every type it uses, each after a
 line of 80 '=' and `MSG: pkg/msg/Type` (rosbag2 docs/message_definition_encoding.md). The texts
 are read from `<prefix>/share/<pkg>/msg/<Type>.msg`, never typed by hand.
+
+The prefixes are $AMENT_PREFIX_PATH, the environment (where the ROS 2 wheels put them), and last
+`jazzy_msgs/` beside this module: a copy of the Jazzy definitions of the types the package itself
+writes (`BUNDLED_TYPES` and what they use), made by tools/bundle_msgdefs.py. With it the core
+install, which has no ROS 2 message package, writes and replays logs whose schemas are complete;
+an installed definition wins.
 """
 
 from __future__ import annotations
@@ -14,6 +20,8 @@ import re
 import sys
 from pathlib import Path
 
+from . import cdr
+
 DELIMITER = "=" * 80
 _PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
                "int32", "uint32", "int64", "uint64", "string", "wstring"}
@@ -21,6 +29,11 @@ _PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "i
 
 class MessageDefinitionError(LookupError):
     """A message type without an installed definition, or not a message type name."""
+
+
+BUNDLED = Path(__file__).resolve().parent / "jazzy_msgs"
+BUNDLED_TYPES = (cdr.FLOAT64, cdr.BOOL, cdr.FLOAT64_MULTI_ARRAY, cdr.JOINT_STATE,
+                 cdr.DIAGNOSTIC_ARRAY)
 
 
 def type_name(msg_type) -> str:
@@ -31,7 +44,7 @@ def type_name(msg_type) -> str:
 
 def _prefixes() -> list[Path]:
     roots = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
-    return [Path(p) for p in roots] + [Path(sys.prefix)]
+    return [Path(p) for p in roots] + [Path(sys.prefix), BUNDLED]
 
 
 @functools.lru_cache(maxsize=None)

@@ -7,6 +7,7 @@ JSON output.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import math
 from dataclasses import fields
@@ -49,6 +50,36 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         """Raise CliError with `message` instead of printing usage and exiting."""
         raise CliError(message)
+
+
+# ----------------------------------------------------------------------------- ROS 2 or not
+INSTALL_ROS = "pip install 'leadscrew_ros[ros]'"
+# Top-level modules of the ROS 2 wheels that `.[ros]` installs (rclpy, the message packages and
+# what they load: rosidl_*, rcl*, rmw*, rpyutils, ...). The core install has none of them.
+_ROS_MODULES = frozenset({"rclpy", "std_msgs", "sensor_msgs", "geometry_msgs", "diagnostic_msgs",
+                          "std_srvs", "builtin_interfaces", "rpyutils", "ament_index_python",
+                          "service_msgs", "type_description_interfaces", "lifecycle_msgs",
+                          "unique_identifier_msgs", "action_msgs", "rosgraph_msgs"})
+_ROS_PREFIXES = ("rosidl_", "rcl", "rmw", "ros_")
+
+
+def needs_ros(command: str) -> str:
+    """The one-line message for a ROS command run without ROS 2 installed."""
+    return f"'{command}' needs ROS 2 (rclpy): {INSTALL_ROS}"
+
+
+def import_ros(command: str, module: str) -> Any:
+    """`leadscrew_ros.ros.<module>` for `command` (demo, simulate, replay --publish,
+    squeak_node): the only way the CLI reaches the ROS layer, so that a core install without the
+    ROS 2 wheels (or with part of them) says in one line what to install (a CliError) instead of
+    a traceback. Any other import error is ours and propagates."""
+    try:
+        return importlib.import_module(f"{__package__.rpartition('.')[0]}.ros.{module}")
+    except ImportError as exc:   # ModuleNotFoundError, or an extension that fails to load
+        top = (exc.name or "").partition(".")[0]
+        if top in _ROS_MODULES or top.startswith(_ROS_PREFIXES):
+            raise CliError(needs_ros(command)) from None
+        raise
 
 
 # ----------------------------------------------------------------------------- value parsing

@@ -13,8 +13,8 @@ from ..live.settings import JointSettings, LiveSettings
 from ..model.physics.metadata import help_text
 from ..review.replay import ReplaySettings
 from ..review.timeline import InputSettings
-from .args import (PROG, ROS_ARGS_HELP, CliError, Parser, build_model, finite, print_json,
-                   yaml_parameters)
+from .args import (PROG, ROS_ARGS_HELP, CliError, Parser, build_model, finite, import_ros,
+                   print_json, yaml_parameters)
 
 REPLAY_INPUTS = [f.name for f in fields(InputSettings)]    # = option dests, node parameters
 # The node's settings that replay options mirror: their metadata gives the help and the range
@@ -66,14 +66,15 @@ def _publish(args: argparse.Namespace) -> int:
         option = {"nominal_load_n": "load"}.get(given[0], given[0])
         raise CliError(f"--{option.replace('_', '-')} is for the offline replay, not --publish "
                        f"(the namespace of --publish is --ros-args -r __ns:=NS)")
-    from ..ros.replay_live import WAIT_FOR_SUBSCRIBER_S, publish_log
+    live = import_ros("replay --publish", "replay_live")
+    publish_log, wait_s = live.publish_log, live.WAIT_FOR_SUBSCRIBER_S
     try:
         publish_log(log_files(args.log), rate=1.0 if args.rate is None else args.rate,
                     loop=args.loop,
                     start_offset_s=0.0 if args.start_offset is None else args.start_offset,
                     topics=[_topic(t) for t in args.topics] if args.topics else None,
                     remap=_parse_remap(args.remap), progress=not args.quiet,
-                    wait_for_subscriber_s=0.0 if args.no_wait else WAIT_FOR_SUBSCRIBER_S,
+                    wait_for_subscriber_s=0.0 if args.no_wait else wait_s,
                     ros_args=args.ros_args)
     except (ValueError, RuntimeError) as exc:    # bad arguments; rclpy could not start
         raise CliError(str(exc)) from None

@@ -1,13 +1,15 @@
 # SPDX-License-Identifier: Apache-2.0
 """The ROS 2 commands: `demo` (predictor node driven by the actuator simulator, one process)
-and `simulate` (the simulator alone). rclpy is imported only when one of them runs."""
+and `simulate` (the simulator alone), and the `squeak_node` executable. rclpy is imported only
+when one of them runs (`args.import_ros`: without ROS 2, one line says what to install)."""
 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
-from .args import ROS_ARGS_HELP, CliError, Parser, finite
+from .args import ROS_ARGS_HELP, CliError, Parser, finite, import_ros
 
 
 def _stroke(duration_s: float | None):
@@ -22,7 +24,7 @@ def _stroke(duration_s: float | None):
 def cmd_demo(args: argparse.Namespace) -> int:
     """`demo`: run the node against a simulated stroke; exit status."""
     profile = _stroke(args.duration)
-    from ..ros.demo import run_demo
+    run_demo = import_ros("demo", "demo").run_demo
     try:
         return run_demo(profile.duration_s,
                         record_dir=None if args.no_record else Path(args.record_dir))
@@ -33,7 +35,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_simulate(args: argparse.Namespace) -> int:
     """`simulate`: publish a simulated stroke as actuator inputs; exit status."""
     profile = _stroke(args.duration)
-    from ..ros.simulator import MAX_RATE_HZ, run_simulator
+    simulator = import_ros("simulate", "simulator")
+    MAX_RATE_HZ, run_simulator = simulator.MAX_RATE_HZ, simulator.run_simulator
     if not 0 < args.rate <= MAX_RATE_HZ:
         raise CliError(f"argument --rate: must be in (0, {MAX_RATE_HZ:g}] Hz, got {args.rate:g}")
     try:
@@ -42,6 +45,17 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                              ros_args=args.ros_args)
     except (ValueError, RuntimeError) as exc:     # bad --ros-args; rclpy could not start
         raise CliError(str(exc)) from None
+
+
+def squeak_node() -> int:
+    """The `squeak_node` executable (`ros.node.main`); without ROS 2 one line
+    `squeak_node: error: 'squeak_node' needs ROS 2 (rclpy): pip install ...`, exit 2."""
+    try:
+        node = import_ros("squeak_node", "node")
+    except CliError as exc:
+        print(f"squeak_node: error: {exc}", file=sys.stderr)
+        return 2
+    return node.main()
 
 
 def _duration_option(p: argparse.ArgumentParser) -> None:
