@@ -53,7 +53,7 @@ setup(
         "mcap",
         "zstandard",             # MCAP chunk compression, read and written directly
         "lz4",
-        "threadpoolctl",         # eigen-solves run single-threaded (live/predictor.py)
+        "threadpoolctl",         # eigen-solves run single-threaded (live/recompute.py)
         "dask[distributed]",     # `review`: fleet review on a Dask cluster (review/fleet.py)
     ],
     extras_require={
