@@ -25,8 +25,9 @@ from hypothesis import strategies as st
 from leadscrew_ros.cli import CliError, main, split_ros_args
 from leadscrew_ros.cli.args import MAX_COUNT, parse_range
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.model.studies.sweep import (MAX_MEMORY_BYTES, MAX_POINTS, map_work, stability_map, sweep,
-                                       sweep_work)
+from leadscrew_ros.model.studies.stability_map import stability_map
+from leadscrew_ros.model.studies.sweep import sweep
+from leadscrew_ros.model.studies.work import MAX_MEMORY_BYTES, MAX_POINTS, map_work, sweep_work
 
 REPO = Path(__file__).resolve().parents[1]
 TABLE2_HZ = [224, 898, 2020, 2654, 3592, 5612, 7961, 8082]

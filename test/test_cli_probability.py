@@ -17,7 +17,8 @@ from leadscrew_ros.cli.figures import describe_probability_band
 from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.model.studies.countermeasures import DESIGN, FRICTION, OPERATING, STEP
 from leadscrew_ros.model.uncertainty.scatter import DEFAULT_SCATTER, LOG_NORMAL
-from leadscrew_ros.model.studies.sweep import PROBABILITY_LEVELS, stability_map
+from leadscrew_ros.model.studies.fields import PROBABILITY_LEVELS
+from leadscrew_ros.model.studies.stability_map import stability_map
 
 OFF = [a for name in DEFAULT_SCATTER for a in ("--scatter", f"{name}=0")]
 

@@ -15,7 +15,8 @@ from leadscrew_ros.cli.figures import (BOUNDARY, FIGURE_FILES, GRID, VALIDITY, L
                                        describe_frequencies, describe_speed_map, line_bands,
                                        squeak_branches)
 from leadscrew_ros.model import SqueakModel
-from leadscrew_ros.model.studies.sweep import stability_map, sweep
+from leadscrew_ros.model.studies.stability_map import stability_map
+from leadscrew_ros.model.studies.sweep import sweep
 from leadscrew_ros.model.studies.tracking import track_modes
 from leadscrew_ros.review import plots
 from leadscrew_ros.review.plots import plot_frequencies

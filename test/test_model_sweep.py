@@ -5,8 +5,11 @@ import numpy as np
 import pytest
 
 from leadscrew_ros.model import ParameterError, SqueakModel
-from leadscrew_ros.model.studies import sweep as sweep_module
-from leadscrew_ros.model.studies.sweep import find_roots, growth_field, stability_map, sweep
+from leadscrew_ros.model.studies import fields, stability_map as map_module
+from leadscrew_ros.model.studies.fields import growth_field
+from leadscrew_ros.model.studies.roots import find_roots
+from leadscrew_ros.model.studies.stability_map import stability_map
+from leadscrew_ros.model.studies.sweep import sweep
 
 
 @pytest.fixture(scope="module")
@@ -123,13 +126,14 @@ def test_map_boundary_is_refined_in_a_few_batched_calls(model, monkeypatch):
     """The whole boundary (rows and columns) costs a few growth_field calls, not one per
     root, and its points are as exact as a scalar root finder's."""
     calls = []
-    real = sweep_module.growth_field
+    real = map_module.growth_field
 
     def counting(*args, **kwargs):
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(sweep_module, "growth_field", counting)
+    for module in (fields, map_module):                 # the grid, then the root finding
+        monkeypatch.setattr(module, "growth_field", counting)
     m = stability_map(model, "speed_rad_s", np.linspace(1.0, 100.0, 30), "load_n",
                       np.linspace(10.0, 600.0, 30))
     assert len(m.boundary) > 40 and len(calls) <= 10
@@ -137,7 +141,7 @@ def test_map_boundary_is_refined_in_a_few_batched_calls(model, monkeypatch):
     assert np.abs(real(model, x, y).max_growth_rate).max() < 1e-8
 
 
-@pytest.mark.parametrize("field", [sweep_module.growth_field, sweep_module.probability_field])
+@pytest.mark.parametrize("field", [fields.growth_field, fields.probability_field])
 @pytest.mark.parametrize("bad", [dict(speed_rad_s=[20.0, np.nan]), dict(load_n=[200.0, np.inf]),
                                  dict(radius_m=[0.005, np.nan])])
 def test_fields_refuse_non_finite_values_with_one_error(model, field, bad):

@@ -22,9 +22,11 @@ import numpy as np
 from ..model.physics.friction import friction_coefficient, sliding_speed
 from ..model.physics.parameters import ScrewParameters
 from ..model.squeak_model import SqueakModel
-from ..model.studies.sweep import (PROBABILITY_LEVELS, REFERENCE_SPEED_RAD_S, MapResult, SweepResult,
-                           Work, _native, level_crossings, map_work, stability_map, sweep,
-                           sweep_work)
+from ..model.studies.fields import PROBABILITY_LEVELS, REFERENCE_SPEED_RAD_S, _native
+from ..model.studies.roots import level_crossings
+from ..model.studies.stability_map import MapResult, stability_map
+from ..model.studies.sweep import SweepResult, sweep
+from ..model.studies.work import Work, map_work, sweep_work
 from ..model.studies.tracking import Branch, track_modes
 from ..review.plots import (at, axis_display, axis_label, fixed_text, fmt, new_figure,
                             plot_frequencies, plot_map, probability_overlay, save_figure,

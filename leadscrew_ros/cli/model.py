@@ -26,7 +26,10 @@ from ..model.squeak_model import Prediction, SqueakModel
 from ..model.studies.probability import ProbabilityEstimate, monte_carlo
 from ..model.uncertainty.scatter import samples_for
 from ..model.studies.sensitivity import Sensitivity, sensitivities
-from ..model.studies.sweep import MapResult, SweepResult, axis_names, check_axis, sweep, sweep_work
+from ..model.studies.fields import axis_names, check_axis
+from ..model.studies.stability_map import MapResult
+from ..model.studies.sweep import SweepResult, sweep
+from ..model.studies.work import sweep_work
 from .args import (SPEED_AXIS, WORK_LIMITS, CliError, Parser, build_model, finite, finite_float,
                    parse_axis_spec, parse_range, print_json)
 
