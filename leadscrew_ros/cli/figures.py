@@ -19,7 +19,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..model.physics.friction import friction_coefficient, sliding_speed
+from ..model.physics.friction import friction_coefficient, friction_slope, sliding_speed
 from ..model.physics.parameters import ScrewParameters
 from ..model.squeak_model import SqueakModel
 from ..model.studies.fields import PROBABILITY_LEVELS, REFERENCE_SPEED_RAD_S, _native
@@ -343,9 +343,9 @@ def squeak_branches(result: SweepResult) -> list[Branch]:
 def describe_friction(p: ScrewParameters, v: np.ndarray, mu: np.ndarray) -> str:
     v_ref = float(sliding_speed(p, REFERENCE_SPEED_RAD_S))
     mu_ref = float(friction_coefficient(p, v_ref))
-    slope = np.gradient(mu, v)
     return (f"mu falls from {mu[0]:.3f} (mu_s) at rest to {mu[-1]:.3f} at |Vc| = {v[-1]:.2f} m/s "
-            f"(mu_k = {p.mu_kinetic:.3f}), steepest slope {slope.min():.3f} s/m at rest; at "
+            f"(mu_k = {p.mu_kinetic:.3f}), steepest slope {float(friction_slope(p, 0.0)):.3f} "
+            f"s/m at rest; at "
             f"{at('speed_rad_s', REFERENCE_SPEED_RAD_S)} (|Vc| = {v_ref:.3f} m/s) "
             f"mu_o = {mu_ref:.3f}.")
 
