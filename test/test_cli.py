@@ -243,6 +243,19 @@ def test_sweep_text_reports_bands(capsys):
     assert code == 0 and "unstable bands [rad/s]: [0.80" in out
 
 
+def test_sweep_reports_the_refined_peak_not_a_grid_point(capsys):
+    """Table 1, 200 N on a 2 rad/s grid: the best grid point is 144.5 1/s at 4.5303 rad/s; the
+    maximum, 144.54 1/s at 4.357 rad/s (fine grid, test_model_sweep), is in text and JSON."""
+    d = run_json(capsys, "sweep", "--speed", "0.5:200:100")
+    assert d["peak_speed_rad_s"] == pytest.approx(4.3569, abs=2e-4)
+    assert d["peak_growth_rate"] == pytest.approx(144.543, abs=1e-3)
+    assert max(g for g in d["max_growth_rate"]) < d["peak_growth_rate"] - 0.01
+    code, out, _ = run(capsys, "sweep", "--speed", "0.5:200:100")
+    assert code == 0 and ("largest growth rate 144.54 1/s at speed_rad_s = 4.35692 rad/s "
+                          "(refined between grid points; squeak modes at the nearest grid point "
+                          "B1y, B2y, B4y, B3y)") in out
+
+
 def test_sweep_other_axis(capsys, tmp_path):
     png = tmp_path / "radius.png"
     d = run_json(capsys, "sweep", "--axis", "radius_m", "--values", "0.004:0.012:5",

@@ -36,7 +36,8 @@ FUNCTIONS = [
     stability.ModeResult.as_dict,
     sweep.sweep,
     sweep.SweepResult.as_dict,
-    sweep.SweepResult.probability_crossings,
+    sweep.peak_growth,
+    sweep.probability_crossings,
     stability_map.stability_map,
     stability_map.MapResult.as_dict,
     stability_map.MapResult.probability_contours,
@@ -46,6 +47,7 @@ FUNCTIONS = [
     roots.find_roots,
     roots.unstable_intervals,
     roots.level_crossings,
+    roots.refine_level_crossings,
     tracking.track_modes,
     friction_force.HelixFriction,
     friction_force.HelixFriction.velocity,
@@ -170,11 +172,12 @@ def test_the_public_api_is_covered():
     """A new public function or method of these modules must be added to the lists above."""
     covered = {f.__qualname__ for f in FUNCTIONS}
     for module, names in ((squeak_model, ("SqueakModel", "check_operating_point")),
-                          (sweep, ("sweep", "SweepResult")),
+                          (sweep, ("sweep", "SweepResult", "peak_growth",
+                                   "probability_crossings")),
                           (stability_map, ("stability_map", "MapResult")),
                           (fields, ("growth_field", "probability_field")),
                           (roots, ("refine_crossings", "unstable_intervals", "level_crossings",
-                                   "find_roots")),
+                                   "refine_level_crossings", "find_roots")),
                           (tracking, ("track_modes", "Branch")),
                           (parameters, ("ScrewParameters",))):
         for name in names:

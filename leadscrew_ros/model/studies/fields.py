@@ -201,18 +201,39 @@ def _levels_key(level: float) -> str:
     return f"{level:g}"
 
 
-def _growth_at(model: SqueakModel, fixed: dict[str, float], axes: tuple[str, ...],
-               coords: np.ndarray, vary: np.ndarray
-               ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-    """Growth rate [1/s] of cells as one batched function for `find_roots`: cell c sits at
-    `coords[c]` on `axes`, its axis `vary[c]` set to the trial value."""
+def _growth_rate(model: SqueakModel, speed_rad_s, load_n, **params) -> np.ndarray:
+    """`growth_field`'s largest squeak growth rate alone [1/s] (NaN where invalid)."""
+    return growth_field(model, speed_rad_s, load_n, **params).max_growth_rate
+
+
+def _probability(model: SqueakModel, speed_rad_s, load_n, **params) -> np.ndarray:
+    """`probability_field`'s P(squeak) alone (NaN where invalid)."""
+    return probability_field(model, speed_rad_s, load_n, **params)[0]
+
+
+Quantity = Callable[..., np.ndarray]     # (model, speed_rad_s, load_n, **params) -> values
+
+
+def _at_cells(quantity: Quantity, model: SqueakModel, fixed: dict[str, float],
+              axes: tuple[str, ...], coords: np.ndarray, vary: np.ndarray
+              ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """`quantity` (`_growth_rate`, `_probability`) of cells as one batched function for
+    `find_roots`: cell c sits at `coords[c]` on `axes`, its axis `vary[c]` set to the trial
+    value."""
     def f(values: np.ndarray, cells: np.ndarray) -> np.ndarray:
         at = coords[cells].copy()
         at[np.arange(cells.size), vary[cells]] = values
         point = dict(fixed, **{a: at[:, k] for k, a in enumerate(axes)})
         speed, load = point.pop("speed_rad_s"), point.pop("load_n")
-        return growth_field(model, speed, load, **point).max_growth_rate
+        return quantity(model, speed, load, **point)
     return f
+
+
+def _along(quantity: Quantity, model: SqueakModel, fixed: dict[str, float], axis: str
+           ) -> Callable[[np.ndarray], np.ndarray]:
+    """`quantity` at an array of values of `axis`, everything else at `fixed`."""
+    f = _at_cells(quantity, model, fixed, (axis,), np.zeros((1, 1)), np.zeros(1, int))
+    return lambda values: f(values, np.zeros(values.size, int))     # one cell, moved
 
 
 def _fixed(model: SqueakModel, speed_rad_s: float | None, load_n: float | None) -> dict[str, float]:

@@ -1,16 +1,17 @@
 # SPDX-License-Identifier: Apache-2.0
 """Root finding on a grid: sign changes of a quantity between grid points refined by
 Chandrupatla's method, batched over all brackets (`find_roots`), the stability boundaries
-(`refine_crossings`), the unstable intervals they close, and level crossings interpolated on
-the grid (`level_crossings`). Pure numpy: the quantity is any batched function."""
+(`refine_crossings`) and the unstable intervals they close, level crossings refined by
+bisection (`refine_level_crossings`) or interpolated on the grid (`level_crossings`). Pure
+numpy: the quantity is any batched function."""
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, Iterable
 
 import numpy as np
 
-ROOT_RTOL = 1e-9                    # stability boundaries: tolerance relative to the grid span
+ROOT_RTOL = 1e-9                    # boundaries, crossings: tolerance relative to the grid span
 
 
 def level_crossings(x: np.ndarray, values: np.ndarray, level: float) -> list[float]:
@@ -141,6 +142,54 @@ def refine_crossings(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, g: np
     i = _crossings(g)[:, 0]
     return find_roots(lambda values, cells: f(values), x[i], x[i + 1], g[i], g[i + 1],
                       _xtol(x, rtol)).tolist()
+
+
+def refine_level_crossings(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray,
+                           values: np.ndarray, levels: Iterable[float],
+                           rtol: float = ROOT_RTOL) -> dict[float, list[float]]:
+    """Where a quantity reaches each level between grid points, refined by bisection, all
+    levels and crossings together (`find_roots`: one call of f per iteration).
+
+    A crossing of `level` is sought in every cell of the grid where ``values >= level`` holds
+    at one end only (both ends valid). It is where ``f(x) >= level`` switches: the midpoint of
+    the last bracket, narrower than ``rtol`` times the grid span, with ``f >= level`` at one
+    end and ``f < level`` at the other. The quantity need not be continuous: P(squeak), a
+    share of scatter samples, is a step function of the axis. Where it crosses the level more
+    than once inside a cell, one of the switches is found.
+
+    Parameters
+    ----------
+    f : callable
+        The quantity at an array of axis values (in the axis unit), of the same shape; NaN
+        where invalid.
+    x : numpy.ndarray
+        Grid along the axis, in the axis unit.
+    values : numpy.ndarray
+        ``f`` on the grid; NaN where invalid (no crossing is sought next to NaN).
+    levels : iterable of float
+        The levels, in the quantity's unit.
+    rtol : float, optional
+        Tolerance relative to the grid span (dimensionless).
+
+    Returns
+    -------
+    dict of float to list of float
+        Level -> its crossings in the axis unit, in grid order.
+    """
+    x, values, levels = np.asarray(x, float), np.asarray(values, float), list(levels)
+
+    def reached(v: np.ndarray, level) -> np.ndarray:
+        """+1/2 where v >= level, -1/2 below: a sign change without a zero, so Chandrupatla's
+        steps are bisections."""
+        return np.where(np.isnan(v), np.nan, (v >= level) - 0.5)
+
+    cells = [_crossings(reached(values, level))[:, 0] for level in levels]
+    i = np.concatenate([np.zeros(0, int), *cells])
+    at = np.repeat(np.asarray(levels, float), [len(c) for c in cells])   # level per bracket
+    found = find_roots(lambda v, c: reached(f(v), at[c]), x[i], x[i + 1],
+                       reached(values[i], at), reached(values[i + 1], at), _xtol(x, rtol))
+    return {level: part.tolist()
+            for level, part in zip(levels, np.split(found, np.cumsum([len(c) for c in cells])))}
 
 
 def _xtol(x: np.ndarray, rtol: float) -> float:

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..physics.parameters import ParameterError
 from ..squeak_model import SqueakModel
-from .fields import (PROBABILITY_LEVELS, GrowthField, _fixed, _growth_at, _levels_key,
+from .fields import (PROBABILITY_LEVELS, GrowthField, _at_cells, _fixed, _growth_rate, _levels_key,
                      check_axis, growth_field, probability_field)
 from .roots import ROOT_RTOL, _crossings, _xtol, find_roots, level_crossings
 from .work import map_work
@@ -32,7 +32,7 @@ def _refined_boundary(model: SqueakModel, fixed: dict[str, float],
     j, i = rows.T
     ci, cj = cols.T
     roots = find_roots(
-        _growth_at(model, fixed, (xa, ya), coords, vary),
+        _at_cells(_growth_rate, model, fixed, (xa, ya), coords, vary),
         np.concatenate([x[i], y[cj]]), np.concatenate([x[i + 1], y[cj + 1]]),
         np.concatenate([g[j, i], g[cj, ci]]), np.concatenate([g[j, i + 1], g[cj + 1, ci]]),
         np.repeat([_xtol(x, ROOT_RTOL), _xtol(y, ROOT_RTOL)], [len(rows), len(cols)]))

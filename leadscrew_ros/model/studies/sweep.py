@@ -1,20 +1,23 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Predictions along one axis (`sweep`), batched, with the stability boundaries refined by
-root finding on the largest squeak growth rate (`roots.refine_crossings`)."""
+"""Predictions along one axis (`sweep`), batched, with what is read off them refined between
+the grid points: the stability boundaries by root finding on the largest squeak growth rate
+(`roots.refine_crossings`), the largest growth rate by bounded scalar maximisation
+(`peak_growth`), the P(squeak) crossings by bisection (`probability_crossings`)."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable, Iterable
 
 import numpy as np
+from scipy.optimize import minimize_scalar
 
 from ..physics.parameters import ParameterError, field_info
 from ..squeak_model import Prediction, SqueakModel, Validity
-from .fields import (OPERATING_AXES, PROBABILITY_LEVELS, _fixed, _growth_at, _levels_key, _native,
-                     check_axis)
-from .roots import level_crossings, refine_crossings, unstable_intervals
+from .fields import (OPERATING_AXES, PROBABILITY_LEVELS, _along, _fixed, _growth_rate, _levels_key,
+                     _native, _probability, check_axis)
+from .roots import ROOT_RTOL, _xtol, refine_crossings, refine_level_crossings, unstable_intervals
 from .work import _chunk_points, sweep_work
 
 
@@ -38,6 +41,16 @@ class SweepResult:
     unstable_bands : list of tuple of float
         ``(start, end)`` intervals with squeak, in the axis unit; each end is a refined
         boundary or, at the edge of validity or of the grid, a grid point.
+    peak_value : float
+        Where the largest squeak growth rate along the axis is (`peak_growth`: refined between
+        the grid neighbours of the best grid point), in the axis unit; NaN if no value is
+        valid.
+    peak_growth_rate : float
+        That largest growth rate [1/s]; NaN if no value is valid.
+    probability_crossings : dict of float to list of float
+        Level (1, 10, 50 and 90 %) -> where P(squeak) reaches it along the axis, in the axis
+        unit, in grid order (`probability_crossings`: the switch of P >= level, bisected to
+        `ROOT_RTOL` of the grid span).
     """
 
     axis: str
@@ -45,35 +58,20 @@ class SweepResult:
     fixed: dict[str, float]
     predictions: list[Prediction]
     boundaries: list[float]
-    unstable_bands: list[tuple[float, float]] = field(default_factory=list)
+    unstable_bands: list[tuple[float, float]]
+    peak_value: float
+    peak_growth_rate: float
+    probability_crossings: dict[float, list[float]]
 
     @property
     def max_growth_rate(self) -> np.ndarray:
         """Largest squeak growth rate per value [1/s]; NaN where not valid."""
-        return np.array([p.max_growth_rate if p.valid else np.nan for p in self.predictions])
+        return _per_value(self.predictions, "max_growth_rate")
 
     @property
     def probability(self) -> np.ndarray:
         """P(squeak) per value (`Prediction.probability`); NaN where not valid."""
-        return np.array([p.probability if p.valid else np.nan for p in self.predictions])
-
-    def probability_crossings(self, levels: Iterable[float] = PROBABILITY_LEVELS
-                              ) -> dict[float, list[float]]:
-        """Where P(squeak) crosses each level along the axis (`level_crossings`).
-
-        Parameters
-        ----------
-        levels : iterable of float
-            Probabilities in [0, 1]; default 1, 10, 50 and 90 %.
-
-        Returns
-        -------
-        dict of float to list of float
-            Level -> axis values of its crossings (linear between grid points), in the axis
-            unit.
-        """
-        return {level: level_crossings(self.values, self.probability, level)
-                for level in levels}
+        return _per_value(self.predictions, "probability")
 
     def as_dict(self) -> dict:
         """JSON-ready result.
@@ -83,7 +81,9 @@ class SweepResult:
         dict
             Axis values, validity, growth rates [1/s], P(squeak) and its standard error,
             squeak modes and frequencies [Hz], boundaries and bands (keyed with the axis unit,
-            e.g. ``unstable_bands_rad_s``), and where P crosses 1, 10, 50 and 90 %
+            e.g. ``unstable_bands_rad_s``), the refined largest growth rate
+            (``peak_growth_rate`` [1/s] at ``peak_<axis>``, e.g. ``peak_speed_rad_s``; None if
+            no value is valid) and where P reaches 1, 10, 50 and 90 %
             (``probability_crossings``, keyed '0.01', ...).
         """
         return {
@@ -93,12 +93,20 @@ class SweepResult:
             "probability": [p.probability for p in self.predictions],
             "probability_stderr": [p.probability_stderr for p in self.predictions],
             "probability_crossings": {_levels_key(k): v
-                                      for k, v in self.probability_crossings().items()},
+                                      for k, v in self.probability_crossings.items()},
             "unstable_modes": [[m.label for m in p.squeak_modes] for p in self.predictions],
             "unstable_frequencies_hz": [p.unstable_frequencies_hz for p in self.predictions],
             "stability_boundaries": self.boundaries,
             f"unstable_bands_{_unit_suffix(self.axis)}": [list(b) for b in self.unstable_bands],
+            f"peak_{self.axis}": None if math.isnan(self.peak_value) else self.peak_value,
+            "peak_growth_rate": (None if math.isnan(self.peak_growth_rate)
+                                 else self.peak_growth_rate),
         }
+
+
+def _per_value(predictions: list[Prediction], name: str) -> np.ndarray:
+    """A number of each prediction; NaN where it is not valid."""
+    return np.array([getattr(p, name) if p.valid else np.nan for p in predictions])
 
 
 def _unit_suffix(axis: str) -> str:
@@ -134,7 +142,8 @@ def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = Non
     Returns
     -------
     SweepResult
-        Predictions, refined boundaries and unstable bands along the axis.
+        Predictions, refined boundaries, unstable bands, peak and P(squeak) crossings along
+        the axis.
 
     Raises
     ------
@@ -170,10 +179,97 @@ def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = Non
                                               Validity.PARAMETERS_REJECTED, str(exc)))
                 continue
             predictions.append(sub.predict(fixed["speed_rad_s"], fixed["load_n"]))
-    growth = np.array([p.max_growth_rate if p.valid else np.nan for p in predictions])
-    f = _growth_at(model, fixed, (axis,), np.zeros((1, 1)), np.zeros(1, int))  # one cell
-    boundaries = refine_crossings(lambda v: f(v, np.zeros(v.size, int)), values, growth)
+    growth = _per_value(predictions, "max_growth_rate")
+    growth_along = _along(_growth_rate, model, fixed, axis)
+    boundaries = refine_crossings(growth_along, values, growth)
     return SweepResult(axis, values, fixed, predictions, boundaries,
-                       unstable_intervals(values, growth, boundaries))
+                       unstable_intervals(values, growth, boundaries),
+                       *peak_growth(growth_along, values, growth, _is_integer(axis)),
+                       probability_crossings(model, fixed, axis, values,
+                                             _per_value(predictions, "probability")))
+
+
+def _is_integer(axis: str) -> bool:
+    return axis not in OPERATING_AXES and field_info(axis)["type"] == "int"
+
+
+def peak_growth(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, g: np.ndarray,
+                integer: bool = False, rtol: float = ROOT_RTOL) -> tuple[float, float]:
+    """The largest growth rate along an axis and where it is: bounded scalar maximisation
+    (Brent's method, `scipy.optimize.minimize_scalar`) between the grid neighbours of the
+    largest grid value.
+
+    Parameters
+    ----------
+    f : callable
+        Growth rate [1/s] at an array of axis values (in the axis unit); NaN where invalid.
+    x : numpy.ndarray
+        Grid along the axis, in the axis unit.
+    g : numpy.ndarray
+        ``f`` on the grid [1/s]; NaN where invalid.
+    integer : bool, optional
+        The axis takes integers only (a mode count): the best grid point is the answer.
+    rtol : float, optional
+        Tolerance on the position relative to the grid span (dimensionless).
+
+    Returns
+    -------
+    value, growth_rate : float
+        Where the maximum is (axis unit) and its growth rate [1/s]; the best grid point if
+        the search finds nothing larger there, NaN for both if no value is valid.
+    """
+    x, g = np.asarray(x, float), np.asarray(g, float)
+    if not np.isfinite(g).any():
+        return math.nan, math.nan
+    i = int(np.nanargmax(g))
+    best = float(x[i]), float(g[i])
+    ends = x[max(i - 1, 0)], x[min(i + 1, len(x) - 1)]
+    if integer or ends[0] == ends[1]:
+        return best
+
+    def loss(v: float) -> float:
+        growth = f(np.array([v]))[0]
+        return -growth if np.isfinite(growth) else math.inf      # invalid: never the peak
+
+    found = minimize_scalar(loss, bounds=(min(ends), max(ends)), method="bounded",
+                            options={"xatol": _xtol(x, rtol)})
+    return (float(found.x), -float(found.fun)) if -found.fun > best[1] else best
+
+
+def probability_crossings(model: SqueakModel, fixed: dict[str, float], axis: str,
+                          values: np.ndarray, probability: np.ndarray,
+                          levels: Iterable[float] = PROBABILITY_LEVELS
+                          ) -> dict[float, list[float]]:
+    """Where P(squeak) reaches each level along one axis, refined between the grid points.
+
+    P (`Prediction.probability`) is a share of the scatter samples, a step function of the
+    axis; a crossing is where ``P >= level`` switches between two grid points, bisected
+    (`roots.refine_level_crossings`, all levels and crossings in one batch) to `ROOT_RTOL`
+    times the grid span. Without scatter P is 0 or 1 and every crossing is a stability
+    boundary.
+
+    Parameters
+    ----------
+    model : SqueakModel
+        The model and its scatter.
+    fixed : dict[str, float]
+        Everything held fixed: 'speed_rad_s' [rad/s] and 'load_n' [N] unless on the axis, and
+        any parameter field by name.
+    axis : str
+        'speed_rad_s', 'load_n' or a numeric `ScrewParameters` field.
+    values : numpy.ndarray
+        Grid along the axis, in the axis unit.
+    probability : numpy.ndarray
+        P(squeak) on the grid; NaN where invalid.
+    levels : iterable of float, optional
+        Probabilities in [0, 1]; default 1, 10, 50 and 90 %.
+
+    Returns
+    -------
+    dict of float to list of float
+        Level -> its crossings in the axis unit, in grid order.
+    """
+    return refine_level_crossings(_along(_probability, model, fixed, axis), values,
+                                  probability, levels)
 
 
