@@ -180,6 +180,22 @@ def stability_map(model: SqueakModel, x_axis: str, x, y_axis: str, y,
         An axis is not sweepable, or the two axes are the same.
     WorkSizeError
         Too many points or too much memory, before any work.
+
+    Examples
+    --------
+    Table 1 over load and speed: the boundary on the 200 N column is the band of `sweep`.
+
+    >>> import numpy as np
+    >>> from leadscrew_ros.model import SqueakModel
+    >>> from leadscrew_ros.model.studies.stability_map import stability_map
+    >>> m = stability_map(SqueakModel(), "load_n", [100.0, 200.0, 300.0], "speed_rad_s",
+    ...                   np.geomspace(0.5, 200.0, 30))
+    >>> m.field.max_growth_rate.shape
+    (30, 3)
+    >>> sorted(round(y, 3) for x, y in m.boundary if x == 200.0)
+    [0.809, 55.207]
+    >>> bool(m.field.max_growth_rate[10, 1] > 0), m.fixed
+    (True, {})
     """
     for a in (x_axis, y_axis):
         check_axis(a)
