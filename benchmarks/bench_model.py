@@ -33,7 +33,9 @@ from leadscrew_ros.model.physics.contact import contact_integrals
 from leadscrew_ros.model.physics.modes import modal_basis
 from leadscrew_ros.model.uncertainty.scatter import Scatter
 from leadscrew_ros.model.physics.stability import classify, eig_both
-from leadscrew_ros.model.studies.sweep import _CHUNK, growth_field, stability_map
+from leadscrew_ros.model.studies.fields import growth_field
+from leadscrew_ros.model.studies.stability_map import stability_map
+from leadscrew_ros.model.studies.work import _CHUNK
 
 TARGET_POINT_RATIO = 1.5     # predict / bare eig
 TARGET_MAP_RATIO = 1.2       # growth_field / bare eigvals, per point

@@ -11,8 +11,8 @@ import shutil
 import tempfile
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-# One domain per test process avoids the Fast DDS teardown deadlock seen when several
-# processes share a domain (see shared notes); 1..200, never the default 0.
+# One domain per test process: test processes sharing a domain discover each other's
+# participants, and Fast DDS teardown was seen to deadlock then; 1..200, never the default 0.
 os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 200 + 1))
 if "ROS_LOG_DIR" not in os.environ:
     _log_dir = tempfile.mkdtemp(prefix="leadscrew_ros_test_log_")

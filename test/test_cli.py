@@ -25,8 +25,9 @@ from hypothesis import strategies as st
 from leadscrew_ros.cli import CliError, main, split_ros_args
 from leadscrew_ros.cli.args import MAX_COUNT, parse_range
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.model.studies.sweep import (MAX_MEMORY_BYTES, MAX_POINTS, map_work, stability_map, sweep,
-                                       sweep_work)
+from leadscrew_ros.model.studies.stability_map import stability_map
+from leadscrew_ros.model.studies.sweep import sweep
+from leadscrew_ros.model.studies.work import MAX_MEMORY_BYTES, MAX_POINTS, map_work, sweep_work
 
 REPO = Path(__file__).resolve().parents[1]
 TABLE2_HZ = [224, 898, 2020, 2654, 3592, 5612, 7961, 8082]
@@ -240,6 +241,19 @@ def test_sweep_csv_parses(capsys):
 def test_sweep_text_reports_bands(capsys):
     code, out, _ = run(capsys, "sweep", "--speed", "0.5:120:30")
     assert code == 0 and "unstable bands [rad/s]: [0.80" in out
+
+
+def test_sweep_reports_the_refined_peak_not_a_grid_point(capsys):
+    """Table 1, 200 N on a 2 rad/s grid: the best grid point is 144.5 1/s at 4.5303 rad/s; the
+    maximum, 144.54 1/s at 4.357 rad/s (fine grid, test_model_sweep), is in text and JSON."""
+    d = run_json(capsys, "sweep", "--speed", "0.5:200:100")
+    assert d["peak_speed_rad_s"] == pytest.approx(4.3569, abs=2e-4)
+    assert d["peak_growth_rate"] == pytest.approx(144.543, abs=1e-3)
+    assert max(g for g in d["max_growth_rate"]) < d["peak_growth_rate"] - 0.01
+    code, out, _ = run(capsys, "sweep", "--speed", "0.5:200:100")
+    assert code == 0 and ("largest growth rate 144.54 1/s at speed_rad_s = 4.35692 rad/s "
+                          "(refined between grid points; squeak modes at the nearest grid point "
+                          "B1y, B2y, B4y, B3y)") in out
 
 
 def test_sweep_other_axis(capsys, tmp_path):

@@ -16,8 +16,9 @@ from leadscrew_ros.cli import main
 from leadscrew_ros.cli.figures import describe_probability_band
 from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.model.studies.countermeasures import DESIGN, FRICTION, OPERATING, STEP
-from leadscrew_ros.model.uncertainty.scatter import DEFAULT_SCATTER, LOG_NORMAL
-from leadscrew_ros.model.studies.sweep import PROBABILITY_LEVELS, stability_map
+from leadscrew_ros.model.uncertainty.scatter import DEFAULT_SCATTER, LOG_NORMAL, Scatter
+from leadscrew_ros.model.studies.fields import PROBABILITY_LEVELS
+from leadscrew_ros.model.studies.stability_map import stability_map
 
 OFF = [a for name in DEFAULT_SCATTER for a in ("--scatter", f"{name}=0")]
 
@@ -231,6 +232,28 @@ def test_fig07p_summary_brackets_the_nominal_boundary():
     model = SqueakModel()
     result = stability_map(model, "load_n", np.array([100.0, 200.0, 300.0]), "speed_rad_s",
                            np.linspace(30.0, 90.0, 31), probability=True)
-    text = describe_probability_band(result, model.params)
+    text = describe_probability_band(result, model)
     assert text.startswith("at F_z = 200 N (nearest the nominal load) P(squeak) crosses 1 % at")
     assert "nominal stability boundary 55.2 rad/s" in text
+    # refined, not interpolated on the 2 rad/s grid: without scatter every level is the boundary
+    nominal = model.with_scatter(Scatter({}))
+    result = stability_map(nominal, "load_n", np.array([100.0, 200.0, 300.0]), "speed_rad_s",
+                           np.linspace(30.0, 90.0, 31), probability=True)
+    assert "crosses 1 % at 55.2 rad/s; 10 % at 55.2 rad/s; 50 % at 55.2 rad/s; 90 % at 55.2 " \
+           "rad/s; nominal stability boundary 55.2 rad/s" in describe_probability_band(result,
+                                                                                       nominal)
+
+
+def test_sweep_probability_crossings_without_scatter_are_the_boundaries():
+    """`sweep --scatter none`: P is the 0/1 verdict, so each level is crossed at the refined
+    stability boundaries (0.809 and 55.207 rad/s at Table 1, 200 N), in JSON and text, not
+    interpolated along the 2 rad/s grid (0.520 ... 56.9 rad/s)."""
+    args = ("sweep", "--speed", "0.5:200:100", "--probability", "--scatter", "none")
+    d = run_json(*args)
+    edges = d["stability_boundaries"]
+    np.testing.assert_allclose(edges, [0.809, 55.207], atol=1e-3)
+    for level, found in d["probability_crossings"].items():
+        np.testing.assert_allclose(found, edges, rtol=0, atol=2e-7, err_msg=level)  # root tol
+    code, out, _ = run(*args)
+    assert code == 0 and ("P(squeak) crosses 1 % at 0.8091, 55.21, 10 % at 0.8091, 55.21, "
+                          "50 % at 0.8091, 55.21, 90 % at 0.8091, 55.21 [rad/s]") in out

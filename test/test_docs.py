@@ -15,7 +15,7 @@ import pytest
 from leadscrew_ros.model import squeak_model
 from leadscrew_ros.model.nonlinear import friction_force, transient, transient_analysis
 from leadscrew_ros.model.physics import parameters, stability
-from leadscrew_ros.model.studies import sweep, tracking
+from leadscrew_ros.model.studies import fields, roots, stability_map, sweep, tracking
 from leadscrew_ros.model.physics.parameters import ScrewParameters, field_info, field_names
 from leadscrew_ros.review import fleet, fleetreport
 
@@ -35,17 +35,19 @@ FUNCTIONS = [
     ScrewParameters.as_dict,
     stability.ModeResult.as_dict,
     sweep.sweep,
-    sweep.stability_map,
-    sweep.growth_field,
-    sweep.refine_crossings,
-    sweep.find_roots,
-    sweep.unstable_intervals,
     sweep.SweepResult.as_dict,
-    sweep.SweepResult.probability_crossings,
-    sweep.MapResult.as_dict,
-    sweep.MapResult.probability_contours,
-    sweep.probability_field,
-    sweep.level_crossings,
+    sweep.peak_growth,
+    sweep.probability_crossings,
+    stability_map.stability_map,
+    stability_map.MapResult.as_dict,
+    stability_map.MapResult.probability_contours,
+    fields.growth_field,
+    fields.probability_field,
+    roots.refine_crossings,
+    roots.find_roots,
+    roots.unstable_intervals,
+    roots.level_crossings,
+    roots.refine_level_crossings,
     tracking.track_modes,
     friction_force.HelixFriction,
     friction_force.HelixFriction.velocity,
@@ -61,8 +63,8 @@ FUNCTIONS = [
     fleet.review_logs,
     fleetreport.write_fleet,
 ]
-RECORDS = [ScrewParameters, squeak_model.Prediction, stability.ModeResult, sweep.GrowthField,
-           sweep.SweepResult, sweep.MapResult, tracking.Branch, transient.TransientSettings,
+RECORDS = [ScrewParameters, squeak_model.Prediction, stability.ModeResult, fields.GrowthField,
+           sweep.SweepResult, stability_map.MapResult, tracking.Branch, transient.TransientSettings,
            transient.TransientResult, transient_analysis.LinearFit,
            transient_analysis.LimitCycle, transient_analysis.TransientAnalysis,
            fleet.FleetSettings]
@@ -170,10 +172,12 @@ def test_the_public_api_is_covered():
     """A new public function or method of these modules must be added to the lists above."""
     covered = {f.__qualname__ for f in FUNCTIONS}
     for module, names in ((squeak_model, ("SqueakModel", "check_operating_point")),
-                          (sweep, ("sweep", "stability_map", "growth_field", "refine_crossings",
-                                   "unstable_intervals", "probability_field", "level_crossings",
-                                   "find_roots",
-                                   "SweepResult", "MapResult")),
+                          (sweep, ("sweep", "SweepResult", "peak_growth",
+                                   "probability_crossings")),
+                          (stability_map, ("stability_map", "MapResult")),
+                          (fields, ("growth_field", "probability_field")),
+                          (roots, ("refine_crossings", "unstable_intervals", "level_crossings",
+                                   "refine_level_crossings", "find_roots")),
                           (tracking, ("track_modes", "Branch")),
                           (parameters, ("ScrewParameters",))):
         for name in names:

@@ -14,8 +14,10 @@ from leadscrew_ros.cli import figures
 from leadscrew_ros.cli.figures import (BOUNDARY, FIGURE_FILES, GRID, VALIDITY, Limit,
                                        describe_frequencies, describe_speed_map, line_bands,
                                        squeak_branches)
-from leadscrew_ros.model import SqueakModel
-from leadscrew_ros.model.studies.sweep import stability_map, sweep
+from leadscrew_ros.model import ScrewParameters, SqueakModel
+from leadscrew_ros.model.physics.friction import friction_coefficient, friction_slope
+from leadscrew_ros.model.studies.stability_map import stability_map
+from leadscrew_ros.model.studies.sweep import sweep
 from leadscrew_ros.model.studies.tracking import track_modes
 from leadscrew_ros.review import plots
 from leadscrew_ros.review.plots import plot_frequencies
@@ -58,6 +60,25 @@ def test_summary_numbers_come_from_the_model(quick_figures):
     # Fig. 6: the upper speed bound falls as R grows
     up = re.search(r"upper speed bound of squeak (\w+) from", text.split("fig06")[1])
     assert up.group(1) == "falls"
+
+
+def test_fig04_steepest_slope_is_the_derivative_of_the_law_at_rest(quick_figures):
+    """-(mu_s - mu_k) d = -0.500 s/m at Table 1, not a one-sided difference (-0.496)."""
+    p = ScrewParameters()
+    exact = -(p.mu_static - p.mu_kinetic) * p.friction_decay_s_m
+    assert float(friction_slope(p, 0.0)) == pytest.approx(exact, rel=0, abs=1e-9)
+    v, h = np.array([0.01, 0.05, 0.3]), 1e-6                      # elsewhere: central differences
+    fd = (friction_coefficient(p, v + h) - friction_coefficient(p, v - h)) / (2 * h)
+    np.testing.assert_allclose(friction_slope(p, v), fd, rtol=1e-7)
+    text = (quick_figures[0] / "summary.txt").read_text()
+    assert f"steepest slope {exact:.3f} s/m at rest" in text and "-0.500 s/m" in text
+
+
+def test_fig05_largest_growth_is_refined(quick_figures):
+    """The speed sweep's peak is maximised between grid points (144.54 1/s at 4.357 rad/s at
+    Table 1), not the best point of the 60-point quick grid."""
+    text = (quick_figures[0] / "summary.txt").read_text()
+    assert "largest growth 144.5 1/s at Omega = 4.36 rad/s (refined)" in text
 
 
 def test_summary_is_printed(capsys, tmp_path):

@@ -24,7 +24,7 @@ from leadscrew_ros.model import Prediction, SqueakModel, Validity
 from leadscrew_ros.model.studies.advice import (_BAND_POINTS, _MAX_REFINE, _SCAN_BATCH, EDGE_RTOL,
                                         band_around, band_score, speed_bands)
 from leadscrew_ros.model.uncertainty.scatter import Scatter
-from leadscrew_ros.model.studies.sweep import growth_field
+from leadscrew_ros.model.studies.fields import growth_field
 
 # Table 1, 200 N, paper, default scatter: the nominal squeak band is ~0.81..55.2 rad/s; P(squeak)
 # is 0.997 at 20 rad/s, 0.43 at 55.5 (nominally stable), 0.12 at 60, 0.002 at 68, 0 from ~70 on.

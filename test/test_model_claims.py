@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from leadscrew_ros.model import SqueakModel
-from leadscrew_ros.model.studies.sweep import stability_map, sweep
+from leadscrew_ros.model.studies.stability_map import stability_map
+from leadscrew_ros.model.studies.sweep import sweep
 
 SPEEDS = np.linspace(0.5, 150, 150)
 

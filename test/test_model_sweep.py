@@ -5,8 +5,12 @@ import numpy as np
 import pytest
 
 from leadscrew_ros.model import ParameterError, SqueakModel
-from leadscrew_ros.model.studies import sweep as sweep_module
-from leadscrew_ros.model.studies.sweep import find_roots, growth_field, stability_map, sweep
+from leadscrew_ros.model.uncertainty.scatter import Scatter
+from leadscrew_ros.model.studies import fields, stability_map as map_module
+from leadscrew_ros.model.studies.fields import growth_field, probability_field
+from leadscrew_ros.model.studies.roots import ROOT_RTOL, find_roots, refine_level_crossings
+from leadscrew_ros.model.studies.stability_map import stability_map
+from leadscrew_ros.model.studies.sweep import sweep
 
 
 @pytest.fixture(scope="module")
@@ -123,13 +127,14 @@ def test_map_boundary_is_refined_in_a_few_batched_calls(model, monkeypatch):
     """The whole boundary (rows and columns) costs a few growth_field calls, not one per
     root, and its points are as exact as a scalar root finder's."""
     calls = []
-    real = sweep_module.growth_field
+    real = map_module.growth_field
 
     def counting(*args, **kwargs):
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(sweep_module, "growth_field", counting)
+    for module in (fields, map_module):                 # the grid, then the root finding
+        monkeypatch.setattr(module, "growth_field", counting)
     m = stability_map(model, "speed_rad_s", np.linspace(1.0, 100.0, 30), "load_n",
                       np.linspace(10.0, 600.0, 30))
     assert len(m.boundary) > 40 and len(calls) <= 10
@@ -137,7 +142,7 @@ def test_map_boundary_is_refined_in_a_few_batched_calls(model, monkeypatch):
     assert np.abs(real(model, x, y).max_growth_rate).max() < 1e-8
 
 
-@pytest.mark.parametrize("field", [sweep_module.growth_field, sweep_module.probability_field])
+@pytest.mark.parametrize("field", [fields.growth_field, fields.probability_field])
 @pytest.mark.parametrize("bad", [dict(speed_rad_s=[20.0, np.nan]), dict(load_n=[200.0, np.inf]),
                                  dict(radius_m=[0.005, np.nan])])
 def test_fields_refuse_non_finite_values_with_one_error(model, field, bad):
@@ -145,3 +150,69 @@ def test_fields_refuse_non_finite_values_with_one_error(model, field, bad):
     args = {"speed_rad_s": 20.0, "load_n": 200.0, **bad}
     with pytest.raises(ParameterError, match="finite"):
         field(model, args.pop("speed_rad_s"), args.pop("load_n"), **args)
+
+
+# ------------------------------------------------------- what a sweep reads off its grid, refined
+TABLE1_SPEEDS = np.linspace(0.5, 200.0, 100)          # 2 rad/s apart: coarse next to the band
+
+
+@pytest.fixture(scope="module")
+def table1_sweep(model):
+    return sweep(model, "speed_rad_s", TABLE1_SPEEDS)
+
+
+def test_probability_crossings_without_scatter_are_the_stability_boundaries(model):
+    """P is the 0/1 verdict: every level is reached where the growth rate changes sign."""
+    r = sweep(model.with_scatter(Scatter({})), "speed_rad_s", TABLE1_SPEEDS)
+    np.testing.assert_allclose(r.boundaries, [0.809, 55.207], atol=1e-3)   # Table 1, 200 N
+    tol = ROOT_RTOL * np.ptp(TABLE1_SPEEDS)                                 # 2e-7 rad/s
+    for level, found in r.probability_crossings.items():
+        np.testing.assert_allclose(found, r.boundaries, rtol=0, atol=tol, err_msg=str(level))
+
+
+def test_probability_crossings_agree_with_a_fine_grid(model, table1_sweep):
+    """Over the default scatter the lower crossings, 2 rad/s grid, equal those of a grid
+    1e-3 rad/s apart to that spacing (the grid's interpolation gave 0.653, 1.497, 2.341)."""
+    fine = np.linspace(0.5, 2.5, 2001)
+    prob = probability_field(model, fine, 200.0)[0]
+    for level in (0.1, 0.5, 0.9):
+        k = np.flatnonzero((prob[:-1] >= level) != (prob[1:] >= level))
+        assert len(k) == 1, level                                            # P rises once
+        lower = table1_sweep.probability_crossings[level][0]
+        assert fine[k[0]] <= lower <= fine[k[0] + 1], (level, lower)
+    np.testing.assert_allclose([table1_sweep.probability_crossings[v][0] for v in (0.1, 0.5, 0.9)],
+                               [0.579, 0.812, 1.397], atol=1e-3)
+
+
+def test_refine_level_crossings_finds_the_switch_of_a_step_function():
+    """A staircase: the crossing is where f >= level switches, to the tolerance, even where the
+    level equals a step's value; several levels in one batch of calls."""
+    calls = []
+
+    def staircase(x):
+        calls.append(x.size)
+        return np.floor(4 * x) / 4                                          # steps of 0.25
+
+    x = np.array([0.0, 0.6, 1.0])
+    values = np.floor(4 * x) / 4                                            # 0, 0.5, 1
+    found = refine_level_crossings(staircase, x, values, [0.25, 0.5, 0.9, 1.5], rtol=1e-10)
+    assert found[0.25] == pytest.approx([0.25], abs=1e-10)                 # f = level from 0.25
+    assert found[0.5] == pytest.approx([0.5], abs=1e-10)                   # on the grid point
+    assert found[0.9] == pytest.approx([1.0], abs=1e-10)                   # at the grid end
+    assert found[1.5] == []
+    assert calls[0] == 3 and len(calls) <= 40                               # levels batched
+
+
+def test_peak_growth_is_refined_between_grid_points(model, table1_sweep):
+    """The largest growth rate is not left at the best grid point (144.5 at 4.530 rad/s)."""
+    fine = np.linspace(2.5, 6.5, 40001)                                     # 1e-4 rad/s apart
+    g = growth_field(model, fine, 200.0).max_growth_rate
+    i = int(np.argmax(g))
+    assert table1_sweep.peak_value == pytest.approx(fine[i], abs=2e-4)      # 4.357 rad/s
+    assert g[i] - 1e-9 <= table1_sweep.peak_growth_rate <= g[i] + 1e-6      # 144.54 1/s
+    assert table1_sweep.peak_growth_rate > np.nanmax(table1_sweep.max_growth_rate) + 0.01
+    d = table1_sweep.as_dict()
+    assert d["peak_speed_rad_s"] == table1_sweep.peak_value
+    assert d["peak_growth_rate"] == table1_sweep.peak_growth_rate
+    none = sweep(model, "speed_rad_s", [0.01, 0.02])                        # below min speed
+    assert np.isnan(none.peak_value) and none.as_dict()["peak_growth_rate"] is None

@@ -24,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.model.studies.sweep import REFERENCE_SPEED_RAD_S, sweep
+from leadscrew_ros.model.studies.fields import REFERENCE_SPEED_RAD_S
+from leadscrew_ros.model.studies.sweep import sweep
 from leadscrew_ros.model.studies.tracking import track_modes
 from leadscrew_ros.review.plots import fmt
 

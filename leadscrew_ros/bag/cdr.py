@@ -36,7 +36,6 @@ _BOOL_PAYLOADS = {False: _LE_HEADER + b"\x00", True: _LE_HEADER + b"\x01"}
 FLOAT64, BOOL = "std_msgs/msg/Float64", "std_msgs/msg/Bool"
 FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
 JOINT_STATE = "sensor_msgs/msg/JointState"
-DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
 
 
 class JointStateData(NamedTuple):
@@ -213,9 +212,6 @@ class _Encoder:
 
     def u32(self, value: int) -> None:
         self._pack("I", 4, value)
-
-    def f64(self, value: float) -> None:
-        self._pack("d", 8, value)
 
     def string(self, value: str) -> None:
         raw = value.encode("utf-8")                # surrogates: UnicodeEncodeError

@@ -24,7 +24,8 @@ from ..model.physics.parameters import (FORMULATIONS, ParameterError, ScrewParam
 from ..model.uncertainty.perturbation import MAX_GEOMETRY_FIELDS, geometry_fields
 from ..model.squeak_model import SqueakModel
 from ..model.uncertainty.scatter import LOG_NORMAL, REPLICATES, ScatterSettings, scatterable
-from ..model.studies.sweep import MAX_MEMORY_BYTES, MAX_POINTS, REFERENCE_STATE_SIZE, check_axis
+from ..model.studies.fields import check_axis
+from ..model.studies.work import MAX_MEMORY_BYTES, MAX_POINTS, REFERENCE_STATE_SIZE
 from ..review.jsonsafe import json_safe
 
 PROG = "leadscrew-squeak"

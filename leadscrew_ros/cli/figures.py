@@ -20,12 +20,13 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..model.physics.friction import friction_coefficient, sliding_speed
+from ..model.physics.friction import friction_coefficient, friction_slope, sliding_speed
 from ..model.physics.parameters import ScrewParameters
 from ..model.squeak_model import SqueakModel
-from ..model.studies.sweep import (PROBABILITY_LEVELS, REFERENCE_SPEED_RAD_S, MapResult, SweepResult,
-                           Work, _native, level_crossings, map_work, stability_map, sweep,
-                           sweep_work)
+from ..model.studies.fields import REFERENCE_SPEED_RAD_S, _native
+from ..model.studies.stability_map import MapResult, stability_map
+from ..model.studies.sweep import SweepResult, probability_crossings, sweep
+from ..model.studies.work import Work, map_work, sweep_work
 from ..model.studies.tracking import Branch, track_modes
 from ..review.plots import (at, axis_display, axis_label, fixed_text, fmt, new_figure,
                             plot_frequencies, plot_map, probability_overlay, save_figure,
@@ -287,16 +288,17 @@ def describe_load_map(result: MapResult, params: ScrewParameters) -> str:
             f"{_nominal(result, bands, params)}; {_peak(result)}.")
 
 
-def describe_probability_band(result: MapResult, params: ScrewParameters) -> str:
+def describe_probability_band(result: MapResult, model: SqueakModel) -> str:
     """Fig. 7 with P: where P(squeak) crosses each level on the load column nearest the
-    nominal load, next to the nominal boundary there."""
-    i = int(np.argmin(np.abs(result.x - params.axial_load_n)))
-    column = result.probability[:, i]
+    nominal load (refined between the grid points, `sweep.probability_crossings`), next to
+    the nominal boundary there."""
+    i = int(np.argmin(np.abs(result.x - model.params.axial_load_n)))
     roots = sorted(p[1] for p in result.boundary if p[0] == result.x[i])
+    crossings = probability_crossings(model, dict(result.fixed, **{result.x_axis: result.x[i]}),
+                                      result.y_axis, result.y, result.probability[:, i])
     parts = [f"{100 * level:g} % at " + (", ".join(fmt("speed_rad_s", v) for v in found)
                                           or "none")
-             for level in PROBABILITY_LEVELS
-             for found in [level_crossings(result.y, column, level)]]
+             for level, found in crossings.items()]
     bound = ", ".join(fmt("speed_rad_s", r) for r in roots) or "none on the grid"
     return (f"at {at(result.x_axis, result.x[i])} (nearest the nominal load) P(squeak) "
             f"crosses {'; '.join(parts)}; nominal stability boundary {bound}; "
@@ -318,10 +320,10 @@ def describe_speed_sweep(result: SweepResult) -> str:
         return "no valid point in the sweep."
     bands = ", ".join(f"{lo:.3g}-{hi:.3g} rad/s" for lo, hi in result.unstable_bands) or "none"
     modes = ", ".join(b.squeak_text for b in squeak_branches(result)) or "none"
-    i = int(np.nanargmax(g))
     return (f"unstable band {bands} (refined boundaries; stable elsewhere on "
             f"{fmt('speed_rad_s', result.values[0])}-{fmt('speed_rad_s', result.values[-1])}); "
-            f"largest growth {g[i]:.1f} 1/s at {at('speed_rad_s', result.values[i])}; "
+            f"largest growth {result.peak_growth_rate:.1f} 1/s at "
+            f"{at('speed_rad_s', result.peak_value)} (refined); "
             f"squeak modes {modes}.")
 
 
@@ -344,9 +346,9 @@ def describe_friction(p: ScrewParameters, v: np.ndarray, mu: np.ndarray) -> str:
     """The friction law `mu` over sliding speeds `v` [m/s] in words (Fig. 4)."""
     v_ref = float(sliding_speed(p, REFERENCE_SPEED_RAD_S))
     mu_ref = float(friction_coefficient(p, v_ref))
-    slope = np.gradient(mu, v)
     return (f"mu falls from {mu[0]:.3f} (mu_s) at rest to {mu[-1]:.3f} at |Vc| = {v[-1]:.2f} m/s "
-            f"(mu_k = {p.mu_kinetic:.3f}), steepest slope {slope.min():.3f} s/m at rest; at "
+            f"(mu_k = {p.mu_kinetic:.3f}), steepest slope {float(friction_slope(p, 0.0)):.3f} "
+            f"s/m at rest; at "
             f"{at('speed_rad_s', REFERENCE_SPEED_RAD_S)} (|Vc| = {v_ref:.3f} m/s) "
             f"mu_o = {mu_ref:.3f}.")
 
@@ -516,7 +518,7 @@ class FigureSet:
         title = self._title(f"{spec.title}, with P(squeak) over the scatter\n(scatter: "
                             f"{scatter})")
         plot_map(result, path, title, dpi=self.grids.dpi, overlay=probability_overlay(result))
-        return describe_probability_band(result, self.model.params)
+        return describe_probability_band(result, self.model)
 
     def work(self) -> Work:
         """All the predictions of the figures, as one batch (checked before the first)."""

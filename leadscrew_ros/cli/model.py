@@ -26,7 +26,10 @@ from ..model.squeak_model import Prediction, SqueakModel
 from ..model.studies.probability import ProbabilityEstimate, monte_carlo
 from ..model.uncertainty.scatter import samples_for
 from ..model.studies.sensitivity import Sensitivity, sensitivities
-from ..model.studies.sweep import MapResult, SweepResult, axis_names, check_axis, sweep, sweep_work
+from ..model.studies.fields import axis_names, check_axis
+from ..model.studies.stability_map import MapResult
+from ..model.studies.sweep import SweepResult, sweep
+from ..model.studies.work import sweep_work
 from .args import (SPEED_AXIS, WORK_LIMITS, CliError, Parser, build_model, finite, finite_float,
                    parse_axis_spec, parse_range, print_json)
 
@@ -172,16 +175,16 @@ def sweep_text(result: SweepResult, probability: bool = False) -> str:
              "stability boundaries [" + unit + "]: "
              + (", ".join(f"{b:.6g}" for b in result.boundaries) or "none")]
     if n_valid:
-        i = int(np.nanargmax(g))
-        p = result.predictions[i]
-        lines.append(f"largest growth rate {g[i]:.4g} 1/s at {result.axis} = "
-                     f"{result.values[i]:g} {unit}"
-                     + (f" (squeak modes {_unstable_labels(p).replace(';', ', ')})"
-                        if p.squeak_modes else ""))
+        p = result.predictions[int(np.nanargmin(np.abs(result.values - result.peak_value)))]
+        lines.append(f"largest growth rate {result.peak_growth_rate:.5g} 1/s at {result.axis} = "
+                     f"{result.peak_value:.6g} {unit} (refined between grid points"
+                     + (f"; squeak modes at the nearest grid point "
+                        f"{_unstable_labels(p).replace(';', ', ')}" if p.squeak_modes else "")
+                     + ")")
     if probability and n_valid:
         prob = result.probability
         i = int(np.nanargmax(prob))
-        lines += [crossings_text(result.probability_crossings(), unit),
+        lines += [crossings_text(result.probability_crossings, unit),
                   f"largest P(squeak) {prob[i]:.3g} at {result.axis} = {result.values[i]:g} "
                   f"{unit}"]
     reasons = {p.reason for p in result.predictions if not p.valid}

@@ -17,7 +17,9 @@ from typing import TYPE_CHECKING, Callable, NamedTuple
 import numpy as np
 
 from ..model.physics.parameters import field_info
-from ..model.studies.sweep import PROBABILITY_LEVELS, MapResult, SweepResult
+from ..model.studies.fields import PROBABILITY_LEVELS
+from ..model.studies.stability_map import MapResult
+from ..model.studies.sweep import SweepResult
 from ..model.studies.tracking import track_modes
 
 if TYPE_CHECKING:

@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from ..model import SqueakModel
-from ..model.studies.sweep import stability_map, sweep
+from ..model.studies.stability_map import stability_map
+from ..model.studies.sweep import sweep
 from .plots import new_figure, plot_frequencies, plot_map
 from .replay import ReplayResult, attach
 

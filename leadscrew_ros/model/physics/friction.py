@@ -15,6 +15,12 @@ def friction_coefficient(p: ParamsLike, sliding_speed_m_s: ArrayLike) -> np.ndar
     return p.mu_kinetic + (p.mu_static - p.mu_kinetic) * np.exp(-p.friction_decay_s_m * v)
 
 
+def friction_slope(p: ParamsLike, sliding_speed_m_s: ArrayLike) -> np.ndarray:
+    """Slope of (12), s/m: dmu/d|Vc| = -d (mu_s - mu_k) exp(-d |Vc|), steepest at rest."""
+    v = np.abs(sliding_speed_m_s)
+    return -p.friction_decay_s_m * (p.mu_static - p.mu_kinetic) * np.exp(-p.friction_decay_s_m * v)
+
+
 def sliding_speed(p: ParamsLike, speed_rad_s: ArrayLike) -> np.ndarray:
     """Steady contact sliding speed |Vc| = R |Omega| / cos(beta), m/s (from (4), (11))."""
     return p.radius_m * np.abs(speed_rad_s) / np.cos(p.helix_angle_rad)

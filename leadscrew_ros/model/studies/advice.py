@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike
 
 from ..physics.parameters import ParameterError
 from ..squeak_model import SqueakModel
-from .sweep import unstable_intervals
+from .roots import unstable_intervals
 
 _BAND_POINTS = 64          # log-spaced speeds between min_speed and the critical speed
 _SCAN_BATCH = 8            # grid points per batch of predictions of `band_around`'s scan
