@@ -36,6 +36,7 @@ _BOOL_PAYLOADS = {False: _LE_HEADER + b"\x00", True: _LE_HEADER + b"\x01"}
 FLOAT64, BOOL = "std_msgs/msg/Float64", "std_msgs/msg/Bool"
 FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
 JOINT_STATE = "sensor_msgs/msg/JointState"
+DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"   # bundled for logs written without ROS
 
 
 class JointStateData(NamedTuple):
