@@ -342,7 +342,7 @@ def recovered(log: Path, scratch: Path) -> tuple[Path, str]:
 def _points(result) -> list[list[float]]:
     """At most POINTS_PER_LOG squeak points (speed [rad/s], load [N], frequency [Hz]), evenly
     from the replay's sample, 4 significant digits."""
-    sample = result.plot.squeak.sample()
+    sample = result.plot_data.squeak.sample()
     if not len(sample):
         return []
     pick = np.unique(np.linspace(0, len(sample) - 1, POINTS_PER_LOG).round().astype(int))
