@@ -33,6 +33,8 @@ class FileStats:
 
 @dataclass
 class TopicStats:
+    """One topic of a bag in metadata.yaml: name, type, message count, offered QoS."""
+
     name: str
     type_name: str              # 'pkg/msg/Type'
     count: int = 0
@@ -41,6 +43,8 @@ class TopicStats:
 
 @dataclass
 class BagStats:
+    """What metadata.yaml says of a bag: its files, its topics and custom data."""
+
     files: list[FileStats] = field(default_factory=list)
     topics: list[TopicStats] = field(default_factory=list)
     custom_data: dict[str, str] = field(default_factory=dict)

@@ -40,6 +40,9 @@ DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
 
 
 class JointStateData(NamedTuple):
+    """sensor_msgs/JointState: the header stamp [ns] and frame, and per joint its name,
+    position, velocity and effort (each may be empty)."""
+
     stamp_ns: int
     frame_id: str
     name: tuple[str, ...]
@@ -57,6 +60,8 @@ class Dimension(NamedTuple):
 
 
 class Float64MultiArrayData(NamedTuple):
+    """std_msgs/Float64MultiArray: the layout (dimensions, data offset) and the data."""
+
     dim: tuple[Dimension, ...]
     data_offset: int
     data: tuple[float, ...]

@@ -57,6 +57,8 @@ class LogError(Exception):
 
 @dataclass(frozen=True)
 class Topic:
+    """A channel of a log with its schema: what a copy needs to write it back verbatim."""
+
     name: str
     type_name: str              # 'pkg/msg/Type'
     schema_encoding: str
@@ -67,11 +69,14 @@ class Topic:
 
     @property
     def stored_schema_name(self) -> str:
+        """The schema name as stored, or the type name when the log stored none."""
         return self.schema_name or self.type_name
 
 
 @dataclass(frozen=True)
 class LogMessage:
+    """One message of a log: its topic, times [ns], sequence and serialized payload."""
+
     topic: Topic
     log_time_ns: int
     publish_time_ns: int

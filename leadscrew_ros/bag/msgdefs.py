@@ -20,7 +20,7 @@ _PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "i
 
 
 class MessageDefinitionError(LookupError):
-    pass
+    """A message type whose definition is not known here."""
 
 
 def type_name(msg_type) -> str:

@@ -27,6 +27,8 @@ from ..model.squeak_model import OperatingPointError
 from . import figures, fleet, logs, model, ros, transient
 from .args import PROG, CliError, Parser, common_parser
 
+__all__ = ["CliError", "build_parser", "main", "split_ros_args"]
+
 ROS_COMMANDS = ("simulate", "replay")      # the ones that start a ROS node (replay: --publish)
 
 

@@ -302,6 +302,8 @@ def describe_friction(p: ScrewParameters, v: np.ndarray, mu: np.ndarray) -> str:
 # --------------------------------------------------------------------------- the figure set
 @dataclass(frozen=True)
 class Grids:
+    """Resolution of the figure set: sweep and map points, and the PNGs' dots per inch."""
+
     sweep_points: int
     map_x: int
     map_y: int
@@ -384,6 +386,9 @@ def run_map(model: SqueakModel, x_axis: str, x: np.ndarray, y_axis: str, y: np.n
 
 @dataclass
 class FigureSet:
+    """The paper's figures of one model into `out`: each job draws a figure and returns its
+    summary sentence; the maps are computed once (fig07p reuses Fig. 7's)."""
+
     model: SqueakModel
     out: Path
     grids: Grids

@@ -157,11 +157,26 @@ def _single_threaded_blas() -> None:
 
 
 class LivePredictor:
+    """The node's prediction logic without rclpy: takes the inputs, decides when to recompute
+    (deadbands, rate limit, coalescing), keeps the last good prediction and the safe-speed
+    advice, and gives the diagnostic verdict (`status`). Times `now` are the policy's clock
+    [s].
+
+    Parameters
+    ----------
+    model : SqueakModel
+        The model (parameters, scatter) predictions are made with.
+    settings : LiveSettings
+        Deadbands, rate limit, thresholds of the verdict.
+    clock : callable
+        Seconds; times each prediction for the recompute interval.
+    joints : JointSettings
+        The screw joint of JointState inputs.
+    """
+
     def __init__(self, model: SqueakModel, settings: LiveSettings = LiveSettings(),
                  clock: Callable[[], float] = time.perf_counter,
                  joints: JointSettings = JointSettings()):
-        """`clock` (seconds) times each prediction for the recompute interval; the `now`
-        arguments are the policy's time. `joints`: the screw joint of JointState inputs."""
         _single_threaded_blas()
         self.model = model
         self._nut_model = model                        # model at the contact's nut position

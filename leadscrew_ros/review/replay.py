@@ -79,14 +79,30 @@ MEDIA_TYPES = {".json": "application/json", ".png": "image/png"}   # of the atta
 
 @dataclass(frozen=True)
 class ReplaySettings:
+    """How a log is replayed (`replay`).
+
+    Attributes
+    ----------
+    inputs : InputSettings
+        Where the inputs are, the deadbands and the P(squeak) thresholds.
+    namespace : str or None
+        Of the inputs; None: the log's single input namespace.
+    out_namespace : str or None
+        Of the predictions; None: /replay + the input namespace.
+    workers : int
+        Prediction processes for long logs (0: all in this process).
+    progress : bool
+        A progress bar on stderr (a terminal only).
+    """
+
     inputs: InputSettings = field(default_factory=InputSettings)
-    namespace: str | None = None      # of the inputs; None: the log's single input namespace
-    out_namespace: str | None = None  # of the predictions; None: /replay + input namespace
-    # Prediction processes for long logs (0: all in this process). Two: on a 2-core machine a
-    # log whose nut moves at every message keeps both busy solving while this process reads and
-    # writes; where reading is the bottleneck (a log mostly at rest) the second one idles.
+    namespace: str | None = None
+    out_namespace: str | None = None
+    # Two workers: on a 2-core machine a log whose nut moves at every message keeps both busy
+    # solving while this process reads and writes; where reading is the bottleneck (a log
+    # mostly at rest) the second one idles.
     workers: int = 2
-    progress: bool = True     # progress bar on stderr (a terminal only)
+    progress: bool = True
 
     def __post_init__(self) -> None:
         for what, ns in (("namespace", self.namespace), ("output namespace", self.out_namespace)):
@@ -723,10 +739,32 @@ def _namespaces(source: LogSource, settings: ReplaySettings) -> tuple[str, str]:
 
 def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
            settings: ReplaySettings = ReplaySettings()) -> ReplayResult:
-    """Replay `log` (an MCAP or .db3 file, or a bag directory of split files) offline into
-    `out_dir`, predicting with `model`: its parameters, and its scatter and sample count for
-    P(squeak) (e.g. `SqueakModel(params, scatter_settings.scatter, scatter_settings.samples)`,
-    as the node builds it)."""
+    """Replay a log offline: the node's predictions recomputed for the whole log (the module's
+    outputs).
+
+    Parameters
+    ----------
+    log : path
+        An MCAP or .db3 file, or a bag directory of split files.
+    model : SqueakModel
+        Its parameters, and its scatter and sample count for P(squeak) (e.g.
+        `SqueakModel(params, scatter_settings.scatter, scatter_settings.samples)`, as the node
+        builds it).
+    out_dir : path
+        Receives the annotated log, episodes.json, summary.json and summary.txt.
+    settings : ReplaySettings
+        Inputs, namespaces, worker processes, progress bar.
+
+    Returns
+    -------
+    ReplayResult
+        Counts, episodes, P(squeak) over time and what the report draws.
+
+    Raises
+    ------
+    LogError
+        The log is unreadable or foreign, or has none of the inputs.
+    """
     t0 = time.perf_counter()
     log, out_dir = Path(log), Path(out_dir)
     source = open_log(log)

@@ -41,6 +41,8 @@ BAND_COLORS = ("tab:blue", "tab:green", "tab:purple", "tab:brown")
 
 @dataclass(frozen=True)
 class ReportGrids:
+    """Resolution of the replay report: map and sweep points, and the PNGs' dots per inch."""
+
     map_loads: int
     map_speeds: int
     sweep_speeds: int

@@ -104,6 +104,15 @@ def bag_prefix(namespace: str) -> str:
 
 
 class SqueakPredictorNode(Node):
+    """The `squeak_predictor` node (the module's topics, parameters and recording): wires the
+    ROS interfaces to a `LivePredictor`, a `Recorder` and the /diagnostics updater.
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to `rclpy.node.Node` (context, namespace, parameter overrides, ...).
+    """
+
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         self._declare_parameters()

@@ -161,6 +161,13 @@ _FIELD_BY_NAME = {f.name: f for f in _FIELDS}
 
 
 def field_names() -> list[str]:
+    """The names of the `ScrewParameters` fields, in declaration order.
+
+    Returns
+    -------
+    list of str
+        The field names.
+    """
     return list(_FIELD_BY_NAME)
 
 
