@@ -364,7 +364,27 @@ def inspect(path: Path | str) -> LogInfo:
 
 def recover(src: Path | str, dst: Path | str,
             compression: CompressionType = CompressionType.ZSTD) -> LogInfo:
-    """Rewrite every whole message of a cut-off (or damaged) file into a finished file."""
+    """Rewrite every whole message of a cut-off (or damaged) file into a finished file.
+
+    Parameters
+    ----------
+    src : path
+        The damaged MCAP file.
+    dst : path
+        The file to write (removed again when nothing could be recovered).
+    compression : CompressionType
+        Chunk compression of `dst`.
+
+    Returns
+    -------
+    LogInfo
+        What reading `src` found: topics, counts, where it stopped.
+
+    Raises
+    ------
+    LogError
+        No whole message to recover.
+    """
     info = _rewrite(src, dst, compression)
     if not info.messages:
         Path(dst).unlink(missing_ok=True)

@@ -208,9 +208,22 @@ _LEVEL_STYLES = ("dotted", "dashed", "solid", "dashdot")   # of the PROBABILITY_
 
 def probability_overlay(result: MapResult, band: tuple[float, float] = (0.1, 0.9)
                         ) -> Overlay:
-    """Draws the iso-P(squeak) lines `PROBABILITY_LEVELS` (1, 10, 50, 90 %) of a map computed
-    with the probability, labelled in percent, and shades the band between the `band` levels
-    (where a drive squeaks or not depending on its scatter); for `plot_map`'s `overlay`."""
+    """The iso-P(squeak) lines `PROBABILITY_LEVELS` (1, 10, 50, 90 %) of a map, labelled in
+    percent, and the band between two levels shaded (where a drive squeaks or not depending on
+    its scatter); for `plot_map`'s `overlay`.
+
+    Parameters
+    ----------
+    result : MapResult
+        A map computed with the probability (without: nothing is drawn).
+    band : tuple of float
+        The levels the shaded band lies between.
+
+    Returns
+    -------
+    callable
+        Draws on an axes (in display units) and returns its legend handles.
+    """
     def draw(ax: "Axes") -> list:
         from matplotlib.lines import Line2D
         from matplotlib.patches import Patch

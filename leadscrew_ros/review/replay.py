@@ -333,6 +333,13 @@ class ReplayResult:
         return self.duration_s / self.wall_s if self.wall_s > 0 else math.inf
 
     def summary(self) -> dict[str, Any]:
+        """The replay in numbers (summary.json).
+
+        Returns
+        -------
+        dict
+            Counts, P(squeak) times, settings, warnings, wall time.
+        """
         return {"log": str(self.log), "files": [str(f) for f in self.files],
                 "annotated": str(self.annotated), "duration_s": self.duration_s,
                 "messages": self.messages, "input_messages": dict(self.inputs),
@@ -361,7 +368,13 @@ class ReplayResult:
         return seconds / self.duration_s if self.duration_s > 0 else 0.0
 
     def probability_text(self) -> str:
-        """One line: peak P(squeak) and the time at or above WARN and ERROR."""
+        """Peak P(squeak) and the time at or above WARN and ERROR.
+
+        Returns
+        -------
+        str
+            One line.
+        """
         pt = self.probability
         if pt.peak is None:
             return "P(squeak): no prediction"
@@ -371,7 +384,13 @@ class ReplayResult:
                 f"{self.error_probability:g} for {pt.above_error_s:.2f} s")
 
     def scatter_text(self) -> str:
-        """One line: the scatter P(squeak) is taken over."""
+        """The scatter P(squeak) is taken over.
+
+        Returns
+        -------
+        str
+            One line.
+        """
         if not self.scatter:
             return "scatter: none (P(squeak) is the nominal verdict, 0 or 1)"
         log_normal = [name for name in self.scatter if name in LOG_NORMAL]
@@ -380,6 +399,13 @@ class ReplayResult:
                                      else "") + f"), {self.scatter_samples} samples")
 
     def summary_text(self) -> str:
+        """The replay in words (summary.txt).
+
+        Returns
+        -------
+        str
+            One line per item, no final newline.
+        """
         lines = [f"replay of {self.log}: {len(self.files)} file(s), {self.messages} messages "
                  f"over {self.duration_s:.1f} s",
                  "input messages: " + (", ".join(f"{k} {v}" for k, v in self.inputs.items())

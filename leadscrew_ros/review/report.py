@@ -67,8 +67,25 @@ def nut_bands(nuts: np.ndarray) -> np.ndarray:
 
 def write_report(result: ReplayResult, model: SqueakModel, out: Path | str,
                  grids: ReportGrids = FULL) -> list[Path]:
-    """Write the three PNGs into `out` and attach them to the annotated log, if it is there
-    (`replay.attach`); returns their paths."""
+    """Write the three PNGs (the module's) into `out` and attach them to the annotated log,
+    if it is there (`replay.attach`).
+
+    Parameters
+    ----------
+    result : ReplayResult
+        The replay.
+    model : SqueakModel
+        The model it was replayed with (the maps and the sweep).
+    out : path
+        An existing directory.
+    grids : ReportGrids
+        Map and sweep resolution, dots per inch.
+
+    Returns
+    -------
+    list of Path
+        timeline.png, map_speed_load.png, frequency_vs_speed.png.
+    """
     out = Path(out)
     paths = [out / TIMELINE_FILE, out / MAP_FILE, out / FREQUENCY_FILE]
     result.plot().savefig(paths[0], dpi=grids.dpi)
