@@ -29,3 +29,5 @@ def _version() -> str:
 
 
 __version__ = _version()
+
+__all__ = ["__version__"]      # the layers are sub-packages: model, live, bag, review, ros, cli

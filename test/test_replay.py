@@ -431,9 +431,9 @@ def test_invalid_inputs_are_counted_never_predicted(tmp_path):
                                      "speed at or above the first critical speed": 1}
     (p,) = decoded(r.annotated, topics=["/replay/squeak/risk"])
     assert p[1] == 3 * s and math.isfinite(p[5].data)
-    t, lo, _, _, count = r.plot.probability.series()     # seconds from the first message
+    t, lo, _, _, count = r.plot_data.probability.series()     # seconds from the first message
     (k,) = np.flatnonzero(np.isfinite(lo[:, 0]))
-    assert abs(t[k] - 2.0) <= r.plot.probability.bin_s and count.sum() == r.recomputes
+    assert abs(t[k] - 2.0) <= r.plot_data.probability.bin_s and count.sum() == r.recomputes
 
 
 def test_wrong_input_type_is_a_one_line_error(tmp_path, capsys):

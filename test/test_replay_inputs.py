@@ -210,20 +210,16 @@ def test_backwards_and_repeated_log_times_are_counted_and_never_drawn(tmp_path):
     assert np.all(np.diff(t) > 0)
 
 
-def test_the_nut_is_drawn_only_when_measured(tmp_path, monkeypatch):
-    figures = []
-    new_figure = report.new_figure
-    monkeypatch.setattr(report, "new_figure",
-                        lambda **kw: figures.append(new_figure(**kw)) or figures[-1])
+def test_the_nut_is_drawn_only_when_measured(tmp_path):
     s = 1_000_000_000
     plain = write_mcap(tmp_path / "plain.mcap", [
         f64("/motor_speed", 20.0 + k, k * s) for k in range(5)] + [f64("/axial_load", 200.0, 1)])
     r = run_replay(plain, tmp_path / "a")
     assert not r.timeline.nut_measured and np.isnan(r.timeline.trace.series()[1][:, 2]).all()
-    report.plot_timeline(r, tmp_path / "a.png", report.QUICK)
-    assert [ax.get_ylabel() for ax in figures[-1].axes] == [
+    fig = r.plot()
+    assert [ax.get_ylabel() for ax in fig.axes] == [
         "speed [rad/s]", "axial load [N]", "P(squeak)"]
-    assert "no nut input" in figures[-1].axes[0].get_title()
+    assert "no nut input" in fig.axes[0].get_title()
 
     cycle = DutyCycle(duration_s=6.0, rate_hz=25.0, rest_s=1.0)
     r = run_replay(write_log(cycle, tmp_path / "bag"), tmp_path / "b",
@@ -233,8 +229,7 @@ def test_the_nut_is_drawn_only_when_measured(tmp_path, monkeypatch):
     first = samples(cycle).nut_position_m[0]
     k = np.flatnonzero(np.isfinite(hi[:, 2]))[0]
     assert lo[k, 2] == pytest.approx(first, abs=1e-9) and hi[k, 2] < first + 1e-3 < 0.1
-    report.plot_timeline(r, tmp_path / "b.png", report.QUICK)
-    assert "nut position [mm]" in [ax.get_ylabel() for ax in figures[-1].axes]
+    assert "nut position [mm]" in [ax.get_ylabel() for ax in r.plot().axes]
 
 
 def test_a_travelling_nut_is_mapped_per_band(tmp_path):
@@ -244,7 +239,7 @@ def test_a_travelling_nut_is_mapped_per_band(tmp_path):
     cycle = DutyCycle(duration_s=30.0, rate_hz=20.0, rest_s=2.0)
     r = run_replay(write_log(cycle, tmp_path / "bag"), tmp_path / "out",
                    joint_name=cycle.joint_name)
-    nuts = r.plot.points.sample()[:, 2]
+    nuts = r.plot_data.points.sample()[:, 2]
     assert nuts.max() - nuts.min() > 0.1
     paths = report.write_report(r, SqueakModel(), tmp_path / "out", report.QUICK)
     assert all(p.stat().st_size > 5000 for p in paths)

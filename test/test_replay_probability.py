@@ -211,15 +211,11 @@ def test_cli_bad_thresholds_are_one_line_errors(log, tmp_path, capsys, argv, pro
     assert code == 2 and out == "" and err.count("\n") == 1 and problem in err
 
 
-def test_report_draws_p_squeak_with_the_thresholds(log, tmp_path, monkeypatch):
-    figures = []
-    new_figure = report.new_figure
-    monkeypatch.setattr(report, "new_figure",
-                        lambda **kw: figures.append(new_figure(**kw)) or figures[-1])
+def test_report_draws_p_squeak_with_the_thresholds(log, tmp_path):
     r = run(log[0], tmp_path, warn_probability=0.2, error_probability=0.7)
     paths = report.write_report(r, SqueakModel(), tmp_path, report.QUICK)
     assert paths[0].name == "timeline.png" and paths[0].read_bytes().startswith(b"\x89PNG")
-    ax = figures[0].axes[-1]
+    ax = r.plot().axes[-1]
     assert ax.get_ylabel() == "P(squeak)"
     assert ax.get_title() == r.probability_text()
     dashed = {line.get_label(): line.get_ydata()[0] for line in ax.get_lines()
@@ -234,7 +230,7 @@ def test_report_draws_p_squeak_with_the_thresholds(log, tmp_path, monkeypatch):
         bars = [p for p in ax.patches if p.get_label() == f"P >= {name}"]
         x = [p.get_patch_transform().transform(p.get_path().vertices)[:, 0] for p in bars]
         assert sum(v.max() - v.min() for v in x) == pytest.approx(
-            seconds, abs=4 * r.plot.probability.bin_s)
+            seconds, abs=4 * r.plot_data.probability.bin_s)
     assert 0 < r.probability.above_error_s < r.probability.above_warn_s
     (peak,) = [line for line in ax.get_lines() if line.get_label() == "peak"]
     assert (peak.get_xdata()[0], peak.get_ydata()[0]) == (r.probability.peak_t_s,

@@ -34,7 +34,7 @@ class FileStats:
 
 @dataclass
 class TopicStats:
-    """One topic of a bag: name, type, message count and offered QoS (metadata.yaml)."""
+    """One topic of a bag in metadata.yaml: name, type, message count, offered QoS."""
 
     name: str
     type_name: str              # 'pkg/msg/Type'
@@ -44,7 +44,7 @@ class TopicStats:
 
 @dataclass
 class BagStats:
-    """The files, topics and custom data of a bag, as its metadata.yaml lists them."""
+    """What metadata.yaml says of a bag: its files, its topics and custom data."""
 
     files: list[FileStats] = field(default_factory=list)
     topics: list[TopicStats] = field(default_factory=list)

@@ -40,7 +40,8 @@ DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"   # bundled for logs wr
 
 
 class JointStateData(NamedTuple):
-    """A decoded sensor_msgs/msg/JointState (header stamp in ns)."""
+    """sensor_msgs/JointState: the header stamp [ns] and frame, and per joint its name,
+    position, velocity and effort (each may be empty)."""
 
     stamp_ns: int
     frame_id: str
@@ -59,7 +60,7 @@ class Dimension(NamedTuple):
 
 
 class Float64MultiArrayData(NamedTuple):
-    """A decoded std_msgs/msg/Float64MultiArray (layout and data)."""
+    """std_msgs/Float64MultiArray: the layout (dimensions, data offset) and the data."""
 
     dim: tuple[Dimension, ...]
     data_offset: int

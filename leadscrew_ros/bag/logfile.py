@@ -57,7 +57,7 @@ class LogError(Exception):
 
 @dataclass(frozen=True)
 class Topic:
-    """One channel of a log: topic name, message type, schema and encoding."""
+    """A channel of a log with its schema: what a copy needs to write it back verbatim."""
 
     name: str
     type_name: str              # 'pkg/msg/Type'
@@ -69,7 +69,7 @@ class Topic:
 
     @property
     def stored_schema_name(self) -> str:
-        """The schema name stored in the file: `schema_name`, else the type name."""
+        """The schema name as stored, or the type name when the log stored none."""
         return self.schema_name or self.type_name
 
 
@@ -365,7 +365,27 @@ def inspect(path: Path | str) -> LogInfo:
 
 def recover(src: Path | str, dst: Path | str,
             compression: CompressionType = CompressionType.ZSTD) -> LogInfo:
-    """Rewrite every whole message of a cut-off (or damaged) file into a finished file."""
+    """Rewrite every whole message of a cut-off (or damaged) file into a finished file.
+
+    Parameters
+    ----------
+    src : path
+        The damaged MCAP file.
+    dst : path
+        The file to write (removed again when nothing could be recovered).
+    compression : CompressionType
+        Chunk compression of `dst`.
+
+    Returns
+    -------
+    LogInfo
+        What reading `src` found: topics, counts, where it stopped.
+
+    Raises
+    ------
+    LogError
+        No whole message to recover.
+    """
     info = _rewrite(src, dst, compression)
     if not info.messages:
         Path(dst).unlink(missing_ok=True)

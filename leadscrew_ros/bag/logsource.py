@@ -26,7 +26,21 @@ DB3 = ".db3"
 
 @dataclass
 class LogSource:
-    """A log's files and, once read, every topic it declares with its message count."""
+    """A log's files and, once read, every topic it declares with its message count.
+
+    Attributes
+    ----------
+    path : Path
+        The log (file or bag directory).
+    files : list of Path
+        Its files in split order.
+    sqlite : bool
+        rosbag2 sqlite3 (.db3) files, not MCAP.
+    topics : dict of str to Topic
+        Every topic the files declare, once `messages` has run.
+    counts : Counter
+        Messages per topic, once `messages` has run.
+    """
 
     path: Path
     files: list[Path]
@@ -35,8 +49,14 @@ class LogSource:
     counts: Counter = field(default_factory=Counter)
 
     def messages(self) -> Iterator[tuple[Path, LogMessage]]:
-        """(file, message) of every file in split order, each file in file order; collects
-        `topics` (including those without messages) and `counts` on the way."""
+        """Every message of the log; collects `topics` (including those without messages) and
+        `counts` on the way.
+
+        Returns
+        -------
+        iterator of (Path, LogMessage)
+            (file, message) of every file in split order, each file in file order.
+        """
         for f in self.files:
             info = LogInfo(f)
             for m in (_db3_messages(f, info) if self.sqlite else read_messages(f, info=info)):
@@ -47,8 +67,24 @@ class LogSource:
 
 
 def open_log(path: Path | str) -> LogSource:
-    """The log at `path`: an .mcap or .db3 file, or a bag directory of split files (MCAP
-    preferred when both are present). LogError if there is none."""
+    """Open a log (its files are read by `LogSource.messages`).
+
+    Parameters
+    ----------
+    path : path
+        An .mcap or .db3 file, or a bag directory of split files (MCAP preferred when both are
+        present).
+
+    Returns
+    -------
+    LogSource
+        The log's files.
+
+    Raises
+    ------
+    LogError
+        There is no log at `path`.
+    """
     path = Path(path)
     if path.is_dir() and not any(path.glob("*.mcap")):
         db3 = sorted(path.glob(f"*{DB3}"), key=lambda p: _split_key(p.with_suffix(".mcap")))

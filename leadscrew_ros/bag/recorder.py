@@ -43,7 +43,7 @@ from mcap.writer import CompressionType, Writer
 
 from . import msgdefs
 from .bagmeta import METADATA, BagStats, FileStats, TopicStats
-from ..model.physics.metadata import check, setting
+from ..model.physics.metadata import check, documented, setting
 
 COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}
@@ -65,6 +65,7 @@ def ensure_directory(directory: str) -> Path:
     return root
 
 
+@documented
 @dataclass(frozen=True)
 class RecordSettings:
     """How a recording is written (SI units; default, unit, range and description are the
@@ -143,16 +144,35 @@ class _Topic:
 @dataclass
 class Recorder:
     """Writes serialized ROS messages to a split MCAP bag. Call `tick` periodically (flush and
-    split)."""
+    split). Thread-safe.
+
+    Attributes
+    ----------
+    settings : RecordSettings
+        Directory, splitting, compression, flush period.
+    name : str
+        Bag directory prefix (the node adds its namespace).
+    clock : callable
+        Log time [ns] of a message written without one.
+    bag : Path or None
+        Directory of the recording in progress, or of the last one.
+    error : str
+        Why the last recording stopped on its own.
+    files : list of FileStats
+        The files of the recording.
+    losses : dict of str to TopicLoss
+        Topic -> what never arrived.
+    metadata : dict of str to dict
+        Metadata records written at the start of every file: name -> string map.
+    """
 
     settings: RecordSettings = field(default_factory=RecordSettings)
-    name: str = "squeak"                 # bag directory prefix (the node adds its namespace)
-    clock: Callable[[], int] = time.time_ns   # log time [ns] of a message written without one
-    bag: Path | None = None              # directory of the recording in progress / last one
-    error: str = ""                      # why the last recording stopped on its own
+    name: str = "squeak"
+    clock: Callable[[], int] = time.time_ns
+    bag: Path | None = None
+    error: str = ""
     files: list[FileStats] = field(default_factory=list)
-    losses: dict[str, TopicLoss] = field(default_factory=dict)   # topic -> what never arrived
-    # Metadata records written at the start of every file: name -> string map
+    losses: dict[str, TopicLoss] = field(default_factory=dict)
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     _out: object = None
     _writer: Writer | None = None
@@ -163,7 +183,7 @@ class Recorder:
 
     @property
     def active(self) -> bool:
-        """True while a recording is open."""
+        """A recording is in progress."""
         return self._writer is not None
 
     @property
@@ -173,11 +193,22 @@ class Recorder:
 
     @property
     def messages(self) -> int:
-        """Messages written in this recording, over all files."""
+        """Messages written in this recording so far."""
         return sum(f.messages for f in self.files)
 
     def count(self, topic: str) -> int:
-        """Messages of `topic` written in this recording so far."""
+        """Messages of one topic written in this recording so far.
+
+        Parameters
+        ----------
+        topic : str
+            The topic's name.
+
+        Returns
+        -------
+        int
+            The count.
+        """
         with self._lock:
             t = self._topics.get(topic)
             return 0 if t is None else t.count
@@ -188,9 +219,20 @@ class Recorder:
         return sum(loss.lost for loss in list(self.losses.values()))
 
     def start(self, now_ns: int | None = None, topics: tuple[str, ...] = ()) -> bool:
-        """Open a new bag named by the wall clock; False (with `error`) if the directory cannot
-        take it. `now_ns` starts the time base of `tick` (default: a monotonic wall clock);
-        `topics` get a loss counter each (`losses`)."""
+        """Open a new bag named by the wall clock.
+
+        Parameters
+        ----------
+        now_ns : int, optional
+            Starts the time base of `tick` [ns] (default: a monotonic wall clock).
+        topics : tuple of str
+            Topics that get a loss counter each (`losses`).
+
+        Returns
+        -------
+        bool
+            False (with `error`) if the directory cannot take it.
+        """
         with self._lock:
             if self.active:
                 return True
@@ -215,9 +257,22 @@ class Recorder:
     def write_serialized(self, topic: str, type_name: str, data: bytes,
                          log_time_ns: int | None = None, publish_time_ns: int | None = None
                          ) -> None:
-        """Record one serialized (CDR) message of type 'pkg/msg/Type'. log_time defaults to
-        `clock()` read under the lock, so that writers on several threads keep a file in log
-        time order; publish_time defaults to log_time."""
+        """Record one serialized (CDR) message (nothing when not recording).
+
+        Parameters
+        ----------
+        topic : str
+            Its topic.
+        type_name : str
+            Its type, 'pkg/msg/Type'.
+        data : bytes
+            The CDR payload.
+        log_time_ns : int, optional
+            Default: `clock()` read under the lock, so that writers on several threads keep a
+            file in log time order.
+        publish_time_ns : int, optional
+            Default: the log time.
+        """
         with self._lock:
             if not self.active:
                 return
@@ -240,7 +295,12 @@ class Recorder:
 
     def tick(self, now_ns: int | None = None) -> None:
         """Flush when the flush period is over; split when the file is too big or too old.
-        `now_ns` is on the time base given to `start` (default: the monotonic wall clock)."""
+
+        Parameters
+        ----------
+        now_ns : int, optional
+            On the time base given to `start` [ns] (default: the monotonic wall clock).
+        """
         with self._lock:
             if not self.active:
                 return
@@ -261,7 +321,13 @@ class Recorder:
 
     def split(self, now_ns: int | None = None) -> None:
         """Finish the current file and go on in the next one, which gets the `metadata` of now
-        (nothing when not recording). `now_ns` as for `tick`."""
+        (nothing when not recording).
+
+        Parameters
+        ----------
+        now_ns : int, optional
+            As for `tick`.
+        """
         with self._lock:
             if self.active:
                 self._split(time.monotonic_ns() if now_ns is None else now_ns)

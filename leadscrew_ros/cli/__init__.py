@@ -27,12 +27,20 @@ from ..model.squeak_model import OperatingPointError
 from . import figures, fleet, logs, model, ros, transient
 from .args import PROG, CliError, Parser, common_parser
 
+__all__ = ["CliError", "build_parser", "main", "split_ros_args"]
+
 ROS_COMMANDS = ("simulate", "replay")      # the ones that start a ROS node (replay: --publish)
 
 
 def build_parser() -> Parser:
     """The `leadscrew-squeak` parser: every command group adds its subcommands, in the order
-    of the help text."""
+    of the help text.
+
+    Returns
+    -------
+    Parser
+        Its parsed namespace has `run`, the command's function.
+    """
     common = [common_parser()]
     parser = Parser(prog=PROG, description="Predict friction-induced squeak of a lead screw "
                                            "(continuous model, eigenvalues of eq. 27).")
@@ -44,8 +52,19 @@ def build_parser() -> Parser:
 
 
 def split_ros_args(argv: Sequence[str]) -> tuple[list[str], list[str]]:
-    """(the program's arguments, the ROS arguments): every `--ros-args` section up to `--` or
-    the end, as rcl delimits them (the `--` itself belongs to neither)."""
+    """Split the command line as rcl delimits the ROS arguments: every `--ros-args` section up
+    to `--` or the end (the `--` itself belongs to neither).
+
+    Parameters
+    ----------
+    argv : sequence of str
+        The command line without the program name.
+
+    Returns
+    -------
+    tuple of (list of str, list of str)
+        (the program's arguments, the ROS arguments).
+    """
     ours: list[str] = []
     ros_args: list[str] = []
     inside = False
@@ -65,10 +84,21 @@ def _one_line(message: str) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the CLI; returns the exit code (0 ok, 2 bad input, 130 interrupted, 141 closed
-    pipe). The long-running ROS commands (demo, simulate, replay --publish) return 0 when
-    stopped by SIGINT/SIGTERM (`ros_env.StopSignals.exit_status`); 130 is Ctrl-C of the others
-    or a second Ctrl-C."""
+    """Run the CLI.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        The command line without the program name; default: `sys.argv[1:]`.
+
+    Returns
+    -------
+    int
+        The exit code: 0 ok, 2 bad input, 130 interrupted, 141 closed pipe (`review`: 10 + the
+        number of failed logs when some fail). The long-running ROS commands (demo, simulate,
+        replay --publish) return 0 when stopped by SIGINT/SIGTERM
+        (`ros_env.StopSignals.exit_status`); 130 is Ctrl-C of the others or a second Ctrl-C.
+    """
     try:
         ours, ros_args = split_ros_args(sys.argv[1:] if argv is None else list(argv))
         args = build_parser().parse_args(ours)

@@ -2,8 +2,8 @@
 """`leadscrew-squeak figures`: the paper's Figs. 4-11 with a computed summary, Fig. 7 again with
 the P(squeak) band around its boundary (fig07p); and the sweep plot.
 
-`plot_sweep` is shared by the `figures` command and `sweep --plot`; the map and frequency
-plots (`review.plots`) are shared with `map --plot` and the replay report. `make_figures`
+The plots are `review.plots`' (`plot_sweep` is shared with `sweep --plot`, `plot_map` with
+`map --plot` and the replay report); this module computes, calls and saves. `make_figures`
 writes fig04..fig11 and fig07p PNGs and `summary.txt`, whose sentences are computed from the
 plotted data (nothing is hard-coded). Importing this module does not import matplotlib
 (`map --json`).
@@ -28,59 +28,10 @@ from ..model.studies.stability_map import MapResult, stability_map
 from ..model.studies.sweep import SweepResult, probability_crossings, sweep
 from ..model.studies.work import Work, map_work, sweep_work
 from ..model.studies.tracking import Branch, track_modes
-from ..review.plots import (at, axis_display, axis_label, fixed_text, fmt, new_figure,
-                            plot_frequencies, plot_map, probability_overlay, save_figure,
-                            scale_axis)
+from ..review.plots import (at, fixed_text, fmt, plot_frequencies, plot_friction, plot_map,
+                            plot_sweep, probability_overlay)
 from ..review.progress import progress_bar
 from .args import WORK_LIMITS, Parser, build_model
-
-GROWTH_LABEL = r"growth rate Re($\lambda$) [1/s]"
-
-
-# --------------------------------------------------------------------------- sweep plot
-def plot_sweep(result: SweepResult, path: Path, title: str = "", top: int = 6,
-               dpi: int = 120, probability: bool = False) -> None:
-    """Largest growth rate and Re(lambda) of the `top` least stable modes along the axis, with
-    the unstable bands shaded (the paper's Fig. 5 for a speed sweep); with `probability`,
-    P(squeak) on a second y axis."""
-    k = axis_display(result.axis).factor
-    x = result.values * k
-    branches = sorted(sorted(track_modes(result.predictions), key=lambda b: -b.peak_growth)[:top],
-                      key=lambda b: b.typical_frequency_hz)
-    fig = new_figure(figsize=(7.5, 4.8), layout="constrained")
-    ax = fig.subplots()
-    ax.plot(x, result.max_growth_rate, color="0.75", lw=5, label=r"largest Re($\lambda$)")
-    for b in branches:
-        ax.plot(x, b.growth, lw=1.4, label=f"{b.label} ({b.typical_frequency_hz:.4g} Hz)")
-    for i, (lo, hi) in enumerate(result.unstable_bands):
-        ax.axvspan(lo * k, hi * k, color="tab:red", alpha=0.12,
-                   label="unstable (squeak)" if i == 0 else None)
-    ax.axhline(0.0, color="k", lw=0.8)
-    scale_axis(ax, "x", result.values)
-    shown = np.concatenate([result.max_growth_rate] + [b.growth for b in branches])
-    if np.isfinite(shown).any():
-        hi = max(float(np.nanmax(shown)), 1.0)
-        ax.set_ylim(max(float(np.nanmin(shown)), -2.5 * hi) * 1.05, hi * 1.1)
-    ax.set_xlabel(axis_label(result.axis))
-    ax.set_ylabel(GROWTH_LABEL)
-    ax.set_title(title or f"Squeak propensity vs {axis_display(result.axis).label}\n"
-                          f"({fixed_text(result.fixed)}; {_formulation(result)} formulation)")
-    ax.grid(alpha=0.3, which="both")
-    handles, anchor = ax.get_legend_handles_labels()[0], 1.01
-    if probability:
-        twin = ax.twinx()
-        handles += twin.plot(x, result.probability, color="k", ls="--", lw=1.6,
-                             label="P(squeak) (right axis)")
-        twin.set_ylim(-0.02, 1.02)
-        twin.set_ylabel("P(squeak) over the scatter")
-        anchor = 1.12
-    ax.legend(handles=handles, fontsize=8, loc="upper left", bbox_to_anchor=(anchor, 1.0))
-    save_figure(fig, path, dpi)
-
-
-def _formulation(result: SweepResult) -> str:
-    return result.predictions[0].formulation if result.predictions else "?"
-
 
 # --------------------------------------------------------------------------- data summaries
 BOUNDARY, VALIDITY, GRID = "boundary", "validity", "grid"
@@ -356,7 +307,7 @@ def describe_friction(p: ScrewParameters, v: np.ndarray, mu: np.ndarray) -> str:
 # --------------------------------------------------------------------------- the figure set
 @dataclass(frozen=True)
 class Grids:
-    """Grid sizes and resolution of the figures."""
+    """Resolution of the figure set: sweep and map points, and the PNGs' dots per inch."""
 
     sweep_points: int
     map_x: int
@@ -440,7 +391,8 @@ def run_map(model: SqueakModel, x_axis: str, x: np.ndarray, y_axis: str, y: np.n
 
 @dataclass
 class FigureSet:
-    """The paper's figures of one model, written to `out`; maps are computed once."""
+    """The paper's figures of one model into `out`: each job draws a figure and returns its
+    summary sentence; the maps are computed once (fig07p reuses Fig. 7's)."""
 
     model: SqueakModel
     out: Path
@@ -460,36 +412,20 @@ class FigureSet:
         """Draw the friction law (Fig. 4) to `path`; its description."""
         p = self.model.params
         v = np.linspace(0.0, float(sliding_speed(p, SWEEP_SPEEDS_RAD_S[1])), 400)
-        mu = friction_coefficient(p, v)
-        fig = new_figure(figsize=(7, 4.5), layout="constrained")
-        ax = fig.subplots()
-        ax.plot(v, mu, lw=2, label=r"$\mu = \mu_k + (\mu_s - \mu_k)\,e^{-d|V_c|}$ (12)")
-        for value, name in ((p.mu_static, r"$\mu_s$"), (p.mu_kinetic, r"$\mu_k$")):
-            ax.axhline(value, color="0.5", ls=":", lw=1)
-            ax.annotate(f"{name} = {value:g}", (v[-1], value), ha="right", va="bottom")
-        top = ax.secondary_xaxis("top", functions=(
-            lambda s: s * math.cos(p.helix_angle_rad) / p.radius_m,
-            lambda w: w * p.radius_m / math.cos(p.helix_angle_rad)))
-        top.set_xlabel(r"rotation speed $\Omega = |V_c| \cos\beta / R$ [rad/s]")
-        ax.set_xlabel(r"sliding speed $|V_c|$ [m/s]")
-        ax.set_ylabel(r"friction coefficient $\mu$ [-]")
-        ax.set_title(f"Fig. 4: friction-velocity curve ($d$ = {p.friction_decay_s_m:g} s/m)")
-        ax.grid(alpha=0.3)
-        ax.legend()
-        save_figure(fig, path, self.grids.dpi)
-        return describe_friction(p, v, mu)
+        plot_friction(p, v).savefig(path, dpi=self.grids.dpi)
+        return describe_friction(p, v, friction_coefficient(p, v))
 
     def growth(self, path: Path) -> str:
         """Draw the growth rates against speed (Fig. 5) to `path`; their description."""
-        plot_sweep(self.speed_sweep, path,
-                   self._title("Fig. 5: squeak propensity vs rotation speed"), dpi=self.grids.dpi)
+        plot_sweep(self.speed_sweep, title=self._title(
+            "Fig. 5: squeak propensity vs rotation speed")).savefig(path, dpi=self.grids.dpi)
         return describe_speed_sweep(self.speed_sweep)
 
     def frequencies(self, path: Path) -> str:
         """Draw the squeak frequencies against speed (Fig. 11) to `path`; their description."""
-        plot_frequencies(self.speed_sweep, path,
-                         self._title("Fig. 11: squeak frequencies vs rotation speed "
-                                     r"(thick: Re($\lambda$) > 0)"), dpi=self.grids.dpi)
+        plot_frequencies(self.speed_sweep, title=self._title(
+            r"Fig. 11: squeak frequencies vs rotation speed (thick: Re($\lambda$) > 0)")
+        ).savefig(path, dpi=self.grids.dpi)
         return describe_frequencies(self.speed_sweep)
 
     def map(self, spec: MapSpec) -> MapResult:
@@ -506,7 +442,7 @@ class FigureSet:
         """Draw the stability map of `spec` to `path`; its description."""
         result = self.map(spec)
         title = self._title("\n".join(filter(None, (spec.title, fixed_text(result.fixed)))))
-        plot_map(result, path, title, dpi=self.grids.dpi)
+        plot_map(result, title=title).savefig(path, dpi=self.grids.dpi)
         return spec.describe(result, self.model.params)
 
     def probability_band(self, path: Path) -> str:
@@ -517,7 +453,8 @@ class FigureSet:
         scatter = ", ".join(f"{k} {v:g}" for k, v in self.model.scatter.sd.items()) or "none"
         title = self._title(f"{spec.title}, with P(squeak) over the scatter\n(scatter: "
                             f"{scatter})")
-        plot_map(result, path, title, dpi=self.grids.dpi, overlay=probability_overlay(result))
+        plot_map(result, title=title, overlay=probability_overlay(result)).savefig(
+            path, dpi=self.grids.dpi)
         return describe_probability_band(result, self.model)
 
     def work(self) -> Work:

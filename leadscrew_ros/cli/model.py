@@ -16,7 +16,6 @@ import csv
 import math
 import sys
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -275,8 +274,8 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     else:
         print(sweep_text(result, args.probability))
     if args.plot:
-        from .figures import plot_sweep
-        plot_sweep(result, Path(args.plot), probability=args.probability)
+        from ..review.plots import plot_sweep
+        plot_sweep(result, probability=args.probability).savefig(args.plot, dpi=120)
     return 0
 
 
@@ -298,8 +297,9 @@ def cmd_map(args: argparse.Namespace) -> int:
         print(map_text(result))
     if args.plot:
         from ..review.plots import plot_map, probability_overlay
-        plot_map(result, Path(args.plot), formulation=model.params.formulation,
-                 overlay=probability_overlay(result) if args.probability else None)
+        plot_map(result, formulation=model.params.formulation,
+                 overlay=probability_overlay(result) if args.probability else None
+                 ).savefig(args.plot, dpi=120)
     return 0
 
 

@@ -49,38 +49,6 @@ def write_wav(path: Path, samples: np.ndarray) -> None:
     wavfile.write(path, WAV_RATE_HZ, samples)
 
 
-def plot_transient(run: TransientResult, result: TransientAnalysis, path: Path,
-                   title: str) -> None:
-    """Amplitude (log) with the linear fit, surface velocity at the nut, spectrogram."""
-    from ..review.plots import new_figure, save_figure
-    t, fit = run.time_s, result.linear_fit
-    fig = new_figure(figsize=(8, 8.5), layout="constrained")
-    ax = fig.subplots(3, 1, sharex=True)
-    ax[0].semilogy(t, result.amplitude, color="k", lw=1, label="modal energy norm a(t)")
-    inside = (t >= fit.start_s) & (t <= fit.end_s)
-    mid = np.argmin(np.abs(t - (fit.start_s + fit.end_s) / 2))
-    ax[0].semilogy(t[inside], result.amplitude[mid] * np.exp(fit.growth_rate * (t[inside]
-                   - t[mid])), color="tab:red", lw=3, alpha=0.6,
-                   label=f"fit: {fit.mode} {fit.frequency_hz:.1f} Hz, "
-                         f"growth {fit.growth_rate:+.1f} 1/s")
-    ax[0].set_ylabel("a [m/s]")
-    ax[0].legend(loc="lower right")
-    ax[0].set_title(title)
-    v = run.surface_velocity_m_s
-    ax[1].plot(t, v[:, 1], lw=0.5, label="tangential")
-    ax[1].plot(t, v[:, 0], lw=0.5, label="radial")
-    ax[1].set_ylabel("surface velocity at nut [m/s]")
-    ax[1].legend(loc="lower right")
-    rate = 1 / (t[1] - t[0])
-    nfft = 1 << max(8, int(math.log2(rate * 2e-3)))
-    ax[2].specgram(v[:, 1], NFFT=nfft, Fs=rate, noverlap=nfft // 2, cmap="magma",
-                   scale="dB", mode="magnitude")
-    ax[2].set_ylim(0, min(rate / 2, 20000))
-    ax[2].set_ylabel("frequency [Hz]")
-    ax[2].set_xlabel("time [s]")
-    save_figure(fig, path, 120)
-
-
 def _text(args, result: TransientAnalysis, linear: dict, elapsed: str) -> str:
     fit, cycle = result.linear_fit, result.limit_cycle
     lines = [f"speed {args.speed:g} rad/s, load {args.load_n:g} N: {result.regime}",
@@ -131,8 +99,9 @@ def cmd_transient(args: argparse.Namespace) -> int:
         write_wav(Path(args.wav), samples)
         out["wav"] = {"file": args.wav, "rate_hz": WAV_RATE_HZ, "full_scale_m_s": full_scale}
     if args.plot:
-        plot_transient(run, result, Path(args.plot),
-                       f"{args.speed:g} rad/s, {args.load_n:g} N, {run.q.shape[1]} modes")
+        from ..review.plots import plot_transient
+        plot_transient(run, result, title=f"{args.speed:g} rad/s, {args.load_n:g} N, "
+                                          f"{run.q.shape[1]} modes").savefig(args.plot, dpi=120)
     if args.json:
         print_json(out)
     else:

@@ -35,7 +35,19 @@ class ProfileError(ValueError):
 
 
 class ActuatorState(NamedTuple):
-    """The actuator at one instant: screw speed, axial load, nut position, screw angle."""
+    """The actuator at one time of a stroke.
+
+    Attributes
+    ----------
+    speed_rad_s : float
+        Motor (screw) speed [rad/s], negative on a return stroke.
+    load_n : float
+        Axial load [N].
+    nut_position_m : float
+        Nut position z_o [m].
+    screw_angle_rad : float
+        Screw angle [rad], 0 at `nut_position_at_zero_angle_m`.
+    """
 
     speed_rad_s: float
     load_n: float
@@ -45,7 +57,27 @@ class ActuatorState(NamedTuple):
 
 @dataclass(frozen=True)
 class StrokeProfile:
-    """A simulated stroke: speed up to `peak_speed_rad_s` and back, load in [min, max] [N]."""
+    """A power-seat adjuster stroke (the module's shape); raises `ProfileError` when it cannot
+    be simulated.
+
+    Attributes
+    ----------
+    duration_s : float
+        Length of one stroke [s].
+    peak_speed_rad_s : float
+        Motor speed of the hold phase [rad/s].
+    load_min_n, load_max_n : float
+        Range of the axial load [N].
+    start_nut_position_m : float
+        Nut position at the start [m].
+    lead_m_per_rad : float
+        Nut travel per radian of screw rotation, R tan(beta) [m/rad].
+    max_nut_position_m : float
+        Highest nut position on the screw, L - b [m].
+    nut_position_at_zero_angle_m : float
+        Nut position at screw angle 0 [m] (the node's default, so that joint_states and
+        nut_position describe the same nut).
+    """
 
     duration_s: float = 12.0
     peak_speed_rad_s: float = 120.0
@@ -54,13 +86,24 @@ class StrokeProfile:
     start_nut_position_m: float = 0.02
     lead_m_per_rad: float = _DEFAULTS.lead_per_rad_m
     max_nut_position_m: float = _DEFAULTS.nut_travel_m
-    # Screw angle 0 <-> this nut position (the node's `nut_position_at_zero_angle_m` default),
-    # so that joint_states and nut_position describe the same nut.
     nut_position_at_zero_angle_m: float = JointSettings.nut_position_at_zero_angle_m
 
     @classmethod
     def for_params(cls, params: ScrewParameters, **changes: Any) -> "StrokeProfile":
-        """A profile for this screw: lead R tan(beta) and travel limit L - b from `params`."""
+        """A profile for this screw: lead R tan(beta) and travel limit L - b from `params`.
+
+        Parameters
+        ----------
+        params : ScrewParameters
+            The screw.
+        **changes
+            Other fields of the profile.
+
+        Returns
+        -------
+        StrokeProfile
+            The profile.
+        """
         return cls(lead_m_per_rad=params.lead_per_rad_m,
                    max_nut_position_m=params.nut_travel_m, **changes)
 
@@ -94,7 +137,7 @@ class StrokeProfile:
 
     @property
     def end_nut_position_m(self) -> float:
-        """Nut position at the end of the stroke [m]."""
+        """Nut position at the end of a forward stroke [m]."""
         return self.start_nut_position_m + self.travel_m
 
     def _speed_fraction(self, tau: float) -> float:
@@ -118,11 +161,22 @@ class StrokeProfile:
         return w * d * (RAMP * up ** 3 / 3 + hold + RAMP * (1 - (1 - down) ** 3) / 3)
 
     def state(self, t: float, loop: bool = False) -> ActuatorState:
-        """Speed [rad/s], load [N], nut position [m] and screw angle [rad] at time t [s].
+        """Speed, load, nut position and screw angle at a time of the stroke.
 
-        Without `loop` the stroke holds its end state (at rest) after `duration_s` and its start
-        state before 0. With `loop` it repeats forever, every second stroke backwards (negative
-        speed, the nut returning), so the nut never jumps."""
+        Parameters
+        ----------
+        t : float
+            Time since the start [s].
+        loop : bool
+            Repeat the stroke forever, every second one backwards (negative speed, the nut
+            returning), so the nut never jumps. Without it the stroke holds its end state (at
+            rest) after `duration_s` and its start state before 0.
+
+        Returns
+        -------
+        ActuatorState
+            The actuator at `t`.
+        """
         d = self.duration_s
         t = max(float(t), 0.0)
         k = int(t // d) if loop else 0

@@ -158,13 +158,26 @@ def _single_threaded_blas() -> None:
 
 
 class LivePredictor:
-    """The node's prediction policy: inputs in, recomputes when due, a verdict out."""
+    """The node's prediction logic without rclpy: takes the inputs, decides when to recompute
+    (deadbands, rate limit, coalescing), keeps the last good prediction and the safe-speed
+    advice, and gives the diagnostic verdict (`status`). Times `now` are the policy's clock
+    [s].
+
+    Parameters
+    ----------
+    model : SqueakModel
+        The model (parameters, scatter) predictions are made with.
+    settings : LiveSettings
+        Deadbands, rate limit, thresholds of the verdict.
+    clock : callable
+        Seconds; times each prediction for the recompute interval.
+    joints : JointSettings
+        The screw joint of JointState inputs.
+    """
 
     def __init__(self, model: SqueakModel, settings: LiveSettings = LiveSettings(),
                  clock: Callable[[], float] = time.perf_counter,
                  joints: JointSettings = JointSettings()):
-        """`clock` (seconds) times each prediction for the recompute interval; the `now`
-        arguments are the policy's time. `joints`: the screw joint of JointState inputs."""
         _single_threaded_blas()
         self.model = model
         self._nut_model = model                        # model at the contact's nut position
@@ -195,22 +208,76 @@ class LivePredictor:
         return self.rules.inputs
 
     def set_speed(self, value: object, now: float) -> str:
-        """Take a speed [rad/s] arrived at `now`; returns '' or why it was rejected."""
+        """Take a speed.
+
+        Parameters
+        ----------
+        value : object
+            Speed Omega [rad/s], as received.
+        now : float
+            When it arrived [s, the policy's clock].
+
+        Returns
+        -------
+        str
+            '' when taken, else why it was rejected.
+        """
         return self._arrive(self.rules.set_speed(value), now).error
 
     def set_load(self, value: object, now: float) -> str:
-        """Take an axial load [N] arrived at `now`; returns '' or why it was rejected."""
+        """Take an axial load.
+
+        Parameters
+        ----------
+        value : object
+            Axial load F_z [N], as received.
+        now : float
+            When it arrived [s, the policy's clock].
+
+        Returns
+        -------
+        str
+            '' when taken, else why it was rejected.
+        """
         return self._arrive(self.rules.set_load(value), now).error
 
     def set_nut_position(self, value: object, now: float) -> str:
-        """Take a nut position z_o [m], 0 <= z_o <= L - b; returns '' or why it was rejected."""
+        """Take a nut position.
+
+        Parameters
+        ----------
+        value : object
+            Nut position z_o [m], 0 <= z_o <= L - b, as received.
+        now : float
+            When it arrived [s, the policy's clock].
+
+        Returns
+        -------
+        str
+            '' when taken, else why it was rejected.
+        """
         return self._arrive(self.rules.set_nut_position(value), now).error
 
     def set_joint_state(self, names: Sequence[str], positions: Sequence[float],
                         velocities: Sequence[float], now: float,
                         joints: JointSettings | None = None) -> Outcome:
-        """Take the screw joint's speed and nut position of a JointState arrived at `now`
-        (`rules.InputRules.set_joint_state`); `joints` first replaces the joint settings."""
+        """Take the screw joint's speed and nut position of a JointState
+        (`rules.InputRules.set_joint_state`).
+
+        Parameters
+        ----------
+        names, positions, velocities : sequence
+            The JointState's fields.
+        now : float
+            When it arrived [s, the policy's clock].
+        joints : JointSettings, optional
+            Replaces the joint settings first.
+
+        Returns
+        -------
+        Outcome
+            What was taken, and what was rejected or ignored and why.
+        """
         if joints is not None:
             self.rules.joints = joints
         return self._arrive(self.rules.set_joint_state(names, positions, velocities), now)
@@ -223,7 +290,15 @@ class LivePredictor:
 
     # ---------------------------------------------------------------- model
     def set_model(self, model: SqueakModel, settings: LiveSettings | None = None) -> None:
-        """New parameters: the next `due` is true and recomputes with them."""
+        """New parameters: the next `due` is true and recomputes with them.
+
+        Parameters
+        ----------
+        model : SqueakModel
+            The new model.
+        settings : LiveSettings, optional
+            New settings; default: keep them.
+        """
         self.model, self.settings = model, settings or self.settings
         self._nut_model = model
         self.rules.reset(model.params, self.settings)
@@ -233,7 +308,13 @@ class LivePredictor:
         self._pending = False
 
     def changed(self) -> bool:
-        """The operating point moved beyond a deadband since the last recompute."""
+        """Whether the operating point moved beyond a deadband since the last recompute.
+
+        Returns
+        -------
+        bool
+            True when a recompute would give something new.
+        """
         return self.rules.changed()
 
     @property
@@ -244,12 +325,34 @@ class LivePredictor:
         return max(1.0 / self.settings.max_rate_hz, _MAX_DUTY_RATIO * self._cost_s)
 
     def due(self, now: float) -> bool:
-        """A change is waiting and the rate limit allows a recompute now."""
+        """Whether a change is waiting and the rate limit allows a recompute now.
+
+        Parameters
+        ----------
+        now : float
+            The policy's time [s].
+
+        Returns
+        -------
+        bool
+            True: call `update`.
+        """
         return self.changed() and now - self._last_update >= self.min_interval_s
 
     def update(self, now: float) -> Prediction | None:
-        """Recompute at the latest inputs. Returns the new prediction, or None when the point
-        is outside the model's validity (the last good prediction is kept)."""
+        """Recompute at the latest inputs.
+
+        Parameters
+        ----------
+        now : float
+            The policy's time [s].
+
+        Returns
+        -------
+        Prediction or None
+            The new prediction, or None when the point is outside the model's validity (the
+            last good prediction is kept).
+        """
         computed = self.rules.compute()
         if computed is None:
             return None
@@ -347,8 +450,14 @@ class LivePredictor:
         return True
 
     def poll_advice(self) -> bool:
-        """Pick up a finished background search without blocking; True when the latest
-        prediction got its advice from it (publish `safe_speed_rad_s` then)."""
+        """Pick up a finished background search without blocking.
+
+        Returns
+        -------
+        bool
+            True when the latest prediction got its advice from it (publish
+            `safe_speed_rad_s` then).
+        """
         waiting = self._pending
         if not self._collect() or self._advised is None:
             return False
@@ -356,8 +465,18 @@ class LivePredictor:
         return waiting and not self._pending
 
     def wait_for_advice(self, timeout: float | None = None) -> bool:
-        """Block until the latest prediction's advice is ready (synchronous callers, tests);
-        False if `timeout` (s) passed first."""
+        """Block until the latest prediction's advice is ready (synchronous callers, tests).
+
+        Parameters
+        ----------
+        timeout : float, optional
+            At most this long [s]; default: as long as it takes.
+
+        Returns
+        -------
+        bool
+            False if `timeout` passed first.
+        """
         deadline = None if timeout is None else time.monotonic() + timeout
         while self.advice_pending:
             remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
@@ -376,7 +495,18 @@ class LivePredictor:
 
     # ---------------------------------------------------------------- verdict
     def status(self, now: float) -> Status:
-        """The diagnostic status at time `now` (s): level, message and key values."""
+        """The diagnostic verdict: level, message and the key-value pairs of /diagnostics.
+
+        Parameters
+        ----------
+        now : float
+            The policy's time [s] (staleness of the inputs).
+
+        Returns
+        -------
+        Status
+            Level, message and values.
+        """
         i, s, p = self.inputs, self.settings, self.prediction
         arrived = self._arrived
         valid = p is not None and self._validity in (None, Validity.OK)

@@ -197,21 +197,62 @@ class InputRules:
 
     def reset(self, params: ScrewParameters, live: LiveSettings) -> None:
         """New parameters or settings: the next point is computed whatever it is, with the
-        contact at the parameters' nut position until the nut moves beyond the deadband."""
+        contact at the parameters' nut position until the nut moves beyond the deadband.
+
+        Parameters
+        ----------
+        params : ScrewParameters
+            The new parameters.
+        live : LiveSettings
+            The new deadbands.
+        """
         self.params, self.live = params, live
         self.computed_at, self.contact_nut_m = None, params.nut_position_m
 
     # ---------------------------------------------------------------- single values
     def set_speed(self, value: object) -> Outcome:
-        """Take a speed [rad/s]."""
+        """Take a speed.
+
+        Parameters
+        ----------
+        value : object
+            Speed Omega [rad/s], as received.
+
+        Returns
+        -------
+        Outcome
+            What was taken, and what was rejected and why.
+        """
         return self._operating_value("speed", value)
 
     def set_load(self, value: object) -> Outcome:
-        """Take an axial load [N]."""
+        """Take an axial load.
+
+        Parameters
+        ----------
+        value : object
+            Axial load F_z [N], as received.
+
+        Returns
+        -------
+        Outcome
+            What was taken, and what was rejected and why.
+        """
         return self._operating_value("load", value)
 
     def set_nut_position(self, value: object) -> Outcome:
-        """Take a nut position z_o [m], 0 <= z_o <= nut_travel_m."""
+        """Take a nut position.
+
+        Parameters
+        ----------
+        value : object
+            Nut position z_o [m], 0 <= z_o <= nut_travel_m, as received.
+
+        Returns
+        -------
+        Outcome
+            What was taken, and what was rejected and why.
+        """
         z, travel = _real(value), self.params.nut_travel_m
         if z is None:
             return self._reject("nut", Rejection(
@@ -251,7 +292,20 @@ class InputRules:
     def set_joint_state(self, names: Sequence[str], positions: Sequence[float],
                         velocities: Sequence[float]) -> Outcome:
         """Take the screw joint's speed and nut position (both before any recompute decision);
-        ignored without `joints.joint_name` or without that joint."""
+        ignored without `joints.joint_name` or without that joint.
+
+        Parameters
+        ----------
+        names : sequence of str
+            Joint names of the JointState.
+        positions, velocities : sequence of float
+            Its angles [rad] and speeds [rad/s] (either may be empty).
+
+        Returns
+        -------
+        Outcome
+            What was taken, and what was rejected or ignored and why.
+        """
         reading = read_joint_state(names, positions, velocities, self.joints,
                                    self.params.lead_per_rad_m)
         if reading.ignored:
@@ -274,22 +328,40 @@ class InputRules:
         return self.params.nut_position_m if nut is None else nut
 
     def point(self) -> Point | None:
-        """(speed, load, nut) at the latest inputs, None before a speed and a load."""
+        """The operating point at the latest inputs.
+
+        Returns
+        -------
+        Point or None
+            (speed, load, nut); None before a speed and a load.
+        """
         i = self.inputs
         if i.speed_rad_s is None or i.load_n is None:
             return None
         return i.speed_rad_s, i.load_n, self.nut_position_m
 
     def changed(self) -> bool:
-        """There is a point and it moved beyond a deadband since the last `compute` (or none
-        was computed yet)."""
+        """Whether there is a point and it moved beyond a deadband since the last `compute`
+        (or none was computed yet).
+
+        Returns
+        -------
+        bool
+            True: a recompute would give something new.
+        """
         point = self.point()
         return point is not None and (self.computed_at is None
                                       or moved(point, self.computed_at, self.live))
 
     def compute(self) -> tuple[Point, float] | None:
-        """Mark the current point as computed; returns it and the nut position [m] the contact
-        is integrated at for it (moved only beyond nut_deadband_m), or None without a point."""
+        """Mark the current point as computed.
+
+        Returns
+        -------
+        tuple of (Point, float) or None
+            The point and the nut position [m] the contact is integrated at for it (moved only
+            beyond nut_deadband_m); None without a point.
+        """
         point = self.point()
         if point is None:
             return None

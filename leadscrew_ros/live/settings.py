@@ -11,9 +11,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..model.physics.metadata import check, setting
+from ..model.physics.metadata import check, documented, setting
 
 
+@documented
 @dataclass(frozen=True)
 class LiveSettings:
     """When to recompute and what the verdict says (SI units; see the field metadata)."""
@@ -46,6 +47,7 @@ class LiveSettings:
                              f"error_probability = {self.error_probability:g}")
 
 
+@documented
 @dataclass(frozen=True)
 class JointSettings:
     """Which joint of sensor_msgs/JointState is the screw, and where the nut is at angle 0.

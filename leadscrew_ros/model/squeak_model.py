@@ -424,6 +424,31 @@ class SqueakModel:
         ------
         OperatingPointError
             Speed or load is not a finite real number of plausible magnitude.
+
+        Examples
+        --------
+        The Table 1 screw at 20 rad/s and 200 N squeaks in its first two y-bending modes:
+
+        >>> from leadscrew_ros.model import SqueakModel
+        >>> p = SqueakModel().predict(20.0, 200.0)
+        >>> p.stable
+        False
+        >>> [mode.label for mode in p.squeak_modes]
+        ['B1y', 'B2y']
+        >>> [round(hz) for hz in p.unstable_frequencies_hz]
+        [224, 898]
+        >>> round(p.max_growth_rate)
+        74
+        >>> p.probability > 0.9
+        True
+
+        Below `min_speed_rad_s` the linearisation does not hold: no numbers, a reason.
+
+        >>> q = SqueakModel().predict(0.1)
+        >>> q.valid, q.validity.name
+        (False, 'BELOW_MIN_SPEED')
+        >>> q.reason
+        "outside the model's validity: |speed| = 0.1 rad/s is below min_speed_rad_s = ..."
         """
         speed, load = check_operating_point(
             speed_rad_s, self.params.axial_load_n if load_n is None else load_n)

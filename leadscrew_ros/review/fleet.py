@@ -111,7 +111,13 @@ class FleetSettings:
         Scatter(self.scatter)
 
     def as_dict(self) -> dict[str, Any]:
-        """Everything the results depend on, JSON-ready (the run's parameters in fleet.json)."""
+        """Everything the results depend on (the run's parameters in fleet.json).
+
+        Returns
+        -------
+        dict
+            JSON-ready.
+        """
         out = {f.name: getattr(self, f.name) for f in fields(self)}
         out["params"] = self.params.as_dict()
         out["inputs"] = asdict(self.inputs)
@@ -119,13 +125,37 @@ class FleetSettings:
         return json_safe(out)
 
     def digest(self) -> str:
-        """Hash of `as_dict`: a review with another digest is not skipped."""
+        """Hash of `as_dict`: a review with another digest is not skipped.
+
+        Returns
+        -------
+        str
+            32 hex digits.
+        """
         text = json.dumps(self.as_dict(), sort_keys=True, allow_nan=False)
         return hashlib.blake2b(text.encode(), digest_size=16).hexdigest()
 
     def model_for(self, meta: logmeta.LogMetadata | None, log: Path
                   ) -> tuple[SqueakModel, InputSettings]:
-        """The model and input settings of one log (its own with `use_log_params`)."""
+        """The model and input settings of one log (its own with `use_log_params`).
+
+        Parameters
+        ----------
+        meta : LogMetadata or None
+            The log's `leadscrew_ros` metadata record, if it has one.
+        log : Path
+            The log (for the error).
+
+        Returns
+        -------
+        tuple of (SqueakModel, InputSettings)
+            What the log is replayed with.
+
+        Raises
+        ------
+        LogError
+            `use_log_params` and the log has no usable record.
+        """
         if not self.use_log_params:
             return SqueakModel(self.params, Scatter(self.scatter), self.samples), self.inputs
         if meta is None:
@@ -342,7 +372,7 @@ def recovered(log: Path, scratch: Path) -> tuple[Path, str]:
 def _points(result) -> list[list[float]]:
     """At most POINTS_PER_LOG squeak points (speed [rad/s], load [N], frequency [Hz]), evenly
     from the replay's sample, 4 significant digits."""
-    sample = result.plot.squeak.sample()
+    sample = result.plot_data.squeak.sample()
     if not len(sample):
         return []
     pick = np.unique(np.linspace(0, len(sample) - 1, POINTS_PER_LOG).round().astype(int))
@@ -445,12 +475,27 @@ def read_index(path: Path) -> dict[str, dict[str, Any]]:
 
 @dataclass
 class FleetRun:
-    """A finished review: the rows of the logs asked for and how they came about."""
+    """A finished review: the rows of the logs asked for and how they came about
+    (`plots.plot_fleet` draws it).
+
+    Attributes
+    ----------
+    rows : list of dict
+        One per log (the columns of fleet.csv).
+    points : list of list of float
+        Squeak points (speed [rad/s], load [N], frequency [Hz]), a bounded sample.
+    reviewed : int
+        Logs replayed (or failed) in this run.
+    skipped : int
+        Unchanged since an earlier review: not replayed.
+    wall_s : float
+        Wall time of the review [s].
+    """
 
     rows: list[dict[str, Any]]
-    points: list[list[float]]       # squeak points (speed, load, Hz), a bounded sample
-    reviewed: int                    # logs replayed (or failed) in this run
-    skipped: int                     # unchanged since an earlier review: not replayed
+    points: list[list[float]]
+    reviewed: int
+    skipped: int
     wall_s: float = math.nan
 
     @property

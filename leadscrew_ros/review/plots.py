@@ -1,22 +1,32 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Plotting primitives shared by the offline report and the paper's figures: axis display
-(labels, display units, log scale of geometric grids), the stability colormap, and the plots
-of a stability map and of the mode frequencies along a sweep.
+"""Every plot of the package, and the primitives they share: axis display (labels, display
+units, log scale of geometric grids), the stability colormap, the overlays.
+
+A plot is a function of its data in the matplotlib convention: `plot_x(data, ..., ax=None)` (one
+axes) or `plot_x(data, ..., fig=None)` (several panels) draws into the given axes or figure, or
+into a new one when none is given, and returns the Figure. Nothing here writes a file: the
+caller saves (`fig.savefig(path, dpi=...)`).
+
+- `plot_map` (a `MapResult`), `plot_frequencies` and `plot_sweep` (a `SweepResult`),
+  `plot_friction` (the friction law of the parameters), `plot_transient` (a `TransientResult`
+  with its `TransientAnalysis`): the model's results have no `plot` method, as `model` may not
+  import this layer (matplotlib is a review dependency); they are plotted here;
+- `plot_timeline` (a `ReplayResult`, also `ReplayResult.plot`) and `plot_fleet` (a `FleetRun`).
 
 matplotlib is imported where a figure is drawn, never at import: importing this module (e.g.
-for `map --json`) neither loads matplotlib nor selects a backend. Figures are made with
+for `map --json`) neither loads matplotlib nor selects a backend. New figures are
 matplotlib.figure.Figure, which renders PNGs without pyplot or any GUI backend.
 """
 
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import TYPE_CHECKING, Callable, NamedTuple
 
 import numpy as np
 
-from ..model.physics.parameters import field_info
+from ..model.physics.friction import friction_coefficient
+from ..model.physics.parameters import ScrewParameters, field_info
 from ..model.studies.fields import PROBABILITY_LEVELS
 from ..model.studies.stability_map import MapResult
 from ..model.studies.sweep import SweepResult
@@ -26,6 +36,11 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.colors import Colormap
     from matplotlib.figure import Figure
+
+    from ..model.nonlinear.transient import TransientResult
+    from ..model.nonlinear.transient_analysis import TransientAnalysis
+    from .fleet import FleetRun
+    from .replay import ReplayResult
 
 Overlay = Callable[["Axes"], list]     # draws on a finished plot, returns legend handles
 
@@ -101,28 +116,60 @@ def stability_cmap() -> "Colormap":
 
 
 def new_figure(**kwargs) -> "Figure":
-    """A figure that is not registered with pyplot (no backend, nothing to close)."""
+    """A figure that is not registered with pyplot (no backend, nothing to close).
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to `matplotlib.figure.Figure` (figsize, layout, ...).
+
+    Returns
+    -------
+    Figure
+        The new figure.
+    """
     from matplotlib.figure import Figure
     return Figure(**kwargs)
 
 
-def save_figure(fig: "Figure", path: Path, dpi: int) -> None:
-    """Write `fig` to `path` (the format from its suffix) at `dpi` dots per inch."""
-    fig.savefig(path, dpi=dpi)
+def _axes(ax: "Axes | None", **figure) -> tuple["Figure", "Axes"]:
+    """The figure of `ax` and `ax`, or a new figure (of `figure`'s options) and its one axes."""
+    if ax is None:
+        ax = new_figure(**figure).subplots()
+    return ax.get_figure(root=True), ax
 
 
-def plot_map(result: MapResult, path: Path, title: str = "", dpi: int = 120,
-             formulation: str = "", overlay: Overlay | None = None) -> None:
-    """Filled contour of the largest growth rate (red: squeak, blue: stable), the zero contour,
-    the root-refined boundary points, and hatching where the model is not valid; `overlay`
-    draws more (in display units) and returns its legend handles."""
+def plot_map(result: MapResult, *, title: str = "", formulation: str = "",
+             overlay: Overlay | None = None, ax: "Axes | None" = None) -> "Figure":
+    """Stability map: filled contour of the largest growth rate (red: squeak, blue: stable),
+    the zero contour, the root-refined boundary points, and hatching where the model is not
+    valid.
+
+    Parameters
+    ----------
+    result : MapResult
+        The map (`studies.sweep.stability_map`).
+    title : str
+        The title; default: the fixed values and `formulation`.
+    formulation : str
+        Named in the default title ('' leaves it out).
+    overlay : callable, optional
+        Draws more on the axes (in display units) and returns its legend handles, e.g.
+        `probability_overlay(result)`.
+    ax : Axes, optional
+        The axes to draw into (the legend goes to its figure); default: a new figure.
+
+    Returns
+    -------
+    Figure
+        The figure drawn into.
+    """
     from matplotlib.colors import TwoSlopeNorm
     from matplotlib.patches import Patch
     kx, ky = axis_display(result.x_axis).factor, axis_display(result.y_axis).factor
     x, y, g = result.x * kx, result.y * ky, np.ma.masked_invalid(result.field.max_growth_rate)
     cmap = stability_cmap()
-    fig = new_figure(figsize=(7, 5.2), layout="constrained")
-    ax = fig.subplots()
+    fig, ax = _axes(ax, figsize=(7, 5.2), layout="constrained")
     if g.count():
         lo, hi = min(float(g.min()), -1e-6), max(float(g.max()), 1e-6)
         levels = np.concatenate([np.linspace(lo, 0, 12)[:-1], np.linspace(0, hi, 16)])
@@ -155,7 +202,7 @@ def plot_map(result: MapResult, path: Path, title: str = "", dpi: int = 120,
     ax.set_title(title or f"Stability map ({default})", fontsize=10)
     fig.legend(handles=handles, fontsize=8, loc="outside lower center",
                ncols=min(len(handles), 4))
-    save_figure(fig, path, dpi)
+    return fig
 
 
 _LEVEL_STYLES = ("dotted", "dashed", "solid", "dashdot")   # of the PROBABILITY_LEVELS lines
@@ -163,9 +210,22 @@ _LEVEL_STYLES = ("dotted", "dashed", "solid", "dashdot")   # of the PROBABILITY_
 
 def probability_overlay(result: MapResult, band: tuple[float, float] = (0.1, 0.9)
                         ) -> Overlay:
-    """Draws the iso-P(squeak) lines `PROBABILITY_LEVELS` (1, 10, 50, 90 %) of a map computed
-    with the probability, labelled in percent, and shades the band between the `band` levels
-    (where a drive squeaks or not depending on its scatter); for `plot_map`'s `overlay`."""
+    """The iso-P(squeak) lines `PROBABILITY_LEVELS` (1, 10, 50, 90 %) of a map, labelled in
+    percent, and the band between two levels shaded (where a drive squeaks or not depending on
+    its scatter); for `plot_map`'s `overlay`.
+
+    Parameters
+    ----------
+    result : MapResult
+        A map computed with the probability (without: nothing is drawn).
+    band : tuple of float
+        The levels the shaded band lies between.
+
+    Returns
+    -------
+    callable
+        Draws on an axes (in display units) and returns its legend handles.
+    """
     def draw(ax: "Axes") -> list:
         from matplotlib.lines import Line2D
         from matplotlib.patches import Patch
@@ -190,15 +250,32 @@ def fixed_text(fixed: dict[str, float]) -> str:
     return ", ".join(at(n, v) for n, v in fixed.items())
 
 
-def plot_frequencies(result: SweepResult, path: Path, title: str = "", dpi: int = 120,
-                     overlay: Overlay | None = None) -> None:
-    """Frequency of every oscillatory mode along the axis: thin line, thick where Re > 0;
-    `overlay` draws more (in display units) and returns its legend handles."""
+def plot_frequencies(result: SweepResult, *, title: str = "", overlay: Overlay | None = None,
+                     ax: "Axes | None" = None) -> "Figure":
+    """Frequency of every oscillatory mode along the sweep's axis: thin line, thick where
+    Re > 0 (squeak), each squeaking branch labelled at its peak growth (the paper's Fig. 11
+    for a speed sweep).
+
+    Parameters
+    ----------
+    result : SweepResult
+        The sweep (`studies.sweep.sweep`).
+    title : str
+        The title; default: what the thick lines mean.
+    overlay : callable, optional
+        Draws more on the axes (in display units) and returns its legend handles.
+    ax : Axes, optional
+        The axes to draw into; default: a new figure.
+
+    Returns
+    -------
+    Figure
+        The figure drawn into.
+    """
     from matplotlib.lines import Line2D
     k = axis_display(result.axis).factor
     x = result.values * k
-    fig = new_figure(figsize=(7.5, 5.2), layout="constrained")
-    ax = fig.subplots()
+    fig, ax = _axes(ax, figsize=(7.5, 5.2), layout="constrained")
     for b in track_modes(result.predictions):
         ax.plot(x, b.frequency_hz, color="0.25", lw=0.8)
         squeak = np.where(b.squeaks, b.frequency_hz, np.nan)
@@ -218,6 +295,322 @@ def plot_frequencies(result: SweepResult, path: Path, title: str = "", dpi: int 
                        Line2D([], [], color="tab:red", lw=4,
                               label=r"Re($\lambda$) > 0 (squeak)")]
               + (overlay(ax) if overlay is not None else []), fontsize=8)
-    save_figure(fig, path, dpi)
+    return fig
 
 
+GROWTH_LABEL = r"growth rate Re($\lambda$) [1/s]"
+
+
+def plot_sweep(result: SweepResult, *, title: str = "", top: int = 6, probability: bool = False,
+               ax: "Axes | None" = None) -> "Figure":
+    """Largest growth rate and Re(lambda) of the least stable modes along the sweep's axis,
+    with the unstable bands shaded (the paper's Fig. 5 for a speed sweep).
+
+    Parameters
+    ----------
+    result : SweepResult
+        The sweep (`studies.sweep.sweep`).
+    title : str
+        The title; default: the axis, the fixed values and the formulation.
+    top : int
+        How many mode branches are drawn (those of largest peak growth).
+    probability : bool
+        Also P(squeak) on a second y axis.
+    ax : Axes, optional
+        The axes to draw into; default: a new figure.
+
+    Returns
+    -------
+    Figure
+        The figure drawn into.
+    """
+    k = axis_display(result.axis).factor
+    x = result.values * k
+    branches = sorted(sorted(track_modes(result.predictions), key=lambda b: -b.peak_growth)[:top],
+                      key=lambda b: b.typical_frequency_hz)
+    fig, ax = _axes(ax, figsize=(7.5, 4.8), layout="constrained")
+    ax.plot(x, result.max_growth_rate, color="0.75", lw=5, label=r"largest Re($\lambda$)")
+    for b in branches:
+        ax.plot(x, b.growth, lw=1.4, label=f"{b.label} ({b.typical_frequency_hz:.4g} Hz)")
+    for i, (lo, hi) in enumerate(result.unstable_bands):
+        ax.axvspan(lo * k, hi * k, color="tab:red", alpha=0.12,
+                   label="unstable (squeak)" if i == 0 else None)
+    ax.axhline(0.0, color="k", lw=0.8)
+    scale_axis(ax, "x", result.values)
+    shown = np.concatenate([result.max_growth_rate] + [b.growth for b in branches])
+    if np.isfinite(shown).any():
+        hi = max(float(np.nanmax(shown)), 1.0)
+        ax.set_ylim(max(float(np.nanmin(shown)), -2.5 * hi) * 1.05, hi * 1.1)
+    ax.set_xlabel(axis_label(result.axis))
+    ax.set_ylabel(GROWTH_LABEL)
+    formulation = result.predictions[0].formulation if result.predictions else "?"
+    ax.set_title(title or f"Squeak propensity vs {axis_display(result.axis).label}\n"
+                          f"({fixed_text(result.fixed)}; {formulation} formulation)")
+    ax.grid(alpha=0.3, which="both")
+    handles, anchor = ax.get_legend_handles_labels()[0], 1.01
+    if probability:
+        twin = ax.twinx()
+        handles += twin.plot(x, result.probability, color="k", ls="--", lw=1.6,
+                             label="P(squeak) (right axis)")
+        twin.set_ylim(-0.02, 1.02)
+        twin.set_ylabel("P(squeak) over the scatter")
+        anchor = 1.12
+    ax.legend(handles=handles, fontsize=8, loc="upper left", bbox_to_anchor=(anchor, 1.0))
+    return fig
+
+
+def plot_friction(params: ScrewParameters, sliding_m_s: np.ndarray, *,
+                  ax: "Axes | None" = None) -> "Figure":
+    """The friction law (eq. 12) over the sliding speed, with the rotation speed on top (the
+    paper's Fig. 4).
+
+    Parameters
+    ----------
+    params : ScrewParameters
+        Friction coefficients, decay, radius and helix angle.
+    sliding_m_s : ndarray
+        Sliding speeds |Vc| [m/s] of the curve, increasing.
+    ax : Axes, optional
+        The axes to draw into; default: a new figure.
+
+    Returns
+    -------
+    Figure
+        The figure drawn into.
+    """
+    p, v = params, sliding_m_s
+    fig, ax = _axes(ax, figsize=(7, 4.5), layout="constrained")
+    ax.plot(v, friction_coefficient(p, v), lw=2,
+            label=r"$\mu = \mu_k + (\mu_s - \mu_k)\,e^{-d|V_c|}$ (12)")
+    for value, name in ((p.mu_static, r"$\mu_s$"), (p.mu_kinetic, r"$\mu_k$")):
+        ax.axhline(value, color="0.5", ls=":", lw=1)
+        ax.annotate(f"{name} = {value:g}", (v[-1], value), ha="right", va="bottom")
+    top = ax.secondary_xaxis("top", functions=(
+        lambda s: s * math.cos(p.helix_angle_rad) / p.radius_m,
+        lambda w: w * p.radius_m / math.cos(p.helix_angle_rad)))
+    top.set_xlabel(r"rotation speed $\Omega = |V_c| \cos\beta / R$ [rad/s]")
+    ax.set_xlabel(r"sliding speed $|V_c|$ [m/s]")
+    ax.set_ylabel(r"friction coefficient $\mu$ [-]")
+    ax.set_title(f"Fig. 4: friction-velocity curve ($d$ = {p.friction_decay_s_m:g} s/m)")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    return fig
+
+
+def plot_transient(run: "TransientResult", analysis: "TransientAnalysis", *, title: str = "",
+                   fig: "Figure | None" = None) -> "Figure":
+    """Three panels of a nonlinear run: the amplitude (log) with the fitted linear growth, the
+    surface velocity at the nut, the spectrogram of its tangential component.
+
+    Parameters
+    ----------
+    run : TransientResult
+        The run (`nonlinear.transient.simulate`).
+    analysis : TransientAnalysis
+        Its analysis (`nonlinear.transient_analysis.analyse`).
+    title : str
+        The title of the top panel.
+    fig : Figure, optional
+        The figure to draw the panels into; default: a new figure.
+
+    Returns
+    -------
+    Figure
+        The figure drawn into.
+    """
+    t, fit = run.time_s, analysis.linear_fit
+    fig = fig if fig is not None else new_figure(figsize=(8, 8.5), layout="constrained")
+    ax = fig.subplots(3, 1, sharex=True)
+    ax[0].semilogy(t, analysis.amplitude, color="k", lw=1, label="modal energy norm a(t)")
+    inside = (t >= fit.start_s) & (t <= fit.end_s)
+    mid = np.argmin(np.abs(t - (fit.start_s + fit.end_s) / 2))
+    ax[0].semilogy(t[inside], analysis.amplitude[mid] * np.exp(fit.growth_rate * (t[inside]
+                   - t[mid])), color="tab:red", lw=3, alpha=0.6,
+                   label=f"fit: {fit.mode} {fit.frequency_hz:.1f} Hz, "
+                         f"growth {fit.growth_rate:+.1f} 1/s")
+    ax[0].set_ylabel("a [m/s]")
+    ax[0].legend(loc="lower right")
+    ax[0].set_title(title)
+    v = run.surface_velocity_m_s
+    ax[1].plot(t, v[:, 1], lw=0.5, label="tangential")
+    ax[1].plot(t, v[:, 0], lw=0.5, label="radial")
+    ax[1].set_ylabel("surface velocity at nut [m/s]")
+    ax[1].legend(loc="lower right")
+    rate = 1 / (t[1] - t[0])
+    nfft = 1 << max(8, int(math.log2(rate * 2e-3)))
+    ax[2].specgram(v[:, 1], NFFT=nfft, Fs=rate, noverlap=nfft // 2, cmap="magma",
+                   scale="dB", mode="magnitude")
+    ax[2].set_ylim(0, min(rate / 2, 20000))
+    ax[2].set_ylabel("frequency [Hz]")
+    ax[2].set_xlabel("time [s]")
+    return fig
+
+
+SQUEAK_COLOR = "orange"
+WARN_COLOR, ERROR_COLOR = "goldenrod", "tab:red"
+BAR_HEIGHT = 0.07            # P(squeak) panel: the P >= WARN / ERROR bars under the curve
+
+
+def _held(last: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """`last` with empty bins (count 0) holding the previous bin's value, as a published
+    value holds until the next one."""
+    idx = np.where(count > 0, np.arange(count.size), 0)
+    np.maximum.accumulate(idx, out=idx)
+    out = last[idx]
+    out[: np.argmax(count > 0) if count.any() else count.size] = np.nan
+    return out
+
+
+def _filled(lo: np.ndarray, hi: np.ndarray, last: np.ndarray,
+            count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A binned series' (lo, hi) with empty bins holding the last value before them (`_held`),
+    so that a log sampled more sparsely than the bins is drawn as a line, not as dots."""
+    held = _held(last, count)
+    empty = count[:, None] == 0
+    return np.where(empty, held, lo), np.fmax(np.where(empty, held, hi), held)
+
+
+def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    """(first, last) index of each run of True."""
+    edges = np.diff(np.r_[0, flags.astype(np.int8), 0])
+    return list(zip(np.flatnonzero(edges == 1).tolist(), (np.flatnonzero(edges == -1) - 1).tolist()))
+
+
+def _probability_panel(result: "ReplayResult", axes) -> None:
+    """P(squeak) over time on the last of `axes`, with the WARN and ERROR probabilities
+    (dashed) and bars under the curve where P was at or above them; squeak at the nominal
+    parameters shaded on all of `axes`."""
+    ax = axes[-1]
+    envelope = result.plot_data.probability
+    t, lo, hi, last, count = envelope.series()
+    lo, hi = _filled(lo, hi, last, count)
+    half = envelope.bin_s / 2
+    thresholds = ((result.warn_probability, "WARN", WARN_COLOR),
+                  (result.error_probability, "ERROR", ERROR_COLOR))
+    ylim = (-0.05 - BAR_HEIGHT * len(thresholds), 1.05)
+
+    def fraction(y: float) -> float:             # of the axes' height
+        return (y - ylim[0]) / (ylim[1] - ylim[0])
+
+    handles = []
+    if t.size:
+        handles.append(ax.fill_between(t, lo[:, 0], hi[:, 0], step="mid", color="tab:blue",
+                                       edgecolor="tab:blue", lw=0.8, label="P(squeak)"))
+        for k, (a, b) in enumerate(_runs(np.nan_to_num(hi[:, 1]) > 0)):
+            for other in axes:
+                span = other.axvspan(t[a] - half, t[b] + half, color=SQUEAK_COLOR, alpha=0.3,
+                                     lw=0, label="squeak (nominal)")
+            handles += [span] if k == 0 else []
+        for i, (level, name, color) in enumerate(thresholds):
+            bottom = ylim[0] + BAR_HEIGHT * i
+            for k, (a, b) in enumerate(_runs(np.nan_to_num(hi[:, 0], nan=-1.0) >= level)):
+                span = ax.axvspan(t[a] - half, t[b] + half, fraction(bottom + 0.1 * BAR_HEIGHT),
+                                  fraction(bottom + 0.9 * BAR_HEIGHT), color=color, lw=0,
+                                  label=f"P >= {name}")
+                handles += [span] if k == 0 else []
+    for level, name, color in thresholds:
+        handles.append(ax.axhline(level, color=color, ls="--", lw=1.0,
+                                  label=f"{name} {level:g}"))
+    pt = result.probability
+    if pt.peak is not None:
+        handles += ax.plot([pt.peak_t_s], [pt.peak], "v", color="k", ms=5, label="peak")
+    ax.set_ylim(*ylim)
+    ax.set_yticks([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
+    ax.set_ylabel("P(squeak)")
+    ax.set_title(result.probability_text(), fontsize=9)
+    ax.legend(handles=handles, loc="center left", bbox_to_anchor=(1.005, 0.5), fontsize=7)
+    ax.set_xlabel("time since the log's first message [s]")
+
+
+def plot_timeline(result: "ReplayResult", *, fig: "Figure | None" = None) -> "Figure":
+    """A replay over time: speed, load, nut position (only when the log has a nut input) and
+    P(squeak), squeak at the nominal parameters shaded; the P(squeak) panel has the WARN and
+    ERROR probabilities as dashed lines, bars under the curve where P was at or above them and
+    the peak marked. Drawn from the replay's binned series (min-max band per bin).
+
+    Parameters
+    ----------
+    result : ReplayResult
+        The replay (`review.replay.replay`).
+    fig : Figure, optional
+        The figure to draw the panels into; default: a new figure.
+
+    Returns
+    -------
+    Figure
+        The figure drawn into.
+    """
+    tl = result.timeline
+    t, lo, hi, last, count = tl.trace.series()
+    lo, hi = _filled(lo, hi, last, count)         # an input value holds until the next
+    panels = [(0, "speed [rad/s]", 1.0), (1, "axial load [N]", 1.0)]
+    if tl.nut_measured:
+        panels.append((2, "nut position [mm]", 1e3))
+    if fig is None:
+        fig = new_figure(figsize=(10, 2.1 * (len(panels) + 1) + 0.2), layout="constrained")
+    axes = fig.subplots(len(panels) + 1, 1, sharex=True)
+    for ax, (k, label, factor) in zip(axes, panels):
+        ax.fill_between(t, lo[:, k] * factor, hi[:, k] * factor, step="mid", color="tab:blue",
+                        edgecolor="tab:blue", lw=0.7)
+        ax.set_ylabel(label)
+    _probability_panel(result, axes)
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    nut = "" if tl.nut_measured else (
+        f"; no nut input: model nut at {tl.nut * 1e3:.0f} mm (parameter nut_position_m)")
+    axes[0].set_title(f"Replay of {result.log.name}: {result.episode_count} squeak episodes "
+                      f"(shaded), {result.time_in_squeak_s:.1f} s in squeak{nut}", fontsize=10)
+    return fig
+
+
+_NAMED_BARS = 40          # up to this many logs the time-in-squeak panel names each one
+
+
+def plot_fleet(run: "FleetRun", *, fig: "Figure | None" = None) -> "Figure":
+    """Four panels of a fleet's squeak: share of logs that squeak, squeak frequencies, time in
+    squeak per log, where in speed x load the fleet squeaked.
+
+    Parameters
+    ----------
+    run : FleetRun
+        The review (`review.fleet.review_logs`).
+    fig : Figure, optional
+        The figure to draw the panels into; default: a new figure.
+
+    Returns
+    -------
+    Figure
+        The figure drawn into.
+    """
+    ok = [r for r in run.rows if r["status"] == "ok"]
+    squeaks = [r for r in ok if r["episodes"]]
+    fig = fig if fig is not None else new_figure(figsize=(12, 8.5), layout="constrained")
+    (a, b), (c, d) = fig.subplots(2, 2)
+    counts = [len(squeaks), len(ok) - len(squeaks), run.failed]
+    bars = a.bar(["squeak", "no squeak", "error"], counts, color=["C3", "C2", "0.6"])
+    a.bar_label(bars, [f"{n} ({100 * n / max(len(run.rows), 1):.0f} %)" for n in counts])
+    a.set_ylabel("logs")
+    a.set_title(f"{len(squeaks)} of {len(ok)} reviewed logs squeak")
+    pts = np.array(run.points, dtype=float).reshape(-1, 3)
+    if len(pts):
+        b.hist(pts[:, 2], bins=min(50, max(5, len(pts) // 20)), color="C3")
+    b.set_xlabel("squeak frequency [Hz]")
+    b.set_ylabel("predictions (sample)")
+    b.set_title("squeak frequencies over the fleet")
+    ranked = sorted(ok, key=lambda r: -r["time_in_squeak_s"])
+    times = [r["time_in_squeak_s"] for r in ranked]
+    if len(ranked) <= _NAMED_BARS:
+        c.barh([r["unit_id"] for r in ranked][::-1], times[::-1], color="C3")
+        c.tick_params(axis="y", labelsize=7)
+    else:
+        c.plot(np.arange(1, len(times) + 1), times, color="C3")
+        c.set_xlabel("logs, ranked")
+    c.set_title("time in squeak per log [s]")
+    if len(pts):
+        sc = d.scatter(np.abs(pts[:, 0]), np.abs(pts[:, 1]), c=pts[:, 2], s=6, cmap="viridis")
+        fig.colorbar(sc, ax=d, label="squeak frequency [Hz]")
+    d.set_xlabel(r"rotation speed $|\Omega|$ [rad/s]")
+    d.set_ylabel("axial load $|F_z|$ [N]")
+    d.set_title("where the fleet squeaked (sample of predictions)")
+    fig.suptitle(f"fleet review: {len(run.rows)} logs, {run.failed} errors")
+    return fig

@@ -44,13 +44,14 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field, fields
 from functools import partial
 from pathlib import Path
-from typing import Any, BinaryIO, Callable, NamedTuple, TextIO
+from typing import TYPE_CHECKING, Any, BinaryIO, Callable, NamedTuple, TextIO
 
 import numpy as np
 from ..bag import logmeta, messages, msgdefs
 from ..bag.mcapout import CHUNK_BYTES, McapOut
 from .decimation import Envelope, Reservoir
 from .jsonsafe import json_safe
+from .plots import plot_timeline
 from ..bag.logfile import LogError, LogMessage, Topic
 from ..bag.logsource import LogSource, log_topics, open_log
 from ..model import Prediction, SqueakModel, Validity
@@ -58,6 +59,9 @@ from ..model.uncertainty.scatter import LOG_NORMAL
 from .progress import progress_bar
 from .timeline import (InputError, InputSettings, Job, ModelSpec, Timeline, input_namespaces,
                        predict_jobs)
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 DEFAULT_NAMESPACE = "/replay"
 _BATCH_JOBS = 256              # predictions per batched solve (one worker task)
@@ -75,16 +79,30 @@ MEDIA_TYPES = {".json": "application/json", ".png": "image/png"}   # of the atta
 
 @dataclass(frozen=True)
 class ReplaySettings:
-    """How to replay a log: input topics, namespaces, workers, thresholds."""
+    """How a log is replayed (`replay`).
+
+    Attributes
+    ----------
+    inputs : InputSettings
+        Where the inputs are, the deadbands and the P(squeak) thresholds.
+    namespace : str or None
+        Of the inputs; None: the log's single input namespace.
+    out_namespace : str or None
+        Of the predictions; None: /replay + the input namespace.
+    workers : int
+        Prediction processes for long logs (0: all in this process).
+    progress : bool
+        A progress bar on stderr (a terminal only).
+    """
 
     inputs: InputSettings = field(default_factory=InputSettings)
-    namespace: str | None = None      # of the inputs; None: the log's single input namespace
-    out_namespace: str | None = None  # of the predictions; None: /replay + input namespace
-    # Prediction processes for long logs (0: all in this process). Two: on a 2-core machine a
-    # log whose nut moves at every message keeps both busy solving while this process reads and
-    # writes; where reading is the bottleneck (a log mostly at rest) the second one idles.
+    namespace: str | None = None
+    out_namespace: str | None = None
+    # Two workers: on a 2-core machine a log whose nut moves at every message keeps both busy
+    # solving while this process reads and writes; where reading is the bottleneck (a log
+    # mostly at rest) the second one idles.
     workers: int = 2
-    progress: bool = True     # progress bar on stderr (a terminal only)
+    progress: bool = True
 
     def __post_init__(self) -> None:
         for what, ns in (("namespace", self.namespace), ("output namespace", self.out_namespace)):
@@ -198,35 +216,108 @@ class PlotData:
 
 @dataclass
 class ReplayResult:
-    """What a replay found: files written, counts, P(squeak) over time and the episodes."""
+    """The offline replay of one log (`replay`): counts, squeak episodes, P(squeak) over time
+    and what the report draws; `plot` draws its timeline. Times are seconds from the log's
+    first message.
+
+    Attributes
+    ----------
+    log : Path
+        The log replayed (file or bag directory).
+    files : list of Path
+        Its files, in order.
+    out_dir : Path
+        The output directory.
+    annotated : Path
+        The annotated log written there.
+    start_ns : int
+        Log time of the first message [ns]: t = 0.
+    duration_s : float
+        To the last message [s].
+    messages : int
+        Original messages.
+    inputs : Counter
+        Input messages per topic.
+    recomputes : int
+        Operating points that moved beyond the deadbands.
+    predictions : int
+        Recomputes with a prediction (valid points).
+    no_prediction : Counter
+        Recomputes outside validity, by `Validity.label`.
+    rejected : Counter
+        Input values not taken, by reason.
+    ignored : Counter
+        joint_states messages ignored (no joint_name, no joint).
+    episodes : list of Episode
+        The first `EPISODES_KEPT` squeak episodes.
+    episode_count : int
+        All of them (in episodes.json).
+    time_in_squeak_s : float
+        Time with squeak predicted at the nominal parameters [s].
+    probability : ProbabilityTime
+        P(squeak) over the whole log.
+    plot_data : PlotData
+        What the report draws, binned or sampled to a fixed size.
+    timeline : Timeline
+        Counters, and the inputs over time (binned).
+    namespace : str
+        Of the inputs.
+    out_namespace : str
+        Of the predictions in the annotated log.
+    warn_probability, error_probability : float
+        The WARN and ERROR probabilities the times above are counted against.
+    scatter : dict of str to float
+        `Scatter.sd` of P(squeak).
+    scatter_samples : int
+        Samples of P(squeak).
+    wall_s : float
+        Wall time of the replay [s].
+    outputs : list of Path
+        The files written.
+    """
 
     log: Path
     files: list[Path]
     out_dir: Path
     annotated: Path
-    start_ns: int                     # log time of the first message: t = 0
-    duration_s: float                 # to the last message
-    messages: int                     # original messages
-    inputs: Counter                   # input messages per topic
-    recomputes: int                   # operating points that moved beyond the deadbands
-    predictions: int                  # recomputes with a prediction (valid points)
-    no_prediction: Counter            # recomputes outside validity, by Validity.label
-    rejected: Counter                 # input values not taken, by reason
-    ignored: Counter                  # joint_states messages ignored (no joint_name, no joint)
-    episodes: list[Episode]           # the first EPISODES_KEPT
-    episode_count: int                # all of them (in episodes.json)
+    start_ns: int
+    duration_s: float
+    messages: int
+    inputs: Counter
+    recomputes: int
+    predictions: int
+    no_prediction: Counter
+    rejected: Counter
+    ignored: Counter
+    episodes: list[Episode]
+    episode_count: int
     time_in_squeak_s: float
-    probability: ProbabilityTime      # over the whole log
-    plot: PlotData
-    timeline: Timeline                # counters, and the inputs over time (binned)
-    namespace: str = "/"              # of the inputs
+    probability: ProbabilityTime
+    plot_data: PlotData
+    timeline: Timeline
+    namespace: str = "/"
     out_namespace: str = DEFAULT_NAMESPACE
     warn_probability: float = InputSettings.warn_probability
     error_probability: float = InputSettings.error_probability
-    scatter: dict[str, float] = field(default_factory=dict)   # Scatter.sd of P(squeak)
+    scatter: dict[str, float] = field(default_factory=dict)
     scatter_samples: int = 0
     wall_s: float = math.nan
     outputs: list[Path] = field(default_factory=list)
+
+    def plot(self, fig: "Figure | None" = None) -> "Figure":
+        """The timeline: speed, load, nut position and P(squeak) over time (`plot_timeline`).
+
+        Parameters
+        ----------
+        fig : Figure, optional
+            The figure to draw the panels into; default: a new figure.
+
+        Returns
+        -------
+        Figure
+            The figure drawn into.
+        """
+        return plot_timeline(self, fig=fig)
 
     @property
     def warnings(self) -> list[str]:
@@ -245,7 +336,13 @@ class ReplayResult:
         return self.duration_s / self.wall_s if self.wall_s > 0 else math.inf
 
     def summary(self) -> dict[str, Any]:
-        """The replay's summary as a JSON-ready dict."""
+        """The replay in numbers (summary.json).
+
+        Returns
+        -------
+        dict
+            Counts, P(squeak) times, settings, warnings, wall time.
+        """
         return {"log": str(self.log), "files": [str(f) for f in self.files],
                 "annotated": str(self.annotated), "duration_s": self.duration_s,
                 "messages": self.messages, "input_messages": dict(self.inputs),
@@ -274,7 +371,13 @@ class ReplayResult:
         return seconds / self.duration_s if self.duration_s > 0 else 0.0
 
     def probability_text(self) -> str:
-        """One line: peak P(squeak) and the time at or above WARN and ERROR."""
+        """Peak P(squeak) and the time at or above WARN and ERROR.
+
+        Returns
+        -------
+        str
+            One line.
+        """
         pt = self.probability
         if pt.peak is None:
             return "P(squeak): no prediction"
@@ -284,7 +387,13 @@ class ReplayResult:
                 f"{self.error_probability:g} for {pt.above_error_s:.2f} s")
 
     def scatter_text(self) -> str:
-        """One line: the scatter P(squeak) is taken over."""
+        """The scatter P(squeak) is taken over.
+
+        Returns
+        -------
+        str
+            One line.
+        """
         if not self.scatter:
             return "scatter: none (P(squeak) is the nominal verdict, 0 or 1)"
         log_normal = [name for name in self.scatter if name in LOG_NORMAL]
@@ -293,7 +402,13 @@ class ReplayResult:
                                      else "") + f"), {self.scatter_samples} samples")
 
     def summary_text(self) -> str:
-        """The replay's summary as text, a few lines."""
+        """The replay in words (summary.txt).
+
+        Returns
+        -------
+        str
+            One line per item, no final newline.
+        """
         lines = [f"replay of {self.log}: {len(self.files)} file(s), {self.messages} messages "
                  f"over {self.duration_s:.1f} s",
                  "input messages: " + (", ".join(f"{k} {v}" for k, v in self.inputs.items())
@@ -578,7 +693,7 @@ class _Run:
         self.out, self.progress = out, progress
         self.timeline = Timeline(model.params, inputs)
         self.solver = _Solver(model, workers)
-        self.plot = PlotData()
+        self.plot_data = PlotData()
         self.episodes = _Episodes(episodes, inputs.warn_probability, inputs.error_probability)
         self.no_prediction: Counter[str] = Counter()
         self.messages = self.predictions = 0
@@ -632,7 +747,7 @@ class _Run:
                     self.predictions += 1
                 else:
                     self.no_prediction[p.validity.label] += 1
-                self.plot.add(t, job, p)
+                self.plot_data.add(t, job, p)
                 self.episodes.add(t, p)
                 job, p, payloads = next(jobs, (None, None, None))
         if self.progress is not None:
@@ -655,10 +770,32 @@ def _namespaces(source: LogSource, settings: ReplaySettings) -> tuple[str, str]:
 
 def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
            settings: ReplaySettings = ReplaySettings()) -> ReplayResult:
-    """Replay `log` (an MCAP or .db3 file, or a bag directory of split files) offline into
-    `out_dir`, predicting with `model`: its parameters, and its scatter and sample count for
-    P(squeak) (e.g. `SqueakModel(params, scatter_settings.scatter, scatter_settings.samples)`,
-    as the node builds it)."""
+    """Replay a log offline: the node's predictions recomputed for the whole log (the module's
+    outputs).
+
+    Parameters
+    ----------
+    log : path
+        An MCAP or .db3 file, or a bag directory of split files.
+    model : SqueakModel
+        Its parameters, and its scatter and sample count for P(squeak) (e.g.
+        `SqueakModel(params, scatter_settings.scatter, scatter_settings.samples)`, as the node
+        builds it).
+    out_dir : path
+        Receives the annotated log, episodes.json, summary.json and summary.txt.
+    settings : ReplaySettings
+        Inputs, namespaces, worker processes, progress bar.
+
+    Returns
+    -------
+    ReplayResult
+        Counts, episodes, P(squeak) over time and what the report draws.
+
+    Raises
+    ------
+    LogError
+        The log is unreadable or foreign, or has none of the inputs.
+    """
     t0 = time.perf_counter()
     log, out_dir = Path(log), Path(out_dir)
     source = open_log(log)
@@ -703,7 +840,7 @@ def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
         no_prediction=run.no_prediction, rejected=tl.rejected, ignored=tl.ignored,
         episodes=run.episodes.kept, episode_count=run.episodes.count,
         time_in_squeak_s=run.episodes.time_in_squeak_s, probability=run.episodes.probability,
-        plot=run.plot, timeline=tl, namespace=namespace, out_namespace=out_namespace,
+        plot_data=run.plot_data, timeline=tl, namespace=namespace, out_namespace=out_namespace,
         warn_probability=inputs.warn_probability, error_probability=inputs.error_probability,
         scatter=dict(model.scatter.sd), scatter_samples=model.sample_count)
     result.wall_s = time.perf_counter() - t0

@@ -30,15 +30,12 @@ import numpy as np
 from ..model import SqueakModel
 from ..model.studies.stability_map import stability_map
 from ..model.studies.sweep import sweep
-from .plots import new_figure, plot_frequencies, plot_map
+from .plots import SQUEAK_COLOR, plot_frequencies, plot_map
 from .replay import ReplayResult, attach
 
 TIMELINE_FILE = "timeline.png"
 MAP_FILE = "map_speed_load.png"
 FREQUENCY_FILE = "frequency_vs_speed.png"
-SQUEAK_COLOR = "orange"
-WARN_COLOR, ERROR_COLOR = "goldenrod", "tab:red"
-BAR_HEIGHT = 0.07            # P(squeak) panel: the P >= WARN / ERROR bars under the curve
 NUT_BAND_MIN_M = 0.01        # nut travel below this: one map at the median nut position
 NUT_BAND_M = 0.025           # band width aimed at, 2 to 4 bands
 BAND_COLORS = ("tab:blue", "tab:green", "tab:purple", "tab:brown")
@@ -46,7 +43,7 @@ BAND_COLORS = ("tab:blue", "tab:green", "tab:purple", "tab:brown")
 
 @dataclass(frozen=True)
 class ReportGrids:
-    """Grid sizes and resolution of the report's figures."""
+    """Resolution of the replay report: map and sweep points, and the PNGs' dots per inch."""
 
     map_loads: int
     map_speeds: int
@@ -56,101 +53,6 @@ class ReportGrids:
 
 FULL = ReportGrids(map_loads=41, map_speeds=51, sweep_speeds=300, dpi=110)
 QUICK = ReportGrids(map_loads=7, map_speeds=9, sweep_speeds=40, dpi=60)
-
-
-def _held(last: np.ndarray, count: np.ndarray) -> np.ndarray:
-    """`last` with empty bins (count 0) holding the previous bin's value, as a published
-    value holds until the next one."""
-    idx = np.where(count > 0, np.arange(count.size), 0)
-    np.maximum.accumulate(idx, out=idx)
-    out = last[idx]
-    out[: np.argmax(count > 0) if count.any() else count.size] = np.nan
-    return out
-
-
-def _filled(lo: np.ndarray, hi: np.ndarray, last: np.ndarray,
-            count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A binned series' (lo, hi) with empty bins holding the last value before them (`_held`),
-    so that a log sampled more sparsely than the bins is drawn as a line, not as dots."""
-    held = _held(last, count)
-    empty = count[:, None] == 0
-    return np.where(empty, held, lo), np.fmax(np.where(empty, held, hi), held)
-
-
-def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
-    """(first, last) index of each run of True."""
-    edges = np.diff(np.r_[0, flags.astype(np.int8), 0])
-    return list(zip(np.flatnonzero(edges == 1).tolist(), (np.flatnonzero(edges == -1) - 1).tolist(), strict=True))
-
-
-def _probability_panel(result: ReplayResult, axes) -> None:
-    """P(squeak) over time on the last of `axes`, with the WARN and ERROR probabilities
-    (dashed) and bars under the curve where P was at or above them; squeak at the nominal
-    parameters shaded on all of `axes`."""
-    ax = axes[-1]
-    envelope = result.plot.probability
-    t, lo, hi, last, count = envelope.series()
-    lo, hi = _filled(lo, hi, last, count)
-    half = envelope.bin_s / 2
-    thresholds = ((result.warn_probability, "WARN", WARN_COLOR),
-                  (result.error_probability, "ERROR", ERROR_COLOR))
-    ylim = (-0.05 - BAR_HEIGHT * len(thresholds), 1.05)
-
-    def fraction(y: float) -> float:             # of the axes' height
-        return (y - ylim[0]) / (ylim[1] - ylim[0])
-
-    handles = []
-    if t.size:
-        handles.append(ax.fill_between(t, lo[:, 0], hi[:, 0], step="mid", color="tab:blue",
-                                       edgecolor="tab:blue", lw=0.8, label="P(squeak)"))
-        for k, (a, b) in enumerate(_runs(np.nan_to_num(hi[:, 1]) > 0)):
-            for other in axes:
-                span = other.axvspan(t[a] - half, t[b] + half, color=SQUEAK_COLOR, alpha=0.3,
-                                     lw=0, label="squeak (nominal)")
-            handles += [span] if k == 0 else []
-        for i, (level, name, color) in enumerate(thresholds):
-            bottom = ylim[0] + BAR_HEIGHT * i
-            for k, (a, b) in enumerate(_runs(np.nan_to_num(hi[:, 0], nan=-1.0) >= level)):
-                span = ax.axvspan(t[a] - half, t[b] + half, fraction(bottom + 0.1 * BAR_HEIGHT),
-                                  fraction(bottom + 0.9 * BAR_HEIGHT), color=color, lw=0,
-                                  label=f"P >= {name}")
-                handles += [span] if k == 0 else []
-    for level, name, color in thresholds:
-        handles.append(ax.axhline(level, color=color, ls="--", lw=1.0,
-                                  label=f"{name} {level:g}"))
-    pt = result.probability
-    if pt.peak is not None:
-        handles += ax.plot([pt.peak_t_s], [pt.peak], "v", color="k", ms=5, label="peak")
-    ax.set_ylim(*ylim)
-    ax.set_yticks([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
-    ax.set_ylabel("P(squeak)")
-    ax.set_title(result.probability_text(), fontsize=9)
-    ax.legend(handles=handles, loc="center left", bbox_to_anchor=(1.005, 0.5), fontsize=7)
-    ax.set_xlabel("time since the log's first message [s]")
-
-
-def plot_timeline(result: ReplayResult, path: Path, grids: ReportGrids) -> None:
-    """Draw the inputs and P(squeak) over the log's time to `path`."""
-    tl = result.timeline
-    t, lo, hi, last, count = tl.trace.series()
-    lo, hi = _filled(lo, hi, last, count)         # an input value holds until the next
-    panels = [(0, "speed [rad/s]", 1.0), (1, "axial load [N]", 1.0)]
-    if tl.nut_measured:
-        panels.append((2, "nut position [mm]", 1e3))
-    fig = new_figure(figsize=(10, 2.1 * (len(panels) + 1) + 0.2), layout="constrained")
-    axes = fig.subplots(len(panels) + 1, 1, sharex=True)
-    for ax, (k, label, factor) in zip(axes, panels, strict=False):
-        ax.fill_between(t, lo[:, k] * factor, hi[:, k] * factor, step="mid", color="tab:blue",
-                        edgecolor="tab:blue", lw=0.7)
-        ax.set_ylabel(label)
-    _probability_panel(result, axes)
-    for ax in axes:
-        ax.grid(alpha=0.3)
-    nut = "" if tl.nut_measured else (
-        f"; no nut input: model nut at {tl.nut * 1e3:.0f} mm (parameter nut_position_m)")
-    axes[0].set_title(f"Replay of {result.log.name}: {result.episode_count} squeak episodes "
-                      f"(shaded), {result.time_in_squeak_s:.1f} s in squeak{nut}", fontsize=10)
-    fig.savefig(path, dpi=grids.dpi)
 
 
 def nut_bands(nuts: np.ndarray) -> np.ndarray:
@@ -167,13 +69,30 @@ def nut_bands(nuts: np.ndarray) -> np.ndarray:
 
 def write_report(result: ReplayResult, model: SqueakModel, out: Path | str,
                  grids: ReportGrids = FULL) -> list[Path]:
-    """Write the three PNGs into `out` and attach them to the annotated log, if it is there
-    (`replay.attach`); returns their paths."""
+    """Write the three PNGs (the module's) into `out` and attach them to the annotated log,
+    if it is there (`replay.attach`).
+
+    Parameters
+    ----------
+    result : ReplayResult
+        The replay.
+    model : SqueakModel
+        The model it was replayed with (the maps and the sweep).
+    out : path
+        An existing directory.
+    grids : ReportGrids
+        Map and sweep resolution, dots per inch.
+
+    Returns
+    -------
+    list of Path
+        timeline.png, map_speed_load.png, frequency_vs_speed.png.
+    """
     out = Path(out)
     paths = [out / TIMELINE_FILE, out / MAP_FILE, out / FREQUENCY_FILE]
-    plot_timeline(result, paths[0], grids)
+    result.plot().savefig(paths[0], dpi=grids.dpi)
 
-    points = result.plot.points.sample()
+    points = result.plot_data.points.sample()
     speed, load, nuts = np.abs(points[:, 0]), np.abs(points[:, 1]), points[:, 2]
     active = points[:, 3] > 0
     p = model.params
@@ -222,10 +141,11 @@ def write_report(result: ReplayResult, model: SqueakModel, out: Path | str,
                                "speed_rad_s", speeds)
     where = (f"nut at {map_nut * 1e3:.0f} mm (median of the run)" if bands <= 1 else
              f"filled: {band_text(home)}; lines: squeak boundary of each other nut band")
-    plot_map(result_map, paths[1], f"Replay on the speed-load stability map (Fig. 7 style)\n"
-             f"{where}; |speed|, |load|", grids.dpi, p.formulation, overlay=trajectory)
+    plot_map(result_map, title=f"Replay on the speed-load stability map (Fig. 7 style)\n"
+             f"{where}; |speed|, |load|", formulation=p.formulation,
+             overlay=trajectory).savefig(paths[1], dpi=grids.dpi)
 
-    squeak = result.plot.squeak.sample()
+    squeak = result.plot_data.squeak.sample()
 
     def squeak_points(ax) -> list:
         if not squeak.size:
@@ -237,10 +157,10 @@ def write_report(result: ReplayResult, model: SqueakModel, out: Path | str,
     speed_sweep = sweep(model.with_params(nut_position_m=median_nut), "speed_rad_s",
                         np.geomspace(p.min_speed_rad_s, speed_hi, grids.sweep_speeds),
                         load_n=median_load)
-    plot_frequencies(speed_sweep, paths[2], f"Replayed squeak frequencies on the modes vs speed "
+    plot_frequencies(speed_sweep, title=f"Replayed squeak frequencies on the modes vs speed "
                      f"(Fig. 11 style)\nload {median_load:.0f} N, nut {median_nut * 1e3:.0f} mm "
-                     f"(medians of the run; points at their own load and nut)", grids.dpi,
-                     overlay=squeak_points)
+                     f"(medians of the run; points at their own load and nut)",
+                     overlay=squeak_points).savefig(paths[2], dpi=grids.dpi)
     if result.annotated.exists():        # unless the caller removed it (summaries only)
         attach(result, paths)
     return paths

@@ -92,21 +92,39 @@ class InputError(ValueError):
 class InputSettings:
     """Where the inputs are in the log, when to recompute and the verdict's P(squeak)
     thresholds: node parameter names, defaults and checks from `LiveSettings` and
-    `JointSettings` (`live` and `joints`)."""
+    `JointSettings` (`live` and `joints`).
 
-    # Relative names resolve in the input namespace (`resolved`), absolute ones stay.
-    speed_topic: str = "motor_speed"                    # std_msgs/Float64, rad/s
-    load_topic: str = "axial_load"                      # std_msgs/Float64, N
-    nut_topic: str = "nut_position"                     # std_msgs/Float64, m
-    joint_states_topic: str = "joint_states"            # sensor_msgs/JointState
-    joint_name: str = JointSettings.joint_name        # '': joint_states are ignored
+    Attributes
+    ----------
+    speed_topic, load_topic, nut_topic : str
+        std_msgs/Float64 inputs: speed [rad/s], axial load [N], nut position [m]. Relative
+        names resolve in the input namespace (`resolved`), absolute ones stay.
+    joint_states_topic : str
+        sensor_msgs/JointState input.
+    joint_name : str
+        The screw joint ('': joint_states are ignored).
+    nut_position_at_zero_angle_m : float
+        As in `JointSettings` [m].
+    speed_deadband_rad_s, load_deadband_n, nut_deadband_m : float
+        As in `LiveSettings`.
+    warn_probability, error_probability : float
+        As in `LiveSettings`: the time above them, the report's lines.
+    nominal_load_n : float or None
+        Load from the start [N] (a log without a load topic).
+    """
+
+    speed_topic: str = "motor_speed"
+    load_topic: str = "axial_load"
+    nut_topic: str = "nut_position"
+    joint_states_topic: str = "joint_states"
+    joint_name: str = JointSettings.joint_name
     nut_position_at_zero_angle_m: float = JointSettings.nut_position_at_zero_angle_m
     speed_deadband_rad_s: float = LiveSettings.speed_deadband_rad_s
     load_deadband_n: float = LiveSettings.load_deadband_n
     nut_deadband_m: float = LiveSettings.nut_deadband_m
-    warn_probability: float = LiveSettings.warn_probability     # time above WARN, the report
-    error_probability: float = LiveSettings.error_probability   # time above ERROR, the report
-    nominal_load_n: float | None = None   # load from the start (a log without load topic)
+    warn_probability: float = LiveSettings.warn_probability
+    error_probability: float = LiveSettings.error_probability
+    nominal_load_n: float | None = None
 
     def __post_init__(self) -> None:
         topics = self.topics
@@ -132,17 +150,28 @@ class InputSettings:
 
     @property
     def joints(self) -> JointSettings:
-        """The screw joint settings of JointState inputs."""
+        """The joint name and the nut position at angle 0 (checked by `JointSettings`)."""
         return JointSettings(joint_name=self.joint_name,
                              nut_position_at_zero_angle_m=self.nut_position_at_zero_angle_m)
 
     @property
     def topics(self) -> tuple[str, str, str, str]:
-        """The four input topic names, in `TOPIC_FIELDS` order."""
+        """The speed, load, nut and joint_states topics."""
         return tuple(getattr(self, f) for f in TOPIC_FIELDS)
 
     def resolved(self, namespace: str) -> InputSettings:
-        """These settings with every topic name absolute, resolved in `namespace`."""
+        """These settings with every topic name absolute.
+
+        Parameters
+        ----------
+        namespace : str
+            The input namespace relative names resolve in.
+
+        Returns
+        -------
+        InputSettings
+            A copy with absolute topics.
+        """
         return replace(self, **{f: resolve(getattr(self, f), namespace) for f in TOPIC_FIELDS})
 
 

@@ -271,10 +271,34 @@ def recording_summary(recorder: Recorder) -> str:
 # ----------------------------------------------------------------------------- run
 def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float = 4.0,
              out: TextIO | None = None, record_dir: Path | None = None) -> int:
-    """Run predictor + simulator + monitor for one stroke; 0 when done, and 0 after SIGINT or
-    SIGTERM too, with the summary so far and `StopSignals.exit_status`'s line on stderr. The
-    predictor records into a bag in `record_dir` (created; None: no recording). A bad duration
-    raises ProfileError before anything starts; RuntimeError if rclpy or the discovery fails."""
+    """Run predictor + simulator + monitor for one stroke.
+
+    Parameters
+    ----------
+    duration_s : float
+        Length of the stroke [s].
+    rate_hz : float
+        Publication rate of the simulator [Hz].
+    status_hz : float
+        Rate of the status lines [Hz].
+    out : text file, optional
+        Where the status lines and the summary go; default: stdout.
+    record_dir : Path, optional
+        The predictor records into a bag there (created); None: no recording.
+
+    Returns
+    -------
+    int
+        0 when done, and 0 after SIGINT or SIGTERM too, with the summary so far and
+        `StopSignals.exit_status`'s line on stderr.
+
+    Raises
+    ------
+    ProfileError
+        A bad duration, before anything starts.
+    RuntimeError
+        rclpy or the discovery fails.
+    """
     out = out or sys.stdout
     profile = StrokeProfile(duration_s=duration_s)
     recording = []

@@ -104,7 +104,14 @@ def bag_prefix(namespace: str) -> str:
 
 
 class SqueakPredictorNode(Node):
-    """The squeak predictor node: inputs in, P(squeak) and diagnostics out, recording."""
+    """The `squeak_predictor` node (the module's topics, parameters and recording): wires the
+    ROS interfaces to a `LivePredictor`, a `Recorder` and the /diagnostics updater.
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to `rclpy.node.Node` (context, namespace, parameter overrides, ...).
+    """
 
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)

@@ -21,13 +21,14 @@ from ..bag.logmeta import LogMetadata
 from ..bag.recorder import RecordSettings
 from ..live.settings import JointSettings, LiveSettings
 from ..model.physics.display import exact
-from ..model.physics.metadata import check, check_value, range_text, setting
+from ..model.physics.metadata import check, check_value, documented, range_text, setting
 from ..model.physics.parameters import ParameterError, ScrewParameters
 from ..model.uncertainty.scatter import ScatterSettings
 
 READ_ONLY_NOTE = "read-only: set at start-up"
 
 
+@documented
 @dataclass(frozen=True)
 class NodeSettings:
     """The node's own settings: diagnostics, identity and input subscriptions."""
@@ -46,6 +47,7 @@ class NodeSettings:
         check(self)
 
 
+@documented
 @dataclass(frozen=True)
 class RecordingControl:
     """Whether the node records (`RecordSettings` say how) and what it does with bags an

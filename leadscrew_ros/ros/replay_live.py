@@ -84,15 +84,43 @@ def publish_log(paths: list[Path], *, rate: float = 1.0, loop: bool = False,
     type whose name ends so, e.g. `/robot/motor_speed`; never `/squeak/*`, `/replay/*`).
     `remap` maps log topics to the topics to publish on (a relative target in the node's
     namespace). `ros_args` (`--ros-args ...`) go to rcl: namespace (the inputs move into it),
-    remaps, logging; never the process's argv. `start_offset_s` skips that much of the
-    log from its first message; `loop` repeats until SIGINT/SIGTERM. Publishing starts when a
-    subscriber matched, or after `wait_for_subscriber_s` (0: at once, the simulator's
-    --no-wait).
+    remaps, logging; never the process's argv. Publishing starts when a subscriber matched,
+    or after `wait_for_subscriber_s`.
 
-    Returns the number of messages published, also when stopped by SIGINT/SIGTERM (looped or
-    before its end: `StopSignals.exit_status` writes its line on stderr). Raises ValueError for
-    bad arguments (ROS ones included) and LogError for an unreadable log, both before anything
-    is published."""
+    Parameters
+    ----------
+    paths : list of Path
+        The log's files, in order.
+    rate : float
+        Speed-up of the log's time (1: real time).
+    loop : bool
+        Repeat until SIGINT/SIGTERM.
+    start_offset_s : float
+        Skip that much of the log from its first message [s].
+    topics : list of str, optional
+        Publish exactly these; default: the predictor's input topics in the log.
+    remap : dict of str to str, optional
+        Log topic -> topic to publish on.
+    progress : bool
+        A progress line on stderr.
+    wait_for_subscriber_s : float
+        The longest wait for a subscriber [s] (0: at once, the simulator's --no-wait).
+    ros_args : sequence of str
+        `--ros-args ...` for rcl.
+
+    Returns
+    -------
+    int
+        The number of messages published, also when stopped by SIGINT/SIGTERM (looped or
+        before its end: `StopSignals.exit_status` writes its line on stderr).
+
+    Raises
+    ------
+    ValueError
+        Bad arguments (ROS ones included), before anything is published.
+    LogError
+        An unreadable log, before anything is published.
+    """
     paths = [Path(p) for p in paths]
     _check_arguments(paths, rate, start_offset_s, remap, wait_for_subscriber_s)
     plan = _plan(paths, start_offset_s, topics, remap or {})

@@ -32,7 +32,23 @@ class ActuatorSimulator(Node):
     The stroke clock starts at the first tick, or with `wait_for_subscriber` when something
     subscribes to motor_speed. Time is wall-clock time since then, so a late tick shifts no
     sample. After the stroke the end state (at rest) is published once more and `done` turns
-    True; with `loop` the stroke repeats, back and forth, until the node is destroyed."""
+    True; with `loop` the stroke repeats, back and forth, until the node is destroyed.
+
+    Parameters
+    ----------
+    profile : StrokeProfile, optional
+        The stroke; default: `StrokeProfile()`.
+    rate_hz : float
+        Publication rate, in (0, MAX_RATE_HZ] Hz (else ProfileError).
+    loop : bool
+        Repeat the stroke, back and forth.
+    joint_name : str
+        Also publish joint_states with this joint ('': not).
+    wait_for_subscriber : bool
+        Start the stroke clock when something subscribes to motor_speed.
+    **kwargs
+        Passed to `rclpy.node.Node` (`node_name` too).
+    """
 
     def __init__(self, profile: StrokeProfile | None = None, rate_hz: float = 100.0,
                  loop: bool = False, joint_name: str = "", wait_for_subscriber: bool = False,
@@ -81,7 +97,13 @@ class ActuatorSimulator(Node):
         return matched > 0 and matched >= self.count_subscribers(self.speed_pub.topic_name)
 
     def publish(self, s: ActuatorState) -> None:
-        """Publish the actuator state `s` on the input topics."""
+        """Publish one state on every output topic.
+
+        Parameters
+        ----------
+        s : ActuatorState
+            Speed, load, nut position and screw angle.
+        """
         self.speed_pub.publish(Float64(data=float(s.speed_rad_s)))
         self.load_pub.publish(Float64(data=float(s.load_n)))
         self.nut_pub.publish(Float64(data=float(s.nut_position_m)))
@@ -98,12 +120,29 @@ def run_simulator(profile: StrokeProfile | None = None, rate_hz: float = 100.0,
                   loop: bool = False, joint_name: str = "", wait_for_subscriber: bool = True,
                   out: TextIO | None = None, ros_args: Sequence[str] = ()) -> int:
     """`leadscrew-squeak simulate`: publish the stroke on the user's ROS_DOMAIN_ID (loopback
-    discovery unless chosen otherwise) for a separately started predictor node. `ros_args`
-    (`--ros-args -r __ns:=/seat_left ...`) configure the node as any ROS executable's
-    (ValueError if rcl rejects them); the topics are relative, so a namespace prefixes them.
+    discovery unless chosen otherwise) for a separately started predictor node.
 
-    Returns 0: when the stroke is done, and when stopped by SIGINT/SIGTERM (with or without
-    `loop`; `StopSignals.exit_status` writes its line on stderr)."""
+    Parameters
+    ----------
+    profile, rate_hz, loop, joint_name, wait_for_subscriber
+        As for `ActuatorSimulator`.
+    out : text file, optional
+        Where the progress lines go; default: stdout.
+    ros_args : sequence of str
+        `--ros-args -r __ns:=/seat_left ...`: configure the node as any ROS executable's; the
+        topics are relative, so a namespace prefixes them.
+
+    Returns
+    -------
+    int
+        0: when the stroke is done, and when stopped by SIGINT/SIGTERM (with or without
+        `loop`; `StopSignals.exit_status` writes its line on stderr).
+
+    Raises
+    ------
+    ValueError
+        rcl rejects `ros_args`.
+    """
     out = out or sys.stdout
     profile = profile or StrokeProfile()
     confine_to_localhost()

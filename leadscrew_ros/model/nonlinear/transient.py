@@ -221,14 +221,40 @@ class ModalEquations:
                              "friction did not converge")
 
     def rhs(self, _t: float, y: np.ndarray) -> np.ndarray:
-        """d/dt (dq, dqdot) of the deviation dq = q - q* from steady sliding."""
+        """d/dt (dq, dqdot) of the deviation dq = q - q* from steady sliding.
+
+        Parameters
+        ----------
+        _t : float
+            Time [s] (the equations are autonomous; the integrator passes it).
+        y : ndarray
+            State (dq, dqdot), shape (2N,).
+
+        Returns
+        -------
+        ndarray
+            Its time derivative, shape (2N,).
+        """
         n = self.n
         dq, dqdot = y[:n], y[n:]
         force = self.friction.force(self.q_static + dq, dqdot) - self.q_force_static
         return np.concatenate((dqdot, force - self.stiffness @ dq - self.damping @ dqdot))
 
     def jacobian(self, _t: float, y: np.ndarray) -> np.ndarray:
-        """The state matrix of the linearisation at the state y (2N x 2N)."""
+        """The state matrix of the linearisation at the state y.
+
+        Parameters
+        ----------
+        _t : float
+            Time [s] (unused, as in `rhs`).
+        y : ndarray
+            State (dq, dqdot), shape (2N,).
+
+        Returns
+        -------
+        ndarray
+            d rhs / dy, shape (2N, 2N).
+        """
         n = self.n
         _, jq, jd = self.friction.force(self.q_static + y[:n], y[n:], jacobian=True)
         out = np.zeros((2 * n, 2 * n))
@@ -238,8 +264,13 @@ class ModalEquations:
         return out
 
     def modal_velocity_scale(self) -> np.ndarray:
-        """Peak contact-point velocity per unit modal rate of each mode [m/s per unit qdot]:
-        the amplitude of the shape, times R for torsion."""
+        """Peak contact-point velocity per unit modal rate of each mode.
+
+        Returns
+        -------
+        ndarray
+            (N,) [m/s per unit qdot]: the amplitude of the shape, times R for torsion.
+        """
         b = self.basis
         return b.amplitude * np.where(b.kind == KIND_T, self.friction.params.radius_m, 1.0)
 

@@ -35,7 +35,21 @@ def gyroscopic_unit(basis: ModalBasis) -> np.ndarray:
 
 @dataclass(frozen=True)
 class SystemMatrices:
-    """N x N matrices of (27) at one operating point; `stiffness` and `damping` are the sums."""
+    """N x N matrices of (27) at one operating point; `stiffness` and `damping` are the sums.
+
+    Attributes
+    ----------
+    C : ndarray
+        Modal damping (A.1).
+    G : ndarray
+        Gyroscopic coupling at the speed (A.2).
+    W : dict of str to ndarray
+        The friction-contact matrices W1..W5 at the operating point, by name.
+    stiffness : ndarray
+        K = [omega^2 - Omega^2] + W1 + W2 + W5q.
+    damping : ndarray
+        D = C + G + W3 + W4 + W5qdot.
+    """
 
     C: np.ndarray
     G: np.ndarray
@@ -46,14 +60,29 @@ class SystemMatrices:
 
 @dataclass(frozen=True)
 class Geometry:
-    """The speed- and load-independent parts of the model: basis, contact integrals, G."""
+    """Everything of (27) that depends on the geometry only, precomputed once
+    (`build_geometry`): the matrices at an operating point are a rescaling of its parts.
+
+    Attributes
+    ----------
+    params : ScrewParameters
+        The parameters it was built for.
+    basis : ModalBasis
+        The assumed modes.
+    contact : ContactIntegrals
+        The contact integrals over the nut.
+    G_unit : ndarray
+        Gyroscopic matrix per unit speed.
+    lower_half_units : ndarray
+        (5, N*2N) lower half [K | D] of the state matrix per scale factor: W1+W2, W5q,
+        W3+W4, W5qdot, G (pairs share a scale).
+    """
 
     params: ScrewParameters
     basis: ModalBasis
     contact: ContactIntegrals
     G_unit: np.ndarray
-    lower_half_units: np.ndarray   # (5, N*2N) lower half [K | D] per scale factor:
-    #                               W1+W2, W5q, W3+W4, W5qdot, G (pairs share a scale)
+    lower_half_units: np.ndarray
 
     @property
     def n(self) -> int:
@@ -61,7 +90,20 @@ class Geometry:
         return self.basis.n
 
     def matrices(self, speed_rad_s: float, load_n: float) -> SystemMatrices:
-        """The system matrices of eq. (27) at a rotation speed [rad/s] and an axial load [N]."""
+        """The N x N matrices of (27) at one operating point.
+
+        Parameters
+        ----------
+        speed_rad_s : float
+            Rotation speed Omega [rad/s].
+        load_n : float
+            Axial load F_z [N].
+
+        Returns
+        -------
+        SystemMatrices
+            C, G, the W matrices and their sums.
+        """
         s = scales(self.params, speed_rad_s, load_n, self.contact.alpha)
         W = {k: float(s[k]) * v for k, v in self.contact.unit.items()}
         om = self.basis.omega_rad_s
@@ -84,11 +126,24 @@ class Geometry:
     def state_matrices(self, speed_rad_s: ArrayLike, load_n: ArrayLike,
                        scattered: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
         """First-order state matrices [[0, I], [-K, -D]] of (27) for arrays of operating points
-        (broadcast), shape (..., 2N, 2N). One matrix product rescales all precomputed parts.
+        (broadcast). One matrix product rescales all precomputed parts.
 
-        `scattered` gives arrays of non-geometry parameters (friction, damping; broadcast with
-        the operating points) that replace the nominal values: they enter only through the
-        scale factors and the damping diagonal, so samples of them cost one product each."""
+        Parameters
+        ----------
+        speed_rad_s : float or array_like
+            Rotation speeds Omega [rad/s].
+        load_n : float or array_like
+            Axial loads F_z [N], broadcast with the speeds.
+        scattered : mapping of str to ndarray, optional
+            Arrays of non-geometry parameters (friction, damping; broadcast with the operating
+            points) that replace the nominal values: they enter only through the scale
+            factors and the damping diagonal, so samples of them cost one product each.
+
+        Returns
+        -------
+        ndarray
+            Shape (..., 2N, 2N).
+        """
         if not scattered and (type(speed_rad_s) is float and type(load_n) is float
                               or np.ndim(speed_rad_s) == 0 and np.ndim(load_n) == 0):
             return self._state_matrix(float(cast(float, speed_rad_s)), float(cast(float, load_n)))
@@ -182,8 +237,19 @@ class _Screw:
 
 
 def build_geometry(params: ScrewParameters) -> Geometry:
-    """Geometry for these parameters; cached per geometry (sweeps revisit them), and the modal
-    basis and kernels per screw (a new nut position only integrates the contact)."""
+    """The `Geometry` of these parameters; cached per geometry (sweeps revisit them), and the
+    modal basis and kernels per screw (a new nut position only integrates the contact).
+
+    Parameters
+    ----------
+    params : ScrewParameters
+        The screw, nut and friction parameters.
+
+    Returns
+    -------
+    Geometry
+        With `params` as given (the cached parts shared).
+    """
     geometry = _geometry_of(_Key(params, _GEOMETRY_FIELDS))
     return geometry if geometry.params is params else replace(geometry, params=params)
 

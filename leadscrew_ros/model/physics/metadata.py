@@ -3,8 +3,9 @@
 description in its metadata, and everything else (validation, ROS parameter descriptors, YAML,
 CLI help, README tables) is derived from there.
 
-`setting` declares such a field; `check` validates an instance against it. Ranges are closed
-unless `lo_open` / `hi_open`; `choices` lists the allowed strings of a text setting.
+`setting` declares such a field; `check` validates an instance against it; `documented` writes
+the numpydoc Attributes entries of a settings class from it. Ranges are closed unless
+`lo_open` / `hi_open`; `choices` lists the allowed strings of a text setting.
 """
 
 from __future__ import annotations
@@ -12,9 +13,11 @@ from __future__ import annotations
 import math
 from dataclasses import MISSING, Field, field, fields
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, TypeVar
 
 from .display import exact
+
+T = TypeVar("T")
 
 
 def setting(default: Any, unit: str, description: str, lo: float | None = None,
@@ -134,3 +137,40 @@ def help_text(f: Field, description: str | None = None) -> str:
     allowed = (f", one of {', '.join(md['choices'])}" if md["choices"] else
                f", allowed {range_text({**md, 'unit': ''})}" if md["lo"] is not None else "")
     return f"{description or md['description']}{unit} (default {default_text(f)}{allowed})"
+
+
+def documented(cls: type[T], allowed: Mapping[str, str] | None = None) -> type[T]:
+    """Append the numpydoc Attributes entries of the `setting` fields of `cls` to its docstring
+    (to its Attributes section when it ends with one, for the fields documented by hand):
+    description, unit, default and allowed values from the metadata. A class decorator.
+
+    Parameters
+    ----------
+    cls : type
+        A dataclass with `setting` fields.
+    allowed : mapping of str to str, optional
+        Field name -> what is allowed, where the metadata does not say (e.g. a text whose
+        owner checks it).
+
+    Returns
+    -------
+    type
+        `cls`, its docstring extended.
+    """
+    doc = (cls.__doc__ or "").rstrip() + "\n"
+    lines = [] if "    Attributes\n    ----------" in doc else ["", "    Attributes",
+                                                               "    ----------"]
+    for f in fields(cls):  # type: ignore[arg-type]
+        md = f.metadata
+        if "description" not in md:
+            continue
+        unit = {"": "", "1": " (dimensionless)"}.get(md["unit"], f" [{md['unit']}]")
+        values = ((allowed or {}).get(f.name)
+                  or (f"allowed {range_text(md)}" if md["lo"] is not None else "")
+                  or (f"one of {', '.join(md['choices'])}" if md["choices"] else ""))
+        default = f"{f.default:g}" if isinstance(f.default, float) else repr(f.default)
+        lines += [f"    {f.name} : {f.type}",
+                  f"        {md['description'][0].upper()}{md['description'][1:]}{unit}.",
+                  f"        Default {default}" + (f", {values}." if values else ".")]
+    cls.__doc__ = doc + "\n".join(lines) + "\n"
+    return cls

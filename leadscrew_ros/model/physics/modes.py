@@ -17,14 +17,31 @@ KIND_X, KIND_Y, KIND_T = 0, 1, 2
 
 @dataclass(frozen=True)
 class ModalBasis:
-    """Ordering: B1x, B1y, B2x, B2y, ..., then T1..Tn (row i = equation of mode i)."""
+    """The assumed modes of the screw, eqs. (24)-(26). Ordering: B1x, B1y, B2x, B2y, ...,
+    then T1..Tn (row i = equation of mode i).
+
+    Attributes
+    ----------
+    labels : tuple of str
+        B1x, B1y, ..., T1, ...
+    kind : ndarray
+        (N,) KIND_X / KIND_Y / KIND_T.
+    order : ndarray
+        (N,) n of sin(n pi z / L), or (2n-1) of the torsion shape.
+    wavenumber : ndarray
+        (N,) [rad/m]: n pi / L or (2n-1) pi / (2L).
+    amplitude : ndarray
+        (N,) mass-normalising factor [1/sqrt(kg) or 1/sqrt(kg m^2)].
+    omega_rad_s : ndarray
+        (N,) natural frequencies [rad/s].
+    """
 
     labels: tuple[str, ...]
-    kind: np.ndarray          # (N,) KIND_X / KIND_Y / KIND_T
-    order: np.ndarray         # (N,) n of sin(n pi z / L) or (2n-1) of the torsion shape
-    wavenumber: np.ndarray    # (N,) rad/m: n pi / L or (2n-1) pi / (2L)
-    amplitude: np.ndarray     # (N,) mass-normalising factor, 1/sqrt(kg) or 1/sqrt(kg m^2)
-    omega_rad_s: np.ndarray   # (N,) natural frequencies
+    kind: np.ndarray
+    order: np.ndarray
+    wavenumber: np.ndarray
+    amplitude: np.ndarray
+    omega_rad_s: np.ndarray
 
     @property
     def n(self) -> int:
@@ -33,16 +50,39 @@ class ModalBasis:
 
     @property
     def frequency_hz(self) -> np.ndarray:
-        """Natural frequencies [Hz] of the modes."""
+        """(N,) natural frequencies [Hz]."""
         return self.omega_rad_s / (2 * math.pi)
 
     def shapes(self, z_m: np.ndarray) -> np.ndarray:
-        """Phi_i(z) for every mode i at the positions z (N, len(z)), eqs. (24)-(26)."""
+        """Phi_i(z) for every mode i at the positions z, eqs. (24)-(26).
+
+        Parameters
+        ----------
+        z_m : ndarray
+            Positions along the screw [m].
+
+        Returns
+        -------
+        ndarray
+            (N, len(z_m)).
+        """
         return self.amplitude[:, None] * np.sin(self.wavenumber[:, None] * np.asarray(z_m)[None, :])
 
 
 def modal_basis(p: ScrewParameters) -> ModalBasis:
-    """The assumed modes of a screw (bending and torsion), eqs. (24)-(26)."""
+    """The assumed modes of the screw, mass-normalised: bending (hinged-hinged, x and y) and
+    torsion (clamped-free).
+
+    Parameters
+    ----------
+    p : ScrewParameters
+        Dimensions, material and the numbers of modes `n_bending`, `n_torsion`.
+
+    Returns
+    -------
+    ModalBasis
+        2 * n_bending bending modes, then n_torsion torsion modes.
+    """
     area = math.pi * p.radius_m ** 2
     polar = math.pi * p.radius_m ** 4 / 2          # J = I_zz
     inertia = math.pi * p.radius_m ** 4 / 4        # I_xx = I_yy

@@ -14,7 +14,7 @@ from types import SimpleNamespace
 from typing import Any, Iterable, TypeAlias
 
 from .display import exact
-from .metadata import check_value, range_text, setting
+from .metadata import check_value, documented, setting
 
 FORMULATIONS = ("paper", "consistent")
 MAX_CONTACT_TURNS = 5000      # longest nut accepted, in thread turns
@@ -143,21 +143,6 @@ class ScrewParameters:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
-def _attributes_section() -> str:
-    """Numpydoc Attributes section of `ScrewParameters`, one entry per field from its metadata."""
-    lines = ["", "    Attributes", "    ----------"]
-    for f in fields(ScrewParameters):
-        md = f.metadata
-        unit = {"": "", "1": " (dimensionless)"}.get(md["unit"], f" [{md['unit']}]")
-        allowed = (f"allowed {range_text(md)}" if md["lo"] is not None
-                   else f"one of {', '.join(FORMULATIONS)}")
-        default = f"{f.default:g}" if isinstance(f.default, float) else repr(f.default)
-        lines += [f"    {f.name} : {f.type}",
-                  f"        {md['description'][0].upper()}{md['description'][1:]}{unit}.",
-                  f"        Default {default}, {allowed}."]
-    return "\n".join(lines) + "\n"
-
-
 _FIELDS = fields(ScrewParameters)
 
 # The parameters, or a namespace of their fields where some hold arrays of scattered values
@@ -167,7 +152,13 @@ _FIELD_BY_NAME = {f.name: f for f in _FIELDS}
 
 
 def field_names() -> list[str]:
-    """Names of the `ScrewParameters` fields, in declaration order."""
+    """The names of the `ScrewParameters` fields, in declaration order.
+
+    Returns
+    -------
+    list of str
+        The field names.
+    """
     return list(_FIELD_BY_NAME)
 
 
@@ -202,8 +193,7 @@ def coerce(name: str, value: Any) -> Any:
         raise ParameterError(f"{name} = {value!r} is not a valid {typ}") from None
 
 
-ScrewParameters.__doc__ = ((ScrewParameters.__doc__ or "").rstrip() + "\n"
-                           + _attributes_section())
+documented(ScrewParameters, {"formulation": f"one of {', '.join(FORMULATIONS)}"})
 
 
 def validate(p: ScrewParameters, changed: Iterable[str] | None = None) -> None:

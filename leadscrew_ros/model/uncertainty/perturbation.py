@@ -214,9 +214,23 @@ class FirstOrderProbability:
 
     def with_geometry(self, params: ScrewParameters, geometry: Geometry
                       ) -> FirstOrderProbability:
-        """The estimate for `params`, which differ from this one's only in geometry fields
-        that do not scatter (a moved nut): the samples' friction and damping are the same,
-        only the expansion is new. With scattered geometry the nodes move too: built anew."""
+        """The estimate for other parameters that differ from this one's only in geometry
+        fields that do not scatter (a moved nut): the samples' friction and damping are the
+        same, only the expansion is new. With scattered geometry the nodes move too: built
+        anew.
+
+        Parameters
+        ----------
+        params : ScrewParameters
+            The new parameters.
+        geometry : Geometry
+            Their geometry.
+
+        Returns
+        -------
+        FirstOrderProbability
+            The estimate for `params`, sharing the samples.
+        """
         if self._nodes is not None:
             return FirstOrderProbability(params, geometry, self.samples)
         new = copy.copy(self)
@@ -255,8 +269,20 @@ class FirstOrderProbability:
         return expansions, corners
 
     def margins(self, pairs: EigenPairs, load: float) -> np.ndarray:
-        """Per sample, the largest growth rate beyond the squeak threshold over the modes
-        [1/s] (> 0: squeak), shape (count,); `pairs` is the nominal eigen-solve."""
+        """Per sample, the largest growth rate beyond the squeak threshold over the modes.
+
+        Parameters
+        ----------
+        pairs : EigenPairs
+            The nominal eigen-solve at the operating point.
+        load : float
+            Axial load F_z [N].
+
+        Returns
+        -------
+        ndarray
+            Shape (count,) [1/s]; > 0: the sample squeaks.
+        """
         if self._nodes is None:
             return self._nominal.margins(pairs, load, self._damping, self._reach_damping)
         expansions, corners = self._nodes
@@ -274,8 +300,20 @@ class FirstOrderProbability:
                    np.zeros(self.samples.count))
 
     def hits(self, pairs: EigenPairs, load: float) -> np.ndarray:
-        """Whether each sample squeaks at the operating point of `pairs`, by the expansion;
-        shape (replicates, per_replicate)."""
+        """Whether each sample squeaks at the operating point of `pairs`, by the expansion.
+
+        Parameters
+        ----------
+        pairs : EigenPairs
+            The nominal eigen-solve at the operating point.
+        load : float
+            Axial load F_z [N].
+
+        Returns
+        -------
+        ndarray of bool
+            Shape (replicates, per_replicate).
+        """
         return (self.margins(pairs, load) > 0).reshape(self._shape)
 
 

@@ -143,6 +143,8 @@ class Samples:
 
     Attributes
     ----------
+    scatter : Scatter
+        The scatter drawn from.
     u : numpy.ndarray
         Shape (replicates, per_replicate, len(names)), every point inside the valid domain.
     values : dict of str to numpy.ndarray

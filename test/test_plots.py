@@ -1,0 +1,105 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Every plot of `review.plots` in the matplotlib convention: it returns the Figure it drew,
+draws into the axes (`ax=`) or figure (`fig=`) it is given and returns that figure, and makes a
+pyplot-free Figure when given none (the CLI's PNGs: test_figures, test_cli, test_replay,
+test_fleet, test_transient)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from matplotlib.figure import Figure
+
+from leadscrew_ros.bag.synthetic import DutyCycle, write_log
+from leadscrew_ros.model import ScrewParameters, SqueakModel
+from leadscrew_ros.model.nonlinear import analyse, simulate
+from leadscrew_ros.model.nonlinear.transient import TransientSettings
+from leadscrew_ros.model.studies.sweep import stability_map, sweep
+from leadscrew_ros.review import plots
+from leadscrew_ros.review.fleet import FleetRun
+from leadscrew_ros.review.replay import ReplaySettings, replay
+from leadscrew_ros.review.timeline import InputSettings
+
+
+@pytest.fixture(scope="module")
+def speed_sweep():
+    return sweep(SqueakModel(), "speed_rad_s", np.geomspace(0.5, 120.0, 25))
+
+
+@pytest.fixture(scope="module")
+def speed_map():
+    return stability_map(SqueakModel(), "load_n", np.linspace(0.0, 600.0, 4), "speed_rad_s",
+                         np.geomspace(1.0, 100.0, 5), probability=True)
+
+
+@pytest.fixture(scope="module")
+def transient():
+    run = simulate(ScrewParameters(), 20.0, 200.0, TransientSettings(duration_s=0.02, modes=6))
+    return run, analyse(run)
+
+
+@pytest.fixture(scope="module")
+def replayed(tmp_path_factory):
+    cycle = DutyCycle(duration_s=6.0, rate_hz=20.0, rest_s=1.0)
+    tmp = tmp_path_factory.mktemp("replay")
+    return replay(write_log(cycle, tmp / "bag"), SqueakModel(), tmp / "out",
+                  ReplaySettings(InputSettings(joint_name=cycle.joint_name), workers=0,
+                                 progress=False))
+
+
+FLEET = FleetRun(rows=[{"status": "ok", "episodes": 2, "time_in_squeak_s": 1.5, "unit_id": "a"},
+                       {"status": "ok", "episodes": 0, "time_in_squeak_s": 0.0, "unit_id": "b"},
+                       {"status": "error"}],
+                 points=[[20.0, 200.0, 1500.0], [25.0, 210.0, 1520.0]], reviewed=3, skipped=0)
+
+# (plot, the fixture of its data or None, other arguments): one axes
+SINGLE = {"map": (plots.plot_map, "speed_map", {}),
+          "map with P": (plots.plot_map, "speed_map", {"overlay": "probability"}),
+          "frequencies": (plots.plot_frequencies, "speed_sweep", {}),
+          "sweep": (plots.plot_sweep, "speed_sweep", {"probability": True}),
+          "friction": (plots.plot_friction, None, {})}
+
+
+def _single_args(request, fixture, options):
+    if fixture is None:                   # the friction law: parameters and sliding speeds
+        return (ScrewParameters(), np.linspace(0.0, 1.0, 50)), {}
+    data = request.getfixturevalue(fixture)
+    if options.get("overlay") == "probability":
+        options = {"overlay": plots.probability_overlay(data)}
+    return (data,), options
+
+
+@pytest.mark.parametrize("name", SINGLE)
+def test_a_plot_makes_its_figure(name, request):
+    plot, fixture, options = SINGLE[name]
+    args, kwargs = _single_args(request, fixture, options)
+    fig = plot(*args, **kwargs)
+    assert isinstance(fig, Figure) and fig.axes and fig.canvas.manager is None   # no pyplot
+
+
+@pytest.mark.parametrize("name", SINGLE)
+def test_a_plot_draws_into_the_axes_it_is_given(name, request):
+    plot, fixture, options = SINGLE[name]
+    args, kwargs = _single_args(request, fixture, options)
+    given = Figure()
+    left, right = given.subplots(1, 2)
+    assert plot(*args, **kwargs, ax=right) is given
+    assert right.has_data() and not left.has_data()
+
+
+def test_the_panels_go_into_the_figure_given(transient, replayed):
+    run, analysis = transient
+    for draw, panels in ((lambda fig: plots.plot_transient(run, analysis, fig=fig), 3),
+                         (lambda fig: plots.plot_timeline(replayed, fig=fig), 4),
+                         (lambda fig: replayed.plot(fig=fig), 4),
+                         (lambda fig: plots.plot_fleet(FLEET, fig=fig), 4)):
+        new = draw(None)
+        assert isinstance(new, Figure) and len(new.axes) >= panels
+        given = Figure()
+        assert draw(given) is given and len(given.axes) == len(new.axes)
+
+
+def test_nothing_is_written(tmp_path, monkeypatch, speed_sweep):
+    monkeypatch.chdir(tmp_path)
+    plots.plot_sweep(speed_sweep).canvas.draw()
+    assert not list(tmp_path.iterdir())
