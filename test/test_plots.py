@@ -14,7 +14,8 @@ from leadscrew_ros.bag.synthetic import DutyCycle, write_log
 from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.model.nonlinear import analyse, simulate
 from leadscrew_ros.model.nonlinear.transient import TransientSettings
-from leadscrew_ros.model.studies.sweep import stability_map, sweep
+from leadscrew_ros.model.studies.stability_map import stability_map
+from leadscrew_ros.model.studies.sweep import sweep
 from leadscrew_ros.review import plots
 from leadscrew_ros.review.fleet import FleetRun
 from leadscrew_ros.review.replay import ReplaySettings, replay
