@@ -10,7 +10,7 @@ holds; chunk sizes, CRCs and the footer are checked. Every problem becomes a one
 `strict=False` mode up to the last whole record, and `recover` rewrites that into a finished
 file; `recover_bag` does so in place for every cut-off file of a rosbag2 bag directory and
 regenerates its `metadata.yaml` (like `ros2 bag reindex`), so that every tool opens the bag
-afterwards.
+afterwards. A file still being recorded (`livelock`) is never recovered.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ from mcap.records import Channel, Header, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
 from .bagmeta import METADATA, BagStats, FileStats, TopicStats
+from .livelock import LIVE, is_live, live_files
 
 MAGIC = b"\x89MCAP0\r\n"
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_METADATA = (
@@ -98,6 +99,7 @@ class LogInfo:
     complete: bool = False            # footer reached
     damage: str = ""                  # why reading stopped early ('' if it did not)
     cut_off: bool = False             # damage is only a missing tail: every byte before it read
+    live: bool = False                # a recorder is writing the file: its tail is still to come
     # MCAP Metadata records read (e.g. `logmeta`'s), name -> string map; kept by `recover`
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
 
@@ -174,6 +176,8 @@ def _incomplete(path: Path) -> str:
         return "empty file"
     if head != MAGIC:
         return "not an MCAP file (bad magic)"
+    if is_live(path):
+        return f"{LIVE}: it gets its footer when the recording stops; read it then"
     return (f"truncated: no footer (the recording was interrupted); "
             f"recover it with `{RECOVER_HINT} {bag_of(path) or path}`")
 
@@ -371,15 +375,26 @@ def read_log(path: Path | str, topics: set[str] | None = None,
 
 def inspect(path: Path | str) -> LogInfo:
     """Read a whole file tolerantly: topics, counts, time span, complete or where damaged."""
-    info = LogInfo(Path(path))
+    info = LogInfo(Path(path), live=is_live(path))
     for _ in read_messages(path, strict=False, info=info):
         pass
     return info
 
 
+def _refuse_live(path: Path, files: list[Path]) -> None:
+    """Raise LogError if a recorder writes any of `files`: recovering would replace the file
+    under it, and it would go on writing into the replaced copy."""
+    live = [f for f in files if is_live(f)]
+    if live:
+        raise LogError(live[0], f"{LIVE}; `{RECOVER_HINT}` leaves {path} alone until the "
+                                f"recording stops (nothing changed)")
+
+
 def recover(src: Path | str, dst: Path | str,
             compression: CompressionType = CompressionType.ZSTD) -> LogInfo:
-    """Rewrite every whole message of a cut-off (or damaged) file into a finished file."""
+    """Rewrite every whole message of a cut-off (or damaged) file into a finished file;
+    LogError for a file that is still being recorded."""
+    _refuse_live(Path(src), [Path(src)])
     info = _rewrite(src, dst, compression)
     if not info.messages:
         Path(dst).unlink(missing_ok=True)
@@ -486,22 +501,35 @@ class BagRecovery:
 def cut_off_bags(directory: Path | str) -> list[Path]:
     """Recordings under `directory` that need `recover_bag`: bag directories directly under it
     with .mcap files but no `metadata.yaml`, or with a file lacking its footer, and loose .mcap
-    files lacking their footer. Cheap (reads file tails only), so a node can call it on start.
-    A recording still in progress (by another process) looks cut off too."""
-    found = []
+    files lacking their footer; not those still being recorded (`live_recordings`). Cheap
+    (reads file tails only), so a node can call it on start."""
+    return _scan(directory)[0]
+
+
+def live_recordings(directory: Path | str) -> list[Path]:
+    """Bag directories and loose .mcap files directly under `directory` that a recorder (of any
+    process) is writing now."""
+    return _scan(directory)[1]
+
+
+def _scan(directory: Path | str) -> tuple[list[Path], list[Path]]:
+    """(cut off, live) recordings directly under `directory`."""
+    cut, live = [], []
     try:
         entries = sorted(Path(directory).iterdir())
     except OSError:
-        return []
+        return [], []
     for entry in entries:
         if entry.is_dir():
             files = list(entry.glob("*.mcap"))
-            if files and (not (entry / METADATA).is_file()
-                          or not all(is_complete(f) for f in files)):
-                found.append(entry)
+            if files and live_files(entry):
+                live.append(entry)
+            elif files and (not (entry / METADATA).is_file()
+                            or not all(is_complete(f) for f in files)):
+                cut.append(entry)
         elif entry.suffix == ".mcap" and entry.is_file() and not is_complete(entry):
-            found.append(entry)
-    return found
+            (live if is_live(entry) else cut).append(entry)
+    return cut, live
 
 
 def recover_bag(path: Path | str) -> BagRecovery:
@@ -514,15 +542,13 @@ def recover_bag(path: Path | str) -> BagRecovery:
     without a single whole message is moved there and left out of the bag. A bag's
     `metadata.yaml` is regenerated from its files when it is missing or does not match them
     (keeping its `custom_data` and QoS profiles). Raises LogError (nothing changed for the
-    file concerned) for a file that is not a ros2 MCAP or a rewrite that does not verify.
+    file concerned) for a file that is not a ros2 MCAP or a rewrite that does not verify, and
+    (nothing changed) when a file of the bag is still being recorded.
     """
     path = Path(path)
-    if path.is_dir():
-        _restore_interrupted(path)
-        bag = path
-    else:
-        _restore_interrupted(path.parent)
-        bag = bag_of(path)
+    bag = path if path.is_dir() else bag_of(path)
+    _refuse_live(path, log_files(bag or path) if bag is not None else [path])
+    _restore_interrupted(path if path.is_dir() else path.parent)
     result = BagRecovery(path, bag, [_recover_file(f) for f in log_files(path)])
     if bag is not None:
         result.metadata_written = _reindex(bag, result.files)

@@ -25,6 +25,9 @@ Crash safety: the open chunk is finished and handed to the operating system ever
 file is read by `logfile.read_messages(strict=False)` and repaired by `logfile.recover`.
 A failing disk (missing or read-only directory, file size limit, disk full) stops the recording
 with `error` naming the path; nothing is raised to the caller.
+
+While a file is written the recorder holds an advisory lock on it (`livelock`), so that
+`recover` and `info` tell it from a file cut off by a crash.
 """
 
 from __future__ import annotations
@@ -41,7 +44,7 @@ from typing import Callable
 
 from mcap.writer import CompressionType, Writer
 
-from . import msgdefs
+from . import livelock, msgdefs
 from .bagmeta import METADATA, BagStats, FileStats, TopicStats
 from ..model.fields import check, setting
 
@@ -273,6 +276,7 @@ class Recorder:
         self.files.append(FileStats(path))
         try:
             self._out = open(path, "wb")
+            livelock.hold(self._out.fileno())
             self._writer = Writer(self._out, chunk_size=_CHUNK_BYTES,
                                   compression=COMPRESSIONS[self.settings.compression])
             self._writer.start(profile="ros2", library="leadscrew_ros recorder")
