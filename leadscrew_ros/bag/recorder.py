@@ -59,7 +59,8 @@ _CHUNK_BYTES = 4 << 20         # chunks are closed by the flush period long befo
 LOST_KEY, LOST_BY_TOPIC_KEY = "lost_messages", "lost_messages_by_topic"   # metadata custom_data
 INCIDENT_KEY = "incident"              # metadata custom_data: a file lost while recording
 _CHECK_PERIOD_NS = 200_000_000         # how often `tick` checks that the file is still there
-# A message every file starts with: topic, 'pkg/msg/Type', CDR payload, publish time (None: log time)
+# A message every file starts with: topic, 'pkg/msg/Type', CDR payload, publish time (None:
+# the log time)
 StateMessage = tuple[str, str, bytes, "int | None"]
 
 
