@@ -22,9 +22,9 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
 from leadscrew_ros.ros.diagnostics import (KEY_BAG, KEY_CUT_OFF_BAGS, KEY_FILES, KEY_LOST,
-                                           KEY_MESSAGES, PREDICTION_TASK, RECORDING_TASK, TOPIC,
-                                           DiagnosticStatusWrapper, Updater, key_lost_on,
-                                           recording_status, status_task)
+                                           KEY_MESSAGES, PREDICTION_TASK, RECORDING_TASK,
+                                           RESUME_HINT, TOPIC, DiagnosticStatusWrapper, Updater,
+                                           key_lost_on, recording_status, status_task)
 from leadscrew_ros.live.status import Level, Status
 from leadscrew_ros.ros.node import LATCHED, NODE_NAME, make_executor
 from test_node import SQUEAK, at, ros  # noqa: F401  (ros: fixture)
@@ -183,8 +183,8 @@ def test_merge_summary_keeps_the_worst_level_and_every_message():
 
 
 def recorder(**changes):
-    r = dict(error="", active=False, path=None, bag=None, files=[], messages=0, lost=0,
-             losses={})
+    r = dict(error="", incident="", active=False, path=None, bag=None, files=[], messages=0,
+             lost=0, losses={})
     return SimpleNamespace(**{**r, **changes})
 
 
@@ -195,13 +195,15 @@ NO_CRASH = SimpleNamespace(message="", level=Level.OK, pending=[])
     (recorder(), NO_CRASH, Level.OK, "not recording"),
     (recorder(active=True, path="/d/b_0.mcap", bag="/d/b"), NO_CRASH, Level.OK,
      "recording to /d/b_0.mcap"),
-    (recorder(error="disk full"), NO_CRASH, Level.ERROR, "disk full"),
+    (recorder(error="disk full"), NO_CRASH, Level.ERROR, f"disk full; {RESUME_HINT}"),
+    (recorder(active=True, path="/d/b_1.mcap", incident="/d/b_0.mcap was deleted"), NO_CRASH,
+     Level.ERROR, "recording to /d/b_1.mcap; /d/b_0.mcap was deleted"),
     (recorder(active=True, path="p", lost=3,
               losses={"/a": SimpleNamespace(lost=3), "/b": SimpleNamespace(lost=0)}),
      NO_CRASH, Level.WARN, "recording to p; 3 input message(s) lost before recording (/a 3)"),
     (recorder(error="disk full"), SimpleNamespace(message="1 bag(s) cut off", level=Level.WARN,
                                                   pending=["/d/x", "/d/y"]),
-     Level.ERROR, "disk full; 1 bag(s) cut off"),
+     Level.ERROR, f"disk full; {RESUME_HINT}; 1 bag(s) cut off"),
 ])
 def test_recording_status(rec, crash, expected_level, words):
     stat = recording_status(DiagnosticStatusWrapper(), rec, crash)

@@ -1,19 +1,21 @@
 # SPDX-License-Identifier: Apache-2.0
 """Reading ROS 2 MCAP logs (ours, rosbag2's, rosbags') defensively, and recovering cut-off files.
 
-Records are parsed sequentially from a memory map, so a damaged length can never make the
-reader allocate or wait for more than the file holds; chunk sizes, CRCs and the footer are
-checked. Every problem becomes a one-line `LogError` naming the file. A recording cut off by a
-crash (no summary, no footer) is read in `strict=False` mode up to the last whole record, and
-`recover` rewrites that into a finished file; `recover_bag` does so in place for every cut-off
-file of a rosbag2 bag directory and regenerates its `metadata.yaml` (like `ros2 bag reindex`),
-so that every tool opens the bag afterwards.
+Records are parsed sequentially with buffered reads of one record at a time (not a memory map:
+its pages would stay resident, so memory would grow with the file, and a file truncated under
+it would kill the process with SIGBUS); a length is checked against the file size before it is
+read, so a damaged length can never make the reader allocate or wait for more than the file
+holds; chunk sizes, CRCs and the footer are checked. Every problem becomes a one-line
+`LogError` naming the file. A recording cut off by a crash (no summary, no footer) is read in
+`strict=False` mode up to the last whole record, and `recover` rewrites that into a finished
+file; `recover_bag` does so in place for every cut-off file of a rosbag2 bag directory and
+regenerates its `metadata.yaml` (like `ros2 bag reindex`), so that every tool opens the bag
+afterwards. A file still being recorded (`livelock`) is never recovered.
 """
 
 from __future__ import annotations
 
 import io
-import mmap
 import os
 import re
 import struct
@@ -31,6 +33,7 @@ from mcap.records import Channel, Header, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
 from .bagmeta import METADATA, BagStats, FileStats, TopicStats
+from .livelock import LIVE, is_live, live_files
 
 MAGIC = b"\x89MCAP0\r\n"
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_METADATA = (
@@ -38,6 +41,9 @@ OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_METADATA =
 _FOOTER_LEN = 20                      # summary_start u64, summary_offset_start u64, crc u32
 _MAX_INFLATION = 1000                 # a larger uncompressed/compressed ratio means corruption
 _RECORD = struct.Struct("<BQ")
+_READ_BUFFER = 1 << 16
+_PARSED = frozenset((OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK,
+                     OP_METADATA))
 _MESSAGE = struct.Struct("<HIQQ")
 _CHUNK = struct.Struct("<QQQI")
 ENCODINGS = {"cdr"}
@@ -98,6 +104,7 @@ class LogInfo:
     complete: bool = False            # footer reached
     damage: str = ""                  # why reading stopped early ('' if it did not)
     cut_off: bool = False             # damage is only a missing tail: every byte before it read
+    live: bool = False                # a recorder is writing the file: its tail is still to come
     # MCAP Metadata records read (e.g. `logmeta`'s), name -> string map; kept by `recover`
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
 
@@ -156,12 +163,12 @@ def read_messages(path: Path | str, topics: set[str] | None = None, strict: bool
     if strict and path.is_file() and not is_complete(path):
         raise LogError(path, _incomplete(path))
     try:
-        with open(path, "rb") as f:
+        with open(path, "rb", buffering=_READ_BUFFER) as f:
             size = f.seek(0, io.SEEK_END)
             if size == 0:
                 raise LogError(path, "empty file")
-            with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as buf:
-                yield from _records(path, buf, topics, strict, info)
+            f.seek(0)
+            yield from _records(path, f, size, topics, strict, info)
     except IsADirectoryError:
         raise LogError(path, "is a directory, not an MCAP file") from None
     except OSError as exc:
@@ -175,6 +182,8 @@ def _incomplete(path: Path) -> str:
         return "empty file"
     if head != MAGIC:
         return "not an MCAP file (bad magic)"
+    if is_live(path):
+        return f"{LIVE}: it gets its footer when the recording stops; read it then"
     return (f"truncated: no footer (the recording was interrupted); "
             f"recover it with `{RECOVER_HINT} {bag_of(path) or path}`")
 
@@ -199,9 +208,10 @@ class _CutOff(_Damage):
     """The file ends inside or right after a whole record: a recording cut off, not corrupted."""
 
 
-def _records(path: Path, buf, topics, strict: bool, info: LogInfo) -> Iterator[LogMessage]:
-    size = len(buf)
-    if buf[:len(MAGIC)] != MAGIC:
+def _records(path: Path, f, size: int, topics, strict: bool, info: LogInfo
+             ) -> Iterator[LogMessage]:
+    """The messages of the open file `f` of `size` bytes, read record by record."""
+    if f.read(len(MAGIC)) != MAGIC:
         raise LogError(path, "not an MCAP file (bad magic)")
     schemas: dict[int, tuple[str, str, str]] = {}
     channels: dict[int, Topic | None] = {}            # None: channel filtered out
@@ -212,44 +222,48 @@ def _records(path: Path, buf, topics, strict: bool, info: LogInfo) -> Iterator[L
                 raise _CutOff(f"ends after {size} bytes without a footer (interrupted)")
             if pos + 9 > size:
                 raise _CutOff(f"cut off at byte {pos} of {size}")
-            op, length = _RECORD.unpack_from(buf, pos)
+            op, length = _RECORD.unpack(_read(f, 9))
             body = pos + 9
             if length > size - body:
                 raise _CutOff(f"record at byte {pos} claims {length} bytes, "
                               f"only {size - body} remain")
             if pos == len(MAGIC) and op != OP_HEADER:
                 raise _Damage("first record is not an MCAP header")
+            if op in _PARSED:
+                rec = _read(f, length)
+            else:                                 # indexes, attachments...: not read
+                f.seek(length, io.SEEK_CUR)
             if op == OP_HEADER:
-                header = Header.read(_stream(buf, body, length))
+                header = Header.read(_stream(rec))
                 info.profile, info.library = header.profile, header.library
                 if header.profile != "ros2":
                     raise LogError(path, f"foreign MCAP: profile {header.profile!r}, "
                                          f"expected 'ros2'")
             elif op == OP_SCHEMA:
-                s = Schema.read(_stream(buf, body, length))
+                s = Schema.read(_stream(rec))
                 schemas[s.id] = (s.name, s.encoding, s.data.decode())
             elif op == OP_CHANNEL:
-                _channel(path, Channel.read(_stream(buf, body, length)), schemas, channels,
-                         topics, info)
+                _channel(path, Channel.read(_stream(rec)), schemas, channels, topics, info)
             elif op == OP_MESSAGE:
-                m = _message(buf, body, length, channels, info)
+                m = _message(rec, 0, length, channels, info)
                 if m is not None:
                     yield m
             elif op == OP_CHUNK:
-                for kind, rec in _chunk(buf, body, length):
+                for kind, chunk_rec in _chunk(rec):
                     if kind == OP_SCHEMA:
-                        schemas[rec.id] = (rec.name, rec.encoding, rec.data.decode())
+                        schemas[chunk_rec.id] = (chunk_rec.name, chunk_rec.encoding,
+                                                 chunk_rec.data.decode())
                     elif kind == OP_CHANNEL:
-                        _channel(path, rec, schemas, channels, topics, info)
+                        _channel(path, chunk_rec, schemas, channels, topics, info)
                     else:
-                        m = _message(rec, 0, len(rec), channels, info)
+                        m = _message(chunk_rec, 0, len(chunk_rec), channels, info)
                         if m is not None:
                             yield m
             elif op == OP_METADATA:
-                record = Metadata.read(_stream(buf, body, length))
+                record = Metadata.read(_stream(rec))
                 info.metadata.setdefault(record.name, record.metadata)
             elif op == OP_FOOTER:
-                if buf[body + length:body + length + len(MAGIC)] != MAGIC:
+                if f.read(len(MAGIC)) != MAGIC:
                     raise _Damage("no closing magic after the footer")
                 info.complete = True
                 return
@@ -266,8 +280,16 @@ def _records(path: Path, buf, topics, strict: bool, info: LogInfo) -> Iterator[L
     info.damage = problem
 
 
-def _stream(buf, start: int, length: int) -> ReadDataStream:
-    return ReadDataStream(io.BytesIO(buf[start:start + length]))
+def _read(f, n: int) -> bytes:
+    """`n` bytes at the file position (checked against the size first, by the caller)."""
+    data = f.read(n)
+    if len(data) != n:
+        raise _CutOff(f"file shrank while it was read ({len(data)} of {n} bytes there)")
+    return data
+
+
+def _stream(rec: bytes) -> ReadDataStream:
+    return ReadDataStream(io.BytesIO(rec))
 
 
 def _channel(path: Path, c: Channel, schemas, channels, topics, info: LogInfo) -> None:
@@ -306,16 +328,18 @@ def _message(buf, start: int, length: int, channels, info: LogInfo) -> LogMessag
                       bytes(buf[start + _MESSAGE.size:start + length]))
 
 
-def _chunk(buf, body: int, length: int) -> Iterator[tuple[int, object]]:
-    """Schemas, channels and raw message records of a chunk, after size and CRC checks."""
-    _, _, usize, crc = _CHUNK.unpack_from(buf, body)
-    p = body + _CHUNK.size
+def _chunk(rec: bytes) -> Iterator[tuple[int, object]]:
+    """Schemas, channels and raw message records of a chunk record's body, after size and CRC
+    checks."""
+    buf = memoryview(rec)
+    _, _, usize, crc = _CHUNK.unpack_from(buf, 0)
+    p = _CHUNK.size
     (clen,) = struct.unpack_from("<I", buf, p)
     compression = bytes(buf[p + 4:p + 4 + clen]).decode()
     p += 4 + clen
     (dlen,) = struct.unpack_from("<Q", buf, p)
     data = buf[p + 8:p + 8 + dlen]
-    if p + 8 + dlen > body + length or len(data) != dlen:
+    if p + 8 + dlen > len(buf) or len(data) != dlen:
         raise _Damage("chunk data overruns its record")
     if usize > max(_MAX_INFLATION * dlen, 1 << 20):
         raise _Damage(f"chunk claims {usize} bytes uncompressed from {dlen}")
@@ -357,10 +381,19 @@ def read_log(path: Path | str, topics: set[str] | None = None,
 
 def inspect(path: Path | str) -> LogInfo:
     """Read a whole file tolerantly: topics, counts, time span, complete or where damaged."""
-    info = LogInfo(Path(path))
+    info = LogInfo(Path(path), live=is_live(path))
     for _ in read_messages(path, strict=False, info=info):
         pass
     return info
+
+
+def _refuse_live(path: Path, files: list[Path]) -> None:
+    """Raise LogError if a recorder writes any of `files`: recovering would replace the file
+    under it, and it would go on writing into the replaced copy."""
+    live = [f for f in files if is_live(f)]
+    if live:
+        raise LogError(live[0], f"{LIVE}; `{RECOVER_HINT}` leaves {path} alone until the "
+                                f"recording stops (nothing changed)")
 
 
 def recover(src: Path | str, dst: Path | str,
@@ -384,8 +417,10 @@ def recover(src: Path | str, dst: Path | str,
     Raises
     ------
     LogError
-        No whole message to recover.
+        No whole message to recover, or `src` is still being recorded (a live writer holds
+        its lock: `bag.livelock`).
     """
+    _refuse_live(Path(src), [Path(src)])
     info = _rewrite(src, dst, compression)
     if not info.messages:
         Path(dst).unlink(missing_ok=True)
@@ -494,22 +529,35 @@ class BagRecovery:
 def cut_off_bags(directory: Path | str) -> list[Path]:
     """Recordings under `directory` that need `recover_bag`: bag directories directly under it
     with .mcap files but no `metadata.yaml`, or with a file lacking its footer, and loose .mcap
-    files lacking their footer. Cheap (reads file tails only), so a node can call it on start.
-    A recording still in progress (by another process) looks cut off too."""
-    found = []
+    files lacking their footer; not those still being recorded (`live_recordings`). Cheap
+    (reads file tails only), so a node can call it on start."""
+    return _scan(directory)[0]
+
+
+def live_recordings(directory: Path | str) -> list[Path]:
+    """Bag directories and loose .mcap files directly under `directory` that a recorder (of any
+    process) is writing now."""
+    return _scan(directory)[1]
+
+
+def _scan(directory: Path | str) -> tuple[list[Path], list[Path]]:
+    """(cut off, live) recordings directly under `directory`."""
+    cut, live = [], []
     try:
         entries = sorted(Path(directory).iterdir())
     except OSError:
-        return []
+        return [], []
     for entry in entries:
         if entry.is_dir():
             files = list(entry.glob("*.mcap"))
-            if files and (not (entry / METADATA).is_file()
-                          or not all(is_complete(f) for f in files)):
-                found.append(entry)
+            if files and live_files(entry):
+                live.append(entry)
+            elif files and (not (entry / METADATA).is_file()
+                            or not all(is_complete(f) for f in files)):
+                cut.append(entry)
         elif entry.suffix == ".mcap" and entry.is_file() and not is_complete(entry):
-            found.append(entry)
-    return found
+            (live if is_live(entry) else cut).append(entry)
+    return cut, live
 
 
 def recover_bag(path: Path | str) -> BagRecovery:
@@ -522,15 +570,13 @@ def recover_bag(path: Path | str) -> BagRecovery:
     without a single whole message is moved there and left out of the bag. A bag's
     `metadata.yaml` is regenerated from its files when it is missing or does not match them
     (keeping its `custom_data` and QoS profiles). Raises LogError (nothing changed for the
-    file concerned) for a file that is not a ros2 MCAP or a rewrite that does not verify.
+    file concerned) for a file that is not a ros2 MCAP or a rewrite that does not verify, and
+    (nothing changed) when a file of the bag is still being recorded.
     """
     path = Path(path)
-    if path.is_dir():
-        _restore_interrupted(path)
-        bag = path
-    else:
-        _restore_interrupted(path.parent)
-        bag = bag_of(path)
+    bag = path if path.is_dir() else bag_of(path)
+    _refuse_live(path, log_files(bag or path) if bag is not None else [path])
+    _restore_interrupted(path if path.is_dir() else path.parent)
     result = BagRecovery(path, bag, [_recover_file(f) for f in log_files(path)])
     if bag is not None:
         result.metadata_written = _reindex(bag, result.files)

@@ -13,7 +13,10 @@ encoders of `cdr`).
 Every file starts with the MCAP Metadata records in `metadata` (name -> string map; the node
 puts its `leadscrew_ros` record there, `logmeta`) as they are when the file is opened, so each
 split file describes itself; `split` starts the next file at once (the node does when its
-parameters change, so that a file's record holds for every message in it).
+parameters change, so that a file's record holds for every message in it). Every file then
+starts with the messages of `state` (the node: its last accepted input on each topic and its
+latched outputs), logged at the file's start time as rosbag2 records transient-local messages,
+so that each file, read on its own, replays to the node's predictions.
 
 Thread safe: the node's input recording thread and its model thread write concurrently.
 Messages the recorder never got are counted per topic (`TopicLoss`: gaps in the publishers'
@@ -25,6 +28,11 @@ Crash safety: the open chunk is finished and handed to the operating system ever
 file is read by `logfile.read_messages(strict=False)` and repaired by `logfile.recover`.
 A failing disk (missing or read-only directory, file size limit, disk full) stops the recording
 with `error` naming the path; nothing is raised to the caller.
+
+While a file is written the recorder holds an advisory lock on it (`livelock`), so that
+`recover` and `info` tell it from a file cut off by a crash. `tick` checks, a few times a
+second, that the file is still at its path; a file deleted or replaced under the recorder is
+an `incident` (its messages are lost), and the recording goes on in the bag's next file.
 """
 
 from __future__ import annotations
@@ -41,7 +49,7 @@ from typing import Callable
 
 from mcap.writer import CompressionType, Writer
 
-from . import msgdefs
+from . import livelock, msgdefs
 from .bagmeta import METADATA, BagStats, FileStats, TopicStats
 from ..model.physics.metadata import check, documented, setting
 
@@ -49,6 +57,11 @@ COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                 "none": CompressionType.NONE}
 _CHUNK_BYTES = 4 << 20         # chunks are closed by the flush period long before this size
 LOST_KEY, LOST_BY_TOPIC_KEY = "lost_messages", "lost_messages_by_topic"   # metadata custom_data
+INCIDENT_KEY = "incident"              # metadata custom_data: a file lost while recording
+_CHECK_PERIOD_NS = 200_000_000         # how often `tick` checks that the file is still there
+# A message every file starts with: topic, 'pkg/msg/Type', CDR payload, publish time (None:
+# the log time)
+StateMessage = tuple[str, str, bytes, "int | None"]
 
 
 def ensure_directory(directory: str) -> Path:
@@ -139,6 +152,8 @@ class _Topic:
     type_name: str
     count: int = 0
     channel_id: int | None = None       # in the current file
+    in_file: int = 0                    # messages in the current file
+    dropped: int = 0                    # messages in files lost under the recorder
 
 
 @dataclass
@@ -158,6 +173,8 @@ class Recorder:
         Directory of the recording in progress, or of the last one.
     error : str
         Why the last recording stopped on its own.
+    incident : str
+        A file of this recording lost under the recorder (deleted or replaced), if any.
     files : list of FileStats
         The files of the recording.
     losses : dict of str to TopicLoss
@@ -167,18 +184,23 @@ class Recorder:
     """
 
     settings: RecordSettings = field(default_factory=RecordSettings)
-    name: str = "squeak"
-    clock: Callable[[], int] = time.time_ns
-    bag: Path | None = None
-    error: str = ""
+    name: str = "squeak"                 # bag directory prefix (the node adds its namespace)
+    clock: Callable[[], int] = time.time_ns   # log time [ns] of a message written without one
+    bag: Path | None = None              # directory of the recording in progress / last one
+    error: str = ""                      # why the last recording stopped on its own
+    incident: str = ""                   # a file of this recording lost under the recorder
     files: list[FileStats] = field(default_factory=list)
     losses: dict[str, TopicLoss] = field(default_factory=dict)
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    # The messages every file starts with (called under the recorder's lock when a file opens)
+    state: Callable[[], list[StateMessage]] | None = None
     _out: object = None
     _writer: Writer | None = None
     _topics: dict[str, _Topic] = field(default_factory=dict)
     _file_start_ns: int = 0
     _last_flush_ns: int = 0
+    _last_check_ns: int = 0
+    _lost_files: set[Path] = field(default_factory=set)
     _lock: threading.RLock = field(default_factory=threading.RLock, repr=False)
 
     @property
@@ -193,8 +215,8 @@ class Recorder:
 
     @property
     def messages(self) -> int:
-        """Messages written in this recording so far."""
-        return sum(f.messages for f in self.files)
+        """Messages of this recording in its files (not those of a file lost under it)."""
+        return sum(f.messages for f in self.files if f.path not in self._lost_files)
 
     def count(self, topic: str) -> int:
         """Messages of one topic written in this recording so far.
@@ -236,7 +258,8 @@ class Recorder:
         with self._lock:
             if self.active:
                 return True
-            self.error, self.files, self._topics = "", [], {}
+            self.error, self.incident, self.files, self._topics = "", "", [], {}
+            self._lost_files = set()
             self.losses = {t: TopicLoss() for t in topics}
             try:
                 root = ensure_directory(self.settings.directory)
@@ -291,6 +314,7 @@ class Recorder:
                 self._fail(exc)
                 return
             t.count += 1
+            t.in_file += 1
             self.files[-1].add(log_time_ns)
 
     def tick(self, now_ns: int | None = None) -> None:
@@ -313,10 +337,16 @@ class Recorder:
                 too_big = s.split_size_mb > 0 and self._out.tell() >= s.split_size_mb * 1e6
                 too_old = s.split_duration_s > 0 and now_ns - self._file_start_ns >= \
                     s.split_duration_s * 1e9
+                gone = ""
+                if now_ns - self._last_check_ns >= _CHECK_PERIOD_NS:
+                    self._last_check_ns = now_ns
+                    gone = self._file_gone()
             except OSError as exc:
                 self._fail(exc)
                 return
-            if too_big or too_old:
+            if gone:
+                self._lose_file(gone, now_ns)
+            elif too_big or too_old:
                 self._split(now_ns)
 
     def split(self, now_ns: int | None = None) -> None:
@@ -338,11 +368,46 @@ class Recorder:
         if not self.error and self._open(now_ns):
             self._write_metadata()
 
+    def _file_gone(self) -> str:
+        """How the file being written left its path ('' if it did not): a deleted file (or
+        bag) takes the data nowhere, with every write still succeeding."""
+        path = self.files[-1].path
+        mine = os.fstat(self._out.fileno())
+        try:
+            there = os.stat(path)
+        except FileNotFoundError:
+            return "deleted"
+        if (there.st_ino, there.st_dev) != (mine.st_ino, mine.st_dev):
+            return "replaced by another file"
+        return ""
+
+    def _lose_file(self, what: str, now_ns: int) -> None:
+        """The file was deleted or replaced under the recorder: its messages are lost; go on
+        in the bag's next file (the bag directory made again if it went too)."""
+        lost = self.files[-1]
+        self._close(finish=False)
+        self._lost_files.add(lost.path)
+        for t in self._topics.values():
+            t.dropped += t.in_file
+        self.incident = (f"{lost.path} was {what} while being recorded ({lost.messages} "
+                         f"messages lost with it); recording continues in "
+                         f"{self.bag / self._file_name(len(self.files))}")
+        try:
+            self.bag.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            self._fail(exc, writer_gone=True)
+            return
+        self._open(now_ns)
+
+    def _file_name(self, index: int) -> str:
+        return f"{self.bag.name}_{index}.mcap"
+
     def _open(self, now_ns: int) -> bool:
-        path = self.bag / f"{self.bag.name}_{len(self.files)}.mcap"
+        path = self.bag / self._file_name(len(self.files))
         self.files.append(FileStats(path))
         try:
-            self._out = open(path, "wb")
+            self._out = open(path, "xb")         # never over another file
+            livelock.hold(self._out.fileno())
             self._writer = Writer(self._out, chunk_size=_CHUNK_BYTES,
                                   compression=COMPRESSIONS[self.settings.compression])
             self._writer.start(profile="ros2", library="leadscrew_ros recorder")
@@ -353,9 +418,13 @@ class Recorder:
             self._fail(exc)
             return False
         for t in self._topics.values():
-            t.channel_id = None                  # each file registers its own channels
-        self._file_start_ns = self._last_flush_ns = now_ns
-        return True
+            t.channel_id, t.in_file = None, 0    # each file registers its own channels
+        self._file_start_ns = self._last_flush_ns = self._last_check_ns = now_ns
+        if self.state is not None:               # the file starts with the current state
+            start_ns = self.clock()
+            for topic, type_name, data, publish_time_ns in self.state():
+                self.write_serialized(topic, type_name, data, start_ns, publish_time_ns)
+        return self.active
 
     def _register(self, t: _Topic) -> int:
         schema = self._writer.register_schema(t.type_name, "ros2msg",
@@ -388,11 +457,14 @@ class Recorder:
     def _write_metadata(self) -> None:
         """rosbag2 metadata.yaml, so that `ros2 bag info/play` and rosbags take the directory."""
         losses = {topic: loss.as_dict() for topic, loss in list(self.losses.items())}
-        stats = BagStats(files=[f for f in self.files if f.path.exists()],
-                         topics=[TopicStats(t.name, t.type_name, t.count)
+        custom = {LOST_KEY: str(self.lost), LOST_BY_TOPIC_KEY: json.dumps(losses, sort_keys=True)}
+        if self.incident:
+            custom[INCIDENT_KEY] = self.incident
+        stats = BagStats(files=[f for f in self.files if f.path.exists()
+                                and f.path not in self._lost_files],
+                         topics=[TopicStats(t.name, t.type_name, t.count - t.dropped)
                                  for t in self._topics.values()],
-                         custom_data={LOST_KEY: str(self.lost),
-                                      LOST_BY_TOPIC_KEY: json.dumps(losses, sort_keys=True)})
+                         custom_data=custom)
         try:
             stats.write(self.bag)
         except OSError as exc:

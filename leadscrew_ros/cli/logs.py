@@ -8,7 +8,9 @@ import argparse
 from dataclasses import fields
 from pathlib import Path
 
-from ..bag.logfile import (LogInfo, bag_of, cut_off_bags, inspect, log_files, recover, recover_bag)
+from ..bag.livelock import LIVE
+from ..bag.logfile import (LogInfo, bag_of, cut_off_bags, inspect, live_recordings, log_files,
+                           recover, recover_bag)
 from ..live.settings import JointSettings, LiveSettings
 from ..model.physics.metadata import help_text
 from ..review.replay import ReplaySettings
@@ -157,6 +159,8 @@ def cmd_recover(args: argparse.Namespace) -> int:
         return 0
     if _record_directory(src):
         targets = cut_off_bags(src)
+        for live in live_recordings(src):       # never touched: a recorder still writes them
+            print(f"{live}: skipped, {LIVE}")
         if not targets:
             print(f"nothing to recover: no cut-off recording in {src}")
             return 0
@@ -175,14 +179,20 @@ def cmd_info(args: argparse.Namespace) -> int:
     infos = [inspect(f) for f in log_files(args.log)]
     if args.json:
         print_json([{"file": str(i.path), "complete": i.complete, "damage": i.damage,
-                     "profile": i.profile, "library": i.library, "messages": i.messages,
+                     "live": i.live, "profile": i.profile, "library": i.library,
+                     "messages": i.messages,
                      "start_ns": i.start_ns, "end_ns": i.end_ns,
                      "topics": [{"name": n, "type": t.type_name, "count": i.counts[n]}
                                 for n, t in sorted(i.topics.items())]} for i in infos])
         return 0
     for i in infos:
-        state = "complete" if i.complete else (
-            f"TRUNCATED: {i.damage}; recover with `{PROG} recover {bag_of(i.path) or i.path}`")
+        if i.complete:
+            state = "complete"
+        elif i.live:                 # not cut off: the rest is still to come
+            state = f"{LIVE}: read up to now; its footer comes when the recording stops"
+        else:
+            state = (f"TRUNCATED: {i.damage}; recover with "
+                     f"`{PROG} recover {bag_of(i.path) or i.path}`")
         print(f"{i.path}: {state}")
         print(f"  {i.messages} messages, {_span(i)}; profile {i.profile!r}, "
               f"written by {i.library or 'unknown'}")

@@ -38,6 +38,9 @@ KEY_FILES = "files"
 KEY_MESSAGES = "messages"
 KEY_LOST = "lost"
 KEY_CUT_OFF_BAGS = "cut_off_bags"
+# What the log line and the status say when a recording stopped on its own
+RESUME_HINT = ("record.enabled set to false; resume with `~/record true` (std_srvs/SetBool "
+               "data: true) or by setting record.enabled to true")
 
 
 def key_lost_on(topic: str) -> str:
@@ -130,13 +133,16 @@ def status_task(status: Callable[[], Status]) -> Task:
 
 def recording_status(stat: DiagnosticStatusWrapper, recorder: Recorder,
                      crash: CrashRecovery) -> DiagnosticStatusWrapper:
-    """ERROR when recording failed, WARN when input messages were lost or bags of an earlier
-    run are cut off, else OK; the counts as key-values."""
+    """ERROR when recording failed or a file was lost under the recorder (never OK while
+    data went nowhere), WARN when input messages were lost or bags of an earlier run are cut
+    off, else OK; the counts as key-values."""
     r = recorder
     if r.error:
-        stat.summary(Level.ERROR, r.error)
+        stat.summary(Level.ERROR, f"{r.error}; {RESUME_HINT}")
     else:
         stat.summary(Level.OK, f"recording to {r.path}" if r.active else "not recording")
+    if r.incident:
+        stat.merge_summary(Level.ERROR, r.incident)
     stat.add(KEY_BAG, r.bag or "")
     stat.add(KEY_FILES, len(r.files))
     stat.add(KEY_MESSAGES, r.messages)

@@ -15,6 +15,7 @@ message-lost events.
 from __future__ import annotations
 
 import threading
+import time
 from dataclasses import dataclass
 
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -27,6 +28,7 @@ from ..bag import msgdefs
 from ..bag.recorder import Recorder, TopicLoss
 
 _SPIN_TIMEOUT_S = 0.1
+_MATCH_TIMEOUT_S = 2.0         # longest wait for the new subscriptions to match the publishers
 
 
 @dataclass
@@ -69,13 +71,27 @@ class InputRecording:
         self._thread = threading.Thread(target=self._spin, daemon=True,
                                         name=f"{node.get_name()} input recording")
         self._thread.start()
+        self._wait_for_publishers(node)
+
+    def _wait_for_publishers(self, node: Node) -> None:
+        """Return once each recording subscription has matched the publishers the node knows
+        on its topic (bounded): a message sent after recording started must reach the bag, and
+        a new DDS reader matches asynchronously (the node's own subscriptions long have)."""
+        deadline = time.monotonic() + _MATCH_TIMEOUT_S
+        for e in self._inputs:
+            while (e.subscription.get_publisher_count() < node.count_publishers(e.topic)
+                   and time.monotonic() < deadline):
+                time.sleep(0.002)
 
     def stop(self) -> None:
-        """End the thread and remove the subscriptions (messages still queued are not part of
-        the recording: it has stopped)."""
+        """End the thread, write what is still queued on the subscriptions (the thread may lag
+        behind the model: an input whose prediction is in the bag must be there too), and
+        remove the subscriptions."""
         self._stop.set()
         self._executor.wake()
         self._thread.join()
+        for e in self._inputs:
+            self._take_queued(e, until_stopped=False)
         self._executor.remove_node(self._node)
         self._executor.shutdown(timeout_sec=1.0)
         self._node.destroy_node()
@@ -90,18 +106,25 @@ class InputRecording:
 
     def _received(self, e: _Input, data: bytes, info: dict) -> None:
         """Write this message and whatever else is queued on the subscription now."""
+        self._write(e, data, info)
+        self._take_queued(e, until_stopped=True)
+
+    def _take_queued(self, e: _Input, until_stopped: bool) -> None:
+        """Write every message queued on `e`'s subscription (`until_stopped`: or until `stop`
+        is asked for, so that the thread ends promptly)."""
         sub = e.subscription
-        while True:
-            e.loss.received(info.get("publication_sequence_number"), sub.get_publisher_count)
-            self._recorder.write_serialized(e.topic, e.type_name, data,
-                                            publish_time_ns=info.get("source_timestamp") or None)
-            if self._stop.is_set():
-                return
+        while not (until_stopped and self._stop.is_set()):
             with sub.handle:
                 taken = sub.handle.take_message(e.msg_type, True)
             if taken is None:
                 return
-            data, info = taken
+            self._write(e, *taken)
+
+    def _write(self, e: _Input, data: bytes, info: dict) -> None:
+        sub = e.subscription
+        e.loss.received(info.get("publication_sequence_number"), sub.get_publisher_count)
+        self._recorder.write_serialized(e.topic, e.type_name, data,
+                                        publish_time_ns=info.get("source_timestamp") or None)
 
     @staticmethod
     def _dds_lost(e: _Input, info) -> None:

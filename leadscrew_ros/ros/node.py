@@ -38,13 +38,15 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
                        qos_profile_sensor_data)
+from rclpy.serialization import serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray
 from std_srvs.srv import SetBool
 
-from .diagnostics import PREDICTION_TASK, RECORDING_TASK, Updater, recording_status, status_task
+from .diagnostics import (PREDICTION_TASK, RECORDING_TASK, RESUME_HINT, Updater,
+                          recording_status, status_task)
 from .input_recording import InputRecording
 from .parameters import (GROUPS, PARAMETER_NAMES, PARAMETERS, NodeSettings, RecordingControl, build,
                          descriptor, help_lines, log_metadata, names_of)
@@ -118,11 +120,13 @@ class SqueakPredictorNode(Node):
         self._declare_parameters()
         self.live = LivePredictor(self._model({}), self._live_settings({}))
         self.joint = self._settings(JointSettings, {})
-        self.recorder = Recorder(self._record_settings({}), bag_prefix(self.get_namespace()),
-                                 clock=self._now_ns, metadata=self._metadata())
+        self.recorder = self._new_recorder(bag_prefix(self.get_namespace()), self._metadata())
         own, control = self._settings(NodeSettings, {}), self._settings(RecordingControl, {})
         self._input_recording: InputRecording | None = None
         self.latched: dict[str, Latched] = {}         # topic -> last message published on it
+        # Input topic -> its last accepted message, oldest first: the state a bag starts with
+        self.accepted: dict[str, object] = {}
+        self._incident_logged = ""
         self._diagnosed: tuple | None = None          # verdict of the last forced /diagnostics
 
         sensor = QoSProfile(depth=own.input_queue_depth,
@@ -135,9 +139,10 @@ class SqueakPredictorNode(Node):
         pub_events = PublisherEventCallbacks(use_default_callbacks=False)
 
         def subscribe(msg_type, topic, callback):
-            sub = self.create_subscription(msg_type, topic, callback, sensor,
-                                           event_callbacks=sub_events)
-            self._inputs[sub.topic_name] = msg_type
+            name = self.resolve_topic_name(topic)        # fully qualified
+            self.create_subscription(msg_type, topic, lambda msg: callback(name, msg), sensor,
+                                     event_callbacks=sub_events)
+            self._inputs[name] = msg_type
 
         self._inputs: dict[str, type] = {}     # fully qualified input topic -> message class
 
@@ -174,8 +179,7 @@ class SqueakPredictorNode(Node):
             self._crash_recovery.start()
         if control.enabled:
             self._set_recording(True)
-            if not self.recorder.active:      # the parameter says what happens: not recording
-                self.set_parameters([Parameter("record.enabled", value=False)])
+            self._check_recording()
         self._diagnose(time.monotonic(), periodic=True)
 
     def destroy_node(self) -> None:
@@ -269,8 +273,7 @@ class SqueakPredictorNode(Node):
         if names & recording:
             if new_bag:                                 # new record settings: a new bag
                 self._stop_recording()
-                self.recorder = Recorder(self._record_settings({}), self.recorder.name,
-                                         clock=self._now_ns, metadata=metadata)
+                self.recorder = self._new_recorder(self.recorder.name, metadata)
             self._set_recording(self.get_parameter("record.enabled").value)
 
     def _create_rate_timer(self):
@@ -283,17 +286,26 @@ class SqueakPredictorNode(Node):
     def _now_ns(self) -> int:
         return self.get_clock().now().nanoseconds
 
+    def _new_recorder(self, name: str, metadata: dict) -> Recorder:
+        return Recorder(self._record_settings({}), name, clock=self._now_ns, metadata=metadata,
+                        state=self._state_messages)
+
+    def _state_messages(self) -> list:
+        """What every file starts with, as rosbag2 records transient-local topics: the last
+        accepted message of each input in the order accepted (so that a replay of the file
+        starts from the node's operating point), then the last message of each output."""
+        return [*((topic, msgdefs.type_name(type(msg)), serialize_message(msg), None)
+                  for topic, msg in list(self.accepted.items())),
+                *((topic, m.type_name, m.data, m.publish_time_ns)
+                  for topic, m in list(self.latched.items()))]
+
     def _set_recording(self, on: bool) -> None:
         if on and not self.recorder.active:
-            # Bags are named and split by the wall clock; log times are the node's clock
+            # Bags are named and split by the wall clock; log times are the node's clock.
+            # A start that fails is reported by `_check_recording`.
             if self.recorder.start(topics=tuple(self._inputs)):
                 self.get_logger().info(f"recording to {self.recorder.bag}")
-                for topic, m in self.latched.items():     # a bag starts with the current state,
-                    self.recorder.write_serialized(       # as a latched subscriber gets it
-                        topic, m.type_name, m.data, publish_time_ns=m.publish_time_ns)
                 self._input_recording = InputRecording(self, self._inputs, self.recorder)
-            else:
-                self.get_logger().error(f"recording failed: {self.recorder.error}")
         elif not on and self.recorder.active:
             self._stop_recording()
             self.get_logger().info(f"recording stopped: {self.recorder.bag}")
@@ -306,10 +318,24 @@ class SqueakPredictorNode(Node):
             self._input_recording = None
         self.recorder.stop()
 
+    def _check_recording(self) -> None:
+        """Say once what the recorder reports. A recording that stopped on its own (disk full,
+        ...) is logged once and `record.enabled` turns false, so that the parameter never
+        reads true while nothing records; a file lost under the recorder is logged once."""
+        r = self.recorder
+        if r.incident and r.incident != self._incident_logged:
+            self._incident_logged = r.incident
+            self.get_logger().error(r.incident)
+        if r.error and not r.active and self.get_parameter("record.enabled").value:
+            self._stop_recording()               # the input thread too; the file stays as is
+            self.get_logger().error(f"{r.error}; {RESUME_HINT}")
+            self.set_parameters([Parameter("record.enabled", value=False)])
+
     def _on_record_service(self, request: SetBool.Request, response: SetBool.Response
                            ) -> SetBool.Response:
         """Start (data=true) or stop recording; `record.enabled` follows."""
         [result] = self.set_parameters([Parameter("record.enabled", value=bool(request.data))])
+        self._check_recording()                   # a start that failed: the parameter false
         response.success = result.successful and self.recorder.active == request.data
         response.message = (str(self.recorder.path) if self.recorder.active else
                             (result.reason if not result.successful else "") or
@@ -327,29 +353,32 @@ class SqueakPredictorNode(Node):
                                            publish_time_ns=publish_time_ns)
 
     # ---------------------------------------------------------------- inputs
-    def _on_speed(self, msg: Float64) -> None:
-        self._input(self.live.set_speed(msg.data, time.monotonic()))
+    def _on_speed(self, topic: str, msg: Float64) -> None:
+        self._input(topic, msg, self.live.set_speed(msg.data, time.monotonic()))
 
-    def _on_load(self, msg: Float64) -> None:
-        self._input(self.live.set_load(msg.data, time.monotonic()))
+    def _on_load(self, topic: str, msg: Float64) -> None:
+        self._input(topic, msg, self.live.set_load(msg.data, time.monotonic()))
 
-    def _on_nut_position(self, msg: Float64) -> None:
-        self._input(self.live.set_nut_position(msg.data, time.monotonic()))
+    def _on_nut_position(self, topic: str, msg: Float64) -> None:
+        self._input(topic, msg, self.live.set_nut_position(msg.data, time.monotonic()))
 
-    def _on_joint_states(self, msg: JointState) -> None:
+    def _on_joint_states(self, topic: str, msg: JointState) -> None:
         """The screw joint's speed and nut position (`live.rules`: ignored while joint_name is
         '' or without that joint), then one recompute decision."""
         now = time.monotonic()
         outcome = self.live.set_joint_state(msg.name, msg.position, msg.velocity, now,
                                             self.joint)
         if not outcome.ignored:
-            self._input(outcome.error, now)
+            self._input(topic, msg, outcome.error, now)
 
-    def _input(self, error: str, now: float | None = None) -> None:
+    def _input(self, topic: str, msg, error: str, now: float | None = None) -> None:
         now = time.monotonic() if now is None else now
         if error:                 # the next tick reports it: a flood of bad input stays bounded
             self.get_logger().warning(f"input rejected: {error}", throttle_duration_sec=2.0)
-        elif self.live.due(now):
+            return
+        self.accepted.pop(topic, None)       # re-inserted last: the order the state arose in
+        self.accepted[topic] = msg
+        if self.live.due(now):
             self._recompute(now)
         elif self.live.changed() and self._rate_timer.is_canceled():
             self._rate_timer.reset()         # held back by the rate limit: recompute later
@@ -363,7 +392,8 @@ class SqueakPredictorNode(Node):
             self._rate_timer.cancel()
 
     def _housekeeping(self) -> None:
-        self.recorder.tick()                  # flush and split by the wall clock
+        self.recorder.tick()                  # flush, split by the wall clock, file still there
+        self._check_recording()
         now = time.monotonic()
         if self.live.poll_advice():          # a background safe-speed search has finished
             self._publish_safe_speed()
@@ -373,7 +403,8 @@ class SqueakPredictorNode(Node):
         """/diagnostics at once when the verdict changed, else (`periodic`) on its period."""
         self._status = self.live.status(now)
         verdict = (self._status.level, self._status.message, self.recorder.active,
-                   self.recorder.error, self.recorder.lost > 0, self._crash_recovery.state)
+                   self.recorder.error, self.recorder.incident, self.recorder.lost > 0,
+                   self._crash_recovery.state)
         if verdict != self._diagnosed:
             self.diagnostics.force_update()
             self._diagnosed = verdict

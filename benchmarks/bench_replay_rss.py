@@ -1,0 +1,128 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Peak memory of `leadscrew-squeak replay` against log length, with and without the report.
+
+    .venv/bin/python benchmarks/bench_replay_rss.py [--minutes 10 60] [--rate HZ] [--src DIR]
+
+For each log length (the duty cycle of `bench_replay.py` in one MCAP file, as rosbag2 records
+without `--max-bag-duration`; `--split-s` for split files; generated once and cached in the temp
+directory) and each way (`replay` with the PNG report, `replay --no-report`), the command runs in
+a fresh child process exactly as the console script runs it (`leadscrew_ros.cli.main`). The child
+samples /proc/self/status every 20 ms and prints the peak resident memory VmHWM and the highest
+file-backed (RssFile) and anonymous (RssAnon) parts it saw; the prediction workers' peak comes
+from RUSAGE_CHILDREN. Streaming means equal peaks: target 60-minute peak <= 1.2 x the 10-minute
+peak, both ways. `--src DIR` runs the package of another checkout (e.g. `git archive` of an old
+commit) on the same logs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_replay import TARGET_RSS_RATIO, size_mb  # noqa: E402
+
+from leadscrew_ros.bag.synthetic import DutyCycle, write_log  # noqa: E402
+
+# Runs in the child: the CLI in this process, a sampler thread beside it.
+CHILD = """
+import json, resource, sys, threading
+from leadscrew_ros.cli import main
+def status():
+    with open("/proc/self/status") as f:
+        return {k: int(v.split()[0]) for k, v in (line.split(":", 1) for line in f)
+                if k in ("VmHWM", "RssFile", "RssAnon")}
+peak = dict.fromkeys(("RssFile", "RssAnon"), 0)
+done = threading.Event()
+def sample():
+    while not done.wait(0.02):
+        for k, v in status().items():
+            if k in peak:
+                peak[k] = max(peak[k], v)
+threading.Thread(target=sample, daemon=True).start()
+code = main(sys.argv[1:])
+done.set()
+print(json.dumps(dict(code=code, peak_mb=status()["VmHWM"] / 1024,
+                      rss_file_mb=peak["RssFile"] / 1024, rss_anon_mb=peak["RssAnon"] / 1024,
+                      workers_peak_mb=resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+                      / 1024)))
+"""
+
+
+def cached_log(cycle: DutyCycle, split_s: float) -> Path:
+    """The bag directory of `cycle` split every `split_s` (0: one file), generated if not
+    cached."""
+    key = hashlib.sha256(repr((cycle, split_s)).encode()).hexdigest()[:12]
+    root = Path(tempfile.gettempdir()) / "leadscrew_ros_bench_replay_rss" / key
+    bags = sorted(root.glob("squeak_*")) if root.is_dir() else []
+    if bags:
+        return bags[0]
+    root.mkdir(parents=True, exist_ok=True)
+    return write_log(cycle, root, split_duration_s=split_s)
+
+
+def replay_peak(bag: Path, joint: str, report: bool, src: str | None = None,
+                extra: tuple[str, ...] = ()) -> dict:
+    """`leadscrew-squeak replay BAG` (`--no-report` unless `report`) in a fresh child process:
+    its peak memory (MB) as printed by `CHILD`."""
+    env = dict(os.environ)        # the child runs in `out`: `-c` puts its cwd first on the path
+    if src:
+        env["PYTHONPATH"] = str(Path(src).resolve())
+    with tempfile.TemporaryDirectory(prefix="bench_replay_rss_") as out:
+        argv = ["replay", str(bag), "--out", out, "--joint-name", joint, "--quiet",
+                *(() if report else ("--no-report",)), *extra]
+        done = subprocess.run([sys.executable, "-c", CHILD, *argv], env=env, cwd=out,
+                              capture_output=True, text=True)
+    if done.returncode:
+        raise SystemExit(f"replay of {bag} failed:\n{done.stderr[-3000:]}")
+    res = json.loads(done.stdout.splitlines()[-1])
+    if res["code"]:
+        raise SystemExit(f"replay of {bag} exited {res['code']}:\n{done.stderr[-3000:]}")
+    return res
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--minutes", type=float, nargs="+", default=[10.0, 60.0],
+                    help="log lengths (default 10 60)")
+    ap.add_argument("--rate", type=float, default=200.0, help="sample rate [Hz] (default 200)")
+    ap.add_argument("--split-s", type=float, default=0.0,
+                    help="split the logs into files of this duration [s] (default 0: one file)")
+    ap.add_argument("--src", metavar="DIR", help="run the package of this checkout instead")
+    args = ap.parse_args(argv)
+    rows = []
+    for minutes in args.minutes:
+        cycle = DutyCycle(duration_s=minutes * 60.0, rate_hz=args.rate)
+        bag = cached_log(cycle, args.split_s)
+        for report in (True, False):
+            r = replay_peak(bag, cycle.joint_name, report, args.src)
+            r.update(minutes=minutes, report=report, log_mb=size_mb(bag))
+            rows.append(r)
+            print(f"{minutes:g} min {'with' if report else 'without'} report: "
+                  f"{r['peak_mb']:.0f} MB", file=sys.stderr, flush=True)
+    print("| log | report | file size | peak RSS (VmHWM) | peak RssFile | peak RssAnon | "
+          "peak RSS (a worker) |\n|---|---|---:|---:|---:|---:|---:|")
+    for r in rows:
+        print(f"| {r['minutes']:g} min at {args.rate:g} Hz | {'yes' if r['report'] else 'no'} | "
+              f"{r['log_mb']:.0f} MB | {r['peak_mb']:.0f} MB | {r['rss_file_mb']:.0f} MB | "
+              f"{r['rss_anon_mb']:.0f} MB | {r['workers_peak_mb']:.0f} MB |")
+    print()
+    for report in (True, False):
+        way = [r for r in rows if r["report"] == report]
+        ratio = way[-1]["peak_mb"] / way[0]["peak_mb"]
+        print(f"{'replay' if report else 'replay --no-report'}: peak ratio "
+              f"{way[-1]['minutes']:g} / {way[0]['minutes']:g} min = **{ratio:.2f}** (target <= "
+              f"{TARGET_RSS_RATIO:g}: {'met' if ratio <= TARGET_RSS_RATIO else 'MISSED'})")
+    print(f"package from {args.src or 'this checkout'}; logs split every {args.split_s:g} s "
+          f"(0: one file); load avg {os.getloadavg()[0]:.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
