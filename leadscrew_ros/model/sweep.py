@@ -123,6 +123,20 @@ def check_axis(name: str) -> None:
         raise ParameterError(f"cannot sweep {name!r}; choose one of {', '.join(axis_names())}")
 
 
+def integer_axis(name: str) -> bool:
+    """A sweep axis of whole numbers: an int field (n_bending, n_torsion)."""
+    return name not in OPERATING_AXES and field_info(name)["type"] == "int"
+
+
+def _check_axis_values(name: str, values: np.ndarray) -> None:
+    """ParameterError if an integer axis has a value that is not a whole number (it would be
+    rounded: a sweep of n_bending must not pretend to have computed n_bending = 2.5)."""
+    if integer_axis(name):
+        bad = values[values != np.round(values)]
+        if bad.size:
+            raise ParameterError(f"{name} takes whole numbers; got {exact(float(bad[0]))}")
+
+
 @dataclass(frozen=True)
 class GrowthField:
     """Largest squeak growth rate on a set of points; NaN where the model is not valid.
@@ -601,6 +615,7 @@ def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = Non
     """
     check_axis(axis)
     values = np.asarray(values, float)
+    _check_axis_values(axis, values)
     sweep_work(model, axis, values).check()
     fixed = _fixed(model, speed_rad_s, load_n)
     fixed.pop(axis, None)
@@ -800,6 +815,8 @@ def stability_map(model: SqueakModel, x_axis: str, x, y_axis: str, y,
     if x_axis == y_axis:
         raise ParameterError("map axes must differ")
     x, y = np.asarray(x, float), np.asarray(y, float)
+    _check_axis_values(x_axis, x)
+    _check_axis_values(y_axis, y)
     map_work(model, x_axis, x, y_axis, y).check()
     fixed = _fixed(model, speed_rad_s, load_n)
     for a in (x_axis, y_axis):
