@@ -533,8 +533,8 @@ def _recover_file(path: Path) -> FileRecovery:
     try:
         info = _rewrite(path, rewrite)
     except LogError as exc:
-        if path.stat().st_size:                      # foreign or not MCAP: leave it alone
-            raise
+        if path.stat().st_size or path.suffix != ".mcap":   # foreign, not MCAP, or not a
+            raise                                           # split file: leave it alone
         info = LogInfo(path, damage=exc.problem)     # an empty file: set it aside
     if not info.messages:
         rewrite.unlink(missing_ok=True)
