@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from leadscrew_ros.bag.synthetic import DutyCycle, write_log
 from leadscrew_ros.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
@@ -26,13 +27,25 @@ def png_bytes() -> bytes:
             + chunk(b"IDAT", zlib.compress(b"\x00\x00\x00\x00")) + chunk(b"IEND", b""))
 
 
+def make_files(d: Path) -> Path:
+    """Hostile input files in `d`: a PNG, an empty file, an empty directory; and one small
+    valid log (a bag directory), for the options that need one."""
+    (d / "picture.png").write_bytes(png_bytes())
+    (d / "empty.yaml").write_bytes(b"")
+    (d / "folder").mkdir()
+    bag = write_log(DutyCycle(duration_s=2.0, rate_hz=20.0, rest_s=0.5), d / "logs")
+    bag.rename(d / "logs" / "bag")
+    return d
+
+
 @pytest.fixture
 def files(tmp_path):
-    """Hostile input files: a PNG, an empty file, a directory."""
-    (tmp_path / "picture.png").write_bytes(png_bytes())
-    (tmp_path / "empty.yaml").write_bytes(b"")
-    (tmp_path / "folder").mkdir()
-    return tmp_path
+    return make_files(tmp_path)
+
+
+@pytest.fixture(scope="module")
+def table_files(tmp_path_factory):
+    return make_files(tmp_path_factory.mktemp("hostile"))
 
 
 def assert_one_error_line(err: str, program: str = "leadscrew-squeak") -> None:
@@ -71,3 +84,130 @@ def test_squeak_node_process_with_a_missing_params_file_exits_2_in_one_line(file
                           capture_output=True, text=True, timeout=60, env=dict(os.environ))
     assert proc.returncode == 2, proc.stderr
     assert_one_error_line(proc.stderr, NODE_NAME)
+
+
+# ----------------------------------------------------------------------------- every command
+# argv ({d}: the folder of `make_files`; LOG: its valid bag) -> the exit code: 2, or 0 where
+# the input is valid. Long computations are kept cheap (--quick, tiny durations, few modes).
+LOG = "{d}/logs/bag"
+NUMBERS = {"nan": "nan", "inf": "inf", "-inf": "-inf", "huge": "1e308"}
+PARAMS_FILES = {"missing file": "{d}/missing.yaml", "directory": "{d}/folder",
+                "PNG": "{d}/picture.png", "empty file": "{d}/empty.yaml"}
+CASES = [
+    # model options, through the cheapest model command
+    *[(["modes", "--param", f"radius_m={v}"], 2) for v in (*NUMBERS.values(), "-1", "0")],
+    *[(["modes", "--params-file", f], 2) for f in PARAMS_FILES.values()],
+    (["modes", "--param", "n_bending=2.5"], 2),
+    (["modes", "--param", "n_bending=nan"], 2),
+    (["modes", "--samples", "0"], 2),
+    (["modes", "--samples", "-8"], 2),
+    (["modes", "--scatter", "mu_kinetic=nan"], 2),
+    (["modes", "--scatter", "mu_kinetic=-1"], 2),
+    (["modes", "--formulation", "bogus"], 2),
+    # predict
+    *[(["predict", "--speed", v], 2) for v in ("nan", "inf", "-inf", "abc")],
+    *[(["predict", "--speed", "20", "--load", v], 2) for v in ("nan", "-inf", "1e308", "-1e8")],
+    *[(["predict", "--speed", "20", "--params-file", f], 2) for f in PARAMS_FILES.values()],
+    (["predict", "--speed", "-20", "--scatter", "none"], 0),              # reverse rotation
+    (["predict", "--speed", "20", "--load", "-1e7", "--scatter", "none"], 0),   # other flank
+    (["predict", "--speed", "0", "--scatter", "none"], 0),      # valid: "no prediction: ..."
+    (["predict", "--speed", "1e308", "--scatter", "none"], 0),  # above the critical speed
+    # sweep
+    *[(["sweep", "--speed", spec], 2) for spec in ("nan:1:3", "1:inf:3", "-inf:1:3", "1:2:0",
+                                                   "1:2:-5", "1:2:1e9", "1:1:3", "1:2")],
+    (["sweep", "--speed", "0.5:120:3", "--plot", "out.txt"], 2),
+    (["sweep", "--speed", "0.5:120:3", "--plot", "{d}/folder"], 2),
+    (["sweep", "--speed", "0.5:120:3", "--plot", "{d}/missing/s.png"], 2),
+    (["sweep", "--speed", "0.5:120:3", "--load", "-inf"], 2),
+    (["sweep", "--axis", "n_bending", "--values", "2:4:5", "--speed", "20"], 2),
+    (["sweep", "--axis", "n_bending", "--values", "2.5:4", "--speed", "20"], 2),
+    (["sweep", "--axis", "bogus", "--values", "1:2:3"], 2),
+    (["sweep", "--speed", "-10:-1:3", "--load", "-200", "--scatter", "none"], 0),
+    # map
+    (["map", "--x", "speed_rad_s:nan:1:3", "--y", "load_n:5:600:3"], 2),
+    (["map", "--x", "speed_rad_s:1:100:3", "--y", "load_n:5:600:3", "--plot", "out.txt"], 2),
+    (["map", "--x", "speed_rad_s:1:100:3", "--y", "speed_rad_s:5:600:3"], 2),
+    (["map", "--x", "load_n:1:100:3", "--y", "radius_m:0.003:0.01:3", "--speed", "-inf"], 2),
+    (["map", "--x", "speed_rad_s:1:100:100000", "--y", "load_n:5:600:100000"], 2),
+    # figures
+    (["figures", "--out", "{d}/picture.png", "--quick"], 2),
+    (["figures", "--out", "{d}/f", "--quick", "--param", "radius_m=nan"], 2),
+    # transient
+    *[(["transient", "--speed", v, "--duration", "0.006"], 2)
+      for v in ("nan", "inf", "-inf", "1e308", "1e-300", "-1e-300", "0")],
+    *[(["transient", "--speed", "20", "--duration", v], 2)
+      for v in ("nan", "-1", "0", "1e308", "1e-300")],
+    (["transient", "--speed", "20", "--load", "1e308", "--duration", "0.006"], 2),
+    (["transient", "--speed", "20", "--modes", "-1", "--duration", "0.006"], 2),
+    (["transient", "--speed", "20", "--regularisation", "-1", "--duration", "0.006"], 2),
+    (["transient", "--speed", "20", "--seed", "-1", "--duration", "0.006"], 2),
+    (["transient", "--speed", "20", "--duration", "0.006", "--plot", "out.txt"], 2),
+    (["transient", "--speed", "20", "--duration", "0.006", "--wav", "out.txt"], 2),
+    (["transient", "--speed", "20", "--duration", "0.006", "--wav", "{d}/folder"], 2),
+    (["transient", "--speed", "-20", "--duration", "0.003", "--modes", "4"], 0),
+    # demo, simulate (rcl refuses the ROS arguments before anything runs)
+    *[(["demo", "--duration", v], 2) for v in ("nan", "inf", "-1", "0", "1e308")],
+    (["demo", "--record-dir", "{d}/picture.png", "--duration", "1"], 2),
+    *[(["simulate", "--duration", v], 2) for v in ("nan", "-inf", "-1", "1e308")],
+    *[(["simulate", "--rate", v], 2) for v in ("nan", "inf", "-inf", "0", "-5", "1e308")],
+    (["simulate", "--ros-args", "-r", "__ns:=bad//ns"], 2),
+    *[(["simulate", "--ros-args", "--params-file", f], 2)
+      for f in ("{d}/missing.yaml", "{d}/picture.png", "{d}/folder")],
+    (["modes", "--ros-args", "-r", "__ns:=/x"], 2),
+    # replay (offline)
+    *[(["replay", f, "--out", "{d}/r"], 2) for f in PARAMS_FILES.values()],
+    (["replay", LOG, "--out", "{d}/picture.png"], 2),
+    (["replay", LOG, "--out", "{d}/r", "--params-file", "{d}/picture.png"], 2),
+    *[(["replay", LOG, "--out", "{d}/r", option, v], 2)
+      for option in ("--speed-deadband", "--warn-probability", "--nut-deadband")
+      for v in ("nan", "-inf", "-1", "1e308")],
+    *[(["replay", LOG, "--out", "{d}/r", "--load", v], 2) for v in ("nan", "-inf", "1e308")],
+    (["replay", LOG, "--out", "{d}/r", "--episodes", "-1"], 2),
+    (["replay", LOG, "--out", "{d}/r", "--workers", "-1"], 2),
+    (["replay", LOG, "--out", "{d}/r", "--namespace", "bad//ns"], 2),
+    (["replay", LOG, "--out", "{d}/r", "--rate", "2"], 2),              # needs --publish
+    # replay --publish
+    *[(["replay", f, "--publish", "--no-wait"], 2) for f in PARAMS_FILES.values()],
+    *[(["replay", LOG, "--publish", "--no-wait", "--rate", v], 2)
+      for v in ("nan", "inf", "-inf", "0", "-1")],
+    *[(["replay", LOG, "--publish", "--no-wait", "--start-offset", v], 2)
+      for v in ("nan", "-1", "1e308")],
+    (["replay", LOG, "--publish", "--no-wait", "--remap", "bogus"], 2),
+    (["replay", LOG, "--publish", "--no-wait", "--topics", "/nope"], 2),
+    (["replay", LOG, "--publish", "--no-wait", "--out", "{d}/r"], 2),
+    (["replay", LOG, "--publish", "--no-wait", "--ros-args", "-r", "__ns:=bad//ns"], 2),
+    (["replay", LOG, "--publish", "--no-wait", "--ros-args", "--params-file",
+      "{d}/picture.png"], 2),
+    # info, recover
+    *[(["info", f], 2) for f in PARAMS_FILES.values()],
+    *[(["recover", f], 2) for f in ("{d}/missing.yaml", "{d}/picture.png", "{d}/empty.yaml")],
+    (["recover", "{d}/folder"], 0),                     # "nothing to recover": valid
+    (["recover", LOG, "-o", "{d}/out.txt"], 2),
+    (["recover", LOG, "-o", "{d}/r.mcap"], 2),          # -o is for one file
+    # review (the table's scheduler never exists: the probe fails fast)
+    (["review", "{d}/missing", "--out", "{d}/v"], 2),
+    (["review", "{d}/folder", "--out", "{d}/v"], 2),
+    (["review", "{d}/logs", "--out", "{d}/picture.png"], 2),
+    *[(["review", "{d}/logs", "--out", "{d}/v", "--workers", v], 2) for v in ("0", "-1", "1e9")],
+    *[(["review", "{d}/logs", "--out", "{d}/v", "--scheduler", a], 2)
+      for a in ("garbage", "foo://x:1", "tcp://127.0.0.1", "tcp://127.0.0.1:99999")],
+    (["review", "{d}/logs", "--out", "{d}/v", "--scheduler", "tcp://127.0.0.1:1",
+      "--connect-timeout", "0.2"], 2),
+    *[(["review", "{d}/logs", "--out", "{d}/v", "--scheduler", "tcp://127.0.0.1:1",
+        "--connect-timeout", v], 2) for v in ("nan", "-1", "0", "1e308")],
+    (["review", "{d}/logs", "--out", "{d}/v", "--connect-timeout", "1"], 2),
+    (["review", "{d}/logs", "--out", "{d}/v", "--warn-probability", "nan"], 2),
+    (["review", "{d}/logs", "--out", "{d}/v", "--use-log-params", "--param", "radius_m=1"], 2),
+]
+
+
+@pytest.mark.parametrize("argv, code", CASES, ids=[" ".join(a) for a, _ in CASES])
+def test_hostile_arguments_are_one_error_line_or_valid(capsys, table_files, argv, code):
+    got = main([a.format(d=table_files) for a in argv])
+    out, err = capsys.readouterr()
+    assert "Traceback" not in out + err, err
+    assert got == code, err
+    if code == 2:
+        assert_one_error_line(err)
+    else:
+        assert "error:" not in err, err

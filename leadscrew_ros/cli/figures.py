@@ -30,7 +30,7 @@ from ..review.plots import (at, axis_display, axis_label, fixed_text, fmt, new_f
                             plot_frequencies, plot_map, probability_overlay, save_figure,
                             scale_axis)
 from ..review.progress import progress_bar
-from .args import WORK_LIMITS, Parser, build_model
+from .args import WORK_LIMITS, Parser, build_model, output_directory
 
 GROWTH_LABEL = r"growth rate Re($\lambda$) [1/s]"
 
@@ -556,7 +556,8 @@ def make_figures(model: SqueakModel, out: Path, quick: bool = False) -> str:
 
 # --------------------------------------------------------------------------- the command
 def cmd_figures(args: argparse.Namespace) -> int:
-    print(make_figures(build_model(args), Path(args.out), quick=args.quick), end="")
+    model = build_model(args)
+    print(make_figures(model, output_directory(args.out), quick=args.quick), end="")
     return 0
 
 

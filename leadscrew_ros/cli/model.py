@@ -26,9 +26,10 @@ from ..model.predictor import Prediction, SqueakModel
 from ..model.probability import ProbabilityEstimate, monte_carlo
 from ..model.scatter import samples_for
 from ..model.sensitivity import Sensitivity, sensitivities
-from ..model.sweep import MapResult, SweepResult, axis_names, check_axis, sweep, sweep_work
+from ..model.sweep import (MapResult, SweepResult, axis_names, check_axis, integer_axis, sweep,
+                          sweep_work)
 from .args import (SPEED_AXIS, WORK_LIMITS, CliError, Parser, build_model, finite, finite_float,
-                   parse_axis_spec, parse_range, print_json)
+                   parse_axis_spec, parse_range, plot_file, print_json)
 
 
 REFERENCE_SAMPLES = 4096     # Monte Carlo samples of predict's `probability`
@@ -249,12 +250,14 @@ def _sweep_axis(args: argparse.Namespace) -> tuple[str, np.ndarray, float | None
     if axis == "load_n" and args.load is not None:
         raise CliError("--load cannot be combined with --axis load_n")
     speed = None if args.speed is None else finite_float(args.speed, "argument --speed")
-    return axis, parse_range(args.values, "argument --values"), speed, args.load
+    return (axis, parse_range(args.values, "argument --values", integer_axis(axis)), speed,
+            args.load)
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     model = build_model(args)
     axis, values, speed, load = _sweep_axis(args)
+    plot = plot_file(args.plot)
     sweep_work(model, axis, values).check()             # before a progress bar shows
     from ..review.progress import progress_bar
     with progress_bar(len(values), "sweep") as update:
@@ -265,9 +268,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         write_sweep_csv(result)
     else:
         print(sweep_text(result, args.probability))
-    if args.plot:
+    if plot:
         from .figures import plot_sweep
-        plot_sweep(result, Path(args.plot), probability=args.probability)
+        plot_sweep(result, plot, probability=args.probability)
     return 0
 
 
@@ -275,6 +278,7 @@ def cmd_map(args: argparse.Namespace) -> int:
     model = build_model(args)
     x_axis, x = parse_axis_spec(args.x, "argument --x")
     y_axis, y = parse_axis_spec(args.y, "argument --y")
+    plot = plot_file(args.plot)
     for option, name, value in (("--speed", SPEED_AXIS, args.speed),
                                 ("--load", "load_n", args.load)):
         if value is not None and name in (x_axis, y_axis):
@@ -286,9 +290,9 @@ def cmd_map(args: argparse.Namespace) -> int:
         print_json(result.as_dict())
     else:
         print(map_text(result))
-    if args.plot:
+    if plot:
         from ..review.plots import plot_map, probability_overlay
-        plot_map(result, Path(args.plot), formulation=model.params.formulation,
+        plot_map(result, plot, formulation=model.params.formulation,
                  overlay=probability_overlay(result) if args.probability else None)
     return 0
 

@@ -5,9 +5,8 @@ and `simulate` (the simulator alone). rclpy is imported only when one of them ru
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from .args import ROS_ARGS_HELP, CliError, Parser, finite
+from .args import ROS_ARGS_HELP, CliError, Parser, finite, output_directory
 
 
 def _stroke(duration_s: float | None):
@@ -21,10 +20,10 @@ def _stroke(duration_s: float | None):
 
 def cmd_demo(args: argparse.Namespace) -> int:
     profile = _stroke(args.duration)
+    record_dir = None if args.no_record else output_directory(args.record_dir, "--record-dir")
     from ..ros.demo import run_demo
     try:
-        return run_demo(profile.duration_s,
-                        record_dir=None if args.no_record else Path(args.record_dir))
+        return run_demo(profile.duration_s, record_dir=record_dir)
     except RuntimeError as exc:          # e.g. rclpy could not start, no subscription
         raise CliError(str(exc)) from None
 

@@ -104,6 +104,13 @@ def new_figure(**kwargs) -> "Figure":
     return Figure(**kwargs)
 
 
+def plot_formats() -> list[str]:
+    """The file suffixes (lower case, no dot) of the formats `save_figure` writes: matplotlib's
+    (png, pdf, svg, ...; its canvas picks the format by the suffix)."""
+    from matplotlib.backend_bases import FigureCanvasBase
+    return sorted(FigureCanvasBase.get_supported_filetypes())
+
+
 def save_figure(fig: "Figure", path: Path, dpi: int) -> None:
     """Write `fig` to `path` (the format from its suffix) at `dpi` dots per inch."""
     fig.savefig(path, dpi=dpi)
