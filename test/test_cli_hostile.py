@@ -3,10 +3,12 @@
 line `<program>: error: <message>` and exit code 2 (or exit 0 where the input is valid),
 never a traceback (issue 19)."""
 
+import json
 import os
 import struct
 import subprocess
 import sys
+import time
 import zlib
 from pathlib import Path
 
@@ -211,3 +213,28 @@ def test_hostile_arguments_are_one_error_line_or_valid(capsys, table_files, argv
         assert_one_error_line(err)
     else:
         assert "error:" not in err, err
+
+
+def test_an_integer_axis_steps_by_one(capsys):
+    """n_bending 2:4 is 2, 3, 4 (a linspace gave 2.5, which the model rounded silently)."""
+    assert main(["sweep", "--axis", "n_bending", "--values", "2:4", "--speed", "20",
+                 "--scatter", "none", "--json"]) == 0
+    out, _ = capsys.readouterr()
+    assert json.loads(out)["n_bending"] == [2.0, 3.0, 4.0]
+
+
+def test_an_unreachable_scheduler_is_one_line_after_the_connect_timeout(table_files):
+    """The console script: the line says it timed out after S s, and the process ends at once
+    (a Client that failed to connect hung 10 s in __del__ with a traceback at exit)."""
+    script = Path(sys.executable).with_name("leadscrew-squeak")
+    command = [str(script)] if script.exists() else [sys.executable, "-m", "leadscrew_ros.cli"]
+    start = time.monotonic()
+    proc = subprocess.run([*command, "review", str(table_files / "logs"), "--out",
+                           str(table_files / "v"), "--scheduler", "tcp://127.0.0.1:1",
+                           "--connect-timeout", "0.5"], capture_output=True, text=True,
+                          timeout=120, env=dict(os.environ))
+    elapsed = time.monotonic() - start
+    assert proc.returncode == 2
+    assert_one_error_line(proc.stderr)
+    assert "timed out after 0.5 s" in proc.stderr
+    assert elapsed < 9, elapsed       # imports take seconds on a busy machine; __del__ took 10
