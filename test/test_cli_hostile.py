@@ -238,3 +238,20 @@ def test_an_unreachable_scheduler_is_one_line_after_the_connect_timeout(table_fi
     assert_one_error_line(proc.stderr)
     assert "timed out after 0.5 s" in proc.stderr
     assert elapsed < 9, elapsed       # imports take seconds on a busy machine; __del__ took 10
+
+
+def test_review_leaves_its_output_folder_out_of_the_inputs_and_says_so(capsys, files):
+    """--out in the input folder: one info line, the log reviewed; --out = the input folder:
+    the error says why there are no logs (it said only 'no logs')."""
+    logs = files / "logs"
+    assert main(["review", str(logs), "--out", str(logs), "--workers", "1"]) == 2
+    _, err = capsys.readouterr()
+    assert_one_error_line(err)
+    assert f"(the output folder {logs} is left out of the inputs)" in err
+    out_dir = logs / "review"
+    assert main(["review", str(logs), "--out", str(out_dir), "--workers", "1",
+                 "--summary-only"]) == 0
+    out, err = capsys.readouterr()
+    assert out.splitlines()[0] == (f"review: the output folder {out_dir} is inside {logs}: "
+                                   "left out of the inputs")
+    assert "1 reviewed" in out and "Traceback" not in err

@@ -68,8 +68,15 @@ def cmd_review(args: argparse.Namespace) -> int:
     from ..review.fleetreport import write_fleet
     out = output_directory(args.out)
     logs = find_logs(args.paths, skip=out)
+    # --out in (or equal to) an input folder: its annotated logs are no inputs; say so
+    inside = [p for p in args.paths if Path(p).is_dir()
+              and out.resolve().is_relative_to(Path(p).resolve())]
+    left_out = f" (the output folder {out} is left out of the inputs)" if inside else ""
     if not logs:
-        raise CliError(f"no logs (.mcap, .db3, bag directories) in {' '.join(args.paths)}")
+        raise CliError(f"no logs (.mcap, .db3, bag directories) in "
+                       f"{' '.join(args.paths)}{left_out}")
+    if left_out and not args.quiet:
+        print(f"review: the output folder {out} is inside {inside[0]}: left out of the inputs")
     workers = args.workers or (None if args.scheduler else os.cpu_count() or 1)
     try:
         with cluster(workers, args.scheduler, reach) as client:
