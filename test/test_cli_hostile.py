@@ -255,3 +255,30 @@ def test_review_leaves_its_output_folder_out_of_the_inputs_and_says_so(capsys, f
     assert out.splitlines()[0] == (f"review: the output folder {out_dir} is inside {logs}: "
                                    "left out of the inputs")
     assert "1 reviewed" in out and "Traceback" not in err
+
+
+@pytest.mark.parametrize("storage", ["MCAP", "SQLITE3"])
+@pytest.mark.parametrize("mode", ["FILE", "MESSAGE"])
+def test_a_compressed_rosbag2_bag_names_its_compression_and_the_conversion(capsys, tmp_path,
+                                                                          storage, mode):
+    """rosbags' writer with FILE or MESSAGE compression: one line with the storage, the
+    compression and a conversion command (it said 'no .mcap files', or read compressed
+    payloads as messages)."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2.writer import CompressionFormat, CompressionMode
+    from rosbags.typesys import Stores, get_typestore
+    store = get_typestore(Stores.ROS2_JAZZY)
+    float64 = store.types["std_msgs/msg/Float64"]
+    bag = tmp_path / "bag"
+    writer = Writer(bag, version=9, storage_plugin=getattr(StoragePlugin, storage))
+    writer.set_compression(getattr(CompressionMode, mode), CompressionFormat.ZSTD)
+    with writer:
+        c = writer.add_connection("/motor_speed", "std_msgs/msg/Float64", typestore=store)
+        for i in range(10):
+            writer.write(c, i, store.serialize_cdr(float64(data=1.0), "std_msgs/msg/Float64"))
+    for argv in (["info", str(bag)], ["replay", str(bag), "--out", str(tmp_path / "r")]):
+        assert main(argv) == 2
+        _, err = capsys.readouterr()
+        assert_one_error_line(err)
+        assert (f"rosbag2 bag with {mode} compression (zstd, storage {storage.lower()})" in err
+                and f"rosbags-convert --src {bag}" in err), err
