@@ -135,10 +135,11 @@ def parse_axis_spec(text: str, what: str) -> tuple[str, np.ndarray]:
     return name, parse_range(rest, what, integer_axis(name))
 
 
-def output_file(path: str | None, option: str, suffixes: Sequence[str]) -> Path | None:
+def output_file(path: str | None, option: str, suffixes: Sequence[str],
+                makes_directory: bool = False) -> Path | None:
     """The file of an output option, checked before any work (a run is not lost to a typo):
     its suffix one of `suffixes` (lower case, without the dot), not a directory, in a
-    directory that exists. None stays None.
+    directory that exists (unless the command `makes_directory`). None stays None.
 
     Raises
     ------
@@ -155,7 +156,7 @@ def output_file(path: str | None, option: str, suffixes: Sequence[str]) -> Path 
                        f"{', '.join('.' + s for s in suffixes)}")
     if out.is_dir():
         raise CliError(f"{option}: {path} is a directory")
-    if not out.resolve().parent.is_dir():
+    if not makes_directory and not out.resolve().parent.is_dir():
         raise CliError(f"{option}: directory of {path} does not exist")
     return out
 

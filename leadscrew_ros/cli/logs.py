@@ -145,7 +145,8 @@ def cmd_recover(args: argparse.Namespace) -> int:
     if args.output:                      # a copy elsewhere; the input stays as it is
         if src.is_dir():
             raise CliError("-o/--output is for one file; a bag directory is recovered in place")
-        info = recover(src, output_file(args.output, "-o/--output", ("mcap",)))
+        info = recover(src, output_file(args.output, "-o/--output", ("mcap",),
+                                        makes_directory=True))
         print(f"recovered {info.messages} messages on {len(info.topics)} topics from {src} "
               f"into {args.output}")
         print(f"time span: {_span(info)}")
