@@ -117,7 +117,8 @@ def test_joint_states_give_speed_and_nut_of_the_named_joint():
     assert r.inputs.speed_rad_s == -20.0
     assert r.inputs.nut_position_m == pytest.approx(0.1 + 50.0 * LEAD, rel=1e-15)
     assert r.set_joint_state(["wheel"], [1.0], [1.0]).ignored == "no joint 'screw'"
-    assert r.set_joint_state(["wheel", "screw"], [1.0], [1.0, 2.0]).taken == ("speed",)
+    assert r.set_joint_state(["wheel", "screw"], [7.0, 8.0], [1.0, 2.0]).taken == ("speed",
+                                                                                  "nut")
     assert r.set_joint_state(["screw"], [0.0], []).taken == ("nut",)
     assert r.set_joint_state(["screw"], [], []).ignored == \
         "joint 'screw' without position or velocity"
@@ -128,6 +129,37 @@ def test_joint_states_give_speed_and_nut_of_the_named_joint():
     assert r.inputs.speed_rad_s == 2.0 and r.inputs.nut_position_m == 0.1 + 10.0 * LEAD
     outcome = r.set_joint_state(["screw"], [1e6], [5.0])
     assert outcome.taken == ("speed",) and "off the screw" in outcome.error
+
+
+@pytest.mark.parametrize("names, positions, velocities, reason, words", [
+    (["wheel", "screw"], [1.0], [1.0, 2.0], "array lengths differ",
+     "2 names but 1 positions and 2 velocities (each empty or one per name)"),
+    (["screw"], [1.0], [1.0, 2.0], "array lengths differ", "1 names but 1 positions and 2"),
+    ([], [1.0], [2.0], "no names", "no joint names (1 positions, 1 velocities)"),
+    ([], [], [], "no names", "no joint names (0 positions, 0 velocities)"),
+    (["screw", "screw"], [1.0, 2.0], [3.0, 4.0], "a name twice",
+     "joint name(s) 'screw' given twice"),
+])
+def test_a_malformed_joint_state_is_rejected_as_a_whole_with_its_reason(
+        names, positions, velocities, reason, words):
+    """Never read by index: one counted reason and an invalid-input error until a well-formed
+    JointState arrives (it was used by index without a word)."""
+    r = rules(JointSettings(joint_name="screw"))
+    outcome = r.set_joint_state(names, positions, velocities)
+    assert not outcome.taken and not outcome.applies
+    assert [x.reason for x in outcome.rejected] == [f"joint_states malformed: {reason}"]
+    assert outcome.error == f"joint_states rejected: {words}" or words in outcome.error
+    assert r.inputs.speed_rad_s is None and r.inputs.nut_position_m is None
+    assert "joint_states" in r.errors
+    assert r.set_joint_state(["screw"], [0.0], [5.0]).applies
+    assert "joint_states" not in r.errors and r.inputs.speed_rad_s == 5.0
+
+
+def test_a_nan_nut_position_is_not_a_finite_number():
+    """Not 'nan m is off the screw'."""
+    outcome = rules().set_nut_position(math.nan)
+    assert [x.reason for x in outcome.rejected] == ["nut position not finite"]
+    assert outcome.error == "nut position nan m is not a finite number"
 
 
 def test_the_empty_joint_name_is_documented():
@@ -201,8 +233,11 @@ def test_bad_values_never_raise_and_keep_the_last_good_state(ops, joint_name):
        st.lists(ANY, max_size=3))
 def test_reading_any_joint_state_never_raises(names, positions, velocities):
     reading = read_joint_state(names, positions, velocities, SCREW, LEAD)
-    assert bool(reading.ignored) == ("screw" not in names or (
-        names.index("screw") >= len(positions) and names.index("screw") >= len(velocities)))
+    malformed = (not names or len(set(names)) < len(names)
+                 or len(positions) not in (0, len(names)) or len(velocities) not in (0, len(names)))
+    assert (reading.rejected is not None) == malformed
+    assert bool(reading.ignored) == (not malformed and (
+        "screw" not in names or not (positions or velocities)))
 
 
 # ----------------------------------------------------------------------------- one stream

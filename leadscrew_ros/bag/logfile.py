@@ -119,6 +119,7 @@ def log_files(path: Path | str) -> list[Path]:
     (rosbag2 and our recorder number splits `<name>_<index>.mcap`)."""
     path = Path(path)
     if path.is_dir():
+        refuse_compressed(path)
         files = _split_files(path)
         if not files:
             raise LogError(path, "directory holds no .mcap files")
@@ -126,6 +127,26 @@ def log_files(path: Path | str) -> list[Path]:
     if not path.exists():
         raise LogError(path, "no such file or directory")
     return [path]
+
+
+def refuse_compressed(bag: Path) -> None:
+    """LogError if the `metadata.yaml` of bag directory `bag` declares rosbag2 compression
+    (FILE: whole `.mcap.zstd` / `.db3.zstd` files; MESSAGE: each payload compressed), which no
+    reader here decodes: the error names the storage and compression and how to convert.
+    A missing or unreadable metadata.yaml is left to the readers."""
+    try:
+        info = yaml.safe_load((bag / METADATA).read_text(encoding="utf-8"))
+        info = info["rosbag2_bagfile_information"]
+        mode, fmt = info.get("compression_mode") or "", info.get("compression_format") or ""
+        storage = info.get("storage_identifier") or "unknown"
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, TypeError, KeyError, AttributeError):
+        return
+    if str(mode).lower() in ("", "none"):
+        return
+    raise LogError(bag, f"rosbag2 bag with {str(mode).upper()} compression ({fmt}, storage "
+                        f"{storage}), which is not read here; convert it to an uncompressed "
+                        f"bag: rosbags-convert --src {bag} --dst {bag.name}_plain --dst-storage "
+                        f"mcap (or ros2 bag convert with compression_mode: none)")
 
 
 def _split_files(directory: Path) -> list[Path]:
@@ -607,8 +628,8 @@ def _recover_file(path: Path) -> FileRecovery:
     try:
         info = _rewrite(path, rewrite)
     except LogError as exc:
-        if path.stat().st_size:                      # foreign or not MCAP: leave it alone
-            raise
+        if path.stat().st_size or path.suffix != ".mcap":   # foreign, not MCAP, or not a
+            raise                                           # split file: leave it alone
         info = LogInfo(path, damage=exc.problem)     # an empty file: set it aside
     if not info.messages:
         rewrite.unlink(missing_ok=True)

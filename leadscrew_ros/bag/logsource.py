@@ -19,7 +19,7 @@ from typing import Iterator
 
 from . import msgdefs
 from .logfile import (ENCODINGS, LogError, LogInfo, LogMessage, Topic, _full_type, _split_key,
-                      log_files, read_messages)
+                      log_files, read_messages, refuse_compressed)
 
 DB3 = ".db3"
 
@@ -86,6 +86,8 @@ def open_log(path: Path | str) -> LogSource:
         There is no log at `path`.
     """
     path = Path(path)
+    if path.is_dir():
+        refuse_compressed(path)
     if path.is_dir() and not any(path.glob("*.mcap")):
         db3 = sorted(path.glob(f"*{DB3}"), key=lambda p: _split_key(p.with_suffix(".mcap")))
         if db3:

@@ -10,9 +10,10 @@ import argparse
 import importlib
 import json
 import math
+import re
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, NoReturn, Sequence
 
 import numpy as np
 import yaml
@@ -24,7 +25,7 @@ from ..model.physics.parameters import (FORMULATIONS, ParameterError, ScrewParam
 from ..model.uncertainty.perturbation import MAX_GEOMETRY_FIELDS, geometry_fields
 from ..model.squeak_model import SqueakModel
 from ..model.uncertainty.scatter import LOG_NORMAL, REPLICATES, ScatterSettings, scatterable
-from ..model.studies.fields import check_axis
+from ..model.studies.fields import check_axis, integer_axis
 from ..model.studies.work import MAX_MEMORY_BYTES, MAX_POINTS, REFERENCE_STATE_SIZE
 from ..review.jsonsafe import json_safe
 
@@ -46,7 +47,14 @@ class CliError(Exception):
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse that raises instead of printing usage and exiting, so `main` reports one line."""
+    """argparse that raises instead of printing usage and exiting, so `main` reports one line,
+    and takes an argument that begins with '-' and a digit, '.', 'inf' or 'nan' as a value
+    (argparse's own rule, '-5' or '-.5' only, took `--load -1e7` and `--speed -inf` for
+    options: "expected one argument"); no option of these commands looks like that."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE_VALUE
 
     def error(self, message: str) -> NoReturn:
         """Raise CliError with `message` instead of printing usage and exiting."""
@@ -81,6 +89,8 @@ def import_ros(command: str, module: str) -> Any:
         if top in _ROS_MODULES or top.startswith(_ROS_PREFIXES):
             raise CliError(needs_ros(command)) from None
         raise
+# A negative number, -inf, -nan, a range START:STOP:COUNT with a negative START
+_NEGATIVE_VALUE = re.compile(r"^-(\d|\.\d|inf|nan)", re.IGNORECASE)
 
 
 # ----------------------------------------------------------------------------- value parsing
@@ -103,9 +113,13 @@ def finite_float(text: str, what: str) -> float:
         raise CliError(f"{what}: {exc}") from None
 
 
-def parse_range(text: str, what: str) -> np.ndarray:
-    """`START:STOP:COUNT` -> COUNT evenly spaced values (finite ends that differ, COUNT >= 2)."""
+def parse_range(text: str, what: str, integer: bool = False) -> np.ndarray:
+    """`START:STOP:COUNT` -> COUNT evenly spaced values (finite ends that differ, COUNT >= 2);
+    with `integer` (an axis of whole numbers) every integer from START to STOP, step 1:
+    `START:STOP`, or with COUNT, which must be their number."""
     parts = text.split(":")
+    if integer and len(parts) in (2, 3):
+        return _integer_range(parts, what)
     if len(parts) != 3:
         raise CliError(f"{what}: expected START:STOP:COUNT, got {text!r}")
     start, stop = (finite_float(p, f"{what} {name}") for p, name in zip(parts, ("START", "STOP"), strict=False))
@@ -122,13 +136,82 @@ def parse_range(text: str, what: str) -> np.ndarray:
     return np.linspace(start, stop, count)
 
 
+def _integer_range(parts: list[str], what: str) -> np.ndarray:
+    """START:STOP[:COUNT] of whole numbers -> START, START +- 1, ..., STOP (as floats)."""
+    ends = []
+    for text, name in zip(parts, ("START", "STOP")):
+        value = finite_float(text, f"{what} {name}")
+        if not value.is_integer():
+            raise CliError(f"{what} {name}: {text!r} is not a whole number (the axis takes "
+                           f"integers, step 1)")
+        ends.append(int(value))
+    start, stop = ends
+    count = abs(stop - start) + 1
+    if count < 2 or count > MAX_COUNT:
+        raise CliError(f"{what}: START and STOP must differ by 1 to {MAX_COUNT - 1}")
+    if len(parts) == 3 and parts[2].strip() != str(count):
+        raise CliError(f"{what}: the axis takes integers, step 1: {start}:{stop} has {count} "
+                       f"values, not {parts[2]!r} (COUNT may be left out)")
+    return np.arange(start, stop + (1 if stop > start else -1), 1 if stop > start else -1,
+                     dtype=float)
+
+
 def parse_axis_spec(text: str, what: str) -> tuple[str, np.ndarray]:
-    """`NAME:START:STOP:COUNT` for a map axis."""
+    """`NAME:START:STOP:COUNT` for a map axis (`NAME:START:STOP` for an integer one)."""
     name, _, rest = text.partition(":")
     if not rest:
         raise CliError(f"{what}: expected NAME:START:STOP:COUNT, got {text!r}")
     check_axis(name)
-    return name, parse_range(rest, what)
+    return name, parse_range(rest, what, integer_axis(name))
+
+
+def output_file(path: str | None, option: str, suffixes: Sequence[str],
+                makes_directory: bool = False) -> Path | None:
+    """The file of an output option, checked before any work (a run is not lost to a typo):
+    its suffix one of `suffixes` (lower case, without the dot), not a directory, in a
+    directory that exists (unless the command `makes_directory`). None stays None.
+
+    Raises
+    ------
+    CliError
+        '--plot: out.txt: .txt is not a supported format; use one of .png, ...'.
+    """
+    if path is None:
+        return None
+    out = Path(path)
+    suffix = out.suffix.lower().removeprefix(".")
+    if suffix not in suffixes:
+        found = f".{suffix} is not a supported format" if suffix else "no suffix"
+        raise CliError(f"{option}: {path}: {found}; use one of "
+                       f"{', '.join('.' + s for s in suffixes)}")
+    if out.is_dir():
+        raise CliError(f"{option}: {path} is a directory")
+    if not makes_directory and not out.resolve().parent.is_dir():
+        raise CliError(f"{option}: directory of {path} does not exist")
+    return out
+
+
+def plot_file(path: str | None, option: str = "--plot") -> Path | None:
+    """`output_file` for a figure: a format matplotlib writes (it picks it by the suffix)."""
+    if path is None:
+        return None
+    from ..review.plots import plot_formats
+    return output_file(path, option, plot_formats())
+
+
+def output_directory(path: str, option: str = "--out") -> Path:
+    """The directory of an output option (created later by the command), checked before any
+    work: not an existing file.
+
+    Raises
+    ------
+    CliError
+        The path exists and is not a directory.
+    """
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise CliError(f"{option}: {path} exists and is not a directory")
+    return out
 
 
 # ----------------------------------------------------------------------------- parameters
@@ -160,6 +243,9 @@ def _file_parameters(path: str) -> dict[str, Any]:
         doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
     except OSError as exc:
         raise CliError(f"--params-file: cannot read {path}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise CliError(f"--params-file: {path} is not a text file (not UTF-8); expected a "
+                       f"ROS parameter file in YAML") from None
     except yaml.YAMLError as exc:
         raise CliError(f"--params-file: {path} is not valid YAML: "
                        f"{' '.join(str(exc).split())}") from None

@@ -31,7 +31,7 @@ from ..model.studies.tracking import Branch, track_modes
 from ..review.plots import (at, fixed_text, fmt, plot_frequencies, plot_friction, plot_map,
                             plot_sweep, probability_overlay)
 from ..review.progress import progress_bar
-from .args import WORK_LIMITS, Parser, build_model
+from .args import WORK_LIMITS, Parser, build_model, output_directory
 
 # --------------------------------------------------------------------------- data summaries
 BOUNDARY, VALIDITY, GRID = "boundary", "validity", "grid"
@@ -509,7 +509,8 @@ def make_figures(model: SqueakModel, out: Path, quick: bool = False) -> str:
 # --------------------------------------------------------------------------- the command
 def cmd_figures(args: argparse.Namespace) -> int:
     """`figures`: write the paper's figures; exit status."""
-    print(make_figures(build_model(args), Path(args.out), quick=args.quick), end="")
+    model = build_model(args)
+    print(make_figures(model, output_directory(args.out), quick=args.quick), end="")
     return 0
 
 

@@ -12,15 +12,19 @@ from __future__ import annotations
 
 import argparse
 import os
+from dataclasses import fields
 from pathlib import Path
 
-from .args import CliError, Parser, build_model
+from ..model.physics.metadata import help_text
+from ..review.fleet import ClusterError, ClusterSettings
+from .args import CliError, Parser, build_model, finite, output_directory
 from .logs import REPLAY_INPUTS, _topic, add_input_options, replay_inputs
 
 FAILED_BASE = 10
 FAILED_CAP = 100
 _ERRORS_SHOWN = 10
 _MODEL_OPTIONS = ("param", "params_file", "formulation", "scatter", "samples")
+_CONNECT_TIMEOUT = next(f for f in fields(ClusterSettings) if f.name == "connect_timeout_s")
 
 
 def exit_status(failed: int) -> int:
@@ -55,14 +59,31 @@ def cmd_review(args: argparse.Namespace) -> int:
         raise CliError(f"argument --workers: must be in [1, 1024], got {args.workers}")
     settings = _settings(args)
     from ..review.fleet import cluster, find_logs, review_logs
+    if args.connect_timeout is not None and not args.scheduler:
+        raise CliError("--connect-timeout is for --scheduler")
+    try:
+        reach = ClusterSettings(**({} if args.connect_timeout is None
+                                   else {"connect_timeout_s": args.connect_timeout}))
+    except ClusterError as exc:
+        raise CliError(str(exc)) from None
     from ..review.fleetreport import write_fleet
-    out = Path(args.out)
+    out = output_directory(args.out)
     logs = find_logs(args.paths, skip=out)
+    # --out in (or equal to) an input folder: its annotated logs are no inputs; say so
+    inside = [p for p in args.paths if Path(p).is_dir()
+              and out.resolve().is_relative_to(Path(p).resolve())]
+    left_out = f" (the output folder {out} is left out of the inputs)" if inside else ""
     if not logs:
-        raise CliError(f"no logs (.mcap, .db3, bag directories) in {' '.join(args.paths)}")
+        raise CliError(f"no logs (.mcap, .db3, bag directories) in "
+                       f"{' '.join(args.paths)}{left_out}")
+    if left_out and not args.quiet:
+        print(f"review: the output folder {out} is inside {inside[0]}: left out of the inputs")
     workers = args.workers or (None if args.scheduler else os.cpu_count() or 1)
-    with cluster(workers, args.scheduler) as client:
-        run = review_logs(logs, out, settings, client, progress=not args.quiet)
+    try:
+        with cluster(workers, args.scheduler, reach) as client:
+            run = review_logs(logs, out, settings, client, progress=not args.quiet)
+    except ClusterError as exc:          # raised before the review starts
+        raise CliError(str(exc)) from None
     where = args.scheduler or f"LocalCluster of {workers} worker(s) on 127.0.0.1"
     paths = write_fleet(run, out, {"inputs": args.paths, "out": str(out.resolve()),
                                    "cluster": where, **settings.as_dict()})
@@ -100,6 +121,9 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
                        help="a running Dask scheduler, tcp://HOST:PORT (`dask scheduler`, "
                             "`dask worker`); its workers must see the logs and DIR at the same "
                             "paths and have leadscrew_ros installed")
+    p.add_argument("--connect-timeout", type=finite, metavar="S",
+                   help=help_text(_CONNECT_TIMEOUT, "with --scheduler: how long to wait for "
+                                                    "it to answer"))
     g = add_input_options(p)
     g.add_argument("--summary-only", action="store_true",
                    help="keep only summary.json and summary.txt of each log (no annotated "

@@ -16,7 +16,7 @@ from ..model.physics.metadata import help_text
 from ..review.replay import ReplaySettings
 from ..review.timeline import InputSettings
 from .args import (PROG, ROS_ARGS_HELP, CliError, Parser, build_model, finite, import_ros,
-                   print_json, yaml_parameters)
+                   output_directory, output_file, print_json, yaml_parameters)
 
 REPLAY_INPUTS = [f.name for f in fields(InputSettings)]    # = option dests, node parameters
 # The node's settings that replay options mirror: their metadata gives the help and the range
@@ -102,7 +102,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
             workers=args.workers, progress=not args.quiet)
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    out = Path(args.out) if args.out else Path(f"{log_name(Path(args.log))}_replay")
+    out = output_directory(args.out or f"{log_name(Path(args.log))}_replay")
     result = replay(args.log, model, out, settings)
     if not args.no_report:
         from ..review.report import write_report
@@ -150,7 +150,8 @@ def cmd_recover(args: argparse.Namespace) -> int:
     if args.output:                      # a copy elsewhere; the input stays as it is
         if src.is_dir():
             raise CliError("-o/--output is for one file; a bag directory is recovered in place")
-        info = recover(src, Path(args.output))
+        info = recover(src, output_file(args.output, "-o/--output", ("mcap",),
+                                        makes_directory=True))
         print(f"recovered {info.messages} messages on {len(info.topics)} topics from {src} "
               f"into {args.output}")
         print(f"time span: {_span(info)}")

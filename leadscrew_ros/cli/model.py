@@ -25,12 +25,12 @@ from ..model.squeak_model import Prediction, SqueakModel
 from ..model.studies.probability import ProbabilityEstimate, monte_carlo
 from ..model.uncertainty.scatter import samples_for
 from ..model.studies.sensitivity import Sensitivity, sensitivities
-from ..model.studies.fields import axis_names, check_axis
+from ..model.studies.fields import axis_names, check_axis, integer_axis
 from ..model.studies.stability_map import MapResult
 from ..model.studies.sweep import SweepResult, sweep
 from ..model.studies.work import sweep_work
 from .args import (SPEED_AXIS, WORK_LIMITS, CliError, Parser, build_model, finite, finite_float,
-                   parse_axis_spec, parse_range, print_json)
+                   parse_axis_spec, parse_range, plot_file, print_json)
 
 
 REFERENCE_SAMPLES = 4096     # Monte Carlo samples of predict's `probability`
@@ -256,13 +256,15 @@ def _sweep_axis(args: argparse.Namespace) -> tuple[str, np.ndarray, float | None
     if axis == "load_n" and args.load is not None:
         raise CliError("--load cannot be combined with --axis load_n")
     speed = None if args.speed is None else finite_float(args.speed, "argument --speed")
-    return axis, parse_range(args.values, "argument --values"), speed, args.load
+    return (axis, parse_range(args.values, "argument --values", integer_axis(axis)), speed,
+            args.load)
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     """`sweep`: sweep one axis and print the result; exit status."""
     model = build_model(args)
     axis, values, speed, load = _sweep_axis(args)
+    plot = plot_file(args.plot)
     sweep_work(model, axis, values).check()             # before a progress bar shows
     from ..review.progress import progress_bar
     with progress_bar(len(values), "sweep") as update:
@@ -273,9 +275,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         write_sweep_csv(result)
     else:
         print(sweep_text(result, args.probability))
-    if args.plot:
+    if plot:
         from ..review.plots import plot_sweep
-        plot_sweep(result, probability=args.probability).savefig(args.plot, dpi=120)
+        plot_sweep(result, probability=args.probability).savefig(plot, dpi=120)
     return 0
 
 
@@ -284,6 +286,7 @@ def cmd_map(args: argparse.Namespace) -> int:
     model = build_model(args)
     x_axis, x = parse_axis_spec(args.x, "argument --x")
     y_axis, y = parse_axis_spec(args.y, "argument --y")
+    plot = plot_file(args.plot)
     for option, name, value in (("--speed", SPEED_AXIS, args.speed),
                                 ("--load", "load_n", args.load)):
         if value is not None and name in (x_axis, y_axis):
@@ -295,11 +298,11 @@ def cmd_map(args: argparse.Namespace) -> int:
         print_json(result.as_dict())
     else:
         print(map_text(result))
-    if args.plot:
+    if plot:
         from ..review.plots import plot_map, probability_overlay
         plot_map(result, formulation=model.params.formulation,
                  overlay=probability_overlay(result) if args.probability else None
-                 ).savefig(args.plot, dpi=120)
+                 ).savefig(plot, dpi=120)
     return 0
 
 

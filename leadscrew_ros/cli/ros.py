@@ -9,7 +9,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .args import ROS_ARGS_HELP, CliError, Parser, finite, import_ros
+from .args import ROS_ARGS_HELP, CliError, Parser, finite, import_ros, output_directory
 
 
 def _stroke(duration_s: float | None):
@@ -24,10 +24,10 @@ def _stroke(duration_s: float | None):
 def cmd_demo(args: argparse.Namespace) -> int:
     """`demo`: run the node against a simulated stroke; exit status."""
     profile = _stroke(args.duration)
+    record_dir = None if args.no_record else output_directory(args.record_dir, "--record-dir")
     run_demo = import_ros("demo", "demo").run_demo
     try:
-        return run_demo(profile.duration_s,
-                        record_dir=None if args.no_record else Path(args.record_dir))
+        return run_demo(profile.duration_s, record_dir=record_dir)
     except RuntimeError as exc:          # e.g. rclpy could not start, no subscription
         raise CliError(str(exc)) from None
 

@@ -24,7 +24,7 @@ from ..model.physics.parameters import FORMULATIONS, ScrewParameters
 from ..model.nonlinear.transient import TransientResult, TransientSettings, simulate
 from ..model.nonlinear.transient_analysis import TransientAnalysis, analyse, linear_counterparts
 from ..model.physics.metadata import help_text
-from .args import CliError, Parser, build_model, finite, print_json
+from .args import CliError, Parser, build_model, finite, output_file, plot_file, print_json
 
 WAV_RATE_HZ = 48000
 WAV_FULL_SCALE = 32767          # int16 code of the largest |surface velocity|
@@ -82,10 +82,7 @@ def cmd_transient(args: argparse.Namespace) -> int:
     args.shown = params.formulation
     settings = TransientSettings(**{k: getattr(args, k) for k in _OPTIONS
                                     if getattr(args, k) is not None})
-    for option in ("wav", "plot"):          # fail before the run, not after it
-        path = getattr(args, option)
-        if path is not None and not Path(path).resolve().parent.is_dir():
-            raise CliError(f"--{option}: directory of {path} does not exist")
+    wav, plot = output_file(args.wav, "--wav", ("wav",)), plot_file(args.plot)
     start = time.perf_counter()
     run = simulate(params, args.speed, args.load_n, settings)
     elapsed = time.perf_counter() - start
@@ -94,14 +91,14 @@ def cmd_transient(args: argparse.Namespace) -> int:
     out = {"speed_rad_s": args.speed, "load_n": args.load_n, **result.as_dict(),
            "linear_model": linear, "settings": {k: getattr(settings, k) for k in _SETTINGS},
            "run_time_s": elapsed, "wav": None}
-    if args.wav:
+    if wav:
         samples, full_scale = audio(run)
-        write_wav(Path(args.wav), samples)
+        write_wav(wav, samples)
         out["wav"] = {"file": args.wav, "rate_hz": WAV_RATE_HZ, "full_scale_m_s": full_scale}
-    if args.plot:
+    if plot:
         from ..review.plots import plot_transient
         plot_transient(run, result, title=f"{args.speed:g} rad/s, {args.load_n:g} N, "
-                                          f"{run.q.shape[1]} modes").savefig(args.plot, dpi=120)
+                                          f"{run.q.shape[1]} modes").savefig(plot, dpi=120)
     if args.json:
         print_json(out)
     else:

@@ -12,7 +12,7 @@ Rules:
 
 - Speed [rad/s] and load [N]: a real number, finite, the load within the upper limit of
   `ScrewParameters.axial_load_n` (`model.squeak_model.check_operating_point`).
-- Nut position z_o [m]: a real number with 0 <= z_o <= `ScrewParameters.nut_travel_m`.
+- Nut position z_o [m]: a finite real number with 0 <= z_o <= `ScrewParameters.nut_travel_m`.
 - A rejected value is not taken: the previous good one stays, and the rejection gives a
   one-line message with the value (`model.physics.display.exact`: never rounded onto the limit) and
   a short reason without the value (the replay counts rejections by it).
@@ -20,9 +20,12 @@ Rules:
   joint. An empty `joint_name` ignores joint_states altogether, in the node and in the replay
   alike: using it is an explicit opt-in, so a JointState from another driver (a wheel, an arm)
   never moves the operating point. The joint's velocity is the speed, its angle theta the nut
-  position `nut_position_at_zero_angle_m + theta * ScrewParameters.lead_per_rad_m`; a message
-  shorter than the joint's index in `velocity` or `position` gives only what it has. Both
-  values are taken first, then one recompute decision follows, none if either was rejected.
+  position `nut_position_at_zero_angle_m + theta * ScrewParameters.lead_per_rad_m`; `velocity`
+  or `position` may be empty (that value is not given). A malformed message is rejected as a
+  whole (reason 'joint_states malformed: ...'), never read by index: no names, a name twice,
+  or a `position` / `velocity` that is neither empty nor one entry per name (sensor_msgs'
+  rule). Both values are taken first, then one recompute decision follows, none if either was
+  rejected.
 - Operating point (speed, load, nut): none until both a speed and a load were taken; the nut
   is `ScrewParameters.nut_position_m` until a nut input was taken.
 - A recompute is due when the point moved more than a deadband (`LiveSettings`) from the point
@@ -96,6 +99,7 @@ class JointReading:
 
     values: dict[str, object]
     ignored: str = ""
+    rejected: Rejection | None = None         # a malformed message
 
 
 def moved(point: Point, last: Point, deadbands: LiveSettings) -> bool:
@@ -140,20 +144,37 @@ def read_joint_state(names: Sequence[str], positions: Sequence[float],
     name = joints.joint_name
     if not name:
         return JointReading({}, "joint_name not set")
+    problem = _malformed(list(names), len(positions), len(velocities))
+    if problem:
+        return JointReading({}, rejected=Rejection(f"joint_states malformed: {problem[0]}",
+                                                   f"joint_states rejected: {problem[1]}"))
     try:
         i = list(names).index(name)
-    except (TypeError, ValueError):
+    except ValueError:
         return JointReading({}, f"no joint {name!r}")
     values: dict[str, object] = {}
-    if i < len(velocities):
+    if velocities:
         values["speed"] = velocities[i]
-    if i < len(positions):
+    if positions:
         theta = _real(positions[i])
         values["nut"] = positions[i] if theta is None else (    # else the nut check names it
             joints.nut_position_at_zero_angle_m + theta * lead_per_rad_m)
     if not values:
         return JointReading({}, f"joint {name!r} without position or velocity")
     return JointReading(values)
+
+
+def _malformed(names: list, positions: int, velocities: int) -> tuple[str, str] | None:
+    """(reason, message) when a JointState's names and arrays do not pair up, else None."""
+    if not names:
+        return "no names", f"no joint names ({positions} positions, {velocities} velocities)"
+    repeated = sorted({str(n) for n in names if names.count(n) > 1})
+    if repeated:
+        return "a name twice", f"joint name(s) {', '.join(map(repr, repeated))} given twice"
+    if positions not in (0, len(names)) or velocities not in (0, len(names)):
+        return ("array lengths differ", f"{len(names)} names but {positions} positions and "
+                f"{velocities} velocities (each empty or one per name)")
+    return None
 
 
 def _is_real(value: object) -> TypeGuard[numbers.Real]:
@@ -257,7 +278,10 @@ class InputRules:
         if z is None:
             return self._reject("nut", Rejection(
                 "nut position not a number", f"nut position {value!r} is not a number"))
-        if not (math.isfinite(z) and 0.0 <= z <= travel):
+        if not math.isfinite(z):             # not 'nan m is off the screw'
+            return self._reject("nut", Rejection(
+                "nut position not finite", f"nut position {z} m is not a finite number"))
+        if not 0.0 <= z <= travel:
             return self._reject("nut", Rejection(
                 f"nut position off the screw [0, {exact(travel)}] m",
                 f"nut position {exact(z)} m is off the screw: allowed [0, {exact(travel)}] m "
@@ -310,6 +334,9 @@ class InputRules:
                                    self.params.lead_per_rad_m)
         if reading.ignored:
             return Outcome(ignored=reading.ignored)
+        if reading.rejected:
+            return self._reject("joint_states", reading.rejected)
+        self.errors.pop("joint_states", None)    # a well-formed one ends that error
         setters = {"speed": self.set_speed, "nut": self.set_nut_position}
         outcomes = [setters[kind](value) for kind, value in reading.values.items()]
         return Outcome(tuple(k for o in outcomes for k in o.taken),

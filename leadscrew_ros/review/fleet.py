@@ -25,6 +25,7 @@ hashed in its task and skipped there if the content is the same.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import glob
 import hashlib
@@ -48,6 +49,7 @@ from ..bag import logmeta
 from ..bag.logfile import LogError, is_complete, recover
 from ..bag.logsource import DB3, open_log
 from ..model import ScrewParameters, SqueakModel
+from ..model.physics.metadata import check, setting
 from ..model.uncertainty.scatter import LIVE_SAMPLES, Scatter
 from .decimation import Reservoir
 from .jsonsafe import json_safe
@@ -439,15 +441,54 @@ def review_one(log: str, out_dir: str, name: str, settings: FleetSettings,
 
 
 # ---------------------------------------------------------------------- the cluster
+class ClusterError(ValueError):
+    """No Dask scheduler to use: a malformed address, or none answered in time."""
+
+
+@dataclass(frozen=True)
+class ClusterSettings:
+    """How `review` reaches a running scheduler (`--scheduler`)."""
+
+    connect_timeout_s: float = setting(5.0, "s", "how long to wait for the scheduler to "
+                                       "answer", 0.0, 3600.0, lo_open=True)
+
+    def __post_init__(self) -> None:
+        check(self, ClusterError, "--connect-timeout: ")
+
+
+async def _probe(address: str, timeout_s: float) -> None:
+    """Open and close one connection to `address` (ValueError: not an address; OSError: no
+    answer within `timeout_s`, Dask retrying a refused connection until then)."""
+    from distributed.comm import connect
+    comm = await connect(address, timeout=timeout_s)
+    await comm.close()
+
+
 @contextlib.contextmanager
-def cluster(workers: int | None = None, scheduler: str | None = None) -> Iterator[Any]:
+def cluster(workers: int | None = None, scheduler: str | None = None,
+            settings: ClusterSettings = ClusterSettings()) -> Iterator[Any]:
     """A Dask client: of a new `distributed.LocalCluster` (`workers` processes, default one
     per core, one thread each, everything on 127.0.0.1, no dashboard), or connected to the
-    running scheduler at `scheduler` (``tcp://HOST:PORT``)."""
+    running scheduler at `scheduler` (``tcp://HOST:PORT``) within `settings.connect_timeout_s`.
+
+    Raises
+    ------
+    ClusterError
+        `scheduler` is not an address Dask takes, or nothing answered there in time (raised
+        before the client is yielded: never for a failure of the work done with it).
+    """
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
-        with Client(scheduler, timeout="30s") as client:
+        timeout = settings.connect_timeout_s
+        try:     # a probe first: a Client that failed to connect hangs in __del__ at exit
+            asyncio.run(_probe(scheduler, timeout))
+        except ValueError as exc:                # 'missing port number', 'unknown scheme'
+            raise ClusterError(f"--scheduler {scheduler!r}: {exc}") from None
+        except OSError:                          # refused, unknown host, no answer
+            raise ClusterError(f"--scheduler {scheduler}: no Dask scheduler answered; timed "
+                               f"out after {timeout:g} s (--connect-timeout)") from None
+        with Client(scheduler, timeout=timeout) as client:
             yield client
         return
     with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,

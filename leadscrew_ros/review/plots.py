@@ -139,6 +139,13 @@ def _axes(ax: "Axes | None", **figure) -> tuple["Figure", "Axes"]:
     return ax.get_figure(root=True), ax
 
 
+def plot_formats() -> list[str]:
+    """The file suffixes (lower case, no dot) of the formats `Figure.savefig` writes:
+    matplotlib's (png, pdf, svg, ...; its canvas picks the format by the suffix)."""
+    from matplotlib.backend_bases import FigureCanvasBase
+    return sorted(FigureCanvasBase.get_supported_filetypes())
+
+
 def plot_map(result: MapResult, *, title: str = "", formulation: str = "",
              overlay: Overlay | None = None, ax: "Axes | None" = None) -> "Figure":
     """Stability map: filled contour of the largest growth rate (red: squeak, blue: stable),

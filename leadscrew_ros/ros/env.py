@@ -15,13 +15,14 @@ import sys
 import tempfile
 import threading
 from contextlib import contextmanager
-from typing import Iterator, Sequence
+from typing import Callable, Iterator, Sequence, TypeVar
 
 import rclpy
 from rclpy.context import Context
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
 PROGRAM = "leadscrew-squeak"
+T = TypeVar("T")
 
 
 def confine_to_localhost(private_domain: bool = False) -> None:
@@ -36,21 +37,43 @@ def init_context(ros_args: Sequence[str] = ()) -> Context:
     """A new Context, initialised with exactly `ros_args` (`--ros-args -r __ns:=/seat_left
     -p name:=value ...`), never with sys.argv: rcl would read the program's own options (it
     warns about `--remap OLD:=NEW` as a deprecated remap rule). Raises ValueError with one
-    line (rcl's own log lines about the failure are dropped) for arguments rcl rejects."""
+    line for arguments rcl rejects (`checked_ros_args`)."""
     ctx = Context()
+    checked_ros_args(lambda: rclpy.init(context=ctx, args=[PROGRAM, *ros_args]))
+    return ctx
+
+
+def checked_ros_args(parse: Callable[[], T]) -> T:
+    """Run `parse`, an rclpy call that parses ROS arguments (`rclpy.init`,
+    `rclpy.utilities.remove_ros_args`), and return its result; arguments rcl rejects raise
+    ValueError with one line: the problem and rcl's warnings about it (its log lines on
+    stderr are dropped).
+
+    Raises
+    ------
+    ValueError
+        '--ros-args: Couldn't parse params file: ...', '--ros-args: unknown ROS arguments
+        [...]', ...
+    """
     with _stderr_captured() as captured:
         try:
-            rclpy.init(context=ctx, args=[PROGRAM, *ros_args])
-            problem = ""
+            result, problem = parse(), ""
         except _rclpy.UnknownROSArgsError as exc:
             problem = f"unknown ROS arguments {exc}"        # "['--bogus', '-x']"
-        except _rclpy.RCLError as exc:
-            problem = str(exc).removeprefix("failed to initialize rcl: ").split(". Error:")[0]
+        except _rclpy.RCLError as exc:       # RCLInvalidROSArgsError (bad file, rule) too
+            problem = (str(exc).removeprefix("failed to initialize rcl: ")
+                       .removeprefix("Failed to parse ROS arguments: "))
     if not problem:
-        sys.stderr.write(captured[0])                # warnings of a successful init stay
-        return ctx
+        sys.stderr.write(captured[0])                # warnings of a successful parse stay
+        return result
     warnings = [line.split("]: ", 1)[-1] for line in captured[0].splitlines()
                 if line.startswith("[WARN]")]
+    # "<problem>. Error: <detail>, at <source file>...": the detail only when rcl gave no
+    # warning, which says it better ("Error opening YAML file" vs "lexeme type 19")
+    problem, _, detail = problem.partition(". Error: ")
+    detail = detail.split(", at ")[0].strip()
+    if detail and not warnings:
+        warnings = [detail]
     raise ValueError(f"--ros-args: {' '.join(problem.split())}"
                      + "".join(f" ({w.strip()})" for w in warnings))
 

@@ -57,7 +57,7 @@ from ..bag.crash_recovery import CrashRecovery
 from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel
 from ..model.uncertainty.scatter import ScatterSettings
 from ..bag.recorder import Recorder, RecordSettings, ensure_directory
-from .env import StopSignals, confine_to_localhost
+from .env import StopSignals, checked_ros_args, confine_to_localhost
 
 NODE_NAME = "squeak_predictor"
 HOUSEKEEPING_PERIOD_S = 0.05
@@ -474,7 +474,12 @@ def main(args: list[str] | None = None) -> int:
     `squeak_predictor: stopped by SIGTERM` (or SIGINT) on stderr, as every long-running
     command: `ros_env.StopSignals.exit_status`), 2 on bad parameters or arguments;
     `-h`/`--help` prints `usage()` and exits 0."""
-    own_args = remove_ros_args(sys.argv if args is None else args)[1:]
+    argv = list(sys.argv if args is None else args)
+    try:       # a bad params file or remap rule: one line, as simulate and replay --publish
+        own_args = checked_ros_args(lambda: remove_ros_args(argv))[1:]
+    except ValueError as exc:
+        print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
+        return 2
     if {"-h", "--help"} & set(own_args):
         print(usage())
         return 0
@@ -488,7 +493,12 @@ def main(args: list[str] | None = None) -> int:
     # "context is invalid", exit 1 with a traceback) or raise KeyboardInterrupt inside any
     # callback.
     with StopSignals() as stop:
-        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        try:     # unknown ROS arguments: remove_ros_args keeps them, init refuses them
+            checked_ros_args(lambda: rclpy.init(args=argv,
+                                                signal_handler_options=SignalHandlerOptions.NO))
+        except ValueError as exc:
+            print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
+            return 2
         node = None
         try:
             node = SqueakPredictorNode()

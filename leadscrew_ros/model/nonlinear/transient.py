@@ -43,6 +43,7 @@ from scipy.integrate import solve_ivp
 
 from ..physics.assembly import gyroscopic_unit
 from ..physics.contact import contact_angles
+from ..physics.display import exact
 from ..physics.metadata import check, setting
 from .friction_force import HelixFriction
 from ..physics.modes import KIND_T, KIND_X, KIND_Y, ModalBasis, modal_basis
@@ -53,6 +54,9 @@ METHODS = ("LSODA", "Radau", "DOP853")
 ATOL_PER_RTOL = 100      # absolute tolerance of each state: 100 rtol times its start size
 MIN_SAMPLES, MAX_SAMPLES = 256, 2_000_000    # stored samples of a run
 STEPS_PER_PERIOD = 8     # largest step: this fraction of the period of the highest mode kept
+# Plausible |speed| of a simulation: from a turn in about 70 days (below it the steady sliding
+# and its perturbation underflow the integrator) to the first critical speed (the model's).
+MIN_SPEED_RAD_S = 1e-6
 
 
 @dataclass(frozen=True)
@@ -305,7 +309,7 @@ def simulate(params: ScrewParameters, speed_rad_s: float, load_n: float,
     params : ScrewParameters
         Screw, nut and friction (any formulation: the force is the nonlinear one).
     speed_rad_s : float
-        Screw speed Omega [rad/s], nonzero.
+        Screw speed Omega [rad/s]: MIN_SPEED_RAD_S <= |Omega| < the first critical speed.
     load_n : float
         Axial load F_z [N].
     settings : TransientSettings, optional
@@ -321,12 +325,21 @@ def simulate(params: ScrewParameters, speed_rad_s: float, load_n: float,
     OperatingPointError
         Speed or load not a finite number, or the load implausibly large.
     ParameterError
-        Zero speed, no steady sliding, or the integrator failed.
+        |speed| below MIN_SPEED_RAD_S or at or above the first critical speed, no
+        steady sliding, or the integrator failed.
     """
     settings = settings or TransientSettings()
     speed_rad_s, load_n = check_operating_point(speed_rad_s, load_n)
     if speed_rad_s == 0:
         raise ParameterError("speed = 0: there is no steady sliding to start from")
+    if abs(speed_rad_s) < MIN_SPEED_RAD_S:      # else LSODA's "Unexpected istate" (underflow)
+        raise ParameterError(f"|speed| = {exact(abs(speed_rad_s))} rad/s is below "
+                             f"{MIN_SPEED_RAD_S:g} rad/s: no steady sliding to simulate")
+    critical = float(modal_basis(params).omega_rad_s.min())     # SqueakModel's, the full basis
+    if abs(speed_rad_s) >= critical:            # else an overflow or a static divergence
+        raise ParameterError(f"|speed| = {exact(abs(speed_rad_s))} rad/s is at or above the "
+                             f"first critical speed {critical:.4g} rad/s: the model holds "
+                             f"below it")
     eq = ModalEquations(params, speed_rad_s, load_n, settings)
     n, om = eq.n, eq.basis.omega_rad_s
     sliding = params.radius_m * abs(speed_rad_s) / math.cos(params.helix_angle_rad)

@@ -180,15 +180,18 @@ def coerce(name: str, value: Any) -> Any:
     """Convert a value (e.g. a CLI string) to the field's type, with a clear error."""
     typ = _field(name).type
     try:
-        if typ == "int":
-            if isinstance(value, float) and not value.is_integer():
-                raise ValueError
-            return int(float(value)) if isinstance(value, str) else int(value)
+        if typ == "int":      # a whole number only: never truncate '2.5' to 2
+            number = float(value) if isinstance(value, str) else value
+            if isinstance(number, float) and not number.is_integer():
+                raise ParameterError(f"{name} = {value!r} is not a whole number")
+            return int(number)
         if typ == "float":
             if isinstance(value, bool):
                 raise ValueError
             return float(value)
         return str(value)
+    except ParameterError:
+        raise
     except (TypeError, ValueError, OverflowError):
         raise ParameterError(f"{name} = {value!r} is not a valid {typ}") from None
 

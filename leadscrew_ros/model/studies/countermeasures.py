@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..physics.parameters import ParameterError
-from ..squeak_model import SqueakModel
+from ..squeak_model import OperatingPointError, SqueakModel
 from .probability import linearised
 from ..uncertainty.scatter import Samples
 
@@ -82,11 +82,11 @@ def countermeasures(model: SqueakModel, speed_rad_s: float, load_n: float,
     for name in DESIGN + FRICTION + OPERATING:
         best = None
         for factor in (1 + STEP, 1 - STEP):
-            try:
+            try:      # a change beyond a parameter's range or the plausible load is no advice
                 changed, speed, load = changed_by(model, speed_rad_s, load_n, name, factor)
-            except ParameterError:
+                e = linearised(changed, speed, load, samples)
+            except (ParameterError, OperatingPointError):
                 continue
-            e = linearised(changed, speed, load, samples)
             if e is not None and e.probability < now.probability and (
                     best is None or e.probability < best.probability):
                 best = Countermeasure(name, factor, e.probability)

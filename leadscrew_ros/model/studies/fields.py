@@ -15,6 +15,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from ..physics.display import exact
 from ..physics.parameters import ParameterError, field_info, field_names
 from ..physics.stability import max_divergence_rate, max_growth_rate
 from ..squeak_model import SqueakModel, Validity
@@ -26,13 +27,29 @@ PROBABILITY_LEVELS = (0.01, 0.1, 0.5, 0.9)    # iso-P(squeak) contours and cross
 
 
 def axis_names() -> list[str]:
+    """Names a sweep or map can vary: the operating axes, then numeric parameters."""
     return list(OPERATING_AXES) + [n for n in field_names()
                                     if field_info(n)["type"] in ("float", "int")]
 
 
 def check_axis(name: str) -> None:
+    """Raise ParameterError unless `name` is one of `axis_names()`."""
     if name not in axis_names():
         raise ParameterError(f"cannot sweep {name!r}; choose one of {', '.join(axis_names())}")
+
+
+def integer_axis(name: str) -> bool:
+    """A sweep axis of whole numbers: an int field (n_bending, n_torsion)."""
+    return name not in OPERATING_AXES and field_info(name)["type"] == "int"
+
+
+def check_axis_values(name: str, values: np.ndarray) -> None:
+    """ParameterError if an integer axis has a value that is not a whole number (it would be
+    rounded: a sweep of n_bending must not pretend to have computed n_bending = 2.5)."""
+    if integer_axis(name):
+        bad = values[values != np.round(values)]
+        if bad.size:
+            raise ParameterError(f"{name} takes whole numbers; got {exact(float(bad[0]))}")
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..physics.parameters import ParameterError
 from ..squeak_model import SqueakModel
-from .fields import (PROBABILITY_LEVELS, GrowthField, _at_cells, _fixed, _growth_rate, _levels_key,
+from .fields import (PROBABILITY_LEVELS, GrowthField, check_axis_values, _at_cells, _fixed, _growth_rate, _levels_key,
                      check_axis, growth_field, probability_field)
 from .roots import ROOT_RTOL, _crossings, _xtol, find_roots, level_crossings
 from .work import map_work
@@ -202,6 +202,8 @@ def stability_map(model: SqueakModel, x_axis: str, x, y_axis: str, y,
     if x_axis == y_axis:
         raise ParameterError("map axes must differ")
     x, y = np.asarray(x, float), np.asarray(y, float)
+    check_axis_values(x_axis, x)
+    check_axis_values(y_axis, y)
     map_work(model, x_axis, x, y_axis, y).check()
     fixed = _fixed(model, speed_rad_s, load_n)
     for a in (x_axis, y_axis):

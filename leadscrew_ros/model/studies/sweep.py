@@ -15,7 +15,7 @@ from scipy.optimize import minimize_scalar
 
 from ..physics.parameters import ParameterError, field_info
 from ..squeak_model import Prediction, SqueakModel, Validity
-from .fields import (OPERATING_AXES, PROBABILITY_LEVELS, _along, _fixed, _growth_rate, _levels_key,
+from .fields import (OPERATING_AXES, check_axis_values, integer_axis, PROBABILITY_LEVELS, _along, _fixed, _growth_rate, _levels_key,
                      _native, _probability, check_axis)
 from .roots import ROOT_RTOL, _xtol, refine_crossings, refine_level_crossings, unstable_intervals
 from .work import _chunk_points, sweep_work
@@ -174,6 +174,7 @@ def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = Non
     """
     check_axis(axis)
     values = np.asarray(values, float)
+    check_axis_values(axis, values)
     sweep_work(model, axis, values).check()
     fixed = _fixed(model, speed_rad_s, load_n)
     fixed.pop(axis, None)
@@ -204,13 +205,9 @@ def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = Non
     boundaries = refine_crossings(growth_along, values, growth)
     return SweepResult(axis, values, fixed, predictions, boundaries,
                        unstable_intervals(values, growth, boundaries),
-                       *peak_growth(growth_along, values, growth, _is_integer(axis)),
+                       *peak_growth(growth_along, values, growth, integer_axis(axis)),
                        probability_crossings(model, fixed, axis, values,
                                              _per_value(predictions, "probability")))
-
-
-def _is_integer(axis: str) -> bool:
-    return axis not in OPERATING_AXES and field_info(axis)["type"] == "int"
 
 
 def peak_growth(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, g: np.ndarray,
