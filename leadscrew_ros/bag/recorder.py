@@ -181,6 +181,9 @@ class Recorder:
         Topic -> what never arrived.
     metadata : dict of str to dict
         Metadata records written at the start of every file: name -> string map.
+    state : callable or None
+        The messages every file starts with (the node's input state and latched outputs),
+        called under the recorder's lock when a file opens.
     """
 
     settings: RecordSettings = field(default_factory=RecordSettings)
@@ -192,7 +195,6 @@ class Recorder:
     files: list[FileStats] = field(default_factory=list)
     losses: dict[str, TopicLoss] = field(default_factory=dict)
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
-    # The messages every file starts with (called under the recorder's lock when a file opens)
     state: Callable[[], list[StateMessage]] | None = None
     _out: object = None
     _writer: Writer | None = None
