@@ -19,3 +19,57 @@ if "ROS_LOG_DIR" not in os.environ:
     atexit.register(shutil.rmtree, _log_dir, ignore_errors=True)
     os.environ["ROS_LOG_DIR"] = _log_dir
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+# ----------------------------------------------------------------------------- ROS fixtures
+# One implementation of the launch-free harness (test/harness/); imported lazily, so rclpy is
+# loaded only by the tests that use it, after the environment above is set.
+import pytest  # noqa: E402
+
+
+@pytest.fixture
+def ros_world():
+    """A `harness.ros.RosWorld`: a private Context, a SingleThreadedExecutor, `make_node`,
+    `spin_until(condition, timeout, what)`, `spin_for`, `drain`, `remove`; closed after the
+    test."""
+    from harness.ros import RosWorld
+
+    with RosWorld() as world:
+        yield world
+
+
+@pytest.fixture
+def make_ros_world():
+    """`make_ros_world(ns=, args=, domain_id=, executor="single"|"events")`: as many RosWorlds
+    as a test needs (own ROS arguments, another domain), all closed after it, newest first."""
+    from harness.ros import RosWorld
+
+    made = []
+
+    def make(**kwargs):
+        made.append(RosWorld(**kwargs))
+        return made[-1]
+
+    try:
+        yield make
+    finally:
+        for world in reversed(made):
+            world.close()
+
+
+@pytest.fixture
+def ros():
+    """A `harness.squeak.SqueakWorld` (probe on every output, `start(**params)` the
+    predictor); the test fails if any output carried a non-finite number."""
+    from harness.squeak import SqueakWorld
+
+    with SqueakWorld() as world:
+        yield world
+        assert not world.violations, world.violations[:10]
+
+
+@pytest.fixture
+def ns():
+    """A topic namespace of this test alone."""
+    from harness.ros import unique_ns
+
+    return unique_ns()

@@ -10,14 +10,12 @@ from pathlib import Path
 
 import pytest
 
+from harness.blocker import BLOCKER, ROS_MODULES
+
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = REPO / "leadscrew_ros"
 LAYERS = ("model", "live", "bag", "review", "ros", "cli")
 ROS_FREE = LAYERS[:4]
-# What a module of a ROS-free layer may not import, directly or through a dependency.
-ROS_MODULES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "sensor_msgs",
-               "diagnostic_msgs", "std_srvs", "geometry_msgs", "rosidl_runtime_py",
-               "rosidl_parser", "rpyutils")
 
 
 def _modules(layer: str) -> list[str]:
@@ -89,16 +87,6 @@ def test_the_direction_check_sees_a_violation(tmp_path, monkeypatch):
         "leadscrew_ros/bag/x.py:2: bag imports leadscrew_ros.ros.node",
         "leadscrew_ros/bag/x.py:3: bag imports leadscrew_ros.review.replay",
         "leadscrew_ros/bag/x.py:5: bag imports std_msgs.msg"]
-
-
-BLOCKER = f"""
-import importlib, importlib.abc, sys
-class Block(importlib.abc.MetaPathFinder):
-    def find_spec(self, name, path=None, target=None):
-        if name.split('.')[0] in {ROS_MODULES!r}:
-            raise ImportError('blocked for this test: ' + name)
-sys.meta_path.insert(0, Block())
-"""
 
 
 @pytest.mark.parametrize("layer", ROS_FREE)

@@ -18,7 +18,7 @@ import pytest
 from mcap.writer import Writer
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as RosbagsWriter
-from test_replay import EXACT, TYPESTORE, cli, decoded, f64, run_replay, write_mcap
+from harness.logs import EXACT, TYPESTORE, cli, decoded, f64, run_replay, write_mcap
 
 from leadscrew_ros.bag import msgdefs
 from leadscrew_ros.review import replay as replay_module
