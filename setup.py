@@ -40,6 +40,9 @@ setup(
     extras_require={
         "test": [
             "pytest",
+            "pytest-cov",            # scripts/run-tests.sh: --cov
+            "coverage>=7.10",        # .coveragerc: patch = subprocess
+            "pytest-timeout",        # setup.cfg: a hung test fails by name
             "hypothesis",
             "sympy",
             "colcon-core",
