@@ -60,6 +60,9 @@ setup(
         "ros": ROS,
         "test": ROS + [          # the suite tests the node too
             "pytest",
+            "pytest-cov",            # scripts/run-tests.sh: --cov
+            "coverage>=7.10",        # .coveragerc: patch = subprocess
+            "pytest-timeout",        # setup.cfg: a hung test fails by name
             "hypothesis",
             "sympy",
             "colcon-core",

@@ -20,5 +20,15 @@ export MPLBACKEND=Agg
 if [[ $# -eq 0 ]]; then
     set -- test
 fi
-# A hang fails loudly (faulthandler dumps the stacks) instead of eating CI's time.
-timeout 1500 .venv/bin/python -m pytest -q -o faulthandler_timeout=300 "$@"
+# A hang fails by name instead of eating CI's time: pytest-timeout, faulthandler and a watchdog
+# (setup.cfg, test/conftest.py), the outer `timeout` as the last resort. The 15 slowest tests
+# and the coverage (branches, child processes too: .coveragerc) are in the output; then the
+# coverage per layer (tools/coverage_by_layer.py).
+rm -f .coverage .coverage.*
+status=0
+timeout 1500 .venv/bin/python -m pytest -q --durations=15 --cov=leadscrew_ros --cov-branch \
+    --cov-report=term "$@" || status=$?
+if [[ -e .coverage ]]; then
+    .venv/bin/python tools/coverage_by_layer.py || true
+fi
+exit "$status"

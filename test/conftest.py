@@ -19,3 +19,107 @@ if "ROS_LOG_DIR" not in os.environ:
     atexit.register(shutil.rmtree, _log_dir, ignore_errors=True)
     os.environ["ROS_LOG_DIR"] = _log_dir
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+# ----------------------------------------------------------------------------- hangs
+# pytest-timeout (setup.cfg: timeout, signal method) fails a hung test by name and goes on, but
+# its SIGALRM handler only runs when the main thread returns to Python. A test stuck in C (the
+# Fast DDS teardown deadlock of the shared notes) gets this watchdog instead: name, all stacks,
+# and the session ends, rather than the outer `timeout` of scripts/run-tests.sh much later.
+import faulthandler  # noqa: E402
+import sys  # noqa: E402
+import threading  # noqa: E402
+
+import pytest  # noqa: E402
+
+WATCHDOG_GRACE_S = 60.0
+
+
+def _hung(item, after_s: float) -> None:
+    """From the watchdog's thread: output capture off (as pytest-timeout's thread method
+    does), the test's name, every thread's stack, exit status 3."""
+    try:
+        capman = item.config.pluginmanager.getplugin("capturemanager")
+        if capman is not None:
+            capman.suspend_global_capture(item)
+        terminal = item.config.get_terminal_writer()
+        terminal.sep("+", f"HUNG: {item.nodeid} still running after {after_s:.0f} s")
+        terminal.line("its timeout could not interrupt it (stuck in C?); stacks follow, "
+                      "ending the session")
+        terminal.flush()
+        faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
+    finally:
+        sys.stderr.flush()
+        os._exit(3)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    limit = getattr(item.config, "_env_timeout", None)       # set by pytest-timeout
+    marker = item.get_closest_marker("timeout")
+    if marker is not None:
+        limit = marker.kwargs.get("timeout", marker.args[0] if marker.args else limit)
+    timer = None
+    if limit:
+        after = float(limit) + WATCHDOG_GRACE_S
+        timer = threading.Timer(after, _hung, args=(item, after))
+        timer.daemon = True
+        timer.start()
+    try:
+        yield
+    finally:
+        if timer is not None:
+            timer.cancel()
+
+
+# ----------------------------------------------------------------------------- ROS fixtures
+# One implementation of the launch-free harness (test/harness/); imported lazily, so rclpy is
+# loaded only by the tests that use it, after the environment above is set.
+
+
+@pytest.fixture
+def ros_world():
+    """A `harness.ros.RosWorld`: a private Context, a SingleThreadedExecutor, `make_node`,
+    `spin_until(condition, timeout, what)`, `spin_for`, `drain`, `remove`; closed after the
+    test."""
+    from harness.ros import RosWorld
+
+    with RosWorld() as world:
+        yield world
+
+
+@pytest.fixture
+def make_ros_world():
+    """`make_ros_world(ns=, args=, domain_id=, executor="single"|"events")`: as many RosWorlds
+    as a test needs (own ROS arguments, another domain), all closed after it, newest first."""
+    from harness.ros import RosWorld
+
+    made = []
+
+    def make(**kwargs):
+        made.append(RosWorld(**kwargs))
+        return made[-1]
+
+    try:
+        yield make
+    finally:
+        for world in reversed(made):
+            world.close()
+
+
+@pytest.fixture
+def ros():
+    """A `harness.squeak.SqueakWorld` (probe on every output, `start(**params)` the
+    predictor); the test fails if any output carried a non-finite number."""
+    from harness.squeak import SqueakWorld
+
+    with SqueakWorld() as world:
+        yield world
+        assert not world.violations, world.violations[:10]
+
+
+@pytest.fixture
+def ns():
+    """A topic namespace of this test alone."""
+    from harness.ros import unique_ns
+
+    return unique_ns()

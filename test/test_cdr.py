@@ -19,7 +19,7 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
-from cdr_reference import cdr_payload
+from harness.cdr_reference import cdr_payload
 from leadscrew_ros.bag import cdr, msgdefs
 from leadscrew_ros.bag.cdr import decode_float64, decode_joint_state
 

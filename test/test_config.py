@@ -104,45 +104,29 @@ ROS_TYPES = {"float": "DOUBLE", "int": "INTEGER", "str": "STRING", "bool": "BOOL
 
 def test_ros_reads_the_types_we_mean():
     """rcl's own YAML parser (not PyYAML) gives double / integer / string parameters."""
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.node import Node
     from rclpy.parameter import Parameter
 
-    ctx = Context()
-    rclpy.init(context=ctx, args=["--ros-args", "--params-file", str(CONFIG)])
-    try:
-        node = Node("squeak_predictor", context=ctx,
-                    automatically_declare_parameters_from_overrides=True)
-        try:
-            assert set(DEFAULTS) <= {p for p in node._parameters}
-            for name, (default, typ) in DEFAULTS.items():
-                p = node.get_parameter(name)
-                assert p.type_ == Parameter.Type[ROS_TYPES[typ]], name
-                assert _same(p.value, default, typ), name
-        finally:
-            node.destroy_node()
-    finally:
-        rclpy.shutdown(context=ctx)
+    from harness.ros import RosWorld
+
+    with RosWorld(args=["--ros-args", "--params-file", str(CONFIG)]) as world:
+        node = world.make_node("squeak_predictor", namespace="/",
+                               automatically_declare_parameters_from_overrides=True)
+        assert set(DEFAULTS) <= {p for p in node._parameters}
+        for name, (default, typ) in DEFAULTS.items():
+            p = node.get_parameter(name)
+            assert p.type_ == Parameter.Type[ROS_TYPES[typ]], name
+            assert _same(p.value, default, typ), name
 
 
 def _node_with_params_file(path: Path) -> dict:
     """Start SqueakPredictorNode with `--ros-args --params-file path`; its parameter values."""
-    import rclpy
-    from rclpy.context import Context
-
     from leadscrew_ros.ros.node import SqueakPredictorNode
 
-    ctx = Context()
-    rclpy.init(context=ctx, args=["--ros-args", "--params-file", str(path)])
-    try:
-        node = SqueakPredictorNode(context=ctx)
-        try:
-            return {name: node.get_parameter(name).value for name in DEFAULTS}
-        finally:
-            node.destroy_node()
-    finally:
-        rclpy.shutdown(context=ctx)
+    from harness.ros import RosWorld
+
+    with RosWorld(args=["--ros-args", "--params-file", str(path)]) as world:
+        node = world.add(SqueakPredictorNode(context=world.ctx))
+        return {name: node.get_parameter(name).value for name in DEFAULTS}
 
 
 def test_node_started_with_the_file_has_every_value():

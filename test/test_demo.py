@@ -4,20 +4,15 @@ subprocesses with the venv's python and the parent's environment (loopback disco
 ROS_DOMAIN_ID of its own (201..230: clear of conftest's per-process domains 1..200)."""
 
 import json
-import os
 import re
 import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import pytest
-import rclpy
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
@@ -33,53 +28,7 @@ from leadscrew_ros.model import SqueakModel, Validity
 from leadscrew_ros.bag.recorder import LOST_BY_TOPIC_KEY
 from leadscrew_ros.ros.node import LATCHED
 
-REPO = Path(__file__).resolve().parents[1]
-CLI = [sys.executable, "-m", "leadscrew_ros.cli"]
-
-
-def domain(offset: int) -> int:
-    return 201 + (os.getpid() + offset) % 30
-
-
-def env_for(domain_id: int) -> dict:
-    return dict(os.environ, ROS_DOMAIN_ID=str(domain_id),
-                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
-
-
-def start(argv, domain_id, tmp_path, name):
-    out, err = (open(tmp_path / f"{name}.{s}", "w+") for s in ("out", "err"))
-    proc = subprocess.Popen(argv, cwd=REPO, env=env_for(domain_id), stdout=out, stderr=err,
-                            text=True)
-    proc.files = (out, err)
-    return proc
-
-
-def output(proc) -> tuple[str, str]:
-    texts = []
-    for f in proc.files:
-        f.flush()
-        f.seek(0)
-        texts.append(f.read())
-    return texts[0], texts[1]
-
-
-def stop(*procs):
-    """Cleanup: anything still running is SIGKILLed, then Fast DDS shared memory it left is
-    cleaned (only zombie segments: `fastdds shm clean` leaves live processes alone)."""
-    killed = False
-    for proc in procs:
-        if proc is not None and proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=10)
-            killed = True
-        if proc is not None:
-            for f in proc.files:
-                f.close()
-    if killed:
-        tool = Path(sys.prefix) / "tools" / "fastdds" / "fastdds.py"
-        if tool.exists():
-            subprocess.run([sys.executable, str(tool), "shm", "clean"], capture_output=True,
-                           timeout=30)
+from harness.processes import CLI, domain, output, start, stop
 
 
 def summary_values(out: str) -> dict:
@@ -202,43 +151,31 @@ class RiskProbe(Node):
         self.diagnostics += 1
 
 
-def spin_until(executor, done, timeout):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline and not done():
-        executor.spin_once(timeout_sec=0.05)
-    return done()
-
-
-def test_simulate_drives_a_separately_started_node(tmp_path):
+def test_simulate_drives_a_separately_started_node(tmp_path, make_ros_world):
     """Fast DDS tells a newcomer about an older participant only at the older one's next
     periodic announcement (every ~3 s), so the order matters: the node first, then the probe
     until it receives the node's latched diagnostics (the node will reach the probe from then
     on), then the simulator, which waits for the node's subscription before its stroke."""
     dom = domain(2)
     node = sim = None
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=dom)
+    world = make_ros_world(domain_id=dom)
     try:
-        probe = RiskProbe(context=ctx)
-        executor = SingleThreadedExecutor(context=ctx)
-        executor.add_node(probe)
+        probe = world.add(RiskProbe(context=world.ctx))
         node = start([sys.executable, "-m", "leadscrew_ros.ros.node"], dom, tmp_path, "node")
-        assert spin_until(executor, lambda: probe.diagnostics or node.poll() is not None, 30)
+        world.spin_until(lambda: probe.diagnostics or node.poll() is not None, 30,
+                         "the node's latched diagnostics")
         assert node.poll() is None and probe.risks == [], output(node)
         sim = start(CLI + ["simulate", "--duration", "3", "--joint-name", "screw"], dom,
                     tmp_path, "sim")
-        spin_until(executor, lambda: sim.poll() is not None, 60)
+        world.spin_until(lambda: sim.poll() is not None, 60, "the simulator to finish")
         sim_code = sim.returncode
-        spin_until(executor, lambda: False, 0.5)             # the last predictions
+        world.spin_for(0.5)                                   # the last predictions
         assert node.poll() is None, output(node)
         node.send_signal(signal.SIGTERM)
         node_code = node.wait(timeout=20)
-        executor.shutdown()
-        probe.destroy_node()
         node_out, node_err = output(node)
         sim_out, sim_err = output(sim)
     finally:
-        rclpy.shutdown(context=ctx)
         stop(node, sim)
     assert sim_code == 0, (sim_out, sim_err)
     assert "waiting for a subscriber on /motor_speed" in sim_out and "stroke done" in sim_out
@@ -252,7 +189,7 @@ def test_simulate_drives_a_separately_started_node(tmp_path):
 
 @pytest.mark.parametrize("speed, words", [(0.1, "speed below min_speed_rad_s"),
                                           (5000.0, "speed at or above the first critical")])
-def test_the_monitor_takes_validity_from_its_key_not_from_the_message(speed, words):
+def test_the_monitor_takes_validity_from_its_key_not_from_the_message(speed, words, ros_world):
     """The status line says why there is no prediction from the validity key of /diagnostics;
     the wording of the status message plays no part."""
     lp = LivePredictor(SqueakModel())
@@ -262,16 +199,10 @@ def test_the_monitor_takes_validity_from_its_key_not_from_the_message(speed, wor
     stat = status_task(lambda: lp.status(0.0))(DiagnosticStatusWrapper())
     assert stat.values[KEY_VALIDITY] != Validity.OK.name
     stat.message = "no prediction: reworded"
-    ctx = Context()
-    rclpy.init(context=ctx)
-    try:
-        monitor = SqueakMonitor(context=ctx)
-        monitor._on_diagnostics(deserialize_message(
-            encode_diagnostic_array(0, (stat.to_data(),)), DiagnosticArray))
-        r = monitor.record
-        assert not r.valid and r.validity is Validity[stat.values[KEY_VALIDITY]]
-        assert r.validity.label.startswith(words)
-        assert status_line(1.0, None, r).endswith(f"| no prediction ({r.validity.label})")
-        monitor.destroy_node()
-    finally:
-        rclpy.shutdown(context=ctx)
+    monitor = ros_world.add(SqueakMonitor(context=ros_world.ctx))
+    monitor._on_diagnostics(deserialize_message(
+        encode_diagnostic_array(0, (stat.to_data(),)), DiagnosticArray))
+    r = monitor.record
+    assert not r.valid and r.validity is Validity[stat.values[KEY_VALIDITY]]
+    assert r.validity.label.startswith(words)
+    assert status_line(1.0, None, r).endswith(f"| no prediction ({r.validity.label})")

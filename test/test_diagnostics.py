@@ -2,23 +2,18 @@
 """The /diagnostics updater (diagnostic_updater's shape) in-process: period, force_update,
 task order, hardware id and names; the recording status it publishes for the node.
 
-Each test has its own rclpy Context and namespace (the pattern of test_node.py); time is a
+Each test has its own rclpy Context and namespace (harness.ros.RosWorld); time is a
 fake clock, so the period is tested without sleeping.
 """
 
 from __future__ import annotations
 
 import time
-import uuid
 from types import SimpleNamespace
 
 import pytest
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.context import Context
-from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
 from leadscrew_ros.ros.diagnostics import (KEY_BAG, KEY_CUT_OFF_BAGS, KEY_FILES, KEY_LOST,
@@ -26,11 +21,10 @@ from leadscrew_ros.ros.diagnostics import (KEY_BAG, KEY_CUT_OFF_BAGS, KEY_FILES,
                                            RESUME_HINT, TOPIC, DiagnosticStatusWrapper, Updater,
                                            key_lost_on, recording_status, status_task)
 from leadscrew_ros.live.status import Level, Status
-from leadscrew_ros.ros.node import LATCHED, NODE_NAME, make_executor
-from test_node import SQUEAK, at, ros  # noqa: F401  (ros: fixture)
+from leadscrew_ros.ros.node import LATCHED, NODE_NAME
 
-COLLECT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+from harness.ros import COLLECT, RosWorld
+from harness.squeak import SQUEAK, at
 
 
 class FakeClock:
@@ -41,26 +35,21 @@ class FakeClock:
         return self.t
 
 
-class World:
+class World(RosWorld):
     """A node with an Updater and a probe that collects this test's /diagnostics."""
 
     def __init__(self):
-        self.ns = f"/t{uuid.uuid4().hex}"
+        super().__init__(executor="events")          # the squeak_predictor node's executor
         self.hardware_id = f"hw_{self.ns[2:]}"
-        self.ctx = Context()
-        rclpy.init(context=self.ctx)
-        self.executor = make_executor(self.ctx)      # the squeak_predictor node's executor
-        self.node = Node("watched", context=self.ctx, namespace=self.ns)
-        self.probe = Node("probe", context=self.ctx, namespace=self.ns)
-        for n in (self.node, self.probe):
-            self.executor.add_node(n)
+        self.node = self.make_node("watched")
+        self.probe = self.make_node("probe")
         self.received: list[DiagnosticArray] = []
         self.probe.create_subscription(DiagnosticArray, TOPIC, self._on, COLLECT)
         self.clock = FakeClock()
         self.seen: list[tuple[str, bytes, int]] = []     # topic, CDR payload, stamp [ns]
         self.updater = Updater(self.node, LATCHED, period_s=1.0, hardware_id=self.hardware_id,
                                clock=self.clock, publish=self._publish)
-        self.spin_until(lambda: self.updater.publisher.get_subscription_count() > 0)
+        self.wait_matched(self.updater.publisher)
 
     def _publish(self, publisher, data: bytes, stamp_ns: int) -> None:
         self.seen.append((publisher.topic_name, data, stamp_ns))
@@ -70,36 +59,18 @@ class World:
         if any(s.hardware_id == self.hardware_id for s in msg.status):
             self.received.append(msg)
 
-    def spin_until(self, condition, timeout: float = 10.0) -> None:
-        deadline = time.monotonic() + timeout
-        while not condition():
-            assert time.monotonic() < deadline, "timeout"
-            self.executor.spin_once(timeout_sec=0.01)
-
     def arrived(self, n: int) -> list[DiagnosticArray]:
         """Wait for n arrays in all, then check that no more come."""
-        self.spin_until(lambda: len(self.received) >= n)
-        for _ in range(5):
-            self.executor.spin_once(timeout_sec=0.0)
+        self.spin_until(lambda: len(self.received) >= n, what=f"{n} diagnostic arrays")
+        self.drain()
         assert len(self.received) == n
         return self.received
-
-    def close(self) -> None:
-        try:
-            for n in (self.node, self.probe):
-                n.destroy_node()
-            self.executor.shutdown(timeout_sec=1.0)
-        finally:
-            rclpy.shutdown(context=self.ctx)
 
 
 @pytest.fixture
 def world():
-    w = World()
-    try:
+    with World() as w:
         yield w
-    finally:
-        w.close()
 
 
 def level(status) -> Level:

@@ -37,7 +37,7 @@ from leadscrew_ros.review import fleet
 from leadscrew_ros.review.fleet import INDEX_FILE, find_logs, output_names, squeak_frequencies
 from leadscrew_ros.review.replay import ReplaySettings, log_name, replay
 from leadscrew_ros.review.timeline import InputSettings
-from test_replay import rosbags_log
+from harness.logs import rosbags_log
 
 pytest.importorskip("distributed")
 

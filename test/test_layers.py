@@ -10,16 +10,14 @@ from pathlib import Path
 
 import pytest
 
+from harness.blocker import BLOCKER, ROS_MODULES
+
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = REPO / "leadscrew_ros"
 LAYERS = ("model", "live", "bag", "review", "ros", "cli")
 ROS_FREE = LAYERS[:4]
 # Inside `model`, the same one-way rule between its sub-packages (squeak_model is a module).
 MODEL_PARTS = ("physics", "uncertainty", "squeak_model", "studies", "nonlinear")
-# What a module of a ROS-free layer may not import, directly or through a dependency.
-ROS_MODULES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "sensor_msgs",
-               "diagnostic_msgs", "std_srvs", "geometry_msgs", "rosidl_runtime_py",
-               "rosidl_parser", "rpyutils")
 
 
 def _modules(layer: str) -> list[str]:
@@ -118,16 +116,6 @@ def test_the_direction_check_sees_a_model_sub_package_violation(tmp_path, monkey
     assert violations(fake.parent / "squeak_model.py") == [
         "leadscrew_ros/model/squeak_model.py:1: model.squeak_model imports "
         "leadscrew_ros.model.studies.sweep"]
-
-
-BLOCKER = f"""
-import importlib, importlib.abc, sys
-class Block(importlib.abc.MetaPathFinder):
-    def find_spec(self, name, path=None, target=None):
-        if name.split('.')[0] in {ROS_MODULES!r}:
-            raise ImportError('blocked for this test: ' + name)
-sys.meta_path.insert(0, Block())
-"""
 
 
 @pytest.mark.parametrize("layer", ROS_FREE)

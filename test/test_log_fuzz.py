@@ -5,6 +5,7 @@ deadline, either successfully or with exit code 2 and one line naming the file. 
 file read with strict=False yields a prefix of the original messages."""
 
 import signal
+import time
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -27,16 +28,26 @@ FUZZ = settings(max_examples=25, deadline=None, derandomize=True,
 
 @contextmanager
 def deadline(seconds: float):
-    """TimeoutError in this (main) thread if the block runs longer: a hang fails the test."""
+    """TimeoutError in this (main) thread if the block runs longer: a hang fails the test.
+    pytest-timeout's per-test timer (signal method) uses the same SIGALRM timer: it gets back
+    what is left of it afterwards, and is left alone when it would expire first anyway."""
+    outer = signal.getitimer(signal.ITIMER_REAL)[0]
+    if outer and outer <= seconds:
+        yield
+        return
+
     def expire(signum, frame):
         raise TimeoutError(f"still running after {seconds} s")
     old = signal.signal(signal.SIGALRM, expire)
     signal.setitimer(signal.ITIMER_REAL, seconds)
+    start = time.monotonic()
     try:
         yield
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, old)
+        if outer:
+            signal.setitimer(signal.ITIMER_REAL, max(outer - (time.monotonic() - start), 1e-3))
 
 
 def unchunked_copy(src: Path, dst: Path) -> Path:

@@ -11,12 +11,10 @@ import subprocess
 import sys
 
 import pytest
-import rclpy
-from rclpy.context import Context
 from std_msgs.msg import Bool, Float64, Float64MultiArray, MultiArrayDimension
 
-from cdr_reference import cdr_payload
-from test_layers import BLOCKER
+from harness.blocker import BLOCKER
+from harness.cdr_reference import cdr_payload
 from leadscrew_ros.bag import cdr, messages
 from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.ros.demo import SqueakMonitor
@@ -85,31 +83,25 @@ def test_malformed_modes_raise_value_error(dims, data, offset, problem):
         messages.decode_modes(cdr.encode_float64_multi_array(dims, data, offset))
 
 
-def test_the_monitor_decodes_the_outputs_and_counts_what_does_not_decode():
-    ctx = Context()
-    rclpy.init(context=ctx)
-    try:
-        monitor = SqueakMonitor(context=ctx)
-        p = MODEL.predict(SQUEAK, LOAD)
-        handlers = {messages.RISK: monitor._on_risk, messages.MARGIN: monitor._on_margin,
-                    messages.FREQUENCIES: monitor._on_frequencies,
-                    messages.ACTIVE: monitor._on_active, messages.MODES: monitor._on_modes}
-        for topic, data in messages.prediction_payloads(p):
-            monitor._decoding(handlers[topic])(data)
-        monitor._decoding(monitor._on_safe_speed)(messages.safe_speed_payload(3.0))
-        r = monitor.record
-        assert (r.predictions, r.probability, r.max_probability, r.active, r.safe_speed) == (
-            1, p.probability, p.probability, True, 3.0)
-        assert r.margin == r.min_margin == p.margin < 0
-        assert r.frequencies == list(p.unstable_frequencies_hz)
-        assert r.squeak_modes == [(m.label, m.frequency_hz) for m in p.modes
-                                  if m.growth_rate > 0] != []
-        for handler in handlers.values():
-            monitor._decoding(handler)(b"\x00\x01\x00\x00\x07")
-        assert r.malformed == 5 and r.predictions == 1
-        monitor.destroy_node()
-    finally:
-        rclpy.shutdown(context=ctx)
+def test_the_monitor_decodes_the_outputs_and_counts_what_does_not_decode(ros_world):
+    monitor = ros_world.add(SqueakMonitor(context=ros_world.ctx))
+    p = MODEL.predict(SQUEAK, LOAD)
+    handlers = {messages.RISK: monitor._on_risk, messages.MARGIN: monitor._on_margin,
+                messages.FREQUENCIES: monitor._on_frequencies,
+                messages.ACTIVE: monitor._on_active, messages.MODES: monitor._on_modes}
+    for topic, data in messages.prediction_payloads(p):
+        monitor._decoding(handlers[topic])(data)
+    monitor._decoding(monitor._on_safe_speed)(messages.safe_speed_payload(3.0))
+    r = monitor.record
+    assert (r.predictions, r.probability, r.max_probability, r.active, r.safe_speed) == (
+        1, p.probability, p.probability, True, 3.0)
+    assert r.margin == r.min_margin == p.margin < 0
+    assert r.frequencies == list(p.unstable_frequencies_hz)
+    assert r.squeak_modes == [(m.label, m.frequency_hz) for m in p.modes
+                              if m.growth_rate > 0] != []
+    for handler in handlers.values():
+        monitor._decoding(handler)(b"\x00\x01\x00\x00\x07")
+    assert r.malformed == 5 and r.predictions == 1
 
 
 def test_outputs_encode_without_any_ros_package():

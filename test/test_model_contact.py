@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Contact integrals: the closed form against quadrature (test/contact_quadrature.py and scipy's
-adaptive quad) over a range of geometries; computed once per geometry; operating-point
-scaling."""
+"""Contact integrals: the closed form against quadrature (test/harness/contact_quadrature.py
+and scipy's adaptive quad) over a range of geometries; computed once per geometry;
+operating-point scaling."""
 
 import math
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from contact_quadrature import quadrature_integrals
+from harness.contact_quadrature import quadrature_integrals
 from leadscrew_ros.model import ScrewParameters, SqueakModel, modal_basis
 from leadscrew_ros.model.physics.contact import contact_angles, contact_integrals, helix_contact
 from leadscrew_ros.model.physics.friction import gamma, mu_o

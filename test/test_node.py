@@ -1,10 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
 """The squeak_predictor node over loopback DDS, launch-free.
 
-Each test gets its own rclpy Context, a unique namespace for the node and the probe, and one
-SingleThreadedExecutor spun with deadlines (`Ros`, below). conftest.py keeps DDS on loopback
-(ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) and on a domain of this test process. Every message on
-every output topic is checked for non-finite numbers as it arrives.
+Each test gets its own rclpy Context, a unique namespace for the node and the probe, and the
+node's executor spun with deadlines (the `ros` fixture, harness.squeak). conftest.py keeps DDS
+on loopback (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST) and on a domain of this test process.
+Every message on every output topic is checked for non-finite numbers as it arrives.
 """
 
 from __future__ import annotations
@@ -14,195 +14,30 @@ import math
 import os
 import signal
 import subprocess
-import sys
 import time
 import tracemalloc
 import uuid
-from pathlib import Path
 
 import pytest
-import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.context import Context
-from rclpy.node import Node
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, Float64, Float64MultiArray
+from std_msgs.msg import Float64, Float64MultiArray
 
 from leadscrew_ros.live.status import (KEY_FORMULATION, KEY_MARGIN, KEY_NUT_POSITION,
                                        KEY_PROBABILITY, KEY_SPEED, KEY_VALIDITY, Level)
-from leadscrew_ros.live.settings import LiveSettings
-from leadscrew_ros.model import SqueakModel, Validity
+from leadscrew_ros.model import Validity
 from leadscrew_ros.model.studies.advice import speed_bands
 from leadscrew_ros.model.uncertainty.scatter import DEFAULT_SCATTER, Scatter
-from leadscrew_ros.bag.messages import MODE_COLUMNS, modes_payload
-from leadscrew_ros.ros.node import NODE_NAME, SqueakPredictorNode, make_executor
+from leadscrew_ros.bag.messages import MODE_COLUMNS
+from leadscrew_ros.ros.node import NODE_NAME
 
-# Table 1, default scatter: nominal squeak band ~0.81..55.2 rad/s at 200 N; P(squeak) 0.997 at
-# 20 rad/s, 0 at 100 rad/s
-MODEL = SqueakModel()
-LOAD, SQUEAK, STABLE = 200.0, 20.0, 100.0
-SAFE = LiveSettings().safe_probability
-OUTPUTS = {"squeak/risk": Float64, "squeak/margin": Float64,
-           "squeak/unstable_frequencies": Float64MultiArray,
-           "squeak/active": Bool, "squeak/modes": Float64MultiArray,
-           "squeak/safe_speed": Float64, "/diagnostics": DiagnosticArray}
-INPUTS = {"motor_speed": Float64, "axial_load": Float64, "nut_position": Float64,
-          "joint_states": JointState}
-# every message of a test, however fast they come: reliable, deep, and late-joining
-COLLECT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+from harness.processes import node_command, stop, wait_initialised
+from harness.ros import COLLECT
+from harness.squeak import (INPUTS, LOAD, MODEL, OUTPUTS, SAFE, SQUEAK, STABLE, at, modes_data,
+                            non_finite)
 
-
-def non_finite(msg) -> list[str]:
-    """Numbers in an output message that are NaN or infinite (squeak/margin is +inf without an
-    oscillatory mode, never in these tests)."""
-    if isinstance(msg, Float64):
-        values = [msg.data]
-    elif isinstance(msg, Float64MultiArray):
-        values = list(msg.data)
-    elif isinstance(msg, DiagnosticArray):
-        values = []
-        for s in msg.status:
-            for kv in s.values:
-                for token in kv.value.split(","):
-                    try:
-                        values.append(float(token))
-                    except ValueError:
-                        pass
-    else:
-        values = []
-    return [f"{type(msg).__name__}: {v}" for v in values if not math.isfinite(v)]
-
-
-class Ros:
-    """One test's ROS world: a private context, a probe node (and optionally the predictor)
-    in a unique namespace, and one executor for both."""
-
-    def __init__(self):
-        self.ns = f"/t{uuid.uuid4().hex}"
-        self.hardware_id = f"hw_{self.ns[2:]}"
-        self.ctx = Context()
-        rclpy.init(context=self.ctx)
-        self.executor = make_executor(self.ctx)
-        self.probe = Node("probe", context=self.ctx, namespace=self.ns)
-        self.executor.add_node(self.probe)
-        self.node: SqueakPredictorNode | None = None
-        self.latest: dict[str, object] = {}
-        self.count = dict.fromkeys(OUTPUTS, 0)
-        self.violations: list[str] = []
-        self.pubs = {}
-        for topic, msg_type in OUTPUTS.items():
-            self.probe.create_subscription(msg_type, topic,
-                                           lambda msg, t=topic: self._received(t, msg), COLLECT)
-
-    def _received(self, topic: str, msg) -> None:
-        if topic == "/diagnostics":          # absolute topic: keep this test's status only
-            status = [s for s in msg.status if s.hardware_id == self.hardware_id]
-            if not status:
-                return
-            msg.status = status
-        self.violations += non_finite(msg)
-        self.latest[topic] = msg
-        self.count[topic] += 1
-
-    def start(self, **params) -> SqueakPredictorNode:
-        """The predictor in this test's namespace, with parameter overrides."""
-        overrides = [Parameter(k, value=v) for k, v in
-                     {"hardware_id": self.hardware_id, **params}.items()]
-        self.node = SqueakPredictorNode(context=self.ctx, namespace=self.ns,
-                                        parameter_overrides=overrides)
-        self.executor.add_node(self.node)
-        return self.node
-
-    def spin_until(self, condition, timeout: float = 10.0, what: str = "condition") -> None:
-        deadline = time.monotonic() + timeout
-        while not condition():
-            if time.monotonic() > deadline:
-                raise AssertionError(f"timeout after {timeout} s waiting for {what}; latest "
-                                     f"outputs: {self.latest}")
-            self.executor.spin_once(timeout_sec=0.01)
-
-    def remove(self, node) -> None:
-        """Take `node` out of the executor, then destroy it. The EventsExecutor (rclpy 7.1.6)
-        still runs events queued for a node after `remove_node`, so the queue is emptied
-        first (nothing new arrives meanwhile: the probe sends nothing while this runs)."""
-        end = time.monotonic() + 0.2
-        while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=0.01)
-        self.executor.remove_node(node)
-        node.destroy_node()
-
-    def drain(self, rounds: int = 5) -> None:
-        """Handle whatever is ready now (no waiting for anything new)."""
-        for _ in range(rounds):
-            self.executor.spin_once(timeout_sec=0.0)
-
-    def publisher(self, topic: str, timeout: float = 10.0):
-        if topic not in self.pubs:
-            pub = self.probe.create_publisher(INPUTS[topic], topic, 10)
-            self.spin_until(lambda: pub.get_subscription_count() > 0, timeout,
-                            f"a subscriber on {topic}")
-            self.pubs[topic] = pub
-        return self.pubs[topic]
-
-    def send(self, topic: str, value) -> None:
-        msg = value if isinstance(value, JointState) else Float64(data=float(value))
-        self.publisher(topic).publish(msg)
-
-    def wait_for(self, topic: str, predicate, timeout: float = 10.0):
-        """The latest message on an output topic, once it satisfies `predicate`."""
-        self.spin_until(lambda: topic in self.latest and predicate(self.latest[topic]),
-                        timeout, f"a matching message on {topic}")
-        return self.latest[topic]
-
-    def status(self, predicate, timeout: float = 10.0) -> DiagnosticStatus:
-        return self.wait_for("/diagnostics", lambda m: predicate(m.status[0]),
-                             timeout).status[0]
-
-    def close(self) -> None:
-        try:
-            for node in (self.node, self.probe):
-                if node is not None:
-                    node.destroy_node()
-            self.executor.shutdown(timeout_sec=1.0)
-        finally:
-            rclpy.shutdown(context=self.ctx)
-
-
-@pytest.fixture
-def ros():
-    r = Ros()
-    try:
-        yield r
-        assert not r.violations, r.violations[:10]
-    finally:
-        r.close()
-
-
-def at(ros: Ros, speed: float, load: float = LOAD, model: SqueakModel = MODEL):
-    """Send an operating point and wait for the prediction published for it (its modes: the
-    probability alone is the same at many points)."""
-    core = model.predict(speed, load)
-    ros.send("motor_speed", speed)
-    ros.send("axial_load", load)
-    ros.wait_for("squeak/modes", lambda m: list(m.data) == pytest.approx(modes_data(core),
-                                                                         rel=1e-9))
-    ros.wait_for("squeak/risk", lambda m: m.data == core.probability)
-    ros.wait_for("squeak/margin", lambda m: m.data == pytest.approx(core.margin, rel=1e-9))
-    # safe-speed advice comes from a background search: wait for it to be published too
-    live = ros.node.live
-    ros.spin_until(lambda: not live.advice_pending, 30.0, "safe-speed advice")
-    ros.wait_for("squeak/safe_speed", lambda m: m.data == live.safe_speed_rad_s)
-    return core
-
-
-def modes_data(p) -> list[float]:
-    """The values of the squeak/modes message of a prediction."""
-    return list(deserialize_message(modes_payload(p), Float64MultiArray).data)
 
 
 def growth(modes: Float64MultiArray) -> float:
@@ -639,38 +474,12 @@ def test_destroy_node_does_not_hang(ros):
 
 
 # ----------------------------------------------------------------------------- process
-def node_command() -> list[str]:
-    script = Path(sys.executable).with_name("squeak_node")
-    return [str(script)] if script.exists() else [sys.executable, "-m", "leadscrew_ros.ros.node"]
-
-
-def stop(proc: subprocess.Popen) -> None:
-    """Failure path only: SIGTERM, then SIGKILL as the last resort."""
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-
-
-def wait_initialised(procs: list[subprocess.Popen], timeout: float = 10.0) -> None:
-    """Wait until each process has run rclpy.init (its log file exists in ROS_LOG_DIR)."""
-    log_dir, deadline = Path(os.environ["ROS_LOG_DIR"]), time.monotonic() + timeout
-    for proc in procs:
-        while not any(log_dir.glob(f"*_{proc.pid}_*.log")):
-            assert proc.poll() is None, f"node process exited early ({proc.returncode})"
-            assert time.monotonic() < deadline, "node process did not initialise rclpy"
-            time.sleep(0.01)
-
-
-def test_node_processes_answer_and_exit_cleanly_on_sigterm_and_sigint(tmp_path):
+def test_node_processes_answer_and_exit_cleanly_on_sigterm_and_sigint(tmp_path, make_ros_world):
     """Two node processes, one per signal, on this test process's private domain over loopback
     DDS; each is busy with inputs when it gets its signal (a callback publishing while rclpy
     shuts the context down must not end in a traceback)."""
     assert os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
-    ns, children, ros = f"/t{uuid.uuid4().hex}", {}, None
+    ns, children = f"/t{uuid.uuid4().hex}", {}
     try:
         for sig in (signal.SIGTERM, signal.SIGINT):
             err = tmp_path / f"{sig.name}.stderr"
@@ -684,11 +493,9 @@ def test_node_processes_answer_and_exit_cleanly_on_sigterm_and_sigint(tmp_path):
         # of it only at the next periodic announcement (3 s). Creating ours once the children
         # have initialised lets the initial announcements of both sides meet (~0.1 s).
         wait_initialised([c["proc"] for c in children.values()])
-        ros = Ros()
+        ros = make_ros_world(ns=ns, executor="events")
         for sig, child in children.items():
-            probe = child["probe"] = Node("probe", context=ros.ctx,
-                                          namespace=f"{ns}/{sig.name.lower()}")
-            ros.executor.add_node(probe)
+            probe = ros.make_node("probe", namespace=f"{ns}/{sig.name.lower()}")
             probe.create_subscription(Float64, "squeak/risk", child["risk"].append, COLLECT)
             probe.create_subscription(
                 DiagnosticArray, "/diagnostics", lambda m, c=child, h=f"hw_{ns[2:]}_{sig.name}":
@@ -732,12 +539,7 @@ def test_node_processes_answer_and_exit_cleanly_on_sigterm_and_sigint(tmp_path):
             assert stderr.splitlines()[-1] == f"{NODE_NAME}: stopped by {sig.name}", sig
     finally:
         for child in children.values():
-            stop(child["proc"])
-        if ros is not None:
-            for child in children.values():
-                if "probe" in child:
-                    child["probe"].destroy_node()
-            ros.close()
+            stop(child["proc"], grace_s=5.0)
 
 
 @pytest.mark.parametrize("param, words", [

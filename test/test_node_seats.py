@@ -7,20 +7,17 @@ from __future__ import annotations
 
 import os
 import subprocess
-import time
 from pathlib import Path
 
-import rclpy
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from leadscrew_ros.ros.node import NODE_NAME, SqueakPredictorNode
 from leadscrew_ros.ros.parameters import PARAMETER_NAMES
-from test_node import COLLECT, node_command
+
+from harness.processes import node_command
+from harness.ros import COLLECT, RosWorld
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "leadscrew.yaml"
 
@@ -28,18 +25,11 @@ CONFIG = Path(__file__).resolve().parents[1] / "config" / "leadscrew.yaml"
 def node_with_ros_args(args: list[str]) -> dict:
     """SqueakPredictorNode on a context initialised with `args` (as from the command line):
     its namespace and parameter values."""
-    ctx = Context()
-    rclpy.init(context=ctx, args=["squeak_node", "--ros-args", *args])
-    try:
-        node = SqueakPredictorNode(context=ctx)
-        try:
-            return {"namespace": node.get_namespace(),
-                    **{p.name: p.value for p in node.get_parameters(PARAMETER_NAMES)},
-                    "radius_m": node.get_parameter("radius_m").value}
-        finally:
-            node.destroy_node()
-    finally:
-        rclpy.shutdown(context=ctx)
+    with RosWorld(args=["squeak_node", "--ros-args", *args]) as world:
+        node = world.add(SqueakPredictorNode(context=world.ctx))
+        return {"namespace": node.get_namespace(),
+                **{p.name: p.value for p in node.get_parameters(PARAMETER_NAMES)},
+                "radius_m": node.get_parameter("radius_m").value}
 
 
 def test_the_shipped_file_applies_to_a_namespaced_node(tmp_path):
@@ -67,37 +57,24 @@ def test_the_shipped_file_applies_to_a_namespaced_node(tmp_path):
     assert node_with_ros_args([*ns, "--params-file", str(old)])["max_rate_hz"] == 100.0
 
 
-def test_two_seats_have_distinct_status_names_and_bags(tmp_path):
-    ctx = Context()
-    rclpy.init(context=ctx)
-    executor = SingleThreadedExecutor(context=ctx)
-    nodes, names = [], set()
-    try:
-        probe = Node("probe", context=ctx)
-        executor.add_node(probe)
-        probe.create_subscription(DiagnosticArray, "/diagnostics", lambda m: names.update(
-            s.name for s in m.status), COLLECT)
-        for seat in ("/seat_left", "/seat_right"):
-            node = SqueakPredictorNode(context=ctx, namespace=seat, parameter_overrides=[
-                Parameter("record.enabled", value=True),
-                Parameter("record.directory", value=str(tmp_path))])
-            executor.add_node(node)
-            nodes.append(node)
-        want = {f"/seat_{side}/{NODE_NAME}: {what}" for side in ("left", "right")
-                for what in ("squeak prediction", "recording")}
-        deadline = time.monotonic() + 20.0
-        while not want <= names:
-            assert time.monotonic() < deadline, names
-            executor.spin_once(timeout_sec=0.05)
-        left, right = (n.recorder.bag for n in nodes)
-        assert left.name.startswith("seat_left_squeak_") and right.name.startswith(
-            "seat_right_squeak_") and left.parent == right.parent == tmp_path
-    finally:
-        for node in nodes:
-            executor.remove_node(node)
-            node.destroy_node()
-        executor.shutdown(timeout_sec=1.0)
-        rclpy.shutdown(context=ctx)
+def test_two_seats_have_distinct_status_names_and_bags(tmp_path, ros_world):
+    names = set()
+    probe = ros_world.make_node("probe", namespace="/")
+    probe.create_subscription(DiagnosticArray, "/diagnostics", lambda m: names.update(
+        s.name for s in m.status), COLLECT)
+    nodes = [ros_world.add(SqueakPredictorNode(
+        context=ros_world.ctx, namespace=seat, parameter_overrides=[
+            Parameter("record.enabled", value=True),
+            Parameter("record.directory", value=str(tmp_path))]))
+        for seat in ("/seat_left", "/seat_right")]
+    want = {f"/seat_{side}/{NODE_NAME}: {what}" for side in ("left", "right")
+            for what in ("squeak prediction", "recording")}
+    ros_world.spin_until(lambda: want <= names, 20.0, "the status names of both seats")
+    left, right = (n.recorder.bag for n in nodes)
+    assert left.name.startswith("seat_left_squeak_") and right.name.startswith(
+        "seat_right_squeak_") and left.parent == right.parent == tmp_path
+    for node in nodes:                               # each bag finished before it is checked
+        ros_world.remove(node)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([left.name, right.name])
     for bag in (left, right):
         assert (bag / "metadata.yaml").is_file()

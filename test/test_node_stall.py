@@ -16,23 +16,19 @@ benchmarks/bench_advice.py measures.
 from __future__ import annotations
 
 import math
-import threading
 import time
 import uuid
 from dataclasses import dataclass, field
 from unittest import mock
 
-import rclpy
 from rcl_interfaces.srv import GetParameters
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
 
 from leadscrew_ros.model import SqueakModel
-from leadscrew_ros.ros.node import SqueakPredictorNode, make_executor
-from test_node import COLLECT
+from leadscrew_ros.ros.node import SqueakPredictorNode
+
+from harness.ros import COLLECT, RosWorld, Spinner, new_executor
 
 RATE_HZ = 50.0
 CALL_PERIOD_S = 0.05               # get_parameters calls start this far apart (or on answer)
@@ -67,11 +63,6 @@ class StallStats:
         return max(b - a for a, b in zip(t, t[1:], strict=False))
 
 
-def _spin(executor, stop: threading.Event) -> None:
-    while not stop.is_set():
-        executor.spin_once(timeout_sec=0.05)
-
-
 def stall_run(n_modes: int, duration_s: float, count_searches=None) -> StallStats:
     """Stream `operating_point` at RATE_HZ for `duration_s` into a node with `n_modes` bending
     and torsion orders, calling get_parameters from another node every CALL_PERIOD_S.
@@ -91,20 +82,16 @@ def stall_run(n_modes: int, duration_s: float, count_searches=None) -> StallStat
 
 
 def _stall_run(n_modes, duration_s, count_searches, ns, stats) -> StallStats:
-    ctx = Context()
-    rclpy.init(context=ctx)
-    stop = threading.Event()
-    node_executor = make_executor(ctx)           # the node's own, as in squeak_node
-    executor = SingleThreadedExecutor(context=ctx)
-    node = driver = spinner = None
+    world = RosWorld(ns=ns)                      # the driver's side, spun in this thread
+    node_executor = new_executor("events", world.ctx)   # the node's own, as in squeak_node
+    node = spinner = None
     try:
-        node = SqueakPredictorNode(context=ctx, namespace=ns, parameter_overrides=[
+        node = SqueakPredictorNode(context=world.ctx, namespace=ns, parameter_overrides=[
             Parameter("n_bending", value=n_modes), Parameter("n_torsion", value=n_modes)])
         node_executor.add_node(node)
-        spinner = threading.Thread(target=_spin, args=(node_executor, stop), daemon=True)
-        spinner.start()
-        driver = Node("driver", context=ctx, namespace=ns)
-        executor.add_node(driver)
+        spinner = Spinner(node_executor)
+        driver = world.make_node("driver")
+        executor = world.executor
         speed_pub = driver.create_publisher(Float64, "motor_speed", 10)
         load_pub = driver.create_publisher(Float64, "axial_load", 10)
         driver.create_subscription(Float64, "squeak/risk",
@@ -113,11 +100,8 @@ def _stall_run(n_modes, duration_s, count_searches, ns, stats) -> StallStats:
                                    lambda m: stats.safe_speeds.append(m.data), COLLECT)
         client = driver.create_client(GetParameters,
                                       f"{node.get_fully_qualified_name()}/get_parameters")
-        deadline = time.monotonic() + 20.0
-        while not (client.service_is_ready() and speed_pub.get_subscription_count()
-                   and load_pub.get_subscription_count()):
-            assert time.monotonic() < deadline, "discovery timed out"
-            executor.spin_once(timeout_sec=0.05)
+        world.spin_until(lambda: client.service_is_ready() and speed_pub.get_subscription_count()
+                         and load_pub.get_subscription_count(), 20.0, "discovery")
 
         request = GetParameters.Request(names=["n_bending", "speed_deadband_rad_s"])
         recomputes0, searches0 = node.live.recomputes, count_searches() if count_searches else 0
@@ -156,15 +140,12 @@ def _stall_run(n_modes, duration_s, count_searches, ns, stats) -> StallStats:
         stats.searches = (count_searches() if count_searches else 0) - searches0
         return stats
     finally:
-        stop.set()
         if spinner is not None:         # ends after the current callback (minutes on old code)
-            spinner.join(timeout=120.0)
-        for n in (driver, node):
-            if n is not None:
-                n.destroy_node()
-        executor.shutdown(timeout_sec=1.0)
+            spinner.stop(timeout=120.0)
+        if node is not None:
+            node.destroy_node()
         node_executor.shutdown(timeout_sec=1.0)
-        rclpy.shutdown(context=ctx)
+        world.close()
 
 
 def test_parameters_and_predictions_never_wait_for_safe_speed_advice(monkeypatch):

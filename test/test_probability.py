@@ -129,12 +129,6 @@ def test_geometry_scatter_fast_estimator_follows_the_model_per_sample(speed, sd)
     assert fast.probability == pytest.approx(mc.probability, abs=0.03)
 
 
-def test_more_geometry_fields_than_the_live_estimate_takes_is_one_clear_error():
-    sd = {"radius_m": 0.01, "nut_position_m": 0.01, "helix_angle_rad": 0.01}
-    with pytest.raises(ParameterError, match="3 geometry fields scatter"):
-        MODEL.with_scatter(Scatter(sd), 64)
-
-
 def test_prediction_carries_the_fast_probability():
     """`predict` shares its eigen-solve with the estimator: the same number as `linearised`
     on the model's own samples; with no scatter it is the nominal verdict, stderr None."""

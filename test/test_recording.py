@@ -2,13 +2,12 @@
 """MCAP recording by the squeak_predictor node: round trip through three independent readers,
 the ~/record service, splitting, compression, record directories (created, or the set
 rejected), completeness under load and loss counting, sim time, cut-off bags reported on start,
-and crash safety (SIGKILL/SIGTERM of a node process). Uses the launch-free `Ros` world of
-test_node.py."""
+and crash safety (SIGKILL/SIGTERM of a node process). Uses the launch-free world of
+harness.squeak (the `ros` fixture) and harness.recording."""
 
 from __future__ import annotations
 
 import array
-import contextlib
 import dataclasses
 import json
 import os
@@ -17,7 +16,6 @@ import signal
 import subprocess
 import sys
 import time
-import uuid
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +26,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
@@ -45,20 +42,13 @@ from leadscrew_ros.bag.logfile import LogError, inspect, is_complete, log_files,
 from leadscrew_ros.live.status import Level
 from leadscrew_ros.bag.recorder import (LOST_BY_TOPIC_KEY, LOST_KEY, Recorder, RecordSettings,
                                         TopicLoss)
-from cdr_reference import cdr_payload
-from test_node import COLLECT, LOAD, SQUEAK, STABLE, Ros, at, node_command, wait_initialised
-from test_demo import stop as stop_processes
+
+from harness.cdr_reference import cdr_payload
+from harness.recording import answering_node
+from harness.ros import COLLECT
+from harness.squeak import LOAD, SQUEAK, STABLE, SqueakWorld, at, recording_status
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
-
-
-@pytest.fixture
-def ros():
-    r = Ros()
-    try:
-        yield r
-    finally:
-        r.close()
 
 
 def plain(value):
@@ -99,7 +89,7 @@ def joint_state(angle: float, speed: float) -> JointState:
     return js
 
 
-def drive(ros: Ros, node) -> list[tuple[str, object]]:
+def drive(ros: SqueakWorld, node) -> list[tuple[str, object]]:
     """Inputs on all four topics through the squeak band and out; waits for each answer."""
     sent = []
     for speed, nut in ((5.0, 0.10), (SQUEAK, 0.12), (40.0, 0.12), (100.0, 0.14)):
@@ -381,19 +371,6 @@ def test_invalid_record_parameters_are_rejected(ros, name, value, words):
     assert node.get_parameter(name).value != value
 
 
-def recording_status(ros: Ros, predicate, timeout: float = 3.0):
-    """The latest 'recording' diagnostic of this test's node, once it satisfies predicate."""
-    found = []
-
-    def check():
-        msg = ros.latest.get("/diagnostics")
-        found[:] = [s for s in (msg.status if msg else []) if s.name.endswith(": recording")]
-        return bool(found) and predicate(found[0])
-
-    ros.spin_until(check, timeout, "a matching recording diagnostic")
-    return found[0]
-
-
 def test_a_missing_record_directory_is_created(ros, tmp_path):
     """Like `ros2 bag record -o`: mkdir -p, at start-up and when enabled later."""
     missing = tmp_path / "no" / "such" / "dir"
@@ -460,87 +437,6 @@ def test_start_up_with_an_unusable_directory_is_an_error_and_the_parameter_reads
 
 
 # ----------------------------------------------------------------------------- processes
-def start_recording_node(tmp_path: Path, ns: str, extra: list[str] = (), preexec_fn=None
-                         ) -> tuple[subprocess.Popen, Path]:
-    directory = tmp_path / "bags"
-    directory.mkdir()
-    err = open(tmp_path / "node.stderr", "w+")
-    proc = subprocess.Popen(
-        [*node_command(), "--ros-args", "-r", f"__ns:={ns}", "-p", f"hardware_id:=hw_{ns[2:]}",
-         "-p", "record.enabled:=true", "-p", f"record.directory:={directory}", *extra],
-        stdout=subprocess.DEVNULL, stderr=err, env=dict(os.environ), preexec_fn=preexec_fn)
-    proc.files = [err, err]
-    return proc, directory
-
-
-class Feed:
-    """Probe side of a node process: publishes inputs, collects risk and recording status."""
-
-    def __init__(self, ns: str):
-        self.ros = Ros()
-        self.node = Node("feed", context=self.ros.ctx, namespace=ns)
-        self.ros.executor.add_node(self.node)
-        self.risk, self.recording = [], []
-        self.node.create_subscription(Float64, "squeak/risk", self.risk.append, COLLECT)
-        self.node.create_subscription(
-            DiagnosticArray, "/diagnostics", lambda m: self.recording.extend(
-                s for s in m.status if s.hardware_id == f"hw_{ns[2:]}"
-                and s.name.endswith(": recording")), COLLECT)
-        self.pubs = [self.node.create_publisher(type_, topic, 10) for type_, topic in
-                     ((Float64, "motor_speed"), (Float64, "axial_load"),
-                      (JointState, "joint_states"))]
-        for pub in self.pubs:
-            self.ros.spin_until(lambda p=pub: p.get_subscription_count() > 0,
-                                10.0, f"node subscribing {pub.topic_name}")
-        self.sent = 0
-
-    def send(self, i: int, joints: int = 1) -> None:
-        self.pubs[0].publish(Float64(data=SQUEAK + i % 20))
-        self.pubs[1].publish(Float64(data=LOAD))
-        if joints > 1:
-            self.pubs[2].publish(JointState(name=[f"joint_{k:04d}" for k in range(joints)],
-                                            position=[0.0] * joints))
-        self.sent += 1
-        self.ros.executor.spin_once(timeout_sec=0.0)
-
-    def run(self, seconds: float, rate_hz: float = 200.0, **kw) -> None:
-        t0 = time.monotonic()
-        k = 0
-        while (now := time.monotonic()) < t0 + seconds:
-            if now >= t0 + k / rate_hz:
-                self.send(k, **kw)
-                k += 1
-            self.ros.executor.spin_once(timeout_sec=0.001)
-
-    def close(self) -> None:
-        self.node.destroy_node()
-        self.ros.close()
-
-
-@contextlib.contextmanager
-def answering_node(tmp_path: Path, ns: str, extra: list[str] = (), preexec_fn=None):
-    """A recording node process and a Feed it already answers; both cleaned up on exit."""
-    proc, directory = start_recording_node(tmp_path, ns, extra, preexec_fn)
-    feed = None
-    try:
-        wait_initialised([proc])
-        feed = Feed(ns)
-        deadline = time.monotonic() + 10
-        while not feed.risk:
-            assert time.monotonic() < deadline, "no answer from the node process"
-            feed.run(0.05)
-        yield proc, directory, feed
-    finally:
-        stop_processes(proc)
-        if feed is not None:
-            feed.close()
-
-
-@pytest.fixture
-def ns():
-    return f"/t{uuid.uuid4().hex}"
-
-
 def test_sigkill_loses_at_most_one_second_and_the_file_is_recoverable(tmp_path, ns):
     with answering_node(tmp_path, ns) as (proc, directory, feed):
         feed.run(2.0)                          # 2 s of 200 Hz speed + load
@@ -772,10 +668,7 @@ def test_cut_off_bags_of_an_earlier_run_are_reported_on_start_and_auto_recovered
     other = directory / "seat_right_squeak_2025_01_01-00_00_00_000"
     other.mkdir()
     (other / f"{other.name}_0.mcap").write_bytes(b"\x89MCAP0\r\n")     # cut off, not ours
-    r = Ros()
-    r.ns = ns
-    try:
-        r.hardware_id = f"hw_{ns[2:]}"
+    with SqueakWorld(ns=ns) as r:
         node = r.start(**{"record.directory": str(directory)})
         status = recording_status(r, lambda s: s.level == bytes([Level.WARN]))
         assert str(cut) in status.message and "leadscrew-squeak recover BAGDIR" in \
@@ -792,5 +685,3 @@ def test_cut_off_bags_of_an_earlier_run_are_reported_on_start_and_auto_recovered
         with RosbagsReader(cut) as reader:
             assert reader.message_count > 0
         assert not (other / "metadata.yaml").exists()
-    finally:
-        r.close()

@@ -3,8 +3,8 @@
 file that is still being recorded alone; a file deleted or replaced under the node is an ERROR
 and the recording goes on in a new file; every file starts with the node's input state, so that
 its replay reproduces the node's predictions; a full disk turns `record.enabled` off with one
-log line and a later start records cleanly. In-process node on the launch-free `Ros` world of
-test_node.py."""
+log line and a later start records cleanly. In-process node on the launch-free `ros` fixture
+(harness.squeak.SqueakWorld)."""
 
 from __future__ import annotations
 
@@ -27,28 +27,14 @@ from leadscrew_ros.bag.logfile import inspect, is_complete, log_files, read_log
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
 from leadscrew_ros.cli import main
 from leadscrew_ros.ros.input_recording import InputRecording
-from test_node import LOAD, MODEL, SQUEAK, STABLE, Ros, at, modes_data
-from test_recording import recording_status
+from harness.logs import cli
+from harness.squeak import (LOAD, MODEL, SQUEAK, STABLE, SqueakWorld, at, modes_data,
+                            recording_status)
 
 ERROR = b"\x02"
 
 
-@pytest.fixture
-def ros():
-    r = Ros()
-    try:
-        yield r
-    finally:
-        r.close()
-
-
-def cli(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def record(ros: Ros, on: bool) -> SetBool.Response:
+def record(ros: SqueakWorld, on: bool) -> SetBool.Response:
     """Call the node's ~/record service."""
     client = ros.probe.create_client(SetBool, f"{ros.ns}/squeak_predictor/record")
     ros.spin_until(client.service_is_ready, 5.0, "the ~/record service")
@@ -57,7 +43,7 @@ def record(ros: Ros, on: bool) -> SetBool.Response:
     return future.result()
 
 
-def speed(ros: Ros, value: float) -> None:
+def speed(ros: SqueakWorld, value: float) -> None:
     """Send a speed only (the load is the node's state) and wait for its prediction."""
     core = MODEL.predict(value, LOAD)
     ros.send("motor_speed", value)
@@ -71,7 +57,7 @@ def floats(path: Path, topic: str) -> list[float]:
     return [deserialize_message(m.data, Float64).data for m in read_log(path, {topic})]
 
 
-def recording_node(ros: Ros, directory: Path):
+def recording_node(ros: SqueakWorld, directory: Path):
     node = ros.start(**{"record.enabled": True, "record.directory": str(directory),
                         "record.flush_period_s": 0.05})
     at(ros, SQUEAK)

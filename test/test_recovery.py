@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
 """Crash recovery closes the loop: `leadscrew-squeak recover BAGDIR|FILE` (`logfile.recover_bag`)
 leaves a bag that rosbags, the mcap reader and `replay` open; in place, verified, idempotent.
-The crash is a real SIGKILL of a recording node process (test_recording's helpers)."""
+The crash is a real SIGKILL of a recording node process (harness.recording)."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from leadscrew_ros.cli import main
 from leadscrew_ros.bag.logfile import (LogError, cut_off_bags, inspect, is_complete, log_files,
                                        read_log, read_messages, recover_bag)
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
-from test_recording import answering_node, ns  # noqa: F401  (ns: fixture)
+from harness.recording import answering_node
 
 CYCLE = DutyCycle(duration_s=30.0, rest_s=5.0)       # 3 topics at 100 Hz: 9000 messages
 

@@ -18,13 +18,12 @@ import pytest
 from mcap.writer import Writer
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as RosbagsWriter
-from test_replay import EXACT, TYPESTORE, cli, decoded, f64, run_replay, write_mcap
+from harness.logs import EXACT, TYPESTORE, cli, decoded, f64, run_replay, write_mcap
 
 from leadscrew_ros.bag import msgdefs
 from leadscrew_ros.review import replay as replay_module
 from leadscrew_ros.review import report, timeline
 from leadscrew_ros.ros import replay_live
-from leadscrew_ros.review.decimation import Envelope, Reservoir
 from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.review.replay import ReplaySettings, replay
 from leadscrew_ros.live.profile import StrokeProfile
@@ -263,21 +262,6 @@ def test_rejected_values_print_past_their_limit(tmp_path):
 
 
 # ----------------------------------------------------------------------------- memory
-def test_bounded_series_keep_extremes():
-    e = Envelope(2, max_bins=8, bin_s=0.1)
-    for i in range(1000):
-        e.add(i * 0.01, float(i), 1e6 if i == 500 else 0.0)
-    t, lo, hi, last, count = e.series()
-    assert len(t) <= 8 and count.sum() == 1000 and np.all(np.diff(t) > 0)
-    assert lo[0, 0] == 0.0 and hi[-1, 0] == last[-1, 0] == 999.0
-    assert np.nanmax(hi[:, 1]) == 1e6                   # a one-sample spike stays
-    r = Reservoir(1, size=10)
-    for i in range(10_000):
-        r.add(float(i))
-    kept = r.sample()[:, 0]
-    assert len(kept) == 10 and np.all(np.diff(kept) > 0) and kept.max() > 5000
-
-
 def test_replay_memory_does_not_grow_with_the_log(tmp_path, monkeypatch):
     """What a replay holds (its result included) hardly changes for a log four times longer, and
     its Python heap peak about the same (a maximum over more segments: a little higher). The

@@ -17,7 +17,6 @@ import subprocess
 import sys
 import threading
 import time
-import uuid
 from io import StringIO
 from pathlib import Path
 
@@ -25,9 +24,6 @@ import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mcap.writer import Writer
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -42,7 +38,10 @@ from leadscrew_ros.ros.node import SqueakPredictorNode
 from leadscrew_ros.bag.recorder import Recorder, RecordSettings
 from leadscrew_ros.ros import replay_live
 from leadscrew_ros.ros.replay_live import publish_log
-from cdr_reference import write_message
+
+from harness.cdr_reference import write_message
+from harness.processes import stop
+from harness.ros import RosWorld, unique_ns
 
 T0 = 1_700_000_000_000_000_000            # log time of the first message [ns]
 STEP_NS, STEPS = 20_000_000, 100            # 50 Hz for 2 s
@@ -52,7 +51,7 @@ TYPES = {"/motor_speed": Float64, "/axial_load": Float64, "/joint_states": Joint
          "/robot/nut_position": Float64, "/replay/motor_speed": Float64,
          "/other/motor_speed": String, "/squeak/risk": Float64, "/diagnostics": DiagnosticArray}
 # every message of a test: reliable, deep (the replay's reliable writer retransmits what a
-# reader missed while matching)
+# reader missed while matching); volatile, unlike harness.ros.COLLECT: only what is replayed now
 COLLECT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
 
@@ -102,15 +101,12 @@ def expected(files: list[Path], topic: str, after_ns: int = T0) -> list:
             for m in read_log(f, {topic}) if m.log_time_ns >= after_ns]
 
 
-class Collector:
+class Collector(RosWorld):
     """A subscriber node on a Context of its own: (arrival time, message) per topic."""
 
     def __init__(self, topics: dict[str, type]):
-        self.ctx = Context()
-        rclpy.init(context=self.ctx)
-        self.node = Node("collector", context=self.ctx, start_parameter_services=False)
-        self.executor = SingleThreadedExecutor(context=self.ctx)
-        self.executor.add_node(self.node)
+        super().__init__()
+        self.node = self.make_node("collector", namespace="/", start_parameter_services=False)
         self.got: dict[str, list[tuple[float, object]]] = {t: [] for t in topics}
         for topic, msg_type in topics.items():
             self.node.create_subscription(
@@ -119,24 +115,6 @@ class Collector:
 
     def messages(self, topic: str) -> list:
         return [m for _, m in self.got[topic]]
-
-    def spin_until(self, condition, timeout: float, what: str) -> None:
-        deadline = time.monotonic() + timeout
-        while not condition():
-            assert time.monotonic() < deadline, f"timeout after {timeout} s waiting for {what}"
-            self.executor.spin_once(timeout_sec=0.01)
-
-    def drain(self, seconds: float = 0.2) -> None:
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=0.01)
-
-    def close(self) -> None:
-        try:
-            self.node.destroy_node()
-            self.executor.shutdown(timeout_sec=1.0)
-        finally:
-            rclpy.shutdown(context=self.ctx)
 
 
 @pytest.fixture
@@ -174,14 +152,14 @@ def replay(c: Collector, files: list[Path], timeout: float = 15.0, **kwargs) -> 
     r.start()
     c.spin_until(lambda: not r.is_alive(), timeout, "the replay to end")
     r.join()
-    c.drain()
+    c.spin_for(0.2)
     if r.error is not None:
         raise r.error
     return r
 
 
 def ns() -> str:
-    return f"/t{uuid.uuid4().hex[:12]}"
+    return unique_ns(length=12)
 
 
 # ----------------------------------------------------------------------------- publishing
@@ -276,24 +254,18 @@ def test_end_to_end_the_predictor_node_answers_a_replayed_log(log, collector):
     """The real node in-process, its inputs fed from the log; its risk follows the log."""
     space = ns()
     c = collector({f"{space}/squeak/risk": Float64})
-    node = SqueakPredictorNode(context=c.ctx, namespace=space,
-                               parameter_overrides=[Parameter("hardware_id", value=space)])
-    c.executor.add_node(node)
-    try:
-        replay(c, log, rate=4.0, topics=["/motor_speed", "/axial_load"],
-               remap={"/motor_speed": f"{space}/motor_speed",
-                      "/axial_load": f"{space}/axial_load"})
-        final = SqueakModel().predict(speed(STEPS - 1), load(STEPS - 1))
-        risks = c.got[f"{space}/squeak/risk"]
-        c.spin_until(lambda: risks and risks[-1][1].data == final.probability,
-                     3.0, "the P(squeak) of the last operating point")
-        values = [m.data for _, m in risks]
-        assert len(values) > 20 and all(math.isfinite(v) and 0 <= v <= 1 for v in values)
-        assert max(values) > 0.99 and final.probability < 0.01    # through the band and out
-        assert node.live.inputs.speed_rad_s == speed(STEPS - 1)
-    finally:
-        c.executor.remove_node(node)
-        node.destroy_node()
+    node = c.add(SqueakPredictorNode(context=c.ctx, namespace=space, parameter_overrides=[
+        Parameter("hardware_id", value=space)]))
+    replay(c, log, rate=4.0, topics=["/motor_speed", "/axial_load"],
+           remap={"/motor_speed": f"{space}/motor_speed", "/axial_load": f"{space}/axial_load"})
+    final = SqueakModel().predict(speed(STEPS - 1), load(STEPS - 1))
+    risks = c.got[f"{space}/squeak/risk"]
+    c.spin_until(lambda: risks and risks[-1][1].data == final.probability,
+                 3.0, "the P(squeak) of the last operating point")
+    values = [m.data for _, m in risks]
+    assert len(values) > 20 and all(math.isfinite(v) and 0 <= v <= 1 for v in values)
+    assert max(values) > 0.99 and final.probability < 0.01    # through the band and out
+    assert node.live.inputs.speed_rad_s == speed(STEPS - 1)
 
 
 # ----------------------------------------------------------------------------- signals
@@ -322,13 +294,7 @@ def finish(proc: subprocess.Popen, err) -> tuple[str, str]:
     try:
         out, _ = proc.communicate(timeout=10)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-            tool = Path(sys.prefix) / "tools" / "fastdds" / "fastdds.py"
-            if tool.exists():
-                subprocess.run([sys.executable, str(tool), "shm", "clean"],
-                               capture_output=True, timeout=30)
+        stop(proc)
     err.seek(0)
     stderr = err.read()
     err.close()
@@ -343,7 +309,7 @@ def test_loop_repeats_until_sigint_then_exits_cleanly(log, collector, tmp_path):
                  "two passes")
     proc.send_signal(signal.SIGINT)
     out, stderr = finish(proc, err)
-    c.drain()
+    c.spin_for(0.2)
     assert proc.returncode == 0 and "Traceback" not in stderr, (out, stderr)
     got = c.messages(topic)
     passes = len(got) // STEPS
@@ -364,7 +330,7 @@ def test_sigterm_stops_a_replay_cleanly_before_its_end(log, collector, tmp_path)
     proc.send_signal(signal.SIGTERM)
     out, stderr = finish(proc, err)
     assert time.monotonic() - t0 < 2.0
-    c.drain()
+    c.spin_for(0.2)
     assert proc.returncode == 0 and "Traceback" not in stderr, (out, stderr)   # asked: success
     lines = out.splitlines()
     n = len(c.got[topic])

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from rosbags.rosbag2 import Reader
-from test_replay import TYPESTORE, cli, decoded, f64, write_mcap
+from harness.logs import TYPESTORE, cli, decoded, f64, write_mcap
 
 from leadscrew_ros.bag.messages import MARGIN, PREDICTION_TOPICS, RISK
 from leadscrew_ros.model import SqueakModel

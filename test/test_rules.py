@@ -26,8 +26,8 @@ from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.model.physics.parameters import field_info
 from leadscrew_ros.review.replay import ReplaySettings, replay
 from leadscrew_ros.review.timeline import InputSettings, ModelSpec, Timeline, predict_jobs
-from cdr_reference import cdr_payload
-from test_node import Ros
+from harness.cdr_reference import cdr_payload
+from harness.squeak import SqueakWorld
 
 PARAMS = ScrewParameters()
 LEAD = PARAMS.lead_per_rad_m
@@ -363,8 +363,7 @@ def wrap_calls(live: LivePredictor) -> Counter:
 
 
 def test_node_and_replay_of_its_recording_predict_alike(tmp_path):
-    ros = Ros()
-    try:
+    with SqueakWorld() as ros:
         node = ros.start(**{"record.enabled": True, "record.directory": str(tmp_path / "bags"),
                             "joint_name": "screw", "max_rate_hz": 10000.0})
         assert node.recorder.active
@@ -390,8 +389,6 @@ def test_node_and_replay_of_its_recording_predict_alike(tmp_path):
         node.destroy_node()                    # the bag is finished
         ros.executor.remove_node(node)
         ros.node = None
-    finally:
-        ros.close()
 
     recorded: dict[str, list] = {}
     for m in read_log(bag):

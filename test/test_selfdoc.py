@@ -37,15 +37,14 @@ from leadscrew_ros.review.report import QUICK, write_report
 from leadscrew_ros.review.timeline import InputSettings
 from leadscrew_ros.ros.node import INPUTS, OUTPUT_CLASSES
 from leadscrew_ros.ros.parameters import PARAMETER_NAMES, PARAMETERS, log_metadata
-import test_node
-from test_node import LOAD
+
+from harness.squeak import LOAD
 
 REPO = Path(__file__).resolve().parents[1]
 LAYOUT = REPO / "foxglove" / "squeak_predictor.json"
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 FLOAT64 = "std_msgs/msg/Float64"
 CDR_ZERO = b"\x00\x01\x00\x00" + bytes(8)          # std_msgs/Float64 0.0
-ros = test_node.ros                                   # the fixture: one test's ROS world
 
 
 def records(path: Path) -> list[tuple[str, dict[str, str]]]:

@@ -97,7 +97,7 @@ def test_build_names_the_parameter_with_its_prefix():
 ])
 def test_node_refuses_to_start_with_a_bad_parameter(parameter, reason):
     """Exit 2 with the reason on one line (no traceback), whichever settings class says no."""
-    from test_node import node_command
+    from harness.processes import node_command
     proc = subprocess.run([*node_command(), "--ros-args", "-p", parameter], capture_output=True,
                           text=True, timeout=120, env=dict(os.environ))
     assert proc.returncode == 2, proc.stderr

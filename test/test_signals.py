@@ -14,8 +14,8 @@ import pytest
 
 from leadscrew_ros.ros.node import NODE_NAME
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
-from test_demo import CLI, domain, output, start, stop
-from test_node import node_command, wait_initialised
+
+from harness.processes import CLI, domain, node_command, output, start, stop, wait_initialised
 
 PROGRAMS = {"node": NODE_NAME, "demo": "leadscrew-squeak", "simulate": "leadscrew-squeak",
             "replay --publish": "leadscrew-squeak"}

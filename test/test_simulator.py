@@ -3,14 +3,10 @@
 
 import math
 import re
-import time
 import uuid
 
 import numpy as np
 import pytest
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
@@ -20,6 +16,8 @@ from leadscrew_ros.cli import main
 from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.live.profile import ProfileError, StrokeProfile, expected_squeak, state
 from leadscrew_ros.ros.simulator import ActuatorSimulator
+
+from harness.processes import CLI, domain, output, start, stop
 
 PARAMS = ScrewParameters()
 LEAD = PARAMS.radius_m * math.tan(PARAMS.helix_angle_rad)          # 0.437 mm/rad
@@ -165,34 +163,22 @@ class Probe(Node):
                                  qos_profile_sensor_data)
 
 
-def test_simulator_node_publishes_the_stroke():
+def test_simulator_node_publishes_the_stroke(ros_world):
     """What arrives is what the simulator published (its own record, not a count expected from
     the wall clock: a busy machine fires fewer timer ticks), in order, from the start, as the
     simulator waits until every subscriber matched."""
     ns = "/sim_" + uuid.uuid4().hex[:8]
     profile = StrokeProfile(duration_s=1.0)
-    ctx = Context()
-    rclpy.init(context=ctx)
-    try:
-        probe = Probe(ns, context=ctx)
-        sim = ActuatorSimulator(profile, rate_hz=100.0, joint_name="screw",
-                                wait_for_subscriber=True, namespace=ns, context=ctx)
-        sent, publish = [], sim.publish
-        sim.publish = lambda s: (sent.append(s), publish(s))
-        executor = SingleThreadedExecutor(context=ctx)
-        executor.add_node(probe)
-        executor.add_node(sim)
-        deadline = time.monotonic() + 30.0
-        while time.monotonic() < deadline and not (
-                sim.done and all(len(probe.got[n]) >= len(sent) for n in probe.got)
-                and len(probe.joints) >= len(sent)):
-            executor.spin_once(timeout_sec=0.01)
-        assert sim.done and sim.started_at is not None
-        executor.shutdown()
-        sim.destroy_node()
-        probe.destroy_node()
-    finally:
-        rclpy.shutdown(context=ctx)
+    probe = ros_world.add(Probe(ns, context=ros_world.ctx))
+    sim = ActuatorSimulator(profile, rate_hz=100.0, joint_name="screw",
+                            wait_for_subscriber=True, namespace=ns, context=ros_world.ctx)
+    sent, publish = [], sim.publish
+    sim.publish = lambda s: (sent.append(s), publish(s))
+    ros_world.add(sim)
+    ros_world.spin_until(lambda: sim.done and all(len(probe.got[n]) >= len(sent)
+                                                  for n in probe.got)
+                         and len(probe.joints) >= len(sent), 30.0, "the whole stroke")
+    assert sim.done and sim.started_at is not None
 
     speeds, loads, nuts = (probe.got[n] for n in ("motor_speed", "axial_load", "nut_position"))
     assert len(sent) == sim.published >= 3
@@ -211,7 +197,7 @@ def test_simulator_node_publishes_the_stroke():
     assert sim.published > 0 and sim.elapsed_s >= profile.duration_s
 
 
-def test_joint_states_describe_the_same_nut_as_nut_position():
+def test_joint_states_describe_the_same_nut_as_nut_position(ros_world):
     """The predictor fed by joint_states only (its nut_position input remapped away) sees the
     simulator's nut: the screw angle follows the node's nut_position_at_zero_angle_m."""
     from rclpy.parameter import Parameter
@@ -220,65 +206,36 @@ def test_joint_states_describe_the_same_nut_as_nut_position():
 
     ns = "/joint_" + uuid.uuid4().hex[:8]
     profile = StrokeProfile(duration_s=1.0)
-    ctx = Context()
-    rclpy.init(context=ctx)
-    try:
-        predictor = SqueakPredictorNode(
-            namespace=ns, context=ctx, cli_args=["--ros-args", "-r", "nut_position:=unused"],
-            parameter_overrides=[Parameter("joint_name", value="screw")])
-        sim = ActuatorSimulator(profile, joint_name="screw", wait_for_subscriber=True,
-                                namespace=ns, context=ctx)
-        executor = SingleThreadedExecutor(context=ctx)
-        executor.add_node(predictor)
-        executor.add_node(sim)
-        deadline = time.monotonic() + 10.0
-        while time.monotonic() < deadline and not sim.done:
-            executor.spin_once(timeout_sec=0.01)
-        linger = time.monotonic() + 0.3
-        while time.monotonic() < linger:
-            executor.spin_once(timeout_sec=0.01)
-        inputs, recomputes = predictor.live.inputs, predictor.live.recomputes
-        executor.shutdown()
-        sim.destroy_node()
-        predictor.destroy_node()
-    finally:
-        rclpy.shutdown(context=ctx)
+    predictor = ros_world.add(SqueakPredictorNode(
+        namespace=ns, context=ros_world.ctx, cli_args=["--ros-args", "-r", "nut_position:=unused"],
+        parameter_overrides=[Parameter("joint_name", value="screw")]))
+    sim = ros_world.add(ActuatorSimulator(profile, joint_name="screw", wait_for_subscriber=True,
+                                          namespace=ns, context=ros_world.ctx))
+    ros_world.spin_until(lambda: sim.done, 10.0, "the stroke")
+    ros_world.spin_for(0.3)                                   # the last inputs
+    inputs, recomputes = predictor.live.inputs, predictor.live.recomputes
     assert sim.done and recomputes > 10
     assert inputs.nut_position_m == pytest.approx(profile.end_nut_position_m, abs=1e-9)
     assert inputs.speed_rad_s == 0.0
 
 
-def test_simulate_in_a_namespace_from_ros_args(tmp_path):
+def test_simulate_in_a_namespace_from_ros_args(tmp_path, make_ros_world):
     """`simulate --ros-args -r __ns:=/seat_left` publishes /seat_left/motor_speed, ... (a
     subprocess, as a user runs it; the probe is started first, see test_demo)."""
-    from test_demo import CLI, domain, output, start, stop
-
     seat = "/seat_left_" + uuid.uuid4().hex[:8]
     dom = domain(7)
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=dom)
+    world = make_ros_world(domain_id=dom)
     sim = None
     try:
-        probe = Probe(seat, context=ctx)
-        root = Probe("/", context=ctx)                    # nothing arrives outside the namespace
-        executor = SingleThreadedExecutor(context=ctx)
-        executor.add_node(probe)
-        executor.add_node(root)
+        probe = world.add(Probe(seat, context=world.ctx))
+        root = world.add(Probe("/", context=world.ctx))   # nothing arrives outside the namespace
         sim = start(CLI + ["simulate", "--duration", "0.5", "--rate", "50", "--ros-args", "-r",
                            f"__ns:={seat}"], dom, tmp_path, "sim")
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and sim.poll() is None:
-            executor.spin_once(timeout_sec=0.05)
-        end = time.monotonic() + 0.5
-        while time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.05)
+        world.spin_until(lambda: sim.poll() is not None, 60, "the simulator to finish")
+        world.spin_for(0.5)
         code = sim.returncode
         out, err = output(sim)
-        executor.shutdown()
-        probe.destroy_node()
-        root.destroy_node()
     finally:
-        rclpy.shutdown(context=ctx)
         stop(sim)
     assert code == 0 and err == "", (out, err)
     assert f"on {seat}/motor_speed, {seat}/axial_load, {seat}/nut_position" in out

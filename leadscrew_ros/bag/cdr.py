@@ -7,7 +7,7 @@ monitor receives. Encoders (the same types and diagnostic_msgs/DiagnosticArray) 
 node publishes and records, the replay annotates and the synthetic logs hold: XCDR1 little
 endian, alignment counted from the end of the 4-byte encapsulation header, padding zero and
 no unused tail, byte for byte the payload Fast CDR writes with its padding zeroed and its
-slack cut (test/cdr_reference.py checks this against rclpy's serializer).
+slack cut (test/harness/cdr_reference.py checks this against rclpy's serializer).
 
 Log data is untrusted, so every length and count is checked against the payload before it is
 used and any malformation raises ValueError. (The offline replay never hands log data to
