@@ -154,6 +154,9 @@ class Recorder:
     losses: dict[str, TopicLoss] = field(default_factory=dict)   # topic -> what never arrived
     # Metadata records written at the start of every file: name -> string map
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    # 'pkg/msg/Type' -> its ros2msg schema text, for types `msgdefs` has no definition of
+    # (e.g. `audiomsgs`' audio types)
+    schemas: dict[str, str] = field(default_factory=dict)
     _out: object = None
     _writer: Writer | None = None
     _topics: dict[str, _Topic] = field(default_factory=dict)
@@ -292,8 +295,8 @@ class Recorder:
         return True
 
     def _register(self, t: _Topic) -> int:
-        schema = self._writer.register_schema(t.type_name, "ros2msg",
-                                              msgdefs.definition(t.type_name).encode())
+        text = self.schemas.get(t.type_name) or msgdefs.definition(t.type_name)
+        schema = self._writer.register_schema(t.type_name, "ros2msg", text.encode())
         return self._writer.register_channel(t.name, "cdr", schema,
                                              {"offered_qos_profiles": ""})
 
