@@ -47,6 +47,7 @@ setup(
             "colcon-common-extensions",
             "colcon-ros",
             "rosbags",
+            "mosqito",           # acoustics tests: TNR/PR and loudness reference
         ],
     },
     zip_safe=True,
