@@ -15,7 +15,7 @@ PACKAGE = REPO / "leadscrew_ros"
 LAYERS = ("model", "live", "bag", "review", "ros", "cli")
 ROS_FREE = LAYERS[:4]
 # Inside `model`, the same one-way rule between its sub-packages (squeak_model is a module).
-MODEL_PARTS = ("physics", "uncertainty", "squeak_model", "studies", "nonlinear")
+MODEL_PARTS = ("physics", "acoustics", "uncertainty", "squeak_model", "studies", "nonlinear")
 # What a module of a ROS-free layer may not import, directly or through a dependency.
 ROS_MODULES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "sensor_msgs",
                "diagnostic_msgs", "std_srvs", "geometry_msgs", "rosidl_runtime_py",
