@@ -51,7 +51,7 @@ from ..live.settings import LiveSettings
 from ..model import ScrewParameters, SqueakModel
 from ..model.physics.metadata import check, setting
 from ..model.physics.parameters import ParameterError
-from ..model.studies.sweep import growth_field
+from ..model.studies.fields import growth_field
 from ..model.uncertainty.scatter import LIVE_SAMPLES, Scatter, valid_mask
 
 MIC_TOPIC, MIC_INFO_TOPIC = "/microphone", "/microphone_info"
