@@ -51,6 +51,7 @@ from ..bag import logmeta, messages, msgdefs
 from ..bag.mcapout import CHUNK_BYTES, McapOut
 from .decimation import Envelope, Reservoir
 from .jsonsafe import json_safe
+from .listen import Heard, ListenSettings, PredictionTrace, SpeedTrace, listen, write_heard
 from .plots import plot_timeline
 from ..bag.logfile import LogError, LogMessage, Topic
 from ..bag.logsource import LogSource, log_topics, open_log
@@ -93,6 +94,8 @@ class ReplaySettings:
         Prediction processes for long logs (0: all in this process).
     progress : bool
         A progress bar on stderr (a terminal only).
+    listen : ListenSettings
+        Where the sound of the drive is, its scale, the comparison of formulations.
     """
 
     inputs: InputSettings = field(default_factory=InputSettings)
@@ -103,6 +106,7 @@ class ReplaySettings:
     # mostly at rest) the second one idles.
     workers: int = 2
     progress: bool = True
+    listen: ListenSettings = field(default_factory=ListenSettings)
 
     def __post_init__(self) -> None:
         for what, ns in (("namespace", self.namespace), ("output namespace", self.out_namespace)):
@@ -274,6 +278,11 @@ class ReplayResult:
         Wall time of the replay [s].
     outputs : list of Path
         The files written.
+    heard : Heard or None
+        What the microphone heard and how the predictions agree with it (`listen`); None
+        without sound.
+    audio_warnings : list of str
+        Why the log's audio was not analysed, if it was not.
     """
 
     log: Path
@@ -303,6 +312,8 @@ class ReplayResult:
     scatter_samples: int = 0
     wall_s: float = math.nan
     outputs: list[Path] = field(default_factory=list)
+    heard: Heard | None = None
+    audio_warnings: list[str] = field(default_factory=list)
 
     def plot(self, fig: "Figure | None" = None) -> "Figure":
         """The timeline: speed, load, nut position and P(squeak) over time (`plot_timeline`).
@@ -328,7 +339,7 @@ class ReplayResult:
                        f"{tl.backwards_max_s:.6g} s): those messages were not applied")
         for topic, n in sorted(tl.duplicates.items()):
             out.append(f"log time repeats {n} time(s) on {topic} (the later value applied)")
-        return out
+        return out + self.audio_warnings
 
     @property
     def x_real_time(self) -> float:
@@ -362,6 +373,10 @@ class ReplayResult:
                              "backwards_max_s": self.timeline.backwards_max_s,
                              "duplicates": dict(self.timeline.duplicates)},
                 "warnings": self.warnings,
+                "heard": self.heard.as_dict() if self.heard else None,
+                "agreement_by_formulation": self.heard.by_formulation_dict() if self.heard
+                else None,
+                "detect_wall_s": self.heard.detect_s if self.heard else None,
                 "squeak_share": self._share(self.time_in_squeak_s),
                 "warn_share": self._share(self.probability.above_warn_s),
                 "wall_s": self.wall_s, "x_real_time": self.x_real_time}
@@ -418,6 +433,7 @@ class ReplayResult:
                  f"{self.time_in_squeak_s:.2f} s ({100 * self._share(self.time_in_squeak_s):.1f}"
                  " % of the log)",
                  self.probability_text(), self.scatter_text()]
+        lines += self.heard.text() if self.heard else []
         examples = {**self.timeline.rejected_example, **self.timeline.ignored_example}
         for title, counts in (("no prediction (outside the model's validity)", self.no_prediction),
                               ("rejected inputs", self.rejected), ("ignored inputs", self.ignored)):
@@ -689,9 +705,15 @@ class _Run:
 
     def __init__(self, model: SqueakModel, inputs: InputSettings, workers: int,
                  out: _AnnotatedWriter, episodes: TextIO,
-                 progress: Callable[[int], None] | None):
+                 progress: Callable[[int], None] | None, listening: bool = False):
         self.out, self.progress = out, progress
         self.timeline = Timeline(model.params, inputs)
+        # for `listen`: the recomputes and the speed samples, compact
+        self.trace = PredictionTrace() if listening else None
+        self.speeds = SpeedTrace()
+        resolved = self.timeline.settings
+        self._speed_topics = {resolved.speed_topic, resolved.joint_states_topic} \
+            if listening else set()
         self.solver = _Solver(model, workers)
         self.plot_data = PlotData()
         self.episodes = _Episodes(episodes, inputs.warn_probability, inputs.error_probability)
@@ -712,6 +734,8 @@ class _Run:
         job = self.timeline.feed(m, len(seg.messages) - 1)
         if job is not None:
             seg.jobs.append(job)
+        if m.topic.name in self._speed_topics and self.timeline.speed is not None:
+            self.speeds.add(self.timeline.seconds(self.timeline.now_ns), self.timeline.speed)
         if len(seg.jobs) >= _BATCH_JOBS or len(seg.messages) >= _SEGMENT_MESSAGES:
             self._seal()
             while self.queue and (self.queue[0].done() or self.held > _IN_FLIGHT_MESSAGES):
@@ -749,6 +773,8 @@ class _Run:
                     self.no_prediction[p.validity.label] += 1
                 self.plot_data.add(t, job, p)
                 self.episodes.add(t, p)
+                if self.trace is not None:
+                    self.trace.add(t, job, p)
                 job, p, payloads = next(jobs, (None, None, None))
         if self.progress is not None:
             self.progress(len(seg.messages))
@@ -815,7 +841,7 @@ def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
                 progress_bar(_message_total(source.files) if show else None, "replay",
                              unit="msg") as bar:
             run = _Run(model, inputs, settings.workers, _AnnotatedWriter(fh, out_namespace),
-                       eh, bar if show else None)
+                       eh, bar if show else None, settings.listen.enabled)
             for f, m in source.messages():
                 try:
                     run.add(m)
@@ -833,6 +859,9 @@ def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
         if run is not None:
             run.solver.close()
     tl = run.timeline
+    heard, audio_warnings = (None, []) if run.trace is None else listen(
+        log, log_topics(source), out_dir, settings.listen, run.trace, run.speeds,
+        run.duration_s, model, solve, _BATCH_JOBS)
     result = ReplayResult(
         log=log, files=source.files, out_dir=out_dir, annotated=annotated,
         start_ns=run.start_ns or 0, duration_s=run.duration_s, messages=run.messages,
@@ -842,11 +871,18 @@ def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
         time_in_squeak_s=run.episodes.time_in_squeak_s, probability=run.episodes.probability,
         plot_data=run.plot_data, timeline=tl, namespace=namespace, out_namespace=out_namespace,
         warn_probability=inputs.warn_probability, error_probability=inputs.error_probability,
-        scatter=dict(model.scatter.sd), scatter_samples=model.sample_count)
+        scatter=dict(model.scatter.sd), scatter_samples=model.sample_count, heard=heard,
+        audio_warnings=audio_warnings)
+    if heard is not None:
+        with open(annotated, "r+b") as fh:
+            writer = McapOut.reopen(fh)
+            write_heard(writer, out_namespace, heard, result.start_ns)
+            writer.finish()
     result.wall_s = time.perf_counter() - t0
     _write_json(out_dir / "summary.json", result.summary())
     (out_dir / "summary.txt").write_text(result.summary_text() + "\n", encoding="utf-8")
     result.outputs = [annotated, episodes, out_dir / "summary.json", out_dir / "summary.txt"]
+    result.outputs += [path for path, _ in heard.clips] if heard else []
     attach(result, [episodes, out_dir / "summary.json"], _metadata(result, model))
     return result
 
