@@ -18,7 +18,7 @@ from pathlib import Path
 from ..model.physics.metadata import help_text
 from ..review.fleet import ClusterError, ClusterSettings
 from .args import CliError, Parser, build_model, finite, output_directory
-from .logs import REPLAY_INPUTS, _topic, add_input_options, replay_inputs
+from .logs import REPLAY_INPUTS, _topic, add_input_options, listen_settings, replay_inputs
 
 FAILED_BASE = 10
 FAILED_CAP = 100
@@ -48,7 +48,8 @@ def _settings(args: argparse.Namespace):
                              args.namespace and _topic(args.namespace),
                              args.out_namespace and _topic(args.out_namespace),
                              use_log_params=args.use_log_params, report=not args.no_report,
-                             summary_only=args.summary_only)
+                             summary_only=args.summary_only,
+                             listen=listen_settings(args, wav_must_exist=False))
     except ValueError as exc:
         raise CliError(str(exc)) from None
 

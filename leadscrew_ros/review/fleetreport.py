@@ -19,8 +19,9 @@ from .plots import plot_fleet
 CSV_FILE, JSON_FILE, PNG_FILE = "fleet.csv", "fleet.json", "fleet.png"
 COLUMNS = ["log", "unit_id", "status", "error", "note", "duration_s", "time_in_squeak_s",
            "squeak_share", "episodes", "peak_growth_rate", "squeak_frequencies_hz",
-           "peak_probability", "time_above_warn_s", "time_above_error_s", "messages",
-           "predictions", "formulation", "name", "wall_s"]
+           "peak_probability", "time_above_warn_s", "time_above_error_s", "heard_s", "recall",
+           "precision", "brier", "heard_frequencies_hz", "messages", "predictions",
+           "formulation", "name", "wall_s"]
 
 
 def _cell(value: Any) -> str:

@@ -232,7 +232,7 @@ class Spectrogram:
     edges_hz : numpy.ndarray
         Row edges [Hz], log-spaced over `SPECTROGRAM_F_HZ` (one more than the rows).
     level_db : numpy.ndarray
-        float32, shape (columns, rows); nan where a band holds no FFT bin.
+        float32, shape (columns, rows); nan above the Nyquist frequency.
     """
 
     times_s: np.ndarray
@@ -244,7 +244,8 @@ def spectrogram(samples: np.ndarray, rate_hz: float, t0_s: float,
                 scale: float = 1.0) -> Spectrogram:
     """`Spectrogram` of a track: at most `SPECTROGRAM_COLUMNS` Hann frames of
     `SPECTROGRAM_FRAME` samples, evenly over the track (half-overlapping for short tracks),
-    their power binned into `SPECTROGRAM_ROWS` log-spaced bands (the maximum of each)."""
+    their power binned into `SPECTROGRAM_ROWS` log-spaced bands (the maximum of each, the
+    nearest bin for a band narrower than a bin)."""
     n = min(SPECTROGRAM_FRAME, samples.size)
     edges = np.geomspace(*SPECTROGRAM_F_HZ, SPECTROGRAM_ROWS + 1)
     if n < 16:
@@ -257,13 +258,14 @@ def spectrogram(samples: np.ndarray, rate_hz: float, t0_s: float,
     psd[:, 1:-1] *= 2
     f = np.fft.rfftfreq(n, 1 / rate_hz)
     band = np.searchsorted(edges, f, side="right") - 1
-    inside = (band >= 0) & (band < SPECTROGRAM_ROWS)
-    level = np.full((starts.size, SPECTROGRAM_ROWS), -np.inf)
-    for k in np.unique(band[inside]).tolist():
+    # a row narrower than a bin has the bin nearest its centre (nan above Nyquist)
+    centre = np.sqrt(edges[:-1] * edges[1:])
+    nearest = np.clip(np.searchsorted(f, centre), 0, f.size - 1)
+    level = psd[:, nearest].copy()
+    level[:, centre > f[-1]] = np.nan
+    for k in np.unique(band[(band >= 0) & (band < SPECTROGRAM_ROWS)]).tolist():
         level[:, k] = psd[:, band == k].max(axis=1)
-    with np.errstate(divide="ignore"):
-        db = 10 * np.log10(np.maximum(level, 1e-30))
-    db[:, ~np.isin(np.arange(SPECTROGRAM_ROWS), band[inside])] = np.nan
+    db = 10 * np.log10(np.maximum(level, 1e-30))
     return Spectrogram(t0_s + (starts + n / 2) / rate_hz, edges, db.astype(np.float32))
 
 
