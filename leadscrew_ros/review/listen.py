@@ -210,13 +210,31 @@ class PredictionTrace:
         return np.column_stack([np.asarray(self.times)[rows], np.asarray(self.mode_hz),
                                 np.asarray(self.probability)[rows]]).reshape(-1, 3)
 
-    def compare(self, detection: Detection, end_s: float) -> Agreement:
-        """`agreement` of these predictions with `detection`, held to `end_s` [s]."""
+    def compare(self, detection: Detection, end_s: float,
+                band_hz: tuple[float, float]) -> tuple[Agreement, float]:
+        """`agreement` of these predictions with `detection`, held to `end_s` [s], counting
+        only what the detector can hear: a recompute whose most unstable squeak mode (the one
+        a squeak locks to) lies outside `band_hz` counts as not predicted, its P(squeak) as
+        unknown; the frequency matches are with the modes inside the band.
+
+        Returns
+        -------
+        tuple of (Agreement, float)
+            The agreement, and the time [s] with the most unstable mode outside the band.
+        """
         from ..model.acoustics import agreement
-        p = np.asarray(self.probability)
-        return agreement(detection, np.asarray(self.times), np.asarray(self.squeak, bool),
+        lo, hi = band_hz
+        modes = self.modes()
+        audible = [[(label, f) for label, f in m if lo <= f <= hi] for m in modes]
+        squeak = np.asarray(self.squeak, bool)
+        outside = squeak & np.array([bool(m) and not lo <= m[0][1] <= hi for m in modes],
+                                    bool)
+        p = np.where(outside, np.nan, np.asarray(self.probability))
+        t = np.asarray(self.times)
+        held = np.diff(np.r_[t, max(end_s, t[-1])]) if t.size else t
+        return agreement(detection, t, squeak & ~outside,
                          [None if math.isnan(v) else float(v) for v in p.tolist()],
-                         self.modes(), valid_until_s=end_s)
+                         audible, valid_until_s=end_s), float(held[outside].sum())
 
 
 @dataclass
@@ -302,6 +320,12 @@ class Heard:
         Of the audio [s].
     detect_s : float
         Wall time of the detection [s].
+    band_hz : tuple of float
+        The frequencies the detector analyses [Hz]: predicted squeak modes outside are not
+        counted.
+    out_of_band_s : dict of str to float
+        Per formulation compared (the replay's at least): time [s] with squeak predicted
+        whose most unstable mode lies outside `band_hz` (not counted).
     """
 
     source: str
@@ -317,6 +341,8 @@ class Heard:
     clips: list[tuple[Path, float]] = field(default_factory=list)
     duration_s: float = 0.0
     detect_s: float = 0.0
+    band_hz: tuple[float, float] = (0.0, 0.0)
+    out_of_band_s: dict[str, float] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         """summary.json's `heard`: source, rate, scale, episodes, agreement, warnings.
@@ -332,12 +358,15 @@ class Heard:
                 "duration_s": self.duration_s,
                 "episodes": [e.as_dict() for e in self.detection.episodes],
                 "agreement": self.agreement.as_dict(),
+                "band_hz": list(self.band_hz),
+                "predicted_out_of_band_s": self.out_of_band_s[self.formulation],
                 "clips": [f"{CLIPS_DIR}/{p.name}" for p, _ in self.clips],
                 "warnings": list(self.warnings)}
 
     def by_formulation_dict(self) -> dict[str, dict[str, Any]] | None:
         """summary.json's `agreement_by_formulation` (None without the comparison)."""
-        return {k: a.as_dict() for k, a in self.by_formulation.items()} or None
+        return {k: {**a.as_dict(), "predicted_out_of_band_s": self.out_of_band_s[k]}
+                for k, a in self.by_formulation.items()} or None
 
     def ranking(self) -> list[str]:
         """The compared formulations, the one that describes the drive best first: lower
@@ -369,6 +398,11 @@ class Heard:
         if a.frequency_match:
             lines.append("; ".join(_match_text(m) for m in _first_per_frequency(
                 a.frequency_match)))
+        outside = self.out_of_band_s[self.formulation]
+        if outside > 0:
+            lines.append(f"squeak predicted at a most unstable mode outside the analysed "
+                         f"{self.band_hz[0]:.0f}-{self.band_hz[1]:.0f} Hz for {outside:.1f} s: "
+                         "not counted")
         if self.scale == "Pa":
             lines.append("levels in dB SPL (calibrated: --audio-scale), loudness in sone")
         else:
@@ -469,7 +503,7 @@ def listen(log: Path, topics: dict[str, Topic], out_dir: Path, settings: ListenS
     import time
 
     from ..model.acoustics import AudioError as DetectorError
-    from ..model.acoustics import detect
+    from ..model.acoustics import DetectorSettings, StreamingDetector, detect
     if not settings.enabled or not has_sound(topics, settings):
         return None, []
     try:
@@ -488,20 +522,27 @@ def listen(log: Path, topics: dict[str, Topic], out_dir: Path, settings: ListenS
     except DetectorError as exc:
         return None, [f"audio not analysed ({track.source}): {exc}"]
     detect_s = time.perf_counter() - t0
-    agreement = trace.compare(detection, end_s)
+    band = (DetectorSettings.f_lo_hz, StreamingDetector(
+        sample_rate_hz=track.sample_rate_hz).analyzer.f_hi_hz)
+    agreement, outside = trace.compare(detection, end_s, band)
     formulation = model.params.formulation
     by: dict[str, Agreement] = {}
+    out_of_band = {formulation: outside}
     if settings.compare_formulations:
         for name in FORMULATIONS:
-            by[name] = agreement if name == formulation else trace.with_verdicts(
-                _other_verdicts(model, name, trace, solve, batch)).compare(detection, end_s)
+            if name != formulation:
+                by[name], out_of_band[name] = trace.with_verdicts(_other_verdicts(
+                    model, name, trace, solve, batch)).compare(detection, end_s, band)
+            else:
+                by[name] = agreement
     points = trace.squeak_points()
     if len(points) > SPECTROGRAM_COLUMNS * 8:
         points = points[np.linspace(0, len(points) - 1, SPECTROGRAM_COLUMNS * 8).astype(int)]
     heard = Heard(track.source, track.sample_rate_hz, detection.scale, detection, agreement,
                   formulation, by, list(track.warnings) + list(detection.warnings),
                   spectrogram(track.samples, track.sample_rate_hz, track.t0_s, scale or 1.0),
-                  points, duration_s=track.duration_s, detect_s=detect_s)
+                  points, duration_s=track.duration_s, detect_s=detect_s, band_hz=band,
+                  out_of_band_s=out_of_band)
     heard.clips = write_clips(track.samples, track.sample_rate_hz, track.t0_s,
                               detection.episodes, out_dir / CLIPS_DIR)
     return heard, []
