@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from .settings import DetectorSettings
-from .tonality import ToneAnalyzer, short_time_psd
+from .tonality import ToneAnalyzer, hann, short_time_psd
 
 P_REF_PA = 20e-6            #: reference sound pressure of dB SPL
 LOUDNESS_RATE_HZ = 48000    #: ISO 532-1 after MOSQITO wants 48 kHz; other rates are resampled
@@ -167,7 +167,7 @@ class _Track:
     """One tone followed frame by frame."""
 
     __slots__ = ("first", "last", "frames", "hz", "f1", "recent", "median", "tnr", "pr",
-                 "power", "last_power")
+                 "power", "last_power", "checked_at", "order_now")
 
     def __init__(self, i: int, f: float, f1: float, tnr: float, pr: float, power: float,
                  window: int) -> None:
@@ -179,6 +179,8 @@ class _Track:
         self.median = f
         self.tnr = self.pr = self.power = -math.inf
         self.last_power = power
+        self.checked_at = 0                  # frames when `order_now` was last decided
+        self.order_now: int | None = None
         self.add(i, f, f1, tnr, pr, power)
 
     def add(self, i: int, f: float, f1: float, tnr: float, pr: float, power: float) -> None:
@@ -260,7 +262,7 @@ class StreamingDetector:
         self._max_dropped = -(-self.frame_len // self.hop) + self._allowed_missing
         self._keep = int(math.ceil((s.loudness_max_s + 2 * s.frame_s + s.max_gap_s
                                     + 2 * s.hop_s) * rate)) + self.frame_len
-        self._window = None
+        self._window = hann(self.frame_len)
         self._new_segment(None)
 
     def _new_segment(self, t0_s: float | None) -> None:
@@ -284,7 +286,8 @@ class StreamingDetector:
     @property
     def heard_now(self) -> bool:
         """A track that has lasted `min_duration_s` and does not (so far) follow the orders
-        covers the latest frame: provisional, the episode is decided when it closes."""
+        covers the latest frame: provisional (the order test re-run as the track grows by an
+        eighth), the episode is decided when it closes."""
         return self._heard_now
 
     @property
@@ -451,10 +454,15 @@ class StreamingDetector:
         seg = self._buf[s0:s0 + (i1 - i0 - 1) * hop + n]
         if self.analyzer.empty:
             return []
-        cand = self.analyzer.candidates(short_time_psd(seg, self.sample_rate_hz, n, hop))
-        bad_cum = np.concatenate([[0], np.cumsum(self._bad[s0:s0 + (i1 - i0 - 1) * hop + n])])
-        starts = np.arange(i1 - i0) * hop
-        dropped = bad_cum[starts + n] - bad_cum[starts] > 0
+        cand = self.analyzer.candidates(short_time_psd(seg, self.sample_rate_hz, n, hop,
+                                                       self._window))
+        bad = self._bad[s0:s0 + seg.size]
+        if bad.any():
+            bad_cum = np.concatenate([[0], np.cumsum(bad)])
+            starts = np.arange(i1 - i0) * hop
+            dropped = bad_cum[starts + n] - bad_cum[starts] > 0
+        else:
+            dropped = np.zeros(i1 - i0, bool)
         prominent = cand.prominent & ~dropped[:, None]
         frame_t = self.frame_time(np.arange(i0, i1))
         if self._speed_t.size:
@@ -609,10 +617,14 @@ class StreamingDetector:
         latest = self._next_frame - 1
         best: _Track | None = None
         for tr in self._tracks:
-            if tr.last - tr.first + 1 >= self._min_frames and \
-                    latest - tr.last <= self._allowed_missing and \
-                    self._follows_order(tr) is None and \
-                    (best is None or tr.last_power > best.last_power):
+            if tr.last - tr.first + 1 < self._min_frames or \
+                    latest - tr.last > self._allowed_missing or \
+                    (best is not None and tr.last_power <= best.last_power):
+                continue
+            n = len(tr.hz)                   # re-decided as the track grows by 1/8
+            if n >= tr.checked_at + max(5, tr.checked_at // 8):
+                tr.order_now, tr.checked_at = self._follows_order(tr), n
+            if tr.order_now is None:
                 best = tr
         self._heard_now = best is not None
         self._frequency_now = best.median if best is not None else math.nan
