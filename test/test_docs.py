@@ -13,6 +13,8 @@ import re
 import pytest
 
 from leadscrew_ros.model import squeak_model
+from leadscrew_ros.model.acoustics import detection, synthesis, tonality
+from leadscrew_ros.model.acoustics.agreement import Agreement, agreement
 from leadscrew_ros.model.nonlinear import friction_force, transient, transient_analysis
 from leadscrew_ros.model.physics import parameters, stability
 from leadscrew_ros.model.studies import sweep, tracking
@@ -60,12 +62,25 @@ FUNCTIONS = [
     fleet.review_one,
     fleet.review_logs,
     fleetreport.write_fleet,
+    detection.detect,                       # the bench microphone (acoustics)
+    detection.StreamingDetector,
+    detection.StreamingDetector.push,
+    detection.frames_heard,
+    detection.Episode.as_dict,
+    detection.Detection.as_dict,
+    agreement,
+    Agreement.as_dict,
+    synthesis.microphone,
+    tonality.tnr_limit_db,
+    tonality.pr_limit_db,
+    tonality.short_time_psd,
+    tonality.ToneAnalyzer,
 ]
 RECORDS = [ScrewParameters, squeak_model.Prediction, stability.ModeResult, sweep.GrowthField,
            sweep.SweepResult, sweep.MapResult, tracking.Branch, transient.TransientSettings,
            transient.TransientResult, transient_analysis.LinearFit,
            transient_analysis.LimitCycle, transient_analysis.TransientAnalysis,
-           fleet.FleetSettings]
+           fleet.FleetSettings, detection.Episode, detection.Detection, Agreement]
 PROPERTIES = [(squeak_model.SqueakModel, ("labels", "critical_speed_rad_s")),
               (squeak_model.Prediction, ("valid", "stable", "squeak_modes",
                                       "unstable_frequencies_hz", "max_growth_rate")),
