@@ -8,8 +8,14 @@ import math
 import numpy as np
 import pytest
 
-from leadscrew_ros.model.acoustics import (AudioError, DetectorSettings, StreamingDetector,
-                                           detect, frames_heard, microphone)
+from leadscrew_ros.model.acoustics import (
+    AudioError,
+    DetectorSettings,
+    StreamingDetector,
+    detect,
+    frames_heard,
+    microphone,
+)
 from leadscrew_ros.model.acoustics.tonality import critical_band, tnr_limit_db
 
 FS = 48000

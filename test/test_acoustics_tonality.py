@@ -4,8 +4,13 @@
 import numpy as np
 import pytest
 
-from leadscrew_ros.model.acoustics.tonality import (ToneAnalyzer, critical_band, pr_limit_db,
-                                                    short_time_psd, tnr_limit_db)
+from leadscrew_ros.model.acoustics.tonality import (
+    ToneAnalyzer,
+    critical_band,
+    pr_limit_db,
+    short_time_psd,
+    tnr_limit_db,
+)
 
 FS = 48000
 

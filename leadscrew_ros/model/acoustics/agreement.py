@@ -44,8 +44,14 @@ class Agreement:
 
     Attributes
     ----------
-    both_s, predicted_only_s, heard_only_s, neither_s : float
-        Time heard and predicted, predicted only, heard only, neither [s].
+    both_s : float
+        Time heard and predicted [s].
+    predicted_only_s : float
+        Time predicted but not heard [s].
+    heard_only_s : float
+        Time heard but not predicted [s].
+    neither_s : float
+        Time neither heard nor predicted [s].
     recall : float or None
         Share of the heard squeak time that was predicted (nominal verdict); None when nothing
         was heard.
@@ -70,7 +76,12 @@ class Agreement:
     frames: int = 0
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-safe dict."""
+        """The agreement as a JSON-safe dict.
+
+        Returns
+        -------
+        dict
+        """
         return asdict(self)
 
 

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from .settings import DetectorSettings
-from .tonality import ToneAnalyzer, short_time_psd
+from .tonality import ToneAnalyzer, hann, short_time_psd
 
 P_REF_PA = 20e-6            #: reference sound pressure of dB SPL
 LOUDNESS_RATE_HZ = 48000    #: ISO 532-1 after MOSQITO wants 48 kHz; other rates are resampled
@@ -60,12 +60,16 @@ class Episode:
 
     Attributes
     ----------
-    start_s, end_s : float
-        Half a hop before its first frame's centre, half a hop after its last's [s].
+    start_s : float
+        Half a hop before its first frame's centre [s].
+    end_s : float
+        Half a hop after its last frame's centre [s].
     frequency_hz : float
         Median frequency of its track [Hz].
-    tnr_db, pr_db : float
-        Largest TNR and PR of its frames [dB] (PR nan where the upper band passes Nyquist).
+    tnr_db : float
+        Largest TNR of its frames [dB].
+    pr_db : float
+        Largest PR of its frames [dB] (nan where the upper band passes Nyquist).
     level_db : float
         Largest tone level of its frames: dB SPL re 20 uPa when calibrated, else dB re full
         scale (mean square re 1, a full-scale sine is -3 dB).
@@ -75,8 +79,10 @@ class Episode:
         MOSQITO is missing.
     order : int or None
         The order it followed (rejected episodes only).
-    track_times_s, track_hz : numpy.ndarray
-        Its frames' centres and frequencies (nan in bridged gaps); not in `as_dict`.
+    track_times_s : numpy.ndarray
+        Its frames' centres [s]; not in `as_dict`.
+    track_hz : numpy.ndarray
+        Its frames' frequencies [Hz] (nan in bridged gaps); not in `as_dict`.
     """
 
     start_s: float
@@ -96,7 +102,12 @@ class Episode:
         return self.end_s - self.start_s
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-safe dict (nan -> None), without the per-frame track."""
+        """The episode as a JSON-safe dict (nan -> None), without the per-frame track.
+
+        Returns
+        -------
+        dict
+        """
         return dict(start_s=self.start_s, end_s=self.end_s, frequency_hz=self.frequency_hz,
                     tnr_db=_finite_or_none(self.tnr_db), pr_db=_finite_or_none(self.pr_db),
                     level_db=_finite_or_none(self.level_db),
@@ -144,7 +155,12 @@ class Detection:
         return float(t[1] - t[0]) if t.size > 1 else math.nan
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-safe dict (no nan: None in its place)."""
+        """The detection as a JSON-safe dict (no nan: None in its place).
+
+        Returns
+        -------
+        dict
+        """
         return dict(frame_times_s=self.frame_times_s.tolist(), heard=self.heard.tolist(),
                     frequency_hz=[_finite_or_none(f) for f in self.frequency_hz.tolist()],
                     episodes=[e.as_dict() for e in self.episodes],
@@ -167,7 +183,7 @@ class _Track:
     """One tone followed frame by frame."""
 
     __slots__ = ("first", "last", "frames", "hz", "f1", "recent", "median", "tnr", "pr",
-                 "power", "last_power")
+                 "power", "last_power", "checked_at", "order_now")
 
     def __init__(self, i: int, f: float, f1: float, tnr: float, pr: float, power: float,
                  window: int) -> None:
@@ -179,6 +195,8 @@ class _Track:
         self.median = f
         self.tnr = self.pr = self.power = -math.inf
         self.last_power = power
+        self.checked_at = 0                  # frames when `order_now` was last decided
+        self.order_now: int | None = None
         self.add(i, f, f1, tnr, pr, power)
 
     def add(self, i: int, f: float, f1: float, tnr: float, pr: float, power: float) -> None:
@@ -260,7 +278,7 @@ class StreamingDetector:
         self._max_dropped = -(-self.frame_len // self.hop) + self._allowed_missing
         self._keep = int(math.ceil((s.loudness_max_s + 2 * s.frame_s + s.max_gap_s
                                     + 2 * s.hop_s) * rate)) + self.frame_len
-        self._window = None
+        self._window = hann(self.frame_len)
         self._new_segment(None)
 
     def _new_segment(self, t0_s: float | None) -> None:
@@ -284,7 +302,8 @@ class StreamingDetector:
     @property
     def heard_now(self) -> bool:
         """A track that has lasted `min_duration_s` and does not (so far) follow the orders
-        covers the latest frame: provisional, the episode is decided when it closes."""
+        covers the latest frame: provisional (the order test re-run as the track grows by an
+        eighth), the episode is decided when it closes."""
         return self._heard_now
 
     @property
@@ -451,10 +470,15 @@ class StreamingDetector:
         seg = self._buf[s0:s0 + (i1 - i0 - 1) * hop + n]
         if self.analyzer.empty:
             return []
-        cand = self.analyzer.candidates(short_time_psd(seg, self.sample_rate_hz, n, hop))
-        bad_cum = np.concatenate([[0], np.cumsum(self._bad[s0:s0 + (i1 - i0 - 1) * hop + n])])
-        starts = np.arange(i1 - i0) * hop
-        dropped = bad_cum[starts + n] - bad_cum[starts] > 0
+        cand = self.analyzer.candidates(short_time_psd(seg, self.sample_rate_hz, n, hop,
+                                                       self._window))
+        bad = self._bad[s0:s0 + seg.size]
+        if bad.any():
+            bad_cum = np.concatenate([[0], np.cumsum(bad)])
+            starts = np.arange(i1 - i0) * hop
+            dropped = bad_cum[starts + n] - bad_cum[starts] > 0
+        else:
+            dropped = np.zeros(i1 - i0, bool)
         prominent = cand.prominent & ~dropped[:, None]
         frame_t = self.frame_time(np.arange(i0, i1))
         if self._speed_t.size:
@@ -609,10 +633,14 @@ class StreamingDetector:
         latest = self._next_frame - 1
         best: _Track | None = None
         for tr in self._tracks:
-            if tr.last - tr.first + 1 >= self._min_frames and \
-                    latest - tr.last <= self._allowed_missing and \
-                    self._follows_order(tr) is None and \
-                    (best is None or tr.last_power > best.last_power):
+            if tr.last - tr.first + 1 < self._min_frames or \
+                    latest - tr.last > self._allowed_missing or \
+                    (best is not None and tr.last_power <= best.last_power):
+                continue
+            n = len(tr.hz)                   # re-decided as the track grows by 1/8
+            if n >= tr.checked_at + max(5, tr.checked_at // 8):
+                tr.order_now, tr.checked_at = self._follows_order(tr), n
+            if tr.order_now is None:
                 best = tr
         self._heard_now = best is not None
         self._frequency_now = best.median if best is not None else math.nan
@@ -631,10 +659,11 @@ def detect(samples: Any, sample_rate_hz: float, *, t0_s: float = 0.0,
         Sample rate [Hz], in [1000, 1e6].
     t0_s : float
         Time of the first sample [s].
-    speed_times_s, speed_rad_s : array_like, optional
-        The shaft speed [rad/s] at these times [s] (interpolated linearly at the frame times);
-        without them no tone is rejected as a motor order. A float `speed_rad_s` alone is a
-        constant speed.
+    speed_times_s : array_like, optional
+        Times [s] of the speed samples.
+    speed_rad_s : float or array_like, optional
+        The shaft speed [rad/s] at `speed_times_s` (interpolated linearly at the frame times);
+        without it no tone is rejected as a motor order. A float alone is a constant speed.
     scale_pa : float, optional
         Pascal per full-scale unit: levels in dB SPL and loudness computed.
     settings : DetectorSettings
