@@ -151,7 +151,8 @@ def test_wav_beside_the_log(tmp_path, dtype):
     x = _tone(4800, 250.0)
     data = {np.int16: lambda: (x * 32767).astype(np.int16),
             np.int32: lambda: (x * 2 ** 31).astype(np.int32),
-            np.float32: lambda: x, np.uint8: lambda: np.round(x * 127 + 128).astype(np.uint8)}[dtype]()
+            np.float32: lambda: x,
+            np.uint8: lambda: np.round(x * 127 + 128).astype(np.uint8)}[dtype]()
     path = tmp_path / "mic.wav"
     wavfile.write(path, RATE, np.column_stack([data, data // 2 if dtype != np.float32
                                                else data / 2]))

@@ -14,8 +14,14 @@ import pytest
 from leadscrew_ros.bag import logmeta
 from leadscrew_ros.bag.audio import read_audio
 from leadscrew_ros.bag.logsource import open_log
-from leadscrew_ros.bag.virtual_bench import (MIC_INFO_TOPIC, MIC_TOPIC, TRUTH, BenchSettings,
-                                             run, simulate_unit)
+from leadscrew_ros.bag.virtual_bench import (
+    MIC_INFO_TOPIC,
+    MIC_TOPIC,
+    TRUTH,
+    BenchSettings,
+    run,
+    simulate_unit,
+)
 from leadscrew_ros.cli import main
 from leadscrew_ros.live.settings import LiveSettings
 from leadscrew_ros.model import ScrewParameters, SqueakModel

@@ -42,17 +42,18 @@ numpy as they are read and concatenated once.
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
+from ..model.physics.metadata import check, setting
 from . import audiomsgs, schema
 from .audiomsgs import PA_FLOAT32, PA_INT8, PA_INT16, PA_INT24, PA_INT32, PA_UINT8
 from .logfile import LogError, Topic
 from .logsource import LogSource, log_topics, open_log
-from ..model.physics.metadata import check, setting
 
 PCM_CODINGS = ("", "wave", "wav", "pcm", "raw")
 # sample_format -> (numpy dtype, offset, full scale): x = (raw - offset) / scale
@@ -218,11 +219,12 @@ def read_audio(log: Path | str | None = None, topic: str | None = None,
     kinds = {name: k for name, t in topics.items() if (k := _kind(t)) is not None}
     name = _choose_topic(source.path, topics, kinds, topic)
     kind = kinds[name]
-    if kind == MULTI_ARRAY and sample_rate_hz is None:
-        raise AudioError(source.path, f"{name} is std_msgs/Float32MultiArray, which carries "
-                                      "no sample rate: give sample_rate_hz")
-    if kind == MULTI_ARRAY and not (sample_rate_hz > 0 and np.isfinite(sample_rate_hz)):
-        raise AudioError(source.path, f"sample_rate_hz = {sample_rate_hz!r} must be > 0")
+    if kind == MULTI_ARRAY:
+        if sample_rate_hz is None:
+            raise AudioError(source.path, f"{name} is std_msgs/Float32MultiArray, which "
+                                          "carries no sample rate: give sample_rate_hz")
+        if not (sample_rate_hz > 0 and np.isfinite(sample_rate_hz)):
+            raise AudioError(source.path, f"sample_rate_hz = {sample_rate_hz!r} must be > 0")
     info_name = _choose_info(source.path, kinds, name, info_topic) \
         if kind in (DRIVERS, DRIVERS_UNSTAMPED) else None
     problems = _Problems()
@@ -272,7 +274,9 @@ def _topics(source: LogSource) -> dict[str, Topic]:
                 summary = make_reader(fh).get_summary()
         except Exception:             # damaged or cut off: log_topics read it through
             summary = None
-        for c in (summary.channels.values() if summary else ()):
+        if summary is None:
+            continue
+        for c in summary.channels.values():
             s = summary.schemas.get(c.schema_id)
             if s is not None:
                 texts.setdefault(c.topic, s.data.decode("utf-8", "replace"))

@@ -36,16 +36,13 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-from . import audiomsgs, logmeta
-from .cdr import FLOAT64, encode_float64
-from .recorder import Recorder, RecordSettings, ensure_directory
-from .synthetic import LOAD_TOPIC, NUT_TOPIC, SPEED_TOPIC, DutyCycle
 from ..live.profile import HOLD, RAMP, StrokeProfile
 from ..live.settings import LiveSettings
 from ..model import ScrewParameters, SqueakModel
@@ -53,6 +50,10 @@ from ..model.physics.metadata import check, setting
 from ..model.physics.parameters import ParameterError
 from ..model.studies.fields import growth_field
 from ..model.uncertainty.scatter import LIVE_SAMPLES, Scatter, valid_mask
+from . import audiomsgs, logmeta
+from .cdr import FLOAT64, encode_float64
+from .recorder import Recorder, RecordSettings, ensure_directory
+from .synthetic import LOAD_TOPIC, NUT_TOPIC, SPEED_TOPIC, DutyCycle
 
 MIC_TOPIC, MIC_INFO_TOPIC = "/microphone", "/microphone_info"
 TRUTH = "truth.json"
