@@ -55,6 +55,7 @@ SPECTROGRAM_F_HZ = (89.1, 11200.0)     # ECMA-418-1's analysis range: the panel'
 SPECTROGRAM_COLUMNS = 600     # time columns at most (a long log: frames further apart)
 SPECTROGRAM_ROWS = 160        # log-spaced frequency rows
 SPECTROGRAM_FRAME = 4096      # samples per spectrogram frame (11.7 Hz bins at 48 kHz)
+COLLAR_S = 0.05              # frames this close to a heard edge are not compared (half a frame)
 SPEED_TOLERANCE = 0.002       # a speed sample is kept when it moved this much (relative)
 SPEED_FLOOR_RAD_S = 1.0       # ... of at least this speed
 
@@ -215,7 +216,9 @@ class PredictionTrace:
         """`agreement` of these predictions with `detection`, held to `end_s` [s], counting
         only what the detector can hear: a recompute whose most unstable squeak mode (the one
         a squeak locks to) lies outside `band_hz` counts as not predicted, its P(squeak) as
-        unknown; the frequency matches are with the modes inside the band.
+        unknown; the frequency matches are with the modes inside the band. Frames within
+        `COLLAR_S` of a heard episode's start or end are not compared (the detector places an
+        edge to about half its 0.1 s frame).
 
         Returns
         -------
@@ -234,7 +237,8 @@ class PredictionTrace:
         held = np.diff(np.r_[t, max(end_s, t[-1])]) if t.size else t
         return agreement(detection, t, squeak & ~outside,
                          [None if math.isnan(v) else float(v) for v in p.tolist()],
-                         audible, valid_until_s=end_s), float(held[outside].sum())
+                         audible, valid_until_s=end_s, collar_s=COLLAR_S), \
+            float(held[outside].sum())
 
 
 @dataclass
@@ -358,7 +362,7 @@ class Heard:
                 "duration_s": self.duration_s,
                 "episodes": [e.as_dict() for e in self.detection.episodes],
                 "agreement": self.agreement.as_dict(),
-                "band_hz": list(self.band_hz),
+                "band_hz": list(self.band_hz), "collar_s": COLLAR_S,
                 "predicted_out_of_band_s": self.out_of_band_s[self.formulation],
                 "clips": [f"{CLIPS_DIR}/{p.name}" for p, _ in self.clips],
                 "warnings": list(self.warnings)}
