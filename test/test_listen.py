@@ -16,14 +16,24 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from scipy.io import wavfile
 
-from harness.audio_logs import (DRIVERS_DATA, as_float32_multi_array, rewrite, samples_of,
-                                with_wav_beside)
+from harness.audio_logs import (
+    DRIVERS_DATA,
+    as_float32_multi_array,
+    rewrite,
+    samples_of,
+    with_wav_beside,
+)
 from leadscrew_ros.bag import audiomsgs
 from leadscrew_ros.bag.virtual_bench import MIC_INFO_TOPIC, MIC_TOPIC, START_NS, BenchSettings, run
 from leadscrew_ros.cli import main
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.review.listen import (CLIP_PAD_S, COLLAR_S, ListenSettings, PredictionTrace,
-                                         SpeedTrace)
+from leadscrew_ros.review.listen import (
+    CLIP_PAD_S,
+    COLLAR_S,
+    ListenSettings,
+    PredictionTrace,
+    SpeedTrace,
+)
 from leadscrew_ros.review.replay import ReplaySettings, replay
 
 FORMULATIONS = ("paper", "consistent")
@@ -298,3 +308,17 @@ def test_traces_are_compact():
     assert np.allclose(np.interp(np.arange(1000) * 0.01, t, v), truth, rtol=0.0021)
     trace = PredictionTrace()
     assert len(trace) == 0 and trace.squeak_points().shape == (0, 3)
+
+
+def test_the_listening_page_shows_what_the_example_prints(tmp_path):
+    """doc/user/listening.md's worked example is tools/listening_example.py's output."""
+    import importlib.util
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("listening_example",
+                                                  root / "tools" / "listening_example.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    page = (root / "doc" / "user" / "listening.md").read_text(encoding="utf-8")
+    shown = page.split("% listening_example: begin\n", 1)[1].split(
+        "\n% listening_example: end", 1)[0]
+    assert shown == tool.example(tmp_path)

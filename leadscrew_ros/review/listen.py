@@ -29,9 +29,10 @@ from __future__ import annotations
 
 import math
 from array import array
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -158,7 +159,7 @@ class PredictionTrace:
         self.times, self.probability = array("d"), array("d")
         self.squeak = array("b")
         self.speed, self.load, self.model_nut = array("d"), array("d"), array("d")
-        self.mode_start = array("q", [0])              # modes of recompute i: [start[i], start[i+1])
+        self.mode_start = array("q", [0])       # recompute i: modes [start[i], start[i+1])
         self.mode_label, self.mode_hz = array("H"), array("d")
         self.labels: list[str] = []
         self._label_index: dict[str, int] = {}
@@ -197,11 +198,13 @@ class PredictionTrace:
             other._modes(v.squeak)
         return other
 
-    def modes(self) -> list[list[tuple[str, float]]]:
-        """Per recompute: its squeak modes (label, frequency [Hz])."""
-        start, hz = self.mode_start, self.mode_hz
-        return [[(self.labels[self.mode_label[j]], hz[j]) for j in range(start[i], start[i + 1])]
-                for i in range(len(self.times))]
+    def modes(self, i: int, band_hz: tuple[float, float] = (0.0, math.inf)
+              ) -> list[tuple[str, float]]:
+        """The squeak modes (label, frequency [Hz]) of recompute `i` within `band_hz`."""
+        lo, hi = band_hz
+        return [(self.labels[self.mode_label[j]], self.mode_hz[j])
+                for j in range(self.mode_start[i], self.mode_start[i + 1])
+                if lo <= self.mode_hz[j] <= hi]
 
     def squeak_points(self) -> np.ndarray:
         """(time [s], frequency [Hz], P(squeak)) of every predicted squeak mode, rows."""
@@ -226,19 +229,31 @@ class PredictionTrace:
             The agreement, and the time [s] with the most unstable mode outside the band.
         """
         from ..model.acoustics import agreement
-        lo, hi = band_hz
-        modes = self.modes()
-        audible = [[(label, f) for label, f in m if lo <= f <= hi] for m in modes]
+        start = np.frombuffer(self.mode_start, np.int64)
+        has_modes = np.diff(start) > 0
+        hz = np.asarray(self.mode_hz)            # the first of a recompute's: most unstable
+        first_hz = hz[np.minimum(start[:-1], hz.size - 1)] if hz.size else np.zeros(len(self))
         squeak = np.asarray(self.squeak, bool)
-        outside = squeak & np.array([bool(m) and not lo <= m[0][1] <= hi for m in modes],
-                                    bool)
+        outside = squeak & has_modes & ~((first_hz >= band_hz[0]) & (first_hz <= band_hz[1]))
         p = np.where(outside, np.nan, np.asarray(self.probability))
         t = np.asarray(self.times)
         held = np.diff(np.r_[t, max(end_s, t[-1])]) if t.size else t
-        return agreement(detection, t, squeak & ~outside,
-                         [None if math.isnan(v) else float(v) for v in p.tolist()],
-                         audible, valid_until_s=end_s, collar_s=COLLAR_S), \
-            float(held[outside].sum())
+        return agreement(detection, t, squeak & ~outside, p, _Modes(self, band_hz),
+                         valid_until_s=end_s, collar_s=COLLAR_S), float(held[outside].sum())
+
+
+class _Modes(Sequence):
+    """The squeak modes within a band of each recompute of a trace, made when asked for (the
+    agreement asks only for those during heard episodes)."""
+
+    def __init__(self, trace: PredictionTrace, band_hz: tuple[float, float]) -> None:
+        self.trace, self.band_hz = trace, band_hz
+
+    def __len__(self) -> int:
+        return len(self.trace)
+
+    def __getitem__(self, i):                      # type: ignore[override]
+        return self.trace.modes(i, self.band_hz)
 
 
 @dataclass

@@ -5,8 +5,8 @@ format, hostile data), or which is dropped for a WAV file beside the log."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 from scipy.io import wavfile
