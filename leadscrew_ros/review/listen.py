@@ -383,14 +383,26 @@ class Heard:
                 "warnings": list(self.warnings)}
 
     def by_formulation_dict(self) -> dict[str, dict[str, Any]] | None:
-        """summary.json's `agreement_by_formulation` (None without the comparison)."""
+        """summary.json's `agreement_by_formulation`.
+
+        Returns
+        -------
+        dict or None
+            Formulation -> its `Agreement.as_dict` and `predicted_out_of_band_s`; None without
+            the comparison.
+        """
         return {k: {**a.as_dict(), "predicted_out_of_band_s": self.out_of_band_s[k]}
                 for k, a in self.by_formulation.items()} or None
 
     def ranking(self) -> list[str]:
-        """The compared formulations, the one that describes the drive best first: lower
-        Brier score, then higher recall, then higher precision (each to 3 digits), then more
-        heard episodes matched in frequency."""
+        """The compared formulations, best first.
+
+        Returns
+        -------
+        list of str
+            By lower Brier score, then higher recall, then higher precision (each to 3
+            digits), then more heard episodes matched in frequency.
+        """
         def key(name: str) -> tuple:
             a = self.by_formulation[name]
             return (_rounded(a.brier, math.inf), -_rounded(a.recall, -1.0),
