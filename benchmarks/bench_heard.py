@@ -36,16 +36,21 @@ from leadscrew_ros.review.replay import ReplaySettings, replay
 
 
 def _replay(log: Path, out: Path, model: SqueakModel, sound: bool) -> dict:
-    replay(log, model, out, ReplaySettings(workers=0, progress=False,
-                                           listen=ListenSettings(enabled=sound)))
+    replay(
+        log,
+        model,
+        out,
+        ReplaySettings(workers=0, progress=False, listen=ListenSettings(enabled=sound)),
+    )
     return json.loads((out / "summary.json").read_text())
 
 
 def _bench(root: Path, units: int, duration_s: float, formulation: str, seed: int) -> list:
     """The bench's (log, truth of the unit) pairs."""
     out = root / f"bench-{formulation}"
-    truth = run(BenchSettings(units=units, duration_s=duration_s, formulation=formulation,
-                              seed=seed), out)
+    truth = run(
+        BenchSettings(units=units, duration_s=duration_s, formulation=formulation, seed=seed), out
+    )
     return [(out / u["log"], u) for u in truth["units"]]
 
 
@@ -55,16 +60,18 @@ def throughput(root: Path, args: argparse.Namespace) -> dict:
     with_sound, without, share = [], [], []
     for r in range(args.rounds):
         for k, (log, _) in enumerate(logs):
-            for sound in ((True, False) if (r + k) % 2 == 0 else (False, True)):
+            for sound in (True, False) if (r + k) % 2 == 0 else (False, True):
                 s = _replay(log, root / "out", model, sound)
                 (with_sound if sound else without).append(s["x_real_time"])
                 if sound:
                     share.append(s["detect_wall_s"] / s["wall_s"])
-    return {"x_real_time_with_sound": statistics.median(with_sound),
-            "x_real_time_without_sound": statistics.median(without),
-            "with_over_without": statistics.median(with_sound) / statistics.median(without),
-            "detection_share": statistics.median(share),
-            "replays": len(with_sound) + len(without)}
+    return {
+        "x_real_time_with_sound": statistics.median(with_sound),
+        "x_real_time_without_sound": statistics.median(without),
+        "with_over_without": statistics.median(with_sound) / statistics.median(without),
+        "detection_share": statistics.median(share),
+        "replays": len(with_sound) + len(without),
+    }
 
 
 def agreement_table(root: Path, args: argparse.Namespace) -> dict:
@@ -84,9 +91,13 @@ def agreement_table(root: Path, args: argparse.Namespace) -> dict:
                         if a[key] is not None:
                             scores[key].append(a[key])
                 out[f"{params_kind} bench={made} replay={replayed}"] = {
-                    key: {"median": statistics.median(v) if v else None,
-                          "worst": (max(v) if key == "brier" else min(v)) if v else None,
-                          "units": len(v)} for key, v in scores.items()}
+                    key: {
+                        "median": statistics.median(v) if v else None,
+                        "worst": (max(v) if key == "brier" else min(v)) if v else None,
+                        "units": len(v),
+                    }
+                    for key, v in scores.items()
+                }
     return out
 
 
@@ -96,29 +107,40 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--duration", type=float, default=6.0, help="stroke duration [s]")
     p.add_argument("--rounds", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--agreement", action="store_true",
-                   help="the 2 x 2 table of recall, precision and Brier instead")
+    p.add_argument(
+        "--agreement",
+        action="store_true",
+        help="the 2 x 2 table of recall, precision and Brier instead",
+    )
     p.add_argument("--json", metavar="OUT.json")
     args = p.parse_args(argv)
     start, load0 = time.perf_counter(), os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="bench_heard_") as tmp:
         result = (agreement_table if args.agreement else throughput)(Path(tmp), args)
     if args.agreement:
-        print("| parameters | bench | replay | recall median (worst) | precision median "
-              "(worst) | Brier median (worst) |")
+        print(
+            "| parameters | bench | replay | recall median (worst) | precision median "
+            "(worst) | Brier median (worst) |"
+        )
         print("|---|---|---|---|---|---|")
         for key, v in result.items():
             kind, made, replayed = key.replace("bench=", "").replace("replay=", "").split()
-            cells = [f"{v[m]['median']:.3f} ({v[m]['worst']:.3f})" if v[m]["median"] is not None
-                     else "n/a" for m in ("recall", "precision", "brier")]
+            cells = [
+                f"{v[m]['median']:.3f} ({v[m]['worst']:.3f})"
+                if v[m]["median"] is not None
+                else "n/a"
+                for m in ("recall", "precision", "brier")
+            ]
             print(f"| {kind} | {made} | {replayed} | " + " | ".join(cells) + " |")
     else:
         print("| what | value |\n|---|---|")
         for key, v in result.items():
             print(f"| {key} | {v:.3g} |")
-    print(f"\n{datetime.date.today()}, Python {sys.version.split()[0]}, {os.cpu_count()} CPUs, "
-          f"load {load0:.2f} -> {os.getloadavg()[0]:.2f}, {args.units} units x "
-          f"{args.duration:g} s, wall {time.perf_counter() - start:.0f} s")
+    print(
+        f"\n{datetime.date.today()}, Python {sys.version.split()[0]}, {os.cpu_count()} CPUs, "
+        f"load {load0:.2f} -> {os.getloadavg()[0]:.2f}, {args.units} units x "
+        f"{args.duration:g} s, wall {time.perf_counter() - start:.0f} s"
+    )
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1) + "\n")
     return 0

@@ -34,8 +34,19 @@ BENCH = BenchSettings(units=1, duration_s=12.0, seed=0)
 
 def _replay(log: Path, out: Path, *options: str) -> dict:
     with contextlib.redirect_stdout(io.StringIO()):
-        code = cli(["replay", str(log), "--out", str(out), "--no-report", "--quiet",
-                    "--workers", "0", *options])
+        code = cli(
+            [
+                "replay",
+                str(log),
+                "--out",
+                str(out),
+                "--no-report",
+                "--quiet",
+                "--workers",
+                "0",
+                *options,
+            ]
+        )
     assert code == 0, code
     return json.loads((out / "summary.json").read_text())
 
@@ -43,8 +54,10 @@ def _replay(log: Path, out: Path, *options: str) -> dict:
 def _row(name: str, options: str, heard: dict) -> str:
     a = heard["agreement"]
     freqs = ", ".join(f"{e['frequency_hz']:.0f}" for e in heard["episodes"])
-    return (f"| {name} | `{options}` | {len(heard['episodes'])} ({freqs} Hz) | "
-            f"{a['recall']:.3f} | {a['precision']:.3f} | {a['brier']:.4f} |")
+    return (
+        f"| {name} | `{options}` | {len(heard['episodes'])} ({freqs} Hz) | "
+        f"{a['recall']:.3f} | {a['precision']:.3f} | {a['brier']:.4f} |"
+    )
 
 
 def example(tmp: Path) -> str:
@@ -53,60 +66,83 @@ def example(tmp: Path) -> str:
     unit = truth["units"][0]
     log = tmp / "bench" / unit["log"]
     scale = truth["audio"]["audio_scale_pa_per_fs"]
-    rows = [_row("AudioDataStamped + AudioInfo", "(none: the only audio topic)",
-                 _replay(log, tmp / "r1")["heard"])]
+    rows = [
+        _row(
+            "AudioDataStamped + AudioInfo",
+            "(none: the only audio topic)",
+            _replay(log, tmp / "r1")["heard"],
+        )
+    ]
     array = as_float32_multi_array(log, tmp / "f32")
-    rows.append(_row("Float32MultiArray", "--audio-rate 48000",
-                     _replay(array, tmp / "r2", "--audio-rate", "48000")["heard"]))
+    rows.append(
+        _row(
+            "Float32MultiArray",
+            "--audio-rate 48000",
+            _replay(array, tmp / "r2", "--audio-rate", "48000")["heard"],
+        )
+    )
     bag, wav, start = with_wav_beside(log, tmp / "wav")
-    rows.append(_row("WAV beside the log", f"--audio <bag>/microphone.wav --audio-start "
-                                           f"{start:g}",
-                     _replay(bag, tmp / "r3", "--audio", str(wav), "--audio-start",
-                             f"{start!r}")["heard"]))
+    rows.append(
+        _row(
+            "WAV beside the log",
+            f"--audio <bag>/microphone.wav --audio-start {start:g}",
+            _replay(bag, tmp / "r3", "--audio", str(wav), "--audio-start", f"{start!r}")["heard"],
+        )
+    )
     s = _replay(log, tmp / "r4", "--audio-scale", f"{scale:.4g}", "--compare-formulations")
     text = (tmp / "r4" / "summary.txt").read_text().splitlines()
-    heard_lines = [line for line in text if line.startswith(("heard", "levels", "paper ",
-                                                             "consistent "))]
+    heard_lines = [
+        line for line in text if line.startswith(("heard", "levels", "paper ", "consistent "))
+    ]
     first = s["heard"]["episodes"][0]
     episode = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in first.items()}
-    agreement = {k: (round(v, 4) if isinstance(v, float) else v)
-                 for k, v in s["heard"]["agreement"].items() if k != "frequency_match"}
-    match = {k: (round(v, 5) if isinstance(v, float) else v)
-             for k, v in s["heard"]["agreement"]["frequency_match"][0].items()}
-    truth_line = ", ".join(f"{i['start_s']:.2f}-{i['end_s']:.2f} s ({i['min_hz']:.0f}-"
-                           f"{i['max_hz']:.0f} Hz)" for i in unit["squeak_intervals"])
-    return "\n".join([
-        f"The unit squeaks (truth.json, its own model): {truth_line}; the bench's scale is "
-        f"{scale:.4g} Pa per full-scale unit.",
-        "",
-        "| input | replay options | heard episodes | recall | precision | Brier |",
-        "|---|---|---|---:|---:|---:|",
-        *rows,
-        "",
-        f"Calibrated (`--audio-scale {scale:.4g} --compare-formulations`), summary.txt says:",
-        "",
-        "```text",
-        *heard_lines,
-        "```",
-        "",
-        "and summary.json's `heard` holds, among the rest, the first episode",
-        "",
-        "```json",
-        json.dumps(episode),
-        "```",
-        "",
-        "the agreement (`frequency_match` aside)",
-        "",
-        "```json",
-        json.dumps(agreement),
-        "```",
-        "",
-        "and the first episode's frequency match",
-        "",
-        "```json",
-        json.dumps(match),
-        "```",
-    ])
+    agreement = {
+        k: (round(v, 4) if isinstance(v, float) else v)
+        for k, v in s["heard"]["agreement"].items()
+        if k != "frequency_match"
+    }
+    match = {
+        k: (round(v, 5) if isinstance(v, float) else v)
+        for k, v in s["heard"]["agreement"]["frequency_match"][0].items()
+    }
+    truth_line = ", ".join(
+        f"{i['start_s']:.2f}-{i['end_s']:.2f} s ({i['min_hz']:.0f}-{i['max_hz']:.0f} Hz)"
+        for i in unit["squeak_intervals"]
+    )
+    return "\n".join(
+        [
+            f"The unit squeaks (truth.json, its own model): {truth_line}; the bench's scale is "
+            f"{scale:.4g} Pa per full-scale unit.",
+            "",
+            "| input | replay options | heard episodes | recall | precision | Brier |",
+            "|---|---|---|---:|---:|---:|",
+            *rows,
+            "",
+            f"Calibrated (`--audio-scale {scale:.4g} --compare-formulations`), summary.txt says:",
+            "",
+            "```text",
+            *heard_lines,
+            "```",
+            "",
+            "and summary.json's `heard` holds, among the rest, the first episode",
+            "",
+            "```json",
+            json.dumps(episode),
+            "```",
+            "",
+            "the agreement (`frequency_match` aside)",
+            "",
+            "```json",
+            json.dumps(agreement),
+            "```",
+            "",
+            "and the first episode's frequency match",
+            "",
+            "```json",
+            json.dumps(match),
+            "```",
+        ]
+    )
 
 
 def main() -> int:

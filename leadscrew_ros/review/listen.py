@@ -49,16 +49,16 @@ if TYPE_CHECKING:
 FORMULATIONS = ("paper", "consistent")
 HEARD, HEARD_FREQUENCY = "squeak/heard", "squeak/heard_frequency"
 CLIPS_DIR = "clips"
-CLIP_PAD_S = 0.2              # a clip starts this before its episode and ends this after it
-CLIP_MAX_S = 10.0             # longer episodes: the first CLIP_MAX_S of them
-MAX_CLIPS = 100               # clips written (the first episodes)
-SPECTROGRAM_F_HZ = (89.1, 11200.0)     # ECMA-418-1's analysis range: the panel's axis
-SPECTROGRAM_COLUMNS = 600     # time columns at most (a long log: frames further apart)
-SPECTROGRAM_ROWS = 160        # log-spaced frequency rows
-SPECTROGRAM_FRAME = 4096      # samples per spectrogram frame (11.7 Hz bins at 48 kHz)
-COLLAR_S = 0.05              # frames this close to a heard edge are not compared (half a frame)
-SPEED_TOLERANCE = 0.002       # a speed sample is kept when it moved this much (relative)
-SPEED_FLOOR_RAD_S = 1.0       # ... of at least this speed
+CLIP_PAD_S = 0.2  # a clip starts this before its episode and ends this after it
+CLIP_MAX_S = 10.0  # longer episodes: the first CLIP_MAX_S of them
+MAX_CLIPS = 100  # clips written (the first episodes)
+SPECTROGRAM_F_HZ = (89.1, 11200.0)  # ECMA-418-1's analysis range: the panel's axis
+SPECTROGRAM_COLUMNS = 600  # time columns at most (a long log: frames further apart)
+SPECTROGRAM_ROWS = 160  # log-spaced frequency rows
+SPECTROGRAM_FRAME = 4096  # samples per spectrogram frame (11.7 Hz bins at 48 kHz)
+COLLAR_S = 0.05  # frames this close to a heard edge are not compared (half a frame)
+SPEED_TOLERANCE = 0.002  # a speed sample is kept when it moved this much (relative)
+SPEED_FLOOR_RAD_S = 1.0  # ... of at least this speed
 
 
 @documented
@@ -67,25 +67,53 @@ class ListenSettings:
     """Where a replay finds the sound of the drive and how it is scaled (`listen`); empty texts
     and zeros are 'not given'."""
 
-    enabled: bool = setting(True, "", "compare the log's sound with the predictions when it "
-                            "has sound (false: --no-audio)")
-    topic: str = setting("", "", "audio topic (ros-drivers AudioDataStamped, mgonzs13 "
-                         "AudioStamped or std_msgs/Float32MultiArray); '' is the log's only "
-                         "audio topic")
-    info_topic: str = setting("", "", "ros-drivers AudioInfo topic; '' is <topic>_info, else "
-                              "the log's only AudioInfo topic")
+    enabled: bool = setting(
+        True,
+        "",
+        "compare the log's sound with the predictions when it has sound (false: --no-audio)",
+    )
+    topic: str = setting(
+        "",
+        "",
+        "audio topic (ros-drivers AudioDataStamped, mgonzs13 "
+        "AudioStamped or std_msgs/Float32MultiArray); '' is the log's only "
+        "audio topic",
+    )
+    info_topic: str = setting(
+        "",
+        "",
+        "ros-drivers AudioInfo topic; '' is <topic>_info, else the log's only AudioInfo topic",
+    )
     channel: int = setting(0, "1", "channel of interleaved audio (0 the first)", 0, 255)
-    rate_hz: float = setting(0.0, "Hz", "sample rate of std_msgs/Float32MultiArray audio, "
-                             "which carries none (0: not given)", 0.0, 1e6)
+    rate_hz: float = setting(
+        0.0,
+        "Hz",
+        "sample rate of std_msgs/Float32MultiArray audio, which carries none (0: not given)",
+        0.0,
+        1e6,
+    )
     file: str = setting("", "", "a WAV file to read instead of the log's audio topics")
-    start_s: float = setting(0.0, "s", "time of the WAV file's first sample after the log's "
-                             "first message", -86400.0, 86400.0)
-    scale_pa: float = setting(0.0, "Pa", "pascal per full-scale unit of the audio: levels in "
-                              "dB SPL and loudness in sone (0: uncalibrated, levels in dB re "
-                              "full scale, no loudness)", 0.0, 1e6)
-    compare_formulations: bool = setting(False, "", "also predict the log with the other "
-                                         "friction formulation and compare both with the "
-                                         "sound")
+    start_s: float = setting(
+        0.0,
+        "s",
+        "time of the WAV file's first sample after the log's first message",
+        -86400.0,
+        86400.0,
+    )
+    scale_pa: float = setting(
+        0.0,
+        "Pa",
+        "pascal per full-scale unit of the audio: levels in "
+        "dB SPL and loudness in sone (0: uncalibrated, levels in dB re "
+        "full scale, no loudness)",
+        0.0,
+        1e6,
+    )
+    compare_formulations: bool = setting(
+        False,
+        "",
+        "also predict the log with the other friction formulation and compare both with the sound",
+    )
 
     def __post_init__(self) -> None:
         check(self)
@@ -115,7 +143,8 @@ def has_sound(topics: dict[str, Topic], settings: ListenSettings) -> bool:
     (audio_common messages, or std_msgs/Float32MultiArray)."""
     return bool(settings.file) or any(
         t.type_name.startswith("audio_common_msgs/") or t.type_name == FLOAT32_MULTI_ARRAY
-        for t in topics.values())
+        for t in topics.values()
+    )
 
 
 class SpeedTrace:
@@ -159,7 +188,7 @@ class PredictionTrace:
         self.times, self.probability = array("d"), array("d")
         self.squeak = array("b")
         self.speed, self.load, self.model_nut = array("d"), array("d"), array("d")
-        self.mode_start = array("q", [0])       # recompute i: modes [start[i], start[i+1])
+        self.mode_start = array("q", [0])  # recompute i: modes [start[i], start[i+1])
         self.mode_label, self.mode_hz = array("H"), array("d")
         self.labels: list[str] = []
         self._label_index: dict[str, int] = {}
@@ -191,31 +220,44 @@ class PredictionTrace:
         """The same recomputes with other verdicts (another model's), in order."""
         other = PredictionTrace()
         other.times, other.speed, other.load, other.model_nut = (
-            self.times, self.speed, self.load, self.model_nut)
+            self.times,
+            self.speed,
+            self.load,
+            self.model_nut,
+        )
         for v in verdicts:
             other.squeak.append(int(v.valid and not v.stable))
             other.probability.append(v.probability if v.valid else math.nan)
             other._modes(v.squeak)
         return other
 
-    def modes(self, i: int, band_hz: tuple[float, float] = (0.0, math.inf)
-              ) -> list[tuple[str, float]]:
+    def modes(
+        self, i: int, band_hz: tuple[float, float] = (0.0, math.inf)
+    ) -> list[tuple[str, float]]:
         """The squeak modes (label, frequency [Hz]) of recompute `i` within `band_hz`."""
         lo, hi = band_hz
-        return [(self.labels[self.mode_label[j]], self.mode_hz[j])
-                for j in range(self.mode_start[i], self.mode_start[i + 1])
-                if lo <= self.mode_hz[j] <= hi]
+        return [
+            (self.labels[self.mode_label[j]], self.mode_hz[j])
+            for j in range(self.mode_start[i], self.mode_start[i + 1])
+            if lo <= self.mode_hz[j] <= hi
+        ]
 
     def squeak_points(self) -> np.ndarray:
         """(time [s], frequency [Hz], P(squeak)) of every predicted squeak mode, rows."""
         start = np.frombuffer(self.mode_start, np.int64)
         counts = np.diff(start)
         rows = np.repeat(np.arange(len(self.times)), counts)
-        return np.column_stack([np.asarray(self.times)[rows], np.asarray(self.mode_hz),
-                                np.asarray(self.probability)[rows]]).reshape(-1, 3)
+        return np.column_stack(
+            [
+                np.asarray(self.times)[rows],
+                np.asarray(self.mode_hz),
+                np.asarray(self.probability)[rows],
+            ]
+        ).reshape(-1, 3)
 
-    def compare(self, detection: Detection, end_s: float,
-                band_hz: tuple[float, float]) -> tuple[Agreement, float]:
+    def compare(
+        self, detection: Detection, end_s: float, band_hz: tuple[float, float]
+    ) -> tuple[Agreement, float]:
         """`agreement` of these predictions with `detection`, held to `end_s` [s], counting
         only what the detector can hear: a recompute whose most unstable squeak mode (the one
         a squeak locks to) lies outside `band_hz` counts as not predicted, its P(squeak) as
@@ -229,17 +271,25 @@ class PredictionTrace:
             The agreement, and the time [s] with the most unstable mode outside the band.
         """
         from ..model.acoustics import agreement
+
         start = np.frombuffer(self.mode_start, np.int64)
         has_modes = np.diff(start) > 0
-        hz = np.asarray(self.mode_hz)            # the first of a recompute's: most unstable
+        hz = np.asarray(self.mode_hz)  # the first of a recompute's: most unstable
         first_hz = hz[np.minimum(start[:-1], hz.size - 1)] if hz.size else np.zeros(len(self))
         squeak = np.asarray(self.squeak, bool)
         outside = squeak & has_modes & ~((first_hz >= band_hz[0]) & (first_hz <= band_hz[1]))
         p = np.where(outside, np.nan, np.asarray(self.probability))
         t = np.asarray(self.times)
         held = np.diff(np.r_[t, max(end_s, t[-1])]) if t.size else t
-        return agreement(detection, t, squeak & ~outside, p, _Modes(self, band_hz),
-                         valid_until_s=end_s, collar_s=COLLAR_S), float(held[outside].sum())
+        return agreement(
+            detection,
+            t,
+            squeak & ~outside,
+            p,
+            _Modes(self, band_hz),
+            valid_until_s=end_s,
+            collar_s=COLLAR_S,
+        ), float(held[outside].sum())
 
 
 class _Modes(Sequence):
@@ -252,7 +302,7 @@ class _Modes(Sequence):
     def __len__(self) -> int:
         return len(self.trace)
 
-    def __getitem__(self, i):                      # type: ignore[override]
+    def __getitem__(self, i):  # type: ignore[override]
         return self.trace.modes(i, self.band_hz)
 
 
@@ -277,8 +327,9 @@ class Spectrogram:
     level_db: np.ndarray
 
 
-def spectrogram(samples: np.ndarray, rate_hz: float, t0_s: float,
-                scale: float = 1.0) -> Spectrogram:
+def spectrogram(
+    samples: np.ndarray, rate_hz: float, t0_s: float, scale: float = 1.0
+) -> Spectrogram:
     """`Spectrogram` of a track: at most `SPECTROGRAM_COLUMNS` Hann frames of
     `SPECTROGRAM_FRAME` samples, evenly over the track (half-overlapping for short tracks),
     their power binned into `SPECTROGRAM_ROWS` log-spaced bands (the maximum of each, the
@@ -291,7 +342,7 @@ def spectrogram(samples: np.ndarray, rate_hz: float, t0_s: float,
     starts = np.arange(0, samples.size - n + 1, hop)[:SPECTROGRAM_COLUMNS]
     window = np.hanning(n).astype(np.float32)
     frames = samples[starts[:, None] + np.arange(n)] * window * np.float32(scale)
-    psd = np.abs(np.fft.rfft(frames, axis=1)) ** 2 / (rate_hz * np.sum(window ** 2))
+    psd = np.abs(np.fft.rfft(frames, axis=1)) ** 2 / (rate_hz * np.sum(window**2))
     psd[:, 1:-1] *= 2
     f = np.fft.rfftfreq(n, 1 / rate_hz)
     band = np.searchsorted(edges, f, side="right") - 1
@@ -371,16 +422,20 @@ class Heard:
         dict
             JSON-ready (nan as None).
         """
-        return {"source": self.source, "sample_rate_hz": self.sample_rate_hz,
-                "scale": self.scale,
-                "level_unit": "dB SPL" if self.scale == "Pa" else "dB re full scale",
-                "duration_s": self.duration_s,
-                "episodes": [e.as_dict() for e in self.detection.episodes],
-                "agreement": self.agreement.as_dict(),
-                "band_hz": list(self.band_hz), "collar_s": COLLAR_S,
-                "predicted_out_of_band_s": self.out_of_band_s[self.formulation],
-                "clips": [f"{CLIPS_DIR}/{p.name}" for p, _ in self.clips],
-                "warnings": list(self.warnings)}
+        return {
+            "source": self.source,
+            "sample_rate_hz": self.sample_rate_hz,
+            "scale": self.scale,
+            "level_unit": "dB SPL" if self.scale == "Pa" else "dB re full scale",
+            "duration_s": self.duration_s,
+            "episodes": [e.as_dict() for e in self.detection.episodes],
+            "agreement": self.agreement.as_dict(),
+            "band_hz": list(self.band_hz),
+            "collar_s": COLLAR_S,
+            "predicted_out_of_band_s": self.out_of_band_s[self.formulation],
+            "clips": [f"{CLIPS_DIR}/{p.name}" for p, _ in self.clips],
+            "warnings": list(self.warnings),
+        }
 
     def by_formulation_dict(self) -> dict[str, dict[str, Any]] | None:
         """summary.json's `agreement_by_formulation`.
@@ -391,8 +446,10 @@ class Heard:
             Formulation -> its `Agreement.as_dict` and `predicted_out_of_band_s`; None without
             the comparison.
         """
-        return {k: {**a.as_dict(), "predicted_out_of_band_s": self.out_of_band_s[k]}
-                for k, a in self.by_formulation.items()} or None
+        return {
+            k: {**a.as_dict(), "predicted_out_of_band_s": self.out_of_band_s[k]}
+            for k, a in self.by_formulation.items()
+        } or None
 
     def ranking(self) -> list[str]:
         """The compared formulations, best first.
@@ -403,10 +460,16 @@ class Heard:
             By lower Brier score, then higher recall, then higher precision (each to 3
             digits), then more heard episodes matched in frequency.
         """
+
         def key(name: str) -> tuple:
             a = self.by_formulation[name]
-            return (_rounded(a.brier, math.inf), -_rounded(a.recall, -1.0),
-                    -_rounded(a.precision, -1.0), -sum(m.matched for m in a.frequency_match))
+            return (
+                _rounded(a.brier, math.inf),
+                -_rounded(a.recall, -1.0),
+                -_rounded(a.precision, -1.0),
+                -sum(m.matched for m in a.frequency_match),
+            )
+
         return sorted(self.by_formulation, key=key)
 
     def text(self) -> list[str]:
@@ -422,31 +485,40 @@ class Heard:
         heard_s, predicted_s = a.both_s + a.heard_only_s, a.both_s + a.predicted_only_s
         freqs = _distinct([e.frequency_hz for e in self.detection.episodes])
         at = f" at {', '.join(f'{f:.0f}' for f in freqs)} Hz" if freqs else ""
-        lines = [f"heard squeak {heard_s:.1f} s{at}; predicted {predicted_s:.1f} s: "
-                 f"recall {_score(a.recall)}, precision {_score(a.precision)}, "
-                 f"Brier {_score(a.brier)} ({self.source}, {self.sample_rate_hz:g} Hz, "
-                 f"{len(self.detection.episodes)} episodes)"]
+        lines = [
+            f"heard squeak {heard_s:.1f} s{at}; predicted {predicted_s:.1f} s: "
+            f"recall {_score(a.recall)}, precision {_score(a.precision)}, "
+            f"Brier {_score(a.brier)} ({self.source}, {self.sample_rate_hz:g} Hz, "
+            f"{len(self.detection.episodes)} episodes)"
+        ]
         if a.frequency_match:
-            lines.append("; ".join(_match_text(m) for m in _first_per_frequency(
-                a.frequency_match)))
+            lines.append("; ".join(_match_text(m) for m in _first_per_frequency(a.frequency_match)))
         outside = self.out_of_band_s[self.formulation]
         if outside > 0:
-            lines.append(f"squeak predicted at a most unstable mode outside the analysed "
-                         f"{self.band_hz[0]:.0f}-{self.band_hz[1]:.0f} Hz for {outside:.1f} s: "
-                         "not counted")
+            lines.append(
+                f"squeak predicted at a most unstable mode outside the analysed "
+                f"{self.band_hz[0]:.0f}-{self.band_hz[1]:.0f} Hz for {outside:.1f} s: "
+                "not counted"
+            )
         if self.scale == "Pa":
             lines.append("levels in dB SPL (calibrated: --audio-scale), loudness in sone")
         else:
-            lines.append("levels in dB re full scale, loudness not computed (uncalibrated: "
-                         "give --audio-scale PA)")
+            lines.append(
+                "levels in dB re full scale, loudness not computed (uncalibrated: "
+                "give --audio-scale PA)"
+            )
         if self.by_formulation:
             rank = self.ranking()
             best, other = rank[0], rank[1:]
-            lines.append(f"{best} describes the drive better than {', '.join(other)}: " + "; ".join(
-                f"{k} Brier {_score(b.brier)}, recall {_score(b.recall)}, precision "
-                f"{_score(b.precision)}, {sum(m.matched for m in b.frequency_match)}/"
-                f"{len(b.frequency_match)} frequencies matched"
-                for k, b in ((k, self.by_formulation[k]) for k in rank)))
+            lines.append(
+                f"{best} describes the drive better than {', '.join(other)}: "
+                + "; ".join(
+                    f"{k} Brier {_score(b.brier)}, recall {_score(b.recall)}, precision "
+                    f"{_score(b.precision)}, {sum(m.matched for m in b.frequency_match)}/"
+                    f"{len(b.frequency_match)} frequencies matched"
+                    for k, b in ((k, self.by_formulation[k]) for k in rank)
+                )
+            )
         return lines
 
 
@@ -455,8 +527,13 @@ def _rounded(value: float | None, none: float) -> float:
 
 
 def _score(value: float | None) -> str:
-    return "n/a" if value is None else f"{value:.2f}" if value >= 0.01 or value == 0 \
+    return (
+        "n/a"
+        if value is None
+        else f"{value:.2f}"
+        if value >= 0.01 or value == 0
         else f"{value:.1e}"
+    )
 
 
 def _distinct(frequencies: list[float], tolerance: float = 0.03) -> list[float]:
@@ -481,25 +558,42 @@ def _match_text(m: Any) -> str:
     if m.label is None:
         return f"heard {m.heard_hz:.0f} Hz: no squeak predicted during it"
     verb = "matches" if m.matched else "does not match"
-    return (f"heard {m.heard_hz:.0f} Hz {verb} {m.label} {m.predicted_hz:.0f} Hz "
-            f"({100 * m.relative_error:+.1f} %)")
+    return (
+        f"heard {m.heard_hz:.0f} Hz {verb} {m.label} {m.predicted_hz:.0f} Hz "
+        f"({100 * m.relative_error:+.1f} %)"
+    )
 
 
-def _other_verdicts(model: SqueakModel, formulation: str, trace: PredictionTrace,
-                    solve: Callable[..., Any], batch: int) -> list[Any]:
+def _other_verdicts(
+    model: SqueakModel,
+    formulation: str,
+    trace: PredictionTrace,
+    solve: Callable[..., Any],
+    batch: int,
+) -> list[Any]:
     """The verdicts of `model` with `formulation` at the recorded operating points."""
     from .timeline import ModelSpec
+
     spec = ModelSpec.of(model.with_params(formulation=formulation))
     speed, load, nut = (np.asarray(a) for a in (trace.speed, trace.load, trace.model_nut))
     out: list[Any] = []
     for i in range(0, speed.size, batch):
-        out += solve(spec, speed[i:i + batch], load[i:i + batch], nut[i:i + batch])[0]
+        out += solve(spec, speed[i : i + batch], load[i : i + batch], nut[i : i + batch])[0]
     return out
 
 
-def listen(log: Path, topics: dict[str, Topic], out_dir: Path, settings: ListenSettings,
-           trace: PredictionTrace, speed: SpeedTrace, end_s: float, model: SqueakModel,
-           solve: Callable[..., Any], batch: int) -> tuple[Heard | None, list[str]]:
+def listen(
+    log: Path,
+    topics: dict[str, Topic],
+    out_dir: Path,
+    settings: ListenSettings,
+    trace: PredictionTrace,
+    speed: SpeedTrace,
+    end_s: float,
+    model: SqueakModel,
+    solve: Callable[..., Any],
+    batch: int,
+) -> tuple[Heard | None, list[str]]:
     """Read the sound, detect, compare (the module's steps).
 
     Parameters
@@ -535,26 +629,40 @@ def listen(log: Path, topics: dict[str, Topic], out_dir: Path, settings: ListenS
 
     from ..model.acoustics import AudioError as DetectorError
     from ..model.acoustics import DetectorSettings, StreamingDetector, detect
+
     if not settings.enabled or not has_sound(topics, settings):
         return None, []
     try:
-        track = read_audio(None if settings.file else log, settings.topic or None,
-                           settings.info_topic or None, settings.channel,
-                           settings.rate_hz or None, settings.file or None, settings.start_s)
+        track = read_audio(
+            None if settings.file else log,
+            settings.topic or None,
+            settings.info_topic or None,
+            settings.channel,
+            settings.rate_hz or None,
+            settings.file or None,
+            settings.start_s,
+        )
     except (AudioError, LogError) as exc:
         return None, [f"audio not analysed: {' '.join(str(exc).split())}"]
     scale = settings.scale_pa or None
     t0 = time.perf_counter()
     speed_t, speed_v = speed.arrays()
     try:
-        detection = detect(track.samples, track.sample_rate_hz, t0_s=track.t0_s,
-                           speed_times_s=speed_t if speed_t.size else None,
-                           speed_rad_s=speed_v if speed_v.size else None, scale_pa=scale)
+        detection = detect(
+            track.samples,
+            track.sample_rate_hz,
+            t0_s=track.t0_s,
+            speed_times_s=speed_t if speed_t.size else None,
+            speed_rad_s=speed_v if speed_v.size else None,
+            scale_pa=scale,
+        )
     except DetectorError as exc:
         return None, [f"audio not analysed ({track.source}): {exc}"]
     detect_s = time.perf_counter() - t0
-    band = (DetectorSettings.f_lo_hz, StreamingDetector(
-        sample_rate_hz=track.sample_rate_hz).analyzer.f_hi_hz)
+    band = (
+        DetectorSettings.f_lo_hz,
+        StreamingDetector(sample_rate_hz=track.sample_rate_hz).analyzer.f_hi_hz,
+    )
     agreement, outside = trace.compare(detection, end_s, band)
     formulation = model.params.formulation
     by: dict[str, Agreement] = {}
@@ -562,25 +670,39 @@ def listen(log: Path, topics: dict[str, Topic], out_dir: Path, settings: ListenS
     if settings.compare_formulations:
         for name in FORMULATIONS:
             if name != formulation:
-                by[name], out_of_band[name] = trace.with_verdicts(_other_verdicts(
-                    model, name, trace, solve, batch)).compare(detection, end_s, band)
+                by[name], out_of_band[name] = trace.with_verdicts(
+                    _other_verdicts(model, name, trace, solve, batch)
+                ).compare(detection, end_s, band)
             else:
                 by[name] = agreement
     points = trace.squeak_points()
     if len(points) > SPECTROGRAM_COLUMNS * 8:
         points = points[np.linspace(0, len(points) - 1, SPECTROGRAM_COLUMNS * 8).astype(int)]
-    heard = Heard(track.source, track.sample_rate_hz, detection.scale, detection, agreement,
-                  formulation, by, list(track.warnings) + list(detection.warnings),
-                  spectrogram(track.samples, track.sample_rate_hz, track.t0_s, scale or 1.0),
-                  points, duration_s=track.duration_s, detect_s=detect_s, band_hz=band,
-                  out_of_band_s=out_of_band)
-    heard.clips = write_clips(track.samples, track.sample_rate_hz, track.t0_s,
-                              detection.episodes, out_dir / CLIPS_DIR)
+    heard = Heard(
+        track.source,
+        track.sample_rate_hz,
+        detection.scale,
+        detection,
+        agreement,
+        formulation,
+        by,
+        list(track.warnings) + list(detection.warnings),
+        spectrogram(track.samples, track.sample_rate_hz, track.t0_s, scale or 1.0),
+        points,
+        duration_s=track.duration_s,
+        detect_s=detect_s,
+        band_hz=band,
+        out_of_band_s=out_of_band,
+    )
+    heard.clips = write_clips(
+        track.samples, track.sample_rate_hz, track.t0_s, detection.episodes, out_dir / CLIPS_DIR
+    )
     return heard, []
 
 
-def write_clips(samples: np.ndarray, rate_hz: float, t0_s: float, episodes: list[Any],
-                directory: Path) -> list[tuple[Path, float]]:
+def write_clips(
+    samples: np.ndarray, rate_hz: float, t0_s: float, episodes: list[Any], directory: Path
+) -> list[tuple[Path, float]]:
     """A float32 WAV clip of each of the first `MAX_CLIPS` episodes, `CLIP_PAD_S` before and
     after it (at most `CLIP_MAX_S` of it), into `directory` (created when there is one).
 
@@ -603,11 +725,13 @@ def write_clips(samples: np.ndarray, rate_hz: float, t0_s: float, episodes: list
         The clips written, with their episode's start [s].
     """
     from scipy.io import wavfile
+
     paths = []
     for k, e in enumerate(episodes[:MAX_CLIPS]):
         a = max(int((e.start_s - CLIP_PAD_S - t0_s) * rate_hz), 0)
-        b = min(int((min(e.end_s, e.start_s + CLIP_MAX_S) + CLIP_PAD_S - t0_s) * rate_hz),
-                samples.size)
+        b = min(
+            int((min(e.end_s, e.start_s + CLIP_MAX_S) + CLIP_PAD_S - t0_s) * rate_hz), samples.size
+        )
         if b <= a:
             continue
         directory.mkdir(parents=True, exist_ok=True)
@@ -638,8 +762,11 @@ def write_heard(out: McapOut, namespace: str, heard: Heard, start_ns: int) -> No
     channels = []
     for topic, type_name in ((HEARD, cdr.BOOL), (HEARD_FREQUENCY, cdr.FLOAT64)):
         schema = out.register_schema(type_name, "ros2msg", msgdefs.definition(type_name).encode())
-        channels.append(out.register_channel(f"{namespace}/{topic}", "cdr", schema,
-                                             {"offered_qos_profiles": ""}))
+        channels.append(
+            out.register_channel(
+                f"{namespace}/{topic}", "cdr", schema, {"offered_qos_profiles": ""}
+            )
+        )
     d = heard.detection
     t_ns = start_ns + np.round(d.frame_times_s * 1e9).astype(np.int64)
     flags = d.heard.astype(bool)

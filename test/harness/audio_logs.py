@@ -29,9 +29,13 @@ def rewrite(bag: Path, out_dir: Path, change: Change, name: str = "changed") -> 
     become `change(k, topic, payload, log_time_ns)` (k counts them), the rest as they were."""
     source = open_log(bag)
     schemas = {n: audiomsgs.definition(n) for n in audiomsgs.TEXTS[audiomsgs.DRIVERS]}
-    rec = Recorder(RecordSettings(directory=str(out_dir), split_size_mb=0.0,
-                                  split_duration_s=0.0, compression="none"), name=name,
-                   schemas=schemas)
+    rec = Recorder(
+        RecordSettings(
+            directory=str(out_dir), split_size_mb=0.0, split_duration_s=0.0, compression="none"
+        ),
+        name=name,
+        schemas=schemas,
+    )
     messages = list(source.messages())
     assert rec.start(messages[0][1].log_time_ns)
     k = 0
@@ -53,19 +57,24 @@ def samples_of(data: bytes) -> tuple[int, np.ndarray]:
     msg = DRIVERS_DATA.decode(data)
     stamp = msg["header"]["stamp"]
     raw = np.asarray(msg["audio"]["data"], np.uint8).tobytes()
-    return (int(stamp["sec"]) * 1_000_000_000 + int(stamp["nanosec"]),
-            np.frombuffer(raw, "<i2") / np.float32(32768))
+    return (
+        int(stamp["sec"]) * 1_000_000_000 + int(stamp["nanosec"]),
+        np.frombuffer(raw, "<i2") / np.float32(32768),
+    )
 
 
 def as_float32_multi_array(bag: Path, out_dir: Path) -> Path:
     """The bench log with its microphone as std_msgs/Float32MultiArray chunks on
     /microphone (no info: the rate must be given), logged as before."""
+
     def change(k: int, topic: str, data: bytes, t: int) -> list[Message]:
         if topic == MIC_INFO_TOPIC:
             return []
         _, x = samples_of(data)
-        return [(MIC_TOPIC, FLOAT32_MULTI_ARRAY,
-                 F32MA_SCHEMA.encode({"data": x.astype(np.float32)}), t)]
+        return [
+            (MIC_TOPIC, FLOAT32_MULTI_ARRAY, F32MA_SCHEMA.encode({"data": x.astype(np.float32)}), t)
+        ]
+
     return rewrite(bag, out_dir, change, "multiarray")
 
 
@@ -75,6 +84,9 @@ def with_wav_beside(bag: Path, out_dir: Path) -> tuple[Path, Path, float]:
     track = read_audio(bag)
     new = rewrite(bag, out_dir, lambda *_: [], "wav")
     wav = new / "microphone.wav"
-    wavfile.write(wav, int(track.sample_rate_hz),
-                  np.round(track.samples * 32768).clip(-32768, 32767).astype("<i2"))
+    wavfile.write(
+        wav,
+        int(track.sample_rate_hz),
+        np.round(track.samples * 32768).clip(-32768, 32767).astype("<i2"),
+    )
     return new, wav, track.t0_s
