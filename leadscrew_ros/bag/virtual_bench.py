@@ -51,7 +51,7 @@ from ..live.settings import LiveSettings
 from ..model import ScrewParameters, SqueakModel
 from ..model.physics.metadata import check, setting
 from ..model.physics.parameters import ParameterError
-from ..model.studies.sweep import growth_field
+from ..model.studies.fields import growth_field
 from ..model.uncertainty.scatter import LIVE_SAMPLES, Scatter, valid_mask
 
 MIC_TOPIC, MIC_INFO_TOPIC = "/microphone", "/microphone_info"
@@ -178,7 +178,7 @@ def squeak_frequencies(params: ScrewParameters, speed_rad_s: np.ndarray, load_n:
                        nut_step_m: float = LiveSettings.nut_deadband_m) -> np.ndarray:
     """Frequency [Hz] of the most unstable mode where the model of `params` (no scatter)
     squeaks at each operating point, else nan; the nut position in steps of `nut_step_m`
-    (points of one step share one batched eigen-solve, `sweep.growth_field`)."""
+    (points of one step share one batched eigen-solve, `fields.growth_field`)."""
     model = SqueakModel(params, Scatter({}))
     nut = np.round(np.asarray(nut_position_m, float) / nut_step_m) * nut_step_m
     nut = np.clip(nut, 0.0, params.nut_travel_m)

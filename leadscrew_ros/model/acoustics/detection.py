@@ -11,15 +11,17 @@ least `min_duration_s` is an episode, from half a hop before its first frame to 
 its last (frame times are frame centres).
 
 Motor and gear noise follows the shaft orders, a squeak locks to a structural mode, so each
-episode is tested once it is closed: with the shaft frequency f1 = |speed| / 2 pi interpolated
-at its frames, k = round(median(f / f1)); the episode follows order k when `order_share` of its
-frames are within `order_tolerance` of k f1. It is rejected as motor/gear noise when it follows
-an order k in 1..`max_order` and either the speed changed over the episode by at least
-4 `order_tolerance` (a constant tone then stays on order k for at most half of its frames, so
-following it is evidence) or k <= 0.25 / `order_tolerance` (12 at 2 %: the tolerance windows of
-neighbouring orders cover at most half of the frequency axis, so a constant tone at constant
-speed lies on order k by chance only at the odds of a coin toss or less). A constant tone at a
-high order at constant speed is kept: by frequency alone it cannot be told from a squeak.
+episode is tested once it is closed, with the shaft frequency f1 = |speed| / 2 pi interpolated
+at its frames: k = round(median(f / f1)), and the episode is on order k when k is in
+1..`max_order` and `order_share` of its frames are within `order_tolerance` of k f1. Whether it
+*follows* the order is judged from the relative rms deviations of its frequencies from k f1
+(r_order) and from their median (r_const), with a floor of a tenth of a frequency bin against
+the frequency estimate's own scatter: r_const >= 3 r_order means the tone moved with the speed
+(rejected as motor/gear noise); r_order >= 3 r_const means it stayed while the speed moved
+(kept); otherwise the speed hardly changed and frequency alone decides: rejected when
+k <= 0.25 / `order_tolerance` (12 at 2 %: the tolerance windows of neighbouring orders cover at
+most half of the frequency axis, so a constant tone lies on order k by chance only at the odds of
+a coin toss or less), kept above, where by frequency alone it cannot be told from a squeak.
 
 `StreamingDetector` is the core: it frames the samples as they come, analyses each frame once,
 and runs the tracks frame by frame with bounded memory. `detect` pushes the whole signal into
@@ -36,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from .settings import DetectorSettings
-from .tonality import ToneAnalyzer, short_time_psd
+from .tonality import ToneAnalyzer, hann, short_time_psd
 
 P_REF_PA = 20e-6            #: reference sound pressure of dB SPL
 LOUDNESS_RATE_HZ = 48000    #: ISO 532-1 after MOSQITO wants 48 kHz; other rates are resampled
@@ -165,7 +167,7 @@ class _Track:
     """One tone followed frame by frame."""
 
     __slots__ = ("first", "last", "frames", "hz", "f1", "recent", "median", "tnr", "pr",
-                 "power", "last_power")
+                 "power", "last_power", "checked_at", "order_now")
 
     def __init__(self, i: int, f: float, f1: float, tnr: float, pr: float, power: float,
                  window: int) -> None:
@@ -177,6 +179,8 @@ class _Track:
         self.median = f
         self.tnr = self.pr = self.power = -math.inf
         self.last_power = power
+        self.checked_at = 0                  # frames when `order_now` was last decided
+        self.order_now: int | None = None
         self.add(i, f, f1, tnr, pr, power)
 
     def add(self, i: int, f: float, f1: float, tnr: float, pr: float, power: float) -> None:
@@ -253,9 +257,12 @@ class StreamingDetector:
         self._allowed_missing = max(int(math.ceil(s.max_gap_s / self.hop_s - 1e-9)) - 1, 0)
         self._max_frames = max(int(s.max_episode_s / self.hop_s), self._min_frames)
         self._median_window = max(self._min_frames, 3)
+        # frames dropped for non-finite samples are bridged up to what one short glitch
+        # costs: every frame holding it, plus the gap allowed anyway
+        self._max_dropped = -(-self.frame_len // self.hop) + self._allowed_missing
         self._keep = int(math.ceil((s.loudness_max_s + 2 * s.frame_s + s.max_gap_s
                                     + 2 * s.hop_s) * rate)) + self.frame_len
-        self._window = None
+        self._window = hann(self.frame_len)
         self._new_segment(None)
 
     def _new_segment(self, t0_s: float | None) -> None:
@@ -266,6 +273,7 @@ class StreamingDetector:
         self._n_samples = 0            # samples received in this segment
         self._next_frame = 0
         self._tracks: list[_Track] = []
+        self._dropped_run = 0
         self._speed_t = np.zeros(0)
         self._speed_v = np.zeros(0)
         self._heard_now = False
@@ -278,7 +286,8 @@ class StreamingDetector:
     @property
     def heard_now(self) -> bool:
         """A track that has lasted `min_duration_s` and does not (so far) follow the orders
-        covers the latest frame: provisional, the episode is decided when it closes."""
+        covers the latest frame: provisional (the order test re-run as the track grows by an
+        eighth), the episode is decided when it closes."""
         return self._heard_now
 
     @property
@@ -360,7 +369,7 @@ class StreamingDetector:
         n_bad = int(bad.sum())
         if n_bad:
             self._warn(f"{n_bad} non-finite samples (NaN/inf) set to 0; the frames holding "
-                       "them are dropped")
+                       "them are dropped (tracks bridge one frame length of them)")
             x = np.where(bad, np.float32(0.0), x)
         n_clip = int(np.count_nonzero(np.abs(x) >= self.settings.clip_level))
         if n_clip:
@@ -445,10 +454,15 @@ class StreamingDetector:
         seg = self._buf[s0:s0 + (i1 - i0 - 1) * hop + n]
         if self.analyzer.empty:
             return []
-        cand = self.analyzer.candidates(short_time_psd(seg, self.sample_rate_hz, n, hop))
-        bad_cum = np.concatenate([[0], np.cumsum(self._bad[s0:s0 + (i1 - i0 - 1) * hop + n])])
-        starts = np.arange(i1 - i0) * hop
-        dropped = bad_cum[starts + n] - bad_cum[starts] > 0
+        cand = self.analyzer.candidates(short_time_psd(seg, self.sample_rate_hz, n, hop,
+                                                       self._window))
+        bad = self._bad[s0:s0 + seg.size]
+        if bad.any():
+            bad_cum = np.concatenate([[0], np.cumsum(bad)])
+            starts = np.arange(i1 - i0) * hop
+            dropped = bad_cum[starts + n] - bad_cum[starts] > 0
+        else:
+            dropped = np.zeros(i1 - i0, bool)
         prominent = cand.prominent & ~dropped[:, None]
         frame_t = self.frame_time(np.arange(i0, i1))
         if self._speed_t.size:
@@ -458,6 +472,14 @@ class StreamingDetector:
         has = prominent.any(axis=1)
         closed: list[Episode] = []
         for j in range(i1 - i0):
+            if dropped[j]:
+                self._dropped_run += 1
+                if self._dropped_run <= self._max_dropped:     # a glitch: the tracks hold
+                    for tr in self._tracks:
+                        tr.last = i0 + j
+                    continue
+            else:
+                self._dropped_run = 0
             if not has[j] and not self._tracks:
                 continue
             cols = np.nonzero(prominent[j])[0]
@@ -514,9 +536,14 @@ class StreamingDetector:
         share = float(np.mean(np.abs(f / (k * f1) - 1.0) <= s.order_tolerance))
         if share < s.order_share:
             return None
-        span = float((f1.max() - f1.min()) / np.median(f1))
-        resolvable = k <= 0.25 / s.order_tolerance
-        return k if span >= 4 * s.order_tolerance or resolvable else None
+        r_order = float(np.sqrt(np.mean((f / (k * f1) - 1.0) ** 2)))
+        r_const = float(np.sqrt(np.mean((f / np.median(f) - 1.0) ** 2)))
+        floor = 0.1 * self.analyzer.df / float(np.median(f))   # a tenth of a bin
+        if r_const >= max(3 * r_order, floor):          # the tone moved with the speed
+            return k
+        if r_order >= max(3 * r_const, floor):          # it stayed while the speed moved
+            return None
+        return k if k <= 0.25 / s.order_tolerance else None     # by frequency alone
 
     def _finish(self, tr: _Track) -> Episode | None:
         if tr.last - tr.first + 1 < self._min_frames:
@@ -590,10 +617,14 @@ class StreamingDetector:
         latest = self._next_frame - 1
         best: _Track | None = None
         for tr in self._tracks:
-            if tr.last - tr.first + 1 >= self._min_frames and \
-                    latest - tr.last <= self._allowed_missing and \
-                    self._follows_order(tr) is None and \
-                    (best is None or tr.last_power > best.last_power):
+            if tr.last - tr.first + 1 < self._min_frames or \
+                    latest - tr.last > self._allowed_missing or \
+                    (best is not None and tr.last_power <= best.last_power):
+                continue
+            n = len(tr.hz)                   # re-decided as the track grows by 1/8
+            if n >= tr.checked_at + max(5, tr.checked_at // 8):
+                tr.order_now, tr.checked_at = self._follows_order(tr), n
+            if tr.order_now is None:
                 best = tr
         self._heard_now = best is not None
         self._frequency_now = best.median if best is not None else math.nan

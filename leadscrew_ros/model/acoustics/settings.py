@@ -53,11 +53,12 @@ class DetectorSettings:
         0.75, "1", "an episode follows order k when this share of its frames is on order k",
         0.0, 1.0, lo_open=True)
     max_peaks: int = setting(
-        8, "1", "spectral peaks evaluated per frame (the strongest against their critical "
-        "band)", 1, 64)
+        8, "1", "spectral peaks evaluated per frame (those with the largest TNR against its "
+        "limit)", 1, 64)
     max_harmonic: int = setting(
-        10, "1", "a weaker tone at m times a simultaneous prominent tone (m = 2..this) is its "
-        "harmonic (e.g. from clipping), not a squeak of its own", 1, 100)
+        10, "1", "a tone at m times a simultaneous prominent tone (m = 2..this) and at most "
+        "1.5 / m of its amplitude is its harmonic (clipping: 1 / m), not a squeak of its own",
+        1, 100)
     max_tracks: int = setting(
         16, "1", "tone tracks followed at once (bounded memory)", 1, 256)
     max_episode_s: float = setting(

@@ -6,8 +6,9 @@ Assumptions (all parameters with defaults): the microphone is linear and its sig
 full-scale units; the motor/gear noise is a sum of sinusoids at k |speed| / 2 pi for the given
 orders, amplitude ``motor_level / k`` (falling with order), phases integrated from the
 instantaneous frequency (so they stay continuous through speed changes) and randomised at the
-start; the background is white Gaussian noise of rms `noise_level`; the squeak is one tone at
-the predicted frequency (interpolated linearly while it lasts, phase integrated), of amplitude
+start, faded out below `HIGH_PASS_HZ` (an AC-coupled microphone: no DC at standstill); the
+background is white Gaussian noise of rms `noise_level`; the squeak is one tone at the
+predicted frequency (interpolated linearly while it lasts, phase integrated), of amplitude
 `squeak_level`, switched on and off with a raised-cosine envelope `onset_s` long centred on the
 switching time (half amplitude at the nominal onset); no room, no microphone response, no
 clipping (values beyond full scale are returned as they are).
@@ -23,6 +24,8 @@ import scipy.signal
 #: Default motor/gear orders of the shaft speed (resolvable by frequency alone at constant
 #: speed with `DetectorSettings.order_tolerance` 2 %, see `detection`).
 MOTOR_ORDERS = (1, 2, 3, 4, 6, 8, 12)
+#: The microphone is AC-coupled: an order's amplitude fades linearly to 0 below this [Hz].
+HIGH_PASS_HZ = 20.0
 
 
 def microphone(times_s: Any, speed_rad_s: Any, squeak_hz: Any, squeak_level: Any = 0.05,
@@ -70,8 +73,9 @@ def microphone(times_s: Any, speed_rad_s: Any, squeak_hz: Any, squeak_level: Any
         np.asarray(speed_rad_s, float), times.shape))) / (2 * np.pi)
     shaft_turns = np.cumsum(shaft_hz) / fs                 # shaft angle [turns]
     out = noise_level * rng.standard_normal(n)
-    for k in motor_orders:
-        out += motor_level / k * np.sin(2 * np.pi * (k * shaft_turns + rng.random()))
+    for k in motor_orders:                 # faded in below HIGH_PASS_HZ (no DC at standstill)
+        fade = np.clip(k * shaft_hz / HIGH_PASS_HZ, 0.0, 1.0)
+        out += fade * motor_level / k * np.sin(2 * np.pi * (k * shaft_turns + rng.random()))
     f_sq = np.broadcast_to(np.asarray(squeak_hz, float), times.shape)
     on_at = np.isfinite(f_sq)
     if on_at.any():

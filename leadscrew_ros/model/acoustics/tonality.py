@@ -21,7 +21,8 @@ interpolated peak leans to (ECMA sums the neighbours within 10 dB that keep fall
 10 Hz bins leaves up to 5 % of an off-bin tone's power in the noise and caps the TNR near
 13 dB), and the noise density excludes exactly those bins (ECMA: "the bandwidth of the tone",
 which MOSQITO takes as one bin); the tone candidates are the local
-maxima that are the strongest against their critical band, at most `max_peaks` per frame; a
+maxima with the largest TNR against its limit (a cheap three-bin TNR ranks them), at most
+`max_peaks` per frame; a
 candidate with a stronger candidate inside its critical band is suppressed (ECMA: only the
 highest tone of a band, which also removes the Hann side lobes of a strong tone); the hearing
 threshold screening of ECMA is not applied (levels need not be calibrated).
@@ -207,6 +208,7 @@ class ToneAnalyzer:
         self.used_bins = min(int(max(self.ub.max(initial=0), self.b.max(initial=0),
                                      self.k_hi + 2)) + 1, self.n_bins)
         self.tnr_limit = tnr_limit_db(np.maximum(f[k], 1e-9))
+        self._rank_scale = self.width_hz * 10.0 ** (self.tnr_limit / 10.0)
         self.pr_limit = pr_limit_db(np.maximum(f[k], 1e-9))
 
     def _bins(self, f_hz: np.ndarray) -> np.ndarray:
@@ -232,7 +234,11 @@ class ToneAnalyzer:
         mid = p[:, lo:hi]
         peak = (mid > p[:, lo - 1:hi - 1]) & (mid >= p[:, lo + 1:hi + 1])
         band = cum[:, self.b] - cum[:, self.a]
-        score = np.where(peak, mid * ((self.b - self.a) * self.df) / (band + _TINY), 0.0)
+        # rank the peaks by a cheap TNR (three-bin tone) against their TNR limit
+        tone3 = (mid + p[:, lo - 1:hi - 1] + p[:, lo + 1:hi + 1]) * self.df
+        density = np.maximum(band - tone3, _TINY) / (np.maximum(self.b - self.a - 3, 1)
+                                                     * self.df)
+        score = np.where(peak, tone3 / (density * self._rank_scale), 0.0)
         if n_peaks < score.shape[1]:
             rel = np.argpartition(-score, n_peaks - 1, axis=1)[:, :n_peaks]
         else:
@@ -277,6 +283,6 @@ class ToneAnalyzer:
             m = np.rint(ratio)
             harmonic = ((m >= 2) & (m <= self.max_harmonic)
                         & (np.abs(ratio - m) <= self.harmonic_tolerance * ratio)
-                        & (tone[:, :, None] >= tone[:, None, :]))
+                        & (tone[:, None, :] * m ** 2 <= 2.25 * tone[:, :, None]))
             prominent &= ~np.any(prominent[:, :, None] & harmonic, axis=1)
         return ToneCandidates(freq, tone, tnr, pr, valid, prominent)
