@@ -149,8 +149,9 @@ class Listener:
     ----------
     speed_rad_s : float or None
         The latest motor speed [rad/s], set by the node; the worker reads it for each chunk.
-    received, dropped, malformed : int
-        Chunks received, dropped because the queue was full, and that did not decode.
+    received, dropped, malformed, analysed : int
+        Chunks received, dropped because the queue was full, that did not decode, and
+        analysed.
     heard : bool
         The heard state after the latest `collect`.
     frequency_hz : float
@@ -163,7 +164,7 @@ class Listener:
                                            settings.scale_pa or None)
         self._queue: queue.Queue[_Chunk] = queue.Queue(maxsize=settings.queue_chunks)
         self.speed_rad_s: float | None = None
-        self.received = self.dropped = self.malformed = 0
+        self.received = self.dropped = self.malformed = self.analysed = 0
         self.last_arrival: float | None = None
         self._last_drop = self._last_malformed = -math.inf
         self.error = ""                              # why the latest malformed chunk was
@@ -182,6 +183,11 @@ class Listener:
         self._closed = False
         self._thread = threading.Thread(target=self._run, daemon=True, name="squeak listening")
         self._thread.start()
+
+    @property
+    def backlog(self) -> int:
+        """Chunks received and not yet analysed (nor dropped or found malformed)."""
+        return self.received - self.dropped - self.malformed - self.analysed
 
     @property
     def delay_s(self) -> float:
@@ -425,6 +431,7 @@ class Listener:
             latest = float(det.frame_time(det.frames_done - 1))
             self._analysed.append(Heard(latest, duration, det.heard_now,
                                         det.frequency_now_hz))
+        self.analysed += 1
 
 
 def _rounded(f: float) -> float | None:
