@@ -32,15 +32,15 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ["ROS_DOMAIN_ID"] = str(101 + (os.getpid() * 7) % 100)
 os.environ.setdefault("ROS_LOG_DIR", tempfile.mkdtemp(prefix="bench_listen_log_"))
 
-import numpy as np                                                   # noqa: E402
-import rclpy                                                         # noqa: E402
-from rclpy.context import Context                                    # noqa: E402
-from rclpy.node import Node                                          # noqa: E402
-from rclpy.qos import qos_profile_sensor_data                        # noqa: E402
-from std_msgs.msg import Float32MultiArray, Float64                  # noqa: E402
+import numpy as np  # noqa: E402
+import rclpy  # noqa: E402
+from rclpy.context import Context  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from rclpy.qos import qos_profile_sensor_data  # noqa: E402
+from std_msgs.msg import Float32MultiArray, Float64  # noqa: E402
 
-from leadscrew_ros.model.acoustics.synthesis import microphone       # noqa: E402
-from leadscrew_ros.ros.node import make_executor                     # noqa: E402
+from leadscrew_ros.model.acoustics.synthesis import microphone  # noqa: E402
+from leadscrew_ros.ros.node import make_executor  # noqa: E402
 
 RATE_HZ = 48000
 INPUT_RATE_HZ = 100.0
@@ -70,9 +70,12 @@ def cpu_s(pid: int) -> float:
 
 def run(listen: bool, audio: np.ndarray, seconds: float, chunk_s: float) -> dict:
     env = dict(os.environ)
-    proc = subprocess.Popen([sys.executable, "-c", CHILD, "--ros-args", "-p",
-                             f"listen.enabled:={str(listen).lower()}"], env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", CHILD, "--ros-args", "-p", f"listen.enabled:={str(listen).lower()}"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.STDOUT,
+    )
     ctx = Context()
     rclpy.init(context=ctx)
     probe = Node("bench_listen_probe", context=ctx)
@@ -84,11 +87,12 @@ def run(listen: bool, audio: np.ndarray, seconds: float, chunk_s: float) -> dict
         mic_pub = probe.create_publisher(Float32MultiArray, "microphone", 10)
         deadline = time.monotonic() + 30.0
         while speed_pub.get_subscription_count() == 0 or (
-                listen and mic_pub.get_subscription_count() == 0):
+            listen and mic_pub.get_subscription_count() == 0
+        ):
             if time.monotonic() > deadline:
                 raise RuntimeError("the node did not subscribe")
             ex.spin_once(timeout_sec=0.05)
-        time.sleep(1.0)                               # start-up over
+        time.sleep(1.0)  # start-up over
         step = int(chunk_s * RATE_HZ)
         c0, t0 = cpu_s(proc.pid), time.monotonic()
         p0 = time.process_time()
@@ -99,15 +103,20 @@ def run(listen: bool, audio: np.ndarray, seconds: float, chunk_s: float) -> dict
                 load_pub.publish(Float64(data=LOAD_N))
                 sent_inputs += 1
             while (sent_chunks + 1) * step <= now * RATE_HZ:
-                x = audio[sent_chunks * step:(sent_chunks + 1) * step]
+                x = audio[sent_chunks * step : (sent_chunks + 1) * step]
                 mic_pub.publish(Float32MultiArray(data=array.array("f", x.tobytes())))
                 sent_chunks += 1
             ex.spin_once(timeout_sec=0.002)
         wall = time.monotonic() - t0
         used = cpu_s(proc.pid) - c0
-        return dict(listen=listen, wall_s=wall, node_cpu_pct=100 * used / wall,
-                    probe_cpu_pct=100 * (time.process_time() - p0) / wall,
-                    chunks=sent_chunks, inputs=sent_inputs)
+        return dict(
+            listen=listen,
+            wall_s=wall,
+            node_cpu_pct=100 * used / wall,
+            probe_cpu_pct=100 * (time.process_time() - p0) / wall,
+            chunks=sent_chunks,
+            inputs=sent_inputs,
+        )
     finally:
         ex.shutdown()
         probe.destroy_node()
@@ -135,15 +144,19 @@ def main(argv: list[str] | None = None) -> int:
     off = [r["node_cpu_pct"] for r in results if not r["listen"]]
     on = [r["node_cpu_pct"] for r in results if r["listen"]]
     added = float(np.median(on) - np.median(off))
-    print(f"node CPU, 100 Hz inputs + 48 kHz microphone in {args.chunk_s:g} s chunks, "
-          f"{args.seconds:g} s x {args.rounds} round(s), load average "
-          f"{os.getloadavg()[0]:.2f}:")
+    print(
+        f"node CPU, 100 Hz inputs + 48 kHz microphone in {args.chunk_s:g} s chunks, "
+        f"{args.seconds:g} s x {args.rounds} round(s), load average "
+        f"{os.getloadavg()[0]:.2f}:"
+    )
     print("| listening | node CPU [% of one core] (median) | runs |")
     print("|---|---|---|")
     print(f"| off | {np.median(off):.1f} | {', '.join(f'{x:.1f}' for x in off)} |")
     print(f"| on | {np.median(on):.1f} | {', '.join(f'{x:.1f}' for x in on)} |")
-    print(f"listening adds {added:.1f} % of one core (target <= {TARGET_PCT:g} %): "
-          f"{'met' if added <= TARGET_PCT else 'NOT met'}")
+    print(
+        f"listening adds {added:.1f} % of one core (target <= {TARGET_PCT:g} %): "
+        f"{'met' if added <= TARGET_PCT else 'NOT met'}"
+    )
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(dict(results=results, added_pct=added), fh, indent=1)

@@ -22,12 +22,13 @@ def _version() -> str:
     except (OSError, ET.ParseError):
         pass
     from importlib.metadata import PackageNotFoundError, version
+
     try:
         return version(__name__)
-    except PackageNotFoundError:       # neither a source tree nor installed: a copied directory
+    except PackageNotFoundError:  # neither a source tree nor installed: a copied directory
         return "0+unknown"
 
 
 __version__ = _version()
 
-__all__ = ["__version__"]      # the layers are sub-packages: model, live, bag, review, ros, cli
+__all__ = ["__version__"]  # the layers are sub-packages: model, live, bag, review, ros, cli

@@ -14,15 +14,21 @@ DOC = ROOT / "doc"
 MAX_README_LINES = 200
 MAX_IMAGE_BYTES = 300_000
 PAGES = sorted(DOC.glob("**/*.md")) + sorted(DOC.glob("**/*.rst"))
-PAGES = [p for p in PAGES if "_build" not in p.parts and "_generated" not in p.parts
-         and "_autosummary" not in p.parts]
+PAGES = [
+    p
+    for p in PAGES
+    if "_build" not in p.parts and "_generated" not in p.parts and "_autosummary" not in p.parts
+]
 
 
 def test_readme_is_short_and_points_to_the_documentation():
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     assert len(readme.splitlines()) <= MAX_README_LINES
-    for command in ("bash scripts/run-demo.sh", "bash scripts/run-tests.sh",
-                    "sphinx-build -W -b html doc doc/_build/html"):
+    for command in (
+        "bash scripts/run-demo.sh",
+        "bash scripts/run-tests.sh",
+        "sphinx-build -W -b html doc doc/_build/html",
+    ):
         assert command in readme, command
 
 
@@ -34,8 +40,9 @@ def test_the_rosdoc2_layout():
 
 def _images(page: Path) -> list[str]:
     text = page.read_text(encoding="utf-8")
-    return (re.findall(r"!\[[^\]]*\]\(([^)\s]+)\)", text)
-            + re.findall(r"\.\. (?:figure|image):: (\S+)", text))
+    return re.findall(r"!\[[^\]]*\]\(([^)\s]+)\)", text) + re.findall(
+        r"\.\. (?:figure|image):: (\S+)", text
+    )
 
 
 @pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(DOC)))

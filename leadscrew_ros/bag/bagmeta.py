@@ -37,7 +37,7 @@ class TopicStats:
     """One topic of a bag in metadata.yaml: name, type, message count, offered QoS."""
 
     name: str
-    type_name: str              # 'pkg/msg/Type'
+    type_name: str  # 'pkg/msg/Type'
     count: int = 0
     offered_qos_profiles: str = ""
 
@@ -56,27 +56,42 @@ class BagStats:
         starts = [f.start_ns for f in files if f.start_ns is not None]
         ends = [f.end_ns for f in files if f.end_ns is not None]
         start = min(starts, default=0)
-        return {"rosbag2_bagfile_information": {
-            "version": 9,
-            "storage_identifier": "mcap",
-            "relative_file_paths": [f.path.name for f in files],
-            "starting_time": {"nanoseconds_since_epoch": start},
-            "duration": {"nanoseconds": max(ends, default=start) - start},
-            "message_count": sum(f.messages for f in files),
-            "topics_with_message_count": [
-                {"topic_metadata": {"name": t.name, "type": t.type_name,
-                                    "serialization_format": "cdr",
-                                    "offered_qos_profiles": t.offered_qos_profiles,
-                                    "type_description_hash": ""},
-                 "message_count": t.count} for t in self.topics],
-            "compression_format": "",
-            "compression_mode": "",
-            "files": [{"path": f.path.name,
-                       "starting_time": {"nanoseconds_since_epoch": f.start_ns or start},
-                       "duration": {"nanoseconds": (f.end_ns or start) - (f.start_ns or start)},
-                       "message_count": f.messages} for f in files],
-            "custom_data": {str(k): str(v) for k, v in self.custom_data.items()},
-            "ros_distro": ROS_DISTRO}}
+        return {
+            "rosbag2_bagfile_information": {
+                "version": 9,
+                "storage_identifier": "mcap",
+                "relative_file_paths": [f.path.name for f in files],
+                "starting_time": {"nanoseconds_since_epoch": start},
+                "duration": {"nanoseconds": max(ends, default=start) - start},
+                "message_count": sum(f.messages for f in files),
+                "topics_with_message_count": [
+                    {
+                        "topic_metadata": {
+                            "name": t.name,
+                            "type": t.type_name,
+                            "serialization_format": "cdr",
+                            "offered_qos_profiles": t.offered_qos_profiles,
+                            "type_description_hash": "",
+                        },
+                        "message_count": t.count,
+                    }
+                    for t in self.topics
+                ],
+                "compression_format": "",
+                "compression_mode": "",
+                "files": [
+                    {
+                        "path": f.path.name,
+                        "starting_time": {"nanoseconds_since_epoch": f.start_ns or start},
+                        "duration": {"nanoseconds": (f.end_ns or start) - (f.start_ns or start)},
+                        "message_count": f.messages,
+                    }
+                    for f in files
+                ],
+                "custom_data": {str(k): str(v) for k, v in self.custom_data.items()},
+                "ros_distro": ROS_DISTRO,
+            }
+        }
 
     def write(self, bag: Path) -> None:
         """Write `bag/metadata.yaml` (raises OSError)."""

@@ -8,5 +8,12 @@ from .recompute import LivePredictor
 from .rules import InputRules
 from .settings import JointSettings, ListenSettings, LiveSettings
 
-__all__ = ["InputRules", "JointSettings", "ListenSettings", "Listener", "LivePredictor",
-           "LiveSettings", "StrokeProfile"]
+__all__ = [
+    "InputRules",
+    "JointSettings",
+    "ListenSettings",
+    "Listener",
+    "LivePredictor",
+    "LiveSettings",
+    "StrokeProfile",
+]

@@ -41,9 +41,9 @@ from __future__ import annotations
 import math
 import queue
 import threading
-import time
 from collections import deque
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
@@ -58,22 +58,22 @@ from .status import Level, Status, value_text
 RESYNC_S = 0.25
 #: The sound may run this far ahead of the chunks' arrival times before it is put back [s].
 AHEAD_S = 2.0
-_MAX_PREDICTIONS = 100_000       # predictions kept for the comparison (also trimmed by time)
+_MAX_PREDICTIONS = 100_000  # predictions kept for the comparison (also trimmed by time)
 
 # Key names of the measurement diagnostic status (`Listener.status`).
-KEY_HEARD = "heard"                          # "true" while the detector hears a squeak
-KEY_HEARD_FREQUENCY = "heard_frequency_hz"   # its frequency, '' when none
-KEY_PREDICTED = "predicted"                  # "true" while the prediction in force squeaks
-KEY_WINDOW_AGREEMENT = "window_agreement"    # share of the window heard == predicted
-KEY_HEARD_S = "heard_s"                      # time heard in squeak since the start [s]
-KEY_PREDICTED_S = "predicted_s"              # time predicted in squeak, same sound [s]
-KEY_AGREEMENT = "agreement"                  # share of the analysed sound heard == predicted
-KEY_ANALYSED_S = "analysed_s"                # sound analysed since the start [s]
-KEY_HEARD_MODES = "heard_modes"              # heard frequencies by predicted mode
-KEY_CHUNKS = "chunks"                        # chunks received
-KEY_DROPPED = "dropped_chunks"               # chunks dropped: the analysis could not keep up
-KEY_MALFORMED = "malformed_chunks"           # chunks that did not decode
-KEY_DETECTOR_WARNING = "detector_warning"    # the detector's latest warning ('' when none)
+KEY_HEARD = "heard"  # "true" while the detector hears a squeak
+KEY_HEARD_FREQUENCY = "heard_frequency_hz"  # its frequency, '' when none
+KEY_PREDICTED = "predicted"  # "true" while the prediction in force squeaks
+KEY_WINDOW_AGREEMENT = "window_agreement"  # share of the window heard == predicted
+KEY_HEARD_S = "heard_s"  # time heard in squeak since the start [s]
+KEY_PREDICTED_S = "predicted_s"  # time predicted in squeak, same sound [s]
+KEY_AGREEMENT = "agreement"  # share of the analysed sound heard == predicted
+KEY_ANALYSED_S = "analysed_s"  # sound analysed since the start [s]
+KEY_HEARD_MODES = "heard_modes"  # heard frequencies by predicted mode
+KEY_CHUNKS = "chunks"  # chunks received
+KEY_DROPPED = "dropped_chunks"  # chunks dropped: the analysis could not keep up
+KEY_MALFORMED = "malformed_chunks"  # chunks that did not decode
+KEY_DETECTOR_WARNING = "detector_warning"  # the detector's latest warning ('' when none)
 
 #: How a chunk's payload becomes samples: (samples in full scale, sample rate [Hz] or None for
 #: `ListenSettings.sample_rate_hz`); ValueError when it is malformed.
@@ -81,10 +81,10 @@ Decoder = Callable[[bytes], tuple[np.ndarray, "float | None"]]
 
 
 class _Chunk(NamedTuple):
-    arrival: float               # monotonic time the callback got it [s]
+    arrival: float  # monotonic time the callback got it [s]
     payload: bytes
     decode: Decoder
-    dropped_before: int          # chunks dropped before this one was queued
+    dropped_before: int  # chunks dropped before this one was queued
 
 
 class Heard(NamedTuple):
@@ -160,26 +160,27 @@ class Listener:
 
     def __init__(self, settings: ListenSettings, detector: DetectorSettings = DetectorSettings()):
         self.settings, self.detector_settings = settings, detector
-        self._detector = StreamingDetector(detector, settings.sample_rate_hz,
-                                           settings.scale_pa or None)
+        self._detector = StreamingDetector(
+            detector, settings.sample_rate_hz, settings.scale_pa or None
+        )
         self._queue: queue.Queue[_Chunk] = queue.Queue(maxsize=settings.queue_chunks)
         self.speed_rad_s: float | None = None
         self.received = self.dropped = self.malformed = self.analysed = 0
         self.last_arrival: float | None = None
         self._last_drop = self._last_malformed = -math.inf
-        self.error = ""                              # why the latest malformed chunk was
-        self.warning = ""                            # the detector's latest warning
+        self.error = ""  # why the latest malformed chunk was
+        self.warning = ""  # the detector's latest warning
         # worker thread -> collect (deque appends and pops are atomic)
         self._analysed: deque[Heard] = deque()
-        self._audio_end: float | None = None         # worker: where the last chunk ended
+        self._audio_end: float | None = None  # worker: where the last chunk ended
         self._seen_dropped = 0
-        self._chunk_s = 0.0                          # worker: duration of the last chunk
+        self._chunk_s = 0.0  # worker: duration of the last chunk
         # collect and status (the node's executor thread)
         self._window: deque[tuple[Heard, bool]] = deque()
         self._predictions: deque[Predicted] = deque(maxlen=_MAX_PREDICTIONS)
         self.heard, self.frequency_hz = False, math.nan
         self._analysed_s = self._heard_s = self._predicted_s = self._agree_s = 0.0
-        self._modes: dict[str, list[float]] = {}     # label ('' unmatched) -> [s, s * Hz]
+        self._modes: dict[str, list[float]] = {}  # label ('' unmatched) -> [s, s * Hz]
         self._closed = False
         self._thread = threading.Thread(target=self._run, daemon=True, name="squeak listening")
         self._thread.start()
@@ -230,9 +231,14 @@ class Listener:
         if p is None:
             self._predictions.append(Predicted(now, False, None, ()))
         else:
-            self._predictions.append(Predicted(
-                now, bool(p.squeak_modes), p.probability,
-                tuple((m.label, m.frequency_hz) for m in p.squeak_modes)))
+            self._predictions.append(
+                Predicted(
+                    now,
+                    bool(p.squeak_modes),
+                    p.probability,
+                    tuple((m.label, m.frequency_hz) for m in p.squeak_modes),
+                )
+            )
 
     def take_over(self, old: Listener) -> None:
         """Continue from another listener (closed, e.g. for new settings).
@@ -311,18 +317,26 @@ class Listener:
         w = self.settings.window_s
         end = self._window[-1][0].time_s if self._window else math.inf
         window = [(h, squeak) for h, squeak in self._window if h.time_s >= end - w]
-        values = {KEY_HEARD: str(self.heard).lower(),
-                  KEY_HEARD_FREQUENCY: value_text(self.frequency_hz if self.heard else None),
-                  KEY_PREDICTED: str(bool(window and window[-1][1])).lower(),
-                  KEY_WINDOW_AGREEMENT: value_text(_share(
-                      sum(h.duration_s for h, s in window if h.heard == s),
-                      sum(h.duration_s for h, _ in window))),
-                  KEY_HEARD_S: f"{self._heard_s:.3f}", KEY_PREDICTED_S: f"{self._predicted_s:.3f}",
-                  KEY_AGREEMENT: value_text(_share(self._agree_s, self._analysed_s)),
-                  KEY_ANALYSED_S: f"{self._analysed_s:.3f}",
-                  KEY_HEARD_MODES: self.heard_modes(),
-                  KEY_CHUNKS: str(self.received), KEY_DROPPED: str(self.dropped),
-                  KEY_MALFORMED: str(self.malformed), KEY_DETECTOR_WARNING: self.warning}
+        values = {
+            KEY_HEARD: str(self.heard).lower(),
+            KEY_HEARD_FREQUENCY: value_text(self.frequency_hz if self.heard else None),
+            KEY_PREDICTED: str(bool(window and window[-1][1])).lower(),
+            KEY_WINDOW_AGREEMENT: value_text(
+                _share(
+                    sum(h.duration_s for h, s in window if h.heard == s),
+                    sum(h.duration_s for h, _ in window),
+                )
+            ),
+            KEY_HEARD_S: f"{self._heard_s:.3f}",
+            KEY_PREDICTED_S: f"{self._predicted_s:.3f}",
+            KEY_AGREEMENT: value_text(_share(self._agree_s, self._analysed_s)),
+            KEY_ANALYSED_S: f"{self._analysed_s:.3f}",
+            KEY_HEARD_MODES: self.heard_modes(),
+            KEY_CHUNKS: str(self.received),
+            KEY_DROPPED: str(self.dropped),
+            KEY_MALFORMED: str(self.malformed),
+            KEY_DETECTOR_WARNING: self.warning,
+        }
         if self.last_arrival is None:
             level, message = Level.STALE, "no sound received yet"
         elif now - self.last_arrival > w:
@@ -370,8 +384,10 @@ class Listener:
             predicted mode matched within `agreement.MATCH_TOLERANCE`); '' when nothing was
             heard.
         """
-        parts = [f"{label or 'unpredicted'} {hz_s / s:.0f} Hz {s:.2f} s" for label, (s, hz_s) in
-                 sorted(self._modes.items(), key=lambda kv: -kv[1][0])]
+        parts = [
+            f"{label or 'unpredicted'} {hz_s / s:.0f} Hz {s:.2f} s"
+            for label, (s, hz_s) in sorted(self._modes.items(), key=lambda kv: -kv[1][0])
+        ]
         return ", ".join(parts)
 
     def close(self, timeout: float = 2.0) -> None:
@@ -383,13 +399,13 @@ class Listener:
             Longest wait for the thread to end [s] (a chunk being analysed finishes first).
         """
         self._closed = True
-        while True:                 # make room for the wake-up
+        while True:  # make room for the wake-up
             try:
                 self._queue.get_nowait()
             except queue.Empty:
                 break
         try:
-            self._queue.put_nowait(None)     # type: ignore[arg-type]
+            self._queue.put_nowait(None)  # type: ignore[arg-type]
         except queue.Full:
             pass
         self._thread.join(timeout)
@@ -412,13 +428,16 @@ class Listener:
                 raise ValueError("no samples")
             duration = n / rate
             start = chunk.arrival - duration
-            if (self._audio_end is None or chunk.dropped_before != self._seen_dropped
-                    or not -AHEAD_S <= start - self._audio_end <= RESYNC_S):
+            if (
+                self._audio_end is None
+                or chunk.dropped_before != self._seen_dropped
+                or not -AHEAD_S <= start - self._audio_end <= RESYNC_S
+            ):
                 t0 = start
             else:
                 t0 = self._audio_end
             det.push(samples, t0, self.speed_rad_s, sample_rate_hz=rate)
-        except ValueError as exc:             # malformed payload, or a sample rate refused
+        except ValueError as exc:  # malformed payload, or a sample rate refused
             self.malformed += 1
             self.error = str(exc)
             self._last_malformed = chunk.arrival
@@ -429,8 +448,7 @@ class Listener:
             self.warning = det.warnings[-1]
         if det.frames_done:
             latest = float(det.frame_time(det.frames_done - 1))
-            self._analysed.append(Heard(latest, duration, det.heard_now,
-                                        det.frequency_now_hz))
+            self._analysed.append(Heard(latest, duration, det.heard_now, det.frequency_now_hz))
         self.analysed += 1
 
 

@@ -12,7 +12,8 @@ import math
 import os
 import sys
 import time
-from typing import Sequence, TextIO
+from collections.abc import Sequence
+from typing import TextIO
 
 import numpy as np
 from rclpy.executors import SingleThreadedExecutor
@@ -28,15 +29,18 @@ from .env import StopSignals, close, confine_to_localhost, init_context
 
 NODE_NAME = "actuator_simulator"
 MAX_RATE_HZ = 10_000.0
-MIC_RATE_HZ = 48000              # the simulated microphone's sample rate
-MIC_CHUNK_S = 0.1                # and its chunks
-MIC_SQUEAK_LEVEL = 0.05          # squeak tone amplitude [full scale] (-26 dBFS)
-_SCHEDULE_RATE_HZ = 100.0        # the model along the stroke, for the squeak tone
+MIC_RATE_HZ = 48000  # the simulated microphone's sample rate
+MIC_CHUNK_S = 0.1  # and its chunks
+MIC_SQUEAK_LEVEL = 0.05  # squeak tone amplitude [full scale] (-26 dBFS)
+_SCHEDULE_RATE_HZ = 100.0  # the model along the stroke, for the squeak tone
 
 
-def stroke_microphone(profile: StrokeProfile, params: ScrewParameters | None = None,
-                      sample_rate_hz: float = MIC_RATE_HZ, seed: int = 0
-                      ) -> tuple[np.ndarray, np.ndarray]:
+def stroke_microphone(
+    profile: StrokeProfile,
+    params: ScrewParameters | None = None,
+    sample_rate_hz: float = MIC_RATE_HZ,
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray]:
     """The simulated microphone of one stroke (computed up front, never in a callback).
 
     The squeak schedule is the model of `params` (`SqueakModel`, nominal verdict, no scatter;
@@ -63,14 +67,18 @@ def stroke_microphone(profile: StrokeProfile, params: ScrewParameters | None = N
     squeak_hz : numpy.ndarray
         The tone's frequency every 10 ms of the stroke, nan where the model is silent [Hz].
     """
-    from ..model.acoustics.synthesis import microphone       # scipy.signal: only when used
+    from ..model.acoustics.synthesis import microphone  # scipy.signal: only when used
+
     params = params or ScrewParameters()
     times = np.arange(int(round(profile.duration_s * _SCHEDULE_RATE_HZ)) + 1) / _SCHEDULE_RATE_HZ
-    speed, load, nut, _ = (np.array(a) for a in zip(*(profile.state(t) for t in times.tolist()),
-                                                    strict=True))
+    speed, load, nut, _ = (
+        np.array(a) for a in zip(*(profile.state(t) for t in times.tolist()), strict=True)
+    )
     squeak_hz = squeak_frequencies(params, speed, load, nut)
-    return (microphone(times, speed, squeak_hz, MIC_SQUEAK_LEVEL, sample_rate_hz, seed=seed),
-            squeak_hz)
+    return (
+        microphone(times, speed, squeak_hz, MIC_SQUEAK_LEVEL, sample_rate_hz, seed=seed),
+        squeak_hz,
+    )
 
 
 class ActuatorSimulator(Node):
@@ -103,9 +111,17 @@ class ActuatorSimulator(Node):
         Passed to `rclpy.node.Node` (`node_name` too).
     """
 
-    def __init__(self, profile: StrokeProfile | None = None, rate_hz: float = 100.0,
-                 loop: bool = False, joint_name: str = "", wait_for_subscriber: bool = False,
-                 microphone: bool = False, params: ScrewParameters | None = None, **kwargs):
+    def __init__(
+        self,
+        profile: StrokeProfile | None = None,
+        rate_hz: float = 100.0,
+        loop: bool = False,
+        joint_name: str = "",
+        wait_for_subscriber: bool = False,
+        microphone: bool = False,
+        params: ScrewParameters | None = None,
+        **kwargs,
+    ):
         if not (math.isfinite(rate_hz) and 0 < rate_hz <= MAX_RATE_HZ):
             raise ProfileError(f"rate_hz must be in (0, {MAX_RATE_HZ:g}] Hz, got {rate_hz!r}")
         if microphone and loop:
@@ -114,7 +130,7 @@ class ActuatorSimulator(Node):
         self.profile = profile or StrokeProfile()
         self.loop, self.joint_name = loop, joint_name
         self.wait_for_subscriber = wait_for_subscriber
-        self.started_at: float | None = None           # time.monotonic() of t = 0
+        self.started_at: float | None = None  # time.monotonic() of t = 0
         self.done = False
         self.published = 0
         self.last_state: ActuatorState | None = None
@@ -122,14 +138,15 @@ class ActuatorSimulator(Node):
         self.speed_pub = self.create_publisher(Float64, "motor_speed", qos)
         self.load_pub = self.create_publisher(Float64, "axial_load", qos)
         self.nut_pub = self.create_publisher(Float64, "nut_position", qos)
-        self.joint_pub = (self.create_publisher(JointState, "joint_states", qos)
-                          if joint_name else None)
+        self.joint_pub = (
+            self.create_publisher(JointState, "joint_states", qos) if joint_name else None
+        )
         self.mic_pub = None
-        self.mic_chunks = 0                             # microphone chunks published
+        self.mic_chunks = 0  # microphone chunks published
         if microphone:
             self.audio, self.squeak_hz = stroke_microphone(self.profile, params)
             self.mic_pub = self.create_publisher(Float32MultiArray, "microphone", qos)
-            self._mic_sent = 0                          # samples published
+            self._mic_sent = 0  # samples published
         self._timer = self.create_timer(1.0 / rate_hz, self._tick)
 
     @property
@@ -158,7 +175,7 @@ class ActuatorSimulator(Node):
         shorter one when `upto` is the end)."""
         step = int(MIC_CHUNK_S * MIC_RATE_HZ)
         while self._mic_sent + step <= upto or self.audio.size == upto > self._mic_sent:
-            chunk = self.audio[self._mic_sent:self._mic_sent + step]
+            chunk = self.audio[self._mic_sent : self._mic_sent + step]
             self.mic_pub.publish(Float32MultiArray(data=array.array("f", chunk.tobytes())))
             self._mic_sent += chunk.size
             self.mic_chunks += 1
@@ -181,17 +198,26 @@ class ActuatorSimulator(Node):
         self.load_pub.publish(Float64(data=float(s.load_n)))
         self.nut_pub.publish(Float64(data=float(s.nut_position_m)))
         if self.joint_pub is not None:
-            msg = JointState(name=[self.joint_name], position=[float(s.screw_angle_rad)],
-                             velocity=[float(s.speed_rad_s)])
+            msg = JointState(
+                name=[self.joint_name],
+                position=[float(s.screw_angle_rad)],
+                velocity=[float(s.speed_rad_s)],
+            )
             msg.header.stamp = self.get_clock().now().to_msg()
             self.joint_pub.publish(msg)
         self.last_state = s
         self.published += 1
 
 
-def run_simulator(profile: StrokeProfile | None = None, rate_hz: float = 100.0,
-                  loop: bool = False, joint_name: str = "", wait_for_subscriber: bool = True,
-                  out: TextIO | None = None, ros_args: Sequence[str] = ()) -> int:
+def run_simulator(
+    profile: StrokeProfile | None = None,
+    rate_hz: float = 100.0,
+    loop: bool = False,
+    joint_name: str = "",
+    wait_for_subscriber: bool = True,
+    out: TextIO | None = None,
+    ros_args: Sequence[str] = (),
+) -> int:
     """`leadscrew-squeak simulate`: publish the stroke on the user's ROS_DOMAIN_ID (loopback
     discovery unless chosen otherwise) for a separately started predictor node.
 
@@ -223,29 +249,43 @@ def run_simulator(profile: StrokeProfile | None = None, rate_hz: float = 100.0,
         ctx = init_context(ros_args)
         node = executor = None
         try:
-            node = ActuatorSimulator(profile, rate_hz=rate_hz, loop=loop,
-                                     joint_name=joint_name,
-                                     wait_for_subscriber=wait_for_subscriber, context=ctx)
+            node = ActuatorSimulator(
+                profile,
+                rate_hz=rate_hz,
+                loop=loop,
+                joint_name=joint_name,
+                wait_for_subscriber=wait_for_subscriber,
+                context=ctx,
+            )
             executor = SingleThreadedExecutor(context=ctx)
             executor.add_node(node)
-            topics = ", ".join(p.topic_name for p in (node.speed_pub, node.load_pub,
-                                                      node.nut_pub, node.joint_pub) if p)
-            print(f"simulating a {profile.duration_s:g} s stroke (0 -> "
-                  f"{profile.peak_speed_rad_s:g} rad/s -> 0, nut "
-                  f"{profile.start_nut_position_m:.3f} -> {profile.end_nut_position_m:.3f} m)"
-                  f"{', looped back and forth' if loop else ''} at {rate_hz:g} Hz on {topics} "
-                  f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')})", file=out,
-                  flush=True)
+            topics = ", ".join(
+                p.topic_name
+                for p in (node.speed_pub, node.load_pub, node.nut_pub, node.joint_pub)
+                if p
+            )
+            print(
+                f"simulating a {profile.duration_s:g} s stroke (0 -> "
+                f"{profile.peak_speed_rad_s:g} rad/s -> 0, nut "
+                f"{profile.start_nut_position_m:.3f} -> {profile.end_nut_position_m:.3f} m)"
+                f"{', looped back and forth' if loop else ''} at {rate_hz:g} Hz on {topics} "
+                f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')})",
+                file=out,
+                flush=True,
+            )
             if wait_for_subscriber:
-                print(f"waiting for a subscriber on {node.speed_pub.topic_name} ...", file=out,
-                      flush=True)
+                print(
+                    f"waiting for a subscriber on {node.speed_pub.topic_name} ...",
+                    file=out,
+                    flush=True,
+                )
             announced = False
             while not node.done and not stop.signum:
                 executor.spin_once(timeout_sec=0.02)
                 if node.started_at is not None and not announced:
                     print("stroke started", file=out, flush=True)
                     announced = True
-            linger = time.monotonic() + 0.3       # let the last samples reach the subscribers
+            linger = time.monotonic() + 0.3  # let the last samples reach the subscribers
             while node.done and not stop.signum and time.monotonic() < linger:
                 executor.spin_once(timeout_sec=0.02)
         finally:
