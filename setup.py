@@ -70,6 +70,7 @@ setup(
             "colcon-ros",
             "mcap-ros2-support",     # an independent decoder of our logs (tests only)
             "rosbags",
+            "mosqito",           # acoustics tests: TNR/PR and loudness reference
         ],
         "doc": [                 # the Sphinx documentation in doc/ (doc/development/documentation.md)
             "sphinx",

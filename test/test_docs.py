@@ -18,6 +18,8 @@ import re
 import pytest
 
 from leadscrew_ros.model import squeak_model
+from leadscrew_ros.model.acoustics import detection, synthesis, tonality
+from leadscrew_ros.model.acoustics.agreement import Agreement, agreement
 from leadscrew_ros.model.nonlinear import friction_force, transient, transient_analysis
 from leadscrew_ros.model.physics import parameters, stability
 from leadscrew_ros.model.studies import fields, roots, stability_map, sweep, tracking
@@ -26,7 +28,8 @@ from leadscrew_ros.review import fleet, replay
 
 PACKAGES = ("leadscrew_ros", "leadscrew_ros.model", "leadscrew_ros.model.physics",
             "leadscrew_ros.model.uncertainty", "leadscrew_ros.model.studies",
-            "leadscrew_ros.model.nonlinear", "leadscrew_ros.live", "leadscrew_ros.bag",
+            "leadscrew_ros.model.nonlinear", "leadscrew_ros.model.acoustics", "leadscrew_ros.live",
+            "leadscrew_ros.bag",
             "leadscrew_ros.review", "leadscrew_ros.ros", "leadscrew_ros.cli")
 # Public functions and classes that are not re-exported by their package (`studies.sweep.sweep`
 # and `review.replay.replay` are named like their modules; the rest are the next level down).

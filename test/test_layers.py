@@ -17,7 +17,7 @@ PACKAGE = REPO / "leadscrew_ros"
 LAYERS = ("model", "live", "bag", "review", "ros", "cli")
 ROS_FREE = LAYERS[:4]
 # Inside `model`, the same one-way rule between its sub-packages (squeak_model is a module).
-MODEL_PARTS = ("physics", "uncertainty", "squeak_model", "studies", "nonlinear")
+MODEL_PARTS = ("physics", "acoustics", "uncertainty", "squeak_model", "studies", "nonlinear")
 
 
 def _modules(layer: str) -> list[str]:

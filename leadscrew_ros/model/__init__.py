@@ -2,7 +2,9 @@
 """Pure model of friction-induced squeak in lead screws (numpy/scipy only, never rclpy).
 
 Sub-packages, imports flowing one way: `physics` (parameters, modes, friction, contact,
-assembly, stability) -> `uncertainty` (scatter, the live P(squeak) estimator) ->
+assembly, stability) -> `acoustics` (the bench microphone: ECMA-418-1 tone prominence, squeak
+episodes, agreement with predictions, a simulated microphone; needs only `physics.metadata`) ->
+`uncertainty` (scatter, the live P(squeak) estimator) ->
 `squeak_model` (`SqueakModel`: one operating point -> `Prediction`) -> `studies` (Monte Carlo
 reference, sensitivities, countermeasures, advice, sweeps and maps, mode tracking) ->
 `nonlinear` (the time-domain check).

@@ -1,0 +1,168 @@
+# SPDX-License-Identifier: Apache-2.0
+"""How well the predictions agree with what the microphone heard.
+
+The comparison is made at the detector's frames, each standing for one hop of time. The
+prediction in force at a frame is the latest one at or before it (zero-order hold, as the live
+node publishes); before the first prediction a frame counts as not predicted with P(squeak) 0.
+Only frames inside the span covered by both the sound (first to last frame) and the predictions
+(first prediction to `valid_until_s`, by default the last prediction) count, so a recording that
+starts before the predictor or outlasts it is not held against it. Frames whose P(squeak) is
+unknown (None or nan) count for the times but not for the Brier score.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .detection import Detection
+
+#: A heard episode and a predicted mode match within this relative frequency error.
+MATCH_TOLERANCE = 0.03
+
+
+@dataclass
+class FrequencyMatch:
+    """A heard episode and the predicted squeak mode nearest to it in frequency."""
+
+    start_s: float
+    end_s: float
+    heard_hz: float
+    label: str | None               #: the predicted mode's label, None when none predicted
+    predicted_hz: float | None      #: its frequency [Hz]
+    relative_error: float | None    #: (predicted - heard) / heard
+    matched: bool                   #: |relative_error| <= MATCH_TOLERANCE
+
+
+@dataclass
+class Agreement:
+    """Seconds of agreement and disagreement, the scores, and the frequency matches.
+
+    Attributes
+    ----------
+    both_s : float
+        Time heard and predicted [s].
+    predicted_only_s : float
+        Time predicted but not heard [s].
+    heard_only_s : float
+        Time heard but not predicted [s].
+    neither_s : float
+        Time neither heard nor predicted [s].
+    recall : float or None
+        Share of the heard squeak time that was predicted (nominal verdict); None when nothing
+        was heard.
+    precision : float or None
+        Share of the predicted squeak time that was heard; None when nothing was predicted.
+    brier : float or None
+        Mean of (P(squeak) - heard)^2 over the counted frames with a known P; None without.
+    frequency_match : list of FrequencyMatch
+        One per heard episode overlapping the counted span.
+    frames : int
+        Frames counted.
+    """
+
+    both_s: float
+    predicted_only_s: float
+    heard_only_s: float
+    neither_s: float
+    recall: float | None
+    precision: float | None
+    brier: float | None
+    frequency_match: list[FrequencyMatch] = field(default_factory=list)
+    frames: int = 0
+
+    def as_dict(self) -> dict[str, Any]:
+        """The agreement as a JSON-safe dict.
+
+        Returns
+        -------
+        dict
+        """
+        return asdict(self)
+
+
+def _probabilities(probability: Sequence[float | None], n: int) -> np.ndarray:
+    p = np.array([math.nan if v is None else float(v) for v in probability], dtype=float)
+    if p.size != n:
+        raise ValueError(f"{p.size} probabilities for {n} prediction times")
+    return p
+
+
+def agreement(detection: Detection, pred_times_s: Any, predicted_squeak: Any,
+              probability: Sequence[float | None],
+              predicted_modes: Sequence[Sequence[tuple[str, float]]], *,
+              valid_until_s: float | None = None) -> Agreement:
+    """Compare the predictions with what the detector heard.
+
+    Parameters
+    ----------
+    detection : Detection
+        What the microphone heard (`detect`).
+    pred_times_s : array_like
+        Times of the predictions [s], increasing.
+    predicted_squeak : array_like of bool
+        Nominal verdict of each prediction.
+    probability : sequence of float or None
+        P(squeak) of each prediction (None: unknown).
+    predicted_modes : sequence of sequence of (str, float)
+        Per prediction: (label, frequency [Hz]) of its squeaking modes.
+    valid_until_s : float, optional
+        End of the span the predictions cover (default: the last prediction's time).
+
+    Returns
+    -------
+    Agreement
+
+    Raises
+    ------
+    ValueError
+        When the per-prediction sequences differ in length.
+    """
+    tp = np.asarray(pred_times_s, dtype=float).reshape(-1)
+    squeak = np.asarray(predicted_squeak, dtype=bool).reshape(-1)
+    p = _probabilities(probability, tp.size)
+    if squeak.size != tp.size or len(predicted_modes) != tp.size:
+        raise ValueError(f"{tp.size} prediction times, {squeak.size} verdicts, "
+                         f"{len(predicted_modes)} mode lists: they must match")
+    t = detection.frame_times_s
+    hop = detection.hop_s
+    if t.size == 0 or tp.size == 0 or not math.isfinite(hop):
+        return Agreement(0.0, 0.0, 0.0, 0.0, None, None, None)
+    end = tp[-1] if valid_until_s is None else float(valid_until_s)
+    counted = (t >= max(t[0], tp[0])) & (t <= min(t[-1], end))
+    j = np.searchsorted(tp, t, side="right") - 1          # prediction in force, -1: none yet
+    pred = np.where(j >= 0, squeak[np.maximum(j, 0)], False)
+    prob = np.where(j >= 0, p[np.maximum(j, 0)], 0.0)
+    heard = detection.heard
+    both = float(np.sum(counted & heard & pred)) * hop
+    pred_only = float(np.sum(counted & ~heard & pred)) * hop
+    heard_only = float(np.sum(counted & heard & ~pred)) * hop
+    neither = float(np.sum(counted & ~heard & ~pred)) * hop
+    known = counted & np.isfinite(prob)
+    brier = float(np.mean((prob[known] - heard[known]) ** 2)) if known.any() else None
+    matches = []
+    lo, hi = max(t[0], tp[0]), min(t[-1], end)
+    for ep in detection.episodes:
+        if ep.end_s < lo or ep.start_s > hi:
+            continue
+        j0 = max(int(np.searchsorted(tp, max(ep.start_s, lo), side="right")) - 1, 0)
+        j1 = int(np.searchsorted(tp, min(ep.end_s, hi), side="right"))
+        modes = [(str(lab), float(f)) for jj in range(j0, j1) for lab, f in predicted_modes[jj]
+                 if math.isfinite(float(f))]
+        if modes:
+            lab, f = min(modes, key=lambda m: abs(m[1] - ep.frequency_hz))
+            err = (f - ep.frequency_hz) / ep.frequency_hz
+            matches.append(FrequencyMatch(ep.start_s, ep.end_s, ep.frequency_hz, lab, f, err,
+                                          abs(err) <= MATCH_TOLERANCE))
+        else:
+            matches.append(FrequencyMatch(ep.start_s, ep.end_s, ep.frequency_hz, None, None,
+                                          None, False))
+    return Agreement(
+        both_s=both, predicted_only_s=pred_only, heard_only_s=heard_only, neither_s=neither,
+        recall=both / (both + heard_only) if both + heard_only > 0 else None,
+        precision=both / (both + pred_only) if both + pred_only > 0 else None,
+        brier=brier, frequency_match=matches, frames=int(counted.sum()))

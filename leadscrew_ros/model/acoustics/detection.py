@@ -1,0 +1,734 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Squeak episodes heard by a microphone: prominent tones that do not follow the motor orders.
+
+Per frame (`DetectorSettings.frame_s` long, every `hop_s`), the tone candidates of `tonality`
+that are prominent after ECMA-418-1 (TNR or PR at or above its limit) between `f_lo_hz` and
+`f_hi_hz` are followed as tracks: a candidate joins the open track whose running median
+frequency (over the last `min_duration_s`, at least 3 frames) is nearest within
+`track_tolerance`, strongest candidates first; otherwise it opens a new track. A track with no
+candidate for `max_gap_s` or more is closed; shorter gaps are bridged. A closed track of at
+least `min_duration_s` is an episode, from half a hop before its first frame to half a hop after
+its last (frame times are frame centres).
+
+Motor and gear noise follows the shaft orders, a squeak locks to a structural mode, so each
+episode is tested once it is closed, with the shaft frequency f1 = |speed| / 2 pi interpolated
+at its frames: k = round(median(f / f1)), and the episode is on order k when k is in
+1..`max_order` and `order_share` of its frames are within `order_tolerance` of k f1. Whether it
+*follows* the order is judged from the relative rms deviations of its frequencies from k f1
+(r_order) and from their median (r_const), with a floor of a tenth of a frequency bin against
+the frequency estimate's own scatter: r_const >= 3 r_order means the tone moved with the speed
+(rejected as motor/gear noise); r_order >= 3 r_const means it stayed while the speed moved
+(kept); otherwise the speed hardly changed and frequency alone decides: rejected when
+k <= 0.25 / `order_tolerance` (12 at 2 %: the tolerance windows of neighbouring orders cover at
+most half of the frequency axis, so a constant tone lies on order k by chance only at the odds of
+a coin toss or less), kept above, where by frequency alone it cannot be told from a squeak.
+
+`StreamingDetector` is the core: it frames the samples as they come, analyses each frame once,
+and runs the tracks frame by frame with bounded memory. `detect` pushes the whole signal into
+one and flushes it, so that the offline and live decisions are the same frame for frame.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .settings import DetectorSettings
+from .tonality import ToneAnalyzer, hann, short_time_psd
+
+P_REF_PA = 20e-6            #: reference sound pressure of dB SPL
+LOUDNESS_RATE_HZ = 48000    #: ISO 532-1 after MOSQITO wants 48 kHz; other rates are resampled
+_BLOCK_FRAMES = 256         # frames analysed per FFT block (bounded memory, same in every mode)
+_MAX_WARNINGS = 100
+
+
+class AudioError(ValueError):
+    """The audio cannot be analysed at all (an invalid sample rate)."""
+
+
+def _finite_or_none(value: float | None) -> float | None:
+    return None if value is None or not math.isfinite(value) else float(value)
+
+
+@dataclass
+class Episode:
+    """One squeak episode (or, in `Detection.rejected`, a tone that followed the orders).
+
+    Attributes
+    ----------
+    start_s : float
+        Half a hop before its first frame's centre [s].
+    end_s : float
+        Half a hop after its last frame's centre [s].
+    frequency_hz : float
+        Median frequency of its track [Hz].
+    tnr_db : float
+        Largest TNR of its frames [dB].
+    pr_db : float
+        Largest PR of its frames [dB] (nan where the upper band passes Nyquist).
+    level_db : float
+        Largest tone level of its frames: dB SPL re 20 uPa when calibrated, else dB re full
+        scale (mean square re 1, a full-scale sine is -3 dB).
+    loudness_sone : float or None
+        Largest ISO 532-1 time-varying loudness (free field, MOSQITO `loudness_zwtv`) over the
+        episode, or its last `loudness_max_s` [sone]; None when uncalibrated, disabled or
+        MOSQITO is missing.
+    order : int or None
+        The order it followed (rejected episodes only).
+    track_times_s : numpy.ndarray
+        Its frames' centres [s]; not in `as_dict`.
+    track_hz : numpy.ndarray
+        Its frames' frequencies [Hz] (nan in bridged gaps); not in `as_dict`.
+    """
+
+    start_s: float
+    end_s: float
+    frequency_hz: float
+    tnr_db: float
+    pr_db: float
+    level_db: float
+    loudness_sone: float | None = None
+    order: int | None = None
+    track_times_s: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    track_hz: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+
+    @property
+    def duration_s(self) -> float:
+        """end_s - start_s [s]."""
+        return self.end_s - self.start_s
+
+    def as_dict(self) -> dict[str, Any]:
+        """The episode as a JSON-safe dict (nan -> None), without the per-frame track.
+
+        Returns
+        -------
+        dict
+        """
+        return dict(start_s=self.start_s, end_s=self.end_s, frequency_hz=self.frequency_hz,
+                    tnr_db=_finite_or_none(self.tnr_db), pr_db=_finite_or_none(self.pr_db),
+                    level_db=_finite_or_none(self.level_db),
+                    loudness_sone=_finite_or_none(self.loudness_sone), order=self.order)
+
+
+@dataclass
+class Detection:
+    """What `detect` heard.
+
+    Attributes
+    ----------
+    frame_times_s : numpy.ndarray
+        Frame centres [s].
+    heard : numpy.ndarray
+        Per frame: a squeak episode covers it.
+    frequency_hz : numpy.ndarray
+        Per frame: the heard frequency (the loudest episode's track; its median in a bridged
+        gap), nan when none [Hz].
+    episodes : list of Episode
+        Squeak episodes, by start time.
+    sample_rate_hz : float
+        Sample rate of the input [Hz].
+    scale : str
+        'Pa' (calibrated: levels in dB SPL) or 'full scale'.
+    warnings : list of str
+        What was wrong with the input (non-finite samples, clipping, too short, ...).
+    rejected : list of Episode
+        Tones that followed the motor orders.
+    """
+
+    frame_times_s: np.ndarray
+    heard: np.ndarray
+    frequency_hz: np.ndarray
+    episodes: list[Episode]
+    sample_rate_hz: float
+    scale: str
+    warnings: list[str]
+    rejected: list[Episode] = field(default_factory=list)
+
+    @property
+    def hop_s(self) -> float:
+        """Spacing of the frames [s] (nan with fewer than two)."""
+        t = self.frame_times_s
+        return float(t[1] - t[0]) if t.size > 1 else math.nan
+
+    def as_dict(self) -> dict[str, Any]:
+        """The detection as a JSON-safe dict (no nan: None in its place).
+
+        Returns
+        -------
+        dict
+        """
+        return dict(frame_times_s=self.frame_times_s.tolist(), heard=self.heard.tolist(),
+                    frequency_hz=[_finite_or_none(f) for f in self.frequency_hz.tolist()],
+                    episodes=[e.as_dict() for e in self.episodes],
+                    rejected=[e.as_dict() for e in self.rejected],
+                    sample_rate_hz=self.sample_rate_hz, scale=self.scale,
+                    warnings=list(self.warnings))
+
+
+def _check_rate(sample_rate_hz: Any) -> float:
+    try:
+        rate = float(sample_rate_hz)
+    except (TypeError, ValueError):
+        raise AudioError(f"sample rate {sample_rate_hz!r} is not a number") from None
+    if not math.isfinite(rate) or not 1000.0 <= rate <= 1e6:
+        raise AudioError(f"sample rate {sample_rate_hz!r} Hz is not allowed, [1000, 1e6] Hz")
+    return rate
+
+
+class _Track:
+    """One tone followed frame by frame."""
+
+    __slots__ = ("first", "last", "frames", "hz", "f1", "recent", "median", "tnr", "pr",
+                 "power", "last_power", "checked_at", "order_now")
+
+    def __init__(self, i: int, f: float, f1: float, tnr: float, pr: float, power: float,
+                 window: int) -> None:
+        self.first = self.last = i
+        self.frames: list[int] = []
+        self.hz: list[float] = []
+        self.f1: list[float] = []
+        self.recent: deque[float] = deque(maxlen=window)
+        self.median = f
+        self.tnr = self.pr = self.power = -math.inf
+        self.last_power = power
+        self.checked_at = 0                  # frames when `order_now` was last decided
+        self.order_now: int | None = None
+        self.add(i, f, f1, tnr, pr, power)
+
+    def add(self, i: int, f: float, f1: float, tnr: float, pr: float, power: float) -> None:
+        self.last = i
+        self.frames.append(i)
+        self.hz.append(f)
+        self.f1.append(f1)
+        self.recent.append(f)
+        r = sorted(self.recent)
+        n = len(r)
+        self.median = r[n // 2] if n % 2 else 0.5 * (r[n // 2 - 1] + r[n // 2])
+        self.tnr = max(self.tnr, tnr)
+        if pr == pr:                                   # not nan
+            self.pr = max(self.pr, pr)
+        self.power = max(self.power, power)
+        self.last_power = power
+
+
+class StreamingDetector:
+    """The squeak detector fed chunk by chunk (the node's listening thread), bounded memory.
+
+    Parameters
+    ----------
+    settings : DetectorSettings
+        Detector settings.
+    sample_rate_hz : float
+        Sample rate [Hz], in [1000, 1e6].
+    scale_pa : float, optional
+        Pascal per full-scale unit (calibrated: dB SPL and loudness); None: uncalibrated.
+
+    Raises
+    ------
+    AudioError
+        For an invalid sample rate.
+
+    Notes
+    -----
+    Frame i covers the samples ``i * hop`` to ``i * hop + frame`` counted from the start of
+    the current segment; its time is its centre. A chunk whose `t0_s` is within
+    ``max(max_gap_s, 2 / rate)`` of where the previous chunk ended continues the segment (time
+    is counted in samples, so time-stamp jitter does not move frames); otherwise a warning is
+    recorded, the open tracks are closed and a new segment starts at `t0_s`. `warnings` holds
+    the last 100 warnings, `rejected` the last 100 rejected (order-following) episodes.
+    """
+
+    def __init__(self, settings: DetectorSettings = DetectorSettings(),
+                 sample_rate_hz: float = 48000.0, scale_pa: float | None = None) -> None:
+        self.settings = settings
+        self.scale_pa = None if scale_pa is None else float(scale_pa)
+        if self.scale_pa is not None and not (math.isfinite(self.scale_pa)
+                                              and self.scale_pa > 0):
+            raise AudioError(f"scale_pa = {scale_pa!r} must be a positive number")
+        self.warnings: deque[str] = deque(maxlen=_MAX_WARNINGS)
+        self.rejected: deque[Episode] = deque(maxlen=_MAX_WARNINGS)
+        self._loudness_missing = False
+        self._reset(_check_rate(sample_rate_hz))
+
+    # -- state -------------------------------------------------------------------------------
+    def _reset(self, rate: float) -> None:
+        s = self.settings
+        self.sample_rate_hz = rate
+        self.frame_len = max(int(round(s.frame_s * rate)), 8)
+        self.hop = max(int(round(s.hop_s * rate)), 1)
+        self.hop_s = self.hop / rate
+        self.analyzer = ToneAnalyzer(rate, self.frame_len, s.f_lo_hz, s.f_hi_hz, s.max_peaks,
+                                     s.track_tolerance, s.max_harmonic)
+        if self.analyzer.empty:
+            self._warn(f"sample rate {rate:g} Hz leaves no frequency to analyse above "
+                       f"{s.f_lo_hz:g} Hz")
+        elif self.analyzer.f_hi_hz < s.f_hi_hz - self.analyzer.df:
+            self._warn(f"sample rate {rate:g} Hz limits the analysis to "
+                       f"{self.analyzer.f_hi_hz:.0f} Hz")
+        self._min_frames = max(int(math.ceil(s.min_duration_s / self.hop_s - 1e-9)), 1)
+        self._allowed_missing = max(int(math.ceil(s.max_gap_s / self.hop_s - 1e-9)) - 1, 0)
+        self._max_frames = max(int(s.max_episode_s / self.hop_s), self._min_frames)
+        self._median_window = max(self._min_frames, 3)
+        # frames dropped for non-finite samples are bridged up to what one short glitch
+        # costs: every frame holding it, plus the gap allowed anyway
+        self._max_dropped = -(-self.frame_len // self.hop) + self._allowed_missing
+        self._keep = int(math.ceil((s.loudness_max_s + 2 * s.frame_s + s.max_gap_s
+                                    + 2 * s.hop_s) * rate)) + self.frame_len
+        self._window = hann(self.frame_len)
+        self._new_segment(None)
+
+    def _new_segment(self, t0_s: float | None) -> None:
+        self._seg_t0 = t0_s
+        self._buf = np.zeros(0, np.float32)
+        self._bad = np.zeros(0, bool)
+        self._buf_start = 0            # segment sample index of _buf[0]
+        self._n_samples = 0            # samples received in this segment
+        self._next_frame = 0
+        self._tracks: list[_Track] = []
+        self._dropped_run = 0
+        self._speed_t = np.zeros(0)
+        self._speed_v = np.zeros(0)
+        self._heard_now = False
+        self._frequency_now = math.nan
+
+    def _warn(self, text: str) -> None:
+        if not self.warnings or self.warnings[-1] != text:
+            self.warnings.append(text)
+
+    @property
+    def heard_now(self) -> bool:
+        """A track that has lasted `min_duration_s` and does not (so far) follow the orders
+        covers the latest frame: provisional (the order test re-run as the track grows by an
+        eighth), the episode is decided when it closes."""
+        return self._heard_now
+
+    @property
+    def frequency_now_hz(self) -> float:
+        """Running median frequency of the strongest track behind `heard_now`, nan when
+        none [Hz]."""
+        return self._frequency_now
+
+    @property
+    def frames_done(self) -> int:
+        """Frames analysed in the current segment."""
+        return self._next_frame
+
+    def frame_time(self, i: np.ndarray | int) -> np.ndarray:
+        """Centre time [s] of frame(s) `i` of the current segment."""
+        t0 = 0.0 if self._seg_t0 is None else self._seg_t0
+        return t0 + (np.asarray(i) * self.hop + self.frame_len / 2) / self.sample_rate_hz
+
+    # -- input ---------------------------------------------------------------------------------
+    def push(self, samples: Any, t0_s: float, speed_rad_s: Any = None,
+             speed_times_s: Any = None, sample_rate_hz: float | None = None) -> list[Episode]:
+        """Analyse a chunk of samples; return the squeak episodes closed by it.
+
+        Parameters
+        ----------
+        samples : array_like
+            Samples in full-scale units (-1..1); several channels (2-D) are averaged.
+        t0_s : float
+            Time of the first sample [s].
+        speed_rad_s : float or array_like, optional
+            Shaft speed [rad/s]: a float is the speed over this chunk; an array goes with
+            `speed_times_s` (samples of the speed, interpolated linearly at the frame times,
+            held beyond the last one known).
+        speed_times_s : array_like, optional
+            Times [s] of the speed samples.
+        sample_rate_hz : float, optional
+            A new sample rate: the open tracks are closed (their episodes returned), the
+            detector restarts at this rate, with a warning.
+
+        Returns
+        -------
+        list of Episode
+            Squeak episodes closed during this chunk.
+
+        Raises
+        ------
+        AudioError
+            For an invalid new sample rate.
+        """
+        closed: list[Episode] = []
+        if sample_rate_hz is not None:
+            rate = _check_rate(sample_rate_hz)
+            if rate != self.sample_rate_hz:
+                self._warn(f"sample rate changed from {self.sample_rate_hz:g} to {rate:g} Hz: "
+                           "detector restarted")
+                closed += self.flush()
+                self._reset(rate)
+        x = self._as_samples(samples)
+        try:
+            t0 = float(t0_s)
+        except (TypeError, ValueError):
+            t0 = math.nan
+        if not math.isfinite(t0):
+            self._warn(f"chunk time {t0_s!r} is not finite: chunk treated as contiguous")
+            t0 = self._expected_t0()
+        if x.size == 0:
+            return closed
+        if self._seg_t0 is None:
+            self._seg_t0 = t0
+        elif abs(t0 - self._expected_t0()) > max(self.settings.max_gap_s,
+                                                 2.0 / self.sample_rate_hz):
+            self._warn(f"audio discontinuity of {t0 - self._expected_t0():+.3f} s at "
+                       f"{t0:.3f} s: tracks closed, framing restarted")
+            closed += self.flush()
+            self._new_segment(t0)
+        t_end = self._seg_t0 + (self._n_samples + x.size) / self.sample_rate_hz
+        self._add_speed(speed_rad_s, speed_times_s, self._expected_t0(), t_end)
+        bad = ~np.isfinite(x)
+        n_bad = int(bad.sum())
+        if n_bad:
+            self._warn(f"{n_bad} non-finite samples (NaN/inf) set to 0; the frames holding "
+                       "them are dropped (tracks bridge one frame length of them)")
+            x = np.where(bad, np.float32(0.0), x)
+        n_clip = int(np.count_nonzero(np.abs(x) >= self.settings.clip_level))
+        if n_clip:
+            self._warn(f"clipped: {n_clip} samples at or beyond {self.settings.clip_level:g} "
+                       "of full scale (harmonics of clipped tones are not counted as squeak)")
+        self._buf = np.concatenate([self._buf, x])
+        self._bad = np.concatenate([self._bad, bad])
+        self._n_samples += x.size
+        closed += self._run_frames()
+        return closed
+
+    def flush(self) -> list[Episode]:
+        """Close every open track (end of the stream); return the squeak episodes among them."""
+        out: list[Episode] = []
+        for tr in self._tracks:
+            ep = self._finish(tr)
+            if ep is not None:
+                out.append(ep)
+        self._tracks = []
+        self._heard_now, self._frequency_now = False, math.nan
+        return sorted(out, key=lambda e: e.start_s)
+
+    def _expected_t0(self) -> float:
+        if self._seg_t0 is None:
+            return 0.0
+        return self._seg_t0 + self._n_samples / self.sample_rate_hz
+
+    def _as_samples(self, samples: Any) -> np.ndarray:
+        try:
+            x = np.asarray(samples, dtype=np.float32)
+        except (TypeError, ValueError):
+            self._warn("samples are not numbers: chunk ignored")
+            return np.zeros(0, np.float32)
+        if x.ndim > 1:
+            axis = int(np.argmin(x.shape))
+            self._warn(f"{x.shape[axis]} channels averaged")
+            x = x.mean(axis=axis)
+            x = x.reshape(-1)
+        return np.ascontiguousarray(x.reshape(-1))
+
+    def _add_speed(self, speed: Any, times: Any, t_start: float, t_end: float) -> None:
+        if speed is None:
+            return
+        try:
+            v = np.asarray(speed, dtype=float).reshape(-1)
+            t = (np.array([t_start, t_end]) if times is None and v.size == 1 else
+                 np.asarray(times, dtype=float).reshape(-1))
+            if v.size == 1 and t.size == 2:
+                v = np.repeat(v, 2)
+        except (TypeError, ValueError):
+            self._warn("speed is not numeric: ignored")
+            return
+        if t.size != v.size:
+            self._warn(f"{v.size} speeds for {t.size} speed times: ignored")
+            return
+        ok = np.isfinite(t) & np.isfinite(v)
+        if not ok.all():
+            self._warn(f"{int((~ok).sum())} non-finite speed samples dropped")
+        t, v = np.concatenate([self._speed_t, t[ok]]), np.concatenate([self._speed_v, v[ok]])
+        if t.size > 1 and np.any(np.diff(t) < 0):
+            order = np.argsort(t, kind="stable")
+            t, v = t[order], v[order]
+        self._speed_t, self._speed_v = t, v
+
+    # -- frames ----------------------------------------------------------------------------------
+    def _run_frames(self) -> list[Episode]:
+        closed: list[Episode] = []
+        n_avail = (self._n_samples - self.frame_len) // self.hop + 1 if \
+            self._n_samples >= self.frame_len else 0
+        while self._next_frame < n_avail:
+            i0 = self._next_frame
+            i1 = min(n_avail, i0 + _BLOCK_FRAMES)
+            closed += self._block(i0, i1)
+            self._next_frame = i1
+        self._trim()
+        self._update_now()
+        return closed
+
+    def _block(self, i0: int, i1: int) -> list[Episode]:
+        n, hop = self.frame_len, self.hop
+        s0 = i0 * hop - self._buf_start
+        seg = self._buf[s0:s0 + (i1 - i0 - 1) * hop + n]
+        if self.analyzer.empty:
+            return []
+        cand = self.analyzer.candidates(short_time_psd(seg, self.sample_rate_hz, n, hop,
+                                                       self._window))
+        bad = self._bad[s0:s0 + seg.size]
+        if bad.any():
+            bad_cum = np.concatenate([[0], np.cumsum(bad)])
+            starts = np.arange(i1 - i0) * hop
+            dropped = bad_cum[starts + n] - bad_cum[starts] > 0
+        else:
+            dropped = np.zeros(i1 - i0, bool)
+        prominent = cand.prominent & ~dropped[:, None]
+        frame_t = self.frame_time(np.arange(i0, i1))
+        if self._speed_t.size:
+            f1 = np.abs(np.interp(frame_t, self._speed_t, self._speed_v)) / (2 * np.pi)
+        else:
+            f1 = np.full(frame_t.shape, np.nan)
+        has = prominent.any(axis=1)
+        closed: list[Episode] = []
+        for j in range(i1 - i0):
+            if dropped[j]:
+                self._dropped_run += 1
+                if self._dropped_run <= self._max_dropped:     # a glitch: the tracks hold
+                    for tr in self._tracks:
+                        tr.last = i0 + j
+                    continue
+            else:
+                self._dropped_run = 0
+            if not has[j] and not self._tracks:
+                continue
+            cols = np.nonzero(prominent[j])[0]
+            cols = cols[np.argsort(-cand.power[j, cols], kind="stable")]
+            found = [(float(cand.frequency_hz[j, c]), float(cand.tnr_db[j, c]),
+                      float(cand.pr_db[j, c]), float(cand.power[j, c])) for c in cols]
+            closed += self._step(i0 + j, found, float(f1[j]))
+        return closed
+
+    def _step(self, i: int, found: list[tuple[float, float, float, float]],
+              f1: float) -> list[Episode]:
+        closed = []
+        keep = []
+        for tr in self._tracks:
+            if i - tr.last - 1 > self._allowed_missing or \
+                    tr.last - tr.first + 1 >= self._max_frames:
+                ep = self._finish(tr)
+                if ep is not None:
+                    closed.append(ep)
+            else:
+                keep.append(tr)
+        self._tracks = keep
+        tol = self.settings.track_tolerance
+        for f, tnr, pr, power in found:
+            best, best_d = None, tol
+            for tr in self._tracks:
+                if tr.last == i:
+                    continue
+                d = abs(f / tr.median - 1.0)
+                if d <= best_d:
+                    best, best_d = tr, d
+            if best is None:
+                if len(self._tracks) >= self.settings.max_tracks:
+                    continue
+                self._tracks.append(_Track(i, f, f1, tnr, pr, power, self._median_window))
+            else:
+                best.add(i, f, f1, tnr, pr, power)
+        return closed
+
+    def _follows_order(self, tr: _Track) -> int | None:
+        """The order k the track follows (rejected), else None; see the module notes."""
+        s = self.settings
+        if s.order_tolerance <= 0 or s.max_order < 1:
+            return None
+        f = np.asarray(tr.hz)
+        f1 = np.asarray(tr.f1)
+        ok = np.isfinite(f1) & (f1 > 0)
+        if ok.sum() * 2 < f.size:
+            return None
+        f, f1 = f[ok], f1[ok]
+        k = int(np.rint(np.median(f / f1)))
+        if not 1 <= k <= s.max_order:
+            return None
+        share = float(np.mean(np.abs(f / (k * f1) - 1.0) <= s.order_tolerance))
+        if share < s.order_share:
+            return None
+        r_order = float(np.sqrt(np.mean((f / (k * f1) - 1.0) ** 2)))
+        r_const = float(np.sqrt(np.mean((f / np.median(f) - 1.0) ** 2)))
+        floor = 0.1 * self.analyzer.df / float(np.median(f))   # a tenth of a bin
+        if r_const >= max(3 * r_order, floor):          # the tone moved with the speed
+            return k
+        if r_order >= max(3 * r_const, floor):          # it stayed while the speed moved
+            return None
+        return k if k <= 0.25 / s.order_tolerance else None     # by frequency alone
+
+    def _finish(self, tr: _Track) -> Episode | None:
+        if tr.last - tr.first + 1 < self._min_frames:
+            return None
+        half = self.hop_s / 2
+        start = float(self.frame_time(tr.first)) - half
+        end = float(self.frame_time(tr.last)) + half
+        frames = np.arange(tr.first, tr.last + 1)
+        hz = np.full(frames.size, np.nan)
+        hz[np.asarray(tr.frames) - tr.first] = tr.hz
+        if self.scale_pa is not None:
+            level = 10 * math.log10(max(tr.power, 1e-300) * self.scale_pa ** 2 / P_REF_PA ** 2)
+        else:
+            level = 10 * math.log10(max(tr.power, 1e-300))
+        ep = Episode(start_s=start, end_s=end, frequency_hz=float(np.median(tr.hz)),
+                     tnr_db=tr.tnr, pr_db=tr.pr if tr.pr > -math.inf else math.nan,
+                     level_db=level, track_times_s=self.frame_time(frames), track_hz=hz)
+        k = self._follows_order(tr)
+        if k is not None:
+            ep.order = k
+            self.rejected.append(ep)
+            return None
+        ep.loudness_sone = self._loudness(start, end)
+        return ep
+
+    def _loudness(self, start: float, end: float) -> float | None:
+        s = self.settings
+        if self.scale_pa is None or s.loudness_max_s <= 0 or self._seg_t0 is None:
+            return None
+        rate = self.sample_rate_hz
+        a = int(round((max(start, end - s.loudness_max_s) - s.frame_s - self._seg_t0) * rate))
+        b = int(round((end - self._seg_t0) * rate))
+        a, b = max(a, self._buf_start), min(b, self._buf_start + self._buf.size)
+        if b - a < int(0.05 * rate):
+            return None
+        x = self._buf[a - self._buf_start:b - self._buf_start].astype(float) * self.scale_pa
+        try:
+            from mosqito.sq_metrics import loudness_zwtv
+        except ImportError:
+            if not self._loudness_missing:
+                self._warn("mosqito is not importable: no loudness")
+                self._loudness_missing = True
+            return None
+        if rate != LOUDNESS_RATE_HZ:
+            from fractions import Fraction
+
+            from scipy.signal import resample_poly
+            r = Fraction(LOUDNESS_RATE_HZ / rate).limit_denominator(1000)
+            x = resample_poly(x, r.numerator, r.denominator)
+        try:
+            n = loudness_zwtv(x, LOUDNESS_RATE_HZ, field_type="free")[0]
+        except Exception as exc:                      # MOSQITO's failure must not stop us
+            self._warn(f"loudness failed: {exc}")
+            return None
+        return float(np.max(n)) if np.size(n) else None
+
+    def _trim(self) -> None:
+        keep_from = max(self._next_frame * self.hop - self._keep, self._buf_start)
+        cut = keep_from - self._buf_start
+        if cut > 0:
+            self._buf = self._buf[cut:]
+            self._bad = self._bad[cut:]
+            self._buf_start = keep_from
+        if self._speed_t.size > 2:
+            t_next = float(self.frame_time(self._next_frame)) - self.settings.frame_s
+            j = int(np.searchsorted(self._speed_t, t_next)) - 1
+            if j > 0:
+                self._speed_t, self._speed_v = self._speed_t[j:], self._speed_v[j:]
+
+    def _update_now(self) -> None:
+        latest = self._next_frame - 1
+        best: _Track | None = None
+        for tr in self._tracks:
+            if tr.last - tr.first + 1 < self._min_frames or \
+                    latest - tr.last > self._allowed_missing or \
+                    (best is not None and tr.last_power <= best.last_power):
+                continue
+            n = len(tr.hz)                   # re-decided as the track grows by 1/8
+            if n >= tr.checked_at + max(5, tr.checked_at // 8):
+                tr.order_now, tr.checked_at = self._follows_order(tr), n
+            if tr.order_now is None:
+                best = tr
+        self._heard_now = best is not None
+        self._frequency_now = best.median if best is not None else math.nan
+
+
+def detect(samples: Any, sample_rate_hz: float, *, t0_s: float = 0.0,
+           speed_times_s: Any = None, speed_rad_s: Any = None, scale_pa: float | None = None,
+           settings: DetectorSettings = DetectorSettings()) -> Detection:
+    """Squeak episodes in a recording (offline; the same decisions as `StreamingDetector`).
+
+    Parameters
+    ----------
+    samples : array_like
+        Samples in full-scale units (-1..1); several channels (2-D) are averaged.
+    sample_rate_hz : float
+        Sample rate [Hz], in [1000, 1e6].
+    t0_s : float
+        Time of the first sample [s].
+    speed_times_s : array_like, optional
+        Times [s] of the speed samples.
+    speed_rad_s : float or array_like, optional
+        The shaft speed [rad/s] at `speed_times_s` (interpolated linearly at the frame times);
+        without it no tone is rejected as a motor order. A float alone is a constant speed.
+    scale_pa : float, optional
+        Pascal per full-scale unit: levels in dB SPL and loudness computed.
+    settings : DetectorSettings
+        Detector settings.
+
+    Returns
+    -------
+    Detection
+        Bad input (NaN/inf samples, no samples, fewer than one frame, clipping) gives warnings,
+        never an exception.
+
+    Raises
+    ------
+    AudioError
+        For an invalid sample rate (or `scale_pa`).
+    """
+    det = StreamingDetector(settings, sample_rate_hz, scale_pa)
+    if speed_rad_s is not None and speed_times_s is None and np.ndim(speed_rad_s) > 0:
+        det._warn("speed_rad_s without speed_times_s: ignored")
+        speed_rad_s = None
+    episodes = det.push(samples, t0_s, speed_rad_s, speed_times_s)
+    n_samples = det._n_samples
+    episodes += det.flush()
+    warnings = list(det.warnings)
+    if n_samples == 0:
+        warnings.append("no audio samples")
+    elif det.frames_done == 0:
+        warnings.append(f"{n_samples} samples are shorter than one frame "
+                        f"({det.frame_len} samples): nothing analysed")
+    times = det.frame_time(np.arange(det.frames_done)).astype(float)
+    heard, freq = frames_heard(times, episodes)
+    return Detection(frame_times_s=times, heard=heard, frequency_hz=freq,
+                     episodes=sorted(episodes, key=lambda e: e.start_s),
+                     sample_rate_hz=det.sample_rate_hz,
+                     scale="Pa" if scale_pa is not None else "full scale",
+                     warnings=warnings, rejected=list(det.rejected))
+
+
+def frames_heard(frame_times_s: np.ndarray, episodes: list[Episode]) -> tuple[np.ndarray,
+                                                                             np.ndarray]:
+    """Per frame: covered by an episode, and the heard frequency (nan when none).
+
+    Parameters
+    ----------
+    frame_times_s : numpy.ndarray
+        Frame centres [s].
+    episodes : list of Episode
+        Episodes (e.g. collected from `StreamingDetector.push`).
+
+    Returns
+    -------
+    heard : numpy.ndarray of bool
+    frequency_hz : numpy.ndarray
+        The loudest covering episode's track frequency, its median in a bridged gap [Hz].
+    """
+    t = np.asarray(frame_times_s, dtype=float)
+    heard = np.zeros(t.shape, bool)
+    freq = np.full(t.shape, np.nan)
+    for ep in sorted(episodes, key=lambda e: e.level_db):      # the loudest wins
+        inside = (t >= ep.start_s) & (t <= ep.end_s)
+        heard |= inside
+        if ep.track_times_s.size:          # the track has every frame of the episode
+            hz = np.interp(t[inside], ep.track_times_s,
+                           np.nan_to_num(ep.track_hz, nan=ep.frequency_hz))
+        else:
+            hz = np.full(int(inside.sum()), ep.frequency_hz)
+        freq[inside] = hz
+    return heard, freq
