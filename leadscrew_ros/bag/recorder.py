@@ -184,6 +184,9 @@ class Recorder:
     state : callable or None
         The messages every file starts with (the node's input state and latched outputs),
         called under the recorder's lock when a file opens.
+    schemas : dict of str to str
+        'pkg/msg/Type' -> its ros2msg schema text, for types `msgdefs` has no definition of
+        (e.g. `audiomsgs`' audio types).
     """
 
     settings: RecordSettings = field(default_factory=RecordSettings)
@@ -196,6 +199,7 @@ class Recorder:
     losses: dict[str, TopicLoss] = field(default_factory=dict)
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     state: Callable[[], list[StateMessage]] | None = None
+    schemas: dict[str, str] = field(default_factory=dict)
     _out: object = None
     _writer: Writer | None = None
     _topics: dict[str, _Topic] = field(default_factory=dict)
@@ -429,8 +433,8 @@ class Recorder:
         return self.active
 
     def _register(self, t: _Topic) -> int:
-        schema = self._writer.register_schema(t.type_name, "ros2msg",
-                                              msgdefs.definition(t.type_name).encode())
+        text = self.schemas.get(t.type_name) or msgdefs.definition(t.type_name)
+        schema = self._writer.register_schema(t.type_name, "ros2msg", text.encode())
         return self._writer.register_channel(t.name, "cdr", schema,
                                              {"offered_qos_profiles": ""})
 

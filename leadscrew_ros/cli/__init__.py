@@ -2,11 +2,12 @@
 """`leadscrew-squeak`: squeak predictions, sweeps, stability maps and the paper's figures; the
 ROS 2 demo (`demo`: predictor node + actuator simulator) and the simulator alone (`simulate`);
 the nonlinear time-domain simulation (`transient`); MCAP logs: offline replay (`replay`),
-playback (`replay --publish`), `recover` and `info`; many logs on a Dask cluster (`review`).
+playback (`replay --publish`), `recover` and `info`; many logs on a Dask cluster (`review`);
+recordings of simulated units with a microphone (`bench`).
 
 One module per command group holds its commands and adds their parsers: `model` (modes,
 predict, sweep, map), `transient` (the nonlinear time-domain simulation), `figures`, `ros`
-(demo, simulate), `logs` (replay, recover, info), `fleet` (review); `args` holds what they
+(demo, simulate), `logs` (replay, recover, info), `fleet` (review), `bench`; `args` holds what they
 share. Heavy or ROS modules are imported only by the command that needs them.
 
 Every error a user can cause (bad option, invalid parameter or operating point, unreadable
@@ -24,7 +25,7 @@ from typing import Callable, Sequence
 from ..bag.logfile import LogError
 from ..model.physics.parameters import ParameterError
 from ..model.squeak_model import OperatingPointError
-from . import figures, fleet, logs, model, ros, transient
+from . import bench, figures, fleet, logs, model, ros, transient
 from .args import PROG, CliError, Parser, common_parser
 
 __all__ = ["CliError", "build_parser", "main", "split_ros_args"]
@@ -46,7 +47,7 @@ def build_parser() -> Parser:
                                            "(continuous model, eigenvalues of eq. 27).")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
                                 parser_class=Parser)
-    for group in (model, transient, figures, ros, logs, fleet):
+    for group in (model, transient, figures, ros, logs, fleet, bench):
         group.add_parsers(sub, common)
     return parser
 

@@ -1,0 +1,605 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Microphone audio from a log (or a WAV file beside it) as one float32 track.
+
+`read_audio` takes, decoded from the schema text the log stores (`schema`; no ROS package):
+
+1. ros-drivers audio_common `AudioDataStamped` (raw bytes in the `AudioInfo`'s
+   `sample_format`: S8, U8, S16LE/BE, U16LE/BE, S24LE/BE (packed), S32LE/BE, U32LE/BE,
+   F32LE/BE, F64LE/BE; interleaved channels), with the `AudioInfo` on `<topic>_info`, on the
+   named `info_topic`, or on the log's only AudioInfo topic (latched once or repeated; a chunk
+   takes the latest info logged at or before it, chunks before the first info the first one);
+   its unstamped `AudioData` only when the log has no stamped audio topic;
+2. mgonzs13 audio_common `AudioStamped` (the info in every message; the array named by
+   `info.format`, a PortAudio constant; both the nested `audio.audio_data`/`audio.info` layout
+   of the repository and a flat `audio`/`info` one);
+3. `std_msgs/Float32MultiArray` chunks (no sample rate in the message: `sample_rate_hz`
+   must be given; a 2-d layout is frames x channels);
+4. a WAV file (`wav`, scipy.io.wavfile: int16, int32, uint8, float32/64), starting
+   `wav_start_s` after the log's first message.
+
+Samples become float32 full scale (-1..1): integers divided by 2^(bits-1) (unsigned ones
+centred first), floats as they are; the channel `channel` is taken out of the interleaved
+frames. Time: a chunk's header stamp is the time of its first sample (for messages without a
+header, the log time minus the chunk's duration: a capture node publishes a chunk once it is
+full); `t0_s` is the first sample's time after the log's first message (any topic), the
+replay's time origin. Chunks are placed one after the other; where a stamp says a chunk starts
+later than the samples before it end (beyond `AudioSettings.stamp_tolerance_s`), the gap is
+filled with zeros (counted) up to `max_gap_s`; a longer gap ends the track there; a chunk
+stamped earlier has its overlap trimmed (counted).
+
+Everything questionable in the data is one line in `AudioTrack.warnings`: NaN/inf samples (set
+to 0), float samples beyond full scale, a data array other than the one the format names, a
+sample format that does not divide the data (partial frame dropped), empty or undecodable
+messages (counted), header stamps of zero, a sample rate, channel count or format changing
+mid-log (the first one's segment kept). What cannot be read at all raises `AudioError`, one
+line: no audio topic or several, an unknown sample format, a coding format other than PCM /
+wave (e.g. mp3), no AudioInfo, no sample rate for Float32MultiArray.
+
+Memory: a 10-min 48 kHz mono log is 29 M samples (115 MB float32); chunks are converted with
+numpy as they are read and concatenated once.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..model.physics.metadata import check, setting
+from . import audiomsgs, schema
+from .audiomsgs import PA_FLOAT32, PA_INT8, PA_INT16, PA_INT24, PA_INT32, PA_UINT8
+from .logfile import LogError, Topic
+from .logsource import LogSource, log_topics, open_log
+
+PCM_CODINGS = ("", "wave", "wav", "pcm", "raw")
+# sample_format -> (numpy dtype, offset, full scale): x = (raw - offset) / scale
+SAMPLE_FORMATS: dict[str, tuple[str, float, float]] = {
+    "S8": ("i1", 0, 2.0 ** 7), "U8": ("u1", 2.0 ** 7, 2.0 ** 7),
+    "S16LE": ("<i2", 0, 2.0 ** 15), "S16BE": (">i2", 0, 2.0 ** 15),
+    "U16LE": ("<u2", 2.0 ** 15, 2.0 ** 15), "U16BE": (">u2", 2.0 ** 15, 2.0 ** 15),
+    "S24LE": ("<i3", 0, 2.0 ** 23), "S24BE": (">i3", 0, 2.0 ** 23),
+    "S32LE": ("<i4", 0, 2.0 ** 31), "S32BE": (">i4", 0, 2.0 ** 31),
+    "U32LE": ("<u4", 2.0 ** 31, 2.0 ** 31), "U32BE": (">u4", 2.0 ** 31, 2.0 ** 31),
+    "F32LE": ("<f4", 0, 1.0), "F32BE": (">f4", 0, 1.0),
+    "F64LE": ("<f8", 0, 1.0), "F64BE": (">f8", 0, 1.0)}
+# mgonzs13: PortAudio format -> (array field, full scale)
+PORTAUDIO_FORMATS = {PA_FLOAT32: ("float32_data", 1.0), PA_INT32: ("int32_data", 2.0 ** 31),
+                     PA_INT24: ("int24_data", 2.0 ** 23), PA_INT16: ("int16_data", 2.0 ** 15),
+                     PA_INT8: ("int8_data", 2.0 ** 7), PA_UINT8: ("uint8_data", 2.0 ** 7)}
+FLOAT32_MULTI_ARRAY = "std_msgs/msg/Float32MultiArray"
+DRIVERS, DRIVERS_UNSTAMPED, MGONZS13, MULTI_ARRAY, INFO = (
+    "ros-drivers AudioDataStamped", "ros-drivers AudioData", "mgonzs13 AudioStamped",
+    "Float32MultiArray", "ros-drivers AudioInfo")
+
+
+class AudioError(LogError):
+    """Audio that cannot be read at all; the message is one line naming the log or file."""
+
+
+@dataclass(frozen=True)
+class AudioSettings:
+    """How chunks are placed on the time line (SI units; metadata as for the node's)."""
+
+    stamp_tolerance_s: float = setting(
+        0.005, "s", "a chunk stamped within this of where the samples before it end follows "
+        "them directly (stamp jitter); beyond it a gap is filled or an overlap trimmed",
+        0.0, 10.0)
+    max_gap_s: float = setting(
+        1.0, "s", "gaps between chunks up to this long are filled with zeros; a longer one "
+        "ends the track (warned)", 0.0, 3600.0)
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+@dataclass
+class AudioTrack:
+    """One channel of microphone audio.
+
+    Attributes
+    ----------
+    samples : numpy.ndarray
+        float32, full scale -1..1.
+    sample_rate_hz : float
+        Samples per second.
+    t0_s : float
+        Time of the first sample after the log's first message [s] (a WAV: `wav_start_s`).
+    source : str
+        The topic name, or the WAV file's path.
+    warnings : list of str
+        One line per kind of problem found (see the module docstring).
+    """
+
+    samples: np.ndarray
+    sample_rate_hz: float
+    t0_s: float
+    source: str
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def duration_s(self) -> float:
+        """Length of the track [s]."""
+        return self.samples.size / self.sample_rate_hz if self.sample_rate_hz else 0.0
+
+
+@dataclass
+class _Chunk:
+    stamp_ns: int
+    samples: np.ndarray             # float32, the chosen channel
+    key: tuple                      # (rate, channels, format): a change ends the segment
+
+
+@dataclass
+class _Problems:
+    """What went wrong, counted; `lines` turns it into the warnings."""
+
+    counts: Counter = field(default_factory=Counter)
+    first: dict[str, str] = field(default_factory=dict)
+
+    def add(self, kind: str, example: str = "", n: int = 1) -> None:
+        self.counts[kind] += n
+        self.first.setdefault(kind, example)
+
+    def lines(self) -> list[str]:
+        texts = {
+            "undecodable": "{n} audio messages not decodable, skipped (first: {e})",
+            "empty": "{n} empty audio messages",
+            "partial": "{n} audio messages end in a partial frame of {e}, dropped (truncated "
+                       "or wrong sample format?)",
+            "nonfinite": "{n} NaN/inf samples set to 0",
+            "beyond": "float samples beyond full scale (peak {e}): wrong sample format or "
+                      "scaling?",
+            "array": "{n} messages fill another array than their format names ({e}); used it",
+            "zero_stamp": "{n} audio messages have a zero header stamp; their log times used",
+            "gap": "{n} gaps between chunks filled with zeros ({e} s in all)",
+            "overlap": "{n} chunks overlap the samples before them; {e} samples trimmed",
+        }
+        out = []
+        for kind, n in self.counts.items():
+            example = self.first[kind]
+            if kind == "gap":
+                example = f"{float(example):.4g}"
+            out.append(texts[kind].format(n=n, e=example) if kind in texts else kind)
+        return out
+
+
+# ----------------------------------------------------------------------------- public
+def read_audio(log: Path | str | None = None, topic: str | None = None,
+               info_topic: str | None = None, channel: int = 0,
+               sample_rate_hz: float | None = None, wav: Path | str | None = None,
+               wav_start_s: float = 0.0, settings: AudioSettings | None = None) -> AudioTrack:
+    """The microphone audio of a log, or of a WAV file beside it.
+
+    Parameters
+    ----------
+    log : path, optional
+        MCAP file, bag directory or .db3 (`logsource.open_log`); may be None with `wav`.
+    topic : str, optional
+        The audio topic; by default the log's only audio-typed topic.
+    info_topic : str, optional
+        ros-drivers AudioInfo topic; default `<topic>_info`, else the only AudioInfo topic.
+    channel : int
+        Which channel of interleaved frames (0 first).
+    sample_rate_hz : float, optional
+        Sample rate of Float32MultiArray chunks (required for them; ignored with a warning
+        for typed audio that carries its own).
+    wav : path, optional
+        Read this WAV file instead of the log's audio topics.
+    wav_start_s : float
+        Time of the WAV's first sample after the log's first message [s].
+    settings : AudioSettings, optional
+        Placement of chunks (gap and jitter tolerances).
+
+    Returns
+    -------
+    AudioTrack
+        Samples (float32, full scale), rate, start time, source and warnings.
+
+    Raises
+    ------
+    AudioError
+        No audio to read, several audio topics and none chosen, an unknown sample format, a
+        compressed coding format (mp3), no AudioInfo, no sample rate, a bad channel.
+    LogError
+        The log itself cannot be read.
+    """
+    settings = settings or AudioSettings()
+    if channel < 0:
+        raise AudioError(wav or log or "audio", f"channel {channel} must be >= 0")
+    if wav is not None:
+        return _read_wav(Path(wav), channel, wav_start_s)
+    if log is None:
+        raise AudioError("audio", "give a log or a WAV file")
+    source = open_log(log)
+    topics = _topics(source)
+    kinds = {name: k for name, t in topics.items() if (k := _kind(t)) is not None}
+    name = _choose_topic(source.path, topics, kinds, topic)
+    kind = kinds[name]
+    if kind == MULTI_ARRAY:
+        if sample_rate_hz is None:
+            raise AudioError(source.path, f"{name} is std_msgs/Float32MultiArray, which "
+                                          "carries no sample rate: give sample_rate_hz")
+        if not (sample_rate_hz > 0 and np.isfinite(sample_rate_hz)):
+            raise AudioError(source.path, f"sample_rate_hz = {sample_rate_hz!r} must be > 0")
+    info_name = _choose_info(source.path, kinds, name, info_topic) \
+        if kind in (DRIVERS, DRIVERS_UNSTAMPED) else None
+    problems = _Problems()
+    warnings: list[str] = []
+    if sample_rate_hz is not None and kind != MULTI_ARRAY:
+        warnings.append(f"sample_rate_hz = {sample_rate_hz:g} ignored: {name} carries its own")
+    parsed = {n: _schema(source.path, topics[n]) for n in (name, info_name) if n}
+    first_ns: int | None = None
+    raw: list[tuple[int, Any]] = []           # (log time, decoded message) of the audio topic
+    infos: list[tuple[int, dict]] = []
+    for _, m in source.messages():
+        if first_ns is None:
+            first_ns = m.log_time_ns
+        if m.topic.name not in parsed:
+            continue
+        try:
+            msg = parsed[m.topic.name].decode(m.data)
+        except schema.CdrError as exc:
+            problems.add("undecodable", str(exc))
+            continue
+        (infos if m.topic.name == info_name else raw).append((m.log_time_ns, msg))
+    if not raw:
+        raise AudioError(source.path, f"audio topic {name} has no decodable messages")
+    convert = {DRIVERS: _drivers, DRIVERS_UNSTAMPED: _drivers, MGONZS13: _mgonzs13,
+               MULTI_ARRAY: _multi_array}[kind]
+    context = _Context(source.path, name, channel, sample_rate_hz, infos, info_name, problems)
+    chunks = [c for c in (convert(context, t, msg) for t, msg in raw) if c is not None]
+    if not chunks:
+        raise AudioError(source.path, f"audio topic {name} holds no samples")
+    samples, rate, t0_ns, ended = _assemble(chunks, settings, problems, first_ns or 0)
+    return AudioTrack(samples, rate, (t0_ns - (first_ns or 0)) / 1e9, name,
+                      warnings + problems.lines() + ended)
+
+
+# ----------------------------------------------------------------------------- topics
+def _topics(source: LogSource) -> dict[str, Topic]:
+    """`log_topics`, with each MCAP topic's schema text from the file summaries (which
+    `log_topics` leaves out)."""
+    topics = log_topics(source)
+    if source.sqlite:
+        return topics
+    from mcap.reader import make_reader
+    texts: dict[str, str] = {}
+    for f in source.files:
+        try:
+            with open(f, "rb") as fh:
+                summary = make_reader(fh).get_summary()
+        except Exception:             # damaged or cut off: log_topics read it through
+            summary = None
+        if summary is None:
+            continue
+        for c in summary.channels.values():
+            s = summary.schemas.get(c.schema_id)
+            if s is not None:
+                texts.setdefault(c.topic, s.data.decode("utf-8", "replace"))
+    return {n: t if t.schema else replace(t, schema=texts.get(n, ""))
+            for n, t in topics.items()}
+
+
+def _schema(path: Path, topic: Topic) -> schema.MessageSchema:
+    """The topic's parsed schema: from the log, else the bundled audio definitions."""
+    text = topic.schema
+    if not text and topic.type_name in audiomsgs.TEXTS[audiomsgs.DRIVERS]:
+        text = audiomsgs.definition(topic.type_name)
+    elif not text and topic.type_name in audiomsgs.TEXTS[audiomsgs.MGONZS13]:
+        text = audiomsgs.definition(topic.type_name, audiomsgs.MGONZS13)
+    try:
+        return schema.parse(text, topic.type_name)
+    except schema.SchemaError as exc:
+        raise AudioError(path, f"topic {topic.name}: {exc}") from None
+
+
+def _kind(topic: Topic) -> str | None:
+    """Which audio input a topic is (None: not audio), from its type and schema fields."""
+    if topic.type_name == FLOAT32_MULTI_ARRAY:
+        return MULTI_ARRAY
+    if not topic.type_name.startswith("audio_common_msgs/"):
+        return None
+    try:
+        s = _schema(Path(""), topic)
+    except AudioError:
+        return None
+    names = {f.name: f for f in s.fields()}
+    if "sample_rate" in names and "sample_format" in names:
+        return INFO
+    if "data" in names and names["data"].type == "uint8":
+        return DRIVERS_UNSTAMPED
+    audio = names.get("audio")
+    if "header" not in names or audio is None or audio.type not in s.types:
+        return None
+    inner = {f.name for f in s.fields(audio.type)}
+    if "data" in inner:
+        return DRIVERS
+    if {"audio_data", "info"} <= inner or ("info" in names and any(
+            n.endswith("_data") for n in inner)):
+        return MGONZS13
+    return None
+
+
+def _choose_topic(path: Path, topics: dict[str, Topic], kinds: dict[str, str],
+                  topic: str | None) -> str:
+    audio = sorted(n for n, k in kinds.items() if k not in (INFO, DRIVERS_UNSTAMPED))
+    audio = audio or sorted(n for n, k in kinds.items() if k == DRIVERS_UNSTAMPED)
+    listed = ", ".join(f"{n} ({kinds[n]})" for n in audio) or "none"
+    if topic is not None:
+        if topic not in topics and "/" + topic.lstrip("/") in topics:
+            topic = "/" + topic.lstrip("/")
+        if topic not in kinds or kinds[topic] == INFO:
+            raise AudioError(path, f"topic {topic} is not an audio topic of this log; audio "
+                                   f"topics: {listed}")
+        return topic
+    if not audio:
+        raise AudioError(path, "no audio topic (audio_common AudioDataStamped / AudioStamped, "
+                               "std_msgs/Float32MultiArray); give a WAV file instead")
+    if len(audio) > 1:
+        raise AudioError(path, f"several audio topics, choose one: {listed}")
+    return audio[0]
+
+
+def _choose_info(path: Path, kinds: dict[str, str], name: str, info_topic: str | None) -> str:
+    infos = sorted(n for n, k in kinds.items() if k == INFO)
+    if info_topic is not None:
+        if info_topic not in infos and "/" + info_topic.lstrip("/") in infos:
+            info_topic = "/" + info_topic.lstrip("/")
+        if info_topic not in infos:
+            raise AudioError(path, f"{info_topic} is not an AudioInfo topic of this log; "
+                                   f"AudioInfo topics: {', '.join(infos) or 'none'}")
+        return info_topic
+    if name + "_info" in infos:
+        return name + "_info"
+    if len(infos) == 1:
+        return infos[0]
+    raise AudioError(path, f"no AudioInfo for {name} (looked for {name}_info); "
+                           f"AudioInfo topics: {', '.join(infos) or 'none'}")
+
+
+# ----------------------------------------------------------------------------- chunks
+@dataclass
+class _Context:
+    path: Path
+    topic: str
+    channel: int
+    sample_rate_hz: float | None
+    infos: list[tuple[int, dict]]
+    info_topic: str | None
+    problems: _Problems
+    _info_times: list[int] = field(default_factory=list)
+
+    def info_at(self, log_time_ns: int) -> dict:
+        """The latest AudioInfo logged at or before `log_time_ns` (else the first one)."""
+        if not self.infos:
+            raise AudioError(self.path, f"no AudioInfo message on {self.info_topic} for "
+                                        f"{self.topic}: sample rate and format unknown")
+        if not self._info_times:
+            self._info_times = [t for t, _ in self.infos]
+        k = int(np.searchsorted(self._info_times, log_time_ns, side="right")) - 1
+        return self.infos[max(k, 0)][1]
+
+    def pick(self, frames: np.ndarray, channels: int, where: str) -> np.ndarray:
+        """The chosen channel of interleaved samples (AudioError if it has no such one)."""
+        if self.channel >= channels:
+            raise AudioError(self.path, f"channel {self.channel} asked of {where}, which has "
+                                        f"{channels} channel(s)")
+        if channels == 1:
+            return frames
+        usable = frames.size - frames.size % channels
+        if usable != frames.size:
+            self.problems.add("partial", f"{frames.size % channels} samples")
+        return frames[:usable].reshape(-1, channels)[:, self.channel]
+
+
+def _stamp(context: _Context, msg: dict, log_time_ns: int, n: int, rate: float) -> int:
+    header = msg.get("header")
+    if header is not None:
+        stamp = header["stamp"]
+        ns = int(stamp["sec"]) * 1_000_000_000 + int(stamp["nanosec"])
+        if ns:
+            return ns
+        context.problems.add("zero_stamp")
+    return log_time_ns - int(round(n / rate * 1e9))
+
+
+def _finite(context: _Context, x: np.ndarray, is_float: bool) -> np.ndarray:
+    if not is_float or x.size == 0:
+        return x
+    bad = ~np.isfinite(x)
+    if bad.any():
+        context.problems.add("nonfinite", n=int(bad.sum()))
+        x = np.where(bad, np.float32(0), x)
+    peak = float(np.max(np.abs(x)))
+    if peak > 1.0:
+        context.problems.add("beyond", f"{peak:.3g}")
+    return x
+
+
+def _to_float(raw: np.ndarray, dtype: str, offset: float, scale: float) -> np.ndarray:
+    if dtype[1:] == "i3":                                   # packed 24-bit
+        b = raw.reshape(-1, 3).astype(np.int32)
+        lo, hi = (0, 2) if dtype[0] == "<" else (2, 0)
+        v = b[:, lo] | (b[:, 1] << 8) | (b[:, hi] << 16)
+        v = np.where(v >= 1 << 23, v - (1 << 24), v)
+        return (v / scale).astype(np.float32)
+    x = raw.view(np.dtype(dtype))
+    if offset:
+        return ((x.astype(np.float64) - offset) / scale).astype(np.float32)
+    return (x / np.float32(scale)).astype(np.float32) if scale != 1.0 else x.astype(np.float32)
+
+
+def _drivers(context: _Context, log_time_ns: int, msg: dict) -> _Chunk | None:
+    info = context.info_at(log_time_ns)
+    coding = str(info.get("coding_format", "")).strip()
+    if coding.lower() not in PCM_CODINGS:
+        raise AudioError(context.path, f"{context.topic} is coded as {coding!r} (compressed), "
+                                       f"not PCM/wave: decode it to WAV and pass wav=")
+    fmt = str(info.get("sample_format", "")).strip().upper()
+    if fmt not in SAMPLE_FORMATS:
+        raise AudioError(context.path, f"{context.topic}: unknown sample_format {fmt!r}; "
+                                       f"known: {', '.join(SAMPLE_FORMATS)}")
+    dtype, offset, scale = SAMPLE_FORMATS[fmt]
+    channels, rate = int(info.get("channels", 0)), float(info.get("sample_rate", 0))
+    if channels < 1 or rate <= 0:
+        raise AudioError(context.path, f"{context.info_topic}: {channels} channels at "
+                                       f"{rate:g} Hz is not audio")
+    data = (msg["audio"] if "audio" in msg else msg)["data"]
+    width = int(dtype[-1])
+    if data.size == 0:
+        context.problems.add("empty")
+        return None
+    if data.size % (width * channels):
+        context.problems.add("partial", f"{data.size % (width * channels)} bytes")
+        data = data[:data.size - data.size % (width * channels)]
+        if data.size == 0:
+            return None
+    x = _finite(context, _to_float(np.ascontiguousarray(data), dtype, offset, scale),
+                fmt.startswith("F"))
+    x = context.pick(x, channels, context.topic)
+    stamp = _stamp(context, msg, log_time_ns, x.size, rate)
+    return _Chunk(stamp, x, (rate, channels, fmt))
+
+
+def _mgonzs13(context: _Context, log_time_ns: int, msg: dict) -> _Chunk | None:
+    audio = msg["audio"]
+    info = audio.get("info") or msg.get("info") or {}
+    arrays = audio.get("audio_data", audio)
+    fmt, channels, rate = (int(info.get(k, 0)) for k in ("format", "channels", "rate"))
+    filled = [n for n, v in arrays.items() if isinstance(v, np.ndarray) and v.size]
+    if not filled:
+        context.problems.add("empty")
+        return None
+    wanted = PORTAUDIO_FORMATS.get(fmt, ("", 0.0))[0]
+    if wanted in filled:
+        name = wanted
+    else:
+        name = filled[0]
+        context.problems.add("array", f"format {fmt} but {name} filled")
+    scale = next((s for n, s in PORTAUDIO_FORMATS.values() if n == name), None)
+    if scale is None:
+        raise AudioError(context.path, f"{context.topic}: unknown audio array {name}")
+    if channels < 1 or rate <= 0:
+        raise AudioError(context.path, f"{context.topic}: {channels} channels at {rate} Hz "
+                                       f"is not audio")
+    values = arrays[name]
+    if name == "uint8_data":
+        x = ((values.astype(np.float32) - 128.0) / 128.0).astype(np.float32)
+    else:
+        x = (values / np.float32(scale)).astype(np.float32) if scale != 1.0 \
+            else values.astype(np.float32)
+    x = context.pick(_finite(context, x, name == "float32_data"), channels, context.topic)
+    stamp = _stamp(context, msg, log_time_ns, x.size, rate)
+    return _Chunk(stamp, x, (float(rate), channels, name))
+
+
+def _multi_array(context: _Context, log_time_ns: int, msg: dict) -> _Chunk | None:
+    data, dims = msg["data"], msg["layout"]["dim"]
+    if data.size == 0:
+        context.problems.add("empty")
+        return None
+    channels = int(dims[1]["size"]) if len(dims) == 2 and dims[1]["size"] > 0 else 1
+    x = context.pick(_finite(context, data.astype(np.float32), True), channels, context.topic)
+    rate = float(context.sample_rate_hz or 0)
+    return _Chunk(_stamp(context, msg, log_time_ns, x.size, rate), x,
+                  (rate, channels, "F32"))
+
+
+# ----------------------------------------------------------------------------- timeline
+def _assemble(chunks: list[_Chunk], settings: AudioSettings, problems: _Problems,
+              first_ns: int) -> tuple[np.ndarray, float, int, list[str]]:
+    """Place the chunks of the first (rate, channels, format) segment on one sample grid."""
+    chunks = sorted(chunks, key=lambda c: c.stamp_ns)          # stable: file order for ties
+    key = chunks[0].key
+    rate = key[0]
+    t0_ns = chunks[0].stamp_ns
+    tolerance = settings.stamp_tolerance_s * rate
+    pieces: list[np.ndarray] = []
+    placed, gap_samples, trimmed = 0, 0, 0
+    ended: list[str] = []
+
+    def at(c: _Chunk) -> str:
+        return f"t = {(c.stamp_ns - first_ns) / 1e9:.3f} s"
+
+    for k, c in enumerate(chunks):
+        if c.key != key:
+            what = _describe_change(key, c.key)
+            ended.append(f"{what} at {at(c)}: the first segment kept, {len(chunks) - k} "
+                         f"messages after it ignored")
+            break
+        offset = int(round((c.stamp_ns - t0_ns) * rate / 1e9)) - placed
+        x = c.samples
+        if offset > tolerance:
+            if offset > settings.max_gap_s * rate:
+                ended.append(f"a gap of {offset / rate:.3g} s at {at(c)} (> max_gap_s "
+                             f"{settings.max_gap_s:g} s): the track ends there, "
+                             f"{len(chunks) - k} messages after it ignored")
+                break
+            pieces.append(np.zeros(offset, np.float32))
+            placed += offset
+            gap_samples += offset
+            problems.add("gap", "0")
+        elif offset < -tolerance:
+            cut = min(-offset, x.size)
+            trimmed += cut
+            problems.add("overlap", "0")
+            x = x[cut:]
+        pieces.append(x)
+        placed += x.size
+    if gap_samples:
+        problems.first["gap"] = str(gap_samples / rate)
+    if trimmed:
+        problems.first["overlap"] = str(trimmed)
+    return np.concatenate(pieces) if len(pieces) > 1 else pieces[0].copy(), rate, t0_ns, ended
+
+
+def _describe_change(old: tuple, new: tuple) -> str:
+    names = ("sample rate", "channel count", "sample format")
+    for name, a, b in zip(names, old, new, strict=True):
+        if a != b:
+            shown: Callable[[Any], str] = (lambda v: f"{v:g} Hz") if name == "sample rate" \
+                else str
+            return f"{name} changed from {shown(a)} to {shown(b)}"
+    return "stream changed"
+
+
+# ----------------------------------------------------------------------------- WAV
+def _read_wav(path: Path, channel: int, start_s: float) -> AudioTrack:
+    from scipy.io import wavfile
+    try:
+        rate, data = wavfile.read(path)
+    except (OSError, ValueError, EOFError) as exc:
+        raise AudioError(path, f"not a readable WAV file: {exc}") from None
+    if data.ndim == 2:
+        if channel >= data.shape[1]:
+            raise AudioError(path, f"channel {channel} asked of a {data.shape[1]}-channel WAV")
+        data = data[:, channel]
+    elif channel > 0:
+        raise AudioError(path, f"channel {channel} asked of a mono WAV")
+    kind = data.dtype
+    if kind == np.uint8:
+        x = ((data.astype(np.float32) - 128.0) / 128.0).astype(np.float32)
+    elif kind.kind == "i":
+        x = (data / np.float32(2.0 ** (8 * kind.itemsize - 1))).astype(np.float32)
+    elif kind.kind == "f":
+        x = data.astype(np.float32)
+    else:
+        raise AudioError(path, f"WAV samples of type {kind} are not audio")
+    warnings: list[str] = []
+    if kind.kind == "f":
+        bad = ~np.isfinite(x)
+        if bad.any():
+            warnings.append(f"{int(bad.sum())} NaN/inf samples set to 0")
+            x = np.where(bad, np.float32(0), x)
+        peak = float(np.max(np.abs(x))) if x.size else 0.0
+        if peak > 1.0:
+            warnings.append(f"float samples beyond full scale (peak {peak:.3g}): wrong "
+                            f"scaling?")
+    if x.size == 0:
+        warnings.append("the WAV file holds no samples")
+    return AudioTrack(np.ascontiguousarray(x), float(rate), float(start_s), str(path),
+                      warnings)
