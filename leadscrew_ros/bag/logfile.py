@@ -32,6 +32,7 @@ from mcap.data_stream import ReadDataStream
 from mcap.records import Channel, Header, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
+from . import bagmeta
 from .bagmeta import METADATA, BagStats, FileStats, TopicStats
 from .livelock import LIVE, is_live, live_files
 
@@ -107,11 +108,41 @@ class LogInfo:
     live: bool = False                # a recorder is writing the file: its tail is still to come
     # MCAP Metadata records read (e.g. `logmeta`'s), name -> string map; kept by `recover`
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    # A topic recorded with more than one type (MCAP channels, .db3 `topics` rows of one
+    # name): `topics` holds its first type, these the others by (name, type), with their
+    # messages (which `counts` includes)
+    retyped: dict[tuple[str, str], Topic] = field(default_factory=dict)
+    retyped_counts: Counter = field(default_factory=Counter)
 
     @property
     def messages(self) -> int:
         """Messages read, over all topics."""
         return sum(self.counts.values())
+
+    def add_topic(self, topic: Topic) -> Topic:
+        """The topic a channel (or .db3 topic row) of `topic` gets: the one of its name and
+        type already known, or `topic`, kept in `topics` or, for a further type, `retyped`."""
+        known = self.topics.setdefault(topic.name, topic)
+        if known.type_name == topic.type_name:
+            return known
+        return self.retyped.setdefault((topic.name, topic.type_name), topic)
+
+    def count(self, topic: Topic) -> None:
+        """One message of `topic` read."""
+        self.counts[topic.name] += 1
+        if self.retyped and topic is not self.topics[topic.name]:
+            self.retyped_counts[topic.name, topic.type_name] += 1
+
+    def type_counts(self) -> list[tuple[Topic, int]]:
+        """Every (topic, messages) by name, then type: a topic recorded with several types
+        once per type."""
+        out = []
+        for name, t in self.topics.items():
+            others = [(o, self.retyped_counts[key]) for key, o in self.retyped.items()
+                      if key[0] == name]
+            out.append((t, self.counts[name] - sum(n for _, n in others)))
+            out += others
+        return sorted(out, key=lambda tn: (tn[0].name, tn[0].type_name))
 
 
 def log_files(path: Path | str) -> list[Path]:
@@ -325,7 +356,7 @@ def _channel(path: Path, c: Channel, schemas, channels, topics, info: LogInfo) -
                              f"a {encoding!r} schema, expected cdr with ros2msg")
     topic = Topic(c.topic, _full_type(name), encoding, text, c.message_encoding,
                   dict(c.metadata), name)
-    channels[c.id] = info.topics.setdefault(c.topic, topic)
+    channels[c.id] = info.add_topic(topic)
 
 
 def _full_type(name: str) -> str:
@@ -342,7 +373,7 @@ def _message(buf, start: int, length: int, channels, info: LogInfo) -> LogMessag
     topic = channels[channel_id]
     if topic is None:
         return None
-    info.counts[topic.name] += 1
+    info.count(topic)
     info.start_ns = log_time if info.start_ns is None else min(info.start_ns, log_time)
     info.end_ns = log_time if info.end_ns is None else max(info.end_ns, log_time)
     return LogMessage(topic, log_time, publish_time, sequence,
@@ -461,14 +492,15 @@ def _rewrite(src: Path | str, dst: Path | str,
         with open(dst, "wb") as out:
             writer = Writer(out, compression=compression)
             writer.start(profile="ros2", library="leadscrew_ros recover")
-            ids: dict[str, int] = {}
+            ids: dict[tuple[str, str], int] = {}        # a channel per topic and type
             for m in read_messages(src, strict=False, info=info):
-                if m.topic.name not in ids:
-                    ids[m.topic.name] = _register(writer, m.topic)
-                writer.add_message(ids[m.topic.name], m.log_time_ns, m.data, m.publish_time_ns,
+                key = (m.topic.name, m.topic.type_name)
+                if key not in ids:
+                    ids[key] = _register(writer, m.topic)
+                writer.add_message(ids[key], m.log_time_ns, m.data, m.publish_time_ns,
                                    m.sequence)
-            for t in info.topics.values():             # channels that had no message yet
-                if t.name not in ids:
+            for t in [*info.topics.values(), *info.retyped.values()]:   # without messages yet
+                if (t.name, t.type_name) not in ids:
                     _register(writer, t)
             for name, record in info.metadata.items():   # e.g. the `leadscrew_ros` record
                 writer.add_metadata(name, record)
@@ -664,27 +696,49 @@ def _sync_directory(directory: Path) -> None:
         os.close(fd)
 
 
-def _reindex(bag: Path, done: list[FileRecovery]) -> bool:
-    """Write `bag/metadata.yaml` from the bag's files unless nothing was recovered and it
-    already matches them; True if written."""
-    known = {f.path: f.info for f in done}
-    old = _read_metadata(bag)
+def bag_stats(infos: list[LogInfo], old: dict | None = None) -> BagStats:
+    """What metadata.yaml should say of a bag whose files, in split order, read as `infos`
+    (custom data and QoS profiles of the `rosbag2_bagfile_information` `old`, if given); a
+    topic recorded with two types is listed once per type."""
+    old = old or {}
     old_qos = {(t.get("topic_metadata") or {}).get("name"):
                (t.get("topic_metadata") or {}).get("offered_qos_profiles")
-               for t in old.get("topics_with_message_count") or [] if isinstance(t, dict)}
-    stats = BagStats(custom_data=dict(old.get("custom_data") or {}))
-    topics: dict[str, TopicStats] = {}
-    for f in _split_files(bag):
-        info = known.get(f) or inspect(f)
-        stats.files.append(FileStats(f, info.start_ns, info.end_ns, info.messages))
-        for name, t in info.topics.items():
-            if name not in topics:
-                qos = old_qos.get(name) or t.metadata.get("offered_qos_profiles", "")
-                topics[name] = TopicStats(name, t.type_name, 0, str(qos))
-            topics[name].count += info.counts[name]
+               for t in old.get("topics_with_message_count") or [] if isinstance(t, dict)
+               and isinstance(t.get("topic_metadata") or {}, dict)}
+    custom = old.get("custom_data")
+    stats = BagStats(custom_data=dict(custom) if isinstance(custom, dict) else {})
+    topics: dict[tuple[str, str], TopicStats] = {}
+    for info in infos:
+        stats.files.append(FileStats(info.path, info.start_ns, info.end_ns, info.messages))
+        for t, n in info.type_counts():
+            key = (t.name, t.type_name)
+            if key not in topics:
+                qos = old_qos.get(t.name) or t.metadata.get("offered_qos_profiles", "")
+                topics[key] = TopicStats(t.name, t.type_name, 0, str(qos))
+            topics[key].count += n
     stats.topics = list(topics.values())
-    if all(f.action == "complete" for f in done) and _matches(
-            old, stats.info()["rosbag2_bagfile_information"]):
+    return stats
+
+
+def metadata_problem(bag: Path, infos: list[LogInfo] | None = None) -> str:
+    """What is wrong with the metadata.yaml of bag directory `bag` (`bagmeta.problem`, against
+    the files as read into `infos` when given) and how to mend it; '' if nothing."""
+    problem = bagmeta.problem(bag, None if infos is None else bag_stats(infos))
+    if not problem:
+        return ""
+    mend = (f"`{RECOVER_HINT} {bag}` mends it" if _split_files(bag) else
+            f"`ros2 bag reindex {bag}` mends it")
+    return f"{problem}; other tools (rosbags, ros2 bag) refuse or misread the bag; {mend}"
+
+
+def _reindex(bag: Path, done: list[FileRecovery]) -> bool:
+    """Write `bag/metadata.yaml` from the bag's files unless nothing was recovered and it
+    already passes `bagmeta.problem` against them; True if written."""
+    known = {f.path: f.info for f in done}
+    stats = bag_stats([known.get(f) or inspect(f) for f in _split_files(bag)],
+                      _read_metadata(bag))
+    if all(f.action == "complete" for f in done) and (bag / METADATA).is_file() \
+            and not bagmeta.problem(bag, stats):
         return False
     try:
         stats.write(bag)
@@ -698,16 +752,6 @@ def _read_metadata(bag: Path) -> dict:
     try:
         doc = yaml.safe_load((bag / METADATA).read_text(encoding="utf-8"))
         info = doc["rosbag2_bagfile_information"]
-    except (OSError, yaml.YAMLError, TypeError, KeyError):
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, TypeError, KeyError):
         return {}
     return info if isinstance(info, dict) else {}
-
-
-def _matches(old: dict, new: dict) -> bool:
-    """Old metadata describes the same files, messages and per-topic counts as the files."""
-    def counts(info):
-        return {(t.get("topic_metadata") or {}).get("name"): t.get("message_count")
-                for t in info.get("topics_with_message_count") or [] if isinstance(t, dict)}
-    return bool(old) and all(old.get(k) == new[k] for k in (
-        "relative_file_paths", "message_count", "starting_time", "duration")) and \
-        counts(old) == counts(new)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from ..bag.livelock import LIVE
 from ..bag.logfile import (LogInfo, bag_of, cut_off_bags, inspect, live_recordings, log_files,
-                           recover, recover_bag)
+                           metadata_problem, recover, recover_bag)
 from ..live.settings import JointSettings, LiveSettings
 from ..model.physics.metadata import help_text
 from ..review.replay import ReplaySettings
@@ -133,8 +133,7 @@ def _utc(ns: int) -> str:
 
 
 def _topic_lines(info: LogInfo) -> list[str]:
-    return [f"  {name:<32} {t.type_name:<36} {info.counts[name]:>10}"
-            for name, t in sorted(info.topics.items())]
+    return [f"  {t.name:<32} {t.type_name:<36} {n:>10}" for t, n in info.type_counts()]
 
 
 def _record_directory(path: Path) -> bool:
@@ -177,14 +176,20 @@ def cmd_recover(args: argparse.Namespace) -> int:
 
 def cmd_info(args: argparse.Namespace) -> int:
     """`info`: print what a log contains; exit status."""
-    infos = [inspect(f) for f in log_files(args.log)]
+    path = Path(args.log)
+    infos = [inspect(f) for f in log_files(path)]
+    bag = path if path.is_dir() else bag_of(path)
+    # a bag directory's metadata.yaml against its files; a file's bag: the file alone
+    problem = "" if bag is None or any(i.live for i in infos) else metadata_problem(
+        bag, infos if bag == path else None)
     if args.json:
         print_json([{"file": str(i.path), "complete": i.complete, "damage": i.damage,
                      "live": i.live, "profile": i.profile, "library": i.library,
                      "messages": i.messages,
                      "start_ns": i.start_ns, "end_ns": i.end_ns,
-                     "topics": [{"name": n, "type": t.type_name, "count": i.counts[n]}
-                                for n, t in sorted(i.topics.items())]} for i in infos])
+                     "metadata_problem": problem,
+                     "topics": [{"name": t.name, "type": t.type_name, "count": n}
+                                for t, n in i.type_counts()]} for i in infos])
         return 0
     for i in infos:
         if i.complete:
@@ -198,6 +203,8 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(f"  {i.messages} messages, {_span(i)}; profile {i.profile!r}, "
               f"written by {i.library or 'unknown'}")
         print("\n".join(_topic_lines(i)))
+    if problem:
+        print(f"{bag}: {problem}")
     return 0
 
 

@@ -424,6 +424,7 @@ def review_one(log: str, out_dir: str, name: str, settings: FleetSettings,
         whole, note = recovered(path, out / RECOVERED_DIR)
         result = replay(whole, model, out, ReplaySettings(
             inputs, settings.namespace, settings.out_namespace, workers=0, progress=False))
+        note = "; ".join(n for n in (note, result.metadata_problem) if n)
         row = {**_row(path, name, unit_id, model, result), "note": note}
         if settings.summary_only:
             for p in result.outputs[:2]:

@@ -52,8 +52,8 @@ from ..bag.mcapout import CHUNK_BYTES, McapOut
 from .decimation import Envelope, Reservoir
 from .jsonsafe import json_safe
 from .plots import plot_timeline
-from ..bag.logfile import LogError, LogMessage, Topic
-from ..bag.logsource import LogSource, log_topics, open_log
+from ..bag.logfile import LogError, LogMessage, Topic, metadata_problem
+from ..bag.logsource import LogSource, log_topics, open_log, topic_types
 from ..model import Prediction, SqueakModel, Validity
 from ..model.uncertainty.scatter import LOG_NORMAL
 from .progress import progress_bar
@@ -274,6 +274,9 @@ class ReplayResult:
         Wall time of the replay [s].
     outputs : list of Path
         The files written.
+    metadata_problem : str
+        What is wrong with the bag directory's metadata.yaml, and how to mend it ('' if
+        nothing, or not a bag directory): the files were read, but other tools refuse it.
     """
 
     log: Path
@@ -303,6 +306,7 @@ class ReplayResult:
     scatter_samples: int = 0
     wall_s: float = math.nan
     outputs: list[Path] = field(default_factory=list)
+    metadata_problem: str = ""
 
     def plot(self, fig: "Figure | None" = None) -> "Figure":
         """The timeline: speed, load, nut position and P(squeak) over time (`plot_timeline`).
@@ -321,8 +325,9 @@ class ReplayResult:
 
     @property
     def warnings(self) -> list[str]:
-        """Log-time problems: stale (backwards) and duplicated input times, per topic."""
-        tl, out = self.timeline, []
+        """Log-time problems: stale (backwards) and duplicated input times, per topic; a
+        broken metadata.yaml."""
+        tl, out = self.timeline, [self.metadata_problem] if self.metadata_problem else []
         for topic, n in sorted(tl.backwards.items()):
             out.append(f"log time goes backwards {n} time(s) on {topic} (up to "
                        f"{tl.backwards_max_s:.6g} s): those messages were not applied")
@@ -361,7 +366,7 @@ class ReplayResult:
                 "log_time": {"backwards": dict(self.timeline.backwards),
                              "backwards_max_s": self.timeline.backwards_max_s,
                              "duplicates": dict(self.timeline.duplicates)},
-                "warnings": self.warnings,
+                "metadata_problem": self.metadata_problem, "warnings": self.warnings,
                 "squeak_share": self._share(self.time_in_squeak_s),
                 "warn_share": self._share(self.probability.above_warn_s),
                 "wall_s": self.wall_s, "x_real_time": self.x_real_time}
@@ -689,9 +694,10 @@ class _Run:
 
     def __init__(self, model: SqueakModel, inputs: InputSettings, workers: int,
                  out: _AnnotatedWriter, episodes: TextIO,
-                 progress: Callable[[int], None] | None):
+                 progress: Callable[[int], None] | None,
+                 types: dict[str, list[str]] | None = None):
         self.out, self.progress = out, progress
-        self.timeline = Timeline(model.params, inputs)
+        self.timeline = Timeline(model.params, inputs, types)
         self.solver = _Solver(model, workers)
         self.plot_data = PlotData()
         self.episodes = _Episodes(episodes, inputs.warn_probability, inputs.error_probability)
@@ -815,7 +821,7 @@ def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
                 progress_bar(_message_total(source.files) if show else None, "replay",
                              unit="msg") as bar:
             run = _Run(model, inputs, settings.workers, _AnnotatedWriter(fh, out_namespace),
-                       eh, bar if show else None)
+                       eh, bar if show else None, topic_types(source))
             for f, m in source.messages():
                 try:
                     run.add(m)
@@ -842,7 +848,8 @@ def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
         time_in_squeak_s=run.episodes.time_in_squeak_s, probability=run.episodes.probability,
         plot_data=run.plot_data, timeline=tl, namespace=namespace, out_namespace=out_namespace,
         warn_probability=inputs.warn_probability, error_probability=inputs.error_probability,
-        scatter=dict(model.scatter.sd), scatter_samples=model.sample_count)
+        scatter=dict(model.scatter.sd), scatter_samples=model.sample_count,
+        metadata_problem=metadata_problem(log, source.infos) if log.is_dir() else "")
     result.wall_s = time.perf_counter() - t0
     _write_json(out_dir / "summary.json", result.summary())
     (out_dir / "summary.txt").write_text(result.summary_text() + "\n", encoding="utf-8")

@@ -193,10 +193,17 @@ class Timeline:
 
     `settings` topics are used as they are if absolute, else resolved in the root namespace.
     Memory is constant: counters, and the point after every input message in `trace`
-    (speed, load, nut; NaN until known, the nut NaN until a nut input was taken), binned."""
+    (speed, load, nut; NaN until known, the nut NaN until a nut input was taken), binned.
 
-    def __init__(self, params: ScrewParameters, settings: InputSettings = InputSettings()):
+    `types` gives every type each topic of the log is recorded with (`logsource.topic_types`):
+    an input topic recorded with its input type and another one is read in the input type,
+    its messages of the other type are counted in `rejected` (a reason naming both types); an
+    input topic without its input type is an `InputError`."""
+
+    def __init__(self, params: ScrewParameters, settings: InputSettings = InputSettings(),
+                 types: dict[str, list[str]] | None = None):
         self.settings = settings = settings.resolved("/")
+        self._types = types or {}
         self.rules = InputRules(params, settings.live, settings.joints)
         if settings.nominal_load_n is not None:
             self.rules.set_load(settings.nominal_load_n)
@@ -218,7 +225,8 @@ class Timeline:
             settings.load_topic: (FLOAT64, self._on_load),
             settings.nut_topic: (FLOAT64, self._on_nut),
             settings.joint_states_topic: (JOINT_STATE, self._on_joint_states)}
-        self._handlers: dict[tuple[str, str], Callable[[bytes], bool] | None] = {}
+        # (topic, type) -> its handler; None: not an input; a str: the reason it is rejected
+        self._handlers: dict[tuple[str, str], Callable[[bytes], bool] | str | None] = {}
 
     @property
     def speed(self) -> float | None:
@@ -261,6 +269,9 @@ class Timeline:
             handler = self._handlers[key] = self._handler(*key)
         if handler is None:
             return None
+        if isinstance(handler, str):          # the other type of an input recorded with two
+            self.rejected[handler] += 1
+            return None
         name = m.topic.name
         self.inputs[name] += 1
         last = self._last_ns.get(name)
@@ -282,10 +293,13 @@ class Timeline:
                        nan if i.nut_position_m is None else i.nut_position_m)
         return self._recompute(index, m.log_time_ns) if accepted else None
 
-    def _handler(self, topic: str, type_name: str) -> Callable[[bytes], bool] | None:
+    def _handler(self, topic: str, type_name: str) -> Callable[[bytes], bool] | str | None:
         route = self._routes.get(topic)
         if route is None:
             return None
+        if type_name != route[0] and route[0] in self._types.get(topic, ()):
+            return (f"{topic}: {type_name} messages not taken (the topic is recorded with two "
+                    f"types; its {route[0]} messages are the input)")
         if type_name != route[0]:
             raise InputError(f"topic {topic} is {type_name}, expected {route[0]}")
         return route[1]
