@@ -18,7 +18,7 @@ HERE = Path(__file__).resolve().parent
 # and bump it there); `leadscrew_ros.__version__` reads the installed metadata written from this.
 VERSION = ET.parse(HERE / "package.xml").getroot().findtext("version").strip()
 
-ROS = [                          # the node and everything that starts one; see package.xml
+ROS = [  # the node and everything that starts one; see package.xml
     "ros-jazzy-rclpy[fastrtps]",
     "ros-jazzy-common-interfaces",
 ]
@@ -32,15 +32,16 @@ setup(
     maintainer_email="maintainers@leadscrew-ros.example.org",
     packages=find_packages(exclude=["test", "test.*"]),
     package_data={
-        PACKAGE: ["py.typed"],   # PEP 561: the package ships its type hints
-        # Message definitions for logs written without ROS 2 (bag/msgdefs.py, tools/bundle_msgdefs.py)
+        PACKAGE: ["py.typed"],  # PEP 561: the package ships its type hints
+        # Message definitions for logs written without ROS 2 (bag/msgdefs.py,
+        # tools/bundle_msgdefs.py)
         f"{PACKAGE}.bag": ["jazzy_msgs/share/*/msg/*.msg"],
     },
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", sorted(glob("config/*.yaml"))),
-        (f"share/{PACKAGE}/foxglove", sorted(glob("foxglove/*.json"))),   # Foxglove layout
+        (f"share/{PACKAGE}/foxglove", sorted(glob("foxglove/*.json"))),  # Foxglove layout
     ],
     python_requires=">=3.10",
     # Keep in step with package.xml's <exec_depend>s (test_package.py checks both lists).
@@ -51,35 +52,36 @@ setup(
         "tqdm",
         "pyyaml",
         "mcap",
-        "zstandard",             # MCAP chunk compression, read and written directly
+        "zstandard",  # MCAP chunk compression, read and written directly
         "lz4",
-        "threadpoolctl",         # eigen-solves run single-threaded (live/recompute.py)
-        "dask[distributed]",     # `review`: fleet review on a Dask cluster (review/fleet.py)
+        "threadpoolctl",  # eigen-solves run single-threaded (live/recompute.py)
+        "dask[distributed]",  # `review`: fleet review on a Dask cluster (review/fleet.py)
     ],
     extras_require={
         "ros": ROS,
-        "test": ROS + [          # the suite tests the node too
+        "test": ROS
+        + [  # the suite tests the node too
             "pytest",
-            "pytest-cov",            # scripts/run-tests.sh: --cov
-            "coverage>=7.10",        # .coveragerc: patch = subprocess
-            "pytest-timeout",        # setup.cfg: a hung test fails by name
+            "pytest-cov",  # scripts/run-tests.sh: --cov
+            "coverage>=7.10",  # .coveragerc: patch = subprocess
+            "pytest-timeout",  # setup.cfg: a hung test fails by name
             "hypothesis",
             "sympy",
             "colcon-core",
             "colcon-common-extensions",
             "colcon-ros",
-            "mcap-ros2-support",     # an independent decoder of our logs (tests only)
+            "mcap-ros2-support",  # an independent decoder of our logs (tests only)
             "rosbags",
-            "mosqito",           # acoustics tests: TNR/PR and loudness reference
+            "mosqito",  # acoustics tests: TNR/PR and loudness reference
         ],
-        "doc": [                 # the Sphinx documentation in doc/ (doc/development/documentation.md)
+        "doc": [  # the Sphinx documentation in doc/ (doc/development/documentation.md)
             "sphinx",
             "myst-parser",
             "numpydoc",
             "sphinx-rtd-theme",
         ],
     },
-    zip_safe=False,              # bag/msgdefs.py reads the bundled .msg files by path
+    zip_safe=False,  # bag/msgdefs.py reads the bundled .msg files by path
     entry_points={
         "console_scripts": [
             "leadscrew-squeak = leadscrew_ros.cli:main",

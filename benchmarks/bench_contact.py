@@ -32,7 +32,7 @@ from leadscrew_ros.model.physics.assembly import build_geometry
 
 SPEED_RAD_S, LOAD_N = 20.0, 200.0
 TARGET = 0.5
-_GOLDEN = (5 ** 0.5 - 1) / 2
+_GOLDEN = (5**0.5 - 1) / 2
 
 
 def _time(fn, calls: int) -> float:
@@ -46,11 +46,11 @@ def cases(modes: int) -> dict:
     """The functions timed at `modes` bending and torsion orders, keyed by row name."""
     params = ScrewParameters(n_bending=modes, n_torsion=modes)
     model = SqueakModel(params)
-    model.predict(SPEED_RAD_S, LOAD_N)               # its samples exist, as in the node
+    model.predict(SPEED_RAD_S, LOAD_N)  # its samples exist, as in the node
     a = model.state_matrix(SPEED_RAD_S, LOAD_N)
     fresh = count(1)
 
-    def new_position() -> float:     # never seen before, spread over the travel
+    def new_position() -> float:  # never seen before, spread over the travel
         return next(fresh) * _GOLDEN % 1.0 * params.nut_travel_m
 
     def rebuild():
@@ -62,8 +62,12 @@ def cases(modes: int) -> dict:
     # parameters with fresh nut positions for the geometry alone; more than the geometry cache
     # holds, cycled, so that every call misses it
     moved = [params.with_(nut_position_m=new_position()) for _ in range(1000)]
-    return dict(eig=lambda: np.linalg.eig(a), rebuild=rebuild, geometry=geometry,
-                with_=lambda: params.with_(nut_position_m=new_position()))
+    return dict(
+        eig=lambda: np.linalg.eig(a),
+        rebuild=rebuild,
+        geometry=geometry,
+        with_=lambda: params.with_(nut_position_m=new_position()),
+    )
 
 
 def run(modes: int, rounds: int, calls: int) -> dict[str, float]:
@@ -71,24 +75,30 @@ def run(modes: int, rounds: int, calls: int) -> dict[str, float]:
     fns = cases(modes)
     if modes != 6:
         del fns["eig"]
-    for fn in fns.values():                               # warm up
+    for fn in fns.values():  # warm up
         _time(fn, max(1, calls // 10))
     samples: dict[str, list[float]] = {k: [] for k in fns}
     for r in range(rounds):
-        for name in (list(fns) if r % 2 == 0 else list(fns)[::-1]):
+        for name in list(fns) if r % 2 == 0 else list(fns)[::-1]:
             samples[name].append(_time(fns[name], calls))
     out = {k: median(v) for k, v in samples.items()}
     if "eig" in samples:
         for k in ("rebuild", "geometry", "with_"):
-            out[k + "_ratio"] = median(x / e for x, e in zip(samples[k], samples["eig"], strict=True))
+            out[k + "_ratio"] = median(
+                x / e for x, e in zip(samples[k], samples["eig"], strict=True)
+            )
     return out
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=15, help="alternating rounds (default 15)")
-    ap.add_argument("--calls", type=int, default=200, help="calls per round at 6/6 modes "
-                    "(default 200; fewer at more modes)")
+    ap.add_argument(
+        "--calls",
+        type=int,
+        default=200,
+        help="calls per round at 6/6 modes (default 200; fewer at more modes)",
+    )
     args = ap.parse_args(argv)
     load0 = os.getloadavg()[0]
     start = time.perf_counter()
@@ -97,22 +107,32 @@ def main(argv: list[str] | None = None) -> int:
     print("|---|---|---:|---:|---:|")
     for m, r in res.items():
         size = 6 * m
-        ratio = {k: f"{r[k + '_ratio']:.2f}×" if "eig" in r else "–"
-                 for k in ("rebuild", "geometry", "with_")}
+        ratio = {
+            k: f"{r[k + '_ratio']:.2f}×" if "eig" in r else "–"
+            for k in ("rebuild", "geometry", "with_")
+        }
         e = f"{r['eig'] * 1e6:,.0f} µs" if "eig" in r else "–"
         target = f" (target ≤ {TARGET}×)" if "eig" in r else ""
-        print(f"| {m}/{m} ({size}×{size}) | new nut position: "
-              f"`model.with_params(nut_position_m=…)`, ready for P(squeak) | "
-              f"{r['rebuild'] * 1e6:,.0f} µs "
-              f"| {e} | {ratio['rebuild']}{target} |")
-        print(f"| | … of which the geometry (`assembly.build_geometry`: contact integrals and "
-              f"state-matrix parts, timed alone) | {r['geometry'] * 1e6:,.0f} µs | | "
-              f"{ratio['geometry']} |")
-        print(f"| | … of which `params.with_` (timed alone) | {r['with_'] * 1e6:,.0f} µs | | "
-              f"{ratio['with_']} |")
-    print(f"\n{args.rounds} rounds of {args.calls} calls (6/6); Table 1, {LOAD_N:g} N, "
-          f"{SPEED_RAD_S:g} rad/s, paper; {os.cpu_count()} CPUs; load avg {load0:.2f} → "
-          f"{os.getloadavg()[0]:.2f}; {time.perf_counter() - start:.0f} s")
+        print(
+            f"| {m}/{m} ({size}×{size}) | new nut position: "
+            f"`model.with_params(nut_position_m=…)`, ready for P(squeak) | "
+            f"{r['rebuild'] * 1e6:,.0f} µs "
+            f"| {e} | {ratio['rebuild']}{target} |"
+        )
+        print(
+            f"| | … of which the geometry (`assembly.build_geometry`: contact integrals and "
+            f"state-matrix parts, timed alone) | {r['geometry'] * 1e6:,.0f} µs | | "
+            f"{ratio['geometry']} |"
+        )
+        print(
+            f"| | … of which `params.with_` (timed alone) | {r['with_'] * 1e6:,.0f} µs | | "
+            f"{ratio['with_']} |"
+        )
+    print(
+        f"\n{args.rounds} rounds of {args.calls} calls (6/6); Table 1, {LOAD_N:g} N, "
+        f"{SPEED_RAD_S:g} rad/s, paper; {os.cpu_count()} CPUs; load avg {load0:.2f} → "
+        f"{os.getloadavg()[0]:.2f}; {time.perf_counter() - start:.0f} s"
+    )
     return 0
 
 

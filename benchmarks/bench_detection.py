@@ -32,7 +32,7 @@ from leadscrew_ros.model.acoustics import DetectorSettings, StreamingDetector, d
 from leadscrew_ros.model.acoustics.tonality import ToneAnalyzer, short_time_psd
 
 FS = 48000
-TARGET = 100.0          # x real time
+TARGET = 100.0  # x real time
 
 
 def stroke(seconds: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -57,31 +57,33 @@ def cases(seconds: float) -> dict:
     def streaming():
         det = StreamingDetector(settings, FS)
         for a in range(0, x.size, chunk):
-            det.push(x[a:a + chunk], a / FS, float(np.interp(a / FS, t, speed)))
+            det.push(x[a : a + chunk], a / FS, float(np.interp(a / FS, t, speed)))
         det.flush()
 
     def spectra():
         for a in range(0, x.size, 256 * hop):
-            short_time_psd(x[a:a + 255 * hop + n], FS, n, hop)
+            short_time_psd(x[a : a + 255 * hop + n], FS, n, hop)
 
     def candidates():
         for a in range(0, x.size, 256 * hop):
-            analyzer.candidates(short_time_psd(x[a:a + 255 * hop + n], FS, n, hop))
+            analyzer.candidates(short_time_psd(x[a : a + 255 * hop + n], FS, n, hop))
 
-    return {"detect (offline, whole signal)": offline,
-            "StreamingDetector.push, 0.1 s chunks": streaming,
-            "… of which short-time spectra (FFT of 256-frame blocks)": spectra,
-            "… of which spectra + tone candidates (TNR, PR, suppression)": candidates}
+    return {
+        "detect (offline, whole signal)": offline,
+        "StreamingDetector.push, 0.1 s chunks": streaming,
+        "… of which short-time spectra (FFT of 256-frame blocks)": spectra,
+        "… of which spectra + tone candidates (TNR, PR, suppression)": candidates,
+    }
 
 
 def run(seconds: float, rounds: int) -> dict[str, float]:
     """Median x real time of each case."""
     fns = cases(seconds)
-    for fn in fns.values():                     # warm up
+    for fn in fns.values():  # warm up
         fn()
     samples: dict[str, list[float]] = {k: [] for k in fns}
     for r in range(rounds):
-        for name in (list(fns) if r % 2 == 0 else list(fns)[::-1]):
+        for name in list(fns) if r % 2 == 0 else list(fns)[::-1]:
             start = time.perf_counter()
             fns[name]()
             samples[name].append(seconds / (time.perf_counter() - start))
@@ -91,8 +93,7 @@ def run(seconds: float, rounds: int) -> dict[str, float]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=7, help="alternating rounds (default 7)")
-    ap.add_argument("--seconds", type=float, default=20.0,
-                    help="signal duration [s] (default 20)")
+    ap.add_argument("--seconds", type=float, default=20.0, help="signal duration [s] (default 20)")
     args = ap.parse_args(argv)
     load0 = os.getloadavg()[0]
     start = time.perf_counter()
@@ -102,9 +103,11 @@ def main(argv: list[str] | None = None) -> int:
     for i, (name, ratio) in enumerate(res.items()):
         target = f" (target ≥ {TARGET:g}×)" if i < 2 else ""
         print(f"| {name} | {ratio:,.0f}×{target} |")
-    print(f"\n{args.rounds} rounds of a {args.seconds:g} s stroke; {os.cpu_count()} CPUs; "
-          f"load avg {load0:.2f} → {os.getloadavg()[0]:.2f}; "
-          f"{time.perf_counter() - start:.0f} s")
+    print(
+        f"\n{args.rounds} rounds of a {args.seconds:g} s stroke; {os.cpu_count()} CPUs; "
+        f"load avg {load0:.2f} → {os.getloadavg()[0]:.2f}; "
+        f"{time.perf_counter() - start:.0f} s"
+    )
     return 0
 
 

@@ -44,21 +44,21 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from bench_replay import cycle_of  # the dense log of the replay benchmark
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
 from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.review.fleet import FleetSettings, cluster, review_logs
 from leadscrew_ros.review.replay import ReplaySettings, replay
 from leadscrew_ros.review.timeline import InputSettings
 
-from bench_replay import cycle_of       # the dense log of the replay benchmark
-
-MACHINES = 10                 # of the cluster estimate
+MACHINES = 10  # of the cluster estimate
 
 
 def cached_logs(count: int, minutes: float, rate_hz: float, regenerate: bool) -> list[Path]:
     """`count` dense logs (seeds 0..count-1), generated if not cached."""
-    root = (Path(tempfile.gettempdir()) / "leadscrew_ros_bench_fleet"
-            / f"{minutes:g}min_{rate_hz:g}Hz")
+    root = (
+        Path(tempfile.gettempdir()) / "leadscrew_ros_bench_fleet" / f"{minutes:g}min_{rate_hz:g}Hz"
+    )
     if regenerate:
         shutil.rmtree(root, ignore_errors=True)
     base = cycle_of("dense", argparse.Namespace(minutes=[minutes], rate=rate_hz))
@@ -75,10 +75,11 @@ def cached_logs(count: int, minutes: float, rate_hz: float, regenerate: bool) ->
 
 def serial(logs: list[Path], joint: str) -> float:
     """Wall time of replaying `logs` one after the other in this process."""
-    model, settings = SqueakModel(), ReplaySettings(InputSettings(joint_name=joint), workers=0,
-                                                    progress=False)
-    with tempfile.TemporaryDirectory(prefix="bench_fleet_serial_") as out, \
-            threadpool_limits(1):
+    model, settings = (
+        SqueakModel(),
+        ReplaySettings(InputSettings(joint_name=joint), workers=0, progress=False),
+    )
+    with tempfile.TemporaryDirectory(prefix="bench_fleet_serial_") as out, threadpool_limits(1):
         t0 = time.perf_counter()
         for k, log in enumerate(logs):
             replay(log, model, Path(out) / str(k), settings)
@@ -95,41 +96,53 @@ def review(logs: list[Path], joint: str, workers: int) -> dict:
             run = review_logs(logs, out, settings, client, progress=False)
     if run.failed:
         raise SystemExit(f"{run.failed} logs failed: {run.rows[0]['error']}")
-    return {"start_s": start, "wall_s": run.wall_s,
-            "task_s": sum(r["wall_s"] for r in run.rows)}
+    return {"start_s": start, "wall_s": run.wall_s, "task_s": sum(r["wall_s"] for r in run.rows)}
 
 
 def table(res: dict) -> str:
     n, serial_s = res["logs"], res["serial_s"]
     rate = {"serial": 60.0 * n / serial_s}
-    lines = ["| run | wall | logs per minute | vs serial | cluster start |",
-             "|---|---:|---:|---:|---:|",
-             f"| serial loop of `replay` (one process) | {serial_s:.1f} s | "
-             f"{rate['serial']:.1f} | 1.00× | – |"]
+    lines = [
+        "| run | wall | logs per minute | vs serial | cluster start |",
+        "|---|---:|---:|---:|---:|",
+        f"| serial loop of `replay` (one process) | {serial_s:.1f} s | "
+        f"{rate['serial']:.1f} | 1.00× | – |",
+    ]
     for w, r in res["review"].items():
         rate[w] = 60.0 * n / r["wall_s"]
-        lines.append(f"| `review`, LocalCluster {w} worker(s) | {r['wall_s']:.1f} s | "
-                     f"{rate[w]:.1f} | {serial_s / r['wall_s']:.2f}× | {r['start_s']:.1f} s |")
+        lines.append(
+            f"| `review`, LocalCluster {w} worker(s) | {r['wall_s']:.1f} s | "
+            f"{rate[w]:.1f} | {serial_s / r['wall_s']:.2f}× | {r['start_s']:.1f} s |"
+        )
     one = res["review"].get("1")
     if one:
-        lines.append(f"\nScheduling overhead per log (1 worker: (wall − the replays' own time "
-                     f"in the tasks) / {n} logs): {1e3 * (one['wall_s'] - one['task_s']) / n:.0f}"
-                     f" ms.")
-    lines += [f"A replay in a task of {w} worker(s) took {r['task_s'] / serial_s:.2f}× its time "
-              f"in the serial loop." for w, r in res["review"].items()]
+        lines.append(
+            f"\nScheduling overhead per log (1 worker: (wall − the replays' own time "
+            f"in the tasks) / {n} logs): {1e3 * (one['wall_s'] - one['task_s']) / n:.0f}"
+            f" ms."
+        )
+    lines += [
+        f"A replay in a task of {w} worker(s) took {r['task_s'] / serial_s:.2f}× its time "
+        f"in the serial loop."
+        for w, r in res["review"].items()
+    ]
     best = max((w for w in res["review"]), key=lambda w: rate[w])
     per_core = rate[best] / int(best)
     cores = res["env"]["cpu_count"]
-    lines.append(f"ESTIMATE (not measured) for {MACHINES} machines like this one "
-                 f"({cores} cores each, one worker per core): ≈ "
-                 f"{MACHINES * cores * per_core:.0f} logs per minute "
-                 f"({MACHINES} × {cores} × {per_core:.1f} logs/min per worker as measured "
-                 f"with {best}), if the logs are on storage that serves them as fast.")
+    lines.append(
+        f"ESTIMATE (not measured) for {MACHINES} machines like this one "
+        f"({cores} cores each, one worker per core): ≈ "
+        f"{MACHINES * cores * per_core:.0f} logs per minute "
+        f"({MACHINES} × {cores} × {per_core:.1f} logs/min per worker as measured "
+        f"with {best}), if the logs are on storage that serves them as fast."
+    )
     env = res["env"]
-    lines.append(f"\n{env['date']} · Python {env['python']} · numpy {env['numpy']} · "
-                 f"{cores} CPUs ({env['machine']}) · load avg {env['load_start']:.2f} → "
-                 f"{env['load_end']:.2f} · {n} dense logs of {res['minutes']:g} min at "
-                 f"{res['rate_hz']:g} Hz ({res['messages']:,} messages each)")
+    lines.append(
+        f"\n{env['date']} · Python {env['python']} · numpy {env['numpy']} · "
+        f"{cores} CPUs ({env['machine']}) · load avg {env['load_start']:.2f} → "
+        f"{env['load_end']:.2f} · {n} dense logs of {res['minutes']:g} min at "
+        f"{res['rate_hz']:g} Hz ({res['messages']:,} messages each)"
+    )
     return "\n".join(lines)
 
 
@@ -144,22 +157,31 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", metavar="OUT.json")
     args = ap.parse_args(argv)
     n = 10 if args.quick else args.logs
-    env = dict(date=datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
-               python=platform.python_version(), numpy=np.__version__,
-               cpu_count=os.cpu_count(), machine=platform.machine(),
-               load_start=os.getloadavg()[0])
+    env = dict(
+        date=datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
+        python=platform.python_version(),
+        numpy=np.__version__,
+        cpu_count=os.cpu_count(),
+        machine=platform.machine(),
+        load_start=os.getloadavg()[0],
+    )
     t0 = time.perf_counter()
     logs = cached_logs(n, args.minutes, args.rate, args.regenerate)
     print(f"{n} logs ready in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
     joint = DutyCycle().joint_name
-    res = {"env": env, "logs": n, "minutes": args.minutes, "rate_hz": args.rate,
-           "messages": 4 * int(round(args.minutes * 60 * args.rate)),
-           "serial_s": serial(logs, joint), "review": {}}
+    res = {
+        "env": env,
+        "logs": n,
+        "minutes": args.minutes,
+        "rate_hz": args.rate,
+        "messages": 4 * int(round(args.minutes * 60 * args.rate)),
+        "serial_s": serial(logs, joint),
+        "review": {},
+    }
     print(f"serial: {res['serial_s']:.1f} s", file=sys.stderr)
     for w in args.workers:
         res["review"][str(w)] = review(logs, joint, w)
-        print(f"review, {w} worker(s): {res['review'][str(w)]['wall_s']:.1f} s",
-              file=sys.stderr)
+        print(f"review, {w} worker(s): {res['review'][str(w)]['wall_s']:.1f} s", file=sys.stderr)
     res["env"]["load_end"] = os.getloadavg()[0]
     print(table(res))
     if args.json:

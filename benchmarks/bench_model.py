@@ -20,9 +20,9 @@ import os
 import platform
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from statistics import median
-from typing import Callable
 
 import numpy as np
 import scipy
@@ -31,27 +31,40 @@ from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.model.physics import assembly
 from leadscrew_ros.model.physics.contact import contact_integrals
 from leadscrew_ros.model.physics.modes import modal_basis
-from leadscrew_ros.model.uncertainty.scatter import Scatter
 from leadscrew_ros.model.physics.stability import classify, eig_both
 from leadscrew_ros.model.studies.fields import growth_field
 from leadscrew_ros.model.studies.stability_map import stability_map
 from leadscrew_ros.model.studies.work import _CHUNK
+from leadscrew_ros.model.uncertainty.scatter import Scatter
 
-TARGET_POINT_RATIO = 1.5     # predict / bare eig
-TARGET_MAP_RATIO = 1.2       # growth_field / bare eigvals, per point
-TARGET_REFINED_MAP_RATIO = 1.1   # stability_map (grid + refined boundary) / bare eigvals
+TARGET_POINT_RATIO = 1.5  # predict / bare eig
+TARGET_MAP_RATIO = 1.2  # growth_field / bare eigvals, per point
+TARGET_REFINED_MAP_RATIO = 1.1  # stability_map (grid + refined boundary) / bare eigvals
 
 # Work per benchmark: default run ~70 s, --quick ~5 s (2-core machine).
 CONFIGS = {
-    "default": dict(point_rounds=41, point_loops=4, map_grid=200, map_rounds=5,
-                    naive_points=50, geometry_rounds=31),
-    "quick": dict(point_rounds=15, point_loops=2, map_grid=64, map_rounds=3,
-                  naive_points=20, geometry_rounds=11),
+    "default": dict(
+        point_rounds=41,
+        point_loops=4,
+        map_grid=200,
+        map_rounds=5,
+        naive_points=50,
+        geometry_rounds=31,
+    ),
+    "quick": dict(
+        point_rounds=15,
+        point_loops=2,
+        map_grid=64,
+        map_rounds=3,
+        naive_points=20,
+        geometry_rounds=11,
+    ),
 }
 
 
-def interleaved(fns: dict[str, Callable[[], object]], rounds: int, warmup: int = 1
-                ) -> tuple[dict[str, list[float]], dict[str, list[float]]]:
+def interleaved(
+    fns: dict[str, Callable[[], object]], rounds: int, warmup: int = 1
+) -> tuple[dict[str, list[float]], dict[str, list[float]]]:
     """Wall and process-CPU seconds per call of each function, `rounds` samples each, the
     functions alternating within a round (order reversed every other round) after `warmup`
     untimed calls each."""
@@ -61,7 +74,7 @@ def interleaved(fns: dict[str, Callable[[], object]], rounds: int, warmup: int =
     wall: dict[str, list[float]] = {name: [] for name in fns}
     cpu: dict[str, list[float]] = {name: [] for name in fns}
     for r in range(rounds):
-        for name in (list(fns) if r % 2 == 0 else list(fns)[::-1]):
+        for name in list(fns) if r % 2 == 0 else list(fns)[::-1]:
             c0, t0 = time.process_time(), time.perf_counter()
             fns[name]()
             wall[name].append(time.perf_counter() - t0)
@@ -112,12 +125,15 @@ def bench_point(model: SqueakModel, rounds: int, loops: int) -> dict:
                 classify(eigen, labels)
 
     calls = loops * len(points)
-    raw, _ = interleaved(dict(predict=predict, eig=eig, rescale=rescale,
-                              label=label), rounds)
+    raw, _ = interleaved(dict(predict=predict, eig=eig, rescale=rescale, label=label), rounds)
     us = {k: [t / calls * 1e6 for t in v] for k, v in raw.items()}
-    return dict(points=points, calls_per_sample=calls, samples_us=us,
-                median_us={k: median(v) for k, v in us.items()},
-                ratio=paired_ratio(us["predict"], us["eig"]))
+    return dict(
+        points=points,
+        calls_per_sample=calls,
+        samples_us=us,
+        median_us={k: median(v) for k, v in us.items()},
+        ratio=paired_ratio(us["predict"], us["eig"]),
+    )
 
 
 def naive_state_matrix(model: SqueakModel, speed: float, load: float) -> np.ndarray:
@@ -136,13 +152,16 @@ def bench_map(model: SqueakModel, grid: int, rounds: int, naive_points: int) -> 
     load = np.linspace(10.0, 600.0, grid)
     s_flat, f_flat = (a.ravel() for a in np.broadcast_arrays(speed[None, :], load[:, None]))
     assert np.all(model.validity_code(s_flat, f_flat) == 0), "map must be all valid points"
-    chunks = [model.geometry.state_matrices(s_flat[i:i + _CHUNK], f_flat[i:i + _CHUNK])
-              for i in range(0, s_flat.size, _CHUNK)]
+    chunks = [
+        model.geometry.state_matrices(s_flat[i : i + _CHUNK], f_flat[i : i + _CHUNK])
+        for i in range(0, s_flat.size, _CHUNK)
+    ]
     pick = np.linspace(0, s_flat.size - 1, naive_points).astype(int)
     naive_pts = list(zip(s_flat[pick].tolist(), f_flat[pick].tolist(), strict=True))
     s0, f0 = naive_pts[0]
-    assert np.allclose(naive_state_matrix(model, s0, f0), model.state_matrix(s0, f0),
-                       rtol=1e-9, atol=1e-6), "naive assembly must give the same matrix"
+    assert np.allclose(
+        naive_state_matrix(model, s0, f0), model.state_matrix(s0, f0), rtol=1e-9, atol=1e-6
+    ), "naive assembly must give the same matrix"
 
     def map_():
         growth_field(model, speed[None, :], load[:, None])
@@ -150,8 +169,9 @@ def bench_map(model: SqueakModel, grid: int, rounds: int, naive_points: int) -> 
     boundary_points = []
 
     def refined():
-        boundary_points[:] = [len(stability_map(model, "speed_rad_s", speed, "load_n",
-                                                load).boundary)]
+        boundary_points[:] = [
+            len(stability_map(model, "speed_rad_s", speed, "load_n", load).boundary)
+        ]
 
     def eigvals():
         for a in chunks:
@@ -161,22 +181,30 @@ def bench_map(model: SqueakModel, grid: int, rounds: int, naive_points: int) -> 
         for s, f in naive_pts:
             np.linalg.eigvals(naive_state_matrix(model, s, f))
 
-    growth_field(model, speed[None, :8], load[:8, None])     # warm up on a small map only
+    growth_field(model, speed[None, :8], load[:8, None])  # warm up on a small map only
     np.linalg.eigvals(chunks[0])
     stability_map(model, "speed_rad_s", speed[:8], "load_n", load[:8])
-    raw, cpu = interleaved(dict(map=map_, refined=refined, eigvals=eigvals, naive=naive),
-                           rounds, warmup=0)
-    n = {"map": s_flat.size, "refined": s_flat.size, "eigvals": s_flat.size,
-         "naive": naive_points}
+    raw, cpu = interleaved(
+        dict(map=map_, refined=refined, eigvals=eigvals, naive=naive), rounds, warmup=0
+    )
+    n = {"map": s_flat.size, "refined": s_flat.size, "eigvals": s_flat.size, "naive": naive_points}
     pps = {k: [n[k] / t for t in v] for k, v in raw.items()}
     med = {k: median(v) for k, v in pps.items()}
-    return dict(grid=[grid, grid], points=s_flat.size, chunk=_CHUNK, naive_points=naive_points,
-                samples_s=raw, samples_points_per_s=pps, median_points_per_s=med,
-                samples_cpu_s=cpu, cpu_per_wall={k: paired_ratio(cpu[k], raw[k]) for k in raw},
-                ratio=paired_ratio(raw["map"], raw["eigvals"]),
-                boundary_points=boundary_points[0],
-                refined_ratio=paired_ratio(raw["refined"], raw["eigvals"]),
-                speedup_over_naive=med["map"] / med["naive"])
+    return dict(
+        grid=[grid, grid],
+        points=s_flat.size,
+        chunk=_CHUNK,
+        naive_points=naive_points,
+        samples_s=raw,
+        samples_points_per_s=pps,
+        median_points_per_s=med,
+        samples_cpu_s=cpu,
+        cpu_per_wall={k: paired_ratio(cpu[k], raw[k]) for k in raw},
+        ratio=paired_ratio(raw["map"], raw["eigvals"]),
+        boundary_points=boundary_points[0],
+        refined_ratio=paired_ratio(raw["refined"], raw["eigvals"]),
+        speedup_over_naive=med["map"] / med["naive"],
+    )
 
 
 def bench_geometry(model: SqueakModel, rounds: int) -> dict:
@@ -187,12 +215,16 @@ def bench_geometry(model: SqueakModel, rounds: int) -> dict:
 
     def total():
         assembly._screw_of.cache_clear()
-        return assembly._geometry_of.__wrapped__(
-            assembly._Key(p, assembly._GEOMETRY_FIELDS))
+        return assembly._geometry_of.__wrapped__(assembly._Key(p, assembly._GEOMETRY_FIELDS))
 
-    raw, _ = interleaved(dict(
-        total=total, modal_basis=lambda: modal_basis(p),
-        contact_integrals=lambda: contact_integrals(p, basis)), rounds)
+    raw, _ = interleaved(
+        dict(
+            total=total,
+            modal_basis=lambda: modal_basis(p),
+            contact_integrals=lambda: contact_integrals(p, basis),
+        ),
+        rounds,
+    )
     ms = {k: [t * 1e3 for t in v] for k, v in raw.items()}
     return dict(samples_ms=ms, median_ms={k: median(v) for k, v in ms.items()})
 
@@ -201,13 +233,19 @@ def environment() -> dict:
     try:
         blas = np.show_config(mode="dicts")["Build Dependencies"]["blas"]
         blas = f"{blas['name']} {blas['version']}"
-    except Exception:                                            # pragma: no cover
+    except Exception:  # pragma: no cover
         blas = "unknown"
-    return dict(date=datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
-                python=platform.python_version(), numpy=np.__version__,
-                scipy=scipy.__version__, blas=blas, cpu_count=os.cpu_count(),
-                openblas_coretype=os.environ.get("OPENBLAS_CORETYPE", ""),
-                machine=platform.machine(), load_avg_1min_start=os.getloadavg()[0])
+    return dict(
+        date=datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
+        python=platform.python_version(),
+        numpy=np.__version__,
+        scipy=scipy.__version__,
+        blas=blas,
+        cpu_count=os.cpu_count(),
+        openblas_coretype=os.environ.get("OPENBLAS_CORETYPE", ""),
+        machine=platform.machine(),
+        load_avg_1min_start=os.getloadavg()[0],
+    )
 
 
 def verdict(ratio: float, target: float) -> str:
@@ -219,38 +257,79 @@ def table(res: dict) -> str:
     u, pps, ms = pt["median_us"], mp["median_points_per_s"], geo["median_ms"]
     g = "×".join(map(str, mp["grid"]))
     rows = [
-        ("1 per point", f"`predict` without scatter (rescale + eig + labels), {len(pt['points'])} "
-         "points cycled", f"{u['predict']:.1f} µs", f"bare `eig` {u['eig']:.1f} µs",
-         f"{pt['ratio']:.2f}×", verdict(pt["ratio"], TARGET_POINT_RATIO)),
-        ("", "… of which rescale (`state_matrix`, timed alone)", f"{u['rescale']:.1f} µs", "", "", ""),
-        ("", "… of which labels (`classify`, timed alone)",
-         f"{u['label']:.1f} µs", "", "", ""),
-        ("2 map", f"`growth_field` {g} speed×load", f"{pps['map']:,.0f} pts/s",
-         f"bare `eigvals` (chunks of {mp['chunk']}) {pps['eigvals']:,.0f} pts/s",
-         f"{mp['ratio']:.2f}×", verdict(mp["ratio"], TARGET_MAP_RATIO)),
-        ("", f"`stability_map` {g} speed×load: grid + refined boundary "
-         f"({mp['boundary_points']} points)", f"{pps['refined']:,.0f} pts/s",
-         f"bare `eigvals` {pps['eigvals']:,.0f} pts/s", f"{mp['refined_ratio']:.2f}×",
-         verdict(mp["refined_ratio"], TARGET_REFINED_MAP_RATIO)),
-        ("", "CPU time / wall time of the map (1 = one busy thread; ~2 = an idle BLAS "
-         "worker thread spinning on the second core)", f"{mp['cpu_per_wall']['map']:.2f}",
-         f"bare `eigvals` {mp['cpu_per_wall']['eigvals']:.2f}", "", ""),
-        ("", f"naive: integrate every entry per point ({mp['naive_points']} points)",
-         f"{pps['naive']:,.1f} pts/s", "map speed-up over naive",
-         f"{mp['speedup_over_naive']:,.0f}×", ""),
-        ("3 geometry", "uncached `_geometry_of` (modal basis + contact integrals + units)",
-         f"{ms['total']:.2f} ms", f"basis {ms['modal_basis']:.3f} ms, contact "
-         f"{ms['contact_integrals']:.2f} ms", "", ""),
+        (
+            "1 per point",
+            f"`predict` without scatter (rescale + eig + labels), {len(pt['points'])} "
+            "points cycled",
+            f"{u['predict']:.1f} µs",
+            f"bare `eig` {u['eig']:.1f} µs",
+            f"{pt['ratio']:.2f}×",
+            verdict(pt["ratio"], TARGET_POINT_RATIO),
+        ),
+        (
+            "",
+            "… of which rescale (`state_matrix`, timed alone)",
+            f"{u['rescale']:.1f} µs",
+            "",
+            "",
+            "",
+        ),
+        ("", "… of which labels (`classify`, timed alone)", f"{u['label']:.1f} µs", "", "", ""),
+        (
+            "2 map",
+            f"`growth_field` {g} speed×load",
+            f"{pps['map']:,.0f} pts/s",
+            f"bare `eigvals` (chunks of {mp['chunk']}) {pps['eigvals']:,.0f} pts/s",
+            f"{mp['ratio']:.2f}×",
+            verdict(mp["ratio"], TARGET_MAP_RATIO),
+        ),
+        (
+            "",
+            f"`stability_map` {g} speed×load: grid + refined boundary "
+            f"({mp['boundary_points']} points)",
+            f"{pps['refined']:,.0f} pts/s",
+            f"bare `eigvals` {pps['eigvals']:,.0f} pts/s",
+            f"{mp['refined_ratio']:.2f}×",
+            verdict(mp["refined_ratio"], TARGET_REFINED_MAP_RATIO),
+        ),
+        (
+            "",
+            "CPU time / wall time of the map (1 = one busy thread; ~2 = an idle BLAS "
+            "worker thread spinning on the second core)",
+            f"{mp['cpu_per_wall']['map']:.2f}",
+            f"bare `eigvals` {mp['cpu_per_wall']['eigvals']:.2f}",
+            "",
+            "",
+        ),
+        (
+            "",
+            f"naive: integrate every entry per point ({mp['naive_points']} points)",
+            f"{pps['naive']:,.1f} pts/s",
+            "map speed-up over naive",
+            f"{mp['speedup_over_naive']:,.0f}×",
+            "",
+        ),
+        (
+            "3 geometry",
+            "uncached `_geometry_of` (modal basis + contact integrals + units)",
+            f"{ms['total']:.2f} ms",
+            f"basis {ms['modal_basis']:.3f} ms, contact {ms['contact_integrals']:.2f} ms",
+            "",
+            "",
+        ),
     ]
-    head = ("| benchmark | measurement | result | reference | ratio | target |\n"
-            "|---|---|---:|---|---:|---|")
+    head = (
+        "| benchmark | measurement | result | reference | ratio | target |\n"
+        "|---|---|---:|---|---:|---|"
+    )
     body = "\n".join("| " + " | ".join(r) + " |" for r in rows)
-    envline = (f"{env['date']} · Python {env['python']} · numpy {env['numpy']} · scipy "
-               f"{env['scipy']} · BLAS {env['blas']} · {env['cpu_count']} CPUs ({env['machine']})"
-               + (f" · OPENBLAS_CORETYPE={env['openblas_coretype']}"
-                  if env["openblas_coretype"] else "")
-               + f" · load avg {env['load_avg_1min_start']:.2f} → {env['load_avg_1min_end']:.2f}"
-               + f" · mode {res['mode']} · {res['wall_s']:.1f} s")
+    envline = (
+        f"{env['date']} · Python {env['python']} · numpy {env['numpy']} · scipy "
+        f"{env['scipy']} · BLAS {env['blas']} · {env['cpu_count']} CPUs ({env['machine']})"
+        + (f" · OPENBLAS_CORETYPE={env['openblas_coretype']}" if env["openblas_coretype"] else "")
+        + f" · load avg {env['load_avg_1min_start']:.2f} → {env['load_avg_1min_end']:.2f}"
+        + f" · mode {res['mode']} · {res['wall_s']:.1f} s"
+    )
     return f"{head}\n{body}\n\n{envline}"
 
 
@@ -263,9 +342,17 @@ def main(argv: list[str] | None = None) -> int:
     cfg = CONFIGS[mode]
     t0 = time.perf_counter()
     model = SqueakModel()
-    res = dict(mode=mode, config=cfg, env=environment(), n_modes=model.params.n_modes,
-               targets=dict(point_ratio=TARGET_POINT_RATIO, map_ratio=TARGET_MAP_RATIO,
-                            refined_map_ratio=TARGET_REFINED_MAP_RATIO))
+    res = dict(
+        mode=mode,
+        config=cfg,
+        env=environment(),
+        n_modes=model.params.n_modes,
+        targets=dict(
+            point_ratio=TARGET_POINT_RATIO,
+            map_ratio=TARGET_MAP_RATIO,
+            refined_map_ratio=TARGET_REFINED_MAP_RATIO,
+        ),
+    )
     res["point"] = bench_point(model, cfg["point_rounds"], cfg["point_loops"])
     res["map"] = bench_map(model, cfg["map_grid"], cfg["map_rounds"], cfg["naive_points"])
     res["geometry"] = bench_geometry(model, cfg["geometry_rounds"])

@@ -25,7 +25,7 @@ from leadscrew_ros.model.studies.probability import monte_carlo
 from leadscrew_ros.model.uncertainty.scatter import Scatter, draw
 
 SPEED_RAD_S, LOAD_N = 55.0, 200.0
-TARGET_LIVE_RATIO = 2.0      # a live update with P / bare eig (issue 10)
+TARGET_LIVE_RATIO = 2.0  # a live update with P / bare eig (issue 10)
 
 
 def _time(fn, repeat: int) -> float:
@@ -35,12 +35,13 @@ def _time(fn, repeat: int) -> float:
     return (time.perf_counter() - start) / repeat
 
 
-def live_update_ratio(model: SqueakModel, rounds: int, repeat: int = 200
-                      ) -> tuple[float, float, float]:
+def live_update_ratio(
+    model: SqueakModel, rounds: int, repeat: int = 200
+) -> tuple[float, float, float]:
     """A live update with P(squeak) (`predict`) vs a bare `eig` of its state matrix, the two
     alternating `rounds` times (`repeat` calls each): median seconds per call of each and the
     median of the per-round ratios."""
-    model.predict(SPEED_RAD_S, LOAD_N)                  # samples drawn, estimator built
+    model.predict(SPEED_RAD_S, LOAD_N)  # samples drawn, estimator built
     a = model.state_matrix(SPEED_RAD_S, LOAD_N)
     eig, update = [], []
     for _ in range(rounds):
@@ -56,8 +57,9 @@ def main(argv: list[str] | None = None) -> int:
     model = SqueakModel()
     ref = draw(model.params, Scatter(), 4096)
     update, eig, ratio = live_update_ratio(model, args.rounds)
-    batch = model.geometry.state_matrices(SPEED_RAD_S, LOAD_N,
-                                          {k: v.ravel() for k, v in ref.values.items()})
+    batch = model.geometry.state_matrices(
+        SPEED_RAD_S, LOAD_N, {k: v.ravel() for k, v in ref.values.items()}
+    )
     mc_ratio, rows = [], []
     for _ in range(args.rounds):
         eigvals = _time(lambda: np.linalg.eigvals(batch), 2)
@@ -67,13 +69,19 @@ def main(argv: list[str] | None = None) -> int:
     eigvals, mc = (median(r[k] for r in rows) for k in range(2))
     print("| measure | ours | bare LAPACK | ratio (median of rounds) |")
     print("|---|---:|---:|---:|")
-    print(f"| live update with probability (`predict` with P, 1024 samples) vs eig "
-          f"36x36 | {update * 1e3:.3f} ms | {eig * 1e3:.3f} ms | {ratio:.2f} "
-          f"(target <= {TARGET_LIVE_RATIO:g}) |")
-    print(f"| Monte Carlo, 4096 samples | {ref.count / mc:,.0f} samples/s | "
-          f"{ref.count / eigvals:,.0f} eigvals/s | {median(mc_ratio):.2f} |")
-    print(f"\n{args.rounds} rounds; Table 1, {LOAD_N:g} N, {SPEED_RAD_S:g} rad/s, paper; "
-          f"Monte Carlo {mc:.2f} s per 4096 samples (target <= 2 s)")
+    print(
+        f"| live update with probability (`predict` with P, 1024 samples) vs eig "
+        f"36x36 | {update * 1e3:.3f} ms | {eig * 1e3:.3f} ms | {ratio:.2f} "
+        f"(target <= {TARGET_LIVE_RATIO:g}) |"
+    )
+    print(
+        f"| Monte Carlo, 4096 samples | {ref.count / mc:,.0f} samples/s | "
+        f"{ref.count / eigvals:,.0f} eigvals/s | {median(mc_ratio):.2f} |"
+    )
+    print(
+        f"\n{args.rounds} rounds; Table 1, {LOAD_N:g} N, {SPEED_RAD_S:g} rad/s, paper; "
+        f"Monte Carlo {mc:.2f} s per 4096 samples (target <= 2 s)"
+    )
     return 0
 
 

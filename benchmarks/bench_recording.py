@@ -38,8 +38,7 @@ import yaml
 REPO = Path(__file__).resolve().parents[1]
 NS = "/bench_rec"
 # topic -> (base, step): value = base + step * index, inside the model's validity
-ENCODING = {"motor_speed": (10.0, 0.01), "axial_load": (200.0, 0.001),
-            "nut_position": (0.05, 1e-6)}
+ENCODING = {"motor_speed": (10.0, 0.01), "axial_load": (200.0, 0.001), "nut_position": (0.05, 1e-6)}
 FRAME_HZ, FRAME_S = 20.0, 0.5
 
 
@@ -58,7 +57,7 @@ def publish(seconds: float, rate_hz: float) -> dict:
         if time.monotonic() > deadline:
             raise SystemExit("bench publisher: the node never subscribed")
         time.sleep(0.01)
-    time.sleep(1.0)                  # the node's other readers match within the same round
+    time.sleep(1.0)  # the node's other readers match within the same round
     k = 0
 
     def phase(rate: float, duration: float) -> None:
@@ -106,13 +105,19 @@ def count_bag(bag: Path) -> dict:
     meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     custom = meta.get("custom_data") or {}
     by_topic = json.loads(custom.get("lost_messages_by_topic", "null") or "null")
-    lost = None if by_topic is None else {t: by_topic.get(t, {}).get("lost", 0)
-                                          for t in indexes}
+    lost = None if by_topic is None else {t: by_topic.get(t, {}).get("lost", 0) for t in indexes}
     return {"indexes": {t: sorted(v) for t, v in indexes.items()}, "lost": lost}
 
 
-def run(seconds: float, rate_hz: float, hog: bool, tree: Path, workdir: Path,
-        queue_depth: int | None = None, pause_s: float = 0.0) -> dict:
+def run(
+    seconds: float,
+    rate_hz: float,
+    hog: bool,
+    tree: Path,
+    workdir: Path,
+    queue_depth: int | None = None,
+    pause_s: float = 0.0,
+) -> dict:
     """One measurement: node process from `tree`, publisher process, optional hog; with
     `pause_s`, the node process is stopped (SIGSTOP) that long in the middle of the burst, so
     that messages are certainly lost (with a small `queue_depth`) and must be counted."""
@@ -122,16 +127,40 @@ def run(seconds: float, rate_hz: float, hog: bool, tree: Path, workdir: Path,
     env.setdefault("ROS_LOG_DIR", str(workdir / "log"))
     bags.mkdir(parents=True)
     node = subprocess.Popen(
-        [sys.executable, "-m", "leadscrew_ros.ros.node", "--ros-args", "-r", f"__ns:={NS}",
-         "-p", "record.enabled:=true", "-p", f"record.directory:={bags}",
-         *(["-p", f"record.queue_depth:={queue_depth}"] if queue_depth else [])],
-        cwd=tree, env=env, stdout=subprocess.DEVNULL, stderr=open(workdir / "node.err", "w"))
-    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
-            for _ in range(max(1, (os.cpu_count() or 2) - 1))] if hog else []
+        [
+            sys.executable,
+            "-m",
+            "leadscrew_ros.ros.node",
+            "--ros-args",
+            "-r",
+            f"__ns:={NS}",
+            "-p",
+            "record.enabled:=true",
+            "-p",
+            f"record.directory:={bags}",
+            *(["-p", f"record.queue_depth:={queue_depth}"] if queue_depth else []),
+        ],
+        cwd=tree,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=open(workdir / "node.err", "w"),
+    )
+    hogs = (
+        [
+            subprocess.Popen([sys.executable, "-c", "while True: pass"])
+            for _ in range(max(1, (os.cpu_count() or 2) - 1))
+        ]
+        if hog
+        else []
+    )
     try:
-        publisher = subprocess.Popen([sys.executable, __file__, "--publish", str(seconds),
-                                      str(rate_hz)], env=dict(env, PYTHONPATH=str(REPO)),
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        publisher = subprocess.Popen(
+            [sys.executable, __file__, "--publish", str(seconds), str(rate_hz)],
+            env=dict(env, PYTHONPATH=str(REPO)),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         if pause_s:
             # discovery (<= 30 s) + 1 s + the 0.5 s lead-in + half the burst: well inside it
             _wait_for_burst(workdir, publisher)
@@ -157,8 +186,12 @@ def run(seconds: float, rate_hz: float, hog: bool, tree: Path, workdir: Path,
         first = idx[0] if idx else sent_total[topic]
         sent = sent_total[topic] - first
         lost = None if counted["lost"] is None else counted["lost"][topic]
-        result["topics"][topic] = {"sent": sent, "recorded": len(idx), "lost": lost,
-                                   "duplicates": len(idx) - len(set(idx))}
+        result["topics"][topic] = {
+            "sent": sent,
+            "recorded": len(idx),
+            "lost": lost,
+            "duplicates": len(idx) - len(set(idx)),
+        }
     t = result["topics"].values()
     result["sent"] = sum(x["sent"] for x in t)
     result["recorded"] = sum(x["recorded"] for x in t)
@@ -168,15 +201,27 @@ def run(seconds: float, rate_hz: float, hog: bool, tree: Path, workdir: Path,
 
 
 def table(results: dict) -> str:
-    rows = ["| code | machine | sent | recorded | completeness | counted lost | "
-            "recorded + lost == sent |", "|---|---|---|---|---|---|---|"]
+    rows = [
+        "| code | machine | sent | recorded | completeness | counted lost | "
+        "recorded + lost == sent |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for name, r in results.items():
         code, cond = name.split(":")
         lost = "–" if r["lost"] is None else str(r["lost"])
-        ok = "–" if r["lost"] is None else ("yes" if r["recorded"] + r["lost"] == r["sent"]
-                                            else f"no ({r['recorded'] + r['lost']})")
-        rows.append(f"| {code} | {cond} | {r['sent']} | {r['recorded']} | "
-                    f"{100 * r['completeness']:.2f} % | {lost} | {ok} |")
+        ok = (
+            "–"
+            if r["lost"] is None
+            else (
+                "yes"
+                if r["recorded"] + r["lost"] == r["sent"]
+                else f"no ({r['recorded'] + r['lost']})"
+            )
+        )
+        rows.append(
+            f"| {code} | {cond} | {r['sent']} | {r['recorded']} | "
+            f"{100 * r['completeness']:.2f} % | {lost} | {ok} |"
+        )
     return "\n".join(rows)
 
 
@@ -187,11 +232,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--conditions", default="quiet,hog", help="quiet, hog or both (comma)")
     p.add_argument("--old-tree", type=Path, help="also measure this checkout's node")
     p.add_argument("--queue-depth", type=int, help="record.queue_depth of the new node")
-    p.add_argument("--pause-s", type=float, default=0.0,
-                   help="SIGSTOP the node this long mid-burst (forces losses to count)")
+    p.add_argument(
+        "--pause-s",
+        type=float,
+        default=0.0,
+        help="SIGSTOP the node this long mid-burst (forces losses to count)",
+    )
     p.add_argument("--json", type=Path, help="write the raw numbers here")
-    p.add_argument("--publish", nargs=2, type=float, metavar=("SECONDS", "RATE_HZ"),
-                   help=argparse.SUPPRESS)              # publisher process mode
+    p.add_argument(
+        "--publish", nargs=2, type=float, metavar=("SECONDS", "RATE_HZ"), help=argparse.SUPPRESS
+    )  # publisher process mode
     a = p.parse_args(argv)
     if a.publish:
         print(json.dumps(publish(*a.publish)))
@@ -202,10 +252,18 @@ def main(argv: list[str] | None = None) -> int:
         for cond in a.conditions.split(","):
             with tempfile.TemporaryDirectory(prefix="bench_recording_") as work:
                 results[f"{code}:{cond}"] = run(
-                    a.seconds, a.rate_hz, cond == "hog", tree, Path(work),
-                    a.queue_depth if code == "new" else None, a.pause_s)
-    print(f"3 topics x {a.rate_hz:g} Hz x {a.seconds:g} s from another process "
-          f"({os.cpu_count()} CPUs, load {os.getloadavg()[0]:.2f}, {time.time() - t0:.0f} s)")
+                    a.seconds,
+                    a.rate_hz,
+                    cond == "hog",
+                    tree,
+                    Path(work),
+                    a.queue_depth if code == "new" else None,
+                    a.pause_s,
+                )
+    print(
+        f"3 topics x {a.rate_hz:g} Hz x {a.seconds:g} s from another process "
+        f"({os.cpu_count()} CPUs, load {os.getloadavg()[0]:.2f}, {time.time() - t0:.0f} s)"
+    )
     print(table(results))
     if a.json:
         a.json.write_text(json.dumps(results, indent=1))

@@ -48,8 +48,8 @@ from pathlib import Path
 
 import numpy as np
 
-from leadscrew_ros.review.replay import ReplaySettings
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
+from leadscrew_ros.review.replay import ReplaySettings
 
 TARGET_X_REAL_TIME = 100.0
 TARGET_RSS_RATIO = 1.2
@@ -123,10 +123,14 @@ def size_mb(path: Path) -> float:
 
 
 def environment() -> dict:
-    return dict(date=datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
-                python=platform.python_version(), numpy=np.__version__,
-                cpu_count=os.cpu_count(), machine=platform.machine(),
-                load_avg_1min_start=os.getloadavg()[0])
+    return dict(
+        date=datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
+        python=platform.python_version(),
+        numpy=np.__version__,
+        cpu_count=os.cpu_count(),
+        machine=platform.machine(),
+        load_avg_1min_start=os.getloadavg()[0],
+    )
 
 
 CASES = {
@@ -139,20 +143,33 @@ def cycle_of(case: str, args: argparse.Namespace) -> DutyCycle:
     """The generated log of `case`."""
     if case == "duty":
         return DutyCycle(duration_s=args.hours * 3600.0, rate_hz=args.rate)
-    return DutyCycle(duration_s=args.minutes[0] * 60.0, rate_hz=args.rate, rest_s=0.0,
-                     nut_position_topic=True)
+    return DutyCycle(
+        duration_s=args.minutes[0] * 60.0, rate_hz=args.rate, rest_s=0.0, nut_position_topic=True
+    )
 
 
-def run_replay(bag: Path, cycle: DutyCycle, workers: int, src: str | None,
-               report: bool) -> dict:
+def run_replay(bag: Path, cycle: DutyCycle, workers: int, src: str | None, report: bool) -> dict:
     """One replay of `bag` in a fresh child process (the package of `src` if given)."""
-    env = dict(os.environ)        # the child runs in `out`: `-c` puts its cwd first on the path
+    env = dict(os.environ)  # the child runs in `out`: `-c` puts its cwd first on the path
     if src:
         env["PYTHONPATH"] = str(Path(src).resolve())
     with tempfile.TemporaryDirectory(prefix="bench_replay_") as out:
-        done = subprocess.run([sys.executable, "-c", _THROUGHPUT_CHILD, str(bag), out,
-                               str(workers), cycle.joint_name, "1" if report else "0"],
-                              env=env, cwd=out, capture_output=True, text=True)
+        done = subprocess.run(
+            [
+                sys.executable,
+                "-c",
+                _THROUGHPUT_CHILD,
+                str(bag),
+                out,
+                str(workers),
+                cycle.joint_name,
+                "1" if report else "0",
+            ],
+            env=env,
+            cwd=out,
+            capture_output=True,
+            text=True,
+        )
     if done.returncode:
         raise SystemExit(f"replay of {bag} failed:\n{done.stderr[-3000:]}")
     return json.loads(done.stdout.splitlines()[-1])
@@ -160,9 +177,14 @@ def run_replay(bag: Path, cycle: DutyCycle, workers: int, src: str | None,
 
 def table(res: dict) -> str:
     """One row per case and package: medians over the rounds."""
-    env, head = res["env"], ("| log | package | messages | predictions | annotated MCAP | "
-                             "wall | x real time | CPU-s per log hour (replaying process "
-                             "+ workers) |\n|---|---|---:|---:|---:|---:|---:|---:|")
+    env, head = (
+        res["env"],
+        (
+            "| log | package | messages | predictions | annotated MCAP | "
+            "wall | x real time | CPU-s per log hour (replaying process "
+            "+ workers) |\n|---|---|---:|---:|---:|---:|---:|---:|"
+        ),
+    )
     lines = [head]
     for case, c in res["cases"].items():
         for label, runs in c["runs"].items():
@@ -179,12 +201,15 @@ def table(res: dict) -> str:
                 f"{runs[0]['annotated_mb']:.1f} MB | {wall:.1f} s | **{ratio:.0f}×** "
                 f"({'met' if ratio >= TARGET_X_REAL_TIME else 'MISSED'}) | "
                 f"{cpu * per_hour:.0f} s ({main * per_hour:.0f} + "
-                f"{(cpu - main) * per_hour:.0f}) |")
-    envline = (f"{env['date']} · Python {env['python']} · numpy {env['numpy']} · "
-               f"{env['cpu_count']} CPUs ({env['machine']}) · load avg "
-               f"{env['load_avg_1min_start']:.2f} → {env['load_avg_1min_end']:.2f} · "
-               f"{res['workers']} prediction worker(s) · median of {res['rounds']} round(s), "
-               f"packages interleaved · target ≥ {TARGET_X_REAL_TIME:g}× real time")
+                f"{(cpu - main) * per_hour:.0f}) |"
+            )
+    envline = (
+        f"{env['date']} · Python {env['python']} · numpy {env['numpy']} · "
+        f"{env['cpu_count']} CPUs ({env['machine']}) · load avg "
+        f"{env['load_avg_1min_start']:.2f} → {env['load_avg_1min_end']:.2f} · "
+        f"{res['workers']} prediction worker(s) · median of {res['rounds']} round(s), "
+        f"packages interleaved · target ≥ {TARGET_X_REAL_TIME:g}× real time"
+    )
     return f"{lines[0]}\n" + "\n".join(lines[1:]) + f"\n\n{envline}"
 
 
@@ -194,9 +219,12 @@ def solve_floor_us(rounds: int = 5, loops: int = 20) -> float:
     band: what a replay cannot go below without skipping predictions."""
     from leadscrew_ros.model import SqueakModel
     from leadscrew_ros.model.physics.stability import eig_both
+
     model = SqueakModel()
-    mats = [model.state_matrix(s, f) for s, f in zip(np.linspace(5.0, 100.0, 16),
-                                                      np.linspace(50.0, 400.0, 16), strict=True)]
+    mats = [
+        model.state_matrix(s, f)
+        for s, f in zip(np.linspace(5.0, 100.0, 16), np.linspace(50.0, 400.0, 16), strict=True)
+    ]
     times = []
     for _ in range(rounds):
         t0 = time.perf_counter()
@@ -210,41 +238,57 @@ def solve_floor_us(rounds: int = 5, loops: int = 20) -> float:
 def floor_lines(res: dict, solve_us: float) -> str:
     """Per log: x real time if both cores did nothing but the predictions' eigen-solves."""
     cores = min(os.cpu_count() or 1, 2)
-    lines = [f"Floor (this run): one eigen-solve with left and right vectors takes {solve_us:.0f}"
-             f" us here; with {cores} cores doing nothing else a replay could reach at most"]
+    lines = [
+        f"Floor (this run): one eigen-solve with left and right vectors takes {solve_us:.0f}"
+        f" us here; with {cores} cores doing nothing else a replay could reach at most"
+    ]
     for case, c in res["cases"].items():
         r = next(iter(c["runs"].values()))[0]["summary"]
         cpu_s = r["predictions"] * solve_us * 1e-6
-        lines.append(f"- {CASES[case]}: {r['predictions']:,} solves = {cpu_s:.1f} CPU-s for "
-                     f"{r['duration_s']:.0f} s of log: "
-                     f"**{r['duration_s'] / (cpu_s / cores):.0f}× real time**")
+        lines.append(
+            f"- {CASES[case]}: {r['predictions']:,} solves = {cpu_s:.1f} CPU-s for "
+            f"{r['duration_s']:.0f} s of log: "
+            f"**{r['duration_s'] / (cpu_s / cores):.0f}× real time**"
+        )
     return "\n".join(lines)
 
 
 def peak_rss(bag: Path, workers: int, src: str | None) -> dict:
     """Replay + report of `bag` in a fresh child process: its peak memory and wall time."""
-    env = dict(os.environ)        # the child runs in `out`: `-c` puts its cwd first on the path
+    env = dict(os.environ)  # the child runs in `out`: `-c` puts its cwd first on the path
     if src:
         env["PYTHONPATH"] = str(Path(src).resolve())
     with tempfile.TemporaryDirectory(prefix="bench_replay_rss_") as out:
-        done = subprocess.run([sys.executable, "-c", _CHILD, str(bag), out, str(workers)],
-                              env=env, cwd=out, capture_output=True, text=True)
+        done = subprocess.run(
+            [sys.executable, "-c", _CHILD, str(bag), out, str(workers)],
+            env=env,
+            cwd=out,
+            capture_output=True,
+            text=True,
+        )
     if done.returncode:
         raise SystemExit(f"replay of {bag} failed:\n{done.stderr[-3000:]}")
     return json.loads(done.stdout.splitlines()[-1])
 
 
 def rss_table(rows: list[dict], src: str | None) -> str:
-    lines = ["| log | messages | file size | peak RSS (replaying process) | "
-             "peak RSS (a worker) | wall (replay + report) |", "|---|---:|---:|---:|---:|---:|"]
+    lines = [
+        "| log | messages | file size | peak RSS (replaying process) | "
+        "peak RSS (a worker) | wall (replay + report) |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
     for r in rows:
-        lines.append(f"| {r['minutes']:g} min at {r['rate_hz']:g} Hz | {r['messages']:,} | "
-                     f"{r['log_mb']:.0f} MB | {r['peak_mb']:.0f} MB | "
-                     f"{r['workers_peak_mb']:.0f} MB | {r['wall_s']:.0f} s |")
+        lines.append(
+            f"| {r['minutes']:g} min at {r['rate_hz']:g} Hz | {r['messages']:,} | "
+            f"{r['log_mb']:.0f} MB | {r['peak_mb']:.0f} MB | "
+            f"{r['workers_peak_mb']:.0f} MB | {r['wall_s']:.0f} s |"
+        )
     ratio = rows[-1]["peak_mb"] / rows[0]["peak_mb"]
-    lines.append(f"\npeak ratio longest / shortest: **{ratio:.2f}** (target ≤ "
-                 f"{TARGET_RSS_RATIO:g}: {'met' if ratio <= TARGET_RSS_RATIO else 'MISSED'}); "
-                 f"package from {src or 'this checkout'}")
+    lines.append(
+        f"\npeak ratio longest / shortest: **{ratio:.2f}** (target ≤ "
+        f"{TARGET_RSS_RATIO:g}: {'met' if ratio <= TARGET_RSS_RATIO else 'MISSED'}); "
+        f"package from {src or 'this checkout'}"
+    )
     return "\n".join(lines)
 
 
@@ -265,35 +309,58 @@ def rss_main(args: argparse.Namespace) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES),
-                    help="logs to replay (default: both)")
+    ap.add_argument(
+        "--cases",
+        nargs="+",
+        choices=list(CASES),
+        default=list(CASES),
+        help="logs to replay (default: both)",
+    )
     ap.add_argument("--hours", type=float, default=1.0, help="duty log duration (default 1 h)")
     ap.add_argument("--rate", type=float, default=100.0, help="sample rate [Hz] (default 100)")
-    ap.add_argument("--workers", type=int, default=ReplaySettings().workers,
-                    help="prediction worker processes (default %(default)s; 0: one process)")
+    ap.add_argument(
+        "--workers",
+        type=int,
+        default=ReplaySettings().workers,
+        help="prediction worker processes (default %(default)s; 0: one process)",
+    )
     ap.add_argument("--rounds", type=int, default=1, help="replays per case and package")
     ap.add_argument("--report", action="store_true", help="also time the PNG report")
     ap.add_argument("--regenerate", action="store_true", help="rebuild the cached log")
     ap.add_argument("--json", metavar="OUT.json", help="also write the raw numbers here")
-    ap.add_argument("--rss", action="store_true",
-                    help="peak memory of replay + report vs log length instead")
-    ap.add_argument("--minutes", type=float, nargs="+", default=None,
-                    help="dense log duration (default 10) / log lengths of --rss (10 60)")
-    ap.add_argument("--src", metavar="DIR",
-                    help="also replay with the package of this checkout (--rss: instead)")
+    ap.add_argument(
+        "--rss", action="store_true", help="peak memory of replay + report vs log length instead"
+    )
+    ap.add_argument(
+        "--minutes",
+        type=float,
+        nargs="+",
+        default=None,
+        help="dense log duration (default 10) / log lengths of --rss (10 60)",
+    )
+    ap.add_argument(
+        "--src",
+        metavar="DIR",
+        help="also replay with the package of this checkout (--rss: instead)",
+    )
     args = ap.parse_args(argv)
     if args.rss:
         args.minutes = args.minutes or [10.0, 60.0]
         return rss_main(args)
     args.minutes = args.minutes or [10.0]
     packages = {"this checkout": None, **({args.src: args.src} if args.src else {})}
-    res = dict(env=environment(), rate_hz=args.rate, workers=args.workers, rounds=args.rounds,
-               cases={})
+    res = dict(
+        env=environment(), rate_hz=args.rate, workers=args.workers, rounds=args.rounds, cases={}
+    )
     for case in args.cases:
         cycle = cycle_of(case, args)
         bag, generate_s = cached_log(cycle, args.regenerate)
-        res["cases"][case] = dict(duration_s=cycle.duration_s, generate_s=generate_s,
-                                  log_mb=size_mb(bag), runs={label: [] for label in packages})
+        res["cases"][case] = dict(
+            duration_s=cycle.duration_s,
+            generate_s=generate_s,
+            log_mb=size_mb(bag),
+            runs={label: [] for label in packages},
+        )
     for _ in range(args.rounds):
         for case in args.cases:
             cycle = cycle_of(case, args)

@@ -27,7 +27,6 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_replay import TARGET_RSS_RATIO, size_mb  # noqa: E402
-
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log  # noqa: E402
 
 # Runs in the child: the CLI in this process, a sampler thread beside it.
@@ -67,18 +66,29 @@ def cached_log(cycle: DutyCycle, split_s: float) -> Path:
     return write_log(cycle, root, split_duration_s=split_s)
 
 
-def replay_peak(bag: Path, joint: str, report: bool, src: str | None = None,
-                extra: tuple[str, ...] = ()) -> dict:
+def replay_peak(
+    bag: Path, joint: str, report: bool, src: str | None = None, extra: tuple[str, ...] = ()
+) -> dict:
     """`leadscrew-squeak replay BAG` (`--no-report` unless `report`) in a fresh child process:
     its peak memory (MB) as printed by `CHILD`."""
-    env = dict(os.environ)        # the child runs in `out`: `-c` puts its cwd first on the path
+    env = dict(os.environ)  # the child runs in `out`: `-c` puts its cwd first on the path
     if src:
         env["PYTHONPATH"] = str(Path(src).resolve())
     with tempfile.TemporaryDirectory(prefix="bench_replay_rss_") as out:
-        argv = ["replay", str(bag), "--out", out, "--joint-name", joint, "--quiet",
-                *(() if report else ("--no-report",)), *extra]
-        done = subprocess.run([sys.executable, "-c", CHILD, *argv], env=env, cwd=out,
-                              capture_output=True, text=True)
+        argv = [
+            "replay",
+            str(bag),
+            "--out",
+            out,
+            "--joint-name",
+            joint,
+            "--quiet",
+            *(() if report else ("--no-report",)),
+            *extra,
+        ]
+        done = subprocess.run(
+            [sys.executable, "-c", CHILD, *argv], env=env, cwd=out, capture_output=True, text=True
+        )
     if done.returncode:
         raise SystemExit(f"replay of {bag} failed:\n{done.stderr[-3000:]}")
     res = json.loads(done.stdout.splitlines()[-1])
@@ -89,11 +99,16 @@ def replay_peak(bag: Path, joint: str, report: bool, src: str | None = None,
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--minutes", type=float, nargs="+", default=[10.0, 60.0],
-                    help="log lengths (default 10 60)")
+    ap.add_argument(
+        "--minutes", type=float, nargs="+", default=[10.0, 60.0], help="log lengths (default 10 60)"
+    )
     ap.add_argument("--rate", type=float, default=200.0, help="sample rate [Hz] (default 200)")
-    ap.add_argument("--split-s", type=float, default=0.0,
-                    help="split the logs into files of this duration [s] (default 0: one file)")
+    ap.add_argument(
+        "--split-s",
+        type=float,
+        default=0.0,
+        help="split the logs into files of this duration [s] (default 0: one file)",
+    )
     ap.add_argument("--src", metavar="DIR", help="run the package of this checkout instead")
     args = ap.parse_args(argv)
     rows = []
@@ -104,23 +119,34 @@ def main(argv: list[str] | None = None) -> int:
             r = replay_peak(bag, cycle.joint_name, report, args.src)
             r.update(minutes=minutes, report=report, log_mb=size_mb(bag))
             rows.append(r)
-            print(f"{minutes:g} min {'with' if report else 'without'} report: "
-                  f"{r['peak_mb']:.0f} MB", file=sys.stderr, flush=True)
-    print("| log | report | file size | peak RSS (VmHWM) | peak RssFile | peak RssAnon | "
-          "peak RSS (a worker) |\n|---|---|---:|---:|---:|---:|---:|")
+            print(
+                f"{minutes:g} min {'with' if report else 'without'} report: {r['peak_mb']:.0f} MB",
+                file=sys.stderr,
+                flush=True,
+            )
+    print(
+        "| log | report | file size | peak RSS (VmHWM) | peak RssFile | peak RssAnon | "
+        "peak RSS (a worker) |\n|---|---|---:|---:|---:|---:|---:|"
+    )
     for r in rows:
-        print(f"| {r['minutes']:g} min at {args.rate:g} Hz | {'yes' if r['report'] else 'no'} | "
-              f"{r['log_mb']:.0f} MB | {r['peak_mb']:.0f} MB | {r['rss_file_mb']:.0f} MB | "
-              f"{r['rss_anon_mb']:.0f} MB | {r['workers_peak_mb']:.0f} MB |")
+        print(
+            f"| {r['minutes']:g} min at {args.rate:g} Hz | {'yes' if r['report'] else 'no'} | "
+            f"{r['log_mb']:.0f} MB | {r['peak_mb']:.0f} MB | {r['rss_file_mb']:.0f} MB | "
+            f"{r['rss_anon_mb']:.0f} MB | {r['workers_peak_mb']:.0f} MB |"
+        )
     print()
     for report in (True, False):
         way = [r for r in rows if r["report"] == report]
         ratio = way[-1]["peak_mb"] / way[0]["peak_mb"]
-        print(f"{'replay' if report else 'replay --no-report'}: peak ratio "
-              f"{way[-1]['minutes']:g} / {way[0]['minutes']:g} min = **{ratio:.2f}** (target <= "
-              f"{TARGET_RSS_RATIO:g}: {'met' if ratio <= TARGET_RSS_RATIO else 'MISSED'})")
-    print(f"package from {args.src or 'this checkout'}; logs split every {args.split_s:g} s "
-          f"(0: one file); load avg {os.getloadavg()[0]:.2f}")
+        print(
+            f"{'replay' if report else 'replay --no-report'}: peak ratio "
+            f"{way[-1]['minutes']:g} / {way[0]['minutes']:g} min = **{ratio:.2f}** (target <= "
+            f"{TARGET_RSS_RATIO:g}: {'met' if ratio <= TARGET_RSS_RATIO else 'MISSED'})"
+        )
+    print(
+        f"package from {args.src or 'this checkout'}; logs split every {args.split_s:g} s "
+        f"(0: one file); load avg {os.getloadavg()[0]:.2f}"
+    )
     return 0
 
 

@@ -27,15 +27,14 @@ import bench_contact
 import bench_model
 import bench_probability
 import bench_replay
-
 from leadscrew_ros.bag.synthetic import DutyCycle
 from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.model.uncertainty.scatter import Scatter
 from leadscrew_ros.review.replay import ReplaySettings, replay
 from leadscrew_ros.review.timeline import InputSettings
 
-MAP_GRID = 48                # speed x load points per side (the full benchmark: 200)
-REPLAY_LOG_S = 120.0         # the duty-cycle log of bench_replay.py, shortened
+MAP_GRID = 48  # speed x load points per side (the full benchmark: 200)
+REPLAY_LOG_S = 120.0  # the duty-cycle log of bench_replay.py, shortened
 REPLAY_ROUNDS = 1
 
 
@@ -49,8 +48,14 @@ def replay_ratio(duration_s: float, rounds: int) -> float:
     for _ in range(rounds):
         with tempfile.TemporaryDirectory(prefix="bench_quick_") as out:
             t0 = time.perf_counter()
-            replay(bag, model, out, ReplaySettings(InputSettings(joint_name=cycle.joint_name),
-                                                   workers=0, progress=False))
+            replay(
+                bag,
+                model,
+                out,
+                ReplaySettings(
+                    InputSettings(joint_name=cycle.joint_name), workers=0, progress=False
+                ),
+            )
             walls.append(time.perf_counter() - t0)
     return duration_s / median(walls)
 
@@ -60,32 +65,58 @@ def rows() -> list[tuple[str, str, float, str, bool | None]]:
     measurement."""
     model = SqueakModel()
     point = bench_model.bench_point(model, rounds=9, loops=2)
-    mp = bench_model.bench_map(model.with_scatter(Scatter({})), MAP_GRID, rounds=3,
-                               naive_points=4)
+    mp = bench_model.bench_map(model.with_scatter(Scatter({})), MAP_GRID, rounds=3, naive_points=4)
     _, _, live = bench_probability.live_update_ratio(SqueakModel(), rounds=5, repeat=50)
     contact = bench_contact.run(6, rounds=5, calls=30)
     x_real_time = replay_ratio(REPLAY_LOG_S, REPLAY_ROUNDS)
     le = "≤ {:g}×".format
     return [
-        ("`predict` without scatter / bare `eig`", "bench_model.py 1", point["ratio"],
-         le(bench_model.TARGET_POINT_RATIO), point["ratio"] <= bench_model.TARGET_POINT_RATIO),
-        ("live update with P(squeak) (`predict`) / bare `eig`", "bench_probability.py", live,
-         le(bench_probability.TARGET_LIVE_RATIO), live <= bench_probability.TARGET_LIVE_RATIO),
-        (f"`growth_field` {MAP_GRID}×{MAP_GRID} map / bare batched `eigvals`",
-         "bench_model.py 2", mp["ratio"], le(bench_model.TARGET_MAP_RATIO),
-         mp["ratio"] <= bench_model.TARGET_MAP_RATIO),
-        (f"`stability_map` {MAP_GRID}×{MAP_GRID} (grid + refined boundary, "
-         f"{mp['boundary_points']} points) / bare batched `eigvals` (the target is for "
-         "200×200: a small grid has more boundary per point)", "bench_model.py 2",
-         mp["refined_ratio"], le(bench_model.TARGET_REFINED_MAP_RATIO),
-         mp["refined_ratio"] <= bench_model.TARGET_REFINED_MAP_RATIO),
-        ("new nut position (model rebuild) / bare `eig`", "bench_contact.py",
-         contact["rebuild_ratio"], le(bench_contact.TARGET),
-         contact["rebuild_ratio"] <= bench_contact.TARGET),
-        (f"replay of a {REPLAY_LOG_S:g} s duty-cycle log, one process: real time / wall time "
-         f"(opening and closing the bags dominate so short a log; the target ≥ "
-         f"{bench_replay.TARGET_X_REAL_TIME:g}× is for the 1 h log)", "bench_replay.py",
-         x_real_time, "–", None),
+        (
+            "`predict` without scatter / bare `eig`",
+            "bench_model.py 1",
+            point["ratio"],
+            le(bench_model.TARGET_POINT_RATIO),
+            point["ratio"] <= bench_model.TARGET_POINT_RATIO,
+        ),
+        (
+            "live update with P(squeak) (`predict`) / bare `eig`",
+            "bench_probability.py",
+            live,
+            le(bench_probability.TARGET_LIVE_RATIO),
+            live <= bench_probability.TARGET_LIVE_RATIO,
+        ),
+        (
+            f"`growth_field` {MAP_GRID}×{MAP_GRID} map / bare batched `eigvals`",
+            "bench_model.py 2",
+            mp["ratio"],
+            le(bench_model.TARGET_MAP_RATIO),
+            mp["ratio"] <= bench_model.TARGET_MAP_RATIO,
+        ),
+        (
+            f"`stability_map` {MAP_GRID}×{MAP_GRID} (grid + refined boundary, "
+            f"{mp['boundary_points']} points) / bare batched `eigvals` (the target is for "
+            "200×200: a small grid has more boundary per point)",
+            "bench_model.py 2",
+            mp["refined_ratio"],
+            le(bench_model.TARGET_REFINED_MAP_RATIO),
+            mp["refined_ratio"] <= bench_model.TARGET_REFINED_MAP_RATIO,
+        ),
+        (
+            "new nut position (model rebuild) / bare `eig`",
+            "bench_contact.py",
+            contact["rebuild_ratio"],
+            le(bench_contact.TARGET),
+            contact["rebuild_ratio"] <= bench_contact.TARGET,
+        ),
+        (
+            f"replay of a {REPLAY_LOG_S:g} s duty-cycle log, one process: real time / wall time "
+            f"(opening and closing the bags dominate so short a log; the target ≥ "
+            f"{bench_replay.TARGET_X_REAL_TIME:g}× is for the 1 h log)",
+            "bench_replay.py",
+            x_real_time,
+            "–",
+            None,
+        ),
     ]
 
 
@@ -96,8 +127,10 @@ def main() -> int:
     for what, full, ratio, target, met in table:
         verdict = "" if met is None else " met" if met else " MISSED"
         print(f"| {what} | {full} | {ratio:.2f}× | {target}{verdict} |")
-    print(f"\nquick mode (ratios from this run; no assertions) · {os.cpu_count()} CPUs · load "
-          f"avg {load0:.2f} → {os.getloadavg()[0]:.2f} · {time.perf_counter() - t0:.1f} s")
+    print(
+        f"\nquick mode (ratios from this run; no assertions) · {os.cpu_count()} CPUs · load "
+        f"avg {load0:.2f} → {os.getloadavg()[0]:.2f} · {time.perf_counter() - t0:.1f} s"
+    )
     return 0
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 DOC = Path(__file__).resolve().parent
 ROOT = DOC.parent
-sys.path.insert(0, str(ROOT))            # the package and tools/ from this checkout
+sys.path.insert(0, str(ROOT))  # the package and tools/ from this checkout
 
 project = "leadscrew_ros"
 author = "leadscrew_ros maintainers"
@@ -46,8 +46,8 @@ autosummary_generate = True
 autosummary_imported_members = False
 autodoc_default_options = {"members": True, "show-inheritance": True, "ignore-module-all": True}
 autodoc_member_order = "bysource"
-autodoc_typehints = "none"               # the numpydoc Parameters sections carry the types
-numpydoc_show_class_members = False      # autodoc lists the members; no second table
+autodoc_typehints = "none"  # the numpydoc Parameters sections carry the types
+numpydoc_show_class_members = False  # autodoc lists the members; no second table
 numpydoc_class_members_toctree = False
 numpydoc_validation_checks: set[str] = set()
 
@@ -64,7 +64,9 @@ html_title = f"leadscrew_ros {release}"
 
 def _write_tables(app) -> None:
     """Render the parameter and topic tables into doc/reference/_generated/ (builder-inited)."""
-    spec = importlib.util.spec_from_file_location("param_tables", ROOT / "tools" / "param_tables.py")
+    spec = importlib.util.spec_from_file_location(
+        "param_tables", ROOT / "tools" / "param_tables.py"
+    )
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     module.write(DOC / "reference" / "_generated")
@@ -79,14 +81,18 @@ def _plain_bars(app, what, name, obj, options, lines) -> None:
     a table's row or border stays as it is)."""
     for i, line in enumerate(lines):
         bare = line.strip()
-        if "|" not in line or bare.startswith(("+-", "+=")) or (
-                bare.startswith("| ") and bare.endswith(" |")):
+        if (
+            "|" not in line
+            or bare.startswith(("+-", "+="))
+            or (bare.startswith("| ") and bare.endswith(" |"))
+        ):
             continue
         parts = line.split("`")
         lines[i] = "`".join(p if k % 2 else _BAR.sub(r"\\|", p) for k, p in enumerate(parts))
 
 
 def setup(app):
+    """Sphinx extension entry point: tables before the build, plain bars in docstrings."""
     app.connect("builder-inited", _write_tables)
     app.connect("autodoc-process-docstring", _plain_bars)
     return {"parallel_read_safe": True}

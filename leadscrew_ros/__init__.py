@@ -17,17 +17,19 @@ def _version() -> str:
     xml = Path(__file__).resolve().parent.parent / "package.xml"
     try:
         root = ET.parse(xml).getroot()
-        if root.findtext("name") == __name__ and root.findtext("version"):
-            return root.findtext("version").strip()
+        version_text = root.findtext("version")
+        if root.findtext("name") == __name__ and version_text:
+            return version_text.strip()
     except (OSError, ET.ParseError):
         pass
     from importlib.metadata import PackageNotFoundError, version
+
     try:
         return version(__name__)
-    except PackageNotFoundError:       # neither a source tree nor installed: a copied directory
+    except PackageNotFoundError:  # neither a source tree nor installed: a copied directory
         return "0+unknown"
 
 
 __version__ = _version()
 
-__all__ = ["__version__"]      # the layers are sub-packages: model, live, bag, review, ros, cli
+__all__ = ["__version__"]  # the layers are sub-packages: model, live, bag, review, ros, cli

@@ -43,8 +43,9 @@ def _hung(item, after_s: float) -> None:
             capman.suspend_global_capture(item)
         terminal = item.config.get_terminal_writer()
         terminal.sep("+", f"HUNG: {item.nodeid} still running after {after_s:.0f} s")
-        terminal.line("its timeout could not interrupt it (stuck in C?); stacks follow, "
-                      "ending the session")
+        terminal.line(
+            "its timeout could not interrupt it (stuck in C?); stacks follow, ending the session"
+        )
         terminal.flush()
         faulthandler.dump_traceback(file=sys.stderr, all_threads=True)
     finally:
@@ -54,7 +55,7 @@ def _hung(item, after_s: float) -> None:
 
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_protocol(item, nextitem):
-    limit = getattr(item.config, "_env_timeout", None)       # set by pytest-timeout
+    limit = getattr(item.config, "_env_timeout", None)  # set by pytest-timeout
     marker = item.get_closest_marker("timeout")
     if marker is not None:
         limit = marker.kwargs.get("timeout", marker.args[0] if marker.args else limit)

@@ -54,20 +54,34 @@ def blocked() -> list[str]:
 
 def run(work: Path) -> dict:
     log = write_log(DutyCycle(duration_s=20.0, rest_s=4.0), work / "logs")
-    report = {"package": str(Path(sys.modules["leadscrew_ros"].__file__).parent),
-              "version": __version__, "log": str(log),
-              "definition": msgdefs.definition("std_msgs/msg/Float64MultiArray"),
-              "definition_prefix": next(str(p) for p in msgdefs._prefixes() if (
-                  p / "share" / "std_msgs" / "msg" / "Float64MultiArray.msg").is_file()),
-              "blocked_by_the_log": blocked(), "commands": []}
+    report = {
+        "package": str(Path(sys.modules["leadscrew_ros"].__file__).parent),
+        "version": __version__,
+        "log": str(log),
+        "definition": msgdefs.definition("std_msgs/msg/Float64MultiArray"),
+        "definition_prefix": next(
+            str(p)
+            for p in msgdefs._prefixes()
+            if (p / "share" / "std_msgs" / "msg" / "Float64MultiArray.msg").is_file()
+        ),
+        "blocked_by_the_log": blocked(),
+        "commands": [],
+    }
     for argv in commands(work, log):
         out, err = io.StringIO(), io.StringIO()
         t0 = time.perf_counter()
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             code = main(argv)
-        report["commands"].append({"argv": argv, "code": code, "stdout": out.getvalue(),
-                                   "stderr": err.getvalue(), "blocked": blocked(),
-                                   "seconds": round(time.perf_counter() - t0, 2)})
+        report["commands"].append(
+            {
+                "argv": argv,
+                "code": code,
+                "stdout": out.getvalue(),
+                "stderr": err.getvalue(),
+                "blocked": blocked(),
+                "seconds": round(time.perf_counter() - t0, 2),
+            }
+        )
     return report
 
 

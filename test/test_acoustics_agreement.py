@@ -26,17 +26,21 @@ def test_seconds_recall_precision_brier_by_hand():
     """Heard 2-4 s; predicted squeak from 3 s to 6 s (P 0.8), silent before (P 0.1) and
     after (P 0.2); predictions at 1, 3, 6 s and a last one at 9 s: frames 1-9 s count (800)."""
     d = _detection([(2.0, 4.0)])
-    a = agreement(d, [1.0, 3.0, 6.0, 9.0], [False, True, False, False], [0.1, 0.8, 0.2, 0.2],
-                  [[], [("b1", 1010.0)], [], []])
+    a = agreement(
+        d,
+        [1.0, 3.0, 6.0, 9.0],
+        [False, True, False, False],
+        [0.1, 0.8, 0.2, 0.2],
+        [[], [("b1", 1010.0)], [], []],
+    )
     assert a.frames == 800
-    assert a.both_s == pytest.approx(1.0)              # 3-4 s
-    assert a.heard_only_s == pytest.approx(1.0)        # 2-3 s
-    assert a.predicted_only_s == pytest.approx(2.0)    # 4-6 s
-    assert a.neither_s == pytest.approx(4.0)           # 1-2 s and 6-9 s
+    assert a.both_s == pytest.approx(1.0)  # 3-4 s
+    assert a.heard_only_s == pytest.approx(1.0)  # 2-3 s
+    assert a.predicted_only_s == pytest.approx(2.0)  # 4-6 s
+    assert a.neither_s == pytest.approx(4.0)  # 1-2 s and 6-9 s
     assert a.recall == pytest.approx(0.5) and a.precision == pytest.approx(1 / 3)
     # 1-2 s P .1 silent, 2-3 s P .1 heard, 3-4 s P .8 heard, 4-6 s P .8 silent, 6-9 s P .2
-    brier = (100 * 0.1 ** 2 + 100 * 0.9 ** 2 + 100 * 0.2 ** 2 + 200 * 0.8 ** 2
-             + 300 * 0.2 ** 2) / 800
+    brier = (100 * 0.1**2 + 100 * 0.9**2 + 100 * 0.2**2 + 200 * 0.8**2 + 300 * 0.2**2) / 800
     assert a.brier == pytest.approx(brier)
     (m,) = a.frequency_match
     assert (m.label, m.predicted_hz, m.matched) == ("b1", 1010.0, True)
@@ -48,8 +52,9 @@ def test_zero_order_hold_and_the_span_that_counts():
     """Sound 0-10 s, predictions 5-8 s (valid until 8.5 s): only 5-8.5 s counts; the hold keeps
     the 7 s verdict to 8.5 s."""
     d = _detection([(0.0, 6.0)])
-    a = agreement(d, [5.0, 7.0], [True, True], [1.0, 1.0], [[("t1", 2000.0)], []],
-                  valid_until_s=8.5)
+    a = agreement(
+        d, [5.0, 7.0], [True, True], [1.0, 1.0], [[("t1", 2000.0)], []], valid_until_s=8.5
+    )
     assert a.frames == 350
     assert a.both_s == pytest.approx(1.0) and a.predicted_only_s == pytest.approx(2.5)
     assert a.heard_only_s == 0.0 and a.neither_s == 0.0
@@ -75,7 +80,7 @@ def test_nearest_mode_of_the_predictions_during_the_episode():
     d = _detection([(2.0, 3.0)], hz=1500.0)
     modes = [[("a", 900.0)], [("b", 1480.0), ("c", 3000.0)], [("d", 1501.0)], [("e", 1500.0)]]
     a = agreement(d, [0.0, 2.5, 2.9, 3.5], [True] * 4, [0.9] * 4, modes)
-    (m,) = a.frequency_match              # a (in force at 2 s), b, d; e comes after the episode
+    (m,) = a.frequency_match  # a (in force at 2 s), b, d; e comes after the episode
     assert m.label == "d" and m.matched
 
 

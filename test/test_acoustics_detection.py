@@ -30,17 +30,19 @@ def gated_tone(f, excess_db, seed, dur=1.5, on=(0.5, 1.0)):
     t = np.arange(n) / FS
     f1, f2 = critical_band(f)
     tnr = float(tnr_limit_db(f)) + excess_db
-    amp = np.sqrt(2 * SIGMA ** 2 * (f2 - f1) / (FS / 2) * 10 ** (tnr / 10))
+    amp = np.sqrt(2 * SIGMA**2 * (f2 - f1) / (FS / 2) * 10 ** (tnr / 10))
     gate = (t >= on[0]) & (t < on[1])
-    return (rng.normal(0.0, SIGMA, n) + amp * gate * np.sin(2 * np.pi * f * t)).astype(
-        np.float32)
+    return (rng.normal(0.0, SIGMA, n) + amp * gate * np.sin(2 * np.pi * f * t)).astype(np.float32)
 
 
 def _found(d, f, on=(0.5, 1.0)):
     """The detection is exactly one episode: onset and end within 50 ms, frequency 1 %."""
-    return (len(d.episodes) == 1 and abs(d.episodes[0].start_s - on[0]) <= 0.05
-            and abs(d.episodes[0].end_s - on[1]) <= 0.05
-            and abs(d.episodes[0].frequency_hz / f - 1) <= 0.01)
+    return (
+        len(d.episodes) == 1
+        and abs(d.episodes[0].start_s - on[0]) <= 0.05
+        and abs(d.episodes[0].end_s - on[1]) <= 0.05
+        and abs(d.episodes[0].frequency_hz / f - 1) <= 0.01
+    )
 
 
 @pytest.mark.parametrize("f", [224.0, 898.0, 2653.0])
@@ -61,26 +63,40 @@ def test_every_tone_found_down_to_the_stated_tnr(f):
         assert np.nanmedian(d.frequency_hz) == pytest.approx(f, rel=0.01)
     for seed in range(10):
         eps = detect(gated_tone(f, -3.0, seed), FS).episodes
-        assert all(abs(e.frequency_hz / f - 1) <= 0.01 and e.start_s >= 0.45 and
-                   e.end_s <= 1.05 for e in eps)
+        assert all(
+            abs(e.frequency_hz / f - 1) <= 0.01 and e.start_s >= 0.45 and e.end_s <= 1.05
+            for e in eps
+        )
 
 
 def test_strong_tone_onset_and_level():
     d = detect(gated_tone(898.0, 30.0, 0), FS)
     (ep,) = d.episodes
     assert ep.start_s == pytest.approx(0.5, abs=0.05) and ep.end_s == pytest.approx(1.0, abs=0.05)
-    amp = np.sqrt(2 * SIGMA ** 2 * np.diff(critical_band(898.0), axis=0)[0] / (FS / 2)
-                  * 10 ** ((float(tnr_limit_db(898.0)) + 30) / 10))
-    assert ep.level_db == pytest.approx(10 * np.log10(amp ** 2 / 2), abs=0.5)   # re full scale
-    assert ep.tnr_db > float(tnr_limit_db(898.0)) + 20     # Hann side lobes cap it near 33 dB
+    amp = np.sqrt(
+        2
+        * SIGMA**2
+        * np.diff(critical_band(898.0), axis=0)[0]
+        / (FS / 2)
+        * 10 ** ((float(tnr_limit_db(898.0)) + 30) / 10)
+    )
+    assert ep.level_db == pytest.approx(10 * np.log10(amp**2 / 2), abs=0.5)  # re full scale
+    assert ep.tnr_db > float(tnr_limit_db(898.0)) + 20  # Hann side lobes cap it near 33 dB
     assert ep.loudness_sone is None and d.scale == "full scale"
 
 
 def _sweep(orders, level=0.3, dur=10.0):
     t = np.linspace(0.0, dur, 301)
-    speed = np.geomspace(30.0, 700.0, t.size)            # shaft 4.8 .. 111 Hz
-    x = microphone(t, speed, np.full(t.size, np.nan), motor_orders=orders, motor_level=level,
-                   noise_level=0.003, seed=3)
+    speed = np.geomspace(30.0, 700.0, t.size)  # shaft 4.8 .. 111 Hz
+    x = microphone(
+        t,
+        speed,
+        np.full(t.size, np.nan),
+        motor_orders=orders,
+        motor_level=level,
+        noise_level=0.003,
+        seed=3,
+    )
     return t, speed, x
 
 
@@ -101,8 +117,16 @@ def test_no_episode_from_motor_orders_sweeping_through_the_band(orders):
 def test_a_squeak_among_sweeping_orders_is_kept():
     t, speed, _ = _sweep((12, 24, 37, 45))
     sq = np.where((t >= 3.0) & (t < 6.0), 1731.0, np.nan)
-    x = microphone(t, speed, sq, squeak_level=0.02, motor_orders=(12, 24, 37, 45),
-                   motor_level=0.3, noise_level=0.003, seed=3)
+    x = microphone(
+        t,
+        speed,
+        sq,
+        squeak_level=0.02,
+        motor_orders=(12, 24, 37, 45),
+        motor_level=0.3,
+        noise_level=0.003,
+        seed=3,
+    )
     d = detect(x, FS, speed_times_s=t, speed_rad_s=speed)
     assert [round(e.frequency_hz) for e in d.episodes] == [1731]
     assert d.episodes[0].start_s == pytest.approx(3.0, abs=0.05)
@@ -111,9 +135,10 @@ def test_a_squeak_among_sweeping_orders_is_kept():
 
 def test_constant_speed_low_orders_rejected_by_frequency_alone():
     t = np.linspace(0.0, 2.0, 201)
-    speed = np.full(t.size, 300.0)                     # 47.7 Hz: 143, 239, 334, 525 Hz
-    x = microphone(t, speed, np.full(t.size, np.nan), motor_orders=(3, 5, 7, 11),
-                   motor_level=0.2, seed=1)
+    speed = np.full(t.size, 300.0)  # 47.7 Hz: 143, 239, 334, 525 Hz
+    x = microphone(
+        t, speed, np.full(t.size, np.nan), motor_orders=(3, 5, 7, 11), motor_level=0.2, seed=1
+    )
     d = detect(x, FS, speed_times_s=t, speed_rad_s=speed)
     assert d.episodes == [] and {e.order for e in d.rejected} == {3, 5, 7, 11}
     assert len(detect(x, FS).episodes) >= 4
@@ -145,16 +170,17 @@ def test_clipped_signals_give_no_false_episodes():
 
 def test_bad_input_never_raises():
     x = gated_tone(898.0, 20.0, 0)
-    x[30000:30010] = np.nan                             # inside the tone: bridged
-    x[60000] = np.inf                                   # after it
+    x[30000:30010] = np.nan  # inside the tone: bridged
+    x[60000] = np.inf  # after it
     d = detect(x, FS)
     assert len(d.episodes) == 1 and d.episodes[0].start_s == pytest.approx(0.5, abs=0.05)
     assert d.episodes[0].end_s == pytest.approx(1.0, abs=0.05)
     assert [w for w in d.warnings if "non-finite" in w] == [
         "11 non-finite samples (NaN/inf) set to 0; the frames holding them are dropped "
-        "(tracks bridge one frame length of them)"]
+        "(tracks bridge one frame length of them)"
+    ]
     long_gap = gated_tone(898.0, 20.0, 0)
-    long_gap[33600:38400] = np.nan                      # 0.1 s of them: the episode splits
+    long_gap[33600:38400] = np.nan  # 0.1 s of them: the episode splits
     d = detect(long_gap, FS)
     assert len(d.episodes) == 2 and d.episodes[0].start_s == pytest.approx(0.5, abs=0.05)
     assert d.episodes[1].end_s == pytest.approx(1.0, abs=0.05)
@@ -168,7 +194,7 @@ def test_bad_input_never_raises():
     assert d.episodes == [] and d.warnings
     d = detect(["a", "b"], FS)
     assert d.episodes == [] and "not numbers" in d.warnings[0]
-    d = detect(np.stack([x, x], axis=1), FS)            # two channels: averaged
+    d = detect(np.stack([x, x], axis=1), FS)  # two channels: averaged
     assert len(d.episodes) == 1 and "2 channels averaged" in d.warnings
     for rate in (0, -48000, math.nan, math.inf, "x", 100):
         with pytest.raises(AudioError):
@@ -179,12 +205,13 @@ def test_bad_input_never_raises():
 def test_detection_is_json_safe():
     t = np.linspace(0.0, 2.0, 201)
     sq = np.where((t >= 0.5) & (t < 1.5), 3000.0, np.nan)
-    d = detect(microphone(t, np.full(t.size, 20.0), sq, squeak_level=0.02, sample_rate_hz=16000),
-               16000)
+    d = detect(
+        microphone(t, np.full(t.size, 20.0), sq, squeak_level=0.02, sample_rate_hz=16000), 16000
+    )
     assert len(d.episodes) == 1 and any("limits the analysis" in w for w in d.warnings)
     text = json.dumps(d.as_dict(), allow_nan=False)
     back = json.loads(text)
-    assert back["scale"] == "full scale" and None in back["frequency_hz"]   # nan -> None
+    assert back["scale"] == "full scale" and None in back["frequency_hz"]  # nan -> None
     assert len(back["frequency_hz"]) == len(back["heard"]) == d.frame_times_s.size
 
 
@@ -206,7 +233,7 @@ def test_detect_and_streaming_agree_frame_for_frame():
     sv = np.interp(st, t, speed)
     t0 = 12.5
     ref = detect(x, FS, t0_s=t0, speed_times_s=st + t0, speed_rad_s=sv)
-    assert len(ref.episodes) >= 2 and ref.rejected     # order 24 crosses the second one
+    assert len(ref.episodes) >= 2 and ref.rejected  # order 24 crosses the second one
     rng = np.random.default_rng(0)
     det = StreamingDetector(DetectorSettings(), FS)
     got, pos, heard_now = [], 0, []
@@ -214,7 +241,7 @@ def test_detect_and_streaming_agree_frame_for_frame():
         n = int(rng.choice([1, 17, 480, 2000, 4800, 14400]))
         a, b = pos / FS, (pos + n) / FS
         m = (st >= a) & (st < b)
-        got += det.push(x[pos:pos + n], t0 + a, sv[m], st[m] + t0)
+        got += det.push(x[pos : pos + n], t0 + a, sv[m], st[m] + t0)
         heard_now.append((t0 + b, det.heard_now, det.frequency_now_hz))
         pos += n
     got += det.flush()
@@ -241,15 +268,15 @@ def test_streaming_sample_rate_change_and_discontinuity():
     det = StreamingDetector(DetectorSettings(), FS)
     x = gated_tone(898.0, 20.0, 0, dur=1.0, on=(0.2, 1.0))
     assert det.push(x, 0.0) == [] and det.heard_now
-    eps = det.push(x[:16000], 1.0, sample_rate_hz=16000)       # new rate: the open one closes
+    eps = det.push(x[:16000], 1.0, sample_rate_hz=16000)  # new rate: the open one closes
     assert len(eps) == 1 and eps[0].end_s == pytest.approx(1.0, abs=0.05)
     assert any("sample rate changed from 48000 to 16000 Hz" in w for w in det.warnings)
     assert det.sample_rate_hz == 16000 and det.frame_len == 1600
-    det.push(np.zeros(8000), 5.0)                              # a 3 s jump
+    det.push(np.zeros(8000), 5.0)  # a 3 s jump
     assert any("discontinuity" in w for w in det.warnings)
     with pytest.raises(AudioError):
         det.push(x, 6.0, sample_rate_hz=-1)
-    det.push(x[:100], math.nan)                                 # unusable time: contiguous
+    det.push(x[:100], math.nan)  # unusable time: contiguous
     assert any("not finite" in w for w in det.warnings)
     det.push(x[:100], 6.0, speed_rad_s=[1.0, 2.0], speed_times_s=[1.0])
     assert any("speeds for" in w for w in det.warnings)

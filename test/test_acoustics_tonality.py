@@ -24,8 +24,8 @@ def test_limits_at_the_notes_frequencies():
 def test_critical_band_is_ecma_418_1():
     f1, f2 = critical_band(np.array([224.0, 500.0, 2653.0]))
     assert f2 - f1 == pytest.approx([103.6, 117.3, 413.7], abs=0.1)
-    assert (f1[0] + f2[0]) / 2 == pytest.approx(224.0)                # arithmetic below 500 Hz
-    assert np.sqrt(f1[2] * f2[2]) == pytest.approx(2653.0, rel=2e-3)   # ~geometric above
+    assert (f1[0] + f2[0]) / 2 == pytest.approx(224.0)  # arithmetic below 500 Hz
+    assert np.sqrt(f1[2] * f2[2]) == pytest.approx(2653.0, rel=2e-3)  # ~geometric above
 
 
 def test_psd_keeps_the_mean_square():
@@ -38,13 +38,14 @@ def test_psd_keeps_the_mean_square():
     t = np.arange(FS) / FS
     s = (0.5 * np.sin(2 * np.pi * 1234.5 * t)).astype(np.float32)
     assert np.median(short_time_psd(s, FS, 4800, 480).sum(axis=1) * 10.0) == pytest.approx(
-        0.125, rel=1e-3)
+        0.125, rel=1e-3
+    )
 
 
 def _tone(f, snr_db, seed, n=FS):
     rng = np.random.default_rng(seed)
     t = np.arange(n) / FS
-    amp = np.sqrt(2.0) * 10 ** (snr_db / 20)          # broadband SNR against unit noise
+    amp = np.sqrt(2.0) * 10 ** (snr_db / 20)  # broadband SNR against unit noise
     return 0.02 * (amp * np.sin(2 * np.pi * f * t) + rng.normal(0.0, 1.0, n))
 
 
@@ -54,8 +55,17 @@ def _mine(x, frame):
     return c
 
 
-CASES = [(224.0, -10.0), (224.0, 0.0), (898.0, -20.0), (898.0, -10.0), (898.0, 0.0),
-         (2653.0, -10.0), (2653.0, 0.0), (5000.0, -10.0), (5000.0, 0.0)]
+CASES = [
+    (224.0, -10.0),
+    (224.0, 0.0),
+    (898.0, -20.0),
+    (898.0, -10.0),
+    (898.0, 0.0),
+    (2653.0, -10.0),
+    (2653.0, 0.0),
+    (5000.0, -10.0),
+    (5000.0, 0.0),
+]
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -76,15 +86,18 @@ def test_tnr_and_pr_within_1_db_of_mosqito(f, snr, seed):
     assert c.frequency_hz[0, i] == pytest.approx(f, abs=0.5)
     _, tnr, _, tf = sq.tnr_ecma_st(x, FS, prominence=False)
     _, pr, _, pf = sq.pr_ecma_st(x, FS, prominence=False)
-    j, k = np.argmin(np.abs(np.asarray(tf, float) - f)), np.argmin(np.abs(np.asarray(pf, float)
-                                                                          - f))
+    j, k = (
+        np.argmin(np.abs(np.asarray(tf, float) - f)),
+        np.argmin(np.abs(np.asarray(pf, float) - f)),
+    )
     assert abs(tf[j] - f) <= 2.0 and abs(pf[k] - f) <= 2.0
     assert c.tnr_db[0, i] == pytest.approx(tnr[j], abs=1.0)
     assert c.pr_db[0, i] == pytest.approx(pr[k], abs=1.0)
 
 
-@pytest.mark.parametrize(("f", "snr"), [(224.0, -10.0), (898.0, -10.0), (2653.0, -10.0),
-                                        (5000.0, 0.0)])
+@pytest.mark.parametrize(
+    ("f", "snr"), [(224.0, -10.0), (898.0, -10.0), (2653.0, -10.0), (5000.0, 0.0)]
+)
 def test_short_frames_agree_with_mosqito_in_the_median(f, snr):
     """The detector's 0.1 s frames: the median over the frames within 1.5 dB of MOSQITO's 1 s
     stationary value (measured: within 0.6 dB)."""
@@ -103,8 +116,9 @@ def test_short_frames_agree_with_mosqito_in_the_median(f, snr):
 
 def test_a_strong_tone_is_one_candidate_without_side_lobes():
     t = np.arange(FS) / FS
-    x = (0.5 * np.sin(2 * np.pi * 1503.7 * t) + 1e-5 * np.random.default_rng(1).normal(
-        size=FS)).astype(np.float32)
+    x = (
+        0.5 * np.sin(2 * np.pi * 1503.7 * t) + 1e-5 * np.random.default_rng(1).normal(size=FS)
+    ).astype(np.float32)
     c = ToneAnalyzer(FS, 4800, 89.1, 11200.0, 8).candidates(short_time_psd(x, FS, 4800, 480))
     assert np.all(c.prominent.sum(axis=1) == 1)
     f = c.frequency_hz[c.prominent]

@@ -21,14 +21,18 @@ from leadscrew_ros.model.physics.kernels import KERNELS, scales
 from leadscrew_ros.model.physics.modes import KIND_T, KIND_X, KIND_Y
 from leadscrew_ros.model.physics.parameters import ScrewParameters
 
-PRINTED = json.loads((Path(__file__).parent / "data" / "appendix_a_printed.json")
-                     .read_text(encoding="utf-8"))["matrices"]
+PRINTED = json.loads(
+    (Path(__file__).parent / "data" / "appendix_a_printed.json").read_text(encoding="utf-8")
+)["matrices"]
 KIND = {"x": KIND_X, "y": KIND_Y, "0": KIND_T}
-THETA = np.linspace(-3.0, 9.5, 23)                   # covers every quadrant, more than a turn
-GEOMETRIES = [(math.radians(deg), radius) for deg in (2.0, 4.76, 15.0, 33.0)
-              for radius in (0.002, 0.005, 0.0137)]
-OPERATING = [(0.7, 35.0), (20.0, 200.0), (310.0, 1250.0)]     # (Omega rad/s, F_z N)
-ALPHA = 7.3                                          # contact angle span, rad
+THETA = np.linspace(-3.0, 9.5, 23)  # covers every quadrant, more than a turn
+GEOMETRIES = [
+    (math.radians(deg), radius)
+    for deg in (2.0, 4.76, 15.0, 33.0)
+    for radius in (0.002, 0.005, 0.0137)
+]
+OPERATING = [(0.7, 35.0), (20.0, 200.0), (310.0, 1250.0)]  # (Omega rad/s, F_z N)
+ALPHA = 7.3  # contact angle span, rad
 
 
 def _evaluate(expr: str, **symbols) -> np.ndarray:
@@ -48,7 +52,13 @@ def printed_integrand(name: str, theta: np.ndarray, beta: float, radius_m: float
 def test_transcription_is_complete():
     assert set(PRINTED) == {"W1", "W2", "W3", "W4", "W5q", "W5qdot"}
     assert [PRINTED[n]["equation"] for n in sorted(PRINTED)] == [
-        "A.3", "A.4", "A.5", "A.6", "A.7", "A.8"]
+        "A.3",
+        "A.4",
+        "A.5",
+        "A.6",
+        "A.7",
+        "A.8",
+    ]
     assert sum(len(m["terms"]) for m in PRINTED.values()) == 4 + 4 + 5 + 4 + 6 + 9
 
 
@@ -60,14 +70,26 @@ def test_paper_kernels_match_appendix_a_entry_by_entry(name, beta, radius_m):
     printed = printed_integrand(name, THETA, beta, radius_m)
     for speed, load in OPERATING:
         scale = float(scales(params, speed, load, ALPHA)[name])
-        prefactor = float(_evaluate(PRINTED[name]["prefactor"], mu=mu_o(params, speed),
-                                    gamma=gamma(params, speed), F=load, Omega=speed,
-                                    alpha=ALPHA, R=radius_m, b=beta))
+        prefactor = float(
+            _evaluate(
+                PRINTED[name]["prefactor"],
+                mu=mu_o(params, speed),
+                gamma=gamma(params, speed),
+                F=load,
+                Omega=speed,
+                alpha=ALPHA,
+                R=radius_m,
+                b=beta,
+            )
+        )
         assert prefactor != 0.0
         for a in "xy0":
             for b in "xy0":
                 np.testing.assert_allclose(
-                    scale * kernel[KIND[a], KIND[b]], prefactor * printed[KIND[a], KIND[b]],
-                    rtol=1e-12, atol=1e-12 * abs(prefactor),
+                    scale * kernel[KIND[a], KIND[b]],
+                    prefactor * printed[KIND[a], KIND[b]],
+                    rtol=1e-12,
+                    atol=1e-12 * abs(prefactor),
                     err_msg=f"{name}[{a} {b}] ({PRINTED[name]['equation']}) at "
-                            f"beta = {beta:.4f} rad, R = {radius_m} m, Omega = {speed} rad/s")
+                    f"beta = {beta:.4f} rad, R = {radius_m} m, Omega = {speed} rad/s",
+                )

@@ -16,18 +16,25 @@ from leadscrew_ros.bag.recorder import Recorder, RecordSettings
 T0 = 1_767_225_600_000_000_000
 RATE = 48000
 SCHEMAS = {name: audiomsgs.definition(name) for name in audiomsgs.TEXTS[audiomsgs.DRIVERS]}
-MG_SCHEMAS = {name: audiomsgs.definition(name, audiomsgs.MGONZS13)
-              for name in audiomsgs.TEXTS[audiomsgs.MGONZS13]}
+MG_SCHEMAS = {
+    name: audiomsgs.definition(name, audiomsgs.MGONZS13)
+    for name in audiomsgs.TEXTS[audiomsgs.MGONZS13]
+}
 F32MA = "std_msgs/msg/Float32MultiArray"
-F32MA_SCHEMA = schema.parse(__import__("leadscrew_ros.bag.msgdefs", fromlist=["x"]).definition(
-    F32MA), F32MA)
+F32MA_SCHEMA = schema.parse(
+    __import__("leadscrew_ros.bag.msgdefs", fromlist=["x"]).definition(F32MA), F32MA
+)
 
 
 def _write(tmp_path, messages, schemas=SCHEMAS):
     """A bag of (topic, type, payload, log time [ns]) in that order, with a Float64 topic's
     first message at T0 (the log's time origin)."""
-    rec = Recorder(RecordSettings(directory=str(tmp_path), split_size_mb=0.0,
-                                  split_duration_s=0.0, compression="none"), schemas=schemas)
+    rec = Recorder(
+        RecordSettings(
+            directory=str(tmp_path), split_size_mb=0.0, split_duration_s=0.0, compression="none"
+        ),
+        schemas=schemas,
+    )
     assert rec.start(T0)
     rec.write_serialized("/motor_speed", FLOAT64, encode_float64(1.0), T0)
     for topic, type_name, data, t in messages:
@@ -45,8 +52,17 @@ def _s16(x):
     return np.round(np.clip(x, -1, 1) * 32767).astype("<i2")
 
 
-def _drivers(x, start_s=0.1, chunk=4800, info=None, info_at=None, fmt="S16LE", rate=RATE,
-             channels=1, to_bytes=None):
+def _drivers(
+    x,
+    start_s=0.1,
+    chunk=4800,
+    info=None,
+    info_at=None,
+    fmt="S16LE",
+    rate=RATE,
+    channels=1,
+    to_bytes=None,
+):
     """ros-drivers messages of samples `x` (frames x channels interleaved when 2-d)."""
     to_bytes = to_bytes or (lambda a: _s16(a).tobytes())
     info = info or audiomsgs.encode_audio_info(channels, rate, fmt, rate * 16, "wave")
@@ -55,12 +71,17 @@ def _drivers(x, start_s=0.1, chunk=4800, info=None, info_at=None, fmt="S16LE", r
     per = chunk * channels
     for k in range(0, flat.size, per):
         stamp = T0 + int(round((start_s + k / channels / rate) * 1e9))
-        part = flat[k:k + per]
-        out.append(("/microphone", audiomsgs.AUDIO_DATA_STAMPED,
-                    audiomsgs.encode_audio_data_stamped(stamp, to_bytes(part)),
-                    stamp + int(part.size / channels / rate * 1e9)))
+        part = flat[k : k + per]
+        out.append(
+            (
+                "/microphone",
+                audiomsgs.AUDIO_DATA_STAMPED,
+                audiomsgs.encode_audio_data_stamped(stamp, to_bytes(part)),
+                stamp + int(part.size / channels / rate * 1e9),
+            )
+        )
     at = T0 + int(2e8) if info_at is None else info_at
-    out.insert(1, ("/microphone_info", audiomsgs.AUDIO_INFO, info, at))   # after a chunk
+    out.insert(1, ("/microphone_info", audiomsgs.AUDIO_INFO, info, at))  # after a chunk
     return sorted(out, key=lambda m: m[3])
 
 
@@ -73,15 +94,16 @@ def test_ros_drivers_s16_mono_placed_at_its_stamps(tmp_path):
     assert track.samples.dtype == np.float32
 
 
-@pytest.mark.parametrize("fmt,dtype,scale", [("S32LE", "<i4", 2 ** 31 - 1),
-                                             ("F32LE", "<f4", 1.0), ("S16BE", ">i2", 32767)])
+@pytest.mark.parametrize(
+    "fmt,dtype,scale", [("S32LE", "<i4", 2**31 - 1), ("F32LE", "<f4", 1.0), ("S16BE", ">i2", 32767)]
+)
 def test_ros_drivers_stereo_formats_and_channel(tmp_path, fmt, dtype, scale):
     left, right = _tone(2000, 500.0), _tone(2000, 3000.0, 0.25)
     frames = np.column_stack([left, right])
 
     def to_bytes(a):
-        return (a * scale).astype(dtype).tobytes() if dtype[1] != "f" else a.astype(dtype)\
-            .tobytes()
+        return (a * scale).astype(dtype).tobytes() if dtype[1] != "f" else a.astype(dtype).tobytes()
+
     log = _write(tmp_path, _drivers(frames, chunk=512, fmt=fmt, channels=2, to_bytes=to_bytes))
     track = read_audio(log, channel=1)
     np.testing.assert_allclose(track.samples, right, atol=1e-4)
@@ -91,21 +113,34 @@ def test_ros_drivers_stereo_formats_and_channel(tmp_path, fmt, dtype, scale):
 
 
 def _mg(x, fmt=audiomsgs.PA_INT16, chunk=512, rate=16000, start_s=0.0):
-    dtype, scale = {audiomsgs.PA_INT16: (np.int16, 32767), audiomsgs.PA_FLOAT32:
-                    (np.float32, 1.0), audiomsgs.PA_UINT8: (np.uint8, None)}[fmt]
+    dtype, scale = {
+        audiomsgs.PA_INT16: (np.int16, 32767),
+        audiomsgs.PA_FLOAT32: (np.float32, 1.0),
+        audiomsgs.PA_UINT8: (np.uint8, None),
+    }[fmt]
     out = []
     for k in range(0, x.size, chunk):
-        part = x[k:k + chunk]
-        values = (np.round(part * 127) + 128).astype(np.uint8) if scale is None else \
-            (part * scale).astype(dtype)
+        part = x[k : k + chunk]
+        values = (
+            (np.round(part * 127) + 128).astype(np.uint8)
+            if scale is None
+            else (part * scale).astype(dtype)
+        )
         stamp = T0 + int(round((start_s + k / rate) * 1e9))
-        out.append(("/audio", audiomsgs.AUDIO_STAMPED,
-                    audiomsgs.encode_audio_stamped(stamp, values, rate, 1, fmt), stamp + 1))
+        out.append(
+            (
+                "/audio",
+                audiomsgs.AUDIO_STAMPED,
+                audiomsgs.encode_audio_stamped(stamp, values, rate, 1, fmt),
+                stamp + 1,
+            )
+        )
     return out
 
 
-@pytest.mark.parametrize("fmt,atol", [(audiomsgs.PA_INT16, 1e-4), (audiomsgs.PA_FLOAT32, 0),
-                                      (audiomsgs.PA_UINT8, 1e-2)])
+@pytest.mark.parametrize(
+    "fmt,atol", [(audiomsgs.PA_INT16, 1e-4), (audiomsgs.PA_FLOAT32, 0), (audiomsgs.PA_UINT8, 1e-2)]
+)
 def test_mgonzs13_audio_stamped(tmp_path, fmt, atol):
     x = _tone(1600, 440.0, rate=16000)
     track = read_audio(_write(tmp_path, _mg(x, fmt), MG_SCHEMAS))
@@ -117,27 +152,54 @@ def test_mgonzs13_flat_layout_and_wrong_array(tmp_path):
     """The issue's layout (AudioStamped: header, AudioData audio, AudioInfo info side by side)
     reads too; a message filling another array than its format names is used and warned."""
     texts = audiomsgs.TEXTS[audiomsgs.MGONZS13]
-    flat = ("std_msgs/Header header\naudio_common_msgs/AudioData audio\n"
-            "audio_common_msgs/AudioInfo info\n")
+    flat = (
+        "std_msgs/Header header\naudio_common_msgs/AudioData audio\n"
+        "audio_common_msgs/AudioInfo info\n"
+    )
     text = audiomsgs.definition(audiomsgs.AUDIO_STAMPED, audiomsgs.MGONZS13).replace(
-        texts[audiomsgs.AUDIO_STAMPED], flat)
+        texts[audiomsgs.AUDIO_STAMPED], flat
+    )
     s = schema.parse(text, audiomsgs.AUDIO_STAMPED)
     x = _tone(1024, 440.0, rate=16000)
-    msgs = [("/audio", audiomsgs.AUDIO_STAMPED, s.encode({
-        "header": {"stamp": {"sec": T0 // 10 ** 9, "nanosec": k * 32_000_000}},
-        "audio": {"float32_data": x[k * 512:(k + 1) * 512]},
-        "info": {"format": audiomsgs.PA_INT16, "channels": 1, "rate": 16000, "chunk": 512}}),
-        T0 + k) for k in range(2)]
+    msgs = [
+        (
+            "/audio",
+            audiomsgs.AUDIO_STAMPED,
+            s.encode(
+                {
+                    "header": {"stamp": {"sec": T0 // 10**9, "nanosec": k * 32_000_000}},
+                    "audio": {"float32_data": x[k * 512 : (k + 1) * 512]},
+                    "info": {
+                        "format": audiomsgs.PA_INT16,
+                        "channels": 1,
+                        "rate": 16000,
+                        "chunk": 512,
+                    },
+                }
+            ),
+            T0 + k,
+        )
+        for k in range(2)
+    ]
     track = read_audio(_write(tmp_path, msgs, {audiomsgs.AUDIO_STAMPED: text}))
     np.testing.assert_array_equal(track.samples, x)
-    assert track.warnings == ["2 messages fill another array than their format names "
-                              "(format 8 but float32_data filled); used it"]
+    assert track.warnings == [
+        "2 messages fill another array than their format names "
+        "(format 8 but float32_data filled); used it"
+    ]
 
 
 def test_float32_multi_array_needs_the_rate(tmp_path):
     x = _tone(4000, 800.0)
-    msgs = [("/mic", F32MA, F32MA_SCHEMA.encode({"data": x[k:k + 1000]}),
-             T0 + int((k + 1000) / RATE * 1e9)) for k in range(0, 4000, 1000)]
+    msgs = [
+        (
+            "/mic",
+            F32MA,
+            F32MA_SCHEMA.encode({"data": x[k : k + 1000]}),
+            T0 + int((k + 1000) / RATE * 1e9),
+        )
+        for k in range(0, 4000, 1000)
+    ]
     log = _write(tmp_path, msgs)
     with pytest.raises(AudioError, match="carries no sample rate: give sample_rate_hz"):
         read_audio(log)
@@ -149,13 +211,16 @@ def test_float32_multi_array_needs_the_rate(tmp_path):
 @pytest.mark.parametrize("dtype", [np.int16, np.int32, np.float32, np.uint8])
 def test_wav_beside_the_log(tmp_path, dtype):
     x = _tone(4800, 250.0)
-    data = {np.int16: lambda: (x * 32767).astype(np.int16),
-            np.int32: lambda: (x * 2 ** 31).astype(np.int32),
-            np.float32: lambda: x,
-            np.uint8: lambda: np.round(x * 127 + 128).astype(np.uint8)}[dtype]()
+    data = {
+        np.int16: lambda: (x * 32767).astype(np.int16),
+        np.int32: lambda: (x * 2**31).astype(np.int32),
+        np.float32: lambda: x,
+        np.uint8: lambda: np.round(x * 127 + 128).astype(np.uint8),
+    }[dtype]()
     path = tmp_path / "mic.wav"
-    wavfile.write(path, RATE, np.column_stack([data, data // 2 if dtype != np.float32
-                                               else data / 2]))
+    wavfile.write(
+        path, RATE, np.column_stack([data, data // 2 if dtype != np.float32 else data / 2])
+    )
     track = read_audio(wav=path, wav_start_s=1.5)
     assert track.t0_s == 1.5 and track.sample_rate_hz == RATE and track.source == str(path)
     np.testing.assert_allclose(track.samples, x, atol=1e-2)
@@ -170,6 +235,7 @@ def test_log_written_by_rosbags(tmp_path):
     """An independent producer: rosbags' rosbag2 MCAP writer with the registered types."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
     store = get_typestore(Stores.ROS2_JAZZY)
     for name, text in audiomsgs.TEXTS[audiomsgs.DRIVERS].items():
         store.register(get_types_from_msg(text, name))
@@ -178,15 +244,21 @@ def test_log_written_by_rosbags(tmp_path):
     with Writer(tmp_path / "bag", version=9, storage_plugin=StoragePlugin.MCAP) as w:
         info = w.add_connection("/mic_info", audiomsgs.AUDIO_INFO, typestore=store)
         mic = w.add_connection("/mic", audiomsgs.AUDIO_DATA_STAMPED, typestore=store)
-        w.write(info, T0, store.serialize_cdr(t[audiomsgs.AUDIO_INFO](1, RATE, "S16LE", 0,
-                                                                       "wave"),
-                                              audiomsgs.AUDIO_INFO))
+        w.write(
+            info,
+            T0,
+            store.serialize_cdr(
+                t[audiomsgs.AUDIO_INFO](1, RATE, "S16LE", 0, "wave"), audiomsgs.AUDIO_INFO
+            ),
+        )
         for k in range(0, 4096, 1024):
             stamp = T0 + int(k / RATE * 1e9)
             msg = t[audiomsgs.AUDIO_DATA_STAMPED](
-                t["std_msgs/msg/Header"](t["builtin_interfaces/msg/Time"](*divmod(stamp, 10 ** 9)),
-                                         ""),
-                t[audiomsgs.AUDIO_DATA](np.frombuffer(_s16(x[k:k + 1024]).tobytes(), np.uint8)))
+                t["std_msgs/msg/Header"](
+                    t["builtin_interfaces/msg/Time"](*divmod(stamp, 10**9)), ""
+                ),
+                t[audiomsgs.AUDIO_DATA](np.frombuffer(_s16(x[k : k + 1024]).tobytes(), np.uint8)),
+            )
             w.write(mic, stamp + 1, store.serialize_cdr(msg, audiomsgs.AUDIO_DATA_STAMPED))
     track = read_audio(tmp_path / "bag")
     np.testing.assert_allclose(track.samples, x, atol=1 / 32767)
@@ -199,13 +271,13 @@ def test_nan_and_beyond_full_scale_float_samples_are_warned(tmp_path):
     x[10:13] = np.nan
     x[500] = np.inf
     x[600] = 3.0
-    log = _write(tmp_path, _drivers(x, fmt="F32LE", to_bytes=lambda a: a.astype("<f4")
-                                    .tobytes()))
+    log = _write(tmp_path, _drivers(x, fmt="F32LE", to_bytes=lambda a: a.astype("<f4").tobytes()))
     track = read_audio(log)
     assert np.isfinite(track.samples).all() and track.samples[10] == 0.0
-    assert track.warnings == ["4 NaN/inf samples set to 0",
-                              "float samples beyond full scale (peak 3): wrong sample format "
-                              "or scaling?"]
+    assert track.warnings == [
+        "4 NaN/inf samples set to 0",
+        "float samples beyond full scale (peak 3): wrong sample format or scaling?",
+    ]
 
 
 def test_unknown_format_and_mp3_are_one_line_errors(tmp_path):
@@ -224,49 +296,74 @@ def test_empty_truncated_and_partial_messages_are_counted(tmp_path):
     x = _tone(3 * 480)
     msgs = _drivers(x, chunk=480)
     good = msgs[-1]
-    stamp = T0 + int(0.12e9)                      # the third chunk's stamp
-    msgs += [("/microphone", audiomsgs.AUDIO_DATA_STAMPED,
-              audiomsgs.encode_audio_data_stamped(stamp, b""), good[3] + 1),
-             ("/microphone", audiomsgs.AUDIO_DATA_STAMPED, good[2][:-7], good[3] + 2),
-             ("/microphone", audiomsgs.AUDIO_DATA_STAMPED,
-              audiomsgs.encode_audio_data_stamped(stamp, _s16(x[:5]).tobytes() + b"\x01"),
-              good[3] + 3)]
+    stamp = T0 + int(0.12e9)  # the third chunk's stamp
+    msgs += [
+        (
+            "/microphone",
+            audiomsgs.AUDIO_DATA_STAMPED,
+            audiomsgs.encode_audio_data_stamped(stamp, b""),
+            good[3] + 1,
+        ),
+        ("/microphone", audiomsgs.AUDIO_DATA_STAMPED, good[2][:-7], good[3] + 2),
+        (
+            "/microphone",
+            audiomsgs.AUDIO_DATA_STAMPED,
+            audiomsgs.encode_audio_data_stamped(stamp, _s16(x[:5]).tobytes() + b"\x01"),
+            good[3] + 3,
+        ),
+    ]
     track = read_audio(_write(tmp_path, msgs))
-    assert track.samples.size == 3 * 480     # the 5 samples of the last one overlap: trimmed
+    assert track.samples.size == 3 * 480  # the 5 samples of the last one overlap: trimmed
     w = track.warnings
-    assert any(line.startswith("1 audio messages not decodable, skipped (first: "
-                               "audio_common_msgs/msg/AudioDataStamped.audio.data: ")
-               for line in w), w
+    assert any(
+        line.startswith(
+            "1 audio messages not decodable, skipped (first: "
+            "audio_common_msgs/msg/AudioDataStamped.audio.data: "
+        )
+        for line in w
+    ), w
     assert "1 empty audio messages" in w
-    assert "1 audio messages end in a partial frame of 1 bytes, dropped (truncated or wrong " \
-           "sample format?)" in w
+    assert (
+        "1 audio messages end in a partial frame of 1 bytes, dropped (truncated or wrong "
+        "sample format?)" in w
+    )
     assert "1 chunks overlap the samples before them; 5 samples trimmed" in w
 
 
 def test_gaps_are_filled_and_a_long_one_ends_the_track(tmp_path):
     x = _tone(4 * 4800)
     msgs = _drivers(x)
-    msgs.remove([m for m in msgs if m[0] == "/microphone"][1])     # the second chunk lost
+    msgs.remove([m for m in msgs if m[0] == "/microphone"][1])  # the second chunk lost
     track = read_audio(_write(tmp_path / "a", msgs))
     assert track.samples.size == x.size
     assert (track.samples[4800:9600] == 0).all()
     assert track.warnings == ["1 gaps between chunks filled with zeros (0.1 s in all)"]
     track = read_audio(_write(tmp_path / "b", msgs), settings=AudioSettings(max_gap_s=0.05))
     assert track.samples.size == 4800
-    assert track.warnings == ["a gap of 0.1 s at t = 0.300 s (> max_gap_s 0.05 s): the track "
-                              "ends there, 2 messages after it ignored"]
+    assert track.warnings == [
+        "a gap of 0.1 s at t = 0.300 s (> max_gap_s 0.05 s): the track "
+        "ends there, 2 messages after it ignored"
+    ]
 
 
 def test_sample_rate_change_keeps_the_first_segment(tmp_path):
     x = _tone(4 * 4800)
     msgs = _drivers(x)
-    msgs.append(("/microphone_info", audiomsgs.AUDIO_INFO,
-                 audiomsgs.encode_audio_info(1, 44100, "S16LE", 0, "wave"), T0 + int(0.35e9)))
+    msgs.append(
+        (
+            "/microphone_info",
+            audiomsgs.AUDIO_INFO,
+            audiomsgs.encode_audio_info(1, 44100, "S16LE", 0, "wave"),
+            T0 + int(0.35e9),
+        )
+    )
     msgs.sort(key=lambda m: m[3])
     track = read_audio(_write(tmp_path, msgs))
     assert track.samples.size == 2 * 4800
-    assert track.warnings == ["sample rate changed from 48000 Hz to 44100 Hz at t = 0.300 s: "
-                              "the first segment kept, 2 messages after it ignored"]
+    assert track.warnings == [
+        "sample rate changed from 48000 Hz to 44100 Hz at t = 0.300 s: "
+        "the first segment kept, 2 messages after it ignored"
+    ]
 
 
 def test_topic_choice(tmp_path):
@@ -274,11 +371,15 @@ def test_topic_choice(tmp_path):
     log = _write(tmp_path / "none", [])
     with pytest.raises(AudioError, match="no audio topic"):
         read_audio(log)
-    msgs = _drivers(x) + [(t.replace("/microphone", "/mic2"), ty, d, s)
-                          for t, ty, d, s in _drivers(x)]
+    msgs = _drivers(x) + [
+        (t.replace("/microphone", "/mic2"), ty, d, s) for t, ty, d, s in _drivers(x)
+    ]
     log = _write(tmp_path / "two", sorted(msgs, key=lambda m: m[3]))
-    with pytest.raises(AudioError, match="several audio topics, choose one: /mic2 "
-                                         r"\(ros-drivers AudioDataStamped\), /microphone"):
+    with pytest.raises(
+        AudioError,
+        match="several audio topics, choose one: /mic2 "
+        r"\(ros-drivers AudioDataStamped\), /microphone",
+    ):
         read_audio(log)
     assert read_audio(log, topic="mic2").source == "/mic2"
     with pytest.raises(AudioError, match="/motor_speed is not an audio topic"):

@@ -17,13 +17,17 @@ from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.model.studies.sweep import sweep
 
 _spec = importlib.util.spec_from_file_location(
-    "band_table", Path(__file__).parents[1] / "tools" / "band_table.py")
+    "band_table", Path(__file__).parents[1] / "tools" / "band_table.py"
+)
 band_table = sys.modules["band_table"] = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(band_table)
 
 # Independent check (issue 9): refined per-mode edges at Table 1, rad/s.
-REFERENCES = {("paper", "B3y"): (1.27, 19.2), ("paper", "B4y"): (1.51, 14.9),
-              ("consistent", "T3"): (1.15, 22.9)}
+REFERENCES = {
+    ("paper", "B3y"): (1.27, 19.2),
+    ("paper", "B4y"): (1.51, 14.9),
+    ("consistent", "T3"): (1.15, 22.9),
+}
 
 
 @pytest.fixture(scope="module")
@@ -58,12 +62,17 @@ def test_mode_ranges_span_the_whole_model_band(models, ranges):
 
 def test_table_row_does_not_depend_on_the_grid(models, ranges):
     row = band_table.table_row(models)
-    assert row == ("| squeak modes anywhere in the band | "
-                   + ", ".join(r.text() for r in ranges["paper"]) + " | "
-                   + ", ".join(r.text() for r in ranges["consistent"]) + " |")
+    assert row == (
+        "| squeak modes anywhere in the band | "
+        + ", ".join(r.text() for r in ranges["paper"])
+        + " | "
+        + ", ".join(r.text() for r in ranges["consistent"])
+        + " |"
+    )
     coarse = {f: band_table.mode_ranges(m, points=400) for f, m in models.items()}
     assert [r.text() for f in coarse for r in coarse[f]] == [
-        r.text() for f in ranges for r in ranges[f]]
+        r.text() for f in ranges for r in ranges[f]
+    ]
 
 
 def test_lowest_unstable_load_against_nut_position(models):
@@ -72,7 +81,8 @@ def test_lowest_unstable_load_against_nut_position(models):
     paper = band_table.lowest_unstable_load(models["paper"], z)
     # consistent: 283 N at z_o = 0 down to 29 N at 240 mm; no minimum near the centre
     assert consistent[0] == pytest.approx(283, abs=1) and consistent[-1] == pytest.approx(
-        29.2, abs=0.1)
+        29.2, abs=0.1
+    )
     assert np.argmin(consistent) == z.size - 1
     assert (np.diff(consistent)[z[1:] > 0.09] < 0).all()
     # paper: squeak is easiest with the nut near the centre

@@ -16,12 +16,11 @@ import yaml
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.rosbag2.errors import ReaderError
 
+from harness.logs import cli, rosbags_log, run_replay
 from leadscrew_ros.bag.bagmeta import METADATA, problem, read_info
 from leadscrew_ros.bag.logfile import cut_off_bags
 from leadscrew_ros.review.fleet import FleetSettings, review_one
 from leadscrew_ros.review.timeline import InputSettings
-
-from harness.logs import cli, rosbags_log, run_replay
 
 SAMPLES = 40
 
@@ -31,6 +30,7 @@ def _edit(change):
         doc = copy.deepcopy(good)
         change(doc["rosbag2_bagfile_information"])
         return yaml.safe_dump(doc)
+
     return text
 
 
@@ -61,14 +61,18 @@ CASES = {
     "start a string": (_set("starting_time", "noon"), "'starting_time' is 'noon'"),
     "a topic without type": (
         _edit(lambda i: i["topics_with_message_count"][0]["topic_metadata"].pop("type")),
-        "has no 'type'"),
+        "has no 'type'",
+    ),
     "a listed file missing": (_edit(_ghost), "lists ghost_1.mcap, which does not exist"),
     "message count": (_set("message_count", 999), "says 999 messages, the files hold 80"),
     "a topic count": (
         _edit(lambda i: i["topics_with_message_count"][0].__setitem__("message_count", 7)),
-        "per-topic counts disagree"),
-    "a topic left out": (_edit(lambda i: i["topics_with_message_count"].pop()),
-                         "per-topic counts disagree"),
+        "per-topic counts disagree",
+    ),
+    "a topic left out": (
+        _edit(lambda i: i["topics_with_message_count"].pop()),
+        "per-topic counts disagree",
+    ),
 }
 
 
@@ -93,7 +97,8 @@ def rosbags_count(bag: Path) -> int:
     with RosbagsReader(bag) as reader:
         read = sum(1 for _ in reader.messages())
         assert read == reader.message_count == sum(c.msgcount for c in reader.connections), (
-            "rosbags reads the bag consistently")
+            "rosbags reads the bag consistently"
+        )
         return read
 
 
@@ -116,7 +121,7 @@ def test_info_says_what_is_wrong_and_that_recover_mends_it(broken, capsys):
     bag, words = broken
     code, out, err = cli(capsys, "info", bag)
     assert code == 0 and not err
-    assert f"{bag / 'bag.mcap'}: complete" in out           # the file itself is whole
+    assert f"{bag / 'bag.mcap'}: complete" in out  # the file itself is whole
     (line,) = [ln for ln in out.splitlines() if METADATA in ln]
     assert line.startswith(f"{bag}: {METADATA} ") and words in line
     assert line.endswith(f"`leadscrew-squeak recover {bag}` mends it")
@@ -149,7 +154,7 @@ def test_review_row_is_ok_with_the_problem_in_its_note(broken, good_bag, tmp_pat
 
 def test_recover_mends_it_and_rosbags_reads_every_message(broken, capsys):
     bag, _ = broken
-    assert cut_off_bags(bag.parent) == []      # not cut off: `recover BAGDIR`, as info says
+    assert cut_off_bags(bag.parent) == []  # not cut off: `recover BAGDIR`, as info says
     code, out, _ = cli(capsys, "recover", bag)
     assert code == 0 and f"{bag / METADATA} regenerated" in out
     assert rosbags_count(bag) == 2 * SAMPLES

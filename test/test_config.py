@@ -34,7 +34,7 @@ def _flat(tree: dict, prefix: str = "") -> dict:
 
 def _params(path: Path = CONFIG) -> dict:
     doc = yaml.safe_load(path.read_text())
-    assert list(doc) == [KEY]            # any namespace, any node name
+    assert list(doc) == [KEY]  # any namespace, any node name
     assert list(doc[KEY]) == ["ros__parameters"]
     return _flat(doc[KEY]["ros__parameters"])
 
@@ -51,17 +51,19 @@ def test_file_is_the_generated_text():
 
 def test_generator_tool_checks_and_writes(tmp_path, monkeypatch):
     import importlib.util
+
     spec = importlib.util.spec_from_file_location(
-        "gen_config", Path(__file__).resolve().parents[1] / "tools" / "gen_config.py")
+        "gen_config", Path(__file__).resolve().parents[1] / "tools" / "gen_config.py"
+    )
     tool = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(tool)
     assert tool.main(["--check"]) == 0
     monkeypatch.setattr(tool, "CONFIG", tmp_path / "leadscrew.yaml")
-    assert tool.main(["--check"]) == 1                   # missing
+    assert tool.main(["--check"]) == 1  # missing
     assert tool.main([]) == 0
     assert tool.CONFIG.read_text() == config_yaml()
     tool.CONFIG.write_text(config_yaml().replace("0.005", "0.006", 1))
-    assert tool.main(["--check"]) == 1                   # edited by hand
+    assert tool.main(["--check"]) == 1  # edited by hand
 
 
 def test_every_settings_field_is_a_parameter():
@@ -86,9 +88,13 @@ def test_value_is_the_default_with_the_right_type(name):
 
 
 def test_every_entry_has_a_unit_comment():
-    lines = [ln for ln in CONFIG.read_text().splitlines()
-             if ln.startswith("    ") and not ln.lstrip().startswith("#")
-             and not ln.rstrip().endswith(":")]                 # nested-name headers
+    lines = [
+        ln
+        for ln in CONFIG.read_text().splitlines()
+        if ln.startswith("    ")
+        and not ln.lstrip().startswith("#")
+        and not ln.rstrip().endswith(":")
+    ]  # nested-name headers
     assert len(lines) == len(DEFAULTS)
     for ln in lines:
         assert "# [" in ln and "]" in ln.split("# [", 1)[1], ln
@@ -109,8 +115,9 @@ def test_ros_reads_the_types_we_mean():
     from harness.ros import RosWorld
 
     with RosWorld(args=["--ros-args", "--params-file", str(CONFIG)]) as world:
-        node = world.make_node("squeak_predictor", namespace="/",
-                               automatically_declare_parameters_from_overrides=True)
+        node = world.make_node(
+            "squeak_predictor", namespace="/", automatically_declare_parameters_from_overrides=True
+        )
         assert set(DEFAULTS) <= {p for p in node._parameters}
         for name, (default, typ) in DEFAULTS.items():
             p = node.get_parameter(name)
@@ -120,9 +127,8 @@ def test_ros_reads_the_types_we_mean():
 
 def _node_with_params_file(path: Path) -> dict:
     """Start SqueakPredictorNode with `--ros-args --params-file path`; its parameter values."""
-    from leadscrew_ros.ros.node import SqueakPredictorNode
-
     from harness.ros import RosWorld
+    from leadscrew_ros.ros.node import SqueakPredictorNode
 
     with RosWorld(args=["--ros-args", "--params-file", str(path)]) as world:
         node = world.add(SqueakPredictorNode(context=world.ctx))
@@ -139,10 +145,18 @@ def test_node_started_with_the_file_has_every_value():
 def test_node_takes_every_value_from_the_file(tmp_path):
     """A file differing from the defaults in every kind of entry (model, node, read-only)
     really overrides them."""
-    changed = {"radius_m": 0.006, "n_bending": 5, "formulation": "consistent",
-               "max_rate_hz": 50.0, "stale_timeout_s": 2.5, "joint_name": "screw_joint",
-               "hardware_id": "screw_7", "input_queue_depth": 7,
-               "record.split_duration_s": 30.0, "record.compression": "lz4"}
+    changed = {
+        "radius_m": 0.006,
+        "n_bending": 5,
+        "formulation": "consistent",
+        "max_rate_hz": 50.0,
+        "stale_timeout_s": 2.5,
+        "joint_name": "screw_joint",
+        "hardware_id": "screw_7",
+        "input_queue_depth": 7,
+        "record.split_duration_s": 30.0,
+        "record.compression": "lz4",
+    }
     doc = {KEY: {"ros__parameters": {**_params(), **changed}}}
     path = tmp_path / "changed.yaml"
     path.write_text(yaml.safe_dump(doc))

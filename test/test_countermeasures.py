@@ -4,9 +4,16 @@
 import pytest
 
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.model.studies.countermeasures import (DESIGN, FRICTION, OPERATING, STEP,
-                                                 Countermeasure, advice_text, changed_by,
-                                                 countermeasures)
+from leadscrew_ros.model.studies.countermeasures import (
+    DESIGN,
+    FRICTION,
+    OPERATING,
+    STEP,
+    Countermeasure,
+    advice_text,
+    changed_by,
+    countermeasures,
+)
 from leadscrew_ros.model.studies.probability import linearised
 from leadscrew_ros.model.uncertainty.scatter import Scatter, draw
 
@@ -33,8 +40,9 @@ def test_each_lever_changes_what_it_says():
     assert drop.mu_static - drop.mu_kinetic == pytest.approx(0.9 * (p.mu_static - p.mu_kinetic))
     assert changed_by(MODEL, 55.0, 200.0, "speed_rad_s", 1.1)[1:] == (55.0 * 1.1, 200.0)
     assert changed_by(MODEL, 55.0, 200.0, "load_n", 0.9)[1:] == (55.0, 200.0 * 0.9)
-    assert changed_by(MODEL, 55.0, 200.0, "radius_m", 1.1)[0].params.radius_m == \
-        pytest.approx(1.1 * p.radius_m)
+    assert changed_by(MODEL, 55.0, 200.0, "radius_m", 1.1)[0].params.radius_m == pytest.approx(
+        1.1 * p.radius_m
+    )
 
 
 def test_a_smaller_stribeck_drop_lowers_the_probability_near_an_edge():
@@ -63,12 +71,16 @@ def test_outside_validity_there_is_no_advice():
 
 
 def test_advice_is_one_line():
-    found = [Countermeasure("radius_m", 1.1, 0.01), Countermeasure("friction_drop", 0.9, 0.05),
-             Countermeasure("speed_rad_s", 0.9, 0.06)]
+    found = [
+        Countermeasure("radius_m", 1.1, 0.01),
+        Countermeasure("friction_drop", 0.9, 0.05),
+        Countermeasure("speed_rad_s", 0.9, 0.06),
+    ]
     assert advice_text(0.114, found) == "P(squeak) 0.11: raise the radius or lower mu_s - mu_k"
     assert advice_text(0.0, []) == "P(squeak) 0.00"
-    assert advice_text(0.5, []) == \
-        "P(squeak) 0.50: no 10 % change of one parameter lowers it by 0.01"
+    assert (
+        advice_text(0.5, []) == "P(squeak) 0.50: no 10 % change of one parameter lowers it by 0.01"
+    )
     assert advice_text(0.995, [Countermeasure("radius_m", 1.1, 0.99)]).endswith("by 0.01")
 
 

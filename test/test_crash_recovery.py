@@ -11,8 +11,7 @@ import pytest
 
 from leadscrew_ros.bag import crash_recovery
 from leadscrew_ros.bag.crash_recovery import CrashRecovery
-from leadscrew_ros.bag.logfile import (METADATA, RECOVER_HINT, is_complete, log_files,
-                                       read_log)
+from leadscrew_ros.bag.logfile import METADATA, RECOVER_HINT, is_complete, log_files, read_log
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
 from leadscrew_ros.live.status import Level
 
@@ -27,8 +26,9 @@ def recorded(tmp_path_factory) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in bag.iterdir()}
 
 
-def make_bag(directory: Path, name: str, recorded: dict[str, bytes], keep: float = 1.0,
-             metadata: bool = True) -> Path:
+def make_bag(
+    directory: Path, name: str, recorded: dict[str, bytes], keep: float = 1.0, metadata: bool = True
+) -> Path:
     """A copy of the recorded bag named `name`: its file cut to `keep` of its bytes (a crash
     mid-write), with or without metadata.yaml."""
     bag = directory / name
@@ -38,7 +38,7 @@ def make_bag(directory: Path, name: str, recorded: dict[str, bytes], keep: float
             if metadata:
                 (bag / file_name).write_bytes(data)
             continue
-        (bag / f"{name}_0.mcap").write_bytes(data[:int(len(data) * keep)])
+        (bag / f"{name}_0.mcap").write_bytes(data[: int(len(data) * keep)])
     return bag
 
 
@@ -49,26 +49,30 @@ def messages(path: Path) -> list[tuple[str, int, bytes]]:
 def test_only_this_nodes_cut_off_bags_are_found(tmp_path, recorded):
     own_no_metadata = make_bag(tmp_path, f"squeak_{STAMP}", recorded, metadata=False)
     own_truncated = make_bag(tmp_path, f"squeak_{STAMP}_1", recorded, keep=0.6)
-    make_bag(tmp_path, "squeak_2026_01_02-00_00_00_000", recorded)           # complete
-    make_bag(tmp_path, f"seat_left_squeak_{STAMP}", recorded, keep=0.6)       # another node's
-    make_bag(tmp_path, "squeak_backup", recorded, keep=0.6)                   # not a bag name
-    loose = tmp_path / f"squeak_{STAMP}.mcap"                                 # not a bag dir
+    make_bag(tmp_path, "squeak_2026_01_02-00_00_00_000", recorded)  # complete
+    make_bag(tmp_path, f"seat_left_squeak_{STAMP}", recorded, keep=0.6)  # another node's
+    make_bag(tmp_path, "squeak_backup", recorded, keep=0.6)  # not a bag name
+    loose = tmp_path / f"squeak_{STAMP}.mcap"  # not a bag dir
     loose.write_bytes(next(v for k, v in recorded.items() if k != METADATA)[:100])
     crash = CrashRecovery(str(tmp_path), "squeak")
     assert crash.bags == [own_no_metadata, own_truncated]
     assert crash.pending == crash.bags and crash.state == (2, 0, 0)
     assert crash.level is Level.WARN
-    assert crash.message == (f"2 bag(s) of an earlier run cut off (crash?): {own_no_metadata}, "
-                             f"{own_truncated}; run `{RECOVER_HINT} BAGDIR` on each")
+    assert crash.message == (
+        f"2 bag(s) of an earlier run cut off (crash?): {own_no_metadata}, "
+        f"{own_truncated}; run `{RECOVER_HINT} BAGDIR` on each"
+    )
     # the prefix is literal text, the namespace part of another node's name included
     assert CrashRecovery(str(tmp_path), "seat_left_squeak").bags == [
-        tmp_path / f"seat_left_squeak_{STAMP}"]
+        tmp_path / f"seat_left_squeak_{STAMP}"
+    ]
     assert CrashRecovery(str(tmp_path), "seat.left_squeak").bags == []
 
 
 @pytest.mark.parametrize("keep, whole", [(0.3, False), (0.7, False), (0.95, True)])
-def test_a_truncated_file_is_recovered_with_every_message_before_the_cut(tmp_path, recorded,
-                                                                       keep, whole):
+def test_a_truncated_file_is_recovered_with_every_message_before_the_cut(
+    tmp_path, recorded, keep, whole
+):
     """Cut in the data: the messages up to the cut (whole chunks); cut in the summary and
     index at the end of the file: every message."""
     original = make_bag(tmp_path / "orig", f"squeak_{STAMP}", recorded)
@@ -86,29 +90,29 @@ def test_a_truncated_file_is_recovered_with_every_message_before_the_cut(tmp_pat
     assert is_complete(file) and (bag / METADATA).is_file()
     after = messages(bag)
     # what is left is the start of the recording, unchanged
-    assert after == before[:len(after)] and len(after) > 0
+    assert after == before[: len(after)] and len(after) > 0
     assert (len(after) == len(before)) == whole, (len(after), len(before))
-    assert CrashRecovery(str(tmp_path), "squeak").bags == []         # nothing left to do
+    assert CrashRecovery(str(tmp_path), "squeak").bags == []  # nothing left to do
 
 
 def test_a_bag_that_cannot_be_recovered_is_reported_with_its_reason(tmp_path, recorded):
     broken = tmp_path / f"squeak_{STAMP}"
     broken.mkdir()
     (broken / f"{broken.name}_0.mcap").write_bytes(b"not an MCAP file at all")
-    good = make_bag(tmp_path, "squeak_2026_01_02-00_00_00_000", recorded, keep=0.7,
-                    metadata=False)
+    good = make_bag(tmp_path, "squeak_2026_01_02-00_00_00_000", recorded, keep=0.7, metadata=False)
     crash = CrashRecovery(str(tmp_path), "squeak")
     assert crash.bags == [broken, good]
     crash.start()
     crash.join()
-    assert crash.recovered == [good]                # one failure does not stop the others
+    assert crash.recovered == [good]  # one failure does not stop the others
     assert list(crash.failed) == [broken] and str(broken) in crash.failed[broken]
     assert crash.pending == [broken] and crash.state == (2, 1, 1)
     assert crash.level is Level.WARN
     assert crash.message == (
         f"recovered 1 cut-off bag(s) of an earlier run: {good}; 1 bag(s) of an earlier run "
         f"cut off (crash?): {broken}; run `{RECOVER_HINT} BAGDIR` on each "
-        f"({crash.failed[broken]})")
+        f"({crash.failed[broken]})"
+    )
 
 
 def test_while_the_thread_recovers_the_message_says_so(tmp_path, recorded, monkeypatch):
@@ -140,7 +144,7 @@ def test_nothing_to_recover_says_nothing(tmp_path, directory):
     crash = CrashRecovery(str(tmp_path / directory), "squeak")
     assert crash.bags == [] and crash.pending == [] and crash.state == (0, 0, 0)
     assert crash.level is Level.OK and crash.message == ""
-    crash.join()                                    # never started: returns at once
+    crash.join()  # never started: returns at once
 
 
 def test_the_directory_may_start_with_a_tilde(tmp_path, recorded, monkeypatch):

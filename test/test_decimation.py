@@ -17,7 +17,7 @@ def brute_force(t: np.ndarray, v: np.ndarray, width: float):
     n = k.max() + 1
     lo, hi, last = (np.full((n, v.shape[1]), np.nan) for _ in range(3))
     count = np.zeros(n, int)
-    for i, row in zip(k, v):
+    for i, row in zip(k, v, strict=True):
         lo[i], hi[i] = np.fmin(lo[i], row), np.fmax(hi[i], row)
         last[i] = row
         count[i] += 1
@@ -26,22 +26,23 @@ def brute_force(t: np.ndarray, v: np.ndarray, width: float):
 
 @pytest.mark.parametrize("buffer", [3, 50, 8192])
 @pytest.mark.parametrize("samples, span_s", [(40, 0.5), (2000, 7.3), (5000, 61.0)])
-def test_the_envelope_is_the_binning_of_every_sample_at_its_final_width(monkeypatch, buffer,
-                                                                       samples, span_s):
-    monkeypatch.setattr(decimation, "_BUFFER", buffer)     # flushes in the middle of merges
+def test_the_envelope_is_the_binning_of_every_sample_at_its_final_width(
+    monkeypatch, buffer, samples, span_s
+):
+    monkeypatch.setattr(decimation, "_BUFFER", buffer)  # flushes in the middle of merges
     rng = np.random.default_rng(samples)
     t = np.sort(rng.uniform(-0.05, span_s, samples))
-    t[samples // 3: samples // 3 + 20] = t[samples // 3]   # repeated times
+    t[samples // 3 : samples // 3 + 20] = t[samples // 3]  # repeated times
     v = rng.normal(size=(samples, 3))
-    v[::17, 1] = np.nan                                    # a missing value is skipped
+    v[::17, 1] = np.nan  # a missing value is skipped
     e = Envelope(3, max_bins=16, bin_s=0.1)
-    for ti, row in zip(t, v):
+    for ti, row in zip(t, v, strict=True):
         e.add(float(ti), *row)
     got = e.series()
     # the width doubled just often enough for the last sample to fit in max_bins bins
     assert t[-1] < e.bin_s * 16 and (e.bin_s == 0.1 or t[-1] >= e.bin_s * 8)
     want = brute_force(t, v, e.bin_s)
-    for g, w in zip(got, want):
+    for g, w in zip(got, want, strict=True):
         np.testing.assert_array_equal(g, w)
     assert got[4].sum() == samples
 
@@ -95,9 +96,9 @@ def test_the_reservoir_keeps_whole_rows_in_arrival_order_and_is_reproducible():
     a = run(0)
     kept = a.sample()
     assert kept.shape == (50, 3) and a.seen == 5000
-    assert np.all(np.diff(kept[:, 0]) > 0)                      # arrival order
+    assert np.all(np.diff(kept[:, 0]) > 0)  # arrival order
     np.testing.assert_array_equal(kept[:, 1], 2.0 * kept[:, 0])  # rows stay whole
-    np.testing.assert_array_equal(kept, run(0).sample())         # the same log, the same sample
+    np.testing.assert_array_equal(kept, run(0).sample())  # the same log, the same sample
     assert not np.array_equal(kept, run(1).sample())
     assert a.nbytes == 50 * 3 * 8 + 50 * 8
 

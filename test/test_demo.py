@@ -18,17 +18,16 @@ from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64
 
-from leadscrew_ros.ros.demo import SqueakMonitor, status_line
-from leadscrew_ros.ros.diagnostics import DiagnosticStatusWrapper, status_task
-from leadscrew_ros.live.recompute import LivePredictor
-from leadscrew_ros.live.status import KEY_VALIDITY
+from harness.processes import CLI, domain, output, start, stop
 from leadscrew_ros.bag.cdr import encode_diagnostic_array
 from leadscrew_ros.bag.logfile import inspect, log_files, read_log
-from leadscrew_ros.model import SqueakModel, Validity
 from leadscrew_ros.bag.recorder import LOST_BY_TOPIC_KEY
+from leadscrew_ros.live.recompute import LivePredictor
+from leadscrew_ros.live.status import KEY_VALIDITY
+from leadscrew_ros.model import SqueakModel, Validity
+from leadscrew_ros.ros.demo import SqueakMonitor, status_line
+from leadscrew_ros.ros.diagnostics import DiagnosticStatusWrapper, status_task
 from leadscrew_ros.ros.node import LATCHED
-
-from harness.processes import CLI, domain, output, start, stop
 
 
 def summary_values(out: str) -> dict:
@@ -39,13 +38,17 @@ def summary_values(out: str) -> dict:
     margin = re.search(r"min margin: +([-+][\d.]+|none) \(least damping ratio", out)
     predictions = re.search(r"predictions: +(\d+)", out)
     assert squeak and freqs and speeds and probability and margin and predictions, out
-    return {"squeak_s": float(squeak[1]), "squeak_pct": float(squeak[2]),
-            "frequencies": [(m[1], float(m[2])) for m in
-                            re.finditer(r"(\w+) ([\d.]+)(?:-[\d.]+)? Hz", freqs[1])],
-            "speeds": (float(speeds[1]), float(speeds[2])),
-            "max_probability": float(probability[1]),
-            "min_margin": None if margin[1] == "none" else float(margin[1]),
-            "predictions": int(predictions[1])}
+    return {
+        "squeak_s": float(squeak[1]),
+        "squeak_pct": float(squeak[2]),
+        "frequencies": [
+            (m[1], float(m[2])) for m in re.finditer(r"(\w+) ([\d.]+)(?:-[\d.]+)? Hz", freqs[1])
+        ],
+        "speeds": (float(speeds[1]), float(speeds[2])),
+        "max_probability": float(probability[1]),
+        "min_margin": None if margin[1] == "none" else float(margin[1]),
+        "predictions": int(predictions[1]),
+    }
 
 
 # ----------------------------------------------------------------------------- demo
@@ -53,8 +56,12 @@ def test_demo_runs_a_stroke_and_summarises_it(tmp_path):
     proc = None
     try:
         t0 = time.monotonic()
-        proc = start(CLI + ["demo", "--duration", "3", "--record-dir", str(tmp_path / "rec")],
-                     domain(0), tmp_path, "demo")
+        proc = start(
+            CLI + ["demo", "--duration", "3", "--record-dir", str(tmp_path / "rec")],
+            domain(0),
+            tmp_path,
+            "demo",
+        )
         code = proc.wait(timeout=60)
         elapsed = time.monotonic() - t0
         out, err = output(proc)
@@ -67,13 +74,19 @@ def test_demo_runs_a_stroke_and_summarises_it(tmp_path):
     # Status lines at 4 Hz of wall-clock time (their content depends on timing: only the form
     # is checked; what was predicted is checked on the recording below).
     status = [line for line in out.splitlines() if line.startswith("t ")]
-    assert len(status) >= 8 and "\r" not in out                       # plain lines: no TTY
-    assert all(re.fullmatch(r"t +\d+\.\d s (.* rad/s .* N nut .* m|\s*waiting for the predictor)"
-                            r" \| (no prediction.*|(ok|SQUEAK) +P\(squeak\) \d\.\d\d"
-                            r"( margin ([-+]\d\.\d{4}|none))?( safe .*)?( \| .*)?)", line)
-               for line in status), status
-    assert any(re.search(r"\| SQUEAK P\(squeak\) 1\.00 margin -0\.\d{4}", line)
-               for line in status), status
+    assert len(status) >= 8 and "\r" not in out  # plain lines: no TTY
+    assert all(
+        re.fullmatch(
+            r"t +\d+\.\d s (.* rad/s .* N nut .* m|\s*waiting for the predictor)"
+            r" \| (no prediction.*|(ok|SQUEAK) +P\(squeak\) \d\.\d\d"
+            r"( margin ([-+]\d\.\d{4}|none))?( safe .*)?( \| .*)?)",
+            line,
+        )
+        for line in status
+    ), status
+    assert any(
+        re.search(r"\| SQUEAK P\(squeak\) 1\.00 margin -0\.\d{4}", line) for line in status
+    ), status
     v = summary_values(out)
     # About 40 % of the stroke squeaks (the model along the profile says the same).
     assert 0.5 < v["squeak_s"] < 2.5 and v["squeak_pct"] > 15
@@ -84,7 +97,7 @@ def test_demo_runs_a_stroke_and_summarises_it(tmp_path):
     assert v["max_probability"] >= 0.99 and v["predictions"] > 30
     assert v["min_margin"] < -0.01
     lo, hi = v["speeds"]
-    assert 0.5 <= lo < 5 and 30 < hi < 75                  # the band, not the 120 rad/s peak
+    assert 0.5 <= lo < 5 and 30 < hi < 75  # the band, not the 120 rad/s peak
     # ... and the recording it names holds the stroke's inputs and every prediction
     line = re.search(r"recording: +(\S+) \(1 file, \d+ kB, (\d+) messages .* complete\)", out)
     assert line, out
@@ -104,8 +117,11 @@ def test_demo_runs_a_stroke_and_summarises_it(tmp_path):
     at_speed = None
     high = []
     for m in read_log(line[1]):
-        data = deserialize_message(m.data, Float64).data if m.topic.name in (
-            "/motor_speed", "/squeak/risk") else None
+        data = (
+            deserialize_message(m.data, Float64).data
+            if m.topic.name in ("/motor_speed", "/squeak/risk")
+            else None
+        )
         if m.topic.name == "/motor_speed":
             at_speed = data
         elif m.topic.name == "/squeak/risk" and at_speed is not None and at_speed > 100:
@@ -116,11 +132,15 @@ def test_demo_runs_a_stroke_and_summarises_it(tmp_path):
 def test_demo_stops_cleanly_on_sigterm(tmp_path):
     proc = None
     try:
-        proc = start(CLI + ["demo", "--duration", "10", "--record-dir", str(tmp_path / "rec")],
-                     domain(1), tmp_path, "demo")
+        proc = start(
+            CLI + ["demo", "--duration", "10", "--record-dir", str(tmp_path / "rec")],
+            domain(1),
+            tmp_path,
+            "demo",
+        )
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline and proc.poll() is None:
-            if re.search(r"^t +\d.*P\(squeak\)", output(proc)[0], re.M):   # predictions flow
+            if re.search(r"^t +\d.*P\(squeak\)", output(proc)[0], re.M):  # predictions flow
                 break
             time.sleep(0.05)
         proc.send_signal(signal.SIGTERM)
@@ -128,12 +148,12 @@ def test_demo_stops_cleanly_on_sigterm(tmp_path):
         out, err = output(proc)
     finally:
         stop(proc)
-    assert code == 0, (out, err)                         # a requested shutdown is a success
+    assert code == 0, (out, err)  # a requested shutdown is a success
     assert "Traceback" not in out + err
     assert err.strip() == "leadscrew-squeak: stopped by SIGTERM"
     assert "interrupted after" in out
-    summary_values(out)                                           # a summary all the same
-    assert re.search(r"recording: .* messages .* complete\)", out), out   # closed cleanly
+    summary_values(out)  # a summary all the same
+    assert re.search(r"recording: .* messages .* complete\)", out), out  # closed cleanly
 
 
 # ----------------------------------------------------------------------------- simulate + node
@@ -141,10 +161,8 @@ class RiskProbe(Node):
     def __init__(self, **kwargs):
         super().__init__("risk_probe", **kwargs)
         self.risks, self.diagnostics = [], 0
-        qos = QoSProfile(depth=100, reliability=LATCHED.reliability,
-                         durability=LATCHED.durability)
-        self.create_subscription(Float64, "squeak/risk", lambda m: self.risks.append(m.data),
-                                 qos)
+        qos = QoSProfile(depth=100, reliability=LATCHED.reliability, durability=LATCHED.durability)
+        self.create_subscription(Float64, "squeak/risk", lambda m: self.risks.append(m.data), qos)
         self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, qos)
 
     def _on_diagnostics(self, msg):
@@ -162,14 +180,18 @@ def test_simulate_drives_a_separately_started_node(tmp_path, make_ros_world):
     try:
         probe = world.add(RiskProbe(context=world.ctx))
         node = start([sys.executable, "-m", "leadscrew_ros.ros.node"], dom, tmp_path, "node")
-        world.spin_until(lambda: probe.diagnostics or node.poll() is not None, 30,
-                         "the node's latched diagnostics")
+        world.spin_until(
+            lambda: probe.diagnostics or node.poll() is not None,
+            30,
+            "the node's latched diagnostics",
+        )
         assert node.poll() is None and probe.risks == [], output(node)
-        sim = start(CLI + ["simulate", "--duration", "3", "--joint-name", "screw"], dom,
-                    tmp_path, "sim")
+        sim = start(
+            CLI + ["simulate", "--duration", "3", "--joint-name", "screw"], dom, tmp_path, "sim"
+        )
         world.spin_until(lambda: sim.poll() is not None, 60, "the simulator to finish")
         sim_code = sim.returncode
-        world.spin_for(0.5)                                   # the last predictions
+        world.spin_for(0.5)  # the last predictions
         assert node.poll() is None, output(node)
         node.send_signal(signal.SIGTERM)
         node_code = node.wait(timeout=20)
@@ -181,14 +203,16 @@ def test_simulate_drives_a_separately_started_node(tmp_path, make_ros_world):
     assert "waiting for a subscriber on /motor_speed" in sim_out and "stroke done" in sim_out
     assert f"ROS_DOMAIN_ID={dom}" in sim_out and "joint_states" in sim_out
     assert "Traceback" not in sim_err
-    assert max(probe.risks) > 0.99, probe.risks                  # squeak predicted at some point
-    assert min(probe.risks) < 0.5, probe.risks                   # and not at the peak
+    assert max(probe.risks) > 0.99, probe.risks  # squeak predicted at some point
+    assert min(probe.risks) < 0.5, probe.risks  # and not at the peak
     assert node_code == 0, (node_out, node_err)
     assert "Traceback" not in node_err
 
 
-@pytest.mark.parametrize("speed, words", [(0.1, "speed below min_speed_rad_s"),
-                                          (5000.0, "speed at or above the first critical")])
+@pytest.mark.parametrize(
+    "speed, words",
+    [(0.1, "speed below min_speed_rad_s"), (5000.0, "speed at or above the first critical")],
+)
 def test_the_monitor_takes_validity_from_its_key_not_from_the_message(speed, words, ros_world):
     """The status line says why there is no prediction from the validity key of /diagnostics;
     the wording of the status message plays no part."""
@@ -200,8 +224,9 @@ def test_the_monitor_takes_validity_from_its_key_not_from_the_message(speed, wor
     assert stat.values[KEY_VALIDITY] != Validity.OK.name
     stat.message = "no prediction: reworded"
     monitor = ros_world.add(SqueakMonitor(context=ros_world.ctx))
-    monitor._on_diagnostics(deserialize_message(
-        encode_diagnostic_array(0, (stat.to_data(),)), DiagnosticArray))
+    monitor._on_diagnostics(
+        deserialize_message(encode_diagnostic_array(0, (stat.to_data(),)), DiagnosticArray)
+    )
     r = monitor.record
     assert not r.valid and r.validity is Validity[stat.values[KEY_VALIDITY]]
     assert r.validity.label.startswith(words)

@@ -1,8 +1,9 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The documentation site (doc/) and the README that points to it: the README stays short and
-names the set-up and build commands; every picture a page shows exists and is small. (The
-build itself, with warnings as errors and the pages' doctests, runs in .ci/run; the generated
-tables are tested in test_settings.py, the architecture tree in test_layers.py.)"""
+"""The documentation site (doc/) and the README that points to it.
+
+The README stays short and names the set-up and build commands; every picture a page shows
+exists and is small. (The build itself, with warnings as errors and the pages' doctests, runs
+in .ci/run; the generated tables are tested in test_settings.py, the architecture tree in test_layers.py.)"""
 
 import re
 from pathlib import Path
@@ -14,15 +15,21 @@ DOC = ROOT / "doc"
 MAX_README_LINES = 200
 MAX_IMAGE_BYTES = 300_000
 PAGES = sorted(DOC.glob("**/*.md")) + sorted(DOC.glob("**/*.rst"))
-PAGES = [p for p in PAGES if "_build" not in p.parts and "_generated" not in p.parts
-         and "_autosummary" not in p.parts]
+PAGES = [
+    p
+    for p in PAGES
+    if "_build" not in p.parts and "_generated" not in p.parts and "_autosummary" not in p.parts
+]
 
 
 def test_readme_is_short_and_points_to_the_documentation():
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     assert len(readme.splitlines()) <= MAX_README_LINES
-    for command in ("bash scripts/run-demo.sh", "bash scripts/run-tests.sh",
-                    "sphinx-build -W -b html doc doc/_build/html"):
+    for command in (
+        "bash scripts/run-demo.sh",
+        "bash scripts/run-tests.sh",
+        "sphinx-build -W -b html doc doc/_build/html",
+    ):
         assert command in readme, command
 
 
@@ -34,8 +41,9 @@ def test_the_rosdoc2_layout():
 
 def _images(page: Path) -> list[str]:
     text = page.read_text(encoding="utf-8")
-    return (re.findall(r"!\[[^\]]*\]\(([^)\s]+)\)", text)
-            + re.findall(r"\.\. (?:figure|image):: (\S+)", text))
+    return re.findall(r"!\[[^\]]*\]\(([^)\s]+)\)", text) + re.findall(
+        r"\.\. (?:figure|image):: (\S+)", text
+    )
 
 
 @pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(DOC)))

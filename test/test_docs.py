@@ -18,30 +18,51 @@ import re
 import pytest
 
 from leadscrew_ros.model import squeak_model
-from leadscrew_ros.model.acoustics import detection, synthesis, tonality
-from leadscrew_ros.model.acoustics.agreement import Agreement, agreement
 from leadscrew_ros.model.nonlinear import friction_force, transient, transient_analysis
-from leadscrew_ros.model.physics import parameters, stability
-from leadscrew_ros.model.studies import fields, roots, stability_map, sweep, tracking
 from leadscrew_ros.model.physics.parameters import ScrewParameters, field_info, field_names
+from leadscrew_ros.model.studies import fields, roots, stability_map, sweep
 from leadscrew_ros.review import fleet, replay
 
-PACKAGES = ("leadscrew_ros", "leadscrew_ros.model", "leadscrew_ros.model.physics",
-            "leadscrew_ros.model.uncertainty", "leadscrew_ros.model.studies",
-            "leadscrew_ros.model.nonlinear", "leadscrew_ros.model.acoustics", "leadscrew_ros.live",
-            "leadscrew_ros.bag",
-            "leadscrew_ros.review", "leadscrew_ros.ros", "leadscrew_ros.cli")
+PACKAGES = (
+    "leadscrew_ros",
+    "leadscrew_ros.model",
+    "leadscrew_ros.model.physics",
+    "leadscrew_ros.model.uncertainty",
+    "leadscrew_ros.model.studies",
+    "leadscrew_ros.model.nonlinear",
+    "leadscrew_ros.model.acoustics",
+    "leadscrew_ros.live",
+    "leadscrew_ros.bag",
+    "leadscrew_ros.review",
+    "leadscrew_ros.ros",
+    "leadscrew_ros.cli",
+)
 # Public functions and classes that are not re-exported by their package (`studies.sweep.sweep`
 # and `review.replay.replay` are named like their modules; the rest are the next level down).
 MODULE_API = [
-    sweep.sweep, sweep.peak_growth, sweep.probability_crossings, stability_map.stability_map,
-    fields.growth_field, fields.probability_field, fields.GrowthField, roots.refine_crossings,
-    roots.find_roots, roots.unstable_intervals, roots.level_crossings,
-    roots.refine_level_crossings, squeak_model.check_operating_point,
-    friction_force.HelixFriction, transient.ModalEquations, transient.TransientSettings,
-    transient_analysis.fit_growth, transient_analysis.linear_counterparts,
-    transient_analysis.LinearFit, transient_analysis.LimitCycle, fleet.find_logs,
-    fleet.review_one, replay.replay,
+    sweep.sweep,
+    sweep.peak_growth,
+    sweep.probability_crossings,
+    stability_map.stability_map,
+    fields.growth_field,
+    fields.probability_field,
+    fields.GrowthField,
+    roots.refine_crossings,
+    roots.find_roots,
+    roots.unstable_intervals,
+    roots.level_crossings,
+    roots.refine_level_crossings,
+    squeak_model.check_operating_point,
+    friction_force.HelixFriction,
+    transient.ModalEquations,
+    transient.TransientSettings,
+    transient_analysis.fit_growth,
+    transient_analysis.linear_counterparts,
+    transient_analysis.LinearFit,
+    transient_analysis.LimitCycle,
+    fleet.find_logs,
+    fleet.review_one,
+    replay.replay,
 ]
 
 
@@ -78,7 +99,7 @@ def api() -> tuple[list, list, list]:
         if _records(obj):
             records.append(obj)
         elif not issubclass(obj, (BaseException, enum.Enum)):
-            funcs.append(obj)                  # the class docstring documents __init__
+            funcs.append(obj)  # the class docstring documents __init__
         for attr, member in vars(obj).items():
             if attr.startswith("_"):
                 continue
@@ -115,7 +136,7 @@ def entries(section: list[str]) -> dict[str, str]:
     names: list[str] = []
     for line in section:
         if line and not line[0].isspace():
-            names = [n.strip() for n in line.split(" : ")[0].split(", ")]   # 'a, b : float'
+            names = [n.strip() for n in line.split(" : ")[0].split(", ")]  # 'a, b : float'
             out.update(dict.fromkeys(names, line))
         else:
             for name in names:
@@ -134,23 +155,26 @@ def _id(obj) -> str:
 @pytest.mark.parametrize("func", FUNCTIONS, ids=_id)
 def test_every_argument_is_documented(func):
     doc = sections(func.__doc__)
-    params = [p for p in inspect.signature(func).parameters.values()
-              if p.name not in ("self", "cls")]
+    params = [
+        p for p in inspect.signature(func).parameters.values() if p.name not in ("self", "cls")
+    ]
     if params:
         assert "Parameters" in doc, f"{func.__qualname__}: no Parameters section"
         listed = entries(doc["Parameters"])
         for p in params:
-            assert documented_name(p) in listed, \
+            assert documented_name(p) in listed, (
                 f"{func.__qualname__}: argument {documented_name(p)} not documented"
-            assert listed[documented_name(p)].count("\n") >= 1, \
+            )
+            assert listed[documented_name(p)].count("\n") >= 1, (
                 f"{func.__qualname__}: argument {p.name} has no description"
+            )
         extra = set(listed) - {documented_name(p) for p in params}
         assert not extra, f"{func.__qualname__}: documents arguments it does not take: {extra}"
 
 
 @pytest.mark.parametrize("func", FUNCTIONS, ids=_id)
 def test_returns_section_where_something_is_returned(func):
-    if inspect.isclass(func):                  # a constructor returns the instance
+    if inspect.isclass(func):  # a constructor returns the instance
         return
     annotation = inspect.signature(func).return_annotation
     assert annotation is not inspect.Signature.empty, f"{func.__qualname__}: no return type"
@@ -161,8 +185,11 @@ def test_returns_section_where_something_is_returned(func):
 @pytest.mark.parametrize("record", RECORDS, ids=_id)
 def test_every_field_is_documented(record):
     """Under Attributes, or under Parameters (a dataclass's fields are its constructor's)."""
-    names = (record._fields if hasattr(record, "_fields")
-             else [f.name for f in dataclasses.fields(record) if not f.name.startswith("_")])
+    names = (
+        record._fields
+        if hasattr(record, "_fields")
+        else [f.name for f in dataclasses.fields(record) if not f.name.startswith("_")]
+    )
     doc = sections(record.__doc__)
     listed = {**entries(doc.get("Attributes", [])), **entries(doc.get("Parameters", []))}
     assert sorted(listed) == sorted(names), record.__qualname__
@@ -182,8 +209,9 @@ def test_screw_parameters_attributes_state_unit_default_and_range():
     assert "one of paper, consistent" in listed["formulation"]
 
 
-@pytest.mark.parametrize("owner,name", PROPERTIES,
-                         ids=[f"{o.__qualname__}.{n}" for o, n in PROPERTIES])
+@pytest.mark.parametrize(
+    "owner,name", PROPERTIES, ids=[f"{o.__qualname__}.{n}" for o, n in PROPERTIES]
+)
 def test_properties_have_docstrings(owner, name):
     doc = inspect.getdoc(getattr(owner, name))
     assert doc and doc != inspect.getdoc(property), f"{owner.__qualname__}.{name}"
@@ -191,7 +219,7 @@ def test_properties_have_docstrings(owner, name):
 
 @pytest.mark.parametrize("name,obj", exported(), ids=[n for n, _ in exported()])
 def test_every_exported_name_has_a_docstring(name, obj):
-    doc = obj.__doc__ or ""       # not inherited; not the signature a dataclass makes up
+    doc = obj.__doc__ or ""  # not inherited; not the signature a dataclass makes up
     assert doc.strip() and not doc.startswith(f"{obj.__name__}("), name
 
 
@@ -199,20 +227,28 @@ def test_every_public_class_has_a_docstring():
     """Also those no `__all__` lists: every class of every module (AST, nothing imported)."""
     import ast
     from pathlib import Path
+
     root = Path(squeak_model.__file__).parents[2]
-    missing = [f"{path.relative_to(root)}:{node.lineno} {node.name}"
-               for path in sorted((root / "leadscrew_ros").rglob("*.py"))
-               for node in ast.parse(path.read_text(encoding="utf-8")).body
-               if isinstance(node, ast.ClassDef) and not node.name.startswith("_")
-               and not ast.get_docstring(node)]
+    missing = [
+        f"{path.relative_to(root)}:{node.lineno} {node.name}"
+        for path in sorted((root / "leadscrew_ros").rglob("*.py"))
+        for node in ast.parse(path.read_text(encoding="utf-8")).body
+        if isinstance(node, ast.ClassDef)
+        and not node.name.startswith("_")
+        and not ast.get_docstring(node)
+    ]
     assert not missing, missing
 
 
 def test_the_examples_of_predict_run():
     finder = doctest.DocTestFinder()
-    (test,) = finder.find(squeak_model.SqueakModel.predict, "SqueakModel.predict",
-                          globs={"SqueakModel": squeak_model.SqueakModel})
+    (test,) = finder.find(
+        squeak_model.SqueakModel.predict,
+        "SqueakModel.predict",
+        globs={"SqueakModel": squeak_model.SqueakModel},
+    )
     assert test.examples, "SqueakModel.predict has no Examples"
-    result = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE
-                                   ).run(test)
+    result = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE).run(
+        test
+    )
     assert result.failed == 0 and result.attempted == len(test.examples)

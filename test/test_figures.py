@@ -9,11 +9,18 @@ import time
 import numpy as np
 import pytest
 
-from leadscrew_ros.cli import main
-from leadscrew_ros.cli import figures
-from leadscrew_ros.cli.figures import (BOUNDARY, FIGURE_FILES, GRID, VALIDITY, Limit,
-                                       describe_frequencies, describe_speed_map, line_bands,
-                                       squeak_branches)
+from leadscrew_ros.cli import figures, main
+from leadscrew_ros.cli.figures import (
+    BOUNDARY,
+    FIGURE_FILES,
+    GRID,
+    VALIDITY,
+    Limit,
+    describe_frequencies,
+    describe_speed_map,
+    line_bands,
+    squeak_branches,
+)
 from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.model.physics.friction import friction_coefficient, friction_slope
 from leadscrew_ros.model.studies.stability_map import stability_map
@@ -66,7 +73,7 @@ def test_fig04_steepest_slope_is_the_derivative_of_the_law_at_rest(quick_figures
     p = ScrewParameters()
     exact = -(p.mu_static - p.mu_kinetic) * p.friction_decay_s_m
     assert float(friction_slope(p, 0.0)) == pytest.approx(exact, rel=0, abs=1e-9)
-    v, h = np.array([0.01, 0.05, 0.3]), 1e-6                      # elsewhere: central differences
+    v, h = np.array([0.01, 0.05, 0.3]), 1e-6  # elsewhere: central differences
     fd = (friction_coefficient(p, v + h) - friction_coefficient(p, v - h)) / (2 * h)
     np.testing.assert_allclose(friction_slope(p, v), fd, rtol=1e-7)
     text = (quick_figures[0] / "summary.txt").read_text()
@@ -93,10 +100,11 @@ def test_line_bands_tell_boundaries_from_validity_and_grid_edges():
     limits = (Limit(0.0, "low"), Limit(np.inf, "high"))
     bands = line_bands(values, growth, [0.5, 1.5, 4.5, 5.5, 6.5], lambda: limits)
     assert [[(e.value, e.kind) for e in b] for b in bands] == [
-        [(0.0, VALIDITY), (0.5, BOUNDARY)],          # grid start at the lower validity limit
-        [(1.5, BOUNDARY), (2.0, VALIDITY)],          # the next point is invalid
+        [(0.0, VALIDITY), (0.5, BOUNDARY)],  # grid start at the lower validity limit
+        [(1.5, BOUNDARY), (2.0, VALIDITY)],  # the next point is invalid
         [(4.5, BOUNDARY), (5.5, BOUNDARY)],
-        [(6.5, BOUNDARY), (7.0, GRID)]]              # valid beyond the grid end
+        [(6.5, BOUNDARY), (7.0, GRID)],
+    ]  # valid beyond the grid end
     assert bands[0][0].limit == limits[0] and bands[1][0].text("speed_rad_s", False) == "1.5 rad/s"
     assert bands[1][1].text("speed_rad_s", True) == "2 rad/s (last valid grid point)"
     assert line_bands(values, -np.abs(growth), []) == []
@@ -108,20 +116,23 @@ def radius_columns():
     model = SqueakModel()
     spec = next(s for s in figures.MAPS if s.file.startswith("fig06"))
     y = figures._grid(spec.y_axis, *spec.y_range, figures.FULL.map_y)
-    result = stability_map(model, "radius_m", np.array([0.002, 0.0022, 0.005, 0.010]),
-                           "speed_rad_s", y)
+    result = stability_map(
+        model, "radius_m", np.array([0.002, 0.0022, 0.005, 0.010]), "speed_rad_s", y
+    )
     return result, figures.map_bands(result, "y", model.params), model
 
 
 def test_band_at_2mm_ends_at_the_edge_of_validity(radius_columns):
     result, bands, model = radius_columns
-    (lo, hi), = bands[0]
+    ((lo, hi),) = bands[0]
     critical = model.with_params(radius_m=0.002).critical_speed_rad_s
     assert lo.kind == BOUNDARY and 1.9 < lo.value < 2.1
     assert hi.kind == VALIDITY and hi.value < critical < 570 and hi.limit.value == critical
     text = describe_speed_map(result, model.params)
-    assert ("squeak bands at R = 2 mm: 1.98 rad/s to 559 rad/s (last valid grid point; "
-            "validity ends at the first critical speed 564 rad/s)") in text
+    assert (
+        "squeak bands at R = 2 mm: 1.98 rad/s to 559 rad/s (last valid grid point; "
+        "validity ends at the first critical speed 564 rad/s)"
+    ) in text
 
 
 def test_two_bands_at_2_2mm_are_both_listed(radius_columns):
@@ -132,21 +143,24 @@ def test_two_bands_at_2_2mm_are_both_listed(radius_columns):
     assert a_hi.value == pytest.approx(423, abs=1) and b_lo.value == pytest.approx(555, abs=1)
     # the grid ends below the critical speed (~621 rad/s): squeak continues beyond it
     assert b_hi.value == 600 < model.with_params(radius_m=0.0022).critical_speed_rad_s
-    assert ("more than one band at R = 2.2 mm (1.8-423 rad/s and 555 rad/s to >= 600 rad/s "
-            "(grid edge))") in describe_speed_map(result, model.params)
+    assert (
+        "more than one band at R = 2.2 mm (1.8-423 rad/s and 555 rad/s to >= 600 rad/s (grid edge))"
+    ) in describe_speed_map(result, model.params)
 
 
 def test_lower_bound_at_10mm_is_the_validity_limit_not_a_boundary(radius_columns):
     result, bands, model = radius_columns
-    (lo, hi), = bands[3]
+    ((lo, hi),) = bands[3]
     assert lo.kind == VALIDITY and lo.value == model.params.min_speed_rad_s == lo.limit.value
     assert hi.kind == BOUNDARY
     # the linearised boundary lies below min_speed_rad_s: the grid start is no boundary
     low = model.with_params(radius_m=0.010, min_speed_rad_s=0.1)
     assert low.predict(0.46, 200.0).max_growth_rate < 0 < low.predict(0.48, 200.0).max_growth_rate
     text = describe_speed_map(result, model.params)
-    assert ("at R = 10 mm: 0.5 rad/s (first valid grid point; validity ends at "
-            "min_speed_rad_s 0.5 rad/s) to 16.6 rad/s") in text
+    assert (
+        "at R = 10 mm: 0.5 rad/s (first valid grid point; validity ends at "
+        "min_speed_rad_s 0.5 rad/s) to 16.6 rad/s"
+    ) in text
     assert "nearest the nominal value, at R = 5 mm: 0.809-55.2 rad/s" in text
 
 
@@ -163,29 +177,31 @@ def test_fig11_label_and_summary_give_the_same_frequency():
 
 
 def test_map_json_and_import_do_not_load_matplotlib():
-    code = ("import sys, io, contextlib\n"
-            "import leadscrew_ros.cli.figures\n"
-            "from leadscrew_ros.cli import main\n"
-            "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
-            "    rc = main(['map', '--x', 'radius_m:0.004:0.006:3', '--y', 'speed_rad_s:5:50:3',"
-            " '--json'])\n"
-            "assert rc == 0 and out.getvalue().startswith('{'), rc\n"
-            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'matplotlib'))\n")
-    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=300)
+    code = (
+        "import sys, io, contextlib\n"
+        "import leadscrew_ros.cli.figures\n"
+        "from leadscrew_ros.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+        "    rc = main(['map', '--x', 'radius_m:0.004:0.006:3', '--y', 'speed_rad_s:5:50:3',"
+        " '--json'])\n"
+        "assert rc == 0 and out.getvalue().startswith('{'), rc\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'matplotlib'))\n"
+    )
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
     assert run.stdout.strip() == "[]"
 
 
 def test_the_report_plots_do_not_import_the_cli():
-    code = ("import sys\n"
-            "import leadscrew_ros.review.plots\n"
-            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('rclpy', 'matplotlib')"
-            " or m.startswith(('leadscrew_ros.cli', 'leadscrew_ros.ros'))))\n"
-            "import leadscrew_ros.review.report\n"
-            "print(sorted(m for m in sys.modules if m.startswith('leadscrew_ros.cli')))\n")
-    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=300)
+    code = (
+        "import sys\n"
+        "import leadscrew_ros.review.plots\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('rclpy', 'matplotlib')"
+        " or m.startswith(('leadscrew_ros.cli', 'leadscrew_ros.ros'))))\n"
+        "import leadscrew_ros.review.report\n"
+        "print(sorted(m for m in sys.modules if m.startswith('leadscrew_ros.cli')))\n"
+    )
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
     assert run.stdout.split() == ["[]", "[]"]
 
@@ -194,8 +210,9 @@ def test_track_modes_follows_continuous_branches():
     preds = SqueakModel().predict_many(np.geomspace(1, 100, 80), 200.0)
     branches = track_modes(preds)
     assert sum(np.isfinite(b.frequency_hz).sum() for b in branches) == sum(
-        len(p.modes) for p in preds)
-    for b in branches:      # consecutive eigenvalues of a branch are close (relative)
+        len(p.modes) for p in preds
+    )
+    for b in branches:  # consecutive eigenvalues of a branch are close (relative)
         lam = (b.growth + 2j * np.pi * b.frequency_hz)[np.isfinite(b.frequency_hz)]
         jump = np.abs(np.diff(lam)) / np.maximum(np.abs(lam[1:]), np.abs(lam[:-1]))
         assert np.all(jump < 0.15)

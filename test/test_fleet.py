@@ -27,6 +27,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
+from harness.logs import rosbags_log
 from leadscrew_ros.bag import logmeta
 from leadscrew_ros.bag.logfile import recover
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
@@ -37,14 +38,21 @@ from leadscrew_ros.review import fleet
 from leadscrew_ros.review.fleet import INDEX_FILE, find_logs, output_names, squeak_frequencies
 from leadscrew_ros.review.replay import ReplaySettings, log_name, replay
 from leadscrew_ros.review.timeline import InputSettings
-from harness.logs import rosbags_log
 
 pytest.importorskip("distributed")
 
-JOINT = "screw"            # the rosbags logs' joint; the Recorder's logs have /motor_speed
-NUMBERS = ["duration_s", "time_in_squeak_s", "episodes", "peak_probability",
-           "time_above_warn_s", "time_above_error_s", "messages", "predictions"]
-DASK = [sys.executable, "-m"]     # + distributed.cli.dask_scheduler / dask_worker
+JOINT = "screw"  # the rosbags logs' joint; the Recorder's logs have /motor_speed
+NUMBERS = [
+    "duration_s",
+    "time_in_squeak_s",
+    "episodes",
+    "peak_probability",
+    "time_above_warn_s",
+    "time_above_error_s",
+    "messages",
+    "predictions",
+]
+DASK = [sys.executable, "-m"]  # + distributed.cli.dask_scheduler / dask_worker
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -70,10 +78,15 @@ def add_metadata(path: Path, meta: logmeta.LogMetadata) -> None:
                 schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
             if channel.id not in channels:
                 channels[channel.id] = w.register_channel(
-                    channel.topic, channel.message_encoding, schemas[schema.id],
-                    channel.metadata)
-            w.add_message(channels[channel.id], message.log_time, message.data,
-                          message.publish_time, message.sequence)
+                    channel.topic, channel.message_encoding, schemas[schema.id], channel.metadata
+                )
+            w.add_message(
+                channels[channel.id],
+                message.log_time,
+                message.data,
+                message.publish_time,
+                message.sequence,
+            )
         w.add_metadata(logmeta.RECORD_NAME, meta.record())
         w.finish()
 
@@ -98,15 +111,20 @@ def logs(tmp_path_factory):
         write_log(cycle(k), root / "bench" / f"station{k}")
     for k, unit in ((4, "seat-0042"), (5, "seat-0043")):
         bag = write_log(cycle(k), root / "vehicles" / unit)
-        meta = logmeta.LogMetadata(ScrewParameters().as_dict(), {"samples": 1024},
-                                   {"joint_name": ""}, unit_id=unit, hardware_id="hw")
+        meta = logmeta.LogMetadata(
+            ScrewParameters().as_dict(),
+            {"samples": 1024},
+            {"joint_name": ""},
+            unit_id=unit,
+            hardware_id="hw",
+        )
         add_metadata(the_mcap(bag), meta)
-    for k in range(2):       # the same log name in two folders
+    for k in range(2):  # the same log name in two folders
         rosbags_log(root / "line" / f"day{k}" / "run", [JOINT], samples=100 + 40 * k)
     for k in range(2):
         rosbags_log(root / "line" / f"cell_{k}", ["wheel", JOINT], samples=120)
     cut = the_mcap(write_log(cycle(9), root / "broken" / "cut"))
-    cut.write_bytes(cut.read_bytes()[:int(cut.stat().st_size * 0.6)])
+    cut.write_bytes(cut.read_bytes()[: int(cut.stat().st_size * 0.6)])
     foreign_mcap(root / "foreign.mcap")
     return root
 
@@ -121,22 +139,36 @@ def expected(logs, tmp_path_factory):
         if log.name == "foreign.mcap":
             continue
         key = str(log)
-        if log.parent.name == "cut":      # reviewed as `recover` leaves it: the whole messages
+        if log.parent.name == "cut":  # reviewed as `recover` leaves it: the whole messages
             mended = out / "recovered" / log.name
             mended.mkdir(parents=True)
             for f in log.glob("*.mcap"):
                 recover(f, mended / f.name)
             log = mended
-        r = replay(log, model, out / str(len(found)), ReplaySettings(
-            InputSettings(joint_name=JOINT), workers=0, progress=False))
+        r = replay(
+            log,
+            model,
+            out / str(len(found)),
+            ReplaySettings(InputSettings(joint_name=JOINT), workers=0, progress=False),
+        )
         found[key] = (r.summary(), [e.as_dict() for e in r.episodes])
     assert len(found) == 11
     return found
 
 
 def review(logs, out, *options):
-    return main(["review", str(logs), "--out", str(out), "--joint-name", JOINT, "--quiet",
-                 *map(str, options)])
+    return main(
+        [
+            "review",
+            str(logs),
+            "--out",
+            str(out),
+            "--joint-name",
+            JOINT,
+            "--quiet",
+            *map(str, options),
+        ]
+    )
 
 
 def table(out: Path) -> list[dict]:
@@ -174,7 +206,7 @@ def check_table(out: Path, expected: dict) -> list[dict]:
     assert units["seat-0042"] == "seat-0042" and units["seat-0043"] == "seat-0043"
     names = [r["name"] for r in rows]
     assert len(set(names)) == 12
-    assert sum(n.startswith("run-") for n in names) == 2          # the shared name, made unique
+    assert sum(n.startswith("run-") for n in names) == 2  # the shared name, made unique
     return rows
 
 
@@ -182,11 +214,12 @@ def test_log_discovery_and_names(logs, tmp_path):
     found = find_logs([str(logs)])
     assert len(found) == 12
     # a split file stands for its bag, globs and overlapping inputs give each log once
-    assert find_logs([str(logs / "bench" / "**" / "*.mcap"), str(logs / "bench")]) == \
-        find_logs([str(logs / "bench")])
+    assert find_logs([str(logs / "bench" / "**" / "*.mcap"), str(logs / "bench")]) == find_logs(
+        [str(logs / "bench")]
+    )
     assert len(find_logs([str(logs)], skip=logs / "line")) == 8
     names = output_names(found)
-    assert names == output_names(list(reversed(found)))[::-1]     # the same in every order
+    assert names == output_names(list(reversed(found)))[::-1]  # the same in every order
     # a name an earlier review gave another log in the same directory is not taken again
     other = {"/elsewhere/station0": names[0]}
     assert output_names(found[:1], other)[0].startswith(names[0] + "-")
@@ -202,8 +235,14 @@ def test_local_cluster_reviews_every_log_and_resumes(logs, expected, tmp_path):
     rows = check_table(out, expected)
     ok = next(r for r in rows if r["status"] == "ok")
     outputs = sorted(p.name for p in (out / ok["name"]).iterdir())
-    assert outputs == sorted(["episodes.json", "summary.json", "summary.txt",
-                              f"{log_name(Path(ok['log']))}.annotated.mcap"])
+    assert outputs == sorted(
+        [
+            "episodes.json",
+            "summary.json",
+            "summary.txt",
+            f"{log_name(Path(ok['log']))}.annotated.mcap",
+        ]
+    )
     assert (out / "fleet.png").read_bytes().startswith(b"\x89PNG")
     # the annotated logs in the output directory are not logs to review
     assert find_logs([str(logs), str(out / "**" / "*.mcap")], skip=out) == find_logs([str(logs)])
@@ -223,36 +262,62 @@ def test_local_cluster_reviews_every_log_and_resumes(logs, expected, tmp_path):
     assert (doc["reviewed"], doc["skipped"]) == (0, 12)
     assert len((out / INDEX_FILE).read_text().splitlines()) == 12
     vehicles = [r for r in rows if "/vehicles/" in r["log"]]
-    assert review(logs / "vehicles", out, "--workers", 1, "--summary-only", "--scatter",
-                  "none") == 0
+    assert (
+        review(logs / "vehicles", out, "--workers", 1, "--summary-only", "--scatter", "none") == 0
+    )
     doc = json.loads((out / "fleet.json").read_text())
     assert (doc["logs"], doc["reviewed"], doc["skipped"]) == (2, 2, 0)
-    assert [r["peak_probability"] for r in doc["rows"]] == [1.0, 1.0]      # the 0/1 verdict
+    assert [r["peak_probability"] for r in doc["rows"]] == [1.0, 1.0]  # the 0/1 verdict
     for r in vehicles:
-        assert sorted(p.name for p in (out / r["name"]).iterdir()) == ["summary.json",
-                                                                       "summary.txt"]
+        assert sorted(p.name for p in (out / r["name"]).iterdir()) == [
+            "summary.json",
+            "summary.txt",
+        ]
 
 
 def test_use_log_params(logs, tmp_path, capsys):
     out = tmp_path / "own"
-    code = main(["review", str(logs / "vehicles"), str(logs / "bench" / "station0"), "--out",
-                 str(out), "--use-log-params", "--workers", "1", "--quiet", "--summary-only"])
+    code = main(
+        [
+            "review",
+            str(logs / "vehicles"),
+            str(logs / "bench" / "station0"),
+            "--out",
+            str(out),
+            "--use-log-params",
+            "--workers",
+            "1",
+            "--quiet",
+            "--summary-only",
+        ]
+    )
     capsys.readouterr()
     assert code == exit_status(1)
     rows = {Path(r["log"]).parent.name: r for r in table(out)}
     assert rows["seat-0042"]["status"] == rows["seat-0043"]["status"] == "ok"
     assert "no 'leadscrew_ros' metadata record" in rows["station0"]["error"]
-    code = main(["review", str(logs), "--out", str(out), "--use-log-params", "--param",
-                 "radius_m=0.01"])
+    code = main(
+        ["review", str(logs), "--out", str(out), "--use-log-params", "--param", "radius_m=0.01"]
+    )
     assert code == 2 and "exclude each other" in capsys.readouterr().err
 
 
 def test_bad_arguments_exit_2(logs, tmp_path, capsys):
-    for argv in (["review", str(tmp_path / "nothing"), "--out", str(tmp_path / "o")],
-                 ["review", str(logs), "--out", str(tmp_path / "o"), "--workers", "0"],
-                 ["review", str(logs), "--out", str(tmp_path / "o"), "--workers", "2",
-                  "--scheduler", "tcp://127.0.0.1:1"],
-                 ["review", str(tmp_path), "--out", str(tmp_path / "o")]):
+    for argv in (
+        ["review", str(tmp_path / "nothing"), "--out", str(tmp_path / "o")],
+        ["review", str(logs), "--out", str(tmp_path / "o"), "--workers", "0"],
+        [
+            "review",
+            str(logs),
+            "--out",
+            str(tmp_path / "o"),
+            "--workers",
+            "2",
+            "--scheduler",
+            "tcp://127.0.0.1:1",
+        ],
+        ["review", str(tmp_path), "--out", str(tmp_path / "o")],
+    ):
         assert main(argv) == 2
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and err.startswith("leadscrew-squeak: error")
@@ -271,21 +336,51 @@ def external_cluster(tmp_path):
     dashboard); yields the scheduler address, stops them all afterwards."""
     from distributed import Client
 
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [str(REPO), os.environ.get("PYTHONPATH", "")]))
+    env = dict(
+        os.environ, PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])
+    )
     address = f"tcp://127.0.0.1:{free_port()}"
-    procs = [subprocess.Popen(DASK + ["distributed.cli.dask_scheduler", "--host",
-                                          "127.0.0.1", "--port", address.rsplit(":", 1)[1],
-                                          "--no-dashboard"],
-                              env=env, cwd=tmp_path, stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL, start_new_session=True)]
+    procs = [
+        subprocess.Popen(
+            DASK
+            + [
+                "distributed.cli.dask_scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                address.rsplit(":", 1)[1],
+                "--no-dashboard",
+            ],
+            env=env,
+            cwd=tmp_path,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+    ]
     try:
         for _ in range(2):
-            procs.append(subprocess.Popen(
-                DASK + ["distributed.cli.dask_worker", address, "--host", "127.0.0.1",
-                            "--nthreads", "1", "--nworkers", "1", "--no-dashboard"],
-                env=env, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                start_new_session=True))
+            procs.append(
+                subprocess.Popen(
+                    DASK
+                    + [
+                        "distributed.cli.dask_worker",
+                        address,
+                        "--host",
+                        "127.0.0.1",
+                        "--nthreads",
+                        "1",
+                        "--nworkers",
+                        "1",
+                        "--no-dashboard",
+                    ],
+                    env=env,
+                    cwd=tmp_path,
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                    start_new_session=True,
+                )
+            )
         with Client(address, timeout="120s") as client:
             client.wait_for_workers(2, timeout=180)
             assert all(w.startswith("tcp://127.0.0.1:") for w in client.nthreads())
@@ -302,20 +397,21 @@ def external_cluster(tmp_path):
                 p.wait()
 
 
-def test_external_cluster_and_a_worker_killed_mid_run(logs, expected, external_cluster,
-                                                     tmp_path):
+def test_external_cluster_and_a_worker_killed_mid_run(logs, expected, external_cluster, tmp_path):
     from distributed import Client
 
     out = tmp_path / "external"
-    assert review(logs, out, "--scheduler", external_cluster,
-                  "--no-report") == exit_status(1)
+    assert review(logs, out, "--scheduler", external_cluster, "--no-report") == exit_status(1)
     reference = check_table(out, expected)
 
     # again into a new directory, and one worker process is killed once the first log is in
     out = tmp_path / "killed"
     result = {}
-    thread = threading.Thread(target=lambda: result.setdefault("code", review(
-        logs, out, "--scheduler", external_cluster, "--no-report")))
+    thread = threading.Thread(
+        target=lambda: result.setdefault(
+            "code", review(logs, out, "--scheduler", external_cluster, "--no-report")
+        )
+    )
     thread.start()
     index = out / INDEX_FILE
     while thread.is_alive() and not (index.exists() and index.read_text().strip()):

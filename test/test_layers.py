@@ -21,16 +21,19 @@ MODEL_PARTS = ("physics", "acoustics", "uncertainty", "squeak_model", "studies",
 
 
 def _modules(layer: str) -> list[str]:
-    return sorted(".".join(p.relative_to(REPO).with_suffix("").parts).removesuffix(".__init__")
-                  for p in (PACKAGE / layer).rglob("*.py"))
+    return sorted(
+        ".".join(p.relative_to(REPO).with_suffix("").parts).removesuffix(".__init__")
+        for p in (PACKAGE / layer).rglob("*.py")
+    )
 
 
 def _imports(path: Path) -> list[tuple[int, str]]:
     """(line, absolute module) of every import in the file, at any depth (functions,
     TYPE_CHECKING blocks included)."""
     module = ".".join(path.relative_to(REPO).with_suffix("").parts)
-    package = module.rsplit(".", 1)[0] if path.name != "__init__.py" else \
-        module.removesuffix(".__init__")
+    package = (
+        module.rsplit(".", 1)[0] if path.name != "__init__.py" else module.removesuffix(".__init__")
+    )
     out = []
     for node in ast.walk(ast.parse(path.read_text(), str(path))):
         if isinstance(node, ast.Import):
@@ -48,15 +51,19 @@ def _imports(path: Path) -> list[tuple[int, str]]:
 
 def _layer(module: str) -> str | None:
     parts = module.split(".")
-    return parts[1] if parts[0] == "leadscrew_ros" and len(parts) > 1 and \
-        parts[1] in LAYERS else None
+    return (
+        parts[1] if parts[0] == "leadscrew_ros" and len(parts) > 1 and parts[1] in LAYERS else None
+    )
 
 
 def _model_part(module: str) -> str | None:
     """The sub-package (or `squeak_model`) of a module of `model`; None for `model` itself."""
     parts = module.split(".")
-    return parts[2] if parts[:2] == ["leadscrew_ros", "model"] and len(parts) > 2 and \
-        parts[2] in MODEL_PARTS else None
+    return (
+        parts[2]
+        if parts[:2] == ["leadscrew_ros", "model"] and len(parts) > 2 and parts[2] in MODEL_PARTS
+        else None
+    )
 
 
 def violations(path: Path) -> list[str]:
@@ -79,8 +86,9 @@ def violations(path: Path) -> list[str]:
 def test_every_module_is_in_a_layer():
     top = sorted(p.name for p in PACKAGE.glob("*.py"))
     assert top == ["__init__.py"]
-    assert sorted(p.name for p in PACKAGE.iterdir() if p.is_dir() and p.name != "__pycache__") \
-        == sorted(LAYERS)
+    assert sorted(
+        p.name for p in PACKAGE.iterdir() if p.is_dir() and p.name != "__pycache__"
+    ) == sorted(LAYERS)
 
 
 def test_imports_flow_one_way():
@@ -92,14 +100,17 @@ def test_the_direction_check_sees_a_violation(tmp_path, monkeypatch):
     """The check above can fail: an upward import, relative or absolute, inside a function."""
     fake = tmp_path / "leadscrew_ros" / "bag"
     fake.mkdir(parents=True)
-    (fake / "x.py").write_text("def f():\n    from ..ros.node import main\n"
-                               "import leadscrew_ros.review.replay\nfrom .cdr import y\n"
-                               "from std_msgs.msg import Float64\n")
+    (fake / "x.py").write_text(
+        "def f():\n    from ..ros.node import main\n"
+        "import leadscrew_ros.review.replay\nfrom .cdr import y\n"
+        "from std_msgs.msg import Float64\n"
+    )
     monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
     assert violations(fake / "x.py") == [
         "leadscrew_ros/bag/x.py:2: bag imports leadscrew_ros.ros.node",
         "leadscrew_ros/bag/x.py:3: bag imports leadscrew_ros.review.replay",
-        "leadscrew_ros/bag/x.py:5: bag imports std_msgs.msg"]
+        "leadscrew_ros/bag/x.py:5: bag imports std_msgs.msg",
+    ]
 
 
 def test_the_direction_check_sees_a_model_sub_package_violation(tmp_path, monkeypatch):
@@ -107,32 +118,47 @@ def test_the_direction_check_sees_a_model_sub_package_violation(tmp_path, monkey
     fake = tmp_path / "leadscrew_ros" / "model" / "physics"
     fake.mkdir(parents=True)
     (fake / "x.py").write_text("from ..squeak_model import SqueakModel\nfrom .kernels import k\n")
-    (fake.parent / "squeak_model.py").write_text("from .studies.sweep import sweep\n"
-                                                 "from .uncertainty.scatter import Scatter\n")
+    (fake.parent / "squeak_model.py").write_text(
+        "from .studies.sweep import sweep\nfrom .uncertainty.scatter import Scatter\n"
+    )
     monkeypatch.setattr(sys.modules[__name__], "REPO", tmp_path)
     assert violations(fake / "x.py") == [
-        "leadscrew_ros/model/physics/x.py:1: model.physics imports "
-        "leadscrew_ros.model.squeak_model"]
+        "leadscrew_ros/model/physics/x.py:1: model.physics imports leadscrew_ros.model.squeak_model"
+    ]
     assert violations(fake.parent / "squeak_model.py") == [
         "leadscrew_ros/model/squeak_model.py:1: model.squeak_model imports "
-        "leadscrew_ros.model.studies.sweep"]
+        "leadscrew_ros.model.studies.sweep"
+    ]
 
 
 @pytest.mark.parametrize("layer", ROS_FREE)
 def test_layer_imports_without_ros(layer):
     modules = _modules(layer)
     assert len(modules) >= 3, modules
-    code = BLOCKER + (f"for n in {modules!r}: importlib.import_module(n)\n"
-                      "print(len([m for m in sys.modules if m.startswith('leadscrew_ros')]))\n")
-    r = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True,
-                       env=os.environ.copy(), timeout=120)
+    code = BLOCKER + (
+        f"for n in {modules!r}: importlib.import_module(n)\n"
+        "print(len([m for m in sys.modules if m.startswith('leadscrew_ros')]))\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        env=os.environ.copy(),
+        timeout=120,
+    )
     assert r.returncode == 0, r.stdout + r.stderr
 
 
 def test_the_blocker_blocks():
-    r = subprocess.run([sys.executable, "-c", BLOCKER + "import leadscrew_ros.ros.node\n"],
-                       cwd=REPO, capture_output=True, text=True, env=os.environ.copy(),
-                       timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-c", BLOCKER + "import leadscrew_ros.ros.node\n"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        env=os.environ.copy(),
+        timeout=120,
+    )
     assert r.returncode != 0 and "blocked for this test: rclpy" in r.stderr
 
 
@@ -153,11 +179,14 @@ def test_architecture_page_lists_every_module_in_its_layer():
             continue
         depth, name = (len(line) - len(line.lstrip())) // 2, line.split()[0]
         if depth == 0:
-            break                                  # tools/, config/ ...: outside the package
+            break  # tools/, config/ ...: outside the package
         if name.endswith("/") or name.endswith(".py"):
-            stack = stack[:depth - 1] + [name.rstrip("/")]
+            stack = stack[: depth - 1] + [name.rstrip("/")]
             if name.endswith(".py"):
                 listed.add("/".join(stack))
-    actual = {str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("*.py")
-              if p.name != "__init__.py" or p.parent.name == "cli"}
+    actual = {
+        str(p.relative_to(PACKAGE))
+        for p in PACKAGE.rglob("*.py")
+        if p.name != "__init__.py" or p.parent.name == "cli"
+    }
     assert listed == actual

@@ -10,28 +10,44 @@ import threading
 
 import numpy as np
 import pytest
-from scipy.linalg import lapack
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.linalg import lapack
 
 from leadscrew_ros.live import recompute as live_module
 from leadscrew_ros.live.recompute import LatestWorker, LivePredictor, LiveSettings, Superseded
-from leadscrew_ros.live.status import (KEY_MARGIN, KEY_NUT_POSITION, KEY_PROBABILITY,
-                                       KEY_PROBABILITY_STDERR, KEY_SAFE_SPEED_ERROR,
-                                       KEY_SAFE_SPEED_PENDING, KEY_SQUEAK_FREQUENCIES, KEY_VALID,
-                                       KEY_VALIDITY, Level, prediction_status)
+from leadscrew_ros.live.status import (
+    KEY_MARGIN,
+    KEY_NUT_POSITION,
+    KEY_PROBABILITY,
+    KEY_PROBABILITY_STDERR,
+    KEY_SAFE_SPEED_ERROR,
+    KEY_SAFE_SPEED_PENDING,
+    KEY_SQUEAK_FREQUENCIES,
+    KEY_VALID,
+    KEY_VALIDITY,
+    Level,
+    prediction_status,
+)
 from leadscrew_ros.model import Prediction, SqueakModel, Validity
-from leadscrew_ros.model.studies.advice import (_BAND_POINTS, _MAX_REFINE, _SCAN_BATCH, EDGE_RTOL,
-                                        band_around, band_score, speed_bands)
-from leadscrew_ros.model.uncertainty.scatter import Scatter
+from leadscrew_ros.model.studies.advice import (
+    _BAND_POINTS,
+    _MAX_REFINE,
+    _SCAN_BATCH,
+    EDGE_RTOL,
+    band_around,
+    band_score,
+    speed_bands,
+)
 from leadscrew_ros.model.studies.fields import growth_field
+from leadscrew_ros.model.uncertainty.scatter import Scatter
 
 # Table 1, 200 N, paper, default scatter: the nominal squeak band is ~0.81..55.2 rad/s; P(squeak)
 # is 0.997 at 20 rad/s, 0.43 at 55.5 (nominally stable), 0.12 at 60, 0.002 at 68, 0 from ~70 on.
 MODEL = SqueakModel()
 LOAD = 200.0
 SQUEAK, STABLE, NEAR_EDGE = 20.0, 100.0, 55.5  # rad/s
-SAFE = LiveSettings().safe_probability         # 0.01: squeak/safe_speed has P below it
+SAFE = LiveSettings().safe_probability  # 0.01: squeak/safe_speed has P below it
 
 
 def live(**settings) -> LivePredictor:
@@ -50,8 +66,14 @@ def at(speed: float, load: float = LOAD, now: float = 0.0, **settings) -> LivePr
 
 
 def finite_numbers(p: Prediction, safe_speed: float | None) -> list[float]:
-    numbers = [p.speed_rad_s, p.load_n, p.probability, *p.divergence_rates,
-               *p.unstable_frequencies_hz, *([] if p.margin is None else [p.margin])]
+    numbers = [
+        p.speed_rad_s,
+        p.load_n,
+        p.probability,
+        *p.divergence_rates,
+        *p.unstable_frequencies_hz,
+        *([] if p.margin is None else [p.margin]),
+    ]
     numbers += [v for m in p.modes for v in (m.frequency_hz, m.growth_rate, m.damping_ratio)]
     return numbers + ([] if safe_speed is None else [safe_speed])
 
@@ -61,19 +83,22 @@ def test_nothing_is_due_before_speed_and_load_arrive():
     lp = live()
     assert not lp.due(0.0) and lp.update(0.0) is None and lp.recomputes == 0
     lp.set_speed(SQUEAK, 0.0)
-    assert not lp.due(0.0)                     # load still missing
+    assert not lp.due(0.0)  # load still missing
     assert lp.status(0.0).level == Level.STALE
     lp.set_load(LOAD, 0.0)
     assert lp.due(0.0)
 
 
 # ----------------------------------------------------------------------------- deadbands
-@pytest.mark.parametrize("setter, below, above", [
-    ("set_speed", STABLE + 0.05, STABLE + 0.2),           # speed_deadband_rad_s = 0.1
-    ("set_speed", STABLE - 0.09, STABLE - 0.11),
-    ("set_load", LOAD + 0.5, LOAD + 1.5),                 # load_deadband_n = 1
-    ("set_nut_position", 0.15 + 0.0004, 0.15 + 0.0006),   # nut_deadband_m = 0.0005
-])
+@pytest.mark.parametrize(
+    "setter, below, above",
+    [
+        ("set_speed", STABLE + 0.05, STABLE + 0.2),  # speed_deadband_rad_s = 0.1
+        ("set_speed", STABLE - 0.09, STABLE - 0.11),
+        ("set_load", LOAD + 0.5, LOAD + 1.5),  # load_deadband_n = 1
+        ("set_nut_position", 0.15 + 0.0004, 0.15 + 0.0006),  # nut_deadband_m = 0.0005
+    ],
+)
 def test_deadbands(setter, below, above):
     lp = at(STABLE)
     assert not lp.due(1.0)
@@ -85,14 +110,14 @@ def test_deadbands(setter, below, above):
 
 def test_deadband_is_measured_from_the_last_recompute_not_the_last_input():
     lp = at(STABLE)
-    for i in range(1, 6):                      # creeping by 0.04 rad/s: 0.2 in total
+    for i in range(1, 6):  # creeping by 0.04 rad/s: 0.2 in total
         lp.set_speed(STABLE + 0.04 * i, 1.0)
     assert lp.due(1.0)
 
 
 # ----------------------------------------------------------------------------- rate limit
 def test_rate_limit():
-    lp = at(STABLE, max_rate_hz=10.0)                    # computed at t = 0
+    lp = at(STABLE, max_rate_hz=10.0)  # computed at t = 0
     lp.set_speed(STABLE + 5.0, 0.01)
     for t in (0.01, 0.05, 0.0999):
         assert lp.changed() and not lp.due(t), t
@@ -111,7 +136,7 @@ def test_a_burst_of_inputs_is_one_recompute_at_the_latest_value():
     assert lp.due(1.0)
     p = lp.update(1.0)
     assert p.speed_rad_s == 123.0 and lp.prediction is p
-    assert lp.recomputes == 2                  # the first one in at() and this one
+    assert lp.recomputes == 2  # the first one in at() and this one
     assert not lp.due(2.0)
 
 
@@ -126,7 +151,7 @@ def test_burst_recomputes_are_bounded_by_the_rate_limit():
         if lp.due(now):
             lp.update(now)
     assert 1 <= lp.recomputes <= duration * 100.0 + 1
-    assert lp.due(duration + 0.01)             # the tick after the burst picks up the rest
+    assert lp.due(duration + 0.01)  # the tick after the burst picks up the rest
     lp.update(duration + 0.01)
     assert lp.prediction.speed_rad_s == 60.0 + (n - 1) % 100
     assert lp.recomputes <= duration * 100.0 + 2
@@ -152,16 +177,20 @@ BAD_INPUTS = [
     ("set_nut_position", 10**400, ["nut position", "not a number"]),
     ("set_nut_position", 0.25, ["nut position", "0.25", "off the screw", "z_o + b <= L"]),
     ("set_nut_position", -0.01, ["nut position", "-0.01", "off the screw"]),
-    ("set_nut_position", 0.2400001, ["nut position 0.2400001 m is off the screw",
-                                     "allowed [0, 0.24] m"]),
+    (
+        "set_nut_position",
+        0.2400001,
+        ["nut position 0.2400001 m is off the screw", "allowed [0, 0.24] m"],
+    ),
 ]
 
 
 GOOD = {"set_speed": SQUEAK, "set_load": LOAD, "set_nut_position": 0.15}
 
 
-@pytest.mark.parametrize("setter, value, words", BAD_INPUTS,
-                         ids=[f"{s}-{v!r:.20}" for s, v, _ in BAD_INPUTS])
+@pytest.mark.parametrize(
+    "setter, value, words", BAD_INPUTS, ids=[f"{s}-{v!r:.20}" for s, v, _ in BAD_INPUTS]
+)
 def test_invalid_input_is_rejected_and_named(setter, value, words):
     lp = at(SQUEAK)
     good, safe, inputs = lp.prediction, lp.safe_speed_rad_s, vars(lp.inputs).copy()
@@ -171,8 +200,8 @@ def test_invalid_input_is_rejected_and_named(setter, value, words):
     status = lp.status(1.0)
     assert status.level == Level.ERROR
     assert status.message == f"invalid input: {reason}"
-    assert vars(lp.inputs) == inputs           # the bad value is not stored
-    assert not lp.due(1.0)                     # nothing to recompute
+    assert vars(lp.inputs) == inputs  # the bad value is not stored
+    assert not lp.due(1.0)  # nothing to recompute
     assert lp.prediction is good and lp.safe_speed_rad_s == safe
     # a good value of the same input clears the error; the verdict is the prediction's again
     getattr(lp, setter)(GOOD[setter], 1.0)
@@ -182,10 +211,10 @@ def test_invalid_input_is_rejected_and_named(setter, value, words):
 def test_an_input_error_lasts_until_that_input_is_good_again():
     lp = at(SQUEAK)
     lp.set_speed(math.nan, 1.0)
-    lp.set_load(LOAD, 1.0)                     # another input being fine does not hide it
+    lp.set_load(LOAD, 1.0)  # another input being fine does not hide it
     lp.set_nut_position(0.1, 1.0)
     assert lp.status(1.0).message == "invalid input: speed = nan is not finite (rad/s)"
-    lp.set_load(None, 1.0)                     # two bad inputs: both named
+    lp.set_load(None, 1.0)  # two bad inputs: both named
     message = lp.status(1.0).message
     assert "speed = nan" in message and "load = None" in message
     lp.set_speed(SQUEAK, 1.0)
@@ -195,10 +224,14 @@ def test_an_input_error_lasts_until_that_input_is_good_again():
 
 
 # ----------------------------------------------------------------------------- validity
-@pytest.mark.parametrize("speed, words, validity", [
-    (0.1, "below min_speed_rad_s", Validity.BELOW_MIN_SPEED),
-    (-0.1, "below min_speed_rad_s", Validity.BELOW_MIN_SPEED),
-    (5000.0, "critical speed", Validity.AT_CRITICAL_SPEED)])
+@pytest.mark.parametrize(
+    "speed, words, validity",
+    [
+        (0.1, "below min_speed_rad_s", Validity.BELOW_MIN_SPEED),
+        (-0.1, "below min_speed_rad_s", Validity.BELOW_MIN_SPEED),
+        (5000.0, "critical speed", Validity.AT_CRITICAL_SPEED),
+    ],
+)
 def test_outside_validity_keeps_the_last_good_prediction(speed, words, validity):
     lp = at(SQUEAK)
     good, safe = lp.prediction, lp.safe_speed_rad_s
@@ -211,8 +244,8 @@ def test_outside_validity_keeps_the_last_good_prediction(speed, words, validity)
     assert status.message.startswith("no prediction: outside the model's validity")
     assert words in status.message
     assert status.values[KEY_VALID] == "false" and status.values[KEY_VALIDITY] == validity.name
-    assert not lp.due(1.5)                     # no retry until the point moves
-    lp.set_speed(STABLE, 2.0)                  # back inside: a new prediction, verdict OK
+    assert not lp.due(1.5)  # no retry until the point moves
+    lp.set_speed(STABLE, 2.0)  # back inside: a new prediction, verdict OK
     lp.set_load(LOAD, 2.0)
     assert lp.update(2.0).speed_rad_s == STABLE and lp.status(2.0).level == Level.OK
 
@@ -225,13 +258,13 @@ def test_stale_after_the_timeout():
     assert status.level == Level.STALE
     assert "motor_speed" in status.message and "axial_load" in status.message
     assert "1 s" in status.message
-    lp.set_speed(STABLE, 11.5)                 # fresh speed, load still old
+    lp.set_speed(STABLE, 11.5)  # fresh speed, load still old
     status = lp.status(11.6)
     assert status.level == Level.STALE
     assert "axial_load" in status.message and "motor_speed" not in status.message
     lp.set_load(LOAD, 11.6)
     assert lp.status(11.7).level == Level.OK
-    assert lp.prediction is not None            # staleness never drops the last prediction
+    assert lp.prediction is not None  # staleness never drops the last prediction
 
 
 # ----------------------------------------------------------------------------- verdict
@@ -243,7 +276,8 @@ def test_squeak_is_error():
     assert status.message == "squeak predicted: P(squeak) 1 (B1y 224 Hz, B2y 898 Hz)"
     assert float(status.values[KEY_PROBABILITY]) == pytest.approx(p.probability, rel=1e-5)
     assert float(status.values[KEY_PROBABILITY_STDERR]) == pytest.approx(
-        p.probability_stderr, rel=1e-5)
+        p.probability_stderr, rel=1e-5
+    )
     assert float(status.values[KEY_MARGIN]) == pytest.approx(p.margin, rel=1e-5)
     assert p.margin < 0
     assert status.values[KEY_VALID] == "true"
@@ -253,13 +287,17 @@ def test_squeak_is_error():
 
 # Points of known P (module comment): the level follows P and the thresholds, not whether the
 # nominal parameters squeak (55 rad/s squeaks nominally, 55.5 and 60 do not).
-@pytest.mark.parametrize("speed, low, high, level, message", [
-    (20.0, 0.99, 1.0, Level.ERROR, "squeak predicted: P(squeak) 1 (B1y 224 Hz, B2y 898 Hz)"),
-    (55.0, 0.4, 0.5, Level.WARN, "squeak possible: P(squeak) 0.46 >= 0.1 (B1y 225 Hz)"),
-    (55.5, 0.4, 0.5, Level.WARN, "squeak possible: P(squeak) 0.43 >= 0.1"),
-    (60.0, 0.1, 0.2, Level.WARN, "squeak possible: P(squeak) 0.12 >= 0.1"),
-    (70.0, 0.0, 0.0, Level.OK, "no squeak: P(squeak) 0 < 0.1"),
-    (STABLE, 0.0, 0.0, Level.OK, "no squeak: P(squeak) 0 < 0.1")])
+@pytest.mark.parametrize(
+    "speed, low, high, level, message",
+    [
+        (20.0, 0.99, 1.0, Level.ERROR, "squeak predicted: P(squeak) 1 (B1y 224 Hz, B2y 898 Hz)"),
+        (55.0, 0.4, 0.5, Level.WARN, "squeak possible: P(squeak) 0.46 >= 0.1 (B1y 225 Hz)"),
+        (55.5, 0.4, 0.5, Level.WARN, "squeak possible: P(squeak) 0.43 >= 0.1"),
+        (60.0, 0.1, 0.2, Level.WARN, "squeak possible: P(squeak) 0.12 >= 0.1"),
+        (70.0, 0.0, 0.0, Level.OK, "no squeak: P(squeak) 0 < 0.1"),
+        (STABLE, 0.0, 0.0, Level.OK, "no squeak: P(squeak) 0 < 0.1"),
+    ],
+)
 def test_diagnostic_level_by_probability(speed, low, high, level, message):
     lp = at(speed)
     assert low <= lp.prediction.probability <= high
@@ -268,12 +306,13 @@ def test_diagnostic_level_by_probability(speed, low, high, level, message):
 
 
 def test_probability_thresholds_are_settings():
-    p = at(60.0).prediction                                 # P 0.12
+    p = at(60.0).prediction  # P 0.12
     assert at(60.0, warn_probability=0.13).status(0.0).level == Level.OK
-    assert at(60.0, warn_probability=0.12, error_probability=0.12).status(0.0).level == \
-        Level.ERROR
-    assert at(60.0, warn_probability=0.05, error_probability=p.probability).status(0.0) \
-        .message == "squeak predicted: P(squeak) 0.12109375"    # >= it; 0.12 would be below
+    assert at(60.0, warn_probability=0.12, error_probability=0.12).status(0.0).level == Level.ERROR
+    assert (
+        at(60.0, warn_probability=0.05, error_probability=p.probability).status(0.0).message
+        == "squeak predicted: P(squeak) 0.12109375"
+    )  # >= it; 0.12 would be below
     assert at(55.0, error_probability=0.4).status(0.0).level == Level.ERROR
 
 
@@ -281,8 +320,12 @@ def test_without_scatter_the_verdict_is_the_nominal_one():
     """No scatter: P is 0 or 1, so the level is the nominal verdict (OK or ERROR)."""
     lp = LivePredictor(MODEL.with_scatter(Scatter({})), clock=lambda: 0.0)
     lp.set_load(LOAD, 0.0)
-    for speed, probability, level in ((55.0, 1.0, Level.ERROR), (55.5, 0.0, Level.OK),
-                                      (60.0, 0.0, Level.OK), (20.0, 1.0, Level.ERROR)):
+    for speed, probability, level in (
+        (55.0, 1.0, Level.ERROR),
+        (55.5, 0.0, Level.OK),
+        (60.0, 0.0, Level.OK),
+        (20.0, 1.0, Level.ERROR),
+    ):
         lp.set_speed(speed, 0.0)
         p = lp.update(0.0)
         assert (p.probability, p.probability_stderr) == (probability, None)
@@ -294,12 +337,16 @@ def made(probability: float, divergence: tuple[float, ...] = ()) -> Prediction:
     return Prediction(60.0, LOAD, "paper", Validity.OK, "", (), divergence, probability, None)
 
 
-@pytest.mark.parametrize("probability, level, message", [
-    (0.0996, Level.OK, "no squeak: P(squeak) 0.0996 < 0.1"),    # not rounded onto 0.1
-    (0.1, Level.WARN, "squeak possible: P(squeak) 0.1 >= 0.1"),
-    (0.4996, Level.WARN, "squeak possible: P(squeak) 0.4996 >= 0.1"),
-    (0.5, Level.ERROR, "squeak predicted: P(squeak) 0.5"),
-    (0.0123, Level.OK, "no squeak: P(squeak) 0.012 < 0.1")])
+@pytest.mark.parametrize(
+    "probability, level, message",
+    [
+        (0.0996, Level.OK, "no squeak: P(squeak) 0.0996 < 0.1"),  # not rounded onto 0.1
+        (0.1, Level.WARN, "squeak possible: P(squeak) 0.1 >= 0.1"),
+        (0.4996, Level.WARN, "squeak possible: P(squeak) 0.4996 >= 0.1"),
+        (0.5, Level.ERROR, "squeak predicted: P(squeak) 0.5"),
+        (0.0123, Level.OK, "no squeak: P(squeak) 0.012 < 0.1"),
+    ],
+)
 def test_probability_is_never_rounded_across_a_threshold(probability, level, message):
     status = prediction_status(made(probability), LiveSettings())
     assert (status.level, status.message) == (level, message)
@@ -308,7 +355,9 @@ def test_probability_is_never_rounded_across_a_threshold(probability, level, mes
 def test_divergence_is_error_whatever_the_probability():
     status = prediction_status(made(0.0, (3.25,)), LiveSettings())
     assert (status.level, status.message) == (
-        Level.ERROR, "divergence predicted: P(squeak) 0 (divergence 3.25 1/s)")
+        Level.ERROR,
+        "divergence predicted: P(squeak) 0 (divergence 3.25 1/s)",
+    )
 
 
 # ----------------------------------------------------------------------------- nut position
@@ -320,11 +369,13 @@ def test_nut_movement_beyond_the_deadband_changes_the_prediction():
     lp.set_nut_position(0.12, 2.0)
     assert lp.due(2.0)
     middle = lp.update(2.0)
-    expected = {z: MODEL.with_params(nut_position_m=z).predict(SQUEAK, LOAD).max_growth_rate
-                for z in (0.02, 0.12)}
+    expected = {
+        z: MODEL.with_params(nut_position_m=z).predict(SQUEAK, LOAD).max_growth_rate
+        for z in (0.02, 0.12)
+    }
     assert near_end.max_growth_rate == pytest.approx(expected[0.02], rel=1e-9)
     assert middle.max_growth_rate == pytest.approx(expected[0.12], rel=1e-9)
-    assert abs(near_end.max_growth_rate - middle.max_growth_rate) > 10.0   # 44.6 vs 81.8 1/s
+    assert abs(near_end.max_growth_rate - middle.max_growth_rate) > 10.0  # 44.6 vs 81.8 1/s
     assert lp.status(2.0).values[KEY_NUT_POSITION] == "0.12"
 
 
@@ -334,12 +385,12 @@ def test_contact_is_reintegrated_only_beyond_the_nut_deadband():
     lp.set_nut_position(0.1, 1.0)
     lp.update(1.0)
     built = lp._nut_model.geometry.contact
-    lp.set_nut_position(0.1 + 0.0003, 2.0)             # within the 0.5 mm deadband
+    lp.set_nut_position(0.1 + 0.0003, 2.0)  # within the 0.5 mm deadband
     lp.set_speed(SQUEAK + 1.0, 2.0)
     assert lp.update(2.0) is not None
     assert lp._nut_model.geometry.contact is built
     assert lp._nut_model.params.nut_position_m == 0.1
-    lp.set_nut_position(0.1 + 0.0008, 3.0)             # beyond it
+    lp.set_nut_position(0.1 + 0.0008, 3.0)  # beyond it
     lp.update(3.0)
     assert lp._nut_model.geometry.contact is not built
     assert lp._nut_model.params.nut_position_m == pytest.approx(0.1008)
@@ -352,7 +403,7 @@ def test_new_model_recomputes_with_the_new_parameters():
     assert lp.due(1.0)
     p = lp.update(1.0)
     assert p.formulation == "consistent"
-    assert p.unstable_frequencies_hz[0] == pytest.approx(2654.0, rel=1e-3)   # T1
+    assert p.unstable_frequencies_hz[0] == pytest.approx(2654.0, rel=1e-3)  # T1
 
 
 # ----------------------------------------------------------------------------- safe speed
@@ -401,21 +452,35 @@ def test_safe_probability_sets_the_band():
     assert MODEL.predict(safe * (1 - 3 * EDGE_RTOL), LOAD).probability >= 0.2
 
 
-def full_search_safe_speed(model: SqueakModel, load: float, speed: float,
-                           margin: float = 0.05) -> float:
+def full_search_safe_speed(
+    model: SqueakModel, load: float, speed: float, margin: float = 0.05
+) -> float:
     """The advice of the former synchronous path: every band (speed_bands), then the nearer
     edge of the one containing the speed, moved out by the margin, within the valid range."""
     w = abs(speed)
     for lo, hi in speed_bands(model, load, speed, safe_probability=SAFE):
         if lo <= w <= hi:
-            options = [v for v in (lo * (1 - margin), hi * (1 + margin))
-                       if model.params.min_speed_rad_s <= v < model.critical_speed_rad_s]
+            options = [
+                v
+                for v in (lo * (1 - margin), hi * (1 + margin))
+                if model.params.min_speed_rad_s <= v < model.critical_speed_rad_s
+            ]
             return math.copysign(min(options, key=lambda v: abs(v - w)), speed) if options else 0.0
     return speed
 
 
-POINTS = [(20.0, 200.0), (-20.0, 200.0), (3.0, 200.0), (50.0, 200.0), (-50.0, 200.0),
-          (20.0, 600.0), (-20.0, 600.0), (1.0, 50.0), (20.0, 50.0), (-20.0, -200.0)]
+POINTS = [
+    (20.0, 200.0),
+    (-20.0, 200.0),
+    (3.0, 200.0),
+    (50.0, 200.0),
+    (-50.0, 200.0),
+    (20.0, 600.0),
+    (-20.0, 600.0),
+    (1.0, 50.0),
+    (20.0, 50.0),
+    (-20.0, -200.0),
+]
 
 
 @pytest.mark.parametrize("scatter", ["default", "none"])
@@ -512,7 +577,8 @@ def test_a_speed_jittering_inside_a_band_settles_on_extended_bands(monkeypatch):
         lp.poll_advice()
     assert lp.wait_for_advice(timeout=60.0)
     assert lp.safe_speed_rad_s == pytest.approx(
-        full_search_safe_speed(MODEL, LOAD, speeds[-1]), abs=2e-3)
+        full_search_safe_speed(MODEL, LOAD, speeds[-1]), abs=2e-3
+    )
     assert len(searches) <= 10, len(searches)
 
 
@@ -521,27 +587,28 @@ def test_recomputes_leave_the_executor_half_its_time():
     """A prediction that takes 30 ms (with 40/40 modes one takes 20-80 ms): the next recompute
     starts at least two prediction times after the start of the last one, whatever
     max_rate_hz allows."""
-    ticks = iter([0.0, 0.03, 1.0, 1.001])          # the clock around each prediction
+    ticks = iter([0.0, 0.03, 1.0, 1.001])  # the clock around each prediction
     lp = LivePredictor(MODEL, LiveSettings(max_rate_hz=1000.0), clock=lambda: next(ticks))
     lp.set_speed(STABLE, 0.0)
     lp.set_load(LOAD, 0.0)
-    lp.update(0.0)                                  # took 30 ms
+    lp.update(0.0)  # took 30 ms
     assert lp.min_interval_s == pytest.approx(0.06)
     lp.set_speed(STABLE + 5.0, 0.0)
     assert not lp.due(0.0599) and lp.due(0.06)
-    lp.update(0.06)                                 # took 1 ms: the rate limit rules again
+    lp.update(0.06)  # took 1 ms: the rate limit rules again
     assert lp.min_interval_s == pytest.approx(0.002)
     lp.set_speed(STABLE + 10.0, 0.06)
     assert not lp.due(0.0615) and lp.due(0.062)
 
 
 def test_a_real_40_mode_prediction_sets_the_interval():
-    lp = LivePredictor(MODEL.with_params(n_bending=40, n_torsion=40),
-                       LiveSettings(max_rate_hz=10000.0))
+    lp = LivePredictor(
+        MODEL.with_params(n_bending=40, n_torsion=40), LiveSettings(max_rate_hz=10000.0)
+    )
     lp.set_speed(STABLE, 0.0)
     lp.set_load(LOAD, 0.0)
     lp.update(0.0)
-    assert lp.min_interval_s > 0.0005               # a 240x240 eig takes > 0.25 ms
+    assert lp.min_interval_s > 0.0005  # a 240x240 eig takes > 0.25 ms
 
 
 # ----------------------------------------------------------------------------- background
@@ -563,13 +630,13 @@ def worker_threads() -> list[threading.Thread]:
 def test_worker_runs_a_job_and_ends_its_thread():
     w, go = LatestWorker(), threading.Event()
     ident = w.submit(lambda checkpoint: go.wait() and "band")
-    assert w.busy and w.take() is None                      # pending
+    assert w.busy and w.take() is None  # pending
     [thread] = worker_threads()
-    assert thread.daemon                                    # never keeps the process alive
+    assert thread.daemon  # never keeps the process alive
     go.set()
     assert w.wait(30.0) and not w.busy
-    assert w.take() == (ident, "band", None) and w.take() is None   # ready, once
-    wait_until(lambda: not thread.is_alive())               # idle: no thread left
+    assert w.take() == (ident, "band", None) and w.take() is None  # ready, once
+    wait_until(lambda: not thread.is_alive())  # idle: no thread left
 
 
 def test_worker_latest_request_wins():
@@ -580,7 +647,7 @@ def test_worker_latest_request_wins():
         first_started.set()
         release.wait(30.0)
         try:
-            checkpoint()                                    # stale by now: abandoned here
+            checkpoint()  # stale by now: abandoned here
         except Superseded:
             log.append("first abandoned")
             raise
@@ -591,12 +658,13 @@ def test_worker_latest_request_wins():
             checkpoint()
             log.append(name)
             return name
+
         return run
 
     w.submit(first)
     assert first_started.wait(30.0)
-    w.submit(job("second"))                                 # waits; then replaced by
-    last = w.submit(job("third"))                           # the third: no queue
+    w.submit(job("second"))  # waits; then replaced by
+    last = w.submit(job("third"))  # the third: no queue
     release.set()
     assert w.wait(30.0)
     assert w.take() == (last, "third", None)
@@ -623,7 +691,7 @@ def test_worker_reports_errors_and_stops_on_close():
     assert spinning.wait(30.0)
     w.close(timeout=30.0)
     assert stopped.is_set() and not worker_threads()
-    w.submit(lambda checkpoint: "late")                     # closed: nothing runs any more
+    w.submit(lambda checkpoint: "late")  # closed: nothing runs any more
     assert not w.busy and not worker_threads() and w.take() is None
 
 
@@ -637,8 +705,15 @@ def gate(monkeypatch):
         searched.append((load, speed))
         go.models.append(model)
         assert go.wait(30.0)
-        return search(model, load, speed, margin, checkpoint=checkpoint, known=known,
-                      safe_probability=safe_probability)
+        return search(
+            model,
+            load,
+            speed,
+            margin,
+            checkpoint=checkpoint,
+            known=known,
+            safe_probability=safe_probability,
+        )
 
     monkeypatch.setattr(live_module, "band_around", held)
     go.searched, go.models = searched, []
@@ -651,21 +726,23 @@ def test_advice_is_kept_until_the_new_one_is_ready(gate):
     assert lp.safe_speed_rad_s == STABLE and not lp.advice_pending
     gate.clear()
     lp.set_speed(SQUEAK, 1.0)
-    lp.update(1.0)                                          # returns at once: search held
+    lp.update(1.0)  # returns at once: search held
     assert lp.advice_pending and lp.safe_speed_rad_s == STABLE
     assert lp.status(1.0).values[KEY_SAFE_SPEED_PENDING] == "true"
     assert not lp.poll_advice() and lp.safe_speed_rad_s == STABLE
     gate.set()
     wait_until(lambda: lp.poll_advice())
     assert not lp.advice_pending
-    assert lp.safe_speed_rad_s == pytest.approx(full_search_safe_speed(MODEL, LOAD, SQUEAK),
-                                                abs=2e-3)
+    assert lp.safe_speed_rad_s == pytest.approx(
+        full_search_safe_speed(MODEL, LOAD, SQUEAK), abs=2e-3
+    )
     assert lp.status(1.0).values[KEY_SAFE_SPEED_PENDING] == "false"
-    lp.set_speed(SQUEAK - 1.0, 2.0)       # same band and bin, decided by what is known of it
+    lp.set_speed(SQUEAK - 1.0, 2.0)  # same band and bin, decided by what is known of it
     lp.update(2.0)
     assert not lp.advice_pending and gate.searched == [(LOAD, SQUEAK)]
     assert lp.safe_speed_rad_s == pytest.approx(
-        full_search_safe_speed(MODEL, LOAD, SQUEAK - 1.0), abs=2e-3)
+        full_search_safe_speed(MODEL, LOAD, SQUEAK - 1.0), abs=2e-3
+    )
 
 
 def test_the_search_predicts_on_the_live_model(gate):
@@ -682,14 +759,15 @@ def test_the_search_predicts_on_the_live_model(gate):
 def test_advice_is_for_the_latest_bin(gate):
     lp = live()
     lp.set_speed(SQUEAK, 0.0)
-    for i, load in enumerate([LOAD, 300.0, 450.0]):         # three 5 % load bins
+    for i, load in enumerate([LOAD, 300.0, 450.0]):  # three 5 % load bins
         lp.set_load(load, float(i))
         lp.update(float(i))
         assert lp.advice_pending and lp.safe_speed_rad_s is None
     gate.set()
     assert lp.wait_for_advice(timeout=30.0)
-    assert lp.safe_speed_rad_s == pytest.approx(full_search_safe_speed(MODEL, 450.0, SQUEAK),
-                                                abs=2e-3)
+    assert lp.safe_speed_rad_s == pytest.approx(
+        full_search_safe_speed(MODEL, 450.0, SQUEAK), abs=2e-3
+    )
     assert 1 <= len(gate.searched) <= 3 and gate.searched[-1] == (450.0, SQUEAK)
 
 
@@ -718,7 +796,7 @@ def test_a_failed_search_keeps_the_last_advice(monkeypatch):
     assert lp.wait_for_advice(timeout=30.0)
     assert lp.safe_speed_rad_s == STABLE
     assert "did not converge" in lp.status(1.0).values[KEY_SAFE_SPEED_ERROR]
-    lp.set_speed(SQUEAK + 1.0, 2.0)                         # no retry within the bin
+    lp.set_speed(SQUEAK + 1.0, 2.0)  # no retry within the bin
     lp.update(2.0)
     assert not lp.advice_pending
 
@@ -729,18 +807,25 @@ def test_close_stops_the_search(gate):
     lp.set_load(LOAD, 0.0)
     lp.update(0.0)
     assert lp.advice_pending and worker_threads()
-    lp.close()                                              # the held search is abandoned
+    lp.close()  # the held search is abandoned
     gate.set()
     wait_until(lambda: not worker_threads())
     assert not lp.advice_pending and lp.wait_for_advice(timeout=1.0)
 
 
 # ----------------------------------------------------------------------------- hypothesis
-ANY_INPUT = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.none(), st.text(),
-                      st.booleans(), st.sampled_from([SQUEAK, -SQUEAK, STABLE, 0.0, 0.1,
-                                                      LOAD, -LOAD, 0.05, 0.24, 1e7]))
-OPS = st.lists(st.tuples(st.sampled_from(["set_speed", "set_load", "set_nut_position"]),
-                         ANY_INPUT), min_size=1, max_size=8)
+ANY_INPUT = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.none(),
+    st.text(),
+    st.booleans(),
+    st.sampled_from([SQUEAK, -SQUEAK, STABLE, 0.0, 0.1, LOAD, -LOAD, 0.05, 0.24, 1e7]),
+)
+OPS = st.lists(
+    st.tuples(st.sampled_from(["set_speed", "set_load", "set_nut_position"]), ANY_INPUT),
+    min_size=1,
+    max_size=8,
+)
 
 
 def diagnostic_numbers(status) -> list[float]:
@@ -751,7 +836,7 @@ def diagnostic_numbers(status) -> list[float]:
             try:
                 numbers.append(float(token))
             except ValueError:
-                pass                           # text: formulation, validity, ...
+                pass  # text: formulation, validity, ...
     return numbers
 
 
@@ -771,7 +856,6 @@ def test_arbitrary_inputs_never_raise_and_never_publish_nan(ops):
             if p is not None:
                 assert p is lp.prediction and p.valid
         if lp.prediction is not None:
-            assert all(math.isfinite(v) for v in finite_numbers(lp.prediction,
-                                                                  lp.safe_speed_rad_s))
+            assert all(math.isfinite(v) for v in finite_numbers(lp.prediction, lp.safe_speed_rad_s))
             assert 0.0 <= lp.prediction.probability <= 1.0
         assert all(math.isfinite(x) for x in diagnostic_numbers(status))

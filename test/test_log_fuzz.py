@@ -14,16 +14,20 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from mcap.writer import Writer
 
-from leadscrew_ros.cli import main
 from leadscrew_ros.bag.logfile import LogError, read_messages
-from leadscrew_ros.live.profile import StrokeProfile
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
+from leadscrew_ros.cli import main
+from leadscrew_ros.live.profile import StrokeProfile
 
 CYCLE = DutyCycle(duration_s=4.0, rate_hz=20.0, rest_s=0.5, stroke=StrokeProfile(duration_s=3.0))
 LAYOUTS = ("zstd", "lz4", "none", "unchunked")
-DEADLINE_S = 30.0          # per run; a normal one takes ~50 ms
-FUZZ = settings(max_examples=25, deadline=None, derandomize=True,
-                suppress_health_check=[HealthCheck.function_scoped_fixture])
+DEADLINE_S = 30.0  # per run; a normal one takes ~50 ms
+FUZZ = settings(
+    max_examples=25,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
+)
 
 
 @contextmanager
@@ -38,6 +42,7 @@ def deadline(seconds: float):
 
     def expire(signum, frame):
         raise TimeoutError(f"still running after {seconds} s")
+
     old = signal.signal(signal.SIGALRM, expire)
     signal.setitimer(signal.ITIMER_REAL, seconds)
     start = time.monotonic()
@@ -80,8 +85,11 @@ def logs(tmp_path_factory) -> dict[str, bytes]:
 def check_commands(path: Path, out: Path, capsys) -> list[int]:
     """replay, info and recover of `path`: exit 0, or 2 with one line naming the file."""
     codes = []
-    for argv in (["replay", path, "--out", out, "--no-report", "--quiet", "--workers", "0"],
-                 ["info", path], ["recover", path, "-o", out / "recovered.mcap"]):
+    for argv in (
+        ["replay", path, "--out", out, "--no-report", "--quiet", "--workers", "0"],
+        ["info", path],
+        ["recover", path, "-o", out / "recovered.mcap"],
+    ):
         with deadline(DEADLINE_S):
             code = main([str(a) for a in argv])
         _, err = capsys.readouterr()
@@ -103,24 +111,24 @@ def test_the_undamaged_logs_replay(logs, tmp_path, capsys):
 @pytest.mark.parametrize("layout", LAYOUTS)
 @FUZZ
 @given(fraction=st.floats(0.0, 1.0, exclude_max=True))
-def test_truncated_logs_fail_cleanly_and_read_as_a_prefix(logs, tmp_path, capsys, layout,
-                                                          fraction):
+def test_truncated_logs_fail_cleanly_and_read_as_a_prefix(logs, tmp_path, capsys, layout, fraction):
     data = logs[layout]
     path = tmp_path / "cut.mcap"
-    path.write_bytes(data[:int(len(data) * fraction)])
+    path.write_bytes(data[: int(len(data) * fraction)])
     replay_code, _, _ = check_commands(path, tmp_path / "out", capsys)
-    assert replay_code == 2                     # no footer: refused, recover is named
+    assert replay_code == 2  # no footer: refused, recover is named
     original = tmp_path / "whole.mcap"
     original.write_bytes(data)
     whole = [(m.topic.name, m.log_time_ns, m.data) for m in read_messages(original)]
     try:
         with deadline(DEADLINE_S):
-            prefix = [(m.topic.name, m.log_time_ns, m.data)
-                      for m in read_messages(path, strict=False)]
-    except LogError as exc:                     # cut inside the magic or the header
+            prefix = [
+                (m.topic.name, m.log_time_ns, m.data) for m in read_messages(path, strict=False)
+            ]
+    except LogError as exc:  # cut inside the magic or the header
         assert str(path) in str(exc)
         return
-    assert prefix == whole[:len(prefix)]
+    assert prefix == whole[: len(prefix)]
 
 
 @pytest.mark.parametrize("layout", LAYOUTS)

@@ -19,8 +19,13 @@ def _write(path, records):
 
 def test_round_trip(tmp_path):
     params = ScrewParameters().with_(formulation="consistent", nut_position_m=0.05)
-    meta = logmeta.LogMetadata(params.as_dict(), {"mu_static": 0.05, "samples": 1024},
-                               {"min_interval_s": 0.01}, unit_id="seat-7", hardware_id="hw")
+    meta = logmeta.LogMetadata(
+        params.as_dict(),
+        {"mu_static": 0.05, "samples": 1024},
+        {"min_interval_s": 0.01},
+        unit_id="seat-7",
+        hardware_id="hw",
+    )
     path = tmp_path / "a.mcap"
     _write(path, [("other", {"x": "1"}), (logmeta.RECORD_NAME, meta.record())])
     back = logmeta.read(path)

@@ -14,11 +14,10 @@ from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as RosbagsWriter
 
+from harness.logs import TYPESTORE, f64, write_mcap
 from leadscrew_ros.bag import msgdefs
 from leadscrew_ros.bag.logfile import LogError
 from leadscrew_ros.bag.logsource import log_topics, open_log
-
-from harness.logs import TYPESTORE, f64, write_mcap
 
 FLOAT64 = "std_msgs/msg/Float64"
 T0 = 1_700_000_000_000_000_000
@@ -39,9 +38,17 @@ def split_bag(directory: Path, indices=(0, 1, 2, 10)) -> dict[int, list]:
 def with_silent_topic(path: Path, summary: bool = True) -> Path:
     """/motor_speed with two messages and /nut_position declared without any; `summary` False
     writes no summary section (readers must read the file through)."""
-    kw = {} if summary else dict(use_chunking=False, use_statistics=False,
-                                 use_summary_offsets=False, repeat_channels=False,
-                                 repeat_schemas=False)
+    kw = (
+        {}
+        if summary
+        else dict(
+            use_chunking=False,
+            use_statistics=False,
+            use_summary_offsets=False,
+            repeat_channels=False,
+            repeat_schemas=False,
+        )
+    )
     with open(path, "wb") as f:
         w = Writer(f, **kw)
         w.start(profile="ros2")
@@ -67,12 +74,17 @@ def db3(path: Path, topics, rows, definitions=None) -> Path:
     con.executemany("INSERT INTO topics VALUES (?, ?, ?, ?, '')", topics)
     con.executemany("INSERT INTO messages(topic_id, timestamp, data) VALUES (?, ?, ?)", rows)
     if definitions is not None:
-        con.execute("CREATE TABLE message_definitions(id INTEGER PRIMARY KEY, topic_type TEXT, "
-                    "encoding TEXT, encoded_message_definition TEXT, type_description_hash "
-                    "TEXT)")
-        con.executemany("INSERT INTO message_definitions(topic_type, encoding, "
-                        "encoded_message_definition, type_description_hash) VALUES "
-                        "(?, 'ros2msg', ?, '')", definitions.items())
+        con.execute(
+            "CREATE TABLE message_definitions(id INTEGER PRIMARY KEY, topic_type TEXT, "
+            "encoding TEXT, encoded_message_definition TEXT, type_description_hash "
+            "TEXT)"
+        )
+        con.executemany(
+            "INSERT INTO message_definitions(topic_type, encoding, "
+            "encoded_message_definition, type_description_hash) VALUES "
+            "(?, 'ros2msg', ?, '')",
+            definitions.items(),
+        )
     con.commit()
     con.close()
     return path
@@ -87,12 +99,17 @@ def test_split_files_stream_in_split_order_each_in_file_order(tmp_path):
     written = split_bag(tmp_path / "bag")
     source = open_log(tmp_path / "bag")
     assert not source.sqlite
-    assert [f.name for f in source.files] == ["bag_0.mcap", "bag_1.mcap", "bag_2.mcap",
-                                              "bag_10.mcap"]
+    assert [f.name for f in source.files] == [
+        "bag_0.mcap",
+        "bag_1.mcap",
+        "bag_2.mcap",
+        "bag_10.mcap",
+    ]
     got = [(f.name, m.topic.name, m.log_time_ns, m.data) for f, m in source.messages()]
-    want = [(f"bag_{i}.mcap", t, time, payload(v)) for i in (0, 1, 2, 10)
-            for t, v, time in written[i]]
-    assert got == want                    # not sorted by log time (that runs backwards)
+    want = [
+        (f"bag_{i}.mcap", t, time, payload(v)) for i in (0, 1, 2, 10) for t, v, time in written[i]
+    ]
+    assert got == want  # not sorted by log time (that runs backwards)
     assert list(source.topics) == ["/motor_speed"] and source.counts == {"/motor_speed": 12}
 
 
@@ -112,12 +129,15 @@ def test_topics_without_messages_are_declared(tmp_path, summary):
 
 def test_topics_of_a_cut_off_file_are_those_before_the_cut(tmp_path):
     """No summary to read (the tail is gone): the topics the readable part declares."""
-    log = write_mcap(tmp_path / "cut.mcap", [f64("/motor_speed", 1.0, T0),
-                                             f64("/axial_load", 2.0, T0 + 1)], chunked=False)
+    log = write_mcap(
+        tmp_path / "cut.mcap",
+        [f64("/motor_speed", 1.0, T0), f64("/axial_load", 2.0, T0 + 1)],
+        chunked=False,
+    )
     data = log.read_bytes()
-    log.write_bytes(data[:int(len(data) * 0.8)])
+    log.write_bytes(data[: int(len(data) * 0.8)])
     assert set(log_topics(open_log(log))) == {"/motor_speed", "/axial_load"}
-    with pytest.raises(LogError, match="cut.mcap"):         # the strict read says why
+    with pytest.raises(LogError, match="cut.mcap"):  # the strict read says why
         list(open_log(log).messages())
 
 
@@ -129,10 +149,13 @@ def test_mcap_is_preferred_when_a_directory_holds_both(tmp_path):
     assert not source.sqlite and source.files == [bag / "bag_0.mcap"]
 
 
-@pytest.mark.parametrize("make, problem", [
-    (lambda d: d / "nothing.mcap", "no such file or directory"),
-    (lambda d: d, "directory holds no .mcap files"),
-])
+@pytest.mark.parametrize(
+    "make, problem",
+    [
+        (lambda d: d / "nothing.mcap", "no such file or directory"),
+        (lambda d: d, "directory holds no .mcap files"),
+    ],
+)
 def test_no_log_is_one_error_naming_the_path(tmp_path, make, problem):
     with pytest.raises(LogError, match=problem) as e:
         open_log(make(tmp_path))
@@ -141,19 +164,33 @@ def test_no_log_is_one_error_naming_the_path(tmp_path, make, problem):
 
 # ----------------------------------------------------------------------------- sqlite3
 def test_db3_messages_in_insertion_order_with_sequence_per_topic(tmp_path):
-    rows = [(1, T0 + 30, payload(1.0)), (2, T0 + 10, payload(2.0)), (1, T0 + 20, payload(3.0)),
-            (1, T0 + 5, payload(4.0))]
-    log = db3(tmp_path / "a.db3", [(1, "/motor_speed", FLOAT64, "cdr"),
-                                   (2, "/axial_load", FLOAT64, "cdr"),
-                                   (3, "/nut_position", FLOAT64, "cdr")], rows)
+    rows = [
+        (1, T0 + 30, payload(1.0)),
+        (2, T0 + 10, payload(2.0)),
+        (1, T0 + 20, payload(3.0)),
+        (1, T0 + 5, payload(4.0)),
+    ]
+    log = db3(
+        tmp_path / "a.db3",
+        [
+            (1, "/motor_speed", FLOAT64, "cdr"),
+            (2, "/axial_load", FLOAT64, "cdr"),
+            (3, "/nut_position", FLOAT64, "cdr"),
+        ],
+        rows,
+    )
     source = open_log(log)
     assert source.sqlite and source.files == [log]
-    got = [(m.topic.name, m.log_time_ns, m.publish_time_ns, m.sequence, m.data)
-           for _, m in source.messages()]
-    assert got == [("/motor_speed", T0 + 30, T0 + 30, 0, payload(1.0)),
-                   ("/axial_load", T0 + 10, T0 + 10, 0, payload(2.0)),
-                   ("/motor_speed", T0 + 20, T0 + 20, 1, payload(3.0)),
-                   ("/motor_speed", T0 + 5, T0 + 5, 2, payload(4.0))]
+    got = [
+        (m.topic.name, m.log_time_ns, m.publish_time_ns, m.sequence, m.data)
+        for _, m in source.messages()
+    ]
+    assert got == [
+        ("/motor_speed", T0 + 30, T0 + 30, 0, payload(1.0)),
+        ("/axial_load", T0 + 10, T0 + 10, 0, payload(2.0)),
+        ("/motor_speed", T0 + 20, T0 + 20, 1, payload(3.0)),
+        ("/motor_speed", T0 + 5, T0 + 5, 2, payload(4.0)),
+    ]
     assert source.counts == {"/motor_speed": 3, "/axial_load": 1, "/nut_position": 0}
     assert set(log_topics(source)) == {"/motor_speed", "/axial_load", "/nut_position"}
 
@@ -162,11 +199,18 @@ def test_db3_splits_are_in_split_order(tmp_path):
     bag = tmp_path / "bag"
     bag.mkdir()
     for i in (10, 2, 0, 1):
-        db3(bag / f"bag_{i}.db3", [(1, "/motor_speed", FLOAT64, "cdr")],
-            [(1, T0 + i, payload(float(i)))])
+        db3(
+            bag / f"bag_{i}.db3",
+            [(1, "/motor_speed", FLOAT64, "cdr")],
+            [(1, T0 + i, payload(float(i)))],
+        )
     source = open_log(bag)
     assert source.sqlite and [f.name for f in source.files] == [
-        "bag_0.db3", "bag_1.db3", "bag_2.db3", "bag_10.db3"]
+        "bag_0.db3",
+        "bag_1.db3",
+        "bag_2.db3",
+        "bag_10.db3",
+    ]
     assert [m.log_time_ns - T0 for _, m in source.messages()] == [0, 1, 2, 10]
 
 
@@ -174,22 +218,28 @@ def test_db3_message_definitions_stored_installed_or_none(tmp_path):
     stored = "float64 data  # as the file has it\n"
     topics = [(1, "/a", FLOAT64, "cdr"), (2, "/b", "no_such_pkg/msg/Thing", "cdr")]
     with_table = open_log(db3(tmp_path / "iron.db3", topics, [], {FLOAT64: stored}))
-    assert {t.name: t.schema for t in log_topics(with_table).values()} == {"/a": stored,
-                                                                          "/b": ""}
+    assert {t.name: t.schema for t in log_topics(with_table).values()} == {"/a": stored, "/b": ""}
     humble = open_log(db3(tmp_path / "humble.db3", topics, []))
     found = log_topics(humble)
-    assert found["/a"].schema == msgdefs.definition(FLOAT64)      # the installed one
+    assert found["/a"].schema == msgdefs.definition(FLOAT64)  # the installed one
     assert found["/b"].schema == "" and found["/b"].schema_encoding == "ros2msg"
     assert found["/a"].metadata == {"offered_qos_profiles": ""}
 
 
-@pytest.mark.parametrize("make, problem", [
-    (lambda p: db3(p, [(1, "/a", FLOAT64, "json")], []),
-     "foreign rosbag2 storage: topic /a is serialized as 'json', expected cdr"),
-    (lambda p: db3(p, [(1, "/a", FLOAT64, "cdr")], [(7, T0, b"x")]),
-     "message on unknown topic id 7"),
-    (lambda p: p.write_text("not sqlite at all " * 100), "not a rosbag2 sqlite3 (.db3) file"),
-])
+@pytest.mark.parametrize(
+    "make, problem",
+    [
+        (
+            lambda p: db3(p, [(1, "/a", FLOAT64, "json")], []),
+            "foreign rosbag2 storage: topic /a is serialized as 'json', expected cdr",
+        ),
+        (
+            lambda p: db3(p, [(1, "/a", FLOAT64, "cdr")], [(7, T0, b"x")]),
+            "message on unknown topic id 7",
+        ),
+        (lambda p: p.write_text("not sqlite at all " * 100), "not a rosbag2 sqlite3 (.db3) file"),
+    ],
+)
 def test_broken_or_foreign_db3_is_one_error_naming_the_file(tmp_path, make, problem):
     path = tmp_path / "bad.db3"
     make(path)
@@ -205,8 +255,11 @@ def test_a_db3_written_by_rosbags_reads_as_rosbags_reads_it(tmp_path):
         load = w.add_connection("/axial_load", FLOAT64, typestore=TYPESTORE)
         for k in range(20):
             msg = TYPESTORE.types[FLOAT64](float(k))
-            w.write(speed if k % 3 else load, T0 + 1000 * (20 - k),
-                    TYPESTORE.serialize_cdr(msg, FLOAT64))
+            w.write(
+                speed if k % 3 else load,
+                T0 + 1000 * (20 - k),
+                TYPESTORE.serialize_cdr(msg, FLOAT64),
+            )
     with RosbagsReader(bag) as reader:
         theirs = [(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()]
     source = open_log(bag)

@@ -30,7 +30,7 @@ def written(chunk_bytes: int, late_channel: bool) -> tuple[bytes, list[tuple]]:
             data = bytes([i % 256]) * (i % 7)
             out.add_message(channel, t, data, t + 1, i)
             sent.append((topic, t, t + 1, i, data))
-    if late_channel:                   # registered after the last message: summary only
+    if late_channel:  # registered after the last message: summary only
         out.register_channel("/late", "cdr", schema, {})
     out.finish()
     return fh.getvalue(), sent
@@ -49,12 +49,16 @@ def test_mcap_reader_finds_every_message_through_the_indexes(chunk_bytes):
     assert stats.chunk_count == 1 if chunk_bytes > len(data) else stats.chunk_count > 10
     assert [c.topic for c in summary.channels.values()] == ["/a", "/b", "/late"]
     # log-time order goes through the chunk and message indexes
-    got = [(c.topic, m.log_time, m.publish_time, m.sequence, m.data)
-           for _, c, m in reader.iter_messages(log_time_order=True)]
+    got = [
+        (c.topic, m.log_time, m.publish_time, m.sequence, m.data)
+        for _, c, m in reader.iter_messages(log_time_order=True)
+    ]
     assert got == sorted(sent, key=lambda s: s[1])
     # as written: a plain scan of the data section
-    scanned = [(c.topic, m.log_time, m.publish_time, m.sequence, m.data)
-               for _, c, m in make_reader(io.BytesIO(data)).iter_messages(log_time_order=False)]
+    scanned = [
+        (c.topic, m.log_time, m.publish_time, m.sequence, m.data)
+        for _, c, m in make_reader(io.BytesIO(data)).iter_messages(log_time_order=False)
+    ]
     assert scanned == sent
 
 
@@ -62,8 +66,10 @@ def test_our_strict_reader_reads_it_as_written(tmp_path):
     data, sent = written(4096, late_channel=False)
     path = tmp_path / "out.mcap"
     path.write_bytes(data)
-    got = [(m.topic.name, m.log_time_ns, m.publish_time_ns, m.sequence, m.data)
-           for m in read_messages(path)]
+    got = [
+        (m.topic.name, m.log_time_ns, m.publish_time_ns, m.sequence, m.data)
+        for m in read_messages(path)
+    ]
     assert got == sent
 
 
@@ -75,8 +81,10 @@ def test_the_layout_is_the_one_of_mcaps_writer():
     w = Writer(fh)
     w.start("ros2", "test")
     schema = w.register_schema(*SCHEMA)
-    ids = {"/a": w.register_channel("/a", "cdr", schema, {"offered_qos_profiles": ""}),
-           "/b": w.register_channel("/b", "cdr", schema, {})}
+    ids = {
+        "/a": w.register_channel("/a", "cdr", schema, {"offered_qos_profiles": ""}),
+        "/b": w.register_channel("/b", "cdr", schema, {}),
+    }
     for topic, t, pt, seq, data in sent:
         w.add_message(ids[topic], t, data, pt, seq)
     w.finish()
@@ -85,7 +93,14 @@ def test_the_layout_is_the_one_of_mcaps_writer():
     assert mine.statistics == theirs.statistics
     assert mine.schemas == theirs.schemas and mine.channels == theirs.channels
     (a,), (b,) = mine.chunk_indexes, theirs.chunk_indexes
-    assert (a.message_start_time, a.message_end_time, a.uncompressed_size,
-            a.message_index_offsets.keys()) == (b.message_start_time, b.message_end_time,
-                                                b.uncompressed_size,
-                                                b.message_index_offsets.keys())
+    assert (
+        a.message_start_time,
+        a.message_end_time,
+        a.uncompressed_size,
+        a.message_index_offsets.keys(),
+    ) == (
+        b.message_start_time,
+        b.message_end_time,
+        b.uncompressed_size,
+        b.message_index_offsets.keys(),
+    )

@@ -27,9 +27,9 @@ def _band(model, **changes):
 def test_squeak_only_in_a_band_of_moderate_speeds(model):
     lo, hi = _band(model)
     assert 0.5 < lo < 5.0 and 20.0 < hi < 150.0
-    assert model.predict(0.6).stable                           # radial-slip dissipation near 0
+    assert model.predict(0.6).stable  # radial-slip dissipation near 0
     assert not model.predict(20.0).stable
-    for speed in (hi * 1.2, 300.0, 1000.0):                    # and stable at high speed
+    for speed in (hi * 1.2, 300.0, 1000.0):  # and stable at high speed
         assert model.predict(speed).stable
     # Near zero speed all real parts drop (Fig. 5).
     assert model.predict(0.6).max_growth_rate < model.predict(lo * 1.5).max_growth_rate
@@ -49,28 +49,33 @@ def test_larger_radius_stabilises_and_lowers_the_upper_speed_bound(model):
     uppers = [_band(model, radius_m=r)[1] for r in (0.003, 0.004, 0.005, 0.007, 0.010)]
     assert all(a > b for a, b in zip(uppers, uppers[1:], strict=False)), uppers
     assert uppers[0] > 2 * uppers[-1]
-    growth = [model.with_params(radius_m=r).predict(20.0).max_growth_rate
-              for r in (0.004, 0.006, 0.008)]
+    growth = [
+        model.with_params(radius_m=r).predict(20.0).max_growth_rate for r in (0.004, 0.006, 0.008)
+    ]
     assert growth[0] > growth[1] > growth[2]
 
 
 def test_lower_load_bound_and_load_destabilises_most_at_low_speed(model):
-    assert model.predict(20.0, 5.0).stable                      # below the lower load bound
+    assert model.predict(20.0, 5.0).stable  # below the lower load bound
     assert not model.predict(20.0, 200.0).stable
     bound = sweep(model, "load_n", np.linspace(1.0, 400.0, 40), speed_rad_s=20.0).boundaries
     assert len(bound) == 1 and 5.0 < bound[0] < 100.0
     widths = [np.diff(_band(model.with_params(axial_load_n=f)))[0] for f in (50.0, 200.0, 600.0)]
     assert widths[0] < widths[1] < widths[2]
     # More load raises the growth rate more at low speed than at high speed (Fig. 7).
-    gain = {w: model.predict(w, 400.0).max_growth_rate - model.predict(w, 100.0).max_growth_rate
-            for w in (5.0, 40.0)}
+    gain = {
+        w: model.predict(w, 400.0).max_growth_rate - model.predict(w, 100.0).max_growth_rate
+        for w in (5.0, 40.0)
+    }
     assert gain[5.0] > gain[40.0] > 0
 
 
 def test_squeak_propensity_largest_with_nut_near_centre(model):
     L, b = model.params.length_m, model.params.nut_length_m
     z = np.linspace(0.0, L - b, 13)
-    growth = np.array([model.with_params(nut_position_m=v).predict(20.0).max_growth_rate for v in z])
+    growth = np.array(
+        [model.with_params(nut_position_m=v).predict(20.0).max_growth_rate for v in z]
+    )
     centre = (L - b) / 2
     assert abs(z[np.argmax(growth)] - centre) <= 0.05 * L
     uppers = np.array([_band(model, nut_position_m=v)[1] for v in z])
@@ -79,8 +84,14 @@ def test_squeak_propensity_largest_with_nut_near_centre(model):
 
 
 def test_fig9_map_load_vs_radius_at_20_rad_s(model):
-    m = stability_map(model, "radius_m", np.linspace(0.003, 0.010, 8), "load_n",
-                      np.linspace(5.0, 600.0, 25), speed_rad_s=20.0)
+    m = stability_map(
+        model,
+        "radius_m",
+        np.linspace(0.003, 0.010, 8),
+        "load_n",
+        np.linspace(5.0, 600.0, 25),
+        speed_rad_s=20.0,
+    )
     unstable = m.field.max_growth_rate > 0
     # Smaller radius and larger load destabilise: the lowest unstable load rises with R.
     lowest = [m.y[np.argmax(col)] if col.any() else np.inf for col in unstable.T]
@@ -93,9 +104,15 @@ def test_fig9_map_load_vs_radius_at_20_rad_s(model):
 
 def test_fig10_map_load_vs_location_at_20_rad_s(model):
     L, b = model.params.length_m, model.params.nut_length_m
-    m = stability_map(model, "nut_position_m", np.linspace(0.0, L - b, 9), "load_n",
-                      np.linspace(2.0, 200.0, 34), speed_rad_s=20.0)
+    m = stability_map(
+        model,
+        "nut_position_m",
+        np.linspace(0.0, L - b, 9),
+        "load_n",
+        np.linspace(2.0, 200.0, 34),
+        speed_rad_s=20.0,
+    )
     unstable = m.field.max_growth_rate > 0
     lowest = np.array([m.y[np.argmax(col)] if col.any() else np.inf for col in unstable.T])
-    assert np.argmin(lowest) in (3, 4, 5)                       # easiest to squeak near centre
+    assert np.argmin(lowest) in (3, 4, 5)  # easiest to squeak near centre
     assert lowest[4] < lowest[0] and lowest[4] < lowest[-1]

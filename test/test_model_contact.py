@@ -31,19 +31,36 @@ GEOMETRIES = {
     "0.4 turn at the start": dict(nut_position_m=0.0, nut_length_m=0.0011),
     "1 mm at the far end": dict(nut_position_m=0.299, nut_length_m=0.001),
     "1e-6 m nut": dict(nut_position_m=0.1, nut_length_m=1e-6),
-    "182 turns at 1 deg, far end": dict(helix_angle_rad=math.radians(1.0), nut_position_m=0.2,
-                                        nut_length_m=0.0999, n_bending=8, n_torsion=8),
-    "547 turns at 1 deg, 2 m screw": dict(helix_angle_rad=math.radians(1.0), length_m=2.0,
-                                          nut_position_m=1.5, nut_length_m=0.3,
-                                          n_bending=20, n_torsion=20),
-    "40 deg, far end": dict(helix_angle_rad=math.radians(40.0), nut_position_m=0.25,
-                            nut_length_m=0.05),
-    "40 deg, 40/40 modes, start": dict(helix_angle_rad=math.radians(40.0), nut_position_m=0.0,
-                                       nut_length_m=0.12, n_bending=40, n_torsion=40),
-    "resonance": dict(helix_angle_rad=math.atan(0.3 / (23 * math.pi * 0.005)), n_bending=20,
-                      n_torsion=12),
+    "182 turns at 1 deg, far end": dict(
+        helix_angle_rad=math.radians(1.0),
+        nut_position_m=0.2,
+        nut_length_m=0.0999,
+        n_bending=8,
+        n_torsion=8,
+    ),
+    "547 turns at 1 deg, 2 m screw": dict(
+        helix_angle_rad=math.radians(1.0),
+        length_m=2.0,
+        nut_position_m=1.5,
+        nut_length_m=0.3,
+        n_bending=20,
+        n_torsion=20,
+    ),
+    "40 deg, far end": dict(
+        helix_angle_rad=math.radians(40.0), nut_position_m=0.25, nut_length_m=0.05
+    ),
+    "40 deg, 40/40 modes, start": dict(
+        helix_angle_rad=math.radians(40.0),
+        nut_position_m=0.0,
+        nut_length_m=0.12,
+        n_bending=40,
+        n_torsion=40,
+    ),
+    "resonance": dict(
+        helix_angle_rad=math.atan(0.3 / (23 * math.pi * 0.005)), n_bending=20, n_torsion=12
+    ),
 }
-TOLERANCE = 1e-12       # of the largest entry of the matrix
+TOLERANCE = 1e-12  # of the largest entry of the matrix
 
 
 def _params(geometry: str, formulation: str) -> ScrewParameters:
@@ -84,20 +101,21 @@ def _adaptive(p: ScrewParameters, basis, name: str, i: int, j: int, epsabs: floa
 
     alpha_o, alpha = contact_angles(p)
     edges = alpha_o + alpha * np.linspace(0, 1, math.ceil(alpha / (2 * math.pi)) + 1)
-    pieces = [quad(integrand, lo, hi, epsabs=epsabs / math.sqrt(len(edges) - 1), epsrel=0,
-                   limit=200)
-              for lo, hi in zip(edges[:-1], edges[1:], strict=True)]
+    pieces = [
+        quad(integrand, lo, hi, epsabs=epsabs / math.sqrt(len(edges) - 1), epsrel=0, limit=200)
+        for lo, hi in zip(edges[:-1], edges[1:], strict=True)
+    ]
     return math.fsum(v for v, _ in pieces)
 
 
-ENTRIES = [   # geometry, formulation, matrix, mode labels (row, column)
+ENTRIES = [  # geometry, formulation, matrix, mode labels (row, column)
     ("table 1", "paper", "W1", "B1x", "B2y"),
     ("table 1", "consistent", "W4", "B3y", "T2"),
     ("0.4 turn at the start", "paper", "W3", "B6x", "B6x"),
     ("182 turns at 1 deg, far end", "consistent", "W5qdot", "T8", "B7y"),
     ("40 deg, 40/40 modes, start", "paper", "W2", "B40x", "T40"),
     ("40 deg, 40/40 modes, start", "consistent", "W5q", "B39y", "B40x"),
-    ("resonance", "paper", "W3", "B3x", "B20x"),          # omega = 0 for m = -1 and +1
+    ("resonance", "paper", "W3", "B3x", "B20x"),  # omega = 0 for m = -1 and +1
     ("resonance", "consistent", "W1", "B11y", "B12x"),
 ]
 
@@ -141,23 +159,32 @@ def test_kernels_are_trigonometric_polynomials_of_degree_2(formulation, beta):
 def test_state_matrix_parts_are_the_contact_integrals(formulation):
     """The assembled lower half [K | D] units are the sums of the unit matrices that share a
     scale factor (W1 + W2, W5q, W3 + W4, W5qdot, G)."""
-    g = SqueakModel(ScrewParameters(formulation=formulation, n_bending=5,
-                                    n_torsion=7)).geometry
+    g = SqueakModel(ScrewParameters(formulation=formulation, n_bending=5, n_torsion=7)).geometry
     u, zero = g.contact.unit, np.zeros((g.n, g.n))
-    expected = np.stack([np.hstack(pair).ravel() for pair in (
-        (u["W1"] + u["W2"], zero), (u["W5q"], zero), (zero, u["W3"] + u["W4"]),
-        (zero, u["W5qdot"]), (zero, g.G_unit))])
-    np.testing.assert_allclose(g.lower_half_units, expected, rtol=1e-14,
-                               atol=1e-14 * np.abs(expected).max())
+    expected = np.stack(
+        [
+            np.hstack(pair).ravel()
+            for pair in (
+                (u["W1"] + u["W2"], zero),
+                (u["W5q"], zero),
+                (zero, u["W3"] + u["W4"]),
+                (zero, u["W5qdot"]),
+                (zero, g.G_unit),
+            )
+        ]
+    )
+    np.testing.assert_allclose(
+        g.lower_half_units, expected, rtol=1e-14, atol=1e-14 * np.abs(expected).max()
+    )
 
 
 def test_geometry_is_computed_once_and_reused():
     m = SqueakModel()
     same = m.with_params(mu_static=0.3, modal_damping=0.01, axial_load_n=50.0)
-    assert same.geometry.contact is m.geometry.contact          # no re-integration
+    assert same.geometry.contact is m.geometry.contact  # no re-integration
     moved = m.with_params(nut_position_m=0.1)
     assert moved.geometry.contact is not m.geometry.contact
-    again = m.with_params(nut_position_m=0.1 + 1e-9)     # the modes and kernels are per screw
+    again = m.with_params(nut_position_m=0.1 + 1e-9)  # the modes and kernels are per screw
     assert again.geometry.basis is moved.geometry.basis
     assert again.geometry.contact.helix is moved.geometry.contact.helix
     assert not np.allclose(moved.geometry.contact.unit["W3"], m.geometry.contact.unit["W3"])
@@ -171,8 +198,14 @@ def test_operating_point_only_rescales_matrices():
     a, b = m.geometry.matrices(10.0, 100.0), m.geometry.matrices(30.0, 250.0)
     mu_ratio = mu_o(p, 30.0) / mu_o(p, 10.0)
     g_ratio = gamma(p, 30.0) / gamma(p, 10.0)
-    expected = {"W1": mu_ratio * 2.5, "W2": mu_ratio * 2.5, "W3": mu_ratio * 2.5 / 3,
-                "W4": mu_ratio * 2.5 / 3, "W5q": g_ratio * 2.5 * 3, "W5qdot": g_ratio * 2.5}
+    expected = {
+        "W1": mu_ratio * 2.5,
+        "W2": mu_ratio * 2.5,
+        "W3": mu_ratio * 2.5 / 3,
+        "W4": mu_ratio * 2.5 / 3,
+        "W5q": g_ratio * 2.5 * 3,
+        "W5qdot": g_ratio * 2.5,
+    }
     for name, ratio in expected.items():
         np.testing.assert_allclose(b.W[name], ratio * a.W[name], rtol=1e-12, atol=0)
     np.testing.assert_allclose(b.G, 3 * a.G)
@@ -183,7 +216,7 @@ def test_state_matrix_is_eq_27_in_first_order_form():
     m = SqueakModel()
     s = m.geometry.matrices(20.0, 200.0)
     om = m.geometry.basis.omega_rad_s
-    K = np.diag(om ** 2 - 20.0 ** 2) + s.W["W1"] + s.W["W2"] + s.W["W5q"]
+    K = np.diag(om**2 - 20.0**2) + s.W["W1"] + s.W["W2"] + s.W["W5q"]
     D = s.C + s.G + s.W["W3"] + s.W["W4"] + s.W["W5qdot"]
     n = len(om)
     A = np.block([[np.zeros((n, n)), np.eye(n)], [-K, -D]])
@@ -197,8 +230,9 @@ def test_lead_and_travel_are_the_helix_and_the_screw_less_the_nut():
     """The derived quantities every layer uses: the helix advances 2 pi R tan(beta) per turn,
     so the contact spans alpha = b / (R tan(beta)) rad from alpha_o = z_o / (R tan(beta));
     the nut can travel to L - b."""
-    p = ScrewParameters(radius_m=0.006, helix_angle_rad=0.1, nut_position_m=0.05,
-                        nut_length_m=0.04, length_m=0.25)
+    p = ScrewParameters(
+        radius_m=0.006, helix_angle_rad=0.1, nut_position_m=0.05, nut_length_m=0.04, length_m=0.25
+    )
     assert p.lead_per_rad_m == pytest.approx(0.006 * math.tan(0.1), rel=1e-15)
     assert p.nut_travel_m == pytest.approx(0.21, rel=1e-15)
     alpha_o, alpha = contact_angles(p)

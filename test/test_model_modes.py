@@ -10,9 +10,16 @@ from leadscrew_ros.model.physics.assembly import gyroscopic_unit
 from leadscrew_ros.model.physics.modes import KIND_T
 
 # Table 2: the uncoupled screw (Hz) and the mode(s) at each frequency.
-TABLE_2 = [(224, ("B1x", "B1y")), (898, ("B2x", "B2y")), (2020, ("B3x", "B3y")), (2654, ("T1",)),
-           (3592, ("B4x", "B4y")), (5612, ("B5x", "B5y")), (7961, ("T2",)),
-           (8082, ("B6x", "B6y"))]
+TABLE_2 = [
+    (224, ("B1x", "B1y")),
+    (898, ("B2x", "B2y")),
+    (2020, ("B3x", "B3y")),
+    (2654, ("T1",)),
+    (3592, ("B4x", "B4y")),
+    (5612, ("B5x", "B5y")),
+    (7961, ("T2",)),
+    (8082, ("B6x", "B6y")),
+]
 
 
 @pytest.fixture(scope="module")
@@ -36,27 +43,33 @@ def test_labels_and_ordering(basis):
 def test_shapes_are_mass_normalised(basis):
     """rho A int Phi_i Phi_j dz = delta_ij for bending, rho J int ... for torsion (reading 1)."""
     p = ScrewParameters()
-    area, polar = np.pi * p.radius_m ** 2, np.pi * p.radius_m ** 4 / 2
+    area, polar = np.pi * p.radius_m**2, np.pi * p.radius_m**4 / 2
     for i in (0, 3, 11, 12, 17):
         mass = p.density_kg_m3 * (polar if basis.kind[i] == KIND_T else area)
         for j in (i, i + 2 if i + 2 < 18 and basis.kind[i + 2] == basis.kind[i] else i):
-            val = quad(lambda z, i=i, j=j: basis.shapes(np.array([z]))[i, 0] * basis.shapes(np.array([z]))[j, 0],
-                       0, p.length_m, limit=200)[0]
+            val = quad(
+                lambda z, i=i, j=j: (
+                    basis.shapes(np.array([z]))[i, 0] * basis.shapes(np.array([z]))[j, 0]
+                ),
+                0,
+                p.length_m,
+                limit=200,
+            )[0]
             assert mass * val == pytest.approx(1.0 if i == j else 0.0, abs=1e-9)
 
 
 def test_hinged_and_clamped_free_boundary_conditions(basis):
     p = ScrewParameters()
     ends = basis.shapes(np.array([0.0, p.length_m]))
-    assert np.allclose(ends[basis.kind != KIND_T], 0.0, atol=1e-9)          # hinged-hinged
-    assert np.allclose(ends[basis.kind == KIND_T, 0], 0.0, atol=1e-9)       # clamped at z = 0
+    assert np.allclose(ends[basis.kind != KIND_T], 0.0, atol=1e-9)  # hinged-hinged
+    assert np.allclose(ends[basis.kind == KIND_T, 0], 0.0, atol=1e-9)  # clamped at z = 0
     free = basis.amplitude[basis.kind == KIND_T]
-    assert np.allclose(np.abs(ends[basis.kind == KIND_T, 1]), free)         # free end: extremum
+    assert np.allclose(np.abs(ends[basis.kind == KIND_T, 1]), free)  # free end: extremum
 
 
 def test_gyroscopic_matrix_couples_each_bending_pair_by_two(basis):
     g = gyroscopic_unit(basis)
     assert np.allclose(g, -g.T)
     i, j = basis.labels.index("B3x"), basis.labels.index("B3y")
-    assert g[i, j] == -2.0 and g[j, i] == 2.0                                # (A.2), x row: -2 Omega
+    assert g[i, j] == -2.0 and g[j, i] == 2.0  # (A.2), x row: -2 Omega
     assert np.count_nonzero(g) == 2 * 6

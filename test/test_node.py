@@ -25,19 +25,34 @@ from rclpy.parameter_client import AsyncParameterClient
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray
 
-from leadscrew_ros.live.status import (KEY_FORMULATION, KEY_MARGIN, KEY_NUT_POSITION,
-                                       KEY_PROBABILITY, KEY_SPEED, KEY_VALIDITY, Level)
+from harness.processes import node_command, stop, wait_initialised
+from harness.ros import COLLECT
+from harness.squeak import (
+    INPUTS,
+    LOAD,
+    MODEL,
+    OUTPUTS,
+    SAFE,
+    SQUEAK,
+    STABLE,
+    at,
+    modes_data,
+    non_finite,
+)
+from leadscrew_ros.bag.messages import MODE_COLUMNS
+from leadscrew_ros.live.status import (
+    KEY_FORMULATION,
+    KEY_MARGIN,
+    KEY_NUT_POSITION,
+    KEY_PROBABILITY,
+    KEY_SPEED,
+    KEY_VALIDITY,
+    Level,
+)
 from leadscrew_ros.model import Validity
 from leadscrew_ros.model.studies.advice import speed_bands
 from leadscrew_ros.model.uncertainty.scatter import DEFAULT_SCATTER, Scatter
-from leadscrew_ros.bag.messages import MODE_COLUMNS
 from leadscrew_ros.ros.node import NODE_NAME
-
-from harness.processes import node_command, stop, wait_initialised
-from harness.ros import COLLECT
-from harness.squeak import (INPUTS, LOAD, MODEL, OUTPUTS, SAFE, SQUEAK, STABLE, at, modes_data,
-                            non_finite)
-
 
 
 def growth(modes: Float64MultiArray) -> float:
@@ -55,7 +70,7 @@ def test_topics_live_in_the_namespace(ros):
     # before any input: nothing predicted, diagnostics say so
     status = ros.status(lambda s: True)
     assert status.level == bytes([Level.STALE]) and "motor_speed" in status.message
-    assert status.name == f"{ros.ns}/{NODE_NAME}: squeak prediction"   # fully qualified
+    assert status.name == f"{ros.ns}/{NODE_NAME}: squeak prediction"  # fully qualified
     ros.drain()
     assert ros.count["squeak/risk"] == 0
 
@@ -70,7 +85,7 @@ def test_table1_squeak_at_20_rad_s(ros):
     assert ros.wait_for("squeak/active", lambda m: m.data).data is True
     freqs = ros.wait_for("squeak/unstable_frequencies", lambda m: len(m.data) > 0)
     assert list(freqs.data) == pytest.approx(core.unstable_frequencies_hz, rel=1e-9)
-    assert len(core.unstable_frequencies_hz) == 2                 # B1y ~224 Hz, B2y ~898 Hz
+    assert len(core.unstable_frequencies_hz) == 2  # B1y ~224 Hz, B2y ~898 Hz
     assert freqs.layout.dim[0].label == "frequency_hz"
     assert freqs.layout.dim[0].size == len(freqs.data)
 
@@ -126,25 +141,26 @@ def test_nut_position_topic_changes_the_prediction(ros):
     ros.send("nut_position", 0.02)
     modes = ros.wait_for("squeak/modes", lambda m: growth(m) != middle)
     assert growth(modes) == pytest.approx(expected, rel=1e-9)
-    assert abs(growth(modes) - middle) > 10.0                     # 44.6 vs 73.6 1/s
-    status = ros.status(lambda s: {kv.key: kv.value for kv in s.values}[KEY_NUT_POSITION]
-                        == "0.02")
-    assert status.level == bytes([Level.ERROR])                   # still squeaking
+    assert abs(growth(modes) - middle) > 10.0  # 44.6 vs 73.6 1/s
+    status = ros.status(lambda s: {kv.key: kv.value for kv in s.values}[KEY_NUT_POSITION] == "0.02")
+    assert status.level == bytes([Level.ERROR])  # still squeaking
 
 
 def test_joint_states_give_speed_and_nut_travel(ros):
     ros.start(joint_name="screw", nut_position_at_zero_angle_m=0.15)
     p = MODEL.params
-    lead = p.radius_m * math.tan(p.helix_angle_rad)               # m of nut travel per radian
+    lead = p.radius_m * math.tan(p.helix_angle_rad)  # m of nut travel per radian
     angle = (0.02 - 0.15) / lead
     expected = MODEL.with_params(nut_position_m=0.02).predict(SQUEAK, LOAD)
     ros.send("axial_load", LOAD)
-    ros.send("joint_states", JointState(name=["wheel", "screw"], position=[1.0, angle],
-                                        velocity=[STABLE, SQUEAK]))
+    ros.send(
+        "joint_states",
+        JointState(name=["wheel", "screw"], position=[1.0, angle], velocity=[STABLE, SQUEAK]),
+    )
     modes = ros.wait_for("squeak/modes", lambda m: True)
     assert list(modes.data) == pytest.approx(list(modes_data(expected)), rel=1e-9)
     ros.drain()
-    assert ros.count["squeak/modes"] == 1        # one prediction, at the new speed AND position
+    assert ros.count["squeak/modes"] == 1  # one prediction, at the new speed AND position
     status = ros.status(lambda s: s.message.startswith("squeak predicted"))
     values = {kv.key: kv.value for kv in status.values}
     assert float(values[KEY_SPEED]) == SQUEAK
@@ -156,8 +172,9 @@ def test_safe_speed(ros):
     ros.start()
     at(ros, SQUEAK)
     safe = ros.wait_for("squeak/safe_speed", lambda m: True).data
-    assert 0.0 < safe and not any(lo <= safe <= hi for lo, hi in speed_bands(
-        MODEL, LOAD, safe_probability=SAFE))
+    assert 0.0 < safe and not any(
+        lo <= safe <= hi for lo, hi in speed_bands(MODEL, LOAD, safe_probability=SAFE)
+    )
     check = MODEL.predict(safe, LOAD)
     assert check.valid and check.stable and check.probability < SAFE
     at(ros, STABLE)
@@ -172,15 +189,18 @@ def test_safe_speed(ros):
 
 
 # ----------------------------------------------------------------------------- parameters
-@pytest.mark.parametrize("name, value, words", [
-    ("radius_m", -1.0, ["radius_m", "out of range"]),
-    ("nut_position_m", 0.25, ["z_o + b <= L"]),
-    ("formulation", "foo", ["'foo'", "paper, consistent"]),
-    ("n_bending", 2.5, ["expected", "INTEGER"]),                  # wrong type
-    ("max_rate_hz", 0.0, ["max_rate_hz", "out of range"]),
-    ("hardware_id", "other", ["read-only"]),
-    ("input_queue_depth", 10, ["read-only"]),
-])
+@pytest.mark.parametrize(
+    "name, value, words",
+    [
+        ("radius_m", -1.0, ["radius_m", "out of range"]),
+        ("nut_position_m", 0.25, ["z_o + b <= L"]),
+        ("formulation", "foo", ["'foo'", "paper, consistent"]),
+        ("n_bending", 2.5, ["expected", "INTEGER"]),  # wrong type
+        ("max_rate_hz", 0.0, ["max_rate_hz", "out of range"]),
+        ("hardware_id", "other", ["read-only"]),
+        ("input_queue_depth", 10, ["read-only"]),
+    ],
+)
 def test_rejected_parameter_keeps_the_old_model(ros, name, value, words):
     node = ros.start()
     at(ros, SQUEAK)
@@ -193,24 +213,27 @@ def test_rejected_parameter_keeps_the_old_model(ros, name, value, words):
     assert node.get_parameter(name).value == old
     assert node.live.model is model
     ros.drain()
-    assert ros.count["squeak/risk"] == published["squeak/risk"]   # nothing republished
+    assert ros.count["squeak/risk"] == published["squeak/risk"]  # nothing republished
     # the old model still answers: a new point is predicted with Table 1 as before
     expected = MODEL.predict(SQUEAK + 1.0, LOAD).unstable_frequencies_hz
     ros.send("motor_speed", SQUEAK + 1.0)
-    ros.wait_for("squeak/unstable_frequencies",
-                 lambda m: list(m.data) == pytest.approx(expected, rel=1e-9))
+    ros.wait_for(
+        "squeak/unstable_frequencies", lambda m: list(m.data) == pytest.approx(expected, rel=1e-9)
+    )
 
 
-@pytest.mark.parametrize("value, words", [
-    (math.nan, ["scatter.mu_kinetic", "nan"]),
-    (-1.0, ["scatter.mu_kinetic", "out of range"]),
-    (2.0, ["scatter.mu_kinetic", "out of range"]),
-    (1, ["expected", "DOUBLE"]),                                  # wrong type
-])
+@pytest.mark.parametrize(
+    "value, words",
+    [
+        (math.nan, ["scatter.mu_kinetic", "nan"]),
+        (-1.0, ["scatter.mu_kinetic", "out of range"]),
+        (2.0, ["scatter.mu_kinetic", "out of range"]),
+        (1, ["expected", "DOUBLE"]),  # wrong type
+    ],
+)
 def test_a_bad_scatter_is_rejected_and_the_last_good_model_kept(ros, value, words):
     node = ros.start(**{"scatter.mu_kinetic": 0.08})
-    core = at(ros, 60.0, model=MODEL.with_scatter(Scatter({**DEFAULT_SCATTER,
-                                                           "mu_kinetic": 0.08})))
+    core = at(ros, 60.0, model=MODEL.with_scatter(Scatter({**DEFAULT_SCATTER, "mu_kinetic": 0.08})))
     model = node.live.model
     [result] = node.set_parameters([Parameter("scatter.mu_kinetic", value=value)])
     assert not result.successful and "\n" not in result.reason
@@ -218,18 +241,25 @@ def test_a_bad_scatter_is_rejected_and_the_last_good_model_kept(ros, value, word
         assert w in result.reason, result.reason
     assert node.get_parameter("scatter.mu_kinetic").value == 0.08
     assert node.live.model is model and model.scatter.sd["mu_kinetic"] == 0.08
-    ros.send("motor_speed", 61.0)                # the kept model still predicts
+    ros.send("motor_speed", 61.0)  # the kept model still predicts
     expected = model.predict(61.0, LOAD).probability
     assert ros.wait_for("squeak/risk", lambda m: m.data == expected).data == expected
-    assert core.probability != MODEL.predict(60.0, LOAD).probability   # the scatter mattered
+    assert core.probability != MODEL.predict(60.0, LOAD).probability  # the scatter mattered
 
 
-@pytest.mark.parametrize("before, name, value, words", [
-    ((), "scatter.samples", 100, ["scatter.samples = 100", "power of 2"]),
-    # two geometry fields are taken, a third is more than the live estimator takes
-    (("scatter.radius_m", "scatter.nut_length_m"), "scatter.helix_angle_rad", 0.01,
-     ["3 geometry fields scatter"]),
-])
+@pytest.mark.parametrize(
+    "before, name, value, words",
+    [
+        ((), "scatter.samples", 100, ["scatter.samples = 100", "power of 2"]),
+        # two geometry fields are taken, a third is more than the live estimator takes
+        (
+            ("scatter.radius_m", "scatter.nut_length_m"),
+            "scatter.helix_angle_rad",
+            0.01,
+            ["3 geometry fields scatter"],
+        ),
+    ],
+)
 def test_a_scatter_the_model_cannot_take_is_rejected(ros, before, name, value, words):
     node = ros.start()
     at(ros, SQUEAK)
@@ -250,10 +280,14 @@ def test_without_scatter_the_risk_is_the_nominal_verdict(ros):
     node = ros.start()
     at(ros, 60.0)
     assert 0.1 < ros.latest["squeak/risk"].data < 0.2
-    assert all(r.successful for r in node.set_parameters(
-        [Parameter(f"scatter.{name}", value=0.0) for name in DEFAULT_SCATTER]))
+    assert all(
+        r.successful
+        for r in node.set_parameters(
+            [Parameter(f"scatter.{name}", value=0.0) for name in DEFAULT_SCATTER]
+        )
+    )
     assert node.live.model.scatter == Scatter({})
-    assert ros.wait_for("squeak/risk", lambda m: m.data == 0.0).data == 0.0   # recomputed
+    assert ros.wait_for("squeak/risk", lambda m: m.data == 0.0).data == 0.0  # recomputed
     nominal = MODEL.with_scatter(Scatter({}))
     for speed, probability in ((55.0, 1.0), (60.0, 0.0), (SQUEAK, 1.0), (STABLE, 0.0)):
         core = at(ros, speed, model=nominal)
@@ -268,15 +302,20 @@ def test_diagnostic_levels_follow_the_probability_thresholds(ros):
     """ERROR at P >= error_probability (0.5), WARN at P >= warn_probability (0.1), else OK;
     the thresholds are parameters."""
     node = ros.start()
-    for speed, level, start in ((SQUEAK, Level.ERROR, "squeak predicted: P(squeak) 1 ("),
-                                (55.0, Level.WARN, "squeak possible: P(squeak) 0.46 >= 0.1"),
-                                (60.0, Level.WARN, "squeak possible: P(squeak) 0.12 >= 0.1"),
-                                (70.0, Level.OK, "no squeak: P(squeak) 0 < 0.1")):
+    for speed, level, start in (
+        (SQUEAK, Level.ERROR, "squeak predicted: P(squeak) 1 ("),
+        (55.0, Level.WARN, "squeak possible: P(squeak) 0.46 >= 0.1"),
+        (60.0, Level.WARN, "squeak possible: P(squeak) 0.12 >= 0.1"),
+        (70.0, Level.OK, "no squeak: P(squeak) 0 < 0.1"),
+    ):
         at(ros, speed)
-        status = ros.status(lambda s, speed=speed: float({kv.key: kv.value for kv in s.values}[
-            KEY_SPEED]) == speed)
+        status = ros.status(
+            lambda s, speed=speed: float({kv.key: kv.value for kv in s.values}[KEY_SPEED]) == speed
+        )
         assert status.level == bytes([level]) and status.message.startswith(start), (
-            speed, status.message)
+            speed,
+            status.message,
+        )
     at(ros, 60.0)
     ros.status(lambda s: s.level == bytes([Level.WARN]))
     [result] = node.set_parameters([Parameter("warn_probability", value=0.2)])
@@ -293,8 +332,9 @@ def test_rejected_set_is_atomic_and_reason_reaches_a_remote_caller(ros):
     client = AsyncParameterClient(ros.probe, f"{ros.ns}/{NODE_NAME}")
     ros.spin_until(lambda: client.services_are_ready(), what="parameter services")
     # valid on its own, invalid with the other: nothing of the set is applied
-    future = client.set_parameters_atomically([Parameter("nut_length_m", value=0.1),
-                                               Parameter("nut_position_m", value=0.25)])
+    future = client.set_parameters_atomically(
+        [Parameter("nut_length_m", value=0.1), Parameter("nut_position_m", value=0.25)]
+    )
     ros.spin_until(future.done, what="set_parameters_atomically")
     result = future.result().result
     assert not result.successful and "z_o + b <= L" in result.reason
@@ -308,14 +348,16 @@ def test_accepted_parameter_is_applied_and_republished(ros):
     before = ros.count["squeak/unstable_frequencies"]
     [result] = node.set_parameters([Parameter("formulation", value="consistent")])
     assert result.successful
-    freqs = ros.wait_for("squeak/unstable_frequencies",
-                         lambda m: len(m.data) > 0 and abs(m.data[0] - 2654.0) < 2.0)
+    freqs = ros.wait_for(
+        "squeak/unstable_frequencies", lambda m: len(m.data) > 0 and abs(m.data[0] - 2654.0) < 2.0
+    )
     assert ros.count["squeak/unstable_frequencies"] > before
     core = MODEL.with_params(formulation="consistent").predict(SQUEAK, LOAD)
     assert list(freqs.data) == pytest.approx(core.unstable_frequencies_hz, rel=1e-9)
     assert node.live.model.params.formulation == "consistent"
-    status = ros.status(lambda s: {kv.key: kv.value for kv in s.values}[KEY_FORMULATION]
-                        == "consistent")
+    status = ros.status(
+        lambda s: {kv.key: kv.value for kv in s.values}[KEY_FORMULATION] == "consistent"
+    )
     assert status.message.startswith("squeak predicted: P(squeak) ")
     assert "T1 2654 Hz" in status.message
     # a node setting: a new rate limit re-creates the rate-limit timer
@@ -325,23 +367,36 @@ def test_accepted_parameter_is_applied_and_republished(ros):
 
 
 # ----------------------------------------------------------------------------- bad input
-GOOD = {"motor_speed": SQUEAK, "axial_load": LOAD, "nut_position": 0.15,
-        "joint_states": JointState(name=["screw"], velocity=[SQUEAK], position=[0.0])}
+GOOD = {
+    "motor_speed": SQUEAK,
+    "axial_load": LOAD,
+    "nut_position": 0.15,
+    "joint_states": JointState(name=["screw"], velocity=[SQUEAK], position=[0.0]),
+}
 
 
-@pytest.mark.parametrize("topic, value, words", [
-    ("motor_speed", math.nan, ["speed = nan", "not finite"]),
-    ("motor_speed", math.inf, ["speed = inf", "not finite"]),
-    ("axial_load", -math.inf, ["load = -inf", "not finite"]),
-    ("axial_load", 1e12, ["load = 1e+12", "exceeds"]),
-    ("nut_position", 0.25, ["nut position 0.25 m", "off the screw", "z_o + b <= L"]),
-    ("nut_position", math.nan, ["nut position nan"]),
-    ("joint_states", JointState(name=["screw"], velocity=[math.nan]), ["speed = nan"]),
-    ("joint_states", JointState(name=["screw"], velocity=[math.nan], position=[0.0]),
-     ["speed = nan"]),                                            # a good position keeps it
-    ("joint_states", JointState(name=["screw"], position=[1e9]), ["nut position", "off the "
-                                                                  "screw"]),
-])
+@pytest.mark.parametrize(
+    "topic, value, words",
+    [
+        ("motor_speed", math.nan, ["speed = nan", "not finite"]),
+        ("motor_speed", math.inf, ["speed = inf", "not finite"]),
+        ("axial_load", -math.inf, ["load = -inf", "not finite"]),
+        ("axial_load", 1e12, ["load = 1e+12", "exceeds"]),
+        ("nut_position", 0.25, ["nut position 0.25 m", "off the screw", "z_o + b <= L"]),
+        ("nut_position", math.nan, ["nut position nan"]),
+        ("joint_states", JointState(name=["screw"], velocity=[math.nan]), ["speed = nan"]),
+        (
+            "joint_states",
+            JointState(name=["screw"], velocity=[math.nan], position=[0.0]),
+            ["speed = nan"],
+        ),  # a good position keeps it
+        (
+            "joint_states",
+            JointState(name=["screw"], position=[1e9]),
+            ["nut position", "off the screw"],
+        ),
+    ],
+)
 def test_bad_input_is_an_error_diagnostic_and_publishes_nothing(ros, topic, value, words):
     ros.start(joint_name="screw")
     at(ros, SQUEAK)
@@ -354,11 +409,12 @@ def test_bad_input_is_an_error_diagnostic_and_publishes_nothing(ros, topic, valu
         assert w in status.message, status.message
     ros.drain()
     assert {t: n for t, n in ros.count.items() if t != "/diagnostics"} == published
-    assert ros.latest["squeak/risk"].data == MODEL.predict(SQUEAK, LOAD).probability   # kept
+    assert ros.latest["squeak/risk"].data == MODEL.predict(SQUEAK, LOAD).probability  # kept
     # a good value on the same input clears the error
     ros.send(topic, GOOD[topic])
     assert ros.status(lambda s: s.message.startswith("squeak predicted")).level == bytes(
-        [Level.ERROR])
+        [Level.ERROR]
+    )
 
 
 def test_a_flood_of_bad_input_gives_a_bounded_number_of_diagnostics(ros):
@@ -371,10 +427,10 @@ def test_a_flood_of_bad_input_gives_a_bounded_number_of_diagnostics(ros):
     for i in range(2000):
         ros.send("motor_speed", math.nan)
         if i % 10 == 0:
-            ros.drain(1)                      # the node takes about 200 of them
+            ros.drain(1)  # the node takes about 200 of them
     ros.status(lambda s: "speed = nan" in s.message)
     ros.drain()
-    periods = (time.monotonic() - t0) / 1.0   # diagnostics_period_s
+    periods = (time.monotonic() - t0) / 1.0  # diagnostics_period_s
     assert ros.count["/diagnostics"] - before <= 2 + periods, ros.count["/diagnostics"] - before
 
 
@@ -386,8 +442,9 @@ def test_outside_validity_warns_and_keeps_the_last_prediction(ros):
     ros.send("motor_speed", 5000.0)
     status = ros.status(lambda s: s.level == bytes([Level.WARN]))
     assert status.message.startswith("no prediction: outside the model's validity")
-    assert {kv.key: kv.value for kv in status.values}[KEY_VALIDITY] == \
-        Validity.AT_CRITICAL_SPEED.name
+    assert {kv.key: kv.value for kv in status.values}[
+        KEY_VALIDITY
+    ] == Validity.AT_CRITICAL_SPEED.name
     ros.drain()
     assert {t: n for t, n in ros.count.items() if t != "/diagnostics"} == published
 
@@ -401,7 +458,7 @@ def test_stale_input(ros):
     assert time.monotonic() - t_input >= 0.2
     assert "motor_speed" in status.message and "axial_load" in status.message
     assert "0.2 s" in status.message
-    ros.send("motor_speed", STABLE)                               # speed fresh, load still old
+    ros.send("motor_speed", STABLE)  # speed fresh, load still old
     status = ros.status(lambda s: "motor_speed" not in s.message)
     assert status.level == bytes([Level.STALE]) and "axial_load" in status.message
     ros.send("axial_load", LOAD)
@@ -417,13 +474,12 @@ def test_burst_is_coalesced_with_flat_memory(ros):
     node = ros.start()
     at(ros, STABLE)
     pub = ros.publisher("motor_speed")
-    [on_speed] = [s.callback for s in node.subscriptions
-                  if s.topic_name == f"{ros.ns}/motor_speed"]
+    [on_speed] = [s.callback for s in node.subscriptions if s.topic_name == f"{ros.ns}/motor_speed"]
 
     def burst(n: int, last: float, direct: bool = False) -> None:
         t0, r0 = time.monotonic(), node.live.recomputes
         for i in range(n):
-            msg = Float64(data=60.0 + (i % 200) * 0.5)              # stable speeds, 60..159.5
+            msg = Float64(data=60.0 + (i % 200) * 0.5)  # stable speeds, 60..159.5
             if direct:
                 on_speed(msg)
             else:
@@ -431,18 +487,20 @@ def test_burst_is_coalesced_with_flat_memory(ros):
                 if i % 10 == 0:
                     ros.executor.spin_once(timeout_sec=0.0)
         pub.publish(Float64(data=last))
-        ros.wait_for("squeak/safe_speed", lambda m: m.data == last)    # stable: safe == speed
+        ros.wait_for("squeak/safe_speed", lambda m: m.data == last)  # stable: safe == speed
         elapsed, recomputes = time.monotonic() - t0, node.live.recomputes - r0
         assert 1 <= recomputes <= node.live.settings.max_rate_hz * elapsed + 2, (
-            recomputes, elapsed)
+            recomputes,
+            elapsed,
+        )
         assert node.live.prediction.speed_rad_s == last
 
     tracemalloc.start()
     growth, peaks = [], []
     try:
-        burst(2_000, 111.25)                  # warm-up: rclpy/DDS caches fill, traced too
+        burst(2_000, 111.25)  # warm-up: rclpy/DDS caches fill, traced too
         burst(2_000, 112.25, direct=True)
-        for window in range(2):               # two equal windows: a leak grows in both
+        for window in range(2):  # two equal windows: a leak grows in both
             gc.collect()
             before = tracemalloc.get_traced_memory()[0]
             tracemalloc.reset_peak()
@@ -485,9 +543,18 @@ def test_node_processes_answer_and_exit_cleanly_on_sigterm_and_sigint(tmp_path, 
             err = tmp_path / f"{sig.name}.stderr"
             with open(tmp_path / f"{sig.name}.stdout", "wb") as out, open(err, "wb") as errf:
                 proc = subprocess.Popen(
-                    [*node_command(), "--ros-args", "-r", f"__ns:={ns}/{sig.name.lower()}",
-                     "-p", f"hardware_id:=hw_{ns[2:]}_{sig.name}"],
-                    stdout=out, stderr=errf, env=dict(os.environ))
+                    [
+                        *node_command(),
+                        "--ros-args",
+                        "-r",
+                        f"__ns:={ns}/{sig.name.lower()}",
+                        "-p",
+                        f"hardware_id:=hw_{ns[2:]}_{sig.name}",
+                    ],
+                    stdout=out,
+                    stderr=errf,
+                    env=dict(os.environ),
+                )
             children[sig] = {"proc": proc, "err": err, "risk": [], "status": []}
         # Fast DDS: a participant appearing after another's initial announcements often learns
         # of it only at the next periodic announcement (3 s). Creating ours once the children
@@ -498,10 +565,16 @@ def test_node_processes_answer_and_exit_cleanly_on_sigterm_and_sigint(tmp_path, 
             probe = ros.make_node("probe", namespace=f"{ns}/{sig.name.lower()}")
             probe.create_subscription(Float64, "squeak/risk", child["risk"].append, COLLECT)
             probe.create_subscription(
-                DiagnosticArray, "/diagnostics", lambda m, c=child, h=f"hw_{ns[2:]}_{sig.name}":
-                c["status"].extend(s for s in m.status if s.hardware_id == h), COLLECT)
-            child["pubs"] = [probe.create_publisher(Float64, t, 10)
-                             for t in ("motor_speed", "axial_load")]
+                DiagnosticArray,
+                "/diagnostics",
+                lambda m, c=child, h=f"hw_{ns[2:]}_{sig.name}": c["status"].extend(
+                    s for s in m.status if s.hardware_id == h
+                ),
+                COLLECT,
+            )
+            child["pubs"] = [
+                probe.create_publisher(Float64, t, 10) for t in ("motor_speed", "axial_load")
+            ]
 
         def stream(i: int) -> None:
             """Inputs are a best-effort stream, as from a sensor."""
@@ -512,8 +585,11 @@ def test_node_processes_answer_and_exit_cleanly_on_sigterm_and_sigint(tmp_path, 
 
         for child in children.values():
             for pub in child["pubs"]:
-                ros.spin_until(lambda pub=pub: pub.get_subscription_count() > 0, 10.0,
-                               f"the node process subscribing to {pub.topic_name}")
+                ros.spin_until(
+                    lambda pub=pub: pub.get_subscription_count() > 0,
+                    10.0,
+                    f"the node process subscribing to {pub.topic_name}",
+                )
         # the node may not yet have matched our writer when ours has matched its reader:
         # keep streaming until both answer
         deadline, i = time.monotonic() + 10.0, 0
@@ -521,19 +597,21 @@ def test_node_processes_answer_and_exit_cleanly_on_sigterm_and_sigint(tmp_path, 
             assert time.monotonic() < deadline, "no answer from a node process"
             stream(i := i + 1)
         for sig, child in children.items():
-            assert child["risk"][-1].data > 0.99, sig          # P(squeak) at 20..22 rad/s
+            assert child["risk"][-1].data > 0.99, sig  # P(squeak) at 20..22 rad/s
             assert not [v for m in child["risk"] for v in non_finite(m)], sig
-            ros.spin_until(lambda c=child: any(s.message.startswith("squeak predicted")
-                                               for s in c["status"]), what="ERROR diagnostic")
+            ros.spin_until(
+                lambda c=child: any(s.message.startswith("squeak predicted") for s in c["status"]),
+                what="ERROR diagnostic",
+            )
         for sig, child in children.items():
             child["proc"].send_signal(sig)
         deadline = time.monotonic() + 10.0
-        while any(c["proc"].poll() is None for c in children.values()):   # busy until the end
+        while any(c["proc"].poll() is None for c in children.values()):  # busy until the end
             assert time.monotonic() < deadline, "a node process ignored its signal"
             stream(i := i + 1)
         for sig, child in children.items():
             stderr = child["err"].read_text()
-            print(f"{sig.name} node process stderr:\n{stderr}")   # shown in full on failure
+            print(f"{sig.name} node process stderr:\n{stderr}")  # shown in full on failure
             assert child["proc"].returncode == 0, (sig, stderr)
             assert "Traceback" not in stderr, sig
             assert stderr.splitlines()[-1] == f"{NODE_NAME}: stopped by {sig.name}", sig
@@ -542,15 +620,23 @@ def test_node_processes_answer_and_exit_cleanly_on_sigterm_and_sigint(tmp_path, 
             stop(child["proc"], grace_s=5.0)
 
 
-@pytest.mark.parametrize("param, words", [
-    ("radius_m:=-1.0", ["radius_m", "out of range"]),
-    ("nut_position_m:=0.25", ["z_o + b <= L"]),
-    ("scatter.mu_kinetic:=2.0", ["scatter.mu_kinetic", "out of range"]),
-    ("scatter.samples:=100", ["scatter.samples = 100", "power of 2"]),
-])
+@pytest.mark.parametrize(
+    "param, words",
+    [
+        ("radius_m:=-1.0", ["radius_m", "out of range"]),
+        ("nut_position_m:=0.25", ["z_o + b <= L"]),
+        ("scatter.mu_kinetic:=2.0", ["scatter.mu_kinetic", "out of range"]),
+        ("scatter.samples:=100", ["scatter.samples = 100", "power of 2"]),
+    ],
+)
 def test_node_process_with_an_invalid_parameter_exits_with_one_line(param, words):
-    proc = subprocess.run([*node_command(), "--ros-args", "-p", param], capture_output=True,
-                          text=True, timeout=20, env=dict(os.environ))
+    proc = subprocess.run(
+        [*node_command(), "--ros-args", "-p", param],
+        capture_output=True,
+        text=True,
+        timeout=20,
+        env=dict(os.environ),
+    )
     assert proc.returncode != 0
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr

@@ -25,17 +25,16 @@ from rcl_interfaces.srv import GetParameters
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
 
+from harness.ros import COLLECT, RosWorld, Spinner, new_executor
 from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.ros.node import SqueakPredictorNode
 
-from harness.ros import COLLECT, RosWorld, Spinner, new_executor
-
 RATE_HZ = 50.0
-CALL_PERIOD_S = 0.05               # get_parameters calls start this far apart (or on answer)
-MAX_PARAMETER_LATENCY_S = 0.2      # the bound for get_parameters
-MAX_RISK_GAP_S = 0.5               # a band search took 1.7 s (40/40) inside the executor
-LATENCY_PREDICTIONS = 3            # ... or this many of the longest prediction of the run
-GAP_PREDICTIONS = 6                # (recomputes start >= 2 prediction times apart)
+CALL_PERIOD_S = 0.05  # get_parameters calls start this far apart (or on answer)
+MAX_PARAMETER_LATENCY_S = 0.2  # the bound for get_parameters
+MAX_RISK_GAP_S = 0.5  # a band search took 1.7 s (40/40) inside the executor
+LATENCY_PREDICTIONS = 3  # ... or this many of the longest prediction of the run
+GAP_PREDICTIONS = 6  # (recomputes start >= 2 prediction times apart)
 
 
 def operating_point(t: float) -> tuple[float, float]:
@@ -47,12 +46,12 @@ def operating_point(t: float) -> tuple[float, float]:
 
 @dataclass
 class StallStats:
-    latencies_s: list[float] = field(default_factory=list)   # one per get_parameters call
-    risk_times: list[float] = field(default_factory=list)    # monotonic receipt times
-    recomputes: int = 0                                       # during the stream
-    searches: int = 0                                         # advice searches requested
+    latencies_s: list[float] = field(default_factory=list)  # one per get_parameters call
+    risk_times: list[float] = field(default_factory=list)  # monotonic receipt times
+    recomputes: int = 0  # during the stream
+    searches: int = 0  # advice searches requested
     safe_speeds: list[float] = field(default_factory=list)
-    stream_s: tuple[float, float] = (0.0, 0.0)              # monotonic start and end
+    stream_s: tuple[float, float] = (0.0, 0.0)  # monotonic start and end
     predictions_s: list[float] = field(default_factory=list)  # SqueakModel.predict wall times
 
     @property
@@ -82,26 +81,42 @@ def stall_run(n_modes: int, duration_s: float, count_searches=None) -> StallStat
 
 
 def _stall_run(n_modes, duration_s, count_searches, ns, stats) -> StallStats:
-    world = RosWorld(ns=ns)                      # the driver's side, spun in this thread
-    node_executor = new_executor("events", world.ctx)   # the node's own, as in squeak_node
+    world = RosWorld(ns=ns)  # the driver's side, spun in this thread
+    node_executor = new_executor("events", world.ctx)  # the node's own, as in squeak_node
     node = spinner = None
     try:
-        node = SqueakPredictorNode(context=world.ctx, namespace=ns, parameter_overrides=[
-            Parameter("n_bending", value=n_modes), Parameter("n_torsion", value=n_modes)])
+        node = SqueakPredictorNode(
+            context=world.ctx,
+            namespace=ns,
+            parameter_overrides=[
+                Parameter("n_bending", value=n_modes),
+                Parameter("n_torsion", value=n_modes),
+            ],
+        )
         node_executor.add_node(node)
         spinner = Spinner(node_executor)
         driver = world.make_node("driver")
         executor = world.executor
         speed_pub = driver.create_publisher(Float64, "motor_speed", 10)
         load_pub = driver.create_publisher(Float64, "axial_load", 10)
-        driver.create_subscription(Float64, "squeak/risk",
-                                   lambda _: stats.risk_times.append(time.monotonic()), COLLECT)
-        driver.create_subscription(Float64, "squeak/safe_speed",
-                                   lambda m: stats.safe_speeds.append(m.data), COLLECT)
-        client = driver.create_client(GetParameters,
-                                      f"{node.get_fully_qualified_name()}/get_parameters")
-        world.spin_until(lambda: client.service_is_ready() and speed_pub.get_subscription_count()
-                         and load_pub.get_subscription_count(), 20.0, "discovery")
+        driver.create_subscription(
+            Float64, "squeak/risk", lambda _: stats.risk_times.append(time.monotonic()), COLLECT
+        )
+        driver.create_subscription(
+            Float64, "squeak/safe_speed", lambda m: stats.safe_speeds.append(m.data), COLLECT
+        )
+        client = driver.create_client(
+            GetParameters, f"{node.get_fully_qualified_name()}/get_parameters"
+        )
+        world.spin_until(
+            lambda: (
+                client.service_is_ready()
+                and speed_pub.get_subscription_count()
+                and load_pub.get_subscription_count()
+            ),
+            20.0,
+            "discovery",
+        )
 
         request = GetParameters.Request(names=["n_bending", "speed_deadband_rad_s"])
         recomputes0, searches0 = node.live.recomputes, count_searches() if count_searches else 0
@@ -112,7 +127,7 @@ def _stall_run(n_modes, duration_s, count_searches, ns, stats) -> StallStats:
             speed_pub.publish(Float64(data=speed))
             load_pub.publish(Float64(data=load))
             next_tick = t0 + (tick + 1) / RATE_HZ
-            while True:           # serve the driver until the next tick, one call at a time
+            while True:  # serve the driver until the next tick, one call at a time
                 if pending is not None and pending[1].done():
                     assert pending[1].result().values[0].integer_value == n_modes
                     stats.latencies_s.append(time.monotonic() - pending[0])
@@ -125,12 +140,12 @@ def _stall_run(n_modes, duration_s, count_searches, ns, stats) -> StallStats:
                     break
                 executor.spin_once(timeout_sec=min(remaining, 0.005))
         stats.stream_s = (t0, time.monotonic())
-        end = time.monotonic() + 10.0       # the last call, answered or timed out
+        end = time.monotonic() + 10.0  # the last call, answered or timed out
         while pending is not None and not pending[1].done() and time.monotonic() < end:
             executor.spin_once(timeout_sec=0.01)
         if pending is not None:
             stats.latencies_s.append(time.monotonic() - pending[0])
-        quiet = time.monotonic() + 1.0      # the node catches up, its last risks arrive
+        quiet = time.monotonic() + 1.0  # the node catches up, its last risks arrive
         while time.monotonic() < quiet:
             heard = len(stats.risk_times)
             executor.spin_once(timeout_sec=0.05)
@@ -140,7 +155,7 @@ def _stall_run(n_modes, duration_s, count_searches, ns, stats) -> StallStats:
         stats.searches = (count_searches() if count_searches else 0) - searches0
         return stats
     finally:
-        if spinner is not None:         # ends after the current callback (minutes on old code)
+        if spinner is not None:  # ends after the current callback (minutes on old code)
             spinner.stop(timeout=120.0)
         if node is not None:
             node.destroy_node()
@@ -163,14 +178,17 @@ def test_parameters_and_predictions_never_wait_for_safe_speed_advice(monkeypatch
 
     monkeypatch.setattr(LatestWorker, "submit", counted)
     stats = stall_run(40, 6.0, count_searches=lambda: len(requests))
-    assert stats.searches >= 3                            # advice was asked for meanwhile
+    assert stats.searches >= 3  # advice was asked for meanwhile
     assert len(stats.latencies_s) >= 20
     slowest, prediction = sorted(stats.latencies_s)[-5:], max(stats.predictions_s)
-    print(f"get_parameters: {len(stats.latencies_s)} calls, slowest {slowest}; recomputes "
-          f"{stats.recomputes}, longest prediction {prediction:.3f} s, longest risk gap "
-          f"{stats.max_risk_gap_s:.3f} s, advice requests {stats.searches}")
-    assert max(stats.latencies_s) <= max(MAX_PARAMETER_LATENCY_S,
-                                         LATENCY_PREDICTIONS * prediction), slowest
+    print(
+        f"get_parameters: {len(stats.latencies_s)} calls, slowest {slowest}; recomputes "
+        f"{stats.recomputes}, longest prediction {prediction:.3f} s, longest risk gap "
+        f"{stats.max_risk_gap_s:.3f} s, advice requests {stats.searches}"
+    )
+    assert max(stats.latencies_s) <= max(
+        MAX_PARAMETER_LATENCY_S, LATENCY_PREDICTIONS * prediction
+    ), slowest
     assert stats.recomputes >= 6 and len(stats.risk_times) == stats.recomputes
     assert stats.max_risk_gap_s <= max(MAX_RISK_GAP_S, GAP_PREDICTIONS * prediction)
-    assert stats.safe_speeds                              # advice still reaches the topic
+    assert stats.safe_speeds  # advice still reaches the topic

@@ -26,8 +26,18 @@ REPO = Path(__file__).resolve().parents[1]
 DRIVER = Path(__file__).with_name("offline_cli.py")
 VERSION = ET.parse(REPO / "package.xml").getroot().findtext("version")
 # What a core install has none of: rclpy, rosidl_*, the message and interface packages.
-ROS_ROOTS = ("rclpy", "std_msgs", "sensor_msgs", "builtin_interfaces", "rcl_interfaces",
-             "diagnostic_msgs", "std_srvs", "geometry_msgs", "rpyutils", "ament_index_python")
+ROS_ROOTS = (
+    "rclpy",
+    "std_msgs",
+    "sensor_msgs",
+    "builtin_interfaces",
+    "rcl_interfaces",
+    "diagnostic_msgs",
+    "std_srvs",
+    "geometry_msgs",
+    "rpyutils",
+    "ament_index_python",
+)
 SITECUSTOMIZE = f"""
 import importlib.abc, os, sys
 class _NoRos(importlib.abc.MetaPathFinder):
@@ -44,21 +54,37 @@ sys.meta_path.insert(0, _NoRos())
 """
 INSTALL_ROS = "pip install 'leadscrew_ros[ros]'"
 # The source tree pip needs (no .venv, tests, build outputs).
-SOURCE_ITEMS = ["package.xml", "setup.py", "setup.cfg", "LICENSE", "resource", "config",
-                "foxglove", "leadscrew_ros"]
+SOURCE_ITEMS = [
+    "package.xml",
+    "setup.py",
+    "setup.cfg",
+    "LICENSE",
+    "resource",
+    "config",
+    "foxglove",
+    "leadscrew_ros",
+]
 
 
 def _driver(python: str, work: Path, env: dict) -> dict:
     work.mkdir(parents=True, exist_ok=True)
-    r = subprocess.run([python, str(DRIVER), str(work)], cwd=work, capture_output=True,
-                       text=True, env=env, timeout=600)
+    r = subprocess.run(
+        [python, str(DRIVER), str(work)],
+        cwd=work,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
     assert r.returncode == 0, r.stdout + r.stderr
     return json.loads((work / "report.json").read_text())
 
 
 def _by_name(report: dict) -> dict:
-    return {" ".join(c["argv"][:1] + [a for a in c["argv"] if a == "--publish"]): c
-            for c in report["commands"]}
+    return {
+        " ".join(c["argv"][:1] + [a for a in c["argv"] if a == "--publish"]): c
+        for c in report["commands"]
+    }
 
 
 def _check_commands(report: dict, work: Path) -> None:
@@ -67,10 +93,13 @@ def _check_commands(report: dict, work: Path) -> None:
     for name in ("demo", "simulate", "replay --publish"):
         c = runs.pop(name)
         assert (c["code"], c["stdout"], c["stderr"]) == (
-            2, "", f"leadscrew-squeak: error: '{name}' needs ROS 2 (rclpy): {INSTALL_ROS}\n")
+            2,
+            "",
+            f"leadscrew-squeak: error: '{name}' needs ROS 2 (rclpy): {INSTALL_ROS}\n",
+        )
     for name, c in runs.items():
         assert c["code"] == 0, (name, c["stderr"])
-        assert c["blocked"] == [], (name, c["blocked"])     # not even an optional attempt
+        assert c["blocked"] == [], (name, c["blocked"])  # not even an optional attempt
     assert report["blocked_by_the_log"] == []
     out = {name: c["stdout"] for name, c in runs.items()}
     assert "B1x" in out["modes"] and "224." in out["modes"]
@@ -98,15 +127,26 @@ def _check_commands(report: dict, work: Path) -> None:
 def blocked_env(tmp_path_factory):
     site = tmp_path_factory.mktemp("no_ros_site")
     (site / "sitecustomize.py").write_text(SITECUSTOMIZE)
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(site), str(REPO)] + [
-                   p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join(
+            [str(site), str(REPO)]
+            + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+        ),
+    )
     return env
 
 
 def test_the_blocker_blocks(blocked_env, tmp_path):
     env = dict(blocked_env, LEADSCREW_BLOCKED_LOG=str(tmp_path / "blocked.log"))
-    r = subprocess.run([sys.executable, "-c", "import std_msgs.msg"], cwd=tmp_path,
-                       capture_output=True, text=True, env=env, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-c", "import std_msgs.msg"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
     assert r.returncode == 1 and "ModuleNotFoundError: No module named 'std_msgs" in r.stderr
     assert (tmp_path / "blocked.log").read_text() == "std_msgs\n"
 
@@ -115,7 +155,7 @@ def test_offline_commands_with_ros_blocked(blocked_env, tmp_path):
     env = dict(blocked_env, LEADSCREW_BLOCKED_LOG=str(tmp_path / "blocked.log"))
     report = _driver(sys.executable, tmp_path, env)
     assert Path(report["package"]) == REPO / "leadscrew_ros"
-    assert report["version"] == VERSION                      # from the source tree
+    assert report["version"] == VERSION  # from the source tree
     _check_commands(report, tmp_path)
     # the ROS commands did try (and were refused): the check above saw the real path
     assert all(c["blocked"] for c in report["commands"] if c["code"] == 2)
@@ -123,10 +163,19 @@ def test_offline_commands_with_ros_blocked(blocked_env, tmp_path):
 
 def test_squeak_node_with_ros_blocked(blocked_env, tmp_path):
     code = "import sys; from leadscrew_ros.cli.ros import squeak_node; sys.exit(squeak_node())"
-    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path,
-                       capture_output=True, text=True, env=blocked_env, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        env=blocked_env,
+        timeout=120,
+    )
     assert (r.returncode, r.stdout, r.stderr) == (
-        2, "", f"squeak_node: error: 'squeak_node' needs ROS 2 (rclpy): {INSTALL_ROS}\n")
+        2,
+        "",
+        f"squeak_node: error: 'squeak_node' needs ROS 2 (rclpy): {INSTALL_ROS}\n",
+    )
 
 
 # ----------------------------------------------------------------------------- clean venv
@@ -141,23 +190,58 @@ def clean_venv(tmp_path_factory):
     src.mkdir()
     for item in SOURCE_ITEMS:
         if (REPO / item).is_dir():
-            shutil.copytree(REPO / item, src / item,
-                            ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.egg-info"))
+            shutil.copytree(
+                REPO / item,
+                src / item,
+                ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.egg-info"),
+            )
         else:
             shutil.copy2(REPO / item, src / item)
     # Nothing of this environment may leak in: its ROS wheels' paths, the source tree.
-    env = {k: v for k, v in os.environ.items() if k not in (
-        "PYTHONPATH", "AMENT_PREFIX_PATH", "LD_LIBRARY_PATH", "VIRTUAL_ENV", "PYTHONHOME",
-        "PYTHONDONTWRITEBYTECODE", "_ROS_WHEELS_BOOTSTRAP_COMPLETE")}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k
+        not in (
+            "PYTHONPATH",
+            "AMENT_PREFIX_PATH",
+            "LD_LIBRARY_PATH",
+            "VIRTUAL_ENV",
+            "PYTHONHOME",
+            "PYTHONDONTWRITEBYTECODE",
+            "_ROS_WHEELS_BOOTSTRAP_COMPLETE",
+        )
+    }
     venv = root / "venv"
     python = venv / "bin" / "python"
     t0 = time.monotonic()
-    r = subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)],
-                       capture_output=True, text=True, env=env, timeout=300)
+    r = subprocess.run(
+        [sys.executable, "-m", "venv", "--without-pip", str(venv)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr
-    r = subprocess.run([sys.executable, "-m", "pip", "--python", str(python), "install", "-q",
-                        "--no-cache-dir", "--no-compile", str(src)],
-                       cwd=root, capture_output=True, text=True, env=env, timeout=600)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "--python",
+            str(python),
+            "install",
+            "-q",
+            "--no-cache-dir",
+            "--no-compile",
+            str(src),
+        ],
+        cwd=root,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+    )
     assert r.returncode == 0, r.stdout + r.stderr
     print(f"\nclean venv: created and installed in {time.monotonic() - t0:.1f} s")
     return venv, env
@@ -165,11 +249,18 @@ def clean_venv(tmp_path_factory):
 
 def test_clean_venv_has_no_ros(clean_venv):
     venv, env = clean_venv
-    code = ("import importlib.metadata as m, importlib.util as u, json; print(json.dumps(["
-            "sorted(d.metadata['Name'].lower() for d in m.distributions()), "
-            f"[n for n in {ROS_ROOTS!r} if u.find_spec(n)]]))")
-    r = subprocess.run([str(venv / "bin" / "python"), "-c", code], capture_output=True,
-                       text=True, env=env, timeout=120)
+    code = (
+        "import importlib.metadata as m, importlib.util as u, json; print(json.dumps(["
+        "sorted(d.metadata['Name'].lower() for d in m.distributions()), "
+        f"[n for n in {ROS_ROOTS!r} if u.find_spec(n)]]))"
+    )
+    r = subprocess.run(
+        [str(venv / "bin" / "python"), "-c", code],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
     names, importable = json.loads(r.stdout)
     assert "leadscrew_ros" in names and "mcap" in names and "dask" in names
     assert [n for n in names if n.startswith("ros-") or "rclpy" in n] == [], names
@@ -180,23 +271,34 @@ def test_offline_commands_in_clean_venv(clean_venv, tmp_path):
     venv, env = clean_venv
     work = tmp_path / "work"
     report = _driver(str(venv / "bin" / "python"), work, env)
-    assert Path(report["package"]).is_relative_to(venv)      # the installed copy ...
-    assert report["version"] == VERSION                      # ... its version from metadata
-    assert Path(report["definition_prefix"]).is_relative_to(venv)    # the bundled copy
+    assert Path(report["package"]).is_relative_to(venv)  # the installed copy ...
+    assert report["version"] == VERSION  # ... its version from metadata
+    assert Path(report["definition_prefix"]).is_relative_to(venv)  # the bundled copy
     _check_commands(report, work)
 
 
-@pytest.mark.parametrize("script, argv, prog", [
-    ("leadscrew-squeak", ["demo"], "leadscrew-squeak"),
-    ("squeak_node", [], "squeak_node")])
-def test_ros_executables_in_clean_venv_say_what_to_install(clean_venv, tmp_path, script, argv,
-                                                           prog):
+@pytest.mark.parametrize(
+    "script, argv, prog",
+    [("leadscrew-squeak", ["demo"], "leadscrew-squeak"), ("squeak_node", [], "squeak_node")],
+)
+def test_ros_executables_in_clean_venv_say_what_to_install(
+    clean_venv, tmp_path, script, argv, prog
+):
     venv, env = clean_venv
     command = argv[0] if argv else script
-    r = subprocess.run([str(venv / "bin" / script), *argv], cwd=tmp_path, capture_output=True,
-                       text=True, env=env, timeout=120)
+    r = subprocess.run(
+        [str(venv / "bin" / script), *argv],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
     assert (r.returncode, r.stdout, r.stderr) == (
-        2, "", f"{prog}: error: '{command}' needs ROS 2 (rclpy): {INSTALL_ROS}\n")
+        2,
+        "",
+        f"{prog}: error: '{command}' needs ROS 2 (rclpy): {INSTALL_ROS}\n",
+    )
 
 
 def test_bundled_message_definitions_equal_the_installed_ones():

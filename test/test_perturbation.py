@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""First-order eigenvalue perturbation (`model.uncertainty.perturbation`): the eigenvalue rates against
+"""First-order eigenvalue perturbation (`model.uncertainty.perturbation`): the eigenvalue
+rates against
 finite differences of eigen-solves, and the live P(squeak) estimator's per-sample margins
 against a brute-force eigen-solve of every sample's own state matrix (error of second order in
 the scatter, verdicts the same)."""
@@ -11,10 +12,16 @@ import pytest
 
 from leadscrew_ros.model import ParameterError, SqueakModel
 from leadscrew_ros.model.physics.kernels import scales
-from leadscrew_ros.model.uncertainty.perturbation import (EigenPairs, FirstOrderProbability, _Expansion,
-                                              estimate, geometry_derivative, geometry_fields)
-from leadscrew_ros.model.uncertainty.scatter import DEFAULT_SCATTER, Scatter, draw
 from leadscrew_ros.model.physics.stability import GROWTH_TOL, oscillatory_mask
+from leadscrew_ros.model.uncertainty.perturbation import (
+    EigenPairs,
+    FirstOrderProbability,
+    _Expansion,
+    estimate,
+    geometry_derivative,
+    geometry_fields,
+)
+from leadscrew_ros.model.uncertainty.scatter import DEFAULT_SCATTER, Scatter, draw
 
 MODEL = SqueakModel()
 GEOMETRY = MODEL.geometry
@@ -34,16 +41,16 @@ def exact_margins(samples, speed: float, load: float = LOAD) -> np.ndarray:
     oscillatory growth rate beyond the squeak threshold (`stability.unstable_mask`)."""
     values = {k: v.ravel() for k, v in samples.scatter.values(MODEL.params, samples.u).items()}
     lam = np.linalg.eigvals(GEOMETRY.state_matrices(speed, load, values))
-    return np.where(oscillatory_mask(lam), lam.real - GROWTH_TOL * np.abs(lam),
-                    -np.inf).max(axis=1)
+    return np.where(oscillatory_mask(lam), lam.real - GROWTH_TOL * np.abs(lam), -np.inf).max(axis=1)
 
 
 def first_order_margins(samples, speed: float, load: float = LOAD) -> np.ndarray:
     """The expansion's margins of every mode's maximum (no pruning: values, not just signs)."""
     fo = FirstOrderProbability(MODEL.params, GEOMETRY, samples)
     pairs = EigenPairs.solve(GEOMETRY, speed, load)
-    return _Expansion(GEOMETRY, fo._friction).margins(pairs, load, fo._damping,
-                                                      fo._reach_damping, prune=False)
+    return _Expansion(GEOMETRY, fo._friction).margins(
+        pairs, load, fo._damping, fo._reach_damping, prune=False
+    )
 
 
 def scaled(samples, k: float):
@@ -61,8 +68,11 @@ def test_eigen_pairs_are_the_oscillatory_eigenvalues_with_biorthonormal_vectors(
     np.testing.assert_allclose(np.sort_complex(pairs.lam), want, rtol=1e-10)
     scale = np.abs(pairs.lam)[:, None]
     np.testing.assert_allclose(a @ pairs.x, pairs.x * pairs.lam, atol=1e-9 * scale.max())
-    np.testing.assert_allclose(pairs.y_h @ a, pairs.lam[:, None] * pairs.y_h,
-                               atol=1e-9 * scale.max() * np.abs(pairs.y_h).max())
+    np.testing.assert_allclose(
+        pairs.y_h @ a,
+        pairs.lam[:, None] * pairs.y_h,
+        atol=1e-9 * scale.max() * np.abs(pairs.y_h).max(),
+    )
     # y_i^H x_j = delta_ij: the normalisation the first-order formula needs
     np.testing.assert_allclose(pairs.y_h @ pairs.x, np.eye(len(pairs.lam)), atol=1e-9)
 
@@ -79,13 +89,15 @@ def test_the_speed_derivative_is_the_coefficients_plus_the_stiffness_term():
 
     dc = (coefficients(speed + h) - coefficients(speed - h)) / (2 * h)
     rate = pairs.coefficient_rate(dc) + pairs.speed_rate_of_stiffness()
-    da = (GEOMETRY.state_matrices(speed + h, LOAD) - GEOMETRY.state_matrices(speed - h, LOAD))
-    np.testing.assert_allclose(pairs.matrix_rate(da) / (2 * h), rate, rtol=1e-6,
-                               atol=1e-9 * np.abs(rate).max())
-    hi, lo = (matched(np.linalg.eigvals(GEOMETRY.state_matrices(speed + s, LOAD)), pairs.lam)
-              for s in (h, -h))
-    np.testing.assert_allclose((hi - lo) / (2 * h), rate, rtol=1e-4,
-                               atol=1e-6 * np.abs(rate).max())
+    da = GEOMETRY.state_matrices(speed + h, LOAD) - GEOMETRY.state_matrices(speed - h, LOAD)
+    np.testing.assert_allclose(
+        pairs.matrix_rate(da) / (2 * h), rate, rtol=1e-6, atol=1e-9 * np.abs(rate).max()
+    )
+    hi, lo = (
+        matched(np.linalg.eigvals(GEOMETRY.state_matrices(speed + s, LOAD)), pairs.lam)
+        for s in (h, -h)
+    )
+    np.testing.assert_allclose((hi - lo) / (2 * h), rate, rtol=1e-4, atol=1e-6 * np.abs(rate).max())
 
 
 def test_damping_rate_and_the_stiffness_speed_term_are_those_of_their_matrices():
@@ -95,18 +107,24 @@ def test_damping_rate_and_the_stiffness_speed_term_are_those_of_their_matrices()
     xi = MODEL.params.modal_damping
     # A is affine in the damping ratio: the change of A is exactly -2 d diag(omega) in D
     d = 1e-4
-    da = (GEOMETRY.state_matrices(speed, LOAD, {"modal_damping": np.array([xi + d])})[0]
-          - GEOMETRY.state_matrices(speed, LOAD))
+    da = GEOMETRY.state_matrices(speed, LOAD, {"modal_damping": np.array([xi + d])})[
+        0
+    ] - GEOMETRY.state_matrices(speed, LOAD)
     np.testing.assert_allclose(pairs.matrix_rate(da) / d, pairs.damping_rate(), rtol=1e-7)
-    moved = matched(np.linalg.eigvals(GEOMETRY.state_matrices(
-        speed, LOAD, {"modal_damping": np.array([xi + d])})[0]), pairs.lam)
+    moved = matched(
+        np.linalg.eigvals(
+            GEOMETRY.state_matrices(speed, LOAD, {"modal_damping": np.array([xi + d])})[0]
+        ),
+        pairs.lam,
+    )
     np.testing.assert_allclose((moved - pairs.lam) / d, pairs.damping_rate(), rtol=1e-3)
     # more damping: every mode decays faster, by about omega (Re d lambda / d xi ~ -omega)
     assert np.all(pairs.damping_rate().real < 0)
     stiffness = np.zeros((2 * n, 2 * n))
     stiffness[n:, :n] = 2 * speed * np.eye(n)
-    np.testing.assert_allclose(pairs.speed_rate_of_stiffness(), pairs.matrix_rate(stiffness),
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        pairs.speed_rate_of_stiffness(), pairs.matrix_rate(stiffness), rtol=1e-12
+    )
     assert om.min() > speed
 
 
@@ -122,14 +140,18 @@ def test_coefficient_rates_give_the_eigenvalue_change_with_the_load():
     pairs = EigenPairs.solve(GEOMETRY, speed, LOAD)
     dc = coefficients(LOAD * (1 + 1e-6)) - coefficients(LOAD * (1 - 1e-6))
     da = GEOMETRY.state_matrices(speed, LOAD * (1 + 1e-6)) - GEOMETRY.state_matrices(
-        speed, LOAD * (1 - 1e-6))
+        speed, LOAD * (1 - 1e-6)
+    )
     rate = pairs.coefficient_rate(dc)
-    np.testing.assert_allclose(rate, pairs.matrix_rate(da), rtol=1e-6,
-                               atol=1e-9 * np.abs(rate).max())
-    hi, lo = (matched(np.linalg.eigvals(GEOMETRY.state_matrices(speed, LOAD * (1 + s))),
-                      pairs.lam) for s in (1e-6, -1e-6))
+    np.testing.assert_allclose(
+        rate, pairs.matrix_rate(da), rtol=1e-6, atol=1e-9 * np.abs(rate).max()
+    )
+    hi, lo = (
+        matched(np.linalg.eigvals(GEOMETRY.state_matrices(speed, LOAD * (1 + s))), pairs.lam)
+        for s in (1e-6, -1e-6)
+    )
     np.testing.assert_allclose(hi - lo, rate, rtol=1e-4, atol=1e-6 * np.abs(rate).max())
-    assert np.abs(rate).max() > 0                           # the load does move the modes
+    assert np.abs(rate).max() > 0  # the load does move the modes
 
 
 def test_geometry_derivative_gives_the_eigenvalue_change_with_the_radius():
@@ -137,11 +159,18 @@ def test_geometry_derivative_gives_the_eigenvalue_change_with_the_radius():
     pairs = EigenPairs.solve(GEOMETRY, speed, LOAD)
     rate = pairs.matrix_rate(geometry_derivative(MODEL.params, "radius_m", speed, LOAD))
     h = 1e-5 * MODEL.params.radius_m
-    hi, lo = (matched(np.linalg.eigvals(SqueakModel(MODEL.params.with_(
-        radius_m=MODEL.params.radius_m + s)).geometry.state_matrices(speed, LOAD)), pairs.lam)
-        for s in (h, -h))
-    np.testing.assert_allclose((hi - lo) / (2 * h), rate, rtol=1e-3,
-                               atol=1e-4 * np.abs(rate).max())
+    hi, lo = (
+        matched(
+            np.linalg.eigvals(
+                SqueakModel(
+                    MODEL.params.with_(radius_m=MODEL.params.radius_m + s)
+                ).geometry.state_matrices(speed, LOAD)
+            ),
+            pairs.lam,
+        )
+        for s in (h, -h)
+    )
+    np.testing.assert_allclose((hi - lo) / (2 * h), rate, rtol=1e-3, atol=1e-4 * np.abs(rate).max())
     # 1 % of radius moves the squeak mode (B1y, ~1413 rad/s) by ~14 rad/s, the figure in
     # FirstOrderProbability's docstring
     squeak = pairs.lam.real.argmax()
@@ -202,10 +231,11 @@ def test_geometry_scatter_nodes_interpolate_to_the_samples_own_models():
     margins = fo.margins(EigenPairs.solve(GEOMETRY, speed, LOAD), LOAD)
     values = {k: v.ravel() for k, v in scatter.values(MODEL.params, samples.u).items()}
     for i in (values["radius_m"].argmin(), values["radius_m"].argmax()):
-        own = SqueakModel(MODEL.params.with_(**{k: float(v[i]) for k, v in values.items()}),
-                          Scatter({}))
+        own = SqueakModel(
+            MODEL.params.with_(**{k: float(v[i]) for k, v in values.items()}), Scatter({})
+        )
         assert margins[i] == pytest.approx(own.predict(speed, LOAD).max_growth_rate, abs=0.2)
-    assert len({m > 0 for m in margins}) == 2               # the band edge: both verdicts
+    assert len({m > 0 for m in margins}) == 2  # the band edge: both verdicts
 
 
 def test_a_moved_nut_keeps_the_samples_and_rebuilds_the_expansion():
@@ -217,8 +247,9 @@ def test_a_moved_nut_keeps_the_samples_and_rebuilds_the_expansion():
     pairs = EigenPairs.solve(moved.geometry, 55.0, LOAD)
     np.testing.assert_array_equal(
         shifted.margins(pairs, LOAD),
-        FirstOrderProbability(moved.params, moved.geometry, samples).margins(pairs, LOAD))
-    assert fo.params == MODEL.params                         # the original is unchanged
+        FirstOrderProbability(moved.params, moved.geometry, samples).margins(pairs, LOAD),
+    )
+    assert fo.params == MODEL.params  # the original is unchanged
 
 
 # ----------------------------------------------------------------------------- fields, estimate

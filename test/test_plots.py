@@ -29,8 +29,14 @@ def speed_sweep():
 
 @pytest.fixture(scope="module")
 def speed_map():
-    return stability_map(SqueakModel(), "load_n", np.linspace(0.0, 600.0, 4), "speed_rad_s",
-                         np.geomspace(1.0, 100.0, 5), probability=True)
+    return stability_map(
+        SqueakModel(),
+        "load_n",
+        np.linspace(0.0, 600.0, 4),
+        "speed_rad_s",
+        np.geomspace(1.0, 100.0, 5),
+        probability=True,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -43,26 +49,37 @@ def transient():
 def replayed(tmp_path_factory):
     cycle = DutyCycle(duration_s=6.0, rate_hz=20.0, rest_s=1.0)
     tmp = tmp_path_factory.mktemp("replay")
-    return replay(write_log(cycle, tmp / "bag"), SqueakModel(), tmp / "out",
-                  ReplaySettings(InputSettings(joint_name=cycle.joint_name), workers=0,
-                                 progress=False))
+    return replay(
+        write_log(cycle, tmp / "bag"),
+        SqueakModel(),
+        tmp / "out",
+        ReplaySettings(InputSettings(joint_name=cycle.joint_name), workers=0, progress=False),
+    )
 
 
-FLEET = FleetRun(rows=[{"status": "ok", "episodes": 2, "time_in_squeak_s": 1.5, "unit_id": "a"},
-                       {"status": "ok", "episodes": 0, "time_in_squeak_s": 0.0, "unit_id": "b"},
-                       {"status": "error"}],
-                 points=[[20.0, 200.0, 1500.0], [25.0, 210.0, 1520.0]], reviewed=3, skipped=0)
+FLEET = FleetRun(
+    rows=[
+        {"status": "ok", "episodes": 2, "time_in_squeak_s": 1.5, "unit_id": "a"},
+        {"status": "ok", "episodes": 0, "time_in_squeak_s": 0.0, "unit_id": "b"},
+        {"status": "error"},
+    ],
+    points=[[20.0, 200.0, 1500.0], [25.0, 210.0, 1520.0]],
+    reviewed=3,
+    skipped=0,
+)
 
 # (plot, the fixture of its data or None, other arguments): one axes
-SINGLE = {"map": (plots.plot_map, "speed_map", {}),
-          "map with P": (plots.plot_map, "speed_map", {"overlay": "probability"}),
-          "frequencies": (plots.plot_frequencies, "speed_sweep", {}),
-          "sweep": (plots.plot_sweep, "speed_sweep", {"probability": True}),
-          "friction": (plots.plot_friction, None, {})}
+SINGLE = {
+    "map": (plots.plot_map, "speed_map", {}),
+    "map with P": (plots.plot_map, "speed_map", {"overlay": "probability"}),
+    "frequencies": (plots.plot_frequencies, "speed_sweep", {}),
+    "sweep": (plots.plot_sweep, "speed_sweep", {"probability": True}),
+    "friction": (plots.plot_friction, None, {}),
+}
 
 
 def _single_args(request, fixture, options):
-    if fixture is None:                   # the friction law: parameters and sliding speeds
+    if fixture is None:  # the friction law: parameters and sliding speeds
         return (ScrewParameters(), np.linspace(0.0, 1.0, 50)), {}
     data = request.getfixturevalue(fixture)
     if options.get("overlay") == "probability":
@@ -75,7 +92,7 @@ def test_a_plot_makes_its_figure(name, request):
     plot, fixture, options = SINGLE[name]
     args, kwargs = _single_args(request, fixture, options)
     fig = plot(*args, **kwargs)
-    assert isinstance(fig, Figure) and fig.axes and fig.canvas.manager is None   # no pyplot
+    assert isinstance(fig, Figure) and fig.axes and fig.canvas.manager is None  # no pyplot
 
 
 @pytest.mark.parametrize("name", SINGLE)
@@ -90,10 +107,12 @@ def test_a_plot_draws_into_the_axes_it_is_given(name, request):
 
 def test_the_panels_go_into_the_figure_given(transient, replayed):
     run, analysis = transient
-    for draw, panels in ((lambda fig: plots.plot_transient(run, analysis, fig=fig), 3),
-                         (lambda fig: plots.plot_timeline(replayed, fig=fig), 4),
-                         (lambda fig: replayed.plot(fig=fig), 4),
-                         (lambda fig: plots.plot_fleet(FLEET, fig=fig), 4)):
+    for draw, panels in (
+        (lambda fig: plots.plot_transient(run, analysis, fig=fig), 3),
+        (lambda fig: plots.plot_timeline(replayed, fig=fig), 4),
+        (lambda fig: replayed.plot(fig=fig), 4),
+        (lambda fig: plots.plot_fleet(FLEET, fig=fig), 4),
+    ):
         new = draw(None)
         assert isinstance(new, Figure) and len(new.axes) >= panels
         given = Figure()

@@ -10,27 +10,43 @@ from hypothesis import strategies as st
 
 from leadscrew_ros.model import ParameterError, ScrewParameters, SqueakModel
 from leadscrew_ros.model.studies.probability import linearised, monte_carlo, squeaks
-from leadscrew_ros.model.uncertainty.scatter import DEFAULT_SCATTER, Scatter, draw, scatterable, valid_mask
+from leadscrew_ros.model.uncertainty.scatter import (
+    DEFAULT_SCATTER,
+    Scatter,
+    draw,
+    scatterable,
+    valid_mask,
+)
 
 MODEL = SqueakModel()
 CONSISTENT = SqueakModel(ScrewParameters(formulation="consistent"))
 
 
 def test_default_scatter_is_the_documented_assumption():
-    assert dict(Scatter().sd) == {"friction_decay_s_m": 0.10, "modal_damping": 0.35,
-                                  "mu_kinetic": 0.05, "mu_static": 0.05}
+    assert dict(Scatter().sd) == {
+        "friction_decay_s_m": 0.10,
+        "modal_damping": 0.35,
+        "mu_kinetic": 0.05,
+        "mu_static": 0.05,
+    }
     assert set(DEFAULT_SCATTER) <= set(scatterable())
 
 
-@pytest.mark.parametrize("sd, message", [
-    ({"mu_static": -0.1}, "scatter.mu_static = -0.1 must be a number in [0, 1]"),
-    ({"mu_static": math.nan}, "scatter.mu_static = nan"),
-    ({"mu_static": True}, "scatter.mu_static = True"),
-    ({"axial_load_n": 0.1}, "scatter.axial_load_n: not a scatterable parameter"),
-    ({"nonsense": 0.1}, "scatter.nonsense: not a scatterable parameter")])
+@pytest.mark.parametrize(
+    "sd, message",
+    [
+        ({"mu_static": -0.1}, "scatter.mu_static = -0.1 must be a number in [0, 1]"),
+        ({"mu_static": math.nan}, "scatter.mu_static = nan"),
+        ({"mu_static": True}, "scatter.mu_static = True"),
+        ({"axial_load_n": 0.1}, "scatter.axial_load_n: not a scatterable parameter"),
+        ({"nonsense": 0.1}, "scatter.nonsense: not a scatterable parameter"),
+    ],
+)
 def test_bad_scatter_is_one_clear_error(sd, message):
-    with pytest.raises(ParameterError, match="^" + message.replace("[", r"\[").replace(
-            "]", r"\]").replace(".", r"\.")):
+    with pytest.raises(
+        ParameterError,
+        match="^" + message.replace("[", r"\[").replace("]", r"\]").replace(".", r"\."),
+    ):
         Scatter(sd)
 
 
@@ -64,24 +80,37 @@ def test_samples_follow_the_distributions():
     assert abs(ln.mean()) < 0.02 and ln.std() == pytest.approx(0.35, rel=0.05)
 
 
-@pytest.mark.parametrize("model, speed, scatter", [
-    (MODEL, 60.0, Scatter()), (CONSISTENT, 52.0, Scatter()), (MODEL, -57.0, Scatter()),
-    (MODEL, 57.5, Scatter({"modal_damping": 0.35})), (MODEL, 59.0, Scatter({"mu_kinetic": 0.1}))])
+@pytest.mark.parametrize(
+    "model, speed, scatter",
+    [
+        (MODEL, 60.0, Scatter()),
+        (CONSISTENT, 52.0, Scatter()),
+        (MODEL, -57.0, Scatter()),
+        (MODEL, 57.5, Scatter({"modal_damping": 0.35})),
+        (MODEL, 59.0, Scatter({"mu_kinetic": 0.1})),
+    ],
+)
 def test_estimator_equals_a_loop_over_the_model(model, speed, scatter):
     """Every sample's verdict is what SqueakModel(sample).predict says, exactly (also reverse
     rotation and a single scattered parameter)."""
     s = draw(model.params, scatter, 512, seed=1)
     hits = squeaks(model, speed, 200.0, s.values)
     flat = {k: v.ravel() for k, v in s.values.items()}
-    loop = [bool(SqueakModel(model.params.with_(**{k: float(v[i]) for k, v in flat.items()}))
-                 .predict(speed, 200.0).squeak_modes) for i in range(s.count)]
+    loop = [
+        bool(
+            SqueakModel(model.params.with_(**{k: float(v[i]) for k, v in flat.items()}))
+            .predict(speed, 200.0)
+            .squeak_modes
+        )
+        for i in range(s.count)
+    ]
     assert hits.ravel().tolist() == loop
-    assert 0 < sum(loop) < len(loop)                       # the point is near a band edge
+    assert 0 < sum(loop) < len(loop)  # the point is near a band edge
 
 
 def test_table_1_at_60_rad_s_squeaks_about_one_drive_in_ten():
     e = monte_carlo(MODEL, 60.0, 200.0, draw(MODEL.params, Scatter(), 4096))
-    assert not MODEL.predict(60.0, 200.0).squeak_modes       # nominal: stable
+    assert not MODEL.predict(60.0, 200.0).squeak_modes  # nominal: stable
     assert 0.08 < e.probability < 0.18 and 0 < e.stderr < 0.01
 
 
@@ -100,9 +129,13 @@ def test_outside_validity_there_is_no_probability():
 def test_standard_error_shrinks_with_the_samples_and_describes_the_spread():
     """Quadrupling the samples four times (n x 16) cuts the error at least as 1/sqrt(n) (QMC is
     faster), and the quoted error matches the spread of independent estimates."""
+
     def runs(n):
-        return [monte_carlo(MODEL, 55.0, 200.0, draw(MODEL.params, Scatter(), n, seed=k))
-                for k in range(6)]
+        return [
+            monte_carlo(MODEL, 55.0, 200.0, draw(MODEL.params, Scatter(), n, seed=k))
+            for k in range(6)
+        ]
+
     small, large = runs(256), runs(4096)
     ratio = np.mean([e.stderr for e in large]) / np.mean([e.stderr for e in small])
     assert 1 / 16 < ratio < 1.5 / 4
@@ -112,20 +145,27 @@ def test_standard_error_shrinks_with_the_samples_and_describes_the_spread():
 
 def test_probability_grows_with_the_scatter_near_an_edge():
     """60 rad/s is just above the band's upper edge: more scatter, more drives squeak."""
-    p = [monte_carlo(MODEL, 60.0, 200.0, draw(MODEL.params, Scatter(
-        {n: k * s for n, s in DEFAULT_SCATTER.items()}), 2048)).probability
-         for k in (0.25, 0.5, 1.0, 2.0)]
+    p = [
+        monte_carlo(
+            MODEL,
+            60.0,
+            200.0,
+            draw(MODEL.params, Scatter({n: k * s for n, s in DEFAULT_SCATTER.items()}), 2048),
+        ).probability
+        for k in (0.25, 0.5, 1.0, 2.0)
+    ]
     assert p == sorted(p) and p[0] < 0.01 and p[-1] > 0.2
 
 
-@pytest.mark.parametrize("speed, sd", [(57.0, {"radius_m": 0.01}),
-                                       (52.0, {"nut_position_m": 0.1, "mu_kinetic": 0.05})])
+@pytest.mark.parametrize(
+    "speed, sd", [(57.0, {"radius_m": 0.01}), (52.0, {"nut_position_m": 0.1, "mu_kinetic": 0.05})]
+)
 def test_geometry_scatter_fast_estimator_follows_the_model_per_sample(speed, sd):
     """A scattered geometry field: the reference builds a model per sample; the fast estimator
     expands A to first order in it (a difference of two geometries) on the same samples."""
     s = draw(MODEL.params, Scatter(sd), 256, seed=5)
     mc, fast = monte_carlo(MODEL, speed, 200.0, s), linearised(MODEL, speed, 200.0, s)
-    assert 0.02 < mc.probability < 0.98                      # near the band edge
+    assert 0.02 < mc.probability < 0.98  # near the band edge
     assert fast.probability == pytest.approx(mc.probability, abs=0.03)
 
 
@@ -141,13 +181,16 @@ def test_prediction_carries_the_fast_probability():
         assert none.probability_stderr is None
     assert MODEL.samples.count == 1024
     assert MODEL.predict(60.0, 200.0).margin == pytest.approx(
-        min(m.damping_ratio for m in MODEL.predict(60.0, 200.0).modes))
+        min(m.damping_ratio for m in MODEL.predict(60.0, 200.0).modes)
+    )
 
 
 @settings(max_examples=25, deadline=None)
-@given(sd=st.dictionaries(st.sampled_from(sorted(DEFAULT_SCATTER)),
-                          st.floats(0.0, 1.0), max_size=4),
-       speed=st.floats(-500.0, 500.0), load=st.floats(-1e4, 1e4))
+@given(
+    sd=st.dictionaries(st.sampled_from(sorted(DEFAULT_SCATTER)), st.floats(0.0, 1.0), max_size=4),
+    speed=st.floats(-500.0, 500.0),
+    load=st.floats(-1e4, 1e4),
+)
 def test_probability_is_a_probability(sd, speed, load):
     samples = draw(MODEL.params, Scatter(sd), 64, seed=0)
     valid = MODEL.validity(speed, load)[0].name == "OK"
@@ -159,8 +202,11 @@ def test_probability_is_a_probability(sd, speed, load):
 
 
 @settings(max_examples=30, deadline=None)
-@given(sd=st.dictionaries(st.sampled_from(scatterable()), st.floats(0.0, 0.3), max_size=4),
-       speed=st.floats(-2000.0, 2000.0), load=st.floats(-1e5, 1e5))
+@given(
+    sd=st.dictionaries(st.sampled_from(scatterable()), st.floats(0.0, 0.3), max_size=4),
+    speed=st.floats(-2000.0, 2000.0),
+    load=st.floats(-1e5, 1e5),
+)
 def test_any_scatter_setting_gives_a_probability_or_a_clear_error(sd, speed, load):
     """Random scatter of any scatterable field (geometry too) through `predict`: a P in
     [0, 1] with a finite stderr, or a one-line ParameterError (too many geometry fields, a
@@ -173,13 +219,14 @@ def test_any_scatter_setting_gives_a_probability_or_a_clear_error(sd, speed, loa
         return
     if p.valid:
         assert 0.0 <= p.probability <= 1.0
-        assert p.probability_stderr is None or (math.isfinite(p.probability_stderr)
-                                                and p.probability_stderr >= 0)
+        assert p.probability_stderr is None or (
+            math.isfinite(p.probability_stderr) and p.probability_stderr >= 0
+        )
     else:
         assert p.probability is None
 
 
-FAST_GRID_SPEEDS = (5.0, 20.0, 40.0, 50.0, 55.0, 60.0, 70.0, -40.0)     # band, both edges
+FAST_GRID_SPEEDS = (5.0, 20.0, 40.0, 50.0, 55.0, 60.0, 70.0, -40.0)  # band, both edges
 FAST_GRID_LOADS = (50.0, 200.0, 600.0)
 
 
@@ -198,14 +245,15 @@ def test_fast_estimator_is_within_0_03_of_the_reference(formulation):
             if mc is not None:
                 errors.append(abs(fast.probability - mc.probability))
                 inside += 0.05 < mc.probability < 0.95
-    assert max(errors) <= 0.03 and inside >= 4          # several points near an edge
+    assert max(errors) <= 0.03 and inside >= 4  # several points near an edge
 
 
 def test_fast_estimator_on_the_same_samples_is_nearly_exact():
     s = draw(MODEL.params, Scatter(), 4096)
     for speed in (50.0, 55.0, 60.0):
         assert linearised(MODEL, speed, 200.0, s).probability == pytest.approx(
-            monte_carlo(MODEL, speed, 200.0, s).probability, abs=0.005)
+            monte_carlo(MODEL, speed, 200.0, s).probability, abs=0.005
+        )
 
 
 def test_fast_estimator_with_zero_scatter_is_the_nominal_verdict():
@@ -218,6 +266,7 @@ def test_predict_is_thread_safe():
     """Two threads predicting on one model (the node's executor and its background safe-speed
     search) get the numbers one thread gets."""
     from concurrent.futures import ThreadPoolExecutor
+
     speeds = [50.0, 55.0, 57.0, 60.0] * 25
     alone = [MODEL.predict(s, 200.0).probability for s in speeds]
     with ThreadPoolExecutor(2) as pool:
@@ -225,8 +274,14 @@ def test_predict_is_thread_safe():
             assert list(pool.map(lambda s: MODEL.predict(s, 200.0).probability, speeds)) == alone
 
 
-@pytest.mark.parametrize("scatter", [None, Scatter({"mu_static": 0.05, "radius_m": 0.01}),
-                                     Scatter({"nut_length_m": 0.05, "mu_kinetic": 0.05})])
+@pytest.mark.parametrize(
+    "scatter",
+    [
+        None,
+        Scatter({"mu_static": 0.05, "radius_m": 0.01}),
+        Scatter({"nut_length_m": 0.05, "mu_kinetic": 0.05}),
+    ],
+)
 def test_moved_nut_shares_the_samples_and_predicts_as_a_new_model(scatter):
     """with_params(nut_position_m=...) reuses the samples (and, without geometry scatter, the
     per-sample friction) instead of drawing them again: the predictions are those of a model

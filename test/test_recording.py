@@ -28,25 +28,29 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
-from rosgraph_msgs.msg import Clock
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import Stores, get_typestore
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 from std_srvs.srv import SetBool
-
-from leadscrew_ros.bag import cdr, msgdefs
-from leadscrew_ros.bag.messages import OUTPUT_TYPES, RISK
-from leadscrew_ros.ros.node import OUTPUT_CLASSES
-from leadscrew_ros.bag.logfile import LogError, inspect, is_complete, log_files, read_log, recover
-from leadscrew_ros.live.status import Level
-from leadscrew_ros.bag.recorder import (LOST_BY_TOPIC_KEY, LOST_KEY, Recorder, RecordSettings,
-                                        TopicLoss)
 
 from harness.cdr_reference import cdr_payload
 from harness.recording import answering_node
 from harness.ros import COLLECT
 from harness.squeak import LOAD, SQUEAK, STABLE, SqueakWorld, at, recording_status
+from leadscrew_ros.bag import cdr, msgdefs
+from leadscrew_ros.bag.logfile import LogError, inspect, is_complete, log_files, read_log, recover
+from leadscrew_ros.bag.messages import OUTPUT_TYPES, RISK
+from leadscrew_ros.bag.recorder import (
+    LOST_BY_TOPIC_KEY,
+    LOST_KEY,
+    Recorder,
+    RecordSettings,
+    TopicLoss,
+)
+from leadscrew_ros.live.status import Level
+from leadscrew_ros.ros.node import OUTPUT_CLASSES
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
@@ -54,17 +58,20 @@ TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 def plain(value):
     """A message (rclpy, mcap_ros2 or rosbags object) as nested Python lists/dicts/scalars."""
     if isinstance(value, (bytes, bytearray)) and len(value) == 1:
-        return value[0]                                  # rclpy 'byte' fields
+        return value[0]  # rclpy 'byte' fields
     if isinstance(value, (list, tuple, array.array, np.ndarray)):
         return [plain(v) for v in value]
     if isinstance(value, (np.generic,)):
         return value.item()
     fields = getattr(value, "get_fields_and_field_types", None)
-    if fields is not None:                                  # rclpy
+    if fields is not None:  # rclpy
         names = list(fields())
-    elif dataclasses.is_dataclass(value):                   # rosbags, mcap_ros2
-        names = [f.name for f in dataclasses.fields(value)    # not __msgtype__, constants
-                 if not f.name.startswith("_") and not f.name.isupper()]
+    elif dataclasses.is_dataclass(value):  # rosbags, mcap_ros2
+        names = [
+            f.name
+            for f in dataclasses.fields(value)  # not __msgtype__, constants
+            if not f.name.startswith("_") and not f.name.isupper()
+        ]
     else:
         names = [n for n in getattr(value, "__slots__", ()) if not n.startswith("_")]
     if names:
@@ -79,6 +86,7 @@ def spy_publications(node) -> list[tuple[str, bytes, int | None]]:
     def spy(pub, data: bytes, publish_time_ns: int | None = None) -> None:
         published.append((pub.topic_name, data, publish_time_ns))
         publish(pub, data, publish_time_ns)
+
     node._publish = spy
     return published
 
@@ -93,9 +101,11 @@ def drive(ros: SqueakWorld, node) -> list[tuple[str, object]]:
     """Inputs on all four topics through the squeak band and out; waits for each answer."""
     sent = []
     for speed, nut in ((5.0, 0.10), (SQUEAK, 0.12), (40.0, 0.12), (100.0, 0.14)):
-        for topic, msg in (("nut_position", Float64(data=nut)),
-                           ("axial_load", Float64(data=LOAD)),
-                           ("motor_speed", Float64(data=speed))):
+        for topic, msg in (
+            ("nut_position", Float64(data=nut)),
+            ("axial_load", Float64(data=LOAD)),
+            ("motor_speed", Float64(data=speed)),
+        ):
             ros.publisher(topic).publish(msg)
             sent.append((f"{ros.ns}/{topic}", msg))
         ros.spin_until(lambda s=speed: node.live.inputs.speed_rad_s == s, what="the speed")
@@ -114,19 +124,24 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
     latched = [(t, m.data, m.publish_time_ns) for t, m in node.latched.items()]
     assert [t for t, *_ in latched] == ["/diagnostics"]
     published = spy_publications(node)
-    classes = {p.topic_name: p.msg_type for p in [*node.output_pubs.values(),
-                                                  node.diagnostics.publisher]}
+    classes = {
+        p.topic_name: p.msg_type for p in [*node.output_pubs.values(), node.diagnostics.publisher]
+    }
     assert node.set_parameters([Parameter("record.enabled", value=True)])[0].successful
     sent = drive(ros, node)
     bag = node.recorder.bag
-    ros.remove(node)                                   # closes the file cleanly
+    ros.remove(node)  # closes the file cleanly
     ros.node = None
-    outputs = latched + published                # (topic, bytes, publish time)
+    outputs = latched + published  # (topic, bytes, publish time)
     expected = [(t, deserialize_message(d, classes[t])) for t, d, _ in outputs] + sent
     inputs = {t for t, _ in sent}
-    assert {t for t, *_ in published} >= {f"{ros.ns}/squeak/risk", f"{ros.ns}/squeak/modes",
-                                         f"{ros.ns}/squeak/unstable_frequencies",
-                                         f"{ros.ns}/squeak/active", "/diagnostics"}
+    assert {t for t, *_ in published} >= {
+        f"{ros.ns}/squeak/risk",
+        f"{ros.ns}/squeak/modes",
+        f"{ros.ns}/squeak/unstable_frequencies",
+        f"{ros.ns}/squeak/active",
+        "/diagnostics",
+    }
     files = log_files(bag)
     assert len(files) == 1 and is_complete(files[0])
     assert (bag / "metadata.yaml").is_file()
@@ -149,11 +164,11 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
         assert all(name == msgdefs.type_name(want[0]) for name, _ in got)
         times = [m.log_time for _, m in got]
         assert times == sorted(times)
-        if topic in inputs:              # as rosbag2: the publisher's send time (same clock)
+        if topic in inputs:  # as rosbag2: the publisher's send time (same clock)
             assert all(0 <= m.log_time - m.publish_time < 2e9 for _, m in got)
             continue
         sent_out = [(d, pt) for t, d, pt in outputs if t == topic]
-        assert [m.data for _, m in got] == [d for d, _ in sent_out], topic   # the same bytes
+        assert [m.data for _, m in got] == [d for d, _ in sent_out], topic  # the same bytes
         for (_, m), w, (_, pt) in zip(got, want, sent_out, strict=True):
             stamp = getattr(getattr(w, "header", None), "stamp", None)  # outputs: header stamp
             assert pt == (None if stamp is None else stamp.sec * 10**9 + stamp.nanosec)
@@ -163,7 +178,8 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
     decoded: dict[str, list] = {}
     with open(files[0], "rb") as f:
         for _, channel, _, msg in make_reader(
-                f, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            f, decoder_factories=[DecoderFactory()]
+        ).iter_decoded_messages():
             decoded.setdefault(channel.topic, []).append(plain(msg))
     for topic in decoded:
         want = [plain(m) for t, m in expected if t == topic]
@@ -177,7 +193,8 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
         assert reader.message_count == len(expected)
         for conn, _, raw in reader.messages():
             from_rosbags.setdefault(conn.topic, []).append(
-                plain(TYPESTORE.deserialize_cdr(raw, conn.msgtype)))
+                plain(TYPESTORE.deserialize_cdr(raw, conn.msgtype))
+            )
     assert set(from_rosbags) == {t for t, _ in expected}
     for topic in from_rosbags:
         assert from_rosbags[topic] == [plain(m) for t, m in expected if t == topic], topic
@@ -185,15 +202,18 @@ def test_round_trip_through_mcap_mcap_ros2_and_rosbags(ros, tmp_path):
 
 def test_recorded_outputs_are_the_bytes_a_raw_subscriber_receives(ros, tmp_path):
     received: dict[str, list[bytes]] = {t: [] for t in OUTPUT_TYPES}
-    for topic in received:                    # subscribed before the node exists: every message
-        ros.probe.create_subscription(OUTPUT_CLASSES[topic], topic, received[topic].append,
-                                      COLLECT, raw=True)
+    for topic in received:  # subscribed before the node exists: every message
+        ros.probe.create_subscription(
+            OUTPUT_CLASSES[topic], topic, received[topic].append, COLLECT, raw=True
+        )
     node = ros.start(**{"record.enabled": True, "record.directory": str(tmp_path)})
     at(ros, SQUEAK)
     at(ros, STABLE)
     names = {t: f"{ros.ns}/{t}" for t in received}
-    ros.spin_until(lambda: all(len(received[t]) == node.recorder.count(names[t])
-                               for t in received), what="every recorded output")
+    ros.spin_until(
+        lambda: all(len(received[t]) == node.recorder.count(names[t]) for t in received),
+        what="every recorded output",
+    )
     bag = node.recorder.bag
     ros.remove(node)
     ros.node = None
@@ -208,8 +228,11 @@ def test_message_definitions_come_from_the_installed_packages_with_every_depende
     assert root.rstrip("\n") == msgdefs.msg_text("diagnostic_msgs/msg/DiagnosticArray").rstrip()
     # depth first in field order, each once, as rosbag2 writes them
     assert [d.splitlines()[0] for d in deps] == [
-        "MSG: std_msgs/msg/Header", "MSG: builtin_interfaces/msg/Time",
-        "MSG: diagnostic_msgs/msg/DiagnosticStatus", "MSG: diagnostic_msgs/msg/KeyValue"]
+        "MSG: std_msgs/msg/Header",
+        "MSG: builtin_interfaces/msg/Time",
+        "MSG: diagnostic_msgs/msg/DiagnosticStatus",
+        "MSG: diagnostic_msgs/msg/KeyValue",
+    ]
     for d in deps:
         name = d.splitlines()[0].removeprefix("MSG: ")
         assert d.split("\n", 1)[1].rstrip() == msgdefs.msg_text(name).rstrip()
@@ -227,20 +250,37 @@ def messages(draw):
     """Messages whose serialized length varies in every way alignment can care about."""
     kind = draw(st.sampled_from(["joint_state", "multi_array", "diagnostics"]))
     if kind == "joint_state":
-        msg = JointState(name=draw(st.lists(names, max_size=3)), position=draw(floats),
-                         velocity=draw(floats), effort=draw(floats))
+        msg = JointState(
+            name=draw(st.lists(names, max_size=3)),
+            position=draw(floats),
+            velocity=draw(floats),
+            effort=draw(floats),
+        )
         msg.header.frame_id = draw(names)
         return msg
     if kind == "multi_array":
-        dims = [MultiArrayDimension(label=draw(names), size=draw(st.integers(0, 2**32 - 1)),
-                                    stride=0) for _ in range(draw(st.integers(0, 2)))]
-        return Float64MultiArray(layout=MultiArrayLayout(dim=dims, data_offset=draw(
-            st.integers(0, 2**32 - 1))), data=draw(floats))
-    return DiagnosticArray(status=[DiagnosticStatus(
-        level=bytes([draw(st.integers(0, 3))]), name=draw(names), message=draw(names),
-        values=[KeyValue(key=draw(names), value=draw(names))
-                for _ in range(draw(st.integers(0, 2)))])
-        for _ in range(draw(st.integers(0, 2)))])
+        dims = [
+            MultiArrayDimension(label=draw(names), size=draw(st.integers(0, 2**32 - 1)), stride=0)
+            for _ in range(draw(st.integers(0, 2)))
+        ]
+        return Float64MultiArray(
+            layout=MultiArrayLayout(dim=dims, data_offset=draw(st.integers(0, 2**32 - 1))),
+            data=draw(floats),
+        )
+    return DiagnosticArray(
+        status=[
+            DiagnosticStatus(
+                level=bytes([draw(st.integers(0, 3))]),
+                name=draw(names),
+                message=draw(names),
+                values=[
+                    KeyValue(key=draw(names), value=draw(names))
+                    for _ in range(draw(st.integers(0, 2)))
+                ],
+            )
+            for _ in range(draw(st.integers(0, 2)))
+        ]
+    )
 
 
 @settings(max_examples=300, deadline=None)
@@ -251,7 +291,7 @@ def test_cdr_payload_is_what_rclpy_and_rosbags_read(msg):
     take as the same message."""
     data = cdr_payload(msg)
     assert len(data) <= len(serialize_message(msg))
-    assert data == cdr_payload(deserialize_message(data, type(msg)))    # deterministic
+    assert data == cdr_payload(deserialize_message(data, type(msg)))  # deterministic
     assert deserialize_message(data, type(msg)) == msg
     assert plain(TYPESTORE.deserialize_cdr(data, msgdefs.type_name(msg))) == plain(msg)
 
@@ -286,9 +326,15 @@ def test_recording_splits_by_duration_and_by_size(ros, tmp_path):
     for split, value in (("record.split_duration_s", 0.3), ("record.split_size_mb", 0.004)):
         directory = tmp_path / split
         directory.mkdir()
-        node = ros.start(**{"record.enabled": True, "record.directory": str(directory),
-                            "record.flush_period_s": 0.05, "record.compression": "none",
-                            split: value})
+        node = ros.start(
+            **{
+                "record.enabled": True,
+                "record.directory": str(directory),
+                "record.flush_period_s": 0.05,
+                "record.compression": "none",
+                split: value,
+            }
+        )
         end, i = time.monotonic() + 1.2, 0
         while time.monotonic() < end:
             ros.publisher("motor_speed").publish(Float64(data=10.0 + i % 20))
@@ -310,13 +356,13 @@ def test_recording_splits_by_duration_and_by_size(ros, tmp_path):
         assert [f.name for f in files] == [f"{bag.name}_{k}.mcap" for k in range(len(files))]
         messages = list(read_log(bag))
         times = [m.log_time_ns for m in messages]
-        assert times == sorted(times)                     # split files continue in order
+        assert times == sorted(times)  # split files continue in order
         speeds = [m for m in messages if m.topic.name.endswith("/motor_speed")]
         assert len(speeds) == sum(inspect(f).counts[speeds[0].topic.name] for f in files)
         meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
         assert meta["relative_file_paths"] == [f.name for f in files]
         assert meta["message_count"] == len(messages)
-        for f in files[:-1]:                   # split at the first check past the limit
+        for f in files[:-1]:  # split at the first check past the limit
             if split == "record.split_size_mb":
                 assert f.stat().st_size >= value * 1e6
             else:
@@ -324,14 +370,14 @@ def test_recording_splits_by_duration_and_by_size(ros, tmp_path):
                 assert (info.end_ns - info.start_ns) / 1e9 <= value + 0.1
 
 
-@pytest.mark.parametrize("compression, chunk", [("zstd", "zstd"), ("lz4", "lz4"),
-                                                ("none", "")])
+@pytest.mark.parametrize("compression, chunk", [("zstd", "zstd"), ("lz4", "lz4"), ("none", "")])
 def test_compression_setting_reaches_the_chunks(tmp_path, compression, chunk):
     rec = Recorder(RecordSettings(directory=str(tmp_path), compression=compression))
     assert rec.start(time.time_ns())
     for i in range(200):
-        rec.write_serialized("/motor_speed", cdr.FLOAT64, cdr.encode_float64(float(i)),
-                             time.time_ns())
+        rec.write_serialized(
+            "/motor_speed", cdr.FLOAT64, cdr.encode_float64(float(i)), time.time_ns()
+        )
     rec.stop()
     with open(log_files(rec.bag)[0], "rb") as f:
         indexes = make_reader(f).get_summary().chunk_indexes
@@ -339,30 +385,45 @@ def test_compression_setting_reaches_the_chunks(tmp_path, compression, chunk):
 
 
 @settings(max_examples=200, deadline=None)
-@given(size=st.floats(), duration=st.floats(), flush=st.floats(),
-       compression=st.sampled_from(["zstd", "lz4", "none", "gzip", "", "ZSTD"]))
+@given(
+    size=st.floats(),
+    duration=st.floats(),
+    flush=st.floats(),
+    compression=st.sampled_from(["zstd", "lz4", "none", "gzip", "", "ZSTD"]),
+)
 def test_record_settings_accept_exactly_the_valid_values(size, duration, flush, compression):
-    def within(name, value):          # the range in the field metadata, closed at both ends
+    def within(name, value):  # the range in the field metadata, closed at both ends
         md = RecordSettings.__dataclass_fields__[name].metadata
         return md["lo"] <= value <= md["hi"]
 
-    valid = (within("split_size_mb", size) and within("split_duration_s", duration)
-             and within("flush_period_s", flush) and compression in ("zstd", "lz4", "none"))
+    valid = (
+        within("split_size_mb", size)
+        and within("split_duration_s", duration)
+        and within("flush_period_s", flush)
+        and compression in ("zstd", "lz4", "none")
+    )
     try:
-        RecordSettings(split_size_mb=size, split_duration_s=duration, flush_period_s=flush,
-                       compression=compression)
+        RecordSettings(
+            split_size_mb=size,
+            split_duration_s=duration,
+            flush_period_s=flush,
+            compression=compression,
+        )
     except ValueError as exc:
         assert not valid, exc
     else:
         assert valid
 
 
-@pytest.mark.parametrize("name, value, words", [
-    ("record.compression", "gzip", ["compression", "zstd"]),
-    ("record.split_size_mb", -1.0, ["record.split_size_mb"]),
-    ("record.flush_period_s", 0.0, ["record.flush_period_s"]),
-    ("record.directory", "", ["directory"]),
-])
+@pytest.mark.parametrize(
+    "name, value, words",
+    [
+        ("record.compression", "gzip", ["compression", "zstd"]),
+        ("record.split_size_mb", -1.0, ["record.split_size_mb"]),
+        ("record.flush_period_s", 0.0, ["record.flush_period_s"]),
+        ("record.directory", "", ["directory"]),
+    ],
+)
 def test_invalid_record_parameters_are_rejected(ros, name, value, words):
     node = ros.start()
     result = node.set_parameters([Parameter(name, value=value)])[0]
@@ -387,10 +448,14 @@ def unusable_directories(tmp_path: Path) -> dict[str, Path]:
     """Directories no recording can use, and why."""
     plain = tmp_path / "plain_file"
     plain.write_text("not a directory")
-    return {"proc": Path("/proc/leadscrew_bags"), "proc itself": Path("/proc"),
-            "under a plain file": plain / "bags", "a plain file": plain,
-            # root ignores file modes; the kernel's sysfs refuses anyone
-            "read-only": Path("/sys/kernel") if os.geteuid() == 0 else Path("/")}
+    return {
+        "proc": Path("/proc/leadscrew_bags"),
+        "proc itself": Path("/proc"),
+        "under a plain file": plain / "bags",
+        "a plain file": plain,
+        # root ignores file modes; the kernel's sysfs refuses anyone
+        "read-only": Path("/sys/kernel") if os.geteuid() == 0 else Path("/"),
+    }
 
 
 def test_enabling_a_recording_that_cannot_start_is_rejected_with_the_reason(ros, tmp_path):
@@ -400,8 +465,9 @@ def test_enabling_a_recording_that_cannot_start_is_rejected_with_the_reason(ros,
     ros.spin_until(client.service_is_ready, 5.0, "the ~/record service")
     for what, bad in unusable_directories(tmp_path).items():
         # enabling with a bad directory: the whole set is rejected, nothing records
-        result = node.set_parameters_atomically([Parameter("record.directory", value=str(bad)),
-                                                 Parameter("record.enabled", value=True)])
+        result = node.set_parameters_atomically(
+            [Parameter("record.directory", value=str(bad)), Parameter("record.enabled", value=True)]
+        )
         assert not result.successful, what
         assert str(bad) in result.reason and "cannot record" in result.reason, (what, result)
         assert node.get_parameter("record.enabled").value is False, what
@@ -421,11 +487,12 @@ def test_enabling_a_recording_that_cannot_start_is_rejected_with_the_reason(ros,
         assert not result.successful and str(bad) in result.reason, what
         assert node.recorder.active and node.recorder.bag == bag
         assert node.set_parameters([Parameter("record.enabled", value=False)])[0].successful
-    at(ros, SQUEAK)                                      # still predicting
+    at(ros, SQUEAK)  # still predicting
 
 
 def test_start_up_with_an_unusable_directory_is_an_error_and_the_parameter_reads_false(
-        ros, tmp_path):
+    ros, tmp_path
+):
     bad = unusable_directories(tmp_path)["under a plain file"]
     node = ros.start(**{"record.enabled": True, "record.directory": str(bad)})
     status = recording_status(ros, lambda s: s.level == b"\x02")
@@ -433,13 +500,13 @@ def test_start_up_with_an_unusable_directory_is_an_error_and_the_parameter_reads
     assert node.get_parameter("record.enabled").value is False
     assert not node.recorder.active
     assert "recording" not in ros.latest["/diagnostics"].status[0].message  # prediction status
-    at(ros, SQUEAK)                                      # still predicting
+    at(ros, SQUEAK)  # still predicting
 
 
 # ----------------------------------------------------------------------------- processes
 def test_sigkill_loses_at_most_one_second_and_the_file_is_recoverable(tmp_path, ns):
     with answering_node(tmp_path, ns) as (proc, directory, feed):
-        feed.run(2.0)                          # 2 s of 200 Hz speed + load
+        feed.run(2.0)  # 2 s of 200 Hz speed + load
         killed_ns = time.time_ns()
         proc.kill()
         proc.wait(timeout=10)
@@ -451,8 +518,10 @@ def test_sigkill_loses_at_most_one_second_and_the_file_is_recoverable(tmp_path, 
     speed_topic = f"{ns}/motor_speed"
     assert info.counts[speed_topic] > 0
     loss_s = (killed_ns - info.end_ns) / 1e9
-    print(f"SIGKILL: {info.messages} messages readable, last one {loss_s:.3f} s before the "
-          f"kill ({info.damage or 'no damage'})")
+    print(
+        f"SIGKILL: {info.messages} messages readable, last one {loss_s:.3f} s before the "
+        f"kill ({info.damage or 'no damage'})"
+    )
     assert 0.0 <= loss_s <= 1.0
     fixed = tmp_path / "recovered.mcap"
     recovered = recover(files[0], fixed)
@@ -485,24 +554,26 @@ def test_disk_full_stops_the_recording_with_an_error_and_predictions_continue(tm
     def small_disk():
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
-    with answering_node(tmp_path, ns, ["-p", "record.compression:=none",
-                                       "-p", "record.flush_period_s:=0.1"],
-                        preexec_fn=small_disk) as (proc, directory, feed):
+    with answering_node(
+        tmp_path,
+        ns,
+        ["-p", "record.compression:=none", "-p", "record.flush_period_s:=0.1"],
+        preexec_fn=small_disk,
+    ) as (proc, directory, feed):
         deadline = time.monotonic() + 20
         while not any(s.level == b"\x02" for s in feed.recording):
             assert time.monotonic() < deadline, "no recording error while the disk filled up"
-            feed.run(0.1, joints=200)             # ~8 kB per joint_states message
+            feed.run(0.1, joints=200)  # ~8 kB per joint_states message
         error = next(s for s in feed.recording if s.level == b"\x02")
-        assert str(directory) in error.message and "File too large" in error.message, \
-            error.message
+        assert str(directory) in error.message and "File too large" in error.message, error.message
         before = len(feed.risk)
         feed.run(0.5)
-        assert len(feed.risk) > before            # still predicting
+        assert len(feed.risk) > before  # still predicting
         assert proc.poll() is None
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=10) == 0
     bag = next(directory.iterdir())
-    info = inspect(log_files(bag)[0])                   # what was written before stays readable
+    info = inspect(log_files(bag)[0])  # what was written before stays readable
     assert info.messages > 0
 
 
@@ -513,9 +584,23 @@ BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_recording.py
 def bench_recording(tmp_path: Path, *args: str) -> dict:
     """benchmarks/bench_recording.py for 3 s (node and publisher processes): its raw numbers."""
     out = tmp_path / f"bench{len(list(tmp_path.glob('bench*')))}.json"
-    proc = subprocess.run([sys.executable, str(BENCH), "--seconds", "3", "--conditions",
-                           "quiet", "--json", str(out), *args], capture_output=True, text=True,
-                          timeout=240, env=dict(os.environ))
+    proc = subprocess.run(
+        [
+            sys.executable,
+            str(BENCH),
+            "--seconds",
+            "3",
+            "--conditions",
+            "quiet",
+            "--json",
+            str(out),
+            *args,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=240,
+        env=dict(os.environ),
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
     print(proc.stdout)
     return json.loads(out.read_text())["new:quiet"]
@@ -545,33 +630,38 @@ def test_messages_lost_to_a_stopped_node_are_counted_exactly(tmp_path):
 
 def test_topic_loss_counts_sequence_gaps_of_one_publisher():
     loss = TopicLoss()
-    for seq in (1, 2, 3, 7, 8, 20):            # 4..6 and 9..19 missing
+    for seq in (1, 2, 3, 7, 8, 20):  # 4..6 and 9..19 missing
         loss.received(seq, lambda: 1)
     assert loss.sequence_gaps == 14 and loss.lost == 14
-    loss.received(1, lambda: 1)                 # a new publisher starts at 1: nothing lost
+    loss.received(1, lambda: 1)  # a new publisher starts at 1: nothing lost
     loss.received(2, lambda: 1)
     assert loss.lost == 14
-    loss.dds_lost = 20                          # DDS events are a subset of the gaps...
-    assert loss.lost == 20                      # ...unless they saw more (the larger counts)
+    loss.dds_lost = 20  # DDS events are a subset of the gaps...
+    assert loss.lost == 20  # ...unless they saw more (the larger counts)
     several = TopicLoss()
-    for seq in (1, 1, 2, 2, 5):                 # two publishers interleave: no gap counting
+    for seq in (1, 1, 2, 2, 5):  # two publishers interleave: no gap counting
         several.received(seq, lambda: 2)
     several.dds_lost = 3
     assert not several.sequence_checked and several.lost == 3
-    assert TopicLoss().as_dict() == {"lost": 0, "sequence_gaps": 0, "dds_lost": 0,
-                                     "sequence_checked": True}
+    assert TopicLoss().as_dict() == {
+        "lost": 0,
+        "sequence_gaps": 0,
+        "dds_lost": 0,
+        "sequence_checked": True,
+    }
 
 
 def test_lost_inputs_are_in_the_recording_diagnostic_and_the_metadata(ros, tmp_path):
     """While the recorder is busy (its lock held: the recording thread waits) the 5-deep DDS
     queue of the recording subscription overflows; the gap shows at the next message."""
-    node = ros.start(**{"record.enabled": True, "record.directory": str(tmp_path),
-                        "record.queue_depth": 5})
+    node = ros.start(
+        **{"record.enabled": True, "record.directory": str(tmp_path), "record.queue_depth": 5}
+    )
     pub = ros.publisher("axial_load")
     ros.spin_until(lambda: pub.get_subscription_count() >= 2, 5.0, "the recording reader")
-    recorded = lambda: node.recorder._topics.get(pub.topic_name)   # noqa: E731
+    recorded = lambda: node.recorder._topics.get(pub.topic_name)  # noqa: E731
     sent = 0
-    while not recorded():                       # the recording reader has matched us
+    while not recorded():  # the recording reader has matched us
         pub.publish(Float64(data=LOAD))
         sent += 1
         ros.spin_until(lambda: True)
@@ -597,8 +687,11 @@ def test_lost_inputs_are_in_the_recording_diagnostic_and_the_metadata(ros, tmp_p
     custom = meta["custom_data"]
     assert custom[LOST_KEY] == str(loss.lost)
     assert json.loads(custom[LOST_BY_TOPIC_KEY])[pub.topic_name]["lost"] == loss.lost
-    [topic] = [t for t in meta["topics_with_message_count"]
-               if t["topic_metadata"]["name"] == pub.topic_name]
+    [topic] = [
+        t
+        for t in meta["topics_with_message_count"]
+        if t["topic_metadata"]["name"] == pub.topic_name
+    ]
     assert topic["message_count"] + loss.lost == sent
 
 
@@ -613,10 +706,11 @@ def test_sim_time_bags_are_named_and_split_by_wall_clock_with_sim_log_times(ros,
         msg.clock.sec, msg.clock.nanosec = int(sim_s), int(round(sim_s % 1 * 1e9))
         clock.publish(msg)
 
-    node = ros.start(use_sim_time=True, **{"record.directory": str(tmp_path),
-                                           "record.split_duration_s": 30.0})
+    node = ros.start(
+        use_sim_time=True, **{"record.directory": str(tmp_path), "record.split_duration_s": 30.0}
+    )
     year = time.gmtime().tm_year
-    assert node.get_clock().now().nanoseconds == 0          # no /clock yet
+    assert node.get_clock().now().nanoseconds == 0  # no /clock yet
     assert node.set_parameters([Parameter("record.enabled", value=True)])[0].successful
     first = node.recorder.bag
     assert first.name.startswith(f"{ros.ns[1:]}_squeak_{year}_"), first.name
@@ -624,24 +718,25 @@ def test_sim_time_bags_are_named_and_split_by_wall_clock_with_sim_log_times(ros,
     tick(100.0)
     ros.spin_until(lambda: node.get_clock().now().nanoseconds == 100 * 10**9, 5.0, "sim time")
     at(ros, SQUEAK)
-    tick(1_000_000.0)                                        # jump: 11.6 days of sim time
+    tick(1_000_000.0)  # jump: 11.6 days of sim time
     ros.spin_until(lambda: node.get_clock().now().nanoseconds == 10**15, 5.0, "the jump")
     at(ros, 40.0)
     ros.drain()
-    assert len(node.recorder.files) == 1                     # split by wall clock only
+    assert len(node.recorder.files) == 1  # split by wall clock only
     bags = [first]
-    for _ in range(3):                                       # paused clock: off, on, off...
+    for _ in range(3):  # paused clock: off, on, off...
         assert node.set_parameters([Parameter("record.enabled", value=False)])[0].successful
         assert node.set_parameters([Parameter("record.enabled", value=True)])[0].successful
         assert node.recorder.active, node.recorder.error
         bags.append(node.recorder.bag)
     assert node.set_parameters([Parameter("record.enabled", value=False)])[0].successful
-    assert len(set(bags)) == len(bags) and all(b.name.startswith(
-        f"{ros.ns[1:]}_squeak_{year}_") for b in bags), bags
+    assert len(set(bags)) == len(bags) and all(
+        b.name.startswith(f"{ros.ns[1:]}_squeak_{year}_") for b in bags
+    ), bags
     times = [m.log_time_ns for m in read_log(first)]
-    assert min(times) == 0 and max(times) == 10**15          # the node's clock, as rosbag2
+    assert min(times) == 0 and max(times) == 10**15  # the node's clock, as rosbag2
     assert 100 * 10**9 in times
-    for bag in bags[1:]:                                     # the latched state, at paused time
+    for bag in bags[1:]:  # the latched state, at paused time
         assert {m.log_time_ns for m in read_log(bag)} == {10**15}
 
 
@@ -667,16 +762,17 @@ def test_cut_off_bags_of_an_earlier_run_are_reported_on_start_and_auto_recovered
     [cut] = list(directory.iterdir())
     other = directory / "seat_right_squeak_2025_01_01-00_00_00_000"
     other.mkdir()
-    (other / f"{other.name}_0.mcap").write_bytes(b"\x89MCAP0\r\n")     # cut off, not ours
+    (other / f"{other.name}_0.mcap").write_bytes(b"\x89MCAP0\r\n")  # cut off, not ours
     with SqueakWorld(ns=ns) as r:
         node = r.start(**{"record.directory": str(directory)})
         status = recording_status(r, lambda s: s.level == bytes([Level.WARN]))
-        assert str(cut) in status.message and "leadscrew-squeak recover BAGDIR" in \
-            status.message, status.message
+        assert str(cut) in status.message and "leadscrew-squeak recover BAGDIR" in status.message, (
+            status.message
+        )
         assert str(other) not in status.message
         values = {kv.key: kv.value for kv in status.values}
         assert values["cut_off_bags"] == str(cut)
-        assert not (cut / "metadata.yaml").exists()           # only reported
+        assert not (cut / "metadata.yaml").exists()  # only reported
         r.remove(node)
         node = r.start(**{"record.directory": str(directory), "record.auto_recover": True})
         status = recording_status(r, lambda s: "recovered 1 cut-off bag" in s.message, 20.0)

@@ -22,14 +22,21 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import SetBool
 
+from harness.logs import cli
+from harness.squeak import (
+    LOAD,
+    MODEL,
+    SQUEAK,
+    STABLE,
+    SqueakWorld,
+    at,
+    modes_data,
+    recording_status,
+)
 from leadscrew_ros.bag import recorder as recorder_module
 from leadscrew_ros.bag.logfile import inspect, is_complete, log_files, read_log
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
-from leadscrew_ros.cli import main
 from leadscrew_ros.ros.input_recording import InputRecording
-from harness.logs import cli
-from harness.squeak import (LOAD, MODEL, SQUEAK, STABLE, SqueakWorld, at, modes_data,
-                            recording_status)
 
 ERROR = b"\x02"
 
@@ -47,8 +54,9 @@ def speed(ros: SqueakWorld, value: float) -> None:
     """Send a speed only (the load is the node's state) and wait for its prediction."""
     core = MODEL.predict(value, LOAD)
     ros.send("motor_speed", value)
-    ros.wait_for("squeak/modes", lambda m: list(m.data) == pytest.approx(modes_data(core),
-                                                                         rel=1e-9))
+    ros.wait_for(
+        "squeak/modes", lambda m: list(m.data) == pytest.approx(modes_data(core), rel=1e-9)
+    )
     ros.wait_for("squeak/risk", lambda m: m.data == core.probability)
 
 
@@ -58,17 +66,23 @@ def floats(path: Path, topic: str) -> list[float]:
 
 
 def recording_node(ros: SqueakWorld, directory: Path):
-    node = ros.start(**{"record.enabled": True, "record.directory": str(directory),
-                        "record.flush_period_s": 0.05})
+    node = ros.start(
+        **{
+            "record.enabled": True,
+            "record.directory": str(directory),
+            "record.flush_period_s": 0.05,
+        }
+    )
     at(ros, SQUEAK)
     return node
 
 
 # ----------------------------------------------------------------------------- live writer
 def test_recover_refuses_a_file_being_recorded_and_recovers_only_the_cut_off_bags(
-        ros, tmp_path, capsys):
+    ros, tmp_path, capsys
+):
     directory = tmp_path / "bags"
-    cut_bag = write_log(DutyCycle(duration_s=5.0, rest_s=1.0), directory)   # a crashed run
+    cut_bag = write_log(DutyCycle(duration_s=5.0, rest_s=1.0), directory)  # a crashed run
     cut_file = log_files(cut_bag)[0]
     cut_file.write_bytes(cut_file.read_bytes()[:-200])
     (cut_bag / "metadata.yaml").unlink()
@@ -92,20 +106,19 @@ def test_recover_refuses_a_file_being_recorded_and_recovers_only_the_cut_off_bag
     code, out, err = cli(capsys, "replay", live, "--out", tmp_path / "r", "--no-report")
     assert code == 2 and "is being recorded (live writer)" in err, err
 
-    after = os.stat(live)                            # the node's file, untouched
+    after = os.stat(live)  # the node's file, untouched
     assert (after.st_ino, after.st_dev) == (before.st_ino, before.st_dev)
     assert sorted(p.name for p in bag.iterdir()) == [live.name]
     at(ros, STABLE)
     assert node.set_parameters([Parameter("record.enabled", value=False)])[0].successful
     info = inspect(live)
     assert info.complete and not info.live and not info.damage
-    assert info.counts[f"{ros.ns}/squeak/risk"] == 2       # both predictions, in the one file
+    assert info.counts[f"{ros.ns}/squeak/risk"] == 2  # both predictions, in the one file
     code, out, err = cli(capsys, "recover", bag)
-    assert code == 0 and "nothing to recover" in out, out     # it was never touched
+    assert code == 0 and "nothing to recover" in out, out  # it was never touched
 
 
-def test_a_file_deleted_or_replaced_under_the_node_is_an_error_and_recording_goes_on(
-        ros, tmp_path):
+def test_a_file_deleted_or_replaced_under_the_node_is_an_error_and_recording_goes_on(ros, tmp_path):
     node = recording_node(ros, tmp_path)
     bag = node.recorder.bag
     first = node.recorder.path
@@ -125,10 +138,10 @@ def test_a_file_deleted_or_replaced_under_the_node_is_an_error_and_recording_goe
     assert third not in (first, second) and third.is_file()
     speed(ros, 30.0)
     status = recording_status(ros, lambda s: True)
-    assert status.level == ERROR, status.message          # never OK while data were lost
+    assert status.level == ERROR, status.message  # never OK while data were lost
     assert node.set_parameters([Parameter("record.enabled", value=False)])[0].successful
 
-    assert second.read_bytes() == b"not ours"             # the recorder never writes over it
+    assert second.read_bytes() == b"not ours"  # the recorder never writes over it
     info = inspect(third)
     assert info.complete
     # the new file starts with the node's state (load and speed), then what came after
@@ -147,9 +160,13 @@ def replayed(capsys, log: Path, out: Path, ns: str) -> dict[str, list]:
     code, stdout, err = cli(capsys, "replay", log, "--out", out, "--no-report", "--quiet")
     assert code == 0, err
     [annotated] = out.glob("*.annotated.mcap")
-    return {"risk": floats(annotated, f"/replay{ns}/squeak/risk"),
-            "modes": [list(deserialize_message(m.data, Float64MultiArray).data)
-                      for m in read_log(annotated, {f"/replay{ns}/squeak/modes"})]}
+    return {
+        "risk": floats(annotated, f"/replay{ns}/squeak/risk"),
+        "modes": [
+            list(deserialize_message(m.data, Float64MultiArray).data)
+            for m in read_log(annotated, {f"/replay{ns}/squeak/modes"})
+        ],
+    }
 
 
 def recorded(files: list[Path], ns: str) -> dict[str, list]:
@@ -159,16 +176,20 @@ def recorded(files: list[Path], ns: str) -> dict[str, list]:
     for i, f in enumerate(files):
         start = min(m.log_time_ns for m in read_log(f))
         for key, topic, cls in (("risk", "risk", Float64), ("modes", "modes", Float64MultiArray)):
-            said[key] += [deserialize_message(m.data, cls).data for m in
-                          read_log(f, {f"{ns}/squeak/{topic}"}) if i == 0 or m.log_time_ns > start]
+            said[key] += [
+                deserialize_message(m.data, cls).data
+                for m in read_log(f, {f"{ns}/squeak/{topic}"})
+                if i == 0 or m.log_time_ns > start
+            ]
     said["modes"] = [list(m) for m in said["modes"]]
     return said
 
 
 def test_a_recording_starts_with_the_load_published_before_it_and_replays_to_the_nodes_predictions(
-        ros, tmp_path, capsys):
+    ros, tmp_path, capsys
+):
     node = ros.start(**{"record.directory": str(tmp_path / "bags")})
-    ros.send("axial_load", LOAD)                          # once, before recording starts
+    ros.send("axial_load", LOAD)  # once, before recording starts
     ros.spin_until(lambda: node.live.inputs.load_n == LOAD, what="the load")
     assert record(ros, True).success
     for value in (SQUEAK, 40.0, STABLE, 10.0):
@@ -196,13 +217,14 @@ def test_a_recording_starts_with_the_load_published_before_it_and_replays_to_the
 
 
 def test_inputs_still_queued_for_the_recording_when_it_stops_are_written(
-        ros, tmp_path, monkeypatch):
+    ros, tmp_path, monkeypatch
+):
     """The recording thread may lag behind the model: the inputs whose predictions are in the
     bag must be there too."""
     node = recording_node(ros, tmp_path)
     received = InputRecording._received
 
-    def lagging(self, e, data, info):          # the recording thread falls behind until stop
+    def lagging(self, e, data, info):  # the recording thread falls behind until stop
         while not self._stop.is_set():
             time.sleep(0.001)
         received(self, e, data, info)
@@ -231,7 +253,8 @@ class _Spy:
 
 
 def test_disk_full_logs_once_turns_record_enabled_off_and_a_later_start_records_cleanly(
-        ros, tmp_path, monkeypatch):
+    ros, tmp_path, monkeypatch
+):
     full = threading.Event()
 
     class Disk(io.FileIO):
@@ -240,9 +263,12 @@ def test_disk_full_logs_once_turns_record_enabled_off_and_a_later_start_records_
                 raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), self.name)
             return super().write(data)
 
-    monkeypatch.setattr(recorder_module, "open",
-                        lambda path, mode: io.BufferedWriter(Disk(path, mode.replace("b", ""))),
-                        raising=False)
+    monkeypatch.setattr(
+        recorder_module,
+        "open",
+        lambda path, mode: io.BufferedWriter(Disk(path, mode.replace("b", ""))),
+        raising=False,
+    )
     node = recording_node(ros, tmp_path)
     spy = _Spy(node.get_logger())
     monkeypatch.setattr(node, "get_logger", lambda: spy)
@@ -250,16 +276,19 @@ def test_disk_full_logs_once_turns_record_enabled_off_and_a_later_start_records_
     status = recording_status(ros, lambda s: s.level == ERROR)
     assert "No space left on device" in status.message, status.message
     assert "~/record true" in status.message and "record.enabled" in status.message
-    ros.spin_until(lambda: node.get_parameter("record.enabled").value is False, 5.0,
-                   "record.enabled to turn false")
+    ros.spin_until(
+        lambda: node.get_parameter("record.enabled").value is False,
+        5.0,
+        "record.enabled to turn false",
+    )
     assert not node.recorder.active
-    at(ros, STABLE)                                       # predictions go on
+    at(ros, STABLE)  # predictions go on
     at(ros, 30.0)
     lines = [e for e in spy.errors if "No space left on device" in e]
-    assert len(lines) == 1, spy.errors                    # once per failure episode
+    assert len(lines) == 1, spy.errors  # once per failure episode
     assert "~/record true" in lines[0]
 
-    full.clear()                                          # space again
+    full.clear()  # space again
     response = record(ros, True)
     assert response.success, response.message
     assert node.get_parameter("record.enabled").value is True
@@ -269,4 +298,4 @@ def test_disk_full_logs_once_turns_record_enabled_off_and_a_later_start_records_
     assert record(ros, False).success
     [file] = log_files(node.recorder.bag)
     info = inspect(file)
-    assert info.complete and info.counts[f"{ros.ns}/squeak/risk"] >= 2   # state + new one
+    assert info.complete and info.counts[f"{ros.ns}/squeak/risk"] >= 2  # state + new one

@@ -13,13 +13,21 @@ import yaml
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
-from leadscrew_ros.cli import main
-from leadscrew_ros.bag.logfile import (LogError, cut_off_bags, inspect, is_complete, log_files,
-                                       read_log, read_messages, recover_bag)
-from leadscrew_ros.bag.synthetic import DutyCycle, write_log
 from harness.recording import answering_node
+from leadscrew_ros.bag.logfile import (
+    LogError,
+    cut_off_bags,
+    inspect,
+    is_complete,
+    log_files,
+    read_log,
+    read_messages,
+    recover_bag,
+)
+from leadscrew_ros.bag.synthetic import DutyCycle, write_log
+from leadscrew_ros.cli import main
 
-CYCLE = DutyCycle(duration_s=30.0, rest_s=5.0)       # 3 topics at 100 Hz: 9000 messages
+CYCLE = DutyCycle(duration_s=30.0, rest_s=5.0)  # 3 topics at 100 Hz: 9000 messages
 
 
 def cli(capsys, *argv):
@@ -45,7 +53,7 @@ def snapshot(directory: Path) -> dict[str, tuple[bytes, int]]:
 
 def cut(path: Path, fraction: float) -> None:
     data = path.read_bytes()
-    path.write_bytes(data[:int(len(data) * fraction)])
+    path.write_bytes(data[: int(len(data) * fraction)])
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +74,8 @@ def split_bag(tmp_path, split_bag_bytes) -> Path:
 
 
 def test_sigkill_then_recover_bagdir_every_tool_reads_it_and_a_second_run_is_a_no_op(
-        tmp_path, capsys, ns):  # noqa: F811
+    tmp_path, capsys, ns
+):  # noqa: F811
     with answering_node(tmp_path, ns) as (proc, directory, feed):
         feed.run(1.5)
         proc.kill()
@@ -96,24 +105,38 @@ def test_sigkill_then_recover_bagdir_every_tool_reads_it_and_a_second_run_is_a_n
 
     read = rosbags_messages(bag)
     assert len(read) == readable.messages
-    assert read == [(m.topic.name, m.log_time_ns, m.data)
-                    for m in read_messages(file)]   # same messages, same order, same bytes
+    assert read == [
+        (m.topic.name, m.log_time_ns, m.data) for m in read_messages(file)
+    ]  # same messages, same order, same bytes
     with open(file, "rb") as f:
         reader = make_reader(f)
         assert reader.get_summary().statistics.message_count == readable.messages
         assert sum(1 for _ in reader.iter_messages()) == readable.messages
     meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert meta["message_count"] == readable.messages
-    assert {t["topic_metadata"]["name"]: t["message_count"]
-            for t in meta["topics_with_message_count"]} == dict(readable.counts)
-    code, _, err = cli(capsys, "replay", bag, "--out", tmp_path / "r1", "--quiet", "--no-report",
-                       "--speed-topic", f"{ns}/motor_speed", "--load-topic", f"{ns}/axial_load")
+    assert {
+        t["topic_metadata"]["name"]: t["message_count"] for t in meta["topics_with_message_count"]
+    } == dict(readable.counts)
+    code, _, err = cli(
+        capsys,
+        "replay",
+        bag,
+        "--out",
+        tmp_path / "r1",
+        "--quiet",
+        "--no-report",
+        "--speed-topic",
+        f"{ns}/motor_speed",
+        "--load-topic",
+        f"{ns}/axial_load",
+    )
     assert code == 0 and err == "", err
 
     before = snapshot(bag)
     code, out, err = cli(capsys, "recover", bag)
     assert code == 0 and out.splitlines()[-1] == (
-        f"nothing to recover: {bag} is complete ({readable.messages} messages)")
+        f"nothing to recover: {bag} is complete ({readable.messages} messages)"
+    )
     assert snapshot(bag) == before
 
 
@@ -129,13 +152,14 @@ def test_truncated_file_in_the_middle_of_a_split_bag(split_bag, capsys):
     assert code == 0 and err == ""
     lines = out.splitlines()
     assert lines[0].endswith("_0.mcap: complete, 3003 messages")
-    assert f"{middle}: recovered " in lines[1] and lines[2].endswith("_2.mcap: complete, "
-                                                                      "2997 messages")
+    assert f"{middle}: recovered " in lines[1] and lines[2].endswith(
+        "_2.mcap: complete, 2997 messages"
+    )
     read = rosbags_messages(split_bag)
     recovered = ours(middle)
     assert 0 < len(recovered) < 3000
     # what survives is the whole of files 0 and 2 and a prefix of file 1, unchanged
-    assert read == whole[:3003 + len(recovered)] + whole[-2997:]
+    assert read == whole[: 3003 + len(recovered)] + whole[-2997:]
     assert {p.name: p.read_bytes() for p in log_files(split_bag) if p != middle} == untouched
     meta = yaml.safe_load((split_bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert [f["message_count"] for f in meta["files"]] == [3003, len(recovered), 2997]
@@ -154,8 +178,7 @@ def test_recover_one_file_of_a_bag_also_regenerates_the_bag_metadata(split_bag, 
     assert len(rosbags_messages(split_bag)) == 3003 + 3000 + inspect(last).messages
 
 
-def test_a_loose_file_is_recovered_in_place_and_o_still_writes_a_copy(split_bag, tmp_path,
-                                                                      capsys):
+def test_a_loose_file_is_recovered_in_place_and_o_still_writes_a_copy(split_bag, tmp_path, capsys):
     loose = tmp_path / "loose.mcap"
     loose.write_bytes(log_files(split_bag)[0].read_bytes())
     cut(loose, 0.7)
@@ -165,8 +188,7 @@ def test_a_loose_file_is_recovered_in_place_and_o_still_writes_a_copy(split_bag,
     code, out, _ = cli(capsys, "recover", loose)
     assert code == 0 and is_complete(loose) and out.startswith(f"{loose}: recovered ")
     assert ours(loose) == ours(tmp_path / "copy.mcap")
-    assert sorted(p.name for p in tmp_path.iterdir() if p.is_file()) == ["copy.mcap",
-                                                                         "loose.mcap"]
+    assert sorted(p.name for p in tmp_path.iterdir() if p.is_file()) == ["copy.mcap", "loose.mcap"]
     assert not (tmp_path / "metadata.yaml").exists()
     code, out, _ = cli(capsys, "recover", loose)
     assert code == 0 and out.splitlines()[-1].startswith("nothing to recover")
@@ -183,13 +205,15 @@ def test_nothing_to_recover(split_bag, tmp_path, capsys):
         directory.mkdir(exist_ok=True)
         assert cut_off_bags(directory) == []
         code, out, err = cli(capsys, "recover", directory)
-        assert (code, out, err) == (0, f"nothing to recover: no cut-off recording in "
-                                       f"{directory}\n", "")
+        assert (code, out, err) == (
+            0,
+            f"nothing to recover: no cut-off recording in {directory}\n",
+            "",
+        )
     assert snapshot(split_bag) == before
 
 
-def test_a_record_directory_recovers_each_cut_off_bag_and_loose_file(split_bag, tmp_path,
-                                                                     capsys):
+def test_a_record_directory_recovers_each_cut_off_bag_and_loose_file(split_bag, tmp_path, capsys):
     other = tmp_path / "other_bag"
     other.mkdir()
     (other / "other_bag_0.mcap").write_bytes(log_files(split_bag)[0].read_bytes())  # no yaml
@@ -208,7 +232,7 @@ def test_a_record_directory_recovers_each_cut_off_bag_and_loose_file(split_bag, 
 def test_a_file_damaged_before_its_end_keeps_its_original(split_bag, capsys):
     first = log_files(split_bag)[0]
     data = bytearray(first.read_bytes())
-    data[len(data) // 2] ^= 0xFF                   # inside a compressed chunk: CRC mismatch
+    data[len(data) // 2] ^= 0xFF  # inside a compressed chunk: CRC mismatch
     first.write_bytes(bytes(data))
     assert is_complete(first) and inspect(first).damage
     code, out, err = cli(capsys, "recover", split_bag)
@@ -221,7 +245,7 @@ def test_a_file_damaged_before_its_end_keeps_its_original(split_bag, capsys):
 
 def test_a_file_without_a_whole_message_is_set_aside(split_bag, capsys):
     last = log_files(split_bag)[2]
-    cut(last, 0.001)                               # the header, no message
+    cut(last, 0.001)  # the header, no message
     code, out, _ = cli(capsys, "recover", split_bag)
     assert code == 0 and f"{last}: no whole message" in out
     assert not last.exists() and last.with_name(last.name + ".broken").is_file()

@@ -21,19 +21,18 @@ import pytest
 from mcap.reader import make_reader
 from rosbags.rosbag2 import Reader
 
-from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.bag.messages import PREDICTION_TOPICS
-from leadscrew_ros.review.report import QUICK, write_report
-from leadscrew_ros.live.profile import StrokeProfile
-from leadscrew_ros.bag.synthetic import DutyCycle, write_log
-from leadscrew_ros.review.timeline import InputSettings
-
 from harness.logs import EXACT, TYPESTORE, cli, decoded, f64, rosbags_log, run_replay, write_mcap
+from leadscrew_ros.bag.messages import PREDICTION_TOPICS
+from leadscrew_ros.bag.synthetic import DutyCycle, write_log
+from leadscrew_ros.live.profile import StrokeProfile
+from leadscrew_ros.model import ScrewParameters, SqueakModel
+from leadscrew_ros.review.report import QUICK, write_report
+from leadscrew_ros.review.timeline import InputSettings
 
 PARAMS = ScrewParameters()
 LEAD = PARAMS.radius_m * math.tan(PARAMS.helix_angle_rad)
-CYCLE = DutyCycle(duration_s=30.0, rate_hz=50.0, rest_s=3.0)      # two strokes, back and forth
-SHORT = DutyCycle(duration_s=12.5, rate_hz=25.0, rest_s=0.5)      # one stroke
+CYCLE = DutyCycle(duration_s=30.0, rate_hz=50.0, rest_s=3.0)  # two strokes, back and forth
+SHORT = DutyCycle(duration_s=12.5, rate_hz=25.0, rest_s=0.5)  # one stroke
 OUT_NAMES = [f"/replay/{topic}" for topic in PREDICTION_TOPICS]
 
 
@@ -129,9 +128,12 @@ def check_against_core(annotated: Path, joint="", nut_zero=0.15):
         assert active.data == (not p.stable)
         labels = modes.layout.dim[0].label.removeprefix("modes:").split(",")
         assert labels == [m.label for m in p.modes]
-        assert np.allclose(np.reshape(modes.data, (-1, 3)),
-                           [(m.frequency_hz, m.growth_rate, m.damping_ratio) for m in p.modes],
-                           rtol=1e-12, atol=0)
+        assert np.allclose(
+            np.reshape(modes.data, (-1, 3)),
+            [(m.frequency_hz, m.growth_rate, m.damping_ratio) for m in p.modes],
+            rtol=1e-12,
+            atol=0,
+        )
     assert next(it, None) is None, "a prediction the core did not make"
     return seen
 
@@ -158,13 +160,16 @@ def test_replay_of_a_recorded_log(replayed, bag):
     r = replayed
     samples = CYCLE.samples
     assert r.files == sorted(bag.glob("*.mcap")) and r.messages == 3 * samples
-    assert dict(r.inputs) == {"/motor_speed": samples, "/axial_load": samples,
-                              "/joint_states": samples}
+    assert dict(r.inputs) == {
+        "/motor_speed": samples,
+        "/axial_load": samples,
+        "/joint_states": samples,
+    }
     assert r.duration_s == pytest.approx(CYCLE.duration_s - 1 / CYCLE.rate_hz, abs=1e-3)
-    assert 0 < r.predictions <= r.recomputes < r.messages / 3      # the deadbands coalesce
-    assert set(r.no_prediction) == {"speed below min_speed_rad_s"}   # at rest
+    assert 0 < r.predictions <= r.recomputes < r.messages / 3  # the deadbands coalesce
+    assert set(r.no_prediction) == {"speed below min_speed_rad_s"}  # at rest
     assert not r.rejected and not r.ignored
-    assert len(r.episodes) >= 2                                      # each stroke squeaks
+    assert len(r.episodes) >= 2  # each stroke squeaks
     assert r.annotated.name == f"{bag.name}.annotated.mcap"
     episodes = json.loads((r.out_dir / "episodes.json").read_text())
     assert len(episodes) == len(r.episodes)
@@ -194,8 +199,8 @@ def test_zero_deadbands_give_the_core_prediction_at_every_input(short_log, tmp_p
     assert r.recomputes == len(seen) and r.predictions == sum(p.valid for _, p in seen)
     assert r.predictions > 100
     probabilities = [p.probability for _, p in seen if p.valid]
-    assert min(probabilities) == 0.0 and max(probabilities) > 0.98   # fast; in the band
-    assert any(0.2 < q < 0.8 for q in probabilities)                 # near a band edge
+    assert min(probabilities) == 0.0 and max(probabilities) > 0.98  # fast; in the band
+    assert any(0.2 < q < 0.8 for q in probabilities)  # near a band edge
     # Episodes are exactly the intervals where the core says unstable.
     expected = intervals(seen, r.start_ns, r.duration_s)
     assert len(expected) >= 1
@@ -209,10 +214,15 @@ def test_zero_deadbands_give_the_core_prediction_at_every_input(short_log, tmp_p
 
 def test_input_defaults_are_the_nodes():
     from leadscrew_ros.ros.parameters import PARAMETERS
+
     defaults = {s.name: s.default for s in PARAMETERS}
     s = InputSettings()
-    for name in ("speed_deadband_rad_s", "load_deadband_n", "nut_deadband_m",
-                 "nut_position_at_zero_angle_m"):
+    for name in (
+        "speed_deadband_rad_s",
+        "load_deadband_n",
+        "nut_deadband_m",
+        "nut_position_at_zero_angle_m",
+    ):
         assert getattr(s, name) == defaults[name], name
     assert StrokeProfile().nut_position_at_zero_angle_m == s.nut_position_at_zero_angle_m
 
@@ -227,9 +237,16 @@ def test_annotated_log_holds_every_original_message_unchanged(replayed, bag):
     def channels(path):
         with open(path, "rb") as f:
             s = make_reader(f).get_summary()
-        return {c.topic: (c.message_encoding, dict(c.metadata), s.schemas[c.schema_id].name,
-                          s.schemas[c.schema_id].encoding, s.schemas[c.schema_id].data)
-                for c in s.channels.values()}
+        return {
+            c.topic: (
+                c.message_encoding,
+                dict(c.metadata),
+                s.schemas[c.schema_id].name,
+                s.schemas[c.schema_id].encoding,
+                s.schemas[c.schema_id].data,
+            )
+            for c in s.channels.values()
+        }
 
     before = channels(next(bag.glob("*.mcap")))
     after = channels(replayed.annotated)
@@ -250,11 +267,14 @@ def test_annotated_log_reads_with_rosbags(replayed):
 def test_split_directory_is_read_in_order(tmp_path, replayed):
     bag = write_log(CYCLE, tmp_path / "split", split_duration_s=2.5)
     files = list(bag.glob("*.mcap"))
-    assert len(files) == 12              # `_10` sorts before `_2` by name: ordered by index
+    assert len(files) == 12  # `_10` sorts before `_2` by name: ordered by index
     r = run_replay(bag, tmp_path / "out", joint_name=CYCLE.joint_name)
     assert r.files == sorted(files, key=lambda p: int(p.stem.rsplit("_", 1)[1]))
     assert (r.messages, r.predictions, r.recomputes) == (
-        replayed.messages, replayed.predictions, replayed.recomputes)
+        replayed.messages,
+        replayed.predictions,
+        replayed.recomputes,
+    )
     assert [e.as_dict() for e in r.episodes] == [e.as_dict() for e in replayed.episodes]
 
 
@@ -262,7 +282,7 @@ def test_prediction_workers_give_the_same_log(tmp_path, bag):
     """Long logs solve in spawned worker processes: same predictions as in-process."""
     a = run_replay(bag, tmp_path / "a", workers=0, joint_name=CYCLE.joint_name, **EXACT)
     b = run_replay(bag, tmp_path / "b", workers=2, joint_name=CYCLE.joint_name, **EXACT)
-    assert a.predictions > 4 * 256          # several batches: the pool starts
+    assert a.predictions > 4 * 256  # several batches: the pool starts
     assert plain(decoded(a.annotated)) == plain(decoded(b.annotated))
 
 
@@ -273,15 +293,22 @@ def test_a_dead_worker_is_replaced_by_solving_here():
     from leadscrew_ros.bag.messages import prediction_payloads
     from leadscrew_ros.review.replay import Verdict, _Segment
     from leadscrew_ros.review.timeline import ModelSpec, predict_jobs
-    args = (ModelSpec.of(SqueakModel()), np.array([20.0]), np.array([200.0]),
-            np.array([PARAMS.nut_position_m]))
+
+    args = (
+        ModelSpec.of(SqueakModel()),
+        np.array([20.0]),
+        np.array([200.0]),
+        np.array([PARAMS.nut_position_m]),
+    )
     future = Future()
     future.set_exception(BrokenProcessPool("killed"))
     (v,), (payloads,) = _Segment(solved=future, args=args).result()
     p = predict_jobs(*args)[0]
     assert p == SqueakModel().predict(20.0, 200.0) and not p.stable
-    assert v == Verdict.of(p) and v.squeak == tuple((m.label, m.frequency_hz)
-                                                     for m in p.squeak_modes) != ()
+    assert (
+        v == Verdict.of(p)
+        and v.squeak == tuple((m.label, m.frequency_hz) for m in p.squeak_modes) != ()
+    )
     assert payloads == tuple(data for _, data in prediction_payloads(p))
 
 
@@ -293,8 +320,11 @@ def test_output_directory_must_not_be_the_log_directory(bag, capsys):
 
 def test_report_pngs(replayed, tmp_path):
     paths = write_report(replayed, SqueakModel(), tmp_path, QUICK)
-    assert [p.name for p in paths] == ["timeline.png", "map_speed_load.png",
-                                       "frequency_vs_speed.png"]
+    assert [p.name for p in paths] == [
+        "timeline.png",
+        "map_speed_load.png",
+        "frequency_vs_speed.png",
+    ]
     for p in paths:
         assert p.read_bytes().startswith(b"\x89PNG") and p.stat().st_size > 5000
 
@@ -314,7 +344,7 @@ def test_joint_states_with_several_joints_need_a_joint_name(tmp_path, capsys):
     code, out, err = cli(capsys, "replay", log, "--out", tmp_path / "out", "--quiet")
     assert code == 2 and out == "" and len(err.splitlines()) == 1
     assert "no speed" in err and "--joint-name" in err and "/joint_states" in err
-    assert not list((tmp_path / "out").glob("*.mcap*"))       # no half-written output
+    assert not list((tmp_path / "out").glob("*.mcap*"))  # no half-written output
 
 
 def test_joint_states_without_a_joint_name_are_ignored(tmp_path, capsys):
@@ -323,14 +353,20 @@ def test_joint_states_without_a_joint_name_are_ignored(tmp_path, capsys):
     log = rosbags_log(tmp_path / "rosbags_bag", ["screw"], samples=40)
     code, out, err = cli(capsys, "replay", log, "--out", tmp_path / "x", "--quiet")
     assert code == 2 and len(err.splitlines()) == 1
-    assert ("40 x /joint_states: joint_name not set; use --joint-name (joints screw)"
-            in err)
-    r = run_replay(log, tmp_path / "load", load_topic="/unused", nominal_load_n=200.0,
-                   speed_topic="/axial_load")          # a speed from elsewhere: a summary
+    assert "40 x /joint_states: joint_name not set; use --joint-name (joints screw)" in err
+    r = run_replay(
+        log,
+        tmp_path / "load",
+        load_topic="/unused",
+        nominal_load_n=200.0,
+        speed_topic="/axial_load",
+    )  # a speed from elsewhere: a summary
     assert dict(r.ignored) == {"/joint_states: joint_name not set; use --joint-name": 40}
     text = (tmp_path / "load" / "summary.txt").read_text()
-    assert ("ignored inputs: 40 x /joint_states: joint_name not set; use --joint-name "
-            "(first: joints screw)") in text
+    assert (
+        "ignored inputs: 40 x /joint_states: joint_name not set; use --joint-name "
+        "(first: joints screw)"
+    ) in text
     r = run_replay(log, tmp_path / "out", joint_name="screw", **EXACT)
     assert r.predictions > 0 and not r.ignored
     check_against_core(r.annotated, joint="screw")
@@ -339,79 +375,141 @@ def test_joint_states_without_a_joint_name_are_ignored(tmp_path, capsys):
 # ----------------------------------------------------------------------------- bad values
 def test_invalid_inputs_are_counted_never_predicted(tmp_path):
     s = 1_000_000_000
-    log = write_mcap(tmp_path / "bad.mcap", [
-        f64("/motor_speed", math.nan, 1 * s), f64("/axial_load", 200.0, 2 * s),
-        f64("/motor_speed", 20.0, 3 * s),                    # the one valid prediction
-        f64("/axial_load", math.inf, 4 * s), f64("/axial_load", 2e7, 5 * s),
-        f64("/nut_position", 5.0, 6 * s),
-        ("/motor_speed", "std_msgs/msg/Float64", b"\x00\x01\x00\x00\x01", 7 * s),
-        f64("/motor_speed", 0.1, 8 * s), f64("/motor_speed", 2000.0, 9 * s),
-    ])
+    log = write_mcap(
+        tmp_path / "bad.mcap",
+        [
+            f64("/motor_speed", math.nan, 1 * s),
+            f64("/axial_load", 200.0, 2 * s),
+            f64("/motor_speed", 20.0, 3 * s),  # the one valid prediction
+            f64("/axial_load", math.inf, 4 * s),
+            f64("/axial_load", 2e7, 5 * s),
+            f64("/nut_position", 5.0, 6 * s),
+            ("/motor_speed", "std_msgs/msg/Float64", b"\x00\x01\x00\x00\x01", 7 * s),
+            f64("/motor_speed", 0.1, 8 * s),
+            f64("/motor_speed", 2000.0, 9 * s),
+        ],
+    )
     r = run_replay(log, tmp_path / "out")
     assert r.predictions == 1 and r.recomputes == 3
-    assert dict(r.rejected) == {"speed not finite": 1, "load not finite": 1,
-                                "load beyond 1e+07 N": 1,
-                                "nut position off the screw [0, 0.24] m": 1,
-                                "/motor_speed: undecodable payload": 1}
-    assert dict(r.no_prediction) == {"speed below min_speed_rad_s": 1,
-                                     "speed at or above the first critical speed": 1}
+    assert dict(r.rejected) == {
+        "speed not finite": 1,
+        "load not finite": 1,
+        "load beyond 1e+07 N": 1,
+        "nut position off the screw [0, 0.24] m": 1,
+        "/motor_speed: undecodable payload": 1,
+    }
+    assert dict(r.no_prediction) == {
+        "speed below min_speed_rad_s": 1,
+        "speed at or above the first critical speed": 1,
+    }
     (p,) = decoded(r.annotated, topics=["/replay/squeak/risk"])
     assert p[1] == 3 * s and math.isfinite(p[5].data)
-    t, lo, _, _, count = r.plot_data.probability.series()     # seconds from the first message
+    t, lo, _, _, count = r.plot_data.probability.series()  # seconds from the first message
     (k,) = np.flatnonzero(np.isfinite(lo[:, 0]))
     assert abs(t[k] - 2.0) <= r.plot_data.probability.bin_s and count.sum() == r.recomputes
 
 
 def test_wrong_input_type_is_a_one_line_error(tmp_path, capsys):
-    js = TYPESTORE.serialize_cdr(TYPESTORE.types["std_msgs/msg/Float64"](1.0),
-                                 "std_msgs/msg/Float64")
-    log = write_mcap(tmp_path / "typed.mcap", [
-        ("/motor_speed", "std_msgs/msg/Float32", js[:8], 1), f64("/axial_load", 1.0, 2)])
+    js = TYPESTORE.serialize_cdr(
+        TYPESTORE.types["std_msgs/msg/Float64"](1.0), "std_msgs/msg/Float64"
+    )
+    log = write_mcap(
+        tmp_path / "typed.mcap",
+        [("/motor_speed", "std_msgs/msg/Float32", js[:8], 1), f64("/axial_load", 1.0, 2)],
+    )
     code, _, err = cli(capsys, "replay", log, "--out", tmp_path / "out", "--quiet")
     assert code == 2 and len(err.splitlines()) == 1
-    assert f"{log}: topic /motor_speed is std_msgs/msg/Float32, expected std_msgs/msg/Float64" \
-        in err
+    assert (
+        f"{log}: topic /motor_speed is std_msgs/msg/Float32, expected std_msgs/msg/Float64" in err
+    )
 
 
 # ----------------------------------------------------------------------------- command line
 def test_cli_replay_with_report(bag, tmp_path, capsys):
-    code, out, err = cli(capsys, "replay", bag, "--out", tmp_path, "--speed-deadband", "0.5",
-                         "--out-namespace", "/offline")
+    code, out, err = cli(
+        capsys,
+        "replay",
+        bag,
+        "--out",
+        tmp_path,
+        "--speed-deadband",
+        "0.5",
+        "--out-namespace",
+        "/offline",
+    )
     assert code == 0, err
     assert "squeak episodes:" in out and "x real time" in out and "wrote:" in out
     names = {p.name for p in tmp_path.iterdir()}
-    assert {f"{bag.name}.annotated.mcap", "episodes.json", "summary.json", "summary.txt",
-            "timeline.png", "map_speed_load.png", "frequency_vs_speed.png"} <= names
+    assert {
+        f"{bag.name}.annotated.mcap",
+        "episodes.json",
+        "summary.json",
+        "summary.txt",
+        "timeline.png",
+        "map_speed_load.png",
+        "frequency_vs_speed.png",
+    } <= names
     topics = {m[0] for m in decoded(tmp_path / f"{bag.name}.annotated.mcap")}
     assert "/offline/squeak/active" in topics and "/replay/squeak/active" not in topics
 
 
 def test_cli_replay_takes_node_parameters_from_the_params_file(short_log, tmp_path, capsys):
     params = tmp_path / "p.yaml"
-    params.write_text("squeak_predictor:\n  ros__parameters:\n    speed_deadband_rad_s: 0.0\n"
-                      "    load_deadband_n: 0.0\n    nut_deadband_m: 0.0\n"
-                      "    record: {enabled: false}\n")
-    code, _, err = cli(capsys, "replay", short_log, "--out", tmp_path / "a", "--no-report",
-                       "--quiet", "--params-file", params)
+    params.write_text(
+        "squeak_predictor:\n  ros__parameters:\n    speed_deadband_rad_s: 0.0\n"
+        "    load_deadband_n: 0.0\n    nut_deadband_m: 0.0\n"
+        "    record: {enabled: false}\n"
+    )
+    code, _, err = cli(
+        capsys,
+        "replay",
+        short_log,
+        "--out",
+        tmp_path / "a",
+        "--no-report",
+        "--quiet",
+        "--params-file",
+        params,
+    )
     assert code == 0, err
     exact = json.loads((tmp_path / "a" / "summary.json").read_text())
-    code, _, err = cli(capsys, "replay", short_log, "--out", tmp_path / "b", "--no-report",
-                       "--quiet", "--params-file", params, "--speed-deadband", "5")
+    code, _, err = cli(
+        capsys,
+        "replay",
+        short_log,
+        "--out",
+        tmp_path / "b",
+        "--no-report",
+        "--quiet",
+        "--params-file",
+        params,
+        "--speed-deadband",
+        "5",
+    )
     coarse = json.loads((tmp_path / "b" / "summary.json").read_text())
     assert code == 0 and coarse["recomputes"] < exact["recomputes"]
 
 
-@pytest.mark.parametrize("make, problem", [
-    (lambda d: d / "missing.mcap", "no such file or directory"),
-    (lambda d: (d / "empty_dir").mkdir() or d / "empty_dir", "directory holds no .mcap files"),
-    (lambda d: d / "image.png", "not an MCAP file (bad magic)"),
-    (lambda d: d / "notes.txt", "not an MCAP file (bad magic)"),
-    (lambda d: write_mcap(d / "plain.mcap", [f64("/motor_speed", 1.0, 1)], profile=""),
-     "foreign MCAP: profile ''"),
-    (lambda d: write_mcap(d / "json.mcap", [f64("/motor_speed", 1.0, 1)],
-                          encodings=("json", "jsonschema")), "foreign MCAP: topic /motor_speed"),
-    (lambda d: d / "empty.mcap", "not an MCAP file (bad magic)|empty file"),
-])
+@pytest.mark.parametrize(
+    "make, problem",
+    [
+        (lambda d: d / "missing.mcap", "no such file or directory"),
+        (lambda d: (d / "empty_dir").mkdir() or d / "empty_dir", "directory holds no .mcap files"),
+        (lambda d: d / "image.png", "not an MCAP file (bad magic)"),
+        (lambda d: d / "notes.txt", "not an MCAP file (bad magic)"),
+        (
+            lambda d: write_mcap(d / "plain.mcap", [f64("/motor_speed", 1.0, 1)], profile=""),
+            "foreign MCAP: profile ''",
+        ),
+        (
+            lambda d: write_mcap(
+                d / "json.mcap", [f64("/motor_speed", 1.0, 1)], encodings=("json", "jsonschema")
+            ),
+            "foreign MCAP: topic /motor_speed",
+        ),
+        (lambda d: d / "empty.mcap", "not an MCAP file (bad magic)|empty file"),
+    ],
+)
 def test_cli_bad_logs_are_one_line_errors(tmp_path, capsys, make, problem):
     (tmp_path / "image.png").write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(100))
     (tmp_path / "notes.txt").write_text("speed,load\n1,2\n")
@@ -429,7 +527,7 @@ def test_cli_bad_logs_are_one_line_errors(tmp_path, capsys, make, problem):
 def test_cli_truncated_log_then_recover_then_replay(short_log, tmp_path, capsys):
     cut = tmp_path / "cut.mcap"
     data = short_log.read_bytes()
-    cut.write_bytes(data[:int(len(data) * 0.7)])
+    cut.write_bytes(data[: int(len(data) * 0.7)])
     code, _, err = cli(capsys, "replay", cut, "--out", tmp_path / "out", "--quiet")
     assert code == 2 and err.count("\n") == 1
     assert "truncated" in err and f"leadscrew-squeak recover {cut}" in err
@@ -447,12 +545,13 @@ def test_cli_truncated_log_then_recover_then_replay(short_log, tmp_path, capsys)
 
     code, out, err = cli(capsys, "info", recovered)
     assert code == 0 and ": complete" in out.splitlines()[0]
-    code, out, err = cli(capsys, "replay", recovered, "--out", tmp_path / "out", "--quiet",
-                         "--no-report")
+    code, out, err = cli(
+        capsys, "replay", recovered, "--out", tmp_path / "out", "--quiet", "--no-report"
+    )
     assert code == 0 and err == ""
     assert json.loads((tmp_path / "out" / "summary.json").read_text())["messages"] == n
 
-    code, out, err = cli(capsys, "recover", cut)              # default: in place
+    code, out, err = cli(capsys, "recover", cut)  # default: in place
     assert code == 0 and f"{cut}: recovered {n} messages" in out
     assert cli(capsys, "info", cut)[1].splitlines()[0] == f"{cut}: complete"
 
@@ -467,25 +566,31 @@ def test_cli_info(bag, capsys):
     assert {t["name"]: t["count"] for t in info["topics"]}["/axial_load"] == CYCLE.samples
 
 
-@pytest.mark.parametrize("argv, problem", [
-    (["--rate", "2"], "--rate needs --publish"),
-    (["--loop"], "--loop needs --publish"),
-    (["--publish", "--out", "x"], "--out is for the offline replay, not --publish"),
-    (["--publish", "--load", "200"], "--load is for the offline replay, not --publish"),
-    (["--publish", "--namespace", "/a"], "--namespace is for the offline replay"),
-    (["--publish", "--out-namespace", "/a"], "--out-namespace is for the offline replay"),
-    (["--publish", "--remap", "speed"], "expected OLD:=NEW"),
-    (["--speed-deadband", "-1"], "speed_deadband_rad_s = -1 is out of range, allowed [0, 1000]"),
-    (["--speed-deadband", "1001"], "speed_deadband_rad_s = 1001 is out of range"),  # the node's
-    (["--nut-position-at-zero-angle", "-101"], "nut_position_at_zero_angle_m = -101 is out"),
-    (["--namespace", "/bad name"], "namespace must be a ROS name"),
-    (["--out-namespace", "/bad name"], "output namespace must be a ROS name"),
-    (["--load", "1e8"], "nominal load = 1e+08 N exceeds the plausible magnitude 1e+07 N"),
-    (["--workers", "-1"], "workers must be in [0, 64], got -1"),
-    (["--workers", "100000"], "workers must be in [0, 64], got 100000"),
-    (["--load-topic", "motor_speed"], "input topics must be distinct"),
-    (["--speed-deadband", "nan"], "is not a finite number"),
-])
+@pytest.mark.parametrize(
+    "argv, problem",
+    [
+        (["--rate", "2"], "--rate needs --publish"),
+        (["--loop"], "--loop needs --publish"),
+        (["--publish", "--out", "x"], "--out is for the offline replay, not --publish"),
+        (["--publish", "--load", "200"], "--load is for the offline replay, not --publish"),
+        (["--publish", "--namespace", "/a"], "--namespace is for the offline replay"),
+        (["--publish", "--out-namespace", "/a"], "--out-namespace is for the offline replay"),
+        (["--publish", "--remap", "speed"], "expected OLD:=NEW"),
+        (
+            ["--speed-deadband", "-1"],
+            "speed_deadband_rad_s = -1 is out of range, allowed [0, 1000]",
+        ),
+        (["--speed-deadband", "1001"], "speed_deadband_rad_s = 1001 is out of range"),  # the node's
+        (["--nut-position-at-zero-angle", "-101"], "nut_position_at_zero_angle_m = -101 is out"),
+        (["--namespace", "/bad name"], "namespace must be a ROS name"),
+        (["--out-namespace", "/bad name"], "output namespace must be a ROS name"),
+        (["--load", "1e8"], "nominal load = 1e+08 N exceeds the plausible magnitude 1e+07 N"),
+        (["--workers", "-1"], "workers must be in [0, 64], got -1"),
+        (["--workers", "100000"], "workers must be in [0, 64], got 100000"),
+        (["--load-topic", "motor_speed"], "input topics must be distinct"),
+        (["--speed-deadband", "nan"], "is not a finite number"),
+    ],
+)
 def test_cli_replay_bad_options(bag, tmp_path, capsys, argv, problem):
     code, out, err = cli(capsys, "replay", bag, "--quiet", *argv)
     assert code == 2 and out == "" and err.count("\n") == 1 and problem in err
@@ -497,26 +602,56 @@ def test_cli_publish_calls_publish_log(bag, monkeypatch, capsys):
     fake.publish_log = lambda paths, **kwargs: calls.append((paths, kwargs)) or 7
     fake.WAIT_FOR_SUBSCRIBER_S = 5.0
     monkeypatch.setitem(sys.modules, "leadscrew_ros.ros.replay_live", fake)
-    code, _, err = cli(capsys, "replay", bag, "--publish", "--rate", "4", "--loop",
-                       "--start-offset", "1.5", "--topics", "motor_speed", "/axial_load",
-                       "--remap", "motor_speed:=/seat/motor_speed", "--no-wait", "--quiet")
+    code, _, err = cli(
+        capsys,
+        "replay",
+        bag,
+        "--publish",
+        "--rate",
+        "4",
+        "--loop",
+        "--start-offset",
+        "1.5",
+        "--topics",
+        "motor_speed",
+        "/axial_load",
+        "--remap",
+        "motor_speed:=/seat/motor_speed",
+        "--no-wait",
+        "--quiet",
+    )
     assert code == 0, err
-    (paths, kwargs), = calls
+    ((paths, kwargs),) = calls
     assert paths == sorted(bag.glob("*.mcap"))
-    assert kwargs == dict(rate=4.0, loop=True, start_offset_s=1.5,
-                          topics=["/motor_speed", "/axial_load"],
-                          remap={"/motor_speed": "/seat/motor_speed"}, progress=False,
-                          wait_for_subscriber_s=0.0, ros_args=[])
+    assert kwargs == dict(
+        rate=4.0,
+        loop=True,
+        start_offset_s=1.5,
+        topics=["/motor_speed", "/axial_load"],
+        remap={"/motor_speed": "/seat/motor_speed"},
+        progress=False,
+        wait_for_subscriber_s=0.0,
+        ros_args=[],
+    )
     calls.clear()
     assert cli(capsys, "replay", bag, "--publish")[0] == 0
-    assert calls[0][1] == dict(rate=1.0, loop=False, start_offset_s=0.0, topics=None, remap={},
-                               progress=True, wait_for_subscriber_s=5.0, ros_args=[])
+    assert calls[0][1] == dict(
+        rate=1.0,
+        loop=False,
+        start_offset_s=0.0,
+        topics=None,
+        remap={},
+        progress=True,
+        wait_for_subscriber_s=5.0,
+        ros_args=[],
+    )
     calls.clear()
     assert cli(capsys, "replay", bag, "--publish", "--ros-args", "-r", "__ns:=/seat")[0] == 0
     assert calls[0][1]["ros_args"] == ["--ros-args", "-r", "__ns:=/seat"]
 
     def refuse(paths, **kwargs):
         raise ValueError("rate must be a finite number > 0")
+
     fake.publish_log = refuse
     code, _, err = cli(capsys, "replay", bag, "--publish", "--rate", "0")
     assert code == 2 and err == "leadscrew-squeak: error: rate must be a finite number > 0\n"

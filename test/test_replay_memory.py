@@ -40,20 +40,23 @@ def bulky_log(directory: Path, duration_s: float) -> Path:
     """One MCAP file: speed and load at 20 Hz (a 12 s stroke every 30 s) and the bulky topic."""
     cycle = DutyCycle(duration_s=duration_s, rate_hz=20.0, rest_s=18.0)
     s = samples(cycle)
-    rec = Recorder(RecordSettings(directory=str(directory), split_size_mb=0.0,
-                                  split_duration_s=0.0))
+    rec = Recorder(
+        RecordSettings(directory=str(directory), split_size_mb=0.0, split_duration_s=0.0)
+    )
     assert rec.start(cycle.start_ns)
     rng = np.random.default_rng(0)
     bulk_every = int(cycle.rate_hz / BULK_HZ)
     times = cycle.start_ns + np.round(s.time_s * 1e9).astype(np.int64)
-    for i, (now, speed, load) in enumerate(zip(times.tolist(), s.speed_rad_s.tolist(),
-                                               s.load_n.tolist())):
+    for i, (now, speed, load) in enumerate(
+        zip(times.tolist(), s.speed_rad_s.tolist(), s.load_n.tolist(), strict=True)
+    ):
         rec.write_serialized(SPEED_TOPIC, FLOAT64, encode_float64(speed), now)
         rec.write_serialized(LOAD_TOPIC, FLOAT64, encode_float64(load), now + 100_000)
         if i % bulk_every == 0:
             data = rng.integers(0, 256, BULK_BYTES, dtype=np.uint8).tobytes()
-            rec.write_serialized(BULK_TOPIC, BULK_TYPE,
-                                 serialize_message(UInt8MultiArray(data=data)), now + 200_000)
+            rec.write_serialized(
+                BULK_TOPIC, BULK_TYPE, serialize_message(UInt8MultiArray(data=data)), now + 200_000
+            )
         rec.tick(now)
     rec.stop()
     assert not rec.error, rec.error
@@ -63,11 +66,27 @@ def bulky_log(directory: Path, duration_s: float) -> Path:
 def peak_kb(bag: Path, out: Path) -> int:
     """Peak resident memory [kB] of `leadscrew-squeak replay BAG --no-report` in a fresh
     process (the test environment: the venv's python, this checkout on the path)."""
-    out.mkdir()           # the child runs there: `-c` puts its cwd first on the module path
+    out.mkdir()  # the child runs there: `-c` puts its cwd first on the module path
     done = subprocess.run(
-        [sys.executable, "-c", CHILD, "replay", str(bag), "--out", str(out), "--no-report",
-         "--quiet", "--workers", "0"], env=dict(os.environ), cwd=out, capture_output=True,
-        text=True, timeout=300)
+        [
+            sys.executable,
+            "-c",
+            CHILD,
+            "replay",
+            str(bag),
+            "--out",
+            str(out),
+            "--no-report",
+            "--quiet",
+            "--workers",
+            "0",
+        ],
+        env=dict(os.environ),
+        cwd=out,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert done.returncode == 0, done.stderr[-2000:]
     res = json.loads(done.stdout.splitlines()[-1])
     assert res["code"] == 0, done.stderr[-2000:]
@@ -75,9 +94,10 @@ def peak_kb(bag: Path, out: Path) -> int:
 
 
 def test_replay_peak_memory_does_not_grow_with_the_log(tmp_path):
-    short, long = (bulky_log(tmp_path / name, d) for name, d in (("short", SHORT_S),
-                                                                 ("long", LONG_S)))
+    short, long = (
+        bulky_log(tmp_path / name, d) for name, d in (("short", SHORT_S), ("long", LONG_S))
+    )
     size = sum(f.stat().st_size for f in long.glob("*.mcap"))
-    assert size > 50e6                          # enough to show if the reader kept it
+    assert size > 50e6  # enough to show if the reader kept it
     small, big = (peak_kb(bag, tmp_path / f"out_{bag.parent.name}") for bag in (short, long))
     assert big / small <= 1.2, f"peak RSS {small / 1024:.0f} MB -> {big / 1024:.0f} MB"

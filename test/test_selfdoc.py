@@ -22,6 +22,7 @@ from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import Stores, get_typestore
 from std_msgs.msg import Float64
 
+from harness.squeak import LOAD
 from leadscrew_ros import __version__
 from leadscrew_ros.bag import logmeta
 from leadscrew_ros.bag.logfile import is_complete, log_files, recover
@@ -38,13 +39,11 @@ from leadscrew_ros.review.timeline import InputSettings
 from leadscrew_ros.ros.node import INPUTS, OUTPUT_CLASSES
 from leadscrew_ros.ros.parameters import PARAMETER_NAMES, PARAMETERS, log_metadata
 
-from harness.squeak import LOAD
-
 REPO = Path(__file__).resolve().parents[1]
 LAYOUT = REPO / "foxglove" / "squeak_predictor.json"
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 FLOAT64 = "std_msgs/msg/Float64"
-CDR_ZERO = b"\x00\x01\x00\x00" + bytes(8)          # std_msgs/Float64 0.0
+CDR_ZERO = b"\x00\x01\x00\x00" + bytes(8)  # std_msgs/Float64 0.0
 
 
 def records(path: Path) -> list[tuple[str, dict[str, str]]]:
@@ -78,8 +77,9 @@ def default_values(**changes) -> dict:
 
 # ----------------------------------------------------------------------------- the node
 def test_node_recording_describes_itself_in_every_file(ros, tmp_path):
-    node = ros.start(**{"record.directory": str(tmp_path), "record.enabled": True,
-                        "unit_id": "seat-7"})
+    node = ros.start(
+        **{"record.directory": str(tmp_path), "record.enabled": True, "unit_id": "seat-7"}
+    )
 
     def drive(speed: float) -> None:
         ros.publisher("axial_load").publish(Float64(data=LOAD))
@@ -129,16 +129,20 @@ def test_unit_id_is_read_only_with_an_empty_default(ros):
 # ----------------------------------------------------------------------------- the recorder
 def test_every_file_gets_the_records_current_when_it_opens(tmp_path):
     first = {logmeta.RECORD_NAME: log_metadata(default_values(unit_id="a")).record()}
-    rec = Recorder(RecordSettings(directory=str(tmp_path), split_duration_s=1.0,
-                                  compression="none"), metadata=first)
+    rec = Recorder(
+        RecordSettings(directory=str(tmp_path), split_duration_s=1.0, compression="none"),
+        metadata=first,
+    )
     assert rec.start(now_ns=0)
     rec.write_serialized("/x", FLOAT64, CDR_ZERO, 1)
-    rec.split(now_ns=10)                                   # split by the caller
-    second = {logmeta.RECORD_NAME: log_metadata(default_values(unit_id="b")).record(),
-              "other": {"k": "v"}}
-    rec.metadata = second                                  # in the next file only
+    rec.split(now_ns=10)  # split by the caller
+    second = {
+        logmeta.RECORD_NAME: log_metadata(default_values(unit_id="b")).record(),
+        "other": {"k": "v"},
+    }
+    rec.metadata = second  # in the next file only
     rec.write_serialized("/x", FLOAT64, CDR_ZERO, 2)
-    rec.tick(now_ns=2_000_000_000)                         # split by duration
+    rec.tick(now_ns=2_000_000_000)  # split by duration
     rec.write_serialized("/x", FLOAT64, CDR_ZERO, 3)
     rec.stop()
     files = log_files(rec.bag)
@@ -149,17 +153,18 @@ def test_every_file_gets_the_records_current_when_it_opens(tmp_path):
 
 def test_a_cut_off_file_and_its_recovery_keep_the_record(tmp_path):
     record = log_metadata(default_values(unit_id="c")).record()
-    rec = Recorder(RecordSettings(directory=str(tmp_path / "rec")),
-                   metadata={logmeta.RECORD_NAME: record})
+    rec = Recorder(
+        RecordSettings(directory=str(tmp_path / "rec")), metadata={logmeta.RECORD_NAME: record}
+    )
     assert rec.start(now_ns=0)
     for i in range(10):
         rec.write_serialized("/x", FLOAT64, CDR_ZERO, i)
-    rec.tick(now_ns=10**9)                                  # flushed: a crash keeps these
+    rec.tick(now_ns=10**9)  # flushed: a crash keeps these
     cut = tmp_path / "cut.mcap"
-    shutil.copy(rec.path, cut)                              # the file as a crash leaves it
+    shutil.copy(rec.path, cut)  # the file as a crash leaves it
     rec.stop()
     assert not is_complete(cut)
-    assert logmeta.read_record(cut) == record               # read from the start of the file
+    assert logmeta.read_record(cut) == record  # read from the start of the file
     info = recover(cut, tmp_path / "recovered.mcap")
     assert info.messages == 10 and info.metadata == {logmeta.RECORD_NAME: record}
     assert logmeta.read_record(tmp_path / "recovered.mcap") == record
@@ -172,12 +177,15 @@ def reviewed(tmp_path_factory):
     report paths)."""
     record = log_metadata(default_values(unit_id="seat-9", hardware_id="hw-9")).record()
     cycle = DutyCycle(duration_s=8.0, rate_hz=20.0, rest_s=0.5)
-    bag = write_log(cycle, tmp_path_factory.mktemp("log"),
-                    metadata={logmeta.RECORD_NAME: record})
+    bag = write_log(cycle, tmp_path_factory.mktemp("log"), metadata={logmeta.RECORD_NAME: record})
     out = tmp_path_factory.mktemp("out")
     model = SqueakModel()
-    result = replay(bag, model, out, ReplaySettings(InputSettings(joint_name=cycle.joint_name),
-                                                    workers=0, progress=False))
+    result = replay(
+        bag,
+        model,
+        out,
+        ReplaySettings(InputSettings(joint_name=cycle.joint_name), workers=0, progress=False),
+    )
     pngs = write_report(result, model, out, QUICK)
     return result, record, pngs
 
@@ -191,7 +199,7 @@ def test_annotated_log_holds_the_review_as_attachments(reviewed):
         attachments = list(reader.iter_attachments())
     assert [a.name for a in attachments] == [p.name for p in expected]
     for a, path in zip(attachments, expected, strict=True):
-        assert a.data == path.read_bytes(), a.name           # the same bytes as the files
+        assert a.data == path.read_bytes(), a.name  # the same bytes as the files
         assert a.media_type == ("image/png" if path.suffix == ".png" else "application/json")
         assert a.log_time == result.start_ns + round(result.duration_s * 1e9)
     assert json.loads(attachments[1].data)["episodes"] == result.episode_count
@@ -203,14 +211,17 @@ def test_annotated_log_holds_the_review_as_attachments(reviewed):
         kinds = [type(r).__name__ for r in StreamReader(f, validate_crcs=True).records]
     data_end = kinds.index("DataEnd")
     assert kinds.count("Attachment") == len(expected)
-    assert max(i for i, k in enumerate(kinds) if k in ("Chunk", "Attachment", "Metadata")) \
-        < data_end < kinds.index("AttachmentIndex")
+    assert (
+        max(i for i, k in enumerate(kinds) if k in ("Chunk", "Attachment", "Metadata"))
+        < data_end
+        < kinds.index("AttachmentIndex")
+    )
 
 
 def test_annotated_log_carries_the_input_record_and_the_replays_own(reviewed):
     result, record, _ = reviewed
     path = result.annotated
-    assert logmeta.read_record(path) == record                # copied as it is
+    assert logmeta.read_record(path) == record  # copied as it is
     own = logmeta.read(path, logmeta.REPLAY_RECORD_NAME)
     model = SqueakModel()
     assert own.params == model.params.as_dict() and own.version == __version__
@@ -219,7 +230,10 @@ def test_annotated_log_carries_the_input_record_and_the_replays_own(reviewed):
     assert own.node["joint_name"] == DutyCycle.joint_name
     assert own.node["speed_deadband_rad_s"] == InputSettings.speed_deadband_rad_s
     assert (own.node["log"], own.node["namespace"], own.node["out_namespace"]) == (
-        str(result.log), result.namespace, result.out_namespace)
+        str(result.log),
+        result.namespace,
+        result.out_namespace,
+    )
 
 
 def test_annotated_log_still_reads_with_every_message(reviewed):
@@ -233,13 +247,29 @@ def test_replay_command_of_a_log_without_record(tmp_path):
     """`replay --no-report`: the JSON outputs attached, only the replay's own record."""
     bag = write_log(DutyCycle(duration_s=3.0, rate_hz=10.0, rest_s=0.5), tmp_path / "log")
     out = tmp_path / "out"
-    assert main(["replay", str(bag), "--out", str(out), "--joint-name", DutyCycle.joint_name,
-                 "--workers", "0", "--no-report", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "replay",
+                str(bag),
+                "--out",
+                str(out),
+                "--joint-name",
+                DutyCycle.joint_name,
+                "--workers",
+                "0",
+                "--no-report",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     (annotated,) = out.glob("*.annotated.mcap")
     with open(annotated, "rb") as f:
         attachments = {a.name: a.data for a in make_reader(f).iter_attachments()}
-    assert attachments == {name: (out / name).read_bytes()
-                           for name in ("episodes.json", "summary.json")}
+    assert attachments == {
+        name: (out / name).read_bytes() for name in ("episodes.json", "summary.json")
+    }
     assert [name for name, _ in records(annotated)] == [logmeta.REPLAY_RECORD_NAME]
     assert logmeta.read(annotated, logmeta.REPLAY_RECORD_NAME).unit_id == ""
 
@@ -249,33 +279,32 @@ def test_reopen_refuses_a_file_it_did_not_finish(tmp_path):
     stream = io.BytesIO()
     out = McapOut(stream, "ros2", "test")
     out.finish()
-    path.write_bytes(stream.getvalue()[:-20])               # cut off: no footer
+    path.write_bytes(stream.getvalue()[:-20])  # cut off: no footer
     with open(path, "r+b") as f, pytest.raises(ValueError, match="not an MCAP file finished"):
         McapOut.reopen(f)
 
 
 # ----------------------------------------------------------------------------- Foxglove
 def _panels(node) -> list[str]:
-    return [node] if isinstance(node, str) else _panels(node["first"]) + \
-        _panels(node["second"])
+    return [node] if isinstance(node, str) else _panels(node["first"]) + _panels(node["second"])
 
 
 def test_foxglove_layout_names_only_the_nodes_topics():
     layout = json.loads(LAYOUT.read_text())
     panels = layout["configById"]
-    assert sorted(_panels(layout["layout"])) == sorted(panels)    # every panel placed once
+    assert sorted(_panels(layout["layout"])) == sorted(panels)  # every panel placed once
     types = {p.split("!")[0] for p in panels}
     assert {"Plot", "Indicator", "DiagnosticSummary"} <= types
     classes = {f"/{t}": c for t, c in {**OUTPUT_CLASSES, **INPUTS}.items()}
-    paths = [p["value"] for c in panels.values() for p in c.get("paths", [])] + \
-        [c["path"] for c in panels.values() if "path" in c]
+    paths = [p["value"] for c in panels.values() for p in c.get("paths", [])] + [
+        c["path"] for c in panels.values() if "path" in c
+    ]
     topics = {c["topicToRender"] for c in panels.values() if "topicToRender" in c}
     assert topics == {"/diagnostics"}
-    for path in paths:                    # '/topic.field[index]': a field of the topic's type
+    for path in paths:  # '/topic.field[index]': a field of the topic's type
         topic, field = re.fullmatch(r"(/[\w/]+)\.(\w+)(\[\d+\])?", path).groups()[:2]
         assert topic in classes, path
         assert field in classes[topic].get_fields_and_field_types(), path
     shown = {re.match(r"[^.]+", p).group() for p in paths}
-    assert {f"/{RISK}", "/squeak/active", "/squeak/unstable_frequencies",
-            "/motor_speed"} <= shown
+    assert {f"/{RISK}", "/squeak/active", "/squeak/unstable_frequencies", "/motor_speed"} <= shown
     assert set(OUTPUT_TYPES) >= {t[1:] for t in shown if t.startswith("/squeak/")}

@@ -10,9 +10,16 @@ from leadscrew_ros.model.studies.sensitivity import FRICTION, GEOMETRY, sensitiv
 NAMES = (*FRICTION, "modal_damping", "speed_rad_s", "load_n", *GEOMETRY)
 MODELS = {f: SqueakModel(ScrewParameters(formulation=f)) for f in ("paper", "consistent")}
 # In the band, near its upper edge, reverse rotation, the other flank (load sign), both readings.
-CASES = [("paper", 40.0, 200.0), ("paper", 54.0, 200.0), ("paper", -30.0, 200.0),
-         ("paper", 30.0, -150.0), ("consistent", 45.0, 200.0), ("consistent", 49.0, 200.0),
-         ("consistent", -45.0, 200.0), ("consistent", 40.0, -200.0)]
+CASES = [
+    ("paper", 40.0, 200.0),
+    ("paper", 54.0, 200.0),
+    ("paper", -30.0, 200.0),
+    ("paper", 30.0, -150.0),
+    ("consistent", 45.0, 200.0),
+    ("consistent", 49.0, 200.0),
+    ("consistent", -45.0, 200.0),
+    ("consistent", 40.0, -200.0),
+]
 STEP = 1e-4
 
 
@@ -24,6 +31,7 @@ def _growth(model, speed, load, near):
 def _finite_difference(model, speed, load, name, near):
     """d Re(lambda) / d ln p by a fourth-order central difference, the mode followed by
     nearest eigenvalue."""
+
     def at(k):
         x = 1 + k * STEP
         if name == "speed_rad_s":
@@ -32,6 +40,7 @@ def _finite_difference(model, speed, load, name, near):
             return _growth(model, speed, load * x, near)
         value = getattr(model.params, name)
         return _growth(model.with_params(**{name: value * x}), speed, load, near)
+
     return (8 * (at(1) - at(-1)) - (at(2) - at(-2))) / (12 * STEP)
 
 

@@ -12,13 +12,16 @@ from pathlib import Path
 
 import pytest
 
-from leadscrew_ros.ros.node import NODE_NAME
-from leadscrew_ros.bag.synthetic import DutyCycle, write_log
-
 from harness.processes import CLI, domain, node_command, output, start, stop, wait_initialised
+from leadscrew_ros.bag.synthetic import DutyCycle, write_log
+from leadscrew_ros.ros.node import NODE_NAME
 
-PROGRAMS = {"node": NODE_NAME, "demo": "leadscrew-squeak", "simulate": "leadscrew-squeak",
-            "replay --publish": "leadscrew-squeak"}
+PROGRAMS = {
+    "node": NODE_NAME,
+    "demo": "leadscrew-squeak",
+    "simulate": "leadscrew-squeak",
+    "replay --publish": "leadscrew-squeak",
+}
 
 
 @pytest.fixture(scope="module")
@@ -27,11 +30,12 @@ def bag(tmp_path_factory) -> Path:
 
 
 def argv(command: str, bag: Path) -> list[str]:
-    return {"node": node_command(),
-            "demo": CLI + ["demo", "--duration", "10", "--no-record"],
-            "simulate": CLI + ["simulate"],                    # waits for a subscriber: forever
-            "replay --publish": CLI + ["replay", str(bag), "--publish", "--loop", "--no-wait"],
-            }[command]
+    return {
+        "node": node_command(),
+        "demo": CLI + ["demo", "--duration", "10", "--no-record"],
+        "simulate": CLI + ["simulate"],  # waits for a subscriber: forever
+        "replay --publish": CLI + ["replay", str(bag), "--publish", "--loop", "--no-wait"],
+    }[command]
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=lambda s: s.name)
@@ -40,15 +44,15 @@ def test_long_running_commands_stop_with_exit_0_and_one_line(command, sig, bag, 
     proc = None
     try:
         proc = start(argv(command, bag), domain(7), tmp_path, "cmd")
-        wait_initialised([proc], timeout=30.0)        # rclpy is up: the handlers are in place
-        time.sleep(0.5)                               # and it runs (spins, publishes)
+        wait_initialised([proc], timeout=30.0)  # rclpy is up: the handlers are in place
+        time.sleep(0.5)  # and it runs (spins, publishes)
         assert proc.poll() is None, output(proc)
         proc.send_signal(sig)
         code = proc.wait(timeout=30)
         out, err = output(proc)
     finally:
         stop(proc)
-    print(f"stdout:\n{out}\nstderr:\n{err}")          # shown in full on failure
+    print(f"stdout:\n{out}\nstderr:\n{err}")  # shown in full on failure
     assert code == 0, (code, out, err)
     assert "Traceback" not in out + err
     assert err.splitlines()[-1] == f"{PROGRAMS[command]}: stopped by {sig.name}"

@@ -12,16 +12,15 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
+from harness.processes import CLI, domain, output, start, stop
 from leadscrew_ros.cli import main
-from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.live.profile import ProfileError, StrokeProfile, expected_squeak, state
+from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.ros.simulator import ActuatorSimulator
 
-from harness.processes import CLI, domain, output, start, stop
-
 PARAMS = ScrewParameters()
-LEAD = PARAMS.radius_m * math.tan(PARAMS.helix_angle_rad)          # 0.437 mm/rad
-TRAVEL_LIMIT = PARAMS.length_m - PARAMS.nut_length_m                # 0.24 m
+LEAD = PARAMS.radius_m * math.tan(PARAMS.helix_angle_rad)  # 0.437 mm/rad
+TRAVEL_LIMIT = PARAMS.length_m - PARAMS.nut_length_m  # 0.24 m
 
 
 def sample(profile, n=4001, loop=False, strokes=1):
@@ -36,7 +35,7 @@ def test_default_profile_matches_table1_screw():
     assert p.lead_m_per_rad == pytest.approx(0.4374e-3, rel=1e-3) == LEAD
     assert p.max_nut_position_m == pytest.approx(0.24)
     assert StrokeProfile.for_params(PARAMS) == p
-    assert state(3.0) == p.state(3.0)                   # module-level function, same profile
+    assert state(3.0) == p.state(3.0)  # module-level function, same profile
 
 
 def test_speed_ramps_through_and_beyond_the_squeak_band_and_back():
@@ -46,14 +45,15 @@ def test_speed_ramps_through_and_beyond_the_squeak_band_and_back():
     assert speed[0] == 0 and speed[-1] == 0 and np.all(speed >= 0)
     assert speed.max() == pytest.approx(p.peak_speed_rad_s)
     peak = np.flatnonzero(speed == speed.max())
-    assert np.all(np.diff(speed[:peak[0] + 1]) >= 0)          # ramps up monotonically
-    assert np.all(np.diff(speed[peak[-1]:]) <= 0)             # holds, then ramps down
-    assert np.abs(np.diff(speed)).max() < 0.5                # continuous (dt = 3 ms)
+    assert np.all(np.diff(speed[: peak[0] + 1]) >= 0)  # ramps up monotonically
+    assert np.all(np.diff(speed[peak[-1] :]) <= 0)  # holds, then ramps down
+    assert np.abs(np.diff(speed)).max() < 0.5  # continuous (dt = 3 ms)
     # The model (paper formulation, Table 1) squeaks on the way up and on the way down ...
     model = SqueakModel()
     verdicts = {x: model.predict(*p.state(x)[:2]) for x in (2.0, 3.0, 7.5, 8.5)}
-    assert all(v.valid and not v.stable and v.probability > 0.5 for v in verdicts.values()), \
+    assert all(v.valid and not v.stable and v.probability > 0.5 for v in verdicts.values()), (
         verdicts
+    )
     assert any(abs(f - 224.3) < 2 for v in verdicts.values() for f in v.unstable_frequencies_hz)
     # ... and not at the peak speed, beyond the band, at any load of the stroke: P(squeak) ~0.
     for x in t[speed == speed.max()][::50]:
@@ -65,10 +65,10 @@ def test_expected_squeak_along_the_stroke():
     p = StrokeProfile()
     times, flags = expected_squeak(p, samples=121)
     squeak_s = flags.mean() * p.duration_s
-    assert 3.0 < squeak_s < 7.0                       # a large part of the ramps, not the hold
+    assert 3.0 < squeak_s < 7.0  # a large part of the ramps, not the hold
     hold = (times > 0.45 * p.duration_s) & (times < 0.48 * p.duration_s)
     assert hold.any() and not flags[hold].any()
-    assert not flags[0] and not flags[-1]             # at rest
+    assert not flags[0] and not flags[-1]  # at rest
 
 
 def test_nut_stays_on_the_screw_and_load_in_range():
@@ -80,9 +80,9 @@ def test_nut_stays_on_the_screw_and_load_in_range():
         assert nut.min() == pytest.approx(p.start_nut_position_m)
         assert nut.max() == pytest.approx(p.end_nut_position_m) and nut.max() < TRAVEL_LIMIT - 0.01
         assert load.min() >= p.load_min_n - 1e-9 and load.max() <= p.load_max_n + 1e-9
-        assert load.max() - load.min() > 0.8 * (p.load_max_n - p.load_min_n)   # it varies
+        assert load.max() - load.min() > 0.8 * (p.load_max_n - p.load_min_n)  # it varies
     _, s = sample(p)
-    assert np.abs(np.diff(s[:, 1])).max() < 1.0                        # smoothly (N per 3 ms)
+    assert np.abs(np.diff(s[:, 1])).max() < 1.0  # smoothly (N per 3 ms)
     assert s[-1, 2] - s[0, 2] == pytest.approx(p.travel_m) and 0.15 < p.travel_m < 0.22
 
 
@@ -103,7 +103,7 @@ def test_loop_runs_back_and_forth_without_jumps():
     forward, back = p.state(0.5 * d, loop=True), p.state(1.5 * d, loop=True)
     assert forward.speed_rad_s > 0 > back.speed_rad_s
     assert back.speed_rad_s == -forward.speed_rad_s
-    for k in (1, 2, 3):                        # stroke boundaries: at rest, nut continuous
+    for k in (1, 2, 3):  # stroke boundaries: at rest, nut continuous
         before, after = p.state(k * d - 1e-9, loop=True), p.state(k * d, loop=True)
         assert before.speed_rad_s == after.speed_rad_s == 0
         assert before.nut_position_m == pytest.approx(after.nut_position_m, abs=1e-9)
@@ -114,34 +114,41 @@ def test_loop_runs_back_and_forth_without_jumps():
 
 def test_profile_is_deterministic_and_scales_with_duration():
     a, b = StrokeProfile(duration_s=3.0), StrokeProfile(duration_s=3.0)
-    assert [a.state(x) for x in np.linspace(0, 3, 50)] == [b.state(x) for x in np.linspace(0, 3,
-                                                                                          50)]
+    assert [a.state(x) for x in np.linspace(0, 3, 50)] == [
+        b.state(x) for x in np.linspace(0, 3, 50)
+    ]
     assert a.state(1.0).speed_rad_s == StrokeProfile().state(4.0).speed_rad_s
     assert a.travel_m == pytest.approx(StrokeProfile().travel_m / 4)
 
 
-@pytest.mark.parametrize("changes, match", [
-    ({"duration_s": 20.0}, r"off the screw .* longest stroke at this speed is 13\.1 s"),
-    ({"duration_s": 0.0}, "duration_s must be"),
-    ({"duration_s": math.nan}, "duration_s must be"),
-    ({"peak_speed_rad_s": -5.0}, "peak_speed_rad_s must be"),
-    ({"load_min_n": 400.0}, "load_min_n <= load_max_n"),
-    ({"start_nut_position_m": -0.01}, "off the screw"),
-])
+@pytest.mark.parametrize(
+    "changes, match",
+    [
+        ({"duration_s": 20.0}, r"off the screw .* longest stroke at this speed is 13\.1 s"),
+        ({"duration_s": 0.0}, "duration_s must be"),
+        ({"duration_s": math.nan}, "duration_s must be"),
+        ({"peak_speed_rad_s": -5.0}, "peak_speed_rad_s must be"),
+        ({"load_min_n": 400.0}, "load_min_n <= load_max_n"),
+        ({"start_nut_position_m": -0.01}, "off the screw"),
+    ],
+)
 def test_impossible_profiles_are_rejected(changes, match):
     with pytest.raises(ProfileError, match=match):
         StrokeProfile(**changes)
 
 
-@pytest.mark.parametrize("argv, match", [
-    (["simulate", "--duration", "100"], "argument --duration: a 100 s stroke"),
-    (["simulate", "--duration", "0"], "argument --duration: duration_s must be"),
-    (["simulate", "--rate", "0"], "argument --rate: must be in (0, 10000] Hz"),
-    (["simulate", "--rate", "1e5"], "argument --rate: must be in (0, 10000] Hz"),
-    (["simulate", "--rate", "nan"], "argument --rate"),
-    (["demo", "--duration", "-3"], "argument --duration"),
-    (["demo", "--loop"], "unrecognized arguments"),
-])
+@pytest.mark.parametrize(
+    "argv, match",
+    [
+        (["simulate", "--duration", "100"], "argument --duration: a 100 s stroke"),
+        (["simulate", "--duration", "0"], "argument --duration: duration_s must be"),
+        (["simulate", "--rate", "0"], "argument --rate: must be in (0, 10000] Hz"),
+        (["simulate", "--rate", "1e5"], "argument --rate: must be in (0, 10000] Hz"),
+        (["simulate", "--rate", "nan"], "argument --rate"),
+        (["demo", "--duration", "-3"], "argument --duration"),
+        (["demo", "--loop"], "unrecognized arguments"),
+    ],
+)
 def test_cli_rejects_bad_simulator_arguments(capsys, argv, match):
     assert main(argv) == 2
     out, err = capsys.readouterr()
@@ -156,11 +163,15 @@ class Probe(Node):
         self.got = {name: [] for name in ("motor_speed", "axial_load", "nut_position")}
         self.joints = []
         for name in self.got:
-            self.create_subscription(Float64, name,
-                                     lambda msg, name=name: self.got[name].append(msg.data),
-                                     qos_profile_sensor_data)       # as the predictor does
-        self.create_subscription(JointState, "joint_states", self.joints.append,
-                                 qos_profile_sensor_data)
+            self.create_subscription(
+                Float64,
+                name,
+                lambda msg, name=name: self.got[name].append(msg.data),
+                qos_profile_sensor_data,
+            )  # as the predictor does
+        self.create_subscription(
+            JointState, "joint_states", self.joints.append, qos_profile_sensor_data
+        )
 
 
 def test_simulator_node_publishes_the_stroke(ros_world):
@@ -170,14 +181,26 @@ def test_simulator_node_publishes_the_stroke(ros_world):
     ns = "/sim_" + uuid.uuid4().hex[:8]
     profile = StrokeProfile(duration_s=1.0)
     probe = ros_world.add(Probe(ns, context=ros_world.ctx))
-    sim = ActuatorSimulator(profile, rate_hz=100.0, joint_name="screw",
-                            wait_for_subscriber=True, namespace=ns, context=ros_world.ctx)
+    sim = ActuatorSimulator(
+        profile,
+        rate_hz=100.0,
+        joint_name="screw",
+        wait_for_subscriber=True,
+        namespace=ns,
+        context=ros_world.ctx,
+    )
     sent, publish = [], sim.publish
     sim.publish = lambda s: (sent.append(s), publish(s))
     ros_world.add(sim)
-    ros_world.spin_until(lambda: sim.done and all(len(probe.got[n]) >= len(sent)
-                                                  for n in probe.got)
-                         and len(probe.joints) >= len(sent), 30.0, "the whole stroke")
+    ros_world.spin_until(
+        lambda: (
+            sim.done
+            and all(len(probe.got[n]) >= len(sent) for n in probe.got)
+            and len(probe.joints) >= len(sent)
+        ),
+        30.0,
+        "the whole stroke",
+    )
     assert sim.done and sim.started_at is not None
 
     speeds, loads, nuts = (probe.got[n] for n in ("motor_speed", "axial_load", "nut_position"))
@@ -206,13 +229,25 @@ def test_joint_states_describe_the_same_nut_as_nut_position(ros_world):
 
     ns = "/joint_" + uuid.uuid4().hex[:8]
     profile = StrokeProfile(duration_s=1.0)
-    predictor = ros_world.add(SqueakPredictorNode(
-        namespace=ns, context=ros_world.ctx, cli_args=["--ros-args", "-r", "nut_position:=unused"],
-        parameter_overrides=[Parameter("joint_name", value="screw")]))
-    sim = ros_world.add(ActuatorSimulator(profile, joint_name="screw", wait_for_subscriber=True,
-                                          namespace=ns, context=ros_world.ctx))
+    predictor = ros_world.add(
+        SqueakPredictorNode(
+            namespace=ns,
+            context=ros_world.ctx,
+            cli_args=["--ros-args", "-r", "nut_position:=unused"],
+            parameter_overrides=[Parameter("joint_name", value="screw")],
+        )
+    )
+    sim = ros_world.add(
+        ActuatorSimulator(
+            profile,
+            joint_name="screw",
+            wait_for_subscriber=True,
+            namespace=ns,
+            context=ros_world.ctx,
+        )
+    )
     ros_world.spin_until(lambda: sim.done, 10.0, "the stroke")
-    ros_world.spin_for(0.3)                                   # the last inputs
+    ros_world.spin_for(0.3)  # the last inputs
     inputs, recomputes = predictor.live.inputs, predictor.live.recomputes
     assert sim.done and recomputes > 10
     assert inputs.nut_position_m == pytest.approx(profile.end_nut_position_m, abs=1e-9)
@@ -228,9 +263,23 @@ def test_simulate_in_a_namespace_from_ros_args(tmp_path, make_ros_world):
     sim = None
     try:
         probe = world.add(Probe(seat, context=world.ctx))
-        root = world.add(Probe("/", context=world.ctx))   # nothing arrives outside the namespace
-        sim = start(CLI + ["simulate", "--duration", "0.5", "--rate", "50", "--ros-args", "-r",
-                           f"__ns:={seat}"], dom, tmp_path, "sim")
+        root = world.add(Probe("/", context=world.ctx))  # nothing arrives outside the namespace
+        sim = start(
+            CLI
+            + [
+                "simulate",
+                "--duration",
+                "0.5",
+                "--rate",
+                "50",
+                "--ros-args",
+                "-r",
+                f"__ns:={seat}",
+            ],
+            dom,
+            tmp_path,
+            "sim",
+        )
         world.spin_until(lambda: sim.poll() is not None, 60, "the simulator to finish")
         world.spin_for(0.5)
         code = sim.returncode
@@ -241,5 +290,5 @@ def test_simulate_in_a_namespace_from_ros_args(tmp_path, make_ros_world):
     assert f"on {seat}/motor_speed, {seat}/axial_load, {seat}/nut_position" in out
     published = int(re.search(r"stroke done: (\d+) samples published", out)[1])
     speeds = probe.got["motor_speed"]
-    assert 0 < len(speeds) <= published and speeds[-1] == 0.0       # the stroke, to its end
+    assert 0 < len(speeds) <= published and speeds[-1] == 0.0  # the stroke, to its end
     assert all(v == [] for v in root.got.values())

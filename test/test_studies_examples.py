@@ -22,8 +22,9 @@ def test_examples_run_and_print_what_they_say(module, name):
 def test_a_wrong_example_fails():
     """The check above can fail: doctest reports a changed number."""
     finder = doctest.DocTestFinder()
-    test = finder.find(stability_map.stability_map, "stability_map",
-                       globs=vars(stability_map).copy())[0]
+    test = finder.find(
+        stability_map.stability_map, "stability_map", globs=vars(stability_map).copy()
+    )[0]
     example = next(e for e in test.examples if "boundary" in e.source)
     example.want = "[0.809, 55.3]\n"
     runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 import math
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
@@ -16,20 +16,23 @@ from scipy.io import wavfile
 
 from leadscrew_ros.cli import main
 from leadscrew_ros.cli.transient import WAV_RATE_HZ, audio, write_wav
-from leadscrew_ros.model.physics.assembly import build_geometry
 from leadscrew_ros.model.nonlinear.friction_force import HelixFriction
+from leadscrew_ros.model.nonlinear.transient import (
+    ModalEquations,
+    TransientSettings,
+    kept_basis,
+    simulate,
+)
+from leadscrew_ros.model.nonlinear.transient_analysis import analyse, fit_growth
+from leadscrew_ros.model.physics.assembly import build_geometry
 from leadscrew_ros.model.physics.parameters import ParameterError, ScrewParameters
 from leadscrew_ros.model.squeak_model import OperatingPointError, SqueakModel
 from leadscrew_ros.model.uncertainty.scatter import Scatter
-from leadscrew_ros.model.nonlinear.transient import (ModalEquations, TransientSettings, kept_basis,
-                                           simulate)
-from leadscrew_ros.model.nonlinear.transient_analysis import analyse, fit_growth
 
 CONSISTENT = ScrewParameters(formulation="consistent")
 
 
-@pytest.mark.parametrize("speed, load", [(20.0, 200.0), (-5.0, 200.0), (40.0, -300.0),
-                                         (0.3, 50.0)])
+@pytest.mark.parametrize("speed, load", [(20.0, 200.0), (-5.0, 200.0), (40.0, -300.0), (0.3, 50.0)])
 def test_jacobian_at_steady_sliding_is_the_consistent_matrices(speed, load):
     """-dQ/dq = W1 + W2 + W5q and -dQ/dqdot = W3 + W4 + W5qdot at q = qdot = 0, against the
     closed-form contact integrals (`contact`), both flanks and directions; 16 Gauss points per
@@ -44,7 +47,7 @@ def test_jacobian_at_steady_sliding_is_the_consistent_matrices(speed, load):
     assert np.abs(-dqdot - damping).max() <= 1e-10 * np.abs(damping).max()
 
 
-@pytest.mark.parametrize("sliding", [1.0, 1e-3])     # of the steady speed: sliding, near 0
+@pytest.mark.parametrize("sliding", [1.0, 1e-3])  # of the steady speed: sliding, near 0
 def test_analytic_jacobian_matches_finite_differences(sliding):
     """Away from steady sliding too, and where the regularisation acts: a T1 rate cancels
     all but `sliding` of the tangential sliding at the nut, so that |Vc| falls to the axial
@@ -63,12 +66,16 @@ def test_analytic_jacobian_matches_finite_differences(sliding):
     _, dq, dqdot = friction.force(q, qdot, jacobian=True)
     h = 1e-9
     for analytic, shift in ((dq, lambda e: (q + e, qdot)), (dqdot, lambda e: (q, qdot + e))):
-        fd = np.array([(friction.force(*shift(h * e)) - friction.force(*shift(-h * e))) / (2 * h)
-                       for e in np.eye(basis.n)]).T
+        fd = np.array(
+            [
+                (friction.force(*shift(h * e)) - friction.force(*shift(-h * e))) / (2 * h)
+                for e in np.eye(basis.n)
+            ]
+        ).T
         assert np.abs(fd - analytic).max() <= 1e-6 * np.abs(analytic).max()
 
 
-@lru_cache(maxsize=None)
+@cache
 def linear_run(speed: float, load: float, duration: float):
     """Table 1, all 18 modes, from steady sliding + 1e-6, through the linear regime."""
     return simulate(ScrewParameters(), speed, load, TransientSettings(duration_s=duration))
@@ -79,8 +86,9 @@ def run_20_200():
     return linear_run(20.0, 200.0, 0.04)
 
 
-@pytest.mark.parametrize("speed, load, duration", [(20.0, 200.0, 0.04), (5.0, 200.0, 0.03),
-                                                   (40.0, 300.0, 0.06)])
+@pytest.mark.parametrize(
+    "speed, load, duration", [(20.0, 200.0, 0.04), (5.0, 200.0, 0.03), (40.0, 300.0, 0.06)]
+)
 def test_linear_regime_grows_at_the_consistent_eigenvalue(speed, load, duration):
     """The fit sees T1 grow at the `consistent` eigenvalue (measured: within 1e-5 in growth
     and 1e-6 in frequency, where the test asks 2 % and 0.5 %); the `paper` formulation
@@ -110,13 +118,17 @@ def test_without_friction_the_gyroscopic_system_keeps_its_energy(method, drift):
     by 9e-3."""
     p = ScrewParameters(modal_damping=0.0)
     speed = 200.0
-    run = simulate(p, speed, 0.0, TransientSettings(duration_s=0.01, modes=6, rtol=1e-9,
-                                                    perturbation=1e-3, method=method))
-    k = run.omega_rad_s ** 2 - speed ** 2
-    energy = 0.5 * ((run.qdot ** 2).sum(1) + (k * run.q ** 2).sum(1))
+    run = simulate(
+        p,
+        speed,
+        0.0,
+        TransientSettings(duration_s=0.01, modes=6, rtol=1e-9, perturbation=1e-3, method=method),
+    )
+    k = run.omega_rad_s**2 - speed**2
+    energy = 0.5 * ((run.qdot**2).sum(1) + (k * run.q**2).sum(1))
     assert np.abs(energy / energy[0] - 1).max() < drift
-    naive = 0.5 * ((run.qdot ** 2).sum(1) + (run.omega_rad_s ** 2 * run.q ** 2).sum(1))
-    assert np.abs(naive / naive[0] - 1).max() > 10 * drift     # the test tells them apart
+    naive = 0.5 * ((run.qdot**2).sum(1) + (run.omega_rad_s**2 * run.q**2).sum(1))
+    assert np.abs(naive / naive[0] - 1).max() > 10 * drift  # the test tells them apart
 
 
 def test_without_load_only_modal_damping_acts():
@@ -136,6 +148,7 @@ def test_limit_cycle_changes_little_when_the_regularisation_is_halved():
     speed, lasts): the motion after it changes by less than 1e-3 with v_eps halved (measured
     1.4e-4); at (2 rad/s, 200 N), a limit cycle, |Vc| stays above 8.7 v_eps and the limit
     cycle changes by less than 1e-6 (measured: not in the printed digits)."""
+
     def after(v_eps, speed, **kw):
         s = TransientSettings(modes=7, regularisation_m_s=v_eps, **kw)
         return analyse(simulate(ScrewParameters(), speed, 200.0, s))
@@ -155,7 +168,7 @@ def test_static_deflection_balances_the_steady_friction():
     force = eq.friction.force(eq.q_static, np.zeros(eq.n))
     assert np.allclose(eq.stiffness @ eq.q_static, force, rtol=0, atol=1e-12 * np.abs(force).max())
     t1 = eq.basis.labels.index("T1")
-    assert eq.q_static[t1] < 0        # the friction torque twists the screw against Omega
+    assert eq.q_static[t1] < 0  # the friction torque twists the screw against Omega
 
 
 def test_wav_reads_back_at_48_khz_16_bit(tmp_path, run_20_200):
@@ -167,8 +180,9 @@ def test_wav_reads_back_at_48_khz_16_bit(tmp_path, run_20_200):
     assert data.dtype == np.int16 and data.ndim == 1
     assert len(data) == pytest.approx(0.04 * 48000, abs=2)
     assert np.abs(data).max() == 32767
-    assert full_scale == pytest.approx(np.abs(run_20_200.surface_velocity_m_s[:, 1]).max(),
-                                       rel=0.05)
+    assert full_scale == pytest.approx(
+        np.abs(run_20_200.surface_velocity_m_s[:, 1]).max(), rel=0.05
+    )
 
 
 def test_settings_reject_with_the_reason():
@@ -177,7 +191,7 @@ def test_settings_reject_with_the_reason():
     with pytest.raises(ParameterError, match="method"):
         TransientSettings(method="Euler")
     with pytest.raises(ParameterError, match="samples"):
-        TransientSettings(duration_s=1e-3)                # 96 samples: too few to analyse
+        TransientSettings(duration_s=1e-3)  # 96 samples: too few to analyse
     with pytest.raises(ParameterError, match="perturbation"):
         TransientSettings(perturbation=0.0)
     with pytest.raises(ParameterError, match="speed = 0"):
@@ -186,18 +200,21 @@ def test_settings_reject_with_the_reason():
         simulate(ScrewParameters(), 20.0, math.inf)
 
 
-@pytest.mark.parametrize("argv", [
-    ["transient", "--load", "200"],                               # no --speed
-    ["transient", "--speed", "0"],
-    ["transient", "--speed", "nan"],
-    ["transient", "--speed", "20", "--duration", "-1"],
-    ["transient", "--speed", "20", "--modes", "-3"],
-    ["transient", "--speed", "20", "--modes", "two"],
-    ["transient", "--speed", "20", "--formulation", "bogus"],
-    ["transient", "--speed", "20", "--wav", "/no/such/dir/x.wav"],
-    ["transient", "--speed", "20", "--duration", "0.001"],
-    ["transient", "--speed", "20", "--load", "1e9"],
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["transient", "--load", "200"],  # no --speed
+        ["transient", "--speed", "0"],
+        ["transient", "--speed", "nan"],
+        ["transient", "--speed", "20", "--duration", "-1"],
+        ["transient", "--speed", "20", "--modes", "-3"],
+        ["transient", "--speed", "20", "--modes", "two"],
+        ["transient", "--speed", "20", "--formulation", "bogus"],
+        ["transient", "--speed", "20", "--wav", "/no/such/dir/x.wav"],
+        ["transient", "--speed", "20", "--duration", "0.001"],
+        ["transient", "--speed", "20", "--load", "1e9"],
+    ],
+)
 def test_cli_bad_arguments_exit_2_with_one_line(capsys, argv):
     assert main(argv) == 2
     err = capsys.readouterr().err
@@ -206,8 +223,24 @@ def test_cli_bad_arguments_exit_2_with_one_line(capsys, argv):
 
 def test_cli_json_keys_wav_and_plot(capsys, tmp_path):
     wav, png = tmp_path / "s.wav", tmp_path / "t.png"
-    code = main(["transient", "--speed", "20", "--load", "200", "--duration", "0.01",
-                 "--modes", "7", "--wav", str(wav), "--plot", str(png), "--json"])
+    code = main(
+        [
+            "transient",
+            "--speed",
+            "20",
+            "--load",
+            "200",
+            "--duration",
+            "0.01",
+            "--modes",
+            "7",
+            "--wav",
+            str(wav),
+            "--plot",
+            str(png),
+            "--json",
+        ]
+    )
     out, err = capsys.readouterr()
     assert code == 0, err
     doc = json.loads(out)
@@ -225,12 +258,13 @@ def test_cli_json_keys_wav_and_plot(capsys, tmp_path):
 def test_cli_below_min_speed_still_simulates(capsys):
     """The linear model refuses 0.2 rad/s (min_speed_rad_s 0.5); the simulation runs and says
     why there is no eigenvalue."""
-    code = main(["transient", "--speed", "0.2", "--duration", "0.005", "--modes", "7",
-                 "--json"])
+    code = main(["transient", "--speed", "0.2", "--duration", "0.005", "--modes", "7", "--json"])
     out, err = capsys.readouterr()
     assert code == 0, err
     doc = json.loads(out)
     assert doc["regime"] == "decaying"
     assert doc["linear_model"]["paper"]["growth_rate"] is None
-    assert "min_speed" in doc["linear_model"]["consistent"]["reason"] or doc[
-        "linear_model"]["consistent"]["reason"]
+    assert (
+        "min_speed" in doc["linear_model"]["consistent"]["reason"]
+        or doc["linear_model"]["consistent"]["reason"]
+    )

@@ -14,16 +14,17 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as RosbagsWriter
 
-from leadscrew_ros.bag.logfile import inspect, recover
-
 from harness.logs import TYPESTORE, cli, decoded, run_replay
+from leadscrew_ros.bag.logfile import inspect, recover
 
 F64, F32 = "std_msgs/msg/Float64", "std_msgs/msg/Float32"
 T0 = 1_700_000_000_000_000_000
 SAMPLES = 60
 STORAGES = {"mcap": StoragePlugin.MCAP, "db3": StoragePlugin.SQLITE3}
-REASON = (f"/motor_speed: {F32} messages not taken (the topic is recorded with two types; its "
-          f"{F64} messages are the input)")
+REASON = (
+    f"/motor_speed: {F32} messages not taken (the topic is recorded with two types; its "
+    f"{F64} messages are the input)"
+)
 
 
 def _payload(type_name: str, value: float) -> bytes:
@@ -46,8 +47,17 @@ def two_type_bag(path: Path, storage: str, float32_first: bool) -> Path:
 
 
 def _counts(summary: dict) -> dict:
-    keys = ("messages", "input_messages", "recomputes", "predictions", "no_prediction",
-            "rejected_inputs", "ignored_inputs", "episodes", "peak_probability")
+    keys = (
+        "messages",
+        "input_messages",
+        "recomputes",
+        "predictions",
+        "no_prediction",
+        "rejected_inputs",
+        "ignored_inputs",
+        "episodes",
+        "peak_probability",
+    )
     return {k: summary[k] for k in keys}
 
 
@@ -67,13 +77,16 @@ def test_both_storages_give_the_same_counts_and_predictions(tmp_path, float32_fi
     assert summary == _counts(db3.summary())
     assert summary["messages"] == 2 * SAMPLES + 1
     assert summary["input_messages"] == {"/axial_load": 1, "/motor_speed": SAMPLES}
-    assert summary["rejected_inputs"] == {REASON: SAMPLES}     # names both types
+    assert summary["rejected_inputs"] == {REASON: SAMPLES}  # names both types
     assert summary["predictions"] > 0
     assert _risk(mcap.annotated) == _risk(db3.annotated) and _risk(mcap.annotated)
     # every original message copied, each on a channel of its own type
     for r in (mcap, db3):
-        copied = [(row[0], type(row[5]).__name__) for row in decoded(r.annotated)
-                  if row[0] == "/motor_speed"]
+        copied = [
+            (row[0], type(row[5]).__name__)
+            for row in decoded(r.annotated)
+            if row[0] == "/motor_speed"
+        ]
         assert sorted(set(copied)) == [("/motor_speed", "Float32"), ("/motor_speed", "Float64")]
         assert len(copied) == 2 * SAMPLES
 
@@ -91,14 +104,15 @@ def test_an_input_recorded_only_in_another_type_is_still_refused(tmp_path, capsy
 def test_info_lists_the_topic_once_per_type(tmp_path, capsys):
     bag = two_type_bag(tmp_path / "bag", "mcap", float32_first=True)
     code, out, _ = cli(capsys, "info", bag)
-    assert code == 0 and "metadata.yaml" not in out          # rosbags' metadata agrees
+    assert code == 0 and "metadata.yaml" not in out  # rosbags' metadata agrees
     lines = [ln.split() for ln in out.splitlines() if ln.startswith("  /motor_speed")]
     assert lines == [["/motor_speed", F32, str(SAMPLES)], ["/motor_speed", F64, str(SAMPLES)]]
     code, out, _ = cli(capsys, "info", "--json", bag)
     (entry,) = json.loads(out)
     assert [t for t in entry["topics"] if t["name"] == "/motor_speed"] == [
         {"name": "/motor_speed", "type": F32, "count": SAMPLES},
-        {"name": "/motor_speed", "type": F64, "count": SAMPLES}]
+        {"name": "/motor_speed", "type": F64, "count": SAMPLES},
+    ]
 
 
 def test_recover_keeps_a_channel_per_type(tmp_path):
@@ -106,7 +120,7 @@ def test_recover_keeps_a_channel_per_type(tmp_path):
     (src,) = bag.glob("*.mcap")
     data = src.read_bytes()
     cut = tmp_path / "cut.mcap"
-    cut.write_bytes(data[:len(data) * 3 // 4])                 # cut off before its summary
+    cut.write_bytes(data[: len(data) * 3 // 4])  # cut off before its summary
     info = recover(cut, tmp_path / "recovered.mcap")
     assert info.retyped_counts[("/motor_speed", F32)] > 0
     kinds = {(row[0], type(row[5]).__name__) for row in decoded(tmp_path / "recovered.mcap")}

@@ -17,9 +17,14 @@ def _ensure(ws: Path, extras: str) -> list[str]:
     """Run `ensure_venv EXTRAS` in `ws`; the pip installs it made ('' entries dropped)."""
     log = ws / ".venv" / "pip.log"
     log.unlink(missing_ok=True)
-    r = subprocess.run(["bash", "-c", f"source scripts/_venv.sh && ensure_venv {extras}"],
-                       cwd=ws, capture_output=True, text=True, timeout=60,
-                       env=dict(os.environ))
+    r = subprocess.run(
+        ["bash", "-c", f"source scripts/_venv.sh && ensure_venv {extras}"],
+        cwd=ws,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=dict(os.environ),
+    )
     assert r.returncode == 0, r.stderr
     calls = log.read_text().splitlines() if log.exists() else []
     return [c for c in calls if "--upgrade pip" not in c]
@@ -33,15 +38,16 @@ def test_stamps_per_extras_set(tmp_path):
     python.write_text(FAKE_PYTHON)
     python.chmod(0o755)
 
-    assert _ensure(tmp_path, "ros") == ["-m pip install -q -e .[ros]"]          # run-demo
-    assert _ensure(tmp_path, "ros") == []                                        # rerun: fast
+    assert _ensure(tmp_path, "ros") == ["-m pip install -q -e .[ros]"]  # run-demo
+    assert _ensure(tmp_path, "ros") == []  # rerun: fast
     assert _ensure(tmp_path, "ros,test,doc") == ["-m pip install -q -e .[doc,ros,test]"]
-    assert _ensure(tmp_path, "ros") == []                    # a superset serves run-demo
-    assert _ensure(tmp_path, "test,ros,doc") == []           # any order
-    assert [p.name.rsplit("-", 1)[1] for p in (tmp_path / ".venv").glob(".installed-*")] \
-        == ["doc,ros,test"]
-    with open(tmp_path / "setup.py", "a") as f:              # a dependency changed: reinstall
+    assert _ensure(tmp_path, "ros") == []  # a superset serves run-demo
+    assert _ensure(tmp_path, "test,ros,doc") == []  # any order
+    assert [p.name.rsplit("-", 1)[1] for p in (tmp_path / ".venv").glob(".installed-*")] == [
+        "doc,ros,test"
+    ]
+    with open(tmp_path / "setup.py", "a") as f:  # a dependency changed: reinstall
         f.write("\n# changed\n")
     assert _ensure(tmp_path, "ros") == ["-m pip install -q -e .[ros]"]
     assert len(list((tmp_path / ".venv").glob(".installed-*"))) == 1
-    assert _ensure(tmp_path, "") == []                       # the core is in every install
+    assert _ensure(tmp_path, "") == []  # the core is in every install

@@ -31,7 +31,7 @@ from leadscrew_ros.review.plots import fmt
 
 FORMULATIONS = ("paper", "consistent")
 SPEED_POINTS = 1500
-NUT_POINTS = 49                     # z_o every 5 mm at Table 1
+NUT_POINTS = 49  # z_o every 5 mm at Table 1
 LOADS_N = np.linspace(0.0, 600.0, 121)
 
 
@@ -42,7 +42,7 @@ class ModeRange:
     label: str
     frequency_hz: float
     intervals: list[tuple[float, float]]
-    starts_at_min_speed: bool         # unstable at the lowest valid speed: lo is no boundary
+    starts_at_min_speed: bool  # unstable at the lowest valid speed: lo is no boundary
 
     def text(self) -> str:
         parts = [f"{lo:.3g}-{hi:.3g}" for lo, hi in self.intervals]
@@ -57,8 +57,9 @@ def _nearest(model: SqueakModel, speed: float, load: float, lam: complex) -> com
     return complex(eig[np.argmin(np.abs(eig - lam) / np.maximum(abs(lam), np.abs(eig)))])
 
 
-def _refine(model: SqueakModel, load: float, a: float, lam_a: complex, b: float,
-            lam_b: complex) -> float:
+def _refine(
+    model: SqueakModel, load: float, a: float, lam_a: complex, b: float, lam_b: complex
+) -> float:
     """Speed in (a, b) where the branch through lam_a (at a) and lam_b (at b) has Re = 0."""
     while b - a > 1e-10 * b:
         mid = math.sqrt(a * b)
@@ -85,16 +86,23 @@ def mode_ranges(model: SqueakModel, points: int = SPEED_POINTS) -> list[ModeRang
         edges = []
         for i in range(points - 1):
             if unstable[i] != unstable[i + 1] and np.isfinite(lam[[i, i + 1]]).all():
-                edges.append(_refine(model, p.axial_load_n, speeds[i], lam[i], speeds[i + 1],
-                                     lam[i + 1]))
+                edges.append(
+                    _refine(model, p.axial_load_n, speeds[i], lam[i], speeds[i + 1], lam[i + 1])
+                )
             elif unstable[i] != unstable[i + 1]:
                 raise RuntimeError(f"branch {b.label} appears unstable: refine the grid")
         if unstable[0]:
             edges.insert(0, float(speeds[0]))
         if unstable[-1]:
             raise RuntimeError(f"branch {b.label} unstable up to the critical speed")
-        out.append(ModeRange(b.label, b.squeak_frequency_hz, list(zip(edges[::2], edges[1::2], strict=True)),
-                             bool(unstable[0])))
+        out.append(
+            ModeRange(
+                b.label,
+                b.squeak_frequency_hz,
+                list(zip(edges[::2], edges[1::2], strict=True)),
+                bool(unstable[0]),
+            )
+        )
     return sorted(out, key=lambda r: r.frequency_hz)
 
 
@@ -102,8 +110,12 @@ def lowest_unstable_load(model: SqueakModel, nut_positions_m: np.ndarray) -> np.
     """Refined lowest unstable load at the reference speed for each nut position, N."""
     out = []
     for z in nut_positions_m.tolist():
-        bands = sweep(model.with_params(nut_position_m=z), "load_n", LOADS_N,
-                      speed_rad_s=REFERENCE_SPEED_RAD_S).unstable_bands
+        bands = sweep(
+            model.with_params(nut_position_m=z),
+            "load_n",
+            LOADS_N,
+            speed_rad_s=REFERENCE_SPEED_RAD_S,
+        ).unstable_bands
         out.append(bands[0][0] if bands else math.nan)
     return np.array(out)
 
@@ -115,17 +127,27 @@ def nut_trend(model: SqueakModel, points: int = NUT_POINTS) -> str:
     z = np.linspace(0.0, p.nut_travel_m, points)
     load = lowest_unstable_load(model, z)
     step = np.diff(load)
-    shape = ("falls monotonically" if (step < 0).all() else
-             "rises monotonically" if (step > 0).all() else "is not monotonic")
+    shape = (
+        "falls monotonically"
+        if (step < 0).all()
+        else "rises monotonically"
+        if (step > 0).all()
+        else "is not monotonic"
+    )
     i = int(np.nanargmin(load))
-    dips = [f"{load[k]:.3g} N at z_o = {fmt('nut_position_m', z[k])}"
-            for k in range(1, points - 1) if load[k] < min(load[k - 1], load[k + 1])]
-    return (f"{p.formulation}: the lowest unstable load at "
-            f"{fmt('speed_rad_s', REFERENCE_SPEED_RAD_S)} {shape}: {load[0]:.3g} N at z_o = "
-            f"{fmt('nut_position_m', z[0])}, {load[-1]:.3g} N at z_o = "
-            f"{fmt('nut_position_m', z[-1])}; smallest {load[i]:.3g} N at z_o = "
-            f"{fmt('nut_position_m', z[i])}; interior local minima: {'; '.join(dips) or 'none'} "
-            f"({points} positions)")
+    dips = [
+        f"{load[k]:.3g} N at z_o = {fmt('nut_position_m', z[k])}"
+        for k in range(1, points - 1)
+        if load[k] < min(load[k - 1], load[k + 1])
+    ]
+    return (
+        f"{p.formulation}: the lowest unstable load at "
+        f"{fmt('speed_rad_s', REFERENCE_SPEED_RAD_S)} {shape}: {load[0]:.3g} N at z_o = "
+        f"{fmt('nut_position_m', z[0])}, {load[-1]:.3g} N at z_o = "
+        f"{fmt('nut_position_m', z[-1])}; smallest {load[i]:.3g} N at z_o = "
+        f"{fmt('nut_position_m', z[i])}; interior local minima: {'; '.join(dips) or 'none'} "
+        f"({points} positions)"
+    )
 
 
 def table_row(models: dict[str, SqueakModel]) -> str:

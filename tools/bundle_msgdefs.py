@@ -36,8 +36,9 @@ def wanted() -> dict[Path, Path]:
     for root in msgdefs.BUNDLED_TYPES:
         installed(root)
         names.add(root)
-        names |= {line[5:] for line in msgdefs.definition(root).splitlines()
-                  if line.startswith("MSG: ")}
+        names |= {
+            line[5:] for line in msgdefs.definition(root).splitlines() if line.startswith("MSG: ")
+        }
     out = {}
     for name in sorted(names):
         pkg, _, typ = name.split("/")
@@ -50,15 +51,21 @@ def stale() -> list[str]:
     files = wanted()
     present = set(msgdefs.BUNDLED.rglob("*.msg")) if msgdefs.BUNDLED.is_dir() else set()
     out = [f"extra: {p}" for p in sorted(present - set(files))]
-    out += [f"missing or different: {dst}" for dst, src in files.items()
-            if not dst.is_file() or dst.read_bytes() != src.read_bytes()]
+    out += [
+        f"missing or different: {dst}"
+        for dst, src in files.items()
+        if not dst.is_file() or dst.read_bytes() != src.read_bytes()
+    ]
     return out
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--check", action="store_true",
-                   help="only compare: exit 1 when the copy differs from the installed files")
+    p.add_argument(
+        "--check",
+        action="store_true",
+        help="only compare: exit 1 when the copy differs from the installed files",
+    )
     args = p.parse_args(argv)
     if args.check:
         problems = stale()

@@ -37,8 +37,13 @@ def layers() -> dict[str, list[Path]]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data-file", default=str(ROOT / ".coverage"))
-    ap.add_argument("--fail-under", type=float, default=None, metavar="PCT",
-                    help="exit 1 if a rclpy-free layer's line coverage is below PCT")
+    ap.add_argument(
+        "--fail-under",
+        type=float,
+        default=None,
+        metavar="PCT",
+        help="exit 1 if a rclpy-free layer's line coverage is below PCT",
+    )
     args = ap.parse_args(argv)
     if not Path(args.data_file).exists():
         print(f"coverage_by_layer: no coverage data at {args.data_file}", file=sys.stderr)
@@ -57,19 +62,24 @@ def main(argv: list[str] | None = None) -> int:
             missed += len(missing)
         lines = 100.0 * (statements - missed) / statements if statements else 100.0
         # coverage.py's own total over these files: lines and branches together
-        combined = cov.report(include=[str(f) for f in files], file=io.StringIO(),
-                              skip_covered=False, ignore_errors=True)
+        combined = cov.report(
+            include=[str(f) for f in files],
+            file=io.StringIO(),
+            skip_covered=False,
+            ignore_errors=True,
+        )
         mark = ""
         if name in ROS_FREE:
             ok = lines >= (args.fail_under if args.fail_under is not None else TARGET)
             mark = "  target 90 % lines: met" if lines >= TARGET else "  target 90 % lines: BELOW"
             if not ok:
                 below.append(name)
-        print(f"{name:<8} {len(files):>5} {statements:>6} {missed:>5} {lines:>6.1f}% "
-              f"{combined:>7.1f}%{mark}")
+        print(
+            f"{name:<8} {len(files):>5} {statements:>6} {missed:>5} {lines:>6.1f}% "
+            f"{combined:>7.1f}%{mark}"
+        )
     if args.fail_under is not None and below:
-        print(f"coverage_by_layer: below {args.fail_under} %: {', '.join(below)}",
-              file=sys.stderr)
+        print(f"coverage_by_layer: below {args.fail_under} %: {', '.join(below)}", file=sys.stderr)
         return 1
     return 0
 

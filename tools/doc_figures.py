@@ -35,8 +35,11 @@ MAP_ARGS = ["map", "--x", "speed_rad_s:1:100:80", "--y", "load_n:5:600:60", "--p
 
 def _cli(*args: str) -> None:
     """Run `leadscrew-squeak ARGS` of this checkout in a child process (as a user would)."""
-    env = {**os.environ, "MPLBACKEND": "Agg",
-           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    env = {
+        **os.environ,
+        "MPLBACKEND": "Agg",
+        "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+    }
     cmd = [sys.executable, "-m", "leadscrew_ros.cli", *args]
     print("$ leadscrew-squeak " + " ".join(args), file=sys.stderr)
     subprocess.run(cmd, check=True, env=env, cwd=ROOT, stdout=subprocess.DEVNULL)
@@ -53,8 +56,11 @@ def _small(src: Path, dst: Path) -> None:
         if dst.stat().st_size <= MAX_BYTES:
             break
         image = image.resize((image.width * 3 // 4, image.height * 3 // 4), Image.LANCZOS)
-    print(f"{dst.relative_to(ROOT) if dst.is_relative_to(ROOT) else dst}: "
-          f"{dst.stat().st_size // 1000} kB", file=sys.stderr)
+    print(
+        f"{dst.relative_to(ROOT) if dst.is_relative_to(ROOT) else dst}: "
+        f"{dst.stat().st_size // 1000} kB",
+        file=sys.stderr,
+    )
 
 
 def _logs(work: Path) -> list[Path]:
@@ -65,16 +71,27 @@ def _logs(work: Path) -> list[Path]:
     from leadscrew_ros.live.profile import StrokeProfile
     from leadscrew_ros.model import ScrewParameters
 
-    strokes = [StrokeProfile(), StrokeProfile(peak_speed_rad_s=40.0),
-               StrokeProfile(load_min_n=40.0, load_max_n=90.0, peak_speed_rad_s=100.0),
-               StrokeProfile(load_min_n=200.0, load_max_n=500.0),
-               StrokeProfile(load_min_n=2.0, load_max_n=6.0)]        # too light to squeak
+    strokes = [
+        StrokeProfile(),
+        StrokeProfile(peak_speed_rad_s=40.0),
+        StrokeProfile(load_min_n=40.0, load_max_n=90.0, peak_speed_rad_s=100.0),
+        StrokeProfile(load_min_n=200.0, load_max_n=500.0),
+        StrokeProfile(load_min_n=2.0, load_max_n=6.0),
+    ]  # too light to squeak
     logs = []
     for i, stroke in enumerate(strokes):
-        record = logmeta.LogMetadata(params=ScrewParameters().as_dict(), unit_id=f"seat-{i + 1:04d}")
-        logs.append(write_log(DutyCycle(duration_s=60.0, rest_s=18.0, stroke=stroke, seed=i,
-                                        nut_position_topic=True), work / "logs" / f"seat_{i}",
-                              metadata={logmeta.RECORD_NAME: record.record()}))
+        record = logmeta.LogMetadata(
+            params=ScrewParameters().as_dict(), unit_id=f"seat-{i + 1:04d}"
+        )
+        logs.append(
+            write_log(
+                DutyCycle(
+                    duration_s=60.0, rest_s=18.0, stroke=stroke, seed=i, nut_position_topic=True
+                ),
+                work / "logs" / f"seat_{i}",
+                metadata={logmeta.RECORD_NAME: record.record()},
+            )
+        )
     return logs
 
 
@@ -90,14 +107,25 @@ def main(argv: list[str] | None = None) -> int:
         logs = _logs(work)
         replay = work / "replay"
         _cli("replay", str(logs[0]), "--out", str(replay), "--quiet")
-        for name, target in (("timeline", "report_timeline"), ("map_speed_load", "report_map"),
-                             ("frequency_vs_speed", "report_frequency")):
+        for name, target in (
+            ("timeline", "report_timeline"),
+            ("map_speed_load", "report_map"),
+            ("frequency_vs_speed", "report_frequency"),
+        ):
             _small(replay / f"{name}.png", args.out / f"{target}.png")
         _cli(*MAP_ARGS, "--plot", str(work / "stability_map.png"))
         _small(work / "stability_map.png", args.out / "stability_map.png")
         fleet = work / "fleet"
-        _cli("review", *map(str, logs), "--out", str(fleet), "--workers", "1", "--no-report",
-             "--quiet")
+        _cli(
+            "review",
+            *map(str, logs),
+            "--out",
+            str(fleet),
+            "--workers",
+            "1",
+            "--no-report",
+            "--quiet",
+        )
         _small(fleet / "fleet.png", args.out / "fleet.png")
     finally:
         if args.keep is None:

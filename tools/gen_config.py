@@ -21,8 +21,11 @@ CONFIG = Path(__file__).resolve().parents[1] / "config" / "leadscrew.yaml"
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--check", action="store_true",
-                   help="only compare: exit 1 when the file differs from the generated text")
+    p.add_argument(
+        "--check",
+        action="store_true",
+        help="only compare: exit 1 when the file differs from the generated text",
+    )
     args = p.parse_args(argv)
     text = config_yaml()
     if args.check:

@@ -3,7 +3,7 @@
 
     .venv/bin/python tools/param_tables.py            # prints every table
     .venv/bin/python tools/param_tables.py record     # prints one
-    .venv/bin/python tools/param_tables.py --write doc/reference/_generated   # what doc/conf.py does
+    .venv/bin/python tools/param_tables.py --write doc/reference/_generated  # as doc/conf.py
 
 One markdown table per entry of `TABLES` (parameter, unit, default, allowed values, meaning),
 and the node's topic table (`topic_table`: names and types from the code, QoS and meaning from
@@ -19,73 +19,109 @@ import sys
 from pathlib import Path
 
 from leadscrew_ros.bag import messages
+from leadscrew_ros.bag.msgdefs import type_name
 from leadscrew_ros.bag.recorder import RecordSettings
 from leadscrew_ros.live import status
 from leadscrew_ros.live.settings import JointSettings, LiveSettings
-from leadscrew_ros.model.physics.parameters import ScrewParameters
 from leadscrew_ros.model.physics.metadata import default_text, range_text
+from leadscrew_ros.model.physics.parameters import ScrewParameters
 from leadscrew_ros.model.uncertainty.scatter import ScatterSettings
-from leadscrew_ros.bag.msgdefs import type_name
 from leadscrew_ros.ros import diagnostics
 from leadscrew_ros.ros.node import INPUTS
-from leadscrew_ros.ros.parameters import (GROUPS, READ_ONLY_NOTE, NodeSettings, RecordingControl,
-                                          Spec, specs)
+from leadscrew_ros.ros.parameters import (
+    GROUPS,
+    READ_ONLY_NOTE,
+    NodeSettings,
+    RecordingControl,
+    Spec,
+    specs,
+)
 
 # table name -> the settings dataclasses it lists, in the node's parameter order
-TABLES = {"node": (LiveSettings, JointSettings, NodeSettings),
-          "scatter": (ScatterSettings,),
-          "record": (RecordingControl, RecordSettings),
-          "model": (ScrewParameters,)}
-NODE_TABLES = ("node", "scatter", "record")       # the node's own parameters, not the model's
+TABLES = {
+    "node": (LiveSettings, JointSettings, NodeSettings),
+    "scatter": (ScatterSettings,),
+    "record": (RecordingControl, RecordSettings),
+    "model": (ScrewParameters,),
+}
+NODE_TABLES = ("node", "scatter", "record")  # the node's own parameters, not the model's
 HEADER = ["| parameter | unit | default | allowed | meaning |", "|---|---|---|---|---|"]
-TOPIC_TABLE = "topics"                            # file name of `topic_table` in `write`
+TOPIC_TABLE = "topics"  # file name of `topic_table` in `write`
 
 SENSOR, LATCHED = "sensor data (best effort)", "reliable, transient local, depth 1"
-_PREDICTION = (f"`/squeak_predictor: {diagnostics.PREDICTION_TASK}`: OK (P(squeak) < `warn_probability`) / "
-               "WARN (P >= `warn_probability`, default 0.1; or no prediction: outside the "
-               "model's validity) / ERROR (P >= `error_probability`, default 0.5, or a "
-               "divergence predicted, or invalid input) / STALE (speed or load older than "
-               "`stale_timeout_s`); the message gives P(squeak) and the modes that squeak at "
-               "the nominal parameters, e.g. `squeak predicted: P(squeak) 1 (B1y 224 Hz, B2y "
-               "898 Hz)`, `squeak possible: P(squeak) 0.12 >= 0.1`, `no squeak: P(squeak) 0 < "
-               "0.1` (P is never rounded across a threshold); key-values {keys} (constants "
-               "`leadscrew_ros.live.status.KEY_*`; `validity` is the `Validity` name of the "
-               "latest point, `probability_stderr` '' when not sampled)")
-_RECORDING = (f"`/squeak_predictor: {diagnostics.RECORDING_TASK}`: OK (recording to PATH, or not "
-              "recording) / WARN (input messages lost before recording, with the counts; bags "
-              "of an earlier run cut off by a crash) / ERROR (the disk error, with the path), "
-              "with key-values {keys}, `lost <topic>` (constants "
-              "`leadscrew_ros.ros.diagnostics.KEY_*`)")
+_PREDICTION = (
+    f"`/squeak_predictor: {diagnostics.PREDICTION_TASK}`: OK (P(squeak) < `warn_probability`) / "
+    "WARN (P >= `warn_probability`, default 0.1; or no prediction: outside the "
+    "model's validity) / ERROR (P >= `error_probability`, default 0.5, or a "
+    "divergence predicted, or invalid input) / STALE (speed or load older than "
+    "`stale_timeout_s`); the message gives P(squeak) and the modes that squeak at "
+    "the nominal parameters, e.g. `squeak predicted: P(squeak) 1 (B1y 224 Hz, B2y "
+    "898 Hz)`, `squeak possible: P(squeak) 0.12 >= 0.1`, `no squeak: P(squeak) 0 < "
+    "0.1` (P is never rounded across a threshold); key-values {keys} (constants "
+    "`leadscrew_ros.live.status.KEY_*`; `validity` is the `Validity` name of the "
+    "latest point, `probability_stderr` '' when not sampled)"
+)
+_RECORDING = (
+    f"`/squeak_predictor: {diagnostics.RECORDING_TASK}`: OK (recording to PATH, or not "
+    "recording) / WARN (input messages lost before recording, with the counts; bags "
+    "of an earlier run cut off by a crash) / ERROR (the disk error, with the path), "
+    "with key-values {keys}, `lost <topic>` (constants "
+    "`leadscrew_ros.ros.diagnostics.KEY_*`)"
+)
 # topic (relative to the node's namespace, as the code names it) -> (direction, QoS, meaning)
 TOPICS = {
     "motor_speed": ("in", SENSOR, "screw speed, rad/s, sign = direction"),
     "axial_load": ("in", "sensor data", "axial load, N (sign = loaded flank)"),
     "nut_position": ("in, optional", "sensor data", "nut position z_o along the screw, m"),
-    "joint_states": ("in, optional", "sensor data", "joint `joint_name` only (`''`, the "
-                     "default, ignores joint_states): velocity = speed, position (screw angle) "
-                     "moves the nut by R tan(beta) per rad from `nut_position_at_zero_angle_m`"),
-    messages.RISK: ("out", LATCHED, "P(squeak) in [0, 1]: the probability over the unit-to-unit "
-                    "scatter (`scatter.*`) that some oscillatory mode grows at this speed, load "
-                    "and nut position (`Prediction.probability`, the live first-order "
-                    "estimator); exactly 0 or 1 (the nominal verdict) without scatter"),
-    messages.MARGIN: ("out", "same", "the deterministic stability margin at the nominal "
-                      "parameters: least damping ratio -Re(lambda)/|lambda| of the oscillatory "
-                      "modes (`Prediction.margin`), negative when a mode squeaks, +inf without "
-                      "an oscillatory mode"),
+    "joint_states": (
+        "in, optional",
+        "sensor data",
+        "joint `joint_name` only (`''`, the "
+        "default, ignores joint_states): velocity = speed, position (screw angle) "
+        "moves the nut by R tan(beta) per rad from `nut_position_at_zero_angle_m`",
+    ),
+    messages.RISK: (
+        "out",
+        LATCHED,
+        "P(squeak) in [0, 1]: the probability over the unit-to-unit "
+        "scatter (`scatter.*`) that some oscillatory mode grows at this speed, load "
+        "and nut position (`Prediction.probability`, the live first-order "
+        "estimator); exactly 0 or 1 (the nominal verdict) without scatter",
+    ),
+    messages.MARGIN: (
+        "out",
+        "same",
+        "the deterministic stability margin at the nominal "
+        "parameters: least damping ratio -Re(lambda)/|lambda| of the oscillatory "
+        "modes (`Prediction.margin`), negative when a mode squeaks, +inf without "
+        "an oscillatory mode",
+    ),
     messages.FREQUENCIES: ("out", "same", "squeak frequencies, Hz, most unstable first"),
     messages.ACTIVE: ("out", "same", "a squeak mode exists"),
-    messages.MODES: ("out", "same", "rows = oscillatory modes (labels in `layout.dim[0].label`), "
-                     "columns " + ", ".join(messages.MODE_COLUMNS)),
-    messages.SAFE_SPEED: ("out", "same", "nearest speed in the same direction whose P(squeak) is "
-                          "below `safe_probability` (default 0.01), at the current load and nut "
-                          "position, rad/s (the current speed when its P is already below it; 0 "
-                          "if no valid such speed exists in that direction)"),
-    diagnostics.TOPIC: ("out", "same", "two statuses, named by the node's fully qualified name. "
-                        "{prediction}; {recording}. Both come from a small updater in "
-                        "diagnostic_updater's shape (`leadscrew_ros/ros/diagnostics.py`: an "
-                        "`Updater` owns the publisher, the period and the hardware id; tasks "
-                        "fill a status; `update()` on the period, `force_update()` on a change "
-                        "of verdict)"),
+    messages.MODES: (
+        "out",
+        "same",
+        "rows = oscillatory modes (labels in `layout.dim[0].label`), "
+        "columns " + ", ".join(messages.MODE_COLUMNS),
+    ),
+    messages.SAFE_SPEED: (
+        "out",
+        "same",
+        "nearest speed in the same direction whose P(squeak) is "
+        "below `safe_probability` (default 0.01), at the current load and nut "
+        "position, rad/s (the current speed when its P is already below it; 0 "
+        "if no valid such speed exists in that direction)",
+    ),
+    diagnostics.TOPIC: (
+        "out",
+        "same",
+        "two statuses, named by the node's fully qualified name. "
+        "{prediction}; {recording}. Both come from a small updater in "
+        "diagnostic_updater's shape (`leadscrew_ros/ros/diagnostics.py`: an "
+        "`Updater` owns the publisher, the period and the hardware id; tasks "
+        "fill a status; `update()` on the period, `force_update()` on a change "
+        "of verdict)",
+    ),
 }
 
 
@@ -100,8 +136,13 @@ def row(spec: Spec) -> str:
     """One table row of parameter `spec`."""
     md, default = spec.md, spec.default
     shown = f"`{default}`" if isinstance(default, str) and default else default_text(spec.field)
-    allowed = (", ".join(f"`{c}`" for c in md["choices"]) if md["choices"] else
-               range_text({**md, "unit": ""}) if md["lo"] is not None else "")
+    allowed = (
+        ", ".join(f"`{c}`" for c in md["choices"])
+        if md["choices"]
+        else range_text({**md, "unit": ""})
+        if md["lo"] is not None
+        else ""
+    )
     meaning = md["description"] + (f" ({READ_ONLY_NOTE})" if md["read_only"] else "")
     cells = [f"`{spec.name}`", md["unit"], shown, allowed, meaning]
     return "| " + " | ".join(_cell(c) for c in cells) + " |"
@@ -120,8 +161,11 @@ def _keys(module) -> str:
 
 def topic_types() -> dict[str, str]:
     """Topic -> 'pkg/Type' of every topic the node subscribes to or publishes, from the code."""
-    named = {**{t: type_name(c) for t, c in INPUTS.items()}, **messages.OUTPUT_TYPES,
-             diagnostics.TOPIC: "diagnostic_msgs/msg/DiagnosticArray"}
+    named = {
+        **{t: type_name(c) for t, c in INPUTS.items()},
+        **messages.OUTPUT_TYPES,
+        diagnostics.TOPIC: "diagnostic_msgs/msg/DiagnosticArray",
+    }
     return {t: n.replace("/msg/", "/") for t, n in named.items()}
 
 
@@ -133,11 +177,12 @@ def topic_table() -> str:
         raise ValueError(f"TOPICS and the node's topics differ: {sorted(set(types) ^ set(TOPICS))}")
     rows = ["| topic | type | QoS | meaning |", "|---|---|---|---|"]
     for topic, (direction, qos, meaning) in TOPICS.items():
-        meaning = meaning.format(prediction=_PREDICTION.format(keys=_keys(status)),
-                                 recording=_RECORDING.format(keys=_keys(diagnostics)))
+        meaning = meaning.format(
+            prediction=_PREDICTION.format(keys=_keys(status)),
+            recording=_RECORDING.format(keys=_keys(diagnostics)),
+        )
         name = f"`{topic}`" + (f" ({direction})" if direction != "out" else "")
-        rows.append("| " + " | ".join(_cell(c) for c in (name, types[topic], qos, meaning))
-                    + " |")
+        rows.append("| " + " | ".join(_cell(c) for c in (name, types[topic], qos, meaning)) + " |")
     return "\n".join(rows)
 
 
@@ -151,8 +196,10 @@ def write(directory: Path | str) -> list[Path]:
     paths = []
     for name, text in texts.items():
         path = directory / f"{name}.md"
-        text = ("<!-- generated by tools/param_tables.py from the settings' metadata: "
-                "do not edit -->\n\n" + text + "\n")
+        text = (
+            "<!-- generated by tools/param_tables.py from the settings' metadata: "
+            "do not edit -->\n\n" + text + "\n"
+        )
         if not path.exists() or path.read_text(encoding="utf-8") != text:
             path.write_text(text, encoding="utf-8")
         paths.append(path)
@@ -170,8 +217,10 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     unknown = set(names) - set(TABLES)
     if unknown:
-        print(f"unknown table(s) {', '.join(sorted(unknown))}; known: {', '.join(TABLES)}",
-              file=sys.stderr)
+        print(
+            f"unknown table(s) {', '.join(sorted(unknown))}; known: {', '.join(TABLES)}",
+            file=sys.stderr,
+        )
         return 2
     print("\n\n".join(table(n) for n in names or TABLES))
     return 0

@@ -1,5 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Numbers for doc/theory/probability.md: P(squeak) at Table 1 from both estimators, and their largest gap.
+"""Numbers for doc/theory/probability.md: P(squeak) at Table 1 from both estimators.
+
+Also their largest gap.
 
     .venv/bin/python tools/probability_table.py
 
@@ -31,8 +33,10 @@ def main() -> int:
         ref = draw(model.params, Scatter(), 4096, seed=11)
         for speed in speeds:
             mc, live = monte_carlo(model, speed, LOAD_N, ref), model.predict(speed, LOAD_N)
-            print(f"| {formulation} | {speed:g} | {mc.probability:.3f} ± {mc.stderr:.3f} | "
-                  f"{live.probability:.3f} |")
+            print(
+                f"| {formulation} | {speed:g} | {mc.probability:.3f} ± {mc.stderr:.3f} | "
+                f"{live.probability:.3f} |"
+            )
         gap, where = 0.0, None
         for load in GRID_LOADS:
             for speed in GRID_SPEEDS:
@@ -42,8 +46,10 @@ def main() -> int:
         worst.append((formulation, gap, where))
     print()
     for formulation, gap, (speed, load) in worst:
-        print(f"- {formulation}: largest |P live - P Monte Carlo| over {len(GRID_SPEEDS)} speeds "
-              f"x {len(GRID_LOADS)} loads: {gap:.3f} (at {speed:g} rad/s, {load:g} N)")
+        print(
+            f"- {formulation}: largest |P live - P Monte Carlo| over {len(GRID_SPEEDS)} speeds "
+            f"x {len(GRID_LOADS)} loads: {gap:.3f} (at {speed:g} rad/s, {load:g} N)"
+        )
     return 0
 
 

@@ -4,6 +4,6 @@ definitions, CDR encode and decode, synthetic logs. Imports `model` and `live` o
 
 from .logfile import LogError, recover
 from .logsource import LogSource, open_log
-from .recorder import RecordSettings, Recorder
+from .recorder import Recorder, RecordSettings
 
 __all__ = ["LogError", "LogSource", "RecordSettings", "Recorder", "open_log", "recover"]

@@ -58,22 +58,40 @@ from .logsource import LogSource, log_topics, open_log
 PCM_CODINGS = ("", "wave", "wav", "pcm", "raw")
 # sample_format -> (numpy dtype, offset, full scale): x = (raw - offset) / scale
 SAMPLE_FORMATS: dict[str, tuple[str, float, float]] = {
-    "S8": ("i1", 0, 2.0 ** 7), "U8": ("u1", 2.0 ** 7, 2.0 ** 7),
-    "S16LE": ("<i2", 0, 2.0 ** 15), "S16BE": (">i2", 0, 2.0 ** 15),
-    "U16LE": ("<u2", 2.0 ** 15, 2.0 ** 15), "U16BE": (">u2", 2.0 ** 15, 2.0 ** 15),
-    "S24LE": ("<i3", 0, 2.0 ** 23), "S24BE": (">i3", 0, 2.0 ** 23),
-    "S32LE": ("<i4", 0, 2.0 ** 31), "S32BE": (">i4", 0, 2.0 ** 31),
-    "U32LE": ("<u4", 2.0 ** 31, 2.0 ** 31), "U32BE": (">u4", 2.0 ** 31, 2.0 ** 31),
-    "F32LE": ("<f4", 0, 1.0), "F32BE": (">f4", 0, 1.0),
-    "F64LE": ("<f8", 0, 1.0), "F64BE": (">f8", 0, 1.0)}
+    "S8": ("i1", 0, 2.0**7),
+    "U8": ("u1", 2.0**7, 2.0**7),
+    "S16LE": ("<i2", 0, 2.0**15),
+    "S16BE": (">i2", 0, 2.0**15),
+    "U16LE": ("<u2", 2.0**15, 2.0**15),
+    "U16BE": (">u2", 2.0**15, 2.0**15),
+    "S24LE": ("<i3", 0, 2.0**23),
+    "S24BE": (">i3", 0, 2.0**23),
+    "S32LE": ("<i4", 0, 2.0**31),
+    "S32BE": (">i4", 0, 2.0**31),
+    "U32LE": ("<u4", 2.0**31, 2.0**31),
+    "U32BE": (">u4", 2.0**31, 2.0**31),
+    "F32LE": ("<f4", 0, 1.0),
+    "F32BE": (">f4", 0, 1.0),
+    "F64LE": ("<f8", 0, 1.0),
+    "F64BE": (">f8", 0, 1.0),
+}
 # mgonzs13: PortAudio format -> (array field, full scale)
-PORTAUDIO_FORMATS = {PA_FLOAT32: ("float32_data", 1.0), PA_INT32: ("int32_data", 2.0 ** 31),
-                     PA_INT24: ("int24_data", 2.0 ** 23), PA_INT16: ("int16_data", 2.0 ** 15),
-                     PA_INT8: ("int8_data", 2.0 ** 7), PA_UINT8: ("uint8_data", 2.0 ** 7)}
+PORTAUDIO_FORMATS = {
+    PA_FLOAT32: ("float32_data", 1.0),
+    PA_INT32: ("int32_data", 2.0**31),
+    PA_INT24: ("int24_data", 2.0**23),
+    PA_INT16: ("int16_data", 2.0**15),
+    PA_INT8: ("int8_data", 2.0**7),
+    PA_UINT8: ("uint8_data", 2.0**7),
+}
 FLOAT32_MULTI_ARRAY = "std_msgs/msg/Float32MultiArray"
 DRIVERS, DRIVERS_UNSTAMPED, MGONZS13, MULTI_ARRAY, INFO = (
-    "ros-drivers AudioDataStamped", "ros-drivers AudioData", "mgonzs13 AudioStamped",
-    "Float32MultiArray", "ros-drivers AudioInfo")
+    "ros-drivers AudioDataStamped",
+    "ros-drivers AudioData",
+    "mgonzs13 AudioStamped",
+    "Float32MultiArray",
+    "ros-drivers AudioInfo",
+)
 
 
 class AudioError(LogError):
@@ -85,12 +103,21 @@ class AudioSettings:
     """How chunks are placed on the time line (SI units; metadata as for the node's)."""
 
     stamp_tolerance_s: float = setting(
-        0.005, "s", "a chunk stamped within this of where the samples before it end follows "
+        0.005,
+        "s",
+        "a chunk stamped within this of where the samples before it end follows "
         "them directly (stamp jitter); beyond it a gap is filled or an overlap trimmed",
-        0.0, 10.0)
+        0.0,
+        10.0,
+    )
     max_gap_s: float = setting(
-        1.0, "s", "gaps between chunks up to this long are filled with zeros; a longer one "
-        "ends the track (warned)", 0.0, 3600.0)
+        1.0,
+        "s",
+        "gaps between chunks up to this long are filled with zeros; a longer one "
+        "ends the track (warned)",
+        0.0,
+        3600.0,
+    )
 
     def __post_init__(self) -> None:
         check(self)
@@ -129,8 +156,8 @@ class AudioTrack:
 @dataclass
 class _Chunk:
     stamp_ns: int
-    samples: np.ndarray             # float32, the chosen channel
-    key: tuple                      # (rate, channels, format): a change ends the segment
+    samples: np.ndarray  # float32, the chosen channel
+    key: tuple  # (rate, channels, format): a change ends the segment
 
 
 @dataclass
@@ -149,10 +176,9 @@ class _Problems:
             "undecodable": "{n} audio messages not decodable, skipped (first: {e})",
             "empty": "{n} empty audio messages",
             "partial": "{n} audio messages end in a partial frame of {e}, dropped (truncated "
-                       "or wrong sample format?)",
+            "or wrong sample format?)",
             "nonfinite": "{n} NaN/inf samples set to 0",
-            "beyond": "float samples beyond full scale (peak {e}): wrong sample format or "
-                      "scaling?",
+            "beyond": "float samples beyond full scale (peak {e}): wrong sample format or scaling?",
             "array": "{n} messages fill another array than their format names ({e}); used it",
             "zero_stamp": "{n} audio messages have a zero header stamp; their log times used",
             "gap": "{n} gaps between chunks filled with zeros ({e} s in all)",
@@ -168,10 +194,16 @@ class _Problems:
 
 
 # ----------------------------------------------------------------------------- public
-def read_audio(log: Path | str | None = None, topic: str | None = None,
-               info_topic: str | None = None, channel: int = 0,
-               sample_rate_hz: float | None = None, wav: Path | str | None = None,
-               wav_start_s: float = 0.0, settings: AudioSettings | None = None) -> AudioTrack:
+def read_audio(
+    log: Path | str | None = None,
+    topic: str | None = None,
+    info_topic: str | None = None,
+    channel: int = 0,
+    sample_rate_hz: float | None = None,
+    wav: Path | str | None = None,
+    wav_start_s: float = 0.0,
+    settings: AudioSettings | None = None,
+) -> AudioTrack:
     """The microphone audio of a log, or of a WAV file beside it.
 
     Parameters
@@ -221,19 +253,25 @@ def read_audio(log: Path | str | None = None, topic: str | None = None,
     kind = kinds[name]
     if kind == MULTI_ARRAY:
         if sample_rate_hz is None:
-            raise AudioError(source.path, f"{name} is std_msgs/Float32MultiArray, which "
-                                          "carries no sample rate: give sample_rate_hz")
+            raise AudioError(
+                source.path,
+                f"{name} is std_msgs/Float32MultiArray, which "
+                "carries no sample rate: give sample_rate_hz",
+            )
         if not (sample_rate_hz > 0 and np.isfinite(sample_rate_hz)):
             raise AudioError(source.path, f"sample_rate_hz = {sample_rate_hz!r} must be > 0")
-    info_name = _choose_info(source.path, kinds, name, info_topic) \
-        if kind in (DRIVERS, DRIVERS_UNSTAMPED) else None
+    info_name = (
+        _choose_info(source.path, kinds, name, info_topic)
+        if kind in (DRIVERS, DRIVERS_UNSTAMPED)
+        else None
+    )
     problems = _Problems()
     warnings: list[str] = []
     if sample_rate_hz is not None and kind != MULTI_ARRAY:
         warnings.append(f"sample_rate_hz = {sample_rate_hz:g} ignored: {name} carries its own")
     parsed = {n: _schema(source.path, topics[n]) for n in (name, info_name) if n}
     first_ns: int | None = None
-    raw: list[tuple[int, Any]] = []           # (log time, decoded message) of the audio topic
+    raw: list[tuple[int, Any]] = []  # (log time, decoded message) of the audio topic
     infos: list[tuple[int, dict]] = []
     for _, m in source.messages():
         if first_ns is None:
@@ -248,15 +286,20 @@ def read_audio(log: Path | str | None = None, topic: str | None = None,
         (infos if m.topic.name == info_name else raw).append((m.log_time_ns, msg))
     if not raw:
         raise AudioError(source.path, f"audio topic {name} has no decodable messages")
-    convert = {DRIVERS: _drivers, DRIVERS_UNSTAMPED: _drivers, MGONZS13: _mgonzs13,
-               MULTI_ARRAY: _multi_array}[kind]
+    convert = {
+        DRIVERS: _drivers,
+        DRIVERS_UNSTAMPED: _drivers,
+        MGONZS13: _mgonzs13,
+        MULTI_ARRAY: _multi_array,
+    }[kind]
     context = _Context(source.path, name, channel, sample_rate_hz, infos, info_name, problems)
     chunks = [c for c in (convert(context, t, msg) for t, msg in raw) if c is not None]
     if not chunks:
         raise AudioError(source.path, f"audio topic {name} holds no samples")
     samples, rate, t0_ns, ended = _assemble(chunks, settings, problems, first_ns or 0)
-    return AudioTrack(samples, rate, (t0_ns - (first_ns or 0)) / 1e9, name,
-                      warnings + problems.lines() + ended)
+    return AudioTrack(
+        samples, rate, (t0_ns - (first_ns or 0)) / 1e9, name, warnings + problems.lines() + ended
+    )
 
 
 # ----------------------------------------------------------------------------- topics
@@ -267,12 +310,13 @@ def _topics(source: LogSource) -> dict[str, Topic]:
     if source.sqlite:
         return topics
     from mcap.reader import make_reader
+
     texts: dict[str, str] = {}
     for f in source.files:
         try:
             with open(f, "rb") as fh:
                 summary = make_reader(fh).get_summary()
-        except Exception:             # damaged or cut off: log_topics read it through
+        except Exception:  # damaged or cut off: log_topics read it through
             summary = None
         if summary is None:
             continue
@@ -280,8 +324,7 @@ def _topics(source: LogSource) -> dict[str, Topic]:
             s = summary.schemas.get(c.schema_id)
             if s is not None:
                 texts.setdefault(c.topic, s.data.decode("utf-8", "replace"))
-    return {n: t if t.schema else replace(t, schema=texts.get(n, ""))
-            for n, t in topics.items()}
+    return {n: t if t.schema else replace(t, schema=texts.get(n, "")) for n, t in topics.items()}
 
 
 def _schema(path: Path, topic: Topic) -> schema.MessageSchema:
@@ -318,14 +361,16 @@ def _kind(topic: Topic) -> str | None:
     inner = {f.name for f in s.fields(audio.type)}
     if "data" in inner:
         return DRIVERS
-    if {"audio_data", "info"} <= inner or ("info" in names and any(
-            n.endswith("_data") for n in inner)):
+    if {"audio_data", "info"} <= inner or (
+        "info" in names and any(n.endswith("_data") for n in inner)
+    ):
         return MGONZS13
     return None
 
 
-def _choose_topic(path: Path, topics: dict[str, Topic], kinds: dict[str, str],
-                  topic: str | None) -> str:
+def _choose_topic(
+    path: Path, topics: dict[str, Topic], kinds: dict[str, str], topic: str | None
+) -> str:
     audio = sorted(n for n, k in kinds.items() if k not in (INFO, DRIVERS_UNSTAMPED))
     audio = audio or sorted(n for n, k in kinds.items() if k == DRIVERS_UNSTAMPED)
     listed = ", ".join(f"{n} ({kinds[n]})" for n in audio) or "none"
@@ -333,12 +378,16 @@ def _choose_topic(path: Path, topics: dict[str, Topic], kinds: dict[str, str],
         if topic not in topics and "/" + topic.lstrip("/") in topics:
             topic = "/" + topic.lstrip("/")
         if topic not in kinds or kinds[topic] == INFO:
-            raise AudioError(path, f"topic {topic} is not an audio topic of this log; audio "
-                                   f"topics: {listed}")
+            raise AudioError(
+                path, f"topic {topic} is not an audio topic of this log; audio topics: {listed}"
+            )
         return topic
     if not audio:
-        raise AudioError(path, "no audio topic (audio_common AudioDataStamped / AudioStamped, "
-                               "std_msgs/Float32MultiArray); give a WAV file instead")
+        raise AudioError(
+            path,
+            "no audio topic (audio_common AudioDataStamped / AudioStamped, "
+            "std_msgs/Float32MultiArray); give a WAV file instead",
+        )
     if len(audio) > 1:
         raise AudioError(path, f"several audio topics, choose one: {listed}")
     return audio[0]
@@ -350,15 +399,21 @@ def _choose_info(path: Path, kinds: dict[str, str], name: str, info_topic: str |
         if info_topic not in infos and "/" + info_topic.lstrip("/") in infos:
             info_topic = "/" + info_topic.lstrip("/")
         if info_topic not in infos:
-            raise AudioError(path, f"{info_topic} is not an AudioInfo topic of this log; "
-                                   f"AudioInfo topics: {', '.join(infos) or 'none'}")
+            raise AudioError(
+                path,
+                f"{info_topic} is not an AudioInfo topic of this log; "
+                f"AudioInfo topics: {', '.join(infos) or 'none'}",
+            )
         return info_topic
     if name + "_info" in infos:
         return name + "_info"
     if len(infos) == 1:
         return infos[0]
-    raise AudioError(path, f"no AudioInfo for {name} (looked for {name}_info); "
-                           f"AudioInfo topics: {', '.join(infos) or 'none'}")
+    raise AudioError(
+        path,
+        f"no AudioInfo for {name} (looked for {name}_info); "
+        f"AudioInfo topics: {', '.join(infos) or 'none'}",
+    )
 
 
 # ----------------------------------------------------------------------------- chunks
@@ -376,8 +431,11 @@ class _Context:
     def info_at(self, log_time_ns: int) -> dict:
         """The latest AudioInfo logged at or before `log_time_ns` (else the first one)."""
         if not self.infos:
-            raise AudioError(self.path, f"no AudioInfo message on {self.info_topic} for "
-                                        f"{self.topic}: sample rate and format unknown")
+            raise AudioError(
+                self.path,
+                f"no AudioInfo message on {self.info_topic} for "
+                f"{self.topic}: sample rate and format unknown",
+            )
         if not self._info_times:
             self._info_times = [t for t, _ in self.infos]
         k = int(np.searchsorted(self._info_times, log_time_ns, side="right")) - 1
@@ -386,8 +444,10 @@ class _Context:
     def pick(self, frames: np.ndarray, channels: int, where: str) -> np.ndarray:
         """The chosen channel of interleaved samples (AudioError if it has no such one)."""
         if self.channel >= channels:
-            raise AudioError(self.path, f"channel {self.channel} asked of {where}, which has "
-                                        f"{channels} channel(s)")
+            raise AudioError(
+                self.path,
+                f"channel {self.channel} asked of {where}, which has {channels} channel(s)",
+            )
         if channels == 1:
             return frames
         usable = frames.size - frames.size % channels
@@ -421,7 +481,7 @@ def _finite(context: _Context, x: np.ndarray, is_float: bool) -> np.ndarray:
 
 
 def _to_float(raw: np.ndarray, dtype: str, offset: float, scale: float) -> np.ndarray:
-    if dtype[1:] == "i3":                                   # packed 24-bit
+    if dtype[1:] == "i3":  # packed 24-bit
         b = raw.reshape(-1, 3).astype(np.int32)
         lo, hi = (0, 2) if dtype[0] == "<" else (2, 0)
         v = b[:, lo] | (b[:, 1] << 8) | (b[:, hi] << 16)
@@ -437,17 +497,23 @@ def _drivers(context: _Context, log_time_ns: int, msg: dict) -> _Chunk | None:
     info = context.info_at(log_time_ns)
     coding = str(info.get("coding_format", "")).strip()
     if coding.lower() not in PCM_CODINGS:
-        raise AudioError(context.path, f"{context.topic} is coded as {coding!r} (compressed), "
-                                       f"not PCM/wave: decode it to WAV and pass wav=")
+        raise AudioError(
+            context.path,
+            f"{context.topic} is coded as {coding!r} (compressed), "
+            f"not PCM/wave: decode it to WAV and pass wav=",
+        )
     fmt = str(info.get("sample_format", "")).strip().upper()
     if fmt not in SAMPLE_FORMATS:
-        raise AudioError(context.path, f"{context.topic}: unknown sample_format {fmt!r}; "
-                                       f"known: {', '.join(SAMPLE_FORMATS)}")
+        raise AudioError(
+            context.path,
+            f"{context.topic}: unknown sample_format {fmt!r}; known: {', '.join(SAMPLE_FORMATS)}",
+        )
     dtype, offset, scale = SAMPLE_FORMATS[fmt]
     channels, rate = int(info.get("channels", 0)), float(info.get("sample_rate", 0))
     if channels < 1 or rate <= 0:
-        raise AudioError(context.path, f"{context.info_topic}: {channels} channels at "
-                                       f"{rate:g} Hz is not audio")
+        raise AudioError(
+            context.path, f"{context.info_topic}: {channels} channels at {rate:g} Hz is not audio"
+        )
     data = (msg["audio"] if "audio" in msg else msg)["data"]
     width = int(dtype[-1])
     if data.size == 0:
@@ -455,11 +521,12 @@ def _drivers(context: _Context, log_time_ns: int, msg: dict) -> _Chunk | None:
         return None
     if data.size % (width * channels):
         context.problems.add("partial", f"{data.size % (width * channels)} bytes")
-        data = data[:data.size - data.size % (width * channels)]
+        data = data[: data.size - data.size % (width * channels)]
         if data.size == 0:
             return None
-    x = _finite(context, _to_float(np.ascontiguousarray(data), dtype, offset, scale),
-                fmt.startswith("F"))
+    x = _finite(
+        context, _to_float(np.ascontiguousarray(data), dtype, offset, scale), fmt.startswith("F")
+    )
     x = context.pick(x, channels, context.topic)
     stamp = _stamp(context, msg, log_time_ns, x.size, rate)
     return _Chunk(stamp, x, (rate, channels, fmt))
@@ -484,14 +551,18 @@ def _mgonzs13(context: _Context, log_time_ns: int, msg: dict) -> _Chunk | None:
     if scale is None:
         raise AudioError(context.path, f"{context.topic}: unknown audio array {name}")
     if channels < 1 or rate <= 0:
-        raise AudioError(context.path, f"{context.topic}: {channels} channels at {rate} Hz "
-                                       f"is not audio")
+        raise AudioError(
+            context.path, f"{context.topic}: {channels} channels at {rate} Hz is not audio"
+        )
     values = arrays[name]
     if name == "uint8_data":
         x = ((values.astype(np.float32) - 128.0) / 128.0).astype(np.float32)
     else:
-        x = (values / np.float32(scale)).astype(np.float32) if scale != 1.0 \
+        x = (
+            (values / np.float32(scale)).astype(np.float32)
+            if scale != 1.0
             else values.astype(np.float32)
+        )
     x = context.pick(_finite(context, x, name == "float32_data"), channels, context.topic)
     stamp = _stamp(context, msg, log_time_ns, x.size, rate)
     return _Chunk(stamp, x, (float(rate), channels, name))
@@ -505,15 +576,15 @@ def _multi_array(context: _Context, log_time_ns: int, msg: dict) -> _Chunk | Non
     channels = int(dims[1]["size"]) if len(dims) == 2 and dims[1]["size"] > 0 else 1
     x = context.pick(_finite(context, data.astype(np.float32), True), channels, context.topic)
     rate = float(context.sample_rate_hz or 0)
-    return _Chunk(_stamp(context, msg, log_time_ns, x.size, rate), x,
-                  (rate, channels, "F32"))
+    return _Chunk(_stamp(context, msg, log_time_ns, x.size, rate), x, (rate, channels, "F32"))
 
 
 # ----------------------------------------------------------------------------- timeline
-def _assemble(chunks: list[_Chunk], settings: AudioSettings, problems: _Problems,
-              first_ns: int) -> tuple[np.ndarray, float, int, list[str]]:
+def _assemble(
+    chunks: list[_Chunk], settings: AudioSettings, problems: _Problems, first_ns: int
+) -> tuple[np.ndarray, float, int, list[str]]:
     """Place the chunks of the first (rate, channels, format) segment on one sample grid."""
-    chunks = sorted(chunks, key=lambda c: c.stamp_ns)          # stable: file order for ties
+    chunks = sorted(chunks, key=lambda c: c.stamp_ns)  # stable: file order for ties
     key = chunks[0].key
     rate = key[0]
     t0_ns = chunks[0].stamp_ns
@@ -528,16 +599,20 @@ def _assemble(chunks: list[_Chunk], settings: AudioSettings, problems: _Problems
     for k, c in enumerate(chunks):
         if c.key != key:
             what = _describe_change(key, c.key)
-            ended.append(f"{what} at {at(c)}: the first segment kept, {len(chunks) - k} "
-                         f"messages after it ignored")
+            ended.append(
+                f"{what} at {at(c)}: the first segment kept, {len(chunks) - k} "
+                f"messages after it ignored"
+            )
             break
         offset = int(round((c.stamp_ns - t0_ns) * rate / 1e9)) - placed
         x = c.samples
         if offset > tolerance:
             if offset > settings.max_gap_s * rate:
-                ended.append(f"a gap of {offset / rate:.3g} s at {at(c)} (> max_gap_s "
-                             f"{settings.max_gap_s:g} s): the track ends there, "
-                             f"{len(chunks) - k} messages after it ignored")
+                ended.append(
+                    f"a gap of {offset / rate:.3g} s at {at(c)} (> max_gap_s "
+                    f"{settings.max_gap_s:g} s): the track ends there, "
+                    f"{len(chunks) - k} messages after it ignored"
+                )
                 break
             pieces.append(np.zeros(offset, np.float32))
             placed += offset
@@ -561,8 +636,7 @@ def _describe_change(old: tuple, new: tuple) -> str:
     names = ("sample rate", "channel count", "sample format")
     for name, a, b in zip(names, old, new, strict=True):
         if a != b:
-            shown: Callable[[Any], str] = (lambda v: f"{v:g} Hz") if name == "sample rate" \
-                else str
+            shown: Callable[[Any], str] = (lambda v: f"{v:g} Hz") if name == "sample rate" else str
             return f"{name} changed from {shown(a)} to {shown(b)}"
     return "stream changed"
 
@@ -570,6 +644,7 @@ def _describe_change(old: tuple, new: tuple) -> str:
 # ----------------------------------------------------------------------------- WAV
 def _read_wav(path: Path, channel: int, start_s: float) -> AudioTrack:
     from scipy.io import wavfile
+
     try:
         rate, data = wavfile.read(path)
     except (OSError, ValueError, EOFError) as exc:
@@ -597,9 +672,7 @@ def _read_wav(path: Path, channel: int, start_s: float) -> AudioTrack:
             x = np.where(bad, np.float32(0), x)
         peak = float(np.max(np.abs(x))) if x.size else 0.0
         if peak > 1.0:
-            warnings.append(f"float samples beyond full scale (peak {peak:.3g}): wrong "
-                            f"scaling?")
+            warnings.append(f"float samples beyond full scale (peak {peak:.3g}): wrong scaling?")
     if x.size == 0:
         warnings.append("the WAV file holds no samples")
-    return AudioTrack(np.ascontiguousarray(x), float(rate), float(start_s), str(path),
-                      warnings)
+    return AudioTrack(np.ascontiguousarray(x), float(rate), float(start_s), str(path), warnings)

@@ -54,15 +54,19 @@ TEXTS: dict[str, dict[str, str]] = {
     DRIVERS: {
         AUDIO_DATA: "uint8[] data\n",
         AUDIO_DATA_STAMPED: "std_msgs/Header header\naudio_common_msgs/AudioData audio\n",
-        AUDIO_INFO: ("uint8 channels       # Number of channels\n"
-                     "uint32 sample_rate   # Sampling rate [Hz]\n"
-                     "string sample_format # Audio format (e.g. S16LE)\n"
-                     "uint32 bitrate       # Amount of audio data per second [bits/s]\n"
-                     "string coding_format # Audio coding format (e.g. WAVE, MP3)\n"),
+        AUDIO_INFO: (
+            "uint8 channels       # Number of channels\n"
+            "uint32 sample_rate   # Sampling rate [Hz]\n"
+            "string sample_format # Audio format (e.g. S16LE)\n"
+            "uint32 bitrate       # Amount of audio data per second [bits/s]\n"
+            "string coding_format # Audio coding format (e.g. WAVE, MP3)\n"
+        ),
     },
     MGONZS13: {
-        AUDIO_DATA: ("float32[] float32_data\nint32[] int32_data\nint16[] int16_data\n"
-                     "int8[] int8_data \nuint8[] uint8_data\n"),
+        AUDIO_DATA: (
+            "float32[] float32_data\nint32[] int32_data\nint16[] int16_data\n"
+            "int8[] int8_data \nuint8[] uint8_data\n"
+        ),
         AUDIO_INFO: "int32 format\nint32 channels\nint32 rate\nint32 chunk",
         AUDIO: "audio_common_msgs/AudioData audio_data\naudio_common_msgs/AudioInfo info",
         AUDIO_STAMPED: "std_msgs/Header header\naudio_common_msgs/Audio audio",
@@ -103,8 +107,9 @@ def definition(name: str, package: str = DRIVERS) -> str:
             if dep not in seen:
                 seen.add(dep)
                 pkg, _, typ = dep.split("/")
-                parts.append(f"{msgdefs.DELIMITER}\nMSG: {pkg}/{typ}\n"
-                             f"{text_of(dep).rstrip(chr(10))}")
+                parts.append(
+                    f"{msgdefs.DELIMITER}\nMSG: {pkg}/{typ}\n{text_of(dep).rstrip(chr(10))}"
+                )
                 visit(dep)
 
     visit(name)
@@ -127,33 +132,62 @@ def _stamp(stamp_ns: int) -> dict[str, int]:
     return {"sec": sec, "nanosec": nanosec}
 
 
-def encode_audio_data_stamped(stamp_ns: int, data: bytes | np.ndarray, frame_id: str = ""
-                              ) -> bytes:
+def encode_audio_data_stamped(stamp_ns: int, data: bytes | np.ndarray, frame_id: str = "") -> bytes:
     """ros-drivers AudioDataStamped: header (stamp [ns since the epoch], frame) and the raw
     sample bytes `data` (interleaved, in the AudioInfo's sample_format)."""
     raw = np.frombuffer(bytes(data), np.uint8) if not isinstance(data, np.ndarray) else data
     return message_schema(AUDIO_DATA_STAMPED).encode(
-        {"header": {"stamp": _stamp(stamp_ns), "frame_id": frame_id}, "audio": {"data": raw}})
+        {"header": {"stamp": _stamp(stamp_ns), "frame_id": frame_id}, "audio": {"data": raw}}
+    )
 
 
-def encode_audio_info(channels: int, sample_rate: int, sample_format: str = "S16LE",
-                      bitrate: int = 0, coding_format: str = "wave") -> bytes:
+def encode_audio_info(
+    channels: int,
+    sample_rate: int,
+    sample_format: str = "S16LE",
+    bitrate: int = 0,
+    coding_format: str = "wave",
+) -> bytes:
     """ros-drivers AudioInfo."""
     return message_schema(AUDIO_INFO).encode(
-        {"channels": channels, "sample_rate": sample_rate, "sample_format": sample_format,
-         "bitrate": bitrate, "coding_format": coding_format})
+        {
+            "channels": channels,
+            "sample_rate": sample_rate,
+            "sample_format": sample_format,
+            "bitrate": bitrate,
+            "coding_format": coding_format,
+        }
+    )
 
 
-def encode_audio_stamped(stamp_ns: int, samples: np.ndarray, rate: int, channels: int = 1,
-                         fmt: int = PA_FLOAT32, frame_id: str = "", chunk: int | None = None
-                         ) -> bytes:
+def encode_audio_stamped(
+    stamp_ns: int,
+    samples: np.ndarray,
+    rate: int,
+    channels: int = 1,
+    fmt: int = PA_FLOAT32,
+    frame_id: str = "",
+    chunk: int | None = None,
+) -> bytes:
     """mgonzs13 AudioStamped: `samples` (interleaved, of the numpy type of `fmt`: float32,
     int32, int16, int8 or uint8) in the array `fmt` names, and the info."""
-    array = {PA_FLOAT32: "float32_data", PA_INT32: "int32_data", PA_INT16: "int16_data",
-             PA_INT8: "int8_data", PA_UINT8: "uint8_data"}[fmt]
+    array = {
+        PA_FLOAT32: "float32_data",
+        PA_INT32: "int32_data",
+        PA_INT16: "int16_data",
+        PA_INT8: "int8_data",
+        PA_UINT8: "uint8_data",
+    }[fmt]
     frames = len(samples) // max(channels, 1)
-    audio: dict[str, Any] = {"audio_data": {array: samples},
-                             "info": {"format": fmt, "channels": channels, "rate": rate,
-                                      "chunk": frames if chunk is None else chunk}}
+    audio: dict[str, Any] = {
+        "audio_data": {array: samples},
+        "info": {
+            "format": fmt,
+            "channels": channels,
+            "rate": rate,
+            "chunk": frames if chunk is None else chunk,
+        },
+    }
     return message_schema(AUDIO_STAMPED, MGONZS13).encode(
-        {"header": {"stamp": _stamp(stamp_ns), "frame_id": frame_id}, "audio": audio})
+        {"header": {"stamp": _stamp(stamp_ns), "frame_id": frame_id}, "audio": audio}
+    )

@@ -18,12 +18,18 @@ import yaml
 
 METADATA = "metadata.yaml"
 ROS_DISTRO = "jazzy"
-STORAGES = {"mcap": ".mcap", "sqlite3": ".db3"}      # storage_identifier -> file suffix
-MAX_VERSION = 9                                      # the newest rosbags (and Jazzy) reads
+STORAGES = {"mcap": ".mcap", "sqlite3": ".db3"}  # storage_identifier -> file suffix
+MAX_VERSION = 9  # the newest rosbags (and Jazzy) reads
 # The keys of `rosbag2_bagfile_information` rosbags reads (a missing one: it refuses the bag)
-_REQUIRED = {"version": int, "storage_identifier": str, "relative_file_paths": list,
-             "starting_time": dict, "duration": dict, "message_count": int,
-             "topics_with_message_count": list}
+_REQUIRED = {
+    "version": int,
+    "storage_identifier": str,
+    "relative_file_paths": list,
+    "starting_time": dict,
+    "duration": dict,
+    "message_count": int,
+    "topics_with_message_count": list,
+}
 _KINDS = {int: "a whole number", str: "a string", list: "a list", dict: "a mapping"}
 
 
@@ -48,7 +54,7 @@ class TopicStats:
     """One topic of a bag in metadata.yaml: name, type, message count, offered QoS."""
 
     name: str
-    type_name: str              # 'pkg/msg/Type'
+    type_name: str  # 'pkg/msg/Type'
     count: int = 0
     offered_qos_profiles: str = ""
 
@@ -67,41 +73,57 @@ class BagStats:
         starts = [f.start_ns for f in files if f.start_ns is not None]
         ends = [f.end_ns for f in files if f.end_ns is not None]
         start = min(starts, default=0)
-        return {"rosbag2_bagfile_information": {
-            "version": 9,
-            "storage_identifier": "mcap",
-            "relative_file_paths": [f.path.name for f in files],
-            "starting_time": {"nanoseconds_since_epoch": start},
-            "duration": {"nanoseconds": max(ends, default=start) - start},
-            "message_count": sum(f.messages for f in files),
-            "topics_with_message_count": [
-                {"topic_metadata": {"name": t.name, "type": t.type_name,
-                                    "serialization_format": "cdr",
-                                    "offered_qos_profiles": t.offered_qos_profiles,
-                                    "type_description_hash": ""},
-                 "message_count": t.count} for t in self.topics],
-            "compression_format": "",
-            "compression_mode": "",
-            "files": [{"path": f.path.name,
-                       "starting_time": {"nanoseconds_since_epoch": f.start_ns or start},
-                       "duration": {"nanoseconds": (f.end_ns or start) - (f.start_ns or start)},
-                       "message_count": f.messages} for f in files],
-            "custom_data": {str(k): str(v) for k, v in self.custom_data.items()},
-            "ros_distro": ROS_DISTRO}}
+        return {
+            "rosbag2_bagfile_information": {
+                "version": 9,
+                "storage_identifier": "mcap",
+                "relative_file_paths": [f.path.name for f in files],
+                "starting_time": {"nanoseconds_since_epoch": start},
+                "duration": {"nanoseconds": max(ends, default=start) - start},
+                "message_count": sum(f.messages for f in files),
+                "topics_with_message_count": [
+                    {
+                        "topic_metadata": {
+                            "name": t.name,
+                            "type": t.type_name,
+                            "serialization_format": "cdr",
+                            "offered_qos_profiles": t.offered_qos_profiles,
+                            "type_description_hash": "",
+                        },
+                        "message_count": t.count,
+                    }
+                    for t in self.topics
+                ],
+                "compression_format": "",
+                "compression_mode": "",
+                "files": [
+                    {
+                        "path": f.path.name,
+                        "starting_time": {"nanoseconds_since_epoch": f.start_ns or start},
+                        "duration": {"nanoseconds": (f.end_ns or start) - (f.start_ns or start)},
+                        "message_count": f.messages,
+                    }
+                    for f in files
+                ],
+                "custom_data": {str(k): str(v) for k, v in self.custom_data.items()},
+                "ros_distro": ROS_DISTRO,
+            }
+        }
 
     def write(self, bag: Path) -> None:
         """Write `bag/metadata.yaml` (raises OSError)."""
         (Path(bag) / METADATA).write_text(yaml.safe_dump(self.info(), sort_keys=False))
 
 
-def _whole(value) -> bool:
+def _whole(value: object) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def _mapping(value, what: str) -> dict:
+def _mapping(value: object, what: str) -> dict:
     if not isinstance(value, dict):
-        raise ValueError(f"{what} is {type(value).__name__ if value is not None else 'empty'}, "
-                         f"not a mapping")
+        raise ValueError(
+            f"{what} is {type(value).__name__ if value is not None else 'empty'}, not a mapping"
+        )
     return value
 
 
@@ -149,8 +171,9 @@ def read_info(bag: Path) -> dict:
     if not 1 <= info["version"] <= MAX_VERSION:
         raise ValueError(f"version {info['version']} (rosbags reads 1 to {MAX_VERSION})")
     if info["storage_identifier"] not in STORAGES:
-        raise ValueError(f"storage_identifier {info['storage_identifier']!r}, not one of "
-                         f"{', '.join(STORAGES)}")
+        raise ValueError(
+            f"storage_identifier {info['storage_identifier']!r}, not one of {', '.join(STORAGES)}"
+        )
     for key, inner in (("starting_time", "nanoseconds_since_epoch"), ("duration", "nanoseconds")):
         if not _whole(info[key].get(inner)):
             raise ValueError(f"{key}.{inner} is {info[key].get(inner)!r}, not a whole number")
@@ -166,8 +189,9 @@ def read_info(bag: Path) -> dict:
             if not isinstance(topic.get(key), str):
                 raise ValueError(f"{what}.topic_metadata has no {key!r}")
         if topic["serialization_format"] != "cdr":
-            raise ValueError(f"topic {topic['name']} is serialized as "
-                             f"{topic['serialization_format']!r}, not cdr")
+            raise ValueError(
+                f"topic {topic['name']} is serialized as {topic['serialization_format']!r}, not cdr"
+            )
         if not _whole(entry.get("message_count")):
             raise ValueError(f"{what} has no whole 'message_count'")
     return info
@@ -190,18 +214,27 @@ def disagreement(old: dict, new: dict) -> str:
     listed = [Path(str(n)).name for n in old.get("relative_file_paths") or []]
     if listed != new["relative_file_paths"]:
         missing = [n for n in new["relative_file_paths"] if n not in listed]
-        return (f"does not list {', '.join(missing)} of the bag" if missing else
-                f"lists the files {', '.join(listed) or 'none'}, the bag has "
-                f"{', '.join(new['relative_file_paths']) or 'none'}")
+        return (
+            f"does not list {', '.join(missing)} of the bag"
+            if missing
+            else f"lists the files {', '.join(listed) or 'none'}, the bag has "
+            f"{', '.join(new['relative_file_paths']) or 'none'}"
+        )
     if old.get("message_count") != new["message_count"]:
         return f"says {old.get('message_count')} messages, the files hold {new['message_count']}"
     was, now = topic_counts(old), topic_counts(new)
     if was != now:
         diff = sorted(set(was) | set(now), key=str)
-        shown = [f"{n} {was.get(n, 0)} (files: {now.get(n, 0)})" for n in diff
-                 if was.get(n, 0) != now.get(n, 0)]
-        return "per-topic counts disagree with the files: " + ", ".join(shown[:3]) + (
-            f" and {len(shown) - 3} more" if len(shown) > 3 else "")
+        shown = [
+            f"{n} {was.get(n, 0)} (files: {now.get(n, 0)})"
+            for n in diff
+            if was.get(n, 0) != now.get(n, 0)
+        ]
+        return (
+            "per-topic counts disagree with the files: "
+            + ", ".join(shown[:3])
+            + (f" and {len(shown) - 3} more" if len(shown) > 3 else "")
+        )
     for key in ("starting_time", "duration"):
         if old.get(key) != new[key]:
             return f"{key} {old.get(key)} is not the messages' {new[key]}"
@@ -234,8 +267,10 @@ def problem(bag: Path, actual: BagStats | None = None) -> str:
     if actual is not None:
         storage = STORAGES[info["storage_identifier"]]
         if any(f.path.suffix != storage for f in actual.files):
-            return (f"{METADATA} says storage {info['storage_identifier']}, the bag's files "
-                    f"are {actual.files[0].path.suffix}")
+            return (
+                f"{METADATA} says storage {info['storage_identifier']}, the bag's files "
+                f"are {actual.files[0].path.suffix}"
+            )
         wrong = disagreement(info, actual.info()["rosbag2_bagfile_information"])
         if wrong:
             return f"{METADATA} disagrees with the files: {wrong}"

@@ -22,21 +22,21 @@ from __future__ import annotations
 import struct
 from typing import NamedTuple
 
-_ENCAPSULATION = {b"\x00\x00": ">", b"\x00\x01": "<"}     # CDR_BE, CDR_LE
-_HEADER = 4                                                # encapsulation kind + options
+_ENCAPSULATION = {b"\x00\x00": ">", b"\x00\x01": "<"}  # CDR_BE, CDR_LE
+_HEADER = 4  # encapsulation kind + options
 _U32 = {e: struct.Struct(e + "I") for e in "<>"}
 _F64 = {e: struct.Struct(e + "d") for e in "<>"}
 _STAMP = {e: struct.Struct(e + "iI") for e in "<>"}
-_LE_HEADER = b"\x00\x01\x00\x00"                          # CDR_LE, no options
+_LE_HEADER = b"\x00\x01\x00\x00"  # CDR_LE, no options
 _F64_LE, _U32_LE, _TWO_U32_LE = struct.Struct("<d"), struct.Struct("<I"), struct.Struct("<II")
-_PAD = [bytes(n) for n in range(9)]                       # NUL, alignment padding
+_PAD = [bytes(n) for n in range(9)]  # NUL, alignment padding
 _BOOL_PAYLOADS = {False: _LE_HEADER + b"\x00", True: _LE_HEADER + b"\x01"}
 
 # 'pkg/msg/Type' of the types this module knows.
 FLOAT64, BOOL = "std_msgs/msg/Float64", "std_msgs/msg/Bool"
 FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
 JOINT_STATE = "sensor_msgs/msg/JointState"
-DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"   # bundled for logs written without ROS
+DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"  # bundled for logs written without ROS
 
 
 class JointStateData(NamedTuple):
@@ -129,7 +129,7 @@ def _string(data: bytes, pos: int, endian: str) -> tuple[str, int]:
     if n == 0 or data[pos + n - 1] != 0:
         raise ValueError("string not terminated by NUL")
     try:
-        return bytes(data[pos:pos + n - 1]).decode("utf-8"), pos + n
+        return bytes(data[pos : pos + n - 1]).decode("utf-8"), pos + n
     except UnicodeDecodeError as exc:
         raise ValueError(f"string is not UTF-8: {exc.reason}") from None
 
@@ -156,26 +156,27 @@ def decode_joint_state(data: bytes) -> JointStateData:
     _check(data, _HEADER + 8)
     sec, nanosec = _STAMP[endian].unpack_from(data, _HEADER)
     seen_endian, seen, frame_id, names, pos = _names_seen
-    if endian != seen_endian or data[_HEADER + 8:pos] != seen:
+    if endian != seen_endian or data[_HEADER + 8 : pos] != seen:
         frame_id, pos = _string(data, _HEADER + 8, endian)
-        count, pos = _count(data, pos, endian, 5)       # a string: u32 length + NUL at least
+        count, pos = _count(data, pos, endian, 5)  # a string: u32 length + NUL at least
         parsed = []
         for _ in range(count):
             name, pos = _string(data, pos, endian)
             parsed.append(name)
         names = tuple(parsed)
-        _names_seen = (endian, bytes(data[_HEADER + 8:pos]), frame_id, names, pos)
+        _names_seen = (endian, bytes(data[_HEADER + 8 : pos]), frame_id, names, pos)
     position, pos = _float64s(data, pos, endian)
     velocity, pos = _float64s(data, pos, endian)
     effort, _ = _float64s(data, pos, endian)
-    return JointStateData(sec * 1_000_000_000 + nanosec, frame_id, names, position, velocity,
-                          effort)
+    return JointStateData(
+        sec * 1_000_000_000 + nanosec, frame_id, names, position, velocity, effort
+    )
 
 
 def decode_float64_multi_array(data: bytes) -> Float64MultiArrayData:
     """std_msgs/Float64MultiArray: layout dimensions, data offset and data."""
     endian = _endian(data)
-    count, pos = _count(data, _HEADER, endian, 13)     # string (5 bytes at least), 2 x u32
+    count, pos = _count(data, _HEADER, endian, 13)  # string (5 bytes at least), 2 x u32
     dims = []
     for _ in range(count):
         label, pos = _string(data, pos, endian)
@@ -216,7 +217,7 @@ class _Encoder:
         self._pack("I", 4, value)
 
     def string(self, value: str) -> None:
-        raw = value.encode("utf-8")                # surrogates: UnicodeEncodeError
+        raw = value.encode("utf-8")  # surrogates: UnicodeEncodeError
         if b"\x00" in raw:
             raise ValueError(f"string {value!r} holds a NUL, which ends a CDR string")
         self.u32(len(raw) + 1)
@@ -255,20 +256,19 @@ def encode_bool(value: bool) -> bytes:
     return _BOOL_PAYLOADS[bool(value)]
 
 
-def encode_float64_multi_array(dim: tuple[Dimension, ...], data, data_offset: int = 0
-                               ) -> bytes:
+def encode_float64_multi_array(dim: tuple[Dimension, ...], data, data_offset: int = 0) -> bytes:
     """std_msgs/Float64MultiArray of layout dimensions `dim` and values `data` (written
     directly: every prediction publishes two)."""
     out = bytearray(_LE_HEADER)
     try:
         out += _U32_LE.pack(len(dim))
-        for d in dim:                  # label, size, stride: ends 4-aligned
+        for d in dim:  # label, size, stride: ends 4-aligned
             raw = d.label.encode("utf-8")
             if b"\x00" in raw:
                 raise ValueError(f"string {d.label!r} holds a NUL, which ends a CDR string")
             out += _U32_LE.pack(len(raw) + 1)
             out += raw
-            out += _PAD[1 + -(len(raw) + 1) % 4]          # the NUL and the padding
+            out += _PAD[1 + -(len(raw) + 1) % 4]  # the NUL and the padding
             out += _TWO_U32_LE.pack(d.size, d.stride)
         out += _TWO_U32_LE.pack(data_offset, len(data))
         if len(data):
@@ -289,8 +289,9 @@ def encode_joint_state(msg: JointStateData) -> bytes:
     return e.payload()
 
 
-def encode_diagnostic_array(stamp_ns: int, status: tuple[DiagnosticStatusData, ...],
-                            frame_id: str = "") -> bytes:
+def encode_diagnostic_array(
+    stamp_ns: int, status: tuple[DiagnosticStatusData, ...], frame_id: str = ""
+) -> bytes:
     """diagnostic_msgs/DiagnosticArray stamped `stamp_ns` [ns since the epoch]."""
     e = _Encoder()
     e.header(stamp_ns, frame_id)

@@ -19,16 +19,20 @@ class CrashRecovery:
 
     def __init__(self, directory: str, prefix: str):
         own = re.compile(re.escape(prefix) + r"_\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d_\d{3}(_\d+)?$")
-        self.bags = [b for b in cut_off_bags(Path(directory).expanduser())
-                     if b.is_dir() and own.match(b.name)]
+        self.bags = [
+            b
+            for b in cut_off_bags(Path(directory).expanduser())
+            if b.is_dir() and own.match(b.name)
+        ]
         self.recovered: list[Path] = []
         self.failed: dict[Path, str] = {}
         self._thread: threading.Thread | None = None
 
     def start(self) -> None:
         """Recover the cut-off bags on a background thread."""
-        self._thread = threading.Thread(target=self._recover, daemon=True,
-                                        name="cut-off bag recovery")
+        self._thread = threading.Thread(
+            target=self._recover, daemon=True, name="cut-off bag recovery"
+        )
         self._thread.start()
 
     def join(self) -> None:
@@ -64,16 +68,20 @@ class CrashRecovery:
         """'' when there is nothing to say."""
         parts = []
         if self.recovered:
-            parts.append(f"recovered {len(self.recovered)} cut-off bag(s) of an earlier run: "
-                         + ", ".join(str(b) for b in self.recovered))
+            parts.append(
+                f"recovered {len(self.recovered)} cut-off bag(s) of an earlier run: "
+                + ", ".join(str(b) for b in self.recovered)
+            )
         running = self._thread is not None and self._thread.is_alive()
         waiting = [b for b in self.pending if b not in self.failed]
         if waiting and running:
             parts.append(f"recovering {len(waiting)} cut-off bag(s) of an earlier run")
         elif self.pending:
-            parts.append(f"{len(self.pending)} bag(s) of an earlier run cut off (crash?): "
-                         + ", ".join(str(b) for b in self.pending) + "; run `"
-                         + f"{RECOVER_HINT} BAGDIR` on each"
-                         + "".join(f" ({self.failed[b]})" for b in self.pending
-                                   if b in self.failed))
+            parts.append(
+                f"{len(self.pending)} bag(s) of an earlier run cut off (crash?): "
+                + ", ".join(str(b) for b in self.pending)
+                + "; run `"
+                + f"{RECOVER_HINT} BAGDIR` on each"
+                + "".join(f" ({self.failed[b]})" for b in self.pending if b in self.failed)
+            )
         return "; ".join(parts)

@@ -14,7 +14,7 @@ import fcntl
 import os
 from pathlib import Path
 
-LIVE = "is being recorded (live writer)"      # what readers and `recover` say of such a file
+LIVE = "is being recorded (live writer)"  # what readers and `recover` say of such a file
 
 
 def hold(fd: int) -> None:
@@ -33,10 +33,10 @@ def is_live(path: Path | str) -> bool:
         fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
     except BlockingIOError:
         return True
-    except OSError:               # a file system without flock: no writer can have locked it
+    except OSError:  # a file system without flock: no writer can have locked it
         return False
     finally:
-        os.close(fd)              # closing releases the probe's own lock
+        os.close(fd)  # closing releases the probe's own lock
     return False
 
 

@@ -21,9 +21,9 @@ import re
 import struct
 import zlib
 from collections import Counter
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
 
 import lz4.frame
 import yaml
@@ -38,20 +38,28 @@ from .livelock import LIVE, is_live, live_files
 
 MAGIC = b"\x89MCAP0\r\n"
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_METADATA = (
-    0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x0C)
-_FOOTER_LEN = 20                      # summary_start u64, summary_offset_start u64, crc u32
-_MAX_INFLATION = 1000                 # a larger uncompressed/compressed ratio means corruption
+    0x01,
+    0x02,
+    0x03,
+    0x04,
+    0x05,
+    0x06,
+    0x0C,
+)
+_FOOTER_LEN = 20  # summary_start u64, summary_offset_start u64, crc u32
+_MAX_INFLATION = 1000  # a larger uncompressed/compressed ratio means corruption
 _RECORD = struct.Struct("<BQ")
 _READ_BUFFER = 1 << 16
-_PARSED = frozenset((OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK,
-                     OP_METADATA))
+_PARSED = frozenset(
+    (OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_METADATA)
+)
 _MESSAGE = struct.Struct("<HIQQ")
 _CHUNK = struct.Struct("<QQQI")
 ENCODINGS = {"cdr"}
 SCHEMA_ENCODINGS = {"ros2msg", "ros2idl"}
 RECOVER_HINT = "leadscrew-squeak recover"
-BROKEN_SUFFIX = ".broken"             # `<name>.mcap.broken`: an original set aside by recover
-_REWRITE_SUFFIX = ".recovering"       # `<name>.mcap.recovering`: a rewrite not yet verified
+BROKEN_SUFFIX = ".broken"  # `<name>.mcap.broken`: an original set aside by recover
+_REWRITE_SUFFIX = ".recovering"  # `<name>.mcap.recovering`: a rewrite not yet verified
 
 
 class LogError(Exception):
@@ -67,12 +75,12 @@ class Topic:
     """A channel of a log with its schema: what a copy needs to write it back verbatim."""
 
     name: str
-    type_name: str              # 'pkg/msg/Type'
+    type_name: str  # 'pkg/msg/Type'
     schema_encoding: str
-    schema: str                 # complete message definition
+    schema: str  # complete message definition
     message_encoding: str
     metadata: dict[str, str]
-    schema_name: str = ""       # as stored (e.g. 'pkg/Type'); copies keep it verbatim
+    schema_name: str = ""  # as stored (e.g. 'pkg/Type'); copies keep it verbatim
 
     @property
     def stored_schema_name(self) -> str:
@@ -88,7 +96,7 @@ class LogMessage:
     log_time_ns: int
     publish_time_ns: int
     sequence: int
-    data: bytes                 # serialized (CDR) payload
+    data: bytes  # serialized (CDR) payload
 
 
 @dataclass
@@ -102,10 +110,10 @@ class LogInfo:
     counts: Counter = field(default_factory=Counter)
     start_ns: int | None = None
     end_ns: int | None = None
-    complete: bool = False            # footer reached
-    damage: str = ""                  # why reading stopped early ('' if it did not)
-    cut_off: bool = False             # damage is only a missing tail: every byte before it read
-    live: bool = False                # a recorder is writing the file: its tail is still to come
+    complete: bool = False  # footer reached
+    damage: str = ""  # why reading stopped early ('' if it did not)
+    cut_off: bool = False  # damage is only a missing tail: every byte before it read
+    live: bool = False  # a recorder is writing the file: its tail is still to come
     # MCAP Metadata records read (e.g. `logmeta`'s), name -> string map; kept by `recover`
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     # A topic recorded with more than one type (MCAP channels, .db3 `topics` rows of one
@@ -138,8 +146,9 @@ class LogInfo:
         once per type."""
         out = []
         for name, t in self.topics.items():
-            others = [(o, self.retyped_counts[key]) for key, o in self.retyped.items()
-                      if key[0] == name]
+            others = [
+                (o, self.retyped_counts[key]) for key, o in self.retyped.items() if key[0] == name
+            ]
             out.append((t, self.counts[name] - sum(n for _, n in others)))
             out += others
         return sorted(out, key=lambda tn: (tn[0].name, tn[0].type_name))
@@ -174,10 +183,13 @@ def refuse_compressed(bag: Path) -> None:
         return
     if str(mode).lower() in ("", "none"):
         return
-    raise LogError(bag, f"rosbag2 bag with {str(mode).upper()} compression ({fmt}, storage "
-                        f"{storage}), which is not read here; convert it to an uncompressed "
-                        f"bag: rosbags-convert --src {bag} --dst {bag.name}_plain --dst-storage "
-                        f"mcap (or ros2 bag convert with compression_mode: none)")
+    raise LogError(
+        bag,
+        f"rosbag2 bag with {str(mode).upper()} compression ({fmt}, storage "
+        f"{storage}), which is not read here; convert it to an uncompressed "
+        f"bag: rosbags-convert --src {bag} --dst {bag.name}_plain --dst-storage "
+        f"mcap (or ros2 bag convert with compression_mode: none)",
+    )
 
 
 def _split_files(directory: Path) -> list[Path]:
@@ -186,7 +198,7 @@ def _split_files(directory: Path) -> list[Path]:
 
 def _split_key(p: Path):
     m = re.search(r"_(\d+)\.mcap$", p.name)
-    return (p.name[:m.start()] if m else p.stem, int(m.group(1)) if m else -1, p.name)
+    return (p.name[: m.start()] if m else p.stem, int(m.group(1)) if m else -1, p.name)
 
 
 def is_complete(path: Path | str) -> bool:
@@ -205,8 +217,12 @@ def is_complete(path: Path | str) -> bool:
     return op == OP_FOOTER and length == _FOOTER_LEN and tail.endswith(MAGIC)
 
 
-def read_messages(path: Path | str, topics: set[str] | None = None, strict: bool = True,
-                  info: LogInfo | None = None) -> Iterator[LogMessage]:
+def read_messages(
+    path: Path | str,
+    topics: set[str] | None = None,
+    strict: bool = True,
+    info: LogInfo | None = None,
+) -> Iterator[LogMessage]:
     """Messages of one MCAP file in file order (topics: only these). strict=True raises
     LogError for a file without footer; strict=False stops quietly at the first damaged or
     missing record and notes why in `info.damage`."""
@@ -236,8 +252,10 @@ def _incomplete(path: Path) -> str:
         return "not an MCAP file (bad magic)"
     if is_live(path):
         return f"{LIVE}: it gets its footer when the recording stops; read it then"
-    return (f"truncated: no footer (the recording was interrupted); "
-            f"recover it with `{RECOVER_HINT} {bag_of(path) or path}`")
+    return (
+        f"truncated: no footer (the recording was interrupted); "
+        f"recover it with `{RECOVER_HINT} {bag_of(path) or path}`"
+    )
 
 
 def bag_of(path: Path | str) -> Path | None:
@@ -246,8 +264,9 @@ def bag_of(path: Path | str) -> Path | None:
     None for a loose file."""
     path = Path(path)
     parent = path.parent
-    if (parent / METADATA).is_file() or re.fullmatch(re.escape(parent.name) + r"_\d+\.mcap",
-                                                     path.name):
+    if (parent / METADATA).is_file() or re.fullmatch(
+        re.escape(parent.name) + r"_\d+\.mcap", path.name
+    ):
         return parent
     return None
 
@@ -260,13 +279,12 @@ class _CutOff(_Damage):
     """The file ends inside or right after a whole record: a recording cut off, not corrupted."""
 
 
-def _records(path: Path, f, size: int, topics, strict: bool, info: LogInfo
-             ) -> Iterator[LogMessage]:
+def _records(path: Path, f, size: int, topics, strict: bool, info: LogInfo) -> Iterator[LogMessage]:
     """The messages of the open file `f` of `size` bytes, read record by record."""
     if f.read(len(MAGIC)) != MAGIC:
         raise LogError(path, "not an MCAP file (bad magic)")
     schemas: dict[int, tuple[str, str, str]] = {}
-    channels: dict[int, Topic | None] = {}            # None: channel filtered out
+    channels: dict[int, Topic | None] = {}  # None: channel filtered out
     pos = len(MAGIC)
     try:
         while True:
@@ -277,20 +295,22 @@ def _records(path: Path, f, size: int, topics, strict: bool, info: LogInfo
             op, length = _RECORD.unpack(_read(f, 9))
             body = pos + 9
             if length > size - body:
-                raise _CutOff(f"record at byte {pos} claims {length} bytes, "
-                              f"only {size - body} remain")
+                raise _CutOff(
+                    f"record at byte {pos} claims {length} bytes, only {size - body} remain"
+                )
             if pos == len(MAGIC) and op != OP_HEADER:
                 raise _Damage("first record is not an MCAP header")
             if op in _PARSED:
                 rec = _read(f, length)
-            else:                                 # indexes, attachments...: not read
+            else:  # indexes, attachments...: not read
                 f.seek(length, io.SEEK_CUR)
             if op == OP_HEADER:
                 header = Header.read(_stream(rec))
                 info.profile, info.library = header.profile, header.library
                 if header.profile != "ros2":
-                    raise LogError(path, f"foreign MCAP: profile {header.profile!r}, "
-                                         f"expected 'ros2'")
+                    raise LogError(
+                        path, f"foreign MCAP: profile {header.profile!r}, expected 'ros2'"
+                    )
             elif op == OP_SCHEMA:
                 s = Schema.read(_stream(rec))
                 schemas[s.id] = (s.name, s.encoding, s.data.decode())
@@ -303,8 +323,11 @@ def _records(path: Path, f, size: int, topics, strict: bool, info: LogInfo
             elif op == OP_CHUNK:
                 for kind, chunk_rec in _chunk(rec):
                     if kind == OP_SCHEMA:
-                        schemas[chunk_rec.id] = (chunk_rec.name, chunk_rec.encoding,
-                                                 chunk_rec.data.decode())
+                        schemas[chunk_rec.id] = (
+                            chunk_rec.name,
+                            chunk_rec.encoding,
+                            chunk_rec.data.decode(),
+                        )
                     elif kind == OP_CHANNEL:
                         _channel(path, chunk_rec, schemas, channels, topics, info)
                     else:
@@ -325,7 +348,7 @@ def _records(path: Path, f, size: int, topics, strict: bool, info: LogInfo
     except _Damage as exc:
         problem = str(exc)
         info.cut_off = isinstance(exc, _CutOff)
-    except (Exception, MemoryError) as exc:       # any parse error of a damaged record
+    except (Exception, MemoryError) as exc:  # any parse error of a damaged record
         problem = f"damaged record near byte {pos}: {type(exc).__name__}: {exc}"
     if strict:
         raise LogError(path, problem)
@@ -352,10 +375,14 @@ def _channel(path: Path, c: Channel, schemas, channels, topics, info: LogInfo) -
         raise _Damage(f"channel {c.topic!r} refers to unknown schema {c.schema_id}")
     name, encoding, text = schemas[c.schema_id]
     if c.message_encoding not in ENCODINGS or encoding not in SCHEMA_ENCODINGS:
-        raise LogError(path, f"foreign MCAP: topic {c.topic} is {c.message_encoding!r} with "
-                             f"a {encoding!r} schema, expected cdr with ros2msg")
-    topic = Topic(c.topic, _full_type(name), encoding, text, c.message_encoding,
-                  dict(c.metadata), name)
+        raise LogError(
+            path,
+            f"foreign MCAP: topic {c.topic} is {c.message_encoding!r} with "
+            f"a {encoding!r} schema, expected cdr with ros2msg",
+        )
+    topic = Topic(
+        c.topic, _full_type(name), encoding, text, c.message_encoding, dict(c.metadata), name
+    )
     channels[c.id] = info.add_topic(topic)
 
 
@@ -376,8 +403,9 @@ def _message(buf, start: int, length: int, channels, info: LogInfo) -> LogMessag
     info.count(topic)
     info.start_ns = log_time if info.start_ns is None else min(info.start_ns, log_time)
     info.end_ns = log_time if info.end_ns is None else max(info.end_ns, log_time)
-    return LogMessage(topic, log_time, publish_time, sequence,
-                      bytes(buf[start + _MESSAGE.size:start + length]))
+    return LogMessage(
+        topic, log_time, publish_time, sequence, bytes(buf[start + _MESSAGE.size : start + length])
+    )
 
 
 def _chunk(rec: bytes) -> Iterator[tuple[int, object]]:
@@ -387,10 +415,10 @@ def _chunk(rec: bytes) -> Iterator[tuple[int, object]]:
     _, _, usize, crc = _CHUNK.unpack_from(buf, 0)
     p = _CHUNK.size
     (clen,) = struct.unpack_from("<I", buf, p)
-    compression = bytes(buf[p + 4:p + 4 + clen]).decode()
+    compression = bytes(buf[p + 4 : p + 4 + clen]).decode()
     p += 4 + clen
     (dlen,) = struct.unpack_from("<Q", buf, p)
-    data = buf[p + 8:p + 8 + dlen]
+    data = buf[p + 8 : p + 8 + dlen]
     if p + 8 + dlen > len(buf) or len(data) != dlen:
         raise _Damage("chunk data overruns its record")
     if usize > max(_MAX_INFLATION * dlen, 1 << 20):
@@ -416,16 +444,17 @@ def _chunk(rec: bytes) -> Iterator[tuple[int, object]]:
         if rlen > end - start:
             raise _Damage("chunk record overruns its chunk")
         if op == OP_MESSAGE:
-            yield OP_MESSAGE, raw[start:start + rlen]
+            yield OP_MESSAGE, raw[start : start + rlen]
         elif op == OP_SCHEMA:
-            yield OP_SCHEMA, Schema.read(ReadDataStream(io.BytesIO(raw[start:start + rlen])))
+            yield OP_SCHEMA, Schema.read(ReadDataStream(io.BytesIO(raw[start : start + rlen])))
         elif op == OP_CHANNEL:
-            yield OP_CHANNEL, Channel.read(ReadDataStream(io.BytesIO(raw[start:start + rlen])))
+            yield OP_CHANNEL, Channel.read(ReadDataStream(io.BytesIO(raw[start : start + rlen])))
         pos = start + rlen
 
 
-def read_log(path: Path | str, topics: set[str] | None = None,
-             strict: bool = True) -> Iterator[LogMessage]:
+def read_log(
+    path: Path | str, topics: set[str] | None = None, strict: bool = True
+) -> Iterator[LogMessage]:
     """Messages of a log file or of a directory of split files, file after file."""
     for f in log_files(path):
         yield from read_messages(f, topics, strict)
@@ -444,12 +473,16 @@ def _refuse_live(path: Path, files: list[Path]) -> None:
     under it, and it would go on writing into the replaced copy."""
     live = [f for f in files if is_live(f)]
     if live:
-        raise LogError(live[0], f"{LIVE}; `{RECOVER_HINT}` leaves {path} alone until the "
-                                f"recording stops (nothing changed)")
+        raise LogError(
+            live[0],
+            f"{LIVE}; `{RECOVER_HINT}` leaves {path} alone until the "
+            f"recording stops (nothing changed)",
+        )
 
 
-def recover(src: Path | str, dst: Path | str,
-            compression: CompressionType = CompressionType.ZSTD) -> LogInfo:
+def recover(
+    src: Path | str, dst: Path | str, compression: CompressionType = CompressionType.ZSTD
+) -> LogInfo:
     """Rewrite every whole message of a cut-off (or damaged) file into a finished file.
 
     Parameters
@@ -480,29 +513,29 @@ def recover(src: Path | str, dst: Path | str,
     return info
 
 
-def _rewrite(src: Path | str, dst: Path | str,
-             compression: CompressionType = CompressionType.ZSTD) -> LogInfo:
+def _rewrite(
+    src: Path | str, dst: Path | str, compression: CompressionType = CompressionType.ZSTD
+) -> LogInfo:
     """`recover` without the check for messages: dst is finished and synced even if empty."""
     src, dst = Path(src), Path(dst)
     if src.resolve() == dst.resolve():
         raise LogError(dst, "recovery output must differ from its input")
     info = LogInfo(src)
     try:
-        dst.parent.mkdir(parents=True, exist_ok=True)          # like `replay --out DIR`
+        dst.parent.mkdir(parents=True, exist_ok=True)  # like `replay --out DIR`
         with open(dst, "wb") as out:
             writer = Writer(out, compression=compression)
             writer.start(profile="ros2", library="leadscrew_ros recover")
-            ids: dict[tuple[str, str], int] = {}        # a channel per topic and type
+            ids: dict[tuple[str, str], int] = {}  # a channel per topic and type
             for m in read_messages(src, strict=False, info=info):
                 key = (m.topic.name, m.topic.type_name)
                 if key not in ids:
                     ids[key] = _register(writer, m.topic)
-                writer.add_message(ids[key], m.log_time_ns, m.data, m.publish_time_ns,
-                                   m.sequence)
-            for t in [*info.topics.values(), *info.retyped.values()]:   # without messages yet
+                writer.add_message(ids[key], m.log_time_ns, m.data, m.publish_time_ns, m.sequence)
+            for t in [*info.topics.values(), *info.retyped.values()]:  # without messages yet
                 if (t.name, t.type_name) not in ids:
                     _register(writer, t)
-            for name, record in info.metadata.items():   # e.g. the `leadscrew_ros` record
+            for name, record in info.metadata.items():  # e.g. the `leadscrew_ros` record
                 writer.add_metadata(name, record)
             writer.finish()
             out.flush()
@@ -510,7 +543,7 @@ def _rewrite(src: Path | str, dst: Path | str,
     except OSError as exc:
         dst.unlink(missing_ok=True)
         raise LogError(dst, exc.strerror or exc) from None
-    except LogError:                                   # foreign or not MCAP: nothing written
+    except LogError:  # foreign or not MCAP: nothing written
         dst.unlink(missing_ok=True)
         raise
     return info
@@ -527,12 +560,12 @@ class FileRecovery:
     """What `recover_bag` did to one MCAP file."""
 
     path: Path
-    action: str                 # 'complete' (untouched), 'recovered' or 'set aside'
-    messages: int               # whole messages the file holds now (0 if set aside)
+    action: str  # 'complete' (untouched), 'recovered' or 'set aside'
+    messages: int  # whole messages the file holds now (0 if set aside)
     topics: int = 0
-    damage: str = ""            # why the original could not be read to its end
+    damage: str = ""  # why the original could not be read to its end
     broken: Path | None = None  # the original, kept as `<name>.mcap.broken`
-    info: LogInfo | None = field(default=None, repr=False)   # of the file as it is now
+    info: LogInfo | None = field(default=None, repr=False)  # of the file as it is now
 
     def line(self) -> str:
         """One line for the user."""
@@ -540,21 +573,27 @@ class FileRecovery:
             return f"{self.path}: complete, {self.messages} messages"
         if self.action == "set aside":
             return f"{self.path}: no whole message ({self.damage}); moved to {self.broken}"
-        kept = (f"; original kept as {self.broken} (damaged before its end: a specialised tool "
-                f"may get more out of it)" if self.broken else "")
-        return (f"{self.path}: recovered {self.messages} messages on {self.topics} topics "
-                f"(was: {self.damage}){kept}")
+        kept = (
+            f"; original kept as {self.broken} (damaged before its end: a specialised tool "
+            f"may get more out of it)"
+            if self.broken
+            else ""
+        )
+        return (
+            f"{self.path}: recovered {self.messages} messages on {self.topics} topics "
+            f"(was: {self.damage}){kept}"
+        )
 
 
 @dataclass
 class BagRecovery:
     """What `recover_bag` did: per file, and whether the bag's `metadata.yaml` was written."""
 
-    path: Path                          # the bag directory or file asked for
-    bag: Path | None                    # the bag directory (None: a loose file)
+    path: Path  # the bag directory or file asked for
+    bag: Path | None  # the bag directory (None: a loose file)
     files: list[FileRecovery] = field(default_factory=list)
     metadata_written: bool = False
-    still_cut_off: list[Path] = field(default_factory=list)   # other files of the bag
+    still_cut_off: list[Path] = field(default_factory=list)  # other files of the bag
 
     @property
     def changed(self) -> bool:
@@ -574,8 +613,12 @@ class BagRecovery:
         done = [f"{sum(f.action == 'recovered' for f in self.files)} file(s) recovered"]
         if self.metadata_written:
             done.append(f"{self.bag / METADATA} regenerated")
-        rest = (f"; {len(self.still_cut_off)} other file(s) of the bag still cut off: "
-                f"`{RECOVER_HINT} {self.bag}`" if self.still_cut_off else "")
+        rest = (
+            f"; {len(self.still_cut_off)} other file(s) of the bag still cut off: "
+            f"`{RECOVER_HINT} {self.bag}`"
+            if self.still_cut_off
+            else ""
+        )
         return f"{what}: " + ", ".join(done) + f"; {self.messages} messages readable" + rest
 
 
@@ -605,8 +648,9 @@ def _scan(directory: Path | str) -> tuple[list[Path], list[Path]]:
             files = list(entry.glob("*.mcap"))
             if files and live_files(entry):
                 live.append(entry)
-            elif files and (not (entry / METADATA).is_file()
-                            or not all(is_complete(f) for f in files)):
+            elif files and (
+                not (entry / METADATA).is_file() or not all(is_complete(f) for f in files)
+            ):
                 cut.append(entry)
         elif entry.suffix == ".mcap" and entry.is_file() and not is_complete(entry):
             (live if is_live(entry) else cut).append(entry)
@@ -633,8 +677,7 @@ def recover_bag(path: Path | str) -> BagRecovery:
     result = BagRecovery(path, bag, [_recover_file(f) for f in log_files(path)])
     if bag is not None:
         result.metadata_written = _reindex(bag, result.files)
-        result.still_cut_off = [f for f in _split_files(bag) if f != path
-                                and not is_complete(f)]
+        result.still_cut_off = [f for f in _split_files(bag) if f != path and not is_complete(f)]
     return result
 
 
@@ -643,7 +686,7 @@ def _restore_interrupted(directory: Path) -> None:
     `<name>.mcap.recovering` without `<name>.mcap`: put the original back, so this run starts
     over from it. A file set aside for want of messages has no `.recovering` and stays."""
     for rewrite in directory.glob("*.mcap" + _REWRITE_SUFFIX):
-        original = rewrite.with_name(rewrite.name[:-len(_REWRITE_SUFFIX)])
+        original = rewrite.with_name(rewrite.name[: -len(_REWRITE_SUFFIX)])
         broken = original.with_name(original.name + BROKEN_SUFFIX)
         if not original.exists() and broken.exists():
             os.replace(broken, original)
@@ -660,9 +703,9 @@ def _recover_file(path: Path) -> FileRecovery:
     try:
         info = _rewrite(path, rewrite)
     except LogError as exc:
-        if path.stat().st_size or path.suffix != ".mcap":   # foreign, not MCAP, or not a
-            raise                                           # split file: leave it alone
-        info = LogInfo(path, damage=exc.problem)     # an empty file: set it aside
+        if path.stat().st_size or path.suffix != ".mcap":  # foreign, not MCAP, or not a
+            raise  # split file: leave it alone
+        info = LogInfo(path, damage=exc.problem)  # an empty file: set it aside
     if not info.messages:
         rewrite.unlink(missing_ok=True)
         os.replace(path, broken)
@@ -674,18 +717,22 @@ def _recover_file(path: Path) -> FileRecovery:
     try:
         for _ in read_messages(path, strict=True, info=check):
             pass
-        problem = "" if check.counts == info.counts else (
-            f"read back {check.messages} messages, expected {info.messages}")
+        problem = (
+            ""
+            if check.counts == info.counts
+            else (f"read back {check.messages} messages, expected {info.messages}")
+        )
     except LogError as exc:
         problem = exc.problem
     if problem:
-        os.replace(broken, path)                     # the original back in place
+        os.replace(broken, path)  # the original back in place
         raise LogError(path, f"recovery did not verify ({problem}); the file is unchanged")
     if info.cut_off:
         broken.unlink()
         broken = None
-    return FileRecovery(path, "recovered", info.messages, len(info.topics), info.damage, broken,
-                        check)
+    return FileRecovery(
+        path, "recovered", info.messages, len(info.topics), info.damage, broken, check
+    )
 
 
 def _sync_directory(directory: Path) -> None:
@@ -701,10 +748,13 @@ def bag_stats(infos: list[LogInfo], old: dict | None = None) -> BagStats:
     (custom data and QoS profiles of the `rosbag2_bagfile_information` `old`, if given); a
     topic recorded with two types is listed once per type."""
     old = old or {}
-    old_qos = {(t.get("topic_metadata") or {}).get("name"):
-               (t.get("topic_metadata") or {}).get("offered_qos_profiles")
-               for t in old.get("topics_with_message_count") or [] if isinstance(t, dict)
-               and isinstance(t.get("topic_metadata") or {}, dict)}
+    old_qos = {
+        (t.get("topic_metadata") or {}).get("name"): (t.get("topic_metadata") or {}).get(
+            "offered_qos_profiles"
+        )
+        for t in old.get("topics_with_message_count") or []
+        if isinstance(t, dict) and isinstance(t.get("topic_metadata") or {}, dict)
+    }
     custom = old.get("custom_data")
     stats = BagStats(custom_data=dict(custom) if isinstance(custom, dict) else {})
     topics: dict[tuple[str, str], TopicStats] = {}
@@ -726,8 +776,11 @@ def metadata_problem(bag: Path, infos: list[LogInfo] | None = None) -> str:
     problem = bagmeta.problem(bag, None if infos is None else bag_stats(infos))
     if not problem:
         return ""
-    mend = (f"`{RECOVER_HINT} {bag}` mends it" if _split_files(bag) else
-            f"`ros2 bag reindex {bag}` mends it")
+    mend = (
+        f"`{RECOVER_HINT} {bag}` mends it"
+        if _split_files(bag)
+        else f"`ros2 bag reindex {bag}` mends it"
+    )
     return f"{problem}; other tools (rosbags, ros2 bag) refuse or misread the bag; {mend}"
 
 
@@ -735,10 +788,12 @@ def _reindex(bag: Path, done: list[FileRecovery]) -> bool:
     """Write `bag/metadata.yaml` from the bag's files unless nothing was recovered and it
     already passes `bagmeta.problem` against them; True if written."""
     known = {f.path: f.info for f in done}
-    stats = bag_stats([known.get(f) or inspect(f) for f in _split_files(bag)],
-                      _read_metadata(bag))
-    if all(f.action == "complete" for f in done) and (bag / METADATA).is_file() \
-            and not bagmeta.problem(bag, stats):
+    stats = bag_stats([known.get(f) or inspect(f) for f in _split_files(bag)], _read_metadata(bag))
+    if (
+        all(f.action == "complete" for f in done)
+        and (bag / METADATA).is_file()
+        and not bagmeta.problem(bag, stats)
+    ):
         return False
     try:
         stats.write(bag)

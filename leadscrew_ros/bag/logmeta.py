@@ -13,9 +13,10 @@ parameters. A replay's annotated log carries the input log's record unchanged an
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 from leadscrew_ros import __version__
 from leadscrew_ros.model.physics.parameters import ParameterError, ScrewParameters, coerce
@@ -58,11 +59,15 @@ class LogMetadata:
 
     def record(self) -> dict[str, str]:
         """The MCAP Metadata map (string values; dicts as JSON)."""
-        return {"package_version": self.version, "formulation": self.formulation,
-                "unit_id": self.unit_id, "hardware_id": self.hardware_id,
-                "model_parameters": json.dumps(self.params, sort_keys=True),
-                "scatter": json.dumps(self.scatter, sort_keys=True),
-                "node_parameters": json.dumps(self.node, sort_keys=True)}
+        return {
+            "package_version": self.version,
+            "formulation": self.formulation,
+            "unit_id": self.unit_id,
+            "hardware_id": self.hardware_id,
+            "model_parameters": json.dumps(self.params, sort_keys=True),
+            "scatter": json.dumps(self.scatter, sort_keys=True),
+            "node_parameters": json.dumps(self.node, sort_keys=True),
+        }
 
     @classmethod
     def from_record(cls, record: Mapping[str, str]) -> LogMetadata:
@@ -75,8 +80,14 @@ class LogMetadata:
             raise ValueError(f"metadata '{RECORD_NAME}' is not readable: {exc}") from None
         if not all(isinstance(d, dict) for d in (params, scatter, node)):
             raise ValueError(f"metadata '{RECORD_NAME}': parameters are not JSON objects")
-        return cls(params, scatter, node, str(record.get("unit_id", "")),
-                   str(record.get("hardware_id", "")), str(record.get("package_version", "")))
+        return cls(
+            params,
+            scatter,
+            node,
+            str(record.get("unit_id", "")),
+            str(record.get("hardware_id", "")),
+            str(record.get("package_version", "")),
+        )
 
     def screw_parameters(self) -> ScrewParameters:
         """The recorded model parameters (unknown names ignored: a newer writer); ParameterError
@@ -101,7 +112,7 @@ def read_record(path: Path | str, name: str = RECORD_NAME) -> dict[str, str] | N
     with open(path, "rb") as stream:
         try:
             records = list(make_reader(stream).iter_metadata())
-        except Exception as exc:            # the mcap reader raises several unrelated types
+        except Exception as exc:  # the mcap reader raises several unrelated types
             error = ValueError(f"{Path(path).name}: metadata not readable: {exc}")
             stream.seek(0)
             records = []
@@ -109,7 +120,7 @@ def read_record(path: Path | str, name: str = RECORD_NAME) -> dict[str, str] | N
                 for record in StreamReader(stream, emit_chunks=True).records:
                     if isinstance(record, Metadata):
                         records.append(record)
-            except Exception:               # where the cut-off file ends
+            except Exception:  # where the cut-off file ends
                 pass
             if not any(rec.name == name for rec in records):
                 raise error from None

@@ -13,13 +13,23 @@ from __future__ import annotations
 
 import sqlite3
 from collections import Counter
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
 
 from . import msgdefs
-from .logfile import (ENCODINGS, LogError, LogInfo, LogMessage, Topic, _full_type, _split_key,
-                      log_files, read_messages, refuse_compressed)
+from .logfile import (
+    ENCODINGS,
+    LogError,
+    LogInfo,
+    LogMessage,
+    Topic,
+    _full_type,
+    _split_key,
+    log_files,
+    read_messages,
+    refuse_compressed,
+)
 
 DB3 = ".db3"
 
@@ -62,7 +72,7 @@ class LogSource:
         """
         for f in self.files:
             info = LogInfo(f)
-            for m in (_db3_messages(f, info) if self.sqlite else read_messages(f, info=info)):
+            for m in _db3_messages(f, info) if self.sqlite else read_messages(f, info=info):
                 yield f, m
             for name, topic in info.topics.items():
                 self.topics.setdefault(name, topic)
@@ -137,10 +147,11 @@ def _declared(source: LogSource) -> list[Topic]:
 
 def _mcap_topics(path: Path) -> list[Topic]:
     from mcap.reader import make_reader
+
     try:
         with open(path, "rb") as fh:
             summary = make_reader(fh).get_summary()
-    except Exception:                 # damaged or foreign: the strict read says why later
+    except Exception:  # damaged or foreign: the strict read says why later
         summary = None
     if summary is None:
         info = LogInfo(path)
@@ -151,8 +162,17 @@ def _mcap_topics(path: Path) -> list[Topic]:
     for _, c in sorted(summary.channels.items()):
         s = summary.schemas.get(c.schema_id)
         if s is not None:
-            out.append(Topic(c.topic, _full_type(s.name), s.encoding, "", c.message_encoding,
-                             dict(c.metadata), s.name))
+            out.append(
+                Topic(
+                    c.topic,
+                    _full_type(s.name),
+                    s.encoding,
+                    "",
+                    c.message_encoding,
+                    dict(c.metadata),
+                    s.name,
+                )
+            )
     return out
 
 
@@ -173,24 +193,38 @@ def _db3_topics(path: Path, con: sqlite3.Connection) -> dict[int, Topic]:
     """Topic id -> Topic, with the stored or installed message definition."""
     stored: dict[str, tuple[str, str]] = {}
     try:
-        stored = {t: (enc, text) for t, enc, text in con.execute(
-            "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions")}
-    except sqlite3.Error:             # before Iron: no definitions in the file
+        stored = {
+            t: (enc, text)
+            for t, enc, text in con.execute(
+                "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions"
+            )
+        }
+    except sqlite3.Error:  # before Iron: no definitions in the file
         pass
     topics = {}
     for tid, name, type_name, encoding, qos in con.execute(
-            "SELECT id, name, type, serialization_format, offered_qos_profiles FROM topics"):
+        "SELECT id, name, type, serialization_format, offered_qos_profiles FROM topics"
+    ):
         if encoding not in ENCODINGS:
-            raise LogError(path, f"foreign rosbag2 storage: topic {name} is serialized as "
-                                 f"{encoding!r}, expected cdr")
+            raise LogError(
+                path,
+                f"foreign rosbag2 storage: topic {name} is serialized as "
+                f"{encoding!r}, expected cdr",
+            )
         schema_encoding, text = stored.get(type_name, ("ros2msg", ""))
         if not text:
             try:
                 text = msgdefs.definition(type_name)
             except msgdefs.MessageDefinitionError:
                 text = ""
-        topics[tid] = Topic(name, type_name, schema_encoding or "ros2msg", text, encoding,
-                            {"offered_qos_profiles": qos or ""})
+        topics[tid] = Topic(
+            name,
+            type_name,
+            schema_encoding or "ros2msg",
+            text,
+            encoding,
+            {"offered_qos_profiles": qos or ""},
+        )
     return topics
 
 
@@ -202,7 +236,8 @@ def _db3_messages(path: Path, info: LogInfo) -> Iterator[LogMessage]:
         sequence: Counter[int] = Counter()
         try:
             for tid, stamp, data in con.execute(
-                    "SELECT topic_id, timestamp, data FROM messages ORDER BY id"):
+                "SELECT topic_id, timestamp, data FROM messages ORDER BY id"
+            ):
                 topic = topics.get(tid)
                 if topic is None:
                     raise LogError(path, f"message on unknown topic id {tid}")

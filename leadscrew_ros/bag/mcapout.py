@@ -24,19 +24,31 @@ import zstandard
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
-from mcap.records import (Attachment, AttachmentIndex, Channel, Chunk, ChunkIndex, DataEnd,
-                          Footer, Header, Metadata, MetadataIndex, Schema, Statistics,
-                          SummaryOffset)
+from mcap.records import (
+    Attachment,
+    AttachmentIndex,
+    Channel,
+    Chunk,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
 from mcap.writer import MCAP0_MAGIC
 
-CHUNK_BYTES = 1 << 20          # a chunk is compressed once its messages reach this size
-ZSTD_LEVEL = 1                 # chunks of small CDR messages: level 1 is ~2x level 3's speed
+CHUNK_BYTES = 1 << 20  # a chunk is compressed once its messages reach this size
+ZSTD_LEVEL = 1  # chunks of small CDR messages: level 1 is ~2x level 3's speed
 # Message record: opcode, record length, channel id, sequence, log time, publish time.
 _MESSAGE = struct.Struct("<BQHIQQ")
 _MESSAGE_FIELDS = 2 + 4 + 8 + 8
-_INDEX_HEAD = struct.Struct("<BQHI")     # message index: opcode, length, channel, bytes
-_FOOTER_TAIL = 1 + 8 + 20 + len(MCAP0_MAGIC)   # footer record and closing magic [bytes]
-_DATA_END_LENGTH = 1 + 8 + 4                   # data end record [bytes]
+_INDEX_HEAD = struct.Struct("<BQHI")  # message index: opcode, length, channel, bytes
+_FOOTER_TAIL = 1 + 8 + 20 + len(MCAP0_MAGIC)  # footer record and closing magic [bytes]
+_DATA_END_LENGTH = 1 + 8 + 4  # data end record [bytes]
 
 
 class McapOut:
@@ -52,8 +64,9 @@ class McapOut:
         Uncompressed chunk size [bytes] at which a chunk is written.
     """
 
-    def __init__(self, stream: BinaryIO, profile: str, library: str,
-                 chunk_bytes: int = CHUNK_BYTES):
+    def __init__(
+        self, stream: BinaryIO, profile: str, library: str, chunk_bytes: int = CHUNK_BYTES
+    ):
         self._setup(stream, chunk_bytes)
         stream.write(MCAP0_MAGIC)
         self._write(Header(profile, library))
@@ -64,7 +77,7 @@ class McapOut:
         self.schemas: list[Schema] = []
         self.channels: list[Channel] = []
         self._chunk = bytearray()
-        self._index: defaultdict[int, list[int]] = defaultdict(list)   # channel -> t, offset
+        self._index: defaultdict[int, list[int]] = defaultdict(list)  # channel -> t, offset
         self._start, self._end = None, 0
         self._chunk_indexes: list[ChunkIndex] = []
         self._counts: defaultdict[int, int] = defaultdict(int)
@@ -95,12 +108,14 @@ class McapOut:
         try:
             summary = make_reader(stream).get_summary()
             stream.seek(stream.seek(0, 2) - _FOOTER_TAIL)
-            data_end = struct.unpack_from("<Q", stream.read(_FOOTER_TAIL), 9)[0] \
-                - _DATA_END_LENGTH
+            data_end = struct.unpack_from("<Q", stream.read(_FOOTER_TAIL), 9)[0] - _DATA_END_LENGTH
             stream.seek(data_end)
-            finished = summary is not None and summary.statistics is not None and \
-                stream.read(1) == bytes([Opcode.DATA_END])
-        except Exception:               # the mcap reader raises several unrelated types
+            finished = (
+                summary is not None
+                and summary.statistics is not None
+                and stream.read(1) == bytes([Opcode.DATA_END])
+            )
+        except Exception:  # the mcap reader raises several unrelated types
             finished = False
         if not finished:
             raise ValueError("not an MCAP file finished by McapOut")
@@ -141,25 +156,37 @@ class McapOut:
         self._record(schema)
         return schema.id
 
-    def register_channel(self, topic: str, message_encoding: str, schema_id: int,
-                         metadata: dict[str, str]) -> int:
+    def register_channel(
+        self, topic: str, message_encoding: str, schema_id: int, metadata: dict[str, str]
+    ) -> int:
         """A new channel; returns its id (1, 2, ...)."""
-        channel = Channel(id=len(self.channels) + 1, topic=topic,
-                          message_encoding=message_encoding, schema_id=schema_id,
-                          metadata=dict(metadata))
+        channel = Channel(
+            id=len(self.channels) + 1,
+            topic=topic,
+            message_encoding=message_encoding,
+            schema_id=schema_id,
+            metadata=dict(metadata),
+        )
         self.channels.append(channel)
         self._record(channel)
         return channel.id
 
-    def add_message(self, channel_id: int, log_time_ns: int, data: bytes,
-                    publish_time_ns: int, sequence: int) -> None:
+    def add_message(
+        self, channel_id: int, log_time_ns: int, data: bytes, publish_time_ns: int, sequence: int
+    ) -> None:
         """One message; the chunk is written once it is `chunk_bytes` long."""
         chunk = self._chunk
         index = self._index[channel_id]
         index.append(log_time_ns)
         index.append(len(chunk))
-        chunk += _MESSAGE.pack(Opcode.MESSAGE, _MESSAGE_FIELDS + len(data), channel_id,
-                               sequence, log_time_ns, publish_time_ns)
+        chunk += _MESSAGE.pack(
+            Opcode.MESSAGE,
+            _MESSAGE_FIELDS + len(data),
+            channel_id,
+            sequence,
+            log_time_ns,
+            publish_time_ns,
+        )
         chunk += data
         if self._start is None or log_time_ns < self._start:
             self._start = log_time_ns
@@ -168,17 +195,33 @@ class McapOut:
         if len(chunk) >= self.chunk_bytes:
             self._finish_chunk()
 
-    def add_attachment(self, name: str, media_type: str, data: bytes, log_time_ns: int,
-                       create_time_ns: int) -> None:
+    def add_attachment(
+        self, name: str, media_type: str, data: bytes, log_time_ns: int, create_time_ns: int
+    ) -> None:
         """One attachment (e.g. 'episodes.json', 'application/json'), after the messages so
         far; times [ns] as MCAP defines them (log time: on the messages' clock)."""
         self._finish_chunk()
         offset = self.stream.tell()
-        length = self._write(Attachment(create_time=create_time_ns, log_time=log_time_ns,
-                                        name=name, media_type=media_type, data=data))
-        self._attachments.append(AttachmentIndex(
-            offset=offset, length=length, log_time=log_time_ns, create_time=create_time_ns,
-            data_size=len(data), name=name, media_type=media_type))
+        length = self._write(
+            Attachment(
+                create_time=create_time_ns,
+                log_time=log_time_ns,
+                name=name,
+                media_type=media_type,
+                data=data,
+            )
+        )
+        self._attachments.append(
+            AttachmentIndex(
+                offset=offset,
+                length=length,
+                log_time=log_time_ns,
+                create_time=create_time_ns,
+                data_size=len(data),
+                name=name,
+                media_type=media_type,
+            )
+        )
 
     def add_metadata(self, name: str, metadata: dict[str, str]) -> None:
         """One Metadata record (a string -> string map), after the messages so far."""
@@ -188,29 +231,42 @@ class McapOut:
         self._metadata.append(MetadataIndex(offset=offset, length=length, name=name))
 
     def _finish_chunk(self) -> None:
-        if not self._index:            # no message yet: schemas and channels wait
+        if not self._index:  # no message yet: schemas and channels wait
             return
         data = bytes(self._chunk)
         compressed = self._zstd.compress(data)
         start = self.stream.tell()
-        length = self._write(Chunk(
-            message_start_time=self._start, message_end_time=self._end,
-            uncompressed_size=len(data), uncompressed_crc=zlib.crc32(data), compression="zstd",
-            data=compressed))
+        length = self._write(
+            Chunk(
+                message_start_time=self._start,
+                message_end_time=self._end,
+                uncompressed_size=len(data),
+                uncompressed_crc=zlib.crc32(data),
+                compression="zstd",
+                data=compressed,
+            )
+        )
         offsets, index = {}, bytearray()
         for channel_id, entries in self._index.items():
             offsets[channel_id] = start + length + len(index)
             body = struct.pack(f"<{len(entries)}Q", *entries)
-            index += _INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + len(body), channel_id,
-                                      len(body))
+            index += _INDEX_HEAD.pack(Opcode.MESSAGE_INDEX, 6 + len(body), channel_id, len(body))
             index += body
             self._counts[channel_id] += len(entries) // 2
         self.stream.write(index)
-        self._chunk_indexes.append(ChunkIndex(
-            message_start_time=self._start, message_end_time=self._end,
-            chunk_start_offset=start, chunk_length=length, message_index_offsets=offsets,
-            message_index_length=len(index), compression="zstd",
-            compressed_size=len(compressed), uncompressed_size=len(data)))
+        self._chunk_indexes.append(
+            ChunkIndex(
+                message_start_time=self._start,
+                message_end_time=self._end,
+                chunk_start_offset=start,
+                chunk_length=length,
+                message_index_offsets=offsets,
+                message_index_length=len(index),
+                compression="zstd",
+                compressed_size=len(compressed),
+                uncompressed_size=len(data),
+            )
+        )
         self._first = self._start if self._first is None else min(self._first, self._start)
         self._last = max(self._last, self._end)
         self._chunk.clear()
@@ -219,34 +275,49 @@ class McapOut:
 
     def finish(self) -> None:
         """The last chunk, the summary and the footer."""
-        self._finish_chunk()           # schemas and channels after it: in the summary only
+        self._finish_chunk()  # schemas and channels after it: in the summary only
         self._write(DataEnd(0))
         summary_start = self.stream.tell()
         rb, offsets = RecordBuilder(), []
         stats = Statistics(
-            message_count=sum(self._counts.values()), schema_count=len(self.schemas),
-            channel_count=len(self.channels), attachment_count=len(self._attachments),
+            message_count=sum(self._counts.values()),
+            schema_count=len(self.schemas),
+            channel_count=len(self.channels),
+            attachment_count=len(self._attachments),
             metadata_count=len(self._metadata),
-            chunk_count=len(self._chunk_indexes), message_start_time=self._first or 0,
-            message_end_time=self._last, channel_message_counts=dict(self._counts))
-        for opcode, group in ((Opcode.SCHEMA, self.schemas), (Opcode.CHANNEL, self.channels),
-                              (Opcode.STATISTICS, [stats]),
-                              (Opcode.CHUNK_INDEX, self._chunk_indexes),
-                              (Opcode.ATTACHMENT_INDEX, self._attachments),
-                              (Opcode.METADATA_INDEX, self._metadata)):
+            chunk_count=len(self._chunk_indexes),
+            message_start_time=self._first or 0,
+            message_end_time=self._last,
+            channel_message_counts=dict(self._counts),
+        )
+        for opcode, group in (
+            (Opcode.SCHEMA, self.schemas),
+            (Opcode.CHANNEL, self.channels),
+            (Opcode.STATISTICS, [stats]),
+            (Opcode.CHUNK_INDEX, self._chunk_indexes),
+            (Opcode.ATTACHMENT_INDEX, self._attachments),
+            (Opcode.METADATA_INDEX, self._metadata),
+        ):
             group_start = rb.count
             for record in group:
                 record.write(rb)
-            offsets.append(SummaryOffset(group_opcode=opcode,
-                                         group_start=summary_start + group_start,
-                                         group_length=rb.count - group_start))
+            offsets.append(
+                SummaryOffset(
+                    group_opcode=opcode,
+                    group_start=summary_start + group_start,
+                    group_length=rb.count - group_start,
+                )
+            )
         offset_start = summary_start + rb.count
         for o in offsets:
             o.write(rb)
         summary = rb.end()
-        crc = zlib.crc32(struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, offset_start),
-                         zlib.crc32(summary))
+        crc = zlib.crc32(
+            struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, offset_start),
+            zlib.crc32(summary),
+        )
         self.stream.write(summary)
-        self._write(Footer(summary_start=summary_start, summary_offset_start=offset_start,
-                           summary_crc=crc))
+        self._write(
+            Footer(summary_start=summary_start, summary_offset_start=offset_start, summary_crc=crc)
+        )
         self.stream.write(MCAP0_MAGIC)

@@ -18,17 +18,23 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from . import cdr
 from ..model import Prediction
+from . import cdr
 
 RISK, MARGIN = "squeak/risk", "squeak/margin"
 FREQUENCIES, ACTIVE = "squeak/unstable_frequencies", "squeak/active"
 MODES, SAFE_SPEED = "squeak/modes", "squeak/safe_speed"
-OUTPUT_TYPES = {RISK: cdr.FLOAT64, MARGIN: cdr.FLOAT64, FREQUENCIES: cdr.FLOAT64_MULTI_ARRAY,
-                ACTIVE: cdr.BOOL, MODES: cdr.FLOAT64_MULTI_ARRAY, SAFE_SPEED: cdr.FLOAT64}
-PREDICTION_TOPICS = (RISK, MARGIN, FREQUENCIES, ACTIVE, MODES)   # one prediction publishes
+OUTPUT_TYPES = {
+    RISK: cdr.FLOAT64,
+    MARGIN: cdr.FLOAT64,
+    FREQUENCIES: cdr.FLOAT64_MULTI_ARRAY,
+    ACTIVE: cdr.BOOL,
+    MODES: cdr.FLOAT64_MULTI_ARRAY,
+    SAFE_SPEED: cdr.FLOAT64,
+}
+PREDICTION_TOPICS = (RISK, MARGIN, FREQUENCIES, ACTIVE, MODES)  # one prediction publishes
 MODE_COLUMNS = ("frequency_hz", "growth_rate", "damping_ratio")
-MODES_PREFIX = "modes:"                                     # of the row dimension's label
+MODES_PREFIX = "modes:"  # of the row dimension's label
 
 
 class Mode(NamedTuple):
@@ -36,18 +42,20 @@ class Mode(NamedTuple):
 
     label: str
     frequency_hz: float
-    growth_rate: float           # [1/s], > 0: the mode grows (squeak)
-    damping_ratio: float         # [1]
+    growth_rate: float  # [1/s], > 0: the mode grows (squeak)
+    damping_ratio: float  # [1]
 
 
 def prediction_payloads(p: Prediction) -> tuple[tuple[str, bytes], ...]:
     """(topic, CDR payload) of every topic in `PREDICTION_TOPICS` for a valid prediction, in
     that order."""
-    return ((RISK, cdr.encode_float64(float(p.probability))),
-            (MARGIN, cdr.encode_float64(math.inf if p.margin is None else float(p.margin))),
-            (FREQUENCIES, frequencies_payload(p)),
-            (ACTIVE, cdr.encode_bool(not p.stable)),
-            (MODES, modes_payload(p)))
+    return (
+        (RISK, cdr.encode_float64(float(p.probability))),
+        (MARGIN, cdr.encode_float64(math.inf if p.margin is None else float(p.margin))),
+        (FREQUENCIES, frequencies_payload(p)),
+        (ACTIVE, cdr.encode_bool(not p.stable)),
+        (MODES, modes_payload(p)),
+    )
 
 
 def safe_speed_payload(speed_rad_s: float) -> bytes:
@@ -58,17 +66,21 @@ def safe_speed_payload(speed_rad_s: float) -> bytes:
 def frequencies_payload(p: Prediction) -> bytes:
     """squeak/unstable_frequencies: squeak frequencies [Hz], most unstable first."""
     n = len(p.unstable_frequencies_hz)
-    return cdr.encode_float64_multi_array((cdr.Dimension("frequency_hz", n, n),),
-                                          [float(f) for f in p.unstable_frequencies_hz])
+    return cdr.encode_float64_multi_array(
+        (cdr.Dimension("frequency_hz", n, n),), [float(f) for f in p.unstable_frequencies_hz]
+    )
 
 
 def modes_payload(p: Prediction) -> bytes:
     """squeak/modes of a prediction (layout in the module docstring)."""
     rows, cols = len(p.modes), len(MODE_COLUMNS)
     return cdr.encode_float64_multi_array(
-        (cdr.Dimension(MODES_PREFIX + ",".join(m.label for m in p.modes), rows, rows * cols),
-         cdr.Dimension(",".join(MODE_COLUMNS), cols, cols)),
-        [float(v) for m in p.modes for v in (m.frequency_hz, m.growth_rate, m.damping_ratio)])
+        (
+            cdr.Dimension(MODES_PREFIX + ",".join(m.label for m in p.modes), rows, rows * cols),
+            cdr.Dimension(",".join(MODE_COLUMNS), cols, cols),
+        ),
+        [float(v) for m in p.modes for v in (m.frequency_hz, m.growth_rate, m.damping_ratio)],
+    )
 
 
 def decode_modes(data: bytes) -> tuple[Mode, ...]:
@@ -78,13 +90,15 @@ def decode_modes(data: bytes) -> tuple[Mode, ...]:
     if len(msg.dim) != 2 or not msg.dim[0].label.startswith(MODES_PREFIX):
         raise ValueError(f"not a squeak/modes layout: {[d.label for d in msg.dim]}")
     rows, columns = msg.dim
-    labels = rows.label[len(MODES_PREFIX):].split(",") if rows.size else []
+    labels = rows.label[len(MODES_PREFIX) :].split(",") if rows.size else []
     if columns.label.split(",") != list(MODE_COLUMNS) or columns.size != len(MODE_COLUMNS):
-        raise ValueError(f"squeak/modes columns are {columns.label!r}, expected "
-                         f"{','.join(MODE_COLUMNS)!r}")
-    if len(labels) != rows.size or msg.data_offset or \
-            len(msg.data) != rows.size * columns.size:
-        raise ValueError(f"squeak/modes of {len(labels)} labels, {rows.size} rows, offset "
-                         f"{msg.data_offset} and {len(msg.data)} values")
+        raise ValueError(
+            f"squeak/modes columns are {columns.label!r}, expected {','.join(MODE_COLUMNS)!r}"
+        )
+    if len(labels) != rows.size or msg.data_offset or len(msg.data) != rows.size * columns.size:
+        raise ValueError(
+            f"squeak/modes of {len(labels)} labels, {rows.size} rows, offset "
+            f"{msg.data_offset} and {len(msg.data)} values"
+        )
     n = len(MODE_COLUMNS)
-    return tuple(Mode(label, *msg.data[i * n:(i + 1) * n]) for i, label in enumerate(labels))
+    return tuple(Mode(label, *msg.data[i * n : (i + 1) * n]) for i, label in enumerate(labels))

@@ -23,8 +23,23 @@ from pathlib import Path
 from . import cdr
 
 DELIMITER = "=" * 80
-_PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
-               "int32", "uint32", "int64", "uint64", "string", "wstring"}
+_PRIMITIVES = {
+    "bool",
+    "byte",
+    "char",
+    "float32",
+    "float64",
+    "int8",
+    "uint8",
+    "int16",
+    "uint16",
+    "int32",
+    "uint32",
+    "int64",
+    "uint64",
+    "string",
+    "wstring",
+}
 
 
 class MessageDefinitionError(LookupError):
@@ -32,8 +47,13 @@ class MessageDefinitionError(LookupError):
 
 
 BUNDLED = Path(__file__).resolve().parent / "jazzy_msgs"
-BUNDLED_TYPES = (cdr.FLOAT64, cdr.BOOL, cdr.FLOAT64_MULTI_ARRAY, cdr.JOINT_STATE,
-                 cdr.DIAGNOSTIC_ARRAY)
+BUNDLED_TYPES = (
+    cdr.FLOAT64,
+    cdr.BOOL,
+    cdr.FLOAT64_MULTI_ARRAY,
+    cdr.JOINT_STATE,
+    cdr.DIAGNOSTIC_ARRAY,
+)
 
 
 def type_name(msg_type) -> str:
@@ -47,7 +67,7 @@ def _prefixes() -> list[Path]:
     return [Path(p) for p in roots] + [Path(sys.prefix), BUNDLED]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def msg_text(name: str) -> str:
     """The .msg file of 'pkg/msg/Type' (or 'pkg/Type') as installed."""
     pkg, _, typ = _split(name)
@@ -74,8 +94,8 @@ def _field_types(text: str, package: str) -> list[str]:
         line = line.split("#", 1)[0].strip()
         if not line:
             continue
-        base = re.sub(r"\[.*\]$", "", line.split()[0])         # drop [], [N], [<=N]
-        base = re.sub(r"<=\d+$", "", base)                      # bounded strings
+        base = re.sub(r"\[.*\]$", "", line.split()[0])  # drop [], [N], [<=N]
+        base = re.sub(r"<=\d+$", "", base)  # bounded strings
         if base in _PRIMITIVES or "=" in line.split()[0]:
             continue
         pkg, _, typ = _split(base) if "/" in base else (package, "msg", base)
@@ -83,7 +103,7 @@ def _field_types(text: str, package: str) -> list[str]:
     return out
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def definition(name: str) -> str:
     """`ros2msg` schema text of 'pkg/msg/Type': root definition, then each dependency once,
     depth first in field order (as rosbag2 writes it)."""

@@ -43,22 +43,25 @@ import os
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 from mcap.writer import CompressionType, Writer
 
+from ..model.physics.metadata import check, documented, setting
 from . import livelock, msgdefs
 from .bagmeta import METADATA, BagStats, FileStats, TopicStats
-from ..model.physics.metadata import check, documented, setting
 
-COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
-                "none": CompressionType.NONE}
-_CHUNK_BYTES = 4 << 20         # chunks are closed by the flush period long before this size
-LOST_KEY, LOST_BY_TOPIC_KEY = "lost_messages", "lost_messages_by_topic"   # metadata custom_data
-INCIDENT_KEY = "incident"              # metadata custom_data: a file lost while recording
-_CHECK_PERIOD_NS = 200_000_000         # how often `tick` checks that the file is still there
+COMPRESSIONS = {
+    "zstd": CompressionType.ZSTD,
+    "lz4": CompressionType.LZ4,
+    "none": CompressionType.NONE,
+}
+_CHUNK_BYTES = 4 << 20  # chunks are closed by the flush period long before this size
+LOST_KEY, LOST_BY_TOPIC_KEY = "lost_messages", "lost_messages_by_topic"  # metadata custom_data
+INCIDENT_KEY = "incident"  # metadata custom_data: a file lost while recording
+_CHECK_PERIOD_NS = 200_000_000  # how often `tick` checks that the file is still there
 # A message every file starts with: topic, 'pkg/msg/Type', CDR payload, publish time (None:
 # the log time)
 StateMessage = tuple[str, str, bytes, "int | None"]
@@ -73,8 +76,9 @@ def ensure_directory(directory: str) -> Path:
         root.mkdir(parents=True, exist_ok=True)
         os.rmdir(tempfile.mkdtemp(prefix=".probe_", dir=root))
     except OSError as exc:
-        raise OSError(exc.errno, f"{exc.filename or root}: {exc.strerror or exc}; cannot "
-                      f"record into {root}") from None
+        raise OSError(
+            exc.errno, f"{exc.filename or root}: {exc.strerror or exc}; cannot record into {root}"
+        ) from None
     return root
 
 
@@ -85,19 +89,33 @@ class RecordSettings:
     field metadata, from which the node's `record.*` parameters are made)."""
 
     directory: str = setting(
-        ".", "", "directory that receives one [<namespace>_]squeak_<UTC wall-clock time> bag "
-        "per recording; created if missing (mkdir -p)")
+        ".",
+        "",
+        "directory that receives one [<namespace>_]squeak_<UTC wall-clock time> bag "
+        "per recording; created if missing (mkdir -p)",
+    )
     split_size_mb: float = setting(
-        512.0, "MB", "start a new file beyond this size (0: never)", 0.0, 1e6)
+        512.0, "MB", "start a new file beyond this size (0: never)", 0.0, 1e6
+    )
     split_duration_s: float = setting(
-        600.0, "s", "start a new file after this long (0: never)", 0.0, 1e7)
+        600.0, "s", "start a new file after this long (0: never)", 0.0, 1e7
+    )
     compression: str = setting("zstd", "", "chunk compression", choices=tuple(COMPRESSIONS))
     flush_period_s: float = setting(
-        0.5, "s", "hand recorded data to the OS this often: the most a killed process loses",
-        0.05, 10.0)
+        0.5,
+        "s",
+        "hand recorded data to the OS this often: the most a killed process loses",
+        0.05,
+        10.0,
+    )
     queue_depth: int = setting(
-        10000, "1", "DDS history of each input recording subscription: messages held per "
-        "topic while the process is busy (10 s at 1 kHz)", 1, 1_000_000)
+        10000,
+        "1",
+        "DDS history of each input recording subscription: messages held per "
+        "topic while the process is busy (10 s at 1 kHz)",
+        1,
+        1_000_000,
+    )
 
     def __post_init__(self):
         check(self)
@@ -125,7 +143,7 @@ class TopicLoss:
         """A message with publication sequence number `sequence` was taken; `publishers`
         (called only when the sequence does not continue) counts the topic's publishers."""
         last, self._last = self._last, sequence
-        if sequence is None:                   # the middleware does not number its messages
+        if sequence is None:  # the middleware does not number its messages
             self.sequence_checked = False
         if not self.sequence_checked or last is None or sequence == last + 1:
             return
@@ -142,8 +160,12 @@ class TopicLoss:
 
     def as_dict(self) -> dict:
         """The counts as a JSON-ready dict."""
-        return {"lost": self.lost, "sequence_gaps": self.sequence_gaps,
-                "dds_lost": self.dds_lost, "sequence_checked": self.sequence_checked}
+        return {
+            "lost": self.lost,
+            "sequence_gaps": self.sequence_gaps,
+            "dds_lost": self.dds_lost,
+            "sequence_checked": self.sequence_checked,
+        }
 
 
 @dataclass
@@ -151,9 +173,9 @@ class _Topic:
     name: str
     type_name: str
     count: int = 0
-    channel_id: int | None = None       # in the current file
-    in_file: int = 0                    # messages in the current file
-    dropped: int = 0                    # messages in files lost under the recorder
+    channel_id: int | None = None  # in the current file
+    in_file: int = 0  # messages in the current file
+    dropped: int = 0  # messages in files lost under the recorder
 
 
 @dataclass
@@ -190,11 +212,11 @@ class Recorder:
     """
 
     settings: RecordSettings = field(default_factory=RecordSettings)
-    name: str = "squeak"                 # bag directory prefix (the node adds its namespace)
-    clock: Callable[[], int] = time.time_ns   # log time [ns] of a message written without one
-    bag: Path | None = None              # directory of the recording in progress / last one
-    error: str = ""                      # why the last recording stopped on its own
-    incident: str = ""                   # a file of this recording lost under the recorder
+    name: str = "squeak"  # bag directory prefix (the node adds its namespace)
+    clock: Callable[[], int] = time.time_ns  # log time [ns] of a message written without one
+    bag: Path | None = None  # directory of the recording in progress / last one
+    error: str = ""  # why the last recording stopped on its own
+    incident: str = ""  # a file of this recording lost under the recorder
     files: list[FileStats] = field(default_factory=list)
     losses: dict[str, TopicLoss] = field(default_factory=dict)
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
@@ -283,9 +305,14 @@ class Recorder:
             self._close(finish=True)
             self._write_metadata()
 
-    def write_serialized(self, topic: str, type_name: str, data: bytes,
-                         log_time_ns: int | None = None, publish_time_ns: int | None = None
-                         ) -> None:
+    def write_serialized(
+        self,
+        topic: str,
+        type_name: str,
+        data: bytes,
+        log_time_ns: int | None = None,
+        publish_time_ns: int | None = None,
+    ) -> None:
         """Record one serialized (CDR) message (nothing when not recording).
 
         Parameters
@@ -313,9 +340,13 @@ class Recorder:
             try:
                 if t.channel_id is None:
                     t.channel_id = self._register(t)
-                self._writer.add_message(t.channel_id, log_time_ns, data,
-                                         log_time_ns if publish_time_ns is None
-                                         else publish_time_ns, t.count)
+                self._writer.add_message(
+                    t.channel_id,
+                    log_time_ns,
+                    data,
+                    log_time_ns if publish_time_ns is None else publish_time_ns,
+                    t.count,
+                )
             except OSError as exc:
                 self._fail(exc)
                 return
@@ -341,8 +372,10 @@ class Recorder:
                     self._writer.flush()
                     self._last_flush_ns = now_ns
                 too_big = s.split_size_mb > 0 and self._out.tell() >= s.split_size_mb * 1e6
-                too_old = s.split_duration_s > 0 and now_ns - self._file_start_ns >= \
-                    s.split_duration_s * 1e9
+                too_old = (
+                    s.split_duration_s > 0
+                    and now_ns - self._file_start_ns >= s.split_duration_s * 1e9
+                )
                 gone = ""
                 if now_ns - self._last_check_ns >= _CHECK_PERIOD_NS:
                     self._last_check_ns = now_ns
@@ -395,9 +428,11 @@ class Recorder:
         self._lost_files.add(lost.path)
         for t in self._topics.values():
             t.dropped += t.in_file
-        self.incident = (f"{lost.path} was {what} while being recorded ({lost.messages} "
-                         f"messages lost with it); recording continues in "
-                         f"{self.bag / self._file_name(len(self.files))}")
+        self.incident = (
+            f"{lost.path} was {what} while being recorded ({lost.messages} "
+            f"messages lost with it); recording continues in "
+            f"{self.bag / self._file_name(len(self.files))}"
+        )
         try:
             self.bag.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -412,10 +447,13 @@ class Recorder:
         path = self.bag / self._file_name(len(self.files))
         self.files.append(FileStats(path))
         try:
-            self._out = open(path, "xb")         # never over another file
+            self._out = open(path, "xb")  # never over another file
             livelock.hold(self._out.fileno())
-            self._writer = Writer(self._out, chunk_size=_CHUNK_BYTES,
-                                  compression=COMPRESSIONS[self.settings.compression])
+            self._writer = Writer(
+                self._out,
+                chunk_size=_CHUNK_BYTES,
+                compression=COMPRESSIONS[self.settings.compression],
+            )
             self._writer.start(profile="ros2", library="leadscrew_ros recorder")
             for name, record in self.metadata.items():
                 self._writer.add_metadata(name, record)
@@ -424,9 +462,9 @@ class Recorder:
             self._fail(exc)
             return False
         for t in self._topics.values():
-            t.channel_id, t.in_file = None, 0    # each file registers its own channels
+            t.channel_id, t.in_file = None, 0  # each file registers its own channels
         self._file_start_ns = self._last_flush_ns = self._last_check_ns = now_ns
-        if self.state is not None:               # the file starts with the current state
+        if self.state is not None:  # the file starts with the current state
             start_ns = self.clock()
             for topic, type_name, data, publish_time_ns in self.state():
                 self.write_serialized(topic, type_name, data, start_ns, publish_time_ns)
@@ -435,8 +473,7 @@ class Recorder:
     def _register(self, t: _Topic) -> int:
         text = self.schemas.get(t.type_name) or msgdefs.definition(t.type_name)
         schema = self._writer.register_schema(t.type_name, "ros2msg", text.encode())
-        return self._writer.register_channel(t.name, "cdr", schema,
-                                             {"offered_qos_profiles": ""})
+        return self._writer.register_channel(t.name, "cdr", schema, {"offered_qos_profiles": ""})
 
     def _close(self, finish: bool) -> None:
         writer, out, self._writer, self._out = self._writer, self._out, None, None
@@ -452,7 +489,7 @@ class Recorder:
             try:
                 out.close()
             except OSError:
-                pass                  # the buffer could not be written: already reported
+                pass  # the buffer could not be written: already reported
 
     def _fail(self, exc: OSError, writer_gone: bool = False) -> None:
         path = exc.filename or (self.files[-1].path if self.files else self.bag)
@@ -466,11 +503,13 @@ class Recorder:
         custom = {LOST_KEY: str(self.lost), LOST_BY_TOPIC_KEY: json.dumps(losses, sort_keys=True)}
         if self.incident:
             custom[INCIDENT_KEY] = self.incident
-        stats = BagStats(files=[f for f in self.files if f.path.exists()
-                                and f.path not in self._lost_files],
-                         topics=[TopicStats(t.name, t.type_name, t.count - t.dropped)
-                                 for t in self._topics.values()],
-                         custom_data=custom)
+        stats = BagStats(
+            files=[f for f in self.files if f.path.exists() and f.path not in self._lost_files],
+            topics=[
+                TopicStats(t.name, t.type_name, t.count - t.dropped) for t in self._topics.values()
+            ],
+            custom_data=custom,
+        )
         try:
             stats.write(self.bag)
         except OSError as exc:

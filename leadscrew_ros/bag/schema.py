@@ -33,21 +33,45 @@ import numpy as np
 
 DELIMITER_RE = re.compile(r"^={10,}\s*$")
 _HEADER = 4
-_ENCAPSULATION = {b"\x00\x00": ">", b"\x00\x01": "<"}     # CDR_BE, CDR_LE
+_ENCAPSULATION = {b"\x00\x00": ">", b"\x00\x01": "<"}  # CDR_BE, CDR_LE
 _LE_HEADER = b"\x00\x01\x00\x00"
 # primitive -> (struct code, size); byte and char are octets (ROS 2: char is uint8)
 PRIMITIVES: dict[str, tuple[str, int]] = {
-    "bool": ("?", 1), "byte": ("B", 1), "char": ("B", 1), "int8": ("b", 1), "uint8": ("B", 1),
-    "int16": ("h", 2), "uint16": ("H", 2), "int32": ("i", 4), "uint32": ("I", 4),
-    "int64": ("q", 8), "uint64": ("Q", 8), "float32": ("f", 4), "float64": ("d", 8)}
-_NUMPY = {"bool": "u1", "byte": "u1", "char": "u1", "int8": "i1", "uint8": "u1",
-          "int16": "i2", "uint16": "u2", "int32": "i4", "uint32": "u4", "int64": "i8",
-          "uint64": "u8", "float32": "f4", "float64": "f8"}
+    "bool": ("?", 1),
+    "byte": ("B", 1),
+    "char": ("B", 1),
+    "int8": ("b", 1),
+    "uint8": ("B", 1),
+    "int16": ("h", 2),
+    "uint16": ("H", 2),
+    "int32": ("i", 4),
+    "uint32": ("I", 4),
+    "int64": ("q", 8),
+    "uint64": ("Q", 8),
+    "float32": ("f", 4),
+    "float64": ("d", 8),
+}
+_NUMPY = {
+    "bool": "u1",
+    "byte": "u1",
+    "char": "u1",
+    "int8": "i1",
+    "uint8": "u1",
+    "int16": "i2",
+    "uint16": "u2",
+    "int32": "i4",
+    "uint32": "u4",
+    "int64": "i8",
+    "uint64": "u8",
+    "float32": "f4",
+    "float64": "f8",
+}
 _STRUCTS = {(e, code): struct.Struct(e + code) for e in "<>" for code, _ in PRIMITIVES.values()}
 _U32 = {e: struct.Struct(e + "I") for e in "<>"}
 _FIELD_RE = re.compile(
     r"^(?P<type>[A-Za-z][\w/]*)(?:<=(?P<strbound>\d+))?"
-    r"(?:\[(?P<array>(?:<=)?\d*)\])?$")
+    r"(?:\[(?P<array>(?:<=)?\d*)\])?$"
+)
 _NAME_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
 
@@ -188,7 +212,7 @@ def _parse_fields(text: str, type_name: str) -> tuple[Field, ...]:
             raise SchemaError(f"{type_name} line {number}: {line!r} is not 'type name'")
         rest = parts[1].split("#", 1)[0].strip()
         if re.match(r"^[A-Za-z][A-Za-z0-9_]*\s*=", rest):
-            continue                                     # a constant
+            continue  # a constant
         name = rest.split()[0] if rest.split() else ""
         m = _FIELD_RE.match(parts[0])
         if m is None or not _NAME_RE.match(name):
@@ -255,14 +279,17 @@ def parse(text: str, name: str) -> MessageSchema:
     for type_name, flds in types.items():
         for f in flds:
             if not f.primitive and f.type != "string" and f.type not in types:
-                raise SchemaError(f"{type_name}.{f.name}: type {f.type} is not defined in the "
-                                  f"schema text of {root}")
+                raise SchemaError(
+                    f"{type_name}.{f.name}: type {f.type} is not defined in the "
+                    f"schema text of {root}"
+                )
     _check_acyclic(root, types, ())
     return MessageSchema(root, types)
 
 
-def _check_acyclic(type_name: str, types: Mapping[str, tuple[Field, ...]],
-                   path: tuple[str, ...]) -> None:
+def _check_acyclic(
+    type_name: str, types: Mapping[str, tuple[Field, ...]], path: tuple[str, ...]
+) -> None:
     if type_name in path:
         raise SchemaError(f"recursive message definition: {' -> '.join(path + (type_name,))}")
     for f in types[type_name]:
@@ -277,8 +304,7 @@ class _Reader:
 
     def _need(self, pos: int, size: int, what: str) -> None:
         if pos + size > len(self.buf):
-            raise CdrError(f"{what}: payload cut off at byte {len(self.buf)} (needs "
-                           f"{pos + size})")
+            raise CdrError(f"{what}: payload cut off at byte {len(self.buf)} (needs {pos + size})")
 
     def _align(self, pos: int, size: int) -> int:
         return pos + (_HEADER - pos) % size
@@ -300,18 +326,18 @@ class _Reader:
 
     def string(self, pos: int, what: str) -> tuple[str, int]:
         n, pos = self.count(pos, 1, what)
-        if n == 0:                       # not what Fast CDR writes, but unambiguous
+        if n == 0:  # not what Fast CDR writes, but unambiguous
             return "", pos
         if self.buf[pos + n - 1] != 0:
             raise CdrError(f"{what}: string not terminated by NUL")
         try:
-            return self.buf[pos:pos + n - 1].decode("utf-8"), pos + n
+            return self.buf[pos : pos + n - 1].decode("utf-8"), pos + n
         except UnicodeDecodeError as exc:
             raise CdrError(f"{what}: string is not UTF-8 ({exc.reason})") from None
 
     def message(self, type_name: str, pos: int, what: str) -> tuple[dict[str, Any], int]:
         fields = self.types[type_name]
-        if not fields:                   # rosidl's structure_needs_at_least_one_member
+        if not fields:  # rosidl's structure_needs_at_least_one_member
             _, pos = self.scalar("uint8", pos, what)
             return {}, pos
         out: dict[str, Any] = {}
@@ -368,7 +394,8 @@ class _Writer:
             if isinstance(value, (str, bytes)):
                 raise CdrError(f"{what}: {value!r} is not a number")
         elif isinstance(value, (float, np.floating)) or not isinstance(
-                value, (int, np.integer, bool, np.bool_)):
+            value, (int, np.integer, bool, np.bool_)
+        ):
             raise CdrError(f"{what}: {value!r} is not an integer ({type_})")
         try:
             self.out += _STRUCTS["<", code].pack(value)

@@ -16,13 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ..live.profile import StrokeProfile
 from .cdr import FLOAT64, JOINT_STATE, JointStateData, encode_float64, encode_joint_state
 from .recorder import Recorder, RecordSettings
-from ..live.profile import StrokeProfile
 
 SPEED_TOPIC, LOAD_TOPIC = "/motor_speed", "/axial_load"
 JOINT_STATES_TOPIC, NUT_TOPIC = "/joint_states", "/nut_position"
-_TOPIC_OFFSET_NS = 100_000       # topics of one sample are logged 0.1 ms apart, as on a robot
+_TOPIC_OFFSET_NS = 100_000  # topics of one sample are logged 0.1 ms apart, as on a robot
 
 
 @dataclass(frozen=True)
@@ -31,15 +31,15 @@ class DutyCycle:
 
     duration_s: float = 3600.0
     rate_hz: float = 100.0
-    rest_s: float = 48.0                    # motor off after each stroke (12 s stroke: 20 % duty)
+    rest_s: float = 48.0  # motor off after each stroke (12 s stroke: 20 % duty)
     stroke: StrokeProfile = field(default_factory=StrokeProfile)
     joint_name: str = "seat_screw"
-    nut_position_topic: bool = False        # also log the nut position (Float64, m)
-    speed_noise_rad_s: float = 0.02         # standard deviation of the speed signal
-    load_noise_n: float = 0.3               # standard deviation of the load cell
-    encoder_counts_per_rev: int = 4096      # resolution of the screw angle
+    nut_position_topic: bool = False  # also log the nut position (Float64, m)
+    speed_noise_rad_s: float = 0.02  # standard deviation of the speed signal
+    load_noise_n: float = 0.3  # standard deviation of the load cell
+    encoder_counts_per_rev: int = 4096  # resolution of the screw angle
     seed: int = 0
-    start_ns: int = 1_767_225_600_000_000_000     # 2026-01-01T00:00:00Z
+    start_ns: int = 1_767_225_600_000_000_000  # 2026-01-01T00:00:00Z
 
     @property
     def samples(self) -> int:
@@ -51,11 +51,11 @@ class DutyCycle:
 class Samples:
     """The signals of a duty cycle, one row per sample (SI units)."""
 
-    time_s: np.ndarray              # since the first sample
-    speed_rad_s: np.ndarray         # measured (with noise)
-    load_n: np.ndarray              # measured (with noise)
-    nut_position_m: np.ndarray      # from the quantised screw angle
-    screw_angle_rad: np.ndarray     # quantised
+    time_s: np.ndarray  # since the first sample
+    speed_rad_s: np.ndarray  # measured (with noise)
+    load_n: np.ndarray  # measured (with noise)
+    nut_position_m: np.ndarray  # from the quantised screw angle
+    screw_angle_rad: np.ndarray  # quantised
 
 
 def samples(cycle: DutyCycle) -> Samples:
@@ -66,43 +66,65 @@ def samples(cycle: DutyCycle) -> Samples:
     k = np.floor(t / period)
     # Stroke k runs at loop time k * duration: odd strokes go backwards and bring the nut back;
     # during the rest the stroke's end state holds.
-    states = [p.state(s, loop=True) for s in
-              (k * p.duration_s + np.minimum(t - k * period, p.duration_s)).tolist()]
+    states = [
+        p.state(s, loop=True)
+        for s in (k * p.duration_s + np.minimum(t - k * period, p.duration_s)).tolist()
+    ]
     speed, load, _, angle = (np.array(a) for a in zip(*states, strict=True))
     step = 2 * np.pi / cycle.encoder_counts_per_rev
     angle = np.round(angle / step) * step
-    return Samples(t, speed + rng.normal(0.0, cycle.speed_noise_rad_s, t.size),
-                   load + rng.normal(0.0, cycle.load_noise_n, t.size),
-                   p.nut_position_at_zero_angle_m + angle * p.lead_m_per_rad, angle)
+    return Samples(
+        t,
+        speed + rng.normal(0.0, cycle.speed_noise_rad_s, t.size),
+        load + rng.normal(0.0, cycle.load_noise_n, t.size),
+        p.nut_position_at_zero_angle_m + angle * p.lead_m_per_rad,
+        angle,
+    )
 
 
-def write_log(cycle: DutyCycle, directory: Path | str,
-              split_duration_s: float = RecordSettings.split_duration_s,
-              compression: str = RecordSettings.compression,
-              metadata: dict[str, dict[str, str]] | None = None) -> Path:
+def write_log(
+    cycle: DutyCycle,
+    directory: Path | str,
+    split_duration_s: float = RecordSettings.split_duration_s,
+    compression: str = RecordSettings.compression,
+    metadata: dict[str, dict[str, str]] | None = None,
+) -> Path:
     """Record `cycle` into a new bag directory under `directory` (created if needed), with the
     MCAP Metadata records `metadata` in every file (e.g. a `logmeta` record, as the node
     writes); returns the bag directory."""
     s = samples(cycle)
     Path(directory).mkdir(parents=True, exist_ok=True)
-    rec = Recorder(RecordSettings(directory=str(directory), split_size_mb=0.0,
-                                  split_duration_s=split_duration_s, compression=compression),
-                   metadata=dict(metadata or {}))
+    rec = Recorder(
+        RecordSettings(
+            directory=str(directory),
+            split_size_mb=0.0,
+            split_duration_s=split_duration_s,
+            compression=compression,
+        ),
+        metadata=dict(metadata or {}),
+    )
     if not rec.start(cycle.start_ns):
         raise OSError(rec.error)
     times = cycle.start_ns + np.round(s.time_s * 1e9).astype(np.int64)
-    for now, speed, load, nut, angle in zip(times.tolist(), s.speed_rad_s.tolist(),
-                                            s.load_n.tolist(), s.nut_position_m.tolist(),
-                                            s.screw_angle_rad.tolist(), strict=True):
+    for now, speed, load, nut, angle in zip(
+        times.tolist(),
+        s.speed_rad_s.tolist(),
+        s.load_n.tolist(),
+        s.nut_position_m.tolist(),
+        s.screw_angle_rad.tolist(),
+        strict=True,
+    ):
         rec.write_serialized(SPEED_TOPIC, FLOAT64, encode_float64(speed), now)
         rec.write_serialized(LOAD_TOPIC, FLOAT64, encode_float64(load), now + _TOPIC_OFFSET_NS)
-        stamp = now + 2 * _TOPIC_OFFSET_NS          # publish time: the header stamp
+        stamp = now + 2 * _TOPIC_OFFSET_NS  # publish time: the header stamp
         joint = JointStateData(stamp, "", (cycle.joint_name,), (angle,), (speed,), ())
-        rec.write_serialized(JOINT_STATES_TOPIC, JOINT_STATE, encode_joint_state(joint), stamp,
-                             stamp)
+        rec.write_serialized(
+            JOINT_STATES_TOPIC, JOINT_STATE, encode_joint_state(joint), stamp, stamp
+        )
         if cycle.nut_position_topic:
-            rec.write_serialized(NUT_TOPIC, FLOAT64, encode_float64(nut),
-                                 now + 3 * _TOPIC_OFFSET_NS)
+            rec.write_serialized(
+                NUT_TOPIC, FLOAT64, encode_float64(nut), now + 3 * _TOPIC_OFFSET_NS
+            )
         rec.tick(now)
     rec.stop()
     if rec.error:

@@ -48,7 +48,7 @@ from ..live.settings import LiveSettings
 from ..model import ScrewParameters, SqueakModel
 from ..model.physics.metadata import check, setting
 from ..model.physics.parameters import ParameterError
-from ..model.studies.sweep import growth_field
+from ..model.studies.fields import growth_field
 from ..model.uncertainty.scatter import LIVE_SAMPLES, Scatter, valid_mask
 from . import audiomsgs, logmeta
 from .cdr import FLOAT64, encode_float64
@@ -58,9 +58,9 @@ from .synthetic import LOAD_TOPIC, NUT_TOPIC, SPEED_TOPIC, DutyCycle
 MIC_TOPIC, MIC_INFO_TOPIC = "/microphone", "/microphone_info"
 TRUTH = "truth.json"
 START_NS = DutyCycle.start_ns
-P_REF_PA = 20e-6                        # reference pressure of dB SPL
-_TOPIC_OFFSET_NS = 100_000              # topics of one input sample 0.1 ms apart (synthetic)
-_NUT_MARGIN_M = 0.002                   # a stroke ends this short of the end of the screw
+P_REF_PA = 20e-6  # reference pressure of dB SPL
+_TOPIC_OFFSET_NS = 100_000  # topics of one input sample 0.1 ms apart (synthetic)
+_NUT_MARGIN_M = 0.002  # a stroke ends this short of the end of the screw
 _MAX_REDRAWS = 100
 
 
@@ -69,31 +69,61 @@ class BenchSettings:
     """The bench run: units, stroke, microphone (SI units; metadata as for the node's)."""
 
     units: int = setting(10, "1", "simulated units, one recording each", 1, 100000)
-    formulation: str = setting("paper", "", "friction matrices of every unit's model",
-                               choices=("paper", "consistent"))
-    seed: int = setting(0, "1", "seed of the units, strokes, sensor noise and microphone",
-                        0, 2 ** 31 - 1)
+    formulation: str = setting(
+        "paper", "", "friction matrices of every unit's model", choices=("paper", "consistent")
+    )
+    seed: int = setting(
+        0, "1", "seed of the units, strokes, sensor noise and microphone", 0, 2**31 - 1
+    )
     duration_s: float = setting(12.0, "s", "stroke duration of every unit", 1.0, 3600.0)
-    input_rate_hz: float = setting(100.0, "Hz", "rate of motor_speed, axial_load and "
-                                   "nut_position (and of the model along the stroke)",
-                                   1.0, 10000.0)
-    peak_speed_rad_s: float = setting(120.0, "rad/s", "peak speed of a stroke before the "
-                                      "per-unit spread (lowered when the nut would leave the "
-                                      "screw)", 1.0, 1000.0)
-    speed_spread: float = setting(0.15, "1", "a unit's peak speed is peak_speed_rad_s times "
-                                  "U(1 - speed_spread, 1)", 0.0, 0.9)
-    load_spread: float = setting(0.15, "1", "a unit's load range is the profile's times "
-                                 "U(1 - load_spread, 1 + load_spread), each end", 0.0, 0.9)
+    input_rate_hz: float = setting(
+        100.0,
+        "Hz",
+        "rate of motor_speed, axial_load and nut_position (and of the model along the stroke)",
+        1.0,
+        10000.0,
+    )
+    peak_speed_rad_s: float = setting(
+        120.0,
+        "rad/s",
+        "peak speed of a stroke before the "
+        "per-unit spread (lowered when the nut would leave the "
+        "screw)",
+        1.0,
+        1000.0,
+    )
+    speed_spread: float = setting(
+        0.15, "1", "a unit's peak speed is peak_speed_rad_s times U(1 - speed_spread, 1)", 0.0, 0.9
+    )
+    load_spread: float = setting(
+        0.15,
+        "1",
+        "a unit's load range is the profile's times U(1 - load_spread, 1 + load_spread), each end",
+        0.0,
+        0.9,
+    )
     sample_rate_hz: int = setting(48000, "Hz", "microphone sample rate", 8000, 192000)
-    chunk_samples: int = setting(4800, "1", "microphone samples per AudioDataStamped message",
-                                 16, 1_000_000)
-    info_period_s: float = setting(1.0, "s", "AudioInfo published at the start and this often",
-                                   0.01, 3600.0)
-    squeak_level_dbfs: float = setting(-20.0, "dBFS", "squeak tone amplitude re full scale "
-                                       "(a full-scale sine is 0 dBFS)", -120.0, 0.0)
-    squeak_spl_db: float = setting(94.0, "dB", "sound pressure level (rms, re 20 uPa) the "
-                                   "squeak tone stands for; fixes audio_scale_pa_per_fs",
-                                   0.0, 194.0)
+    chunk_samples: int = setting(
+        4800, "1", "microphone samples per AudioDataStamped message", 16, 1_000_000
+    )
+    info_period_s: float = setting(
+        1.0, "s", "AudioInfo published at the start and this often", 0.01, 3600.0
+    )
+    squeak_level_dbfs: float = setting(
+        -20.0,
+        "dBFS",
+        "squeak tone amplitude re full scale (a full-scale sine is 0 dBFS)",
+        -120.0,
+        0.0,
+    )
+    squeak_spl_db: float = setting(
+        94.0,
+        "dB",
+        "sound pressure level (rms, re 20 uPa) the "
+        "squeak tone stands for; fixes audio_scale_pa_per_fs",
+        0.0,
+        194.0,
+    )
 
     def __post_init__(self) -> None:
         check(self, ParameterError, "bench.")
@@ -145,8 +175,9 @@ class Unit:
         return np.isfinite(self.squeak_hz)
 
 
-def draw_params(nominal: ScrewParameters, scatter: Scatter, rng: np.random.Generator
-                ) -> ScrewParameters:
+def draw_params(
+    nominal: ScrewParameters, scatter: Scatter, rng: np.random.Generator
+) -> ScrewParameters:
     """One unit's parameters: standard-normal draws of the scatter, redrawn outside the valid
     domain (mu_s >= mu_k, field ranges)."""
     for _ in range(_MAX_REDRAWS):
@@ -157,26 +188,36 @@ def draw_params(nominal: ScrewParameters, scatter: Scatter, rng: np.random.Gener
     raise ParameterError("the scatter's valid domain is (almost) never hit")
 
 
-def draw_stroke(settings: BenchSettings, params: ScrewParameters, rng: np.random.Generator
-                ) -> StrokeProfile:
+def draw_stroke(
+    settings: BenchSettings, params: ScrewParameters, rng: np.random.Generator
+) -> StrokeProfile:
     """One unit's stroke: peak speed, load range and start position drawn; the peak speed is
     lowered where the nut would otherwise run off the screw."""
     base = StrokeProfile()
     start = float(rng.uniform(0.015, 0.03))
     lead, d = params.lead_per_rad_m, settings.duration_s
     fits = (params.nut_travel_m - start - _NUT_MARGIN_M) / (lead * d * (2 * RAMP / 3 + HOLD))
-    peak = min(settings.peak_speed_rad_s * float(rng.uniform(1 - settings.speed_spread, 1.0)),
-               fits)
+    peak = min(settings.peak_speed_rad_s * float(rng.uniform(1 - settings.speed_spread, 1.0)), fits)
     spread = settings.load_spread
     lo = base.load_min_n * float(rng.uniform(1 - spread, 1 + spread))
     hi = max(base.load_max_n * float(rng.uniform(1 - spread, 1 + spread)), lo)
-    return StrokeProfile.for_params(params, duration_s=d, peak_speed_rad_s=peak,
-                                    load_min_n=lo, load_max_n=hi, start_nut_position_m=start)
+    return StrokeProfile.for_params(
+        params,
+        duration_s=d,
+        peak_speed_rad_s=peak,
+        load_min_n=lo,
+        load_max_n=hi,
+        start_nut_position_m=start,
+    )
 
 
-def squeak_frequencies(params: ScrewParameters, speed_rad_s: np.ndarray, load_n: np.ndarray,
-                       nut_position_m: np.ndarray,
-                       nut_step_m: float = LiveSettings.nut_deadband_m) -> np.ndarray:
+def squeak_frequencies(
+    params: ScrewParameters,
+    speed_rad_s: np.ndarray,
+    load_n: np.ndarray,
+    nut_position_m: np.ndarray,
+    nut_step_m: float = LiveSettings.nut_deadband_m,
+) -> np.ndarray:
     """Frequency [Hz] of the most unstable mode where the model of `params` (no scatter)
     squeaks at each operating point, else nan; the nut position in steps of `nut_step_m`
     (points of one step share one batched eigen-solve, `sweep.growth_field`)."""
@@ -188,66 +229,115 @@ def squeak_frequencies(params: ScrewParameters, speed_rad_s: np.ndarray, load_n:
     return np.where(squeak, field.peak_frequency_hz, np.nan)
 
 
-def simulate_unit(settings: BenchSettings, index: int, rng: np.random.Generator,
-                  nominal: ScrewParameters, scatter: Scatter) -> Unit:
+def simulate_unit(
+    settings: BenchSettings,
+    index: int,
+    rng: np.random.Generator,
+    nominal: ScrewParameters,
+    scatter: Scatter,
+) -> Unit:
     """Unit `index`: draw its parameters and stroke and evaluate its model along the stroke."""
     params = draw_params(nominal, scatter, rng)
     stroke = draw_stroke(settings, params, rng)
-    times = np.arange(int(round(settings.duration_s * settings.input_rate_hz)) + 1) \
+    times = (
+        np.arange(int(round(settings.duration_s * settings.input_rate_hz)) + 1)
         / settings.input_rate_hz
-    speed, load, nut, _ = (np.array(a) for a in zip(*(stroke.state(t) for t in times.tolist()),
-                                                    strict=True))
-    return Unit(f"bench-{index:03d}", params, stroke, times, speed, load, nut,
-                squeak_frequencies(params, speed, load, nut))
+    )
+    speed, load, nut, _ = (
+        np.array(a) for a in zip(*(stroke.state(t) for t in times.tolist()), strict=True)
+    )
+    return Unit(
+        f"bench-{index:03d}",
+        params,
+        stroke,
+        times,
+        speed,
+        load,
+        nut,
+        squeak_frequencies(params, speed, load, nut),
+    )
 
 
 def _metadata(nominal: ScrewParameters, scatter: Scatter, unit_id: str) -> dict[str, str]:
     """The recording's `leadscrew_ros` record: nominal parameters, as a real unit's has."""
-    return logmeta.LogMetadata(nominal.as_dict(), {**scatter.sd, "samples": LIVE_SAMPLES},
-                               {}, unit_id, "virtual_bench").record()
+    return logmeta.LogMetadata(
+        nominal.as_dict(), {**scatter.sd, "samples": LIVE_SAMPLES}, {}, unit_id, "virtual_bench"
+    ).record()
 
 
-def write_unit(settings: BenchSettings, unit: Unit, directory: Path, nominal: ScrewParameters,
-               scatter: Scatter, rng: np.random.Generator) -> Path:
+def write_unit(
+    settings: BenchSettings,
+    unit: Unit,
+    directory: Path,
+    nominal: ScrewParameters,
+    scatter: Scatter,
+    rng: np.random.Generator,
+) -> Path:
     """Record one unit's stroke (inputs with sensor noise, the microphone) into a new bag
     directory under `directory`; returns the bag."""
     # here, not at the top: the CLI's parser reads BenchSettings, and model.acoustics pulls
     # in scipy.signal (~70 ms at every command's start)
     from ..model.acoustics.synthesis import microphone
+
     cycle = DutyCycle()
     n = unit.times_s.size
     speed = unit.speed_rad_s + rng.normal(0.0, cycle.speed_noise_rad_s, n)
     load = unit.load_n + rng.normal(0.0, cycle.load_noise_n, n)
     amplitude = settings.squeak_amplitude_fs
-    audio = microphone(unit.times_s, unit.speed_rad_s, unit.squeak_hz, amplitude,
-                       settings.sample_rate_hz, seed=int(rng.integers(2 ** 31)))
+    audio = microphone(
+        unit.times_s,
+        unit.speed_rad_s,
+        unit.squeak_hz,
+        amplitude,
+        settings.sample_rate_hz,
+        seed=int(rng.integers(2**31)),
+    )
     pcm = np.round(np.clip(audio, -1.0, 1.0) * 32767.0).astype("<i2")
     fs, chunk = settings.sample_rate_hz, settings.chunk_samples
-    events: list[tuple[int, int, str, str, bytes]] = []     # (log time, order, topic, ...)
+    events: list[tuple[int, int, str, str, bytes]] = []  # (log time, order, topic, ...)
     stamps = START_NS + np.round(unit.times_s * 1e9).astype(np.int64)
     for k, t in enumerate(stamps.tolist()):
         events.append((t, 0, SPEED_TOPIC, FLOAT64, encode_float64(float(speed[k]))))
-        events.append((t + _TOPIC_OFFSET_NS, 0, LOAD_TOPIC, FLOAT64,
-                       encode_float64(float(load[k]))))
-        events.append((t + 2 * _TOPIC_OFFSET_NS, 0, NUT_TOPIC, FLOAT64,
-                       encode_float64(float(unit.nut_position_m[k]))))
+        events.append(
+            (t + _TOPIC_OFFSET_NS, 0, LOAD_TOPIC, FLOAT64, encode_float64(float(load[k])))
+        )
+        events.append(
+            (
+                t + 2 * _TOPIC_OFFSET_NS,
+                0,
+                NUT_TOPIC,
+                FLOAT64,
+                encode_float64(float(unit.nut_position_m[k])),
+            )
+        )
     info = audiomsgs.encode_audio_info(1, fs, "S16LE", 16 * fs, "wave")
     for t in np.arange(0.0, unit.times_s[-1] + 1e-9, settings.info_period_s).tolist():
-        events.append((START_NS + int(round(t * 1e9)), 1, MIC_INFO_TOPIC, audiomsgs.AUDIO_INFO,
-                       info))
+        events.append(
+            (START_NS + int(round(t * 1e9)), 1, MIC_INFO_TOPIC, audiomsgs.AUDIO_INFO, info)
+        )
     for start in range(0, pcm.size, chunk):
-        part = pcm[start:start + chunk]
+        part = pcm[start : start + chunk]
         stamp = START_NS + int(round(start / fs * 1e9))
         full = START_NS + int(round((start + part.size) / fs * 1e9))
-        events.append((full, 2, MIC_TOPIC, audiomsgs.AUDIO_DATA_STAMPED,
-                       audiomsgs.encode_audio_data_stamped(stamp, part.view(np.uint8),
-                                                           "microphone")))
+        events.append(
+            (
+                full,
+                2,
+                MIC_TOPIC,
+                audiomsgs.AUDIO_DATA_STAMPED,
+                audiomsgs.encode_audio_data_stamped(stamp, part.view(np.uint8), "microphone"),
+            )
+        )
     events.sort(key=lambda e: (e[0], e[1]))
-    rec = Recorder(RecordSettings(directory=str(directory), split_size_mb=0.0,
-                                  split_duration_s=0.0), name=unit.unit_id,
-                   metadata={logmeta.RECORD_NAME: _metadata(nominal, scatter, unit.unit_id)},
-                   schemas={name: audiomsgs.definition(name)
-                            for name in (audiomsgs.AUDIO_DATA_STAMPED, audiomsgs.AUDIO_INFO)})
+    rec = Recorder(
+        RecordSettings(directory=str(directory), split_size_mb=0.0, split_duration_s=0.0),
+        name=unit.unit_id,
+        metadata={logmeta.RECORD_NAME: _metadata(nominal, scatter, unit.unit_id)},
+        schemas={
+            name: audiomsgs.definition(name)
+            for name in (audiomsgs.AUDIO_DATA_STAMPED, audiomsgs.AUDIO_INFO)
+        },
+    )
     if not rec.start(START_NS):
         raise OSError(rec.error)
     for t, _, topic, type_name, data in events:
@@ -267,13 +357,22 @@ def _intervals(unit: Unit) -> list[dict[str, float]]:
     out = []
     for a, b in zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True):
         f = unit.squeak_hz[a:b]
-        out.append({"start_s": float(unit.times_s[a]), "end_s": float(unit.times_s[b - 1]),
-                    "min_hz": float(f.min()), "max_hz": float(f.max())})
+        out.append(
+            {
+                "start_s": float(unit.times_s[a]),
+                "end_s": float(unit.times_s[b - 1]),
+                "min_hz": float(f.min()),
+                "max_hz": float(f.max()),
+            }
+        )
     return out
 
 
-def run(settings: BenchSettings, out: Path | str,
-        progress: Callable[[int, Unit, Path], None] | None = None) -> dict[str, Any]:
+def run(
+    settings: BenchSettings,
+    out: Path | str,
+    progress: Callable[[int, Unit, Path], None] | None = None,
+) -> dict[str, Any]:
     """Simulate and record every unit into `out` (created if needed), write `out/truth.json`.
 
     Parameters
@@ -303,25 +402,37 @@ def run(settings: BenchSettings, out: Path | str,
     rng = np.random.default_rng(settings.seed)
     units = []
     for k in range(settings.units):
-        unit_rng, record_rng = (np.random.default_rng(s) for s in rng.integers(2 ** 63, size=2))
+        unit_rng, record_rng = (np.random.default_rng(s) for s in rng.integers(2**63, size=2))
         unit = simulate_unit(settings, k, unit_rng, nominal, scatter)
         bag = write_unit(settings, unit, out, nominal, scatter, record_rng)
         if progress:
             progress(k, unit, bag)
-        units.append({
-            "unit_id": unit.unit_id, "log": bag.name,
-            "params": {name: getattr(unit.params, name) for name in scatter.names},
-            "stroke": {f.name: getattr(unit.stroke, f.name) for f in fields(unit.stroke)},
-            "squeak_s": float(unit.squeaks.sum() / settings.input_rate_hz),
-            "squeak_intervals": _intervals(unit)})
-    truth = {"formulation": settings.formulation, "seed": settings.seed,
-             "settings": asdict(settings), "nominal": nominal.as_dict(),
-             "scatter": dict(scatter.sd),
-             "audio": {"topic": MIC_TOPIC, "info_topic": MIC_INFO_TOPIC,
-                       "sample_format": "S16LE", "squeak_amplitude_fs": settings.
-                       squeak_amplitude_fs, "squeak_spl_db": settings.squeak_spl_db,
-                       "audio_scale_pa_per_fs": settings.audio_scale_pa_per_fs,
-                       "t0_s": 0.0},
-             "units": units}
+        units.append(
+            {
+                "unit_id": unit.unit_id,
+                "log": bag.name,
+                "params": {name: getattr(unit.params, name) for name in scatter.names},
+                "stroke": {f.name: getattr(unit.stroke, f.name) for f in fields(unit.stroke)},
+                "squeak_s": float(unit.squeaks.sum() / settings.input_rate_hz),
+                "squeak_intervals": _intervals(unit),
+            }
+        )
+    truth = {
+        "formulation": settings.formulation,
+        "seed": settings.seed,
+        "settings": asdict(settings),
+        "nominal": nominal.as_dict(),
+        "scatter": dict(scatter.sd),
+        "audio": {
+            "topic": MIC_TOPIC,
+            "info_topic": MIC_INFO_TOPIC,
+            "sample_format": "S16LE",
+            "squeak_amplitude_fs": settings.squeak_amplitude_fs,
+            "squeak_spl_db": settings.squeak_spl_db,
+            "audio_scale_pa_per_fs": settings.audio_scale_pa_per_fs,
+            "t0_s": 0.0,
+        },
+        "units": units,
+    }
     (out / TRUTH).write_text(json.dumps(truth, indent=1, sort_keys=True) + "\n")
     return truth

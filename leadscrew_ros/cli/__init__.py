@@ -20,7 +20,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 from ..bag.logfile import LogError
 from ..model.physics.parameters import ParameterError
@@ -30,7 +30,7 @@ from .args import PROG, CliError, Parser, common_parser
 
 __all__ = ["CliError", "build_parser", "main", "split_ros_args"]
 
-ROS_COMMANDS = ("simulate", "replay")      # the ones that start a ROS node (replay: --publish)
+ROS_COMMANDS = ("simulate", "replay")  # the ones that start a ROS node (replay: --publish)
 
 
 def build_parser() -> Parser:
@@ -43,10 +43,14 @@ def build_parser() -> Parser:
         Its parsed namespace has `run`, the command's function.
     """
     common = [common_parser()]
-    parser = Parser(prog=PROG, description="Predict friction-induced squeak of a lead screw "
-                                           "(continuous model, eigenvalues of eq. 27).")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
-                                parser_class=Parser)
+    parser = Parser(
+        prog=PROG,
+        description="Predict friction-induced squeak of a lead screw "
+        "(continuous model, eigenvalues of eq. 27).",
+    )
+    sub = parser.add_subparsers(
+        dest="command", required=True, metavar="COMMAND", parser_class=Parser
+    )
     for group in (model, transient, figures, ros, logs, fleet, bench):
         group.add_parsers(sub, common)
     return parser
@@ -105,20 +109,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(ours)
         args.ros_args = ros_args
         if ros_args and args.command not in ROS_COMMANDS:
-            raise CliError(f"{args.command} takes no --ros-args (only "
-                           f"{' and '.join(ROS_COMMANDS)} --publish do)")
+            raise CliError(
+                f"{args.command} takes no --ros-args (only "
+                f"{' and '.join(ROS_COMMANDS)} --publish do)"
+            )
         run: Callable[[argparse.Namespace], int] = args.run
         return run(args)
-    except BrokenPipeError:      # `... | head`: the reader left; stay quiet like other tools
+    except BrokenPipeError:  # `... | head`: the reader left; stay quiet like other tools
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
     except (CliError, ParameterError, OperatingPointError, LogError, OSError) as exc:
         # OSError: unwritable --out / --plot and the like.
         print(f"{PROG}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
-    except SystemExit as exc:    # --help
+    except SystemExit as exc:  # --help
         return exc.code if isinstance(exc.code, int) else 0
-    except MemoryError:          # beyond the up-front estimates: still one line, no traceback
+    except MemoryError:  # beyond the up-front estimates: still one line, no traceback
         print(f"{PROG}: error: out of memory; use fewer points", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -11,35 +11,39 @@ import importlib
 import json
 import math
 import re
+from collections.abc import Sequence
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, NoReturn, Sequence
+from typing import Any, NoReturn
 
 import numpy as np
 import yaml
 
 from ..model.physics.display import exact
 from ..model.physics.metadata import default_text, help_text, range_text
-from ..model.physics.parameters import (FORMULATIONS, ParameterError, ScrewParameters,
-                                field_names)
-from ..model.uncertainty.perturbation import MAX_GEOMETRY_FIELDS, geometry_fields
+from ..model.physics.parameters import FORMULATIONS, ParameterError, ScrewParameters, field_names
 from ..model.squeak_model import SqueakModel
-from ..model.uncertainty.scatter import LOG_NORMAL, REPLICATES, ScatterSettings, scatterable
 from ..model.studies.fields import check_axis, integer_axis
 from ..model.studies.work import MAX_MEMORY_BYTES, MAX_POINTS, REFERENCE_STATE_SIZE
+from ..model.uncertainty.perturbation import MAX_GEOMETRY_FIELDS, geometry_fields
+from ..model.uncertainty.scatter import LOG_NORMAL, REPLICATES, ScatterSettings, scatterable
 from ..review.jsonsafe import json_safe
 
 PROG = "leadscrew-squeak"
 SPEED_AXIS = "speed_rad_s"
-MAX_COUNT = 100_000          # points per range axis (a map is COUNT_x * COUNT_y eigenproblems)
-WORK_LIMITS = (f"At most {MAX_POINTS} points (fewer for a model with more modes: the limit "
-               f"scales with ({REFERENCE_STATE_SIZE} / state size)^3) and about "
-               f"{MAX_MEMORY_BYTES / 1e9:g} GB; a larger request is refused before it starts. "
-               f"Progress on a terminal; Ctrl-C stops (exit 130).")
-SCATTER_PREFIX = "scatter."   # ROS parameters and params-file keys of ScatterSettings
-NO_SCATTER = "none"          # --scatter none: every scatter 0 (the nominal 0/1 verdict)
-ROS_ARGS_HELP = ("ROS arguments follow --ros-args, as for any ROS executable (up to --): "
-                 "namespace (-r __ns:=/seat_left), remaps (-r OLD:=NEW), parameters, log level")
+MAX_COUNT = 100_000  # points per range axis (a map is COUNT_x * COUNT_y eigenproblems)
+WORK_LIMITS = (
+    f"At most {MAX_POINTS} points (fewer for a model with more modes: the limit "
+    f"scales with ({REFERENCE_STATE_SIZE} / state size)^3) and about "
+    f"{MAX_MEMORY_BYTES / 1e9:g} GB; a larger request is refused before it starts. "
+    f"Progress on a terminal; Ctrl-C stops (exit 130)."
+)
+SCATTER_PREFIX = "scatter."  # ROS parameters and params-file keys of ScatterSettings
+NO_SCATTER = "none"  # --scatter none: every scatter 0 (the nominal 0/1 verdict)
+ROS_ARGS_HELP = (
+    "ROS arguments follow --ros-args, as for any ROS executable (up to --): "
+    "namespace (-r __ns:=/seat_left), remaps (-r OLD:=NEW), parameters, log level"
+)
 
 
 class CliError(Exception):
@@ -65,10 +69,25 @@ class Parser(argparse.ArgumentParser):
 INSTALL_ROS = "pip install 'leadscrew_ros[ros]'"
 # Top-level modules of the ROS 2 wheels that `.[ros]` installs (rclpy, the message packages and
 # what they load: rosidl_*, rcl*, rmw*, rpyutils, ...). The core install has none of them.
-_ROS_MODULES = frozenset({"rclpy", "std_msgs", "sensor_msgs", "geometry_msgs", "diagnostic_msgs",
-                          "std_srvs", "builtin_interfaces", "rpyutils", "ament_index_python",
-                          "service_msgs", "type_description_interfaces", "lifecycle_msgs",
-                          "unique_identifier_msgs", "action_msgs", "rosgraph_msgs"})
+_ROS_MODULES = frozenset(
+    {
+        "rclpy",
+        "std_msgs",
+        "sensor_msgs",
+        "geometry_msgs",
+        "diagnostic_msgs",
+        "std_srvs",
+        "builtin_interfaces",
+        "rpyutils",
+        "ament_index_python",
+        "service_msgs",
+        "type_description_interfaces",
+        "lifecycle_msgs",
+        "unique_identifier_msgs",
+        "action_msgs",
+        "rosgraph_msgs",
+    }
+)
 _ROS_PREFIXES = ("rosidl_", "rcl", "rmw", "ros_")
 
 
@@ -84,11 +103,13 @@ def import_ros(command: str, module: str) -> Any:
     a traceback. Any other import error is ours and propagates."""
     try:
         return importlib.import_module(f"{__package__.rpartition('.')[0]}.ros.{module}")
-    except ImportError as exc:   # ModuleNotFoundError, or an extension that fails to load
+    except ImportError as exc:  # ModuleNotFoundError, or an extension that fails to load
         top = (exc.name or "").partition(".")[0]
         if top in _ROS_MODULES or top.startswith(_ROS_PREFIXES):
             raise CliError(needs_ros(command)) from None
         raise
+
+
 # A negative number, -inf, -nan, a range START:STOP:COUNT with a negative START
 _NEGATIVE_VALUE = re.compile(r"^-(\d|\.\d|inf|nan)", re.IGNORECASE)
 
@@ -122,7 +143,9 @@ def parse_range(text: str, what: str, integer: bool = False) -> np.ndarray:
         return _integer_range(parts, what)
     if len(parts) != 3:
         raise CliError(f"{what}: expected START:STOP:COUNT, got {text!r}")
-    start, stop = (finite_float(p, f"{what} {name}") for p, name in zip(parts, ("START", "STOP"), strict=False))
+    start, stop = (
+        finite_float(p, f"{what} {name}") for p, name in zip(parts, ("START", "STOP"), strict=False)
+    )
     try:
         count = int(parts[2])
     except ValueError:
@@ -139,21 +162,25 @@ def parse_range(text: str, what: str, integer: bool = False) -> np.ndarray:
 def _integer_range(parts: list[str], what: str) -> np.ndarray:
     """START:STOP[:COUNT] of whole numbers -> START, START +- 1, ..., STOP (as floats)."""
     ends = []
-    for text, name in zip(parts, ("START", "STOP")):
+    for text, name in zip(parts, ("START", "STOP"), strict=False):
         value = finite_float(text, f"{what} {name}")
         if not value.is_integer():
-            raise CliError(f"{what} {name}: {text!r} is not a whole number (the axis takes "
-                           f"integers, step 1)")
+            raise CliError(
+                f"{what} {name}: {text!r} is not a whole number (the axis takes integers, step 1)"
+            )
         ends.append(int(value))
     start, stop = ends
     count = abs(stop - start) + 1
     if count < 2 or count > MAX_COUNT:
         raise CliError(f"{what}: START and STOP must differ by 1 to {MAX_COUNT - 1}")
     if len(parts) == 3 and parts[2].strip() != str(count):
-        raise CliError(f"{what}: the axis takes integers, step 1: {start}:{stop} has {count} "
-                       f"values, not {parts[2]!r} (COUNT may be left out)")
-    return np.arange(start, stop + (1 if stop > start else -1), 1 if stop > start else -1,
-                     dtype=float)
+        raise CliError(
+            f"{what}: the axis takes integers, step 1: {start}:{stop} has {count} "
+            f"values, not {parts[2]!r} (COUNT may be left out)"
+        )
+    return np.arange(
+        start, stop + (1 if stop > start else -1), 1 if stop > start else -1, dtype=float
+    )
 
 
 def parse_axis_spec(text: str, what: str) -> tuple[str, np.ndarray]:
@@ -165,8 +192,9 @@ def parse_axis_spec(text: str, what: str) -> tuple[str, np.ndarray]:
     return name, parse_range(rest, what, integer_axis(name))
 
 
-def output_file(path: str | None, option: str, suffixes: Sequence[str],
-                makes_directory: bool = False) -> Path | None:
+def output_file(
+    path: str | None, option: str, suffixes: Sequence[str], makes_directory: bool = False
+) -> Path | None:
     """The file of an output option, checked before any work (a run is not lost to a typo):
     its suffix one of `suffixes` (lower case, without the dot), not a directory, in a
     directory that exists (unless the command `makes_directory`). None stays None.
@@ -182,8 +210,9 @@ def output_file(path: str | None, option: str, suffixes: Sequence[str],
     suffix = out.suffix.lower().removeprefix(".")
     if suffix not in suffixes:
         found = f".{suffix} is not a supported format" if suffix else "no suffix"
-        raise CliError(f"{option}: {path}: {found}; use one of "
-                       f"{', '.join('.' + s for s in suffixes)}")
+        raise CliError(
+            f"{option}: {path}: {found}; use one of {', '.join('.' + s for s in suffixes)}"
+        )
     if out.is_dir():
         raise CliError(f"{option}: {path} is a directory")
     if not makes_directory and not out.resolve().parent.is_dir():
@@ -196,6 +225,7 @@ def plot_file(path: str | None, option: str = "--plot") -> Path | None:
     if path is None:
         return None
     from ..review.plots import plot_formats
+
     return output_file(path, option, plot_formats())
 
 
@@ -244,11 +274,14 @@ def _file_parameters(path: str) -> dict[str, Any]:
     except OSError as exc:
         raise CliError(f"--params-file: cannot read {path}: {exc.strerror}") from None
     except UnicodeDecodeError:
-        raise CliError(f"--params-file: {path} is not a text file (not UTF-8); expected a "
-                       f"ROS parameter file in YAML") from None
+        raise CliError(
+            f"--params-file: {path} is not a text file (not UTF-8); expected a "
+            f"ROS parameter file in YAML"
+        ) from None
     except yaml.YAMLError as exc:
-        raise CliError(f"--params-file: {path} is not valid YAML: "
-                       f"{' '.join(str(exc).split())}") from None
+        raise CliError(
+            f"--params-file: {path} is not valid YAML: {' '.join(str(exc).split())}"
+        ) from None
     values = _ros_parameters(doc)
     if not values:
         raise CliError(f"--params-file: {path} has no '<node>: ros__parameters:' section")
@@ -272,8 +305,10 @@ def _scatter_value(item: str) -> tuple[str, float]:
     if not sep or not name:
         raise CliError(f"--scatter: expected NAME=SD or {NO_SCATTER}, got {item!r}")
     if name not in scatterable():
-        raise CliError(f"--scatter {name}: not a parameter that can scatter; NAME is one of "
-                       f"{', '.join(scatterable())} or {NO_SCATTER}")
+        raise CliError(
+            f"--scatter {name}: not a parameter that can scatter; NAME is one of "
+            f"{', '.join(scatterable())} or {NO_SCATTER}"
+        )
     try:
         return name, float(text)
     except ValueError:
@@ -283,14 +318,15 @@ def _scatter_value(item: str) -> tuple[str, float]:
 def _settings(values: dict[str, Any], what: str) -> ScatterSettings:
     try:
         settings = ScatterSettings(**values)
-        geometry_fields(settings.scatter)          # more than the live estimate takes
+        geometry_fields(settings.scatter)  # more than the live estimate takes
         return settings
     except ParameterError as exc:
         raise CliError(f"{what}: {exc}") from None
 
 
-def scatter_settings(args: argparse.Namespace, file_values: dict[str, Any] | None = None
-                     ) -> ScatterSettings:
+def scatter_settings(
+    args: argparse.Namespace, file_values: dict[str, Any] | None = None
+) -> ScatterSettings:
     """The scatter of P(squeak): defaults <- `scatter.<name>` / `scatter.samples` of
     --params-file (`file_values`: its parameters, dotted) <- --scatter NAME=SD and --scatter
     none, in command-line order <- --samples; validated by ScatterSettings.
@@ -304,10 +340,12 @@ def scatter_settings(args: argparse.Namespace, file_values: dict[str, Any] | Non
     values: dict[str, Any] = {}
     for key, value in (file_values or {}).items():
         if key.startswith(SCATTER_PREFIX):
-            name = key[len(SCATTER_PREFIX):]
+            name = key[len(SCATTER_PREFIX) :]
             if name not in known:
-                raise CliError(f"--params-file: {key} is not a scatter setting; one of "
-                               f"{', '.join(SCATTER_PREFIX + n for n in sorted(known))}")
+                raise CliError(
+                    f"--params-file: {key} is not a scatter setting; one of "
+                    f"{', '.join(SCATTER_PREFIX + n for n in sorted(known))}"
+                )
             values[name] = value
     _settings(values, "--params-file")
     for item in args.scatter:
@@ -343,33 +381,54 @@ def _scatter_help() -> str:
     info = {f.name: f for f in fields(ScatterSettings)}
     on = [f"{n} {default_text(info[n])}" for n in scatterable() if info[n].default]
     allowed = range_text({**info[scatterable()[0]].metadata, "unit": ""})
-    return (f"unit-to-unit scatter of one parameter behind P(squeak) (repeatable): NAME=SD, "
-            f"the relative standard deviation (for {', '.join(sorted(LOG_NORMAL))} the SD of "
-            f"its logarithm), allowed {allowed}; 0 switches one off, '{NO_SCATTER}' every one "
-            f"(then P is the nominal 0/1 verdict). Defaults: {', '.join(on)}, every other 0. "
-            f"NAME is any of {', '.join(scatterable())} (at most {MAX_GEOMETRY_FIELDS} "
-            f"geometry fields); as the ROS parameters {SCATTER_PREFIX}<NAME> of --params-file")
+    return (
+        f"unit-to-unit scatter of one parameter behind P(squeak) (repeatable): NAME=SD, "
+        f"the relative standard deviation (for {', '.join(sorted(LOG_NORMAL))} the SD of "
+        f"its logarithm), allowed {allowed}; 0 switches one off, '{NO_SCATTER}' every one "
+        f"(then P is the nominal 0/1 verdict). Defaults: {', '.join(on)}, every other 0. "
+        f"NAME is any of {', '.join(scatterable())} (at most {MAX_GEOMETRY_FIELDS} "
+        f"geometry fields); as the ROS parameters {SCATTER_PREFIX}<NAME> of --params-file"
+    )
 
 
 def common_parser() -> Parser:
     """The parent parser of the commands that build a model: the model parameter options."""
     common = Parser(add_help=False)
     group = common.add_argument_group("model parameters")
-    group.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
-                       help="set a ScrewParameters field (repeatable; SI units)")
-    group.add_argument("--formulation", choices=FORMULATIONS,
-                       help="friction matrices: Appendix A as printed (paper, the default) or "
-                            "the first-principles linearisation (consistent)")
-    group.add_argument("--params-file", metavar="FILE.yaml",
-                       help="ROS parameter file (<node>: ros__parameters: {...}); keys that are "
-                            "not model parameters or scatter.<NAME> are ignored")
+    group.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="set a ScrewParameters field (repeatable; SI units)",
+    )
+    group.add_argument(
+        "--formulation",
+        choices=FORMULATIONS,
+        help="friction matrices: Appendix A as printed (paper, the default) or "
+        "the first-principles linearisation (consistent)",
+    )
+    group.add_argument(
+        "--params-file",
+        metavar="FILE.yaml",
+        help="ROS parameter file (<node>: ros__parameters: {...}); keys that are "
+        "not model parameters or scatter.<NAME> are ignored",
+    )
     group = common.add_argument_group("scatter of P(squeak)")
-    group.add_argument("--scatter", action="append", default=[], metavar="NAME=SD",
-                       help=_scatter_help())
+    group.add_argument(
+        "--scatter", action="append", default=[], metavar="NAME=SD", help=_scatter_help()
+    )
     samples = next(f for f in fields(ScatterSettings) if f.name == "samples")
-    group.add_argument("--samples", type=int, metavar="N", help=help_text(
-        samples, f"scatter samples of the fast P(squeak) estimator (sweeps, maps, figures, "
-                 f"replay, predict's probability_live): {REPLICATES} times a power of 2"))
+    group.add_argument(
+        "--samples",
+        type=int,
+        metavar="N",
+        help=help_text(
+            samples,
+            f"scatter samples of the fast P(squeak) estimator (sweeps, maps, figures, "
+            f"replay, predict's probability_live): {REPLICATES} times a power of 2",
+        ),
+    )
     return common
 
 

@@ -18,38 +18,64 @@ _OPTIONS = ("units", "formulation", "seed", "duration_s")
 def cmd_bench(args: argparse.Namespace) -> int:
     """`bench`: simulate and record the units; prints one line per unit and a JSON summary."""
     from ..bag.virtual_bench import TRUTH, BenchSettings, Unit, run
-    settings = BenchSettings(**{name: getattr(args, name) for name in _OPTIONS
-                                if getattr(args, name) is not None})
+
+    settings = BenchSettings(
+        **{name: getattr(args, name) for name in _OPTIONS if getattr(args, name) is not None}
+    )
     start = time.perf_counter()
 
     def progress(k: int, unit: Unit, bag: Path) -> None:
         if not args.quiet:
             squeak_s = unit.squeaks.sum() / settings.input_rate_hz
-            print(f"{unit.unit_id}: {bag.name}  squeaks {squeak_s:5.2f} s of "
-                  f"{settings.duration_s:g} s", flush=True)
+            print(
+                f"{unit.unit_id}: {bag.name}  squeaks {squeak_s:5.2f} s of "
+                f"{settings.duration_s:g} s",
+                flush=True,
+            )
 
     truth = run(settings, args.out, progress)
     if not args.quiet:
-        print_json({"out": args.out, "truth": str(Path(args.out) / TRUTH),
-                    "units": len(truth["units"]), "formulation": settings.formulation,
-                    "seed": settings.seed, "run_time_s": round(time.perf_counter() - start, 3)})
+        print_json(
+            {
+                "out": args.out,
+                "truth": str(Path(args.out) / TRUTH),
+                "units": len(truth["units"]),
+                "formulation": settings.formulation,
+                "seed": settings.seed,
+                "run_time_s": round(time.perf_counter() - start, 3),
+            }
+        )
     return 0
 
 
 def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     """Add `bench` to `sub` (no model options: every unit has its own drawn parameters)."""
     from ..bag.virtual_bench import BenchSettings
+
     spec = {f.name: f for f in fields(BenchSettings)}
-    p = sub.add_parser("bench", help="virtual bench: N recordings of simulated units (a stroke "
-                                     "each, with a 48 kHz microphone on /microphone), in the "
-                                     "node's format, the hidden truth in DIR/truth.json")
+    p = sub.add_parser(
+        "bench",
+        help="virtual bench: N recordings of simulated units (a stroke "
+        "each, with a 48 kHz microphone on /microphone), in the "
+        "node's format, the hidden truth in DIR/truth.json",
+    )
     p.add_argument("--units", type=int, metavar="N", help=help_text(spec["units"]))
-    p.add_argument("--out", required=True, metavar="DIR",
-                   help="output directory: one bag per unit and truth.json")
-    p.add_argument("--formulation", choices=("paper", "consistent"),
-                   help=help_text(spec["formulation"]))
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="output directory: one bag per unit and truth.json",
+    )
+    p.add_argument(
+        "--formulation", choices=("paper", "consistent"), help=help_text(spec["formulation"])
+    )
     p.add_argument("--seed", type=int, metavar="S", help=help_text(spec["seed"]))
-    p.add_argument("--duration", dest="duration_s", type=finite, metavar="S",
-                   help=help_text(spec["duration_s"]))
+    p.add_argument(
+        "--duration",
+        dest="duration_s",
+        type=finite,
+        metavar="S",
+        help=help_text(spec["duration_s"]),
+    )
     p.add_argument("--quiet", action="store_true", help="print nothing")
     p.set_defaults(run=cmd_bench)

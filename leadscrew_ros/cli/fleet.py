@@ -34,21 +34,31 @@ def exit_status(failed: int) -> int:
 
 def _settings(args: argparse.Namespace):
     from ..review.fleet import FleetSettings
-    options = {name: getattr(args, name) for name in REPLAY_INPUTS
-               if getattr(args, name) is not None}
+
+    options = {
+        name: getattr(args, name) for name in REPLAY_INPUTS if getattr(args, name) is not None
+    }
     if args.use_log_params:
         given = [o for o in _MODEL_OPTIONS if getattr(args, o) not in (None, [])]
         if given:
-            raise CliError(f"--{given[0].replace('_', '-')} and --use-log-params exclude each "
-                           f"other (with it every log has its recorded parameters)")
+            raise CliError(
+                f"--{given[0].replace('_', '-')} and --use-log-params exclude each "
+                f"other (with it every log has its recorded parameters)"
+            )
     model = build_model(args)
     try:
-        return FleetSettings(model.params, dict(model.scatter.sd), model.sample_count,
-                             replay_inputs(args), options,
-                             args.namespace and _topic(args.namespace),
-                             args.out_namespace and _topic(args.out_namespace),
-                             use_log_params=args.use_log_params, report=not args.no_report,
-                             summary_only=args.summary_only)
+        return FleetSettings(
+            model.params,
+            dict(model.scatter.sd),
+            model.sample_count,
+            replay_inputs(args),
+            options,
+            args.namespace and _topic(args.namespace),
+            args.out_namespace and _topic(args.out_namespace),
+            use_log_params=args.use_log_params,
+            report=not args.no_report,
+            summary_only=args.summary_only,
+        )
     except ValueError as exc:
         raise CliError(str(exc)) from None
 
@@ -59,38 +69,50 @@ def cmd_review(args: argparse.Namespace) -> int:
         raise CliError(f"argument --workers: must be in [1, 1024], got {args.workers}")
     settings = _settings(args)
     from ..review.fleet import cluster, find_logs, review_logs
+
     if args.connect_timeout is not None and not args.scheduler:
         raise CliError("--connect-timeout is for --scheduler")
     try:
-        reach = ClusterSettings(**({} if args.connect_timeout is None
-                                   else {"connect_timeout_s": args.connect_timeout}))
+        reach = ClusterSettings(
+            **({} if args.connect_timeout is None else {"connect_timeout_s": args.connect_timeout})
+        )
     except ClusterError as exc:
         raise CliError(str(exc)) from None
     from ..review.fleetreport import write_fleet
+
     out = output_directory(args.out)
     logs = find_logs(args.paths, skip=out)
     # --out in (or equal to) an input folder: its annotated logs are no inputs; say so
-    inside = [p for p in args.paths if Path(p).is_dir()
-              and out.resolve().is_relative_to(Path(p).resolve())]
+    inside = [
+        p
+        for p in args.paths
+        if Path(p).is_dir() and out.resolve().is_relative_to(Path(p).resolve())
+    ]
     left_out = f" (the output folder {out} is left out of the inputs)" if inside else ""
     if not logs:
-        raise CliError(f"no logs (.mcap, .db3, bag directories) in "
-                       f"{' '.join(args.paths)}{left_out}")
+        raise CliError(
+            f"no logs (.mcap, .db3, bag directories) in {' '.join(args.paths)}{left_out}"
+        )
     if left_out and not args.quiet:
         print(f"review: the output folder {out} is inside {inside[0]}: left out of the inputs")
     workers = args.workers or (None if args.scheduler else os.cpu_count() or 1)
     try:
         with cluster(workers, args.scheduler, reach) as client:
             run = review_logs(logs, out, settings, client, progress=not args.quiet)
-    except ClusterError as exc:          # raised before the review starts
+    except ClusterError as exc:  # raised before the review starts
         raise CliError(str(exc)) from None
     where = args.scheduler or f"LocalCluster of {workers} worker(s) on 127.0.0.1"
-    paths = write_fleet(run, out, {"inputs": args.paths, "out": str(out.resolve()),
-                                   "cluster": where, **settings.as_dict()})
+    paths = write_fleet(
+        run,
+        out,
+        {"inputs": args.paths, "out": str(out.resolve()), "cluster": where, **settings.as_dict()},
+    )
     if not args.quiet:
-        print(f"review of {len(run.rows)} logs on {where}: {run.reviewed} reviewed, "
-              f"{run.skipped} unchanged since the last review, {run.failed} failed "
-              f"({run.wall_s:.1f} s)")
+        print(
+            f"review of {len(run.rows)} logs on {where}: {run.reviewed} reviewed, "
+            f"{run.skipped} unchanged since the last review, {run.failed} failed "
+            f"({run.wall_s:.1f} s)"
+        )
         errors = [r for r in run.rows if r["status"] != "ok"]
         for r in errors[:_ERRORS_SHOWN]:
             print(f"  error: {r['error']}")
@@ -103,37 +125,65 @@ def cmd_review(args: argparse.Namespace) -> int:
 def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     """Add `review` (with the model options `common`) to `sub`."""
     p = sub.add_parser(
-        "review", parents=common,
+        "review",
+        parents=common,
         help="review many logs on a Dask cluster (one offline replay per log, as `replay`): "
-             "per-log outputs in DIR/<log name>/, fleet.csv, fleet.json, fleet.png; a re-run "
-             "skips unchanged logs")
-    p.add_argument("paths", nargs="+", metavar="PATH",
-                   help="log files (.mcap, .db3), bag directories, folders (searched "
-                        "recursively) or glob patterns (quote them; ** for any depth)")
-    p.add_argument("--out", required=True, metavar="DIR",
-                   help="output directory: <log name>/ per log (the replay's outputs), "
-                        "fleet.csv, fleet.json, fleet.png and the resume index")
+        "per-log outputs in DIR/<log name>/, fleet.csv, fleet.json, fleet.png; a re-run "
+        "skips unchanged logs",
+    )
+    p.add_argument(
+        "paths",
+        nargs="+",
+        metavar="PATH",
+        help="log files (.mcap, .db3), bag directories, folders (searched "
+        "recursively) or glob patterns (quote them; ** for any depth)",
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="output directory: <log name>/ per log (the replay's outputs), "
+        "fleet.csv, fleet.json, fleet.png and the resume index",
+    )
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, metavar="N",
-                       help="Dask worker processes of a local cluster on 127.0.0.1, one "
-                            "thread each (default: one per core)")
-    where.add_argument("--scheduler", metavar="ADDRESS",
-                       help="a running Dask scheduler, tcp://HOST:PORT (`dask scheduler`, "
-                            "`dask worker`); its workers must see the logs and DIR at the same "
-                            "paths and have leadscrew_ros installed")
-    p.add_argument("--connect-timeout", type=finite, metavar="S",
-                   help=help_text(_CONNECT_TIMEOUT, "with --scheduler: how long to wait for "
-                                                    "it to answer"))
+    where.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="Dask worker processes of a local cluster on 127.0.0.1, one "
+        "thread each (default: one per core)",
+    )
+    where.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="a running Dask scheduler, tcp://HOST:PORT (`dask scheduler`, "
+        "`dask worker`); its workers must see the logs and DIR at the same "
+        "paths and have leadscrew_ros installed",
+    )
+    p.add_argument(
+        "--connect-timeout",
+        type=finite,
+        metavar="S",
+        help=help_text(_CONNECT_TIMEOUT, "with --scheduler: how long to wait for it to answer"),
+    )
     g = add_input_options(p)
-    g.add_argument("--summary-only", action="store_true",
-                   help="keep only summary.json and summary.txt of each log (no annotated "
-                        "MCAP, episodes.json or report)")
-    g.add_argument("--use-log-params", action="store_true",
-                   help="each log with the model parameters, scatter and input settings of "
-                        "its leadscrew_ros metadata record (input options given here still "
-                        "apply); a log without the record is an error row")
+    g.add_argument(
+        "--summary-only",
+        action="store_true",
+        help="keep only summary.json and summary.txt of each log (no annotated "
+        "MCAP, episodes.json or report)",
+    )
+    g.add_argument(
+        "--use-log-params",
+        action="store_true",
+        help="each log with the model parameters, scatter and input settings of "
+        "its leadscrew_ros metadata record (input options given here still "
+        "apply); a log without the record is an error row",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress and no summary")
-    p.epilog = (f"Exit status: 0 every log reviewed; 2 bad command line; {FAILED_BASE} + the "
-                f"number of failed logs otherwise ({FAILED_BASE + FAILED_CAP}: "
-                f"{FAILED_CAP} or more).")
+    p.epilog = (
+        f"Exit status: 0 every log reviewed; 2 bad command line; {FAILED_BASE} + the "
+        f"number of failed logs otherwise ({FAILED_BASE + FAILED_CAP}: "
+        f"{FAILED_CAP} or more)."
+    )
     p.set_defaults(run=cmd_review)

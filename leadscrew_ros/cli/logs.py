@@ -9,19 +9,43 @@ from dataclasses import fields
 from pathlib import Path
 
 from ..bag.livelock import LIVE
-from ..bag.logfile import (LogInfo, bag_of, cut_off_bags, inspect, live_recordings, log_files,
-                           metadata_problem, recover, recover_bag)
+from ..bag.logfile import (
+    LogInfo,
+    bag_of,
+    cut_off_bags,
+    inspect,
+    live_recordings,
+    log_files,
+    metadata_problem,
+    recover,
+    recover_bag,
+)
 from ..live.settings import JointSettings, LiveSettings
 from ..model.physics.metadata import help_text
 from ..review.replay import ReplaySettings
 from ..review.timeline import InputSettings
-from .args import (PROG, ROS_ARGS_HELP, CliError, Parser, build_model, finite, import_ros,
-                   output_directory, output_file, print_json, yaml_parameters)
+from .args import (
+    PROG,
+    ROS_ARGS_HELP,
+    CliError,
+    Parser,
+    build_model,
+    finite,
+    import_ros,
+    output_directory,
+    output_file,
+    print_json,
+    yaml_parameters,
+)
 
-REPLAY_INPUTS = [f.name for f in fields(InputSettings)]    # = option dests, node parameters
+REPLAY_INPUTS = [f.name for f in fields(InputSettings)]  # = option dests, node parameters
 # The node's settings that replay options mirror: their metadata gives the help and the range
-REPLAY_SETTINGS = {f.name: f for cls in (LiveSettings, JointSettings) for f in fields(cls)
-                   if f.name in REPLAY_INPUTS}
+REPLAY_SETTINGS = {
+    f.name: f
+    for cls in (LiveSettings, JointSettings)
+    for f in fields(cls)
+    if f.name in REPLAY_INPUTS
+}
 LIVE_OPTIONS = ("rate", "loop", "start_offset", "topics", "remap", "no_wait", "ros_args")
 
 
@@ -40,8 +64,9 @@ def replay_inputs(args: argparse.Namespace) -> InputSettings:
     stay as given: relative ones resolve in the input namespace (--namespace, or the log's)."""
     values = yaml_parameters(args.params_file) if args.params_file else {}
     values = {name: values[name] for name in REPLAY_INPUTS if name in values}
-    values.update({name: getattr(args, name) for name in REPLAY_INPUTS
-                   if getattr(args, name) is not None})
+    values.update(
+        {name: getattr(args, name) for name in REPLAY_INPUTS if getattr(args, name) is not None}
+    )
     try:
         return InputSettings(**values)
     except (TypeError, ValueError) as exc:
@@ -58,27 +83,40 @@ def _parse_remap(items: list[str]) -> dict[str, str]:
     return remap
 
 
-OFFLINE_OPTIONS = ("out", "no_report", "namespace", "out_namespace", "nominal_load_n",
-                   "warn_probability", "error_probability")
+OFFLINE_OPTIONS = (
+    "out",
+    "no_report",
+    "namespace",
+    "out_namespace",
+    "nominal_load_n",
+    "warn_probability",
+    "error_probability",
+)
 
 
 def _publish(args: argparse.Namespace) -> int:
     given = [o for o in OFFLINE_OPTIONS if getattr(args, o) not in (None, False)]
     if given:
         option = {"nominal_load_n": "load"}.get(given[0], given[0])
-        raise CliError(f"--{option.replace('_', '-')} is for the offline replay, not --publish "
-                       f"(the namespace of --publish is --ros-args -r __ns:=NS)")
+        raise CliError(
+            f"--{option.replace('_', '-')} is for the offline replay, not --publish "
+            f"(the namespace of --publish is --ros-args -r __ns:=NS)"
+        )
     live = import_ros("replay --publish", "replay_live")
     publish_log, wait_s = live.publish_log, live.WAIT_FOR_SUBSCRIBER_S
     try:
-        publish_log(log_files(args.log), rate=1.0 if args.rate is None else args.rate,
-                    loop=args.loop,
-                    start_offset_s=0.0 if args.start_offset is None else args.start_offset,
-                    topics=[_topic(t) for t in args.topics] if args.topics else None,
-                    remap=_parse_remap(args.remap), progress=not args.quiet,
-                    wait_for_subscriber_s=0.0 if args.no_wait else wait_s,
-                    ros_args=args.ros_args)
-    except (ValueError, RuntimeError) as exc:    # bad arguments; rclpy could not start
+        publish_log(
+            log_files(args.log),
+            rate=1.0 if args.rate is None else args.rate,
+            loop=args.loop,
+            start_offset_s=0.0 if args.start_offset is None else args.start_offset,
+            topics=[_topic(t) for t in args.topics] if args.topics else None,
+            remap=_parse_remap(args.remap),
+            progress=not args.quiet,
+            wait_for_subscriber_s=0.0 if args.no_wait else wait_s,
+            ros_args=args.ros_args,
+        )
+    except (ValueError, RuntimeError) as exc:  # bad arguments; rclpy could not start
         raise CliError(str(exc)) from None
     return 0
 
@@ -95,24 +133,33 @@ def cmd_replay(args: argparse.Namespace) -> int:
     model = build_model(args)
     inputs = replay_inputs(args)
     from ..review.replay import log_name, replay
+
     try:
         settings = ReplaySettings(
-            inputs, namespace=args.namespace and _topic(args.namespace),
+            inputs,
+            namespace=args.namespace and _topic(args.namespace),
             out_namespace=args.out_namespace and _topic(args.out_namespace),
-            workers=args.workers, progress=not args.quiet)
+            workers=args.workers,
+            progress=not args.quiet,
+        )
     except ValueError as exc:
         raise CliError(str(exc)) from None
     out = output_directory(args.out or f"{log_name(Path(args.log))}_replay")
     result = replay(args.log, model, out, settings)
     if not args.no_report:
         from ..review.report import write_report
+
         result.outputs += write_report(result, model, out)
     if not args.quiet:
         print(result.summary_text())
-        for e in result.episodes[:args.episodes]:
-            print(f"  squeak {e.start_s:10.2f} - {e.end_s:10.2f} s  peak P(squeak) "
-                  f"{e.probability.peak:.3f}  peak growth {e.peak_growth_rate:7.1f} 1/s  "
-                  + ", ".join(f"{m} {f:.0f} Hz" for m, f in zip(e.modes, e.frequencies_hz, strict=True)))
+        for e in result.episodes[: args.episodes]:
+            print(
+                f"  squeak {e.start_s:10.2f} - {e.end_s:10.2f} s  peak P(squeak) "
+                f"{e.probability.peak:.3f}  peak growth {e.peak_growth_rate:7.1f} 1/s  "
+                + ", ".join(
+                    f"{m} {f:.0f} Hz" for m, f in zip(e.modes, e.frequencies_hz, strict=True)
+                )
+            )
         if result.episode_count > args.episodes:
             print(f"  ... {result.episode_count - args.episodes} more in episodes.json")
         print("wrote: " + ", ".join(str(p) for p in result.outputs))
@@ -122,14 +169,18 @@ def cmd_replay(args: argparse.Namespace) -> int:
 def _span(info: LogInfo) -> str:
     if info.start_ns is None:
         return "no messages"
-    return (f"{(info.end_ns - info.start_ns) / 1e9:.3f} s ({_utc(info.start_ns)} to "
-            f"{_utc(info.end_ns)})")
+    return (
+        f"{(info.end_ns - info.start_ns) / 1e9:.3f} s ({_utc(info.start_ns)} to "
+        f"{_utc(info.end_ns)})"
+    )
 
 
 def _utc(ns: int) -> str:
     import datetime
+
     return datetime.datetime.fromtimestamp(ns / 1e9, datetime.timezone.utc).isoformat(
-        timespec="milliseconds")
+        timespec="milliseconds"
+    )
 
 
 def _topic_lines(info: LogInfo) -> list[str]:
@@ -139,27 +190,33 @@ def _topic_lines(info: LogInfo) -> list[str]:
 def _record_directory(path: Path) -> bool:
     """A directory of recordings (bag directories, loose files) rather than one bag: it has no
     metadata.yaml and holds no .mcap file or a subdirectory with one."""
-    return path.is_dir() and not (path / "metadata.yaml").exists() and (
-        not any(path.glob("*.mcap")) or any(path.glob("*/*.mcap")))
+    return (
+        path.is_dir()
+        and not (path / "metadata.yaml").exists()
+        and (not any(path.glob("*.mcap")) or any(path.glob("*/*.mcap")))
+    )
 
 
 def cmd_recover(args: argparse.Namespace) -> int:
     """`recover`: repair a cut-off log or bag; exit status."""
     src = Path(args.log)
-    if args.output:                      # a copy elsewhere; the input stays as it is
+    if args.output:  # a copy elsewhere; the input stays as it is
         if src.is_dir():
             raise CliError("-o/--output is for one file; a bag directory is recovered in place")
-        info = recover(src, output_file(args.output, "-o/--output", ("mcap",),
-                                        makes_directory=True))
-        print(f"recovered {info.messages} messages on {len(info.topics)} topics from {src} "
-              f"into {args.output}")
+        info = recover(
+            src, output_file(args.output, "-o/--output", ("mcap",), makes_directory=True)
+        )
+        print(
+            f"recovered {info.messages} messages on {len(info.topics)} topics from {src} "
+            f"into {args.output}"
+        )
         print(f"time span: {_span(info)}")
         print("damage: " + (info.damage or "none (the file was complete)"))
         print("\n".join(_topic_lines(info)))
         return 0
     if _record_directory(src):
         targets = cut_off_bags(src)
-        for live in live_recordings(src):       # never touched: a recorder still writes them
+        for live in live_recordings(src):  # never touched: a recorder still writes them
             print(f"{live}: skipped, {LIVE}")
         if not targets:
             print(f"nothing to recover: no cut-off recording in {src}")
@@ -180,28 +237,48 @@ def cmd_info(args: argparse.Namespace) -> int:
     infos = [inspect(f) for f in log_files(path)]
     bag = path if path.is_dir() else bag_of(path)
     # a bag directory's metadata.yaml against its files; a file's bag: the file alone
-    problem = "" if bag is None or any(i.live for i in infos) else metadata_problem(
-        bag, infos if bag == path else None)
+    problem = (
+        ""
+        if bag is None or any(i.live for i in infos)
+        else metadata_problem(bag, infos if bag == path else None)
+    )
     if args.json:
-        print_json([{"file": str(i.path), "complete": i.complete, "damage": i.damage,
-                     "live": i.live, "profile": i.profile, "library": i.library,
-                     "messages": i.messages,
-                     "start_ns": i.start_ns, "end_ns": i.end_ns,
-                     "metadata_problem": problem,
-                     "topics": [{"name": t.name, "type": t.type_name, "count": n}
-                                for t, n in i.type_counts()]} for i in infos])
+        print_json(
+            [
+                {
+                    "file": str(i.path),
+                    "complete": i.complete,
+                    "damage": i.damage,
+                    "live": i.live,
+                    "profile": i.profile,
+                    "library": i.library,
+                    "messages": i.messages,
+                    "start_ns": i.start_ns,
+                    "end_ns": i.end_ns,
+                    "metadata_problem": problem,
+                    "topics": [
+                        {"name": t.name, "type": t.type_name, "count": n}
+                        for t, n in i.type_counts()
+                    ],
+                }
+                for i in infos
+            ]
+        )
         return 0
     for i in infos:
         if i.complete:
             state = "complete"
-        elif i.live:                 # not cut off: the rest is still to come
+        elif i.live:  # not cut off: the rest is still to come
             state = f"{LIVE}: read up to now; its footer comes when the recording stops"
         else:
-            state = (f"TRUNCATED: {i.damage}; recover with "
-                     f"`{PROG} recover {bag_of(i.path) or i.path}`")
+            state = (
+                f"TRUNCATED: {i.damage}; recover with `{PROG} recover {bag_of(i.path) or i.path}`"
+            )
         print(f"{i.path}: {state}")
-        print(f"  {i.messages} messages, {_span(i)}; profile {i.profile!r}, "
-              f"written by {i.library or 'unknown'}")
+        print(
+            f"  {i.messages} messages, {_span(i)}; profile {i.profile!r}, "
+            f"written by {i.library or 'unknown'}"
+        )
         print("\n".join(_topic_lines(i)))
     if problem:
         print(f"{bag}: {problem}")
@@ -212,97 +289,197 @@ def add_input_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
     """The input-topic, deadband, P(squeak)-threshold and namespace options of the offline
     replay (also `review`'s; the dests of the first ones are the `InputSettings` fields, see
     `replay_inputs`); returns the group 'offline replay' for a command's own options."""
-    g = p.add_argument_group("inputs (defaults: the node's topics, relative names in the input "
-                             "namespace; node parameters from --params-file)")
-    g.add_argument("--speed-topic", metavar="TOPIC", help="std_msgs/Float64 speed [rad/s] "
-                                                          "(default motor_speed)")
-    g.add_argument("--load-topic", metavar="TOPIC", help="std_msgs/Float64 axial load [N] "
-                                                         "(default axial_load)")
-    g.add_argument("--nut-topic", metavar="TOPIC", help="std_msgs/Float64 nut position [m] "
-                                                        "(default nut_position)")
-    g.add_argument("--joint-states-topic", metavar="TOPIC",
-                   help="sensor_msgs/JointState (default joint_states)")
+    g = p.add_argument_group(
+        "inputs (defaults: the node's topics, relative names in the input "
+        "namespace; node parameters from --params-file)"
+    )
+    g.add_argument(
+        "--speed-topic",
+        metavar="TOPIC",
+        help="std_msgs/Float64 speed [rad/s] (default motor_speed)",
+    )
+    g.add_argument(
+        "--load-topic", metavar="TOPIC", help="std_msgs/Float64 axial load [N] (default axial_load)"
+    )
+    g.add_argument(
+        "--nut-topic",
+        metavar="TOPIC",
+        help="std_msgs/Float64 nut position [m] (default nut_position)",
+    )
+    g.add_argument(
+        "--joint-states-topic",
+        metavar="TOPIC",
+        help="sensor_msgs/JointState (default joint_states)",
+    )
     g.add_argument("--joint-name", metavar="NAME", help=_setting_help("joint_name"))
-    g.add_argument("--nut-position-at-zero-angle", dest="nut_position_at_zero_angle_m",
-                   type=finite, metavar="M", help=_setting_help("nut_position_at_zero_angle_m"))
-    g.add_argument("--speed-deadband", dest="speed_deadband_rad_s", type=finite,
-                   metavar="RAD_S", help=_setting_help("speed_deadband_rad_s"))
-    g.add_argument("--load-deadband", dest="load_deadband_n", type=finite, metavar="N",
-                   help=_setting_help("load_deadband_n"))
-    g.add_argument("--nut-deadband", dest="nut_deadband_m", type=finite, metavar="M",
-                   help=_setting_help("nut_deadband_m"))
-    g = p.add_argument_group("P(squeak) thresholds (the node's; summary, episodes and report "
-                             "give the time at or above them)")
-    g.add_argument("--warn-probability", dest="warn_probability", type=finite, metavar="P",
-                   help=_setting_help("warn_probability", "time at or above this P(squeak) "
-                                      "is counted as WARN (the node's diagnostic WARN)"))
-    g.add_argument("--error-probability", dest="error_probability", type=finite, metavar="P",
-                   help=_setting_help("error_probability", "time at or above this "
-                                      "P(squeak) is counted as ERROR (the node's diagnostic "
-                                      "ERROR)"))
+    g.add_argument(
+        "--nut-position-at-zero-angle",
+        dest="nut_position_at_zero_angle_m",
+        type=finite,
+        metavar="M",
+        help=_setting_help("nut_position_at_zero_angle_m"),
+    )
+    g.add_argument(
+        "--speed-deadband",
+        dest="speed_deadband_rad_s",
+        type=finite,
+        metavar="RAD_S",
+        help=_setting_help("speed_deadband_rad_s"),
+    )
+    g.add_argument(
+        "--load-deadband",
+        dest="load_deadband_n",
+        type=finite,
+        metavar="N",
+        help=_setting_help("load_deadband_n"),
+    )
+    g.add_argument(
+        "--nut-deadband",
+        dest="nut_deadband_m",
+        type=finite,
+        metavar="M",
+        help=_setting_help("nut_deadband_m"),
+    )
+    g = p.add_argument_group(
+        "P(squeak) thresholds (the node's; summary, episodes and report "
+        "give the time at or above them)"
+    )
+    g.add_argument(
+        "--warn-probability",
+        dest="warn_probability",
+        type=finite,
+        metavar="P",
+        help=_setting_help(
+            "warn_probability",
+            "time at or above this P(squeak) is counted as WARN (the node's diagnostic WARN)",
+        ),
+    )
+    g.add_argument(
+        "--error-probability",
+        dest="error_probability",
+        type=finite,
+        metavar="P",
+        help=_setting_help(
+            "error_probability",
+            "time at or above this P(squeak) is counted as ERROR (the node's diagnostic ERROR)",
+        ),
+    )
     g = p.add_argument_group("offline replay")
-    g.add_argument("--namespace", metavar="NS",
-                   help="namespace of the input topics, as a node's __ns (default: the one "
-                        "namespace of the log that has predictor inputs)")
-    g.add_argument("--out-namespace", metavar="NS",
-                   help="namespace of the prediction topics in the annotated log (default "
-                        "/replay + the input namespace: /replay/squeak/risk, ...)")
-    g.add_argument("--load", dest="nominal_load_n", type=finite, metavar="N",
-                   help="nominal axial load [N] from the start, for a log without load topic "
-                        "(a load topic in the log overrides it)")
+    g.add_argument(
+        "--namespace",
+        metavar="NS",
+        help="namespace of the input topics, as a node's __ns (default: the one "
+        "namespace of the log that has predictor inputs)",
+    )
+    g.add_argument(
+        "--out-namespace",
+        metavar="NS",
+        help="namespace of the prediction topics in the annotated log (default "
+        "/replay + the input namespace: /replay/squeak/risk, ...)",
+    )
+    g.add_argument(
+        "--load",
+        dest="nominal_load_n",
+        type=finite,
+        metavar="N",
+        help="nominal axial load [N] from the start, for a log without load topic "
+        "(a load topic in the log overrides it)",
+    )
     g.add_argument("--no-report", action="store_true", help="skip the PNG report")
     return g
 
 
 def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     """Add `replay` (with the model options `common`), `recover` and `info` to `sub`."""
-    p = sub.add_parser("replay", parents=common,
-                       help="recompute the node's predictions for an MCAP log (offline, into "
-                            "--out), or play the log to ROS 2 topics (--publish)")
-    p.add_argument("log", metavar="LOG", help="MCAP file, or a directory of split .mcap files "
-                   "(offline also rosbag2 sqlite3 .db3)")
-    p.add_argument("--out", metavar="DIR", help="output directory (default ./<log name>_replay): "
-                   "<log name>.annotated.mcap, episodes.json, summary.json/.txt, PNG report")
+    p = sub.add_parser(
+        "replay",
+        parents=common,
+        help="recompute the node's predictions for an MCAP log (offline, into "
+        "--out), or play the log to ROS 2 topics (--publish)",
+    )
+    p.add_argument(
+        "log",
+        metavar="LOG",
+        help="MCAP file, or a directory of split .mcap files (offline also rosbag2 sqlite3 .db3)",
+    )
+    p.add_argument(
+        "--out",
+        metavar="DIR",
+        help="output directory (default ./<log name>_replay): "
+        "<log name>.annotated.mcap, episodes.json, summary.json/.txt, PNG report",
+    )
     g = add_input_options(p)
-    g.add_argument("--workers", type=int, default=ReplaySettings.workers, metavar="N",
-                   help="prediction processes for long logs (default %(default)s; 0: one "
-                        "process)")
-    g.add_argument("--episodes", type=int, default=10, metavar="N",
-                   help="squeak episodes listed on stdout (default 10)")
+    g.add_argument(
+        "--workers",
+        type=int,
+        default=ReplaySettings.workers,
+        metavar="N",
+        help="prediction processes for long logs (default %(default)s; 0: one process)",
+    )
+    g.add_argument(
+        "--episodes",
+        type=int,
+        default=10,
+        metavar="N",
+        help="squeak episodes listed on stdout (default 10)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress and no summary")
     g = p.add_argument_group("playback to ROS 2 topics")
-    g.add_argument("--publish", action="store_true",
-                   help="publish the log's messages in real time instead")
+    g.add_argument(
+        "--publish", action="store_true", help="publish the log's messages in real time instead"
+    )
     g.add_argument("--rate", type=finite, metavar="R", help="speed factor (default 1)")
     g.add_argument("--loop", action="store_true", help="repeat until Ctrl-C")
-    g.add_argument("--start-offset", type=finite, metavar="S",
-                   help="skip this much of the log [s]")
-    g.add_argument("--topics", nargs="+", metavar="T",
-                   help="publish exactly these topics (default: the predictor's inputs)")
-    g.add_argument("--remap", action="append", default=[], metavar="OLD:=NEW",
-                   help="publish log topic OLD on NEW (repeatable; a relative NEW is in the "
-                        "node's namespace)")
-    g.add_argument("--no-wait", action="store_true",
-                   help="start at once instead of waiting (up to 5 s) for a subscriber")
-    p.epilog = (ROS_ARGS_HELP + " (with --publish; in a namespace other than / the log's inputs "
-                                "are published in it: --ros-args -r __ns:=/seat_right)")
+    g.add_argument("--start-offset", type=finite, metavar="S", help="skip this much of the log [s]")
+    g.add_argument(
+        "--topics",
+        nargs="+",
+        metavar="T",
+        help="publish exactly these topics (default: the predictor's inputs)",
+    )
+    g.add_argument(
+        "--remap",
+        action="append",
+        default=[],
+        metavar="OLD:=NEW",
+        help="publish log topic OLD on NEW (repeatable; a relative NEW is in the node's namespace)",
+    )
+    g.add_argument(
+        "--no-wait",
+        action="store_true",
+        help="start at once instead of waiting (up to 5 s) for a subscriber",
+    )
+    p.epilog = (
+        ROS_ARGS_HELP + " (with --publish; in a namespace other than / the log's inputs "
+        "are published in it: --ros-args -r __ns:=/seat_right)"
+    )
     p.set_defaults(run=cmd_replay)
 
     p = sub.add_parser(
-        "recover", help="make a recording cut off by a crash readable by every tool: each cut-off "
-                        "file rewritten complete in place (the original kept as "
-                        "<name>.mcap.broken until the rewrite reads back), the bag's "
-                        "metadata.yaml regenerated; a second run changes nothing")
-    p.add_argument("log", metavar="BAGDIR|FILE",
-                   help="bag directory, one .mcap file (its bag's metadata.yaml is regenerated "
-                        "too), or a record directory (every cut-off bag in it)")
-    p.add_argument("-o", "--output", metavar="OUT.mcap",
-                   help="write the recovered messages of one FILE to OUT.mcap instead, leaving "
-                        "the input untouched")
+        "recover",
+        help="make a recording cut off by a crash readable by every tool: each cut-off "
+        "file rewritten complete in place (the original kept as "
+        "<name>.mcap.broken until the rewrite reads back), the bag's "
+        "metadata.yaml regenerated; a second run changes nothing",
+    )
+    p.add_argument(
+        "log",
+        metavar="BAGDIR|FILE",
+        help="bag directory, one .mcap file (its bag's metadata.yaml is regenerated "
+        "too), or a record directory (every cut-off bag in it)",
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        metavar="OUT.mcap",
+        help="write the recovered messages of one FILE to OUT.mcap instead, leaving "
+        "the input untouched",
+    )
     p.set_defaults(run=cmd_recover)
 
-    p = sub.add_parser("info", help="topics, types, counts, time span of an MCAP log; "
-                                    "complete or truncated")
+    p = sub.add_parser(
+        "info", help="topics, types, counts, time span of an MCAP log; complete or truncated"
+    )
     p.add_argument("log", metavar="LOG", help="MCAP file or directory of split files")
     p.add_argument("--json", action="store_true", help="print JSON (one object per file)")
     p.set_defaults(run=cmd_info)

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
 from .args import ROS_ARGS_HELP, CliError, Parser, finite, import_ros, output_directory
 
@@ -15,6 +14,7 @@ from .args import ROS_ARGS_HELP, CliError, Parser, finite, import_ros, output_di
 def _stroke(duration_s: float | None):
     """The simulator's stroke profile of `--duration` (a bad duration is a CliError)."""
     from ..live.profile import ProfileError, StrokeProfile
+
     try:
         return StrokeProfile() if duration_s is None else StrokeProfile(duration_s=duration_s)
     except ProfileError as exc:
@@ -28,7 +28,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     run_demo = import_ros("demo", "demo").run_demo
     try:
         return run_demo(profile.duration_s, record_dir=record_dir)
-    except RuntimeError as exc:          # e.g. rclpy could not start, no subscription
+    except RuntimeError as exc:  # e.g. rclpy could not start, no subscription
         raise CliError(str(exc)) from None
 
 
@@ -40,10 +40,15 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if not 0 < args.rate <= MAX_RATE_HZ:
         raise CliError(f"argument --rate: must be in (0, {MAX_RATE_HZ:g}] Hz, got {args.rate:g}")
     try:
-        return run_simulator(profile, rate_hz=args.rate, loop=args.loop,
-                             joint_name=args.joint_name, wait_for_subscriber=not args.no_wait,
-                             ros_args=args.ros_args)
-    except (ValueError, RuntimeError) as exc:     # bad --ros-args; rclpy could not start
+        return run_simulator(
+            profile,
+            rate_hz=args.rate,
+            loop=args.loop,
+            joint_name=args.joint_name,
+            wait_for_subscriber=not args.no_wait,
+            ros_args=args.ros_args,
+        )
+    except (ValueError, RuntimeError) as exc:  # bad --ros-args; rclpy could not start
         raise CliError(str(exc)) from None
 
 
@@ -59,35 +64,60 @@ def squeak_node() -> int:
 
 
 def _duration_option(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--duration", type=finite, metavar="S",
-                   help="stroke duration [s] (default 12; at most about 13, or the nut would "
-                        "leave the screw)")
+    p.add_argument(
+        "--duration",
+        type=finite,
+        metavar="S",
+        help="stroke duration [s] (default 12; at most about 13, or the nut would leave the screw)",
+    )
 
 
 def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     """Add `demo` and `simulate` to `sub` (neither takes the model options `common`)."""
-    p = sub.add_parser("demo", help="the ROS 2 predictor node driven by the actuator simulator "
-                                    "(one process, loopback, private ROS_DOMAIN_ID)")
+    p = sub.add_parser(
+        "demo",
+        help="the ROS 2 predictor node driven by the actuator simulator "
+        "(one process, loopback, private ROS_DOMAIN_ID)",
+    )
     _duration_option(p)
-    p.add_argument("--record-dir", default="squeak_demo", metavar="DIR",
-                   help="the predictor records inputs and outputs into a bag in DIR (created; "
-                        "default ./squeak_demo)")
+    p.add_argument(
+        "--record-dir",
+        default="squeak_demo",
+        metavar="DIR",
+        help="the predictor records inputs and outputs into a bag in DIR (created; "
+        "default ./squeak_demo)",
+    )
     p.add_argument("--no-record", action="store_true", help="do not record")
     p.set_defaults(run=cmd_demo)
 
-    p = sub.add_parser("simulate", help="publish a simulated power-seat stroke for a separately "
-                                        "started squeak_node (same ROS_DOMAIN_ID)",
-                       usage="%(prog)s [options] [--ros-args ...]",
-                       epilog=ROS_ARGS_HELP + "; e.g. --ros-args -r __ns:=/seat_left publishes "
-                                              "/seat_left/motor_speed, ...")
+    p = sub.add_parser(
+        "simulate",
+        help="publish a simulated power-seat stroke for a separately "
+        "started squeak_node (same ROS_DOMAIN_ID)",
+        usage="%(prog)s [options] [--ros-args ...]",
+        epilog=ROS_ARGS_HELP + "; e.g. --ros-args -r __ns:=/seat_left publishes "
+        "/seat_left/motor_speed, ...",
+    )
     _duration_option(p)
-    p.add_argument("--rate", type=finite, default=100.0, metavar="HZ",
-                   help="publishing rate [Hz] (default 100)")
-    p.add_argument("--loop", action="store_true",
-                   help="repeat the stroke, back and forth, until Ctrl-C")
-    p.add_argument("--joint-name", default="", metavar="NAME",
-                   help="also publish joint_states with this joint (screw angle, speed)")
-    p.add_argument("--no-wait", action="store_true",
-                   help="start the stroke at once instead of when something subscribes to "
-                        "motor_speed")
+    p.add_argument(
+        "--rate",
+        type=finite,
+        default=100.0,
+        metavar="HZ",
+        help="publishing rate [Hz] (default 100)",
+    )
+    p.add_argument(
+        "--loop", action="store_true", help="repeat the stroke, back and forth, until Ctrl-C"
+    )
+    p.add_argument(
+        "--joint-name",
+        default="",
+        metavar="NAME",
+        help="also publish joint_states with this joint (screw angle, speed)",
+    )
+    p.add_argument(
+        "--no-wait",
+        action="store_true",
+        help="start the stroke at once instead of when something subscribes to motor_speed",
+    )
     p.set_defaults(run=cmd_simulate)

@@ -26,7 +26,7 @@ from .settings import JointSettings
 # Phases as fractions of the stroke duration: rest, ramp up, hold, ramp down (RAMP again), and
 # rest for the remaining 0.15.
 REST_START, RAMP, HOLD = 0.05, 0.36, 0.08
-SPRING_SHARE = 0.8           # share of the load range that follows the travel (the rest: occupant)
+SPRING_SHARE = 0.8  # share of the load range that follows the travel (the rest: occupant)
 _DEFAULTS = ScrewParameters()
 
 
@@ -89,7 +89,7 @@ class StrokeProfile:
     nut_position_at_zero_angle_m: float = JointSettings.nut_position_at_zero_angle_m
 
     @classmethod
-    def for_params(cls, params: ScrewParameters, **changes: Any) -> "StrokeProfile":
+    def for_params(cls, params: ScrewParameters, **changes: Any) -> StrokeProfile:
         """A profile for this screw: lead R tan(beta) and travel limit L - b from `params`.
 
         Parameters
@@ -104,30 +104,40 @@ class StrokeProfile:
         StrokeProfile
             The profile.
         """
-        return cls(lead_m_per_rad=params.lead_per_rad_m,
-                   max_nut_position_m=params.nut_travel_m, **changes)
+        return cls(
+            lead_m_per_rad=params.lead_per_rad_m, max_nut_position_m=params.nut_travel_m, **changes
+        )
 
     def __post_init__(self) -> None:
         for name in ("duration_s", "peak_speed_rad_s", "lead_m_per_rad"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ProfileError(f"{name} must be a finite number > 0, got {value!r}")
-        for name in ("load_min_n", "load_max_n", "start_nut_position_m",
-                     "max_nut_position_m", "nut_position_at_zero_angle_m"):
+        for name in (
+            "load_min_n",
+            "load_max_n",
+            "start_nut_position_m",
+            "max_nut_position_m",
+            "nut_position_at_zero_angle_m",
+        ):
             if not math.isfinite(getattr(self, name)):
                 raise ProfileError(f"{name} must be finite, got {getattr(self, name)!r}")
         if not 0 <= self.load_min_n <= self.load_max_n:
-            raise ProfileError(f"need 0 <= load_min_n <= load_max_n, got {self.load_min_n:g} "
-                               f"and {self.load_max_n:g} N")
+            raise ProfileError(
+                f"need 0 <= load_min_n <= load_max_n, got {self.load_min_n:g} "
+                f"and {self.load_max_n:g} N"
+            )
         end = self.start_nut_position_m + self.travel_m
         if not 0 <= self.start_nut_position_m <= end <= self.max_nut_position_m:
-            longest = ((self.max_nut_position_m - self.start_nut_position_m)
-                       / (self.travel_m / self.duration_s))
+            longest = (self.max_nut_position_m - self.start_nut_position_m) / (
+                self.travel_m / self.duration_s
+            )
             raise ProfileError(
                 f"a {self.duration_s:g} s stroke at {self.peak_speed_rad_s:g} rad/s moves the nut "
                 f"{self.travel_m:.3g} m from {self.start_nut_position_m:g} m, off the screw "
                 f"(nut positions 0..{self.max_nut_position_m:g} m); the longest stroke at this "
-                f"speed is {max(longest, 0):.3g} s (use --loop to keep going)")
+                f"speed is {max(longest, 0):.3g} s (use --loop to keep going)"
+            )
 
     # ---------------------------------------------------------------- shape
     @property
@@ -158,7 +168,7 @@ class StrokeProfile:
         up = min(max(tau - REST_START, 0.0), RAMP) / RAMP
         hold = min(max(tau - REST_START - RAMP, 0.0), HOLD)
         down = min(max(tau - REST_START - RAMP - HOLD, 0.0), RAMP) / RAMP
-        return w * d * (RAMP * up ** 3 / 3 + hold + RAMP * (1 - (1 - down) ** 3) / 3)
+        return w * d * (RAMP * up**3 / 3 + hold + RAMP * (1 - (1 - down) ** 3) / 3)
 
     def state(self, t: float, loop: bool = False) -> ActuatorState:
         """Speed, load, nut position and screw angle at a time of the stroke.
@@ -183,16 +193,17 @@ class StrokeProfile:
         tau = (t - k * d) / d if loop else min(t / d, 1.0)
         sign = -1.0 if k % 2 else 1.0
         travel = self.lead_m_per_rad * self._angle_of_stroke(tau)
-        nut = (self.start_nut_position_m + travel if sign > 0
-               else self.end_nut_position_m - travel)
-        nut = min(max(nut, 0.0), self.max_nut_position_m)       # guards rounding only
-        u = (nut - self.start_nut_position_m) / self.travel_m                # 0..1
-        occupant = 0.5 * (1.0 - math.cos(2.0 * math.pi * tau))              # 0..1..0
+        nut = self.start_nut_position_m + travel if sign > 0 else self.end_nut_position_m - travel
+        nut = min(max(nut, 0.0), self.max_nut_position_m)  # guards rounding only
+        u = (nut - self.start_nut_position_m) / self.travel_m  # 0..1
+        occupant = 0.5 * (1.0 - math.cos(2.0 * math.pi * tau))  # 0..1..0
         load = self.load_min_n + (self.load_max_n - self.load_min_n) * (
-            SPRING_SHARE * min(max(u, 0.0), 1.0) + (1.0 - SPRING_SHARE) * occupant)
+            SPRING_SHARE * min(max(u, 0.0), 1.0) + (1.0 - SPRING_SHARE) * occupant
+        )
         angle = (nut - self.nut_position_at_zero_angle_m) / self.lead_m_per_rad
-        return ActuatorState(sign * self.peak_speed_rad_s * self._speed_fraction(tau), load,
-                             nut, angle)
+        return ActuatorState(
+            sign * self.peak_speed_rad_s * self._speed_fraction(tau), load, nut, angle
+        )
 
 
 def state(t: float, profile: StrokeProfile | None = None, loop: bool = False) -> ActuatorState:
@@ -200,8 +211,9 @@ def state(t: float, profile: StrokeProfile | None = None, loop: bool = False) ->
     return (profile or StrokeProfile()).state(t, loop)
 
 
-def expected_squeak(profile: StrokeProfile, model: SqueakModel | None = None,
-                    samples: int = 241) -> tuple[np.ndarray, np.ndarray]:
+def expected_squeak(
+    profile: StrokeProfile, model: SqueakModel | None = None, samples: int = 241
+) -> tuple[np.ndarray, np.ndarray]:
     """The model along the stroke, at `samples` evenly spaced times: (times [s], squeak flags).
 
     What an ideal, lag-free predictor would say; the demo compares the node's output with it."""
@@ -211,7 +223,7 @@ def expected_squeak(profile: StrokeProfile, model: SqueakModel | None = None,
     for i, t in enumerate(times):
         s = profile.state(t)
         if abs(s.speed_rad_s) < model.params.min_speed_rad_s:
-            continue                                           # at rest: no squeak
+            continue  # at rest: no squeak
         p = model.with_params(nut_position_m=s.nut_position_m).predict(s.speed_rad_s, s.load_n)
         flags[i] = bool(p.valid and p.squeak_modes)
     return times, flags

@@ -24,27 +24,43 @@ from __future__ import annotations
 import math
 import threading
 import time
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
 from functools import partial
-from typing import Callable, Sequence, cast
+from typing import cast
 
 from threadpoolctl import threadpool_limits
 
 from ..model import ParameterError, Prediction, SqueakModel, Validity
 from ..model.studies.advice import Band, band_around
 from .rules import InputRules, Inputs, Outcome
-from .status import (KEY_FORMULATION, KEY_LOAD, KEY_MARGIN, KEY_MAX_GROWTH_RATE, KEY_NUT_POSITION,
-                     KEY_PROBABILITY, KEY_PROBABILITY_STDERR, KEY_RECOMPUTES, KEY_SAFE_SPEED,
-                     KEY_SAFE_SPEED_ERROR, KEY_SAFE_SPEED_PENDING, KEY_SPEED,
-                     KEY_SQUEAK_FREQUENCIES, KEY_VALID, KEY_VALIDITY, Level, Status,
-                     prediction_status, value_text)
 from .settings import JointSettings, LiveSettings
+from .status import (
+    KEY_FORMULATION,
+    KEY_LOAD,
+    KEY_MARGIN,
+    KEY_MAX_GROWTH_RATE,
+    KEY_NUT_POSITION,
+    KEY_PROBABILITY,
+    KEY_PROBABILITY_STDERR,
+    KEY_RECOMPUTES,
+    KEY_SAFE_SPEED,
+    KEY_SAFE_SPEED_ERROR,
+    KEY_SAFE_SPEED_PENDING,
+    KEY_SPEED,
+    KEY_SQUEAK_FREQUENCIES,
+    KEY_VALID,
+    KEY_VALIDITY,
+    Level,
+    Status,
+    prediction_status,
+    value_text,
+)
 
+_LOAD_BIN = 0.05  # relative load bin of the cached squeak bands (safe-speed advice)
+_NUT_BIN_M = 0.005  # nut position bin of the cached squeak bands
+_BANDS_KEPT = 4  # bands kept for the current bin (speeds moving around within it)
+_MAX_DUTY_RATIO = 2.0  # recomputes start at least this many prediction times apart
 
-_LOAD_BIN = 0.05          # relative load bin of the cached squeak bands (safe-speed advice)
-_NUT_BIN_M = 0.005        # nut position bin of the cached squeak bands
-_BANDS_KEPT = 4           # bands kept for the current bin (speeds moving around within it)
-_MAX_DUTY_RATIO = 2.0     # recomputes start at least this many prediction times apart
 
 class Superseded(Exception):
     """Raised at a checkpoint of a background job that a newer request replaced."""
@@ -63,8 +79,8 @@ class LatestWorker:
     def __init__(self, name: str = "squeak-advice"):
         self._name = name
         self._cv = threading.Condition()
-        self._latest = 0                                    # id of the newest request
-        self._waiting: tuple[int, Callable] | None = None   # request not started yet
+        self._latest = 0  # id of the newest request
+        self._waiting: tuple[int, Callable] | None = None  # request not started yet
         self._running = False
         self._done: tuple[int, object, Exception | None] | None = None
         self._thread: threading.Thread | None = None
@@ -107,8 +123,7 @@ class LatestWorker:
     def wait(self, timeout: float | None = None) -> bool:
         """Block until no request waits or runs; False if `timeout` (s) passed first."""
         with self._cv:
-            return self._cv.wait_for(lambda: self._waiting is None and not self._running,
-                                     timeout)
+            return self._cv.wait_for(lambda: self._waiting is None and not self._running, timeout)
 
     def close(self, timeout: float = 1.0) -> None:
         """Abandon all work and let the thread end (joined for at most `timeout` s)."""
@@ -122,7 +137,7 @@ class LatestWorker:
             thread.join(timeout)
 
     def _checkpoint(self, ident: int) -> None:
-        if ident != self._latest:       # an int read: atomic, no lock on the hot path
+        if ident != self._latest:  # an int read: atomic, no lock on the hot path
             raise Superseded
 
     def _run(self) -> None:
@@ -137,7 +152,7 @@ class LatestWorker:
                 result, error = job(partial(self._checkpoint, ident)), None
             except Superseded:
                 continue
-            except Exception as exc:          # reported through take(), never lost silently
+            except Exception as exc:  # reported through take(), never lost silently
                 result, error = None, exc
             with self._cv:
                 self._running = False
@@ -175,29 +190,33 @@ class LivePredictor:
         The screw joint of JointState inputs.
     """
 
-    def __init__(self, model: SqueakModel, settings: LiveSettings = LiveSettings(),
-                 clock: Callable[[], float] = time.perf_counter,
-                 joints: JointSettings = JointSettings()):
+    def __init__(
+        self,
+        model: SqueakModel,
+        settings: LiveSettings = LiveSettings(),
+        clock: Callable[[], float] = time.perf_counter,
+        joints: JointSettings = JointSettings(),
+    ):
         _single_threaded_blas()
         self.model = model
-        self._nut_model = model                        # model at the contact's nut position
+        self._nut_model = model  # model at the contact's nut position
         self.settings = settings
         self.rules = InputRules(model.params, settings, joints)
         self._arrived = {"speed": -math.inf, "load": -math.inf}  # input -> when last taken
-        self.prediction: Prediction | None = None        # last good (valid) prediction
-        self.safe_speed_rad_s: float | None = None      # last advice, kept while a new one
+        self.prediction: Prediction | None = None  # last good (valid) prediction
+        self.safe_speed_rad_s: float | None = None  # last advice, kept while a new one
         #                                                   is searched in the background
         self.recomputes = 0
         self._last_update = -math.inf
         self._clock = clock
-        self._cost_s = 0.0                             # how long the last prediction took
-        self._validity: Validity | None = None         # verdict at the latest point
-        self._invalid_reason = ""                      # why it has no prediction
-        self._bands: dict[tuple, list[Band]] = {}       # one bin: bands found in it
+        self._cost_s = 0.0  # how long the last prediction took
+        self._validity: Validity | None = None  # verdict at the latest point
+        self._invalid_reason = ""  # why it has no prediction
+        self._bands: dict[tuple, list[Band]] = {}  # one bin: bands found in it
         self._advised: tuple[SqueakModel, Prediction] | None = None  # what advice is for
-        self._search: tuple[int, tuple] | None = None   # background request: id, bin key
-        self._pending = False                           # latest prediction waits for it
-        self._failed: tuple | None = None               # bin whose search raised
+        self._search: tuple[int, tuple] | None = None  # background request: id, bin key
+        self._pending = False  # latest prediction waits for it
+        self._failed: tuple | None = None  # bin whose search raised
         self._advice_error = ""
         self._worker = LatestWorker()
 
@@ -258,9 +277,14 @@ class LivePredictor:
         """
         return self._arrive(self.rules.set_nut_position(value), now).error
 
-    def set_joint_state(self, names: Sequence[str], positions: Sequence[float],
-                        velocities: Sequence[float], now: float,
-                        joints: JointSettings | None = None) -> Outcome:
+    def set_joint_state(
+        self,
+        names: Sequence[str],
+        positions: Sequence[float],
+        velocities: Sequence[float],
+        now: float,
+        joints: JointSettings | None = None,
+    ) -> Outcome:
         """Take the screw joint's speed and nut position of a JointState
         (`rules.InputRules.set_joint_state`).
 
@@ -377,7 +401,7 @@ class LivePredictor:
         rebuilt only when that moved."""
         if nut == self._nut_model.params.nut_position_m:
             return self._nut_model
-        try:                            # geometry is cached: a revisited position is free
+        try:  # geometry is cached: a revisited position is free
             self._nut_model = self.model.with_params(nut_position_m=nut)
         except ParameterError as exc:
             self._validity = Validity.PARAMETERS_REJECTED
@@ -405,24 +429,33 @@ class LivePredictor:
         margin = self.settings.safe_speed_margin
         # Band edges move slowly with load and nut position: reuse them within a bin.
         load_bin = round(math.log(abs(p.load_n)) / math.log(1 + _LOAD_BIN)) if p.load_n else None
-        key = (load_bin, round(model.params.nut_position_m / _NUT_BIN_M),
-               math.copysign(1, p.speed_rad_s))
+        key = (
+            load_bin,
+            round(model.params.nut_position_m / _NUT_BIN_M),
+            math.copysign(1, p.speed_rad_s),
+        )
         for band in self._bands.get(key, ()):
             safe = band.safe_speed(p.speed_rad_s, lowest, highest, margin)
             if safe is not None:
                 return self._set_advice(safe, key)
-        if key == self._failed:   # keep the last advice; no retry within this bin
+        if key == self._failed:  # keep the last advice; no retry within this bin
             self._pending = False
             return
         self._pending = True
         if self._search is not None and self._search[1] == key:
-            return                # a search of this bin is under way: re-checked when it ends
+            return  # a search of this bin is under way: re-checked when it ends
         known = next((b for b in self._bands.get(key, ()) if b.contains(p.speed_rad_s)), None)
         # predict is thread-safe: the search shares the executor's model (and its samples)
-        job = partial(band_around, model, p.load_n, p.speed_rad_s, margin, known=known,
-                      safe_probability=self.settings.safe_probability)
-        self._search = (self._worker.submit(lambda checkpoint: job(checkpoint=checkpoint)),
-                        key)
+        job = partial(
+            band_around,
+            model,
+            p.load_n,
+            p.speed_rad_s,
+            margin,
+            known=known,
+            safe_probability=self.settings.safe_probability,
+        )
+        self._search = (self._worker.submit(lambda checkpoint: job(checkpoint=checkpoint)), key)
 
     def _set_advice(self, safe_speed_rad_s: float, key: tuple | None) -> None:
         """Advice decided now; a search of another bin is stale and cancelled, one of this
@@ -438,13 +471,16 @@ class LivePredictor:
         if done is None or self._search is None or done[0] != self._search[0]:
             return False
         (_, found, error), key = done, self._search[1]
-        band = cast("Band | None", found)        # what the search (`band_around`) returns
+        band = cast("Band | None", found)  # what the search (`band_around`) returns
         self._search = None
-        if error is not None:     # keep the last advice; no retry within this bin
+        if error is not None:  # keep the last advice; no retry within this bin
             self._failed, self._advice_error = key, f"safe-speed search failed: {error}"
-        elif band is not None:    # None only for a safe point, which `_advise` never searches
-            others = [b for b in self._bands.get(key, ())      # minus the one it extends
-                      if not band.low_rad_s <= b.low_rad_s <= b.high_rad_s <= band.high_rad_s]
+        elif band is not None:  # None only for a safe point, which `_advise` never searches
+            others = [
+                b
+                for b in self._bands.get(key, ())  # minus the one it extends
+                if not band.low_rad_s <= b.low_rad_s <= b.high_rad_s <= band.high_rad_s
+            ]
             self._bands = {key: ([band] + others)[:_BANDS_KEPT]}
             self._advice_error = ""
         return True
@@ -461,7 +497,7 @@ class LivePredictor:
         waiting = self._pending
         if not self._collect() or self._advised is None:
             return False
-        self._advise(*self._advised)      # the speed may have moved on: maybe search again
+        self._advise(*self._advised)  # the speed may have moved on: maybe search again
         return waiting and not self._pending
 
     def wait_for_advice(self, timeout: float | None = None) -> bool:
@@ -482,7 +518,7 @@ class LivePredictor:
             remaining = None if deadline is None else max(0.0, deadline - time.monotonic())
             if not self._worker.wait(remaining):
                 return False
-            if not self._collect():       # nothing came back (closed worker): stop waiting
+            if not self._collect():  # nothing came back (closed worker): stop waiting
                 self._search, self._pending = None, False
             elif self._advised is not None:
                 self._advise(*self._advised)
@@ -511,7 +547,8 @@ class LivePredictor:
         arrived = self._arrived
         valid = p is not None and self._validity in (None, Validity.OK)
         values = {
-            KEY_SPEED: value_text(i.speed_rad_s), KEY_LOAD: value_text(i.load_n),
+            KEY_SPEED: value_text(i.speed_rad_s),
+            KEY_LOAD: value_text(i.load_n),
             KEY_NUT_POSITION: value_text(self.rules.nut_position_m),
             KEY_FORMULATION: self.model.params.formulation,
             KEY_VALID: str(valid).lower(),
@@ -521,7 +558,8 @@ class LivePredictor:
             KEY_MARGIN: value_text(p.margin if p else None),
             KEY_MAX_GROWTH_RATE: value_text(p.max_growth_rate if p else None),
             KEY_SQUEAK_FREQUENCIES: ", ".join(f"{f:.1f}" for f in p.unstable_frequencies_hz)
-            if p else "",
+            if p
+            else "",
             KEY_SAFE_SPEED: value_text(self.safe_speed_rad_s),
             KEY_SAFE_SPEED_PENDING: str(self.advice_pending).lower(),
             KEY_SAFE_SPEED_ERROR: self._advice_error,
@@ -530,11 +568,17 @@ class LivePredictor:
         if self.rules.errors:
             errors = "; ".join(r.message for r in self.rules.errors.values())
             return Status(Level.ERROR, f"invalid input: {errors}", values)
-        stale = [n for n, t in (("motor_speed", arrived["speed"]),
-                                ("axial_load", arrived["load"])) if now - t > s.stale_timeout_s]
+        stale = [
+            n
+            for n, t in (("motor_speed", arrived["speed"]), ("axial_load", arrived["load"]))
+            if now - t > s.stale_timeout_s
+        ]
         if stale:
-            return Status(Level.STALE, f"no fresh input on {', '.join(stale)} for more than "
-                                       f"{s.stale_timeout_s:g} s", values)
+            return Status(
+                Level.STALE,
+                f"no fresh input on {', '.join(stale)} for more than {s.stale_timeout_s:g} s",
+                values,
+            )
         if self._validity not in (None, Validity.OK):
             return Status(Level.WARN, f"no prediction: {self._invalid_reason}", values)
         if p is None:

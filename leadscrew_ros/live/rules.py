@@ -37,8 +37,9 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple, Sequence, TypeGuard
+from typing import NamedTuple, TypeGuard
 
 from ..model import OperatingPointError, ScrewParameters
 from ..model.physics.display import exact
@@ -49,7 +50,7 @@ from .settings import JointSettings, LiveSettings
 # As check_operating_point: the upper limit of the axial_load_n field (for the reason text).
 _LOAD_LIMIT_N = field_info("axial_load_n")["hi"]
 
-Point = tuple[float, float, float]          # speed [rad/s], load [N], nut position [m]
+Point = tuple[float, float, float]  # speed [rad/s], load [N], nut position [m]
 
 
 @dataclass(frozen=True)
@@ -64,9 +65,9 @@ class Rejection:
 class Outcome(NamedTuple):
     """What one input message did (a NamedTuple: one per input message, so cheap)."""
 
-    taken: tuple[str, ...] = ()              # inputs taken: 'speed', 'load', 'nut'
-    rejected: tuple[Rejection, ...] = ()     # values not taken
-    ignored: str = ""                        # why the whole message was ignored, else ''
+    taken: tuple[str, ...] = ()  # inputs taken: 'speed', 'load', 'nut'
+    rejected: tuple[Rejection, ...] = ()  # values not taken
+    ignored: str = ""  # why the whole message was ignored, else ''
 
     @property
     def error(self) -> str:
@@ -99,7 +100,7 @@ class JointReading:
 
     values: dict[str, object]
     ignored: str = ""
-    rejected: Rejection | None = None         # a malformed message
+    rejected: Rejection | None = None  # a malformed message
 
 
 def moved(point: Point, last: Point, deadbands: LiveSettings) -> bool:
@@ -116,14 +117,20 @@ def moved(point: Point, last: Point, deadbands: LiveSettings) -> bool:
     -------
     bool
     """
-    return (abs(point[0] - last[0]) > deadbands.speed_deadband_rad_s
-            or abs(point[1] - last[1]) > deadbands.load_deadband_n
-            or abs(point[2] - last[2]) > deadbands.nut_deadband_m)
+    return (
+        abs(point[0] - last[0]) > deadbands.speed_deadband_rad_s
+        or abs(point[1] - last[1]) > deadbands.load_deadband_n
+        or abs(point[2] - last[2]) > deadbands.nut_deadband_m
+    )
 
 
-def read_joint_state(names: Sequence[str], positions: Sequence[float],
-                     velocities: Sequence[float], joints: JointSettings,
-                     lead_per_rad_m: float) -> JointReading:
+def read_joint_state(
+    names: Sequence[str],
+    positions: Sequence[float],
+    velocities: Sequence[float],
+    joints: JointSettings,
+    lead_per_rad_m: float,
+) -> JointReading:
     """The screw joint's speed and nut position in a JointState (see the module docstring).
 
     Parameters
@@ -146,8 +153,12 @@ def read_joint_state(names: Sequence[str], positions: Sequence[float],
         return JointReading({}, "joint_name not set")
     problem = _malformed(list(names), len(positions), len(velocities))
     if problem:
-        return JointReading({}, rejected=Rejection(f"joint_states malformed: {problem[0]}",
-                                                   f"joint_states rejected: {problem[1]}"))
+        return JointReading(
+            {},
+            rejected=Rejection(
+                f"joint_states malformed: {problem[0]}", f"joint_states rejected: {problem[1]}"
+            ),
+        )
     try:
         i = list(names).index(name)
     except ValueError:
@@ -157,8 +168,12 @@ def read_joint_state(names: Sequence[str], positions: Sequence[float],
         values["speed"] = velocities[i]
     if positions:
         theta = _real(positions[i])
-        values["nut"] = positions[i] if theta is None else (    # else the nut check names it
-            joints.nut_position_at_zero_angle_m + theta * lead_per_rad_m)
+        values["nut"] = (
+            positions[i]
+            if theta is None
+            # else the nut check names it
+            else (joints.nut_position_at_zero_angle_m + theta * lead_per_rad_m)
+        )
     if not values:
         return JointReading({}, f"joint {name!r} without position or velocity")
     return JointReading(values)
@@ -172,8 +187,11 @@ def _malformed(names: list, positions: int, velocities: int) -> tuple[str, str] 
     if repeated:
         return "a name twice", f"joint name(s) {', '.join(map(repr, repeated))} given twice"
     if positions not in (0, len(names)) or velocities not in (0, len(names)):
-        return ("array lengths differ", f"{len(names)} names but {positions} positions and "
-                f"{velocities} velocities (each empty or one per name)")
+        return (
+            "array lengths differ",
+            f"{len(names)} names but {positions} positions and "
+            f"{velocities} velocities (each empty or one per name)",
+        )
     return None
 
 
@@ -189,7 +207,7 @@ def _real(value: object) -> float | None:
         return None
     try:
         return float(value)
-    except OverflowError:                                      # an int beyond the float range
+    except OverflowError:  # an int beyond the float range
         return None
 
 
@@ -207,14 +225,18 @@ class InputRules:
         from its parameters).
     """
 
-    def __init__(self, params: ScrewParameters, live: LiveSettings = LiveSettings(),
-                 joints: JointSettings = JointSettings()):
+    def __init__(
+        self,
+        params: ScrewParameters,
+        live: LiveSettings = LiveSettings(),
+        joints: JointSettings = JointSettings(),
+    ):
         self.params, self.live, self.joints = params, live, joints
         self.inputs = Inputs()
-        self.errors: dict[str, Rejection] = {}          # input -> its latest value's rejection,
+        self.errors: dict[str, Rejection] = {}  # input -> its latest value's rejection,
         #                                                 until a good value arrives
-        self.computed_at: Point | None = None           # the point last computed
-        self.contact_nut_m = params.nut_position_m      # where the contact is integrated
+        self.computed_at: Point | None = None  # the point last computed
+        self.contact_nut_m = params.nut_position_m  # where the contact is integrated
 
     def reset(self, params: ScrewParameters, live: LiveSettings) -> None:
         """New parameters or settings: the next point is computed whatever it is, with the
@@ -276,16 +298,24 @@ class InputRules:
         """
         z, travel = _real(value), self.params.nut_travel_m
         if z is None:
-            return self._reject("nut", Rejection(
-                "nut position not a number", f"nut position {value!r} is not a number"))
-        if not math.isfinite(z):             # not 'nan m is off the screw'
-            return self._reject("nut", Rejection(
-                "nut position not finite", f"nut position {z} m is not a finite number"))
+            return self._reject(
+                "nut",
+                Rejection("nut position not a number", f"nut position {value!r} is not a number"),
+            )
+        if not math.isfinite(z):  # not 'nan m is off the screw'
+            return self._reject(
+                "nut",
+                Rejection("nut position not finite", f"nut position {z} m is not a finite number"),
+            )
         if not 0.0 <= z <= travel:
-            return self._reject("nut", Rejection(
-                f"nut position off the screw [0, {exact(travel)}] m",
-                f"nut position {exact(z)} m is off the screw: allowed [0, {exact(travel)}] m "
-                f"(z_o + b <= L)"))
+            return self._reject(
+                "nut",
+                Rejection(
+                    f"nut position off the screw [0, {exact(travel)}] m",
+                    f"nut position {exact(z)} m is off the screw: allowed [0, {exact(travel)}] m "
+                    f"(z_o + b <= L)",
+                ),
+            )
         self.inputs.nut_position_m = z
         return self._taken("nut")
 
@@ -296,10 +326,14 @@ class InputRules:
             else:
                 _, self.inputs.load_n = check_operating_point(0.0, value)
         except OperatingPointError as exc:
-            v = _real(value)                     # None also for an int beyond the floats
-            reason = (f"{kind} not a number" if not _is_real(value) else
-                      f"{kind} not finite" if v is None or not math.isfinite(v) else
-                      f"load beyond {exact(_LOAD_LIMIT_N)} N")
+            v = _real(value)  # None also for an int beyond the floats
+            reason = (
+                f"{kind} not a number"
+                if not _is_real(value)
+                else f"{kind} not finite"
+                if v is None or not math.isfinite(v)
+                else f"load beyond {exact(_LOAD_LIMIT_N)} N"
+            )
             return self._reject(kind, Rejection(reason, str(exc)))
         return self._taken(kind)
 
@@ -313,8 +347,9 @@ class InputRules:
         return Outcome(rejected=(rejection,))
 
     # ---------------------------------------------------------------- JointState
-    def set_joint_state(self, names: Sequence[str], positions: Sequence[float],
-                        velocities: Sequence[float]) -> Outcome:
+    def set_joint_state(
+        self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float]
+    ) -> Outcome:
         """Take the screw joint's speed and nut position (both before any recompute decision);
         ignored without `joints.joint_name` or without that joint.
 
@@ -330,17 +365,20 @@ class InputRules:
         Outcome
             What was taken, and what was rejected or ignored and why.
         """
-        reading = read_joint_state(names, positions, velocities, self.joints,
-                                   self.params.lead_per_rad_m)
+        reading = read_joint_state(
+            names, positions, velocities, self.joints, self.params.lead_per_rad_m
+        )
         if reading.ignored:
             return Outcome(ignored=reading.ignored)
         if reading.rejected:
             return self._reject("joint_states", reading.rejected)
-        self.errors.pop("joint_states", None)    # a well-formed one ends that error
+        self.errors.pop("joint_states", None)  # a well-formed one ends that error
         setters = {"speed": self.set_speed, "nut": self.set_nut_position}
         outcomes = [setters[kind](value) for kind, value in reading.values.items()]
-        return Outcome(tuple(k for o in outcomes for k in o.taken),
-                       tuple(r for o in outcomes for r in o.rejected))
+        return Outcome(
+            tuple(k for o in outcomes for k in o.taken),
+            tuple(r for o in outcomes for r in o.rejected),
+        )
 
     # ---------------------------------------------------------------- operating point
     @property
@@ -377,8 +415,9 @@ class InputRules:
             True: a recompute would give something new.
         """
         point = self.point()
-        return point is not None and (self.computed_at is None
-                                      or moved(point, self.computed_at, self.live))
+        return point is not None and (
+            self.computed_at is None or moved(point, self.computed_at, self.live)
+        )
 
     def compute(self) -> tuple[Point, float] | None:
         """Mark the current point as computed.

@@ -20,31 +20,45 @@ class LiveSettings:
     """When to recompute and what the verdict says (SI units; see the field metadata)."""
 
     speed_deadband_rad_s: float = setting(
-        0.1, "rad/s", "recompute when the speed moved more than this", 0.0, 1000.0)
+        0.1, "rad/s", "recompute when the speed moved more than this", 0.0, 1000.0
+    )
     load_deadband_n: float = setting(
-        1.0, "N", "recompute when the load moved more than this", 0.0, 1e5)
+        1.0, "N", "recompute when the load moved more than this", 0.0, 1e5
+    )
     nut_deadband_m: float = setting(
-        0.0005, "m", "re-integrate the contact when the nut moved more than this", 0.0, 1.0)
+        0.0005, "m", "re-integrate the contact when the nut moved more than this", 0.0, 1.0
+    )
     max_rate_hz: float = setting(
-        100.0, "Hz", "maximum recompute rate (bursts are coalesced)", 0.1, 10000.0)
+        100.0, "Hz", "maximum recompute rate (bursts are coalesced)", 0.1, 10000.0
+    )
     warn_probability: float = setting(
-        0.1, "1", "diagnostic WARN at or above this P(squeak)", 0.0, 1.0)
+        0.1, "1", "diagnostic WARN at or above this P(squeak)", 0.0, 1.0
+    )
     error_probability: float = setting(
-        0.5, "1", "diagnostic ERROR at or above this P(squeak)", 0.0, 1.0)
+        0.5, "1", "diagnostic ERROR at or above this P(squeak)", 0.0, 1.0
+    )
     safe_probability: float = setting(
-        0.01, "1", "squeak/safe_speed: nearest speed whose P(squeak) is below this", 0.0, 1.0,
-        lo_open=True)
+        0.01,
+        "1",
+        "squeak/safe_speed: nearest speed whose P(squeak) is below this",
+        0.0,
+        1.0,
+        lo_open=True,
+    )
     stale_timeout_s: float = setting(
-        1.0, "s", "diagnostic STALE when speed or load is older than this", 0.01, 3600.0)
+        1.0, "s", "diagnostic STALE when speed or load is older than this", 0.01, 3600.0
+    )
     safe_speed_margin: float = setting(
-        0.05, "1", "relative distance kept from a squeak band edge by squeak/safe_speed",
-        0.0, 0.5)
+        0.05, "1", "relative distance kept from a squeak band edge by squeak/safe_speed", 0.0, 0.5
+    )
 
     def __post_init__(self) -> None:
         check(self)
         if self.warn_probability > self.error_probability:
-            raise ValueError(f"warn_probability = {self.warn_probability:g} exceeds "
-                             f"error_probability = {self.error_probability:g}")
+            raise ValueError(
+                f"warn_probability = {self.warn_probability:g} exceeds "
+                f"error_probability = {self.error_probability:g}"
+            )
 
 
 @documented
@@ -59,11 +73,14 @@ class JointSettings:
     `nut_position_at_zero_angle_m + theta * ScrewParameters.lead_per_rad_m` (`live.rules`).
     """
 
-    joint_name: str = setting(
-        "", "", "screw joint in joint_states ('' ignores joint_states)")
+    joint_name: str = setting("", "", "screw joint in joint_states ('' ignores joint_states)")
     nut_position_at_zero_angle_m: float = setting(
-        0.15, "m", "nut position when the screw joint angle is 0; the nut travels "
-        "R tan(beta) per radian", -100.0, 100.0)
+        0.15,
+        "m",
+        "nut position when the screw joint angle is 0; the nut travels R tan(beta) per radian",
+        -100.0,
+        100.0,
+    )
 
     def __post_init__(self) -> None:
         check(self)

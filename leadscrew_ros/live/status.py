@@ -20,11 +20,11 @@ KEY_SPEED = "speed_rad_s"
 KEY_LOAD = "load_n"
 KEY_NUT_POSITION = "nut_position_m"
 KEY_FORMULATION = "formulation"
-KEY_VALID = "valid"                      # "true" when the latest point has a prediction
-KEY_VALIDITY = "validity"                # Validity name of the latest point ('' before one)
-KEY_PROBABILITY = "probability"           # P(squeak) of the latest prediction
-KEY_PROBABILITY_STDERR = "probability_stderr"   # its standard error ('' when not sampled)
-KEY_MARGIN = "margin"                     # least damping ratio (< 0: a nominal mode squeaks)
+KEY_VALID = "valid"  # "true" when the latest point has a prediction
+KEY_VALIDITY = "validity"  # Validity name of the latest point ('' before one)
+KEY_PROBABILITY = "probability"  # P(squeak) of the latest prediction
+KEY_PROBABILITY_STDERR = "probability_stderr"  # its standard error ('' when not sampled)
+KEY_MARGIN = "margin"  # least damping ratio (< 0: a nominal mode squeaks)
 KEY_MAX_GROWTH_RATE = "max_growth_rate_1_s"
 KEY_SQUEAK_FREQUENCIES = "squeak_frequencies_hz"
 KEY_SAFE_SPEED = "safe_speed_rad_s"
@@ -51,17 +51,19 @@ class Status:
     values: dict[str, str] = field(default_factory=dict)
 
 
-
-def prediction_status(p: Prediction, s: LiveSettings, values: dict[str, str] | None = None
-                      ) -> Status:
+def prediction_status(
+    p: Prediction, s: LiveSettings, values: dict[str, str] | None = None
+) -> Status:
     """The diagnostic level and message of a valid prediction: ERROR when P(squeak) >=
     error_probability or a divergence (non-oscillatory growth) is predicted, WARN when P >=
     warn_probability, else OK; the message gives P (never rounded across a threshold) and
     the modes that squeak at the nominal parameters."""
     assert p.probability is not None, "a valid prediction has its P(squeak)"
     text = f"{p.probability:.2g}"
-    if any((float(text) >= t) != (p.probability >= t)
-           for t in (s.warn_probability, s.error_probability)):
+    if any(
+        (float(text) >= t) != (p.probability >= t)
+        for t in (s.warn_probability, s.error_probability)
+    ):
         text = exact(p.probability)
     prob = f"P(squeak) {text}"
     notes = [f"{m.label} {m.frequency_hz:.0f} Hz" for m in p.squeak_modes]
@@ -73,8 +75,9 @@ def prediction_status(p: Prediction, s: LiveSettings, values: dict[str, str] | N
     if p.divergence_rates:
         return Status(Level.ERROR, f"divergence predicted: {prob}{detail}", values)
     if p.probability >= s.warn_probability:
-        return Status(Level.WARN, f"squeak possible: {prob} >= {s.warn_probability:g}{detail}",
-                      values)
+        return Status(
+            Level.WARN, f"squeak possible: {prob} >= {s.warn_probability:g}{detail}", values
+        )
     return Status(Level.OK, f"no squeak: {prob} < {s.warn_probability:g}{detail}", values)
 
 

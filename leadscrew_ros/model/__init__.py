@@ -10,10 +10,33 @@ reference, sensitivities, countermeasures, advice, sweeps and maps, mode trackin
 `nonlinear` (the time-domain check).
 """
 
-from .physics import (FORMULATIONS, Geometry, ModalBasis, ModeResult, ParameterError,
-                      ScrewParameters, SystemMatrices, build_geometry, field_names, modal_basis)
+from .physics import (
+    FORMULATIONS,
+    Geometry,
+    ModalBasis,
+    ModeResult,
+    ParameterError,
+    ScrewParameters,
+    SystemMatrices,
+    build_geometry,
+    field_names,
+    modal_basis,
+)
 from .squeak_model import OperatingPointError, Prediction, SqueakModel, Validity
 
-__all__ = ["FORMULATIONS", "Geometry", "ModalBasis", "ModeResult", "OperatingPointError",
-           "ParameterError", "Prediction", "ScrewParameters", "SqueakModel", "SystemMatrices",
-           "Validity", "build_geometry", "field_names", "modal_basis"]
+__all__ = [
+    "FORMULATIONS",
+    "Geometry",
+    "ModalBasis",
+    "ModeResult",
+    "OperatingPointError",
+    "ParameterError",
+    "Prediction",
+    "ScrewParameters",
+    "SqueakModel",
+    "SystemMatrices",
+    "Validity",
+    "build_geometry",
+    "field_names",
+    "modal_basis",
+]

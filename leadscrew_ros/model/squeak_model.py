@@ -17,9 +17,9 @@ from .physics.assembly import build_geometry
 from .physics.display import exact
 from .physics.friction import mu_o
 from .physics.parameters import ScrewParameters, field_info
+from .physics.stability import Eigen, ModeResult, classify, eig_both
 from .uncertainty.perturbation import EigenPairs, FirstOrderProbability, estimate, geometry_fields
 from .uncertainty.scatter import LIVE_SAMPLES, Samples, Scatter, check_count, involved, samples_for
-from .physics.stability import Eigen, ModeResult, classify, eig_both
 
 _LOAD_LIMIT_N = field_info("axial_load_n")["hi"]
 
@@ -55,21 +55,26 @@ _VALIDITY_TEXT = {
     Validity.OK: ("valid", "the sliding linearisation holds at this operating point"),
     Validity.BELOW_MIN_SPEED: (
         "speed below min_speed_rad_s",
-        "near stick the sliding linearisation does not hold; a nonlinear analysis is needed"),
+        "near stick the sliding linearisation does not hold; a nonlinear analysis is needed",
+    ),
     Validity.AT_CRITICAL_SPEED: (
         "speed at or above the first critical speed",
         "the model holds below the first critical speed, where the backward whirl of the "
-        "lowest mode reaches zero frequency"),
+        "lowest mode reaches zero frequency",
+    ),
     Validity.SELF_LOCKING: (
         "overhauling load on a self-locking thread",
         "with mu_o tan(beta) >= 1 an overhauling load gives no steady sliding: the thread "
-        "self-locks"),
+        "self-locks",
+    ),
     Validity.SOLVER_FAILED: (
         "eigen-solver failed",
-        "LAPACK did not converge at this operating point: no number is given"),
+        "LAPACK did not converge at this operating point: no number is given",
+    ),
     Validity.PARAMETERS_REJECTED: (
         "parameters not allowed at this point",
-        "the parameters at this point (e.g. the nut position) do not make a valid screw"),
+        "the parameters at this point (e.g. the nut position) do not make a valid screw",
+    ),
 }
 
 
@@ -109,8 +114,8 @@ class Prediction:
     load_n: float
     formulation: str
     validity: Validity
-    reason: str                          # why the point is outside validity ("" when valid)
-    modes: tuple[ModeResult, ...] = ()   # oscillatory modes, growth rate descending
+    reason: str  # why the point is outside validity ("" when valid)
+    modes: tuple[ModeResult, ...] = ()  # oscillatory modes, growth rate descending
     divergence_rates: tuple[float, ...] = ()
     probability: float | None = None
     probability_stderr: float | None = None
@@ -158,14 +163,21 @@ class Prediction:
         dict[str, Any]
             The fields and derived properties, in the same units; modes as dicts.
         """
-        return {"speed_rad_s": self.speed_rad_s, "load_n": self.load_n,
-                "formulation": self.formulation, "valid": self.valid, "reason": self.reason,
-                "stable": self.stable, "probability": self.probability,
-                "probability_stderr": self.probability_stderr, "margin": self.margin,
-                "max_growth_rate": self.max_growth_rate,
-                "unstable_frequencies_hz": self.unstable_frequencies_hz,
-                "divergence_rates": list(self.divergence_rates),
-                "modes": [m.as_dict() for m in self.modes]}
+        return {
+            "speed_rad_s": self.speed_rad_s,
+            "load_n": self.load_n,
+            "formulation": self.formulation,
+            "valid": self.valid,
+            "reason": self.reason,
+            "stable": self.stable,
+            "probability": self.probability,
+            "probability_stderr": self.probability_stderr,
+            "margin": self.margin,
+            "max_growth_rate": self.max_growth_rate,
+            "unstable_frequencies_hz": self.unstable_frequencies_hz,
+            "divergence_rates": list(self.divergence_rates),
+            "modes": [m.as_dict() for m in self.modes],
+        }
 
 
 def check_operating_point(speed_rad_s: Any, load_n: Any) -> tuple[float, float]:
@@ -189,8 +201,12 @@ def check_operating_point(speed_rad_s: Any, load_n: Any) -> tuple[float, float]:
     OperatingPointError
         A value is not a real number, not finite, or the load is implausibly large.
     """
-    if (type(speed_rad_s) is float and type(load_n) is float and math.isfinite(speed_rad_s)
-            and abs(load_n) <= _LOAD_LIMIT_N):          # the common case, per input message
+    if (
+        type(speed_rad_s) is float
+        and type(load_n) is float
+        and math.isfinite(speed_rad_s)
+        and abs(load_n) <= _LOAD_LIMIT_N
+    ):  # the common case, per input message
         return speed_rad_s, load_n
     out = []
     for name, unit, v in (("speed", "rad/s", speed_rad_s), ("load", "N", load_n)):
@@ -198,14 +214,15 @@ def check_operating_point(speed_rad_s: Any, load_n: Any) -> tuple[float, float]:
             raise OperatingPointError(f"{name} = {v!r} is not a number ({unit})")
         try:
             v = float(v)
-        except OverflowError:                         # an int beyond the float range
+        except OverflowError:  # an int beyond the float range
             raise OperatingPointError(f"{name} = {v!r} is not finite ({unit})") from None
         if not math.isfinite(v):
             raise OperatingPointError(f"{name} = {v} is not finite ({unit})")
         out.append(v)
     if abs(out[1]) > _LOAD_LIMIT_N:
-        raise OperatingPointError(f"load = {exact(out[1])} N exceeds the plausible magnitude "
-                                  f"{_LOAD_LIMIT_N:g} N")
+        raise OperatingPointError(
+            f"load = {exact(out[1])} N exceeds the plausible magnitude {_LOAD_LIMIT_N:g} N"
+        )
     return out[0], out[1]
 
 
@@ -237,13 +254,17 @@ class SqueakModel:
         Modal basis and precomputed contact integrals.
     """
 
-    def __init__(self, params: ScrewParameters | None = None, scatter: Scatter | None = None,
-                 samples: int = LIVE_SAMPLES):
+    def __init__(
+        self,
+        params: ScrewParameters | None = None,
+        scatter: Scatter | None = None,
+        samples: int = LIVE_SAMPLES,
+    ):
         self.geometry = build_geometry(params or ScrewParameters())
         self.params = self.geometry.params
         self.scatter = Scatter() if scatter is None else scatter
         self.sample_count = check_count(samples)
-        geometry_fields(self.scatter)          # what the live estimate cannot take: say now
+        geometry_fields(self.scatter)  # what the live estimate cannot take: say now
 
     @cached_property
     def samples(self) -> Samples:
@@ -267,7 +288,7 @@ class SqueakModel:
         frequency; the model holds below it."""
         return float(self.geometry.basis.omega_rad_s.min())
 
-    def with_params(self, **changes: Any) -> "SqueakModel":
+    def with_params(self, **changes: Any) -> SqueakModel:
         """A model with changed parameters, re-integrating only if the geometry changed.
 
         Parameters
@@ -290,13 +311,11 @@ class SqueakModel:
             # the samples do not depend on the changed fields: share them (and, for geometry
             # changes, the estimate's per-sample friction), a moved nut costs its contact only
             model.samples = self.samples
-            if self._probability is not None and all(
-                    field_info(k)["geometry"] for k in changes):
-                model._probability = self._probability.with_geometry(model.params,
-                                                                     model.geometry)
+            if self._probability is not None and all(field_info(k)["geometry"] for k in changes):
+                model._probability = self._probability.with_geometry(model.params, model.geometry)
         return model
 
-    def with_scatter(self, scatter: Scatter, samples: int | None = None) -> "SqueakModel":
+    def with_scatter(self, scatter: Scatter, samples: int | None = None) -> SqueakModel:
         """A copy of this model with another scatter (and sample count); the geometry is reused.
 
         Parameters
@@ -316,11 +335,11 @@ class SqueakModel:
         ParameterError
             A bad sample count, or more geometry fields scatter than the live estimate takes.
         """
-        return SqueakModel(self.params, scatter,
-                           self.sample_count if samples is None else samples)
+        return SqueakModel(self.params, scatter, self.sample_count if samples is None else samples)
 
-    def validity_code(self, speed_rad_s: ArrayLike, load_n: ArrayLike,
-                      scattered: dict | None = None) -> np.ndarray:
+    def validity_code(
+        self, speed_rad_s: ArrayLike, load_n: ArrayLike, scattered: dict | None = None
+    ) -> np.ndarray:
         """Vectorised validity: `Validity` codes (Validity.OK where the linearisation holds).
 
         Parameters
@@ -342,12 +361,15 @@ class SqueakModel:
         p = self.params
         friction = SimpleNamespace(**{**p.as_dict(), **scattered}) if scattered else p
         w = np.abs(np.asarray(speed_rad_s, float))
-        code = np.where(w < p.min_speed_rad_s, Validity.BELOW_MIN_SPEED,
-                        np.where(w >= self.critical_speed_rad_s, Validity.AT_CRITICAL_SPEED,
-                                 Validity.OK))
-        if p.formulation == "consistent":      # overhauling load on a self-locking thread
-            locks = ((np.sign(speed_rad_s) * np.sign(load_n) < 0)
-                     & (mu_o(friction, w) * math.tan(p.helix_angle_rad) >= 1))
+        code = np.where(
+            w < p.min_speed_rad_s,
+            Validity.BELOW_MIN_SPEED,
+            np.where(w >= self.critical_speed_rad_s, Validity.AT_CRITICAL_SPEED, Validity.OK),
+        )
+        if p.formulation == "consistent":  # overhauling load on a self-locking thread
+            locks = (np.sign(speed_rad_s) * np.sign(load_n) < 0) & (
+                mu_o(friction, w) * math.tan(p.helix_angle_rad) >= 1
+            )
             code = np.where((code == Validity.OK) & locks, Validity.SELF_LOCKING, code)
         return code
 
@@ -370,7 +392,7 @@ class SqueakModel:
         """
         w, p = abs(speed_rad_s), self.params
         if p.formulation == "paper" and p.min_speed_rad_s <= w < self.critical_speed_rad_s:
-            return Validity.OK, ""          # the common case, as validity_code decides it
+            return Validity.OK, ""  # the common case, as validity_code decides it
         code = Validity(int(self.validity_code(speed_rad_s, load_n)))
         if code is Validity.OK:
             return code, ""
@@ -378,13 +400,16 @@ class SqueakModel:
             Validity.BELOW_MIN_SPEED: (
                 f"outside the model's validity: |speed| = {w:g} rad/s is below "
                 f"min_speed_rad_s = {p.min_speed_rad_s:g} rad/s (near stick the sliding "
-                "linearisation does not hold; a nonlinear analysis is needed)"),
+                "linearisation does not hold; a nonlinear analysis is needed)"
+            ),
             Validity.AT_CRITICAL_SPEED: (
                 f"outside the model's validity: |speed| = {w:g} rad/s is not below the first "
-                f"critical speed {self.critical_speed_rad_s:.1f} rad/s"),
+                f"critical speed {self.critical_speed_rad_s:.1f} rad/s"
+            ),
             Validity.SELF_LOCKING: (
                 "outside the model's validity: overhauling load with mu_o tan(beta) >= 1 (no "
-                "steady sliding, the thread self-locks)"),
+                "steady sliding, the thread self-locks)"
+            ),
         }[code]
 
     def state_matrix(self, speed_rad_s: float, load_n: float) -> np.ndarray:
@@ -451,15 +476,21 @@ class SqueakModel:
         "outside the model's validity: |speed| = 0.1 rad/s is below min_speed_rad_s = ..."
         """
         speed, load = check_operating_point(
-            speed_rad_s, self.params.axial_load_n if load_n is None else load_n)
+            speed_rad_s, self.params.axial_load_n if load_n is None else load_n
+        )
         validity, reason = self.validity(speed, load)
         if validity is not Validity.OK:
             return Prediction(speed, load, self.params.formulation, validity, reason)
         try:
             eigen = eig_both(self.state_matrix(speed, load), self.scatter.names != ())
-        except np.linalg.LinAlgError as exc:          # LAPACK gave up: say so, no number
-            return Prediction(speed, load, self.params.formulation, Validity.SOLVER_FAILED,
-                              f"eigen-solver failed at this operating point: {exc}")
+        except np.linalg.LinAlgError as exc:  # LAPACK gave up: say so, no number
+            return Prediction(
+                speed,
+                load,
+                self.params.formulation,
+                Validity.SOLVER_FAILED,
+                f"eigen-solver failed at this operating point: {exc}",
+            )
         return self._prediction(speed, load, eigen)
 
     def predict_many(self, speeds_rad_s: ArrayLike, loads_n: ArrayLike) -> list[Prediction]:
@@ -482,16 +513,25 @@ class SqueakModel:
         OperatingPointError
             Any speed or load is not a finite real number of plausible magnitude.
         """
-        speeds, loads = (a.ravel() for a in np.broadcast_arrays(
-            np.asarray(speeds_rad_s, float), np.asarray(loads_n, float)))
-        points = [check_operating_point(s, f) for s, f in zip(speeds.tolist(), loads.tolist(), strict=True)]
+        speeds, loads = (
+            a.ravel()
+            for a in np.broadcast_arrays(
+                np.asarray(speeds_rad_s, float), np.asarray(loads_n, float)
+            )
+        )
+        points = [
+            check_operating_point(s, f)
+            for s, f in zip(speeds.tolist(), loads.tolist(), strict=True)
+        ]
         verdicts = [self.validity(s, f) for s, f in points]
         ok = [i for i, (v, _) in enumerate(verdicts) if v is Validity.OK]
-        out = [Prediction(s, f, self.params.formulation, *v)
-               for (s, f), v in zip(points, verdicts, strict=True)]
+        out = [
+            Prediction(s, f, self.params.formulation, *v)
+            for (s, f), v in zip(points, verdicts, strict=True)
+        ]
         if ok:
             matrices = self.geometry.state_matrices(speeds[ok], loads[ok])
-            left = self.scatter.names != ()               # the probability needs them
+            left = self.scatter.names != ()  # the probability needs them
             for k, i in enumerate(ok):
                 out[i] = self._prediction(*points[i], eig_both(matrices[k], left))
         return out
@@ -501,8 +541,18 @@ class SqueakModel:
         squeak = any(m.unstable for m in modes)
         if self._probability is None:
             probability, stderr = float(squeak), None
-        else:           # the same eigen-solve gives the first-order expansion
-            probability, stderr = estimate(self._probability.hits(
-                EigenPairs(self.geometry, speed, eigen), load))
-        return Prediction(speed, load, self.params.formulation, Validity.OK, "", modes,
-                          divergence, probability, stderr)
+        else:  # the same eigen-solve gives the first-order expansion
+            probability, stderr = estimate(
+                self._probability.hits(EigenPairs(self.geometry, speed, eigen), load)
+            )
+        return Prediction(
+            speed,
+            load,
+            self.params.formulation,
+            Validity.OK,
+            "",
+            modes,
+            divergence,
+            probability,
+            stderr,
+        )

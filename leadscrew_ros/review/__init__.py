@@ -6,13 +6,35 @@ The function `replay` is not re-exported here: `review.replay` stays the module 
 
 from .fleet import FleetRun, FleetSettings, review_logs
 from .fleetreport import write_fleet
-from .plots import (plot_fleet, plot_frequencies, plot_friction, plot_map, plot_sweep,
-                    plot_timeline, plot_transient, probability_overlay)
+from .plots import (
+    plot_fleet,
+    plot_frequencies,
+    plot_friction,
+    plot_map,
+    plot_sweep,
+    plot_timeline,
+    plot_transient,
+    probability_overlay,
+)
 from .replay import ReplayResult, ReplaySettings
 from .report import write_report
 from .timeline import InputSettings
 
-__all__ = ["FleetRun", "FleetSettings", "InputSettings", "ReplayResult", "ReplaySettings",
-           "plot_fleet", "plot_frequencies", "plot_friction", "plot_map", "plot_sweep",
-           "plot_timeline", "plot_transient", "probability_overlay", "review_logs",
-           "write_fleet", "write_report"]
+__all__ = [
+    "FleetRun",
+    "FleetSettings",
+    "InputSettings",
+    "ReplayResult",
+    "ReplaySettings",
+    "plot_fleet",
+    "plot_frequencies",
+    "plot_friction",
+    "plot_map",
+    "plot_sweep",
+    "plot_timeline",
+    "plot_transient",
+    "probability_overlay",
+    "review_logs",
+    "write_fleet",
+    "write_report",
+]

@@ -17,7 +17,7 @@ from array import array
 
 import numpy as np
 
-_BUFFER = 8192                   # samples collected before they are binned with numpy
+_BUFFER = 8192  # samples collected before they are binned with numpy
 
 
 class Envelope:
@@ -31,8 +31,8 @@ class Envelope:
         self.lo = np.full((max_bins, channels), np.nan)
         self.hi = np.full((max_bins, channels), np.nan)
         self.last = np.full((max_bins, channels), np.nan)
-        self.count = np.zeros(max_bins, np.int64)      # samples per bin
-        self.bins = 0                                  # bins in use (1 + the last with data)
+        self.count = np.zeros(max_bins, np.int64)  # samples per bin
+        self.bins = 0  # bins in use (1 + the last with data)
         self._t, self._values = array("d"), array("d")
 
     def add(self, t_s: float, *values: float) -> None:
@@ -66,8 +66,11 @@ class Envelope:
         """Pairs of bins into one: half as many bins, twice as wide."""
         half, c = self.max_bins // 2, self.channels
         lo, hi, last = (a.reshape(half, 2, c) for a in (self.lo, self.hi, self.last))
-        merged = (np.fmin(lo[:, 0], lo[:, 1]), np.fmax(hi[:, 0], hi[:, 1]),
-                  np.where(self.count[1::2, None] > 0, last[:, 1], last[:, 0]))
+        merged = (
+            np.fmin(lo[:, 0], lo[:, 1]),
+            np.fmax(hi[:, 0], hi[:, 1]),
+            np.where(self.count[1::2, None] > 0, last[:, 1], last[:, 0]),
+        )
         for a, m in zip((self.lo, self.hi, self.last), merged, strict=True):
             a[:half], a[half:] = m, np.nan
         self.count[:half] = self.count[0::2] + self.count[1::2]
@@ -79,8 +82,13 @@ class Envelope:
         """(bin centres [s], lo, hi, last, count) of the bins in use."""
         self.flush()
         n = self.bins
-        return ((np.arange(n) + 0.5) * self.bin_s, self.lo[:n].copy(), self.hi[:n].copy(),
-                self.last[:n].copy(), self.count[:n].copy())
+        return (
+            (np.arange(n) + 0.5) * self.bin_s,
+            self.lo[:n].copy(),
+            self.hi[:n].copy(),
+            self.last[:n].copy(),
+            self.count[:n].copy(),
+        )
 
     @property
     def nbytes(self) -> int:
@@ -93,7 +101,7 @@ class Reservoir:
 
     def __init__(self, width: int, size: int = 20_000, seed: int = 0):
         self.rows = np.full((size, width), np.nan)
-        self.order = np.zeros(size, np.int64)         # arrival index of each kept row
+        self.order = np.zeros(size, np.int64)  # arrival index of each kept row
         self.size, self.seen = size, 0
         self._rng = np.random.default_rng(seed)
 

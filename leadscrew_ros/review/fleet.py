@@ -58,9 +58,9 @@ from .replay import ReplaySettings, log_name, replay
 from .timeline import InputSettings
 
 INDEX_FILE = "review-index.jsonl"
-RECOVERED_DIR = "recovered"   # in a log's outputs: the readable copy of a cut-off recording
-POINTS_PER_LOG = 64           # squeak points (speed, load, frequency) a log adds to fleet.png
-IN_FLIGHT_PER_THREAD = 2      # tasks submitted per worker thread ahead of the results
+RECOVERED_DIR = "recovered"  # in a log's outputs: the readable copy of a cut-off recording
+POINTS_PER_LOG = 64  # squeak points (speed, load, frequency) a log adds to fleet.png
+IN_FLIGHT_PER_THREAD = 2  # tasks submitted per worker thread ahead of the results
 MIN_IN_FLIGHT = 4
 _SUFFIXES = (".mcap", DB3)
 _GLOB = re.compile(r"[*?[]")
@@ -109,7 +109,7 @@ class FleetSettings:
     summary_only: bool = False
 
     def __post_init__(self) -> None:
-        ReplaySettings(self.inputs, self.namespace, self.out_namespace)     # checks the names
+        ReplaySettings(self.inputs, self.namespace, self.out_namespace)  # checks the names
         Scatter(self.scatter)
 
     def as_dict(self) -> dict[str, Any]:
@@ -137,8 +137,9 @@ class FleetSettings:
         text = json.dumps(self.as_dict(), sort_keys=True, allow_nan=False)
         return hashlib.blake2b(text.encode(), digest_size=16).hexdigest()
 
-    def model_for(self, meta: logmeta.LogMetadata | None, log: Path
-                  ) -> tuple[SqueakModel, InputSettings]:
+    def model_for(
+        self, meta: logmeta.LogMetadata | None, log: Path
+    ) -> tuple[SqueakModel, InputSettings]:
         """The model and input settings of one log (its own with `use_log_params`).
 
         Parameters
@@ -161,8 +162,11 @@ class FleetSettings:
         if not self.use_log_params:
             return SqueakModel(self.params, Scatter(self.scatter), self.samples), self.inputs
         if meta is None:
-            raise LogError(log, f"no '{logmeta.RECORD_NAME}' metadata record, so no recorded "
-                                f"parameters (review it without --use-log-params)")
+            raise LogError(
+                log,
+                f"no '{logmeta.RECORD_NAME}' metadata record, so no recorded "
+                f"parameters (review it without --use-log-params)",
+            )
         scatter = dict(meta.scatter)
         samples = int(scatter.pop("samples", self.samples))
         known = {f.name for f in fields(InputSettings)}
@@ -235,8 +239,13 @@ def find_logs(inputs: Iterable[str], skip: Path | str | None = None) -> list[Pat
                 raise LogError(m, "no such file or directory")
             # a split file stands for its bag: the splits are one log
             logs = _walk(m, skip) if m.is_dir() else [m.parent if _is_bag(m.parent) else m]
-            found.update(dict.fromkeys(p.resolve() for p in logs
-                                       if skip is None or not p.resolve().is_relative_to(skip)))
+            found.update(
+                dict.fromkeys(
+                    p.resolve()
+                    for p in logs
+                    if skip is None or not p.resolve().is_relative_to(skip)
+                )
+            )
     return list(found)
 
 
@@ -249,9 +258,12 @@ def output_names(logs: list[Path], known: dict[str, str] | None = None) -> list[
     names = [known.get(str(p)) or log_name(p).strip(".") or "log" for p in logs]
     this = {str(p) for p in logs}
     counts = Counter(names) + Counter(n for path, n in known.items() if path not in this)
-    return [n if counts[n] == 1 or str(p) in known else
-            f"{n}-{hashlib.blake2b(str(p).encode(), digest_size=4).hexdigest()}"
-            for p, n in zip(logs, names, strict=True)]
+    return [
+        n
+        if counts[n] == 1 or str(p) in known
+        else f"{n}-{hashlib.blake2b(str(p).encode(), digest_size=4).hexdigest()}"
+        for p, n in zip(logs, names, strict=True)
+    ]
 
 
 # ---------------------------------------------------------------------- one log: one task
@@ -311,25 +323,43 @@ def squeak_frequencies(episodes: list[dict[str, Any]]) -> list[float]:
 
 def error_row(log: Path, name: str, error: str, unit_id: str | None = None) -> dict[str, Any]:
     """The row of a log that could not be reviewed."""
-    return {"log": str(log), "name": name, "unit_id": unit_id or name, "status": "error",
-            "error": error}
+    return {
+        "log": str(log),
+        "name": name,
+        "unit_id": unit_id or name,
+        "status": "error",
+        "error": error,
+    }
 
 
 def _row(log: Path, name: str, unit_id: str, model: SqueakModel, result) -> dict[str, Any]:
     s = result.summary()
     episodes = _episodes(result)
-    growth = [e["peak_growth_rate"] for e in episodes if e["peak_growth_rate"] is not None
-              and math.isfinite(e["peak_growth_rate"])]
-    return {"log": str(log), "name": name, "unit_id": unit_id, "status": "ok", "error": "",
-            "duration_s": s["duration_s"], "time_in_squeak_s": s["time_in_squeak_s"],
-            "squeak_share": s["squeak_share"], "episodes": s["episodes"],
-            "peak_growth_rate": max(growth) if growth else None,
-            "squeak_frequencies_hz": squeak_frequencies(episodes),
-            "peak_probability": s["peak_probability"],
-            "time_above_warn_s": s["time_above_warn_s"],
-            "time_above_error_s": s["time_above_error_s"],
-            "messages": s["messages"], "predictions": s["predictions"],
-            "formulation": model.params.formulation, "wall_s": s["wall_s"]}
+    growth = [
+        e["peak_growth_rate"]
+        for e in episodes
+        if e["peak_growth_rate"] is not None and math.isfinite(e["peak_growth_rate"])
+    ]
+    return {
+        "log": str(log),
+        "name": name,
+        "unit_id": unit_id,
+        "status": "ok",
+        "error": "",
+        "duration_s": s["duration_s"],
+        "time_in_squeak_s": s["time_in_squeak_s"],
+        "squeak_share": s["squeak_share"],
+        "episodes": s["episodes"],
+        "peak_growth_rate": max(growth) if growth else None,
+        "squeak_frequencies_hz": squeak_frequencies(episodes),
+        "peak_probability": s["peak_probability"],
+        "time_above_warn_s": s["time_above_warn_s"],
+        "time_above_error_s": s["time_above_error_s"],
+        "messages": s["messages"],
+        "predictions": s["predictions"],
+        "formulation": model.params.formulation,
+        "wall_s": s["wall_s"],
+    }
 
 
 def recovered(log: Path, scratch: Path) -> tuple[Path, str]:
@@ -367,8 +397,10 @@ def recovered(log: Path, scratch: Path) -> tuple[Path, str]:
         else:
             shutil.copyfile(f, dst)
     lost = "; ".join(f"{i.path.name}: {i.damage or 'no footer'}" for i in infos)
-    return target, (f"cut off ({lost}): reviewed the {sum(i.messages for i in infos)} whole "
-                    f"messages before the cut; `leadscrew-squeak recover` mends the file")
+    return target, (
+        f"cut off ({lost}): reviewed the {sum(i.messages for i in infos)} whole "
+        f"messages before the cut; `leadscrew-squeak recover` mends the file"
+    )
 
 
 def _points(result) -> list[list[float]]:
@@ -381,8 +413,9 @@ def _points(result) -> list[list[float]]:
     return [[float(f"{v:.4g}") for v in (row[0], row[1], row[3])] for row in sample[pick]]
 
 
-def review_one(log: str, out_dir: str, name: str, settings: FleetSettings,
-               known_hash: str | None = None) -> dict[str, Any]:
+def review_one(
+    log: str, out_dir: str, name: str, settings: FleetSettings, known_hash: str | None = None
+) -> dict[str, Any]:
     """Review one log (the body of a Dask task): the same replay as the `replay` command.
 
     Parameters
@@ -420,10 +453,16 @@ def review_one(log: str, out_dir: str, name: str, settings: FleetSettings,
                 raise
         unit_id = (meta.unit_id if meta is not None else "") or name
         model, inputs = settings.model_for(meta, path)
-        shutil.rmtree(out, ignore_errors=True)        # outputs of an earlier review
+        shutil.rmtree(out, ignore_errors=True)  # outputs of an earlier review
         whole, note = recovered(path, out / RECOVERED_DIR)
-        result = replay(whole, model, out, ReplaySettings(
-            inputs, settings.namespace, settings.out_namespace, workers=0, progress=False))
+        result = replay(
+            whole,
+            model,
+            out,
+            ReplaySettings(
+                inputs, settings.namespace, settings.out_namespace, workers=0, progress=False
+            ),
+        )
         note = "; ".join(n for n in (note, result.metadata_problem) if n)
         row = {**_row(path, name, unit_id, model, result), "note": note}
         if settings.summary_only:
@@ -432,13 +471,17 @@ def review_one(log: str, out_dir: str, name: str, settings: FleetSettings,
             shutil.rmtree(out / RECOVERED_DIR, ignore_errors=True)
         elif settings.report:
             from .report import write_report
+
             write_report(result, model, out)
         return {"content": content, "row": row, "points": _points(result)}
-    except Exception as exc:           # any failure of this log is its error row
+    except Exception as exc:  # any failure of this log is its error row
         if out.is_dir() and not any(out.iterdir()):
             out.rmdir()
-        return {"content": content, "row": error_row(path, name, _one_line(exc), unit_id),
-                "points": []}
+        return {
+            "content": content,
+            "row": error_row(path, name, _one_line(exc), unit_id),
+            "points": [],
+        }
 
 
 # ---------------------------------------------------------------------- the cluster
@@ -450,8 +493,9 @@ class ClusterError(ValueError):
 class ClusterSettings:
     """How `review` reaches a running scheduler (`--scheduler`)."""
 
-    connect_timeout_s: float = setting(5.0, "s", "how long to wait for the scheduler to "
-                                       "answer", 0.0, 3600.0, lo_open=True)
+    connect_timeout_s: float = setting(
+        5.0, "s", "how long to wait for the scheduler to answer", 0.0, 3600.0, lo_open=True
+    )
 
     def __post_init__(self) -> None:
         check(self, ClusterError, "--connect-timeout: ")
@@ -461,13 +505,17 @@ async def _probe(address: str, timeout_s: float) -> None:
     """Open and close one connection to `address` (ValueError: not an address; OSError: no
     answer within `timeout_s`, Dask retrying a refused connection until then)."""
     from distributed.comm import connect
+
     comm = await connect(address, timeout=timeout_s)
     await comm.close()
 
 
 @contextlib.contextmanager
-def cluster(workers: int | None = None, scheduler: str | None = None,
-            settings: ClusterSettings = ClusterSettings()) -> Iterator[Any]:
+def cluster(
+    workers: int | None = None,
+    scheduler: str | None = None,
+    settings: ClusterSettings = ClusterSettings(),
+) -> Iterator[Any]:
     """A Dask client: of a new `distributed.LocalCluster` (`workers` processes, default one
     per core, one thread each, everything on 127.0.0.1, no dashboard), or connected to the
     running scheduler at `scheduler` (``tcp://HOST:PORT``) within `settings.connect_timeout_s`.
@@ -482,19 +530,28 @@ def cluster(workers: int | None = None, scheduler: str | None = None,
 
     if scheduler is not None:
         timeout = settings.connect_timeout_s
-        try:     # a probe first: a Client that failed to connect hangs in __del__ at exit
+        try:  # a probe first: a Client that failed to connect hangs in __del__ at exit
             asyncio.run(_probe(scheduler, timeout))
-        except ValueError as exc:                # 'missing port number', 'unknown scheme'
+        except ValueError as exc:  # 'missing port number', 'unknown scheme'
             raise ClusterError(f"--scheduler {scheduler!r}: {exc}") from None
-        except OSError:                          # refused, unknown host, no answer
-            raise ClusterError(f"--scheduler {scheduler}: no Dask scheduler answered; timed "
-                               f"out after {timeout:g} s (--connect-timeout)") from None
+        except OSError:  # refused, unknown host, no answer
+            raise ClusterError(
+                f"--scheduler {scheduler}: no Dask scheduler answered; timed "
+                f"out after {timeout:g} s (--connect-timeout)"
+            ) from None
         with Client(scheduler, timeout=timeout) as client:
             yield client
         return
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                      host="127.0.0.1", dashboard_address=None) as local, \
-            Client(local) as client:
+    with (
+        LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
+        ) as local,
+        Client(local) as client,
+    ):
         yield client
 
 
@@ -560,8 +617,13 @@ class _Points:
         return self.sample.sample().tolist()
 
 
-def review_logs(logs: list[Path], out_dir: Path | str, settings: FleetSettings, client: Any,
-                progress: bool = True) -> FleetRun:
+def review_logs(
+    logs: list[Path],
+    out_dir: Path | str,
+    settings: FleetSettings,
+    client: Any,
+    progress: bool = True,
+) -> FleetRun:
     """Review `logs` into `out_dir` on the Dask cluster of `client`.
 
     Parameters
@@ -596,8 +658,12 @@ def review_logs(logs: list[Path], out_dir: Path | str, settings: FleetSettings, 
     todo: list[tuple[Path, str, list | None, str | None]] = []
     for log, name in zip(logs, names, strict=True):
         entry = index.get(str(log))
-        usable = (entry is not None and entry["params"] == digest and not entry["retry"]
-                  and (entry["row"]["status"] != "ok" or (out / name / "summary.json").exists()))
+        usable = (
+            entry is not None
+            and entry["params"] == digest
+            and not entry["retry"]
+            and (entry["row"]["status"] != "ok" or (out / name / "summary.json").exists())
+        )
         stat = _stat_or_none(log)
         if usable and stat is not None and entry["stat"] == stat:
             rows[str(log)] = entry["row"]
@@ -612,13 +678,22 @@ def review_logs(logs: list[Path], out_dir: Path | str, settings: FleetSettings, 
 
     def submit(job) -> Any:
         log, name, _, known = job
-        fut = client.submit(review_one, str(log), str(out), name, settings, known,
-                            key=f"review-{name}-{run_id}", pure=False)
+        fut = client.submit(
+            review_one,
+            str(log),
+            str(out),
+            name,
+            settings,
+            known,
+            key=f"review-{name}-{run_id}",
+            pure=False,
+        )
         by_future[fut] = job
         return fut
 
-    bar_or_none = (progress_bar(len(todo), "review", unit="log") if progress
-                   else contextlib.nullcontext())
+    bar_or_none = (
+        progress_bar(len(todo), "review", unit="log") if progress else contextlib.nullcontext()
+    )
     with open(index_path, "a", encoding="utf-8") as index_file, bar_or_none as bar:
         ac = as_completed([submit(j) for j in _take(pending, in_flight)])
         for fut in ac:
@@ -626,9 +701,8 @@ def review_logs(logs: list[Path], out_dir: Path | str, settings: FleetSettings, 
             retry = False
             try:
                 res = fut.result()
-            except Exception as exc:       # the task did not finish: workers died under it
-                res = {"content": known, "row": error_row(log, name, _one_line(exc)),
-                       "points": []}
+            except Exception as exc:  # the task did not finish: workers died under it
+                res = {"content": known, "row": error_row(log, name, _one_line(exc)), "points": []}
                 retry = True
             fut.release()
             if res.get("unchanged"):
@@ -637,17 +711,35 @@ def review_logs(logs: list[Path], out_dir: Path | str, settings: FleetSettings, 
             row = res["row"]
             rows[str(log)] = row
             points.add(res["points"])
-            index_file.write(json.dumps(json_safe(
-                {"params": digest, "stat": stat, "content": res["content"], "retry": retry,
-                 "row": row, "points": res["points"]}), allow_nan=False) + "\n")
+            index_file.write(
+                json.dumps(
+                    json_safe(
+                        {
+                            "params": digest,
+                            "stat": stat,
+                            "content": res["content"],
+                            "retry": retry,
+                            "row": row,
+                            "points": res["points"],
+                        }
+                    ),
+                    allow_nan=False,
+                )
+                + "\n"
+            )
             index_file.flush()
             if bar is not None:
                 bar(1)
             for job in _take(pending, 1):
                 ac.add(submit(job))
     _compact(index_path)
-    return FleetRun([rows[str(log)] for log in logs], points.rows(), len(logs) - skipped,
-                    skipped, time.perf_counter() - t0)
+    return FleetRun(
+        [rows[str(log)] for log in logs],
+        points.rows(),
+        len(logs) - skipped,
+        skipped,
+        time.perf_counter() - t0,
+    )
 
 
 def _take(it: Iterator, n: int) -> list:

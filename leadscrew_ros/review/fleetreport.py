@@ -11,16 +11,32 @@ import json
 from pathlib import Path
 from typing import Any
 
-
 from .fleet import FleetRun
 from .jsonsafe import json_safe
 from .plots import plot_fleet
 
 CSV_FILE, JSON_FILE, PNG_FILE = "fleet.csv", "fleet.json", "fleet.png"
-COLUMNS = ["log", "unit_id", "status", "error", "note", "duration_s", "time_in_squeak_s",
-           "squeak_share", "episodes", "peak_growth_rate", "squeak_frequencies_hz",
-           "peak_probability", "time_above_warn_s", "time_above_error_s", "messages",
-           "predictions", "formulation", "name", "wall_s"]
+COLUMNS = [
+    "log",
+    "unit_id",
+    "status",
+    "error",
+    "note",
+    "duration_s",
+    "time_in_squeak_s",
+    "squeak_share",
+    "episodes",
+    "peak_growth_rate",
+    "squeak_frequencies_hz",
+    "peak_probability",
+    "time_above_warn_s",
+    "time_above_error_s",
+    "messages",
+    "predictions",
+    "formulation",
+    "name",
+    "wall_s",
+]
 
 
 def _cell(value: Any) -> str:
@@ -56,10 +72,18 @@ def write_fleet(run: FleetRun, out_dir: Path | str, parameters: dict[str, Any]) 
         w.writerow(COLUMNS)
         for row in run.rows:
             w.writerow([_cell(row.get(c)) for c in COLUMNS])
-    doc = {"parameters": parameters, "logs": len(run.rows), "ok": len(run.rows) - run.failed,
-           "errors": run.failed, "reviewed": run.reviewed, "skipped": run.skipped,
-           "wall_s": run.wall_s, "rows": [{c: row.get(c) for c in COLUMNS} for row in run.rows]}
-    paths[1].write_text(json.dumps(json_safe(doc), indent=1, allow_nan=False) + "\n",
-                        encoding="utf-8")
+    doc = {
+        "parameters": parameters,
+        "logs": len(run.rows),
+        "ok": len(run.rows) - run.failed,
+        "errors": run.failed,
+        "reviewed": run.reviewed,
+        "skipped": run.skipped,
+        "wall_s": run.wall_s,
+        "rows": [{c: row.get(c) for c in COLUMNS} for row in run.rows],
+    }
+    paths[1].write_text(
+        json.dumps(json_safe(doc), indent=1, allow_nan=False) + "\n", encoding="utf-8"
+    )
     plot_fleet(run).savefig(paths[2], dpi=100)
     return paths

@@ -21,7 +21,8 @@ matplotlib.figure.Figure, which renders PNGs without pyplot or any GUI backend.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Callable, NamedTuple
+from collections.abc import Callable
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -42,16 +43,16 @@ if TYPE_CHECKING:
     from .fleet import FleetRun
     from .replay import ReplayResult
 
-Overlay = Callable[["Axes"], list]     # draws on a finished plot, returns legend handles
+Overlay = Callable[["Axes"], list]  # draws on a finished plot, returns legend handles
 
 
 class Display(NamedTuple):
     """How values of an axis are shown in plots and in summary sentences."""
 
-    label: str      # axis label (matplotlib mathtext)
-    symbol: str     # plain-text symbol for summary.txt
-    unit: str       # display unit
-    factor: float   # SI value * factor = display value
+    label: str  # axis label (matplotlib mathtext)
+    symbol: str  # plain-text symbol for summary.txt
+    unit: str  # display unit
+    factor: float  # SI value * factor = display value
 
 
 _DISPLAY = {
@@ -100,22 +101,29 @@ def _is_geometric(values: np.ndarray) -> bool:
     return bool(np.allclose(step, step[0], rtol=1e-6) and values[-1] / values[0] > 20)
 
 
-def scale_axis(ax: "Axes", which: str, values: np.ndarray) -> None:
+def scale_axis(ax: Axes, which: str, values: np.ndarray) -> None:
     """A log scale on axis `which` ('x' or 'y') when `values` are a geometric grid."""
     if _is_geometric(values):
         getattr(ax, f"set_{which}scale")("log")
 
 
-def stability_cmap() -> "Colormap":
+def stability_cmap() -> Colormap:
     """Blues below zero, reds above, with a visible step at zero (the stability boundary)."""
     from matplotlib import colormaps
     from matplotlib.colors import ListedColormap
-    return ListedColormap(np.vstack([colormaps["Blues_r"](np.linspace(0.0, 0.7, 128)),
-                                     colormaps["Reds"](np.linspace(0.3, 1.0, 128))]),
-                          name="stability")
+
+    return ListedColormap(
+        np.vstack(
+            [
+                colormaps["Blues_r"](np.linspace(0.0, 0.7, 128)),
+                colormaps["Reds"](np.linspace(0.3, 1.0, 128)),
+            ]
+        ),
+        name="stability",
+    )
 
 
-def new_figure(**kwargs) -> "Figure":
+def new_figure(**kwargs) -> Figure:
     """A figure that is not registered with pyplot (no backend, nothing to close).
 
     Parameters
@@ -129,10 +137,11 @@ def new_figure(**kwargs) -> "Figure":
         The new figure.
     """
     from matplotlib.figure import Figure
+
     return Figure(**kwargs)
 
 
-def _axes(ax: "Axes | None", **figure) -> tuple["Figure", "Axes"]:
+def _axes(ax: Axes | None, **figure) -> tuple[Figure, Axes]:
     """The figure of `ax` and `ax`, or a new figure (of `figure`'s options) and its one axes."""
     if ax is None:
         ax = new_figure(**figure).subplots()
@@ -143,11 +152,18 @@ def plot_formats() -> list[str]:
     """The file suffixes (lower case, no dot) of the formats `Figure.savefig` writes:
     matplotlib's (png, pdf, svg, ...; its canvas picks the format by the suffix)."""
     from matplotlib.backend_bases import FigureCanvasBase
+
     return sorted(FigureCanvasBase.get_supported_filetypes())
 
 
-def plot_map(result: MapResult, *, title: str = "", formulation: str = "",
-             overlay: Overlay | None = None, ax: "Axes | None" = None) -> "Figure":
+def plot_map(
+    result: MapResult,
+    *,
+    title: str = "",
+    formulation: str = "",
+    overlay: Overlay | None = None,
+    ax: Axes | None = None,
+) -> Figure:
     """Stability map: filled contour of the largest growth rate (red: squeak, blue: stable),
     the zero contour, the root-refined boundary points, and hatching where the model is not
     valid.
@@ -173,6 +189,7 @@ def plot_map(result: MapResult, *, title: str = "", formulation: str = "",
     """
     from matplotlib.colors import TwoSlopeNorm
     from matplotlib.patches import Patch
+
     kx, ky = axis_display(result.x_axis).factor, axis_display(result.y_axis).factor
     x, y, g = result.x * kx, result.y * ky, np.ma.masked_invalid(result.field.max_growth_rate)
     cmap = stability_cmap()
@@ -180,19 +197,20 @@ def plot_map(result: MapResult, *, title: str = "", formulation: str = "",
     if g.count():
         lo, hi = min(float(g.min()), -1e-6), max(float(g.max()), 1e-6)
         levels = np.concatenate([np.linspace(lo, 0, 12)[:-1], np.linspace(0, hi, 16)])
-        cs = ax.contourf(x, y, g, levels=levels, cmap=cmap,
-                         norm=TwoSlopeNorm(0, lo, hi))
+        cs = ax.contourf(x, y, g, levels=levels, cmap=cmap, norm=TwoSlopeNorm(0, lo, hi))
         fig.colorbar(cs, ax=ax, label=r"largest growth rate Re($\lambda$) [1/s]")
         if lo < 0 < hi and g.count() > 3:
             ax.contour(x, y, g, levels=[0.0], colors="k", linewidths=1.2)
-    handles = [Patch(facecolor=cmap(0.8), label="unstable (squeak)"),
-               Patch(facecolor=cmap(0.2), label="stable")]
+    handles = [
+        Patch(facecolor=cmap(0.8), label="unstable (squeak)"),
+        Patch(facecolor=cmap(0.2), label="stable"),
+    ]
     invalid = ~result.field.valid
     if invalid.any():
-        ax.contourf(x, y, invalid.astype(float), levels=[0.5, 1.5], colors="none",
-                    hatches=["///"])
-        handles.append(Patch(facecolor="white", edgecolor="0.3", hatch="///",
-                             label="outside model validity"))
+        ax.contourf(x, y, invalid.astype(float), levels=[0.5, 1.5], colors="none", hatches=["///"])
+        handles.append(
+            Patch(facecolor="white", edgecolor="0.3", hatch="///", label="outside model validity")
+        )
     if result.boundary:
         bx, by = np.array(result.boundary).T
         handles += ax.plot(bx * kx, by * ky, "k.", ms=3, label="stability boundary (refined)")
@@ -204,19 +222,18 @@ def plot_map(result: MapResult, *, title: str = "", formulation: str = "",
     ax.set_ylim(y[0], y[-1])
     ax.set_xlabel(axis_label(result.x_axis))
     ax.set_ylabel(axis_label(result.y_axis))
-    default = "; ".join(filter(None, (fixed_text(result.fixed),
-                                      formulation and f"{formulation} formulation")))
+    default = "; ".join(
+        filter(None, (fixed_text(result.fixed), formulation and f"{formulation} formulation"))
+    )
     ax.set_title(title or f"Stability map ({default})", fontsize=10)
-    fig.legend(handles=handles, fontsize=8, loc="outside lower center",
-               ncols=min(len(handles), 4))
+    fig.legend(handles=handles, fontsize=8, loc="outside lower center", ncols=min(len(handles), 4))
     return fig
 
 
-_LEVEL_STYLES = ("dotted", "dashed", "solid", "dashdot")   # of the PROBABILITY_LEVELS lines
+_LEVEL_STYLES = ("dotted", "dashed", "solid", "dashdot")  # of the PROBABILITY_LEVELS lines
 
 
-def probability_overlay(result: MapResult, band: tuple[float, float] = (0.1, 0.9)
-                        ) -> Overlay:
+def probability_overlay(result: MapResult, band: tuple[float, float] = (0.1, 0.9)) -> Overlay:
     """The iso-P(squeak) lines `PROBABILITY_LEVELS` (1, 10, 50, 90 %) of a map, labelled in
     percent, and the band between two levels shaded (where a drive squeaks or not depending on
     its scatter); for `plot_map`'s `overlay`.
@@ -233,22 +250,39 @@ def probability_overlay(result: MapResult, band: tuple[float, float] = (0.1, 0.9
     callable
         Draws on an axes (in display units) and returns its legend handles.
     """
-    def draw(ax: "Axes") -> list:
+
+    def draw(ax: Axes) -> list:
         from matplotlib.lines import Line2D
         from matplotlib.patches import Patch
+
         prob = result.probability
         if prob is None or np.isfinite(prob).sum() < 4 or np.nanmax(prob) == np.nanmin(prob):
             return []
         kx, ky = axis_display(result.x_axis).factor, axis_display(result.y_axis).factor
         x, y, p = result.x * kx, result.y * ky, np.ma.masked_invalid(prob)
         ax.contourf(x, y, p, levels=list(band), colors="none", hatches=["..."])
-        lines = ax.contour(x, y, p, levels=list(PROBABILITY_LEVELS), colors="k",
-                           linestyles=_LEVEL_STYLES, linewidths=1.0)
+        lines = ax.contour(
+            x,
+            y,
+            p,
+            levels=list(PROBABILITY_LEVELS),
+            colors="k",
+            linestyles=_LEVEL_STYLES,
+            linewidths=1.0,
+        )
         ax.clabel(lines, fmt=lambda v: f"{100 * v:g} %", fontsize=7)
-        return [Patch(facecolor="none", edgecolor="0.3", hatch="...",
-                      label=f"P(squeak) {100 * band[0]:g}-{100 * band[1]:g} %")] + [
+        return [
+            Patch(
+                facecolor="none",
+                edgecolor="0.3",
+                hatch="...",
+                label=f"P(squeak) {100 * band[0]:g}-{100 * band[1]:g} %",
+            )
+        ] + [
             Line2D([], [], color="k", lw=1.0, ls=style, label=f"P = {100 * level:g} %")
-            for level, style in zip(PROBABILITY_LEVELS, _LEVEL_STYLES, strict=True)]
+            for level, style in zip(PROBABILITY_LEVELS, _LEVEL_STYLES, strict=True)
+        ]
+
     return draw
 
 
@@ -257,8 +291,9 @@ def fixed_text(fixed: dict[str, float]) -> str:
     return ", ".join(at(n, v) for n, v in fixed.items())
 
 
-def plot_frequencies(result: SweepResult, *, title: str = "", overlay: Overlay | None = None,
-                     ax: "Axes | None" = None) -> "Figure":
+def plot_frequencies(
+    result: SweepResult, *, title: str = "", overlay: Overlay | None = None, ax: Axes | None = None
+) -> Figure:
     """Frequency of every oscillatory mode along the sweep's axis: thin line, thick where
     Re > 0 (squeak), each squeaking branch labelled at its peak growth (the paper's Fig. 11
     for a speed sweep).
@@ -280,6 +315,7 @@ def plot_frequencies(result: SweepResult, *, title: str = "", overlay: Overlay |
         The figure drawn into.
     """
     from matplotlib.lines import Line2D
+
     k = axis_display(result.axis).factor
     x = result.values * k
     fig, ax = _axes(ax, figsize=(7.5, 5.2), layout="constrained")
@@ -289,27 +325,43 @@ def plot_frequencies(result: SweepResult, *, title: str = "", overlay: Overlay |
         if b.squeaks.any():
             ax.plot(x, squeak, color="tab:red", lw=4, solid_capstyle="butt")
             i = int(np.nanargmax(np.where(b.squeaks, b.growth, np.nan)))
-            ax.annotate(b.squeak_text, (x[i], squeak[i]),
-                        xytext=(4, 6), textcoords="offset points", color="tab:red",
-                        fontsize=9, fontweight="bold")
+            ax.annotate(
+                b.squeak_text,
+                (x[i], squeak[i]),
+                xytext=(4, 6),
+                textcoords="offset points",
+                color="tab:red",
+                fontsize=9,
+                fontweight="bold",
+            )
     scale_axis(ax, "x", result.values)
     ax.set_yscale("log")
     ax.set_xlabel(axis_label(result.axis))
     ax.set_ylabel("frequency Im($\\lambda$)/2$\\pi$ [Hz]")
     ax.set_title(title or "Mode frequencies; thick: Re($\\lambda$) > 0 (squeak)")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(handles=[Line2D([], [], color="0.25", lw=0.8, label=r"Re($\lambda$) $\leq$ 0"),
-                       Line2D([], [], color="tab:red", lw=4,
-                              label=r"Re($\lambda$) > 0 (squeak)")]
-              + (overlay(ax) if overlay is not None else []), fontsize=8)
+    ax.legend(
+        handles=[
+            Line2D([], [], color="0.25", lw=0.8, label=r"Re($\lambda$) $\leq$ 0"),
+            Line2D([], [], color="tab:red", lw=4, label=r"Re($\lambda$) > 0 (squeak)"),
+        ]
+        + (overlay(ax) if overlay is not None else []),
+        fontsize=8,
+    )
     return fig
 
 
 GROWTH_LABEL = r"growth rate Re($\lambda$) [1/s]"
 
 
-def plot_sweep(result: SweepResult, *, title: str = "", top: int = 6, probability: bool = False,
-               ax: "Axes | None" = None) -> "Figure":
+def plot_sweep(
+    result: SweepResult,
+    *,
+    title: str = "",
+    top: int = 6,
+    probability: bool = False,
+    ax: Axes | None = None,
+) -> Figure:
     """Largest growth rate and Re(lambda) of the least stable modes along the sweep's axis,
     with the unstable bands shaded (the paper's Fig. 5 for a speed sweep).
 
@@ -333,15 +385,22 @@ def plot_sweep(result: SweepResult, *, title: str = "", top: int = 6, probabilit
     """
     k = axis_display(result.axis).factor
     x = result.values * k
-    branches = sorted(sorted(track_modes(result.predictions), key=lambda b: -b.peak_growth)[:top],
-                      key=lambda b: b.typical_frequency_hz)
+    branches = sorted(
+        sorted(track_modes(result.predictions), key=lambda b: -b.peak_growth)[:top],
+        key=lambda b: b.typical_frequency_hz,
+    )
     fig, ax = _axes(ax, figsize=(7.5, 4.8), layout="constrained")
     ax.plot(x, result.max_growth_rate, color="0.75", lw=5, label=r"largest Re($\lambda$)")
     for b in branches:
         ax.plot(x, b.growth, lw=1.4, label=f"{b.label} ({b.typical_frequency_hz:.4g} Hz)")
     for i, (lo, hi) in enumerate(result.unstable_bands):
-        ax.axvspan(lo * k, hi * k, color="tab:red", alpha=0.12,
-                   label="unstable (squeak)" if i == 0 else None)
+        ax.axvspan(
+            lo * k,
+            hi * k,
+            color="tab:red",
+            alpha=0.12,
+            label="unstable (squeak)" if i == 0 else None,
+        )
     ax.axhline(0.0, color="k", lw=0.8)
     scale_axis(ax, "x", result.values)
     shown = np.concatenate([result.max_growth_rate] + [b.growth for b in branches])
@@ -351,14 +410,18 @@ def plot_sweep(result: SweepResult, *, title: str = "", top: int = 6, probabilit
     ax.set_xlabel(axis_label(result.axis))
     ax.set_ylabel(GROWTH_LABEL)
     formulation = result.predictions[0].formulation if result.predictions else "?"
-    ax.set_title(title or f"Squeak propensity vs {axis_display(result.axis).label}\n"
-                          f"({fixed_text(result.fixed)}; {formulation} formulation)")
+    ax.set_title(
+        title
+        or f"Squeak propensity vs {axis_display(result.axis).label}\n"
+        f"({fixed_text(result.fixed)}; {formulation} formulation)"
+    )
     ax.grid(alpha=0.3, which="both")
     handles, anchor = ax.get_legend_handles_labels()[0], 1.01
     if probability:
         twin = ax.twinx()
-        handles += twin.plot(x, result.probability, color="k", ls="--", lw=1.6,
-                             label="P(squeak) (right axis)")
+        handles += twin.plot(
+            x, result.probability, color="k", ls="--", lw=1.6, label="P(squeak) (right axis)"
+        )
         twin.set_ylim(-0.02, 1.02)
         twin.set_ylabel("P(squeak) over the scatter")
         anchor = 1.12
@@ -366,8 +429,9 @@ def plot_sweep(result: SweepResult, *, title: str = "", top: int = 6, probabilit
     return fig
 
 
-def plot_friction(params: ScrewParameters, sliding_m_s: np.ndarray, *,
-                  ax: "Axes | None" = None) -> "Figure":
+def plot_friction(
+    params: ScrewParameters, sliding_m_s: np.ndarray, *, ax: Axes | None = None
+) -> Figure:
     """The friction law (eq. 12) over the sliding speed, with the rotation speed on top (the
     paper's Fig. 4).
 
@@ -387,14 +451,22 @@ def plot_friction(params: ScrewParameters, sliding_m_s: np.ndarray, *,
     """
     p, v = params, sliding_m_s
     fig, ax = _axes(ax, figsize=(7, 4.5), layout="constrained")
-    ax.plot(v, friction_coefficient(p, v), lw=2,
-            label=r"$\mu = \mu_k + (\mu_s - \mu_k)\,e^{-d|V_c|}$ (12)")
+    ax.plot(
+        v,
+        friction_coefficient(p, v),
+        lw=2,
+        label=r"$\mu = \mu_k + (\mu_s - \mu_k)\,e^{-d|V_c|}$ (12)",
+    )
     for value, name in ((p.mu_static, r"$\mu_s$"), (p.mu_kinetic, r"$\mu_k$")):
         ax.axhline(value, color="0.5", ls=":", lw=1)
         ax.annotate(f"{name} = {value:g}", (v[-1], value), ha="right", va="bottom")
-    top = ax.secondary_xaxis("top", functions=(
-        lambda s: s * math.cos(p.helix_angle_rad) / p.radius_m,
-        lambda w: w * p.radius_m / math.cos(p.helix_angle_rad)))
+    top = ax.secondary_xaxis(
+        "top",
+        functions=(
+            lambda s: s * math.cos(p.helix_angle_rad) / p.radius_m,
+            lambda w: w * p.radius_m / math.cos(p.helix_angle_rad),
+        ),
+    )
     top.set_xlabel(r"rotation speed $\Omega = |V_c| \cos\beta / R$ [rad/s]")
     ax.set_xlabel(r"sliding speed $|V_c|$ [m/s]")
     ax.set_ylabel(r"friction coefficient $\mu$ [-]")
@@ -404,8 +476,9 @@ def plot_friction(params: ScrewParameters, sliding_m_s: np.ndarray, *,
     return fig
 
 
-def plot_transient(run: "TransientResult", analysis: "TransientAnalysis", *, title: str = "",
-                   fig: "Figure | None" = None) -> "Figure":
+def plot_transient(
+    run: TransientResult, analysis: TransientAnalysis, *, title: str = "", fig: Figure | None = None
+) -> Figure:
     """Three panels of a nonlinear run: the amplitude (log) with the fitted linear growth, the
     surface velocity at the nut, the spectrogram of its tangential component.
 
@@ -431,10 +504,14 @@ def plot_transient(run: "TransientResult", analysis: "TransientAnalysis", *, tit
     ax[0].semilogy(t, analysis.amplitude, color="k", lw=1, label="modal energy norm a(t)")
     inside = (t >= fit.start_s) & (t <= fit.end_s)
     mid = np.argmin(np.abs(t - (fit.start_s + fit.end_s) / 2))
-    ax[0].semilogy(t[inside], analysis.amplitude[mid] * np.exp(fit.growth_rate * (t[inside]
-                   - t[mid])), color="tab:red", lw=3, alpha=0.6,
-                   label=f"fit: {fit.mode} {fit.frequency_hz:.1f} Hz, "
-                         f"growth {fit.growth_rate:+.1f} 1/s")
+    ax[0].semilogy(
+        t[inside],
+        analysis.amplitude[mid] * np.exp(fit.growth_rate * (t[inside] - t[mid])),
+        color="tab:red",
+        lw=3,
+        alpha=0.6,
+        label=f"fit: {fit.mode} {fit.frequency_hz:.1f} Hz, growth {fit.growth_rate:+.1f} 1/s",
+    )
     ax[0].set_ylabel("a [m/s]")
     ax[0].legend(loc="lower right")
     ax[0].set_title(title)
@@ -445,8 +522,9 @@ def plot_transient(run: "TransientResult", analysis: "TransientAnalysis", *, tit
     ax[1].legend(loc="lower right")
     rate = 1 / (t[1] - t[0])
     nfft = 1 << max(8, int(math.log2(rate * 2e-3)))
-    ax[2].specgram(v[:, 1], NFFT=nfft, Fs=rate, noverlap=nfft // 2, cmap="magma",
-                   scale="dB", mode="magnitude")
+    ax[2].specgram(
+        v[:, 1], NFFT=nfft, Fs=rate, noverlap=nfft // 2, cmap="magma", scale="dB", mode="magnitude"
+    )
     ax[2].set_ylim(0, min(rate / 2, 20000))
     ax[2].set_ylabel("frequency [Hz]")
     ax[2].set_xlabel("time [s]")
@@ -455,7 +533,7 @@ def plot_transient(run: "TransientResult", analysis: "TransientAnalysis", *, tit
 
 SQUEAK_COLOR = "orange"
 WARN_COLOR, ERROR_COLOR = "goldenrod", "tab:red"
-BAR_HEIGHT = 0.07            # P(squeak) panel: the P >= WARN / ERROR bars under the curve
+BAR_HEIGHT = 0.07  # P(squeak) panel: the P >= WARN / ERROR bars under the curve
 
 
 def _held(last: np.ndarray, count: np.ndarray) -> np.ndarray:
@@ -468,8 +546,9 @@ def _held(last: np.ndarray, count: np.ndarray) -> np.ndarray:
     return out
 
 
-def _filled(lo: np.ndarray, hi: np.ndarray, last: np.ndarray,
-            count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _filled(
+    lo: np.ndarray, hi: np.ndarray, last: np.ndarray, count: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """A binned series' (lo, hi) with empty bins holding the last value before them (`_held`),
     so that a log sampled more sparsely than the bins is drawn as a line, not as dots."""
     held = _held(last, count)
@@ -480,10 +559,16 @@ def _filled(lo: np.ndarray, hi: np.ndarray, last: np.ndarray,
 def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
     """(first, last) index of each run of True."""
     edges = np.diff(np.r_[0, flags.astype(np.int8), 0])
-    return list(zip(np.flatnonzero(edges == 1).tolist(), (np.flatnonzero(edges == -1) - 1).tolist()))
+    return list(
+        zip(
+            np.flatnonzero(edges == 1).tolist(),
+            (np.flatnonzero(edges == -1) - 1).tolist(),
+            strict=True,
+        )
+    )
 
 
-def _probability_panel(result: "ReplayResult", axes) -> None:
+def _probability_panel(result: ReplayResult, axes) -> None:
     """P(squeak) over time on the last of `axes`, with the WARN and ERROR probabilities
     (dashed) and bars under the curve where P was at or above them; squeak at the nominal
     parameters shaded on all of `axes`."""
@@ -492,32 +577,55 @@ def _probability_panel(result: "ReplayResult", axes) -> None:
     t, lo, hi, last, count = envelope.series()
     lo, hi = _filled(lo, hi, last, count)
     half = envelope.bin_s / 2
-    thresholds = ((result.warn_probability, "WARN", WARN_COLOR),
-                  (result.error_probability, "ERROR", ERROR_COLOR))
+    thresholds = (
+        (result.warn_probability, "WARN", WARN_COLOR),
+        (result.error_probability, "ERROR", ERROR_COLOR),
+    )
     ylim = (-0.05 - BAR_HEIGHT * len(thresholds), 1.05)
 
-    def fraction(y: float) -> float:             # of the axes' height
+    def fraction(y: float) -> float:  # of the axes' height
         return (y - ylim[0]) / (ylim[1] - ylim[0])
 
     handles = []
     if t.size:
-        handles.append(ax.fill_between(t, lo[:, 0], hi[:, 0], step="mid", color="tab:blue",
-                                       edgecolor="tab:blue", lw=0.8, label="P(squeak)"))
+        handles.append(
+            ax.fill_between(
+                t,
+                lo[:, 0],
+                hi[:, 0],
+                step="mid",
+                color="tab:blue",
+                edgecolor="tab:blue",
+                lw=0.8,
+                label="P(squeak)",
+            )
+        )
         for k, (a, b) in enumerate(_runs(np.nan_to_num(hi[:, 1]) > 0)):
             for other in axes:
-                span = other.axvspan(t[a] - half, t[b] + half, color=SQUEAK_COLOR, alpha=0.3,
-                                     lw=0, label="squeak (nominal)")
+                span = other.axvspan(
+                    t[a] - half,
+                    t[b] + half,
+                    color=SQUEAK_COLOR,
+                    alpha=0.3,
+                    lw=0,
+                    label="squeak (nominal)",
+                )
             handles += [span] if k == 0 else []
         for i, (level, name, color) in enumerate(thresholds):
             bottom = ylim[0] + BAR_HEIGHT * i
             for k, (a, b) in enumerate(_runs(np.nan_to_num(hi[:, 0], nan=-1.0) >= level)):
-                span = ax.axvspan(t[a] - half, t[b] + half, fraction(bottom + 0.1 * BAR_HEIGHT),
-                                  fraction(bottom + 0.9 * BAR_HEIGHT), color=color, lw=0,
-                                  label=f"P >= {name}")
+                span = ax.axvspan(
+                    t[a] - half,
+                    t[b] + half,
+                    fraction(bottom + 0.1 * BAR_HEIGHT),
+                    fraction(bottom + 0.9 * BAR_HEIGHT),
+                    color=color,
+                    lw=0,
+                    label=f"P >= {name}",
+                )
                 handles += [span] if k == 0 else []
     for level, name, color in thresholds:
-        handles.append(ax.axhline(level, color=color, ls="--", lw=1.0,
-                                  label=f"{name} {level:g}"))
+        handles.append(ax.axhline(level, color=color, ls="--", lw=1.0, label=f"{name} {level:g}"))
     pt = result.probability
     if pt.peak is not None:
         handles += ax.plot([pt.peak_t_s], [pt.peak], "v", color="k", ms=5, label="peak")
@@ -529,7 +637,7 @@ def _probability_panel(result: "ReplayResult", axes) -> None:
     ax.set_xlabel("time since the log's first message [s]")
 
 
-def plot_timeline(result: "ReplayResult", *, fig: "Figure | None" = None) -> "Figure":
+def plot_timeline(result: ReplayResult, *, fig: Figure | None = None) -> Figure:
     """A replay over time: speed, load, nut position (only when the log has a nut input) and
     P(squeak), squeak at the nominal parameters shaded; the P(squeak) panel has the WARN and
     ERROR probabilities as dashed lines, bars under the curve where P was at or above them and
@@ -549,31 +657,44 @@ def plot_timeline(result: "ReplayResult", *, fig: "Figure | None" = None) -> "Fi
     """
     tl = result.timeline
     t, lo, hi, last, count = tl.trace.series()
-    lo, hi = _filled(lo, hi, last, count)         # an input value holds until the next
+    lo, hi = _filled(lo, hi, last, count)  # an input value holds until the next
     panels = [(0, "speed [rad/s]", 1.0), (1, "axial load [N]", 1.0)]
     if tl.nut_measured:
         panels.append((2, "nut position [mm]", 1e3))
     if fig is None:
         fig = new_figure(figsize=(10, 2.1 * (len(panels) + 1) + 0.2), layout="constrained")
     axes = fig.subplots(len(panels) + 1, 1, sharex=True)
-    for ax, (k, label, factor) in zip(axes, panels):
-        ax.fill_between(t, lo[:, k] * factor, hi[:, k] * factor, step="mid", color="tab:blue",
-                        edgecolor="tab:blue", lw=0.7)
+    for ax, (k, label, factor) in zip(axes, panels, strict=False):
+        ax.fill_between(
+            t,
+            lo[:, k] * factor,
+            hi[:, k] * factor,
+            step="mid",
+            color="tab:blue",
+            edgecolor="tab:blue",
+            lw=0.7,
+        )
         ax.set_ylabel(label)
     _probability_panel(result, axes)
     for ax in axes:
         ax.grid(alpha=0.3)
-    nut = "" if tl.nut_measured else (
-        f"; no nut input: model nut at {tl.nut * 1e3:.0f} mm (parameter nut_position_m)")
-    axes[0].set_title(f"Replay of {result.log.name}: {result.episode_count} squeak episodes "
-                      f"(shaded), {result.time_in_squeak_s:.1f} s in squeak{nut}", fontsize=10)
+    nut = (
+        ""
+        if tl.nut_measured
+        else (f"; no nut input: model nut at {tl.nut * 1e3:.0f} mm (parameter nut_position_m)")
+    )
+    axes[0].set_title(
+        f"Replay of {result.log.name}: {result.episode_count} squeak episodes "
+        f"(shaded), {result.time_in_squeak_s:.1f} s in squeak{nut}",
+        fontsize=10,
+    )
     return fig
 
 
-_NAMED_BARS = 40          # up to this many logs the time-in-squeak panel names each one
+_NAMED_BARS = 40  # up to this many logs the time-in-squeak panel names each one
 
 
-def plot_fleet(run: "FleetRun", *, fig: "Figure | None" = None) -> "Figure":
+def plot_fleet(run: FleetRun, *, fig: Figure | None = None) -> Figure:
     """Four panels of a fleet's squeak: share of logs that squeak, squeak frequencies, time in
     squeak per log, where in speed x load the fleet squeaked.
 

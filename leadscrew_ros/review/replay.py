@@ -39,42 +39,51 @@ import sys
 import textwrap
 import time
 from collections import Counter, deque
+from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field, fields
 from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, BinaryIO, Callable, NamedTuple, TextIO
+from typing import TYPE_CHECKING, Any, BinaryIO, NamedTuple, TextIO
 
 import numpy as np
+
 from ..bag import logmeta, messages, msgdefs
+from ..bag.logfile import LogError, LogMessage, Topic, metadata_problem
+from ..bag.logsource import LogSource, log_topics, open_log, topic_types
 from ..bag.mcapout import CHUNK_BYTES, McapOut
+from ..model import Prediction, SqueakModel, Validity
+from ..model.uncertainty.scatter import LOG_NORMAL
 from .decimation import Envelope, Reservoir
 from .jsonsafe import json_safe
 from .plots import plot_timeline
-from ..bag.logfile import LogError, LogMessage, Topic, metadata_problem
-from ..bag.logsource import LogSource, log_topics, open_log, topic_types
-from ..model import Prediction, SqueakModel, Validity
-from ..model.uncertainty.scatter import LOG_NORMAL
 from .progress import progress_bar
-from .timeline import (InputError, InputSettings, Job, ModelSpec, Timeline, input_namespaces,
-                       predict_jobs)
+from .timeline import (
+    InputError,
+    InputSettings,
+    Job,
+    ModelSpec,
+    Timeline,
+    input_namespaces,
+    predict_jobs,
+)
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 DEFAULT_NAMESPACE = "/replay"
-_BATCH_JOBS = 256              # predictions per batched solve (one worker task)
-_SEGMENT_MESSAGES = 20_000     # a segment without predictions is written at this size
+_BATCH_JOBS = 256  # predictions per batched solve (one worker task)
+_SEGMENT_MESSAGES = 20_000  # a segment without predictions is written at this size
 # Messages held while their predictions are computed (~250 bytes each): enough to read on
 # through a rest while the workers solve the stroke before it.
 _IN_FLIGHT_MESSAGES = 250_000
-_CHUNK_BYTES = CHUNK_BYTES     # annotated MCAP chunk: buffered until this size, then compressed
-EPISODES_KEPT = 1000           # episodes kept in the result (all of them in episodes.json)
-_FREQUENCIES_KEPT = 512        # frequencies per mode and episode kept for its median
+_CHUNK_BYTES = CHUNK_BYTES  # annotated MCAP chunk: buffered until this size, then compressed
+EPISODES_KEPT = 1000  # episodes kept in the result (all of them in episodes.json)
+_FREQUENCIES_KEPT = 512  # frequencies per mode and episode kept for its median
 _NAME = re.compile(r"(/[A-Za-z_][A-Za-z0-9_]*)+")
-MAX_WORKERS = 64               # prediction processes (each ~170 MB): more only thrash a machine
-MEDIA_TYPES = {".json": "application/json", ".png": "image/png"}   # of the attachments
+MAX_WORKERS = 64  # prediction processes (each ~170 MB): more only thrash a machine
+MEDIA_TYPES = {".json": "application/json", ".png": "image/png"}  # of the attachments
 
 
 @dataclass(frozen=True)
@@ -117,10 +126,10 @@ class ProbabilityTime:
     """P(squeak) as published over an interval: its peak and the time it was at or above the
     WARN and ERROR probabilities (seconds; times from the log's first message)."""
 
-    peak: float | None = None             # max P(squeak) [1]; None without a prediction
-    peak_t_s: float | None = None         # when it was first reached
-    above_warn_s: float = 0.0             # P >= warn_probability
-    above_error_s: float = 0.0            # P >= error_probability
+    peak: float | None = None  # max P(squeak) [1]; None without a prediction
+    peak_t_s: float | None = None  # when it was first reached
+    above_warn_s: float = 0.0  # P >= warn_probability
+    above_error_s: float = 0.0  # P >= error_probability
 
     def sample(self, t_s: float, probability: float) -> None:
         """A recompute's probability at time `t_s`."""
@@ -136,9 +145,12 @@ class ProbabilityTime:
 
     def as_dict(self) -> dict[str, Any]:
         """The figures as a JSON-ready dict (times in s)."""
-        return {"peak_probability": self.peak, "peak_probability_t_s": self.peak_t_s,
-                "time_above_warn_s": self.above_warn_s,
-                "time_above_error_s": self.above_error_s}
+        return {
+            "peak_probability": self.peak,
+            "peak_probability_t_s": self.peak_t_s,
+            "time_above_warn_s": self.above_warn_s,
+            "time_above_error_s": self.above_error_s,
+        }
 
 
 @dataclass
@@ -148,7 +160,7 @@ class Episode:
 
     start_s: float
     end_s: float
-    peak_growth_rate: float                       # 1/s
+    peak_growth_rate: float  # 1/s
     speed_range_rad_s: tuple[float, float]
     load_range_n: tuple[float, float]
     predictions: int
@@ -182,14 +194,20 @@ class Episode:
 
     def as_dict(self) -> dict[str, Any]:
         """The episode as a JSON-ready dict (times in s from the log's start)."""
-        return {"start_s": self.start_s, "end_s": self.end_s,
-                "duration_s": self.end_s - self.start_s,
-                "frequencies_hz": self.frequencies_hz, "modes": self.modes,
-                "peak_growth_rate": self.peak_growth_rate,
-                "speed_min_rad_s": self.speed_range_rad_s[0],
-                "speed_max_rad_s": self.speed_range_rad_s[1],
-                "load_min_n": self.load_range_n[0], "load_max_n": self.load_range_n[1],
-                "predictions": self.predictions, **self.probability.as_dict()}
+        return {
+            "start_s": self.start_s,
+            "end_s": self.end_s,
+            "duration_s": self.end_s - self.start_s,
+            "frequencies_hz": self.frequencies_hz,
+            "modes": self.modes,
+            "peak_growth_rate": self.peak_growth_rate,
+            "speed_min_rad_s": self.speed_range_rad_s[0],
+            "speed_max_rad_s": self.speed_range_rad_s[1],
+            "load_min_n": self.load_range_n[0],
+            "load_max_n": self.load_range_n[1],
+            "predictions": self.predictions,
+            **self.probability.as_dict(),
+        }
 
 
 @dataclass
@@ -308,7 +326,7 @@ class ReplayResult:
     outputs: list[Path] = field(default_factory=list)
     metadata_problem: str = ""
 
-    def plot(self, fig: "Figure | None" = None) -> "Figure":
+    def plot(self, fig: Figure | None = None) -> Figure:
         """The timeline: speed, load, nut position and P(squeak) over time (`plot_timeline`).
 
         Parameters
@@ -329,8 +347,10 @@ class ReplayResult:
         broken metadata.yaml."""
         tl, out = self.timeline, [self.metadata_problem] if self.metadata_problem else []
         for topic, n in sorted(tl.backwards.items()):
-            out.append(f"log time goes backwards {n} time(s) on {topic} (up to "
-                       f"{tl.backwards_max_s:.6g} s): those messages were not applied")
+            out.append(
+                f"log time goes backwards {n} time(s) on {topic} (up to "
+                f"{tl.backwards_max_s:.6g} s): those messages were not applied"
+            )
         for topic, n in sorted(tl.duplicates.items()):
             out.append(f"log time repeats {n} time(s) on {topic} (the later value applied)")
         return out
@@ -348,28 +368,41 @@ class ReplayResult:
         dict
             Counts, P(squeak) times, settings, warnings, wall time.
         """
-        return {"log": str(self.log), "files": [str(f) for f in self.files],
-                "annotated": str(self.annotated), "duration_s": self.duration_s,
-                "messages": self.messages, "input_messages": dict(self.inputs),
-                "recomputes": self.recomputes, "predictions": self.predictions,
-                "no_prediction": dict(self.no_prediction), "rejected_inputs": dict(self.rejected),
-                "rejected_examples": dict(self.timeline.rejected_example),
-                "ignored_inputs": dict(self.ignored),
-                "ignored_examples": dict(self.timeline.ignored_example),
-                "episodes": self.episode_count,
-                "time_in_squeak_s": self.time_in_squeak_s,
-                **self.probability.as_dict(),
-                "warn_probability": self.warn_probability,
-                "error_probability": self.error_probability,
-                "scatter": self.scatter, "scatter_samples": self.scatter_samples,
-                "namespace": self.namespace, "out_namespace": self.out_namespace,
-                "log_time": {"backwards": dict(self.timeline.backwards),
-                             "backwards_max_s": self.timeline.backwards_max_s,
-                             "duplicates": dict(self.timeline.duplicates)},
-                "metadata_problem": self.metadata_problem, "warnings": self.warnings,
-                "squeak_share": self._share(self.time_in_squeak_s),
-                "warn_share": self._share(self.probability.above_warn_s),
-                "wall_s": self.wall_s, "x_real_time": self.x_real_time}
+        return {
+            "log": str(self.log),
+            "files": [str(f) for f in self.files],
+            "annotated": str(self.annotated),
+            "duration_s": self.duration_s,
+            "messages": self.messages,
+            "input_messages": dict(self.inputs),
+            "recomputes": self.recomputes,
+            "predictions": self.predictions,
+            "no_prediction": dict(self.no_prediction),
+            "rejected_inputs": dict(self.rejected),
+            "rejected_examples": dict(self.timeline.rejected_example),
+            "ignored_inputs": dict(self.ignored),
+            "ignored_examples": dict(self.timeline.ignored_example),
+            "episodes": self.episode_count,
+            "time_in_squeak_s": self.time_in_squeak_s,
+            **self.probability.as_dict(),
+            "warn_probability": self.warn_probability,
+            "error_probability": self.error_probability,
+            "scatter": self.scatter,
+            "scatter_samples": self.scatter_samples,
+            "namespace": self.namespace,
+            "out_namespace": self.out_namespace,
+            "log_time": {
+                "backwards": dict(self.timeline.backwards),
+                "backwards_max_s": self.timeline.backwards_max_s,
+                "duplicates": dict(self.timeline.duplicates),
+            },
+            "metadata_problem": self.metadata_problem,
+            "warnings": self.warnings,
+            "squeak_share": self._share(self.time_in_squeak_s),
+            "warn_share": self._share(self.probability.above_warn_s),
+            "wall_s": self.wall_s,
+            "x_real_time": self.x_real_time,
+        }
 
     def _share(self, seconds: float) -> float:
         """`seconds` as a share of the log's duration."""
@@ -386,10 +419,12 @@ class ReplayResult:
         pt = self.probability
         if pt.peak is None:
             return "P(squeak): no prediction"
-        return (f"P(squeak): peak {pt.peak:.3f} at {pt.peak_t_s:.2f} s; >= WARN "
-                f"{self.warn_probability:g} for {pt.above_warn_s:.2f} s "
-                f"({100 * self._share(pt.above_warn_s):.1f} % of the log), >= ERROR "
-                f"{self.error_probability:g} for {pt.above_error_s:.2f} s")
+        return (
+            f"P(squeak): peak {pt.peak:.3f} at {pt.peak_t_s:.2f} s; >= WARN "
+            f"{self.warn_probability:g} for {pt.above_warn_s:.2f} s "
+            f"({100 * self._share(pt.above_warn_s):.1f} % of the log), >= ERROR "
+            f"{self.error_probability:g} for {pt.above_error_s:.2f} s"
+        )
 
     def scatter_text(self) -> str:
         """The scatter P(squeak) is taken over.
@@ -402,9 +437,13 @@ class ReplayResult:
         if not self.scatter:
             return "scatter: none (P(squeak) is the nominal verdict, 0 or 1)"
         log_normal = [name for name in self.scatter if name in LOG_NORMAL]
-        return ("scatter: " + ", ".join(f"{name} {sd:g}" for name, sd in self.scatter.items())
-                + " (relative SD" + (f"; SD of ln for {', '.join(log_normal)}" if log_normal
-                                     else "") + f"), {self.scatter_samples} samples")
+        return (
+            "scatter: "
+            + ", ".join(f"{name} {sd:g}" for name, sd in self.scatter.items())
+            + " (relative SD"
+            + (f"; SD of ln for {', '.join(log_normal)}" if log_normal else "")
+            + f"), {self.scatter_samples} samples"
+        )
 
     def summary_text(self) -> str:
         """The replay in words (summary.txt).
@@ -414,21 +453,28 @@ class ReplayResult:
         str
             One line per item, no final newline.
         """
-        lines = [f"replay of {self.log}: {len(self.files)} file(s), {self.messages} messages "
-                 f"over {self.duration_s:.1f} s",
-                 "input messages: " + (", ".join(f"{k} {v}" for k, v in self.inputs.items())
-                                       or "none"),
-                 f"recomputes: {self.recomputes} ({self.predictions} with a prediction)",
-                 f"squeak episodes: {self.episode_count}, time in squeak "
-                 f"{self.time_in_squeak_s:.2f} s ({100 * self._share(self.time_in_squeak_s):.1f}"
-                 " % of the log)",
-                 self.probability_text(), self.scatter_text()]
+        lines = [
+            f"replay of {self.log}: {len(self.files)} file(s), {self.messages} messages "
+            f"over {self.duration_s:.1f} s",
+            "input messages: " + (", ".join(f"{k} {v}" for k, v in self.inputs.items()) or "none"),
+            f"recomputes: {self.recomputes} ({self.predictions} with a prediction)",
+            f"squeak episodes: {self.episode_count}, time in squeak "
+            f"{self.time_in_squeak_s:.2f} s ({100 * self._share(self.time_in_squeak_s):.1f}"
+            " % of the log)",
+            self.probability_text(),
+            self.scatter_text(),
+        ]
         examples = {**self.timeline.rejected_example, **self.timeline.ignored_example}
-        for title, counts in (("no prediction (outside the model's validity)", self.no_prediction),
-                              ("rejected inputs", self.rejected), ("ignored inputs", self.ignored)):
-            lines += [f"{title}: {n} x {reason}"
-                      + (f" (first: {examples[reason]})" if reason in examples else "")
-                      for reason, n in sorted(counts.items())]
+        for title, counts in (
+            ("no prediction (outside the model's validity)", self.no_prediction),
+            ("rejected inputs", self.rejected),
+            ("ignored inputs", self.ignored),
+        ):
+            lines += [
+                f"{title}: {n} x {reason}"
+                + (f" (first: {examples[reason]})" if reason in examples else "")
+                for reason, n in sorted(counts.items())
+            ]
         lines += [f"warning: {w}" for w in self.warnings]
         lines.append(f"wall time {self.wall_s:.2f} s ({self.x_real_time:.0f}x real time)")
         lines.append(f"annotated log: {self.annotated}")
@@ -442,7 +488,7 @@ def log_name(path: Path) -> str:
 
 
 # ---------------------------------------------------------------------- the annotated log
-Payloads = tuple[bytes, ...]      # of `messages.PREDICTION_TOPICS`, in that order
+Payloads = tuple[bytes, ...]  # of `messages.PREDICTION_TOPICS`, in that order
 
 
 class _AnnotatedWriter:
@@ -451,29 +497,46 @@ class _AnnotatedWriter:
     def __init__(self, fh: BinaryIO, namespace: str):
         self.writer = McapOut(fh, "ros2", "leadscrew_ros replay", _CHUNK_BYTES)
         self._schemas: dict[tuple[str, str, str], int] = {}
-        self._channels: dict[int, tuple[Topic, int]] = {}        # id(topic) -> topic, channel
+        self._channels: dict[int, tuple[Topic, int]] = {}  # id(topic) -> topic, channel
         self._by_value: dict[tuple, int] = {}
-        self._outputs = [self._channel(Topic(
-            f"{namespace}/{topic}", messages.OUTPUT_TYPES[topic], "ros2msg",
-            msgdefs.definition(messages.OUTPUT_TYPES[topic]), "cdr",
-            {"offered_qos_profiles": ""})) for topic in messages.PREDICTION_TOPICS]
-        self._sequence = -1           # of the predictions: 0, 1, ... on every topic
+        self._outputs = [
+            self._channel(
+                Topic(
+                    f"{namespace}/{topic}",
+                    messages.OUTPUT_TYPES[topic],
+                    "ros2msg",
+                    msgdefs.definition(messages.OUTPUT_TYPES[topic]),
+                    "cdr",
+                    {"offered_qos_profiles": ""},
+                )
+            )
+            for topic in messages.PREDICTION_TOPICS
+        ]
+        self._sequence = -1  # of the predictions: 0, 1, ... on every topic
 
     def _channel(self, t: Topic) -> int:
-        key = (t.name, t.stored_schema_name, t.schema_encoding, t.schema, t.message_encoding,
-               tuple(sorted(t.metadata.items())))
+        key = (
+            t.name,
+            t.stored_schema_name,
+            t.schema_encoding,
+            t.schema,
+            t.message_encoding,
+            tuple(sorted(t.metadata.items())),
+        )
         if key not in self._by_value:
             schema_key = (t.stored_schema_name, t.schema_encoding, t.schema)
             if schema_key not in self._schemas:
                 self._schemas[schema_key] = self.writer.register_schema(
-                    t.stored_schema_name, t.schema_encoding, t.schema.encode())
+                    t.stored_schema_name, t.schema_encoding, t.schema.encode()
+                )
             self._by_value[key] = self.writer.register_channel(
-                t.name, t.message_encoding, self._schemas[schema_key], dict(t.metadata))
+                t.name, t.message_encoding, self._schemas[schema_key], dict(t.metadata)
+            )
         return self._by_value[key]
 
     def original(self, m: LogMessage) -> None:
         entry = self._channels.get(id(m.topic))
-        if entry is None:             # holding the topic keeps its id from being reused
+        if entry is None:  # holding the topic keeps its id from being reused
             entry = self._channels[id(m.topic)] = (m.topic, self._channel(m.topic))
         self.writer.add_message(entry[1], m.log_time_ns, m.data, m.publish_time_ns, m.sequence)
 
@@ -521,8 +584,15 @@ class Verdict(NamedTuple):
     @classmethod
     def of(cls, p: Prediction) -> Verdict:
         """The verdict kept of prediction `p`."""
-        return cls(p.speed_rad_s, p.load_n, p.validity, p.probability, p.max_growth_rate,
-                   p.divergence_rates, tuple((m.label, m.frequency_hz) for m in p.squeak_modes))
+        return cls(
+            p.speed_rad_s,
+            p.load_n,
+            p.validity,
+            p.probability,
+            p.max_growth_rate,
+            p.divergence_rates,
+            tuple((m.label, m.frequency_hz) for m in p.squeak_modes),
+        )
 
     @property
     def valid(self) -> bool:
@@ -535,15 +605,17 @@ class Verdict(NamedTuple):
         return self.valid and not self.squeak and not self.divergence_rates
 
 
-def solve(spec: ModelSpec, speeds: np.ndarray, loads: np.ndarray, model_nuts: np.ndarray
-          ) -> tuple[list[Verdict], list[Payloads | None]]:
+def solve(
+    spec: ModelSpec, speeds: np.ndarray, loads: np.ndarray, model_nuts: np.ndarray
+) -> tuple[list[Verdict], list[Payloads | None]]:
     """`predict_jobs` as verdicts and the valid predictions' CDR payloads (None outside
     validity), encoded where they are solved: in a worker, the replaying process only copies
     bytes."""
     predictions = predict_jobs(spec, speeds, loads, model_nuts)
     return [Verdict.of(p) for p in predictions], [
         tuple(data for _, data in messages.prediction_payloads(p)) if p.valid else None
-        for p in predictions]
+        for p in predictions
+    ]
 
 
 @dataclass
@@ -551,7 +623,7 @@ class _Segment:
     messages: list[LogMessage] = field(default_factory=list)
     jobs: list[Job] = field(default_factory=list)
     solved: Future | tuple[list[Verdict], list[Payloads | None]] | None = None
-    args: tuple = ()                  # of solve
+    args: tuple = ()  # of solve
 
     def done(self) -> bool:
         return not isinstance(self.solved, Future) or self.solved.done()
@@ -561,7 +633,7 @@ class _Segment:
         if isinstance(self.solved, Future):
             try:
                 self.solved = self.solved.result()
-            except BrokenProcessPool:      # a worker died (killed, out of memory): solve here
+            except BrokenProcessPool:  # a worker died (killed, out of memory): solve here
                 self.solved = solve(*self.args)
         return self.solved
 
@@ -579,15 +651,22 @@ class _Solver:
         if not seg.jobs:
             seg.solved = [], []
             return
-        seg.args = (self.spec, *(np.array([getattr(j, f) for j in seg.jobs]) for f in
-                                   ("speed_rad_s", "load_n", "model_nut_m")))
+        seg.args = (
+            self.spec,
+            *(
+                np.array([getattr(j, f) for j in seg.jobs])
+                for f in ("speed_rad_s", "load_n", "model_nut_m")
+            ),
+        )
         self.batches += 1
         if self.workers and self.batches > 1 and self.pool is None:
             # spawn, not fork: the parent holds BLAS and tqdm threads. Workers ignore SIGINT:
             # Ctrl-C reaches the whole process group, and this process shuts the pool down.
             self.pool = ProcessPoolExecutor(
-                self.workers, multiprocessing.get_context("spawn"),
-                initializer=partial(signal.signal, signal.SIGINT, signal.SIG_IGN))
+                self.workers,
+                multiprocessing.get_context("spawn"),
+                initializer=partial(signal.signal, signal.SIGINT, signal.SIG_IGN),
+            )
         if self.pool is not None:
             try:
                 seg.solved = self.pool.submit(solve, *seg.args)
@@ -619,7 +698,7 @@ class _Episodes:
         self.open: Episode | None = None
         self.count, self.time_in_squeak_s = 0, 0.0
         self.probability = ProbabilityTime()
-        self._held: tuple[float, float] | None = None      # (since [s], P) of the last recompute
+        self._held: tuple[float, float] | None = None  # (since [s], P) of the last recompute
         sink.write("[")
 
     def _hold(self, t: float) -> None:
@@ -642,12 +721,15 @@ class _Episodes:
             return
         growth = p.max_growth_rate if p.max_growth_rate is not None else -math.inf
         if e is None:
-            e = self.open = Episode(t, t, growth, (p.speed_rad_s, p.speed_rad_s),
-                                    (p.load_n, p.load_n), 0)
+            e = self.open = Episode(
+                t, t, growth, (p.speed_rad_s, p.speed_rad_s), (p.load_n, p.load_n), 0
+            )
         e.end_s = t
         e.peak_growth_rate = max(e.peak_growth_rate, growth, *p.divergence_rates)
-        e.speed_range_rad_s = (min(e.speed_range_rad_s[0], p.speed_rad_s),
-                               max(e.speed_range_rad_s[1], p.speed_rad_s))
+        e.speed_range_rad_s = (
+            min(e.speed_range_rad_s[0], p.speed_rad_s),
+            max(e.speed_range_rad_s[1], p.speed_rad_s),
+        )
         e.load_range_n = (min(e.load_range_n[0], p.load_n), max(e.load_range_n[1], p.load_n))
         e.predictions += 1
         e.probability.sample(t, p.probability)
@@ -657,11 +739,14 @@ class _Episodes:
     def _end(self, t: float) -> None:
         e, self.open = self.open, None
         e.end_s = t
-        self.sink.write(("," if self.count else "") + "\n" + textwrap.indent(json.dumps(
-            json_safe(e.as_dict()), indent=1, allow_nan=False), " "))
+        self.sink.write(
+            ("," if self.count else "")
+            + "\n"
+            + textwrap.indent(json.dumps(json_safe(e.as_dict()), indent=1, allow_nan=False), " ")
+        )
         self.count += 1
         self.time_in_squeak_s += e.end_s - e.start_s
-        if len(self.kept) < self.keep:      # with each mode's median only: a few hundred bytes
+        if len(self.kept) < self.keep:  # with each mode's median only: a few hundred bytes
             e.frequencies = dict(zip(e.modes, ([hz] for hz in e.frequencies_hz), strict=True))
             self.kept.append(e)
 
@@ -677,13 +762,14 @@ class _Episodes:
 def _message_total(files: list[Path]) -> int | None:
     """Message count from the files' summaries, for the progress bar (None if unknown)."""
     from mcap.reader import make_reader
+
     total = 0
     try:
         for f in files:
             with open(f, "rb") as fh:
                 stats = make_reader(fh).get_summary().statistics
             total += stats.message_count
-    except Exception:            # only a hint: a damaged summary (or a .db3) shows no total
+    except Exception:  # only a hint: a damaged summary (or a .db3) shows no total
         return None
     return total
 
@@ -692,10 +778,16 @@ class _Run:
     """One replay in progress: messages go to the timeline and into segments; a segment is
     written (originals, predictions after their inputs) once its predictions are back."""
 
-    def __init__(self, model: SqueakModel, inputs: InputSettings, workers: int,
-                 out: _AnnotatedWriter, episodes: TextIO,
-                 progress: Callable[[int], None] | None,
-                 types: dict[str, list[str]] | None = None):
+    def __init__(
+        self,
+        model: SqueakModel,
+        inputs: InputSettings,
+        workers: int,
+        out: _AnnotatedWriter,
+        episodes: TextIO,
+        progress: Callable[[int], None] | None,
+        types: dict[str, list[str]] | None = None,
+    ):
         self.out, self.progress = out, progress
         self.timeline = Timeline(model.params, inputs, types)
         self.solver = _Solver(model, workers)
@@ -705,7 +797,7 @@ class _Run:
         self.messages = self.predictions = 0
         self.start_ns, self.end_ns = None, None
         self.queue: deque[_Segment] = deque()
-        self.held = 0                                    # messages in `queue`
+        self.held = 0  # messages in `queue`
         self.segment = _Segment()
 
     def add(self, m: LogMessage) -> None:
@@ -767,15 +859,22 @@ def _namespaces(source: LogSource, settings: ReplaySettings) -> tuple[str, str]:
     if ns is None:
         found = input_namespaces(log_topics(source).values(), settings.inputs)
         if len(found) > 1:
-            raise LogError(source.path, f"predictor inputs in several namespaces "
-                                        f"({', '.join(found)}); choose one with --namespace NS")
+            raise LogError(
+                source.path,
+                f"predictor inputs in several namespaces "
+                f"({', '.join(found)}); choose one with --namespace NS",
+            )
         ns = found[0] if found else "/"
     out = settings.out_namespace or DEFAULT_NAMESPACE + ("" if ns == "/" else ns)
     return ns, out
 
 
-def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
-           settings: ReplaySettings = ReplaySettings()) -> ReplayResult:
+def replay(
+    log: Path | str,
+    model: SqueakModel,
+    out_dir: Path | str,
+    settings: ReplaySettings = ReplaySettings(),
+) -> ReplayResult:
     """Replay a log offline: the node's predictions recomputed for the whole log (the module's
     outputs).
 
@@ -806,8 +905,11 @@ def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
     log, out_dir = Path(log), Path(out_dir)
     source = open_log(log)
     if log.is_dir() and out_dir.resolve() == log.resolve():
-        raise LogError(log, "the output directory must not be the log directory (the "
-                            "annotated log would become one of its split files)")
+        raise LogError(
+            log,
+            "the output directory must not be the log directory (the "
+            "annotated log would become one of its split files)",
+        )
     namespace, out_namespace = _namespaces(source, settings)
     inputs = settings.inputs.resolved(namespace)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -817,11 +919,22 @@ def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
     show = settings.progress and sys.stderr.isatty()
     run = None
     try:
-        with open(partial[0], "wb") as fh, open(partial[1], "w", encoding="utf-8") as eh, \
-                progress_bar(_message_total(source.files) if show else None, "replay",
-                             unit="msg") as bar:
-            run = _Run(model, inputs, settings.workers, _AnnotatedWriter(fh, out_namespace),
-                       eh, bar if show else None, topic_types(source))
+        with (
+            open(partial[0], "wb") as fh,
+            open(partial[1], "w", encoding="utf-8") as eh,
+            progress_bar(
+                _message_total(source.files) if show else None, "replay", unit="msg"
+            ) as bar,
+        ):
+            run = _Run(
+                model,
+                inputs,
+                settings.workers,
+                _AnnotatedWriter(fh, out_namespace),
+                eh,
+                bar if show else None,
+                topic_types(source),
+            )
             for f, m in source.messages():
                 try:
                     run.add(m)
@@ -840,16 +953,33 @@ def replay(log: Path | str, model: SqueakModel, out_dir: Path | str,
             run.solver.close()
     tl = run.timeline
     result = ReplayResult(
-        log=log, files=source.files, out_dir=out_dir, annotated=annotated,
-        start_ns=run.start_ns or 0, duration_s=run.duration_s, messages=run.messages,
-        inputs=tl.inputs, recomputes=tl.recomputes, predictions=run.predictions,
-        no_prediction=run.no_prediction, rejected=tl.rejected, ignored=tl.ignored,
-        episodes=run.episodes.kept, episode_count=run.episodes.count,
-        time_in_squeak_s=run.episodes.time_in_squeak_s, probability=run.episodes.probability,
-        plot_data=run.plot_data, timeline=tl, namespace=namespace, out_namespace=out_namespace,
-        warn_probability=inputs.warn_probability, error_probability=inputs.error_probability,
-        scatter=dict(model.scatter.sd), scatter_samples=model.sample_count,
-        metadata_problem=metadata_problem(log, source.infos) if log.is_dir() else "")
+        log=log,
+        files=source.files,
+        out_dir=out_dir,
+        annotated=annotated,
+        start_ns=run.start_ns or 0,
+        duration_s=run.duration_s,
+        messages=run.messages,
+        inputs=tl.inputs,
+        recomputes=tl.recomputes,
+        predictions=run.predictions,
+        no_prediction=run.no_prediction,
+        rejected=tl.rejected,
+        ignored=tl.ignored,
+        episodes=run.episodes.kept,
+        episode_count=run.episodes.count,
+        time_in_squeak_s=run.episodes.time_in_squeak_s,
+        probability=run.episodes.probability,
+        plot_data=run.plot_data,
+        timeline=tl,
+        namespace=namespace,
+        out_namespace=out_namespace,
+        warn_probability=inputs.warn_probability,
+        error_probability=inputs.error_probability,
+        scatter=dict(model.scatter.sd),
+        scatter_samples=model.sample_count,
+        metadata_problem=metadata_problem(log, source.infos) if log.is_dir() else "",
+    )
     result.wall_s = time.perf_counter() - t0
     _write_json(out_dir / "summary.json", result.summary())
     (out_dir / "summary.txt").write_text(result.summary_text() + "\n", encoding="utf-8")
@@ -863,23 +993,35 @@ def _metadata(result: ReplayResult, model: SqueakModel) -> dict[str, dict[str, s
     it has a readable one) and the replay's own record, with the unit and hardware ids of the
     input's."""
     try:
-        recorded = (logmeta.read_record(result.files[0]) if result.files[0].suffix == ".mcap"
-                    else None) or {}
-    except (OSError, ValueError):       # the messages were read: a record is only a bonus
+        recorded = (
+            logmeta.read_record(result.files[0]) if result.files[0].suffix == ".mcap" else None
+        ) or {}
+    except (OSError, ValueError):  # the messages were read: a record is only a bonus
         recorded = {}
-    inputs = {f.name: getattr(result.timeline.settings, f.name)
-              for f in fields(result.timeline.settings)}
+    inputs = {
+        f.name: getattr(result.timeline.settings, f.name) for f in fields(result.timeline.settings)
+    }
     own = logmeta.LogMetadata(
-        model.params.as_dict(), {**model.scatter.sd, "samples": model.sample_count},
-        {**inputs, "log": str(result.log), "namespace": result.namespace,
-         "out_namespace": result.out_namespace},
-        recorded.get("unit_id", ""), recorded.get("hardware_id", ""))
-    return {**({logmeta.RECORD_NAME: recorded} if recorded else {}),
-            logmeta.REPLAY_RECORD_NAME: own.record()}
+        model.params.as_dict(),
+        {**model.scatter.sd, "samples": model.sample_count},
+        {
+            **inputs,
+            "log": str(result.log),
+            "namespace": result.namespace,
+            "out_namespace": result.out_namespace,
+        },
+        recorded.get("unit_id", ""),
+        recorded.get("hardware_id", ""),
+    )
+    return {
+        **({logmeta.RECORD_NAME: recorded} if recorded else {}),
+        logmeta.REPLAY_RECORD_NAME: own.record(),
+    }
 
 
-def attach(result: ReplayResult, paths: list[Path],
-           metadata: dict[str, dict[str, str]] | None = None) -> None:
+def attach(
+    result: ReplayResult, paths: list[Path], metadata: dict[str, dict[str, str]] | None = None
+) -> None:
     """Add the files `paths` (.json, .png) to the replay's annotated log as MCAP Attachments
     named as the files (log time: the log's last message), and the `metadata` records.
 
@@ -891,8 +1033,9 @@ def attach(result: ReplayResult, paths: list[Path],
     with open(result.annotated, "r+b") as fh:
         out = McapOut.reopen(fh)
         for path in paths:
-            out.add_attachment(path.name, MEDIA_TYPES[path.suffix], path.read_bytes(), end_ns,
-                               now_ns)
+            out.add_attachment(
+                path.name, MEDIA_TYPES[path.suffix], path.read_bytes(), end_ns, now_ns
+            )
         for name, record in (metadata or {}).items():
             out.add_metadata(name, record)
         out.finish()
@@ -902,30 +1045,46 @@ def _check_inputs(log: Path, timeline: Timeline, counts: dict[str, int]) -> None
     """A log without speed or load gives no prediction at all: say which topics it has, which
     of the input topics exist without messages, and how to choose others."""
     s = timeline.settings
-    missing = [(what, where, topics) for what, where, topics, value in (
-        ("speed", f"std_msgs/Float64 on {s.speed_topic} or a joint velocity on "
-                  f"{s.joint_states_topic}", (s.speed_topic, s.joint_states_topic),
-         timeline.speed),
-        ("axial load", f"std_msgs/Float64 on {s.load_topic}", (s.load_topic,), timeline.load))
-        if value is None]
+    missing = [
+        (what, where, topics)
+        for what, where, topics, value in (
+            (
+                "speed",
+                f"std_msgs/Float64 on {s.speed_topic} or a joint velocity on "
+                f"{s.joint_states_topic}",
+                (s.speed_topic, s.joint_states_topic),
+                timeline.speed,
+            ),
+            ("axial load", f"std_msgs/Float64 on {s.load_topic}", (s.load_topic,), timeline.load),
+        )
+        if value is None
+    ]
     if not missing:
         return
     parts = []
     for what, where, topics in missing:
         empty = [t for t in topics if t in counts and not counts[t]]
         if empty:
-            where += (f"; {' and '.join(empty)} exist{'s' if len(empty) == 1 else ''} in the "
-                      f"log but {'has' if len(empty) == 1 else 'have'} no messages")
+            where += (
+                f"; {' and '.join(empty)} exist{'s' if len(empty) == 1 else ''} in the "
+                f"log but {'has' if len(empty) == 1 else 'have'} no messages"
+            )
         parts.append(f"{what} ({where})")
     listed = ", ".join(f"{t}{'' if n else ' (empty)'}" for t, n in sorted(counts.items()))
-    hint = ("choose the topics with --speed-topic, --load-topic, --joint-states-topic, "
-            "--joint-name or --namespace")
+    hint = (
+        "choose the topics with --speed-topic, --load-topic, --joint-states-topic, "
+        "--joint-name or --namespace"
+    )
     if timeline.load is None and timeline.speed is not None:
         hint = f"for a log without load give a nominal load with --load N, or {hint}"
-    ignored = "".join(f"; {n} x {reason} ({timeline.ignored_example[reason]})"
-                      for reason, n in sorted(timeline.ignored.items()))
-    raise LogError(log, f"no {' and no '.join(parts)} in the log (its topics: "
-                        f"{listed or 'none'}){ignored}; {hint}")
+    ignored = "".join(
+        f"; {n} x {reason} ({timeline.ignored_example[reason]})"
+        for reason, n in sorted(timeline.ignored.items())
+    )
+    raise LogError(
+        log,
+        f"no {' and no '.join(parts)} in the log (its topics: {listed or 'none'}){ignored}; {hint}",
+    )
 
 
 def _write_json(path: Path, obj: Any) -> None:

@@ -36,8 +36,8 @@ from .replay import ReplayResult, attach
 TIMELINE_FILE = "timeline.png"
 MAP_FILE = "map_speed_load.png"
 FREQUENCY_FILE = "frequency_vs_speed.png"
-NUT_BAND_MIN_M = 0.01        # nut travel below this: one map at the median nut position
-NUT_BAND_M = 0.025           # band width aimed at, 2 to 4 bands
+NUT_BAND_MIN_M = 0.01  # nut travel below this: one map at the median nut position
+NUT_BAND_M = 0.025  # band width aimed at, 2 to 4 bands
 BAND_COLORS = ("tab:blue", "tab:green", "tab:purple", "tab:brown")
 
 
@@ -67,8 +67,9 @@ def nut_bands(nuts: np.ndarray) -> np.ndarray:
     return np.linspace(lo, hi, n + 1)
 
 
-def write_report(result: ReplayResult, model: SqueakModel, out: Path | str,
-                 grids: ReportGrids = FULL) -> list[Path]:
+def write_report(
+    result: ReplayResult, model: SqueakModel, out: Path | str, grids: ReportGrids = FULL
+) -> list[Path]:
     """Write the three PNGs (the module's) into `out` and attach them to the annotated log,
     if it is there (`replay.attach`).
 
@@ -104,12 +105,11 @@ def write_report(result: ReplayResult, model: SqueakModel, out: Path | str,
     edges = nut_bands(nuts)
     bands = len(edges) - 1
     band = np.clip(np.searchsorted(edges, nuts, side="right") - 1, 0, max(bands - 1, 0))
-    home = int(np.clip(np.searchsorted(edges, median_nut, side="right") - 1, 0,
-                       max(bands - 1, 0)))
+    home = int(np.clip(np.searchsorted(edges, median_nut, side="right") - 1, 0, max(bands - 1, 0)))
 
     def at_band(k: int) -> float:
         inside = nuts[band == k]
-        return float(np.median(inside)) if inside.size else float(edges[k:k + 2].mean())
+        return float(np.median(inside)) if inside.size else float(edges[k : k + 2].mean())
 
     map_nut = at_band(home) if bands > 1 else median_nut
 
@@ -124,43 +124,80 @@ def write_report(result: ReplayResult, model: SqueakModel, out: Path | str,
                 continue
             color = "0.15" if bands <= 1 else BAND_COLORS[k]
             label = "replayed operating points" if bands <= 1 else band_text(k)
-            handles += ax.plot(load[sel], speed[sel], ".", ms=2, color=color, alpha=0.6,
-                               label=label)
+            handles += ax.plot(
+                load[sel], speed[sel], ".", ms=2, color=color, alpha=0.6, label=label
+            )
             if bands > 1 and k != home:
-                other = stability_map(model.with_params(nut_position_m=at_band(k)), "load_n",
-                                      loads, "speed_rad_s", speeds)
+                other = stability_map(
+                    model.with_params(nut_position_m=at_band(k)),
+                    "load_n",
+                    loads,
+                    "speed_rad_s",
+                    speeds,
+                )
                 g = np.nan_to_num(other.field.max_growth_rate, nan=-1.0)
                 if g.min() < 0 < g.max():
                     ax.contour(loads, speeds, g, levels=[0.0], colors=[color], linewidths=1.4)
         if active.any():
-            handles += ax.plot(load[active], speed[active], "o", ms=3, mfc=SQUEAK_COLOR,
-                               mec="k", mew=0.3, ls="none", label="squeak predicted")
+            handles += ax.plot(
+                load[active],
+                speed[active],
+                "o",
+                ms=3,
+                mfc=SQUEAK_COLOR,
+                mec="k",
+                mew=0.3,
+                ls="none",
+                label="squeak predicted",
+            )
         return handles
 
-    result_map = stability_map(model.with_params(nut_position_m=map_nut), "load_n", loads,
-                               "speed_rad_s", speeds)
-    where = (f"nut at {map_nut * 1e3:.0f} mm (median of the run)" if bands <= 1 else
-             f"filled: {band_text(home)}; lines: squeak boundary of each other nut band")
-    plot_map(result_map, title=f"Replay on the speed-load stability map (Fig. 7 style)\n"
-             f"{where}; |speed|, |load|", formulation=p.formulation,
-             overlay=trajectory).savefig(paths[1], dpi=grids.dpi)
+    result_map = stability_map(
+        model.with_params(nut_position_m=map_nut), "load_n", loads, "speed_rad_s", speeds
+    )
+    where = (
+        f"nut at {map_nut * 1e3:.0f} mm (median of the run)"
+        if bands <= 1
+        else f"filled: {band_text(home)}; lines: squeak boundary of each other nut band"
+    )
+    plot_map(
+        result_map,
+        title=f"Replay on the speed-load stability map (Fig. 7 style)\n{where}; |speed|, |load|",
+        formulation=p.formulation,
+        overlay=trajectory,
+    ).savefig(paths[1], dpi=grids.dpi)
 
     squeak = result.plot_data.squeak.sample()
 
     def squeak_points(ax) -> list:
         if not squeak.size:
             return []
-        return ax.plot(np.abs(squeak[:, 0]), squeak[:, 3], "o", ms=3, mfc=SQUEAK_COLOR,
-                       mec="k", mew=0.3, ls="none", label="replayed squeak predictions")
+        return ax.plot(
+            np.abs(squeak[:, 0]),
+            squeak[:, 3],
+            "o",
+            ms=3,
+            mfc=SQUEAK_COLOR,
+            mec="k",
+            mew=0.3,
+            ls="none",
+            label="replayed squeak predictions",
+        )
 
     median_load = float(np.median(load)) if load.size else p.axial_load_n
-    speed_sweep = sweep(model.with_params(nut_position_m=median_nut), "speed_rad_s",
-                        np.geomspace(p.min_speed_rad_s, speed_hi, grids.sweep_speeds),
-                        load_n=median_load)
-    plot_frequencies(speed_sweep, title=f"Replayed squeak frequencies on the modes vs speed "
-                     f"(Fig. 11 style)\nload {median_load:.0f} N, nut {median_nut * 1e3:.0f} mm "
-                     f"(medians of the run; points at their own load and nut)",
-                     overlay=squeak_points).savefig(paths[2], dpi=grids.dpi)
-    if result.annotated.exists():        # unless the caller removed it (summaries only)
+    speed_sweep = sweep(
+        model.with_params(nut_position_m=median_nut),
+        "speed_rad_s",
+        np.geomspace(p.min_speed_rad_s, speed_hi, grids.sweep_speeds),
+        load_n=median_load,
+    )
+    plot_frequencies(
+        speed_sweep,
+        title=f"Replayed squeak frequencies on the modes vs speed "
+        f"(Fig. 11 style)\nload {median_load:.0f} N, nut {median_nut * 1e3:.0f} mm "
+        f"(medians of the run; points at their own load and nut)",
+        overlay=squeak_points,
+    ).savefig(paths[2], dpi=grids.dpi)
+    if result.annotated.exists():  # unless the caller removed it (summaries only)
         attach(result, paths)
     return paths

@@ -27,28 +27,38 @@ from __future__ import annotations
 
 import math
 from collections import Counter, OrderedDict
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from functools import lru_cache
-from typing import Callable, Iterable
 
 import numpy as np
 
 from ..bag.cdr import decode_float64, decode_joint_state
-from .decimation import Envelope
+from ..bag.logfile import LogMessage, Topic
 from ..live.rules import InputRules, Outcome
 from ..live.settings import JointSettings, LiveSettings
-from ..bag.logfile import LogMessage, Topic
-from ..model import (OperatingPointError, ParameterError, Prediction, ScrewParameters, SqueakModel,
-                     Validity)
+from ..model import (
+    OperatingPointError,
+    ParameterError,
+    Prediction,
+    ScrewParameters,
+    SqueakModel,
+    Validity,
+)
 from ..model.physics.display import exact
 from ..model.squeak_model import check_operating_point
 from ..model.uncertainty.scatter import Scatter
+from .decimation import Envelope
 
 FLOAT64, JOINT_STATE = "std_msgs/msg/Float64", "sensor_msgs/msg/JointState"
-_MODEL_CACHE = 1024                          # nut positions kept per process (~60 kB each)
+_MODEL_CACHE = 1024  # nut positions kept per process (~60 kB each)
 # The predictor's inputs (base name -> the type it subscribes with).
-INPUTS = {"motor_speed": FLOAT64, "axial_load": FLOAT64, "nut_position": FLOAT64,
-          "joint_states": JOINT_STATE}
+INPUTS = {
+    "motor_speed": FLOAT64,
+    "axial_load": FLOAT64,
+    "nut_position": FLOAT64,
+    "joint_states": JOINT_STATE,
+}
 # Namespaces of the node's and the replay's own outputs: never inputs.
 OWN_NAMESPACES = {"squeak", "replay"}
 TOPIC_FIELDS = ("speed_topic", "load_topic", "nut_topic", "joint_states_topic")
@@ -60,7 +70,7 @@ def matches(topic: Topic, relative: str, type_name: str) -> str | None:
     elsewhere only with the input's type, never under the outputs' namespaces."""
     if topic.name == "/" + relative:
         return "/"
-    namespace = topic.name[:-len(relative) - 1]
+    namespace = topic.name[: -len(relative) - 1]
     if not (topic.name.endswith("/" + relative) and namespace and topic.type_name == type_name):
         return None
     return None if OWN_NAMESPACES.intersection(namespace.split("/")) else namespace
@@ -73,10 +83,19 @@ def is_input(topic: Topic) -> bool:
 
 def input_namespaces(topics: Iterable[Topic], settings: InputSettings) -> list[str]:
     """The namespaces in which some relative input topic of `settings` exists, sorted."""
-    needs = [(getattr(settings, f), type_name) for f, type_name in zip(TOPIC_FIELDS, (
-        FLOAT64, FLOAT64, FLOAT64, JOINT_STATE), strict=True) if not getattr(settings, f).startswith("/")]
-    return sorted({ns for t in topics for rel, type_name in needs
-                   if (ns := matches(t, rel, type_name)) is not None})
+    needs = [
+        (getattr(settings, f), type_name)
+        for f, type_name in zip(TOPIC_FIELDS, (FLOAT64, FLOAT64, FLOAT64, JOINT_STATE), strict=True)
+        if not getattr(settings, f).startswith("/")
+    ]
+    return sorted(
+        {
+            ns
+            for t in topics
+            for rel, type_name in needs
+            if (ns := matches(t, rel, type_name)) is not None
+        }
+    )
 
 
 def resolve(name: str, namespace: str) -> str:
@@ -128,31 +147,34 @@ class InputSettings:
 
     def __post_init__(self) -> None:
         topics = self.topics
-        if not all(t.strip("/") and " " not in t for t in topics) \
-                or len(set(topics)) < len(topics):
+        if not all(t.strip("/") and " " not in t for t in topics) or len(set(topics)) < len(topics):
             raise ValueError(f"input topics must be distinct names, got {', '.join(topics)}")
         if self.nominal_load_n is not None:
             try:
                 check_operating_point(0.0, self.nominal_load_n)
             except OperatingPointError as exc:
                 raise ValueError(f"nominal {exc}") from None
-        _ = self.live, self.joints          # built to be checked: their ranges raise ValueError
+        _ = self.live, self.joints  # built to be checked: their ranges raise ValueError
 
     @property
     def live(self) -> LiveSettings:
         """The deadbands and the WARN / ERROR probabilities (the node's other settings at
         their defaults)."""
-        return LiveSettings(speed_deadband_rad_s=self.speed_deadband_rad_s,
-                            load_deadband_n=self.load_deadband_n,
-                            nut_deadband_m=self.nut_deadband_m,
-                            warn_probability=self.warn_probability,
-                            error_probability=self.error_probability)
+        return LiveSettings(
+            speed_deadband_rad_s=self.speed_deadband_rad_s,
+            load_deadband_n=self.load_deadband_n,
+            nut_deadband_m=self.nut_deadband_m,
+            warn_probability=self.warn_probability,
+            error_probability=self.error_probability,
+        )
 
     @property
     def joints(self) -> JointSettings:
         """The joint name and the nut position at angle 0 (checked by `JointSettings`)."""
-        return JointSettings(joint_name=self.joint_name,
-                             nut_position_at_zero_angle_m=self.nut_position_at_zero_angle_m)
+        return JointSettings(
+            joint_name=self.joint_name,
+            nut_position_at_zero_angle_m=self.nut_position_at_zero_angle_m,
+        )
 
     @property
     def topics(self) -> tuple[str, str, str, str]:
@@ -179,13 +201,13 @@ class InputSettings:
 class Job:
     """A recompute: the operating point and the nut position the contact is integrated at."""
 
-    index: int              # of the triggering message in its segment
-    log_time_ns: int        # of the triggering message
-    clock_ns: int           # latest log time so far (>= log_time_ns): episodes, plots
+    index: int  # of the triggering message in its segment
+    log_time_ns: int  # of the triggering message
+    clock_ns: int  # latest log time so far (>= log_time_ns): episodes, plots
     speed_rad_s: float
     load_n: float
-    nut_position_m: float   # true nut position
-    model_nut_m: float      # where the contact is integrated
+    nut_position_m: float  # true nut position
+    model_nut_m: float  # where the contact is integrated
 
 
 class Timeline:
@@ -200,31 +222,36 @@ class Timeline:
     its messages of the other type are counted in `rejected` (a reason naming both types); an
     input topic without its input type is an `InputError`."""
 
-    def __init__(self, params: ScrewParameters, settings: InputSettings = InputSettings(),
-                 types: dict[str, list[str]] | None = None):
+    def __init__(
+        self,
+        params: ScrewParameters,
+        settings: InputSettings = InputSettings(),
+        types: dict[str, list[str]] | None = None,
+    ):
         self.settings = settings = settings.resolved("/")
         self._types = types or {}
         self.rules = InputRules(params, settings.live, settings.joints)
         if settings.nominal_load_n is not None:
             self.rules.set_load(settings.nominal_load_n)
-        self.inputs: Counter[str] = Counter()              # accepted-or-not input messages
-        self.rejected: Counter[str] = Counter()            # values not taken, by reason
-        self.rejected_example: dict[str, str] = {}         # reason -> its first message
-        self.ignored: Counter[str] = Counter()             # messages ignored, by reason
-        self.ignored_example: dict[str, str] = {}          # reason -> the first one's joints
-        self.backwards: Counter[str] = Counter()           # stale inputs (not applied), by topic
-        self.backwards_max_s = 0.0                         # largest step back in log time
-        self.duplicates: Counter[str] = Counter()          # same log time as the previous
+        self.inputs: Counter[str] = Counter()  # accepted-or-not input messages
+        self.rejected: Counter[str] = Counter()  # values not taken, by reason
+        self.rejected_example: dict[str, str] = {}  # reason -> its first message
+        self.ignored: Counter[str] = Counter()  # messages ignored, by reason
+        self.ignored_example: dict[str, str] = {}  # reason -> the first one's joints
+        self.backwards: Counter[str] = Counter()  # stale inputs (not applied), by topic
+        self.backwards_max_s = 0.0  # largest step back in log time
+        self.duplicates: Counter[str] = Counter()  # same log time as the previous
         self.recomputes = 0
-        self.start_ns: int | None = None                   # first message: t = 0
-        self.now_ns = 0                                    # latest log time seen
+        self.start_ns: int | None = None  # first message: t = 0
+        self.now_ns = 0  # latest log time seen
         self.trace = Envelope(3)
-        self._last_ns: dict[str, int] = {}                 # per input topic
+        self._last_ns: dict[str, int] = {}  # per input topic
         self._routes: dict[str, tuple[str, Callable[[bytes], bool]]] = {
             settings.speed_topic: (FLOAT64, self._on_speed),
             settings.load_topic: (FLOAT64, self._on_load),
             settings.nut_topic: (FLOAT64, self._on_nut),
-            settings.joint_states_topic: (JOINT_STATE, self._on_joint_states)}
+            settings.joint_states_topic: (JOINT_STATE, self._on_joint_states),
+        }
         # (topic, type) -> its handler; None: not an input; a str: the reason it is rejected
         self._handlers: dict[tuple[str, str], Callable[[bytes], bool] | str | None] = {}
 
@@ -269,14 +296,14 @@ class Timeline:
             handler = self._handlers[key] = self._handler(*key)
         if handler is None:
             return None
-        if isinstance(handler, str):          # the other type of an input recorded with two
+        if isinstance(handler, str):  # the other type of an input recorded with two
             self.rejected[handler] += 1
             return None
         name = m.topic.name
         self.inputs[name] += 1
         last = self._last_ns.get(name)
         if last is not None and m.log_time_ns <= last:
-            if m.log_time_ns < last:          # stale: the newer value stays
+            if m.log_time_ns < last:  # stale: the newer value stays
                 self.backwards[name] += 1
                 self.backwards_max_s = max(self.backwards_max_s, (last - m.log_time_ns) / 1e9)
                 return None
@@ -288,9 +315,12 @@ class Timeline:
             self.rejected[f"{name}: undecodable payload"] += 1
             accepted = False
         i, nan = self.rules.inputs, math.nan
-        self.trace.add(self.seconds(self.now_ns), nan if i.speed_rad_s is None else i.speed_rad_s,
-                       nan if i.load_n is None else i.load_n,
-                       nan if i.nut_position_m is None else i.nut_position_m)
+        self.trace.add(
+            self.seconds(self.now_ns),
+            nan if i.speed_rad_s is None else i.speed_rad_s,
+            nan if i.load_n is None else i.load_n,
+            nan if i.nut_position_m is None else i.nut_position_m,
+        )
         return self._recompute(index, m.log_time_ns) if accepted else None
 
     def _handler(self, topic: str, type_name: str) -> Callable[[bytes], bool] | str | None:
@@ -298,8 +328,10 @@ class Timeline:
         if route is None:
             return None
         if type_name != route[0] and route[0] in self._types.get(topic, ()):
-            return (f"{topic}: {type_name} messages not taken (the topic is recorded with two "
-                    f"types; its {route[0]} messages are the input)")
+            return (
+                f"{topic}: {type_name} messages not taken (the topic is recorded with two "
+                f"types; its {route[0]} messages are the input)"
+            )
         if type_name != route[0]:
             raise InputError(f"topic {topic} is {type_name}, expected {route[0]}")
         return route[1]
@@ -376,7 +408,7 @@ def _spec_model(spec: ModelSpec) -> SqueakModel:
     """The model of a spec at its own nut position, whose samples the others share (kept
     here, not on the spec: the spec is pickled to the workers)."""
     model = SqueakModel(spec.params, Scatter(dict(spec.scatter)), spec.samples)
-    _ = model.samples                    # drawn once: with_params passes them on
+    _ = model.samples  # drawn once: with_params passes them on
     return model
 
 
@@ -399,8 +431,9 @@ def _model_at(spec: ModelSpec, nut: float) -> SqueakModel | None:
     return model
 
 
-def predict_jobs(spec: ModelSpec, speeds: np.ndarray, loads: np.ndarray,
-                 model_nuts: np.ndarray) -> list[Prediction]:
+def predict_jobs(
+    spec: ModelSpec, speeds: np.ndarray, loads: np.ndarray, model_nuts: np.ndarray
+) -> list[Prediction]:
     """Predictions at the jobs' operating points: one batched eigen-solve per nut position.
     Outside validity a prediction has `valid=False` and the reason."""
     out: list[Prediction | None] = [None] * len(speeds)
@@ -409,10 +442,16 @@ def predict_jobs(spec: ModelSpec, speeds: np.ndarray, loads: np.ndarray,
         idx = np.flatnonzero(inverse == k)
         model = _model_at(spec, nut)
         if model is None:
-            preds = [Prediction(float(speeds[i]), float(loads[i]), spec.params.formulation,
-                                Validity.PARAMETERS_REJECTED,
-                                f"nut position {exact(nut)} m is not allowed by the parameters")
-                     for i in idx]
+            preds = [
+                Prediction(
+                    float(speeds[i]),
+                    float(loads[i]),
+                    spec.params.formulation,
+                    Validity.PARAMETERS_REJECTED,
+                    f"nut position {exact(nut)} m is not allowed by the parameters",
+                )
+                for i in idx
+            ]
         else:
             preds = model.predict_many(speeds[idx], loads[idx])
         for i, p in zip(idx.tolist(), preds, strict=True):

@@ -6,11 +6,22 @@ helper."""
 from importlib import import_module
 from typing import Any
 
-_HOMES = {"ActuatorSimulator": "simulator", "NodeSettings": "parameters",
-          "SqueakPredictorNode": "node", "publish_log": "replay_live", "run_demo": "demo",
-          "run_simulator": "simulator"}
-__all__ = ["ActuatorSimulator", "NodeSettings", "SqueakPredictorNode", "publish_log", "run_demo",
-           "run_simulator"]
+_HOMES = {
+    "ActuatorSimulator": "simulator",
+    "NodeSettings": "parameters",
+    "SqueakPredictorNode": "node",
+    "publish_log": "replay_live",
+    "run_demo": "demo",
+    "run_simulator": "simulator",
+}
+__all__ = [
+    "ActuatorSimulator",
+    "NodeSettings",
+    "SqueakPredictorNode",
+    "publish_log",
+    "run_demo",
+    "run_simulator",
+]
 
 
 def __getattr__(name: str) -> Any:

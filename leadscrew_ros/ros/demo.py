@@ -26,46 +26,52 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 
-from ..live.status import (KEY_RECOMPUTES, KEY_SPEED, KEY_SQUEAK_FREQUENCIES, KEY_VALID,
-                           KEY_VALIDITY, Level)
 from ..bag import cdr, messages
 from ..bag.logfile import LogError, inspect, log_files
-from ..model import Validity
-from .node import LATCHED, OUTPUT_CLASSES, SqueakPredictorNode, make_executor
 from ..bag.recorder import Recorder
-from .env import StopSignals, close, confine_to_localhost, init_context
 from ..live.profile import ActuatorState, StrokeProfile, expected_squeak
+from ..live.status import (
+    KEY_RECOMPUTES,
+    KEY_SPEED,
+    KEY_SQUEAK_FREQUENCIES,
+    KEY_VALID,
+    KEY_VALIDITY,
+    Level,
+)
+from ..model import Validity
+from .env import StopSignals, close, confine_to_localhost, init_context
+from .node import LATCHED, OUTPUT_CLASSES, SqueakPredictorNode, make_executor
 from .simulator import ActuatorSimulator
 
-START_TIMEOUT_S = 10.0       # the simulator waits this long for the predictor's subscription
-TAIL_S = 0.3                 # keep spinning after the stroke so the last outputs arrive
-DRAIN_TIMEOUT_S = 10.0       # longest wait for the recording to hold every stroke sample
+START_TIMEOUT_S = 10.0  # the simulator waits this long for the predictor's subscription
+TAIL_S = 0.3  # keep spinning after the stroke so the last outputs arrive
+DRAIN_TIMEOUT_S = 10.0  # longest wait for the recording to hold every stroke sample
 SPIN_STEP_S = 0.01
-STATUS_MODES = 3             # squeak modes named in the status line
+STATUS_MODES = 3  # squeak modes named in the status line
 
 
 @dataclass
 class SqueakRecord:
     """What the monitor has seen on the predictor's outputs."""
 
-    predictions: int = 0                           # squeak/risk messages (one per prediction)
-    max_probability: float | None = None           # largest P(squeak) on squeak/risk
-    probability: float | None = None               # latest P(squeak) on squeak/risk
-    margin: float | None = None                    # latest squeak/margin (inf: no mode)
-    min_margin: float | None = None                # least squeak/margin seen
+    predictions: int = 0  # squeak/risk messages (one per prediction)
+    max_probability: float | None = None  # largest P(squeak) on squeak/risk
+    probability: float | None = None  # latest P(squeak) on squeak/risk
+    margin: float | None = None  # latest squeak/margin (inf: no mode)
+    min_margin: float | None = None  # least squeak/margin seen
     active: bool = False
     frequencies: list[float] = field(default_factory=list)
-    squeak_modes: list[tuple[str, float]] = field(default_factory=list)   # latest, (label, Hz)
+    squeak_modes: list[tuple[str, float]] = field(default_factory=list)  # latest, (label, Hz)
     safe_speed: float | None = None
-    valid: bool = False                            # latest diagnostics: a prediction holds
-    level: Level = Level.STALE                     # latest diagnostics: the verdict
-    validity: Validity | None = None               # latest diagnostics: at the latest point
+    valid: bool = False  # latest diagnostics: a prediction holds
+    level: Level = Level.STALE  # latest diagnostics: the verdict
+    validity: Validity | None = None  # latest diagnostics: at the latest point
     recomputes: str = ""
     squeak_time_s: float = 0.0
-    squeak_since: float | None = None              # monotonic time squeak started
-    speed_range: list[float] = field(default_factory=list)               # [min, max] |rad/s|
+    squeak_since: float | None = None  # monotonic time squeak started
+    speed_range: list[float] = field(default_factory=list)  # [min, max] |rad/s|
     frequency_range: dict[str, list[float]] = field(default_factory=dict)  # label -> [lo, hi]
-    malformed: int = 0                             # output messages that did not decode
+    malformed: int = 0  # output messages that did not decode
 
 
 class SqueakMonitor(Node):
@@ -82,34 +88,44 @@ class SqueakMonitor(Node):
     def __init__(self, **kwargs):
         super().__init__("squeak_monitor", **kwargs)
         # The predictor's latched QoS (reliable, transient local), with room for bursts.
-        qos = QoSProfile(depth=100, reliability=LATCHED.reliability,
-                         durability=LATCHED.durability, history=LATCHED.history)
+        qos = QoSProfile(
+            depth=100,
+            reliability=LATCHED.reliability,
+            durability=LATCHED.durability,
+            history=LATCHED.history,
+        )
         self.record = SqueakRecord()
-        for topic, callback in ((messages.RISK, self._on_risk),
-                                (messages.MARGIN, self._on_margin),
-                                (messages.FREQUENCIES, self._on_frequencies),
-                                (messages.ACTIVE, self._on_active),
-                                (messages.MODES, self._on_modes),
-                                (messages.SAFE_SPEED, self._on_safe_speed)):
-            self.create_subscription(OUTPUT_CLASSES[topic], topic, self._decoding(callback),
-                                     qos, raw=True)
+        for topic, callback in (
+            (messages.RISK, self._on_risk),
+            (messages.MARGIN, self._on_margin),
+            (messages.FREQUENCIES, self._on_frequencies),
+            (messages.ACTIVE, self._on_active),
+            (messages.MODES, self._on_modes),
+            (messages.SAFE_SPEED, self._on_safe_speed),
+        ):
+            self.create_subscription(
+                OUTPUT_CLASSES[topic], topic, self._decoding(callback), qos, raw=True
+            )
         self.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, qos)
 
     def _decoding(self, callback):
         """`callback(data)`, with a payload it cannot decode counted and dropped."""
+
         def run(data: bytes) -> None:
             try:
                 callback(data)
             except ValueError:
                 self.record.malformed += 1
+
         return run
 
     def _on_risk(self, data: bytes) -> None:
         r, probability = self.record, cdr.decode_float64(data)
         r.predictions += 1
         r.probability = probability
-        r.max_probability = probability if r.max_probability is None else max(
-            r.max_probability, probability)
+        r.max_probability = (
+            probability if r.max_probability is None else max(r.max_probability, probability)
+        )
 
     def _on_margin(self, data: bytes) -> None:
         r, margin = self.record, cdr.decode_float64(data)
@@ -127,8 +143,9 @@ class SqueakMonitor(Node):
 
     def _on_modes(self, data: bytes) -> None:
         """The squeaking modes (growth rate > 0): labels and frequencies."""
-        squeak = [(m.label, m.frequency_hz) for m in messages.decode_modes(data)
-                  if m.growth_rate > 0]
+        squeak = [
+            (m.label, m.frequency_hz) for m in messages.decode_modes(data) if m.growth_rate > 0
+        ]
         self.record.squeak_modes = squeak
         for label, f in squeak:
             lo_hi = self.record.frequency_range.setdefault(label, [f, f])
@@ -149,8 +166,9 @@ class SqueakMonitor(Node):
                 w = abs(float(values[KEY_SPEED]))
             except (KeyError, ValueError):
                 return
-            r.speed_range = [min(r.speed_range[0], w), max(r.speed_range[1], w)] \
-                if r.speed_range else [w, w]
+            r.speed_range = (
+                [min(r.speed_range[0], w), max(r.speed_range[1], w)] if r.speed_range else [w, w]
+            )
 
     def set_squeak(self, squeak: bool, now: float) -> None:
         """Squeak on/off at `now`; accumulates the time in squeak."""
@@ -167,18 +185,23 @@ def status_line(t: float, s: ActuatorState | None, r: SqueakRecord) -> str:
     """One line: time, inputs | verdict, P(squeak), margin, safe speed | squeak modes (most
     unstable first). The least important part comes last, where a narrow terminal cuts it
     off."""
-    head = (f"t {t:5.1f} s {s.speed_rad_s:6.1f} rad/s {s.load_n:4.0f} N nut "
-            f"{s.nut_position_m:.3f} m" if s else f"t {t:5.1f} s  waiting for the predictor")
+    head = (
+        f"t {t:5.1f} s {s.speed_rad_s:6.1f} rad/s {s.load_n:4.0f} N nut {s.nut_position_m:.3f} m"
+        if s
+        else f"t {t:5.1f} s  waiting for the predictor"
+    )
     if not r.valid or r.probability is None:
         why = _why_not(r) if not r.valid else ""
         return f"{head} | no prediction" + (f" ({why})" if why else " yet")
     safe = "" if r.safe_speed is None else f" safe {r.safe_speed:5.1f} rad/s"
     margin = "" if r.margin is None else f" margin {_margin_text(r.margin)}"
-    line = (f"{head} | {'SQUEAK' if r.active else 'ok':<6} P(squeak) {r.probability:.2f}"
-            f"{margin}{safe}")
+    line = (
+        f"{head} | {'SQUEAK' if r.active else 'ok':<6} P(squeak) {r.probability:.2f}{margin}{safe}"
+    )
     if r.active:
-        modes = [f"{label} {f:.0f} Hz" for label, f in r.squeak_modes] or \
-            [f"{f:.0f} Hz" for f in r.frequencies]
+        modes = [f"{label} {f:.0f} Hz" for label, f in r.squeak_modes] or [
+            f"{f:.0f} Hz" for f in r.frequencies
+        ]
         more = f" +{len(modes) - STATUS_MODES}" if len(modes) > STATUS_MODES else ""
         line += f" | {', '.join(modes[:STATUS_MODES])}{more}"
     return line
@@ -213,36 +236,55 @@ def _recorded(recorder: Recorder, sim: ActuatorSimulator) -> bool:
     return True
 
 
-def summary(profile: StrokeProfile, r: SqueakRecord, elapsed_s: float, finished: bool,
-            expected_s: float | None, published: int = 0) -> str:
+def summary(
+    profile: StrokeProfile,
+    r: SqueakRecord,
+    elapsed_s: float,
+    finished: bool,
+    expected_s: float | None,
+    published: int = 0,
+) -> str:
     """The demo's closing summary: the stroke, what was predicted and published."""
     d = profile.duration_s
     loads = [profile.state(t).load_n for t in [d * i / 200 for i in range(201)]]
-    lines = [f"summary of the {d:g} s stroke (0 -> {profile.peak_speed_rad_s:g} rad/s -> 0, "
-             f"load {min(loads):.0f}-{max(loads):.0f} N, nut {profile.start_nut_position_m:.3f}"
-             f" -> {profile.end_nut_position_m:.3f} m):"]
+    lines = [
+        f"summary of the {d:g} s stroke (0 -> {profile.peak_speed_rad_s:g} rad/s -> 0, "
+        f"load {min(loads):.0f}-{max(loads):.0f} N, nut {profile.start_nut_position_m:.3f}"
+        f" -> {profile.end_nut_position_m:.3f} m):"
+    ]
     if not finished:
         lines.append(f"  interrupted after {elapsed_s:.1f} s")
     share = 100 * r.squeak_time_s / d
     model = "" if expected_s is None else f"; the model along the profile: {expected_s:.2f} s"
-    lines.append(f"  time in squeak:     {r.squeak_time_s:.2f} s ({share:.1f} % of the stroke)"
-                 f"{model}")
-    freqs = ", ".join(f"{label} {lo:.1f} Hz" if round(lo, 1) == round(hi, 1) else
-                      f"{label} {lo:.1f}-{hi:.1f} Hz"
-                      for label, (lo, hi) in sorted(r.frequency_range.items(),
-                                                    key=lambda kv: kv[1][0]))
+    lines.append(
+        f"  time in squeak:     {r.squeak_time_s:.2f} s ({share:.1f} % of the stroke){model}"
+    )
+    freqs = ", ".join(
+        f"{label} {lo:.1f} Hz" if round(lo, 1) == round(hi, 1) else f"{label} {lo:.1f}-{hi:.1f} Hz"
+        for label, (lo, hi) in sorted(r.frequency_range.items(), key=lambda kv: kv[1][0])
+    )
     lines.append(f"  squeak frequencies: {freqs or 'none'}")
-    lines.append("  squeak speeds:      " + (f"{r.speed_range[0]:.2f} - {r.speed_range[1]:.1f} "
-                                             f"rad/s" if r.speed_range else "none"))
-    lines.append("  max P(squeak):      " + ("none" if r.max_probability is None else
-                                             f"{r.max_probability:.3f}"))
-    lines.append("  min margin:         " + ("none" if r.min_margin is None else
-                                             _margin_text(r.min_margin))
-                 + " (least damping ratio at the nominal parameters; < 0: a mode squeaks)")
-    lines.append(f"  predictions:        {r.predictions}"
-                 + (f" (node recomputes: {r.recomputes})" if r.recomputes else ""))
-    lines.append(f"  simulator:          {published} samples published (motor_speed, "
-                 f"axial_load, nut_position each)")
+    lines.append(
+        "  squeak speeds:      "
+        + (f"{r.speed_range[0]:.2f} - {r.speed_range[1]:.1f} rad/s" if r.speed_range else "none")
+    )
+    lines.append(
+        "  max P(squeak):      "
+        + ("none" if r.max_probability is None else f"{r.max_probability:.3f}")
+    )
+    lines.append(
+        "  min margin:         "
+        + ("none" if r.min_margin is None else _margin_text(r.min_margin))
+        + " (least damping ratio at the nominal parameters; < 0: a mode squeaks)"
+    )
+    lines.append(
+        f"  predictions:        {r.predictions}"
+        + (f" (node recomputes: {r.recomputes})" if r.recomputes else "")
+    )
+    lines.append(
+        f"  simulator:          {published} samples published (motor_speed, "
+        f"axial_load, nut_position each)"
+    )
     return "\n".join(lines)
 
 
@@ -260,17 +302,26 @@ def recording_summary(recorder: Recorder) -> str:
     ends = [i.end_ns for i in infos if i.end_ns is not None]
     span = (max(ends) - min(starts)) / 1e9 if starts else 0.0
     state = "complete" if all(i.complete for i in infos) else "NOT complete"
-    line = (f"  recording:          {recorder.bag} ({len(files)} file"
-            f"{'s' * (len(files) != 1)}, {size / 1e3:.0f} kB, {sum(i.messages for i in infos)} "
-            f"messages over {span:.1f} s, {len(infos[0].topics) if infos else 0} topics, {state})")
+    line = (
+        f"  recording:          {recorder.bag} ({len(files)} file"
+        f"{'s' * (len(files) != 1)}, {size / 1e3:.0f} kB, {sum(i.messages for i in infos)} "
+        f"messages over {span:.1f} s, {len(infos[0].topics) if infos else 0} topics, {state})"
+    )
     line += f"; error: {recorder.error}" if recorder.error else ""
-    return (f"{line}\n  review it offline:  leadscrew-squeak replay {recorder.bag} --out "
-            f"{recorder.bag}_review")
+    return (
+        f"{line}\n  review it offline:  leadscrew-squeak replay {recorder.bag} --out "
+        f"{recorder.bag}_review"
+    )
 
 
 # ----------------------------------------------------------------------------- run
-def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float = 4.0,
-             out: TextIO | None = None, record_dir: Path | None = None) -> int:
+def run_demo(
+    duration_s: float = 12.0,
+    rate_hz: float = 100.0,
+    status_hz: float = 4.0,
+    out: TextIO | None = None,
+    record_dir: Path | None = None,
+) -> int:
     """Run predictor + simulator + monitor for one stroke.
 
     Parameters
@@ -304,12 +355,14 @@ def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float 
     recording = []
     if record_dir is not None:
         Path(record_dir).mkdir(parents=True, exist_ok=True)
-        recording = [Parameter("record.enabled", value=True),
-                     Parameter("record.directory", value=str(record_dir))]
+        recording = [
+            Parameter("record.enabled", value=True),
+            Parameter("record.directory", value=str(record_dir)),
+        ]
     confine_to_localhost(private_domain=True)
     tty = out.isatty()
     with StopSignals() as stop:
-        ctx = init_context()                  # not sys.argv: the CLI's options are not rcl's
+        ctx = init_context()  # not sys.argv: the CLI's options are not rcl's
         nodes: list[Node] = []
         executor = monitor = sim = predictor = None
         width, stopped = 0, time.monotonic()
@@ -323,28 +376,33 @@ def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float 
             nodes.append(predictor)
             monitor = SqueakMonitor(context=ctx)
             nodes.append(monitor)
-            sim = ActuatorSimulator(profile, rate_hz=rate_hz, wait_for_subscriber=True,
-                                    context=ctx)
+            sim = ActuatorSimulator(profile, rate_hz=rate_hz, wait_for_subscriber=True, context=ctx)
             nodes.append(sim)
             executor = make_executor(ctx)
             for node in nodes:
                 executor.add_node(node)
-            print(f"leadscrew_ros demo: squeak predictor + simulated power-seat stroke "
-                  f"({duration_s:g} s, 0 -> {profile.peak_speed_rad_s:g} rad/s -> 0), "
-                  f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}, discovery "
-                  f"{os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE')}", file=out, flush=True)
+            print(
+                f"leadscrew_ros demo: squeak predictor + simulated power-seat stroke "
+                f"({duration_s:g} s, 0 -> {profile.peak_speed_rad_s:g} rad/s -> 0), "
+                f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}, discovery "
+                f"{os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE')}",
+                file=out,
+                flush=True,
+            )
             begin = time.monotonic()
             next_status, done_at = begin, None
             while not stop.signum:
                 executor.spin_once(timeout_sec=SPIN_STEP_S)
                 now = time.monotonic()
                 if sim.started_at is None and now - begin > START_TIMEOUT_S:
-                    raise RuntimeError("the predictor node did not subscribe to motor_speed "
-                                       f"within {START_TIMEOUT_S:g} s")
+                    raise RuntimeError(
+                        "the predictor node did not subscribe to motor_speed "
+                        f"within {START_TIMEOUT_S:g} s"
+                    )
                 if now >= next_status:
                     line = status_line(sim.elapsed_s, sim.last_state, monitor.record)
-                    if tty:                          # overwrite, within the terminal
-                        line = line[:shutil.get_terminal_size().columns - 1]
+                    if tty:  # overwrite, within the terminal
+                        line = line[: shutil.get_terminal_size().columns - 1]
                         print("\r" + line.ljust(width), end="", file=out, flush=True)
                         width = len(line)
                     else:
@@ -352,9 +410,11 @@ def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float 
                     next_status += 1.0 / status_hz
                 if sim.done and done_at is None:
                     done_at = now
-                if done_at is not None and now - done_at >= TAIL_S and (
-                        _recorded(predictor.recorder, sim)
-                        or now - done_at >= DRAIN_TIMEOUT_S):
+                if (
+                    done_at is not None
+                    and now - done_at >= TAIL_S
+                    and (_recorded(predictor.recorder, sim) or now - done_at >= DRAIN_TIMEOUT_S)
+                ):
                     break
         finally:
             stopped = time.monotonic()
@@ -363,13 +423,23 @@ def run_demo(duration_s: float = 12.0, rate_hz: float = 100.0, status_hz: float 
             close(ctx, executor, list(reversed(nodes)))
     finished = sim is not None and sim.done
     if monitor is not None:
-        monitor.set_squeak(False, stopped)                # close an open squeak interval
+        monitor.set_squeak(False, stopped)  # close an open squeak interval
         expected = None
         if finished:
             times, flags = expected_squeak(profile)
             expected = float(flags.mean() * profile.duration_s)
-        print(summary(profile, monitor.record, sim.elapsed_s if sim else 0.0, finished,
-                      expected, sim.published if sim else 0), file=out, flush=True)
+        print(
+            summary(
+                profile,
+                monitor.record,
+                sim.elapsed_s if sim else 0.0,
+                finished,
+                expected,
+                sim.published if sim else 0,
+            ),
+            file=out,
+            flush=True,
+        )
     if predictor is not None and record_dir is not None:
         print(recording_summary(predictor.recorder), file=out, flush=True)
     return 0 if finished else stop.exit_status()

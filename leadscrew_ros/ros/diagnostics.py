@@ -13,8 +13,9 @@ status by `recording_status` below, from the recorder and the crash recovery.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
@@ -39,8 +40,10 @@ KEY_MESSAGES = "messages"
 KEY_LOST = "lost"
 KEY_CUT_OFF_BAGS = "cut_off_bags"
 # What the log line and the status say when a recording stopped on its own
-RESUME_HINT = ("record.enabled set to false; resume with `~/record true` (std_srvs/SetBool "
-               "data: true) or by setting record.enabled to true")
+RESUME_HINT = (
+    "record.enabled set to false; resume with `~/record true` (std_srvs/SetBool "
+    "data: true) or by setting record.enabled to true"
+)
 
 
 def key_lost_on(topic: str) -> str:
@@ -73,8 +76,9 @@ class DiagnosticStatusWrapper:
 
     def to_data(self) -> DiagnosticStatusData:
         """The status as `bag.cdr` encodes it."""
-        return DiagnosticStatusData(int(self.level), self.name, self.message, self.hardware_id,
-                                    tuple(self.values.items()))
+        return DiagnosticStatusData(
+            int(self.level), self.name, self.message, self.hardware_id, tuple(self.values.items())
+        )
 
 
 Task = Callable[[DiagnosticStatusWrapper], DiagnosticStatusWrapper]
@@ -86,16 +90,22 @@ class Updater:
     stamped `stamp_ns` [ns] instead of `publisher.publish(data)` (the node also latches and
     records its outputs)."""
 
-    def __init__(self, node: Node, qos: QoSProfile, period_s: float = 1.0,
-                 hardware_id: str = "", clock: Callable[[], float] = time.monotonic,
-                 publish: Callable[[Publisher, bytes, int], None] | None = None,
-                 **publisher_kwargs):
+    def __init__(
+        self,
+        node: Node,
+        qos: QoSProfile,
+        period_s: float = 1.0,
+        hardware_id: str = "",
+        clock: Callable[[], float] = time.monotonic,
+        publish: Callable[[Publisher, bytes, int], None] | None = None,
+        **publisher_kwargs,
+    ):
         self.node, self.period_s, self.hardware_id = node, period_s, hardware_id
         self.publisher = node.create_publisher(DiagnosticArray, TOPIC, qos, **publisher_kwargs)
         self._clock = clock
         self._publish = publish or (lambda publisher, data, stamp_ns: publisher.publish(data))
         self._tasks: list[tuple[str, Task]] = []
-        self._last = -float("inf")                  # clock time of the last publication
+        self._last = -float("inf")  # clock time of the last publication
         self.published = 0
 
     def add(self, name: str, task: Task) -> None:
@@ -113,8 +123,10 @@ class Updater:
         """Run every task and publish now."""
         prefix = self.node.get_fully_qualified_name()
         stamp_ns = self.node.get_clock().now().nanoseconds
-        status = tuple(task(DiagnosticStatusWrapper(f"{prefix}: {name}", self.hardware_id)
-                            ).to_data() for name, task in self._tasks)
+        status = tuple(
+            task(DiagnosticStatusWrapper(f"{prefix}: {name}", self.hardware_id)).to_data()
+            for name, task in self._tasks
+        )
         self._publish(self.publisher, encode_diagnostic_array(stamp_ns, status), stamp_ns)
         self._last = self._clock()
         self.published += 1
@@ -122,17 +134,20 @@ class Updater:
 
 def status_task(status: Callable[[], Status]) -> Task:
     """A task that reports a `Status` (e.g. `LivePredictor.status`'s verdict)."""
+
     def run(stat: DiagnosticStatusWrapper) -> DiagnosticStatusWrapper:
         s = status()
         stat.summary(s.level, s.message)
         for key, value in s.values.items():
             stat.add(key, value)
         return stat
+
     return run
 
 
-def recording_status(stat: DiagnosticStatusWrapper, recorder: Recorder,
-                     crash: CrashRecovery) -> DiagnosticStatusWrapper:
+def recording_status(
+    stat: DiagnosticStatusWrapper, recorder: Recorder, crash: CrashRecovery
+) -> DiagnosticStatusWrapper:
     """ERROR when recording failed or a file was lost under the recorder (never OK while
     data went nowhere), WARN when input messages were lost or bags of an earlier run are cut
     off, else OK; the counts as key-values."""
@@ -151,8 +166,12 @@ def recording_status(stat: DiagnosticStatusWrapper, recorder: Recorder,
     for topic, loss in r.losses.items():
         stat.add(key_lost_on(topic), loss.lost)
     if losses:
-        stat.merge_summary(Level.WARN, f"{r.lost} input message(s) lost before recording ("
-                           + ", ".join(f"{t} {loss.lost}" for t, loss in losses.items()) + ")")
+        stat.merge_summary(
+            Level.WARN,
+            f"{r.lost} input message(s) lost before recording ("
+            + ", ".join(f"{t} {loss.lost}" for t, loss in losses.items())
+            + ")",
+        )
     if crash.message:
         stat.merge_summary(crash.level, crash.message)
         stat.add(KEY_CUT_OFF_BAGS, " ".join(str(b) for b in crash.pending))

@@ -14,8 +14,9 @@ import signal
 import sys
 import tempfile
 import threading
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import Callable, Iterator, Sequence, TypeVar
+from typing import TypeVar
 
 import rclpy
 from rclpy.context import Context
@@ -59,23 +60,28 @@ def checked_ros_args(parse: Callable[[], T]) -> T:
         try:
             result, problem = parse(), ""
         except _rclpy.UnknownROSArgsError as exc:
-            problem = f"unknown ROS arguments {exc}"        # "['--bogus', '-x']"
-        except _rclpy.RCLError as exc:       # RCLInvalidROSArgsError (bad file, rule) too
-            problem = (str(exc).removeprefix("failed to initialize rcl: ")
-                       .removeprefix("Failed to parse ROS arguments: "))
+            problem = f"unknown ROS arguments {exc}"  # "['--bogus', '-x']"
+        except _rclpy.RCLError as exc:  # RCLInvalidROSArgsError (bad file, rule) too
+            problem = (
+                str(exc)
+                .removeprefix("failed to initialize rcl: ")
+                .removeprefix("Failed to parse ROS arguments: ")
+            )
     if not problem:
-        sys.stderr.write(captured[0])                # warnings of a successful parse stay
+        sys.stderr.write(captured[0])  # warnings of a successful parse stay
         return result
-    warnings = [line.split("]: ", 1)[-1] for line in captured[0].splitlines()
-                if line.startswith("[WARN]")]
+    warnings = [
+        line.split("]: ", 1)[-1] for line in captured[0].splitlines() if line.startswith("[WARN]")
+    ]
     # "<problem>. Error: <detail>, at <source file>...": the detail only when rcl gave no
     # warning, which says it better ("Error opening YAML file" vs "lexeme type 19")
     problem, _, detail = problem.partition(". Error: ")
     detail = detail.split(", at ")[0].strip()
     if detail and not warnings:
         warnings = [detail]
-    raise ValueError(f"--ros-args: {' '.join(problem.split())}"
-                     + "".join(f" ({w.strip()})" for w in warnings))
+    raise ValueError(
+        f"--ros-args: {' '.join(problem.split())}" + "".join(f" ({w.strip()})" for w in warnings)
+    )
 
 
 @contextmanager
@@ -119,7 +125,7 @@ class StopSignals:
     `<program>: stopped by SIGINT` / `<program>: stopped by SIGTERM`; stdout keeps the
     command's own output (its summary so far)."""
 
-    def __enter__(self) -> "StopSignals":
+    def __enter__(self) -> StopSignals:
         self.signum = 0
         self._old: dict[int, object] = {}
         if threading.current_thread() is threading.main_thread():
@@ -128,7 +134,7 @@ class StopSignals:
         return self
 
     def _handle(self, signum: int, frame) -> None:
-        if self.signum == signum:                                  # asked twice: give in
+        if self.signum == signum:  # asked twice: give in
             signal.signal(signum, self._old.pop(signum))
             if signum == signal.SIGINT:
                 raise KeyboardInterrupt
@@ -143,6 +149,9 @@ class StopSignals:
         """The exit status of a command that ran until now: 0. After a stop signal, first
         write `<program>: stopped by SIGTERM` (or SIGINT) on stderr."""
         if self.signum:
-            print(f"{program}: stopped by {signal.Signals(self.signum).name}", file=sys.stderr,
-                  flush=True)
+            print(
+                f"{program}: stopped by {signal.Signals(self.signum).name}",
+                file=sys.stderr,
+                flush=True,
+            )
         return 0

@@ -28,12 +28,12 @@ from ..bag import msgdefs
 from ..bag.recorder import Recorder, TopicLoss
 
 _SPIN_TIMEOUT_S = 0.1
-_MATCH_TIMEOUT_S = 2.0         # longest wait for the new subscriptions to match the publishers
+_MATCH_TIMEOUT_S = 2.0  # longest wait for the new subscriptions to match the publishers
 
 
 @dataclass
 class _Input:
-    topic: str                   # fully qualified
+    topic: str  # fully qualified
     msg_type: type
     type_name: str
     loss: TopicLoss
@@ -48,28 +48,42 @@ class InputRecording:
         self._recorder = recorder
         # Hidden helper node: no global arguments (a `__node:=` remap or a params file is the
         # main node's), no rosout, no parameter services. Topics are absolute already.
-        self._node = Node(f"_{node.get_name()}_recorder", namespace=node.get_namespace(),
-                          context=node.context, use_global_arguments=False,
-                          enable_rosout=False, start_parameter_services=False)
-        qos = QoSProfile(depth=recorder.settings.queue_depth,
-                         history=HistoryPolicy.KEEP_LAST,
-                         reliability=ReliabilityPolicy.BEST_EFFORT,
-                         durability=DurabilityPolicy.VOLATILE)
+        self._node = Node(
+            f"_{node.get_name()}_recorder",
+            namespace=node.get_namespace(),
+            context=node.context,
+            use_global_arguments=False,
+            enable_rosout=False,
+            start_parameter_services=False,
+        )
+        qos = QoSProfile(
+            depth=recorder.settings.queue_depth,
+            history=HistoryPolicy.KEEP_LAST,
+            reliability=ReliabilityPolicy.BEST_EFFORT,
+            durability=DurabilityPolicy.VOLATILE,
+        )
         self._inputs = []
         for topic, msg_type in inputs.items():
             entry = _Input(topic, msg_type, msgdefs.type_name(msg_type), recorder.losses[topic])
             events = SubscriptionEventCallbacks(
                 message_lost=lambda info, e=entry: self._dds_lost(e, info),
-                use_default_callbacks=False)
+                use_default_callbacks=False,
+            )
             entry.subscription = self._node.create_subscription(
-                msg_type, topic, lambda data, info, e=entry: self._received(e, data, info),
-                qos, raw=True, event_callbacks=events)
+                msg_type,
+                topic,
+                lambda data, info, e=entry: self._received(e, data, info),
+                qos,
+                raw=True,
+                event_callbacks=events,
+            )
             self._inputs.append(entry)
         self._executor = SingleThreadedExecutor(context=node.context)
         self._executor.add_node(self._node)
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._spin, daemon=True,
-                                        name=f"{node.get_name()} input recording")
+        self._thread = threading.Thread(
+            target=self._spin, daemon=True, name=f"{node.get_name()} input recording"
+        )
         self._thread.start()
         self._wait_for_publishers(node)
 
@@ -79,8 +93,10 @@ class InputRecording:
         a new DDS reader matches asynchronously (the node's own subscriptions long have)."""
         deadline = time.monotonic() + _MATCH_TIMEOUT_S
         for e in self._inputs:
-            while (e.subscription.get_publisher_count() < node.count_publishers(e.topic)
-                   and time.monotonic() < deadline):
+            while (
+                e.subscription.get_publisher_count() < node.count_publishers(e.topic)
+                and time.monotonic() < deadline
+            ):
                 time.sleep(0.002)
 
     def stop(self) -> None:
@@ -100,7 +116,7 @@ class InputRecording:
         try:
             while not self._stop.is_set():
                 self._executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
-        except Exception:           # context shut down under us (process exit): nothing to do
+        except Exception:  # context shut down under us (process exit): nothing to do
             if not self._stop.is_set() and self._node.context.ok():
                 raise
 
@@ -123,8 +139,9 @@ class InputRecording:
     def _write(self, e: _Input, data: bytes, info: dict) -> None:
         sub = e.subscription
         e.loss.received(info.get("publication_sequence_number"), sub.get_publisher_count)
-        self._recorder.write_serialized(e.topic, e.type_name, data,
-                                        publish_time_ns=info.get("source_timestamp") or None)
+        self._recorder.write_serialized(
+            e.topic, e.type_name, data, publish_time_ns=info.get("source_timestamp") or None
+        )
 
     @staticmethod
     def _dds_lost(e: _Input, info) -> None:

@@ -29,15 +29,20 @@ from typing import NamedTuple
 
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.exceptions import ParameterException
+from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.exceptions import ParameterException
 from rclpy.executors import Executor
 from rclpy.experimental import EventsExecutor
-from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
-                       qos_profile_sensor_data)
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
 from rclpy.serialization import serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
@@ -45,31 +50,56 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray
 from std_srvs.srv import SetBool
 
-from .diagnostics import (PREDICTION_TASK, RECORDING_TASK, RESUME_HINT, Updater,
-                          recording_status, status_task)
-from .input_recording import InputRecording
-from .parameters import (GROUPS, PARAMETER_NAMES, PARAMETERS, NodeSettings, RecordingControl, build,
-                         descriptor, help_lines, log_metadata, names_of)
-from ..live.recompute import LivePredictor
-from ..live.settings import JointSettings, LiveSettings
 from ..bag import logmeta, messages, msgdefs
 from ..bag.crash_recovery import CrashRecovery
+from ..bag.recorder import Recorder, RecordSettings, ensure_directory
+from ..live.recompute import LivePredictor
+from ..live.settings import JointSettings, LiveSettings
 from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel
 from ..model.uncertainty.scatter import ScatterSettings
-from ..bag.recorder import Recorder, RecordSettings, ensure_directory
+from .diagnostics import (
+    PREDICTION_TASK,
+    RECORDING_TASK,
+    RESUME_HINT,
+    Updater,
+    recording_status,
+    status_task,
+)
 from .env import StopSignals, checked_ros_args, confine_to_localhost
+from .input_recording import InputRecording
+from .parameters import (
+    GROUPS,
+    PARAMETER_NAMES,
+    PARAMETERS,
+    NodeSettings,
+    RecordingControl,
+    build,
+    descriptor,
+    help_lines,
+    log_metadata,
+    names_of,
+)
 
 NODE_NAME = "squeak_predictor"
 HOUSEKEEPING_PERIOD_S = 0.05
 # Output topic (`bag.messages`) -> rclpy class of its type (the payloads are CDR bytes).
-OUTPUT_CLASSES = {topic: {msgdefs.type_name(c): c for c in (Float64, Float64MultiArray, Bool)
-                          }[type_name] for topic, type_name in messages.OUTPUT_TYPES.items()}
-LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                     history=HistoryPolicy.KEEP_LAST)
+OUTPUT_CLASSES = {
+    topic: {msgdefs.type_name(c): c for c in (Float64, Float64MultiArray, Bool)}[type_name]
+    for topic, type_name in messages.OUTPUT_TYPES.items()
+}
+LATCHED = QoSProfile(
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    history=HistoryPolicy.KEEP_LAST,
+)
 
-INPUTS = {"motor_speed": Float64, "axial_load": Float64, "nut_position": Float64,
-          "joint_states": JointState}
+INPUTS = {
+    "motor_speed": Float64,
+    "axial_load": Float64,
+    "nut_position": Float64,
+    "joint_states": JointState,
+}
 
 
 def make_executor(context=None) -> Executor:
@@ -123,15 +153,17 @@ class SqueakPredictorNode(Node):
         self.recorder = self._new_recorder(bag_prefix(self.get_namespace()), self._metadata())
         own, control = self._settings(NodeSettings, {}), self._settings(RecordingControl, {})
         self._input_recording: InputRecording | None = None
-        self.latched: dict[str, Latched] = {}         # topic -> last message published on it
+        self.latched: dict[str, Latched] = {}  # topic -> last message published on it
         # Input topic -> its last accepted message, oldest first: the state a bag starts with
         self.accepted: dict[str, object] = {}
         self._incident_logged = ""
-        self._diagnosed: tuple | None = None          # verdict of the last forced /diagnostics
+        self._diagnosed: tuple | None = None  # verdict of the last forced /diagnostics
 
-        sensor = QoSProfile(depth=own.input_queue_depth,
-                            reliability=qos_profile_sensor_data.reliability,
-                            durability=qos_profile_sensor_data.durability)
+        sensor = QoSProfile(
+            depth=own.input_queue_depth,
+            reliability=qos_profile_sensor_data.reliability,
+            durability=qos_profile_sensor_data.durability,
+        )
         # Best-effort inputs and reliable transient-local outputs match every peer's QoS, so
         # the default QoS-event handlers could never fire; without them each executor cycle
         # waits on 20 fewer entities (measured: lower input-to-risk latency).
@@ -139,29 +171,38 @@ class SqueakPredictorNode(Node):
         pub_events = PublisherEventCallbacks(use_default_callbacks=False)
 
         def subscribe(msg_type, topic, callback):
-            name = self.resolve_topic_name(topic)        # fully qualified
-            self.create_subscription(msg_type, topic, lambda msg: callback(name, msg), sensor,
-                                     event_callbacks=sub_events)
+            name = self.resolve_topic_name(topic)  # fully qualified
+            self.create_subscription(
+                msg_type, topic, lambda msg: callback(name, msg), sensor, event_callbacks=sub_events
+            )
             self._inputs[name] = msg_type
 
-        self._inputs: dict[str, type] = {}     # fully qualified input topic -> message class
+        self._inputs: dict[str, type] = {}  # fully qualified input topic -> message class
 
         def publisher(msg_type, topic):
             return self.create_publisher(msg_type, topic, LATCHED, event_callbacks=pub_events)
 
-        for topic, callback in (("motor_speed", self._on_speed), ("axial_load", self._on_load),
-                                ("nut_position", self._on_nut_position),
-                                ("joint_states", self._on_joint_states)):
+        for topic, callback in (
+            ("motor_speed", self._on_speed),
+            ("axial_load", self._on_load),
+            ("nut_position", self._on_nut_position),
+            ("joint_states", self._on_joint_states),
+        ):
             subscribe(INPUTS[topic], topic, callback)
         self.output_pubs = {topic: publisher(cls, topic) for topic, cls in OUTPUT_CLASSES.items()}
         self.diagnostics = Updater(
-            self, LATCHED, own.diagnostics_period_s, own.hardware_id,
+            self,
+            LATCHED,
+            own.diagnostics_period_s,
+            own.hardware_id,
             publish=lambda pub, data, stamp_ns: self._publish(pub, data, stamp_ns),
-            event_callbacks=pub_events)
-        self._status = self.live.status(time.monotonic())   # what the prediction task says
+            event_callbacks=pub_events,
+        )
+        self._status = self.live.status(time.monotonic())  # what the prediction task says
         self.diagnostics.add(PREDICTION_TASK, status_task(lambda: self._status))
-        self.diagnostics.add(RECORDING_TASK, lambda stat: recording_status(
-            stat, self.recorder, self._crash_recovery))
+        self.diagnostics.add(
+            RECORDING_TASK, lambda stat: recording_status(stat, self.recorder, self._crash_recovery)
+        )
 
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -173,8 +214,7 @@ class SqueakPredictorNode(Node):
         self.create_timer(HOUSEKEEPING_PERIOD_S, self._housekeeping, clock=self._steady)
         self._rate_timer = self._create_rate_timer()
         self.create_service(SetBool, "~/record", self._on_record_service)
-        self._crash_recovery = CrashRecovery(self.recorder.settings.directory,
-                                             self.recorder.name)
+        self._crash_recovery = CrashRecovery(self.recorder.settings.directory, self.recorder.name)
         if self._crash_recovery.bags and control.auto_recover:
             self._crash_recovery.start()
         if control.enabled:
@@ -184,8 +224,8 @@ class SqueakPredictorNode(Node):
 
     def destroy_node(self) -> None:
         """Stop the predictor and the recording, then destroy the node."""
-        self.live.close()                     # the background safe-speed search ends too
-        self._stop_recording()                # summary, index and footer: a clean file
+        self.live.close()  # the background safe-speed search ends too
+        self._stop_recording()  # summary, index and footer: a clean file
         self._crash_recovery.join()
         super().destroy_node()
 
@@ -195,8 +235,7 @@ class SqueakPredictorNode(Node):
             self.declare_parameter(spec.name, spec.default, descriptor(spec))
 
     def _values(self, changes: dict) -> dict:
-        return {**{p.name: p.value for p in self.get_parameters(
-            PARAMETER_NAMES)}, **changes}
+        return {**{p.name: p.value for p in self.get_parameters(PARAMETER_NAMES)}, **changes}
 
     def _settings(self, cls: type, changes: dict):
         """Settings dataclass `cls` from the current parameters with `changes` applied."""
@@ -208,8 +247,11 @@ class SqueakPredictorNode(Node):
         they cannot take (samples that miss the valid domain, ...) is rejected here with the
         reason, never later in a callback."""
         scatter = self._settings(ScatterSettings, changes)
-        model = SqueakModel(self._settings(ScrewParameters, changes), scatter=scatter.scatter,
-                            samples=scatter.samples)
+        model = SqueakModel(
+            self._settings(ScrewParameters, changes),
+            scatter=scatter.scatter,
+            samples=scatter.samples,
+        )
         try:
             model.predict(model.params.min_speed_rad_s, 0.0)
         except ParameterError:
@@ -236,7 +278,7 @@ class SqueakPredictorNode(Node):
                 self._model(changes)
             recording = names_of(RecordSettings) | names_of(RecordingControl)
             if values["record.enabled"] and recording & set(changes):
-                ensure_directory(values["record.directory"])          # mkdir -p, writable
+                ensure_directory(values["record.directory"])  # mkdir -p, writable
         except (ParameterError, TypeError, ValueError) as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         except OSError as exc:
@@ -271,14 +313,15 @@ class SqueakPredictorNode(Node):
         if names & names_of(NodeSettings):
             self.diagnostics.period_s = self._settings(NodeSettings, {}).diagnostics_period_s
         if names & recording:
-            if new_bag:                                 # new record settings: a new bag
+            if new_bag:  # new record settings: a new bag
                 self._stop_recording()
                 self.recorder = self._new_recorder(self.recorder.name, metadata)
             self._set_recording(self.get_parameter("record.enabled").value)
 
     def _create_rate_timer(self):
-        timer = self.create_timer(1.0 / self.live.settings.max_rate_hz, self._on_rate_timer,
-                                  clock=self._steady)
+        timer = self.create_timer(
+            1.0 / self.live.settings.max_rate_hz, self._on_rate_timer, clock=self._steady
+        )
         timer.cancel()
         return timer
 
@@ -287,17 +330,28 @@ class SqueakPredictorNode(Node):
         return self.get_clock().now().nanoseconds
 
     def _new_recorder(self, name: str, metadata: dict) -> Recorder:
-        return Recorder(self._record_settings({}), name, clock=self._now_ns, metadata=metadata,
-                        state=self._state_messages)
+        return Recorder(
+            self._record_settings({}),
+            name,
+            clock=self._now_ns,
+            metadata=metadata,
+            state=self._state_messages,
+        )
 
     def _state_messages(self) -> list:
         """What every file starts with, as rosbag2 records transient-local topics: the last
         accepted message of each input in the order accepted (so that a replay of the file
         starts from the node's operating point), then the last message of each output."""
-        return [*((topic, msgdefs.type_name(type(msg)), serialize_message(msg), None)
-                  for topic, msg in list(self.accepted.items())),
-                *((topic, m.type_name, m.data, m.publish_time_ns)
-                  for topic, m in list(self.latched.items()))]
+        return [
+            *(
+                (topic, msgdefs.type_name(type(msg)), serialize_message(msg), None)
+                for topic, msg in list(self.accepted.items())
+            ),
+            *(
+                (topic, m.type_name, m.data, m.publish_time_ns)
+                for topic, m in list(self.latched.items())
+            ),
+        ]
 
     def _set_recording(self, on: bool) -> None:
         if on and not self.recorder.active:
@@ -327,30 +381,36 @@ class SqueakPredictorNode(Node):
             self._incident_logged = r.incident
             self.get_logger().error(r.incident)
         if r.error and not r.active and self.get_parameter("record.enabled").value:
-            self._stop_recording()               # the input thread too; the file stays as is
+            self._stop_recording()  # the input thread too; the file stays as is
             self.get_logger().error(f"{r.error}; {RESUME_HINT}")
             self.set_parameters([Parameter("record.enabled", value=False)])
 
-    def _on_record_service(self, request: SetBool.Request, response: SetBool.Response
-                           ) -> SetBool.Response:
+    def _on_record_service(
+        self, request: SetBool.Request, response: SetBool.Response
+    ) -> SetBool.Response:
         """Start (data=true) or stop recording; `record.enabled` follows."""
         [result] = self.set_parameters([Parameter("record.enabled", value=bool(request.data))])
-        self._check_recording()                   # a start that failed: the parameter false
+        self._check_recording()  # a start that failed: the parameter false
         response.success = result.successful and self.recorder.active == request.data
-        response.message = (str(self.recorder.path) if self.recorder.active else
-                            (result.reason if not result.successful else "") or
-                            self.recorder.error or f"stopped; last bag: {self.recorder.bag}")
+        response.message = (
+            str(self.recorder.path)
+            if self.recorder.active
+            else (result.reason if not result.successful else "")
+            or self.recorder.error
+            or f"stopped; last bag: {self.recorder.bag}"
+        )
         return response
 
     def _publish(self, publisher, data: bytes, publish_time_ns: int | None = None) -> None:
         """Publish a CDR payload, latch it and record the same bytes (publish time: the
         message's header stamp if it has one, else the log time)."""
-        publisher.publish(data)                   # bytes: published as serialized
+        publisher.publish(data)  # bytes: published as serialized
         latched = Latched(msgdefs.type_name(publisher.msg_type), data, publish_time_ns)
         self.latched[publisher.topic_name] = latched
-        if self.recorder.active:                  # inputs are recorded by InputRecording
-            self.recorder.write_serialized(publisher.topic_name, latched.type_name, data,
-                                           publish_time_ns=publish_time_ns)
+        if self.recorder.active:  # inputs are recorded by InputRecording
+            self.recorder.write_serialized(
+                publisher.topic_name, latched.type_name, data, publish_time_ns=publish_time_ns
+            )
 
     # ---------------------------------------------------------------- inputs
     def _on_speed(self, topic: str, msg: Float64) -> None:
@@ -366,22 +426,21 @@ class SqueakPredictorNode(Node):
         """The screw joint's speed and nut position (`live.rules`: ignored while joint_name is
         '' or without that joint), then one recompute decision."""
         now = time.monotonic()
-        outcome = self.live.set_joint_state(msg.name, msg.position, msg.velocity, now,
-                                            self.joint)
+        outcome = self.live.set_joint_state(msg.name, msg.position, msg.velocity, now, self.joint)
         if not outcome.ignored:
             self._input(topic, msg, outcome.error, now)
 
     def _input(self, topic: str, msg, error: str, now: float | None = None) -> None:
         now = time.monotonic() if now is None else now
-        if error:                 # the next tick reports it: a flood of bad input stays bounded
+        if error:  # the next tick reports it: a flood of bad input stays bounded
             self.get_logger().warning(f"input rejected: {error}", throttle_duration_sec=2.0)
             return
-        self.accepted.pop(topic, None)       # re-inserted last: the order the state arose in
+        self.accepted.pop(topic, None)  # re-inserted last: the order the state arose in
         self.accepted[topic] = msg
         if self.live.due(now):
             self._recompute(now)
         elif self.live.changed() and self._rate_timer.is_canceled():
-            self._rate_timer.reset()         # held back by the rate limit: recompute later
+            self._rate_timer.reset()  # held back by the rate limit: recompute later
 
     # ---------------------------------------------------------------- outputs
     def _on_rate_timer(self) -> None:
@@ -392,19 +451,25 @@ class SqueakPredictorNode(Node):
             self._rate_timer.cancel()
 
     def _housekeeping(self) -> None:
-        self.recorder.tick()                  # flush, split by the wall clock, file still there
+        self.recorder.tick()  # flush, split by the wall clock, file still there
         self._check_recording()
         now = time.monotonic()
-        if self.live.poll_advice():          # a background safe-speed search has finished
+        if self.live.poll_advice():  # a background safe-speed search has finished
             self._publish_safe_speed()
-        self._diagnose(now, periodic=True)        # e.g. bad input, input went stale
+        self._diagnose(now, periodic=True)  # e.g. bad input, input went stale
 
     def _diagnose(self, now: float, periodic: bool) -> None:
         """/diagnostics at once when the verdict changed, else (`periodic`) on its period."""
         self._status = self.live.status(now)
-        verdict = (self._status.level, self._status.message, self.recorder.active,
-                   self.recorder.error, self.recorder.incident, self.recorder.lost > 0,
-                   self._crash_recovery.state)
+        verdict = (
+            self._status.level,
+            self._status.message,
+            self.recorder.active,
+            self.recorder.error,
+            self.recorder.incident,
+            self.recorder.lost > 0,
+            self._crash_recovery.state,
+        )
         if verdict != self._diagnosed:
             self.diagnostics.force_update()
             self._diagnosed = verdict
@@ -413,7 +478,7 @@ class SqueakPredictorNode(Node):
 
     def _recompute(self, now: float) -> None:
         p = self.live.update(now)
-        if p is not None:                    # else outside validity: keep the last outputs
+        if p is not None:  # else outside validity: keep the last outputs
             self._publish_prediction(p)
         self._diagnose(now, periodic=False)  # else the housekeeping period covers it
         if p is None:
@@ -422,21 +487,23 @@ class SqueakPredictorNode(Node):
     def _publish_prediction(self, p: Prediction) -> None:
         for topic, data in messages.prediction_payloads(p):
             self._publish(self.output_pubs[topic], data)
-        if not self.live.advice_pending:     # else the last advice stays until the new one
+        if not self.live.advice_pending:  # else the last advice stays until the new one
             self._publish_safe_speed()
 
     def _publish_safe_speed(self) -> None:
         if self.live.safe_speed_rad_s is not None:
-            self._publish(self.output_pubs[messages.SAFE_SPEED],
-                          messages.safe_speed_payload(self.live.safe_speed_rad_s))
+            self._publish(
+                self.output_pubs[messages.SAFE_SPEED],
+                messages.safe_speed_payload(self.live.safe_speed_rad_s),
+            )
 
 
 class Latched(NamedTuple):
     """The last message published on an output topic, as a new bag starts with it."""
 
-    type_name: str                      # 'pkg/msg/Type'
-    data: bytes                         # CDR payload
-    publish_time_ns: int | None         # header stamp, None: the log time
+    type_name: str  # 'pkg/msg/Type'
+    data: bytes  # CDR payload
+    publish_time_ns: int | None  # header stamp, None: the log time
 
 
 def usage() -> str:
@@ -462,10 +529,15 @@ def usage() -> str:
         "'<node>: recording')",
         "Service: ~/record (std_srvs/SetBool) starts or stops recording",
         "",
-        "Parameters (name [unit] = default, range: description):", *help_lines()]
-    lines += ["", "Example: squeak_node --ros-args -r __ns:=/seat_left --params-file "
-              "config/leadscrew.yaml -p record.enabled:=true",
-              "(config/leadscrew.yaml is keyed `/**:`, so it applies in any namespace)"]
+        "Parameters (name [unit] = default, range: description):",
+        *help_lines(),
+    ]
+    lines += [
+        "",
+        "Example: squeak_node --ros-args -r __ns:=/seat_left --params-file "
+        "config/leadscrew.yaml -p record.enabled:=true",
+        "(config/leadscrew.yaml is keyed `/**:`, so it applies in any namespace)",
+    ]
     return "\n".join(lines)
 
 
@@ -475,7 +547,7 @@ def main(args: list[str] | None = None) -> int:
     command: `ros_env.StopSignals.exit_status`), 2 on bad parameters or arguments;
     `-h`/`--help` prints `usage()` and exits 0."""
     argv = list(sys.argv if args is None else args)
-    try:       # a bad params file or remap rule: one line, as simulate and replay --publish
+    try:  # a bad params file or remap rule: one line, as simulate and replay --publish
         own_args = checked_ros_args(lambda: remove_ros_args(argv))[1:]
     except ValueError as exc:
         print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
@@ -484,8 +556,11 @@ def main(args: list[str] | None = None) -> int:
         print(usage())
         return 0
     if own_args:
-        print(f"{NODE_NAME}: error: unrecognized arguments: {' '.join(own_args)} (ROS "
-              "arguments go after --ros-args; see --help)", file=sys.stderr)
+        print(
+            f"{NODE_NAME}: error: unrecognized arguments: {' '.join(own_args)} (ROS "
+            "arguments go after --ros-args; see --help)",
+            file=sys.stderr,
+        )
         return 2
     confine_to_localhost()
     # SIGINT/SIGTERM only set `stop.signum`; the loop ends between callbacks. rclpy's own
@@ -493,9 +568,10 @@ def main(args: list[str] | None = None) -> int:
     # "context is invalid", exit 1 with a traceback) or raise KeyboardInterrupt inside any
     # callback.
     with StopSignals() as stop:
-        try:     # unknown ROS arguments: remove_ros_args keeps them, init refuses them
-            checked_ros_args(lambda: rclpy.init(args=argv,
-                                                signal_handler_options=SignalHandlerOptions.NO))
+        try:  # unknown ROS arguments: remove_ros_args keeps them, init refuses them
+            checked_ros_args(
+                lambda: rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+            )
         except ValueError as exc:
             print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
             return 2
@@ -505,7 +581,7 @@ def main(args: list[str] | None = None) -> int:
             executor = make_executor()
             executor.add_node(node)
             while not stop.signum:
-                executor.spin_once(timeout_sec=0.1)    # stops after the current callback
+                executor.spin_once(timeout_sec=0.1)  # stops after the current callback
         except (ParameterError, ParameterException) as exc:
             print(f"{NODE_NAME}: error: {' '.join(str(exc).split())}", file=sys.stderr)
             return 2

@@ -12,8 +12,9 @@ and config/leadscrew.yaml (`config_yaml`, written by tools/gen_config.py).
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from dataclasses import Field, dataclass, fields
-from typing import Any, Iterator, NamedTuple
+from typing import Any, NamedTuple
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
@@ -34,14 +35,21 @@ class NodeSettings:
     """The node's own settings: diagnostics, identity and input subscriptions."""
 
     diagnostics_period_s: float = setting(
-        1.0, "s", "period of /diagnostics when nothing changes", 0.05, 60.0)
+        1.0, "s", "period of /diagnostics when nothing changes", 0.05, 60.0
+    )
     hardware_id: str = setting(
-        "leadscrew", "", "hardware_id of the diagnostic status", read_only=True)
+        "leadscrew", "", "hardware_id of the diagnostic status", read_only=True
+    )
     unit_id: str = setting(
-        "", "", "identity of this drive (e.g. its serial number) in every recording's "
-        "`leadscrew_ros` metadata record ('' when not set)", read_only=True)
+        "",
+        "",
+        "identity of this drive (e.g. its serial number) in every recording's "
+        "`leadscrew_ros` metadata record ('' when not set)",
+        read_only=True,
+    )
     input_queue_depth: int = setting(
-        5, "1", "queue depth of the input subscriptions", 1, 1000, read_only=True)
+        5, "1", "queue depth of the input subscriptions", 1, 1000, read_only=True
+    )
 
     def __post_init__(self) -> None:
         check(self)
@@ -54,11 +62,18 @@ class RecordingControl:
     earlier crash cut off."""
 
     enabled: bool = setting(
-        False, "", "record inputs and outputs to MCAP while true (also ~/record); a set is "
-        "rejected with the reason when recording cannot start")
+        False,
+        "",
+        "record inputs and outputs to MCAP while true (also ~/record); a set is "
+        "rejected with the reason when recording cannot start",
+    )
     auto_recover: bool = setting(
-        False, "", "on start, recover this node's bags cut off by a crash in record.directory "
-        "(else only reported)", read_only=True)
+        False,
+        "",
+        "on start, recover this node's bags cut off by a crash in record.directory "
+        "(else only reported)",
+        read_only=True,
+    )
 
     def __post_init__(self) -> None:
         check(self)
@@ -69,17 +84,24 @@ class Group(NamedTuple):
 
     cls: type
     prefix: str
-    title: str            # one line: what these parameters are (YAML comment)
+    title: str  # one line: what these parameters are (YAML comment)
 
 
 GROUPS = (
-    Group(ScrewParameters, "", "model: Table 1 of the paper, the friction law of Fig. 4, mode "
-          "counts, formulation"),
+    Group(
+        ScrewParameters,
+        "",
+        "model: Table 1 of the paper, the friction law of Fig. 4, mode counts, formulation",
+    ),
     Group(LiveSettings, "", "node: recompute policy and verdict"),
     Group(JointSettings, "", "node: joint_states mapping"),
     Group(NodeSettings, "", "node: diagnostics, identity and inputs"),
-    Group(ScatterSettings, "scatter.", "model: unit-to-unit scatter of the parameters behind "
-          "P(squeak) (squeak/risk); 0 switches one off"),
+    Group(
+        ScatterSettings,
+        "scatter.",
+        "model: unit-to-unit scatter of the parameters behind "
+        "P(squeak) (squeak/risk); 0 switches one off",
+    ),
     Group(RecordingControl, "record.", "node: MCAP recording (also ~/record)"),
     Group(RecordSettings, "record.", "node: MCAP recording, one bag per recording"),
 )
@@ -130,13 +152,13 @@ def build(cls: type, values: dict[str, Any]) -> Any:
         (e.g. cross-field) fail: what the node reports for any bad parameter.
     """
     own = [s for s in PARAMETERS if s.group.cls is cls]
-    for s in own:                         # full parameter names in the reason
+    for s in own:  # full parameter names in the reason
         reason = check_value(s.name, values[s.name], s.field)
         if reason:
             raise ParameterError(reason)
     try:
         return cls(**{s.field.name: values[s.name] for s in own})
-    except ValueError as exc:             # e.g. an empty record.directory, z_o + b > L
+    except ValueError as exc:  # e.g. an empty record.directory, z_o + b > L
         raise ParameterError(str(exc)) from None
 
 
@@ -150,9 +172,14 @@ def log_metadata(values: dict[str, Any]) -> LogMetadata:
     return LogMetadata(
         params={field: values[name] for name, field in model.items()},
         scatter={field: values[name] for name, field in scatter.items()},
-        node={name: values[name] for name in PARAMETER_NAMES
-              if name not in model and name not in scatter},
-        unit_id=values["unit_id"], hardware_id=values["hardware_id"])
+        node={
+            name: values[name]
+            for name in PARAMETER_NAMES
+            if name not in model and name not in scatter
+        },
+        unit_id=values["unit_id"],
+        hardware_id=values["hardware_id"],
+    )
 
 
 def constraints(spec: Spec) -> str:
@@ -169,14 +196,17 @@ def descriptor(spec: Spec) -> ParameterDescriptor:
     """ROS descriptor of a parameter: description with unit, range, read-only."""
     md, default = spec.md, spec.default
     d = ParameterDescriptor(
-        name=spec.name, description=f"{md['description']} [{md['unit']}]" if md["unit"] else
-        md["description"], read_only=md["read_only"], additional_constraints=constraints(spec))
+        name=spec.name,
+        description=f"{md['description']} [{md['unit']}]" if md["unit"] else md["description"],
+        read_only=md["read_only"],
+        additional_constraints=constraints(spec),
+    )
     if md["lo"] is not None and isinstance(default, float):
-        d.floating_point_range = [FloatingPointRange(from_value=float(md["lo"]),
-                                                     to_value=float(md["hi"]))]
+        d.floating_point_range = [
+            FloatingPointRange(from_value=float(md["lo"]), to_value=float(md["hi"]))
+        ]
     elif md["lo"] is not None and isinstance(default, int):
-        d.integer_range = [IntegerRange(from_value=int(md["lo"]), to_value=int(md["hi"]),
-                                        step=1)]
+        d.integer_range = [IntegerRange(from_value=int(md["lo"]), to_value=int(md["hi"]), step=1)]
     return d
 
 
@@ -187,12 +217,15 @@ def help_lines() -> list[str]:
     for spec in PARAMETERS:
         md, default, unit = spec.md, spec.default, spec.md["unit"]
         text = f"  {spec.name}{f' [{unit}]' if unit else ''} = " + (
-            exact(default) if isinstance(default, float) else repr(default))
+            exact(default) if isinstance(default, float) else repr(default)
+        )
         if md["lo"] is not None:
-            text += ", " + "..".join(str(b) if isinstance(b, int) else exact(b)
-                                     for b in (md["lo"], md["hi"]))
-        notes = "; ".join(n for n in (constraints(spec),
-                                      READ_ONLY_NOTE if md["read_only"] else "") if n)
+            text += ", " + "..".join(
+                str(b) if isinstance(b, int) else exact(b) for b in (md["lo"], md["hi"])
+            )
+        notes = "; ".join(
+            n for n in (constraints(spec), READ_ONLY_NOTE if md["read_only"] else "") if n
+        )
         lines.append(f"{text}: {md['description']}" + (f" ({notes})" if notes else ""))
     return lines
 
@@ -219,7 +252,7 @@ def yaml_comment(spec: Spec) -> str:
     if md["choices"]:
         text += f"; one of {' | '.join(md['choices'])}"
     elif md["lo"] is not None:
-        text += f"; allowed {range_text({**md, 'unit': ''})}"     # the unit leads the comment
+        text += f"; allowed {range_text({**md, 'unit': ''})}"  # the unit leads the comment
     return text + (f" ({READ_ONLY_NOTE})" if md["read_only"] else "")
 
 

@@ -25,9 +25,9 @@ import os
 import shutil
 import sys
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Sequence
 
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidTopicNameException
@@ -38,21 +38,25 @@ from rclpy.serialization import deserialize_message
 from rclpy.validate_full_topic_name import validate_full_topic_name
 
 from ..bag.logfile import LogError, LogInfo, LogMessage, Topic, read_messages
-from .env import StopSignals, close, confine_to_localhost, init_context
 from ..review.timeline import INPUTS, resolve
-from ..review.timeline import is_input as _is_input     # the offline replay's rule, shared
+from ..review.timeline import is_input as _is_input  # the offline replay's rule, shared
+from .env import StopSignals, close, confine_to_localhost, init_context
 
 NODE_NAME = "log_replay"
 # Reliable + transient local is at least what any subscriber can request, so every subscriber
 # matches (the predictor's best-effort inputs as well as a reliable, latched recorder). The depth
 # bounds what a slow reliable reader can still catch up on, and what a late latched one receives.
-QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                 durability=DurabilityPolicy.TRANSIENT_LOCAL, history=HistoryPolicy.KEEP_LAST)
-WAIT_FOR_SUBSCRIBER_S = 5.0   # cross-process discovery can take one announcement period (3 s)
-MATCH_GRACE_S = 0.5           # after the first match, this long for the other topics to match
-SETTLE_S = 0.2                # the subscriber's side of the match (best effort drops until then)
-ACK_TIMEOUT_S = 1.0           # at the end: reliable readers acknowledge the last messages
-SLICE_S = 0.05                # longest sleep without looking at the stop flag
+QOS = QoSProfile(
+    depth=100,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    history=HistoryPolicy.KEEP_LAST,
+)
+WAIT_FOR_SUBSCRIBER_S = 5.0  # cross-process discovery can take one announcement period (3 s)
+MATCH_GRACE_S = 0.5  # after the first match, this long for the other topics to match
+SETTLE_S = 0.2  # the subscriber's side of the match (best effort drops until then)
+ACK_TIMEOUT_S = 1.0  # at the end: reliable readers acknowledge the last messages
+SLICE_S = 0.05  # longest sleep without looking at the stop flag
 STATUS_PERIOD_S = 0.25
 
 
@@ -61,22 +65,29 @@ class _Plan:
     """What to publish, checked against the whole log."""
 
     files: list[Path]
-    outputs: dict[str, str]          # log topic -> topic it is published on
-    classes: dict[str, type]         # log topic -> message class
-    topics: dict[str, Topic]         # every topic of the log
-    origin_ns: int                   # log start + start offset: schedule time 0
-    end_ns: int                      # last message of the log (any topic)
+    outputs: dict[str, str]  # log topic -> topic it is published on
+    classes: dict[str, type]  # log topic -> message class
+    topics: dict[str, Topic]  # every topic of the log
+    origin_ns: int  # log start + start offset: schedule time 0
+    end_ns: int  # last message of the log (any topic)
 
     @property
     def span_ns(self) -> int:
         return self.end_ns - self.origin_ns
 
 
-def publish_log(paths: list[Path], *, rate: float = 1.0, loop: bool = False,
-                start_offset_s: float = 0.0, topics: list[str] | None = None,
-                remap: dict[str, str] | None = None, progress: bool = True,
-                wait_for_subscriber_s: float = WAIT_FOR_SUBSCRIBER_S,
-                ros_args: Sequence[str] = ()) -> int:
+def publish_log(
+    paths: list[Path],
+    *,
+    rate: float = 1.0,
+    loop: bool = False,
+    start_offset_s: float = 0.0,
+    topics: list[str] | None = None,
+    remap: dict[str, str] | None = None,
+    progress: bool = True,
+    wait_for_subscriber_s: float = WAIT_FOR_SUBSCRIBER_S,
+    ros_args: Sequence[str] = (),
+) -> int:
     """Publish the log's messages (`paths`: its files in order) in real time / `rate`.
 
     Selection: `topics` (exactly those), or by default the predictor's input topics in the log
@@ -132,10 +143,13 @@ def publish_log(paths: list[Path], *, rate: float = 1.0, loop: bool = False,
         node, player = None, None
         try:
             node = Node(NODE_NAME, context=ctx, start_parameter_services=False)
-            plan = replace(plan, outputs=_outputs(plan.topics, plan.classes, remap or {},
-                                                  node.get_namespace()))
-            pubs = {t: node.create_publisher(plan.classes[t], out, QOS)
-                    for t, out in plan.outputs.items()}
+            plan = replace(
+                plan, outputs=_outputs(plan.topics, plan.classes, remap or {}, node.get_namespace())
+            )
+            pubs = {
+                t: node.create_publisher(plan.classes[t], out, QOS)
+                for t, out in plan.outputs.items()
+            }
             _announce(plan, pubs, rate, loop)
             _wait_for_subscriber(list(pubs.values()), wait_for_subscriber_s, stop)
             status = _Status(progress and sys.stderr.isatty(), plan.span_ns / 1e9, rate, loop)
@@ -156,14 +170,22 @@ def publish_log(paths: list[Path], *, rate: float = 1.0, loop: bool = False,
 
 
 # ----------------------------------------------------------------------------- checks
-def _check_arguments(paths: list[Path], rate: float, start_offset_s: float,
-                     remap: dict[str, str] | None, wait_s: float) -> None:
+def _check_arguments(
+    paths: list[Path],
+    rate: float,
+    start_offset_s: float,
+    remap: dict[str, str] | None,
+    wait_s: float,
+) -> None:
     if not paths:
         raise ValueError("no log files given")
     if not (isinstance(rate, (int, float)) and math.isfinite(rate) and rate > 0):
         raise ValueError(f"rate must be a finite number > 0, got {rate!r}")
-    if not (isinstance(start_offset_s, (int, float)) and math.isfinite(start_offset_s)
-            and start_offset_s >= 0):
+    if not (
+        isinstance(start_offset_s, (int, float))
+        and math.isfinite(start_offset_s)
+        and start_offset_s >= 0
+    ):
         raise ValueError(f"start offset must be a finite number >= 0 s, got {start_offset_s!r}")
     if not (math.isfinite(wait_s) and wait_s >= 0):
         raise ValueError(f"subscriber wait must be a finite number >= 0 s, got {wait_s!r}")
@@ -178,7 +200,7 @@ def _in_namespace(topic: Topic, namespace: str) -> str:
     if namespace == "/":
         return topic.name
     recorded = topic.name.rsplit("/", 1)[0] if _is_input(topic) else ""
-    return namespace.rstrip("/") + topic.name[len(recorded):]
+    return namespace.rstrip("/") + topic.name[len(recorded) :]
 
 
 def _topic_name(name: str, what: str) -> str:
@@ -187,14 +209,15 @@ def _topic_name(name: str, what: str) -> str:
     full = name if name.startswith("/") else "/" + name
     try:
         validate_full_topic_name(full)
-    except InvalidTopicNameException as exc:       # a multi-line message with a caret
+    except InvalidTopicNameException as exc:  # a multi-line message with a caret
         problem = str(exc).splitlines()[0].removeprefix("Invalid topic name: ").rstrip(":")
         raise ValueError(f"{what} {name!r} is not a valid ROS topic name: {problem}") from None
     return full
 
 
-def _plan(paths: list[Path], start_offset_s: float, topics: list[str] | None,
-          remap: dict[str, str]) -> _Plan:
+def _plan(
+    paths: list[Path], start_offset_s: float, topics: list[str] | None, remap: dict[str, str]
+) -> _Plan:
     wanted = None if topics is None else {_topic_name(t, "topic") for t in topics}
 
     def selected(topic: Topic) -> bool:
@@ -214,30 +237,46 @@ def _plan(paths: list[Path], start_offset_s: float, topics: list[str] | None,
     if wanted is not None and not scan.classes:
         raise ValueError(f"no messages on {', '.join(sorted(wanted))} in the log")
     if not scan.classes:
-        raise LogError(log, f"no predictor input topics ({', '.join('/' + n for n in INPUTS)})"
-                            f" in the log {its_topics}; choose topics to publish")
+        raise LogError(
+            log,
+            f"no predictor input topics ({', '.join('/' + n for n in INPUTS)})"
+            f" in the log {its_topics}; choose topics to publish",
+        )
     duration_s = (scan.last_ns - scan.first_ns) / 1e9
     if start_offset_s and start_offset_s >= duration_s:
-        raise ValueError(f"start offset {start_offset_s:g} s is not less than the log's "
-                         f"duration ({duration_s:.3f} s)")
+        raise ValueError(
+            f"start offset {start_offset_s:g} s is not less than the log's "
+            f"duration ({duration_s:.3f} s)"
+        )
     origin_ns = scan.first_ns + round(start_offset_s * 1e9)
     if scan.last_selected_ns < origin_ns:
-        raise ValueError(f"start offset {start_offset_s:g} s skips every message to publish "
-                         f"(the last is at {(scan.last_selected_ns - scan.first_ns) / 1e9:.3f} s)")
-    return _Plan(list(paths), _outputs(scan.topics, scan.classes, remap), scan.classes,
-                 scan.topics, origin_ns, scan.last_ns)
+        raise ValueError(
+            f"start offset {start_offset_s:g} s skips every message to publish "
+            f"(the last is at {(scan.last_selected_ns - scan.first_ns) / 1e9:.3f} s)"
+        )
+    return _Plan(
+        list(paths),
+        _outputs(scan.topics, scan.classes, remap),
+        scan.classes,
+        scan.topics,
+        origin_ns,
+        scan.last_ns,
+    )
 
 
-def _outputs(topics: dict[str, Topic], classes: dict[str, type], remap: dict[str, str],
-             namespace: str = "/") -> dict[str, str]:
+def _outputs(
+    topics: dict[str, Topic], classes: dict[str, type], remap: dict[str, str], namespace: str = "/"
+) -> dict[str, str]:
     """Log topic -> published topic, for a node in `namespace`; one log topic per published
     topic."""
-    full = {_topic_name(k, "remapped topic"): _topic_name(resolve(v, namespace), "remap target")
-            for k, v in remap.items()}
+    full = {
+        _topic_name(k, "remapped topic"): _topic_name(resolve(v, namespace), "remap target")
+        for k, v in remap.items()
+    }
     outputs = {t: full.get(t) or _in_namespace(topics[t], namespace) for t in classes}
     sources: dict[str, str] = {}
     for t, out in outputs.items():
-        _topic_name(out, "topic")                   # a foreign log's name may not be valid ROS
+        _topic_name(out, "topic")  # a foreign log's name may not be valid ROS
         if out in sources:
             raise ValueError(f"{sources[out]} and {t} would both be published on {out}")
         sources[out] = t
@@ -246,11 +285,11 @@ def _outputs(topics: dict[str, Topic], classes: dict[str, type], remap: dict[str
 
 @dataclass
 class _Scan:
-    topics: dict[str, Topic] = field(default_factory=dict)     # every topic of the log
-    classes: dict[str, type] = field(default_factory=dict)     # selected topics with messages
-    first_ns: int | None = None                                # log times of any message
+    topics: dict[str, Topic] = field(default_factory=dict)  # every topic of the log
+    classes: dict[str, type] = field(default_factory=dict)  # selected topics with messages
+    first_ns: int | None = None  # log times of any message
     last_ns: int = 0
-    last_selected_ns: int = 0                                  # of a selected message
+    last_selected_ns: int = 0  # of a selected message
 
 
 def _scan(paths: list[Path], selected: Callable[[Topic], bool]) -> _Scan:
@@ -272,8 +311,11 @@ def _scan(paths: list[Path], selected: Callable[[Topic], bool]) -> _Scan:
             scan.last_ns = max(scan.last_ns, t)
         for name, topic in info.topics.items():
             if scan.topics.setdefault(name, topic).type_name != topic.type_name:
-                raise LogError(path, f"topic {name} is {topic.type_name} here, "
-                                     f"{scan.topics[name].type_name} in an earlier file")
+                raise LogError(
+                    path,
+                    f"topic {name} is {topic.type_name} here, "
+                    f"{scan.topics[name].type_name} in an earlier file",
+                )
     return scan
 
 
@@ -285,29 +327,35 @@ def _message_class(path: Path, topic: Topic) -> type:
             raise ImportError
         return getattr(importlib.import_module(f"{pkg}.msg"), name)
     except (ImportError, AttributeError, ValueError):
-        raise LogError(path, f"topic {topic.name} has type {topic.type_name!r}, which is not "
-                             f"an installed ROS 2 message type") from None
+        raise LogError(
+            path,
+            f"topic {topic.name} has type {topic.type_name!r}, which is not "
+            f"an installed ROS 2 message type",
+        ) from None
 
 
 def _check_payload(path: Path, m: LogMessage, cls: type) -> None:
     """A payload that does not deserialize as its type is never sent to a subscriber."""
     try:
         deserialize_message(m.data, cls)
-    except Exception as exc:                       # rclpy raises RMWError / RuntimeError
-        raise LogError(path, f"message {m.sequence} on {m.topic.name} is not a valid "
-                             f"{m.topic.type_name}: {exc}") from None
+    except Exception as exc:  # rclpy raises RMWError / RuntimeError
+        raise LogError(
+            path,
+            f"message {m.sequence} on {m.topic.name} is not a valid {m.topic.type_name}: {exc}",
+        ) from None
 
 
 # ----------------------------------------------------------------------------- publishing
 def _announce(plan: _Plan, pubs: dict[str, Publisher], rate: float, loop: bool) -> None:
     """One line: what is published where (as rcl resolved the names, its remaps included)."""
-    names = ", ".join(t if p.topic_name == t else f"{t} -> {p.topic_name}"
-                      for t, p in pubs.items())
+    names = ", ".join(t if p.topic_name == t else f"{t} -> {p.topic_name}" for t, p in pubs.items())
     files = plan.files
     where = files[0] if len(files) == 1 else f"{files[0].parent} ({len(files)} files)"
-    print(f"replaying {where}: {plan.span_ns / 1e9:.3f} s of log on {names} at rate {rate:g}"
-          f"{', looped' if loop else ''} (ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')})",
-          flush=True)
+    print(
+        f"replaying {where}: {plan.span_ns / 1e9:.3f} s of log on {names} at rate {rate:g}"
+        f"{', looped' if loop else ''} (ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')})",
+        flush=True,
+    )
 
 
 def _wait_for_subscriber(pubs: list[Publisher], timeout_s: float, stop: StopSignals) -> None:
@@ -345,9 +393,10 @@ class _Status:
             return
         self.next_at = now + STATUS_PERIOD_S
         log_s = min(elapsed_s * self.rate - passes * self.total_s, self.total_s)
-        line = (f"replay {max(log_s, 0.0):.1f}/{self.total_s:.1f} s, {published} messages"
-                + (f", pass {passes + 1}" if self.loop else ""))
-        line = line[:shutil.get_terminal_size().columns - 1]
+        line = f"replay {max(log_s, 0.0):.1f}/{self.total_s:.1f} s, {published} messages" + (
+            f", pass {passes + 1}" if self.loop else ""
+        )
+        line = line[: shutil.get_terminal_size().columns - 1]
         print("\r" + line.ljust(self.width), end="", file=sys.stderr, flush=True)
         self.width = len(line)
 
@@ -360,8 +409,15 @@ class _Status:
 class _Player:
     """Streams the plan's files and publishes each message at its due time."""
 
-    def __init__(self, plan: _Plan, pubs: dict[str, Publisher], rate: float, loop: bool,
-                 stop: StopSignals, status: _Status):
+    def __init__(
+        self,
+        plan: _Plan,
+        pubs: dict[str, Publisher],
+        rate: float,
+        loop: bool,
+        stop: StopSignals,
+        status: _Status,
+    ):
         self.plan, self.pubs, self.rate, self.loop = plan, pubs, rate, loop
         self.stop, self.status = stop, status
         self.published = self.passes = 0
@@ -390,7 +446,7 @@ class _Player:
         for path in plan.files:
             for m in read_messages(path, set(plan.outputs), strict=True):
                 if m.log_time_ns < plan.origin_ns:
-                    continue                                     # before the start offset
+                    continue  # before the start offset
                 due = self.started + (base_ns + m.log_time_ns - plan.origin_ns) / 1e9 / self.rate
                 if not self._wait_until(due):
                     return False

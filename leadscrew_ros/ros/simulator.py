@@ -10,7 +10,8 @@ import math
 import os
 import sys
 import time
-from typing import Sequence, TextIO
+from collections.abc import Sequence
+from typing import TextIO
 
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -50,16 +51,22 @@ class ActuatorSimulator(Node):
         Passed to `rclpy.node.Node` (`node_name` too).
     """
 
-    def __init__(self, profile: StrokeProfile | None = None, rate_hz: float = 100.0,
-                 loop: bool = False, joint_name: str = "", wait_for_subscriber: bool = False,
-                 **kwargs):
+    def __init__(
+        self,
+        profile: StrokeProfile | None = None,
+        rate_hz: float = 100.0,
+        loop: bool = False,
+        joint_name: str = "",
+        wait_for_subscriber: bool = False,
+        **kwargs,
+    ):
         if not (math.isfinite(rate_hz) and 0 < rate_hz <= MAX_RATE_HZ):
             raise ProfileError(f"rate_hz must be in (0, {MAX_RATE_HZ:g}] Hz, got {rate_hz!r}")
         super().__init__(kwargs.pop("node_name", NODE_NAME), **kwargs)
         self.profile = profile or StrokeProfile()
         self.loop, self.joint_name = loop, joint_name
         self.wait_for_subscriber = wait_for_subscriber
-        self.started_at: float | None = None           # time.monotonic() of t = 0
+        self.started_at: float | None = None  # time.monotonic() of t = 0
         self.done = False
         self.published = 0
         self.last_state: ActuatorState | None = None
@@ -67,8 +74,9 @@ class ActuatorSimulator(Node):
         self.speed_pub = self.create_publisher(Float64, "motor_speed", qos)
         self.load_pub = self.create_publisher(Float64, "axial_load", qos)
         self.nut_pub = self.create_publisher(Float64, "nut_position", qos)
-        self.joint_pub = (self.create_publisher(JointState, "joint_states", qos)
-                          if joint_name else None)
+        self.joint_pub = (
+            self.create_publisher(JointState, "joint_states", qos) if joint_name else None
+        )
         self._timer = self.create_timer(1.0 / rate_hz, self._tick)
 
     @property
@@ -108,17 +116,26 @@ class ActuatorSimulator(Node):
         self.load_pub.publish(Float64(data=float(s.load_n)))
         self.nut_pub.publish(Float64(data=float(s.nut_position_m)))
         if self.joint_pub is not None:
-            msg = JointState(name=[self.joint_name], position=[float(s.screw_angle_rad)],
-                             velocity=[float(s.speed_rad_s)])
+            msg = JointState(
+                name=[self.joint_name],
+                position=[float(s.screw_angle_rad)],
+                velocity=[float(s.speed_rad_s)],
+            )
             msg.header.stamp = self.get_clock().now().to_msg()
             self.joint_pub.publish(msg)
         self.last_state = s
         self.published += 1
 
 
-def run_simulator(profile: StrokeProfile | None = None, rate_hz: float = 100.0,
-                  loop: bool = False, joint_name: str = "", wait_for_subscriber: bool = True,
-                  out: TextIO | None = None, ros_args: Sequence[str] = ()) -> int:
+def run_simulator(
+    profile: StrokeProfile | None = None,
+    rate_hz: float = 100.0,
+    loop: bool = False,
+    joint_name: str = "",
+    wait_for_subscriber: bool = True,
+    out: TextIO | None = None,
+    ros_args: Sequence[str] = (),
+) -> int:
     """`leadscrew-squeak simulate`: publish the stroke on the user's ROS_DOMAIN_ID (loopback
     discovery unless chosen otherwise) for a separately started predictor node.
 
@@ -150,29 +167,43 @@ def run_simulator(profile: StrokeProfile | None = None, rate_hz: float = 100.0,
         ctx = init_context(ros_args)
         node = executor = None
         try:
-            node = ActuatorSimulator(profile, rate_hz=rate_hz, loop=loop,
-                                     joint_name=joint_name,
-                                     wait_for_subscriber=wait_for_subscriber, context=ctx)
+            node = ActuatorSimulator(
+                profile,
+                rate_hz=rate_hz,
+                loop=loop,
+                joint_name=joint_name,
+                wait_for_subscriber=wait_for_subscriber,
+                context=ctx,
+            )
             executor = SingleThreadedExecutor(context=ctx)
             executor.add_node(node)
-            topics = ", ".join(p.topic_name for p in (node.speed_pub, node.load_pub,
-                                                      node.nut_pub, node.joint_pub) if p)
-            print(f"simulating a {profile.duration_s:g} s stroke (0 -> "
-                  f"{profile.peak_speed_rad_s:g} rad/s -> 0, nut "
-                  f"{profile.start_nut_position_m:.3f} -> {profile.end_nut_position_m:.3f} m)"
-                  f"{', looped back and forth' if loop else ''} at {rate_hz:g} Hz on {topics} "
-                  f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')})", file=out,
-                  flush=True)
+            topics = ", ".join(
+                p.topic_name
+                for p in (node.speed_pub, node.load_pub, node.nut_pub, node.joint_pub)
+                if p
+            )
+            print(
+                f"simulating a {profile.duration_s:g} s stroke (0 -> "
+                f"{profile.peak_speed_rad_s:g} rad/s -> 0, nut "
+                f"{profile.start_nut_position_m:.3f} -> {profile.end_nut_position_m:.3f} m)"
+                f"{', looped back and forth' if loop else ''} at {rate_hz:g} Hz on {topics} "
+                f"(ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')})",
+                file=out,
+                flush=True,
+            )
             if wait_for_subscriber:
-                print(f"waiting for a subscriber on {node.speed_pub.topic_name} ...", file=out,
-                      flush=True)
+                print(
+                    f"waiting for a subscriber on {node.speed_pub.topic_name} ...",
+                    file=out,
+                    flush=True,
+                )
             announced = False
             while not node.done and not stop.signum:
                 executor.spin_once(timeout_sec=0.02)
                 if node.started_at is not None and not announced:
                     print("stroke started", file=out, flush=True)
                     announced = True
-            linger = time.monotonic() + 0.3       # let the last samples reach the subscribers
+            linger = time.monotonic() + 0.3  # let the last samples reach the subscribers
             while node.done and not stop.signum and time.monotonic() < linger:
                 executor.spin_once(timeout_sec=0.02)
         finally:

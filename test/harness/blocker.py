@@ -3,9 +3,19 @@
 child proves that what it imports needs none (the ROS-free layers, the message encoders)."""
 
 # What a module of a ROS-free layer may not import, directly or through a dependency.
-ROS_MODULES = ("rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "sensor_msgs",
-               "diagnostic_msgs", "std_srvs", "geometry_msgs", "rosidl_runtime_py",
-               "rosidl_parser", "rpyutils")
+ROS_MODULES = (
+    "rclpy",
+    "rcl_interfaces",
+    "builtin_interfaces",
+    "std_msgs",
+    "sensor_msgs",
+    "diagnostic_msgs",
+    "std_srvs",
+    "geometry_msgs",
+    "rosidl_runtime_py",
+    "rosidl_parser",
+    "rpyutils",
+)
 
 BLOCKER = f"""
 import importlib, importlib.abc, sys

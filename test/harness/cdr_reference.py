@@ -18,12 +18,24 @@ from rclpy.serialization import serialize_message
 
 from leadscrew_ros.bag import msgdefs
 
-_BASIC_SIZE = {"boolean": 1, "octet": 1, "char": 1, "int8": 1, "uint8": 1, "int16": 2,
-               "uint16": 2, "int32": 4, "uint32": 4, "float": 4, "int64": 8, "uint64": 8,
-               "double": 8}
+_BASIC_SIZE = {
+    "boolean": 1,
+    "octet": 1,
+    "char": 1,
+    "int8": 1,
+    "uint8": 1,
+    "int16": 2,
+    "uint16": 2,
+    "int32": 4,
+    "uint32": 4,
+    "float": 4,
+    "int64": 8,
+    "uint64": 8,
+    "double": 8,
+}
 # Field kinds of a compiled layout.
 _BASIC, _STRING, _NESTED, _SEQUENCE, _ARRAY = range(5)
-_ENCAPSULATION = 4                     # bytes of the CDR header before the data
+_ENCAPSULATION = 4  # bytes of the CDR header before the data
 
 
 class _Unsized(Exception):
@@ -38,22 +50,24 @@ def cdr_payload(msg) -> bytes:
         return data
     gaps: list[tuple[int, int]] = []
     end = _ENCAPSULATION + _walk(msg, layout, 0, gaps)
-    if end > len(data):                # not the layout we expect: leave the bytes alone
+    if end > len(data):  # not the layout we expect: leave the bytes alone
         return data
     if not gaps:
         return data[:end]
     out = bytearray(data[:end])
     for start, stop in gaps:
-        out[_ENCAPSULATION + start:_ENCAPSULATION + stop] = bytes(stop - start)
+        out[_ENCAPSULATION + start : _ENCAPSULATION + stop] = bytes(stop - start)
     return bytes(out)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _layout(cls) -> tuple | None:
     """((field, kind, element), ...) of a message class; None if a field is unsized."""
     try:
-        return tuple((name, *_kind(slot)) for name, slot in
-                     zip(cls.get_fields_and_field_types(), cls.SLOT_TYPES, strict=True))
+        return tuple(
+            (name, *_kind(slot))
+            for name, slot in zip(cls.get_fields_and_field_types(), cls.SLOT_TYPES, strict=True)
+        )
     except _Unsized:
         return None
 
@@ -75,6 +89,7 @@ def _kind(slot) -> tuple[int, object]:
 
 def _nested_layout(slot) -> tuple:
     import importlib
+
     module = importlib.import_module(".".join(slot.namespaces))
     layout = _layout(getattr(module, slot.name))
     if layout is None:
@@ -105,7 +120,7 @@ def _value(value, kind: int, element, pos: int, gaps: list) -> int:
         return _walk(value, element, pos, gaps)
     if kind == _SEQUENCE:
         pos = _align(pos, 4, gaps) + 4
-    if len(value) == 0:                # an empty sequence is not aligned for its elements
+    if len(value) == 0:  # an empty sequence is not aligned for its elements
         return pos
     item_kind, item = element
     if item_kind == _BASIC:
@@ -115,13 +130,15 @@ def _value(value, kind: int, element, pos: int, gaps: list) -> int:
     return pos
 
 
-def write_message(recorder, topic: str, msg, log_time_ns: int | None = None,
-                  publish_time_ns: int | None = None) -> None:
+def write_message(
+    recorder, topic: str, msg, log_time_ns: int | None = None, publish_time_ns: int | None = None
+) -> None:
     """Record an rclpy message with `Recorder.write_serialized` (publish time defaults to the
     header stamp, else the log time, as the node records its outputs)."""
     if publish_time_ns is None:
         stamp = getattr(getattr(msg, "header", None), "stamp", None)
         if stamp is not None:
             publish_time_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
-    recorder.write_serialized(topic, msgdefs.type_name(msg), cdr_payload(msg), log_time_ns,
-                              publish_time_ns)
+    recorder.write_serialized(
+        topic, msgdefs.type_name(msg), cdr_payload(msg), log_time_ns, publish_time_ns
+    )

@@ -15,8 +15,9 @@ from leadscrew_ros.model.physics.parameters import ScrewParameters
 PANEL_NODES = 8
 
 
-def helix_quadrature(start: float, span: float, nodes_per_turn: int
-                     ) -> tuple[np.ndarray, np.ndarray]:
+def helix_quadrature(
+    start: float, span: float, nodes_per_turn: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Composite Gauss-Legendre nodes and weights on [start, start + span] [rad]."""
     panels = max(1, math.ceil(span / (2 * math.pi) * nodes_per_turn / PANEL_NODES))
     x, w = np.polynomial.legendre.leggauss(PANEL_NODES)
@@ -26,8 +27,9 @@ def helix_quadrature(start: float, span: float, nodes_per_turn: int
     return theta, (half[:, None] * w[None, :]).ravel()
 
 
-def quadrature_integrals(p: ScrewParameters, basis: ModalBasis, nodes_per_turn: int
-                         ) -> dict[str, np.ndarray]:
+def quadrature_integrals(
+    p: ScrewParameters, basis: ModalBasis, nodes_per_turn: int
+) -> dict[str, np.ndarray]:
     """integral k_ab(theta) [Phi_i^a Phi_j^b](R tan(beta) theta) dtheta for every matrix by
     quadrature, one (modes of kind a) x (modes of kind b) product per non-zero block."""
     alpha_o, alpha = contact_angles(p)

@@ -28,15 +28,20 @@ def domain(offset: int) -> int:
 
 
 def env_for(domain_id: int) -> dict:
-    return dict(os.environ, ROS_DOMAIN_ID=str(domain_id),
-                ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
+    return dict(
+        os.environ,
+        ROS_DOMAIN_ID=str(domain_id),
+        ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+        PYTHONUNBUFFERED="1",
+    )
 
 
 def start(argv, domain_id, tmp_path, name) -> subprocess.Popen:
     """`argv` in the repository on `domain_id`, stdout and stderr to files read by `output`."""
     out, err = (open(tmp_path / f"{name}.{s}", "w+") for s in ("out", "err"))
-    proc = subprocess.Popen(argv, cwd=REPO, env=env_for(domain_id), stdout=out, stderr=err,
-                            text=True)
+    proc = subprocess.Popen(
+        argv, cwd=REPO, env=env_for(domain_id), stdout=out, stderr=err, text=True
+    )
     proc.files = (out, err)
     return proc
 
@@ -74,8 +79,9 @@ def stop(*procs, grace_s: float = 0.0) -> None:
     if killed:
         tool = Path(sys.prefix) / "tools" / "fastdds" / "fastdds.py"
         if tool.exists():
-            subprocess.run([sys.executable, str(tool), "shm", "clean"], capture_output=True,
-                           timeout=30)
+            subprocess.run(
+                [sys.executable, str(tool), "shm", "clean"], capture_output=True, timeout=30
+            )
 
 
 def wait_initialised(procs: list[subprocess.Popen], timeout: float = 10.0) -> None:

@@ -18,16 +18,32 @@ from .ros import COLLECT, RosWorld
 from .squeak import LOAD, SQUEAK
 
 
-def start_recording_node(tmp_path: Path, ns: str, extra: list[str] = (), preexec_fn=None
-                         ) -> tuple[subprocess.Popen, Path]:
+def start_recording_node(
+    tmp_path: Path, ns: str, extra: list[str] = (), preexec_fn=None
+) -> tuple[subprocess.Popen, Path]:
     directory = tmp_path / "bags"
     directory.mkdir()
     err = open(tmp_path / "node.stderr", "w+")
     proc = subprocess.Popen(
-        [*node_command(), "--ros-args", "-r", f"__ns:={ns}", "-p", f"hardware_id:=hw_{ns[2:]}",
-         "-p", "record.enabled:=true", "-p", f"record.directory:={directory}", *extra],
-        stdout=subprocess.DEVNULL, stderr=err, env=dict(os.environ), preexec_fn=preexec_fn)
-    proc.files = [err, err]              # `output(proc)`: the node writes to stderr only
+        [
+            *node_command(),
+            "--ros-args",
+            "-r",
+            f"__ns:={ns}",
+            "-p",
+            f"hardware_id:=hw_{ns[2:]}",
+            "-p",
+            "record.enabled:=true",
+            "-p",
+            f"record.directory:={directory}",
+            *extra,
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=err,
+        env=dict(os.environ),
+        preexec_fn=preexec_fn,
+    )
+    proc.files = [err, err]  # `output(proc)`: the node writes to stderr only
     return proc, directory
 
 
@@ -40,12 +56,23 @@ class Feed:
         self.risk, self.recording = [], []
         self.node.create_subscription(Float64, "squeak/risk", self.risk.append, COLLECT)
         self.node.create_subscription(
-            DiagnosticArray, "/diagnostics", lambda m: self.recording.extend(
-                s for s in m.status if s.hardware_id == f"hw_{ns[2:]}"
-                and s.name.endswith(": recording")), COLLECT)
-        self.pubs = [self.node.create_publisher(type_, topic, 10) for type_, topic in
-                     ((Float64, "motor_speed"), (Float64, "axial_load"),
-                      (JointState, "joint_states"))]
+            DiagnosticArray,
+            "/diagnostics",
+            lambda m: self.recording.extend(
+                s
+                for s in m.status
+                if s.hardware_id == f"hw_{ns[2:]}" and s.name.endswith(": recording")
+            ),
+            COLLECT,
+        )
+        self.pubs = [
+            self.node.create_publisher(type_, topic, 10)
+            for type_, topic in (
+                (Float64, "motor_speed"),
+                (Float64, "axial_load"),
+                (JointState, "joint_states"),
+            )
+        ]
         for pub in self.pubs:
             self.ros.wait_matched(pub)
         self.sent = 0
@@ -54,8 +81,9 @@ class Feed:
         self.pubs[0].publish(Float64(data=SQUEAK + i % 20))
         self.pubs[1].publish(Float64(data=LOAD))
         if joints > 1:
-            self.pubs[2].publish(JointState(name=[f"joint_{k:04d}" for k in range(joints)],
-                                            position=[0.0] * joints))
+            self.pubs[2].publish(
+                JointState(name=[f"joint_{k:04d}" for k in range(joints)], position=[0.0] * joints)
+            )
         self.sent += 1
         self.ros.executor.spin_once(timeout_sec=0.0)
 

@@ -23,8 +23,9 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from leadscrew_ros.ros.node import make_executor
 
 # every message of a test, however fast they come: reliable, deep, and late-joining
-COLLECT = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+COLLECT = QoSProfile(
+    depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
 
 
 def unique_ns(prefix: str = "/t", length: int = 32) -> str:
@@ -33,8 +34,9 @@ def unique_ns(prefix: str = "/t", length: int = 32) -> str:
 
 
 def new_executor(kind: str, context: Context):
-    """"single": rclpy's SingleThreadedExecutor; "events": the node's own (`make_executor`,
-    rclpy's EventsExecutor), for tests that must see what squeak_node does."""
+    """The executor of `kind`: "single", rclpy's SingleThreadedExecutor; "events": the node's
+    own (`make_executor`, rclpy's EventsExecutor), for tests that must see what squeak_node
+    does."""
     if kind == "events":
         return make_executor(context)
     if kind == "single":
@@ -46,8 +48,14 @@ class RosWorld:
     """A private rclpy Context with one executor; nodes made or added here are spun by it and
     destroyed by `close` (also a context manager)."""
 
-    def __init__(self, *, ns: str | None = None, args: list[str] | None = None,
-                 domain_id: int | None = None, executor: str = "single"):
+    def __init__(
+        self,
+        *,
+        ns: str | None = None,
+        args: list[str] | None = None,
+        domain_id: int | None = None,
+        executor: str = "single",
+    ):
         self.ns = ns or unique_ns()
         self.ctx = Context()
         rclpy.init(context=self.ctx, args=args, domain_id=domain_id)
@@ -67,8 +75,14 @@ class RosWorld:
 
     def make_node(self, name: str, namespace: str | None = None, **kwargs) -> Node:
         """A plain rclpy Node in this world (default namespace: the world's)."""
-        return self.add(Node(name, context=self.ctx,
-                             namespace=self.ns if namespace is None else namespace, **kwargs))
+        return self.add(
+            Node(
+                name,
+                context=self.ctx,
+                namespace=self.ns if namespace is None else namespace,
+                **kwargs,
+            )
+        )
 
     def remove(self, node) -> None:
         """Take `node` out of the executor, then destroy it. The EventsExecutor (rclpy 7.1.6)
@@ -85,14 +99,16 @@ class RosWorld:
         """What a timeout message adds about the world's state (subclasses say more)."""
         return ""
 
-    def spin_until(self, condition: Callable[[], object], timeout: float = 10.0,
-                   what: str = "condition") -> None:
+    def spin_until(
+        self, condition: Callable[[], object], timeout: float = 10.0, what: str = "condition"
+    ) -> None:
         """Spin until `condition()` is true; AssertionError naming `what` after `timeout` s."""
         deadline = time.monotonic() + timeout
         while not condition():
             if time.monotonic() > deadline:
-                raise AssertionError(f"timeout after {timeout} s waiting for {what}"
-                                     + self.describe())
+                raise AssertionError(
+                    f"timeout after {timeout} s waiting for {what}" + self.describe()
+                )
             self.executor.spin_once(timeout_sec=0.01)
 
     def spin_for(self, seconds: float) -> None:
@@ -108,8 +124,11 @@ class RosWorld:
 
     def wait_matched(self, publisher, timeout: float = 10.0, at_least: int = 1) -> None:
         """Until `publisher` has `at_least` subscribers (before publishing anything)."""
-        self.spin_until(lambda: publisher.get_subscription_count() >= at_least, timeout,
-                        f"{at_least} subscriber(s) on {publisher.topic_name}")
+        self.spin_until(
+            lambda: publisher.get_subscription_count() >= at_least,
+            timeout,
+            f"{at_least} subscriber(s) on {publisher.topic_name}",
+        )
 
     # ------------------------------------------------------------------ teardown
     def close(self) -> None:

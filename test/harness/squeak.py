@@ -26,12 +26,21 @@ from .ros import COLLECT, RosWorld
 MODEL = SqueakModel()
 LOAD, SQUEAK, STABLE = 200.0, 20.0, 100.0
 SAFE = LiveSettings().safe_probability
-OUTPUTS = {"squeak/risk": Float64, "squeak/margin": Float64,
-           "squeak/unstable_frequencies": Float64MultiArray,
-           "squeak/active": Bool, "squeak/modes": Float64MultiArray,
-           "squeak/safe_speed": Float64, "/diagnostics": DiagnosticArray}
-INPUTS = {"motor_speed": Float64, "axial_load": Float64, "nut_position": Float64,
-          "joint_states": JointState}
+OUTPUTS = {
+    "squeak/risk": Float64,
+    "squeak/margin": Float64,
+    "squeak/unstable_frequencies": Float64MultiArray,
+    "squeak/active": Bool,
+    "squeak/modes": Float64MultiArray,
+    "squeak/safe_speed": Float64,
+    "/diagnostics": DiagnosticArray,
+}
+INPUTS = {
+    "motor_speed": Float64,
+    "axial_load": Float64,
+    "nut_position": Float64,
+    "joint_states": JointState,
+}
 
 
 def non_finite(msg) -> list[str]:
@@ -63,17 +72,18 @@ class SqueakWorld(RosWorld):
         super().__init__(ns=ns, executor="events", **kwargs)
         self.hardware_id = f"hw_{self.ns[2:]}"
         self.probe = self.make_node("probe")
-        self.node: SqueakPredictorNode | None = None       # the predictor, once started
+        self.node: SqueakPredictorNode | None = None  # the predictor, once started
         self.latest: dict[str, object] = {}
         self.count = dict.fromkeys(OUTPUTS, 0)
         self.violations: list[str] = []
         self.pubs = {}
         for topic, msg_type in OUTPUTS.items():
-            self.probe.create_subscription(msg_type, topic,
-                                           lambda msg, t=topic: self._received(t, msg), COLLECT)
+            self.probe.create_subscription(
+                msg_type, topic, lambda msg, t=topic: self._received(t, msg), COLLECT
+            )
 
     def _received(self, topic: str, msg) -> None:
-        if topic == "/diagnostics":          # absolute topic: keep this test's status only
+        if topic == "/diagnostics":  # absolute topic: keep this test's status only
             status = [s for s in msg.status if s.hardware_id == self.hardware_id]
             if not status:
                 return
@@ -87,10 +97,12 @@ class SqueakWorld(RosWorld):
 
     def start(self, **params) -> SqueakPredictorNode:
         """The predictor in this test's namespace, with parameter overrides."""
-        overrides = [Parameter(k, value=v) for k, v in
-                     {"hardware_id": self.hardware_id, **params}.items()]
-        self.node = self.add(SqueakPredictorNode(context=self.ctx, namespace=self.ns,
-                                                  parameter_overrides=overrides))
+        overrides = [
+            Parameter(k, value=v) for k, v in {"hardware_id": self.hardware_id, **params}.items()
+        ]
+        self.node = self.add(
+            SqueakPredictorNode(context=self.ctx, namespace=self.ns, parameter_overrides=overrides)
+        )
         return self.node
 
     def remove(self, node) -> None:
@@ -111,13 +123,15 @@ class SqueakWorld(RosWorld):
 
     def wait_for(self, topic: str, predicate, timeout: float = 10.0):
         """The latest message on an output topic, once it satisfies `predicate`."""
-        self.spin_until(lambda: topic in self.latest and predicate(self.latest[topic]),
-                        timeout, f"a matching message on {topic}")
+        self.spin_until(
+            lambda: topic in self.latest and predicate(self.latest[topic]),
+            timeout,
+            f"a matching message on {topic}",
+        )
         return self.latest[topic]
 
     def status(self, predicate, timeout: float = 10.0) -> DiagnosticStatus:
-        return self.wait_for("/diagnostics", lambda m: predicate(m.status[0]),
-                             timeout).status[0]
+        return self.wait_for("/diagnostics", lambda m: predicate(m.status[0]), timeout).status[0]
 
 
 def modes_data(p) -> list[float]:
@@ -131,8 +145,9 @@ def at(ros: SqueakWorld, speed: float, load: float = LOAD, model: SqueakModel = 
     core = model.predict(speed, load)
     ros.send("motor_speed", speed)
     ros.send("axial_load", load)
-    ros.wait_for("squeak/modes", lambda m: list(m.data) == pytest.approx(modes_data(core),
-                                                                         rel=1e-9))
+    ros.wait_for(
+        "squeak/modes", lambda m: list(m.data) == pytest.approx(modes_data(core), rel=1e-9)
+    )
     ros.wait_for("squeak/risk", lambda m: m.data == core.probability)
     ros.wait_for("squeak/margin", lambda m: m.data == pytest.approx(core.margin, rel=1e-9))
     # safe-speed advice comes from a background search: wait for it to be published too

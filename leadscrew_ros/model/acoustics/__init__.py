@@ -11,6 +11,18 @@ from .settings import DetectorSettings
 from .synthesis import microphone
 from .tonality import pr_limit_db, tnr_limit_db
 
-__all__ = ["Agreement", "AudioError", "Detection", "DetectorSettings", "Episode",
-           "FrequencyMatch", "StreamingDetector", "agreement", "detect", "frames_heard",
-           "microphone", "pr_limit_db", "tnr_limit_db"]
+__all__ = [
+    "Agreement",
+    "AudioError",
+    "Detection",
+    "DetectorSettings",
+    "Episode",
+    "FrequencyMatch",
+    "StreamingDetector",
+    "agreement",
+    "detect",
+    "frames_heard",
+    "microphone",
+    "pr_limit_db",
+    "tnr_limit_db",
+]

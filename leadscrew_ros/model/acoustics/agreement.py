@@ -108,10 +108,15 @@ def _probabilities(probability: Sequence[float | None], n: int) -> np.ndarray:
     return p
 
 
-def agreement(detection: Detection, pred_times_s: Any, predicted_squeak: Any,
-              probability: Sequence[float | None],
-              predicted_modes: Sequence[Sequence[tuple[str, float]]], *,
-              valid_until_s: float | None = None) -> Agreement:
+def agreement(
+    detection: Detection,
+    pred_times_s: Any,
+    predicted_squeak: Any,
+    probability: Sequence[float | None],
+    predicted_modes: Sequence[Sequence[tuple[str, float]]],
+    *,
+    valid_until_s: float | None = None,
+) -> Agreement:
     """Compare the predictions with what the detector heard.
 
     Parameters
@@ -142,15 +147,17 @@ def agreement(detection: Detection, pred_times_s: Any, predicted_squeak: Any,
     squeak = np.asarray(predicted_squeak, dtype=bool).reshape(-1)
     p = _probabilities(probability, tp.size)
     if squeak.size != tp.size or len(predicted_modes) != tp.size:
-        raise ValueError(f"{tp.size} prediction times, {squeak.size} verdicts, "
-                         f"{len(predicted_modes)} mode lists: they must match")
+        raise ValueError(
+            f"{tp.size} prediction times, {squeak.size} verdicts, "
+            f"{len(predicted_modes)} mode lists: they must match"
+        )
     t = detection.frame_times_s
     hop = detection.hop_s
     if t.size == 0 or tp.size == 0 or not math.isfinite(hop):
         return Agreement(0.0, 0.0, 0.0, 0.0, None, None, None)
     end = tp[-1] if valid_until_s is None else float(valid_until_s)
     counted = (t >= max(t[0], tp[0])) & (t <= min(t[-1], end))
-    j = np.searchsorted(tp, t, side="right") - 1          # prediction in force, -1: none yet
+    j = np.searchsorted(tp, t, side="right") - 1  # prediction in force, -1: none yet
     pred = np.where(j >= 0, squeak[np.maximum(j, 0)], False)
     prob = np.where(j >= 0, p[np.maximum(j, 0)], 0.0)
     heard = detection.heard
@@ -167,18 +174,32 @@ def agreement(detection: Detection, pred_times_s: Any, predicted_squeak: Any,
             continue
         j0 = max(int(np.searchsorted(tp, max(ep.start_s, lo), side="right")) - 1, 0)
         j1 = int(np.searchsorted(tp, min(ep.end_s, hi), side="right"))
-        modes = [(str(lab), float(f)) for jj in range(j0, j1) for lab, f in predicted_modes[jj]
-                 if math.isfinite(float(f))]
+        modes = [
+            (str(lab), float(f))
+            for jj in range(j0, j1)
+            for lab, f in predicted_modes[jj]
+            if math.isfinite(float(f))
+        ]
         if modes:
             lab, f = min(modes, key=lambda m: abs(m[1] - ep.frequency_hz))
             err = (f - ep.frequency_hz) / ep.frequency_hz
-            matches.append(FrequencyMatch(ep.start_s, ep.end_s, ep.frequency_hz, lab, f, err,
-                                          abs(err) <= MATCH_TOLERANCE))
+            matches.append(
+                FrequencyMatch(
+                    ep.start_s, ep.end_s, ep.frequency_hz, lab, f, err, abs(err) <= MATCH_TOLERANCE
+                )
+            )
         else:
-            matches.append(FrequencyMatch(ep.start_s, ep.end_s, ep.frequency_hz, None, None,
-                                          None, False))
+            matches.append(
+                FrequencyMatch(ep.start_s, ep.end_s, ep.frequency_hz, None, None, None, False)
+            )
     return Agreement(
-        both_s=both, predicted_only_s=pred_only, heard_only_s=heard_only, neither_s=neither,
+        both_s=both,
+        predicted_only_s=pred_only,
+        heard_only_s=heard_only,
+        neither_s=neither,
         recall=both / (both + heard_only) if both + heard_only > 0 else None,
         precision=both / (both + pred_only) if both + pred_only > 0 else None,
-        brier=brier, frequency_match=matches, frames=int(counted.sum()))
+        brier=brier,
+        frequency_match=matches,
+        frames=int(counted.sum()),
+    )

@@ -40,9 +40,9 @@ import numpy as np
 from .settings import DetectorSettings
 from .tonality import ToneAnalyzer, hann, short_time_psd
 
-P_REF_PA = 20e-6            #: reference sound pressure of dB SPL
-LOUDNESS_RATE_HZ = 48000    #: ISO 532-1 after MOSQITO wants 48 kHz; other rates are resampled
-_BLOCK_FRAMES = 256         # frames analysed per FFT block (bounded memory, same in every mode)
+P_REF_PA = 20e-6  #: reference sound pressure of dB SPL
+LOUDNESS_RATE_HZ = 48000  #: ISO 532-1 after MOSQITO wants 48 kHz; other rates are resampled
+_BLOCK_FRAMES = 256  # frames analysed per FFT block (bounded memory, same in every mode)
 _MAX_WARNINGS = 100
 
 
@@ -108,10 +108,16 @@ class Episode:
         -------
         dict
         """
-        return dict(start_s=self.start_s, end_s=self.end_s, frequency_hz=self.frequency_hz,
-                    tnr_db=_finite_or_none(self.tnr_db), pr_db=_finite_or_none(self.pr_db),
-                    level_db=_finite_or_none(self.level_db),
-                    loudness_sone=_finite_or_none(self.loudness_sone), order=self.order)
+        return dict(
+            start_s=self.start_s,
+            end_s=self.end_s,
+            frequency_hz=self.frequency_hz,
+            tnr_db=_finite_or_none(self.tnr_db),
+            pr_db=_finite_or_none(self.pr_db),
+            level_db=_finite_or_none(self.level_db),
+            loudness_sone=_finite_or_none(self.loudness_sone),
+            order=self.order,
+        )
 
 
 @dataclass
@@ -161,12 +167,16 @@ class Detection:
         -------
         dict
         """
-        return dict(frame_times_s=self.frame_times_s.tolist(), heard=self.heard.tolist(),
-                    frequency_hz=[_finite_or_none(f) for f in self.frequency_hz.tolist()],
-                    episodes=[e.as_dict() for e in self.episodes],
-                    rejected=[e.as_dict() for e in self.rejected],
-                    sample_rate_hz=self.sample_rate_hz, scale=self.scale,
-                    warnings=list(self.warnings))
+        return dict(
+            frame_times_s=self.frame_times_s.tolist(),
+            heard=self.heard.tolist(),
+            frequency_hz=[_finite_or_none(f) for f in self.frequency_hz.tolist()],
+            episodes=[e.as_dict() for e in self.episodes],
+            rejected=[e.as_dict() for e in self.rejected],
+            sample_rate_hz=self.sample_rate_hz,
+            scale=self.scale,
+            warnings=list(self.warnings),
+        )
 
 
 def _check_rate(sample_rate_hz: Any) -> float:
@@ -182,11 +192,25 @@ def _check_rate(sample_rate_hz: Any) -> float:
 class _Track:
     """One tone followed frame by frame."""
 
-    __slots__ = ("first", "last", "frames", "hz", "f1", "recent", "median", "tnr", "pr",
-                 "power", "last_power", "checked_at", "order_now")
+    __slots__ = (
+        "first",
+        "last",
+        "frames",
+        "hz",
+        "f1",
+        "recent",
+        "median",
+        "tnr",
+        "pr",
+        "power",
+        "last_power",
+        "checked_at",
+        "order_now",
+    )
 
-    def __init__(self, i: int, f: float, f1: float, tnr: float, pr: float, power: float,
-                 window: int) -> None:
+    def __init__(
+        self, i: int, f: float, f1: float, tnr: float, pr: float, power: float, window: int
+    ) -> None:
         self.first = self.last = i
         self.frames: list[int] = []
         self.hz: list[float] = []
@@ -195,7 +219,7 @@ class _Track:
         self.median = f
         self.tnr = self.pr = self.power = -math.inf
         self.last_power = power
-        self.checked_at = 0                  # frames when `order_now` was last decided
+        self.checked_at = 0  # frames when `order_now` was last decided
         self.order_now: int | None = None
         self.add(i, f, f1, tnr, pr, power)
 
@@ -209,7 +233,7 @@ class _Track:
         n = len(r)
         self.median = r[n // 2] if n % 2 else 0.5 * (r[n // 2 - 1] + r[n // 2])
         self.tnr = max(self.tnr, tnr)
-        if pr == pr:                                   # not nan
+        if pr == pr:  # not nan
             self.pr = max(self.pr, pr)
         self.power = max(self.power, power)
         self.last_power = power
@@ -242,12 +266,15 @@ class StreamingDetector:
     the last 100 warnings, `rejected` the last 100 rejected (order-following) episodes.
     """
 
-    def __init__(self, settings: DetectorSettings = DetectorSettings(),
-                 sample_rate_hz: float = 48000.0, scale_pa: float | None = None) -> None:
+    def __init__(
+        self,
+        settings: DetectorSettings = DetectorSettings(),
+        sample_rate_hz: float = 48000.0,
+        scale_pa: float | None = None,
+    ) -> None:
         self.settings = settings
         self.scale_pa = None if scale_pa is None else float(scale_pa)
-        if self.scale_pa is not None and not (math.isfinite(self.scale_pa)
-                                              and self.scale_pa > 0):
+        if self.scale_pa is not None and not (math.isfinite(self.scale_pa) and self.scale_pa > 0):
             raise AudioError(f"scale_pa = {scale_pa!r} must be a positive number")
         self.warnings: deque[str] = deque(maxlen=_MAX_WARNINGS)
         self.rejected: deque[Episode] = deque(maxlen=_MAX_WARNINGS)
@@ -261,14 +288,23 @@ class StreamingDetector:
         self.frame_len = max(int(round(s.frame_s * rate)), 8)
         self.hop = max(int(round(s.hop_s * rate)), 1)
         self.hop_s = self.hop / rate
-        self.analyzer = ToneAnalyzer(rate, self.frame_len, s.f_lo_hz, s.f_hi_hz, s.max_peaks,
-                                     s.track_tolerance, s.max_harmonic)
+        self.analyzer = ToneAnalyzer(
+            rate,
+            self.frame_len,
+            s.f_lo_hz,
+            s.f_hi_hz,
+            s.max_peaks,
+            s.track_tolerance,
+            s.max_harmonic,
+        )
         if self.analyzer.empty:
-            self._warn(f"sample rate {rate:g} Hz leaves no frequency to analyse above "
-                       f"{s.f_lo_hz:g} Hz")
+            self._warn(
+                f"sample rate {rate:g} Hz leaves no frequency to analyse above {s.f_lo_hz:g} Hz"
+            )
         elif self.analyzer.f_hi_hz < s.f_hi_hz - self.analyzer.df:
-            self._warn(f"sample rate {rate:g} Hz limits the analysis to "
-                       f"{self.analyzer.f_hi_hz:.0f} Hz")
+            self._warn(
+                f"sample rate {rate:g} Hz limits the analysis to {self.analyzer.f_hi_hz:.0f} Hz"
+            )
         self._min_frames = max(int(math.ceil(s.min_duration_s / self.hop_s - 1e-9)), 1)
         self._allowed_missing = max(int(math.ceil(s.max_gap_s / self.hop_s - 1e-9)) - 1, 0)
         self._max_frames = max(int(s.max_episode_s / self.hop_s), self._min_frames)
@@ -276,8 +312,10 @@ class StreamingDetector:
         # frames dropped for non-finite samples are bridged up to what one short glitch
         # costs: every frame holding it, plus the gap allowed anyway
         self._max_dropped = -(-self.frame_len // self.hop) + self._allowed_missing
-        self._keep = int(math.ceil((s.loudness_max_s + 2 * s.frame_s + s.max_gap_s
-                                    + 2 * s.hop_s) * rate)) + self.frame_len
+        self._keep = (
+            int(math.ceil((s.loudness_max_s + 2 * s.frame_s + s.max_gap_s + 2 * s.hop_s) * rate))
+            + self.frame_len
+        )
         self._window = hann(self.frame_len)
         self._new_segment(None)
 
@@ -285,8 +323,8 @@ class StreamingDetector:
         self._seg_t0 = t0_s
         self._buf = np.zeros(0, np.float32)
         self._bad = np.zeros(0, bool)
-        self._buf_start = 0            # segment sample index of _buf[0]
-        self._n_samples = 0            # samples received in this segment
+        self._buf_start = 0  # segment sample index of _buf[0]
+        self._n_samples = 0  # samples received in this segment
         self._next_frame = 0
         self._tracks: list[_Track] = []
         self._dropped_run = 0
@@ -334,8 +372,14 @@ class StreamingDetector:
         return t0 + (np.asarray(i) * self.hop + self.frame_len / 2) / self.sample_rate_hz
 
     # -- input ---------------------------------------------------------------------------------
-    def push(self, samples: Any, t0_s: float, speed_rad_s: Any = None,
-             speed_times_s: Any = None, sample_rate_hz: float | None = None) -> list[Episode]:
+    def push(
+        self,
+        samples: Any,
+        t0_s: float,
+        speed_rad_s: Any = None,
+        speed_times_s: Any = None,
+        sample_rate_hz: float | None = None,
+    ) -> list[Episode]:
         """Analyse a chunk of samples; return the squeak episodes closed by it.
 
         Parameters
@@ -368,8 +412,10 @@ class StreamingDetector:
         if sample_rate_hz is not None:
             rate = _check_rate(sample_rate_hz)
             if rate != self.sample_rate_hz:
-                self._warn(f"sample rate changed from {self.sample_rate_hz:g} to {rate:g} Hz: "
-                           "detector restarted")
+                self._warn(
+                    f"sample rate changed from {self.sample_rate_hz:g} to {rate:g} Hz: "
+                    "detector restarted"
+                )
                 closed += self.flush()
                 self._reset(rate)
         x = self._as_samples(samples)
@@ -384,10 +430,13 @@ class StreamingDetector:
             return closed
         if self._seg_t0 is None:
             self._seg_t0 = t0
-        elif abs(t0 - self._expected_t0()) > max(self.settings.max_gap_s,
-                                                 2.0 / self.sample_rate_hz):
-            self._warn(f"audio discontinuity of {t0 - self._expected_t0():+.3f} s at "
-                       f"{t0:.3f} s: tracks closed, framing restarted")
+        elif abs(t0 - self._expected_t0()) > max(
+            self.settings.max_gap_s, 2.0 / self.sample_rate_hz
+        ):
+            self._warn(
+                f"audio discontinuity of {t0 - self._expected_t0():+.3f} s at "
+                f"{t0:.3f} s: tracks closed, framing restarted"
+            )
             closed += self.flush()
             self._new_segment(t0)
         t_end = self._seg_t0 + (self._n_samples + x.size) / self.sample_rate_hz
@@ -395,13 +444,17 @@ class StreamingDetector:
         bad = ~np.isfinite(x)
         n_bad = int(bad.sum())
         if n_bad:
-            self._warn(f"{n_bad} non-finite samples (NaN/inf) set to 0; the frames holding "
-                       "them are dropped (tracks bridge one frame length of them)")
+            self._warn(
+                f"{n_bad} non-finite samples (NaN/inf) set to 0; the frames holding "
+                "them are dropped (tracks bridge one frame length of them)"
+            )
             x = np.where(bad, np.float32(0.0), x)
         n_clip = int(np.count_nonzero(np.abs(x) >= self.settings.clip_level))
         if n_clip:
-            self._warn(f"clipped: {n_clip} samples at or beyond {self.settings.clip_level:g} "
-                       "of full scale (harmonics of clipped tones are not counted as squeak)")
+            self._warn(
+                f"clipped: {n_clip} samples at or beyond {self.settings.clip_level:g} "
+                "of full scale (harmonics of clipped tones are not counted as squeak)"
+            )
         self._buf = np.concatenate([self._buf, x])
         self._bad = np.concatenate([self._bad, bad])
         self._n_samples += x.size
@@ -448,8 +501,11 @@ class StreamingDetector:
             return
         try:
             v = np.asarray(speed, dtype=float).reshape(-1)
-            t = (np.array([t_start, t_end]) if times is None and v.size == 1 else
-                 np.asarray(times, dtype=float).reshape(-1))
+            t = (
+                np.array([t_start, t_end])
+                if times is None and v.size == 1
+                else np.asarray(times, dtype=float).reshape(-1)
+            )
             if v.size == 1 and t.size == 2:
                 v = np.repeat(v, 2)
         except (TypeError, ValueError):
@@ -470,8 +526,11 @@ class StreamingDetector:
     # -- frames ----------------------------------------------------------------------------------
     def _run_frames(self) -> list[Episode]:
         closed: list[Episode] = []
-        n_avail = (self._n_samples - self.frame_len) // self.hop + 1 if \
-            self._n_samples >= self.frame_len else 0
+        n_avail = (
+            (self._n_samples - self.frame_len) // self.hop + 1
+            if self._n_samples >= self.frame_len
+            else 0
+        )
         while self._next_frame < n_avail:
             i0 = self._next_frame
             i1 = min(n_avail, i0 + _BLOCK_FRAMES)
@@ -484,12 +543,13 @@ class StreamingDetector:
     def _block(self, i0: int, i1: int) -> list[Episode]:
         n, hop = self.frame_len, self.hop
         s0 = i0 * hop - self._buf_start
-        seg = self._buf[s0:s0 + (i1 - i0 - 1) * hop + n]
+        seg = self._buf[s0 : s0 + (i1 - i0 - 1) * hop + n]
         if self.analyzer.empty:
             return []
-        cand = self.analyzer.candidates(short_time_psd(seg, self.sample_rate_hz, n, hop,
-                                                       self._window))
-        bad = self._bad[s0:s0 + seg.size]
+        cand = self.analyzer.candidates(
+            short_time_psd(seg, self.sample_rate_hz, n, hop, self._window)
+        )
+        bad = self._bad[s0 : s0 + seg.size]
         if bad.any():
             bad_cum = np.concatenate([[0], np.cumsum(bad)])
             starts = np.arange(i1 - i0) * hop
@@ -507,7 +567,7 @@ class StreamingDetector:
         for j in range(i1 - i0):
             if dropped[j]:
                 self._dropped_run += 1
-                if self._dropped_run <= self._max_dropped:     # a glitch: the tracks hold
+                if self._dropped_run <= self._max_dropped:  # a glitch: the tracks hold
                     for tr in self._tracks:
                         tr.last = i0 + j
                     continue
@@ -517,18 +577,28 @@ class StreamingDetector:
                 continue
             cols = np.nonzero(prominent[j])[0]
             cols = cols[np.argsort(-cand.power[j, cols], kind="stable")]
-            found = [(float(cand.frequency_hz[j, c]), float(cand.tnr_db[j, c]),
-                      float(cand.pr_db[j, c]), float(cand.power[j, c])) for c in cols]
+            found = [
+                (
+                    float(cand.frequency_hz[j, c]),
+                    float(cand.tnr_db[j, c]),
+                    float(cand.pr_db[j, c]),
+                    float(cand.power[j, c]),
+                )
+                for c in cols
+            ]
             closed += self._step(i0 + j, found, float(f1[j]))
         return closed
 
-    def _step(self, i: int, found: list[tuple[float, float, float, float]],
-              f1: float) -> list[Episode]:
+    def _step(
+        self, i: int, found: list[tuple[float, float, float, float]], f1: float
+    ) -> list[Episode]:
         closed = []
         keep = []
         for tr in self._tracks:
-            if i - tr.last - 1 > self._allowed_missing or \
-                    tr.last - tr.first + 1 >= self._max_frames:
+            if (
+                i - tr.last - 1 > self._allowed_missing
+                or tr.last - tr.first + 1 >= self._max_frames
+            ):
                 ep = self._finish(tr)
                 if ep is not None:
                     closed.append(ep)
@@ -571,12 +641,12 @@ class StreamingDetector:
             return None
         r_order = float(np.sqrt(np.mean((f / (k * f1) - 1.0) ** 2)))
         r_const = float(np.sqrt(np.mean((f / np.median(f) - 1.0) ** 2)))
-        floor = 0.1 * self.analyzer.df / float(np.median(f))   # a tenth of a bin
-        if r_const >= max(3 * r_order, floor):          # the tone moved with the speed
+        floor = 0.1 * self.analyzer.df / float(np.median(f))  # a tenth of a bin
+        if r_const >= max(3 * r_order, floor):  # the tone moved with the speed
             return k
-        if r_order >= max(3 * r_const, floor):          # it stayed while the speed moved
+        if r_order >= max(3 * r_const, floor):  # it stayed while the speed moved
             return None
-        return k if k <= 0.25 / s.order_tolerance else None     # by frequency alone
+        return k if k <= 0.25 / s.order_tolerance else None  # by frequency alone
 
     def _finish(self, tr: _Track) -> Episode | None:
         if tr.last - tr.first + 1 < self._min_frames:
@@ -588,12 +658,19 @@ class StreamingDetector:
         hz = np.full(frames.size, np.nan)
         hz[np.asarray(tr.frames) - tr.first] = tr.hz
         if self.scale_pa is not None:
-            level = 10 * math.log10(max(tr.power, 1e-300) * self.scale_pa ** 2 / P_REF_PA ** 2)
+            level = 10 * math.log10(max(tr.power, 1e-300) * self.scale_pa**2 / P_REF_PA**2)
         else:
             level = 10 * math.log10(max(tr.power, 1e-300))
-        ep = Episode(start_s=start, end_s=end, frequency_hz=float(np.median(tr.hz)),
-                     tnr_db=tr.tnr, pr_db=tr.pr if tr.pr > -math.inf else math.nan,
-                     level_db=level, track_times_s=self.frame_time(frames), track_hz=hz)
+        ep = Episode(
+            start_s=start,
+            end_s=end,
+            frequency_hz=float(np.median(tr.hz)),
+            tnr_db=tr.tnr,
+            pr_db=tr.pr if tr.pr > -math.inf else math.nan,
+            level_db=level,
+            track_times_s=self.frame_time(frames),
+            track_hz=hz,
+        )
         k = self._follows_order(tr)
         if k is not None:
             ep.order = k
@@ -612,7 +689,7 @@ class StreamingDetector:
         a, b = max(a, self._buf_start), min(b, self._buf_start + self._buf.size)
         if b - a < int(0.05 * rate):
             return None
-        x = self._buf[a - self._buf_start:b - self._buf_start].astype(float) * self.scale_pa
+        x = self._buf[a - self._buf_start : b - self._buf_start].astype(float) * self.scale_pa
         try:
             from mosqito.sq_metrics import loudness_zwtv
         except ImportError:
@@ -624,11 +701,12 @@ class StreamingDetector:
             from fractions import Fraction
 
             from scipy.signal import resample_poly
+
             r = Fraction(LOUDNESS_RATE_HZ / rate).limit_denominator(1000)
             x = resample_poly(x, r.numerator, r.denominator)
         try:
             n = loudness_zwtv(x, LOUDNESS_RATE_HZ, field_type="free")[0]
-        except Exception as exc:                      # MOSQITO's failure must not stop us
+        except Exception as exc:  # MOSQITO's failure must not stop us
             self._warn(f"loudness failed: {exc}")
             return None
         return float(np.max(n)) if np.size(n) else None
@@ -650,11 +728,13 @@ class StreamingDetector:
         latest = self._next_frame - 1
         best: _Track | None = None
         for tr in self._tracks:
-            if tr.last - tr.first + 1 < self._min_frames or \
-                    latest - tr.last > self._allowed_missing or \
-                    (best is not None and tr.last_power <= best.last_power):
+            if (
+                tr.last - tr.first + 1 < self._min_frames
+                or latest - tr.last > self._allowed_missing
+                or (best is not None and tr.last_power <= best.last_power)
+            ):
                 continue
-            n = len(tr.hz)                   # re-decided as the track grows by 1/8
+            n = len(tr.hz)  # re-decided as the track grows by 1/8
             if n >= tr.checked_at + max(5, tr.checked_at // 8):
                 tr.order_now, tr.checked_at = self._follows_order(tr), n
             if tr.order_now is None:
@@ -663,9 +743,16 @@ class StreamingDetector:
         self._frequency_now = best.median if best is not None else math.nan
 
 
-def detect(samples: Any, sample_rate_hz: float, *, t0_s: float = 0.0,
-           speed_times_s: Any = None, speed_rad_s: Any = None, scale_pa: float | None = None,
-           settings: DetectorSettings = DetectorSettings()) -> Detection:
+def detect(
+    samples: Any,
+    sample_rate_hz: float,
+    *,
+    t0_s: float = 0.0,
+    speed_times_s: Any = None,
+    speed_rad_s: Any = None,
+    scale_pa: float | None = None,
+    settings: DetectorSettings = DetectorSettings(),
+) -> Detection:
     """Squeak episodes in a recording (offline; the same decisions as `StreamingDetector`).
 
     Parameters
@@ -708,19 +795,27 @@ def detect(samples: Any, sample_rate_hz: float, *, t0_s: float = 0.0,
     if n_samples == 0:
         warnings.append("no audio samples")
     elif det.frames_done == 0:
-        warnings.append(f"{n_samples} samples are shorter than one frame "
-                        f"({det.frame_len} samples): nothing analysed")
+        warnings.append(
+            f"{n_samples} samples are shorter than one frame "
+            f"({det.frame_len} samples): nothing analysed"
+        )
     times = det.frame_time(np.arange(det.frames_done)).astype(float)
     heard, freq = frames_heard(times, episodes)
-    return Detection(frame_times_s=times, heard=heard, frequency_hz=freq,
-                     episodes=sorted(episodes, key=lambda e: e.start_s),
-                     sample_rate_hz=det.sample_rate_hz,
-                     scale="Pa" if scale_pa is not None else "full scale",
-                     warnings=warnings, rejected=list(det.rejected))
+    return Detection(
+        frame_times_s=times,
+        heard=heard,
+        frequency_hz=freq,
+        episodes=sorted(episodes, key=lambda e: e.start_s),
+        sample_rate_hz=det.sample_rate_hz,
+        scale="Pa" if scale_pa is not None else "full scale",
+        warnings=warnings,
+        rejected=list(det.rejected),
+    )
 
 
-def frames_heard(frame_times_s: np.ndarray, episodes: list[Episode]) -> tuple[np.ndarray,
-                                                                             np.ndarray]:
+def frames_heard(
+    frame_times_s: np.ndarray, episodes: list[Episode]
+) -> tuple[np.ndarray, np.ndarray]:
     """Per frame: covered by an episode, and the heard frequency (nan when none).
 
     Parameters
@@ -739,12 +834,13 @@ def frames_heard(frame_times_s: np.ndarray, episodes: list[Episode]) -> tuple[np
     t = np.asarray(frame_times_s, dtype=float)
     heard = np.zeros(t.shape, bool)
     freq = np.full(t.shape, np.nan)
-    for ep in sorted(episodes, key=lambda e: e.level_db):      # the loudest wins
+    for ep in sorted(episodes, key=lambda e: e.level_db):  # the loudest wins
         inside = (t >= ep.start_s) & (t <= ep.end_s)
         heard |= inside
-        if ep.track_times_s.size:          # the track has every frame of the episode
-            hz = np.interp(t[inside], ep.track_times_s,
-                           np.nan_to_num(ep.track_hz, nan=ep.frequency_hz))
+        if ep.track_times_s.size:  # the track has every frame of the episode
+            hz = np.interp(
+                t[inside], ep.track_times_s, np.nan_to_num(ep.track_hz, nan=ep.frequency_hz)
+            )
         else:
             hz = np.full(int(inside.sum()), ep.frequency_hz)
         freq[inside] = hz

@@ -26,56 +26,104 @@ class DetectorSettings:
     metadata; times in s, frequencies in Hz, tolerances relative)."""
 
     frame_s: float = setting(
-        0.1, "s", "analysis frame length (Hann window; 1 / frame_s is the bin spacing)",
-        0.02, 1.0)
+        0.1, "s", "analysis frame length (Hann window; 1 / frame_s is the bin spacing)", 0.02, 1.0
+    )
     hop_s: float = setting(
-        0.01, "s", "time between analysis frames (the detector's frame rate is 1 / hop_s)",
-        0.001, 0.5)
+        0.01,
+        "s",
+        "time between analysis frames (the detector's frame rate is 1 / hop_s)",
+        0.001,
+        0.5,
+    )
     f_lo_hz: float = setting(
-        89.1, "Hz", "lowest tone frequency considered (ECMA-418-1: 89.1 Hz)", 20.0, 20000.0)
+        89.1, "Hz", "lowest tone frequency considered (ECMA-418-1: 89.1 Hz)", 20.0, 20000.0
+    )
     f_hi_hz: float = setting(
-        11200.0, "Hz", "highest tone frequency considered (ECMA-418-1: 11.2 kHz; lowered "
+        11200.0,
+        "Hz",
+        "highest tone frequency considered (ECMA-418-1: 11.2 kHz; lowered "
         "automatically where the critical band would pass the Nyquist frequency)",
-        20.0, 40000.0)
+        20.0,
+        40000.0,
+    )
     track_tolerance: float = setting(
-        0.02, "1", "a frame's tone joins a track within this relative distance of the track's "
-        "running median frequency", 0.001, 0.2)
-    min_duration_s: float = setting(
-        0.05, "s", "shortest squeak episode", 0.0, 60.0)
+        0.02,
+        "1",
+        "a frame's tone joins a track within this relative distance of the track's "
+        "running median frequency",
+        0.001,
+        0.2,
+    )
+    min_duration_s: float = setting(0.05, "s", "shortest squeak episode", 0.0, 60.0)
     max_gap_s: float = setting(
-        0.03, "s", "gaps in a track shorter than this are bridged", 0.0, 10.0)
+        0.03, "s", "gaps in a track shorter than this are bridged", 0.0, 10.0
+    )
     order_tolerance: float = setting(
-        0.02, "1", "a tone within this relative distance of k |speed| / 2 pi is on order k",
-        0.0, 0.2)
+        0.02,
+        "1",
+        "a tone within this relative distance of k |speed| / 2 pi is on order k",
+        0.0,
+        0.2,
+    )
     max_order: int = setting(
-        60, "1", "highest motor/gear order k considered (a gear mesh is order = teeth count "
-        "of the gear on the measured shaft)", 0, 100000)
+        60,
+        "1",
+        "highest motor/gear order k considered (a gear mesh is order = teeth count "
+        "of the gear on the measured shaft)",
+        0,
+        100000,
+    )
     order_share: float = setting(
-        0.75, "1", "an episode follows order k when this share of its frames is on order k",
-        0.0, 1.0, lo_open=True)
+        0.75,
+        "1",
+        "an episode follows order k when this share of its frames is on order k",
+        0.0,
+        1.0,
+        lo_open=True,
+    )
     max_peaks: int = setting(
-        8, "1", "spectral peaks evaluated per frame (those with the largest TNR against its "
-        "limit)", 1, 64)
+        8,
+        "1",
+        "spectral peaks evaluated per frame (those with the largest TNR against its limit)",
+        1,
+        64,
+    )
     max_harmonic: int = setting(
-        10, "1", "a tone at m times a simultaneous prominent tone (m = 2..this) and at most "
+        10,
+        "1",
+        "a tone at m times a simultaneous prominent tone (m = 2..this) and at most "
         "1.5 / m of its amplitude is its harmonic (clipping: 1 / m), not a squeak of its own",
-        1, 100)
-    max_tracks: int = setting(
-        16, "1", "tone tracks followed at once (bounded memory)", 1, 256)
+        1,
+        100,
+    )
+    max_tracks: int = setting(16, "1", "tone tracks followed at once (bounded memory)", 1, 256)
     max_episode_s: float = setting(
-        60.0, "s", "a longer episode is closed and continued as a new one (bounded memory)",
-        0.1, 3600.0)
+        60.0,
+        "s",
+        "a longer episode is closed and continued as a new one (bounded memory)",
+        0.1,
+        3600.0,
+    )
     loudness_max_s: float = setting(
-        2.0, "s", "loudness over the episode, or over its last this many seconds (0: no "
-        "loudness); ISO 532-1 runs at about real time", 0.0, 60.0)
+        2.0,
+        "s",
+        "loudness over the episode, or over its last this many seconds (0: no "
+        "loudness); ISO 532-1 runs at about real time",
+        0.0,
+        60.0,
+    )
     clip_level: float = setting(
-        0.999, "1", "samples at or beyond this share of full scale count as clipped",
-        0.0, 1.0, lo_open=True)
+        0.999,
+        "1",
+        "samples at or beyond this share of full scale count as clipped",
+        0.0,
+        1.0,
+        lo_open=True,
+    )
 
     def __post_init__(self) -> None:
         check(self)
         if self.hop_s > self.frame_s:
             raise ValueError(f"hop_s = {self.hop_s:g} exceeds frame_s = {self.frame_s:g}")
         if self.f_lo_hz >= self.f_hi_hz:
-            raise ValueError(f"f_lo_hz = {self.f_lo_hz:g} is not below f_hi_hz = "
-                             f"{self.f_hi_hz:g}")
+            raise ValueError(f"f_lo_hz = {self.f_lo_hz:g} is not below f_hi_hz = {self.f_hi_hz:g}")

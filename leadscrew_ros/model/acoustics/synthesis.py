@@ -28,10 +28,18 @@ MOTOR_ORDERS = (1, 2, 3, 4, 6, 8, 12)
 HIGH_PASS_HZ = 20.0
 
 
-def microphone(times_s: Any, speed_rad_s: Any, squeak_hz: Any, squeak_level: Any = 0.05,
-               sample_rate_hz: float = 48000.0, seed: int = 0,
-               motor_orders: tuple[int, ...] = MOTOR_ORDERS, motor_level: float = 0.02,
-               noise_level: float = 0.003, onset_s: float = 0.02) -> np.ndarray:
+def microphone(
+    times_s: Any,
+    speed_rad_s: Any,
+    squeak_hz: Any,
+    squeak_level: Any = 0.05,
+    sample_rate_hz: float = 48000.0,
+    seed: int = 0,
+    motor_orders: tuple[int, ...] = MOTOR_ORDERS,
+    motor_level: float = 0.02,
+    noise_level: float = 0.003,
+    onset_s: float = 0.02,
+) -> np.ndarray:
     """Microphone samples of a stroke: motor orders, noise and the squeak tone.
 
     Parameters
@@ -69,11 +77,12 @@ def microphone(times_s: Any, speed_rad_s: Any, squeak_hz: Any, squeak_level: Any
     n = int(np.floor((times[-1] - times[0]) * fs)) + 1
     t = times[0] + np.arange(n) / fs
     rng = np.random.default_rng(seed)
-    shaft_hz = np.abs(np.interp(t, times, np.broadcast_to(
-        np.asarray(speed_rad_s, float), times.shape))) / (2 * np.pi)
-    shaft_turns = np.cumsum(shaft_hz) / fs                 # shaft angle [turns]
+    shaft_hz = np.abs(
+        np.interp(t, times, np.broadcast_to(np.asarray(speed_rad_s, float), times.shape))
+    ) / (2 * np.pi)
+    shaft_turns = np.cumsum(shaft_hz) / fs  # shaft angle [turns]
     out = noise_level * rng.standard_normal(n)
-    for k in motor_orders:                 # faded in below HIGH_PASS_HZ (no DC at standstill)
+    for k in motor_orders:  # faded in below HIGH_PASS_HZ (no DC at standstill)
         fade = np.clip(k * shaft_hz / HIGH_PASS_HZ, 0.0, 1.0)
         out += fade * motor_level / k * np.sin(2 * np.pi * (k * shaft_turns + rng.random()))
     f_sq = np.broadcast_to(np.asarray(squeak_hz, float), times.shape)
@@ -83,14 +92,17 @@ def microphone(times_s: Any, speed_rad_s: Any, squeak_hz: Any, squeak_level: Any
         gate = on_at[idx].astype(float)
         filled = np.where(on_at, f_sq, np.interp(times, times[on_at], f_sq[on_at]))
         freq = np.interp(t, times, filled)
-        level = np.interp(t, times, np.broadcast_to(np.asarray(squeak_level, float),
-                                                    times.shape))
+        level = np.interp(t, times, np.broadcast_to(np.asarray(squeak_level, float), times.shape))
         m = max(int(round(onset_s * fs)), 1)
         if m > 1:
             kernel = np.hanning(m + 2)[1:-1]
-            gate = np.clip(scipy.signal.oaconvolve(np.pad(gate, (m, m), mode="edge"),
-                                                    kernel / kernel.sum(), mode="same")[m:-m],
-                           0.0, 1.0)
+            gate = np.clip(
+                scipy.signal.oaconvolve(
+                    np.pad(gate, (m, m), mode="edge"), kernel / kernel.sum(), mode="same"
+                )[m:-m],
+                0.0,
+                1.0,
+            )
         phase = 2 * np.pi * np.cumsum(freq) / fs
         out += gate * level * np.sin(phase)
     return out.astype(np.float32)

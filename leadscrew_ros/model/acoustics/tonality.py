@@ -79,7 +79,7 @@ def critical_band(f_hz: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
     """Edges (f1, f2) [Hz] of the critical band centred on `f_hz` (ECMA-418-1)."""
     f = np.asarray(f_hz, dtype=float)
     width = 25.0 + 75.0 * (1.0 + 1.4 * (f / 1000.0) ** 2) ** 0.69
-    f1 = np.where(f < 500.0, f - width / 2, -width / 2 + np.sqrt(width ** 2 + 4 * f ** 2) / 2)
+    f1 = np.where(f < 500.0, f - width / 2, -width / 2 + np.sqrt(width**2 + 4 * f**2) / 2)
     return f1, f1 + width
 
 
@@ -87,9 +87,11 @@ def lower_band(f_hz: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
     """Edges [Hz] of the critical band just below the one centred on `f_hz` (D.9)."""
     f = np.asarray(f_hz, dtype=float)
     f2, _ = critical_band(f)
-    f1 = np.where(f < PR_LOW_HZ, 20.0,
-                  np.where(f <= 1600.0, -149.5 + 1.001 * f - 6.9e-5 * f ** 2,
-                           6.8 + 0.806 * f - 8.2e-6 * f ** 2))
+    f1 = np.where(
+        f < PR_LOW_HZ,
+        20.0,
+        np.where(f <= 1600.0, -149.5 + 1.001 * f - 6.9e-5 * f**2, 6.8 + 0.806 * f - 8.2e-6 * f**2),
+    )
     return f1, f2
 
 
@@ -97,8 +99,7 @@ def upper_band(f_hz: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
     """Edges [Hz] of the critical band just above the one centred on `f_hz` (D.9)."""
     f = np.asarray(f_hz, dtype=float)
     _, f1 = critical_band(f)
-    f2 = np.where(f <= 1600.0, 149.5 + 1.035 * f + 7.7e-5 * f ** 2,
-                  3.3 + 1.215 * f + 2.16e-5 * f ** 2)
+    f2 = np.where(f <= 1600.0, 149.5 + 1.035 * f + 7.7e-5 * f**2, 3.3 + 1.215 * f + 2.16e-5 * f**2)
     return f1, f2
 
 
@@ -107,8 +108,13 @@ def hann(n: int) -> np.ndarray:
     return (0.5 - 0.5 * np.cos(2 * np.pi * np.arange(n) / n)).astype(np.float32)
 
 
-def short_time_psd(samples: np.ndarray, sample_rate_hz: float, frame_len: int, hop: int,
-                   window: np.ndarray | None = None) -> np.ndarray:
+def short_time_psd(
+    samples: np.ndarray,
+    sample_rate_hz: float,
+    frame_len: int,
+    hop: int,
+    window: np.ndarray | None = None,
+) -> np.ndarray:
     """One-sided power spectral density of every frame, all frames in one real FFT.
 
     Parameters
@@ -137,7 +143,7 @@ def short_time_psd(samples: np.ndarray, sample_rate_hz: float, frame_len: int, h
     w = hann(frame_len) if window is None else np.asarray(window, np.float32)
     frames = np.lib.stride_tricks.sliding_window_view(x, frame_len)[::hop]
     spec = scipy.fft.rfft(frames * w, axis=1)
-    psd = spec.real ** 2 + spec.imag ** 2
+    psd = spec.real**2 + spec.imag**2
     psd *= np.float32(2.0 / (sample_rate_hz * float(np.sum(w.astype(float) ** 2))))
     psd[:, 0] *= 0.5
     if frame_len % 2 == 0:
@@ -150,12 +156,12 @@ class ToneCandidates:
     """Tone candidates of each frame: (frames, max_peaks) arrays, strongest first is not
     guaranteed; entries with `valid` False are padding (no peak there)."""
 
-    frequency_hz: np.ndarray   #: interpolated peak frequency [Hz]
-    power: np.ndarray          #: the tone's mean square [unit^2]
-    tnr_db: np.ndarray         #: tone-to-noise ratio [dB]
-    pr_db: np.ndarray          #: prominence ratio [dB]; nan where the upper band passes Nyquist
-    valid: np.ndarray          #: a peak that no stronger one inside its critical band suppresses
-    prominent: np.ndarray      #: valid, TNR or PR at or above its limit, not a harmonic
+    frequency_hz: np.ndarray  #: interpolated peak frequency [Hz]
+    power: np.ndarray  #: the tone's mean square [unit^2]
+    tnr_db: np.ndarray  #: tone-to-noise ratio [dB]
+    pr_db: np.ndarray  #: prominence ratio [dB]; nan where the upper band passes Nyquist
+    valid: np.ndarray  #: a peak that no stronger one inside its critical band suppresses
+    prominent: np.ndarray  #: valid, TNR or PR at or above its limit, not a harmonic
 
 
 class ToneAnalyzer:
@@ -180,22 +186,30 @@ class ToneAnalyzer:
         Harmonic numbers 2..max_harmonic are tested (1: no harmonic test).
     """
 
-    def __init__(self, sample_rate_hz: float, frame_len: int, f_lo_hz: float, f_hi_hz: float,
-                 max_peaks: int = 8, harmonic_tolerance: float = 0.02,
-                 max_harmonic: int = 10) -> None:
+    def __init__(
+        self,
+        sample_rate_hz: float,
+        frame_len: int,
+        f_lo_hz: float,
+        f_hi_hz: float,
+        max_peaks: int = 8,
+        harmonic_tolerance: float = 0.02,
+        max_harmonic: int = 10,
+    ) -> None:
         self.df = sample_rate_hz / frame_len
         self.n_bins = frame_len // 2 + 1
         self.max_peaks = max_peaks
         self.harmonic_tolerance = harmonic_tolerance
         self.max_harmonic = max_harmonic
-        last = self.n_bins - 1                    # the Nyquist bin is excluded from any band
+        last = self.n_bins - 1  # the Nyquist bin is excluded from any band
         f = np.arange(self.n_bins) * self.df
         f1, f2 = critical_band(f)
         a, b = self._bins(f1), self._bins(f2)
         fits = (b <= last) & (np.arange(self.n_bins) + 3 <= last)
         k_lo = max(int(np.ceil(f_lo_hz / self.df)), 2)
-        k_hi = min(int(np.floor(f_hi_hz / self.df)),
-                   int(np.nonzero(fits)[0].max()) if fits.any() else -1)
+        k_hi = min(
+            int(np.floor(f_hi_hz / self.df)), int(np.nonzero(fits)[0].max()) if fits.any() else -1
+        )
         self.k_lo, self.k_hi = k_lo, max(k_hi, k_lo - 1)
         self.f_hi_hz = self.k_hi * self.df
         k = np.arange(self.k_lo, self.k_hi + 1)
@@ -209,8 +223,9 @@ class ToneAnalyzer:
         self.ub = np.minimum(self.ub, last)
         self.lower_scale = np.where(f[k] < PR_LOW_HZ, 100.0 / np.maximum(lf2 - lf1, 1e-9), 1.0)
         self.f1, self.f2 = f1[k], f2[k]
-        self.used_bins = min(int(max(self.ub.max(initial=0), self.b.max(initial=0),
-                                     self.k_hi + 2)) + 1, self.n_bins)
+        self.used_bins = min(
+            int(max(self.ub.max(initial=0), self.b.max(initial=0), self.k_hi + 2)) + 1, self.n_bins
+        )
         self.tnr_limit = tnr_limit_db(np.maximum(f[k], 1e-9))
         self._rank_scale = self.width_hz * 10.0 ** (self.tnr_limit / 10.0)
         self.pr_limit = pr_limit_db(np.maximum(f[k], 1e-9))
@@ -230,63 +245,79 @@ class ToneAnalyzer:
         if n_frames == 0 or n_peaks == 0:
             z = np.zeros((n_frames, 0))
             return ToneCandidates(z, z, z, z, z.astype(bool), z.astype(bool))
-        p = psd[:, :self.used_bins]
+        p = psd[:, : self.used_bins]
         cum = np.zeros((n_frames, self.used_bins + 1))
         np.cumsum(p, axis=1, dtype=np.float64, out=cum[:, 1:])
         cum *= self.df
         lo, hi = self.k_lo, self.k_hi + 1
         mid = p[:, lo:hi]
-        peak = (mid > p[:, lo - 1:hi - 1]) & (mid >= p[:, lo + 1:hi + 1])
+        peak = (mid > p[:, lo - 1 : hi - 1]) & (mid >= p[:, lo + 1 : hi + 1])
         band = cum[:, self.b] - cum[:, self.a]
         # rank the peaks by a cheap TNR (three-bin tone) against their TNR limit
-        tone3 = (mid + p[:, lo - 1:hi - 1] + p[:, lo + 1:hi + 1]) * self.df
-        density = np.maximum(band - tone3, _TINY) / (np.maximum(self.b - self.a - 3, 1)
-                                                     * self.df)
+        tone3 = (mid + p[:, lo - 1 : hi - 1] + p[:, lo + 1 : hi + 1]) * self.df
+        density = np.maximum(band - tone3, _TINY) / (np.maximum(self.b - self.a - 3, 1) * self.df)
         score = np.where(peak, tone3 / (density * self._rank_scale), 0.0)
         if n_peaks < score.shape[1]:
             rel = np.argpartition(-score, n_peaks - 1, axis=1)[:, :n_peaks]
         else:
             rel = np.broadcast_to(np.arange(score.shape[1]), score.shape).copy()
         valid = np.take_along_axis(score, rel, axis=1) > 0.0
-        k = rel + lo                                          # absolute peak bins
-        near = np.stack([np.take_along_axis(p, k + d, axis=1) for d in (-2, -1, 0, 1, 2)],
-                        axis=-1).astype(np.float64)
+        k = rel + lo  # absolute peak bins
+        near = np.stack(
+            [np.take_along_axis(p, k + d, axis=1) for d in (-2, -1, 0, 1, 2)], axis=-1
+        ).astype(np.float64)
         p0 = near[..., 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             ln = np.log(np.maximum(near[..., 1:4], _TINY))
             den = ln[..., 0] - 2 * ln[..., 1] + ln[..., 2]
-            delta = np.clip(np.where(den < 0, 0.5 * (ln[..., 0] - ln[..., 2]) / den, 0.0),
-                            -0.5, 0.5)
+            delta = np.clip(
+                np.where(den < 0, 0.5 * (ln[..., 0] - ln[..., 2]) / den, 0.0), -0.5, 0.5
+            )
         freq = (k + delta) * self.df
         # the Hann main lobe: the peak, both neighbours, and the next bin on the side the
         # interpolated peak leans to
-        tone = (near[..., 1] + p0 + near[..., 3] + np.where(delta > 0, near[..., 4], 0.0)
-                + np.where(delta < 0, near[..., 0], 0.0)) * self.df
+        tone = (
+            near[..., 1]
+            + p0
+            + near[..., 3]
+            + np.where(delta > 0, near[..., 4], 0.0)
+            + np.where(delta < 0, near[..., 0], 0.0)
+        ) * self.df
         n_tone = np.where(delta != 0, 4, 3)
         total = np.take_along_axis(band, rel, axis=1)
         a, b = self.a[rel], self.b[rel]
-        noise = np.maximum(total - tone, _TINY) * self.width_hz[rel] / (
-            np.maximum(b - a - n_tone, 1) * self.df)
+        noise = (
+            np.maximum(total - tone, _TINY)
+            * self.width_hz[rel]
+            / (np.maximum(b - a - n_tone, 1) * self.df)
+        )
         tnr = 10.0 * np.log10(np.maximum(tone, _TINY) / noise)
-        lower = (cum[np.arange(n_frames)[:, None], self.lb[rel]]
-                 - cum[np.arange(n_frames)[:, None], self.la[rel]]) * self.lower_scale[rel]
-        upper = (cum[np.arange(n_frames)[:, None], self.ub[rel]]
-                 - cum[np.arange(n_frames)[:, None], self.ua[rel]])
-        pr = 10.0 * np.log10(np.maximum(total, _TINY) / np.maximum(0.5 * (lower + upper),
-                                                                     _TINY))
+        lower = (
+            cum[np.arange(n_frames)[:, None], self.lb[rel]]
+            - cum[np.arange(n_frames)[:, None], self.la[rel]]
+        ) * self.lower_scale[rel]
+        upper = (
+            cum[np.arange(n_frames)[:, None], self.ub[rel]]
+            - cum[np.arange(n_frames)[:, None], self.ua[rel]]
+        )
+        pr = 10.0 * np.log10(np.maximum(total, _TINY) / np.maximum(0.5 * (lower + upper), _TINY))
         pr = np.where(self.pr_ok[rel], pr, np.nan)
         # a stronger peak inside the critical band suppresses a candidate (ties: lower index)
         fi, fj = freq[:, :, None], freq[:, None, :]
         stronger = (p0[:, :, None] > p0[:, None, :]) | (
-            (p0[:, :, None] == p0[:, None, :]) & (rel[:, :, None] < rel[:, None, :]))
+            (p0[:, :, None] == p0[:, None, :]) & (rel[:, :, None] < rel[:, None, :])
+        )
         inside = (fi >= self.f1[rel][:, None, :]) & (fi <= self.f2[rel][:, None, :])
         valid &= ~np.any(valid[:, :, None] & stronger & inside, axis=1)
         prominent = valid & ((tnr >= self.tnr_limit[rel]) | (pr >= self.pr_limit[rel]))
         if self.max_harmonic >= 2:
             ratio = fj / np.maximum(fi, _TINY)
             m = np.rint(ratio)
-            harmonic = ((m >= 2) & (m <= self.max_harmonic)
-                        & (np.abs(ratio - m) <= self.harmonic_tolerance * ratio)
-                        & (tone[:, None, :] * m ** 2 <= 2.25 * tone[:, :, None]))
+            harmonic = (
+                (m >= 2)
+                & (m <= self.max_harmonic)
+                & (np.abs(ratio - m) <= self.harmonic_tolerance * ratio)
+                & (tone[:, None, :] * m**2 <= 2.25 * tone[:, :, None])
+            )
             prominent &= ~np.any(prominent[:, :, None] & harmonic, axis=1)
         return ToneCandidates(freq, tone, tnr, pr, valid, prominent)

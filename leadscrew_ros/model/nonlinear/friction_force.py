@@ -39,7 +39,7 @@ from ..physics.kernels import thread_factors
 from ..physics.modes import ModalBasis
 from ..physics.parameters import ScrewParameters
 
-_SERIES_BELOW = 1e-2     # |V| / v_eps below which tanh(x) / x and its derivative use series
+_SERIES_BELOW = 1e-2  # |V| / v_eps below which tanh(x) / x and its derivative use series
 
 
 def _direction_factors(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -47,12 +47,12 @@ def _direction_factors(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     (the closed forms cancel there)."""
     th = np.tanh(x)
     small = x < _SERIES_BELOW
-    if not small.any():                       # sliding: the common case, no series
+    if not small.any():  # sliding: the common case, no series
         a = th / x
         return a, (1 - th * th) - a
-    xs = np.where(small, 1.0, x)              # no 0 / 0 in the discarded branch
-    a = np.where(small, 1 - x * x / 3 + 2 * x ** 4 / 15, th / xs)
-    b = np.where(small, -2 * x * x / 3 + 8 * x ** 4 / 15, (1 - th * th) - th / xs)
+    xs = np.where(small, 1.0, x)  # no 0 / 0 in the discarded branch
+    a = np.where(small, 1 - x * x / 3 + 2 * x**4 / 15, th / xs)
+    b = np.where(small, -2 * x * x / 3 + 8 * x**4 / 15, (1 - th * th) - th / xs)
     return a, b
 
 
@@ -76,8 +76,15 @@ class HelixFriction:
         Gauss-Legendre points per thread turn of the contact.
     """
 
-    def __init__(self, params: ScrewParameters, basis: ModalBasis, speed_rad_s: float,
-                 load_n: float, regularisation_m_s: float, points_per_turn: int):
+    def __init__(
+        self,
+        params: ScrewParameters,
+        basis: ModalBasis,
+        speed_rad_s: float,
+        load_n: float,
+        regularisation_m_s: float,
+        points_per_turn: int,
+    ):
         self.params, self.speed = params, float(speed_rad_s)
         self.v_eps = float(regularisation_m_s)
         alpha_o, alpha = contact_angles(params)
@@ -91,13 +98,13 @@ class HelixFriction:
         # w_a and k x w_a in (e_r, e_theta, k) per kind a (x, y, 0), as in kernels._consistent
         w_kind = np.array([[c, -s, zero], [s, c, zero], [zero, rr, zero]])
         kw_kind = np.array([[s, c, zero], [-c, s, zero], [-rr, zero, zero]])
-        phi = basis.shapes(params.lead_per_rad_m * theta)                  # (N, P)
-        w_modes = w_kind[basis.kind] * phi[:, None, :]         # (N, 3, P): w_a Phi_i per mode
+        phi = basis.shapes(params.lead_per_rad_m * theta)  # (N, P)
+        w_modes = w_kind[basis.kind] * phi[:, None, :]  # (N, 3, P): w_a Phi_i per mode
         n_modes = basis.n
         self._w_flat = w_modes.reshape(n_modes, -1)
         self._kw_flat = (kw_kind[basis.kind] * phi[:, None, :]).reshape(n_modes, -1)
-        self._state_velocity = np.vstack((self.speed * self._kw_flat, self._w_flat))   # (2N, 3P)
-        self._weighted = w_modes * weight                       # quadrature weights applied
+        self._state_velocity = np.vstack((self.speed * self._kw_flat, self._w_flat))  # (2N, 3P)
+        self._weighted = w_modes * weight  # quadrature weights applied
         self._ww = self._weighted.reshape(n_modes, -1)
         beta = params.helix_angle_rad
         self.v0 = r * self.speed * np.array([0.0, 1.0, math.tan(beta)])
@@ -125,15 +132,18 @@ class HelixFriction:
         return v.reshape(3, -1) + self.v0[:, None]
 
     @overload
-    def force(self, q: np.ndarray, qdot: np.ndarray, jacobian: Literal[False] = False
-              ) -> np.ndarray: ...
+    def force(
+        self, q: np.ndarray, qdot: np.ndarray, jacobian: Literal[False] = False
+    ) -> np.ndarray: ...
 
     @overload
-    def force(self, q: np.ndarray, qdot: np.ndarray, jacobian: Literal[True]
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+    def force(
+        self, q: np.ndarray, qdot: np.ndarray, jacobian: Literal[True]
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 
-    def force(self, q: np.ndarray, qdot: np.ndarray, jacobian: bool = False
-              ) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def force(
+        self, q: np.ndarray, qdot: np.ndarray, jacobian: bool = False
+    ) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Generalised friction forces Q (N,) and, with `jacobian`, dQ/dq and dQ/dqdot (N, N).
 
         Parameters
@@ -154,20 +164,24 @@ class HelixFriction:
         speed = np.sqrt(np.einsum("cp,cp->p", vc, vc))
         a, b = _direction_factors(speed / self.v_eps)
         mu = friction_coefficient(self.params, speed)
-        phi = mu * a / self.v_eps                             # f = -n phi(|V|) V
+        phi = mu * a / self.v_eps  # f = -n phi(|V|) V
         f = -self.normal_per_rad * phi * vc
         q_force = self._ww @ f.ravel()
         if not jacobian:
             return q_force
         p = self.params
-        dmu = -p.friction_decay_s_m * (p.mu_static - p.mu_kinetic) * np.exp(
-            -p.friction_decay_s_m * speed)
+        dmu = (
+            -p.friction_decay_s_m
+            * (p.mu_static - p.mu_kinetic)
+            * np.exp(-p.friction_decay_s_m * speed)
+        )
         # df/dV = -n (phi I + |V| phi'(|V|) e e), e = V / |V|; |V| phi' = (mu' |V| a + mu b)
         # / v_eps, and |V| phi' e e = (mu' a / |V| + mu b / |V|^2) V V / v_eps (finite at 0)
         with np.errstate(invalid="ignore", divide="ignore"):
             e = np.where(speed > 0, vc / speed, 0.0)
         radial = (dmu * speed * a + mu * b) / self.v_eps
-        df = -self.normal_per_rad * (phi * np.eye(3)[:, :, None]
-                                     + radial * e[:, None, :] * e[None, :, :])    # (3, 3, P)
+        df = -self.normal_per_rad * (
+            phi * np.eye(3)[:, :, None] + radial * e[:, None, :] * e[None, :, :]
+        )  # (3, 3, P)
         left = np.einsum("icp,cdp->idp", self._weighted, df).reshape(len(q), -1)
         return q_force, self.speed * (left @ self._kw_flat.T), left @ self._w_flat.T

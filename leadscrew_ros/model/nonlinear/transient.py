@@ -45,15 +45,15 @@ from ..physics.assembly import gyroscopic_unit
 from ..physics.contact import contact_angles
 from ..physics.display import exact
 from ..physics.metadata import check, setting
-from .friction_force import HelixFriction
 from ..physics.modes import KIND_T, KIND_X, KIND_Y, ModalBasis, modal_basis
 from ..physics.parameters import ParameterError, ScrewParameters
 from ..squeak_model import check_operating_point
+from .friction_force import HelixFriction
 
 METHODS = ("LSODA", "Radau", "DOP853")
-ATOL_PER_RTOL = 100      # absolute tolerance of each state: 100 rtol times its start size
-MIN_SAMPLES, MAX_SAMPLES = 256, 2_000_000    # stored samples of a run
-STEPS_PER_PERIOD = 8     # largest step: this fraction of the period of the highest mode kept
+ATOL_PER_RTOL = 100  # absolute tolerance of each state: 100 rtol times its start size
+MIN_SAMPLES, MAX_SAMPLES = 256, 2_000_000  # stored samples of a run
+STEPS_PER_PERIOD = 8  # largest step: this fraction of the period of the highest mode kept
 # Plausible |speed| of a simulation: from a turn in about 70 days (below it the steady sliding
 # and its perturbation underflow the integrator) to the first critical speed (the model's).
 MIN_SPEED_RAD_S = 1e-6
@@ -91,14 +91,26 @@ class TransientSettings:
     duration_s: float = setting(0.2, "s", "simulated time", 0.0, 10.0, lo_open=True)
     sample_rate_hz: int = setting(96000, "Hz", "rate of the stored samples", 1000, 1000000)
     modes: int = setting(0, "1", "keep the K lowest-frequency modes (0: all)", 0, 1000)
-    regularisation_m_s: float = setting(1e-5, "m/s", "width v_eps of the tanh regularisation "
-                                        "of the friction direction near zero sliding speed",
-                                        0.0, 1.0, lo_open=True)
-    perturbation: float = setting(1e-6, "1", "initial perturbation of every mode, as a "
-                                  "fraction of the steady sliding speed", 0.0, 10.0, lo_open=True)
-    seed: int = setting(0, "1", "seed of the initial perturbation", 0, 2 ** 31 - 1)
-    points_per_turn: int = setting(16, "1", "Gauss-Legendre points per thread turn of the "
-                                   "contact integral", 4, 64)
+    regularisation_m_s: float = setting(
+        1e-5,
+        "m/s",
+        "width v_eps of the tanh regularisation of the friction direction near zero sliding speed",
+        0.0,
+        1.0,
+        lo_open=True,
+    )
+    perturbation: float = setting(
+        1e-6,
+        "1",
+        "initial perturbation of every mode, as a fraction of the steady sliding speed",
+        0.0,
+        10.0,
+        lo_open=True,
+    )
+    seed: int = setting(0, "1", "seed of the initial perturbation", 0, 2**31 - 1)
+    points_per_turn: int = setting(
+        16, "1", "Gauss-Legendre points per thread turn of the contact integral", 4, 64
+    )
     rtol: float = setting(1e-8, "1", "relative tolerance of the integrator", 1e-12, 1e-2)
     method: str = setting("LSODA", "", "scipy solve_ivp method", choices=METHODS)
 
@@ -108,7 +120,8 @@ class TransientSettings:
         if not MIN_SAMPLES <= samples <= MAX_SAMPLES:
             raise ParameterError(
                 f"duration_s * sample_rate_hz = {samples:.6g} samples: between {MIN_SAMPLES} "
-                f"and {MAX_SAMPLES} are allowed (at most a few hundred MB of modal coordinates)")
+                f"and {MAX_SAMPLES} are allowed (at most a few hundred MB of modal coordinates)"
+            )
 
 
 @dataclass(frozen=True)
@@ -170,13 +183,18 @@ class TransientResult:
 def kept_basis(basis: ModalBasis, modes: int) -> tuple[ModalBasis, np.ndarray]:
     """The `modes` lowest-frequency modes of `basis` in basis order (all when 0), and their
     indices in `basis`."""
-    keep = (np.arange(basis.n) if modes == 0 or modes >= basis.n else
-            np.sort(np.argsort(basis.omega_rad_s, kind="stable")[:modes]))
+    keep = (
+        np.arange(basis.n)
+        if modes == 0 or modes >= basis.n
+        else np.sort(np.argsort(basis.omega_rad_s, kind="stable")[:modes])
+    )
     if len(keep) == basis.n:
         return basis, keep
-    return replace(basis, labels=tuple(basis.labels[i] for i in keep),
-                   **{f.name: getattr(basis, f.name)[keep] for f in fields(basis)
-                      if f.name != "labels"}), keep
+    return replace(
+        basis,
+        labels=tuple(basis.labels[i] for i in keep),
+        **{f.name: getattr(basis, f.name)[keep] for f in fields(basis) if f.name != "labels"},
+    ), keep
 
 
 class ModalEquations:
@@ -194,16 +212,28 @@ class ModalEquations:
         Modes kept, regularisation and quadrature.
     """
 
-    def __init__(self, params: ScrewParameters, speed_rad_s: float, load_n: float,
-                 settings: TransientSettings):
+    def __init__(
+        self,
+        params: ScrewParameters,
+        speed_rad_s: float,
+        load_n: float,
+        settings: TransientSettings,
+    ):
         self.basis, self.keep = kept_basis(modal_basis(params), settings.modes)
-        self.friction = HelixFriction(params, self.basis, speed_rad_s, load_n,
-                                      settings.regularisation_m_s, settings.points_per_turn)
+        self.friction = HelixFriction(
+            params,
+            self.basis,
+            speed_rad_s,
+            load_n,
+            settings.regularisation_m_s,
+            settings.points_per_turn,
+        )
         om, n = self.basis.omega_rad_s, self.basis.n
         self.n = n
-        self.stiffness = np.diag(om ** 2 - speed_rad_s ** 2)
+        self.stiffness = np.diag(om**2 - speed_rad_s**2)
         self.damping = np.diag(2 * params.modal_damping * om) + speed_rad_s * gyroscopic_unit(
-            self.basis)
+            self.basis
+        )
         self.q_static = self._static_deflection()
         self.q_force_static = self.friction.force(self.q_static, np.zeros(n))
 
@@ -216,13 +246,15 @@ class ModalEquations:
             try:
                 step = np.linalg.solve(self.stiffness - jq, force - self.stiffness @ q)
             except np.linalg.LinAlgError:
-                raise ParameterError("no steady sliding: the static stiffness is singular "
-                                     "(a critical speed)") from None
+                raise ParameterError(
+                    "no steady sliding: the static stiffness is singular (a critical speed)"
+                ) from None
             q = q + step
             if np.abs(step).max() <= 1e-13 * max(np.abs(q).max(), 1e-300):
                 return q
-        raise ParameterError("no steady sliding: the static deflection under the steady "
-                             "friction did not converge")
+        raise ParameterError(
+            "no steady sliding: the static deflection under the steady friction did not converge"
+        )
 
     def rhs(self, _t: float, y: np.ndarray) -> np.ndarray:
         """d/dt (dq, dqdot) of the deviation dq = q - q* from steady sliding.
@@ -288,20 +320,27 @@ def _nut_centre(eq: ModalEquations, q: np.ndarray, qdot: np.ndarray) -> dict[str
     per_kind = [np.where(b.kind == k, phi, 0.0) for k in (KIND_X, KIND_Y, KIND_T)]
     s, c, r, om = math.sin(theta), math.cos(theta), p.radius_m, eq.friction.speed
     (x, y, z), (xd, yd, zd) = ([qq @ k for k in per_kind] for qq in (q, qdot))
-    radial = om * (s * x - c * y - r * z) + c * xd + s * yd                     # (3)
+    radial = om * (s * x - c * y - r * z) + c * xd + s * yd  # (3)
     tangential = om * (c * x + s * y) - s * xd + c * yd + r * zd
     xs, ys, zs = (eq.q_static @ k for k in per_kind)
-    steady = eq.friction.v0 + np.array([om * (s * xs - c * ys - r * zs),
-                                        om * (c * xs + s * ys), 0.0])
-    vc = np.stack((steady[0] + radial, steady[1] + tangential,
-                   np.full_like(radial, steady[2])))
-    return {"lateral": np.stack((x, y), 1), "torsion": z,
-            "surface": np.stack((radial, tangential), 1),
-            "sliding": np.sqrt((vc * vc).sum(0))}
+    steady = eq.friction.v0 + np.array(
+        [om * (s * xs - c * ys - r * zs), om * (c * xs + s * ys), 0.0]
+    )
+    vc = np.stack((steady[0] + radial, steady[1] + tangential, np.full_like(radial, steady[2])))
+    return {
+        "lateral": np.stack((x, y), 1),
+        "torsion": z,
+        "surface": np.stack((radial, tangential), 1),
+        "sliding": np.sqrt((vc * vc).sum(0)),
+    }
 
 
-def simulate(params: ScrewParameters, speed_rad_s: float, load_n: float,
-             settings: TransientSettings | None = None) -> TransientResult:
+def simulate(
+    params: ScrewParameters,
+    speed_rad_s: float,
+    load_n: float,
+    settings: TransientSettings | None = None,
+) -> TransientResult:
     """Integrate the nonlinear modal equations from steady sliding plus a perturbation.
 
     Parameters
@@ -332,14 +371,18 @@ def simulate(params: ScrewParameters, speed_rad_s: float, load_n: float,
     speed_rad_s, load_n = check_operating_point(speed_rad_s, load_n)
     if speed_rad_s == 0:
         raise ParameterError("speed = 0: there is no steady sliding to start from")
-    if abs(speed_rad_s) < MIN_SPEED_RAD_S:      # else LSODA's "Unexpected istate" (underflow)
-        raise ParameterError(f"|speed| = {exact(abs(speed_rad_s))} rad/s is below "
-                             f"{MIN_SPEED_RAD_S:g} rad/s: no steady sliding to simulate")
-    critical = float(modal_basis(params).omega_rad_s.min())     # SqueakModel's, the full basis
-    if abs(speed_rad_s) >= critical:            # else an overflow or a static divergence
-        raise ParameterError(f"|speed| = {exact(abs(speed_rad_s))} rad/s is at or above the "
-                             f"first critical speed {critical:.4g} rad/s: the model holds "
-                             f"below it")
+    if abs(speed_rad_s) < MIN_SPEED_RAD_S:  # else LSODA's "Unexpected istate" (underflow)
+        raise ParameterError(
+            f"|speed| = {exact(abs(speed_rad_s))} rad/s is below "
+            f"{MIN_SPEED_RAD_S:g} rad/s: no steady sliding to simulate"
+        )
+    critical = float(modal_basis(params).omega_rad_s.min())  # SqueakModel's, the full basis
+    if abs(speed_rad_s) >= critical:  # else an overflow or a static divergence
+        raise ParameterError(
+            f"|speed| = {exact(abs(speed_rad_s))} rad/s is at or above the "
+            f"first critical speed {critical:.4g} rad/s: the model holds "
+            f"below it"
+        )
     eq = ModalEquations(params, speed_rad_s, load_n, settings)
     n, om = eq.n, eq.basis.omega_rad_s
     sliding = params.radius_m * abs(speed_rad_s) / math.cos(params.helix_angle_rad)
@@ -352,17 +395,35 @@ def simulate(params: ScrewParameters, speed_rad_s: float, load_n: float,
     atol = np.concatenate((scale / om, scale)) * (ATOL_PER_RTOL * settings.rtol)
     max_step = 2 * math.pi / (STEPS_PER_PERIOD * om.max())
     jac = {} if settings.method == "DOP853" else {"jac": eq.jacobian}
-    sol = solve_ivp(eq.rhs, (0.0, t[-1]), y0, method=settings.method, t_eval=t,
-                    rtol=settings.rtol, atol=atol, max_step=max_step, **jac)
+    sol = solve_ivp(
+        eq.rhs,
+        (0.0, t[-1]),
+        y0,
+        method=settings.method,
+        t_eval=t,
+        rtol=settings.rtol,
+        atol=atol,
+        max_step=max_step,
+        **jac,
+    )
     if sol.status != 0:
         raise ParameterError(f"the integrator failed: {sol.message}")
     q, qdot = sol.y[:n].T, sol.y[n:].T
     at_nut = _nut_centre(eq, q, qdot)
     return TransientResult(
-        speed_rad_s=float(speed_rad_s), load_n=float(load_n), labels=eq.basis.labels,
-        omega_rad_s=om, time_s=sol.t, q=q, qdot=qdot, q_static=eq.q_static,
-        lateral_m=at_nut["lateral"], torsion_rad=at_nut["torsion"],
-        surface_velocity_m_s=at_nut["surface"], sliding_speed_m_s=at_nut["sliding"],
+        speed_rad_s=float(speed_rad_s),
+        load_n=float(load_n),
+        labels=eq.basis.labels,
+        omega_rad_s=om,
+        time_s=sol.t,
+        q=q,
+        qdot=qdot,
+        q_static=eq.q_static,
+        lateral_m=at_nut["lateral"],
+        torsion_rad=at_nut["torsion"],
+        surface_velocity_m_s=at_nut["surface"],
+        sliding_speed_m_s=at_nut["sliding"],
         steady_sliding_m_s=sliding,
         jacobian_eigenvalues=np.linalg.eigvals(eq.jacobian(0.0, np.zeros(2 * n))),
-        evaluations=int(sol.nfev))
+        evaluations=int(sol.nfev),
+    )

@@ -39,17 +39,17 @@ from ..squeak_model import SqueakModel
 from ..uncertainty.scatter import Scatter
 from .transient import TransientResult
 
-LINEAR_FRACTION = 0.01      # linear regime: amplitude below this fraction of saturation
-SATURATED_FRACTION = 0.9    # saturation time: amplitude first reaches this fraction
-TAIL = 0.2                  # last fraction of the run that decides the regime
-STEADY_CHANGE = 0.1         # limit cycle: the amplitude changes less over the tail
-ENGAGED_FRACTION = 0.01     # ... and the vibration velocity is at least this fraction of
+LINEAR_FRACTION = 0.01  # linear regime: amplitude below this fraction of saturation
+SATURATED_FRACTION = 0.9  # saturation time: amplitude first reaches this fraction
+TAIL = 0.2  # last fraction of the run that decides the regime
+STEADY_CHANGE = 0.1  # limit cycle: the amplitude changes less over the tail
+ENGAGED_FRACTION = 0.01  # ... and the vibration velocity is at least this fraction of
 #                             the steady sliding speed (the friction nonlinearity engaged)
-DECAY_FLOOR = 1e-3          # a decaying run is fitted while a stays above this fraction of
+DECAY_FLOOR = 1e-3  # a decaying run is fitted while a stays above this fraction of
 #                             its start (the integrator's absolute tolerance is 1e-6 of it)
-MIN_FIT_SAMPLES = 64        # fewest samples of the linear fit window
+MIN_FIT_SAMPLES = 64  # fewest samples of the linear fit window
 HARMONICS = range(2, 7)
-_PAD = 8                    # zero padding of the spectra
+_PAD = 8  # zero padding of the spectra
 
 
 @dataclass(frozen=True)
@@ -147,13 +147,16 @@ class TransientAnalysis:
         dict
             Field name to value, units as in Attributes (without the amplitude series).
         """
-        return {"regime": self.regime, "linear_fit": asdict(self.linear_fit),
-                "limit_cycle": None if self.limit_cycle is None else asdict(self.limit_cycle)}
+        return {
+            "regime": self.regime,
+            "linear_fit": asdict(self.linear_fit),
+            "limit_cycle": None if self.limit_cycle is None else asdict(self.limit_cycle),
+        }
 
 
 def amplitude(run: TransientResult) -> np.ndarray:
     """The modal energy norm a(t) of the module docstring, per sample."""
-    return np.sqrt((run.qdot ** 2).sum(1) + ((run.q * run.omega_rad_s) ** 2).sum(1))
+    return np.sqrt((run.qdot**2).sum(1) + ((run.q * run.omega_rad_s) ** 2).sum(1))
 
 
 def fit_growth(t: np.ndarray, x: np.ndarray) -> tuple[float, float, float]:
@@ -179,17 +182,19 @@ def fit_growth(t: np.ndarray, x: np.ndarray) -> tuple[float, float, float]:
     spectrum = np.abs(np.fft.rfft(y * np.hanning(len(y)), _PAD * len(y)))
     w0 = 2 * math.pi * np.fft.rfftfreq(_PAD * len(y), dt)[spectrum[1:].argmax() + 1]
     half = len(y) // 2
-    s0 = math.log(max(np.sqrt(np.mean(y[half:] ** 2)), 1e-300)
-                  / max(np.sqrt(np.mean(y[:half] ** 2)), 1e-300)) / (tc[half] - tc[0] or 1)
+    s0 = math.log(
+        max(np.sqrt(np.mean(y[half:] ** 2)), 1e-300) / max(np.sqrt(np.mean(y[:half] ** 2)), 1e-300)
+    ) / (tc[half] - tc[0] or 1)
     basis = np.stack((np.cos(w0 * tc), np.sin(w0 * tc))) * np.exp(s0 * tc)
     ab = np.linalg.lstsq(basis.T, y, rcond=None)[0]
 
     def residual(v: np.ndarray) -> np.ndarray:
         return np.exp(v[0] * tc) * (v[2] * np.cos(v[1] * tc) + v[3] * np.sin(v[1] * tc)) - y
 
-    sol = least_squares(residual, np.array([s0, w0, *ab]), x_scale="jac", xtol=1e-14,
-                        ftol=1e-14, gtol=1e-14)
-    rel = float(np.sqrt(np.mean(sol.fun ** 2) / np.mean(y ** 2)))
+    sol = least_squares(
+        residual, np.array([s0, w0, *ab]), x_scale="jac", xtol=1e-14, ftol=1e-14, gtol=1e-14
+    )
+    rel = float(np.sqrt(np.mean(sol.fun**2) / np.mean(y**2)))
     return float(sol.x[0]), float(abs(sol.x[1]) / (2 * math.pi)), rel
 
 
@@ -226,23 +231,29 @@ def analyse(run: TransientResult) -> TransientAnalysis:
     change = np.polyfit(t[tail], np.log(a[tail]), 1)[0] * (t[-1] - t[tail][0])
     vibration = np.abs(run.surface_velocity_m_s).max(1)
     engaged = vibration[tail].max() >= ENGAGED_FRACTION * run.steady_sliding_m_s
-    regime = ("limit cycle" if engaged and abs(change) < math.log1p(STEADY_CHANGE) else
-              "growing" if change > 0 else "decaying")
+    regime = (
+        "limit cycle"
+        if engaged and abs(change) < math.log1p(STEADY_CHANGE)
+        else "growing"
+        if change > 0
+        else "decaying"
+    )
     a_sat = float(np.median(a[tail]))
     if regime == "limit cycle":
         linear = a < LINEAR_FRACTION * a_sat
     elif regime == "growing":
         linear = vibration < LINEAR_FRACTION * ENGAGED_FRACTION * run.steady_sliding_m_s
-    else:                                # down to where the integrator's tolerance shows
+    else:  # down to where the integrator's tolerance shows
         linear = a >= DECAY_FLOOR * a[0]
     end = int(np.argmin(linear)) if linear[0] and not linear.all() else len(t)
     end = max(end, min(len(t), MIN_FIT_SAMPLES))
     window = slice(end // 2, end)
     q = run.q[window]
-    j = int(np.sqrt((q ** 2).mean(0)).argmax())
+    j = int(np.sqrt((q**2).mean(0)).argmax())
     growth, freq, residual = fit_growth(t[window], q[:, j])
-    fit = LinearFit(growth, freq, run.labels[j], float(t[window][0]), float(t[window][-1]),
-                    residual)
+    fit = LinearFit(
+        growth, freq, run.labels[j], float(t[window][0]), float(t[window][-1]), residual
+    )
     if regime != "limit cycle":
         return TransientAnalysis(regime, fit, None, a)
     sat = int(np.argmax(a >= SATURATED_FRACTION * a_sat))
@@ -257,12 +268,15 @@ def analyse(run: TransientResult) -> TransientAnalysis:
         surface_velocity_rms_m_s=float(np.sqrt(np.mean(v[:, 1] ** 2))),
         radial_velocity_m_s=float(np.abs(v[:, 0]).max()),
         min_sliding_m_s=float(run.sliding_speed_m_s[steady].min()),
-        fundamental_hz=f0, harmonics_db=harmonics)
+        fundamental_hz=f0,
+        harmonics_db=harmonics,
+    )
     return TransientAnalysis(regime, fit, cycle, a)
 
 
-def linear_counterparts(params: ScrewParameters, speed_rad_s: float, load_n: float,
-                        fit: LinearFit) -> dict[str, dict]:
+def linear_counterparts(
+    params: ScrewParameters, speed_rad_s: float, load_n: float, fit: LinearFit
+) -> dict[str, dict]:
     """The eigenvalue of the fitted mode from each formulation at the same point.
 
     The mode with the fit's label closest in frequency (any mode closest in frequency when
@@ -288,17 +302,30 @@ def linear_counterparts(params: ScrewParameters, speed_rad_s: float, load_n: flo
     """
     out: dict[str, dict[str, Any]] = {}
     for name in FORMULATIONS:
-        pred = SqueakModel(params.with_(formulation=name), Scatter({})).predict(
-            speed_rad_s, load_n)
+        pred = SqueakModel(params.with_(formulation=name), Scatter({})).predict(speed_rad_s, load_n)
         if not pred.valid or not pred.modes:
-            out[name] = {"growth_rate": None, "frequency_hz": None, "mode": None,
-                         "unstable": None, "most_unstable": None, "reason": pred.reason}
+            out[name] = {
+                "growth_rate": None,
+                "frequency_hz": None,
+                "mode": None,
+                "unstable": None,
+                "most_unstable": None,
+                "reason": pred.reason,
+            }
             continue
         same = [m for m in pred.modes if m.label == fit.mode] or list(pred.modes)
         m = min(same, key=lambda m: abs(m.frequency_hz - fit.frequency_hz))
         top = pred.modes[0]
-        out[name] = {"growth_rate": m.growth_rate, "frequency_hz": m.frequency_hz,
-                     "mode": m.label, "unstable": m.unstable,
-                     "most_unstable": {"mode": top.label, "frequency_hz": top.frequency_hz,
-                                       "growth_rate": top.growth_rate}, "reason": ""}
+        out[name] = {
+            "growth_rate": m.growth_rate,
+            "frequency_hz": m.frequency_hz,
+            "mode": m.label,
+            "unstable": m.unstable,
+            "most_unstable": {
+                "mode": top.label,
+                "frequency_hz": top.frequency_hz,
+                "growth_rate": top.growth_rate,
+            },
+            "reason": "",
+        }
     return out

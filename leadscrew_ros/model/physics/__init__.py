@@ -8,5 +8,15 @@ from .modes import ModalBasis, modal_basis
 from .parameters import FORMULATIONS, ParameterError, ScrewParameters, field_names
 from .stability import ModeResult
 
-__all__ = ["FORMULATIONS", "Geometry", "ModalBasis", "ModeResult", "ParameterError",
-           "ScrewParameters", "SystemMatrices", "build_geometry", "field_names", "modal_basis"]
+__all__ = [
+    "FORMULATIONS",
+    "Geometry",
+    "ModalBasis",
+    "ModeResult",
+    "ParameterError",
+    "ScrewParameters",
+    "SystemMatrices",
+    "build_geometry",
+    "field_names",
+    "modal_basis",
+]

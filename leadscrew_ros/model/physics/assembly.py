@@ -11,10 +11,11 @@ costs only the closed-form contact integrals.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
 from functools import cached_property, lru_cache
 from types import SimpleNamespace
-from typing import Mapping, cast
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -107,9 +108,9 @@ class Geometry:
         s = scales(self.params, speed_rad_s, load_n, self.contact.alpha)
         W = {k: float(s[k]) * v for k, v in self.contact.unit.items()}
         om = self.basis.omega_rad_s
-        C = np.diag(2 * self.params.modal_damping * om)                            # (A.1)
-        G = speed_rad_s * self.G_unit                                               # (A.2)
-        K = np.diag(om ** 2 - speed_rad_s ** 2) + W["W1"] + W["W2"] + W["W5q"]
+        C = np.diag(2 * self.params.modal_damping * om)  # (A.1)
+        G = speed_rad_s * self.G_unit  # (A.2)
+        K = np.diag(om**2 - speed_rad_s**2) + W["W1"] + W["W2"] + W["W5q"]
         D = C + G + W["W3"] + W["W4"] + W["W5qdot"]
         return SystemMatrices(C=C, G=G, W=W, stiffness=K, damping=D)
 
@@ -119,12 +120,16 @@ class Geometry:
         n, om = self.n, self.basis.omega_rad_s
         a = np.zeros((2 * n, 2 * n))
         a[np.arange(n), n + np.arange(n)] = 1.0
-        a[n + np.arange(n), np.arange(n)] = -om ** 2
-        a[n + np.arange(n), n + np.arange(n)] = -2 * self.params.modal_damping * om    # (A.1)
+        a[n + np.arange(n), np.arange(n)] = -(om**2)
+        a[n + np.arange(n), n + np.arange(n)] = -2 * self.params.modal_damping * om  # (A.1)
         return a
 
-    def state_matrices(self, speed_rad_s: ArrayLike, load_n: ArrayLike,
-                       scattered: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+    def state_matrices(
+        self,
+        speed_rad_s: ArrayLike,
+        load_n: ArrayLike,
+        scattered: Mapping[str, np.ndarray] | None = None,
+    ) -> np.ndarray:
         """First-order state matrices [[0, I], [-K, -D]] of (27) for arrays of operating points
         (broadcast). One matrix product rescales all precomputed parts.
 
@@ -144,19 +149,30 @@ class Geometry:
         ndarray
             Shape (..., 2N, 2N).
         """
-        if not scattered and (type(speed_rad_s) is float and type(load_n) is float
-                              or np.ndim(speed_rad_s) == 0 and np.ndim(load_n) == 0):
+        if not scattered and (
+            type(speed_rad_s) is float
+            and type(load_n) is float
+            or np.ndim(speed_rad_s) == 0
+            and np.ndim(load_n) == 0
+        ):
             return self._state_matrix(float(cast(float, speed_rad_s)), float(cast(float, load_n)))
         speed = np.asarray(speed_rad_s, float)
-        if scattered:                          # one matrix per sample, whatever varies
-            speed = np.broadcast_to(speed, np.broadcast_shapes(
-                speed.shape, *(np.shape(v) for v in scattered.values())))
-        params = self.params if not scattered else SimpleNamespace(
-            **{**self.params.as_dict(), **scattered})
+        if scattered:  # one matrix per sample, whatever varies
+            speed = np.broadcast_to(
+                speed, np.broadcast_shapes(speed.shape, *(np.shape(v) for v in scattered.values()))
+            )
+        params = (
+            self.params
+            if not scattered
+            else SimpleNamespace(**{**self.params.as_dict(), **scattered})
+        )
         s = scales(params, speed, load_n, self.contact.alpha)
         parts = (s["W1"], s["W5q"], s["W3"], s["W5qdot"], speed)
-        coef = (np.array(parts) if all(np.ndim(x) == 0 for x in parts)
-                else np.stack(np.broadcast_arrays(*parts), axis=-1))
+        coef = (
+            np.array(parts)
+            if all(np.ndim(x) == 0 for x in parts)
+            else np.stack(np.broadcast_arrays(*parts), axis=-1)
+        )
         n = self.n
         # einsum, not @: a BLAS matmul here wakes OpenBLAS threads that keep spinning on the
         # other core through the following eigen-solve (measured: 1.8 CPU-s per wall-s).
@@ -165,9 +181,9 @@ class Geometry:
         out = np.empty(lower.shape[:-2] + (2 * n, 2 * n))
         out[...] = self._template
         out[..., n:, :] -= lower
-        flat = out.reshape(out.shape[:-2] + (4 * n * n,))                    # a view
-        flat[..., self._k_diagonal] += (speed ** 2)[..., None]               # -Omega^2 I in K
-        if scattered and "modal_damping" in scattered:                       # (A.1)
+        flat = out.reshape(out.shape[:-2] + (4 * n * n,))  # a view
+        flat[..., self._k_diagonal] += (speed**2)[..., None]  # -Omega^2 I in K
+        if scattered and "modal_damping" in scattered:  # (A.1)
             extra = np.asarray(scattered["modal_damping"], float) - self.params.modal_damping
             flat[..., self._d_diagonal] -= 2 * extra[..., None] * self.basis.omega_rad_s
         return out
@@ -180,7 +196,7 @@ class Geometry:
         n = self.n
         out = self._template.copy()
         out[n:, :] -= np.einsum("k,kj->j", coef, self.lower_half_units).reshape(n, 2 * n)
-        out.reshape(-1)[self._k_diagonal] += speed ** 2                      # -Omega^2 I in K
+        out.reshape(-1)[self._k_diagonal] += speed**2  # -Omega^2 I in K
         return out
 
     @cached_property
@@ -219,8 +235,9 @@ class _Key:
 
 # The contact rows of lower_half_units: [W1 + W2 | 0], [W5q | 0], [0 | W3 + W4], [0 | W5qdot]
 # (sums of the matrices of MATRICES that share a scale factor), then [0 | G].
-_HALVES = np.array([[w in ("W1", "W2"), w == "W5q", w in ("W3", "W4"), w == "W5qdot"]
-                    for w in MATRICES], float).T                        # (4, len(MATRICES))
+_HALVES = np.array(
+    [[w in ("W1", "W2"), w == "W5q", w in ("W3", "W4"), w == "W5qdot"] for w in MATRICES], float
+).T  # (4, len(MATRICES))
 _DAMPING_ROW = np.array([False, False, True, True])
 
 
@@ -231,9 +248,9 @@ class _Screw:
     basis: ModalBasis
     helix: HelixContact
     G_unit: np.ndarray
-    kernels: np.ndarray        # helix kernels of the four contact rows of lower_half_units
-    index: np.ndarray          # (4, N * 2N) their entries in the helix table; 0 at the end
-    G_half: np.ndarray         # (N * 2N,) the last row of lower_half_units
+    kernels: np.ndarray  # helix kernels of the four contact rows of lower_half_units
+    index: np.ndarray  # (4, N * 2N) their entries in the helix table; 0 at the end
+    G_half: np.ndarray  # (N * 2N,) the last row of lower_half_units
 
 
 def build_geometry(params: ScrewParameters) -> Geometry:
@@ -266,8 +283,13 @@ def _geometry_of(key: _Key) -> Geometry:
     halves = np.empty((5, screw.G_half.size))
     np.take(table, screw.index, out=halves[:4])
     halves[4] = screw.G_half
-    return Geometry(params=params, basis=screw.basis, contact=contact, G_unit=screw.G_unit,
-                    lower_half_units=halves)
+    return Geometry(
+        params=params,
+        basis=screw.basis,
+        contact=contact,
+        G_unit=screw.G_unit,
+        lower_half_units=halves,
+    )
 
 
 @lru_cache(maxsize=32)
@@ -276,12 +298,17 @@ def _screw_of(key: _Key) -> _Screw:
     helix = helix_contact(key.params, basis)
     n, w = basis.n, len(MATRICES)
     kernels = (_HALVES @ helix.kernels.reshape(w, -1)).reshape(4 * 9, -1)
-    size = 9 * len(helix.wavenumber) ** 2                      # one matrix's table
-    rows = np.arange(4)[:, None, None] * size + helix.index               # (4, N, N)
-    index = np.full((4, n, 2 * n), 4 * size)                   # the 0 at the end of the table
+    size = 9 * len(helix.wavenumber) ** 2  # one matrix's table
+    rows = np.arange(4)[:, None, None] * size + helix.index  # (4, N, N)
+    index = np.full((4, n, 2 * n), 4 * size)  # the 0 at the end of the table
     index[~_DAMPING_ROW, :, :n] = rows[~_DAMPING_ROW]
     index[_DAMPING_ROW, :, n:] = rows[_DAMPING_ROW]
     G_unit = gyroscopic_unit(basis)
-    return _Screw(basis=basis, helix=helix, G_unit=G_unit, kernels=kernels,
-                  index=index.reshape(4, -1),
-                  G_half=np.hstack((np.zeros_like(G_unit), G_unit)).ravel())
+    return _Screw(
+        basis=basis,
+        helix=helix,
+        G_unit=G_unit,
+        kernels=kernels,
+        index=index.reshape(4, -1),
+        G_half=np.hstack((np.zeros_like(G_unit), G_unit)).ravel(),
+    )

@@ -40,9 +40,9 @@ from .kernels import HARMONICS, MATRICES, kernel_harmonics
 from .modes import ModalBasis
 from .parameters import ScrewParameters
 
-_DIRECT = 0.1          # |x| = |omega alpha / 2| below which sin(x) / x is taken directly
+_DIRECT = 0.1  # |x| = |omega alpha / 2| below which sin(x) / x is taken directly
 _M = len(HARMONICS)
-_BLAS_ONE_THREAD = 65536 * 4   # m n k of a product below which OpenBLAS uses one thread
+_BLAS_ONE_THREAD = 65536 * 4  # m n k of a product below which OpenBLAS uses one thread
 
 
 def contact_angles(p: ScrewParameters) -> tuple[float, float]:
@@ -65,24 +65,25 @@ class HelixContact:
     +1) and omega^+ (sign -1), and P = U * U pairs of the U distinct (wavenumber, amplitude)
     of the N modes (x and y bending modes share theirs)."""
 
-    lead_per_rad_m: float          # R tan(beta), m/rad
-    wavenumber: np.ndarray         # (U,) distinct k of the mode shapes, rad/m
-    weight: np.ndarray             # (M, 2P) sign A_i A_j / omega (0 where omega = 0)
-    level: np.ndarray              # (M, 2P) sign A_i A_j where omega = 0, else 0
-    near: np.ndarray               # flat indices of the other terms by ascending |omega|
-    near_omega: np.ndarray         # their omega, 1/rad
-    near_amplitude: np.ndarray     # their sign A_i A_j
-    kernels: np.ndarray            # (len(MATRICES) * 9, 4M): Re c_m, -Im c_m of each block
-    index: np.ndarray              # (N, N) entry of mode pair (I, J) in one matrix's table
+    lead_per_rad_m: float  # R tan(beta), m/rad
+    wavenumber: np.ndarray  # (U,) distinct k of the mode shapes, rad/m
+    weight: np.ndarray  # (M, 2P) sign A_i A_j / omega (0 where omega = 0)
+    level: np.ndarray  # (M, 2P) sign A_i A_j where omega = 0, else 0
+    near: np.ndarray  # flat indices of the other terms by ascending |omega|
+    near_omega: np.ndarray  # their omega, 1/rad
+    near_amplitude: np.ndarray  # their sign A_i A_j
+    kernels: np.ndarray  # (len(MATRICES) * 9, 4M): Re c_m, -Im c_m of each block
+    index: np.ndarray  # (N, N) entry of mode pair (I, J) in one matrix's table
     near_abs: np.ndarray = field(init=False)
     near_out: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "near_abs", np.abs(self.near_omega))
-        pairs = len(self.wavenumber) ** 2                   # (M, 2P) index -> (M, 2, 2, P)
+        pairs = len(self.wavenumber) ** 2  # (M, 2P) index -> (M, 2, 2, P)
         m, rest = np.divmod(self.near, 2 * pairs)
-        object.__setattr__(self, "near_out", m * 4 * pairs + rest // pairs * 2 * pairs
-                           + rest % pairs)
+        object.__setattr__(
+            self, "near_out", m * 4 * pairs + rest // pairs * 2 * pairs + rest % pairs
+        )
 
     def integrals(self, nut_position_m: float, nut_length_m: float) -> ContactIntegrals:
         """The contact integrals of a nut at z_o = `nut_position_m` of length b =
@@ -91,28 +92,31 @@ class HelixContact:
         alpha_o, alpha = nut_position_m / lead, nut_length_m / lead
         z, half, h = nut_position_m + nut_length_m / 2, nut_length_m / 2, alpha / 2
         # e^{i k_i x} e^{-+i k_j x} for x = z_c and b / 2 (rows of `single`: -z, z, -b/2, b/2)
-        single = np.exp(np.multiply.outer((-1j * z, 1j * z, -1j * half, 1j * half),
-                                          self.wavenumber))
+        single = np.exp(
+            np.multiply.outer((-1j * z, 1j * z, -1j * half, 1j * half), self.wavenumber)
+        )
         pq = (single[1::2, None, :, None] * single.reshape(2, 2, 1, u)).reshape(2, 1, -1)
-        turn = _harmonics(h)                                             # e^{i m alpha / 2}
-        sin_x = (turn * pq[1]).imag                                      # sin(omega alpha / 2)
-        phase = (_harmonics(alpha_o) * turn) * pq[0]                     # e^{i omega theta_c}
+        turn = _harmonics(h)  # e^{i m alpha / 2}
+        sin_x = (turn * pq[1]).imag  # sin(omega alpha / 2)
+        phase = (_harmonics(alpha_o) * turn) * pq[0]  # e^{i omega theta_c}
         g = (sin_x * self.weight + h * self.level).reshape(_M, 2, -1)
         # sign A A F(omega) / 2 = phase g, stored (M, 2 signs, Re / Im, P)
         out = np.empty((_M, 2, 2, u * u))
         np.multiply(phase.real.reshape(g.shape), g, out=out[:, :, 0])
         np.multiply(phase.imag.reshape(g.shape), g, out=out[:, :, 1])
         n = np.searchsorted(self.near_abs, _DIRECT / h)
-        if n:                                    # sin from the split loses digits near 0
+        if n:  # sin from the split loses digits near 0
             x = self.near_omega[:n] * h
             f = phase.take(self.near[:n]) * (h * self.near_amplitude[:n]) * (np.sin(x) / x)
             out.put(self.near_out[:n], f.real)
             out.put(self.near_out[:n] + u * u, f.imag)
-        return ContactIntegrals(alpha_o=alpha_o, alpha=alpha, helix=self,
-                                exponentials=out.reshape(4 * _M, -1))
+        return ContactIntegrals(
+            alpha_o=alpha_o, alpha=alpha, helix=self, exponentials=out.reshape(4 * _M, -1)
+        )
 
-    def table(self, exponentials: np.ndarray, kernels: np.ndarray,
-              out: np.ndarray | None = None) -> np.ndarray:
+    def table(
+        self, exponentials: np.ndarray, kernels: np.ndarray, out: np.ndarray | None = None
+    ) -> np.ndarray:
         """Every kind block (a, b) of every matrix of `kernels` (rows: combinations of the
         rows of `self.kernels`) over the distinct pairs, Re sum_m c_m A A (F^- - F^+) / 2:
         (rows of `kernels`, U * U), written to `out` when given.
@@ -124,7 +128,7 @@ class HelixContact:
             out = np.empty((len(kernels), exponentials.shape[1]))
         step = max(1, _BLAS_ONE_THREAD // kernels.size)
         for c in range(0, exponentials.shape[1], step):
-            np.matmul(kernels, exponentials[:, c:c + step], out=out[:, c:c + step])
+            np.matmul(kernels, exponentials[:, c : c + step], out=out[:, c : c + step])
         return out
 
 
@@ -133,10 +137,10 @@ class ContactIntegrals:
     """integral k_ab(theta) [Phi_i^a Phi_j^b](R tan(beta) theta) dtheta over the contact (A.9)
     for every W of `kernels.MATRICES`."""
 
-    alpha_o: float                 # rad, start angle of the contact (A.9)
-    alpha: float                   # rad, contact angle b / (R tan beta)
+    alpha_o: float  # rad, start angle of the contact (A.9)
+    alpha: float  # rad, contact angle b / (R tan beta)
     helix: HelixContact
-    exponentials: np.ndarray       # (4M, P) sign A_i A_j F(omega) / 2: rows m, sign, Re / Im
+    exponentials: np.ndarray  # (4M, P) sign A_i A_j F(omega) / 2: rows m, sign, Re / Im
 
     @cached_property
     def unit(self) -> dict[str, np.ndarray]:
@@ -148,29 +152,38 @@ class ContactIntegrals:
 
 def helix_contact(p: ScrewParameters, basis: ModalBasis) -> HelixContact:
     """The nut-independent part of the contact integrals for this screw and formulation."""
-    distinct, pick = np.unique(np.stack((basis.wavenumber, basis.amplitude), 1), axis=0,
-                               return_inverse=True)
+    distinct, pick = np.unique(
+        np.stack((basis.wavenumber, basis.amplitude), 1), axis=0, return_inverse=True
+    )
     pick = pick.ravel()
     k, amp = distinct.T
     u, lead = len(k), p.lead_per_rad_m
     pairs = np.stack((k[:, None] - k[None, :], k[:, None] + k[None, :])).reshape(1, 2, -1)
-    omega = (HARMONICS[:, None, None] + lead * pairs).reshape(_M, -1)         # (M, 2P)
-    amp2 = np.broadcast_to((np.outer(amp, amp).ravel() * np.array([[1.0], [-1.0]])).ravel(),
-                           omega.shape)                                      # F^- - F^+
+    omega = (HARMONICS[:, None, None] + lead * pairs).reshape(_M, -1)  # (M, 2P)
+    amp2 = np.broadcast_to(
+        (np.outer(amp, amp).ravel() * np.array([[1.0], [-1.0]])).ravel(), omega.shape
+    )  # F^- - F^+
     zero = omega == 0
     with np.errstate(divide="ignore"):
         weight = np.where(zero, 0.0, amp2 / omega)
     near = np.flatnonzero(~zero)
     near = near[np.argsort(np.abs(omega.ravel()[near]), kind="stable")]
-    c = kernel_harmonics(p.formulation, p.helix_angle_rad, p.radius_m)   # (W, 3, 3, M)
+    c = kernel_harmonics(p.formulation, p.helix_angle_rad, p.radius_m)  # (W, 3, 3, M)
     c = np.stack((c.real, -c.imag), -1).reshape(len(MATRICES) * 9, _M, 1, 2)
     kernels = np.broadcast_to(c, c.shape[:2] + (2, 2)).reshape(len(MATRICES) * 9, -1)
     return HelixContact(
-        lead_per_rad_m=lead, wavenumber=k, weight=weight, level=np.where(zero, amp2, 0.0),
-        near=near, near_omega=omega.ravel()[near], near_amplitude=amp2.ravel()[near],
+        lead_per_rad_m=lead,
+        wavenumber=k,
+        weight=weight,
+        level=np.where(zero, amp2, 0.0),
+        near=near,
+        near_omega=omega.ravel()[near],
+        near_amplitude=amp2.ravel()[near],
         kernels=kernels,
         index=(3 * basis.kind[:, None] + basis.kind[None, :]) * u * u
-        + pick[:, None] * u + pick[None, :])
+        + pick[:, None] * u
+        + pick[None, :],
+    )
 
 
 def contact_integrals(p: ScrewParameters, basis: ModalBasis) -> ContactIntegrals:

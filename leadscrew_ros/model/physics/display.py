@@ -14,7 +14,7 @@ def exact(value: float) -> str:
     for digits in range(6, 18):
         text = f"{v:.{digits}g}"
         if float(text) == v:
-            if "e" in f"{v:.6g}" and "e" not in text:    # 1.0000001e+07 beside 1e+07,
-                text = f"{v:.{digits - 1}e}"              # not 10000001
+            if "e" in f"{v:.6g}" and "e" not in text:  # 1.0000001e+07 beside 1e+07,
+                text = f"{v:.{digits - 1}e}"  # not 10000001
             return text
     return repr(v)

@@ -56,26 +56,73 @@ def paper_kernels(theta: np.ndarray, beta: float, radius_m: float) -> dict[str, 
     return _paper(np.sin(theta), np.cos(theta), beta, radius_m)
 
 
-def _paper(s: np.ndarray, c: np.ndarray, beta: float, radius_m: float
-           ) -> dict[str, np.ndarray]:
+def _paper(s: np.ndarray, c: np.ndarray, beta: float, radius_m: float) -> dict[str, np.ndarray]:
     """`paper_kernels` as polynomials in s = sin(theta), c = cos(theta)."""
     n = len(s)
     sb2, cb2, R = np.sin(beta) ** 2, np.cos(beta) ** 2, radius_m
     return {
-        "W1": _blocks(n, {(X, X): s * c * cb2, (X, Y): -(c ** 2 + s ** 2 * sb2),      # (A.3)
-                          (Y, X): s ** 2 + c ** 2 * sb2, (Y, Y): -s * c * cb2}),
-        "W2": _blocks(n, {(X, T): -R * c, (Y, T): -R * s,                            # (A.4)
-                          (T, X): R * c * sb2, (T, Y): R * s * sb2}),
-        "W3": _blocks(n, {(X, X): c ** 2 + s ** 2 * sb2, (X, Y): -s * c * cb2,        # (A.5)
-                          (Y, X): -s * c * sb2, (Y, Y): c ** 2 * sb2,
-                          (T, T): np.full(n, sb2)}),
-        "W4": _blocks(n, {(X, T): -R * sb2 * s, (Y, T): R * sb2 * c,                 # (A.6)
-                          (T, X): -R * sb2 * s, (T, Y): R * sb2 * c}),
-        "W5q": _blocks(n, {(X, X): -s * c, (Y, Y): c * s, (X, Y): -s ** 2,            # (A.7)
-                           (Y, X): c ** 2, (T, X): R * c, (T, Y): R * s}),
-        "W5qdot": _blocks(n, {(X, X): -s ** 2, (Y, Y): c ** 2, (X, Y): -c * s,        # (A.8)
-                              (Y, X): c * s, (T, X): R * s, (T, Y): R * c,
-                              (X, T): -R * s, (Y, T): R * c, (T, T): np.full(n, R ** 2)}),
+        "W1": _blocks(
+            n,
+            {
+                (X, X): s * c * cb2,
+                (X, Y): -(c**2 + s**2 * sb2),  # (A.3)
+                (Y, X): s**2 + c**2 * sb2,
+                (Y, Y): -s * c * cb2,
+            },
+        ),
+        "W2": _blocks(
+            n,
+            {
+                (X, T): -R * c,
+                (Y, T): -R * s,  # (A.4)
+                (T, X): R * c * sb2,
+                (T, Y): R * s * sb2,
+            },
+        ),
+        "W3": _blocks(
+            n,
+            {
+                (X, X): c**2 + s**2 * sb2,
+                (X, Y): -s * c * cb2,  # (A.5)
+                (Y, X): -s * c * sb2,
+                (Y, Y): c**2 * sb2,
+                (T, T): np.full(n, sb2),
+            },
+        ),
+        "W4": _blocks(
+            n,
+            {
+                (X, T): -R * sb2 * s,
+                (Y, T): R * sb2 * c,  # (A.6)
+                (T, X): -R * sb2 * s,
+                (T, Y): R * sb2 * c,
+            },
+        ),
+        "W5q": _blocks(
+            n,
+            {
+                (X, X): -s * c,
+                (Y, Y): c * s,
+                (X, Y): -(s**2),  # (A.7)
+                (Y, X): c**2,
+                (T, X): R * c,
+                (T, Y): R * s,
+            },
+        ),
+        "W5qdot": _blocks(
+            n,
+            {
+                (X, X): -(s**2),
+                (Y, Y): c**2,
+                (X, Y): -c * s,  # (A.8)
+                (Y, X): c * s,
+                (T, X): R * s,
+                (T, Y): R * c,
+                (X, T): -R * s,
+                (Y, T): R * c,
+                (T, T): np.full(n, R**2),
+            },
+        ),
     }
 
 
@@ -95,31 +142,34 @@ def consistent_kernels(theta: np.ndarray, beta: float, radius_m: float) -> dict[
     return _consistent(np.sin(theta), np.cos(theta), beta, radius_m)
 
 
-def _consistent(s: np.ndarray, c: np.ndarray, beta: float, radius_m: float
-                ) -> dict[str, np.ndarray]:
+def _consistent(
+    s: np.ndarray, c: np.ndarray, beta: float, radius_m: float
+) -> dict[str, np.ndarray]:
     """`consistent_kernels` as polynomials in s = sin(theta), c = cos(theta)."""
     zero, r = np.zeros(len(s)), np.full(len(s), radius_m)
     sb, cb = np.sin(beta), np.cos(beta)
     # i = c e_r - s e_theta, j = s e_r + c e_theta, R e_theta; rows a, components (r, theta, z)
     w = np.array([[c, -s, zero], [s, c, zero], [zero, r, zero]])
-    kw = np.array([[s, c, zero], [-c, s, zero], [-r, zero, zero]])          # k x w_a
-    ew, ekw = cb * w[:, 1] + sb * w[:, 2], cb * kw[:, 1] + sb * kw[:, 2]    # e . w_a
-    fw, fkw = cb * w[:, 2] - sb * w[:, 1], cb * kw[:, 2] - sb * kw[:, 1]    # f . w_a
+    kw = np.array([[s, c, zero], [-c, s, zero], [-r, zero, zero]])  # k x w_a
+    ew, ekw = cb * w[:, 1] + sb * w[:, 2], cb * kw[:, 1] + sb * kw[:, 2]  # e . w_a
+    fw, fkw = cb * w[:, 2] - sb * w[:, 1], cb * kw[:, 2] - sb * kw[:, 1]  # f . w_a
     proj_kw = w[:, None, 0] * kw[None, :, 0] + fw[:, None] * fkw[None, :]
     proj_w = w[:, None, 0] * w[None, :, 0] + fw[:, None] * fw[None, :]
     bend = np.zeros((3, 3, 1), bool)
-    bend[:2, :2] = bend[T, T] = True                                     # W1/W3 vs W2/W4 split
+    bend[:2, :2] = bend[T, T] = True  # W1/W3 vs W2/W4 split
     return {
-        "W1": np.where(bend, proj_kw, 0.0), "W2": np.where(bend, 0.0, proj_kw),
-        "W3": np.where(bend, proj_w, 0.0), "W4": np.where(bend, 0.0, proj_w),
-        "W5q": ew[:, None] * ekw[None, :] / cb ** 2,
-        "W5qdot": ew[:, None] * ew[None, :] / cb ** 2,
+        "W1": np.where(bend, proj_kw, 0.0),
+        "W2": np.where(bend, 0.0, proj_kw),
+        "W3": np.where(bend, proj_w, 0.0),
+        "W4": np.where(bend, 0.0, proj_w),
+        "W5q": ew[:, None] * ekw[None, :] / cb**2,
+        "W5qdot": ew[:, None] * ew[None, :] / cb**2,
     }
 
 
 KERNELS = {"paper": paper_kernels, "consistent": consistent_kernels}
 MATRICES = ("W1", "W2", "W3", "W4", "W5q", "W5qdot")
-HARMONICS = np.arange(-2, 3)          # m of e^{i m theta}: every kernel has degree <= 2
+HARMONICS = np.arange(-2, 3)  # m of e^{i m theta}: every kernel has degree <= 2
 _POLYNOMIALS = {"paper": _paper, "consistent": _consistent}
 # (s, c) where a polynomial of degree 2 in s and c is sampled to find its six coefficients;
 # 0 and +-1 keep the products in the kernels exact
@@ -151,29 +201,31 @@ def kernel_harmonics(formulation: str, beta: float, radius_m: float) -> np.ndarr
         of every matrix W in MATRICES order and block (a, b), in the kernel's unit.
     """
     k = _POLYNOMIALS[formulation](_S, _C, beta, radius_m)
-    v = np.moveaxis(np.stack([k[name] for name in MATRICES]), -1, 0)       # (6, W, 3, 3)
+    v = np.moveaxis(np.stack([k[name] for name in MATRICES]), -1, 0)  # (6, W, 3, 3)
     p00 = v[0]
     p10, p20 = (v[1] - v[2]) / 2, (v[1] + v[2]) / 2 - p00
     p01, p02 = (v[3] - v[4]) / 2, (v[3] + v[4]) / 2 - p00
     p11 = v[5] - p00 - p10 - p01 - p20 - p02
-    c1, c2 = (p01 - 1j * p10) / 2, (p02 - p20 - 1j * p11) / 4          # a cos + b sin
+    c1, c2 = (p01 - 1j * p10) / 2, (p02 - p20 - 1j * p11) / 4  # a cos + b sin
     return np.stack([c2.conj(), c1.conj(), p00 + (p20 + p02) / 2 + 0j, c1, c2], axis=-1)
 
 
-def thread_factors(p: ParamsLike, mu_o_value: ArrayLike, speed_rad_s: ArrayLike,
-                   load_n: ArrayLike) -> tuple[Any, Any, Any]:
+def thread_factors(
+    p: ParamsLike, mu_o_value: ArrayLike, speed_rad_s: ArrayLike, load_n: ArrayLike
+) -> tuple[Any, Any, Any]:
     """(c_f, c_5, d c / d mu_o) of the module docstring: the factors of the friction level and
     slope terms, and their derivative with respect to mu_o (the same for both; 0 for paper)."""
     tb = np.tan(p.helix_angle_rad)
     if p.formulation == "paper":
-        return 1.0, 1.0 - tb ** 2, 0.0
-    flank = np.where(load_n == 0, 1.0, np.sign(load_n)) * np.sign(speed_rad_s)   # (9)
+        return 1.0, 1.0 - tb**2, 0.0
+    flank = np.where(load_n == 0, 1.0, np.sign(load_n)) * np.sign(speed_rad_s)  # (9)
     c = 1.0 / (1.0 + flank * mu_o_value * tb)
     return c, c, -flank * tb * c * c
 
 
-def level_slope(p: ParamsLike, speed_rad_s: ArrayLike, load_n: ArrayLike, alpha: float
-                ) -> tuple[np.ndarray, np.ndarray]:
+def level_slope(
+    p: ParamsLike, speed_rad_s: ArrayLike, load_n: ArrayLike, alpha: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Friction level l = mu_o |F_z| c_f / (alpha R) (W1-W4) and friction slope
     s = gamma |F_z| c_5 / alpha (W5), broadcast over speed, load and the fields of `p` (arrays
     of scattered friction parameters too)."""
@@ -184,11 +236,17 @@ def level_slope(p: ParamsLike, speed_rad_s: ArrayLike, load_n: ArrayLike, alpha:
     return m0 * load / (alpha * p.radius_m) * c_f, g * load / alpha * c_5
 
 
-def scales(p: ParamsLike, speed_rad_s: ArrayLike, load_n: ArrayLike, alpha: float
-           ) -> dict[str, np.ndarray]:
+def scales(
+    p: ParamsLike, speed_rad_s: ArrayLike, load_n: ArrayLike, alpha: float
+) -> dict[str, np.ndarray]:
     """Scalar factors of W1..W5qdot at operating points (broadcast over speed and load)."""
     speed = np.asarray(speed_rad_s, dtype=float)
     level, slope = level_slope(p, speed, load_n, alpha)
-    return {"W1": np.sign(speed) * level, "W2": np.sign(speed) * level,
-            "W3": level / np.abs(speed), "W4": level / np.abs(speed),
-            "W5q": speed * slope, "W5qdot": slope}
+    return {
+        "W1": np.sign(speed) * level,
+        "W2": np.sign(speed) * level,
+        "W3": level / np.abs(speed),
+        "W4": level / np.abs(speed),
+        "W5q": speed * slope,
+        "W5qdot": slope,
+    }

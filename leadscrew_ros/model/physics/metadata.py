@@ -11,8 +11,8 @@ the numpydoc Attributes entries of a settings class from it. Ranges are closed u
 from __future__ import annotations
 
 import math
-from dataclasses import MISSING, Field, field, fields
 from collections.abc import Mapping
+from dataclasses import MISSING, Field, field, fields
 from typing import Any, TypeVar
 
 from .display import exact
@@ -20,9 +20,19 @@ from .display import exact
 T = TypeVar("T")
 
 
-def setting(default: Any, unit: str, description: str, lo: float | None = None,
-            hi: float | None = None, *, lo_open: bool = False, hi_open: bool = False,
-            choices: tuple[str, ...] = (), read_only: bool = False, **extra: Any) -> Any:
+def setting(
+    default: Any,
+    unit: str,
+    description: str,
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    choices: tuple[str, ...] = (),
+    read_only: bool = False,
+    **extra: Any,
+) -> Any:
     """A dataclass field with its metadata.
 
     Parameters
@@ -48,19 +58,33 @@ def setting(default: Any, unit: str, description: str, lo: float | None = None,
     -------
     dataclasses.Field
     """
-    return field(default=default, metadata=dict(
-        unit=unit, description=description, lo=lo, hi=hi, lo_open=lo_open, hi_open=hi_open,
-        choices=tuple(choices), read_only=read_only, **extra))
+    return field(
+        default=default,
+        metadata=dict(
+            unit=unit,
+            description=description,
+            lo=lo,
+            hi=hi,
+            lo_open=lo_open,
+            hi_open=hi_open,
+            choices=tuple(choices),
+            read_only=read_only,
+            **extra,
+        ),
+    )
 
 
 def info(f: Field) -> dict[str, Any]:
     """A field's metadata with its default and type name."""
-    return dict(f.metadata, default=None if f.default is MISSING else f.default,
-                type=type(f.default).__name__)
+    return dict(
+        f.metadata,
+        default=None if f.default is MISSING else f.default,
+        type=type(f.default).__name__,
+    )
 
 
 def _bound(value: float) -> str:
-    return str(value) if isinstance(value, int) else f"{value:g}"    # 1000000, not 1e+06
+    return str(value) if isinstance(value, int) else f"{value:g}"  # 1000000, not 1e+06
 
 
 def range_text(md: Mapping[str, Any]) -> str:
@@ -83,8 +107,11 @@ def check_value(name: str, value: Any, f: Field) -> str:
     if isinstance(default, bool):
         return "" if isinstance(value, bool) else f"{name} = {value!r} must be true or false"
     kind = "int" if isinstance(default, int) else "float"
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or (
-            kind == "int" and not isinstance(value, int)):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float))
+        or (kind == "int" and not isinstance(value, int))
+    ):
         return f"{name} = {value!r} must be a{'n' if kind == 'int' else ''} {kind}"
     if md["lo"] is None:
         return ""
@@ -134,8 +161,13 @@ def help_text(f: Field, description: str | None = None) -> str:
     """
     md = f.metadata
     unit = f" [{md['unit']}]" if md["unit"] not in ("", "1") else ""
-    allowed = (f", one of {', '.join(md['choices'])}" if md["choices"] else
-               f", allowed {range_text({**md, 'unit': ''})}" if md["lo"] is not None else "")
+    allowed = (
+        f", one of {', '.join(md['choices'])}"
+        if md["choices"]
+        else f", allowed {range_text({**md, 'unit': ''})}"
+        if md["lo"] is not None
+        else ""
+    )
     return f"{description or md['description']}{unit} (default {default_text(f)}{allowed})"
 
 
@@ -158,19 +190,24 @@ def documented(cls: type[T], allowed: Mapping[str, str] | None = None) -> type[T
         `cls`, its docstring extended.
     """
     doc = (cls.__doc__ or "").rstrip() + "\n"
-    lines = [] if "    Attributes\n    ----------" in doc else ["", "    Attributes",
-                                                               "    ----------"]
+    lines = (
+        [] if "    Attributes\n    ----------" in doc else ["", "    Attributes", "    ----------"]
+    )
     for f in fields(cls):  # type: ignore[arg-type]
         md = f.metadata
         if "description" not in md:
             continue
         unit = {"": "", "1": " (dimensionless)"}.get(md["unit"], f" [{md['unit']}]")
-        values = ((allowed or {}).get(f.name)
-                  or (f"allowed {range_text(md)}" if md["lo"] is not None else "")
-                  or (f"one of {', '.join(md['choices'])}" if md["choices"] else ""))
+        values = (
+            (allowed or {}).get(f.name)
+            or (f"allowed {range_text(md)}" if md["lo"] is not None else "")
+            or (f"one of {', '.join(md['choices'])}" if md["choices"] else "")
+        )
         default = f"{f.default:g}" if isinstance(f.default, float) else repr(f.default)
-        lines += [f"    {f.name} : {f.type}",
-                  f"        {md['description'][0].upper()}{md['description'][1:]}{unit}.",
-                  f"        Default {default}" + (f", {values}." if values else ".")]
+        lines += [
+            f"    {f.name} : {f.type}",
+            f"        {md['description'][0].upper()}{md['description'][1:]}{unit}.",
+            f"        Default {default}" + (f", {values}." if values else "."),
+        ]
     cls.__doc__ = doc + "\n".join(lines) + "\n"
     return cls

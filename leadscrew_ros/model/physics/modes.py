@@ -83,23 +83,27 @@ def modal_basis(p: ScrewParameters) -> ModalBasis:
     ModalBasis
         2 * n_bending bending modes, then n_torsion torsion modes.
     """
-    area = math.pi * p.radius_m ** 2
-    polar = math.pi * p.radius_m ** 4 / 2          # J = I_zz
-    inertia = math.pi * p.radius_m ** 4 / 4        # I_xx = I_yy
+    area = math.pi * p.radius_m**2
+    polar = math.pi * p.radius_m**4 / 2  # J = I_zz
+    inertia = math.pi * p.radius_m**4 / 4  # I_xx = I_yy
     nb, nt = p.n_bending, p.n_torsion
     n_b = np.repeat(np.arange(1, nb + 1), 2)
     n_t = 2 * np.arange(1, nt + 1) - 1
     k_b = n_b * math.pi / p.length_m
     k_t = n_t * math.pi / (2 * p.length_m)
-    omega_b = k_b ** 2 * math.sqrt(p.youngs_modulus_pa * inertia / (p.density_kg_m3 * area))
+    omega_b = k_b**2 * math.sqrt(p.youngs_modulus_pa * inertia / (p.density_kg_m3 * area))
     omega_t = k_t * math.sqrt(p.shear_modulus_pa / p.density_kg_m3)
     labels = tuple(f"B{n}{'xy'[i % 2]}" for i, n in enumerate(n_b)) + tuple(
-        f"T{n}" for n in range(1, nt + 1))
+        f"T{n}" for n in range(1, nt + 1)
+    )
     kind = np.concatenate([np.tile([KIND_X, KIND_Y], nb), np.full(nt, KIND_T)])
     amp_b = math.sqrt(2 / (p.density_kg_m3 * area * p.length_m))
     amp_t = math.sqrt(2 / (p.density_kg_m3 * polar * p.length_m))
     return ModalBasis(
-        labels=labels, kind=kind, order=np.concatenate([n_b, n_t]),
+        labels=labels,
+        kind=kind,
+        order=np.concatenate([n_b, n_t]),
         wavenumber=np.concatenate([k_b, k_t]),
         amplitude=np.concatenate([np.full(2 * nb, amp_b), np.full(nt, amp_t)]),
-        omega_rad_s=np.concatenate([omega_b, omega_t]))
+        omega_rad_s=np.concatenate([omega_b, omega_t]),
+    )

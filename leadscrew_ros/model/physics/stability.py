@@ -32,11 +32,11 @@ class ModeResult(NamedTuple):
         Squeak: Re(lambda) > 0 with Im(lambda) != 0.
     """
 
-    label: str               # dominant modal coordinate, e.g. "B1y"
-    frequency_hz: float      # |Im(lambda)| / 2 pi
-    growth_rate: float       # Re(lambda), 1/s
-    damping_ratio: float     # -Re(lambda) / |lambda|
-    unstable: bool           # squeak: Re > 0 with Im != 0
+    label: str  # dominant modal coordinate, e.g. "B1y"
+    frequency_hz: float  # |Im(lambda)| / 2 pi
+    growth_rate: float  # Re(lambda), 1/s
+    damping_ratio: float  # -Re(lambda) / |lambda|
+    unstable: bool  # squeak: Re > 0 with Im != 0
 
     def as_dict(self) -> dict:
         """The fields as a dict.
@@ -95,7 +95,7 @@ def eig_both(a: np.ndarray, left: bool = True) -> Eigen:
     numpy.linalg.LinAlgError
         A is not finite or LAPACK did not converge.
     """
-    if not math.isfinite(a.sum()):                  # NaN or inf anywhere
+    if not math.isfinite(a.sum()):  # NaN or inf anywhere
         raise np.linalg.LinAlgError("the state matrix is not finite")
     wr, wi, vl, vr, info = lapack.dgeev(a, compute_vl=int(left), compute_vr=1)
     if info != 0:
@@ -128,8 +128,9 @@ def max_divergence_rate(eigvals: np.ndarray) -> np.ndarray:
     return np.where(growing, eigvals.real, 0.0).max(axis=-1)
 
 
-def classify(eigen: Eigen, labels: tuple[str, ...]
-             ) -> tuple[tuple[ModeResult, ...], tuple[float, ...]]:
+def classify(
+    eigen: Eigen, labels: tuple[str, ...]
+) -> tuple[tuple[ModeResult, ...], tuple[float, ...]]:
     """Oscillatory modes sorted by growth rate (descending) and divergence rates (Re > 0, Im = 0).
 
     A mode is labelled by its dominant modal coordinate (largest |q_i| in the displacement half
@@ -140,13 +141,20 @@ def classify(eigen: Eigen, labels: tuple[str, ...]
     order = np.argsort(-lam.real, kind="stable")
     lam = lam[order]
     two_pi = 2 * math.pi
-    modes = [ModeResult(labels[d], i / two_pi, r, -r / g, r > GROWTH_TOL * g)
-             for d, r, i, g in zip(eigen.dominant(len(labels))[order].tolist(),
-                                   lam.real.tolist(), lam.imag.tolist(),
-                                   np.abs(lam).tolist(), strict=True)]
-    if eigvals.real.max() <= 0:                     # the common case: nothing grows
+    modes = [
+        ModeResult(labels[d], i / two_pi, r, -r / g, r > GROWTH_TOL * g)
+        for d, r, i, g in zip(
+            eigen.dominant(len(labels))[order].tolist(),
+            lam.real.tolist(),
+            lam.imag.tolist(),
+            np.abs(lam).tolist(),
+            strict=True,
+        )
+    ]
+    if eigvals.real.max() <= 0:  # the common case: nothing grows
         return tuple(modes), ()
     mag = np.abs(eigvals)
-    real = eigvals.real[(np.abs(eigvals.imag) <= _IMAG_TOL * mag)
-                        & (eigvals.real > GROWTH_TOL * mag)]
+    real = eigvals.real[
+        (np.abs(eigvals.imag) <= _IMAG_TOL * mag) & (eigvals.real > GROWTH_TOL * mag)
+    ]
     return tuple(modes), tuple(sorted(real.tolist(), reverse=True))

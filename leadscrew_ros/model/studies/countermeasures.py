@@ -16,19 +16,25 @@ from dataclasses import dataclass
 
 from ..physics.parameters import ParameterError
 from ..squeak_model import OperatingPointError, SqueakModel
-from .probability import linearised
 from ..uncertainty.scatter import Samples
+from .probability import linearised
 
 DESIGN = ("radius_m", "helix_angle_rad", "nut_position_m", "nut_length_m", "modal_damping")
 FRICTION = ("friction_drop", "friction_decay_s_m")
 OPERATING = ("speed_rad_s", "load_n")
-STEP = 0.10                                   # relative change offered
-MIN_DROP = 0.01                               # the advice line names changes that gain this
-_WORDS = {"radius_m": "the radius", "helix_angle_rad": "the helix angle",
-          "nut_position_m": "the nut position", "nut_length_m": "the nut length",
-          "modal_damping": "the damping", "friction_drop": "mu_s - mu_k",
-          "friction_decay_s_m": "the friction decay d", "speed_rad_s": "the speed",
-          "load_n": "the load"}
+STEP = 0.10  # relative change offered
+MIN_DROP = 0.01  # the advice line names changes that gain this
+_WORDS = {
+    "radius_m": "the radius",
+    "helix_angle_rad": "the helix angle",
+    "nut_position_m": "the nut position",
+    "nut_length_m": "the nut length",
+    "modal_damping": "the damping",
+    "friction_drop": "mu_s - mu_k",
+    "friction_decay_s_m": "the friction decay d",
+    "speed_rad_s": "the speed",
+    "load_n": "the load",
+}
 
 
 @dataclass(frozen=True)
@@ -56,8 +62,9 @@ class Countermeasure:
         return f"{'raise' if self.factor > 1 else 'lower'} {_WORDS[self.name]}"
 
 
-def countermeasures(model: SqueakModel, speed_rad_s: float, load_n: float,
-                    samples: Samples) -> tuple[float, list[Countermeasure]] | None:
+def countermeasures(
+    model: SqueakModel, speed_rad_s: float, load_n: float, samples: Samples
+) -> tuple[float, list[Countermeasure]] | None:
     """P(squeak) now, and the changes that lower it, most effective first.
 
     Parameters
@@ -82,21 +89,25 @@ def countermeasures(model: SqueakModel, speed_rad_s: float, load_n: float,
     for name in DESIGN + FRICTION + OPERATING:
         best = None
         for factor in (1 + STEP, 1 - STEP):
-            try:      # a change beyond a parameter's range or the plausible load is no advice
+            try:  # a change beyond a parameter's range or the plausible load is no advice
                 changed, speed, load = changed_by(model, speed_rad_s, load_n, name, factor)
                 e = linearised(changed, speed, load, samples)
             except (ParameterError, OperatingPointError):
                 continue
-            if e is not None and e.probability < now.probability and (
-                    best is None or e.probability < best.probability):
+            if (
+                e is not None
+                and e.probability < now.probability
+                and (best is None or e.probability < best.probability)
+            ):
                 best = Countermeasure(name, factor, e.probability)
         if best is not None:
             found.append(best)
     return now.probability, sorted(found, key=lambda c: (c.probability, c.name))
 
 
-def changed_by(model: SqueakModel, speed_rad_s: float, load_n: float, name: str,
-               factor: float) -> tuple[SqueakModel, float, float]:
+def changed_by(
+    model: SqueakModel, speed_rad_s: float, load_n: float, name: str, factor: float
+) -> tuple[SqueakModel, float, float]:
     """The model and operating point with parameter `name` multiplied by `factor`.
 
     Raises
@@ -110,8 +121,11 @@ def changed_by(model: SqueakModel, speed_rad_s: float, load_n: float, name: str,
     if name == "load_n":
         return model, speed_rad_s, load_n * factor
     if name == "friction_drop":
-        return (model.with_params(mu_static=p.mu_kinetic + factor * (p.mu_static - p.mu_kinetic)),
-                speed_rad_s, load_n)
+        return (
+            model.with_params(mu_static=p.mu_kinetic + factor * (p.mu_static - p.mu_kinetic)),
+            speed_rad_s,
+            load_n,
+        )
     return model.with_params(**{name: getattr(p, name) * factor}), speed_rad_s, load_n
 
 
@@ -121,6 +135,9 @@ def advice_text(probability: float, measures: list[Countermeasure], top: int = 2
     head = f"P(squeak) {probability:.2f}"
     useful = [m for m in measures if probability - m.probability >= MIN_DROP][:top]
     if not useful:
-        return head + (f": no 10 % change of one parameter lowers it by {MIN_DROP:g}"
-                       if probability > 0 else "")
+        return head + (
+            f": no 10 % change of one parameter lowers it by {MIN_DROP:g}"
+            if probability > 0
+            else ""
+        )
     return f"{head}: " + " or ".join(m.text for m in useful)

@@ -27,10 +27,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..physics.parameters import field_info
-from ..uncertainty.perturbation import EigenPairs, FirstOrderProbability, estimate
-from ..squeak_model import SqueakModel, Validity, check_operating_point
-from ..uncertainty.scatter import Samples, Scatter
 from ..physics.stability import unstable_mask
+from ..squeak_model import SqueakModel, Validity, check_operating_point
+from ..uncertainty.perturbation import EigenPairs, FirstOrderProbability, estimate
+from ..uncertainty.scatter import Samples, Scatter
 
 
 @dataclass(frozen=True)
@@ -58,8 +58,9 @@ def _values(model: SqueakModel, samples: Samples) -> dict[str, np.ndarray]:
     return samples.scatter.values(model.params, samples.u)
 
 
-def _operating_point(model: SqueakModel, speed_rad_s: float, load_n: float
-                     ) -> tuple[float, float] | None:
+def _operating_point(
+    model: SqueakModel, speed_rad_s: float, load_n: float
+) -> tuple[float, float] | None:
     """The checked point, None outside the model's validity."""
     speed, load = check_operating_point(speed_rad_s, load_n)
     if model.validity(speed, load)[0] is not Validity.OK:
@@ -67,8 +68,9 @@ def _operating_point(model: SqueakModel, speed_rad_s: float, load_n: float
     return speed, load
 
 
-def squeaks(model: SqueakModel, speed_rad_s: float, load_n: float,
-            values: dict[str, np.ndarray]) -> np.ndarray:
+def squeaks(
+    model: SqueakModel, speed_rad_s: float, load_n: float, values: dict[str, np.ndarray]
+) -> np.ndarray:
     """Whether each sample of parameters squeaks at this operating point.
 
     Parameters
@@ -89,13 +91,21 @@ def squeaks(model: SqueakModel, speed_rad_s: float, load_n: float,
     flat = {k: np.broadcast_to(v, shape).ravel() for k, v in values.items()}
     count = len(next(iter(flat.values())))
     geometry = [k for k in flat if field_info(k)["geometry"]]
-    if geometry:                        # a model per sample: the reference, not the live path
-        out = np.array([bool(SqueakModel(model.params.with_(
-            **{k: float(v[i]) for k, v in flat.items()}), Scatter({})).predict(
-                speed_rad_s, load_n).squeak_modes) for i in range(count)])
+    if geometry:  # a model per sample: the reference, not the live path
+        out = np.array(
+            [
+                bool(
+                    SqueakModel(
+                        model.params.with_(**{k: float(v[i]) for k, v in flat.items()}), Scatter({})
+                    )
+                    .predict(speed_rad_s, load_n)
+                    .squeak_modes
+                )
+                for i in range(count)
+            ]
+        )
         return out.reshape(shape)
-    valid = model.validity_code(np.full(count, speed_rad_s), load_n,
-                                scattered=flat) == Validity.OK
+    valid = model.validity_code(np.full(count, speed_rad_s), load_n, scattered=flat) == Validity.OK
     out = np.zeros(valid.shape, bool)
     if valid.any():
         sub = {k: v[valid] for k, v in flat.items()}
@@ -104,8 +114,9 @@ def squeaks(model: SqueakModel, speed_rad_s: float, load_n: float,
     return out.reshape(shape)
 
 
-def monte_carlo(model: SqueakModel, speed_rad_s: float, load_n: float,
-                samples: Samples) -> ProbabilityEstimate | None:
+def monte_carlo(
+    model: SqueakModel, speed_rad_s: float, load_n: float, samples: Samples
+) -> ProbabilityEstimate | None:
     """Reference estimate of P(squeak) over `samples` (from `scatter.draw`).
 
     Parameters
@@ -142,8 +153,9 @@ def _from_hits(hits: np.ndarray) -> ProbabilityEstimate:
     return ProbabilityEstimate(*estimate(hits), hits.size)
 
 
-def linearised(model: SqueakModel, speed_rad_s: float, load_n: float,
-               samples: Samples) -> ProbabilityEstimate | None:
+def linearised(
+    model: SqueakModel, speed_rad_s: float, load_n: float, samples: Samples
+) -> ProbabilityEstimate | None:
     """Fast estimate of P(squeak): first order in the friction level, slope and damping (see
     the module docstring), over the same samples as `monte_carlo`.
 
@@ -172,7 +184,6 @@ def linearised(model: SqueakModel, speed_rad_s: float, load_n: float,
         return None
     speed, load = point
     if not samples.scatter.names:
-        return ProbabilityEstimate(float(bool(model.predict(speed, load).squeak_modes)),
-                                   None, 0)
+        return ProbabilityEstimate(float(bool(model.predict(speed, load).squeak_modes)), None, 0)
     estimator = FirstOrderProbability(model.params, model.geometry, samples)
     return _from_hits(estimator.hits(EigenPairs.solve(model.geometry, speed, load), load))

@@ -7,11 +7,12 @@ numpy: the quantity is any batched function."""
 
 from __future__ import annotations
 
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-ROOT_RTOL = 1e-9                    # boundaries, crossings: tolerance relative to the grid span
+ROOT_RTOL = 1e-9  # boundaries, crossings: tolerance relative to the grid span
 
 
 def level_crossings(x: np.ndarray, values: np.ndarray, level: float) -> list[float]:
@@ -40,9 +41,14 @@ def level_crossings(x: np.ndarray, values: np.ndarray, level: float) -> list[flo
     return out
 
 
-def find_roots(f: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray,
-               hi: np.ndarray, f_lo: np.ndarray, f_hi: np.ndarray, xtol: np.ndarray
-               ) -> np.ndarray:
+def find_roots(
+    f: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    lo: np.ndarray,
+    hi: np.ndarray,
+    f_lo: np.ndarray,
+    f_hi: np.ndarray,
+    xtol: ArrayLike,
+) -> np.ndarray:
     """Roots of many bracketed scalar functions at once (Chandrupatla's method: inverse
     quadratic interpolation, bisection when it would be slow), one batched call of `f` per
     iteration over the brackets not yet converged.
@@ -76,7 +82,7 @@ def find_roots(f: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray
     half_tol = 0.5 * np.broadcast_to(np.asarray(xtol, float), x1.shape)
     eps2 = 2 * np.finfo(float).eps
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(f1 != f2, f1 / (f1 - f2), 0.5)                   # regula falsi first
+        t = np.where(f1 != f2, f1 / (f1 - f2), 0.5)  # regula falsi first
         tl = np.zeros_like(x1)
         active = np.flatnonzero(np.sign(f1) * np.sign(f2) < 0)
         while active.size:
@@ -84,7 +90,7 @@ def find_roots(f: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray
             step = np.clip(t[c], tl[c], 1 - tl[c])
             xt = x1[c] + step * (x2[c] - x1[c])
             ft = f(xt, c)
-            bad = c[~np.isfinite(ft)]                  # undefined inside: stop at the best end
+            bad = c[~np.isfinite(ft)]  # undefined inside: stop at the best end
             better = np.abs(f1[bad]) <= np.abs(f2[bad])
             x1[bad] = x2[bad] = np.where(better, x1[bad], x2[bad])
             f1[bad] = f2[bad] = np.where(better, f1[bad], f2[bad])
@@ -99,10 +105,10 @@ def find_roots(f: Callable[[np.ndarray, np.ndarray], np.ndarray], lo: np.ndarray
             c = c[(f1[c] != 0) & (tl[c] <= 0.5)]
             xi = (x1[c] - x2[c]) / (x3[c] - x2[c])
             phi = (f1[c] - f2[c]) / (f3[c] - f2[c])
-            t_iqi = (f1[c] / (f2[c] - f1[c]) * f3[c] / (f2[c] - f3[c])
-                     + (x3[c] - x1[c]) / (x2[c] - x1[c]) * f1[c] / (f3[c] - f1[c])
-                     * f2[c] / (f3[c] - f2[c]))
-            use = (phi ** 2 < xi) & ((1 - phi) ** 2 < 1 - xi) & np.isfinite(t_iqi)
+            t_iqi = f1[c] / (f2[c] - f1[c]) * f3[c] / (f2[c] - f3[c]) + (x3[c] - x1[c]) / (
+                x2[c] - x1[c]
+            ) * f1[c] / (f3[c] - f1[c]) * f2[c] / (f3[c] - f2[c])
+            use = (phi**2 < xi) & ((1 - phi) ** 2 < 1 - xi) & np.isfinite(t_iqi)
             t[c] = np.where(use, t_iqi, 0.5)
             active = c
         inside = x1 + np.where(f1 != f2, f1 / (f1 - f2), 0.0) * (x2 - x1)
@@ -117,8 +123,9 @@ def _crossings(g: np.ndarray) -> np.ndarray:
     return np.argwhere(np.isfinite(a) & np.isfinite(b) & ((a > 0) != (b > 0)))
 
 
-def refine_crossings(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, g: np.ndarray,
-                     rtol: float = ROOT_RTOL) -> list[float]:
+def refine_crossings(
+    f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, g: np.ndarray, rtol: float = ROOT_RTOL
+) -> list[float]:
     """Roots of f between consecutive grid points where g changes sign (both valid), all
     refined together (`find_roots`: one call of f per iteration).
 
@@ -140,13 +147,18 @@ def refine_crossings(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, g: np
     """
     x, g = np.asarray(x, float), np.asarray(g, float)
     i = _crossings(g)[:, 0]
-    return find_roots(lambda values, cells: f(values), x[i], x[i + 1], g[i], g[i + 1],
-                      _xtol(x, rtol)).tolist()
+    return find_roots(
+        lambda values, cells: f(values), x[i], x[i + 1], g[i], g[i + 1], _xtol(x, rtol)
+    ).tolist()
 
 
-def refine_level_crossings(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray,
-                           values: np.ndarray, levels: Iterable[float],
-                           rtol: float = ROOT_RTOL) -> dict[float, list[float]]:
+def refine_level_crossings(
+    f: Callable[[np.ndarray], np.ndarray],
+    x: np.ndarray,
+    values: np.ndarray,
+    levels: Iterable[float],
+    rtol: float = ROOT_RTOL,
+) -> dict[float, list[float]]:
     """Where a quantity reaches each level between grid points, refined by bisection, all
     levels and crossings together (`find_roots`: one call of f per iteration).
 
@@ -178,18 +190,28 @@ def refine_level_crossings(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray,
     """
     x, values, levels = np.asarray(x, float), np.asarray(values, float), list(levels)
 
-    def reached(v: np.ndarray, level) -> np.ndarray:
+    def reached(v: np.ndarray, level: ArrayLike) -> np.ndarray:
         """+1/2 where v >= level, -1/2 below: a sign change without a zero, so Chandrupatla's
         steps are bisections."""
         return np.where(np.isnan(v), np.nan, (v >= level) - 0.5)
 
     cells = [_crossings(reached(values, level))[:, 0] for level in levels]
     i = np.concatenate([np.zeros(0, int), *cells])
-    at = np.repeat(np.asarray(levels, float), [len(c) for c in cells])   # level per bracket
-    found = find_roots(lambda v, c: reached(f(v), at[c]), x[i], x[i + 1],
-                       reached(values[i], at), reached(values[i + 1], at), _xtol(x, rtol))
-    return {level: part.tolist()
-            for level, part in zip(levels, np.split(found, np.cumsum([len(c) for c in cells])))}
+    at = np.repeat(np.asarray(levels, float), [len(c) for c in cells])  # level per bracket
+    found = find_roots(
+        lambda v, c: reached(f(v), at[c]),
+        x[i],
+        x[i + 1],
+        reached(values[i], at),
+        reached(values[i + 1], at),
+        _xtol(x, rtol),
+    )
+    return {
+        level: part.tolist()
+        for level, part in zip(
+            levels, np.split(found, np.cumsum([len(c) for c in cells])), strict=False
+        )
+    }
 
 
 def _xtol(x: np.ndarray, rtol: float) -> float:
@@ -197,9 +219,9 @@ def _xtol(x: np.ndarray, rtol: float) -> float:
     return rtol * float(np.ptp(x)) if len(x) > 1 else 0.0
 
 
-
-def unstable_intervals(values: np.ndarray, growth: np.ndarray, boundaries: list[float]
-                       ) -> list[tuple[float, float]]:
+def unstable_intervals(
+    values: np.ndarray, growth: np.ndarray, boundaries: list[float]
+) -> list[tuple[float, float]]:
     """Intervals of the axis with squeak, closed by refined boundaries or the grid ends.
 
     Parameters
@@ -227,5 +249,3 @@ def unstable_intervals(values: np.ndarray, growth: np.ndarray, boundaries: list[
     if start is not None:
         bands.append((start, float(values[-1])))
     return bands
-
-

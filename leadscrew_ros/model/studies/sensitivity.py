@@ -27,8 +27,8 @@ import numpy as np
 
 from ..physics.friction import gamma, mu_o, sliding_speed
 from ..physics.kernels import scales, thread_factors
-from ..uncertainty.perturbation import EigenPairs, geometry_derivative
 from ..squeak_model import SqueakModel, Validity, check_operating_point
+from ..uncertainty.perturbation import EigenPairs, geometry_derivative
 
 FRICTION = ("mu_static", "mu_kinetic", "friction_decay_s_m")
 GEOMETRY = ("radius_m", "helix_angle_rad", "nut_position_m", "nut_length_m")
@@ -58,13 +58,16 @@ def _scale_derivatives(model: SqueakModel, speed: float, load: float) -> dict[st
     ms, mk, d = p.mu_static, p.mu_kinetic, p.friction_decay_s_m
     cb = math.cos(p.helix_angle_rad)
     v = float(sliding_speed(p, speed))
-    dv_dw = p.radius_m * math.copysign(1.0, speed) / cb                    # d|Vc|/dOmega
+    dv_dw = p.radius_m * math.copysign(1.0, speed) / cb  # d|Vc|/dOmega
     e = math.exp(-d * v)
-    m0, g = float(mu_o(p, speed)), float(gamma(p, speed))                  # (12), (A.11)
+    m0, g = float(mu_o(p, speed)), float(gamma(p, speed))  # (12), (A.11)
     # (d mu_o, d gamma) per parameter: the friction law differentiated
-    dm = {"mu_static": (e, -d * e * cb), "mu_kinetic": (1 - e, d * e * cb),
-          "friction_decay_s_m": (-(ms - mk) * v * e, -(ms - mk) * cb * e * (1 - d * v)),
-          "speed_rad_s": (-(ms - mk) * d * e * dv_dw, (ms - mk) * d * d * e * cb * dv_dw)}
+    dm = {
+        "mu_static": (e, -d * e * cb),
+        "mu_kinetic": (1 - e, d * e * cb),
+        "friction_decay_s_m": (-(ms - mk) * v * e, -(ms - mk) * cb * e * (1 - d * v)),
+        "speed_rad_s": (-(ms - mk) * d * e * dv_dw, (ms - mk) * d * d * e * cb * dv_dw),
+    }
     f = abs(load)
     c_f, c_5, dc = (float(c) for c in thread_factors(p, m0, speed, load))
     s = scales(p, speed, load, alpha)
@@ -72,8 +75,15 @@ def _scale_derivatives(model: SqueakModel, speed: float, load: float) -> dict[st
     sgn, w = math.copysign(1.0, speed), abs(speed)
 
     def coef(d_level, d_slope, d_speed=0.0):
-        return np.array([sgn * d_level, speed * d_slope + d_speed * slope,
-                         d_level / w - d_speed * sgn * level / (w * w), d_slope, d_speed])
+        return np.array(
+            [
+                sgn * d_level,
+                speed * d_slope + d_speed * slope,
+                d_level / w - d_speed * sgn * level / (w * w),
+                d_slope,
+                d_speed,
+            ]
+        )
 
     out = {}
     for name, (d_m0, d_g) in dm.items():
@@ -84,8 +94,9 @@ def _scale_derivatives(model: SqueakModel, speed: float, load: float) -> dict[st
     return out
 
 
-def mode_derivatives(model: SqueakModel, speed: float, load: float, geometry: bool = True
-                     ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+def mode_derivatives(
+    model: SqueakModel, speed: float, load: float, geometry: bool = True
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Oscillatory eigenvalues (Im > 0) and d lambda / d ln p of each, per parameter.
 
     Parameters
@@ -110,19 +121,20 @@ def mode_derivatives(model: SqueakModel, speed: float, load: float, geometry: bo
         dl = pairs.coefficient_rate(dc)
         if name == "speed_rad_s":
             dl = dl + pairs.speed_rate_of_stiffness()
-        value = speed if name == "speed_rad_s" else load if name == "load_n" else \
-            getattr(p, name)
+        value = speed if name == "speed_rad_s" else load if name == "load_n" else getattr(p, name)
         out[name] = value * dl
     out["modal_damping"] = p.modal_damping * pairs.damping_rate()
     if geometry:
         for name in GEOMETRY:
             out[name] = getattr(p, name) * pairs.matrix_rate(
-                geometry_derivative(p, name, speed, load))
+                geometry_derivative(p, name, speed, load)
+            )
     return pairs.lam, out
 
 
-def sensitivities(model: SqueakModel, speed_rad_s: float, load_n: float,
-                  geometry: bool = True) -> Sensitivity | None:
+def sensitivities(
+    model: SqueakModel, speed_rad_s: float, load_n: float, geometry: bool = True
+) -> Sensitivity | None:
     """d(growth rate)/d(ln p) of the least-stable oscillatory mode.
 
     Parameters
@@ -145,5 +157,4 @@ def sensitivities(model: SqueakModel, speed_rad_s: float, load_n: float,
         return None
     lam, derivatives = mode_derivatives(model, speed, load, geometry)
     k = int(np.argmax(lam.real))
-    return Sensitivity(complex(lam[k]), {name: float(d[k].real)
-                                         for name, d in derivatives.items()})
+    return Sensitivity(complex(lam[k]), {name: float(d[k].real) for name, d in derivatives.items()})

@@ -6,39 +6,65 @@ zero contour refined along the rows and columns, all the sign changes in one bat
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Callable, Iterable
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..physics.parameters import ParameterError
 from ..squeak_model import SqueakModel
-from .fields import (PROBABILITY_LEVELS, GrowthField, check_axis_values, _at_cells, _fixed, _growth_rate, _levels_key,
-                     check_axis, growth_field, probability_field)
+from .fields import (
+    PROBABILITY_LEVELS,
+    GrowthField,
+    _at_cells,
+    _fixed,
+    _growth_rate,
+    _levels_key,
+    check_axis,
+    check_axis_values,
+    growth_field,
+    probability_field,
+)
 from .roots import ROOT_RTOL, _crossings, _xtol, find_roots, level_crossings
 from .work import map_work
 
 
-def _refined_boundary(model: SqueakModel, fixed: dict[str, float],
-                      x_axis: tuple[str, np.ndarray], y_axis: tuple[str, np.ndarray],
-                      g: np.ndarray) -> list[tuple[float, float]]:
+def _refined_boundary(
+    model: SqueakModel,
+    fixed: dict[str, float],
+    x_axis: tuple[str, np.ndarray],
+    y_axis: tuple[str, np.ndarray],
+    g: np.ndarray,
+) -> list[tuple[float, float]]:
     """Zero contour of the growth rate `g` (len(y) x len(x)) refined along the rows, then the
     columns, all in one `find_roots`: ``(x, y)`` points in the axis units, in grid order."""
     (xa, x), (ya, y) = x_axis, y_axis
-    rows, cols = _crossings(g), _crossings(g.T)                   # (j, i), (i, j)
-    coords = np.concatenate([np.column_stack([x[rows[:, 1]], y[rows[:, 0]]]),
-                             np.column_stack([x[cols[:, 0]], y[cols[:, 1]]])])
+    rows, cols = _crossings(g), _crossings(g.T)  # (j, i), (i, j)
+    coords = np.concatenate(
+        [
+            np.column_stack([x[rows[:, 1]], y[rows[:, 0]]]),
+            np.column_stack([x[cols[:, 0]], y[cols[:, 1]]]),
+        ]
+    )
     vary = np.repeat([0, 1], [len(rows), len(cols)])
     j, i = rows.T
     ci, cj = cols.T
     roots = find_roots(
         _at_cells(_growth_rate, model, fixed, (xa, ya), coords, vary),
-        np.concatenate([x[i], y[cj]]), np.concatenate([x[i + 1], y[cj + 1]]),
-        np.concatenate([g[j, i], g[cj, ci]]), np.concatenate([g[j, i + 1], g[cj + 1, ci]]),
-        np.repeat([_xtol(x, ROOT_RTOL), _xtol(y, ROOT_RTOL)], [len(rows), len(cols)]))
-    return [(r, yv) if k == 0 else (xv, r)
-            for k, r, xv, yv in zip(vary.tolist(), roots.tolist(), coords[:, 0].tolist(),
-                                    coords[:, 1].tolist())]
+        np.concatenate([x[i], y[cj]]),
+        np.concatenate([x[i + 1], y[cj + 1]]),
+        np.concatenate([g[j, i], g[cj, ci]]),
+        np.concatenate([g[j, i + 1], g[cj + 1, ci]]),
+        np.repeat([_xtol(x, ROOT_RTOL), _xtol(y, ROOT_RTOL)], [len(rows), len(cols)]),
+    )
+    return [
+        (r, yv) if k == 0 else (xv, r)
+        for k, r, xv, yv in zip(
+            vary.tolist(), roots.tolist(), coords[:, 0].tolist(), coords[:, 1].tolist(), strict=True
+        )
+    ]
 
 
 @dataclass(frozen=True)
@@ -80,8 +106,9 @@ class MapResult:
     probability: np.ndarray | None = None
     probability_stderr: np.ndarray | None = None
 
-    def probability_contours(self, levels: Iterable[float] = PROBABILITY_LEVELS
-                             ) -> dict[float, list[tuple[float, float]]]:
+    def probability_contours(
+        self, levels: Iterable[float] = PROBABILITY_LEVELS
+    ) -> dict[float, list[tuple[float, float]]]:
         """Points of the iso-P(squeak) contours.
 
         Parameters
@@ -100,11 +127,11 @@ class MapResult:
             points: list[tuple[float, float]] = []
             if self.probability is not None:
                 for j, yv in enumerate(self.y.tolist()):
-                    points += [(c, yv) for c in level_crossings(self.x, self.probability[j],
-                                                                level)]
+                    points += [(c, yv) for c in level_crossings(self.x, self.probability[j], level)]
                 for i, xv in enumerate(self.x.tolist()):
-                    points += [(xv, c) for c in level_crossings(self.y, self.probability[:, i],
-                                                                level)]
+                    points += [
+                        (xv, c) for c in level_crossings(self.y, self.probability[:, i], level)
+                    ]
             out[level] = points
         return out
 
@@ -121,17 +148,30 @@ class MapResult:
             points where P crosses it.
         """
         g = self.field.max_growth_rate
-        extra = {} if self.probability is None else {
-            "probability": _grid_list(self.probability),
-            "probability_stderr": _grid_list(self.probability_stderr),
-            "probability_contours": {_levels_key(k): [list(p) for p in v]
-                                     for k, v in self.probability_contours().items()}}
-        return {"x_axis": self.x_axis, "x": self.x.tolist(), "y_axis": self.y_axis,
-                "y": self.y.tolist(), "fixed": self.fixed,
-                "max_growth_rate": _grid_list(g),
-                "unstable": (np.nan_to_num(g, nan=-1.0) > 0).tolist(),
-                "divergence": (np.nan_to_num(self.field.divergence_rate) > 0).tolist(),
-                "boundary": [list(p) for p in self.boundary], **extra}
+        extra = (
+            {}
+            if self.probability is None
+            else {
+                "probability": _grid_list(self.probability),
+                "probability_stderr": _grid_list(np.asarray(self.probability_stderr)),
+                "probability_contours": {
+                    _levels_key(k): [list(p) for p in v]
+                    for k, v in self.probability_contours().items()
+                },
+            }
+        )
+        return {
+            "x_axis": self.x_axis,
+            "x": self.x.tolist(),
+            "y_axis": self.y_axis,
+            "y": self.y.tolist(),
+            "fixed": self.fixed,
+            "max_growth_rate": _grid_list(g),
+            "unstable": (np.nan_to_num(g, nan=-1.0) > 0).tolist(),
+            "divergence": (np.nan_to_num(self.field.divergence_rate) > 0).tolist(),
+            "boundary": [list(p) for p in self.boundary],
+            **extra,
+        }
 
 
 def _grid_list(a: np.ndarray) -> list[list[float | None]]:
@@ -139,10 +179,17 @@ def _grid_list(a: np.ndarray) -> list[list[float | None]]:
     return [[None if math.isnan(v) else v for v in row] for row in a.tolist()]
 
 
-def stability_map(model: SqueakModel, x_axis: str, x, y_axis: str, y,
-                  speed_rad_s: float | None = None, load_n: float | None = None,
-                  progress: Callable[[int], None] | None = None,
-                  probability: bool = False) -> MapResult:
+def stability_map(
+    model: SqueakModel,
+    x_axis: str,
+    x: ArrayLike,
+    y_axis: str,
+    y: ArrayLike,
+    speed_rad_s: float | None = None,
+    load_n: float | None = None,
+    progress: Callable[[int], None] | None = None,
+    probability: bool = False,
+) -> MapResult:
     """Largest squeak growth rate on a 2-D grid and its zero contour refined along rows and
     columns by root finding.
 
@@ -208,11 +255,14 @@ def stability_map(model: SqueakModel, x_axis: str, x, y_axis: str, y,
     fixed = _fixed(model, speed_rad_s, load_n)
     for a in (x_axis, y_axis):
         fixed.pop(a, None)
-    grid = dict(fixed, **{x_axis: x[None, :], y_axis: y[:, None]})
+    grid: dict[str, Any] = dict(fixed, **{x_axis: x[None, :], y_axis: y[:, None]})
     speed, load = grid.pop("speed_rad_s"), grid.pop("load_n")
     gf = growth_field(model, speed, load, progress=progress, **grid)
     g = gf.max_growth_rate
     boundary = _refined_boundary(model, fixed, (x_axis, x), (y_axis, y), g)
-    prob = probability_field(model, speed, load, progress=progress, **grid) \
-        if probability else (None, None)
+    prob = (
+        probability_field(model, speed, load, progress=progress, **grid)
+        if probability
+        else (None, None)
+    )
     return MapResult(x_axis, x, y_axis, y, fixed, gf, boundary, *prob)

@@ -7,16 +7,29 @@ the grid points: the stability boundaries by root finding on the largest squeak 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Callable, Iterable
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.optimize import minimize_scalar
 
 from ..physics.parameters import ParameterError, field_info
 from ..squeak_model import Prediction, SqueakModel, Validity
-from .fields import (OPERATING_AXES, check_axis_values, integer_axis, PROBABILITY_LEVELS, _along, _fixed, _growth_rate, _levels_key,
-                     _native, _probability, check_axis)
+from .fields import (
+    OPERATING_AXES,
+    PROBABILITY_LEVELS,
+    _along,
+    _fixed,
+    _growth_rate,
+    _levels_key,
+    _native,
+    _probability,
+    check_axis,
+    check_axis_values,
+    integer_axis,
+)
 from .roots import ROOT_RTOL, _xtol, refine_crossings, refine_level_crossings, unstable_intervals
 from .work import _chunk_points, sweep_work
 
@@ -87,20 +100,24 @@ class SweepResult:
             (``probability_crossings``, keyed '0.01', ...).
         """
         return {
-            "axis": self.axis, self.axis: self.values.tolist(), "fixed": self.fixed,
+            "axis": self.axis,
+            self.axis: self.values.tolist(),
+            "fixed": self.fixed,
             "valid": [p.valid for p in self.predictions],
             "max_growth_rate": [None if math.isnan(g) else g for g in self.max_growth_rate],
             "probability": [p.probability for p in self.predictions],
             "probability_stderr": [p.probability_stderr for p in self.predictions],
-            "probability_crossings": {_levels_key(k): v
-                                      for k, v in self.probability_crossings.items()},
+            "probability_crossings": {
+                _levels_key(k): v for k, v in self.probability_crossings.items()
+            },
             "unstable_modes": [[m.label for m in p.squeak_modes] for p in self.predictions],
             "unstable_frequencies_hz": [p.unstable_frequencies_hz for p in self.predictions],
             "stability_boundaries": self.boundaries,
             f"unstable_bands_{_unit_suffix(self.axis)}": [list(b) for b in self.unstable_bands],
             f"peak_{self.axis}": None if math.isnan(self.peak_value) else self.peak_value,
-            "peak_growth_rate": (None if math.isnan(self.peak_growth_rate)
-                                 else self.peak_growth_rate),
+            "peak_growth_rate": (
+                None if math.isnan(self.peak_growth_rate) else self.peak_growth_rate
+            ),
         }
 
 
@@ -118,9 +135,14 @@ def _unit_suffix(axis: str) -> str:
     return unit.replace("/", "_").replace("^", "").replace(" ", "") if unit != "1" else "1"
 
 
-def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = None,
-          load_n: float | None = None, progress: Callable[[int], None] | None = None
-          ) -> SweepResult:
+def sweep(
+    model: SqueakModel,
+    axis: str,
+    values: ArrayLike,
+    speed_rad_s: float | None = None,
+    load_n: float | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> SweepResult:
     """Predictions along one axis (batched), with refined stability boundaries and bands.
 
     Parameters
@@ -179,7 +201,7 @@ def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = Non
     fixed = _fixed(model, speed_rad_s, load_n)
     fixed.pop(axis, None)
     if axis in OPERATING_AXES:
-        point = dict(fixed, **{axis: values})
+        point: dict[str, Any] = dict(fixed, **{axis: values})
         speeds, loads = np.broadcast_arrays(point["speed_rad_s"], point["load_n"])
         predictions, chunk = [], _chunk_points(2 * model.geometry.n)
         for start in range(0, values.size, chunk):
@@ -195,23 +217,39 @@ def sweep(model: SqueakModel, axis: str, values, speed_rad_s: float | None = Non
             try:
                 sub = model.with_params(**{axis: _native(axis, v)})
             except ParameterError as exc:
-                predictions.append(Prediction(fixed["speed_rad_s"], fixed["load_n"],
-                                              model.params.formulation,
-                                              Validity.PARAMETERS_REJECTED, str(exc)))
+                predictions.append(
+                    Prediction(
+                        fixed["speed_rad_s"],
+                        fixed["load_n"],
+                        model.params.formulation,
+                        Validity.PARAMETERS_REJECTED,
+                        str(exc),
+                    )
+                )
                 continue
             predictions.append(sub.predict(fixed["speed_rad_s"], fixed["load_n"]))
     growth = _per_value(predictions, "max_growth_rate")
     growth_along = _along(_growth_rate, model, fixed, axis)
     boundaries = refine_crossings(growth_along, values, growth)
-    return SweepResult(axis, values, fixed, predictions, boundaries,
-                       unstable_intervals(values, growth, boundaries),
-                       *peak_growth(growth_along, values, growth, integer_axis(axis)),
-                       probability_crossings(model, fixed, axis, values,
-                                             _per_value(predictions, "probability")))
+    return SweepResult(
+        axis,
+        values,
+        fixed,
+        predictions,
+        boundaries,
+        unstable_intervals(values, growth, boundaries),
+        *peak_growth(growth_along, values, growth, integer_axis(axis)),
+        probability_crossings(model, fixed, axis, values, _per_value(predictions, "probability")),
+    )
 
 
-def peak_growth(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, g: np.ndarray,
-                integer: bool = False, rtol: float = ROOT_RTOL) -> tuple[float, float]:
+def peak_growth(
+    f: Callable[[np.ndarray], np.ndarray],
+    x: np.ndarray,
+    g: np.ndarray,
+    integer: bool = False,
+    rtol: float = ROOT_RTOL,
+) -> tuple[float, float]:
     """The largest growth rate along an axis and where it is: bounded scalar maximisation
     (Brent's method, `scipy.optimize.minimize_scalar`) between the grid neighbours of the
     largest grid value.
@@ -246,17 +284,22 @@ def peak_growth(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray, g: np.ndar
 
     def loss(v: float) -> float:
         growth = f(np.array([v]))[0]
-        return -growth if np.isfinite(growth) else math.inf      # invalid: never the peak
+        return -growth if np.isfinite(growth) else math.inf  # invalid: never the peak
 
-    found = minimize_scalar(loss, bounds=(min(ends), max(ends)), method="bounded",
-                            options={"xatol": _xtol(x, rtol)})
+    found = minimize_scalar(
+        loss, bounds=(min(ends), max(ends)), method="bounded", options={"xatol": _xtol(x, rtol)}
+    )
     return (float(found.x), -float(found.fun)) if -found.fun > best[1] else best
 
 
-def probability_crossings(model: SqueakModel, fixed: dict[str, float], axis: str,
-                          values: np.ndarray, probability: np.ndarray,
-                          levels: Iterable[float] = PROBABILITY_LEVELS
-                          ) -> dict[float, list[float]]:
+def probability_crossings(
+    model: SqueakModel,
+    fixed: dict[str, float],
+    axis: str,
+    values: np.ndarray,
+    probability: np.ndarray,
+    levels: Iterable[float] = PROBABILITY_LEVELS,
+) -> dict[float, list[float]]:
     """Where P(squeak) reaches each level along one axis, refined between the grid points.
 
     P (`Prediction.probability`) is a share of the scatter samples, a step function of the
@@ -286,7 +329,6 @@ def probability_crossings(model: SqueakModel, fixed: dict[str, float], axis: str
     dict of float to list of float
         Level -> its crossings in the axis unit, in grid order.
     """
-    return refine_level_crossings(_along(_probability, model, fixed, axis), values,
-                                  probability, levels)
-
-
+    return refine_level_crossings(
+        _along(_probability, model, fixed, axis), values, probability, levels
+    )

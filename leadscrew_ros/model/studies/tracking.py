@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -95,13 +95,14 @@ def track_modes(predictions: Sequence[Prediction], max_jump: float = 0.15) -> li
     """
     size, last = len(predictions), np.empty(0, complex)
     branches: list[Branch] = []
-    alive: list[int] = []                     # branch index of each mode of `last`
+    alive: list[int] = []  # branch index of each mode of `last`
     for i, p in enumerate(predictions):
         lam = _eigenvalues(p)
         owner = [-1] * len(lam)
         if len(last) and len(lam):
             cost = np.abs(last[:, None] - lam[None, :]) / np.maximum(
-                np.abs(last)[:, None], np.abs(lam)[None, :])
+                np.abs(last)[:, None], np.abs(lam)[None, :]
+            )
             for r, c in zip(*linear_sum_assignment(cost), strict=True):
                 if cost[r, c] < max_jump:
                     owner[c] = alive[r]

@@ -15,12 +15,12 @@ from ..physics.display import exact
 from ..physics.parameters import ParameterError, field_info
 from ..squeak_model import SqueakModel
 
-_CHUNK = 1024                       # points per batched eigen-solve at the reference size
-REFERENCE_STATE_SIZE = 36           # state size of the default model (6 bending + 6 torsion)
-MAX_POINTS = 1_000_000              # points of one map or sweep at the reference state size
-MAX_MEMORY_BYTES = 2_000_000_000   # estimated peak memory of one map or sweep
-_MAP_POINT_BYTES = 250              # result arrays, JSON output (measured: ~40 held, ~200 JSON)
-_PREDICTION_BYTES_PER_STATE = 85    # a sweep's Prediction per point (~3 kB at 36 states)
+_CHUNK = 1024  # points per batched eigen-solve at the reference size
+REFERENCE_STATE_SIZE = 36  # state size of the default model (6 bending + 6 torsion)
+MAX_POINTS = 1_000_000  # points of one map or sweep at the reference state size
+MAX_MEMORY_BYTES = 2_000_000_000  # estimated peak memory of one map or sweep
+_MAP_POINT_BYTES = 250  # result arrays, JSON output (measured: ~40 held, ~200 JSON)
+_PREDICTION_BYTES_PER_STATE = 85  # a sweep's Prediction per point (~3 kB at 36 states)
 
 
 class WorkSizeError(ParameterError):
@@ -31,9 +31,9 @@ class WorkSizeError(ParameterError):
 class Work:
     """The size of a batch of predictions, checked against the limits before it starts."""
 
-    what: str                       # 'map of 100 x 200', 'sweep of 500 radius_m values'
+    what: str  # 'map of 100 x 200', 'sweep of 500 radius_m values'
     points: int
-    state_size: int                 # 2 x (2 n_bending + n_torsion)
+    state_size: int  # 2 x (2 n_bending + n_torsion)
     bytes_per_point: float
     remedy: str = "use fewer points"
 
@@ -44,24 +44,31 @@ class Work:
         return max(1, min(MAX_POINTS, int(MAX_POINTS * scale)))
 
     def memory_bytes(self, points: int | None = None) -> float:
+        """Memory [bytes] that `points` predictions take (default: this batch's)."""
         n = self.points if points is None else points
-        chunk = _chunk_points(self.state_size) * self.state_size ** 2 * 16 * 4   # eig workspace
+        chunk = _chunk_points(self.state_size) * self.state_size**2 * 16 * 4  # eig workspace
         return n * self.bytes_per_point + chunk
 
     def check(self) -> None:
         """Raise WorkSizeError if the work exceeds the point or memory limit."""
         limit = self.point_limit
         if self.points > limit:
-            per_model = (f" for a model of {self.state_size} states ({exact(MAX_POINTS)} at "
-                         f"the default {REFERENCE_STATE_SIZE})" if limit < MAX_POINTS else "")
+            per_model = (
+                f" for a model of {self.state_size} states ({exact(MAX_POINTS)} at "
+                f"the default {REFERENCE_STATE_SIZE})"
+                if limit < MAX_POINTS
+                else ""
+            )
             raise WorkSizeError(
                 f"{self.what} = {exact(self.points)} points (about {_gb(self.memory_bytes())}) "
-                f"exceeds the limit of {exact(limit)} points{per_model}; {self.remedy}")
+                f"exceeds the limit of {exact(limit)} points{per_model}; {self.remedy}"
+            )
         if self.memory_bytes() > MAX_MEMORY_BYTES:
             raise WorkSizeError(
                 f"{self.what} = {exact(self.points)} points needs about "
                 f"{_gb(self.memory_bytes())}, more than the limit of "
-                f"{_gb(MAX_MEMORY_BYTES)}; {self.remedy}")
+                f"{_gb(MAX_MEMORY_BYTES)}; {self.remedy}"
+            )
 
 
 def _gb(n_bytes: float) -> str:
@@ -71,7 +78,7 @@ def _gb(n_bytes: float) -> str:
 def _chunk_points(state_size: int) -> int:
     """Points per batched eigen-solve: about the work (and Ctrl-C latency) of _CHUNK points of
     the default model, whatever the number of modes."""
-    return max(1, _CHUNK * REFERENCE_STATE_SIZE ** 3 // state_size ** 3)
+    return max(1, _CHUNK * REFERENCE_STATE_SIZE**3 // state_size**3)
 
 
 def _state_size(model: SqueakModel, axes: dict[str, np.ndarray]) -> int:
@@ -85,16 +92,22 @@ def _state_size(model: SqueakModel, axes: dict[str, np.ndarray]) -> int:
     return 2 * (2 * n["n_bending"] + n["n_torsion"])
 
 
-def map_work(model: SqueakModel, x_axis: str, x: np.ndarray, y_axis: str, y: np.ndarray
-             ) -> Work:
+def map_work(model: SqueakModel, x_axis: str, x: np.ndarray, y_axis: str, y: np.ndarray) -> Work:
     """The work of `stability_map` on the grid x times y."""
-    return Work(f"map of {len(x)} x {len(y)}", len(x) * len(y),
-                _state_size(model, {x_axis: x, y_axis: y}), _MAP_POINT_BYTES)
+    return Work(
+        f"map of {len(x)} x {len(y)}",
+        len(x) * len(y),
+        _state_size(model, {x_axis: x, y_axis: y}),
+        _MAP_POINT_BYTES,
+    )
 
 
 def sweep_work(model: SqueakModel, axis: str, values: np.ndarray) -> Work:
     """The work of `sweep` along `values`."""
     size = _state_size(model, {axis: values})
-    return Work(f"sweep of {len(values)} {axis} values", len(values), size,
-                _PREDICTION_BYTES_PER_STATE * size)
-
+    return Work(
+        f"sweep of {len(values)} {axis} values",
+        len(values),
+        size,
+        _PREDICTION_BYTES_PER_STATE * size,
+    )

@@ -35,13 +35,13 @@ from numpy.typing import ArrayLike
 from ..physics.assembly import Geometry, build_geometry
 from ..physics.kernels import level_slope
 from ..physics.parameters import ParameterError, ScrewParameters, field_info
-from .scatter import Samples, Scatter
 from ..physics.stability import GROWTH_TOL, Eigen, eig_both
+from .scatter import Samples, Scatter
 
-GEOMETRY_STEP = 1e-6          # relative step of a state-matrix difference in a geometry field
-MAX_GEOMETRY_FIELDS = 2       # scattered geometry fields the live estimate takes
+GEOMETRY_STEP = 1e-6  # relative step of a state-matrix difference in a geometry field
+MAX_GEOMETRY_FIELDS = 2  # scattered geometry fields the live estimate takes
 GEOMETRY_NODES = {1: 9, 2: 5}  # node geometries per scattered geometry field
-_OUTSIDE = -1e30              # margin of a node without a prediction (counts as no squeak)
+_OUTSIDE = -1e30  # margin of a node without a prediction (counts as no squeak)
 
 
 class EigenPairs:
@@ -62,10 +62,10 @@ class EigenPairs:
         self.lam, self.x = eigen.lam[eigen.osc], eigen.right
         assert eigen.left is not None, "the expansion needs the left vectors (eig_both)"
         y_h = eigen.left.conj().T
-        self.y_h = y_h / np.einsum("ij,ji->i", y_h, self.x)[:, None]    # y_i^H x_i = 1
+        self.y_h = y_h / np.einsum("ij,ji->i", y_h, self.x)[:, None]  # y_i^H x_i = 1
 
     @classmethod
-    def solve(cls, geometry: Geometry, speed: float, load: float) -> "EigenPairs":
+    def solve(cls, geometry: Geometry, speed: float, load: float) -> EigenPairs:
         """Eigen-solve A at one operating point [rad/s], [N]."""
         return cls(geometry, speed, eig_both(geometry.state_matrices(speed, load)))
 
@@ -96,13 +96,18 @@ class EigenPairs:
         return np.einsum("ij,ji->i", self.y_h, da @ self.x)
 
 
-def geometry_derivative(params: ScrewParameters, name: str, speed: float, load: float
-                        ) -> np.ndarray:
+def geometry_derivative(
+    params: ScrewParameters, name: str, speed: float, load: float
+) -> np.ndarray:
     """dA / d(name) by a central difference of two geometries (relative step GEOMETRY_STEP);
     the geometries are cached, so a parameter set pays for them once."""
     h = GEOMETRY_STEP * getattr(params, name)
-    hi, lo = (build_geometry(params.with_(**{name: getattr(params, name) + s}))
-              .state_matrices(speed, load) for s in (h, -h))
+    hi, lo = (
+        build_geometry(params.with_(**{name: getattr(params, name) + s})).state_matrices(
+            speed, load
+        )
+        for s in (h, -h)
+    )
     return (hi - lo) / (2 * h)
 
 
@@ -119,7 +124,8 @@ def geometry_fields(scatter: Scatter) -> list[str]:
         raise ParameterError(
             f"{len(fields)} geometry fields scatter ({', '.join(fields)}); the live "
             f"estimate takes at most {MAX_GEOMETRY_FIELDS} (probability.monte_carlo "
-            "takes any)")
+            "takes any)"
+        )
     return fields
 
 
@@ -132,19 +138,26 @@ class _Expansion:
         self.geometry, self.params, n = geometry, geometry.params, geometry.n
         self.sampled = SimpleNamespace(**{**self.params.as_dict(), **friction})
         damping = np.zeros((n, 2 * n))
-        damping[np.arange(n), n + np.arange(n)] = -2 * geometry.basis.omega_rad_s   # (A.1)
+        damping[np.arange(n), n + np.arange(n)] = -2 * geometry.basis.omega_rad_s  # (A.1)
         # dA per unit coefficient (W1, W5q, W3, W5qdot) and per unit of xi, lower half
-        self.units = np.concatenate([-geometry.lower_half_units[:4].reshape(4 * n, 2 * n),
-                                     damping]).astype(complex)  # dA = -[0; U_k], [0; damping]
+        self.units = np.concatenate(
+            [-geometry.lower_half_units[:4].reshape(4 * n, 2 * n), damping]
+        ).astype(complex)  # dA = -[0; U_k], [0; damping]
 
-    def margins(self, pairs: EigenPairs, load: float, damping: np.ndarray,
-                reach_damping: float, prune: bool = True) -> np.ndarray:
+    def margins(
+        self,
+        pairs: EigenPairs,
+        load: float,
+        damping: np.ndarray,
+        reach_damping: float,
+        prune: bool = True,
+    ) -> np.ndarray:
         """Per sample, the largest expanded growth rate beyond the squeak threshold over the
         modes [1/s] (> 0: squeak); `damping` holds the samples' damping-ratio changes. `prune`
         leaves out the modes that cannot reach the threshold (then -inf where none can):
         right for the sign, not for interpolation. Thread-safe: nothing shared is written."""
         speed, n = pairs.speed, self.geometry.n
-        change = np.empty((3, len(damping)))               # level, slope, damping ratio
+        change = np.empty((3, len(damping)))  # level, slope, damping ratio
         change[2] = damping
         alpha = self.geometry.contact.alpha
         level0, slope0 = level_slope(self.params, speed, load, alpha)
@@ -152,18 +165,28 @@ class _Expansion:
         np.subtract(level, level0, out=change[0])
         np.subtract(slope, slope0, out=change[1])
         # d lambda per unit coefficient: y^H dA x over the lower half of A (one product)
-        r = np.einsum("ij,kji->ki", pairs.y_h[:, n:],
-                      (self.units @ pairs.x).reshape(5, n, -1)).real
+        r = np.einsum("ij,kji->ki", pairs.y_h[:, n:], (self.units @ pairs.x).reshape(5, n, -1)).real
         # level l: W1 = sign l, W3 = l / |Omega|; slope s: W5q = Omega s, W5qdot = s
-        rates = np.array([[math.copysign(1.0, speed), 0.0, 1.0 / abs(speed), 0.0, 0.0],
-                          [0.0, speed, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0]]) @ r  # (3, M)
-        threshold = GROWTH_TOL * np.abs(pairs.lam) - pairs.lam.real    # growth beyond it
+        rates = (
+            np.array(
+                [
+                    [math.copysign(1.0, speed), 0.0, 1.0 / abs(speed), 0.0, 0.0],
+                    [0.0, speed, 0.0, 1.0, 0.0],
+                    [0.0, 0.0, 0.0, 0.0, 1.0],
+                ]
+            )
+            @ r
+        )  # (3, M)
+        threshold = GROWTH_TOL * np.abs(pairs.lam) - pairs.lam.real  # growth beyond it
         reach = [abs(change[0]).max(), abs(change[1]).max(), reach_damping]
-        candidates = (np.flatnonzero(np.dot(reach, np.abs(rates)) > threshold) if prune
-                      else np.arange(len(threshold)))
-        if not len(candidates):                                        # no mode can reach it
+        candidates = (
+            np.flatnonzero(np.dot(reach, np.abs(rates)) > threshold)
+            if prune
+            else np.arange(len(threshold))
+        )
+        if not len(candidates):  # no mode can reach it
             return np.full(change.shape[1], -np.inf)
-        growth = rates[:, candidates].T @ change                       # (Mc, count)
+        growth = rates[:, candidates].T @ change  # (Mc, count)
         growth -= threshold[candidates, None]
         return growth.max(axis=0)
 
@@ -202,18 +225,20 @@ class FirstOrderProbability:
         self.params, self.samples = params, samples
         count, scatter = samples.count, samples.scatter
         values = {k: v.ravel() for k, v in scatter.values(params, samples.u).items()}
-        self._friction = {k: np.broadcast_to(values.get(k, getattr(params, k)), (count,))
-                          for k in ("mu_static", "mu_kinetic", "friction_decay_s_m")}
-        self._damping = np.broadcast_to(values.get("modal_damping", params.modal_damping)
-                                        - params.modal_damping, (count,))
+        self._friction = {
+            k: np.broadcast_to(values.get(k, getattr(params, k)), (count,))
+            for k in ("mu_static", "mu_kinetic", "friction_decay_s_m")
+        }
+        self._damping = np.broadcast_to(
+            values.get("modal_damping", params.modal_damping) - params.modal_damping, (count,)
+        )
         self._reach_damping = float(np.abs(self._damping).max())
         self._shape = samples.u.shape[:2]
         self._nominal = _Expansion(geometry, self._friction)
         fields = geometry_fields(scatter)
         self._nodes = self._geometry_nodes(fields, values) if fields else None
 
-    def with_geometry(self, params: ScrewParameters, geometry: Geometry
-                      ) -> FirstOrderProbability:
+    def with_geometry(self, params: ScrewParameters, geometry: Geometry) -> FirstOrderProbability:
         """The estimate for other parameters that differ from this one's only in geometry
         fields that do not scatter (a moved nut): the samples' friction and damping are the
         same, only the expansion is new. With scattered geometry the nodes move too: built
@@ -244,17 +269,16 @@ class FirstOrderProbability:
         axes, cells, fractions = [], [], []
         for name in fields:
             x = values[name]
-            axis = np.quantile(x, np.linspace(0.0, 1.0, per))   # dense where samples are
+            axis = np.quantile(x, np.linspace(0.0, 1.0, per))  # dense where samples are
             cell = np.clip(np.searchsorted(axis, x, side="right") - 1, 0, per - 2)
             axes.append(axis)
             cells.append(cell)
             step = axis[cell + 1] - axis[cell]
-            fractions.append(np.divide(x - axis[cell], step, out=np.zeros_like(x),
-                                       where=step > 0))
+            fractions.append(np.divide(x - axis[cell], step, out=np.zeros_like(x), where=step > 0))
         grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(fields))
         expansions: list[_Expansion | None] = []
         for point in grid:
-            try:            # a corner of two fields may leave the valid domain: no node
+            try:  # a corner of two fields may leave the valid domain: no node
                 node = self.params.with_(**dict(zip(fields, point.tolist(), strict=True)))
                 expansions.append(_Expansion(build_geometry(node), self._friction))
             except ParameterError:
@@ -262,9 +286,12 @@ class FirstOrderProbability:
         # multilinear interpolation: 2^d corners, each a flat node index and a weight
         corners = []
         for bits in np.ndindex(*(2,) * len(fields)):
-            index = np.ravel_multi_index([c + b for c, b in zip(cells, bits, strict=True)],
-                                         (per,) * len(fields))
-            weight = np.prod([f if b else 1 - f for f, b in zip(fractions, bits, strict=True)], axis=0)
+            index = np.ravel_multi_index(
+                [c + b for c, b in zip(cells, bits, strict=True)], (per,) * len(fields)
+            )
+            weight = np.prod(
+                [f if b else 1 - f for f, b in zip(fractions, bits, strict=True)], axis=0
+            )
             corners.append((index, weight))
         return expansions, corners
 
@@ -289,15 +316,15 @@ class FirstOrderProbability:
         speed, rows = pairs.speed, []
         for e in expansions:
             if e is None or abs(speed) >= e.geometry.basis.omega_rad_s.min():
-                rows.append(np.full(self.samples.count, _OUTSIDE))   # not valid: no squeak
+                rows.append(np.full(self.samples.count, _OUTSIDE))  # not valid: no squeak
                 continue
             node_pairs = EigenPairs.solve(e.geometry, speed, load)
-            rows.append(e.margins(node_pairs, load, self._damping, self._reach_damping,
-                                  prune=False))
+            rows.append(
+                e.margins(node_pairs, load, self._damping, self._reach_damping, prune=False)
+            )
         at = np.array(rows)
         columns = np.arange(self.samples.count)
-        return sum((w * at[index, columns] for index, w in corners),
-                   np.zeros(self.samples.count))
+        return sum((w * at[index, columns] for index, w in corners), np.zeros(self.samples.count))
 
     def hits(self, pairs: EigenPairs, load: float) -> np.ndarray:
         """Whether each sample squeaks at the operating point of `pairs`, by the expansion.
@@ -325,4 +352,3 @@ def estimate(hits: np.ndarray) -> tuple[float, float]:
     mean = sum(share) / len(share)
     var = sum((x - mean) ** 2 for x in share) / (len(share) - 1)
     return mean, math.sqrt(var / len(share))
-

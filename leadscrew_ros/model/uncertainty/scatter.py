@@ -18,10 +18,11 @@ estimate over them has a standard error from the spread of the replicates.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, make_dataclass
 from functools import lru_cache
 from types import MappingProxyType, SimpleNamespace
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 from scipy.special import ndtri
@@ -30,22 +31,27 @@ from scipy.stats import qmc
 from ..physics.metadata import check, setting
 from ..physics.parameters import ParameterError, ParamsLike, ScrewParameters
 
-LOG_NORMAL = frozenset({"modal_damping"})       # positive, with a spread of a factor
-DEFAULT_SCATTER = MappingProxyType({"mu_static": 0.05, "mu_kinetic": 0.05,
-                                    "friction_decay_s_m": 0.10, "modal_damping": 0.35})
+LOG_NORMAL = frozenset({"modal_damping"})  # positive, with a spread of a factor
+DEFAULT_SCATTER = MappingProxyType(
+    {"mu_static": 0.05, "mu_kinetic": 0.05, "friction_decay_s_m": 0.10, "modal_damping": 0.35}
+)
 # Fields that are operating conditions or switches, not properties of a drive.
-NOT_SCATTERED = frozenset({"axial_load_n", "n_bending", "n_torsion", "formulation",
-                           "min_speed_rad_s"})
-MAX_SCATTER = 1.0                               # relative SD (or SD of ln) at most
-REPLICATES = 8                                  # independent scramblings per estimate
-LIVE_SAMPLES = 1024                             # samples of the live estimate (default)
+NOT_SCATTERED = frozenset(
+    {"axial_load_n", "n_bending", "n_torsion", "formulation", "min_speed_rad_s"}
+)
+MAX_SCATTER = 1.0  # relative SD (or SD of ln) at most
+REPLICATES = 8  # independent scramblings per estimate
+LIVE_SAMPLES = 1024  # samples of the live estimate (default)
 _MAX_REDRAW_ROUNDS = 20
 # The cross-field rules of ScrewParameters that a sample must keep (`valid_mask`).
-_RULES = ((("mu_static", "mu_kinetic"), lambda get: get("mu_static") >= get("mu_kinetic")),
-          (("nut_position_m", "nut_length_m", "length_m"),
-           lambda get: get("nut_position_m") + get("nut_length_m") <= get("length_m")),
-          (("thread_height_m", "radius_m"),
-           lambda get: get("thread_height_m") < get("radius_m")))
+_RULES = (
+    (("mu_static", "mu_kinetic"), lambda get: get("mu_static") >= get("mu_kinetic")),
+    (
+        ("nut_position_m", "nut_length_m", "length_m"),
+        lambda get: get("nut_position_m") + get("nut_length_m") <= get("length_m"),
+    ),
+    (("thread_height_m", "radius_m"), lambda get: get("thread_height_m") < get("radius_m")),
+)
 
 
 def scatterable() -> tuple[str, ...]:
@@ -70,14 +76,20 @@ class Scatter:
         known = scatterable()
         for name, s in self.sd.items():
             if name not in known:
-                raise ParameterError(f"scatter.{name}: not a scatterable parameter; one of "
-                                     f"{', '.join(known)}")
-            if isinstance(s, bool) or not isinstance(s, (int, float)) or not (
-                    math.isfinite(s) and 0.0 <= s <= MAX_SCATTER):
-                raise ParameterError(f"scatter.{name} = {s!r} must be a number in "
-                                     f"[0, {MAX_SCATTER:g}]")
-        object.__setattr__(self, "sd", MappingProxyType(
-            {k: float(v) for k, v in sorted(self.sd.items()) if v > 0}))
+                raise ParameterError(
+                    f"scatter.{name}: not a scatterable parameter; one of {', '.join(known)}"
+                )
+            if (
+                isinstance(s, bool)
+                or not isinstance(s, (int, float))
+                or not (math.isfinite(s) and 0.0 <= s <= MAX_SCATTER)
+            ):
+                raise ParameterError(
+                    f"scatter.{name} = {s!r} must be a number in [0, {MAX_SCATTER:g}]"
+                )
+        object.__setattr__(
+            self, "sd", MappingProxyType({k: float(v) for k, v in sorted(self.sd.items()) if v > 0})
+        )
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -87,7 +99,7 @@ class Scatter:
     def __hash__(self) -> int:
         return hash(tuple(self.sd.items()))
 
-    def __reduce__(self):                     # a mappingproxy does not pickle; a dict does
+    def __reduce__(self):  # a mappingproxy does not pickle; a dict does
         return (Scatter, (dict(self.sd),))
 
     def __eq__(self, other: object) -> bool:
@@ -111,8 +123,7 @@ class Scatter:
         out = {}
         for k, name in enumerate(self.names):
             p0, s = getattr(nominal, name), self.sd[name]
-            out[name] = p0 * (np.exp(s * u[..., k]) if name in LOG_NORMAL
-                              else 1.0 + s * u[..., k])
+            out[name] = p0 * (np.exp(s * u[..., k]) if name in LOG_NORMAL else 1.0 + s * u[..., k])
         return out
 
 
@@ -164,9 +175,13 @@ class Samples:
         return self.u.shape[0] * self.u.shape[1]
 
 
-def draw(nominal: ParamsLike, scatter: Scatter, count: int = 4096,
-         replicates: int = REPLICATES,
-         seed: int = 0) -> Samples:
+def draw(
+    nominal: ParamsLike,
+    scatter: Scatter,
+    count: int = 4096,
+    replicates: int = REPLICATES,
+    seed: int = 0,
+) -> Samples:
     """Samples of the scatter around `nominal`.
 
     Parameters
@@ -194,39 +209,49 @@ def draw(nominal: ParamsLike, scatter: Scatter, count: int = 4096,
     per = check_count(count, replicates) // replicates
     dim = max(len(scatter.names), 1)
     rng = np.random.default_rng(seed)
-    u = np.stack([ndtri(qmc.Sobol(dim, scramble=True, seed=rng).random(per))
-                  for _ in range(replicates)])[..., :len(scatter.names)]
+    u = np.stack(
+        [ndtri(qmc.Sobol(dim, scramble=True, seed=rng).random(per)) for _ in range(replicates)]
+    )[..., : len(scatter.names)]
     values = scatter.values(nominal, u)
     bad = ~valid_mask(nominal, values)
     redrawn = int(bad.sum())
-    for _ in range(_MAX_REDRAW_ROUNDS):          # redraw outside the domain (truncation)
+    for _ in range(_MAX_REDRAW_ROUNDS):  # redraw outside the domain (truncation)
         if not bad.any():
             break
         u[bad] = rng.standard_normal((int(bad.sum()), u.shape[-1]))
         values = scatter.values(nominal, u)
         bad = ~valid_mask(nominal, values)
     else:
-        raise ParameterError(f"the scatter leaves the valid parameter domain too often "
-                             f"({int(bad.sum())} of {count} samples after "
-                             f"{_MAX_REDRAW_ROUNDS} redraws)")
+        raise ParameterError(
+            f"the scatter leaves the valid parameter domain too often "
+            f"({int(bad.sum())} of {count} samples after "
+            f"{_MAX_REDRAW_ROUNDS} redraws)"
+        )
     return Samples(scatter, u, values, redrawn)
 
 
 def check_count(count: object, replicates: int = REPLICATES) -> int:
     """`count` if it is a valid number of samples (replicates times a power of 2), else
     ParameterError with the reason."""
-    if isinstance(count, bool) or not isinstance(count, int) or isinstance(
-            replicates, bool) or not isinstance(replicates, int) or replicates < 2:
+    if (
+        isinstance(count, bool)
+        or not isinstance(count, int)
+        or isinstance(replicates, bool)
+        or not isinstance(replicates, int)
+        or replicates < 2
+    ):
         raise ParameterError("count and replicates must be integers, replicates >= 2")
     per = count // replicates
     if per < 1 or per * replicates != count or per & (per - 1):
-        raise ParameterError(f"count = {count} must be replicates ({replicates}) times a power "
-                             "of 2")
+        raise ParameterError(
+            f"count = {count} must be replicates ({replicates}) times a power of 2"
+        )
     return count
 
 
-def samples_for(nominal: ScrewParameters, scatter: Scatter, count: int = LIVE_SAMPLES,
-                seed: int = 0) -> Samples:
+def samples_for(
+    nominal: ScrewParameters, scatter: Scatter, count: int = LIVE_SAMPLES, seed: int = 0
+) -> Samples:
     """`draw(nominal, scatter, count, REPLICATES, seed)`, with the standard-normal points
     cached: they depend on the nominal values only through the valid domain, so a model
     rebuilt for a new nut position or load reuses them (values are recomputed around it)."""
@@ -256,13 +281,34 @@ def _points(scatter: Scatter, count: int, seed: int, key: tuple) -> tuple[np.nda
 def _settings_class() -> type:
     """ScatterSettings: one field per scatterable parameter (default: DEFAULT_SCATTER, else 0)
     and the live sample count, each with its metadata (ROS parameters `scatter.<name>`)."""
-    spec: list[tuple[str, type, Any]] = [(name, float, setting(
-        DEFAULT_SCATTER.get(name, 0.0), "1",
-        f"{'SD of ln' if name in LOG_NORMAL else 'relative SD of'} {name} from unit "
-        "to unit (0: fixed)", 0.0, MAX_SCATTER)) for name in scatterable()]
-    spec.append(("samples", int, setting(
-        LIVE_SAMPLES, "1", f"scatter samples of the live P(squeak) ({REPLICATES} replicates "
-        "of a power of 2)", 16, 65536)))
+    spec: list[tuple[str, type, Any]] = [
+        (
+            name,
+            float,
+            setting(
+                DEFAULT_SCATTER.get(name, 0.0),
+                "1",
+                f"{'SD of ln' if name in LOG_NORMAL else 'relative SD of'} {name} from unit "
+                "to unit (0: fixed)",
+                0.0,
+                MAX_SCATTER,
+            ),
+        )
+        for name in scatterable()
+    ]
+    spec.append(
+        (
+            "samples",
+            int,
+            setting(
+                LIVE_SAMPLES,
+                "1",
+                f"scatter samples of the live P(squeak) ({REPLICATES} replicates of a power of 2)",
+                16,
+                65536,
+            ),
+        )
+    )
 
     def post_init(self: Any) -> None:
         check(self, ParameterError, "scatter.")
@@ -275,12 +321,19 @@ def _settings_class() -> type:
         """The scatter these settings give (the SDs > 0)."""
         return Scatter({n: getattr(self, n) for n in scatterable()})
 
-    return make_dataclass("ScatterSettings", spec, frozen=True, namespace={
-        "__post_init__": post_init, "scatter": property(scatter),
-        "__module__": __name__,
-        "__doc__": "Unit-to-unit scatter of the parameters (`Scatter`) and the live sample "
-                   "count,\n    declared with field metadata (ROS parameters "
-                   "`scatter.<name>`)."})
+    return make_dataclass(
+        "ScatterSettings",
+        spec,
+        frozen=True,
+        namespace={
+            "__post_init__": post_init,
+            "scatter": property(scatter),
+            "__module__": __name__,
+            "__doc__": "Unit-to-unit scatter of the parameters (`Scatter`) and the live sample "
+            "count,\n    declared with field metadata (ROS parameters "
+            "`scatter.<name>`).",
+        },
+    )
 
 
 ScatterSettings = _settings_class()
