@@ -3,7 +3,8 @@
 
 The README stays short and names the set-up and build commands; every picture a page shows
 exists and is small. (The build itself, with warnings as errors and the pages' doctests, runs
-in .ci/run; the generated tables are tested in test_settings.py, the architecture tree in test_layers.py.)"""
+in .ci/run; the generated tables are tested in test_settings.py, the architecture tree in
+test_layers.py.)"""
 
 import re
 from pathlib import Path
