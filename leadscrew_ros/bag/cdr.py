@@ -20,6 +20,7 @@ ignored: Fast CDR may pad a payload.
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from typing import NamedTuple
 
 _ENCAPSULATION = {b"\x00\x00": ">", b"\x00\x01": "<"}  # CDR_BE, CDR_LE
@@ -203,7 +204,7 @@ class _Encoder:
     def _align(self, size: int) -> None:
         self.out += bytes(-(len(self.out) - _HEADER) % size)
 
-    def _pack(self, fmt: str, size: int, *values) -> None:
+    def _pack(self, fmt: str, size: int, *values: float) -> None:
         self._align(size)
         try:
             self.out += struct.pack("<" + fmt, *values)
@@ -223,12 +224,12 @@ class _Encoder:
         self.u32(len(raw) + 1)
         self.out += raw + b"\x00"
 
-    def strings(self, values) -> None:
+    def strings(self, values: Sequence[str]) -> None:
         self.u32(len(values))
         for v in values:
             self.string(v)
 
-    def f64s(self, values) -> None:
+    def f64s(self, values: Sequence[float]) -> None:
         """A float64 sequence (an empty one is not aligned for its elements, as Fast CDR)."""
         self.u32(len(values))
         if len(values):
@@ -256,7 +257,9 @@ def encode_bool(value: bool) -> bytes:
     return _BOOL_PAYLOADS[bool(value)]
 
 
-def encode_float64_multi_array(dim: tuple[Dimension, ...], data, data_offset: int = 0) -> bytes:
+def encode_float64_multi_array(
+    dim: tuple[Dimension, ...], data: Sequence[float], data_offset: int = 0
+) -> bytes:
     """std_msgs/Float64MultiArray of layout dimensions `dim` and values `data` (written
     directly: every prediction publishes two)."""
     out = bytearray(_LE_HEADER)

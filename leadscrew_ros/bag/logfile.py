@@ -24,6 +24,7 @@ from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import IO
 
 import lz4.frame
 import yaml
@@ -196,7 +197,7 @@ def _split_files(directory: Path) -> list[Path]:
     return sorted(directory.glob("*.mcap"), key=_split_key)
 
 
-def _split_key(p: Path):
+def _split_key(p: Path) -> tuple[str, int, str]:
     m = re.search(r"_(\d+)\.mcap$", p.name)
     return (p.name[: m.start()] if m else p.stem, int(m.group(1)) if m else -1, p.name)
 
@@ -240,7 +241,7 @@ def read_messages(
     except IsADirectoryError:
         raise LogError(path, "is a directory, not an MCAP file") from None
     except OSError as exc:
-        raise LogError(path, exc.strerror or exc) from None
+        raise LogError(path, exc.strerror or str(exc)) from None
 
 
 def _incomplete(path: Path) -> str:
@@ -279,7 +280,9 @@ class _CutOff(_Damage):
     """The file ends inside or right after a whole record: a recording cut off, not corrupted."""
 
 
-def _records(path: Path, f, size: int, topics, strict: bool, info: LogInfo) -> Iterator[LogMessage]:
+def _records(
+    path: Path, f: IO[bytes], size: int, topics: set[str] | None, strict: bool, info: LogInfo
+) -> Iterator[LogMessage]:
     """The messages of the open file `f` of `size` bytes, read record by record."""
     if f.read(len(MAGIC)) != MAGIC:
         raise LogError(path, "not an MCAP file (bad magic)")
@@ -321,14 +324,14 @@ def _records(path: Path, f, size: int, topics, strict: bool, info: LogInfo) -> I
                 if m is not None:
                     yield m
             elif op == OP_CHUNK:
-                for kind, chunk_rec in _chunk(rec):
-                    if kind == OP_SCHEMA:
+                for _, chunk_rec in _chunk(rec):
+                    if isinstance(chunk_rec, Schema):
                         schemas[chunk_rec.id] = (
                             chunk_rec.name,
                             chunk_rec.encoding,
                             chunk_rec.data.decode(),
                         )
-                    elif kind == OP_CHANNEL:
+                    elif isinstance(chunk_rec, Channel):
                         _channel(path, chunk_rec, schemas, channels, topics, info)
                     else:
                         m = _message(chunk_rec, 0, len(chunk_rec), channels, info)
@@ -355,7 +358,7 @@ def _records(path: Path, f, size: int, topics, strict: bool, info: LogInfo) -> I
     info.damage = problem
 
 
-def _read(f, n: int) -> bytes:
+def _read(f: IO[bytes], n: int) -> bytes:
     """`n` bytes at the file position (checked against the size first, by the caller)."""
     data = f.read(n)
     if len(data) != n:
@@ -367,7 +370,14 @@ def _stream(rec: bytes) -> ReadDataStream:
     return ReadDataStream(io.BytesIO(rec))
 
 
-def _channel(path: Path, c: Channel, schemas, channels, topics, info: LogInfo) -> None:
+def _channel(
+    path: Path,
+    c: Channel,
+    schemas: dict[int, tuple[str, str, str]],
+    channels: dict[int, Topic | None],
+    topics: set[str] | None,
+    info: LogInfo,
+) -> None:
     if topics is not None and c.topic not in topics:
         channels[c.id] = None
         return
@@ -391,7 +401,9 @@ def _full_type(name: str) -> str:
     return f"{parts[0]}/msg/{parts[-1]}" if len(parts) in (2, 3) else name
 
 
-def _message(buf, start: int, length: int, channels, info: LogInfo) -> LogMessage | None:
+def _message(
+    buf: bytes, start: int, length: int, channels: dict[int, Topic | None], info: LogInfo
+) -> LogMessage | None:
     if length < _MESSAGE.size:
         raise _Damage(f"message record of {length} bytes")
     channel_id, sequence, log_time, publish_time = _MESSAGE.unpack_from(buf, start)
@@ -408,7 +420,7 @@ def _message(buf, start: int, length: int, channels, info: LogInfo) -> LogMessag
     )
 
 
-def _chunk(rec: bytes) -> Iterator[tuple[int, object]]:
+def _chunk(rec: bytes) -> Iterator[tuple[int, bytes | Schema | Channel]]:
     """Schemas, channels and raw message records of a chunk record's body, after size and CRC
     checks."""
     buf = memoryview(rec)
@@ -542,7 +554,7 @@ def _rewrite(
             os.fsync(out.fileno())
     except OSError as exc:
         dst.unlink(missing_ok=True)
-        raise LogError(dst, exc.strerror or exc) from None
+        raise LogError(dst, exc.strerror or str(exc)) from None
     except LogError:  # foreign or not MCAP: nothing written
         dst.unlink(missing_ok=True)
         raise
@@ -612,6 +624,7 @@ class BagRecovery:
             return f"nothing to recover: {what} is complete ({self.messages} messages)"
         done = [f"{sum(f.action == 'recovered' for f in self.files)} file(s) recovered"]
         if self.metadata_written:
+            assert self.bag is not None  # metadata is written only for a bag directory
             done.append(f"{self.bag / METADATA} regenerated")
         rest = (
             f"; {len(self.still_cut_off)} other file(s) of the bag still cut off: "
@@ -727,11 +740,12 @@ def _recover_file(path: Path) -> FileRecovery:
     if problem:
         os.replace(broken, path)  # the original back in place
         raise LogError(path, f"recovery did not verify ({problem}); the file is unchanged")
+    kept: Path | None = broken
     if info.cut_off:
         broken.unlink()
-        broken = None
+        kept = None
     return FileRecovery(
-        path, "recovered", info.messages, len(info.topics), info.damage, broken, check
+        path, "recovered", info.messages, len(info.topics), info.damage, kept, check
     )
 
 
@@ -798,7 +812,7 @@ def _reindex(bag: Path, done: list[FileRecovery]) -> bool:
     try:
         stats.write(bag)
     except OSError as exc:
-        raise LogError(bag / METADATA, exc.strerror or exc) from None
+        raise LogError(bag / METADATA, exc.strerror or str(exc)) from None
     return True
 
 

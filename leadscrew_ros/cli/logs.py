@@ -169,6 +169,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 def _span(info: LogInfo) -> str:
     if info.start_ns is None:
         return "no messages"
+    assert info.end_ns is not None  # set with start_ns
     return (
         f"{(info.end_ns - info.start_ns) / 1e9:.3f} s ({_utc(info.start_ns)} to "
         f"{_utc(info.end_ns)})"
@@ -203,9 +204,9 @@ def cmd_recover(args: argparse.Namespace) -> int:
     if args.output:  # a copy elsewhere; the input stays as it is
         if src.is_dir():
             raise CliError("-o/--output is for one file; a bag directory is recovered in place")
-        info = recover(
-            src, output_file(args.output, "-o/--output", ("mcap",), makes_directory=True)
-        )
+        dst = output_file(args.output, "-o/--output", ("mcap",), makes_directory=True)
+        assert dst is not None  # args.output is given
+        info = recover(src, dst)
         print(
             f"recovered {info.messages} messages on {len(info.topics)} topics from {src} "
             f"into {args.output}"

@@ -225,7 +225,11 @@ class PlotData:
     def add(self, t: float, job: Job, p: Verdict) -> None:
         """Add the verdict `p` of `job`, predicted at `t` [s]."""
         squeak = p.valid and not p.stable
-        self.probability.add(t, p.probability if p.valid else math.nan, float(squeak))
+        probability = math.nan
+        if p.valid:
+            assert p.probability is not None  # a valid prediction has one
+            probability = p.probability
+        self.probability.add(t, probability, float(squeak))
         if p.valid:
             self.points.add(p.speed_rad_s, p.load_n, job.nut_position_m, float(squeak))
         for _, hz in p.squeak:
@@ -630,12 +634,15 @@ class _Segment:
 
     def result(self) -> tuple[list[Verdict], list[Payloads | None]]:
         """The verdicts of the jobs and their payloads."""
-        if isinstance(self.solved, Future):
+        solved = self.solved
+        if isinstance(solved, Future):
             try:
-                self.solved = self.solved.result()
+                solved = solved.result()
             except BrokenProcessPool:  # a worker died (killed, out of memory): solve here
-                self.solved = solve(*self.args)
-        return self.solved
+                solved = solve(*self.args)
+            self.solved = solved
+        assert solved is not None  # submitted (`_Solver.submit`) before it is written
+        return solved
 
 
 class _Solver:
@@ -710,15 +717,17 @@ class _Episodes:
 
     def add(self, t: float, p: Verdict) -> None:
         self._hold(t)
-        self._held = (t, p.probability) if p.valid else None
-        if p.valid:
-            self.probability.sample(t, p.probability)
+        probability = p.probability if p.valid else None  # not None when valid
+        self._held = None if probability is None else (t, probability)
+        if probability is not None:
+            self.probability.sample(t, probability)
         squeak = p.valid and not p.stable
         e = self.open
         if not squeak:
             if e is not None:
                 self._end(t)
             return
+        assert probability is not None  # squeak: a valid prediction
         growth = p.max_growth_rate if p.max_growth_rate is not None else -math.inf
         if e is None:
             e = self.open = Episode(
@@ -732,12 +741,13 @@ class _Episodes:
         )
         e.load_range_n = (min(e.load_range_n[0], p.load_n), max(e.load_range_n[1], p.load_n))
         e.predictions += 1
-        e.probability.sample(t, p.probability)
+        e.probability.sample(t, probability)
         for label, hz in p.squeak:
             e.add_frequency(label, hz)
 
     def _end(self, t: float) -> None:
         e, self.open = self.open, None
+        assert e is not None  # ended only while open
         e.end_s = t
         self.sink.write(
             ("," if self.count else "")
@@ -767,8 +777,10 @@ def _message_total(files: list[Path]) -> int | None:
     try:
         for f in files:
             with open(f, "rb") as fh:
-                stats = make_reader(fh).get_summary().statistics
-            total += stats.message_count
+                summary = make_reader(fh).get_summary()
+            if summary is None or summary.statistics is None:
+                return None
+            total += summary.statistics.message_count
     except Exception:  # only a hint: a damaged summary (or a .db3) shows no total
         return None
     return total
@@ -795,7 +807,8 @@ class _Run:
         self.episodes = _Episodes(episodes, inputs.warn_probability, inputs.error_probability)
         self.no_prediction: Counter[str] = Counter()
         self.messages = self.predictions = 0
-        self.start_ns, self.end_ns = None, None
+        self.start_ns: int | None = None  # log time of the first message [ns]
+        self.end_ns = 0  # of the latest one (set with start_ns)
         self.queue: deque[_Segment] = deque()
         self.held = 0  # messages in `queue`
         self.segment = _Segment()
@@ -839,8 +852,10 @@ class _Run:
         for i, m in enumerate(seg.messages):
             self.out.original(m)
             if job is not None and job.index == i:
+                assert p is not None and self.start_ns is not None  # with a job, after a message
                 t = (job.clock_ns - self.start_ns) / 1e9
                 if p.valid:
+                    assert payloads is not None  # encoded for every valid prediction
                     self.out.prediction(job.log_time_ns, payloads)
                     self.predictions += 1
                 else:

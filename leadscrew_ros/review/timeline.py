@@ -194,7 +194,13 @@ class InputSettings:
         InputSettings
             A copy with absolute topics.
         """
-        return replace(self, **{f: resolve(getattr(self, f), namespace) for f in TOPIC_FIELDS})
+        return replace(
+            self,
+            speed_topic=resolve(self.speed_topic, namespace),
+            load_topic=resolve(self.load_topic, namespace),
+            nut_topic=resolve(self.nut_topic, namespace),
+            joint_states_topic=resolve(self.joint_states_topic, namespace),
+        )
 
 
 @dataclass(frozen=True)
@@ -291,8 +297,9 @@ class Timeline:
             self.start_ns = self.now_ns = m.log_time_ns
         self.now_ns = max(self.now_ns, m.log_time_ns)
         key = (m.topic.name, m.topic.type_name)
-        handler = self._handlers.get(key, False)
-        if handler is False:
+        try:
+            handler = self._handlers[key]
+        except KeyError:  # a topic and type not seen yet
             handler = self._handlers[key] = self._handler(*key)
         if handler is None:
             return None
@@ -366,7 +373,9 @@ class Timeline:
     def _recompute(self, index: int, log_time_ns: int) -> Job | None:
         if not self.rules.changed():
             return None
-        point, contact_nut_m = self.rules.compute()
+        computed = self.rules.compute()
+        assert computed is not None  # changed() holds only with a point
+        point, contact_nut_m = computed
         self.recomputes += 1
         return Job(index, log_time_ns, self.now_ns, *point, contact_nut_m)
 
@@ -456,4 +465,6 @@ def predict_jobs(
             preds = model.predict_many(speeds[idx], loads[idx])
         for i, p in zip(idx.tolist(), preds, strict=True):
             out[i] = p
-    return out
+    filled = [p for p in out if p is not None]
+    assert len(filled) == len(out)  # np.unique's inverse gives every job its nut
+    return filled

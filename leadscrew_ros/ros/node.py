@@ -25,17 +25,19 @@ from __future__ import annotations
 import contextlib
 import sys
 import time
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.context import Context
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.executors import Executor
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from rclpy.qos import (
     DurabilityPolicy,
     HistoryPolicy,
@@ -102,7 +104,7 @@ INPUTS = {
 }
 
 
-def make_executor(context=None) -> Executor:
+def make_executor(context: Context | None = None) -> Executor:
     """The executor the node runs on (`main`, the demo, the benchmarks and the tests).
 
     rclpy's `EventsExecutor` (C++): a ready input costs no wait-set rebuild in Python (the
@@ -237,7 +239,7 @@ class SqueakPredictorNode(Node):
     def _values(self, changes: dict) -> dict:
         return {**{p.name: p.value for p in self.get_parameters(PARAMETER_NAMES)}, **changes}
 
-    def _settings(self, cls: type, changes: dict):
+    def _settings(self, cls: type, changes: dict) -> Any:
         """Settings dataclass `cls` from the current parameters with `changes` applied."""
         return build(cls, self._values(changes))
 
@@ -401,7 +403,9 @@ class SqueakPredictorNode(Node):
         )
         return response
 
-    def _publish(self, publisher, data: bytes, publish_time_ns: int | None = None) -> None:
+    def _publish(
+        self, publisher: Publisher, data: bytes, publish_time_ns: int | None = None
+    ) -> None:
         """Publish a CDR payload, latch it and record the same bytes (publish time: the
         message's header stamp if it has one, else the log time)."""
         publisher.publish(data)  # bytes: published as serialized
@@ -430,7 +434,7 @@ class SqueakPredictorNode(Node):
         if not outcome.ignored:
             self._input(topic, msg, outcome.error, now)
 
-    def _input(self, topic: str, msg, error: str, now: float | None = None) -> None:
+    def _input(self, topic: str, msg: object, error: str, now: float | None = None) -> None:
         now = time.monotonic() if now is None else now
         if error:  # the next tick reports it: a flood of bad input stays bounded
             self.get_logger().warning(f"input rejected: {error}", throttle_duration_sec=2.0)

@@ -11,7 +11,7 @@ import os
 import sys
 import time
 from collections.abc import Sequence
-from typing import TextIO
+from typing import Any, TextIO
 
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -58,7 +58,7 @@ class ActuatorSimulator(Node):
         loop: bool = False,
         joint_name: str = "",
         wait_for_subscriber: bool = False,
-        **kwargs,
+        **kwargs: Any,
     ):
         if not (math.isfinite(rate_hz) and 0 < rate_hz <= MAX_RATE_HZ):
             raise ProfileError(f"rate_hz must be in (0, {MAX_RATE_HZ:g}] Hz, got {rate_hz!r}")
