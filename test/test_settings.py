@@ -127,7 +127,7 @@ def test_node_refuses_to_start_with_a_bad_parameter(parameter, reason):
     )
     assert proc.returncode == 2, proc.stderr
     [line] = proc.stderr.strip().splitlines()
-    assert line.startswith(f"squeak_predictor: error: {reason}"), line
+    assert line.startswith(f"squeak_node: error: {reason}"), line
 
 
 # ----------------------------------------------------------------------------- ROS descriptors

@@ -83,6 +83,7 @@ from .parameters import (
 )
 
 NODE_NAME = "squeak_predictor"
+PROG = "squeak_node"  # the executable: its one-line errors name it, as argparse does
 HOUSEKEEPING_PERIOD_S = 0.05
 # Output topic (`bag.messages`) -> rclpy class of its type (the payloads are CDR bytes).
 OUTPUT_CLASSES = {
@@ -554,14 +555,14 @@ def main(args: list[str] | None = None) -> int:
     try:  # a bad params file or remap rule: one line, as simulate and replay --publish
         own_args = checked_ros_args(lambda: remove_ros_args(argv))[1:]
     except ValueError as exc:
-        print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2
     if {"-h", "--help"} & set(own_args):
         print(usage())
         return 0
     if own_args:
         print(
-            f"{NODE_NAME}: error: unrecognized arguments: {' '.join(own_args)} (ROS "
+            f"{PROG}: error: unrecognized arguments: {' '.join(own_args)} (ROS "
             "arguments go after --ros-args; see --help)",
             file=sys.stderr,
         )
@@ -577,7 +578,7 @@ def main(args: list[str] | None = None) -> int:
                 lambda: rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
             )
         except ValueError as exc:
-            print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
+            print(f"{PROG}: error: {exc}", file=sys.stderr)
             return 2
         node = None
         try:
@@ -587,7 +588,7 @@ def main(args: list[str] | None = None) -> int:
             while not stop.signum:
                 executor.spin_once(timeout_sec=0.1)  # stops after the current callback
         except (ParameterError, ParameterException) as exc:
-            print(f"{NODE_NAME}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+            print(f"{PROG}: error: {' '.join(str(exc).split())}", file=sys.stderr)
             return 2
         finally:
             if node is not None:
