@@ -92,6 +92,7 @@ def _plain_bars(app, what, name, obj, options, lines) -> None:
 
 
 def setup(app):
+    """Sphinx extension entry point: tables before the build, plain bars in docstrings."""
     app.connect("builder-inited", _write_tables)
     app.connect("autodoc-process-docstring", _plain_bars)
     return {"parallel_read_safe": True}

@@ -83,7 +83,7 @@ class Mic:
 
 
 def measurement(ros, predicate=lambda s: True, timeout: float = 10.0):
-    """This test's latest measurement status, once it satisfies `predicate`."""
+    """The latest measurement status of this test's node, once it satisfies `predicate`."""
     found = []
 
     def check():

@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: Apache-2.0
 """Settings are declared once, in the dataclasses' field metadata: the node's parameter
 descriptors, the settings' validation, the replay's --help and the documentation's tables
-(rendered at build time by tools/param_tables.py) come from there (config/leadscrew.yaml: test_config.py; `squeak_node --help`: test_node_seats.py)."""
+(rendered at build time by tools/param_tables.py) come from there (config/leadscrew.yaml:
+test_config.py; `squeak_node --help`: test_node_seats.py)."""
 
 import importlib.util
 import math
@@ -126,7 +127,7 @@ def test_node_refuses_to_start_with_a_bad_parameter(parameter, reason):
     )
     assert proc.returncode == 2, proc.stderr
     [line] = proc.stderr.strip().splitlines()
-    assert line.startswith(f"squeak_predictor: error: {reason}"), line
+    assert line.startswith(f"squeak_node: error: {reason}"), line
 
 
 # ----------------------------------------------------------------------------- ROS descriptors
@@ -199,7 +200,7 @@ def test_the_doc_build_writes_every_table(tmp_path):
     paths = param_tables.write(tmp_path / "_generated")
     names = [*param_tables.TABLES, param_tables.TOPIC_TABLE]
     assert [p.name for p in paths] == [f"{n}.md" for n in names]
-    for name, path in zip(names, paths):
+    for name, path in zip(names, paths, strict=True):
         rendered = (
             param_tables.topic_table()
             if name == param_tables.TOPIC_TABLE

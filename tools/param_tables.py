@@ -3,7 +3,7 @@
 
     .venv/bin/python tools/param_tables.py            # prints every table
     .venv/bin/python tools/param_tables.py record     # prints one
-    .venv/bin/python tools/param_tables.py --write doc/reference/_generated   # what doc/conf.py does
+    .venv/bin/python tools/param_tables.py --write doc/reference/_generated  # as doc/conf.py
 
 One markdown table per entry of `TABLES` (parameter, unit, default, allowed values, meaning),
 and the node's topic table (`topic_table`: names and types from the code, QoS and meaning from

@@ -251,14 +251,15 @@ def read_audio(
     kinds = {name: k for name, t in topics.items() if (k := _kind(t)) is not None}
     name = _choose_topic(source.path, topics, kinds, topic)
     kind = kinds[name]
-    if kind == MULTI_ARRAY and sample_rate_hz is None:
-        raise AudioError(
-            source.path,
-            f"{name} is std_msgs/Float32MultiArray, which carries "
-            "no sample rate: give sample_rate_hz",
-        )
-    if kind == MULTI_ARRAY and not (sample_rate_hz > 0 and np.isfinite(sample_rate_hz)):
-        raise AudioError(source.path, f"sample_rate_hz = {sample_rate_hz!r} must be > 0")
+    if kind == MULTI_ARRAY:
+        if sample_rate_hz is None:
+            raise AudioError(
+                source.path,
+                f"{name} is std_msgs/Float32MultiArray, which "
+                "carries no sample rate: give sample_rate_hz",
+            )
+        if not (sample_rate_hz > 0 and np.isfinite(sample_rate_hz)):
+            raise AudioError(source.path, f"sample_rate_hz = {sample_rate_hz!r} must be > 0")
     info_name = (
         _choose_info(source.path, kinds, name, info_topic)
         if kind in (DRIVERS, DRIVERS_UNSTAMPED)
@@ -317,7 +318,9 @@ def _topics(source: LogSource) -> dict[str, Topic]:
                 summary = make_reader(fh).get_summary()
         except Exception:  # damaged or cut off: log_topics read it through
             summary = None
-        for c in summary.channels.values() if summary else ():
+        if summary is None:
+            continue
+        for c in summary.channels.values():
             s = summary.schemas.get(c.schema_id)
             if s is not None:
                 texts.setdefault(c.topic, s.data.decode("utf-8", "replace"))

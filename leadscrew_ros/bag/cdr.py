@@ -3,11 +3,12 @@
 
 Decoders (std_msgs/Float64, Bool, Float64MultiArray, Float32MultiArray and
 sensor_msgs/JointState; XCDR1 as Fast CDR and rosbags write it, either byte order) for what the
-replay reads from logs, the demo's monitor receives and the node's microphone hears. Encoders (the same types and diagnostic_msgs/DiagnosticArray) for what the
-node publishes and records, the replay annotates and the synthetic logs hold: XCDR1 little
-endian, alignment counted from the end of the 4-byte encapsulation header, padding zero and
-no unused tail, byte for byte the payload Fast CDR writes with its padding zeroed and its
-slack cut (test/harness/cdr_reference.py checks this against rclpy's serializer).
+replay reads from logs, the demo's monitor receives and the node's microphone hears. Encoders
+(the same types and diagnostic_msgs/DiagnosticArray) for what the node publishes and records,
+the replay annotates and the synthetic logs hold: XCDR1 little endian, alignment counted from
+the end of the 4-byte encapsulation header, padding zero and no unused tail, byte for byte the
+payload Fast CDR writes with its padding zeroed and its slack cut (test/harness/cdr_reference.py
+checks this against rclpy's serializer).
 
 Log data is untrusted, so every length and count is checked against the payload before it is
 used and any malformation raises ValueError. (The offline replay never hands log data to
@@ -20,6 +21,7 @@ ignored: Fast CDR may pad a payload.
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -231,7 +233,7 @@ class _Encoder:
     def _align(self, size: int) -> None:
         self.out += bytes(-(len(self.out) - _HEADER) % size)
 
-    def _pack(self, fmt: str, size: int, *values) -> None:
+    def _pack(self, fmt: str, size: int, *values: float) -> None:
         self._align(size)
         try:
             self.out += struct.pack("<" + fmt, *values)
@@ -251,12 +253,12 @@ class _Encoder:
         self.u32(len(raw) + 1)
         self.out += raw + b"\x00"
 
-    def strings(self, values) -> None:
+    def strings(self, values: Sequence[str]) -> None:
         self.u32(len(values))
         for v in values:
             self.string(v)
 
-    def f64s(self, values) -> None:
+    def f64s(self, values: Sequence[float]) -> None:
         """A float64 sequence (an empty one is not aligned for its elements, as Fast CDR)."""
         self.u32(len(values))
         if len(values):
@@ -284,7 +286,9 @@ def encode_bool(value: bool) -> bytes:
     return _BOOL_PAYLOADS[bool(value)]
 
 
-def encode_float64_multi_array(dim: tuple[Dimension, ...], data, data_offset: int = 0) -> bytes:
+def encode_float64_multi_array(
+    dim: tuple[Dimension, ...], data: Sequence[float], data_offset: int = 0
+) -> bytes:
     """std_msgs/Float64MultiArray of layout dimensions `dim` and values `data` (written
     directly: every prediction publishes two)."""
     out = bytearray(_LE_HEADER)

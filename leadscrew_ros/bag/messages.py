@@ -54,6 +54,7 @@ class Mode(NamedTuple):
 def prediction_payloads(p: Prediction) -> tuple[tuple[str, bytes], ...]:
     """(topic, CDR payload) of every topic in `PREDICTION_TOPICS` for a valid prediction, in
     that order."""
+    assert p.probability is not None  # a valid prediction has one
     return (
         (RISK, cdr.encode_float64(float(p.probability))),
         (MARGIN, cdr.encode_float64(math.inf if p.margin is None else float(p.margin))),

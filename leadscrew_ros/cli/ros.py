@@ -7,11 +7,15 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 from .args import ROS_ARGS_HELP, CliError, Parser, finite, import_ros, output_directory
 
+if TYPE_CHECKING:
+    from ..live.profile import StrokeProfile
 
-def _stroke(duration_s: float | None):
+
+def _stroke(duration_s: float | None) -> StrokeProfile:
     """The simulator's stroke profile of `--duration` (a bad duration is a CliError)."""
     from ..live.profile import ProfileError, StrokeProfile
 

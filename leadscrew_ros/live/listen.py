@@ -42,7 +42,7 @@ import math
 import queue
 import threading
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -460,7 +460,7 @@ def _share(part: float, whole: float) -> float | None:
     return part / whole if whole > 0 else None
 
 
-def _nearest_mode(f: float, modes) -> str:
+def _nearest_mode(f: float, modes: Sequence[tuple[str, float]]) -> str:
     """Label of the mode nearest to `f` within `MATCH_TOLERANCE`, '' when none."""
     best = min(modes, key=lambda m: abs(m[1] - f), default=None)
     return best[0] if best is not None and abs(best[1] - f) <= MATCH_TOLERANCE * f else ""

@@ -21,8 +21,8 @@ matplotlib.figure.Figure, which renders PNGs without pyplot or any GUI backend.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import TYPE_CHECKING, NamedTuple
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -34,6 +34,7 @@ from ..model.studies.sweep import SweepResult
 from ..model.studies.tracking import track_modes
 
 if TYPE_CHECKING:
+    from matplotlib.artist import Artist
     from matplotlib.axes import Axes
     from matplotlib.colors import Colormap
     from matplotlib.figure import Figure
@@ -123,7 +124,7 @@ def stability_cmap() -> Colormap:
     )
 
 
-def new_figure(**kwargs) -> Figure:
+def new_figure(**kwargs: Any) -> Figure:
     """A figure that is not registered with pyplot (no backend, nothing to close).
 
     Parameters
@@ -141,11 +142,13 @@ def new_figure(**kwargs) -> Figure:
     return Figure(**kwargs)
 
 
-def _axes(ax: Axes | None, **figure) -> tuple[Figure, Axes]:
+def _axes(ax: Axes | None, **figure: Any) -> tuple[Figure, Axes]:
     """The figure of `ax` and `ax`, or a new figure (of `figure`'s options) and its one axes."""
     if ax is None:
         ax = new_figure(**figure).subplots()
-    return ax.get_figure(root=True), ax
+    fig = ax.get_figure(root=True)
+    assert fig is not None  # an axes made by or added to a figure
+    return fig, ax
 
 
 def plot_formats() -> list[str]:
@@ -201,7 +204,7 @@ def plot_map(
         fig.colorbar(cs, ax=ax, label=r"largest growth rate Re($\lambda$) [1/s]")
         if lo < 0 < hi and g.count() > 3:
             ax.contour(x, y, g, levels=[0.0], colors="k", linewidths=1.2)
-    handles = [
+    handles: list[Artist] = [
         Patch(facecolor=cmap(0.8), label="unstable (squeak)"),
         Patch(facecolor=cmap(0.2), label="stable"),
     ]
@@ -463,8 +466,8 @@ def plot_friction(
     top = ax.secondary_xaxis(
         "top",
         functions=(
-            lambda s: s * math.cos(p.helix_angle_rad) / p.radius_m,
-            lambda w: w * p.radius_m / math.cos(p.helix_angle_rad),
+            lambda s: np.multiply(s, math.cos(p.helix_angle_rad) / p.radius_m),
+            lambda w: np.multiply(w, p.radius_m / math.cos(p.helix_angle_rad)),
         ),
     )
     top.set_xlabel(r"rotation speed $\Omega = |V_c| \cos\beta / R$ [rad/s]")
@@ -560,11 +563,15 @@ def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
     """(first, last) index of each run of True."""
     edges = np.diff(np.r_[0, flags.astype(np.int8), 0])
     return list(
-        zip(np.flatnonzero(edges == 1).tolist(), (np.flatnonzero(edges == -1) - 1).tolist())
+        zip(
+            np.flatnonzero(edges == 1).tolist(),
+            (np.flatnonzero(edges == -1) - 1).tolist(),
+            strict=True,
+        )
     )
 
 
-def _probability_panel(result: ReplayResult, axes) -> None:
+def _probability_panel(result: ReplayResult, axes: Sequence[Axes]) -> None:
     """P(squeak) over time on the last of `axes`, with the WARN and ERROR probabilities
     (dashed) and bars under the curve where P was at or above them; squeak at the nominal
     parameters shaded on all of `axes`."""
@@ -582,7 +589,7 @@ def _probability_panel(result: ReplayResult, axes) -> None:
     def fraction(y: float) -> float:  # of the axes' height
         return (y - ylim[0]) / (ylim[1] - ylim[0])
 
-    handles = []
+    handles: list[Artist] = []
     if t.size:
         handles.append(
             ax.fill_between(
@@ -624,6 +631,7 @@ def _probability_panel(result: ReplayResult, axes) -> None:
         handles.append(ax.axhline(level, color=color, ls="--", lw=1.0, label=f"{name} {level:g}"))
     pt = result.probability
     if pt.peak is not None:
+        assert pt.peak_t_s is not None  # set with the peak
         handles += ax.plot([pt.peak_t_s], [pt.peak], "v", color="k", ms=5, label="peak")
     ax.set_ylim(*ylim)
     ax.set_yticks([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
@@ -660,7 +668,7 @@ def plot_timeline(result: ReplayResult, *, fig: Figure | None = None) -> Figure:
     if fig is None:
         fig = new_figure(figsize=(10, 2.1 * (len(panels) + 1) + 0.2), layout="constrained")
     axes = fig.subplots(len(panels) + 1, 1, sharex=True)
-    for ax, (k, label, factor) in zip(axes, panels):
+    for ax, (k, label, factor) in zip(axes, panels, strict=False):
         ax.fill_between(
             t,
             lo[:, k] * factor,

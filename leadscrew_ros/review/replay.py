@@ -50,8 +50,8 @@ from typing import TYPE_CHECKING, Any, BinaryIO, NamedTuple, TextIO
 import numpy as np
 
 from ..bag import logmeta, messages, msgdefs
-from ..bag.logfile import LogError, LogMessage, Topic
-from ..bag.logsource import LogSource, log_topics, open_log
+from ..bag.logfile import LogError, LogMessage, Topic, metadata_problem
+from ..bag.logsource import LogSource, log_topics, open_log, topic_types
 from ..bag.mcapout import CHUNK_BYTES, McapOut
 from ..model import Prediction, SqueakModel, Validity
 from ..model.uncertainty.scatter import LOG_NORMAL
@@ -225,7 +225,11 @@ class PlotData:
     def add(self, t: float, job: Job, p: Verdict) -> None:
         """Add the verdict `p` of `job`, predicted at `t` [s]."""
         squeak = p.valid and not p.stable
-        self.probability.add(t, p.probability if p.valid else math.nan, float(squeak))
+        probability = math.nan
+        if p.valid:
+            assert p.probability is not None  # a valid prediction has one
+            probability = p.probability
+        self.probability.add(t, probability, float(squeak))
         if p.valid:
             self.points.add(p.speed_rad_s, p.load_n, job.nut_position_m, float(squeak))
         for _, hz in p.squeak:
@@ -292,6 +296,9 @@ class ReplayResult:
         Wall time of the replay [s].
     outputs : list of Path
         The files written.
+    metadata_problem : str
+        What is wrong with the bag directory's metadata.yaml, and how to mend it ('' if
+        nothing, or not a bag directory): the files were read, but other tools refuse it.
     """
 
     log: Path
@@ -321,6 +328,7 @@ class ReplayResult:
     scatter_samples: int = 0
     wall_s: float = math.nan
     outputs: list[Path] = field(default_factory=list)
+    metadata_problem: str = ""
 
     def plot(self, fig: Figure | None = None) -> Figure:
         """The timeline: speed, load, nut position and P(squeak) over time (`plot_timeline`).
@@ -339,8 +347,9 @@ class ReplayResult:
 
     @property
     def warnings(self) -> list[str]:
-        """Log-time problems: stale (backwards) and duplicated input times, per topic."""
-        tl, out = self.timeline, []
+        """Log-time problems: stale (backwards) and duplicated input times, per topic; a
+        broken metadata.yaml."""
+        tl, out = self.timeline, [self.metadata_problem] if self.metadata_problem else []
         for topic, n in sorted(tl.backwards.items()):
             out.append(
                 f"log time goes backwards {n} time(s) on {topic} (up to "
@@ -391,6 +400,7 @@ class ReplayResult:
                 "backwards_max_s": self.timeline.backwards_max_s,
                 "duplicates": dict(self.timeline.duplicates),
             },
+            "metadata_problem": self.metadata_problem,
             "warnings": self.warnings,
             "squeak_share": self._share(self.time_in_squeak_s),
             "warn_share": self._share(self.probability.above_warn_s),
@@ -624,12 +634,15 @@ class _Segment:
 
     def result(self) -> tuple[list[Verdict], list[Payloads | None]]:
         """The verdicts of the jobs and their payloads."""
-        if isinstance(self.solved, Future):
+        solved = self.solved
+        if isinstance(solved, Future):
             try:
-                self.solved = self.solved.result()
+                solved = solved.result()
             except BrokenProcessPool:  # a worker died (killed, out of memory): solve here
-                self.solved = solve(*self.args)
-        return self.solved
+                solved = solve(*self.args)
+            self.solved = solved
+        assert solved is not None  # submitted (`_Solver.submit`) before it is written
+        return solved
 
 
 class _Solver:
@@ -704,15 +717,17 @@ class _Episodes:
 
     def add(self, t: float, p: Verdict) -> None:
         self._hold(t)
-        self._held = (t, p.probability) if p.valid else None
-        if p.valid:
-            self.probability.sample(t, p.probability)
+        probability = p.probability if p.valid else None  # not None when valid
+        self._held = None if probability is None else (t, probability)
+        if probability is not None:
+            self.probability.sample(t, probability)
         squeak = p.valid and not p.stable
         e = self.open
         if not squeak:
             if e is not None:
                 self._end(t)
             return
+        assert probability is not None  # squeak: a valid prediction
         growth = p.max_growth_rate if p.max_growth_rate is not None else -math.inf
         if e is None:
             e = self.open = Episode(
@@ -726,12 +741,13 @@ class _Episodes:
         )
         e.load_range_n = (min(e.load_range_n[0], p.load_n), max(e.load_range_n[1], p.load_n))
         e.predictions += 1
-        e.probability.sample(t, p.probability)
+        e.probability.sample(t, probability)
         for label, hz in p.squeak:
             e.add_frequency(label, hz)
 
     def _end(self, t: float) -> None:
         e, self.open = self.open, None
+        assert e is not None  # ended only while open
         e.end_s = t
         self.sink.write(
             ("," if self.count else "")
@@ -761,8 +777,10 @@ def _message_total(files: list[Path]) -> int | None:
     try:
         for f in files:
             with open(f, "rb") as fh:
-                stats = make_reader(fh).get_summary().statistics
-            total += stats.message_count
+                summary = make_reader(fh).get_summary()
+            if summary is None or summary.statistics is None:
+                return None
+            total += summary.statistics.message_count
     except Exception:  # only a hint: a damaged summary (or a .db3) shows no total
         return None
     return total
@@ -780,15 +798,17 @@ class _Run:
         out: _AnnotatedWriter,
         episodes: TextIO,
         progress: Callable[[int], None] | None,
+        types: dict[str, list[str]] | None = None,
     ):
         self.out, self.progress = out, progress
-        self.timeline = Timeline(model.params, inputs)
+        self.timeline = Timeline(model.params, inputs, types)
         self.solver = _Solver(model, workers)
         self.plot_data = PlotData()
         self.episodes = _Episodes(episodes, inputs.warn_probability, inputs.error_probability)
         self.no_prediction: Counter[str] = Counter()
         self.messages = self.predictions = 0
-        self.start_ns, self.end_ns = None, None
+        self.start_ns: int | None = None  # log time of the first message [ns]
+        self.end_ns = 0  # of the latest one (set with start_ns)
         self.queue: deque[_Segment] = deque()
         self.held = 0  # messages in `queue`
         self.segment = _Segment()
@@ -832,8 +852,10 @@ class _Run:
         for i, m in enumerate(seg.messages):
             self.out.original(m)
             if job is not None and job.index == i:
+                assert p is not None and self.start_ns is not None  # with a job, after a message
                 t = (job.clock_ns - self.start_ns) / 1e9
                 if p.valid:
+                    assert payloads is not None  # encoded for every valid prediction
                     self.out.prediction(job.log_time_ns, payloads)
                     self.predictions += 1
                 else:
@@ -926,6 +948,7 @@ def replay(
                 _AnnotatedWriter(fh, out_namespace),
                 eh,
                 bar if show else None,
+                topic_types(source),
             )
             for f, m in source.messages():
                 try:
@@ -970,6 +993,7 @@ def replay(
         error_probability=inputs.error_probability,
         scatter=dict(model.scatter.sd),
         scatter_samples=model.sample_count,
+        metadata_problem=metadata_problem(log, source.infos) if log.is_dir() else "",
     )
     result.wall_s = time.perf_counter() - t0
     _write_json(out_dir / "summary.json", result.summary())

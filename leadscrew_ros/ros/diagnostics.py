@@ -16,7 +16,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
@@ -100,7 +100,7 @@ class Updater:
         hardware_id: str = "",
         clock: Callable[[], float] = time.monotonic,
         publish: Callable[[Publisher, bytes, int], None] | None = None,
-        **publisher_kwargs,
+        **publisher_kwargs: Any,
     ):
         self.node, self.period_s, self.hardware_id = node, period_s, hardware_id
         self.publisher = node.create_publisher(DiagnosticArray, TOPIC, qos, **publisher_kwargs)

@@ -29,18 +29,21 @@ from __future__ import annotations
 import contextlib
 import sys
 import time
-from typing import NamedTuple
+from functools import partial
+from typing import Any, NamedTuple
 
 import numpy as np
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.context import Context
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.executors import Executor
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from rclpy.qos import (
     DurabilityPolicy,
     HistoryPolicy,
@@ -90,6 +93,7 @@ from .parameters import (
 )
 
 NODE_NAME = "squeak_predictor"
+PROG = "squeak_node"  # the executable: its one-line errors name it, as argparse does
 HOUSEKEEPING_PERIOD_S = 0.05
 # Output topic (`bag.messages`) -> rclpy class of its type (the payloads are CDR bytes).
 OUTPUT_CLASSES = {
@@ -158,7 +162,7 @@ def float32_chunk(data: bytes) -> tuple[np.ndarray, None]:
 SOUND_INPUTS = {"microphone": SoundInput(Float32MultiArray, float32_chunk)}
 
 
-def make_executor(context=None) -> Executor:
+def make_executor(context: Context | None = None) -> Executor:
     """The executor the node runs on (`main`, the demo, the benchmarks and the tests).
 
     rclpy's `EventsExecutor` (C++): a ready input costs no wait-set rebuild in Python (the
@@ -263,7 +267,7 @@ class SqueakPredictorNode(Node):
                 self.create_subscription(
                     kind.msg_type,
                     topic,
-                    lambda data, d=kind.decode: self._on_sound(data, d),
+                    partial(self._on_sound, decode=kind.decode),
                     sound,
                     raw=True,
                     event_callbacks=sub_events,
@@ -287,7 +291,7 @@ class SqueakPredictorNode(Node):
         )
         if self.listener is not None:
             self._measurement = self.listener.status(time.monotonic())
-            self.diagnostics.add(MEASUREMENT_TASK, status_task(lambda: self._measurement))
+            self.diagnostics.add(MEASUREMENT_TASK, status_task(self._measurement_status))
             self._publish_heard()  # latched: nothing heard yet
 
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -325,7 +329,7 @@ class SqueakPredictorNode(Node):
     def _values(self, changes: dict) -> dict:
         return {**{p.name: p.value for p in self.get_parameters(PARAMETER_NAMES)}, **changes}
 
-    def _settings(self, cls: type, changes: dict):
+    def _settings(self, cls: type, changes: dict) -> Any:
         """Settings dataclass `cls` from the current parameters with `changes` applied."""
         return build(cls, self._values(changes))
 
@@ -493,7 +497,9 @@ class SqueakPredictorNode(Node):
         )
         return response
 
-    def _publish(self, publisher, data: bytes, publish_time_ns: int | None = None) -> None:
+    def _publish(
+        self, publisher: Publisher, data: bytes, publish_time_ns: int | None = None
+    ) -> None:
         """Publish a CDR payload, latch it and record the same bytes (publish time: the
         message's header stamp if it has one, else the log time)."""
         publisher.publish(data)  # bytes: published as serialized
@@ -522,7 +528,7 @@ class SqueakPredictorNode(Node):
         if not outcome.ignored:
             self._input(topic, msg, outcome.error, now)
 
-    def _input(self, topic: str, msg, error: str, now: float | None = None) -> None:
+    def _input(self, topic: str, msg: object, error: str, now: float | None = None) -> None:
         now = time.monotonic() if now is None else now
         if error:  # the next tick reports it: a flood of bad input stays bounded
             self.get_logger().warning(f"input rejected: {error}", throttle_duration_sec=2.0)
@@ -538,6 +544,7 @@ class SqueakPredictorNode(Node):
 
     def _on_sound(self, data: bytes, decode: Decoder) -> None:
         """A sound chunk: queued for the listening thread as it is (or dropped and counted)."""
+        assert self.listener is not None  # subscribed only while listening
         self.listener.offer(data, time.monotonic(), decode)
 
     # ---------------------------------------------------------------- listening
@@ -545,6 +552,7 @@ class SqueakPredictorNode(Node):
         """New `listen.*` settings: a new listener (and detector); the sound so far is
         forgotten, the last predictions are kept for the comparison."""
         old = self.listener
+        assert old is not None  # listen.* are declared only while listening
         old.close()
         self.listener = Listener(
             self._settings(ListenSettings, {}), self._settings(DetectorSettings, {})
@@ -552,7 +560,12 @@ class SqueakPredictorNode(Node):
         self.listener.take_over(old)
         self._publish_heard()
 
+    def _measurement_status(self) -> Status:
+        assert self._measurement is not None  # set when listening starts
+        return self._measurement
+
     def _publish_heard(self) -> None:
+        assert self.listener is not None
         for topic, data in messages.heard_payloads(self.listener.heard, self.listener.frequency_hz):
             self._publish(self.listen_pubs[topic], data)
 
@@ -677,14 +690,14 @@ def main(args: list[str] | None = None) -> int:
     try:  # a bad params file or remap rule: one line, as simulate and replay --publish
         own_args = checked_ros_args(lambda: remove_ros_args(argv))[1:]
     except ValueError as exc:
-        print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2
     if {"-h", "--help"} & set(own_args):
         print(usage())
         return 0
     if own_args:
         print(
-            f"{NODE_NAME}: error: unrecognized arguments: {' '.join(own_args)} (ROS "
+            f"{PROG}: error: unrecognized arguments: {' '.join(own_args)} (ROS "
             "arguments go after --ros-args; see --help)",
             file=sys.stderr,
         )
@@ -700,7 +713,7 @@ def main(args: list[str] | None = None) -> int:
                 lambda: rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
             )
         except ValueError as exc:
-            print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
+            print(f"{PROG}: error: {exc}", file=sys.stderr)
             return 2
         node = None
         try:
@@ -710,7 +723,7 @@ def main(args: list[str] | None = None) -> int:
             while not stop.signum:
                 executor.spin_once(timeout_sec=0.1)  # stops after the current callback
         except (ParameterError, ParameterException) as exc:
-            print(f"{NODE_NAME}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+            print(f"{PROG}: error: {' '.join(str(exc).split())}", file=sys.stderr)
             return 2
         finally:
             if node is not None:

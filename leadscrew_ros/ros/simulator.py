@@ -13,7 +13,7 @@ import os
 import sys
 import time
 from collections.abc import Sequence
-from typing import TextIO
+from typing import Any, TextIO
 
 import numpy as np
 from rclpy.executors import SingleThreadedExecutor
@@ -120,7 +120,7 @@ class ActuatorSimulator(Node):
         wait_for_subscriber: bool = False,
         microphone: bool = False,
         params: ScrewParameters | None = None,
-        **kwargs,
+        **kwargs: Any,
     ):
         if not (math.isfinite(rate_hz) and 0 < rate_hz <= MAX_RATE_HZ):
             raise ProfileError(f"rate_hz must be in (0, {MAX_RATE_HZ:g}] Hz, got {rate_hz!r}")
@@ -176,6 +176,7 @@ class ActuatorSimulator(Node):
         step = int(MIC_CHUNK_S * MIC_RATE_HZ)
         while self._mic_sent + step <= upto or self.audio.size == upto > self._mic_sent:
             chunk = self.audio[self._mic_sent : self._mic_sent + step]
+            assert self.mic_pub is not None  # the sound exists only with a microphone
             self.mic_pub.publish(Float32MultiArray(data=array.array("f", chunk.tobytes())))
             self._mic_sent += chunk.size
             self.mic_chunks += 1

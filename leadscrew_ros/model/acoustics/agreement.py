@@ -27,15 +27,31 @@ MATCH_TOLERANCE = 0.03
 
 @dataclass
 class FrequencyMatch:
-    """A heard episode and the predicted squeak mode nearest to it in frequency."""
+    """A heard episode and the predicted squeak mode nearest to it in frequency.
+
+    Attributes
+    ----------
+    start_s, end_s : float
+        The heard episode [s].
+    heard_hz : float
+        Its frequency (median of its track) [Hz].
+    label : str or None
+        The nearest predicted squeak mode's label; None when none was predicted during it.
+    predicted_hz : float or None
+        Its frequency [Hz].
+    relative_error : float or None
+        (predicted - heard) / heard.
+    matched : bool
+        |relative_error| <= MATCH_TOLERANCE.
+    """
 
     start_s: float
     end_s: float
     heard_hz: float
-    label: str | None  #: the predicted mode's label, None when none predicted
-    predicted_hz: float | None  #: its frequency [Hz]
-    relative_error: float | None  #: (predicted - heard) / heard
-    matched: bool  #: |relative_error| <= MATCH_TOLERANCE
+    label: str | None
+    predicted_hz: float | None
+    relative_error: float | None
+    matched: bool
 
 
 @dataclass
@@ -44,8 +60,14 @@ class Agreement:
 
     Attributes
     ----------
-    both_s, predicted_only_s, heard_only_s, neither_s : float
-        Time heard and predicted, predicted only, heard only, neither [s].
+    both_s : float
+        Time heard and predicted [s].
+    predicted_only_s : float
+        Time predicted but not heard [s].
+    heard_only_s : float
+        Time heard but not predicted [s].
+    neither_s : float
+        Time neither heard nor predicted [s].
     recall : float or None
         Share of the heard squeak time that was predicted (nominal verdict); None when nothing
         was heard.
@@ -70,7 +92,12 @@ class Agreement:
     frames: int = 0
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-safe dict."""
+        """The agreement as a JSON-safe dict.
+
+        Returns
+        -------
+        dict
+        """
         return asdict(self)
 
 

@@ -60,12 +60,16 @@ class Episode:
 
     Attributes
     ----------
-    start_s, end_s : float
-        Half a hop before its first frame's centre, half a hop after its last's [s].
+    start_s : float
+        Half a hop before its first frame's centre [s].
+    end_s : float
+        Half a hop after its last frame's centre [s].
     frequency_hz : float
         Median frequency of its track [Hz].
-    tnr_db, pr_db : float
-        Largest TNR and PR of its frames [dB] (PR nan where the upper band passes Nyquist).
+    tnr_db : float
+        Largest TNR of its frames [dB].
+    pr_db : float
+        Largest PR of its frames [dB] (nan where the upper band passes Nyquist).
     level_db : float
         Largest tone level of its frames: dB SPL re 20 uPa when calibrated, else dB re full
         scale (mean square re 1, a full-scale sine is -3 dB).
@@ -75,8 +79,10 @@ class Episode:
         MOSQITO is missing.
     order : int or None
         The order it followed (rejected episodes only).
-    track_times_s, track_hz : numpy.ndarray
-        Its frames' centres and frequencies (nan in bridged gaps); not in `as_dict`.
+    track_times_s : numpy.ndarray
+        Its frames' centres [s]; not in `as_dict`.
+    track_hz : numpy.ndarray
+        Its frames' frequencies [Hz] (nan in bridged gaps); not in `as_dict`.
     """
 
     start_s: float
@@ -96,7 +102,12 @@ class Episode:
         return self.end_s - self.start_s
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-safe dict (nan -> None), without the per-frame track."""
+        """The episode as a JSON-safe dict (nan -> None), without the per-frame track.
+
+        Returns
+        -------
+        dict
+        """
         return dict(
             start_s=self.start_s,
             end_s=self.end_s,
@@ -150,7 +161,12 @@ class Detection:
         return float(t[1] - t[0]) if t.size > 1 else math.nan
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-safe dict (no nan: None in its place)."""
+        """The detection as a JSON-safe dict (no nan: None in its place).
+
+        Returns
+        -------
+        dict
+        """
         return dict(
             frame_times_s=self.frame_times_s.tolist(),
             heard=self.heard.tolist(),
@@ -340,7 +356,18 @@ class StreamingDetector:
         return self._next_frame
 
     def frame_time(self, i: np.ndarray | int) -> np.ndarray:
-        """Centre time [s] of frame(s) `i` of the current segment."""
+        """Centre time [s] of frame(s) `i` of the current segment.
+
+        Parameters
+        ----------
+        i : int or numpy.ndarray
+            Frame index (or indices) in the current segment.
+
+        Returns
+        -------
+        numpy.ndarray
+            The frames' centre times [s].
+        """
         t0 = 0.0 if self._seg_t0 is None else self._seg_t0
         return t0 + (np.asarray(i) * self.hop + self.frame_len / 2) / self.sample_rate_hz
 
@@ -435,7 +462,13 @@ class StreamingDetector:
         return closed
 
     def flush(self) -> list[Episode]:
-        """Close every open track (end of the stream); return the squeak episodes among them."""
+        """Close every open track (end of the stream).
+
+        Returns
+        -------
+        list of Episode
+            The squeak episodes among the tracks closed.
+        """
         out: list[Episode] = []
         for tr in self._tracks:
             ep = self._finish(tr)
@@ -730,10 +763,11 @@ def detect(
         Sample rate [Hz], in [1000, 1e6].
     t0_s : float
         Time of the first sample [s].
-    speed_times_s, speed_rad_s : array_like, optional
-        The shaft speed [rad/s] at these times [s] (interpolated linearly at the frame times);
-        without them no tone is rejected as a motor order. A float `speed_rad_s` alone is a
-        constant speed.
+    speed_times_s : array_like, optional
+        Times [s] of the speed samples.
+    speed_rad_s : float or array_like, optional
+        The shaft speed [rad/s] at `speed_times_s` (interpolated linearly at the frame times);
+        without it no tone is rejected as a motor order. A float alone is a constant speed.
     scale_pa : float, optional
         Pascal per full-scale unit: levels in dB SPL and loudness computed.
     settings : DetectorSettings

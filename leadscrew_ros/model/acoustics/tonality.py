@@ -123,9 +123,11 @@ def short_time_psd(
         1-D signal (float32 is fastest).
     sample_rate_hz : float
         Sample rate [Hz].
-    frame_len, hop : int
-        Frame length and hop [samples]; frame i is ``samples[i * hop : i * hop + frame_len]``
-        (strided view, no copy before windowing).
+    frame_len : int
+        Frame length [samples].
+    hop : int
+        Hop [samples]; frame i is ``samples[i * hop : i * hop + frame_len]`` (strided view, no
+        copy before windowing).
     window : numpy.ndarray, optional
         Window of `frame_len` points (default `hann`).
 
@@ -171,9 +173,11 @@ class ToneAnalyzer:
         Sample rate [Hz].
     frame_len : int
         Frame length [samples] (the spectra have ``frame_len // 2 + 1`` bins).
-    f_lo_hz, f_hi_hz : float
-        Tone frequencies considered; `f_hi_hz` is lowered to the highest bin whose critical
-        band lies below the Nyquist frequency (`self.f_hi_hz`).
+    f_lo_hz : float
+        Lowest tone frequency considered [Hz].
+    f_hi_hz : float
+        Highest tone frequency considered [Hz], lowered to the highest bin whose critical band
+        lies below the Nyquist frequency (`self.f_hi_hz`).
     max_peaks : int
         Peaks evaluated per frame.
     harmonic_tolerance : float

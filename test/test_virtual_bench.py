@@ -1,0 +1,222 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The virtual bench (`bag.virtual_bench`, `leadscrew-squeak bench`): the truth stays in
+truth.json (the logs carry the nominal parameters), the logs read with rosbags, with the
+package's replay and with `read_audio`, the squeak tone is in the microphone exactly where the
+unit's own model squeaks (by FFT of frames), the model along the stroke agrees with
+`SqueakModel.predict`, and the same seed gives the same messages."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from leadscrew_ros.bag import logmeta
+from leadscrew_ros.bag.audio import read_audio
+from leadscrew_ros.bag.logsource import open_log
+from leadscrew_ros.bag.virtual_bench import (
+    MIC_INFO_TOPIC,
+    MIC_TOPIC,
+    TRUTH,
+    BenchSettings,
+    run,
+    simulate_unit,
+)
+from leadscrew_ros.cli import main
+from leadscrew_ros.live.settings import LiveSettings
+from leadscrew_ros.model import ScrewParameters, SqueakModel
+from leadscrew_ros.model.uncertainty.scatter import Scatter
+
+SETTINGS = BenchSettings(units=2, duration_s=12.0, seed=3)
+FRAME = 4096  # 85 ms at 48 kHz
+
+
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench")
+    truth = run(SETTINGS, out)
+    return out, truth
+
+
+def _bag(out: Path, unit: dict) -> Path:
+    return out / unit["log"]
+
+
+def _messages(bag: Path):
+    return [(m.topic.name, m.log_time_ns, m.data) for _, m in open_log(bag).messages()]
+
+
+def test_truth_is_apart_and_the_logs_carry_the_nominal_parameters(bench):
+    out, truth = bench
+    assert json.loads((out / TRUTH).read_text()) == truth
+    nominal = ScrewParameters(formulation="paper").as_dict()
+    assert truth["nominal"] == nominal and set(truth["scatter"]) == set(Scatter().names)
+    for unit in truth["units"]:
+        bag = _bag(out, unit)
+        files = sorted(bag.glob("*.mcap"))
+        record = logmeta.read(files[0])
+        assert record.params == nominal and record.unit_id == unit["unit_id"]
+        assert all(unit["params"][k] != nominal[k] for k in unit["params"])
+        assert {p.name for p in bag.iterdir()} == {files[0].name, "metadata.yaml"}
+        assert "truth" not in (bag / "metadata.yaml").read_text()
+        assert set(logmeta.read_record(files[0])) == set(logmeta.LogMetadata({}).record())
+        topics = {t for t, _, _ in _messages(bag)}
+        assert topics == {"/motor_speed", "/axial_load", "/nut_position", MIC_TOPIC, MIC_INFO_TOPIC}
+
+
+def test_logs_read_with_rosbags(bench):
+    from rosbags.highlevel import AnyReader
+
+    out, truth = bench
+    bag = _bag(out, truth["units"][0])
+    counts: dict[str, int] = {}
+    raw = bytearray()
+    with AnyReader([bag]) as reader:
+        for conn, _, data in reader.messages():
+            msg = reader.deserialize(data, conn.msgtype)
+            counts[conn.topic] = counts.get(conn.topic, 0) + 1
+            if conn.topic == MIC_TOPIC:
+                raw += msg.audio.data.tobytes()
+            if conn.topic == MIC_INFO_TOPIC:
+                assert (msg.channels, msg.sample_rate, msg.sample_format, msg.coding_format) == (
+                    1,
+                    48000,
+                    "S16LE",
+                    "wave",
+                )
+    n_inputs = int(SETTINGS.duration_s * SETTINGS.input_rate_hz) + 1
+    assert counts["/motor_speed"] == counts["/axial_load"] == counts["/nut_position"] == n_inputs
+    assert counts[MIC_INFO_TOPIC] == 13  # at 0 s and every second to 12 s
+    track = read_audio(bag)
+    assert track.warnings == [] and track.t0_s == 0.0 and track.sample_rate_hz == 48000
+    np.testing.assert_array_equal(
+        np.frombuffer(bytes(raw), "<i2") / np.float32(32768), track.samples
+    )
+
+
+def test_replay_runs_on_a_bench_log(bench, tmp_path, capsys):
+    out, truth = bench
+    bag = _bag(out, truth["units"][0])
+    assert (
+        main(
+            ["replay", str(bag), "--out", str(tmp_path), "--no-report", "--quiet", "--workers", "0"]
+        )
+        == 0
+    )
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    n_inputs = int(SETTINGS.duration_s * SETTINGS.input_rate_hz) + 1
+    assert summary["input_messages"] == {
+        t: n_inputs for t in ("/motor_speed", "/axial_load", "/nut_position")
+    }
+    assert summary["predictions"] > 0 and summary["time_in_squeak_s"] > 0
+    assert summary["ignored_inputs"] == {} and summary["rejected_inputs"] == {}
+
+
+def _amplitude(frame: np.ndarray, f_hz: float, fs: float) -> float:
+    """Amplitude [FS] of a tone at `f_hz` in a frame (Hann window, peak within +-3 bins)."""
+    w = np.hanning(frame.size)
+    spectrum = np.abs(np.fft.rfft(frame * w)) * 2 / w.sum()
+    k = int(round(f_hz * frame.size / fs))
+    return float(spectrum[max(k - 3, 0) : k + 4].max())
+
+
+def test_tone_exactly_where_the_unit_squeaks(bench):
+    out, truth = bench
+    for k, unit in enumerate(truth["units"]):
+        track = read_audio(_bag(out, unit))
+        fs = track.sample_rate_hz
+        sim = _unit(k)
+        squeaks = sim.squeaks
+        frequencies = sorted({round(f) for f in sim.squeak_hz[squeaks]})
+        # frames centred on input samples at least 60 ms from any change of the verdict or of
+        # the most unstable mode
+        f = np.nan_to_num(sim.squeak_hz)
+        steady = np.ones(squeaks.size, bool)
+        for edge in np.flatnonzero(np.diff(squeaks.astype(int)) | (np.abs(np.diff(f)) > 5)):
+            steady[max(edge - 6, 0) : edge + 8] = False
+        rng = np.random.default_rng(k)
+        on = rng.choice(np.flatnonzero(steady & squeaks), 6, replace=False)
+        off = rng.choice(np.flatnonzero(steady & ~squeaks), 6, replace=False)
+        amp = BenchSettings().squeak_amplitude_fs
+        for i in on.tolist() + off.tolist():
+            centre = int(round(sim.times_s[i] * fs))
+            frame = track.samples[max(centre - FRAME // 2, 0) :][:FRAME]
+            if frame.size < FRAME:
+                continue
+            if squeaks[i]:
+                assert _amplitude(frame, sim.squeak_hz[i], fs) > 0.6 * amp, (k, i)
+            else:
+                for f in frequencies:
+                    assert _amplitude(frame, f, fs) < 0.1 * amp, (k, i, f)
+
+
+def _unit(k: int):
+    """Unit k of SETTINGS, simulated again (as `run` draws it)."""
+    rng = np.random.default_rng(SETTINGS.seed)
+    nominal, scatter = ScrewParameters(formulation=SETTINGS.formulation), Scatter()
+    for j in range(k + 1):
+        unit_rng, _ = (np.random.default_rng(s) for s in rng.integers(2**63, size=2))
+        if j == k:
+            return simulate_unit(SETTINGS, k, unit_rng, nominal, scatter)
+
+
+def test_squeak_along_the_stroke_agrees_with_predict(bench):
+    _, truth = bench
+    sim = _unit(1)
+    assert truth["units"][1]["params"] == {n: getattr(sim.params, n) for n in Scatter().names}
+    model = SqueakModel(sim.params, Scatter({}))
+    step = LiveSettings().nut_deadband_m
+    for i in np.linspace(0, sim.times_s.size - 1, 25).astype(int).tolist():
+        nut = round(sim.nut_position_m[i] / step) * step
+        p = model.with_params(nut_position_m=nut).predict(sim.speed_rad_s[i], sim.load_n[i])
+        squeaks = bool(p.valid and p.squeak_modes)
+        assert squeaks == bool(sim.squeaks[i]), i
+        if squeaks:
+            assert sim.squeak_hz[i] == pytest.approx(p.unstable_frequencies_hz[0], rel=1e-9)
+
+
+def test_same_seed_same_messages(bench, tmp_path):
+    out, truth = bench
+    again = run(SETTINGS, tmp_path)
+    for a, b in zip(truth["units"], again["units"], strict=True):
+        assert _messages(_bag(out, a)) == _messages(_bag(tmp_path, b))
+        assert {**a, "log": ""} == {**b, "log": ""}
+    other = run(BenchSettings(units=1, duration_s=SETTINGS.duration_s, seed=4), tmp_path / "other")
+    assert other["units"][0]["params"] != truth["units"][0]["params"]
+
+
+def test_cli(tmp_path, capsys):
+    assert (
+        main(
+            [
+                "bench",
+                "--units",
+                "1",
+                "--duration",
+                "3",
+                "--seed",
+                "1",
+                "--formulation",
+                "consistent",
+                "--out",
+                str(tmp_path / "b"),
+            ]
+        )
+        == 0
+    )
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("bench-000: bench-000_") and len(lines) == 2
+    assert json.loads(lines[1])["units"] == 1
+    truth = json.loads((tmp_path / "b" / TRUTH).read_text())
+    assert truth["formulation"] == "consistent" and truth["seed"] == 1
+    assert truth["audio"]["audio_scale_pa_per_fs"] == pytest.approx(
+        20e-6 * 10 ** (94 / 20) / (0.1 / np.sqrt(2)), rel=1e-12
+    )
+    for argv, message in (
+        (["--units", "0"], "bench.units = 0 is out of range"),
+        (["--duration", "0.5"], "bench.duration_s = 0.5 is out of range"),
+        (["--formulation", "x"], "invalid choice"),
+    ):
+        assert main(["bench", "--out", str(tmp_path / "c"), *argv]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1
