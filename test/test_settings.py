@@ -147,6 +147,7 @@ def test_descriptors_carry_the_metadata():
         "unit_id",
         "input_queue_depth",
         "record.auto_recover",
+        "listen.enabled",
     ]
     assert descriptor(SPECS["record.compression"]).additional_constraints == (
         "one of: zstd, lz4, none"
@@ -242,12 +243,21 @@ def test_tables_list_every_node_setting_once():
 
 def test_topic_table_names_every_topic_of_the_node_with_its_type():
     from leadscrew_ros.bag import messages
-    from leadscrew_ros.ros.node import INPUTS
+    from leadscrew_ros.ros.node import INPUTS, SOUND_INPUTS
 
     rows = param_tables.topic_table().splitlines()[2:]
     topics = [r.split("`")[1] for r in rows]
     assert topics == list(param_tables.TOPICS)
-    assert set(topics) == set(INPUTS) | set(messages.OUTPUT_TYPES) | {"/diagnostics"}
+    assert set(topics) == (
+        set(INPUTS)
+        | set(messages.OUTPUT_TYPES)
+        | set(SOUND_INPUTS)
+        | set(messages.LISTEN_TYPES)
+        | {"/diagnostics"}
+    )
+    assert "| `microphone` (in, with `listen.enabled`) | std_msgs/Float32MultiArray |" in "\n".join(
+        rows
+    )
     assert "| `squeak/risk` | std_msgs/Float64 |" in rows[4]
     assert (
         "key-values speed_rad_s, load_n," in rows[-1] and "bag, files, messages, lost" in rows[-1]

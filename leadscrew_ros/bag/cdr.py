@@ -1,13 +1,14 @@
 # SPDX-License-Identifier: Apache-2.0
 """Small CDR codec of the few message types the package reads and writes, without rclpy.
 
-Decoders (std_msgs/Float64, Bool, Float64MultiArray and sensor_msgs/JointState; XCDR1 as Fast
-CDR and rosbags write it, either byte order) for what the replay reads from logs and the demo's
-monitor receives. Encoders (the same types and diagnostic_msgs/DiagnosticArray) for what the
-node publishes and records, the replay annotates and the synthetic logs hold: XCDR1 little
-endian, alignment counted from the end of the 4-byte encapsulation header, padding zero and
-no unused tail, byte for byte the payload Fast CDR writes with its padding zeroed and its
-slack cut (test/harness/cdr_reference.py checks this against rclpy's serializer).
+Decoders (std_msgs/Float64, Bool, Float64MultiArray, Float32MultiArray and
+sensor_msgs/JointState; XCDR1 as Fast CDR and rosbags write it, either byte order) for what the
+replay reads from logs, the demo's monitor receives and the node's microphone hears. Encoders
+(the same types and diagnostic_msgs/DiagnosticArray) for what the node publishes and records,
+the replay annotates and the synthetic logs hold: XCDR1 little endian, alignment counted from
+the end of the 4-byte encapsulation header, padding zero and no unused tail, byte for byte the
+payload Fast CDR writes with its padding zeroed and its slack cut (test/harness/cdr_reference.py
+checks this against rclpy's serializer).
 
 Log data is untrusted, so every length and count is checked against the payload before it is
 used and any malformation raises ValueError. (The offline replay never hands log data to
@@ -23,6 +24,8 @@ import struct
 from collections.abc import Sequence
 from typing import NamedTuple
 
+import numpy as np
+
 _ENCAPSULATION = {b"\x00\x00": ">", b"\x00\x01": "<"}  # CDR_BE, CDR_LE
 _HEADER = 4  # encapsulation kind + options
 _U32 = {e: struct.Struct(e + "I") for e in "<>"}
@@ -36,6 +39,7 @@ _BOOL_PAYLOADS = {False: _LE_HEADER + b"\x00", True: _LE_HEADER + b"\x01"}
 # 'pkg/msg/Type' of the types this module knows.
 FLOAT64, BOOL = "std_msgs/msg/Float64", "std_msgs/msg/Bool"
 FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
+FLOAT32_MULTI_ARRAY = "std_msgs/msg/Float32MultiArray"
 JOINT_STATE = "sensor_msgs/msg/JointState"
 DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"  # bundled for logs written without ROS
 
@@ -66,6 +70,15 @@ class Float64MultiArrayData(NamedTuple):
     dim: tuple[Dimension, ...]
     data_offset: int
     data: tuple[float, ...]
+
+
+class Float32MultiArrayData(NamedTuple):
+    """std_msgs/Float32MultiArray: the layout (dimensions, data offset) and the data (float32,
+    native byte order, a copy of the payload's)."""
+
+    dim: tuple[Dimension, ...]
+    data_offset: int
+    data: np.ndarray
 
 
 class DiagnosticStatusData(NamedTuple):
@@ -174,9 +187,9 @@ def decode_joint_state(data: bytes) -> JointStateData:
     )
 
 
-def decode_float64_multi_array(data: bytes) -> Float64MultiArrayData:
-    """std_msgs/Float64MultiArray: layout dimensions, data offset and data."""
-    endian = _endian(data)
+def _layout(data: bytes, endian: str) -> tuple[tuple[Dimension, ...], int, int]:
+    """std_msgs/MultiArrayLayout at the start of the body: dimensions, data offset and the
+    position after it."""
     count, pos = _count(data, _HEADER, endian, 13)  # string (5 bytes at least), 2 x u32
     dims = []
     for _ in range(count):
@@ -189,8 +202,24 @@ def decode_float64_multi_array(data: bytes) -> Float64MultiArrayData:
     pos = _aligned(pos, 4)
     _check(data, pos + 4)
     (offset,) = _U32[endian].unpack_from(data, pos)
-    values, _ = _float64s(data, pos + 4, endian)
-    return Float64MultiArrayData(tuple(dims), offset, values)
+    return tuple(dims), offset, pos + 4
+
+
+def decode_float64_multi_array(data: bytes) -> Float64MultiArrayData:
+    """std_msgs/Float64MultiArray: layout dimensions, data offset and data."""
+    endian = _endian(data)
+    dims, offset, pos = _layout(data, endian)
+    values, _ = _float64s(data, pos, endian)
+    return Float64MultiArrayData(dims, offset, values)
+
+
+def decode_float32_multi_array(data: bytes) -> Float32MultiArrayData:
+    """std_msgs/Float32MultiArray: layout dimensions, data offset and data."""
+    endian = _endian(data)
+    dims, offset, pos = _layout(data, endian)
+    n, pos = _count(data, pos, endian, 4)
+    values = np.frombuffer(data, dtype=f"{endian}f4", count=n, offset=pos)
+    return Float32MultiArrayData(dims, offset, values.astype(np.float32))
 
 
 # ---------------------------------------------------------------------- encoders

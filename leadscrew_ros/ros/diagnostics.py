@@ -6,8 +6,9 @@ passed, `force_update()` at once (on a change of verdict). Status names carry th
 qualified name: '/ns/squeak_predictor: squeak prediction'. The array is published (and handed
 to the node for recording) as the CDR bytes of `bag.cdr.encode_diagnostic_array`.
 
-The squeak-prediction status is decided rclpy-free by `LivePredictor.status`; the recording
-status by `recording_status` below, from the recorder and the crash recovery.
+The squeak-prediction status is decided rclpy-free by `LivePredictor.status`, the measurement
+status (with listening on) by `live.listen.Listener.status`; the recording status by
+`recording_status` below, from the recorder and the crash recovery.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ if TYPE_CHECKING:
 TOPIC = "/diagnostics"
 PREDICTION_TASK = "squeak prediction"
 RECORDING_TASK = "recording"
+MEASUREMENT_TASK = "measurement"  # with listen.enabled: heard against predicted
 
 # Key names of the recording status.
 KEY_BAG = "bag"
