@@ -33,7 +33,8 @@ setup(
     packages=find_packages(exclude=["test", "test.*"]),
     package_data={
         PACKAGE: ["py.typed"],  # PEP 561: the package ships its type hints
-        # Message definitions for logs written without ROS 2 (bag/msgdefs.py, tools/bundle_msgdefs.py)
+        # Message definitions for logs written without ROS 2 (bag/msgdefs.py,
+        # tools/bundle_msgdefs.py)
         f"{PACKAGE}.bag": ["jazzy_msgs/share/*/msg/*.msg"],
     },
     data_files=[

@@ -78,11 +78,14 @@ _BAR = re.compile(r"(?<!\\)\|")
 def _plain_bars(app, what, name, obj, options, lines) -> None:
     """The docstrings write absolute values as plain text, |Vc|, |F_z|: escape each '|' outside
     code spans so that reST does not read |...| as a substitution (autodoc-process-docstring;
-    a table's row or border stays as it is)."""
+    a table's row or border and a doctest example stay as they are)."""
+    in_example = False  # a doctest (>>> and its expected output, up to a blank line) is code
     for i, line in enumerate(lines):
         bare = line.strip()
+        in_example = bare.startswith(">>>") or (in_example and bool(bare))
         if (
-            "|" not in line
+            in_example
+            or "|" not in line
             or bare.startswith(("+-", "+="))
             or (bare.startswith("| ") and bare.endswith(" |"))
         ):
@@ -92,6 +95,7 @@ def _plain_bars(app, what, name, obj, options, lines) -> None:
 
 
 def setup(app):
+    """Sphinx extension entry point: tables before the build, plain bars in docstrings."""
     app.connect("builder-inited", _write_tables)
     app.connect("autodoc-process-docstring", _plain_bars)
     return {"parallel_read_safe": True}

@@ -17,8 +17,9 @@ def _version() -> str:
     xml = Path(__file__).resolve().parent.parent / "package.xml"
     try:
         root = ET.parse(xml).getroot()
-        if root.findtext("name") == __name__ and root.findtext("version"):
-            return root.findtext("version").strip()
+        version_text = root.findtext("version")
+        if root.findtext("name") == __name__ and version_text:
+            return version_text.strip()
     except (OSError, ET.ParseError):
         pass
     from importlib.metadata import PackageNotFoundError, version

@@ -75,19 +75,19 @@ NODE_ARGS = {
 @pytest.mark.parametrize("ros_args, words", NODE_ARGS.values(), ids=NODE_ARGS.keys())
 def test_squeak_node_rejects_bad_ros_arguments_in_one_line(capfd, files, ros_args, words):
     """In-process: rcl refuses them before any node exists (remove_ros_args or init)."""
-    from leadscrew_ros.ros.node import NODE_NAME
+    from leadscrew_ros.ros.node import PROG
     from leadscrew_ros.ros.node import main as node_main
 
     code = node_main(["squeak_node", "--ros-args", *(a.format(d=files) for a in ros_args)])
     out, err = capfd.readouterr()
     assert code == 2 and not out
-    assert_one_error_line(err, NODE_NAME)
+    assert_one_error_line(err, PROG)
     assert words in err
 
 
 def test_squeak_node_process_with_a_missing_params_file_exits_2_in_one_line(files):
     """The console script itself (it was RCLInvalidROSArgsError's traceback, exit 1)."""
-    from leadscrew_ros.ros.node import NODE_NAME
+    from leadscrew_ros.ros.node import PROG
 
     script = Path(sys.executable).with_name("squeak_node")
     command = [str(script)] if script.exists() else [sys.executable, "-m", "leadscrew_ros.ros.node"]
@@ -99,7 +99,7 @@ def test_squeak_node_process_with_a_missing_params_file_exits_2_in_one_line(file
         env=dict(os.environ),
     )
     assert proc.returncode == 2, proc.stderr
-    assert_one_error_line(proc.stderr, NODE_NAME)
+    assert_one_error_line(proc.stderr, PROG)
 
 
 # ----------------------------------------------------------------------------- every command

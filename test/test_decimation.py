@@ -17,7 +17,7 @@ def brute_force(t: np.ndarray, v: np.ndarray, width: float):
     n = k.max() + 1
     lo, hi, last = (np.full((n, v.shape[1]), np.nan) for _ in range(3))
     count = np.zeros(n, int)
-    for i, row in zip(k, v):
+    for i, row in zip(k, v, strict=True):
         lo[i], hi[i] = np.fmin(lo[i], row), np.fmax(hi[i], row)
         last[i] = row
         count[i] += 1
@@ -36,13 +36,13 @@ def test_the_envelope_is_the_binning_of_every_sample_at_its_final_width(
     v = rng.normal(size=(samples, 3))
     v[::17, 1] = np.nan  # a missing value is skipped
     e = Envelope(3, max_bins=16, bin_s=0.1)
-    for ti, row in zip(t, v):
+    for ti, row in zip(t, v, strict=True):
         e.add(float(ti), *row)
     got = e.series()
     # the width doubled just often enough for the last sample to fit in max_bins bins
     assert t[-1] < e.bin_s * 16 and (e.bin_s == 0.1 or t[-1] >= e.bin_s * 8)
     want = brute_force(t, v, e.bin_s)
-    for g, w in zip(got, want):
+    for g, w in zip(got, want, strict=True):
         np.testing.assert_array_equal(g, w)
     assert got[4].sum() == samples
 

@@ -231,3 +231,29 @@ def test_the_monitor_takes_validity_from_its_key_not_from_the_message(speed, wor
     assert not r.valid and r.validity is Validity[stat.values[KEY_VALIDITY]]
     assert r.validity.label.startswith(words)
     assert status_line(1.0, None, r).endswith(f"| no prediction ({r.validity.label})")
+
+
+def test_demo_with_a_microphone_says_heard_against_predicted(tmp_path):
+    proc = None
+    try:
+        proc = start(
+            CLI + ["demo", "--duration", "3", "--microphone", "--no-record"],
+            domain(5),
+            tmp_path,
+            "demo_mic",
+        )
+        code = proc.wait(timeout=60)
+        out, err = output(proc)
+    finally:
+        stop(proc)
+    assert code == 0 and err == "", (out, err)
+    heard = re.search(
+        r"  heard vs predicted: heard squeak ([\d.]+) s \((.*)\); predicted "
+        r"([\d.]+) s; agreement (\d+) % of frames$",
+        out,
+        re.MULTILINE,
+    )
+    assert heard, out
+    # The tone is where the node's model squeaks, so the two mostly agree (timing: loosely)
+    assert float(heard[1]) > 0.3 and float(heard[3]) > 0.3 and int(heard[4]) >= 70
+    assert re.search(r"B\dy \d+ Hz", heard[2]), heard[2]

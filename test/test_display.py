@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""`model.physics.display.exact`: numbers in messages are short, read back as the same float, and are
-never rounded onto the limit they violate."""
+"""`model.physics.display.exact`: numbers in messages are short, read back as the same
+float, and are never rounded onto the limit they violate."""
 
 import math
 

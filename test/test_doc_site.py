@@ -1,8 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The documentation site (doc/) and the README that points to it: the README stays short and
-names the set-up and build commands; every picture a page shows exists and is small. (The
-build itself, with warnings as errors and the pages' doctests, runs in .ci/run; the generated
-tables are tested in test_settings.py, the architecture tree in test_layers.py.)"""
+"""The documentation site (doc/) and the README that points to it.
+
+The README stays short and names the set-up and build commands; every picture a page shows
+exists and is small. (The build itself, with warnings as errors and the pages' doctests, runs
+in .ci/run; the generated tables are tested in test_settings.py, the architecture tree in
+test_layers.py.)"""
 
 import re
 from pathlib import Path

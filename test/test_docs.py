@@ -30,6 +30,7 @@ PACKAGES = (
     "leadscrew_ros.model.uncertainty",
     "leadscrew_ros.model.studies",
     "leadscrew_ros.model.nonlinear",
+    "leadscrew_ros.model.acoustics",
     "leadscrew_ros.live",
     "leadscrew_ros.bag",
     "leadscrew_ros.review",

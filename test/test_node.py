@@ -52,7 +52,7 @@ from leadscrew_ros.live.status import (
 from leadscrew_ros.model import Validity
 from leadscrew_ros.model.studies.advice import speed_bands
 from leadscrew_ros.model.uncertainty.scatter import DEFAULT_SCATTER, Scatter
-from leadscrew_ros.ros.node import NODE_NAME
+from leadscrew_ros.ros.node import NODE_NAME, PROG
 
 
 def growth(modes: Float64MultiArray) -> float:
@@ -640,7 +640,7 @@ def test_node_process_with_an_invalid_parameter_exits_with_one_line(param, words
     assert proc.returncode != 0
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr
-    assert lines[0].startswith(f"{NODE_NAME}: error:")
+    assert lines[0].startswith(f"{PROG}: error:")
     for w in words:
         assert w in lines[0]
     assert "Traceback" not in proc.stderr + proc.stdout

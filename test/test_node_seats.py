@@ -15,7 +15,7 @@ from rclpy.parameter import Parameter
 
 from harness.processes import node_command
 from harness.ros import COLLECT, RosWorld
-from leadscrew_ros.ros.node import NODE_NAME, SqueakPredictorNode
+from leadscrew_ros.ros.node import NODE_NAME, PROG, SqueakPredictorNode
 from leadscrew_ros.ros.parameters import PARAMETER_NAMES
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "leadscrew.yaml"
@@ -141,6 +141,6 @@ def test_help_prints_usage_and_exits_without_starting_a_node():
     )
     assert proc.returncode == 2
     assert proc.stderr.strip() == (
-        f"{NODE_NAME}: error: unrecognized arguments: --bogus (ROS "
+        f"{PROG}: error: unrecognized arguments: --bogus (ROS "
         "arguments go after --ros-args; see --help)"
     )

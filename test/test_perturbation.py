@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""First-order eigenvalue perturbation (`model.uncertainty.perturbation`): the eigenvalue rates against
+"""First-order eigenvalue perturbation (`model.uncertainty.perturbation`): the eigenvalue
+rates against
 finite differences of eigen-solves, and the live P(squeak) estimator's per-sample margins
 against a brute-force eigen-solve of every sample's own state matrix (error of second order in
 the scatter, verdicts the same)."""

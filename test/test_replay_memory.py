@@ -48,7 +48,7 @@ def bulky_log(directory: Path, duration_s: float) -> Path:
     bulk_every = int(cycle.rate_hz / BULK_HZ)
     times = cycle.start_ns + np.round(s.time_s * 1e9).astype(np.int64)
     for i, (now, speed, load) in enumerate(
-        zip(times.tolist(), s.speed_rad_s.tolist(), s.load_n.tolist())
+        zip(times.tolist(), s.speed_rad_s.tolist(), s.load_n.tolist(), strict=True)
     ):
         rec.write_serialized(SPEED_TOPIC, FLOAT64, encode_float64(speed), now)
         rec.write_serialized(LOAD_TOPIC, FLOAT64, encode_float64(load), now + 100_000)

@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: Apache-2.0
 """Settings are declared once, in the dataclasses' field metadata: the node's parameter
 descriptors, the settings' validation, the replay's --help and the documentation's tables
-(rendered at build time by tools/param_tables.py) come from there (config/leadscrew.yaml: test_config.py; `squeak_node --help`: test_node_seats.py)."""
+(rendered at build time by tools/param_tables.py) come from there (config/leadscrew.yaml:
+test_config.py; `squeak_node --help`: test_node_seats.py)."""
 
 import importlib.util
 import math
@@ -126,7 +127,7 @@ def test_node_refuses_to_start_with_a_bad_parameter(parameter, reason):
     )
     assert proc.returncode == 2, proc.stderr
     [line] = proc.stderr.strip().splitlines()
-    assert line.startswith(f"squeak_predictor: error: {reason}"), line
+    assert line.startswith(f"squeak_node: error: {reason}"), line
 
 
 # ----------------------------------------------------------------------------- ROS descriptors
@@ -146,6 +147,7 @@ def test_descriptors_carry_the_metadata():
         "unit_id",
         "input_queue_depth",
         "record.auto_recover",
+        "listen.enabled",
     ]
     assert descriptor(SPECS["record.compression"]).additional_constraints == (
         "one of: zstd, lz4, none"
@@ -198,7 +200,7 @@ def test_the_doc_build_writes_every_table(tmp_path):
     paths = param_tables.write(tmp_path / "_generated")
     names = [*param_tables.TABLES, param_tables.TOPIC_TABLE]
     assert [p.name for p in paths] == [f"{n}.md" for n in names]
-    for name, path in zip(names, paths):
+    for name, path in zip(names, paths, strict=True):
         rendered = (
             param_tables.topic_table()
             if name == param_tables.TOPIC_TABLE
@@ -241,12 +243,21 @@ def test_tables_list_every_node_setting_once():
 
 def test_topic_table_names_every_topic_of_the_node_with_its_type():
     from leadscrew_ros.bag import messages
-    from leadscrew_ros.ros.node import INPUTS
+    from leadscrew_ros.ros.node import INPUTS, SOUND_INPUTS
 
     rows = param_tables.topic_table().splitlines()[2:]
     topics = [r.split("`")[1] for r in rows]
     assert topics == list(param_tables.TOPICS)
-    assert set(topics) == set(INPUTS) | set(messages.OUTPUT_TYPES) | {"/diagnostics"}
+    assert set(topics) == (
+        set(INPUTS)
+        | set(messages.OUTPUT_TYPES)
+        | set(SOUND_INPUTS)
+        | set(messages.LISTEN_TYPES)
+        | {"/diagnostics"}
+    )
+    assert "| `microphone` (in, with `listen.enabled`) | std_msgs/Float32MultiArray |" in "\n".join(
+        rows
+    )
     assert "| `squeak/risk` | std_msgs/Float64 |" in rows[4]
     assert (
         "key-values speed_rad_s, load_n," in rows[-1] and "bag, files, messages, lost" in rows[-1]

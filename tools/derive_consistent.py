@@ -10,8 +10,8 @@ Starts from the paper's kinematics and friction law, not from the printed append
 For each pair of mode kinds (a, b) in {x, y, 0} it returns the stiffness and damping entries per
 unit contact angle, K_ab(theta) = -dQ_a/dq_b and D_ab(theta) = -dQ_a/dqdot_b, which is what the
 assumed-modes matrices integrate against [Phi_i^a Phi_j^b]. test/test_derivation.py compares
-them with leadscrew_ros.model.physics.kernels (kernels * scales) at random points, both flanks and both
-directions of rotation.
+them with leadscrew_ros.model.physics.kernels (kernels * scales) at random points, both flanks
+and both directions of rotation.
 
 Run it to print the kernels:  python tools/derive_consistent.py
 """

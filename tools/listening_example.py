@@ -9,7 +9,7 @@ replays its log (the CLI, no report) (1) from its AudioDataStamped + AudioInfo t
 rewritten with the microphone as std_msgs/Float32MultiArray, given --audio-rate, (3) without
 audio topics and the microphone as a WAV file beside it, --audio/--audio-start; then (1) again
 calibrated (--audio-scale, the bench's Pa per full scale) with --compare-formulations. Prints
-the page's Markdown between its `listening_example` markers (test_listen checks the page has
+the page's Markdown between its `listening_example` markers (test_heard checks the page has
 it); the log and WAV conversions are the tests' (test/harness/audio_logs.py).
 """
 

@@ -3,7 +3,7 @@
 
     .venv/bin/python tools/param_tables.py            # prints every table
     .venv/bin/python tools/param_tables.py record     # prints one
-    .venv/bin/python tools/param_tables.py --write doc/reference/_generated   # what doc/conf.py does
+    .venv/bin/python tools/param_tables.py --write doc/reference/_generated  # as doc/conf.py
 
 One markdown table per entry of `TABLES` (parameter, unit, default, allowed values, meaning),
 and the node's topic table (`topic_table`: names and types from the code, QoS and meaning from
@@ -21,13 +21,14 @@ from pathlib import Path
 from leadscrew_ros.bag import messages
 from leadscrew_ros.bag.msgdefs import type_name
 from leadscrew_ros.bag.recorder import RecordSettings
-from leadscrew_ros.live import status
-from leadscrew_ros.live.settings import JointSettings, LiveSettings
+from leadscrew_ros.live import listen, status
+from leadscrew_ros.live.settings import JointSettings, ListenSettings, LiveSettings
+from leadscrew_ros.model.acoustics.settings import DetectorSettings
 from leadscrew_ros.model.physics.metadata import default_text, range_text
 from leadscrew_ros.model.physics.parameters import ScrewParameters
 from leadscrew_ros.model.uncertainty.scatter import ScatterSettings
 from leadscrew_ros.ros import diagnostics
-from leadscrew_ros.ros.node import INPUTS
+from leadscrew_ros.ros.node import INPUTS, SOUND_INPUTS
 from leadscrew_ros.ros.parameters import (
     GROUPS,
     READ_ONLY_NOTE,
@@ -42,9 +43,10 @@ TABLES = {
     "node": (LiveSettings, JointSettings, NodeSettings),
     "scatter": (ScatterSettings,),
     "record": (RecordingControl, RecordSettings),
+    "listen": (ListenSettings, DetectorSettings),
     "model": (ScrewParameters,),
 }
-NODE_TABLES = ("node", "scatter", "record")  # the node's own parameters, not the model's
+NODE_TABLES = ("node", "scatter", "record", "listen")  # the node's own parameters, not the model's
 HEADER = ["| parameter | unit | default | allowed | meaning |", "|---|---|---|---|---|"]
 TOPIC_TABLE = "topics"  # file name of `topic_table` in `write`
 
@@ -67,6 +69,18 @@ _RECORDING = (
     "of an earlier run cut off by a crash) / ERROR (the disk error, with the path), "
     "with key-values {keys}, `lost <topic>` (constants "
     "`leadscrew_ros.ros.diagnostics.KEY_*`)"
+)
+_MEASUREMENT = (
+    f"with `listen.enabled` a third, `/squeak_predictor: {diagnostics.MEASUREMENT_TASK}`: "
+    "heard against predicted over the last `listen.window_s` of analysed sound, "
+    "allowing for the detector's delay: OK when both squeak or neither (e.g. "
+    "`heard squeak at 2651 Hz, predicted (T1 2653 Hz)`, `no squeak heard, none "
+    "predicted`) / WARN when they disagree, naming which way (`heard squeak at 2651 "
+    "Hz, none predicted`, `predicted squeak (P 0.97), none heard`), or when chunks "
+    "were dropped (the analysis could not keep up) or did not decode during the "
+    "window / STALE when no sound arrived for `listen.window_s`; key-values {keys} "
+    "(constants `leadscrew_ros.live.listen.KEY_*`; `heard_s`, `predicted_s`, "
+    "`agreement`, `analysed_s` and `heard_modes` since the start)"
 )
 # topic (relative to the node's namespace, as the code names it) -> (direction, QoS, meaning)
 TOPICS = {
@@ -112,11 +126,31 @@ TOPICS = {
         "position, rad/s (the current speed when its P is already below it; 0 "
         "if no valid such speed exists in that direction)",
     ),
+    "microphone": (
+        "in, with `listen.enabled`",
+        "sensor data, depth `listen.queue_chunks`",
+        "sound chunks, full scale -1..1, at `listen.sample_rate_hz` (a layout of two "
+        "dimensions, the second of size > 1: interleaved channels, averaged); "
+        "analysed on a thread of its own, never delaying a prediction",
+    ),
+    messages.HEARD: (
+        "out, with `listen.enabled`",
+        LATCHED,
+        "a squeak is heard now: a prominent "
+        "tone (ECMA-418-1) of at least `listen.min_duration_s` that does not follow "
+        "the motor orders (`model.acoustics.StreamingDetector.heard_now`)",
+    ),
+    messages.HEARD_FREQUENCY: (
+        "out, with `listen.enabled`",
+        "same",
+        "its frequency, Hz; 0 while nothing is heard",
+    ),
     diagnostics.TOPIC: (
         "out",
         "same",
-        "two statuses, named by the node's fully qualified name. "
-        "{prediction}; {recording}. Both come from a small updater in "
+        "two statuses (three with `listen.enabled`), named by the "
+        "node's fully qualified name. "
+        "{prediction}; {recording}; {measurement}. They come from a small updater in "
         "diagnostic_updater's shape (`leadscrew_ros/ros/diagnostics.py`: an "
         "`Updater` owns the publisher, the period and the hardware id; tasks "
         "fill a status; `update()` on the period, `force_update()` on a change "
@@ -164,6 +198,8 @@ def topic_types() -> dict[str, str]:
     named = {
         **{t: type_name(c) for t, c in INPUTS.items()},
         **messages.OUTPUT_TYPES,
+        **{t: type_name(k.msg_type) for t, k in SOUND_INPUTS.items()},
+        **messages.LISTEN_TYPES,
         diagnostics.TOPIC: "diagnostic_msgs/msg/DiagnosticArray",
     }
     return {t: n.replace("/msg/", "/") for t, n in named.items()}
@@ -180,6 +216,7 @@ def topic_table() -> str:
         meaning = meaning.format(
             prediction=_PREDICTION.format(keys=_keys(status)),
             recording=_RECORDING.format(keys=_keys(diagnostics)),
+            measurement=_MEASUREMENT.format(keys=_keys(listen)),
         )
         name = f"`{topic}`" + (f" ({direction})" if direction != "out" else "")
         rows.append("| " + " | ".join(_cell(c) for c in (name, types[topic], qos, meaning)) + " |")

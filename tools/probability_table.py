@@ -1,5 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Numbers for doc/theory/probability.md: P(squeak) at Table 1 from both estimators, and their largest gap.
+"""Numbers for doc/theory/probability.md: P(squeak) at Table 1 from both estimators.
+
+Also their largest gap.
 
     .venv/bin/python tools/probability_table.py
 

@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 # SPDX-License-Identifier: Apache-2.0
-"""Numbers for the documentation page doc/theory/transient.md, "Nonlinear time-domain check" (issue 13).
+"""Numbers for doc/theory/transient.md, "Nonlinear time-domain check" (issue 13).
 
-    .venv/bin/python tools/transient_table.py [--plot [doc/images/transient.png]]   # ~5 min on 2 cores
+    .venv/bin/python tools/transient_table.py [--plot [doc/images/transient.png]]  # ~5 min, 2 cores
 
 Simulates the nonlinear equations (`model.nonlinear.transient`, Table 1, all 18 modes, default
 settings) at (20 rad/s, 200 N), (5 rad/s, 200 N), (40 rad/s, 300 N) and (60 rad/s, 200 N) (above the

@@ -6,14 +6,14 @@ Neither package is installable here (not on PyPI, no wheel), and both are called
 the `jazzy_msgs/share` tree `msgdefs` reads: the texts live here, verbatim.
 
 ros-drivers audio_common (branch ros2, released into Jazzy;
-github.com/ros-drivers/audio_common, ``audio_common_msgs/msg/*.msg``):
+github.com/ros-drivers/audio_common, `audio_common_msgs/msg/*.msg`):
 
 - `AudioData`: ``uint8[] data``
 - `AudioDataStamped`: ``std_msgs/Header header``, ``audio_common_msgs/AudioData audio``
 - `AudioInfo`: ``uint8 channels``, ``uint32 sample_rate``, ``string sample_format`` (e.g.
   S16LE), ``uint32 bitrate``, ``string coding_format`` (e.g. wave, mp3)
 
-mgonzs13 audio_common (github.com/mgonzs13/audio_common, main, ``audio_common_msgs/msg/*.msg`` as
+mgonzs13 audio_common (github.com/mgonzs13/audio_common, main, `audio_common_msgs/msg/*.msg` as
 of version 4.0.x; its capturer publishes `AudioStamped` on `audio`, the array named by
 `info.format`, a PortAudio sample format constant, filled):
 

@@ -1,13 +1,14 @@
 # SPDX-License-Identifier: Apache-2.0
 """Small CDR codec of the few message types the package reads and writes, without rclpy.
 
-Decoders (std_msgs/Float64, Bool, Float64MultiArray and sensor_msgs/JointState; XCDR1 as Fast
-CDR and rosbags write it, either byte order) for what the replay reads from logs and the demo's
-monitor receives. Encoders (the same types and diagnostic_msgs/DiagnosticArray) for what the
-node publishes and records, the replay annotates and the synthetic logs hold: XCDR1 little
-endian, alignment counted from the end of the 4-byte encapsulation header, padding zero and
-no unused tail, byte for byte the payload Fast CDR writes with its padding zeroed and its
-slack cut (test/harness/cdr_reference.py checks this against rclpy's serializer).
+Decoders (std_msgs/Float64, Bool, Float64MultiArray, Float32MultiArray and
+sensor_msgs/JointState; XCDR1 as Fast CDR and rosbags write it, either byte order) for what the
+replay reads from logs, the demo's monitor receives and the node's microphone hears. Encoders
+(the same types and diagnostic_msgs/DiagnosticArray) for what the node publishes and records,
+the replay annotates and the synthetic logs hold: XCDR1 little endian, alignment counted from
+the end of the 4-byte encapsulation header, padding zero and no unused tail, byte for byte the
+payload Fast CDR writes with its padding zeroed and its slack cut (test/harness/cdr_reference.py
+checks this against rclpy's serializer).
 
 Log data is untrusted, so every length and count is checked against the payload before it is
 used and any malformation raises ValueError. (The offline replay never hands log data to
@@ -20,7 +21,10 @@ ignored: Fast CDR may pad a payload.
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from typing import NamedTuple
+
+import numpy as np
 
 _ENCAPSULATION = {b"\x00\x00": ">", b"\x00\x01": "<"}  # CDR_BE, CDR_LE
 _HEADER = 4  # encapsulation kind + options
@@ -35,6 +39,7 @@ _BOOL_PAYLOADS = {False: _LE_HEADER + b"\x00", True: _LE_HEADER + b"\x01"}
 # 'pkg/msg/Type' of the types this module knows.
 FLOAT64, BOOL = "std_msgs/msg/Float64", "std_msgs/msg/Bool"
 FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
+FLOAT32_MULTI_ARRAY = "std_msgs/msg/Float32MultiArray"
 JOINT_STATE = "sensor_msgs/msg/JointState"
 DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"  # bundled for logs written without ROS
 
@@ -65,6 +70,15 @@ class Float64MultiArrayData(NamedTuple):
     dim: tuple[Dimension, ...]
     data_offset: int
     data: tuple[float, ...]
+
+
+class Float32MultiArrayData(NamedTuple):
+    """std_msgs/Float32MultiArray: the layout (dimensions, data offset) and the data (float32,
+    native byte order, a copy of the payload's)."""
+
+    dim: tuple[Dimension, ...]
+    data_offset: int
+    data: np.ndarray
 
 
 class DiagnosticStatusData(NamedTuple):
@@ -173,9 +187,9 @@ def decode_joint_state(data: bytes) -> JointStateData:
     )
 
 
-def decode_float64_multi_array(data: bytes) -> Float64MultiArrayData:
-    """std_msgs/Float64MultiArray: layout dimensions, data offset and data."""
-    endian = _endian(data)
+def _layout(data: bytes, endian: str) -> tuple[tuple[Dimension, ...], int, int]:
+    """std_msgs/MultiArrayLayout at the start of the body: dimensions, data offset and the
+    position after it."""
     count, pos = _count(data, _HEADER, endian, 13)  # string (5 bytes at least), 2 x u32
     dims = []
     for _ in range(count):
@@ -188,8 +202,24 @@ def decode_float64_multi_array(data: bytes) -> Float64MultiArrayData:
     pos = _aligned(pos, 4)
     _check(data, pos + 4)
     (offset,) = _U32[endian].unpack_from(data, pos)
-    values, _ = _float64s(data, pos + 4, endian)
-    return Float64MultiArrayData(tuple(dims), offset, values)
+    return tuple(dims), offset, pos + 4
+
+
+def decode_float64_multi_array(data: bytes) -> Float64MultiArrayData:
+    """std_msgs/Float64MultiArray: layout dimensions, data offset and data."""
+    endian = _endian(data)
+    dims, offset, pos = _layout(data, endian)
+    values, _ = _float64s(data, pos, endian)
+    return Float64MultiArrayData(dims, offset, values)
+
+
+def decode_float32_multi_array(data: bytes) -> Float32MultiArrayData:
+    """std_msgs/Float32MultiArray: layout dimensions, data offset and data."""
+    endian = _endian(data)
+    dims, offset, pos = _layout(data, endian)
+    n, pos = _count(data, pos, endian, 4)
+    values = np.frombuffer(data, dtype=f"{endian}f4", count=n, offset=pos)
+    return Float32MultiArrayData(dims, offset, values.astype(np.float32))
 
 
 # ---------------------------------------------------------------------- encoders
@@ -203,7 +233,7 @@ class _Encoder:
     def _align(self, size: int) -> None:
         self.out += bytes(-(len(self.out) - _HEADER) % size)
 
-    def _pack(self, fmt: str, size: int, *values) -> None:
+    def _pack(self, fmt: str, size: int, *values: float) -> None:
         self._align(size)
         try:
             self.out += struct.pack("<" + fmt, *values)
@@ -223,12 +253,12 @@ class _Encoder:
         self.u32(len(raw) + 1)
         self.out += raw + b"\x00"
 
-    def strings(self, values) -> None:
+    def strings(self, values: Sequence[str]) -> None:
         self.u32(len(values))
         for v in values:
             self.string(v)
 
-    def f64s(self, values) -> None:
+    def f64s(self, values: Sequence[float]) -> None:
         """A float64 sequence (an empty one is not aligned for its elements, as Fast CDR)."""
         self.u32(len(values))
         if len(values):
@@ -256,7 +286,9 @@ def encode_bool(value: bool) -> bytes:
     return _BOOL_PAYLOADS[bool(value)]
 
 
-def encode_float64_multi_array(dim: tuple[Dimension, ...], data, data_offset: int = 0) -> bytes:
+def encode_float64_multi_array(
+    dim: tuple[Dimension, ...], data: Sequence[float], data_offset: int = 0
+) -> bytes:
     """std_msgs/Float64MultiArray of layout dimensions `dim` and values `data` (written
     directly: every prediction publishes two)."""
     out = bytearray(_LE_HEADER)

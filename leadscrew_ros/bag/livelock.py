@@ -41,7 +41,7 @@ def is_live(path: Path | str) -> bool:
 
 
 def live_files(path: Path | str) -> list[Path]:
-    """The files of `path` (an MCAP file, or a bag directory's ``*.mcap``) being written now."""
+    """The files of `path` (an MCAP file, or a bag directory's `*.mcap`) being written now."""
     path = Path(path)
     files = sorted(path.glob("*.mcap")) if path.is_dir() else [path]
     return [f for f in files if is_live(f)]

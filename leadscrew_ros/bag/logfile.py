@@ -24,6 +24,7 @@ from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import IO
 
 import lz4.frame
 import yaml
@@ -32,6 +33,7 @@ from mcap.data_stream import ReadDataStream
 from mcap.records import Channel, Header, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
+from . import bagmeta
 from .bagmeta import METADATA, BagStats, FileStats, TopicStats
 from .livelock import LIVE, is_live, live_files
 
@@ -115,11 +117,42 @@ class LogInfo:
     live: bool = False  # a recorder is writing the file: its tail is still to come
     # MCAP Metadata records read (e.g. `logmeta`'s), name -> string map; kept by `recover`
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    # A topic recorded with more than one type (MCAP channels, .db3 `topics` rows of one
+    # name): `topics` holds its first type, these the others by (name, type), with their
+    # messages (which `counts` includes)
+    retyped: dict[tuple[str, str], Topic] = field(default_factory=dict)
+    retyped_counts: Counter = field(default_factory=Counter)
 
     @property
     def messages(self) -> int:
         """Messages read, over all topics."""
         return sum(self.counts.values())
+
+    def add_topic(self, topic: Topic) -> Topic:
+        """The topic a channel (or .db3 topic row) of `topic` gets: the one of its name and
+        type already known, or `topic`, kept in `topics` or, for a further type, `retyped`."""
+        known = self.topics.setdefault(topic.name, topic)
+        if known.type_name == topic.type_name:
+            return known
+        return self.retyped.setdefault((topic.name, topic.type_name), topic)
+
+    def count(self, topic: Topic) -> None:
+        """One message of `topic` read."""
+        self.counts[topic.name] += 1
+        if self.retyped and topic is not self.topics[topic.name]:
+            self.retyped_counts[topic.name, topic.type_name] += 1
+
+    def type_counts(self) -> list[tuple[Topic, int]]:
+        """Every (topic, messages) by name, then type: a topic recorded with several types
+        once per type."""
+        out = []
+        for name, t in self.topics.items():
+            others = [
+                (o, self.retyped_counts[key]) for key, o in self.retyped.items() if key[0] == name
+            ]
+            out.append((t, self.counts[name] - sum(n for _, n in others)))
+            out += others
+        return sorted(out, key=lambda tn: (tn[0].name, tn[0].type_name))
 
 
 def log_files(path: Path | str) -> list[Path]:
@@ -164,7 +197,7 @@ def _split_files(directory: Path) -> list[Path]:
     return sorted(directory.glob("*.mcap"), key=_split_key)
 
 
-def _split_key(p: Path):
+def _split_key(p: Path) -> tuple[str, int, str]:
     m = re.search(r"_(\d+)\.mcap$", p.name)
     return (p.name[: m.start()] if m else p.stem, int(m.group(1)) if m else -1, p.name)
 
@@ -208,7 +241,7 @@ def read_messages(
     except IsADirectoryError:
         raise LogError(path, "is a directory, not an MCAP file") from None
     except OSError as exc:
-        raise LogError(path, exc.strerror or exc) from None
+        raise LogError(path, exc.strerror or str(exc)) from None
 
 
 def _incomplete(path: Path) -> str:
@@ -247,7 +280,9 @@ class _CutOff(_Damage):
     """The file ends inside or right after a whole record: a recording cut off, not corrupted."""
 
 
-def _records(path: Path, f, size: int, topics, strict: bool, info: LogInfo) -> Iterator[LogMessage]:
+def _records(
+    path: Path, f: IO[bytes], size: int, topics: set[str] | None, strict: bool, info: LogInfo
+) -> Iterator[LogMessage]:
     """The messages of the open file `f` of `size` bytes, read record by record."""
     if f.read(len(MAGIC)) != MAGIC:
         raise LogError(path, "not an MCAP file (bad magic)")
@@ -289,14 +324,14 @@ def _records(path: Path, f, size: int, topics, strict: bool, info: LogInfo) -> I
                 if m is not None:
                     yield m
             elif op == OP_CHUNK:
-                for kind, chunk_rec in _chunk(rec):
-                    if kind == OP_SCHEMA:
+                for _, chunk_rec in _chunk(rec):
+                    if isinstance(chunk_rec, Schema):
                         schemas[chunk_rec.id] = (
                             chunk_rec.name,
                             chunk_rec.encoding,
                             chunk_rec.data.decode(),
                         )
-                    elif kind == OP_CHANNEL:
+                    elif isinstance(chunk_rec, Channel):
                         _channel(path, chunk_rec, schemas, channels, topics, info)
                     else:
                         m = _message(chunk_rec, 0, len(chunk_rec), channels, info)
@@ -323,7 +358,7 @@ def _records(path: Path, f, size: int, topics, strict: bool, info: LogInfo) -> I
     info.damage = problem
 
 
-def _read(f, n: int) -> bytes:
+def _read(f: IO[bytes], n: int) -> bytes:
     """`n` bytes at the file position (checked against the size first, by the caller)."""
     data = f.read(n)
     if len(data) != n:
@@ -335,7 +370,14 @@ def _stream(rec: bytes) -> ReadDataStream:
     return ReadDataStream(io.BytesIO(rec))
 
 
-def _channel(path: Path, c: Channel, schemas, channels, topics, info: LogInfo) -> None:
+def _channel(
+    path: Path,
+    c: Channel,
+    schemas: dict[int, tuple[str, str, str]],
+    channels: dict[int, Topic | None],
+    topics: set[str] | None,
+    info: LogInfo,
+) -> None:
     if topics is not None and c.topic not in topics:
         channels[c.id] = None
         return
@@ -351,7 +393,7 @@ def _channel(path: Path, c: Channel, schemas, channels, topics, info: LogInfo) -
     topic = Topic(
         c.topic, _full_type(name), encoding, text, c.message_encoding, dict(c.metadata), name
     )
-    channels[c.id] = info.topics.setdefault(c.topic, topic)
+    channels[c.id] = info.add_topic(topic)
 
 
 def _full_type(name: str) -> str:
@@ -359,7 +401,9 @@ def _full_type(name: str) -> str:
     return f"{parts[0]}/msg/{parts[-1]}" if len(parts) in (2, 3) else name
 
 
-def _message(buf, start: int, length: int, channels, info: LogInfo) -> LogMessage | None:
+def _message(
+    buf: bytes, start: int, length: int, channels: dict[int, Topic | None], info: LogInfo
+) -> LogMessage | None:
     if length < _MESSAGE.size:
         raise _Damage(f"message record of {length} bytes")
     channel_id, sequence, log_time, publish_time = _MESSAGE.unpack_from(buf, start)
@@ -368,7 +412,7 @@ def _message(buf, start: int, length: int, channels, info: LogInfo) -> LogMessag
     topic = channels[channel_id]
     if topic is None:
         return None
-    info.counts[topic.name] += 1
+    info.count(topic)
     info.start_ns = log_time if info.start_ns is None else min(info.start_ns, log_time)
     info.end_ns = log_time if info.end_ns is None else max(info.end_ns, log_time)
     return LogMessage(
@@ -376,7 +420,7 @@ def _message(buf, start: int, length: int, channels, info: LogInfo) -> LogMessag
     )
 
 
-def _chunk(rec: bytes) -> Iterator[tuple[int, object]]:
+def _chunk(rec: bytes) -> Iterator[tuple[int, bytes | Schema | Channel]]:
     """Schemas, channels and raw message records of a chunk record's body, after size and CRC
     checks."""
     buf = memoryview(rec)
@@ -494,15 +538,14 @@ def _rewrite(
         with open(dst, "wb") as out:
             writer = Writer(out, compression=compression)
             writer.start(profile="ros2", library="leadscrew_ros recover")
-            ids: dict[str, int] = {}
+            ids: dict[tuple[str, str], int] = {}  # a channel per topic and type
             for m in read_messages(src, strict=False, info=info):
-                if m.topic.name not in ids:
-                    ids[m.topic.name] = _register(writer, m.topic)
-                writer.add_message(
-                    ids[m.topic.name], m.log_time_ns, m.data, m.publish_time_ns, m.sequence
-                )
-            for t in info.topics.values():  # channels that had no message yet
-                if t.name not in ids:
+                key = (m.topic.name, m.topic.type_name)
+                if key not in ids:
+                    ids[key] = _register(writer, m.topic)
+                writer.add_message(ids[key], m.log_time_ns, m.data, m.publish_time_ns, m.sequence)
+            for t in [*info.topics.values(), *info.retyped.values()]:  # without messages yet
+                if (t.name, t.type_name) not in ids:
                     _register(writer, t)
             for name, record in info.metadata.items():  # e.g. the `leadscrew_ros` record
                 writer.add_metadata(name, record)
@@ -511,7 +554,7 @@ def _rewrite(
             os.fsync(out.fileno())
     except OSError as exc:
         dst.unlink(missing_ok=True)
-        raise LogError(dst, exc.strerror or exc) from None
+        raise LogError(dst, exc.strerror or str(exc)) from None
     except LogError:  # foreign or not MCAP: nothing written
         dst.unlink(missing_ok=True)
         raise
@@ -581,6 +624,7 @@ class BagRecovery:
             return f"nothing to recover: {what} is complete ({self.messages} messages)"
         done = [f"{sum(f.action == 'recovered' for f in self.files)} file(s) recovered"]
         if self.metadata_written:
+            assert self.bag is not None  # metadata is written only for a bag directory
             done.append(f"{self.bag / METADATA} regenerated")
         rest = (
             f"; {len(self.still_cut_off)} other file(s) of the bag still cut off: "
@@ -696,11 +740,12 @@ def _recover_file(path: Path) -> FileRecovery:
     if problem:
         os.replace(broken, path)  # the original back in place
         raise LogError(path, f"recovery did not verify ({problem}); the file is unchanged")
+    kept: Path | None = broken
     if info.cut_off:
         broken.unlink()
-        broken = None
+        kept = None
     return FileRecovery(
-        path, "recovered", info.messages, len(info.topics), info.damage, broken, check
+        path, "recovered", info.messages, len(info.topics), info.damage, kept, check
     )
 
 
@@ -712,37 +757,62 @@ def _sync_directory(directory: Path) -> None:
         os.close(fd)
 
 
-def _reindex(bag: Path, done: list[FileRecovery]) -> bool:
-    """Write `bag/metadata.yaml` from the bag's files unless nothing was recovered and it
-    already matches them; True if written."""
-    known = {f.path: f.info for f in done}
-    old = _read_metadata(bag)
+def bag_stats(infos: list[LogInfo], old: dict | None = None) -> BagStats:
+    """What metadata.yaml should say of a bag whose files, in split order, read as `infos`
+    (custom data and QoS profiles of the `rosbag2_bagfile_information` `old`, if given); a
+    topic recorded with two types is listed once per type."""
+    old = old or {}
     old_qos = {
         (t.get("topic_metadata") or {}).get("name"): (t.get("topic_metadata") or {}).get(
             "offered_qos_profiles"
         )
         for t in old.get("topics_with_message_count") or []
-        if isinstance(t, dict)
+        if isinstance(t, dict) and isinstance(t.get("topic_metadata") or {}, dict)
     }
-    stats = BagStats(custom_data=dict(old.get("custom_data") or {}))
-    topics: dict[str, TopicStats] = {}
-    for f in _split_files(bag):
-        info = known.get(f) or inspect(f)
-        stats.files.append(FileStats(f, info.start_ns, info.end_ns, info.messages))
-        for name, t in info.topics.items():
-            if name not in topics:
-                qos = old_qos.get(name) or t.metadata.get("offered_qos_profiles", "")
-                topics[name] = TopicStats(name, t.type_name, 0, str(qos))
-            topics[name].count += info.counts[name]
+    custom = old.get("custom_data")
+    stats = BagStats(custom_data=dict(custom) if isinstance(custom, dict) else {})
+    topics: dict[tuple[str, str], TopicStats] = {}
+    for info in infos:
+        stats.files.append(FileStats(info.path, info.start_ns, info.end_ns, info.messages))
+        for t, n in info.type_counts():
+            key = (t.name, t.type_name)
+            if key not in topics:
+                qos = old_qos.get(t.name) or t.metadata.get("offered_qos_profiles", "")
+                topics[key] = TopicStats(t.name, t.type_name, 0, str(qos))
+            topics[key].count += n
     stats.topics = list(topics.values())
-    if all(f.action == "complete" for f in done) and _matches(
-        old, stats.info()["rosbag2_bagfile_information"]
+    return stats
+
+
+def metadata_problem(bag: Path, infos: list[LogInfo] | None = None) -> str:
+    """What is wrong with the metadata.yaml of bag directory `bag` (`bagmeta.problem`, against
+    the files as read into `infos` when given) and how to mend it; '' if nothing."""
+    problem = bagmeta.problem(bag, None if infos is None else bag_stats(infos))
+    if not problem:
+        return ""
+    mend = (
+        f"`{RECOVER_HINT} {bag}` mends it"
+        if _split_files(bag)
+        else f"`ros2 bag reindex {bag}` mends it"
+    )
+    return f"{problem}; other tools (rosbags, ros2 bag) refuse or misread the bag; {mend}"
+
+
+def _reindex(bag: Path, done: list[FileRecovery]) -> bool:
+    """Write `bag/metadata.yaml` from the bag's files unless nothing was recovered and it
+    already passes `bagmeta.problem` against them; True if written."""
+    known = {f.path: f.info for f in done}
+    stats = bag_stats([known.get(f) or inspect(f) for f in _split_files(bag)], _read_metadata(bag))
+    if (
+        all(f.action == "complete" for f in done)
+        and (bag / METADATA).is_file()
+        and not bagmeta.problem(bag, stats)
     ):
         return False
     try:
         stats.write(bag)
     except OSError as exc:
-        raise LogError(bag / METADATA, exc.strerror or exc) from None
+        raise LogError(bag / METADATA, exc.strerror or str(exc)) from None
     return True
 
 
@@ -751,26 +821,6 @@ def _read_metadata(bag: Path) -> dict:
     try:
         doc = yaml.safe_load((bag / METADATA).read_text(encoding="utf-8"))
         info = doc["rosbag2_bagfile_information"]
-    except (OSError, yaml.YAMLError, TypeError, KeyError):
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, TypeError, KeyError):
         return {}
     return info if isinstance(info, dict) else {}
-
-
-def _matches(old: dict, new: dict) -> bool:
-    """Old metadata describes the same files, messages and per-topic counts as the files."""
-
-    def counts(info):
-        return {
-            (t.get("topic_metadata") or {}).get("name"): t.get("message_count")
-            for t in info.get("topics_with_message_count") or []
-            if isinstance(t, dict)
-        }
-
-    return (
-        bool(old)
-        and all(
-            old.get(k) == new[k]
-            for k in ("relative_file_paths", "message_count", "starting_time", "duration")
-        )
-        and counts(old) == counts(new)
-    )

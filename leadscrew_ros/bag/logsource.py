@@ -50,6 +50,8 @@ class LogSource:
         Every topic the files declare, once `messages` has run.
     counts : Counter
         Messages per topic, once `messages` has run.
+    infos : list of LogInfo
+        What reading each file found, once `messages` has run (`logfile.metadata_problem`).
     """
 
     path: Path
@@ -57,6 +59,7 @@ class LogSource:
     sqlite: bool = False
     topics: dict[str, Topic] = field(default_factory=dict)
     counts: Counter = field(default_factory=Counter)
+    infos: list[LogInfo] = field(default_factory=list)
 
     def messages(self) -> Iterator[tuple[Path, LogMessage]]:
         """Every message of the log; collects `topics` (including those without messages) and
@@ -74,6 +77,7 @@ class LogSource:
             for name, topic in info.topics.items():
                 self.topics.setdefault(name, topic)
             self.counts.update({name: info.counts[name] for name in info.topics})
+            self.infos.append(info)
 
 
 def open_log(path: Path | str) -> LogSource:
@@ -111,14 +115,37 @@ def log_topics(source: LogSource) -> dict[str, Topic]:
     """Every topic the log declares, before reading its messages: from the MCAP summaries or
     the sqlite3 `topics` tables (a file without summary is read through)."""
     topics: dict[str, Topic] = {}
-    for f in source.files:
-        found = _db3_topics(f, _connect(f)) if source.sqlite else _mcap_topics(f)
-        for t in found.values():
-            topics.setdefault(t.name, t)
+    for t in _declared(source):
+        topics.setdefault(t.name, t)
     return topics
 
 
-def _mcap_topics(path: Path) -> dict[str, Topic]:
+def topic_types(source: LogSource) -> dict[str, list[str]]:
+    """Every type each topic of the log is declared with (a topic recorded with two types,
+    e.g. on two MCAP channels or two .db3 `topics` rows, has both), in the order declared."""
+    types: dict[str, list[str]] = {}
+    for t in _declared(source):
+        if t.type_name not in types.setdefault(t.name, []):
+            types[t.name].append(t.type_name)
+    return types
+
+
+def _declared(source: LogSource) -> list[Topic]:
+    """Every topic of every file (once per channel or topics row) in file order."""
+    out: list[Topic] = []
+    for f in source.files:
+        if source.sqlite:
+            con = _connect(f)
+            try:
+                out += _db3_topics(f, con).values()
+            finally:
+                con.close()
+        else:
+            out += _mcap_topics(f)
+    return out
+
+
+def _mcap_topics(path: Path) -> list[Topic]:
     from mcap.reader import make_reader
 
     try:
@@ -130,19 +157,21 @@ def _mcap_topics(path: Path) -> dict[str, Topic]:
         info = LogInfo(path)
         for _ in read_messages(path, strict=False, info=info):
             pass
-        return info.topics
-    out = {}
-    for c in summary.channels.values():
+        return [*info.topics.values(), *info.retyped.values()]
+    out = []
+    for _, c in sorted(summary.channels.items()):
         s = summary.schemas.get(c.schema_id)
         if s is not None:
-            out[c.topic] = Topic(
-                c.topic,
-                _full_type(s.name),
-                s.encoding,
-                "",
-                c.message_encoding,
-                dict(c.metadata),
-                s.name,
+            out.append(
+                Topic(
+                    c.topic,
+                    _full_type(s.name),
+                    s.encoding,
+                    "",
+                    c.message_encoding,
+                    dict(c.metadata),
+                    s.name,
+                )
             )
     return out
 
@@ -202,8 +231,8 @@ def _db3_topics(path: Path, con: sqlite3.Connection) -> dict[int, Topic]:
 def _db3_messages(path: Path, info: LogInfo) -> Iterator[LogMessage]:
     con = _connect(path)
     try:
-        topics = _db3_topics(path, con)
-        info.topics.update({t.name: t for t in topics.values()})
+        # a name in two rows (two types): each its own topic, as two MCAP channels are
+        topics = {tid: info.add_topic(t) for tid, t in _db3_topics(path, con).items()}
         sequence: Counter[int] = Counter()
         try:
             for tid, stamp, data in con.execute(
@@ -212,7 +241,9 @@ def _db3_messages(path: Path, info: LogInfo) -> Iterator[LogMessage]:
                 topic = topics.get(tid)
                 if topic is None:
                     raise LogError(path, f"message on unknown topic id {tid}")
-                info.counts[topic.name] += 1
+                info.count(topic)
+                info.start_ns = stamp if info.start_ns is None else min(info.start_ns, stamp)
+                info.end_ns = stamp if info.end_ns is None else max(info.end_ns, stamp)
                 yield LogMessage(topic, stamp, stamp, sequence[tid], bytes(data))
                 sequence[tid] += 1
         except sqlite3.Error as exc:

@@ -33,6 +33,7 @@ from mcap.records import (
     DataEnd,
     Footer,
     Header,
+    McapRecord,
     Metadata,
     MetadataIndex,
     Schema,
@@ -78,10 +79,12 @@ class McapOut:
         self.channels: list[Channel] = []
         self._chunk = bytearray()
         self._index: defaultdict[int, list[int]] = defaultdict(list)  # channel -> t, offset
-        self._start, self._end = None, 0
+        self._start: int | None = None  # log time range of the chunk [ns]
+        self._end = 0
         self._chunk_indexes: list[ChunkIndex] = []
         self._counts: defaultdict[int, int] = defaultdict(int)
-        self._first, self._last = None, 0
+        self._first: int | None = None  # log time range of the file [ns]
+        self._last = 0
         self._attachments: list[AttachmentIndex] = []
         self._metadata: list[MetadataIndex] = []
 
@@ -119,6 +122,7 @@ class McapOut:
             finished = False
         if not finished:
             raise ValueError("not an MCAP file finished by McapOut")
+        assert summary is not None and summary.statistics is not None  # as `finished` found
         out = cls.__new__(cls)
         out._setup(stream, CHUNK_BYTES)
         out.schemas = [summary.schemas[i] for i in sorted(summary.schemas)]
@@ -134,7 +138,7 @@ class McapOut:
         stream.truncate()
         return out
 
-    def _write(self, *records) -> int:
+    def _write(self, *records: McapRecord) -> int:
         """Write `records` at the end of the file; returns their length [bytes]."""
         rb = RecordBuilder()
         for r in records:
@@ -143,7 +147,7 @@ class McapOut:
         self.stream.write(data)
         return len(data)
 
-    def _record(self, record) -> None:
+    def _record(self, record: Schema | Channel) -> None:
         """A schema or channel record, into the chunk (as `mcap.writer.Writer` does)."""
         rb = RecordBuilder()
         record.write(rb)
@@ -233,6 +237,7 @@ class McapOut:
     def _finish_chunk(self) -> None:
         if not self._index:  # no message yet: schemas and channels wait
             return
+        assert self._start is not None  # set by the chunk's first message
         data = bytes(self._chunk)
         compressed = self._zstd.compress(data)
         start = self.stream.tell()

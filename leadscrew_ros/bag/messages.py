@@ -10,7 +10,9 @@ oscillatory mode), squeak/unstable_frequencies (std_msgs/Float64MultiArray)
 [Hz, most unstable first], squeak/active (std_msgs/Bool), squeak/modes (Float64MultiArray: one
 row per oscillatory mode, growth rate descending, columns `MODE_COLUMNS`; the row dimension's
 label is 'modes:' followed by the mode labels, comma separated) and squeak/safe_speed
-(std_msgs/Float64) [rad/s]. Payloads are CDR bytes (`cdr`), rclpy-free.
+(std_msgs/Float64) [rad/s]; with listening on, squeak/heard (std_msgs/Bool) and
+squeak/heard_frequency (std_msgs/Float64) [Hz, 0 while nothing is heard]. Payloads are CDR bytes
+(`cdr`), rclpy-free.
 """
 
 from __future__ import annotations
@@ -33,6 +35,9 @@ OUTPUT_TYPES = {
     SAFE_SPEED: cdr.FLOAT64,
 }
 PREDICTION_TOPICS = (RISK, MARGIN, FREQUENCIES, ACTIVE, MODES)  # one prediction publishes
+# With listening on (`listen.enabled`): what the microphone hears
+HEARD, HEARD_FREQUENCY = "squeak/heard", "squeak/heard_frequency"
+LISTEN_TYPES = {HEARD: cdr.BOOL, HEARD_FREQUENCY: cdr.FLOAT64}
 MODE_COLUMNS = ("frequency_hz", "growth_rate", "damping_ratio")
 MODES_PREFIX = "modes:"  # of the row dimension's label
 
@@ -49,12 +54,22 @@ class Mode(NamedTuple):
 def prediction_payloads(p: Prediction) -> tuple[tuple[str, bytes], ...]:
     """(topic, CDR payload) of every topic in `PREDICTION_TOPICS` for a valid prediction, in
     that order."""
+    assert p.probability is not None  # a valid prediction has one
     return (
         (RISK, cdr.encode_float64(float(p.probability))),
         (MARGIN, cdr.encode_float64(math.inf if p.margin is None else float(p.margin))),
         (FREQUENCIES, frequencies_payload(p)),
         (ACTIVE, cdr.encode_bool(not p.stable)),
         (MODES, modes_payload(p)),
+    )
+
+
+def heard_payloads(heard: bool, frequency_hz: float) -> tuple[tuple[str, bytes], ...]:
+    """(topic, CDR payload) of squeak/heard and squeak/heard_frequency [Hz] (0 while nothing
+    is heard)."""
+    return (
+        (HEARD, cdr.encode_bool(heard)),
+        (HEARD_FREQUENCY, cdr.encode_float64(float(frequency_hz) if heard else 0.0)),
     )
 
 

@@ -56,7 +56,7 @@ BUNDLED_TYPES = (
 )
 
 
-def type_name(msg_type) -> str:
+def type_name(msg_type: object) -> str:
     """'pkg/msg/Type' of a generated rclpy message class (or instance)."""
     cls = msg_type if isinstance(msg_type, type) else type(msg_type)
     return f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}"

@@ -46,6 +46,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import IO
 
 from mcap.writer import CompressionType, Writer
 
@@ -147,6 +148,7 @@ class TopicLoss:
             self.sequence_checked = False
         if not self.sequence_checked or last is None or sequence == last + 1:
             return
+        assert sequence is not None  # a None sequence is unchecked: returned above
         if publishers() > 1:
             self.sequence_checked = False
         elif sequence > last + 1:
@@ -222,7 +224,7 @@ class Recorder:
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     state: Callable[[], list[StateMessage]] | None = None
     schemas: dict[str, str] = field(default_factory=dict)
-    _out: object = None
+    _out: IO[bytes] | None = None
     _writer: Writer | None = None
     _topics: dict[str, _Topic] = field(default_factory=dict)
     _file_start_ns: int = 0
@@ -235,6 +237,12 @@ class Recorder:
     def active(self) -> bool:
         """A recording is in progress."""
         return self._writer is not None
+
+    @property
+    def _dir(self) -> Path:
+        """`bag`, set by `start` before any file of the recording opens."""
+        assert self.bag is not None
+        return self.bag
 
     @property
     def path(self) -> Path | None:
@@ -340,6 +348,7 @@ class Recorder:
             try:
                 if t.channel_id is None:
                     t.channel_id = self._register(t)
+                assert self._writer is not None  # active
                 self._writer.add_message(
                     t.channel_id,
                     log_time_ns,
@@ -367,6 +376,7 @@ class Recorder:
                 return
             now_ns = time.monotonic_ns() if now_ns is None else now_ns
             s = self.settings
+            assert self._writer is not None and self._out is not None  # active
             try:
                 if now_ns - self._last_flush_ns >= s.flush_period_s * 1e9:
                     self._writer.flush()
@@ -411,6 +421,7 @@ class Recorder:
         """How the file being written left its path ('' if it did not): a deleted file (or
         bag) takes the data nowhere, with every write still succeeding."""
         path = self.files[-1].path
+        assert self._out is not None  # called while recording
         mine = os.fstat(self._out.fileno())
         try:
             there = os.stat(path)
@@ -431,20 +442,20 @@ class Recorder:
         self.incident = (
             f"{lost.path} was {what} while being recorded ({lost.messages} "
             f"messages lost with it); recording continues in "
-            f"{self.bag / self._file_name(len(self.files))}"
+            f"{self._dir / self._file_name(len(self.files))}"
         )
         try:
-            self.bag.mkdir(parents=True, exist_ok=True)
+            self._dir.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             self._fail(exc, writer_gone=True)
             return
         self._open(now_ns)
 
     def _file_name(self, index: int) -> str:
-        return f"{self.bag.name}_{index}.mcap"
+        return f"{self._dir.name}_{index}.mcap"
 
     def _open(self, now_ns: int) -> bool:
-        path = self.bag / self._file_name(len(self.files))
+        path = self._dir / self._file_name(len(self.files))
         self.files.append(FileStats(path))
         try:
             self._out = open(path, "xb")  # never over another file
@@ -472,11 +483,13 @@ class Recorder:
 
     def _register(self, t: _Topic) -> int:
         text = self.schemas.get(t.type_name) or msgdefs.definition(t.type_name)
+        assert self._writer is not None  # registered while writing a message
         schema = self._writer.register_schema(t.type_name, "ros2msg", text.encode())
         return self._writer.register_channel(t.name, "cdr", schema, {"offered_qos_profiles": ""})
 
     def _close(self, finish: bool) -> None:
         writer, out, self._writer, self._out = self._writer, self._out, None, None
+        assert writer is not None and out is not None  # closed only while recording
         try:
             if finish:
                 writer.finish()
@@ -511,9 +524,9 @@ class Recorder:
             custom_data=custom,
         )
         try:
-            stats.write(self.bag)
+            stats.write(self._dir)
         except OSError as exc:
-            self.error = self.error or f"{self.bag / METADATA}: {exc.strerror or exc}"
+            self.error = self.error or f"{self._dir / METADATA}: {exc.strerror or exc}"
 
 
 def _new_bag(root: Path, name: str) -> Path:

@@ -129,4 +129,5 @@ def write_log(
     rec.stop()
     if rec.error:
         raise OSError(rec.error)
+    assert rec.bag is not None  # set by the recording that stopped without error
     return rec.bag

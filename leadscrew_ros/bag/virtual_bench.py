@@ -220,7 +220,7 @@ def squeak_frequencies(
 ) -> np.ndarray:
     """Frequency [Hz] of the most unstable mode where the model of `params` (no scatter)
     squeaks at each operating point, else nan; the nut position in steps of `nut_step_m`
-    (points of one step share one batched eigen-solve, `sweep.growth_field`)."""
+    (points of one step share one batched eigen-solve, `fields.growth_field`)."""
     model = SqueakModel(params, Scatter({}))
     nut = np.round(np.asarray(nut_position_m, float) / nut_step_m) * nut_step_m
     nut = np.clip(nut, 0.0, params.nut_travel_m)

@@ -14,7 +14,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, NoReturn, Protocol
 
 import numpy as np
 import yaml
@@ -26,7 +26,13 @@ from ..model.squeak_model import SqueakModel
 from ..model.studies.fields import check_axis, integer_axis
 from ..model.studies.work import MAX_MEMORY_BYTES, MAX_POINTS, REFERENCE_STATE_SIZE
 from ..model.uncertainty.perturbation import MAX_GEOMETRY_FIELDS, geometry_fields
-from ..model.uncertainty.scatter import LOG_NORMAL, REPLICATES, ScatterSettings, scatterable
+from ..model.uncertainty.scatter import (
+    LOG_NORMAL,
+    REPLICATES,
+    Scatter,
+    ScatterSettings,
+    scatterable,
+)
 from ..review.jsonsafe import json_safe
 
 PROG = "leadscrew-squeak"
@@ -162,7 +168,7 @@ def parse_range(text: str, what: str, integer: bool = False) -> np.ndarray:
 def _integer_range(parts: list[str], what: str) -> np.ndarray:
     """START:STOP[:COUNT] of whole numbers -> START, START +- 1, ..., STOP (as floats)."""
     ends = []
-    for text, name in zip(parts, ("START", "STOP")):
+    for text, name in zip(parts, ("START", "STOP"), strict=False):
         value = finite_float(text, f"{what} {name}")
         if not value.is_integer():
             raise CliError(
@@ -315,7 +321,22 @@ def _scatter_value(item: str) -> tuple[str, float]:
         raise CliError(f"--scatter {name}: {text!r} is not a number") from None
 
 
-def _settings(values: dict[str, Any], what: str) -> ScatterSettings:
+class ScatterChoice(Protocol):
+    """What is used of a `ScatterSettings`: that class is made at run time (one field per
+    scatterable parameter), so mypy sees none of its attributes."""
+
+    @property
+    def scatter(self) -> Scatter:
+        """The scatter of the parameters."""
+        ...
+
+    @property
+    def samples(self) -> int:
+        """The live sample count."""
+        ...
+
+
+def _settings(values: dict[str, Any], what: str) -> ScatterChoice:
     try:
         settings = ScatterSettings(**values)
         geometry_fields(settings.scatter)  # more than the live estimate takes
@@ -326,7 +347,7 @@ def _settings(values: dict[str, Any], what: str) -> ScatterSettings:
 
 def scatter_settings(
     args: argparse.Namespace, file_values: dict[str, Any] | None = None
-) -> ScatterSettings:
+) -> ScatterChoice:
     """The scatter of P(squeak): defaults <- `scatter.<name>` / `scatter.samples` of
     --params-file (`file_values`: its parameters, dotted) <- --scatter NAME=SD and --scatter
     none, in command-line order <- --samples; validated by ScatterSettings.

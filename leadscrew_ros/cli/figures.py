@@ -151,8 +151,8 @@ def map_bands(result: MapResult, along: str, params: ScrewParameters) -> list[li
     out = []
     for k, v in enumerate((result.x if along == "y" else result.y).tolist()):
         roots = [p[1] if along == "y" else p[0] for p in pts if p[0 if along == "y" else 1] == v]
-        limits = (
-            (lambda v=v: _speed_limits(params, across, v))
+        limits: Callable[[], tuple[Limit, Limit]] = (
+            partial(_speed_limits, params, across, v)
             if axis == "speed_rad_s"
             else (lambda: (Limit(), Limit()))
         )
@@ -297,6 +297,7 @@ def describe_probability_band(result: MapResult, model: SqueakModel) -> str:
     """Fig. 7 with P: where P(squeak) crosses each level on the load column nearest the
     nominal load (refined between the grid points, `sweep.probability_crossings`), next to
     the nominal boundary there."""
+    assert result.probability is not None  # a map made with probability=True
     i = int(np.argmin(np.abs(result.x - model.params.axial_load_n)))
     roots = sorted(p[1] for p in result.boundary if p[0] == result.x[i])
     crossings = probability_crossings(
@@ -319,6 +320,7 @@ def describe_probability_band(result: MapResult, model: SqueakModel) -> str:
 
 
 def _probability_share(result: MapResult) -> str:
+    assert result.probability is not None  # as in describe_probability_band
     prob = result.probability[np.isfinite(result.probability)]
     if not prob.size:
         return "no valid point on the grid"

@@ -14,11 +14,15 @@ import argparse
 import os
 from dataclasses import fields
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..model.physics.metadata import help_text
 from ..review.fleet import ClusterError, ClusterSettings
 from .args import CliError, Parser, build_model, finite, output_directory
 from .logs import REPLAY_INPUTS, _topic, add_input_options, listen_settings, replay_inputs
+
+if TYPE_CHECKING:
+    from ..review.fleet import FleetSettings
 
 FAILED_BASE = 10
 FAILED_CAP = 100
@@ -32,7 +36,7 @@ def exit_status(failed: int) -> int:
     return FAILED_BASE + min(failed, FAILED_CAP) if failed else 0
 
 
-def _settings(args: argparse.Namespace):
+def _settings(args: argparse.Namespace) -> FleetSettings:
     from ..review.fleet import FleetSettings
 
     options = {

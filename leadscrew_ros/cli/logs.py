@@ -16,6 +16,7 @@ from ..bag.logfile import (
     inspect,
     live_recordings,
     log_files,
+    metadata_problem,
     recover,
     recover_bag,
 )
@@ -220,6 +221,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
 def _span(info: LogInfo) -> str:
     if info.start_ns is None:
         return "no messages"
+    assert info.end_ns is not None  # set with start_ns
     return (
         f"{(info.end_ns - info.start_ns) / 1e9:.3f} s ({_utc(info.start_ns)} to "
         f"{_utc(info.end_ns)})"
@@ -235,10 +237,7 @@ def _utc(ns: int) -> str:
 
 
 def _topic_lines(info: LogInfo) -> list[str]:
-    return [
-        f"  {name:<32} {t.type_name:<36} {info.counts[name]:>10}"
-        for name, t in sorted(info.topics.items())
-    ]
+    return [f"  {t.name:<32} {t.type_name:<36} {n:>10}" for t, n in info.type_counts()]
 
 
 def _record_directory(path: Path) -> bool:
@@ -257,9 +256,9 @@ def cmd_recover(args: argparse.Namespace) -> int:
     if args.output:  # a copy elsewhere; the input stays as it is
         if src.is_dir():
             raise CliError("-o/--output is for one file; a bag directory is recovered in place")
-        info = recover(
-            src, output_file(args.output, "-o/--output", ("mcap",), makes_directory=True)
-        )
+        dst = output_file(args.output, "-o/--output", ("mcap",), makes_directory=True)
+        assert dst is not None  # args.output is given
+        info = recover(src, dst)
         print(
             f"recovered {info.messages} messages on {len(info.topics)} topics from {src} "
             f"into {args.output}"
@@ -287,7 +286,15 @@ def cmd_recover(args: argparse.Namespace) -> int:
 
 def cmd_info(args: argparse.Namespace) -> int:
     """`info`: print what a log contains; exit status."""
-    infos = [inspect(f) for f in log_files(args.log)]
+    path = Path(args.log)
+    infos = [inspect(f) for f in log_files(path)]
+    bag = path if path.is_dir() else bag_of(path)
+    # a bag directory's metadata.yaml against its files; a file's bag: the file alone
+    problem = (
+        ""
+        if bag is None or any(i.live for i in infos)
+        else metadata_problem(bag, infos if bag == path else None)
+    )
     if args.json:
         print_json(
             [
@@ -301,9 +308,10 @@ def cmd_info(args: argparse.Namespace) -> int:
                     "messages": i.messages,
                     "start_ns": i.start_ns,
                     "end_ns": i.end_ns,
+                    "metadata_problem": problem,
                     "topics": [
-                        {"name": n, "type": t.type_name, "count": i.counts[n]}
-                        for n, t in sorted(i.topics.items())
+                        {"name": t.name, "type": t.type_name, "count": n}
+                        for t, n in i.type_counts()
                     ],
                 }
                 for i in infos
@@ -325,6 +333,8 @@ def cmd_info(args: argparse.Namespace) -> int:
             f"written by {i.library or 'unknown'}"
         )
         print("\n".join(_topic_lines(i)))
+    if problem:
+        print(f"{bag}: {problem}")
     return 0
 
 

@@ -113,6 +113,7 @@ class Assessment:
         the standard error); '' outside validity."""
         if self.reference is None:
             return ""
+        assert self.measures is not None  # assessed with the reference (`assess`)
         head, sep, rest = advice_text(self.reference.probability, self.measures).partition(":")
         if self.reference.stderr is not None:
             head += f" ± {self.reference.stderr:.1g}"
@@ -150,6 +151,7 @@ def prediction_text(p: Prediction, extra: Assessment, top: int = 5) -> str:
         )
         verdict = f"UNSTABLE at the nominal parameters: squeak predicted; squeak modes: {squeak}"
     lines = [head, verdict, extra.line()]
+    assert extra.sensitivity is not None  # assessed at a valid point (`assess`)
     largest = sorted(extra.sensitivity.growth_per_log.items(), key=lambda kv: -abs(kv[1]))
     lines.append(
         "growth rate d Re(lambda) / d ln p [1/s]: "

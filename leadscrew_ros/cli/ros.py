@@ -7,11 +7,15 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 from .args import ROS_ARGS_HELP, CliError, Parser, finite, import_ros, output_directory
 
+if TYPE_CHECKING:
+    from ..live.profile import StrokeProfile
 
-def _stroke(duration_s: float | None):
+
+def _stroke(duration_s: float | None) -> StrokeProfile:
     """The simulator's stroke profile of `--duration` (a bad duration is a CliError)."""
     from ..live.profile import ProfileError, StrokeProfile
 
@@ -27,7 +31,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     record_dir = None if args.no_record else output_directory(args.record_dir, "--record-dir")
     run_demo = import_ros("demo", "demo").run_demo
     try:
-        return run_demo(profile.duration_s, record_dir=record_dir)
+        return run_demo(profile.duration_s, record_dir=record_dir, microphone=args.microphone)
     except RuntimeError as exc:  # e.g. rclpy could not start, no subscription
         raise CliError(str(exc)) from None
 
@@ -88,6 +92,13 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
         "default ./squeak_demo)",
     )
     p.add_argument("--no-record", action="store_true", help="do not record")
+    p.add_argument(
+        "--microphone",
+        action="store_true",
+        help="the simulator also publishes a simulated microphone (a squeak tone "
+        "where the model squeaks) and the predictor listens to it; the summary "
+        "says heard against predicted",
+    )
     p.set_defaults(run=cmd_demo)
 
     p = sub.add_parser(

@@ -51,7 +51,7 @@ def write_wav(path: Path, samples: np.ndarray) -> None:
     wavfile.write(path, WAV_RATE_HZ, samples)
 
 
-def _text(args, result: TransientAnalysis, linear: dict, elapsed: str) -> str:
+def _text(args: argparse.Namespace, result: TransientAnalysis, linear: dict, elapsed: str) -> str:
     fit, cycle = result.linear_fit, result.limit_cycle
     lines = [
         f"speed {args.speed:g} rad/s, load {args.load_n:g} N: {result.regime}",

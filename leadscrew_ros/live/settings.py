@@ -84,3 +84,54 @@ class JointSettings:
 
     def __post_init__(self) -> None:
         check(self)
+
+
+@documented
+@dataclass(frozen=True)
+class ListenSettings:
+    """The optional microphone input: whether the node listens, how the sound is taken and
+    over which window the measurement status compares what was heard with what was predicted
+    (the detector's own settings are `model.acoustics.DetectorSettings`, `listen.*` too)."""
+
+    enabled: bool = setting(
+        False,
+        "",
+        "subscribe to microphone and publish squeak/heard, squeak/heard_frequency "
+        "and the measurement status",
+        read_only=True,
+    )
+    sample_rate_hz: float = setting(
+        48000.0,
+        "Hz",
+        "sample rate of the std_msgs/Float32MultiArray chunks on microphone "
+        "(the message carries none)",
+        1000.0,
+        1e6,
+    )
+    window_s: float = setting(
+        2.0,
+        "s",
+        "the measurement status compares heard and predicted squeak over this "
+        "window; STALE when no sound arrived for as long",
+        0.1,
+        600.0,
+    )
+    scale_pa: float = setting(
+        0.0,
+        "Pa",
+        "sound pressure of a full-scale sample (calibrated microphone: levels in "
+        "dB SPL); 0: not calibrated",
+        0.0,
+        1e6,
+    )
+    queue_chunks: int = setting(
+        64,
+        "1",
+        "chunks waiting for the analysis thread; a chunk arriving when it is full "
+        "is dropped and counted",
+        1,
+        100000,
+    )
+
+    def __post_init__(self) -> None:
+        check(self)

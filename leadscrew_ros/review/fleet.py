@@ -55,7 +55,7 @@ from .decimation import Reservoir
 from .jsonsafe import json_safe
 from .listen import CLIPS_DIR, ListenSettings
 from .progress import progress_bar
-from .replay import ReplaySettings, log_name, replay
+from .replay import ReplayResult, ReplaySettings, log_name, replay
 from .timeline import InputSettings
 
 INDEX_FILE = "review-index.jsonl"
@@ -308,7 +308,7 @@ def _one_line(exc: BaseException) -> str:
     return text if isinstance(exc, LogError) else f"{type(exc).__name__}: {text}"
 
 
-def _episodes(result) -> list[dict[str, Any]]:
+def _episodes(result: ReplayResult) -> list[dict[str, Any]]:
     """Every episode of a replay (the kept ones, or episodes.json when there are more)."""
     if result.episode_count <= len(result.episodes):
         return [e.as_dict() for e in result.episodes]
@@ -359,7 +359,9 @@ def heard_columns(summary: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def _row(log: Path, name: str, unit_id: str, model: SqueakModel, result) -> dict[str, Any]:
+def _row(
+    log: Path, name: str, unit_id: str, model: SqueakModel, result: ReplayResult
+) -> dict[str, Any]:
     s = result.summary()
     episodes = _episodes(result)
     growth = [
@@ -431,7 +433,7 @@ def recovered(log: Path, scratch: Path) -> tuple[Path, str]:
     )
 
 
-def _points(result) -> list[list[float]]:
+def _points(result: ReplayResult) -> list[list[float]]:
     """At most POINTS_PER_LOG squeak points (speed [rad/s], load [N], frequency [Hz]), evenly
     from the replay's sample, 4 significant digits."""
     sample = result.plot_data.squeak.sample()
@@ -496,6 +498,7 @@ def review_one(
                 listen=settings.listen.beside(path),
             ),
         )
+        note = "; ".join(n for n in (note, result.metadata_problem) if n)
         row = {**_row(path, name, unit_id, model, result), "note": note}
         if settings.summary_only:
             for p in result.outputs[:2]:
@@ -691,25 +694,27 @@ def review_logs(
     todo: list[tuple[Path, str, list | None, str | None]] = []
     for log, name in zip(logs, names, strict=True):
         entry = index.get(str(log))
-        usable = (
-            entry is not None
+        usable = (  # the entry, when it holds for this run
+            entry
+            if entry is not None
             and entry["params"] == digest
             and not entry["retry"]
             and (entry["row"]["status"] != "ok" or (out / name / "summary.json").exists())
+            else None
         )
         stat = _stat_or_none(log)
-        if usable and stat is not None and entry["stat"] == stat:
-            rows[str(log)] = entry["row"]
-            points.add(entry["points"])
+        if usable is not None and stat is not None and usable["stat"] == stat:
+            rows[str(log)] = usable["row"]
+            points.add(usable["points"])
         else:
-            todo.append((log, name, stat, entry["content"] if usable else None))
+            todo.append((log, name, stat, usable["content"] if usable is not None else None))
     skipped = len(logs) - len(todo)
     threads = max(sum(client.nthreads().values()), 1)
     in_flight = max(IN_FLIGHT_PER_THREAD * threads, MIN_IN_FLIGHT)
     pending = iter(todo)
     by_future: dict[Any, tuple[Path, str, list | None, str | None]] = {}
 
-    def submit(job) -> Any:
+    def submit(job: tuple[Path, str, list | None, str | None]) -> Any:
         log, name, _, known = job
         fut = client.submit(
             review_one,

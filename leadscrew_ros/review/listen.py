@@ -302,7 +302,7 @@ class _Modes(Sequence):
     def __len__(self) -> int:
         return len(self.trace)
 
-    def __getitem__(self, i):  # type: ignore[override]
+    def __getitem__(self, i):
         return self.trace.modes(i, self.band_hz)
 
 

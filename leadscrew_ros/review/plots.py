@@ -22,8 +22,8 @@ matplotlib.figure.Figure, which renders PNGs without pyplot or any GUI backend.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import TYPE_CHECKING, NamedTuple
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -35,6 +35,7 @@ from ..model.studies.sweep import SweepResult
 from ..model.studies.tracking import track_modes
 
 if TYPE_CHECKING:
+    from matplotlib.artist import Artist
     from matplotlib.axes import Axes
     from matplotlib.colors import Colormap
     from matplotlib.figure import Figure
@@ -125,7 +126,7 @@ def stability_cmap() -> Colormap:
     )
 
 
-def new_figure(**kwargs) -> Figure:
+def new_figure(**kwargs: Any) -> Figure:
     """A figure that is not registered with pyplot (no backend, nothing to close).
 
     Parameters
@@ -143,11 +144,13 @@ def new_figure(**kwargs) -> Figure:
     return Figure(**kwargs)
 
 
-def _axes(ax: Axes | None, **figure) -> tuple[Figure, Axes]:
+def _axes(ax: Axes | None, **figure: Any) -> tuple[Figure, Axes]:
     """The figure of `ax` and `ax`, or a new figure (of `figure`'s options) and its one axes."""
     if ax is None:
         ax = new_figure(**figure).subplots()
-    return ax.get_figure(root=True), ax
+    fig = ax.get_figure(root=True)
+    assert fig is not None  # an axes made by or added to a figure
+    return fig, ax
 
 
 def plot_formats() -> list[str]:
@@ -203,7 +206,7 @@ def plot_map(
         fig.colorbar(cs, ax=ax, label=r"largest growth rate Re($\lambda$) [1/s]")
         if lo < 0 < hi and g.count() > 3:
             ax.contour(x, y, g, levels=[0.0], colors="k", linewidths=1.2)
-    handles = [
+    handles: list[Artist] = [
         Patch(facecolor=cmap(0.8), label="unstable (squeak)"),
         Patch(facecolor=cmap(0.2), label="stable"),
     ]
@@ -465,8 +468,8 @@ def plot_friction(
     top = ax.secondary_xaxis(
         "top",
         functions=(
-            lambda s: s * math.cos(p.helix_angle_rad) / p.radius_m,
-            lambda w: w * p.radius_m / math.cos(p.helix_angle_rad),
+            lambda s: np.multiply(s, math.cos(p.helix_angle_rad) / p.radius_m),
+            lambda w: np.multiply(w, p.radius_m / math.cos(p.helix_angle_rad)),
         ),
     )
     top.set_xlabel(r"rotation speed $\Omega = |V_c| \cos\beta / R$ [rad/s]")
@@ -562,11 +565,15 @@ def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
     """(first, last) index of each run of True."""
     edges = np.diff(np.r_[0, flags.astype(np.int8), 0])
     return list(
-        zip(np.flatnonzero(edges == 1).tolist(), (np.flatnonzero(edges == -1) - 1).tolist())
+        zip(
+            np.flatnonzero(edges == 1).tolist(),
+            (np.flatnonzero(edges == -1) - 1).tolist(),
+            strict=True,
+        )
     )
 
 
-def _probability_panel(result: ReplayResult, axes) -> None:
+def _probability_panel(result: ReplayResult, axes: Sequence[Axes]) -> None:
     """P(squeak) over time on the last of `axes`, with the WARN and ERROR probabilities
     (dashed) and bars under the curve where P was at or above them; squeak at the nominal
     parameters shaded on all of `axes`."""
@@ -584,7 +591,7 @@ def _probability_panel(result: ReplayResult, axes) -> None:
     def fraction(y: float) -> float:  # of the axes' height
         return (y - ylim[0]) / (ylim[1] - ylim[0])
 
-    handles = []
+    handles: list[Artist] = []
     if t.size:
         handles.append(
             ax.fill_between(
@@ -626,6 +633,7 @@ def _probability_panel(result: ReplayResult, axes) -> None:
         handles.append(ax.axhline(level, color=color, ls="--", lw=1.0, label=f"{name} {level:g}"))
     pt = result.probability
     if pt.peak is not None:
+        assert pt.peak_t_s is not None  # set with the peak
         handles += ax.plot([pt.peak_t_s], [pt.peak], "v", color="k", ms=5, label="peak")
     ax.set_ylim(*ylim)
     ax.set_yticks([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
@@ -681,10 +689,10 @@ def plot_heard(heard: Heard, *, ax: Axes | None = None) -> Figure:
             shading="flat",
             rasterized=True,
         )
-        cax = ax.inset_axes([1.09, 0.0, 0.012, 1.0])
+        cax = ax.inset_axes((1.09, 0.0, 0.012, 1.0))
         unit = "Pa" if heard.scale == "Pa" else "FS"
         fig.colorbar(mesh, cax=cax, label=f"PSD [dB re 1 {unit}²/Hz]")
-    handles = []
+    handles: list[Any] = []
     pts = heard.squeak_points
     if len(pts):
         sc = ax.scatter(
@@ -699,7 +707,7 @@ def plot_heard(heard: Heard, *, ax: Axes | None = None) -> Figure:
             label="predicted squeak modes",
         )
         handles.append(sc)
-        cax = ax.inset_axes([1.005, 0.0, 0.012, 1.0])
+        cax = ax.inset_axes((1.005, 0.0, 0.012, 1.0))
         fig.colorbar(sc, cax=cax, label="P(squeak)")
     for k, e in enumerate(heard.detection.episodes[:_HEARD_MARKED]):
         line = ax.hlines(
@@ -756,7 +764,7 @@ def plot_timeline(result: ReplayResult, *, fig: Figure | None = None) -> Figure:
             height_ratios=[1] * len(panels) + [1.6] * (heard is not None) + [1],
         )
     )
-    for ax, (k, label, factor) in zip(axes, panels):
+    for ax, (k, label, factor) in zip(axes, panels, strict=False):
         ax.fill_between(
             t,
             lo[:, k] * factor,
@@ -868,7 +876,7 @@ def _heard_panels(rows: list[dict], e: Axes, f: Axes) -> None:
     predicted_hz = [hz for r in rows for hz in r["squeak_frequencies_hz"] or []]
     values = [v for v in heard_hz + predicted_hz if v > 0]
     if values:
-        bins = np.geomspace(min(values) / 1.05, max(values) * 1.05, 40)
+        bins = np.geomspace(min(values) / 1.05, max(values) * 1.05, 40).tolist()
         f.hist(
             [predicted_hz, heard_hz],
             bins=bins,

@@ -50,8 +50,8 @@ from typing import TYPE_CHECKING, Any, BinaryIO, NamedTuple, TextIO
 import numpy as np
 
 from ..bag import logmeta, messages, msgdefs
-from ..bag.logfile import LogError, LogMessage, Topic
-from ..bag.logsource import LogSource, log_topics, open_log
+from ..bag.logfile import LogError, LogMessage, Topic, metadata_problem
+from ..bag.logsource import LogSource, log_topics, open_log, topic_types
 from ..bag.mcapout import CHUNK_BYTES, McapOut
 from ..model import Prediction, SqueakModel, Validity
 from ..model.uncertainty.scatter import LOG_NORMAL
@@ -229,7 +229,11 @@ class PlotData:
     def add(self, t: float, job: Job, p: Verdict) -> None:
         """Add the verdict `p` of `job`, predicted at `t` [s]."""
         squeak = p.valid and not p.stable
-        self.probability.add(t, p.probability if p.valid else math.nan, float(squeak))
+        probability = math.nan
+        if p.valid:
+            assert p.probability is not None  # a valid prediction has one
+            probability = p.probability
+        self.probability.add(t, probability, float(squeak))
         if p.valid:
             self.points.add(p.speed_rad_s, p.load_n, job.nut_position_m, float(squeak))
         for _, hz in p.squeak:
@@ -301,6 +305,9 @@ class ReplayResult:
         without sound.
     audio_warnings : list of str
         Why the log's audio was not analysed, if it was not.
+    metadata_problem : str
+        What is wrong with the bag directory's metadata.yaml, and how to mend it ('' if
+        nothing, or not a bag directory): the files were read, but other tools refuse it.
     """
 
     log: Path
@@ -332,6 +339,7 @@ class ReplayResult:
     outputs: list[Path] = field(default_factory=list)
     heard: Heard | None = None
     audio_warnings: list[str] = field(default_factory=list)
+    metadata_problem: str = ""
 
     def plot(self, fig: Figure | None = None) -> Figure:
         """The timeline: speed, load, nut position and P(squeak) over time (`plot_timeline`).
@@ -350,8 +358,9 @@ class ReplayResult:
 
     @property
     def warnings(self) -> list[str]:
-        """Log-time problems: stale (backwards) and duplicated input times, per topic."""
-        tl, out = self.timeline, []
+        """Log-time problems: stale (backwards) and duplicated input times, per topic; a
+        broken metadata.yaml."""
+        tl, out = self.timeline, [self.metadata_problem] if self.metadata_problem else []
         for topic, n in sorted(tl.backwards.items()):
             out.append(
                 f"log time goes backwards {n} time(s) on {topic} (up to "
@@ -402,6 +411,7 @@ class ReplayResult:
                 "backwards_max_s": self.timeline.backwards_max_s,
                 "duplicates": dict(self.timeline.duplicates),
             },
+            "metadata_problem": self.metadata_problem,
             "warnings": self.warnings,
             "heard": self.heard.as_dict() if self.heard else None,
             "agreement_by_formulation": self.heard.by_formulation_dict() if self.heard else None,
@@ -639,12 +649,15 @@ class _Segment:
 
     def result(self) -> tuple[list[Verdict], list[Payloads | None]]:
         """The verdicts of the jobs and their payloads."""
-        if isinstance(self.solved, Future):
+        solved = self.solved
+        if isinstance(solved, Future):
             try:
-                self.solved = self.solved.result()
+                solved = solved.result()
             except BrokenProcessPool:  # a worker died (killed, out of memory): solve here
-                self.solved = solve(*self.args)
-        return self.solved
+                solved = solve(*self.args)
+            self.solved = solved
+        assert solved is not None  # submitted (`_Solver.submit`) before it is written
+        return solved
 
 
 class _Solver:
@@ -719,15 +732,17 @@ class _Episodes:
 
     def add(self, t: float, p: Verdict) -> None:
         self._hold(t)
-        self._held = (t, p.probability) if p.valid else None
-        if p.valid:
-            self.probability.sample(t, p.probability)
+        probability = p.probability if p.valid else None  # not None when valid
+        self._held = None if probability is None else (t, probability)
+        if probability is not None:
+            self.probability.sample(t, probability)
         squeak = p.valid and not p.stable
         e = self.open
         if not squeak:
             if e is not None:
                 self._end(t)
             return
+        assert probability is not None  # squeak: a valid prediction
         growth = p.max_growth_rate if p.max_growth_rate is not None else -math.inf
         if e is None:
             e = self.open = Episode(
@@ -741,12 +756,13 @@ class _Episodes:
         )
         e.load_range_n = (min(e.load_range_n[0], p.load_n), max(e.load_range_n[1], p.load_n))
         e.predictions += 1
-        e.probability.sample(t, p.probability)
+        e.probability.sample(t, probability)
         for label, hz in p.squeak:
             e.add_frequency(label, hz)
 
     def _end(self, t: float) -> None:
         e, self.open = self.open, None
+        assert e is not None  # ended only while open
         e.end_s = t
         self.sink.write(
             ("," if self.count else "")
@@ -776,8 +792,10 @@ def _message_total(files: list[Path]) -> int | None:
     try:
         for f in files:
             with open(f, "rb") as fh:
-                stats = make_reader(fh).get_summary().statistics
-            total += stats.message_count
+                summary = make_reader(fh).get_summary()
+            if summary is None or summary.statistics is None:
+                return None
+            total += summary.statistics.message_count
     except Exception:  # only a hint: a damaged summary (or a .db3) shows no total
         return None
     return total
@@ -796,9 +814,10 @@ class _Run:
         episodes: TextIO,
         progress: Callable[[int], None] | None,
         listening: bool = False,
+        types: dict[str, list[str]] | None = None,
     ):
         self.out, self.progress = out, progress
-        self.timeline = Timeline(model.params, inputs)
+        self.timeline = Timeline(model.params, inputs, types)
         # for `listen`: the recomputes and the speed samples, compact
         self.trace = PredictionTrace() if listening else None
         self.speeds = SpeedTrace()
@@ -811,7 +830,8 @@ class _Run:
         self.episodes = _Episodes(episodes, inputs.warn_probability, inputs.error_probability)
         self.no_prediction: Counter[str] = Counter()
         self.messages = self.predictions = 0
-        self.start_ns, self.end_ns = None, None
+        self.start_ns: int | None = None  # log time of the first message [ns]
+        self.end_ns = 0  # of the latest one (set with start_ns)
         self.queue: deque[_Segment] = deque()
         self.held = 0  # messages in `queue`
         self.segment = _Segment()
@@ -857,8 +877,10 @@ class _Run:
         for i, m in enumerate(seg.messages):
             self.out.original(m)
             if job is not None and job.index == i:
+                assert p is not None and self.start_ns is not None  # with a job, after a message
                 t = (job.clock_ns - self.start_ns) / 1e9
                 if p.valid:
+                    assert payloads is not None  # encoded for every valid prediction
                     self.out.prediction(job.log_time_ns, payloads)
                     self.predictions += 1
                 else:
@@ -954,6 +976,7 @@ def replay(
                 eh,
                 bar if show else None,
                 settings.listen.enabled,
+                topic_types(source),
             )
             for f, m in source.messages():
                 try:
@@ -1016,6 +1039,7 @@ def replay(
         scatter_samples=model.sample_count,
         heard=heard,
         audio_warnings=audio_warnings,
+        metadata_problem=metadata_problem(log, source.infos) if log.is_dir() else "",
     )
     if heard is not None:
         with open(annotated, "r+b") as fh:

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -32,6 +33,9 @@ from ..model.studies.stability_map import stability_map
 from ..model.studies.sweep import sweep
 from .plots import SQUEAK_COLOR, plot_frequencies, plot_map
 from .replay import ReplayResult, attach
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 TIMELINE_FILE = "timeline.png"
 MAP_FILE = "map_speed_load.png"
@@ -116,7 +120,7 @@ def write_report(
     def band_text(k: int) -> str:
         return f"nut {edges[k] * 1e3:.0f}-{edges[k + 1] * 1e3:.0f} mm"
 
-    def trajectory(ax) -> list:
+    def trajectory(ax: Axes) -> list:
         handles = []
         for k in range(max(bands, 1)):
             sel = band == k
@@ -169,7 +173,7 @@ def write_report(
 
     squeak = result.plot_data.squeak.sample()
 
-    def squeak_points(ax) -> list:
+    def squeak_points(ax: Axes) -> list:
         if not squeak.size:
             return []
         return ax.plot(

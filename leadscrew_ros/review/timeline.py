@@ -194,7 +194,13 @@ class InputSettings:
         InputSettings
             A copy with absolute topics.
         """
-        return replace(self, **{f: resolve(getattr(self, f), namespace) for f in TOPIC_FIELDS})
+        return replace(
+            self,
+            speed_topic=resolve(self.speed_topic, namespace),
+            load_topic=resolve(self.load_topic, namespace),
+            nut_topic=resolve(self.nut_topic, namespace),
+            joint_states_topic=resolve(self.joint_states_topic, namespace),
+        )
 
 
 @dataclass(frozen=True)
@@ -215,10 +221,21 @@ class Timeline:
 
     `settings` topics are used as they are if absolute, else resolved in the root namespace.
     Memory is constant: counters, and the point after every input message in `trace`
-    (speed, load, nut; NaN until known, the nut NaN until a nut input was taken), binned."""
+    (speed, load, nut; NaN until known, the nut NaN until a nut input was taken), binned.
 
-    def __init__(self, params: ScrewParameters, settings: InputSettings = InputSettings()):
+    `types` gives every type each topic of the log is recorded with (`logsource.topic_types`):
+    an input topic recorded with its input type and another one is read in the input type,
+    its messages of the other type are counted in `rejected` (a reason naming both types); an
+    input topic without its input type is an `InputError`."""
+
+    def __init__(
+        self,
+        params: ScrewParameters,
+        settings: InputSettings = InputSettings(),
+        types: dict[str, list[str]] | None = None,
+    ):
         self.settings = settings = settings.resolved("/")
+        self._types = types or {}
         self.rules = InputRules(params, settings.live, settings.joints)
         if settings.nominal_load_n is not None:
             self.rules.set_load(settings.nominal_load_n)
@@ -241,7 +258,8 @@ class Timeline:
             settings.nut_topic: (FLOAT64, self._on_nut),
             settings.joint_states_topic: (JOINT_STATE, self._on_joint_states),
         }
-        self._handlers: dict[tuple[str, str], Callable[[bytes], bool] | None] = {}
+        # (topic, type) -> its handler; None: not an input; a str: the reason it is rejected
+        self._handlers: dict[tuple[str, str], Callable[[bytes], bool] | str | None] = {}
 
     @property
     def speed(self) -> float | None:
@@ -279,10 +297,14 @@ class Timeline:
             self.start_ns = self.now_ns = m.log_time_ns
         self.now_ns = max(self.now_ns, m.log_time_ns)
         key = (m.topic.name, m.topic.type_name)
-        handler = self._handlers.get(key, False)
-        if handler is False:
+        try:
+            handler = self._handlers[key]
+        except KeyError:  # a topic and type not seen yet
             handler = self._handlers[key] = self._handler(*key)
         if handler is None:
+            return None
+        if isinstance(handler, str):  # the other type of an input recorded with two
+            self.rejected[handler] += 1
             return None
         name = m.topic.name
         self.inputs[name] += 1
@@ -308,10 +330,15 @@ class Timeline:
         )
         return self._recompute(index, m.log_time_ns) if accepted else None
 
-    def _handler(self, topic: str, type_name: str) -> Callable[[bytes], bool] | None:
+    def _handler(self, topic: str, type_name: str) -> Callable[[bytes], bool] | str | None:
         route = self._routes.get(topic)
         if route is None:
             return None
+        if type_name != route[0] and route[0] in self._types.get(topic, ()):
+            return (
+                f"{topic}: {type_name} messages not taken (the topic is recorded with two "
+                f"types; its {route[0]} messages are the input)"
+            )
         if type_name != route[0]:
             raise InputError(f"topic {topic} is {type_name}, expected {route[0]}")
         return route[1]
@@ -346,7 +373,9 @@ class Timeline:
     def _recompute(self, index: int, log_time_ns: int) -> Job | None:
         if not self.rules.changed():
             return None
-        point, contact_nut_m = self.rules.compute()
+        computed = self.rules.compute()
+        assert computed is not None  # changed() holds only with a point
+        point, contact_nut_m = computed
         self.recomputes += 1
         return Job(index, log_time_ns, self.now_ns, *point, contact_nut_m)
 
@@ -436,4 +465,6 @@ def predict_jobs(
             preds = model.predict_many(speeds[idx], loads[idx])
         for i, p in zip(idx.tolist(), preds, strict=True):
             out[i] = p
-    return out
+    filled = [p for p in out if p is not None]
+    assert len(filled) == len(out)  # np.unique's inverse gives every job its nut
+    return filled

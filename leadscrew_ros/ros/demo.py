@@ -4,8 +4,11 @@
 One process, one rclpy Context, one single-threaded executor with three nodes: the predictor
 (`SqueakPredictorNode`), the simulator (`ActuatorSimulator`, a power-seat stroke) and a monitor
 that listens to the predictor's outputs like any other client would (over DDS, with the
-predictor's latched QoS). The predictor records its inputs and outputs to an MCAP bag. Prints a
-live one-line status and a summary (with the recording), then exits by itself.
+predictor's latched QoS). The predictor records its inputs and outputs to an MCAP bag. With
+`microphone` the simulator also publishes a simulated microphone (`simulator.stroke_microphone`)
+and the predictor listens to it (`listen.enabled`); the summary then says what was heard against
+what was predicted. Prints a live one-line status and a summary (with the recording), then exits
+by itself.
 DDS stays on loopback, on a ROS_DOMAIN_ID of this process's own unless one is set.
 """
 
@@ -29,6 +32,7 @@ from rclpy.qos import QoSProfile
 from ..bag import cdr, messages
 from ..bag.logfile import LogError, inspect, log_files
 from ..bag.recorder import Recorder
+from ..live.listen import KEY_AGREEMENT, KEY_DROPPED, KEY_HEARD_MODES, KEY_HEARD_S, KEY_PREDICTED_S
 from ..live.profile import ActuatorState, StrokeProfile, expected_squeak
 from ..live.status import (
     KEY_RECOMPUTES,
@@ -236,6 +240,13 @@ def _recorded(recorder: Recorder, sim: ActuatorSimulator) -> bool:
     return True
 
 
+def _heard(predictor: SqueakPredictorNode, sim: ActuatorSimulator) -> bool:
+    """Every microphone chunk the simulator published has reached the predictor and has been
+    analysed (or dropped); True when not listening."""
+    listener = predictor.listener
+    return listener is None or (listener.received >= sim.mic_chunks and listener.backlog == 0)
+
+
 def summary(
     profile: StrokeProfile,
     r: SqueakRecord,
@@ -288,6 +299,25 @@ def summary(
     return "\n".join(lines)
 
 
+def listening_summary(values: dict[str, str]) -> str:
+    """One line on what the predictor heard against what it predicted, from the key-values of
+    its measurement status (`live.listen`), e.g. 'heard squeak 4.50 s (T1 2653 Hz); predicted
+    4.60 s; agreement 96 % of frames'."""
+    modes = ", ".join(
+        part.rsplit(" ", 2)[0] for part in values[KEY_HEARD_MODES].split(", ") if part
+    )
+    heard = float(values[KEY_HEARD_S])
+    agreement = values[KEY_AGREEMENT]
+    line = (
+        "  heard vs predicted: "
+        + (f"heard squeak {heard:.2f} s ({modes})" if heard else "heard no squeak")
+        + f"; predicted {float(values[KEY_PREDICTED_S]):.2f} s; agreement "
+        + (f"{100 * float(agreement):.0f} % of frames" if agreement else "none")
+    )
+    dropped = int(values[KEY_DROPPED])
+    return line + (f"; {dropped} chunks dropped" if dropped else "")
+
+
 def recording_summary(recorder: Recorder) -> str:
     """One line on the bag the predictor wrote, read back from disk."""
     if recorder.bag is None:
@@ -321,6 +351,7 @@ def run_demo(
     status_hz: float = 4.0,
     out: TextIO | None = None,
     record_dir: Path | None = None,
+    microphone: bool = False,
 ) -> int:
     """Run predictor + simulator + monitor for one stroke.
 
@@ -336,6 +367,8 @@ def run_demo(
         Where the status lines and the summary go; default: stdout.
     record_dir : Path, optional
         The predictor records into a bag there (created); None: no recording.
+    microphone : bool
+        The simulator publishes a simulated microphone and the predictor listens to it.
 
     Returns
     -------
@@ -366,8 +399,11 @@ def run_demo(
         nodes: list[Node] = []
         executor = monitor = sim = predictor = None
         width, stopped = 0, time.monotonic()
+        listening: dict[str, str] = {}
         try:
-            predictor = SqueakPredictorNode(context=ctx)
+            predictor = SqueakPredictorNode(
+                context=ctx, parameter_overrides=[Parameter("listen.enabled", value=microphone)]
+            )
             # Its warnings (e.g. "no prediction" while the motor rests) repeat what the status
             # line shows; keep the terminal to the status line and the summary.
             predictor.get_logger().set_level(LoggingSeverity.ERROR)
@@ -376,7 +412,13 @@ def run_demo(
             nodes.append(predictor)
             monitor = SqueakMonitor(context=ctx)
             nodes.append(monitor)
-            sim = ActuatorSimulator(profile, rate_hz=rate_hz, wait_for_subscriber=True, context=ctx)
+            sim = ActuatorSimulator(
+                profile,
+                rate_hz=rate_hz,
+                wait_for_subscriber=True,
+                microphone=microphone,
+                context=ctx,
+            )
             nodes.append(sim)
             executor = make_executor(ctx)
             for node in nodes:
@@ -413,9 +455,15 @@ def run_demo(
                 if (
                     done_at is not None
                     and now - done_at >= TAIL_S
-                    and (_recorded(predictor.recorder, sim) or now - done_at >= DRAIN_TIMEOUT_S)
+                    and (
+                        (_recorded(predictor.recorder, sim) and _heard(predictor, sim))
+                        or now - done_at >= DRAIN_TIMEOUT_S
+                    )
                 ):
                     break
+            if predictor.listener is not None:  # everything analysed: the totals
+                predictor.listener.collect()
+                listening = predictor.listener.status(time.monotonic()).values
         finally:
             stopped = time.monotonic()
             if tty and width:
@@ -440,6 +488,8 @@ def run_demo(
             file=out,
             flush=True,
         )
+    if listening:
+        print(listening_summary(listening), file=out, flush=True)
     if predictor is not None and record_dir is not None:
         print(recording_summary(predictor.recorder), file=out, flush=True)
     return 0 if finished else stop.exit_status()

@@ -6,8 +6,9 @@ passed, `force_update()` at once (on a change of verdict). Status names carry th
 qualified name: '/ns/squeak_predictor: squeak prediction'. The array is published (and handed
 to the node for recording) as the CDR bytes of `bag.cdr.encode_diagnostic_array`.
 
-The squeak-prediction status is decided rclpy-free by `LivePredictor.status`; the recording
-status by `recording_status` below, from the recorder and the crash recovery.
+The squeak-prediction status is decided rclpy-free by `LivePredictor.status`, the measurement
+status (with listening on) by `live.listen.Listener.status`; the recording status by
+`recording_status` below, from the recorder and the crash recovery.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
@@ -32,6 +33,7 @@ if TYPE_CHECKING:
 TOPIC = "/diagnostics"
 PREDICTION_TASK = "squeak prediction"
 RECORDING_TASK = "recording"
+MEASUREMENT_TASK = "measurement"  # with listen.enabled: heard against predicted
 
 # Key names of the recording status.
 KEY_BAG = "bag"
@@ -98,7 +100,7 @@ class Updater:
         hardware_id: str = "",
         clock: Callable[[], float] = time.monotonic,
         publish: Callable[[Publisher, bytes, int], None] | None = None,
-        **publisher_kwargs,
+        **publisher_kwargs: Any,
     ):
         self.node, self.period_s, self.hardware_id = node, period_s, hardware_id
         self.publisher = node.create_publisher(DiagnosticArray, TOPIC, qos, **publisher_kwargs)

@@ -14,13 +14,23 @@ import signal
 import sys
 import tempfile
 import threading
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import rclpy
 from rclpy.context import Context
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+if TYPE_CHECKING:
+    from types import FrameType
+
+    from rclpy.executors import Executor
+    from rclpy.node import Node
+
+    # What signal.signal takes and returns.
+    _SignalHandler = Callable[[int, FrameType | None], Any] | int | signal.Handlers | None
+
 
 PROGRAM = "leadscrew-squeak"
 T = TypeVar("T")
@@ -89,7 +99,8 @@ def _stderr_captured() -> Iterator[list[str]]:
     """Redirect file descriptor 2 (where rcutils logs) into a temporary file; the yielded list
     receives what was written, on exit."""
     sys.stderr.flush()
-    saved, text = os.dup(2), []
+    saved = os.dup(2)
+    text: list[str] = []
     with tempfile.TemporaryFile() as tmp:
         os.dup2(tmp.fileno(), 2)
         try:
@@ -101,7 +112,7 @@ def _stderr_captured() -> Iterator[list[str]]:
             text.append(tmp.read().decode(errors="replace"))
 
 
-def close(ctx, executor, nodes) -> None:
+def close(ctx: Context | None, executor: Executor | None, nodes: Iterable[Node]) -> None:
     """Remove and destroy `nodes` (in the given order), stop the executor, shut `ctx` down."""
     for node in nodes:
         if executor is not None:
@@ -127,13 +138,13 @@ class StopSignals:
 
     def __enter__(self) -> StopSignals:
         self.signum = 0
-        self._old: dict[int, object] = {}
+        self._old: dict[int, _SignalHandler] = {}
         if threading.current_thread() is threading.main_thread():
             for sig in (signal.SIGINT, signal.SIGTERM):
                 self._old[sig] = signal.signal(sig, self._handle)
         return self
 
-    def _handle(self, signum: int, frame) -> None:
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
         if self.signum == signum:  # asked twice: give in
             signal.signal(signum, self._old.pop(signum))
             if signum == signal.SIGINT:
@@ -141,7 +152,7 @@ class StopSignals:
             os.kill(os.getpid(), signum)
         self.signum = self.signum or signum
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         for sig, old in self._old.items():
             signal.signal(sig, old)
 

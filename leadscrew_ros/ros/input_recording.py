@@ -16,9 +16,12 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
+from typing import Any, cast
 
-from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -37,7 +40,13 @@ class _Input:
     msg_type: type
     type_name: str
     loss: TopicLoss
-    subscription: Subscription | None = None
+    subscription: Subscription | None = None  # set right after the entry is made
+
+    @property
+    def sub(self) -> Subscription:
+        """`subscription`, made in `InputRecording.__init__`."""
+        assert self.subscription is not None
+        return self.subscription
 
 
 class InputRecording:
@@ -66,13 +75,18 @@ class InputRecording:
         for topic, msg_type in inputs.items():
             entry = _Input(topic, msg_type, msgdefs.type_name(msg_type), recorder.losses[topic])
             events = SubscriptionEventCallbacks(
-                message_lost=lambda info, e=entry: self._dds_lost(e, info),
+                message_lost=partial(self._dds_lost, entry),
                 use_default_callbacks=False,
             )
             entry.subscription = self._node.create_subscription(
                 msg_type,
                 topic,
-                lambda data, info, e=entry: self._received(e, data, info),
+                # rclpy passes (data, message info) to a callback that takes two arguments; its
+                # annotation allows only the one-argument kind.
+                cast(
+                    "Callable[[Any], None]",
+                    lambda data, info, e=entry: self._received(e, data, info),
+                ),
                 qos,
                 raw=True,
                 event_callbacks=events,
@@ -94,7 +108,7 @@ class InputRecording:
         deadline = time.monotonic() + _MATCH_TIMEOUT_S
         for e in self._inputs:
             while (
-                e.subscription.get_publisher_count() < node.count_publishers(e.topic)
+                e.sub.get_publisher_count() < node.count_publishers(e.topic)
                 and time.monotonic() < deadline
             ):
                 time.sleep(0.002)
@@ -128,7 +142,7 @@ class InputRecording:
     def _take_queued(self, e: _Input, until_stopped: bool) -> None:
         """Write every message queued on `e`'s subscription (`until_stopped`: or until `stop`
         is asked for, so that the thread ends promptly)."""
-        sub = e.subscription
+        sub = e.sub
         while not (until_stopped and self._stop.is_set()):
             with sub.handle:
                 taken = sub.handle.take_message(e.msg_type, True)
@@ -137,12 +151,12 @@ class InputRecording:
             self._write(e, *taken)
 
     def _write(self, e: _Input, data: bytes, info: dict) -> None:
-        sub = e.subscription
+        sub = e.sub
         e.loss.received(info.get("publication_sequence_number"), sub.get_publisher_count)
         self._recorder.write_serialized(
             e.topic, e.type_name, data, publish_time_ns=info.get("source_timestamp") or None
         )
 
     @staticmethod
-    def _dds_lost(e: _Input, info) -> None:
+    def _dds_lost(e: _Input, info: QoSMessageLostInfo) -> None:
         e.loss.dds_lost = info.total_count

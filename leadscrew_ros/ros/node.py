@@ -8,6 +8,10 @@ scatter, `scatter.*` parameters), squeak/margin (least damping ratio at the nomi
 squeak/unstable_frequencies, squeak/active, squeak/modes, squeak/safe_speed (nearest speed with
 P(squeak) below `safe_probability`) and /diagnostics (levels by P: `warn_probability`,
 `error_probability`).
+Listens (`listen.*` parameters, off by default) to microphone (std_msgs/Float32MultiArray
+chunks): the callback only queues the payload, a worker thread analyses it (`live.listen`), and
+the housekeeping timer publishes squeak/heard, squeak/heard_frequency and a third diagnostic
+status, the measurement (heard against predicted).
 Records inputs and outputs to MCAP (`record.*` parameters, std_srvs/SetBool `~/record`):
 inputs from subscriptions of their own that never wait for the model, with every lost message
 counted (`ros.input_recording`); outputs as the CDR bytes it publishes (`bag.messages`); every
@@ -25,17 +29,21 @@ from __future__ import annotations
 import contextlib
 import sys
 import time
-from typing import NamedTuple
+from functools import partial
+from typing import Any, NamedTuple
 
+import numpy as np
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.context import Context
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.executors import Executor
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from rclpy.qos import (
     DurabilityPolicy,
     HistoryPolicy,
@@ -47,17 +55,21 @@ from rclpy.serialization import serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, Float64, Float64MultiArray
+from std_msgs.msg import Bool, Float32MultiArray, Float64, Float64MultiArray
 from std_srvs.srv import SetBool
 
-from ..bag import logmeta, messages, msgdefs
+from ..bag import cdr, logmeta, messages, msgdefs
 from ..bag.crash_recovery import CrashRecovery
 from ..bag.recorder import Recorder, RecordSettings, ensure_directory
+from ..live.listen import Decoder, Listener
 from ..live.recompute import LivePredictor
-from ..live.settings import JointSettings, LiveSettings
+from ..live.settings import JointSettings, ListenSettings, LiveSettings
+from ..live.status import Status
 from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel
+from ..model.acoustics.settings import DetectorSettings
 from ..model.uncertainty.scatter import ScatterSettings
 from .diagnostics import (
+    MEASUREMENT_TASK,
     PREDICTION_TASK,
     RECORDING_TASK,
     RESUME_HINT,
@@ -81,6 +93,7 @@ from .parameters import (
 )
 
 NODE_NAME = "squeak_predictor"
+PROG = "squeak_node"  # the executable: its one-line errors name it, as argparse does
 HOUSEKEEPING_PERIOD_S = 0.05
 # Output topic (`bag.messages`) -> rclpy class of its type (the payloads are CDR bytes).
 OUTPUT_CLASSES = {
@@ -100,9 +113,56 @@ INPUTS = {
     "nut_position": Float64,
     "joint_states": JointState,
 }
+LISTEN_CLASSES = {
+    topic: {msgdefs.type_name(c): c for c in (Float64, Bool)}[type_name]
+    for topic, type_name in messages.LISTEN_TYPES.items()
+}
 
 
-def make_executor(context=None) -> Executor:
+class SoundInput(NamedTuple):
+    """A sound input of the node (with `listen.enabled`): its message class and how a payload
+    becomes samples (`live.listen.Decoder`, run on the listening thread)."""
+
+    msg_type: type
+    decode: Decoder
+
+
+def float32_chunk(data: bytes) -> tuple[np.ndarray, None]:
+    """Samples of a std_msgs/Float32MultiArray chunk (full scale; a layout of two dimensions
+    whose second has size > 1 holds interleaved channels), at `listen.sample_rate_hz`.
+
+    Parameters
+    ----------
+    data : bytes
+        The CDR payload.
+
+    Returns
+    -------
+    samples : numpy.ndarray
+        float32, one column per channel when there are several.
+    rate : None
+        The message carries no sample rate.
+
+    Raises
+    ------
+    ValueError
+        A malformed payload.
+    """
+    msg = cdr.decode_float32_multi_array(data)
+    x = msg.data[msg.data_offset :]
+    if len(msg.dim) == 2 and msg.dim[1].size > 1:
+        channels = msg.dim[1].size
+        x = x[: x.size // channels * channels].reshape(-1, channels)
+    return x, None
+
+
+# Sound inputs (topic -> kind) subscribed with `listen.enabled`. Another kind, e.g.
+# audio_common_msgs/AudioDataStamped where that package is importable, is one more entry here
+# with its decoder (samples and rate from the payload; `bag.audio` reads that format from logs).
+SOUND_INPUTS = {"microphone": SoundInput(Float32MultiArray, float32_chunk)}
+
+
+def make_executor(context: Context | None = None) -> Executor:
     """The executor the node runs on (`main`, the demo, the benchmarks and the tests).
 
     rclpy's `EventsExecutor` (C++): a ready input costs no wait-set rebuild in Python (the
@@ -158,6 +218,11 @@ class SqueakPredictorNode(Node):
         self.accepted: dict[str, object] = {}
         self._incident_logged = ""
         self._diagnosed: tuple | None = None  # verdict of the last forced /diagnostics
+        listen = self._settings(ListenSettings, {})
+        self.listener = (
+            Listener(listen, self._settings(DetectorSettings, {})) if listen.enabled else None
+        )
+        self._measurement: Status | None = None  # what the measurement task says
 
         sensor = QoSProfile(
             depth=own.input_queue_depth,
@@ -190,6 +255,27 @@ class SqueakPredictorNode(Node):
         ):
             subscribe(INPUTS[topic], topic, callback)
         self.output_pubs = {topic: publisher(cls, topic) for topic, cls in OUTPUT_CLASSES.items()}
+        self.listen_pubs = {}
+        if self.listener is not None:
+            # Serialized payloads, queued as they are: the analysis thread decodes them
+            sound = QoSProfile(
+                depth=listen.queue_chunks,
+                reliability=qos_profile_sensor_data.reliability,
+                durability=qos_profile_sensor_data.durability,
+            )
+            for topic, kind in SOUND_INPUTS.items():
+                self.create_subscription(
+                    kind.msg_type,
+                    topic,
+                    partial(self._on_sound, decode=kind.decode),
+                    sound,
+                    raw=True,
+                    event_callbacks=sub_events,
+                )
+                self._inputs[self.resolve_topic_name(topic)] = kind.msg_type
+            self.listen_pubs = {
+                topic: publisher(cls, topic) for topic, cls in LISTEN_CLASSES.items()
+            }
         self.diagnostics = Updater(
             self,
             LATCHED,
@@ -203,6 +289,10 @@ class SqueakPredictorNode(Node):
         self.diagnostics.add(
             RECORDING_TASK, lambda stat: recording_status(stat, self.recorder, self._crash_recovery)
         )
+        if self.listener is not None:
+            self._measurement = self.listener.status(time.monotonic())
+            self.diagnostics.add(MEASUREMENT_TASK, status_task(self._measurement_status))
+            self._publish_heard()  # latched: nothing heard yet
 
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -225,6 +315,8 @@ class SqueakPredictorNode(Node):
     def destroy_node(self) -> None:
         """Stop the predictor and the recording, then destroy the node."""
         self.live.close()  # the background safe-speed search ends too
+        if self.listener is not None:
+            self.listener.close()  # the listening thread ends
         self._stop_recording()  # summary, index and footer: a clean file
         self._crash_recovery.join()
         super().destroy_node()
@@ -237,7 +329,7 @@ class SqueakPredictorNode(Node):
     def _values(self, changes: dict) -> dict:
         return {**{p.name: p.value for p in self.get_parameters(PARAMETER_NAMES)}, **changes}
 
-    def _settings(self, cls: type, changes: dict):
+    def _settings(self, cls: type, changes: dict) -> Any:
         """Settings dataclass `cls` from the current parameters with `changes` applied."""
         return build(cls, self._values(changes))
 
@@ -312,6 +404,10 @@ class SqueakPredictorNode(Node):
             self.joint = self._settings(JointSettings, {})
         if names & names_of(NodeSettings):
             self.diagnostics.period_s = self._settings(NodeSettings, {}).diagnostics_period_s
+        if self.listener is not None and names & (
+            names_of(ListenSettings) | names_of(DetectorSettings)
+        ):
+            self._restart_listening()
         if names & recording:
             if new_bag:  # new record settings: a new bag
                 self._stop_recording()
@@ -401,7 +497,9 @@ class SqueakPredictorNode(Node):
         )
         return response
 
-    def _publish(self, publisher, data: bytes, publish_time_ns: int | None = None) -> None:
+    def _publish(
+        self, publisher: Publisher, data: bytes, publish_time_ns: int | None = None
+    ) -> None:
         """Publish a CDR payload, latch it and record the same bytes (publish time: the
         message's header stamp if it has one, else the log time)."""
         publisher.publish(data)  # bytes: published as serialized
@@ -430,17 +528,46 @@ class SqueakPredictorNode(Node):
         if not outcome.ignored:
             self._input(topic, msg, outcome.error, now)
 
-    def _input(self, topic: str, msg, error: str, now: float | None = None) -> None:
+    def _input(self, topic: str, msg: object, error: str, now: float | None = None) -> None:
         now = time.monotonic() if now is None else now
         if error:  # the next tick reports it: a flood of bad input stays bounded
             self.get_logger().warning(f"input rejected: {error}", throttle_duration_sec=2.0)
             return
         self.accepted.pop(topic, None)  # re-inserted last: the order the state arose in
         self.accepted[topic] = msg
+        if self.listener is not None:  # the detector rejects tones on the motor orders
+            self.listener.speed_rad_s = self.live.inputs.speed_rad_s
         if self.live.due(now):
             self._recompute(now)
         elif self.live.changed() and self._rate_timer.is_canceled():
             self._rate_timer.reset()  # held back by the rate limit: recompute later
+
+    def _on_sound(self, data: bytes, decode: Decoder) -> None:
+        """A sound chunk: queued for the listening thread as it is (or dropped and counted)."""
+        assert self.listener is not None  # subscribed only while listening
+        self.listener.offer(data, time.monotonic(), decode)
+
+    # ---------------------------------------------------------------- listening
+    def _restart_listening(self) -> None:
+        """New `listen.*` settings: a new listener (and detector); the sound so far is
+        forgotten, the last predictions are kept for the comparison."""
+        old = self.listener
+        assert old is not None  # listen.* are declared only while listening
+        old.close()
+        self.listener = Listener(
+            self._settings(ListenSettings, {}), self._settings(DetectorSettings, {})
+        )
+        self.listener.take_over(old)
+        self._publish_heard()
+
+    def _measurement_status(self) -> Status:
+        assert self._measurement is not None  # set when listening starts
+        return self._measurement
+
+    def _publish_heard(self) -> None:
+        assert self.listener is not None
+        for topic, data in messages.heard_payloads(self.listener.heard, self.listener.frequency_hz):
+            self._publish(self.listen_pubs[topic], data)
 
     # ---------------------------------------------------------------- outputs
     def _on_rate_timer(self) -> None:
@@ -456,11 +583,16 @@ class SqueakPredictorNode(Node):
         now = time.monotonic()
         if self.live.poll_advice():  # a background safe-speed search has finished
             self._publish_safe_speed()
+        if self.listener is not None:
+            if self.listener.collect():  # what the listening thread heard since
+                self._publish_heard()
+            self._measurement = self.listener.status(now)
         self._diagnose(now, periodic=True)  # e.g. bad input, input went stale
 
     def _diagnose(self, now: float, periodic: bool) -> None:
         """/diagnostics at once when the verdict changed, else (`periodic`) on its period."""
         self._status = self.live.status(now)
+        m = self._measurement
         verdict = (
             self._status.level,
             self._status.message,
@@ -469,6 +601,7 @@ class SqueakPredictorNode(Node):
             self.recorder.incident,
             self.recorder.lost > 0,
             self._crash_recovery.state,
+            m and (m.level, m.message),
         )
         if verdict != self._diagnosed:
             self.diagnostics.force_update()
@@ -478,6 +611,8 @@ class SqueakPredictorNode(Node):
 
     def _recompute(self, now: float) -> None:
         p = self.live.update(now)
+        if self.listener is not None:  # what the measurement compares the sound with
+            self.listener.predicted(now, p)
         if p is not None:  # else outside validity: keep the last outputs
             self._publish_prediction(p)
         self._diagnose(now, periodic=False)  # else the housekeeping period covers it
@@ -518,15 +653,20 @@ def usage() -> str:
         "Subscribes (sensor-data QoS, relative to the namespace):",
         "  motor_speed (std_msgs/Float64) [rad/s], axial_load (std_msgs/Float64) [N],",
         "  nut_position (std_msgs/Float64) [m], joint_states (sensor_msgs/JointState, joint "
-        "`joint_name`)",
+        "`joint_name`),",
+        "  with listen.enabled: microphone (std_msgs/Float32MultiArray chunks, full scale -1..1, "
+        "at listen.sample_rate_hz)",
         "Publishes (reliable, transient local, depth 1):",
         "  squeak/risk (Float64) [1]: P(squeak) over the scatter (scatter.*),",
         "  squeak/margin (Float64) [1]: least damping ratio, < 0 when a nominal mode squeaks,",
         "  squeak/unstable_frequencies (Float64MultiArray) [Hz], squeak/active (Bool),",
         "  squeak/modes (Float64MultiArray),",
         "  squeak/safe_speed (Float64) [rad/s]: nearest speed with P(squeak) < safe_probability,",
+        "  with listen.enabled: squeak/heard (Bool), squeak/heard_frequency (Float64) [Hz, 0 "
+        "while nothing is heard],",
         "  /diagnostics (diagnostic_msgs/DiagnosticArray: '<node>: squeak prediction', "
-        "'<node>: recording')",
+        "'<node>: recording';",
+        "  with listen.enabled also '<node>: measurement', heard against predicted)",
         "Service: ~/record (std_srvs/SetBool) starts or stops recording",
         "",
         "Parameters (name [unit] = default, range: description):",
@@ -550,14 +690,14 @@ def main(args: list[str] | None = None) -> int:
     try:  # a bad params file or remap rule: one line, as simulate and replay --publish
         own_args = checked_ros_args(lambda: remove_ros_args(argv))[1:]
     except ValueError as exc:
-        print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2
     if {"-h", "--help"} & set(own_args):
         print(usage())
         return 0
     if own_args:
         print(
-            f"{NODE_NAME}: error: unrecognized arguments: {' '.join(own_args)} (ROS "
+            f"{PROG}: error: unrecognized arguments: {' '.join(own_args)} (ROS "
             "arguments go after --ros-args; see --help)",
             file=sys.stderr,
         )
@@ -573,7 +713,7 @@ def main(args: list[str] | None = None) -> int:
                 lambda: rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
             )
         except ValueError as exc:
-            print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
+            print(f"{PROG}: error: {exc}", file=sys.stderr)
             return 2
         node = None
         try:
@@ -583,7 +723,7 @@ def main(args: list[str] | None = None) -> int:
             while not stop.signum:
                 executor.spin_once(timeout_sec=0.1)  # stops after the current callback
         except (ParameterError, ParameterException) as exc:
-            print(f"{NODE_NAME}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+            print(f"{PROG}: error: {' '.join(str(exc).split())}", file=sys.stderr)
             return 2
         finally:
             if node is not None:

@@ -20,7 +20,8 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 
 from ..bag.logmeta import LogMetadata
 from ..bag.recorder import RecordSettings
-from ..live.settings import JointSettings, LiveSettings
+from ..live.settings import JointSettings, ListenSettings, LiveSettings
+from ..model.acoustics.settings import DetectorSettings
 from ..model.physics.display import exact
 from ..model.physics.metadata import check, check_value, documented, range_text, setting
 from ..model.physics.parameters import ParameterError, ScrewParameters
@@ -104,6 +105,16 @@ GROUPS = (
     ),
     Group(RecordingControl, "record.", "node: MCAP recording (also ~/record)"),
     Group(RecordSettings, "record.", "node: MCAP recording, one bag per recording"),
+    Group(
+        ListenSettings,
+        "listen.",
+        "node: listening to a microphone (squeak/heard, the measurement status)",
+    ),
+    Group(
+        DetectorSettings,
+        "listen.",
+        "model: the squeak detector of the microphone (model.acoustics)",
+    ),
 )
 
 

@@ -1,29 +1,84 @@
 # SPDX-License-Identifier: Apache-2.0
 """Actuator simulator: the ROS 2 node that publishes a seat stroke (`live.profile.StrokeProfile`)
 on the predictor's input topics: std_msgs/Float64 `motor_speed` [rad/s], `axial_load` [N],
-`nut_position` [m]; optionally sensor_msgs/JointState `joint_states`.
+`nut_position` [m]; optionally sensor_msgs/JointState `joint_states` and a simulated
+microphone, std_msgs/Float32MultiArray `microphone` (`stroke_microphone`).
 """
 
 from __future__ import annotations
 
+import array
 import math
 import os
 import sys
 import time
 from collections.abc import Sequence
-from typing import TextIO
+from typing import Any, TextIO
 
+import numpy as np
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64
+from std_msgs.msg import Float32MultiArray, Float64
 
+from ..bag.virtual_bench import squeak_frequencies
 from ..live.profile import ActuatorState, ProfileError, StrokeProfile
+from ..model import ScrewParameters
 from .env import StopSignals, close, confine_to_localhost, init_context
 
 NODE_NAME = "actuator_simulator"
 MAX_RATE_HZ = 10_000.0
+MIC_RATE_HZ = 48000  # the simulated microphone's sample rate
+MIC_CHUNK_S = 0.1  # and its chunks
+MIC_SQUEAK_LEVEL = 0.05  # squeak tone amplitude [full scale] (-26 dBFS)
+_SCHEDULE_RATE_HZ = 100.0  # the model along the stroke, for the squeak tone
+
+
+def stroke_microphone(
+    profile: StrokeProfile,
+    params: ScrewParameters | None = None,
+    sample_rate_hz: float = MIC_RATE_HZ,
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The simulated microphone of one stroke (computed up front, never in a callback).
+
+    The squeak schedule is the model of `params` (`SqueakModel`, nominal verdict, no scatter;
+    `bag.virtual_bench.squeak_frequencies`) at the stroke's operating points every 10 ms: where
+    it squeaks, a tone at the frequency of its most unstable mode; the samples are
+    `model.acoustics.synthesis.microphone` of the stroke's speed (motor orders, noise) and that
+    tone.
+
+    Parameters
+    ----------
+    profile : StrokeProfile
+        The stroke.
+    params : ScrewParameters, optional
+        The screw (default: Table 1, the node's default).
+    sample_rate_hz : float
+        Sample rate [Hz].
+    seed : int
+        Seed of the noise and the order phases.
+
+    Returns
+    -------
+    samples : numpy.ndarray
+        float32 samples, full scale, from the start of the stroke.
+    squeak_hz : numpy.ndarray
+        The tone's frequency every 10 ms of the stroke, nan where the model is silent [Hz].
+    """
+    from ..model.acoustics.synthesis import microphone  # scipy.signal: only when used
+
+    params = params or ScrewParameters()
+    times = np.arange(int(round(profile.duration_s * _SCHEDULE_RATE_HZ)) + 1) / _SCHEDULE_RATE_HZ
+    speed, load, nut, _ = (
+        np.array(a) for a in zip(*(profile.state(t) for t in times.tolist()), strict=True)
+    )
+    squeak_hz = squeak_frequencies(params, speed, load, nut)
+    return (
+        microphone(times, speed, squeak_hz, MIC_SQUEAK_LEVEL, sample_rate_hz, seed=seed),
+        squeak_hz,
+    )
 
 
 class ActuatorSimulator(Node):
@@ -47,6 +102,11 @@ class ActuatorSimulator(Node):
         Also publish joint_states with this joint ('': not).
     wait_for_subscriber : bool
         Start the stroke clock when something subscribes to motor_speed.
+    microphone : bool
+        Also publish the stroke's simulated microphone (`stroke_microphone`, `MIC_CHUNK_S`
+        chunks as their sound has passed) on `microphone`; not with `loop`.
+    params : ScrewParameters, optional
+        The screw whose model decides where the microphone squeaks (default: Table 1).
     **kwargs
         Passed to `rclpy.node.Node` (`node_name` too).
     """
@@ -58,10 +118,14 @@ class ActuatorSimulator(Node):
         loop: bool = False,
         joint_name: str = "",
         wait_for_subscriber: bool = False,
-        **kwargs,
+        microphone: bool = False,
+        params: ScrewParameters | None = None,
+        **kwargs: Any,
     ):
         if not (math.isfinite(rate_hz) and 0 < rate_hz <= MAX_RATE_HZ):
             raise ProfileError(f"rate_hz must be in (0, {MAX_RATE_HZ:g}] Hz, got {rate_hz!r}")
+        if microphone and loop:
+            raise ProfileError("the simulated microphone covers one stroke: not with loop")
         super().__init__(kwargs.pop("node_name", NODE_NAME), **kwargs)
         self.profile = profile or StrokeProfile()
         self.loop, self.joint_name = loop, joint_name
@@ -77,6 +141,12 @@ class ActuatorSimulator(Node):
         self.joint_pub = (
             self.create_publisher(JointState, "joint_states", qos) if joint_name else None
         )
+        self.mic_pub = None
+        self.mic_chunks = 0  # microphone chunks published
+        if microphone:
+            self.audio, self.squeak_hz = stroke_microphone(self.profile, params)
+            self.mic_pub = self.create_publisher(Float32MultiArray, "microphone", qos)
+            self._mic_sent = 0  # samples published
         self._timer = self.create_timer(1.0 / rate_hz, self._tick)
 
     @property
@@ -94,9 +164,22 @@ class ActuatorSimulator(Node):
         t = self.elapsed_s
         finished = not self.loop and t >= self.profile.duration_s
         self.publish(self.profile.state(self.profile.duration_s if finished else t, self.loop))
+        if self.mic_pub is not None:
+            self._publish_sound(self.audio.size if finished else int(t * MIC_RATE_HZ))
         if finished:
             self.done = True
             self._timer.cancel()
+
+    def _publish_sound(self, upto: int) -> None:
+        """The microphone's whole chunks whose sound ends by sample `upto` (and the last,
+        shorter one when `upto` is the end)."""
+        step = int(MIC_CHUNK_S * MIC_RATE_HZ)
+        while self._mic_sent + step <= upto or self.audio.size == upto > self._mic_sent:
+            chunk = self.audio[self._mic_sent : self._mic_sent + step]
+            assert self.mic_pub is not None  # the sound exists only with a microphone
+            self.mic_pub.publish(Float32MultiArray(data=array.array("f", chunk.tobytes())))
+            self._mic_sent += chunk.size
+            self.mic_chunks += 1
 
     def _subscribers_matched(self) -> bool:
         """Something subscribes to motor_speed, and every subscription the graph knows of has

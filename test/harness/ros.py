@@ -34,8 +34,9 @@ def unique_ns(prefix: str = "/t", length: int = 32) -> str:
 
 
 def new_executor(kind: str, context: Context):
-    """ "single": rclpy's SingleThreadedExecutor; "events": the node's own (`make_executor`,
-    rclpy's EventsExecutor), for tests that must see what squeak_node does."""
+    """The executor of `kind`: "single", rclpy's SingleThreadedExecutor; "events": the node's
+    own (`make_executor`, rclpy's EventsExecutor), for tests that must see what squeak_node
+    does."""
     if kind == "events":
         return make_executor(context)
     if kind == "single":

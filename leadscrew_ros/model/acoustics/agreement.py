@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .detection import Detection
 
@@ -30,15 +31,31 @@ MATCH_TOLERANCE = 0.03
 
 @dataclass
 class FrequencyMatch:
-    """A heard episode and the predicted squeak mode nearest to it in frequency."""
+    """A heard episode and the predicted squeak mode nearest to it in frequency.
+
+    Attributes
+    ----------
+    start_s, end_s : float
+        The heard episode [s].
+    heard_hz : float
+        Its frequency (median of its track) [Hz].
+    label : str or None
+        The nearest predicted squeak mode's label; None when none was predicted during it.
+    predicted_hz : float or None
+        Its frequency [Hz].
+    relative_error : float or None
+        (predicted - heard) / heard.
+    matched : bool
+        |relative_error| <= MATCH_TOLERANCE.
+    """
 
     start_s: float
     end_s: float
     heard_hz: float
-    label: str | None  #: the predicted mode's label, None when none predicted
-    predicted_hz: float | None  #: its frequency [Hz]
-    relative_error: float | None  #: (predicted - heard) / heard
-    matched: bool  #: |relative_error| <= MATCH_TOLERANCE
+    label: str | None
+    predicted_hz: float | None
+    relative_error: float | None
+    matched: bool
 
 
 @dataclass
@@ -88,8 +105,14 @@ class Agreement:
         return asdict(self)
 
 
-def _probabilities(probability: Sequence[float | None], n: int) -> np.ndarray:
-    p = np.array([math.nan if v is None else float(v) for v in probability], dtype=float)
+def _probabilities(probability: ArrayLike, n: int) -> np.ndarray:
+    p = np.array(
+        [
+            math.nan if v is None else float(v)
+            for v in np.ravel(np.asarray(probability, dtype=object))
+        ],
+        dtype=float,
+    )
     if p.size != n:
         raise ValueError(f"{p.size} probabilities for {n} prediction times")
     return p
@@ -99,7 +122,7 @@ def agreement(
     detection: Detection,
     pred_times_s: Any,
     predicted_squeak: Any,
-    probability: Sequence[float | None],
+    probability: ArrayLike,
     predicted_modes: Sequence[Sequence[tuple[str, float]]],
     *,
     valid_until_s: float | None = None,

@@ -356,7 +356,18 @@ class StreamingDetector:
         return self._next_frame
 
     def frame_time(self, i: np.ndarray | int) -> np.ndarray:
-        """Centre time [s] of frame(s) `i` of the current segment."""
+        """Centre time [s] of frame(s) `i` of the current segment.
+
+        Parameters
+        ----------
+        i : int or numpy.ndarray
+            Frame index (or indices) in the current segment.
+
+        Returns
+        -------
+        numpy.ndarray
+            The frames' centre times [s].
+        """
         t0 = 0.0 if self._seg_t0 is None else self._seg_t0
         return t0 + (np.asarray(i) * self.hop + self.frame_len / 2) / self.sample_rate_hz
 
@@ -451,7 +462,13 @@ class StreamingDetector:
         return closed
 
     def flush(self) -> list[Episode]:
-        """Close every open track (end of the stream); return the squeak episodes among them."""
+        """Close every open track (end of the stream).
+
+        Returns
+        -------
+        list of Episode
+            The squeak episodes among the tracks closed.
+        """
         out: list[Episode] = []
         for tr in self._tracks:
             ep = self._finish(tr)

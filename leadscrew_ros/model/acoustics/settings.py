@@ -16,9 +16,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..physics.metadata import check, setting
+from ..physics.metadata import check, documented, setting
 
 
+@documented
 @dataclass(frozen=True)
 class DetectorSettings:
     """How the bench microphone's sound is turned into squeak episodes (see the field

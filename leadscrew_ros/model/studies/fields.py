@@ -12,8 +12,10 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..physics.display import exact
 from ..physics.parameters import ParameterError, field_info, field_names
@@ -92,16 +94,19 @@ def _point_models(
     for k, row in enumerate(uniq):
         idx = np.flatnonzero(inverse.ravel() == k)
         try:
-            yield model.with_params(**{n: _native(n, v) for n, v in zip(names, row)}), idx
+            yield (
+                model.with_params(**{n: _native(n, v) for n, v in zip(names, row, strict=True)}),
+                idx,
+            )
         except ParameterError:
             yield None, idx
 
 
-def _native(name: str, value: float):
+def _native(name: str, value: float) -> float | int:
     return int(round(value)) if field_info(name)["type"] == "int" else float(value)
 
 
-def _flat_points(speed_rad_s, load_n, params: dict) -> tuple:
+def _flat_points(speed_rad_s: ArrayLike, load_n: ArrayLike, params: dict) -> tuple:
     """The broadcast of speeds, loads and parameter arrays: its shape and each flattened
     (parameter columns in the order of `params`); ParameterError if a value is not finite."""
     arrays = np.broadcast_arrays(
@@ -116,7 +121,11 @@ def _flat_points(speed_rad_s, load_n, params: dict) -> tuple:
 
 
 def growth_field(
-    model: SqueakModel, speed_rad_s, load_n, progress: Callable[[int], None] | None = None, **params
+    model: SqueakModel,
+    speed_rad_s: ArrayLike,
+    load_n: ArrayLike,
+    progress: Callable[[int], None] | None = None,
+    **params: Any,
 ) -> GrowthField:
     """Largest squeak growth rate at every point of the broadcast of all given arrays.
 
@@ -148,7 +157,7 @@ def growth_field(
     """
     shape, speeds, loads, columns = _flat_points(speed_rad_s, load_n, params)
     growth, freq, diverge = (np.full(speeds.size, np.nan) for _ in range(3))
-    for sub, idx in _point_models(model, dict(zip(params, columns)), speeds.size):
+    for sub, idx in _point_models(model, dict(zip(params, columns, strict=True)), speeds.size):
         ok = (
             idx[:0]
             if sub is None
@@ -156,7 +165,7 @@ def growth_field(
         )
         if progress and ok.size < idx.size:
             progress(idx.size - ok.size)  # invalid points: done at once
-        if not ok.size:
+        if sub is None or not ok.size:
             continue
         chunk = _chunk_points(2 * sub.geometry.n)
         for start in range(0, ok.size, chunk):
@@ -173,7 +182,11 @@ def growth_field(
 
 
 def probability_field(
-    model: SqueakModel, speed_rad_s, load_n, progress: Callable[[int], None] | None = None, **params
+    model: SqueakModel,
+    speed_rad_s: ArrayLike,
+    load_n: ArrayLike,
+    progress: Callable[[int], None] | None = None,
+    **params: Any,
 ) -> tuple[np.ndarray, np.ndarray]:
     """P(squeak) (`Prediction.probability`: the fast estimator over the model's scatter) at
     every point of the broadcast of all given arrays.
@@ -206,7 +219,7 @@ def probability_field(
     """
     shape, speeds, loads, columns = _flat_points(speed_rad_s, load_n, params)
     prob, stderr = np.full(speeds.size, np.nan), np.full(speeds.size, np.nan)
-    for sub, idx in _point_models(model, dict(zip(params, columns)), speeds.size):
+    for sub, idx in _point_models(model, dict(zip(params, columns, strict=True)), speeds.size):
         if sub is None:  # parameters rejected: NaN
             if progress:
                 progress(idx.size)
@@ -214,7 +227,9 @@ def probability_field(
         chunk = _chunk_points(2 * sub.geometry.n)
         for start in range(0, idx.size, chunk):
             part = idx[start : start + chunk]
-            for i, p in zip(part.tolist(), sub.predict_many(speeds[part], loads[part])):
+            for i, p in zip(
+                part.tolist(), sub.predict_many(speeds[part], loads[part]), strict=True
+            ):
                 if p.valid:
                     prob[i] = p.probability
                     stderr[i] = np.nan if p.probability_stderr is None else p.probability_stderr
@@ -228,12 +243,16 @@ def _levels_key(level: float) -> str:
     return f"{level:g}"
 
 
-def _growth_rate(model: SqueakModel, speed_rad_s, load_n, **params) -> np.ndarray:
+def _growth_rate(
+    model: SqueakModel, speed_rad_s: ArrayLike, load_n: ArrayLike, **params: Any
+) -> np.ndarray:
     """`growth_field`'s largest squeak growth rate alone [1/s] (NaN where invalid)."""
     return growth_field(model, speed_rad_s, load_n, **params).max_growth_rate
 
 
-def _probability(model: SqueakModel, speed_rad_s, load_n, **params) -> np.ndarray:
+def _probability(
+    model: SqueakModel, speed_rad_s: ArrayLike, load_n: ArrayLike, **params: Any
+) -> np.ndarray:
     """`probability_field`'s P(squeak) alone (NaN where invalid)."""
     return probability_field(model, speed_rad_s, load_n, **params)[0]
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 ROOT_RTOL = 1e-9  # boundaries, crossings: tolerance relative to the grid span
 
@@ -46,7 +47,7 @@ def find_roots(
     hi: np.ndarray,
     f_lo: np.ndarray,
     f_hi: np.ndarray,
-    xtol: np.ndarray,
+    xtol: ArrayLike,
 ) -> np.ndarray:
     """Roots of many bracketed scalar functions at once (Chandrupatla's method: inverse
     quadratic interpolation, bisection when it would be slow), one batched call of `f` per
@@ -189,7 +190,7 @@ def refine_level_crossings(
     """
     x, values, levels = np.asarray(x, float), np.asarray(values, float), list(levels)
 
-    def reached(v: np.ndarray, level) -> np.ndarray:
+    def reached(v: np.ndarray, level: ArrayLike) -> np.ndarray:
         """+1/2 where v >= level, -1/2 below: a sign change without a zero, so Chandrupatla's
         steps are bisections."""
         return np.where(np.isnan(v), np.nan, (v >= level) - 0.5)
@@ -207,7 +208,9 @@ def refine_level_crossings(
     )
     return {
         level: part.tolist()
-        for level, part in zip(levels, np.split(found, np.cumsum([len(c) for c in cells])))
+        for level, part in zip(
+            levels, np.split(found, np.cumsum([len(c) for c in cells])), strict=False
+        )
     }
 
 

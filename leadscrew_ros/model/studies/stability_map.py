@@ -8,8 +8,10 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..physics.parameters import ParameterError
 from ..squeak_model import SqueakModel
@@ -60,7 +62,7 @@ def _refined_boundary(
     return [
         (r, yv) if k == 0 else (xv, r)
         for k, r, xv, yv in zip(
-            vary.tolist(), roots.tolist(), coords[:, 0].tolist(), coords[:, 1].tolist()
+            vary.tolist(), roots.tolist(), coords[:, 0].tolist(), coords[:, 1].tolist(), strict=True
         )
     ]
 
@@ -151,7 +153,7 @@ class MapResult:
             if self.probability is None
             else {
                 "probability": _grid_list(self.probability),
-                "probability_stderr": _grid_list(self.probability_stderr),
+                "probability_stderr": _grid_list(np.asarray(self.probability_stderr)),
                 "probability_contours": {
                     _levels_key(k): [list(p) for p in v]
                     for k, v in self.probability_contours().items()
@@ -180,9 +182,9 @@ def _grid_list(a: np.ndarray) -> list[list[float | None]]:
 def stability_map(
     model: SqueakModel,
     x_axis: str,
-    x,
+    x: ArrayLike,
     y_axis: str,
-    y,
+    y: ArrayLike,
     speed_rad_s: float | None = None,
     load_n: float | None = None,
     progress: Callable[[int], None] | None = None,
@@ -253,7 +255,7 @@ def stability_map(
     fixed = _fixed(model, speed_rad_s, load_n)
     for a in (x_axis, y_axis):
         fixed.pop(a, None)
-    grid = dict(fixed, **{x_axis: x[None, :], y_axis: y[:, None]})
+    grid: dict[str, Any] = dict(fixed, **{x_axis: x[None, :], y_axis: y[:, None]})
     speed, load = grid.pop("speed_rad_s"), grid.pop("load_n")
     gf = growth_field(model, speed, load, progress=progress, **grid)
     g = gf.max_growth_rate

@@ -9,8 +9,10 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.optimize import minimize_scalar
 
 from ..physics.parameters import ParameterError, field_info
@@ -136,7 +138,7 @@ def _unit_suffix(axis: str) -> str:
 def sweep(
     model: SqueakModel,
     axis: str,
-    values,
+    values: ArrayLike,
     speed_rad_s: float | None = None,
     load_n: float | None = None,
     progress: Callable[[int], None] | None = None,
@@ -199,7 +201,7 @@ def sweep(
     fixed = _fixed(model, speed_rad_s, load_n)
     fixed.pop(axis, None)
     if axis in OPERATING_AXES:
-        point = dict(fixed, **{axis: values})
+        point: dict[str, Any] = dict(fixed, **{axis: values})
         speeds, loads = np.broadcast_arrays(point["speed_rad_s"], point["load_n"])
         predictions, chunk = [], _chunk_points(2 * model.geometry.n)
         for start in range(0, values.size, chunk):

@@ -44,6 +44,7 @@ class Work:
         return max(1, min(MAX_POINTS, int(MAX_POINTS * scale)))
 
     def memory_bytes(self, points: int | None = None) -> float:
+        """Memory [bytes] that `points` predictions take (default: this batch's)."""
         n = self.points if points is None else points
         chunk = _chunk_points(self.state_size) * self.state_size**2 * 16 * 4  # eig workspace
         return n * self.bytes_per_point + chunk
