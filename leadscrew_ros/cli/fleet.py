@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 from ..model.physics.metadata import help_text
 from ..review.fleet import ClusterError, ClusterSettings
 from .args import CliError, Parser, build_model, finite, output_directory
-from .logs import REPLAY_INPUTS, _topic, add_input_options, replay_inputs
+from .logs import REPLAY_INPUTS, _topic, add_input_options, listen_settings, replay_inputs
 
 if TYPE_CHECKING:
     from ..review.fleet import FleetSettings
@@ -62,6 +62,7 @@ def _settings(args: argparse.Namespace) -> FleetSettings:
             use_log_params=args.use_log_params,
             report=not args.no_report,
             summary_only=args.summary_only,
+            listen=listen_settings(args, wav_must_exist=False),
         )
     except ValueError as exc:
         raise CliError(str(exc)) from None

@@ -22,6 +22,7 @@ from ..bag.logfile import (
 )
 from ..live.settings import JointSettings, LiveSettings
 from ..model.physics.metadata import help_text
+from ..review.listen import ListenSettings
 from ..review.replay import ReplaySettings
 from ..review.timeline import InputSettings
 from .args import (
@@ -47,6 +48,18 @@ REPLAY_SETTINGS = {
     if f.name in REPLAY_INPUTS
 }
 LIVE_OPTIONS = ("rate", "loop", "start_offset", "topics", "remap", "no_wait", "ros_args")
+# option dest -> ListenSettings field (the audio options of replay and review)
+AUDIO_OPTIONS = {
+    "audio_topic": "topic",
+    "audio_info_topic": "info_topic",
+    "audio_channel": "channel",
+    "audio_rate": "rate_hz",
+    "audio": "file",
+    "audio_start": "start_s",
+    "audio_scale": "scale_pa",
+    "compare_formulations": "compare_formulations",
+}
+LISTEN_SETTINGS = {f.name: f for f in fields(ListenSettings)}
 
 
 def _topic(name: str) -> str:
@@ -91,7 +104,45 @@ OFFLINE_OPTIONS = (
     "nominal_load_n",
     "warn_probability",
     "error_probability",
+    "no_audio",
+    *AUDIO_OPTIONS,
 )
+
+
+def listen_settings(args: argparse.Namespace, wav_must_exist: bool = True) -> ListenSettings:
+    """ListenSettings of the audio options (`add_audio_options`); CliError for options that
+    exclude each other or values out of range (and, with `wav_must_exist`, a missing WAV)."""
+    given = {
+        dest: getattr(args, dest)
+        for dest in AUDIO_OPTIONS
+        if getattr(args, dest) not in (None, False)
+    }
+    option = {dest: "--" + dest.replace("_", "-") for dest in AUDIO_OPTIONS}
+    if args.no_audio and given:
+        raise CliError(f"{option[next(iter(given))]} and --no-audio exclude each other")
+    if "audio" in given:
+        for dest in ("audio_topic", "audio_info_topic", "audio_rate"):
+            if dest in given:
+                raise CliError(
+                    f"{option[dest]} is for the log's audio topics, not --audio FILE.wav"
+                )
+        if wav_must_exist and not Path(args.audio).is_file():
+            raise CliError(f"--audio {args.audio}: no such file")
+    elif "audio_start" in given:
+        raise CliError("--audio-start needs --audio FILE.wav")
+    try:
+        return ListenSettings(
+            enabled=not args.no_audio, **{AUDIO_OPTIONS[dest]: v for dest, v in given.items()}
+        )
+    except ValueError as exc:
+        text = str(exc)
+        for dest, name in AUDIO_OPTIONS.items():
+            text = (
+                text.replace(f"{name} = ", f"{option[dest]} = ", 1)
+                if text.startswith(f"{name} = ")
+                else text
+            )
+        raise CliError(f"argument {text}") from None
 
 
 def _publish(args: argparse.Namespace) -> int:
@@ -141,6 +192,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
             out_namespace=args.out_namespace and _topic(args.out_namespace),
             workers=args.workers,
             progress=not args.quiet,
+            listen=listen_settings(args),
         )
     except ValueError as exc:
         raise CliError(str(exc)) from None
@@ -387,7 +439,84 @@ def add_input_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
         "(a load topic in the log overrides it)",
     )
     g.add_argument("--no-report", action="store_true", help="skip the PNG report")
+    add_audio_options(p)
     return g
+
+
+def _listen_help(name: str, description: str | None = None) -> str:
+    """argparse help of the audio option that sets ListenSettings field `name`."""
+    f = LISTEN_SETTINGS[name]
+    text = (
+        (description or f.metadata["description"])
+        if isinstance(f.default, str)
+        else help_text(f, description)
+    )
+    return text.replace("%", "%%")
+
+
+def add_audio_options(p: argparse.ArgumentParser) -> None:
+    """The audio options of the offline replay and the review (`listen_settings`): where the
+    sound of the drive is, its scale, the comparison of the formulations."""
+    g = p.add_argument_group("heard vs predicted (the log's microphone; summary.json heard)")
+    g.add_argument(
+        "--audio-topic",
+        metavar="TOPIC",
+        help=_listen_help(
+            "topic",
+            "audio topic: ros-drivers AudioDataStamped, mgonzs13 AudioStamped or "
+            "std_msgs/Float32MultiArray (default: the log's only audio-typed topic; "
+            "several are listed in the summary's warnings)",
+        ),
+    )
+    g.add_argument(
+        "--audio-info-topic",
+        metavar="TOPIC",
+        help=_listen_help(
+            "info_topic",
+            "ros-drivers AudioInfo topic (default <audio topic>_info, else the "
+            "log's only AudioInfo topic)",
+        ),
+    )
+    g.add_argument("--audio-channel", type=int, metavar="K", help=_listen_help("channel"))
+    g.add_argument(
+        "--audio-rate",
+        type=finite,
+        metavar="HZ",
+        help=_listen_help(
+            "rate_hz", "sample rate of std_msgs/Float32MultiArray audio, which carries none"
+        ),
+    )
+    g.add_argument(
+        "--audio",
+        metavar="FILE.wav",
+        help=_listen_help(
+            "file",
+            "a WAV file recorded beside the log, read instead of its audio topics "
+            "(review: a relative path is taken beside each log)",
+        ),
+    )
+    g.add_argument(
+        "--audio-start",
+        type=finite,
+        metavar="S",
+        help=_listen_help(
+            "start_s", "with --audio: its first sample's time after the log's first message"
+        ),
+    )
+    g.add_argument("--audio-scale", type=finite, metavar="PA", help=_listen_help("scale_pa"))
+    g.add_argument(
+        "--no-audio", action="store_true", help="ignore the log's sound (no heard vs predicted)"
+    )
+    g.add_argument(
+        "--compare-formulations",
+        action="store_true",
+        help=_listen_help(
+            "compare_formulations",
+            "also predict the log with the other friction formulation "
+            "(paper, consistent): agreement_by_formulation in summary.json, "
+            "which describes the drive better in summary.txt",
+        ),
+    )
 
 
 def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:

@@ -6,10 +6,12 @@ The function `replay` is not re-exported here: `review.replay` stays the module 
 
 from .fleet import FleetRun, FleetSettings, review_logs
 from .fleetreport import write_fleet
+from .listen import Heard, ListenSettings
 from .plots import (
     plot_fleet,
     plot_frequencies,
     plot_friction,
+    plot_heard,
     plot_map,
     plot_sweep,
     plot_timeline,
@@ -23,12 +25,15 @@ from .timeline import InputSettings
 __all__ = [
     "FleetRun",
     "FleetSettings",
+    "Heard",
     "InputSettings",
+    "ListenSettings",
     "ReplayResult",
     "ReplaySettings",
     "plot_fleet",
     "plot_frequencies",
     "plot_friction",
+    "plot_heard",
     "plot_map",
     "plot_sweep",
     "plot_timeline",

@@ -53,6 +53,7 @@ from ..model.physics.metadata import check, setting
 from ..model.uncertainty.scatter import LIVE_SAMPLES, Scatter
 from .decimation import Reservoir
 from .jsonsafe import json_safe
+from .listen import CLIPS_DIR, ListenSettings
 from .progress import progress_bar
 from .replay import ReplayResult, ReplaySettings, log_name, replay
 from .timeline import InputSettings
@@ -95,6 +96,8 @@ class FleetSettings:
         Write each log's PNG report.
     summary_only : bool
         Keep only summary.json and summary.txt of each log.
+    listen : ListenSettings
+        Where each log's sound is (a relative WAV file beside each log) and its scale.
     """
 
     params: ScrewParameters = field(default_factory=ScrewParameters)
@@ -107,6 +110,7 @@ class FleetSettings:
     use_log_params: bool = False
     report: bool = True
     summary_only: bool = False
+    listen: ListenSettings = field(default_factory=ListenSettings)
 
     def __post_init__(self) -> None:
         ReplaySettings(self.inputs, self.namespace, self.out_namespace)  # checks the names
@@ -123,6 +127,7 @@ class FleetSettings:
         out = {f.name: getattr(self, f.name) for f in fields(self)}
         out["params"] = self.params.as_dict()
         out["inputs"] = asdict(self.inputs)
+        out["listen"] = asdict(self.listen)
         out["package_version"] = __version__
         return json_safe(out)
 
@@ -332,6 +337,28 @@ def error_row(log: Path, name: str, error: str, unit_id: str | None = None) -> d
     }
 
 
+def heard_columns(summary: dict[str, Any]) -> dict[str, Any]:
+    """The fleet row's heard-vs-predicted columns from a replay's summary: heard squeak time
+    [s] (in the span the agreement counts), recall, precision, Brier score and the distinct
+    heard frequencies [Hz] (each episode's, within 3 % of a lower one dropped); None
+    without sound."""
+    heard = summary["heard"]
+    if heard is None:
+        return dict.fromkeys(("heard_s", "recall", "precision", "brier", "heard_frequencies_hz"))
+    a = heard["agreement"]
+    freqs: list[float] = []
+    for f in sorted(e["frequency_hz"] for e in heard["episodes"]):
+        if not freqs or f > freqs[-1] * 1.03:
+            freqs.append(f)
+    return {
+        "heard_s": a["both_s"] + a["heard_only_s"],
+        "recall": a["recall"],
+        "precision": a["precision"],
+        "brier": a["brier"],
+        "heard_frequencies_hz": freqs,
+    }
+
+
 def _row(
     log: Path, name: str, unit_id: str, model: SqueakModel, result: ReplayResult
 ) -> dict[str, Any]:
@@ -359,6 +386,7 @@ def _row(
         "time_above_error_s": s["time_above_error_s"],
         "messages": s["messages"],
         "predictions": s["predictions"],
+        **heard_columns(s),
         "formulation": model.params.formulation,
         "wall_s": s["wall_s"],
     }
@@ -462,7 +490,12 @@ def review_one(
             model,
             out,
             ReplaySettings(
-                inputs, settings.namespace, settings.out_namespace, workers=0, progress=False
+                inputs,
+                settings.namespace,
+                settings.out_namespace,
+                workers=0,
+                progress=False,
+                listen=settings.listen.beside(path),
             ),
         )
         note = "; ".join(n for n in (note, result.metadata_problem) if n)
@@ -470,7 +503,8 @@ def review_one(
         if settings.summary_only:
             for p in result.outputs[:2]:
                 p.unlink(missing_ok=True)
-            shutil.rmtree(out / RECOVERED_DIR, ignore_errors=True)
+            for d in (RECOVERED_DIR, CLIPS_DIR):
+                shutil.rmtree(out / d, ignore_errors=True)
         elif settings.report:
             from .report import write_report
 

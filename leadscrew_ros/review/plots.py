@@ -11,7 +11,8 @@ caller saves (`fig.savefig(path, dpi=...)`).
   `plot_friction` (the friction law of the parameters), `plot_transient` (a `TransientResult`
   with its `TransientAnalysis`): the model's results have no `plot` method, as `model` may not
   import this layer (matplotlib is a review dependency); they are plotted here;
-- `plot_timeline` (a `ReplayResult`, also `ReplayResult.plot`) and `plot_fleet` (a `FleetRun`).
+- `plot_timeline` (a `ReplayResult`, also `ReplayResult.plot`; with sound its `plot_heard`
+  panel) and `plot_fleet` (a `FleetRun`).
 
 matplotlib is imported where a figure is drawn, never at import: importing this module (e.g.
 for `map --json`) neither loads matplotlib nor selects a backend. New figures are
@@ -42,6 +43,7 @@ if TYPE_CHECKING:
     from ..model.nonlinear.transient import TransientResult
     from ..model.nonlinear.transient_analysis import TransientAnalysis
     from .fleet import FleetRun
+    from .listen import Heard
     from .replay import ReplayResult
 
 Overlay = Callable[["Axes"], list]  # draws on a finished plot, returns legend handles
@@ -641,11 +643,94 @@ def _probability_panel(result: ReplayResult, axes: Sequence[Axes]) -> None:
     ax.set_xlabel("time since the log's first message [s]")
 
 
+HEARD_COLOR = "lime"
+_HEARD_MARKED = 500  # heard episodes drawn (the first ones)
+
+
+def _edges(centres: np.ndarray) -> np.ndarray:
+    """Cell edges around increasing centres (half-way between them, mirrored at the ends)."""
+    if centres.size == 1:
+        return np.array([centres[0] - 0.5, centres[0] + 0.5])
+    mid = (centres[1:] + centres[:-1]) / 2
+    return np.r_[2 * centres[0] - mid[0], mid, 2 * centres[-1] - mid[-1]]
+
+
+def plot_heard(heard: Heard, *, ax: Axes | None = None) -> Figure:
+    """The sound and the predictions: spectrogram (`listen.Spectrogram`, log frequency axis
+    89 Hz - 11.2 kHz, the band maxima of bounded frames), the predicted squeak frequencies over
+    it coloured by P(squeak), the heard episodes marked at their frequency.
+
+    Parameters
+    ----------
+    heard : Heard
+        What the replay heard (`ReplayResult.heard`).
+    ax : Axes, optional
+        The axes to draw into; default: a new figure.
+
+    Returns
+    -------
+    Figure
+        The figure drawn into.
+    """
+    from .listen import SPECTROGRAM_F_HZ
+
+    fig, ax = _axes(ax, figsize=(10, 3.2), layout="constrained")
+    sg = heard.spectrogram
+    if sg.times_s.size:
+        level = np.ma.masked_invalid(sg.level_db.T)
+        top = float(level.max()) if level.count() else 0.0
+        mesh = ax.pcolormesh(
+            _edges(sg.times_s),
+            sg.edges_hz,
+            level,
+            cmap="gray_r",
+            vmin=top - 80.0,
+            vmax=top,
+            shading="flat",
+            rasterized=True,
+        )
+        cax = ax.inset_axes((1.09, 0.0, 0.012, 1.0))
+        unit = "Pa" if heard.scale == "Pa" else "FS"
+        fig.colorbar(mesh, cax=cax, label=f"PSD [dB re 1 {unit}²/Hz]")
+    handles: list[Any] = []
+    pts = heard.squeak_points
+    if len(pts):
+        sc = ax.scatter(
+            pts[:, 0],
+            pts[:, 1],
+            c=np.nan_to_num(pts[:, 2]),
+            s=5,
+            cmap="plasma",
+            vmin=0.0,
+            vmax=1.0,
+            lw=0,
+            label="predicted squeak modes",
+        )
+        handles.append(sc)
+        cax = ax.inset_axes((1.005, 0.0, 0.012, 1.0))
+        fig.colorbar(sc, cax=cax, label="P(squeak)")
+    for k, e in enumerate(heard.detection.episodes[:_HEARD_MARKED]):
+        line = ax.hlines(
+            e.frequency_hz, e.start_s, e.end_s, colors=HEARD_COLOR, lw=3, label="heard episodes"
+        )
+        ax.axvspan(e.start_s, e.end_s, ymax=0.04, color=HEARD_COLOR, lw=0)
+        handles += [line] if k == 0 else []
+    ax.set_yscale("log")
+    ax.set_ylim(*SPECTROGRAM_F_HZ)
+    ax.set_ylabel("frequency [Hz]")
+    ax.set_xlabel("time since the log's first message [s]")
+    ax.set_title(heard.text()[0], fontsize=9)
+    if handles:
+        ax.legend(handles=handles, loc="upper left", fontsize=7, framealpha=0.8)
+    return fig
+
+
 def plot_timeline(result: ReplayResult, *, fig: Figure | None = None) -> Figure:
     """A replay over time: speed, load, nut position (only when the log has a nut input) and
     P(squeak), squeak at the nominal parameters shaded; the P(squeak) panel has the WARN and
     ERROR probabilities as dashed lines, bars under the curve where P was at or above them and
-    the peak marked. Drawn from the replay's binned series (min-max band per bin).
+    the peak marked. Drawn from the replay's binned series (min-max band per bin). With sound,
+    a `plot_heard` panel above P(squeak).
 
     Parameters
     ----------
@@ -665,9 +750,20 @@ def plot_timeline(result: ReplayResult, *, fig: Figure | None = None) -> Figure:
     panels = [(0, "speed [rad/s]", 1.0), (1, "axial load [N]", 1.0)]
     if tl.nut_measured:
         panels.append((2, "nut position [mm]", 1e3))
+    heard = result.heard
+    rows = len(panels) + 1 + (heard is not None)
     if fig is None:
-        fig = new_figure(figsize=(10, 2.1 * (len(panels) + 1) + 0.2), layout="constrained")
-    axes = fig.subplots(len(panels) + 1, 1, sharex=True)
+        fig = new_figure(
+            figsize=(10, 2.1 * rows + 0.2 + (1.0 if heard else 0.0)), layout="constrained"
+        )
+    axes = list(
+        fig.subplots(
+            rows,
+            1,
+            sharex=True,
+            height_ratios=[1] * len(panels) + [1.6] * (heard is not None) + [1],
+        )
+    )
     for ax, (k, label, factor) in zip(axes, panels, strict=False):
         ax.fill_between(
             t,
@@ -679,6 +775,10 @@ def plot_timeline(result: ReplayResult, *, fig: Figure | None = None) -> Figure:
             lw=0.7,
         )
         ax.set_ylabel(label)
+    if heard is not None:
+        sound = axes.pop(-2)
+        plot_heard(heard, ax=sound)
+        sound.set_xlabel("")
     _probability_panel(result, axes)
     for ax in axes:
         ax.grid(alpha=0.3)
@@ -700,7 +800,8 @@ _NAMED_BARS = 40  # up to this many logs the time-in-squeak panel names each one
 
 def plot_fleet(run: FleetRun, *, fig: Figure | None = None) -> Figure:
     """Four panels of a fleet's squeak: share of logs that squeak, squeak frequencies, time in
-    squeak per log, where in speed x load the fleet squeaked.
+    squeak per log, where in speed x load the fleet squeaked; when logs have sound, two more:
+    heard vs predicted squeak time per log, and heard against predicted frequencies.
 
     Parameters
     ----------
@@ -716,8 +817,16 @@ def plot_fleet(run: FleetRun, *, fig: Figure | None = None) -> Figure:
     """
     ok = [r for r in run.rows if r["status"] == "ok"]
     squeaks = [r for r in ok if r["episodes"]]
-    fig = fig if fig is not None else new_figure(figsize=(12, 8.5), layout="constrained")
-    (a, b), (c, d) = fig.subplots(2, 2)
+    heard = [r for r in ok if r.get("heard_s") is not None]
+    fig = (
+        fig
+        if fig is not None
+        else new_figure(figsize=(12, 12.5 if heard else 8.5), layout="constrained")
+    )
+    panels = fig.subplots(3 if heard else 2, 2)
+    (a, b), (c, d) = panels[:2]
+    if heard:
+        _heard_panels(heard, *panels[2])
     counts = [len(squeaks), len(ok) - len(squeaks), run.failed]
     bars = a.bar(["squeak", "no squeak", "error"], counts, color=["C3", "C2", "0.6"])
     a.bar_label(bars, [f"{n} ({100 * n / max(len(run.rows), 1):.0f} %)" for n in counts])
@@ -746,3 +855,36 @@ def plot_fleet(run: FleetRun, *, fig: Figure | None = None) -> Figure:
     d.set_title("where the fleet squeaked (sample of predictions)")
     fig.suptitle(f"fleet review: {len(run.rows)} logs, {run.failed} errors")
     return fig
+
+
+def _heard_panels(rows: list[dict], e: Axes, f: Axes) -> None:
+    """Heard vs predicted squeak time per log (`e`) and the logs' heard and predicted squeak
+    frequencies (`f`)."""
+    predicted = np.array([r["time_in_squeak_s"] for r in rows], float)
+    heard = np.array([r["heard_s"] for r in rows], float)
+    e.scatter(predicted, heard, s=14, color="C0")
+    top = max(float(predicted.max(initial=0.0)), float(heard.max(initial=0.0)), 1e-3) * 1.05
+    e.plot([0, top], [0, top], color="0.5", ls="--", lw=1, label="heard = predicted")
+    if len(rows) <= _NAMED_BARS:
+        for r, x, y in zip(rows, predicted, heard, strict=True):
+            e.annotate(r["unit_id"], (x, y), fontsize=6, xytext=(2, 2), textcoords="offset points")
+    e.set_xlabel("predicted squeak time [s]")
+    e.set_ylabel("heard squeak time [s]")
+    e.legend(fontsize=7)
+    e.set_title(f"heard vs predicted squeak per log ({len(rows)} logs with sound)")
+    heard_hz = [hz for r in rows for hz in r["heard_frequencies_hz"] or []]
+    predicted_hz = [hz for r in rows for hz in r["squeak_frequencies_hz"] or []]
+    values = [v for v in heard_hz + predicted_hz if v > 0]
+    if values:
+        bins = np.geomspace(min(values) / 1.05, max(values) * 1.05, 40).tolist()
+        f.hist(
+            [predicted_hz, heard_hz],
+            bins=bins,
+            color=["C3", "C0"],
+            label=["predicted (per log, per mode)", "heard (per log)"],
+        )
+        f.set_xscale("log")
+        f.legend(fontsize=7)
+    f.set_xlabel("squeak frequency [Hz]")
+    f.set_ylabel("logs")
+    f.set_title("heard against predicted squeak frequencies")

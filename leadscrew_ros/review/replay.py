@@ -57,6 +57,7 @@ from ..model import Prediction, SqueakModel, Validity
 from ..model.uncertainty.scatter import LOG_NORMAL
 from .decimation import Envelope, Reservoir
 from .jsonsafe import json_safe
+from .listen import Heard, ListenSettings, PredictionTrace, SpeedTrace, listen, write_heard
 from .plots import plot_timeline
 from .progress import progress_bar
 from .timeline import (
@@ -102,6 +103,8 @@ class ReplaySettings:
         Prediction processes for long logs (0: all in this process).
     progress : bool
         A progress bar on stderr (a terminal only).
+    listen : ListenSettings
+        Where the sound of the drive is, its scale, the comparison of formulations.
     """
 
     inputs: InputSettings = field(default_factory=InputSettings)
@@ -112,6 +115,7 @@ class ReplaySettings:
     # mostly at rest) the second one idles.
     workers: int = 2
     progress: bool = True
+    listen: ListenSettings = field(default_factory=ListenSettings)
 
     def __post_init__(self) -> None:
         for what, ns in (("namespace", self.namespace), ("output namespace", self.out_namespace)):
@@ -296,6 +300,11 @@ class ReplayResult:
         Wall time of the replay [s].
     outputs : list of Path
         The files written.
+    heard : Heard or None
+        What the microphone heard and how the predictions agree with it (`listen`); None
+        without sound.
+    audio_warnings : list of str
+        Why the log's audio was not analysed, if it was not.
     metadata_problem : str
         What is wrong with the bag directory's metadata.yaml, and how to mend it ('' if
         nothing, or not a bag directory): the files were read, but other tools refuse it.
@@ -328,6 +337,8 @@ class ReplayResult:
     scatter_samples: int = 0
     wall_s: float = math.nan
     outputs: list[Path] = field(default_factory=list)
+    heard: Heard | None = None
+    audio_warnings: list[str] = field(default_factory=list)
     metadata_problem: str = ""
 
     def plot(self, fig: Figure | None = None) -> Figure:
@@ -357,7 +368,7 @@ class ReplayResult:
             )
         for topic, n in sorted(tl.duplicates.items()):
             out.append(f"log time repeats {n} time(s) on {topic} (the later value applied)")
-        return out
+        return out + self.audio_warnings
 
     @property
     def x_real_time(self) -> float:
@@ -402,6 +413,9 @@ class ReplayResult:
             },
             "metadata_problem": self.metadata_problem,
             "warnings": self.warnings,
+            "heard": self.heard.as_dict() if self.heard else None,
+            "agreement_by_formulation": self.heard.by_formulation_dict() if self.heard else None,
+            "detect_wall_s": self.heard.detect_s if self.heard else None,
             "squeak_share": self._share(self.time_in_squeak_s),
             "warn_share": self._share(self.probability.above_warn_s),
             "wall_s": self.wall_s,
@@ -468,6 +482,7 @@ class ReplayResult:
             self.probability_text(),
             self.scatter_text(),
         ]
+        lines += self.heard.text() if self.heard else []
         examples = {**self.timeline.rejected_example, **self.timeline.ignored_example}
         for title, counts in (
             ("no prediction (outside the model's validity)", self.no_prediction),
@@ -798,10 +813,18 @@ class _Run:
         out: _AnnotatedWriter,
         episodes: TextIO,
         progress: Callable[[int], None] | None,
+        listening: bool = False,
         types: dict[str, list[str]] | None = None,
     ):
         self.out, self.progress = out, progress
         self.timeline = Timeline(model.params, inputs, types)
+        # for `listen`: the recomputes and the speed samples, compact
+        self.trace = PredictionTrace() if listening else None
+        self.speeds = SpeedTrace()
+        resolved = self.timeline.settings
+        self._speed_topics = (
+            {resolved.speed_topic, resolved.joint_states_topic} if listening else set()
+        )
         self.solver = _Solver(model, workers)
         self.plot_data = PlotData()
         self.episodes = _Episodes(episodes, inputs.warn_probability, inputs.error_probability)
@@ -823,6 +846,8 @@ class _Run:
         job = self.timeline.feed(m, len(seg.messages) - 1)
         if job is not None:
             seg.jobs.append(job)
+        if m.topic.name in self._speed_topics and self.timeline.speed is not None:
+            self.speeds.add(self.timeline.seconds(self.timeline.now_ns), self.timeline.speed)
         if len(seg.jobs) >= _BATCH_JOBS or len(seg.messages) >= _SEGMENT_MESSAGES:
             self._seal()
             while self.queue and (self.queue[0].done() or self.held > _IN_FLIGHT_MESSAGES):
@@ -862,6 +887,8 @@ class _Run:
                     self.no_prediction[p.validity.label] += 1
                 self.plot_data.add(t, job, p)
                 self.episodes.add(t, p)
+                if self.trace is not None:
+                    self.trace.add(t, job, p)
                 job, p, payloads = next(jobs, (None, None, None))
         if self.progress is not None:
             self.progress(len(seg.messages))
@@ -948,6 +975,7 @@ def replay(
                 _AnnotatedWriter(fh, out_namespace),
                 eh,
                 bar if show else None,
+                settings.listen.enabled,
                 topic_types(source),
             )
             for f, m in source.messages():
@@ -967,6 +995,22 @@ def replay(
         if run is not None:
             run.solver.close()
     tl = run.timeline
+    heard, audio_warnings = (
+        (None, [])
+        if run.trace is None
+        else listen(
+            log,
+            log_topics(source),
+            out_dir,
+            settings.listen,
+            run.trace,
+            run.speeds,
+            run.duration_s,
+            model,
+            solve,
+            _BATCH_JOBS,
+        )
+    )
     result = ReplayResult(
         log=log,
         files=source.files,
@@ -993,12 +1037,20 @@ def replay(
         error_probability=inputs.error_probability,
         scatter=dict(model.scatter.sd),
         scatter_samples=model.sample_count,
+        heard=heard,
+        audio_warnings=audio_warnings,
         metadata_problem=metadata_problem(log, source.infos) if log.is_dir() else "",
     )
+    if heard is not None:
+        with open(annotated, "r+b") as fh:
+            writer = McapOut.reopen(fh)
+            write_heard(writer, out_namespace, heard, result.start_ns)
+            writer.finish()
     result.wall_s = time.perf_counter() - t0
     _write_json(out_dir / "summary.json", result.summary())
     (out_dir / "summary.txt").write_text(result.summary_text() + "\n", encoding="utf-8")
     result.outputs = [annotated, episodes, out_dir / "summary.json", out_dir / "summary.txt"]
+    result.outputs += [path for path, _ in heard.clips] if heard else []
     attach(result, [episodes, out_dir / "summary.json"], _metadata(result, model))
     return result
 

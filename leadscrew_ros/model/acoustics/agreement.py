@@ -7,7 +7,10 @@ node publishes); before the first prediction a frame counts as not predicted wit
 Only frames inside the span covered by both the sound (first to last frame) and the predictions
 (first prediction to `valid_until_s`, by default the last prediction) count, so a recording that
 starts before the predictor or outlasts it is not held against it. Frames whose P(squeak) is
-unknown (None or nan) count for the times but not for the Brier score.
+unknown (None or nan) count for the times but not for the Brier score. With a `collar_s`, frames
+closer than it to a heard episode's start or end are not counted either: the detector places an
+edge only to about half its frame (`DetectorSettings.frame_s`), and sound-event evaluations
+leave such a collar around onsets and offsets for the same reason (DCASE uses 200 ms).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .detection import Detection
 
@@ -101,8 +105,14 @@ class Agreement:
         return asdict(self)
 
 
-def _probabilities(probability: Sequence[float | None], n: int) -> np.ndarray:
-    p = np.array([math.nan if v is None else float(v) for v in probability], dtype=float)
+def _probabilities(probability: ArrayLike, n: int) -> np.ndarray:
+    p = np.array(
+        [
+            math.nan if v is None else float(v)
+            for v in np.ravel(np.asarray(probability, dtype=object))
+        ],
+        dtype=float,
+    )
     if p.size != n:
         raise ValueError(f"{p.size} probabilities for {n} prediction times")
     return p
@@ -112,10 +122,11 @@ def agreement(
     detection: Detection,
     pred_times_s: Any,
     predicted_squeak: Any,
-    probability: Sequence[float | None],
+    probability: ArrayLike,
     predicted_modes: Sequence[Sequence[tuple[str, float]]],
     *,
     valid_until_s: float | None = None,
+    collar_s: float = 0.0,
 ) -> Agreement:
     """Compare the predictions with what the detector heard.
 
@@ -133,6 +144,8 @@ def agreement(
         Per prediction: (label, frequency [Hz]) of its squeaking modes.
     valid_until_s : float, optional
         End of the span the predictions cover (default: the last prediction's time).
+    collar_s : float
+        Frames closer than this to a heard episode's start or end are not counted [s].
 
     Returns
     -------
@@ -157,6 +170,14 @@ def agreement(
         return Agreement(0.0, 0.0, 0.0, 0.0, None, None, None)
     end = tp[-1] if valid_until_s is None else float(valid_until_s)
     counted = (t >= max(t[0], tp[0])) & (t <= min(t[-1], end))
+    if collar_s > 0 and detection.episodes:
+        edges = np.sort([x for e in detection.episodes for x in (e.start_s, e.end_s)])
+        k = np.searchsorted(edges, t)
+        near = np.minimum(
+            np.abs(t - edges[np.maximum(k - 1, 0)]),
+            np.abs(t - edges[np.minimum(k, edges.size - 1)]),
+        )
+        counted &= near >= collar_s
     j = np.searchsorted(tp, t, side="right") - 1  # prediction in force, -1: none yet
     pred = np.where(j >= 0, squeak[np.maximum(j, 0)], False)
     prob = np.where(j >= 0, p[np.maximum(j, 0)], 0.0)

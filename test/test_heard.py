@@ -1,0 +1,410 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Heard vs predicted in the replay and the review (`review.listen`): virtual-bench logs heard
+at their unit's squeak frequency with recall and precision >= 0.95 by the unit's own model,
+--compare-formulations ranking the bench's formulation first (both formulations), no sound ->
+heard null, a WAV beside the log and Float32MultiArray = the topic, hostile audio -> a warning
+and never a traceback, the annotated log's heard topics and clips, the fleet's columns = each
+log's summary, the CLI's one-line errors."""
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from scipy.io import wavfile
+
+from harness.audio_logs import (
+    DRIVERS_DATA,
+    as_float32_multi_array,
+    rewrite,
+    samples_of,
+    with_wav_beside,
+)
+from leadscrew_ros.bag import audiomsgs
+from leadscrew_ros.bag.virtual_bench import MIC_INFO_TOPIC, MIC_TOPIC, START_NS, BenchSettings, run
+from leadscrew_ros.cli import main
+from leadscrew_ros.model import ScrewParameters, SqueakModel
+from leadscrew_ros.review.listen import (
+    CLIP_PAD_S,
+    COLLAR_S,
+    ListenSettings,
+    PredictionTrace,
+    SpeedTrace,
+)
+from leadscrew_ros.review.replay import ReplaySettings, replay
+
+FORMULATIONS = ("paper", "consistent")
+OTHER = {"paper": "consistent", "consistent": "paper"}
+
+
+@pytest.fixture(scope="module", params=FORMULATIONS)
+def bench(request, tmp_path_factory):
+    """One unit, a 12 s stroke, made with each formulation: (formulation, bag, its truth)."""
+    out = tmp_path_factory.mktemp(f"bench-{request.param}")
+    truth = run(BenchSettings(units=1, duration_s=12.0, formulation=request.param, seed=0), out)
+    unit = truth["units"][0]
+    return request.param, out / unit["log"], unit
+
+
+@pytest.fixture(scope="module")
+def paper_bench(tmp_path_factory):
+    """Two paper units, 6 s strokes (the quick cases)."""
+    out = tmp_path_factory.mktemp("bench-short")
+    truth = run(BenchSettings(units=2, duration_s=6.0, seed=1), out)
+    return [out / u["log"] for u in truth["units"]], truth
+
+
+def _replay(log, out, params=None, **listen):
+    return replay(
+        log,
+        SqueakModel(params or ScrewParameters()),
+        out,
+        ReplaySettings(workers=0, progress=False, listen=ListenSettings(**listen)),
+    )
+
+
+def _summary(out: Path) -> dict:
+    return json.loads((out / "summary.json").read_text())
+
+
+def test_bench_log_heard_at_the_units_frequency_by_its_own_model(bench, tmp_path):
+    """The unit's own parameters (truth.json) in the bench's formulation: the replay hears the
+    tone where the unit squeaks, at its frequency, and agrees with it."""
+    formulation, log, unit = bench
+    params = ScrewParameters(formulation=formulation).with_(**unit["params"])
+    result = _replay(log, tmp_path, params)
+    heard = _summary(tmp_path)["heard"]
+    assert heard["source"] == MIC_TOPIC and heard["sample_rate_hz"] == 48000
+    assert heard["scale"] == "full scale" and heard["level_unit"] == "dB re full scale"
+    assert heard["episodes"] and all(e["loudness_sone"] is None for e in heard["episodes"])
+    intervals = unit["squeak_intervals"]
+    for e in heard["episodes"]:
+        inside = [i for i in intervals if i["start_s"] - 0.1 <= e["start_s"] <= i["end_s"]]
+        assert inside, e
+        assert any(i["min_hz"] * 0.97 <= e["frequency_hz"] <= i["max_hz"] * 1.03 for i in inside), (
+            e,
+            inside,
+        )
+    a = heard["agreement"]
+    assert a["recall"] >= 0.95 and a["precision"] >= 0.95, a
+    assert a["brier"] < 0.05 and heard["collar_s"] == COLLAR_S
+    assert all(m["matched"] for m in a["frequency_match"]), a["frequency_match"]
+    text = (tmp_path / "summary.txt").read_text()
+    assert f"recall {a['recall']:.2f}, precision {a['precision']:.2f}" in text
+    assert "matches" in text and "uncalibrated: give --audio-scale PA" in text
+    assert result.heard.spectrogram.level_db.shape[1] == 160
+
+
+@pytest.mark.parametrize("replayed_with", ["own", "other"])
+def test_compare_formulations_ranks_the_benchs_first(bench, tmp_path, capsys, replayed_with):
+    """At the nominal parameters (what a unit's log is replayed with), replayed in either
+    formulation, the comparison names the bench's formulation."""
+    formulation, log, _ = bench
+    chosen = formulation if replayed_with == "own" else OTHER[formulation]
+    code = main(
+        [
+            "replay",
+            str(log),
+            "--out",
+            str(tmp_path),
+            "--formulation",
+            chosen,
+            "--compare-formulations",
+            "--no-report",
+            "--quiet",
+            "--workers",
+            "0",
+        ]
+    )
+    assert code == 0
+    s = _summary(tmp_path)
+    by = s["agreement_by_formulation"]
+    assert set(by) == set(FORMULATIONS)
+    assert by[chosen]["brier"] == s["heard"]["agreement"]["brier"]
+    assert by[formulation]["brier"] < by[OTHER[formulation]]["brier"]
+    assert (
+        f"{formulation} describes the drive better than {OTHER[formulation]}"
+        in (tmp_path / "summary.txt").read_text()
+    )
+
+
+def test_no_sound_is_heard_null(paper_bench, tmp_path):
+    log = rewrite(paper_bench[0][0], tmp_path / "in", lambda *_: [], "silent")
+    result = _replay(log, tmp_path / "out")
+    s = _summary(tmp_path / "out")
+    assert s["heard"] is None and s["agreement_by_formulation"] is None and s["warnings"] == []
+    assert result.heard is None
+    assert "heard squeak" not in (tmp_path / "out" / "summary.txt").read_text()
+    _replay(paper_bench[0][0], tmp_path / "off", enabled=False)  # --no-audio
+    assert _summary(tmp_path / "off")["heard"] is None
+
+
+def _same_heard(a: dict, b: dict) -> None:
+    assert len(a["episodes"]) == len(b["episodes"]) > 0
+    for x, y in zip(a["episodes"], b["episodes"], strict=True):
+        assert x["start_s"] == pytest.approx(y["start_s"], abs=0.011)
+        assert x["end_s"] == pytest.approx(y["end_s"], abs=0.011)
+        assert x["frequency_hz"] == pytest.approx(y["frequency_hz"], rel=1e-3)
+    for key in ("recall", "precision", "brier"):
+        assert a["agreement"][key] == pytest.approx(b["agreement"][key], abs=0.01)
+
+
+def test_wav_beside_the_log_and_float32_multi_array_give_the_topics_result(
+    paper_bench, tmp_path, capsys
+):
+    log = paper_bench[0][0]
+    _replay(log, tmp_path / "topic")
+    topic = _summary(tmp_path / "topic")["heard"]
+    bag, wav, start = with_wav_beside(log, tmp_path / "wav")
+    assert (
+        main(
+            [
+                "replay",
+                str(bag),
+                "--out",
+                str(tmp_path / "w"),
+                "--audio",
+                str(wav),
+                "--audio-start",
+                str(start),
+                "--no-report",
+                "--quiet",
+                "--workers",
+                "0",
+            ]
+        )
+        == 0
+    )
+    beside = _summary(tmp_path / "w")["heard"]
+    assert beside["source"] == str(wav)
+    _same_heard(beside, topic)
+    array = as_float32_multi_array(log, tmp_path / "f32")
+    _replay(array, tmp_path / "a", rate_hz=48000.0)
+    _same_heard(_summary(tmp_path / "a")["heard"], topic)
+    _replay(array, tmp_path / "norate")  # no rate: the predictions without it
+    s = _summary(tmp_path / "norate")
+    assert s["heard"] is None and any("carries no sample rate" in w for w in s["warnings"])
+
+
+def _f32(k, topic, data, t):
+    """F32LE samples, NaN in the 3rd chunk."""
+    if topic == MIC_INFO_TOPIC:
+        return [
+            (
+                topic,
+                audiomsgs.AUDIO_INFO,
+                audiomsgs.encode_audio_info(1, 48000, "F32LE", 0, "wave"),
+                t,
+            )
+        ]
+    stamp, x = samples_of(data)
+    x = x.astype("<f4")
+    if k == 4:
+        x[100:200] = np.nan
+    return [
+        (
+            topic,
+            audiomsgs.AUDIO_DATA_STAMPED,
+            audiomsgs.encode_audio_data_stamped(stamp, x.view(np.uint8)),
+            t,
+        )
+    ]
+
+
+def _info(fmt="S16LE", coding="wave", rate_after_3_s=48000):
+    """The AudioInfo messages changed: sample format, coding, the rate from 3 s on."""
+
+    def change(k, topic, data, t):
+        if topic == MIC_TOPIC:
+            return [(topic, audiomsgs.AUDIO_DATA_STAMPED, data, t)]
+        rate = rate_after_3_s if t >= START_NS + 3_000_000_000 else 48000
+        return [
+            (topic, audiomsgs.AUDIO_INFO, audiomsgs.encode_audio_info(1, rate, fmt, 0, coding), t)
+        ]
+
+    return change
+
+
+def _truncated(k, topic, data, t):
+    """The 2nd chunk empty, the 3rd cut by one byte."""
+    if topic == MIC_INFO_TOPIC:
+        return [(topic, audiomsgs.AUDIO_INFO, data, t)]
+    stamp, _ = samples_of(data)
+    raw = np.asarray(DRIVERS_DATA.decode(data)["audio"]["data"], np.uint8)
+    raw = raw[:0] if k == 2 else raw[:-1] if k == 4 else raw
+    return [
+        (topic, audiomsgs.AUDIO_DATA_STAMPED, audiomsgs.encode_audio_data_stamped(stamp, raw), t)
+    ]
+
+
+def _two_mics(k, topic, data, t):
+    if topic == MIC_INFO_TOPIC:
+        return [(topic, audiomsgs.AUDIO_INFO, data, t)]
+    return [(name, audiomsgs.AUDIO_DATA_STAMPED, data, t) for name in (MIC_TOPIC, "/mic2")]
+
+
+@pytest.mark.parametrize(
+    "change,heard,warning",
+    [
+        (_f32, True, "NaN/inf samples set to 0"),
+        (_info(fmt="S13LE"), False, "audio not analysed: "),
+        (_info(coding="mp3"), False, "coded as 'mp3' (compressed)"),
+        (_truncated, True, "empty audio messages"),
+        (_info(rate_after_3_s=44100), True, "sample rate changed from 48000 Hz to 44100 Hz"),
+        (_two_mics, False, "several audio topics, choose one: /mic2"),
+    ],
+    ids=["nan", "unknown-format", "mp3", "empty-truncated", "rate-change", "two-mics"],
+)
+def test_hostile_audio_is_a_warning_never_a_traceback(
+    paper_bench, tmp_path, capsys, change, heard, warning
+):
+    log = rewrite(paper_bench[0][0], tmp_path / "in", change)
+    code = main(
+        ["replay", str(log), "--out", str(tmp_path / "out"), "--no-report", "--workers", "0"]
+    )
+    out, err = capsys.readouterr()
+    assert code == 0 and "Traceback" not in out + err
+    s = _summary(tmp_path / "out")
+    assert (s["heard"] is not None) == heard
+    warnings = s["warnings"] + (s["heard"]["warnings"] if heard else [])
+    assert any(warning in w for w in warnings), warnings
+    assert all("\n" not in w for w in warnings)
+    if change is _truncated:
+        assert any("partial frame" in w for w in warnings), warnings
+
+
+def test_annotated_log_carries_the_heard_episodes_and_clips(paper_bench, tmp_path):
+    result = _replay(paper_bench[0][0], tmp_path)
+    episodes = result.heard.detection.episodes
+    assert episodes
+    with open(result.annotated, "rb") as fh:
+        reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+        attachments = {a.name: a for a in reader.iter_attachments()}
+        fh.seek(0)
+        got: dict = {"heard": [], "heard_frequency": []}
+        for _, channel, message, decoded in reader.iter_decoded_messages(
+            ["/replay/squeak/heard", "/replay/squeak/heard_frequency"]
+        ):
+            got[channel.topic.rsplit("/", 1)[1]].append(
+                ((message.log_time - result.start_ns) / 1e9, decoded.data)
+            )
+    flags = got["heard"]
+    assert flags[0][1] is False
+    assert [v for _, v in flags[1:]] == [True, False] * len(episodes)
+    for e, (on, off) in zip(episodes, zip(flags[1::2], flags[2::2], strict=True), strict=True):
+        assert on[0] == pytest.approx(e.start_s, abs=0.011)
+        assert off[0] == pytest.approx(e.end_s, abs=0.011)
+    while_heard = [hz for t, hz in got["heard_frequency"] if hz > 0]
+    assert while_heard and all(
+        any(abs(hz - e.frequency_hz) < 0.03 * e.frequency_hz for e in episodes)
+        for hz in while_heard
+    )
+    assert got["heard_frequency"][-1][1] == 0.0
+    clips = sorted((tmp_path / "clips").glob("*.wav"))
+    assert len(clips) == len(episodes)
+    for clip, e in zip(clips, episodes, strict=True):
+        assert attachments[f"clips/{clip.name}"].media_type == "audio/wav"
+        assert attachments[f"clips/{clip.name}"].data == clip.read_bytes()
+        rate, x = wavfile.read(clip)
+        assert x.size / rate == pytest.approx(e.end_s - e.start_s + 2 * CLIP_PAD_S, abs=0.01)
+    assert {"episodes.json", "summary.json"} <= set(attachments)
+    assert _summary(tmp_path)["heard"]["clips"] == [f"clips/{c.name}" for c in clips]
+
+
+def test_calibrated_levels_and_loudness(paper_bench, tmp_path):
+    pytest.importorskip("mosqito")
+    scale = paper_bench[1]["audio"]["audio_scale_pa_per_fs"]
+    _replay(paper_bench[0][1], tmp_path, scale_pa=scale)
+    heard = _summary(tmp_path)["heard"]
+    assert heard["scale"] == "Pa" and heard["level_unit"] == "dB SPL"
+    e = heard["episodes"][0]
+    assert e["level_db"] == pytest.approx(94.0, abs=1.5)  # the bench's squeak_spl_db
+    assert e["loudness_sone"] > 0
+    assert "levels in dB SPL" in (tmp_path / "summary.txt").read_text()
+
+
+def test_fleet_columns_are_each_logs_summary(paper_bench, tmp_path, capsys):
+    logs, _ = paper_bench
+    code = main(
+        [
+            "review",
+            *map(str, logs),
+            "--out",
+            str(tmp_path),
+            "--workers",
+            "1",
+            "--no-report",
+            "--quiet",
+            "--compare-formulations",
+        ]
+    )
+    assert code == 0
+    with open(tmp_path / "fleet.csv", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == len(logs)
+    for row in rows:
+        heard = _summary(tmp_path / row["name"])["heard"]
+        a = heard["agreement"]
+        assert float(row["heard_s"]) == a["both_s"] + a["heard_only_s"]
+        for key in ("recall", "precision", "brier"):
+            assert float(row[key]) == a[key]
+        freqs = [float(f) for f in row["heard_frequencies_hz"].split(";")]
+        assert freqs and all(
+            any(abs(f - e["frequency_hz"]) < 1e-9 for e in heard["episodes"]) for f in freqs
+        )
+    doc = json.loads((tmp_path / "fleet.json").read_text())
+    assert doc["parameters"]["listen"]["compare_formulations"] is True
+    assert (tmp_path / "fleet.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--audio-start", "1"], "--audio-start needs --audio FILE.wav"),
+        (["--no-audio", "--audio-topic", "/m"], "--audio-topic and --no-audio exclude each other"),
+        (["--audio", "missing.wav"], "--audio missing.wav: no such file"),
+        (["--audio", __file__, "--audio-rate", "8000"], "--audio-rate is for the log's audio"),
+        (["--audio-channel", "-1"], "--audio-channel = -1 is out of range"),
+        (["--audio-scale", "-2"], "--audio-scale = -2 is out of range"),
+    ],
+)
+def test_cli_audio_options_one_line_errors(paper_bench, tmp_path, capsys, args, message):
+    code = main(["replay", str(paper_bench[0][0]), "--out", str(tmp_path), *args])
+    _, err = capsys.readouterr()
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_traces_are_compact():
+    speed = SpeedTrace()
+    for k in range(1000):  # constant, then a step, then a ramp
+        speed.add(k * 0.01, 10.0 if k < 400 else 20.0 if k < 700 else 20.0 + (k - 700) * 0.1)
+    t, v = speed.arrays()
+    assert t.size < 340
+    truth = np.where(
+        np.arange(1000) < 400,
+        10.0,
+        np.where(np.arange(1000) < 700, 20.0, 20.0 + (np.arange(1000) - 700) * 0.1),
+    )
+    assert np.allclose(np.interp(np.arange(1000) * 0.01, t, v), truth, rtol=0.0021)
+    trace = PredictionTrace()
+    assert len(trace) == 0 and trace.squeak_points().shape == (0, 3)
+
+
+def test_the_listening_page_shows_what_the_example_prints(tmp_path):
+    """doc/user/listening.md's worked example is tools/listening_example.py's output."""
+    import importlib.util
+
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location(
+        "listening_example", root / "tools" / "listening_example.py"
+    )
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    page = (root / "doc" / "user" / "listening.md").read_text(encoding="utf-8")
+    shown = page.split("% listening_example: begin\n", 1)[1].split("\n% listening_example: end", 1)[
+        0
+    ]
+    assert shown == tool.example(tmp_path)
