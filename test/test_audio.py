@@ -9,7 +9,7 @@ import pytest
 from scipy.io import wavfile
 
 from leadscrew_ros.bag import audiomsgs, schema
-from leadscrew_ros.bag.audio import AudioError, AudioSettings, read_audio
+from leadscrew_ros.bag.audio import AudioError, AudioSettings, LiveAudio, read_audio
 from leadscrew_ros.bag.cdr import FLOAT64, encode_float64
 from leadscrew_ros.bag.recorder import Recorder, RecordSettings
 
@@ -387,3 +387,34 @@ def test_topic_choice(tmp_path):
     with pytest.raises(AudioError, match="/nope is not an AudioInfo topic"):
         read_audio(log, topic="/mic2", info_topic="/nope")
     assert read_audio(log, topic="/mic2", info_topic="/microphone_info").samples.size == 960
+
+
+def test_live_audio_decodes_chunks_with_the_latest_info():
+    """The node's AudioDataStamped decoder: the samples `read_audio` would give, at the rate of
+    the latest AudioInfo; no info yet, mp3, an unknown format or an empty chunk is a ValueError
+    (the listener counts it); a malformed AudioInfo keeps the last good one."""
+    live = LiveAudio(channel=1)
+    tone = (np.sin(np.arange(960) * 0.2) * 20000).astype("<i2")
+    stereo = np.column_stack([np.zeros_like(tone), tone]).ravel()
+    chunk = audiomsgs.encode_audio_data_stamped(1, stereo.tobytes())
+    with pytest.raises(ValueError, match="no AudioInfo yet"):
+        live(chunk)
+    live.info(audiomsgs.encode_audio_info(2, 48000, "S16LE"))
+    samples, rate = live(chunk)
+    assert rate == 48000.0 and samples.dtype == np.float32
+    np.testing.assert_array_equal(samples, tone / np.float32(32768))
+    live.info(b"\x00\x01\x00\x00")
+    assert live.error.startswith("AudioInfo not taken") and live(chunk)[1] == 48000.0
+    for info, problem in (
+        (audiomsgs.encode_audio_info(2, 16000, "S16LE", coding_format="mp3"), "mp3"),
+        (audiomsgs.encode_audio_info(2, 48000, "S13LE"), "unknown sample_format"),
+    ):
+        live.info(info)
+        with pytest.raises(ValueError, match=problem):
+            live(chunk)
+    live.info(audiomsgs.encode_audio_info(1, 44100, "F32LE"))
+    with pytest.raises(ValueError, match="empty"):
+        live(audiomsgs.encode_audio_data_stamped(1, b""))
+    live.channel = 0
+    samples, rate = live(audiomsgs.encode_audio_data_stamped(1, np.float32([0.5, -0.25]).tobytes()))
+    assert rate == 44100.0 and samples.tolist() == [0.5, -0.25]

@@ -300,3 +300,29 @@ def test_listener_places_chunks_on_the_clock():
         assert listener._detector.warnings[-1].startswith("audio discontinuity")
     finally:
         listener.close()
+
+
+def test_audio_common_classes_only_where_ros_drivers_audio_common_is_installed(monkeypatch):
+    """Not installed here: no audio_stamped input. With ros-drivers' audio_common_msgs its two
+    classes; with the incompatible package of the same name (no AudioDataStamped), none."""
+    import sys
+    import types
+
+    from leadscrew_ros.ros.node import audio_common_classes
+
+    assert audio_common_classes() is None
+    drivers = types.ModuleType("audio_common_msgs.msg")
+    drivers.AudioDataStamped, drivers.AudioInfo = (
+        type("AudioDataStamped", (), {}),
+        type("AudioInfo", (), {}),
+    )
+    package = types.ModuleType("audio_common_msgs")
+    package.msg = drivers
+    monkeypatch.setitem(sys.modules, "audio_common_msgs", package)
+    monkeypatch.setitem(sys.modules, "audio_common_msgs.msg", drivers)
+    assert audio_common_classes() == (drivers.AudioDataStamped, drivers.AudioInfo)
+    other = types.ModuleType("audio_common_msgs.msg")
+    other.AudioStamped, other.AudioInfo = type("AudioStamped", (), {}), drivers.AudioInfo
+    monkeypatch.setitem(sys.modules, "audio_common_msgs.msg", other)
+    package.msg = other
+    assert audio_common_classes() is None

@@ -243,7 +243,7 @@ def test_tables_list_every_node_setting_once():
 
 def test_topic_table_names_every_topic_of_the_node_with_its_type():
     from leadscrew_ros.bag import messages
-    from leadscrew_ros.ros.node import INPUTS, SOUND_INPUTS
+    from leadscrew_ros.ros.node import AUDIO_COMMON_TOPICS, INPUTS, SOUND_INPUTS
 
     rows = param_tables.topic_table().splitlines()[2:]
     topics = [r.split("`")[1] for r in rows]
@@ -252,6 +252,7 @@ def test_topic_table_names_every_topic_of_the_node_with_its_type():
         set(INPUTS)
         | set(messages.OUTPUT_TYPES)
         | set(SOUND_INPUTS)
+        | set(AUDIO_COMMON_TOPICS)
         | set(messages.LISTEN_TYPES)
         | {"/diagnostics"}
     )

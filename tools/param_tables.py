@@ -28,7 +28,7 @@ from leadscrew_ros.model.physics.metadata import default_text, range_text
 from leadscrew_ros.model.physics.parameters import ScrewParameters
 from leadscrew_ros.model.uncertainty.scatter import ScatterSettings
 from leadscrew_ros.ros import diagnostics
-from leadscrew_ros.ros.node import INPUTS, SOUND_INPUTS
+from leadscrew_ros.ros.node import AUDIO_COMMON_TOPICS, INPUTS, SOUND_INPUTS
 from leadscrew_ros.ros.parameters import (
     GROUPS,
     READ_ONLY_NOTE,
@@ -133,6 +133,18 @@ TOPICS = {
         "dimensions, the second of size > 1: interleaved channels, averaged); "
         "analysed on a thread of its own, never delaying a prediction",
     ),
+    "audio_stamped": (
+        "in, with `listen.enabled` where ros-drivers audio_common is installed",
+        "sensor data, depth `listen.queue_chunks`",
+        "sound chunks of audio_common's audio_capture node (PCM in the sample format of "
+        "`audio_info`; the first channel analysed), as `microphone`",
+    ),
+    "audio_info": (
+        "in, with `listen.enabled` where ros-drivers audio_common is installed",
+        "sensor data",
+        "channels, sample rate, sample format and coding of `audio_stamped` (a coding other "
+        "than wave/PCM: its chunks are counted as malformed)",
+    ),
     messages.HEARD: (
         "out, with `listen.enabled`",
         LATCHED,
@@ -199,6 +211,7 @@ def topic_types() -> dict[str, str]:
         **{t: type_name(c) for t, c in INPUTS.items()},
         **messages.OUTPUT_TYPES,
         **{t: type_name(k.msg_type) for t, k in SOUND_INPUTS.items()},
+        **AUDIO_COMMON_TOPICS,
         **messages.LISTEN_TYPES,
         diagnostics.TOPIC: "diagnostic_msgs/msg/DiagnosticArray",
     }

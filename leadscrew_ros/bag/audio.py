@@ -676,3 +676,71 @@ def _read_wav(path: Path, channel: int, start_s: float) -> AudioTrack:
     if x.size == 0:
         warnings.append("the WAV file holds no samples")
     return AudioTrack(np.ascontiguousarray(x), float(rate), float(start_s), str(path), warnings)
+
+
+class LiveAudio:
+    """The node's decoder of live ros-drivers AudioDataStamped chunks: the latest AudioInfo
+    (sample rate, channels, sample format, coding) gives their samples, as `read_audio` reads
+    them from a log (the same conversion, `_drivers`). rclpy-free: the node hands it the raw
+    CDR payloads, `info` those of AudioInfo and a call those of each chunk.
+
+    Parameters
+    ----------
+    channel : int
+        The channel analysed (0: the first).
+    """
+
+    def __init__(self, channel: int = 0) -> None:
+        self.channel = channel
+        self.error = ""  # why the last AudioInfo was not taken ('' if it was)
+        self._info: dict | None = None
+
+    def info(self, payload: bytes) -> None:
+        """Take an AudioInfo payload; a malformed one keeps the last good info (`error` says
+        why), as this runs in a subscription callback.
+
+        Parameters
+        ----------
+        payload : bytes
+            The CDR payload of an audio_common_msgs/msg/AudioInfo.
+        """
+        try:
+            self._info = audiomsgs.message_schema(audiomsgs.AUDIO_INFO).decode(payload)
+            self.error = ""
+        except ValueError as exc:
+            self.error = f"AudioInfo not taken: {exc}"
+
+    def __call__(self, payload: bytes) -> tuple[np.ndarray, float]:
+        """The samples of an AudioDataStamped payload.
+
+        Parameters
+        ----------
+        payload : bytes
+            The CDR payload of an audio_common_msgs/msg/AudioDataStamped.
+
+        Returns
+        -------
+        samples : numpy.ndarray
+            float32 in full scale (-1..1), the chosen channel.
+        rate : float
+            The sample rate [Hz] of the latest AudioInfo.
+
+        Raises
+        ------
+        ValueError
+            No AudioInfo yet, a coding other than PCM, an unknown sample format, an empty or
+            malformed payload (the listener counts it as malformed).
+        """
+        if self._info is None:
+            raise ValueError("no AudioInfo yet: sample rate and format unknown")
+        context = _Context(
+            Path("live"), "audio", self.channel, None, [(0, self._info)], "audio_info", _Problems()
+        )
+        try:
+            msg = audiomsgs.message_schema(audiomsgs.AUDIO_DATA_STAMPED).decode(payload)
+            chunk = _drivers(context, 0, msg)
+        except AudioError as exc:
+            raise ValueError(exc.problem) from None
+        if chunk is None:
+            raise ValueError("empty audio message")
+        return chunk.samples, float(chunk.key[0])

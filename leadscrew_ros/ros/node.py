@@ -59,6 +59,7 @@ from std_msgs.msg import Bool, Float32MultiArray, Float64, Float64MultiArray
 from std_srvs.srv import SetBool
 
 from ..bag import cdr, logmeta, messages, msgdefs
+from ..bag.audio import LiveAudio
 from ..bag.crash_recovery import CrashRecovery
 from ..bag.recorder import Recorder, RecordSettings, ensure_directory
 from ..live.listen import Decoder, Listener
@@ -160,6 +161,29 @@ def float32_chunk(data: bytes) -> tuple[np.ndarray, None]:
 # audio_common_msgs/AudioDataStamped where that package is importable, is one more entry here
 # with its decoder (samples and rate from the payload; `bag.audio` reads that format from logs).
 SOUND_INPUTS = {"microphone": SoundInput(Float32MultiArray, float32_chunk)}
+# ros-drivers audio_common (released into Jazzy, not on PyPI): where its `audio_common_msgs` is
+# importable, the node also hears the AudioDataStamped chunks of its audio_capture node, with
+# their AudioInfo (topic -> type; decoded by `bag.audio.LiveAudio`).
+AUDIO_COMMON_TOPICS = {
+    "audio_stamped": "audio_common_msgs/msg/AudioDataStamped",
+    "audio_info": "audio_common_msgs/msg/AudioInfo",
+}
+
+
+def audio_common_classes() -> tuple[type, type] | None:
+    """The message classes of ros-drivers audio_common where that package is installed.
+
+    Returns
+    -------
+    tuple of type or None
+        (AudioDataStamped, AudioInfo); None without the package, or with the incompatible
+        audio_common_msgs of the same name that has no AudioDataStamped.
+    """
+    try:
+        from audio_common_msgs.msg import AudioDataStamped, AudioInfo  # type: ignore[import-not-found]
+    except ImportError:
+        return None
+    return AudioDataStamped, AudioInfo
 
 
 def make_executor(context: Context | None = None) -> Executor:
@@ -273,6 +297,23 @@ class SqueakPredictorNode(Node):
                     event_callbacks=sub_events,
                 )
                 self._inputs[self.resolve_topic_name(topic)] = kind.msg_type
+            classes = audio_common_classes()
+            if classes is not None:
+                audio = LiveAudio()
+                stamped, info = classes
+                self.create_subscription(
+                    info, "audio_info", audio.info, sound, raw=True, event_callbacks=sub_events
+                )
+                self.create_subscription(
+                    stamped,
+                    "audio_stamped",
+                    partial(self._on_sound, decode=audio),
+                    sound,
+                    raw=True,
+                    event_callbacks=sub_events,
+                )
+                for topic, cls in (("audio_info", info), ("audio_stamped", stamped)):
+                    self._inputs[self.resolve_topic_name(topic)] = cls
             self.listen_pubs = {
                 topic: publisher(cls, topic) for topic, cls in LISTEN_CLASSES.items()
             }
