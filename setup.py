@@ -65,6 +65,7 @@ setup(
             "pytest-cov",  # scripts/run-tests.sh: --cov
             "coverage>=7.10",  # .coveragerc: patch = subprocess
             "pytest-timeout",  # setup.cfg: a hung test fails by name
+            "pytest-xdist",  # scripts/run-tests.sh: two worker processes
             "hypothesis",
             "sympy",
             "colcon-core",

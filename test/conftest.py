@@ -14,6 +14,12 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 # One domain per test process: test processes sharing a domain discover each other's
 # participants, and Fast DDS teardown was seen to deadlock then; 1..200, never the default 0.
 os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 200 + 1))
+# pytest-xdist workers (scripts/run-tests.sh: -n 2) inherit the session's domain: each takes
+# its own, 100 apart (Fast DDS allows 0..232).
+_worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+if _worker.startswith("gw"):
+    _base = int(os.environ["ROS_DOMAIN_ID"]) - 1
+    os.environ["ROS_DOMAIN_ID"] = str((_base + 100 * int(_worker[2:])) % 230 + 1)
 if "ROS_LOG_DIR" not in os.environ:
     _log_dir = tempfile.mkdtemp(prefix="leadscrew_ros_test_log_")
     atexit.register(shutil.rmtree, _log_dir, ignore_errors=True)
