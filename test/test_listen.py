@@ -326,3 +326,28 @@ def test_audio_common_classes_only_where_ros_drivers_audio_common_is_installed(m
     monkeypatch.setitem(sys.modules, "audio_common_msgs.msg", other)
     package.msg = other
     assert audio_common_classes() is None
+
+
+def test_motor_orders_of_a_speed_ramp_are_not_heard():
+    """The detector gets the speed history, not only the latest speed: the orders of a ramp
+    stay orders within each 0.1 s chunk (with the latest speed alone, order 12 of this ramp
+    was heard as short squeaks at 198 and 209 Hz)."""
+    rate, duration = 48000, 3.0
+    t = np.arange(0.0, duration + 0.01, 0.01)
+    speed = 40.0 + 40.0 * t  # 40 -> 160 rad/s: order 12 sweeps 76 -> 306 Hz
+    sound = microphone(t, speed, np.full(t.size, np.nan), sample_rate_hz=rate, seed=3)
+    listener = Listener(ListenSettings(enabled=True))
+    step = rate // 10
+    try:
+        for k in range(0, sound.size - step + 1, step):
+            end = (k + step) / rate
+            for ts, v in zip(
+                t[(t > end - 0.1) & (t <= end)], speed[(t > end - 0.1) & (t <= end)], strict=True
+            ):
+                listener.note_speed(100.0 + ts, float(v))
+            chunk = sound[k : k + step]
+            listener.offer(b"", 100.0 + end, lambda _, c=chunk: (c, None))
+        _wait(lambda: listener.analysed == sound.size // step)
+        assert not any(h.heard for h in listener._analysed), listener._detector.rejected
+    finally:
+        listener.close()

@@ -80,6 +80,9 @@ KEY_DETECTOR_WARNING = "detector_warning"  # the detector's latest warning ('' w
 Decoder = Callable[[bytes], tuple[np.ndarray, "float | None"]]
 
 
+SPEED_HISTORY = 4096  # speed inputs kept for the detector (4 s at 1 kHz)
+
+
 class _Chunk(NamedTuple):
     arrival: float  # monotonic time the callback got it [s]
     payload: bytes
@@ -148,7 +151,8 @@ class Listener:
     Attributes
     ----------
     speed_rad_s : float or None
-        The latest motor speed [rad/s], set by the node; the worker reads it for each chunk.
+        The latest motor speed [rad/s] (`note_speed`); the speed of a chunk when no history is
+        noted.
     received, dropped, malformed, analysed : int
         Chunks received, dropped because the queue was full, that did not decode, and
         analysed.
@@ -165,6 +169,9 @@ class Listener:
         )
         self._queue: queue.Queue[_Chunk] = queue.Queue(maxsize=settings.queue_chunks)
         self.speed_rad_s: float | None = None
+        # (monotonic time, speed) of the recent speed inputs: the detector interpolates them at
+        # its frames, so that a motor order stays an order while the speed ramps
+        self._speeds: deque[tuple[float, float]] = deque(maxlen=SPEED_HISTORY)
         self.received = self.dropped = self.malformed = self.analysed = 0
         self.last_arrival: float | None = None
         self._last_drop = self._last_malformed = -math.inf
@@ -250,7 +257,23 @@ class Listener:
             are not.
         """
         self.speed_rad_s = old.speed_rad_s
+        self._speeds.extend(old._speeds)
         self._predictions.extend(old._predictions)
+
+    def note_speed(self, now: float, speed_rad_s: float | None) -> None:
+        """A motor speed input at the node's monotonic time `now` (the clock chunks are placed
+        on).
+
+        Parameters
+        ----------
+        now : float
+            Monotonic time of the input [s].
+        speed_rad_s : float or None
+            The accepted motor speed [rad/s] (None before one).
+        """
+        self.speed_rad_s = speed_rad_s
+        if speed_rad_s is not None:
+            self._speeds.append((now, float(speed_rad_s)))
 
     def collect(self) -> bool:
         """Take what the worker analysed: heard state, totals, window.
@@ -436,7 +459,12 @@ class Listener:
                 t0 = start
             else:
                 t0 = self._audio_end
-            det.push(samples, t0, self.speed_rad_s, sample_rate_hz=rate)
+            speeds = list(self._speeds)  # a snapshot: the node appends from its own thread
+            if speeds:
+                times, values = np.array(speeds).T
+                det.push(samples, t0, values, speed_times_s=times, sample_rate_hz=rate)
+            else:
+                det.push(samples, t0, self.speed_rad_s, sample_rate_hz=rate)
         except ValueError as exc:  # malformed payload, or a sample rate refused
             self.malformed += 1
             self.error = str(exc)

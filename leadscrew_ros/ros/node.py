@@ -577,7 +577,7 @@ class SqueakPredictorNode(Node):
         self.accepted.pop(topic, None)  # re-inserted last: the order the state arose in
         self.accepted[topic] = msg
         if self.listener is not None:  # the detector rejects tones on the motor orders
-            self.listener.speed_rad_s = self.live.inputs.speed_rad_s
+            self.listener.note_speed(now, self.live.inputs.speed_rad_s)
         if self.live.due(now):
             self._recompute(now)
         elif self.live.changed() and self._rate_timer.is_canceled():
