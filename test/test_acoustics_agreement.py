@@ -6,7 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from leadscrew_ros.model.acoustics import Detection, Episode, agreement
+from leadscrew_ros.model.acoustics import Detection, Episode
+from leadscrew_ros.model.acoustics.agreement import agreement
 
 
 def _detection(heard_spans, t0=0.0, t1=10.0, hop=0.01, hz=1000.0):

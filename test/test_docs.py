@@ -18,6 +18,7 @@ import re
 import pytest
 
 from leadscrew_ros.model import squeak_model
+from leadscrew_ros.model.acoustics import agreement as acoustics_agreement
 from leadscrew_ros.model.nonlinear import friction_force, transient, transient_analysis
 from leadscrew_ros.model.physics.parameters import ScrewParameters, field_info, field_names
 from leadscrew_ros.model.studies import fields, roots, stability_map, sweep
@@ -63,6 +64,8 @@ MODULE_API = [
     fleet.find_logs,
     fleet.review_one,
     replay.replay,
+    acoustics_agreement.agreement,
+    acoustics_agreement.nearest_mode,
 ]
 
 

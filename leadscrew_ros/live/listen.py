@@ -48,7 +48,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..model import Prediction
-from ..model.acoustics.agreement import MATCH_TOLERANCE
+from ..model.acoustics.agreement import MATCH_TOLERANCE, nearest_mode
 from ..model.acoustics.detection import StreamingDetector
 from ..model.acoustics.settings import DetectorSettings
 from .settings import ListenSettings
@@ -293,7 +293,7 @@ class Listener:
             self._predicted_s += h.duration_s * squeak
             self._agree_s += h.duration_s * (h.heard == squeak)
             if h.heard:
-                label = _nearest_mode(h.frequency_hz, p.modes if p is not None else ())
+                label = _matched_label(h.frequency_hz, p.modes if p is not None else ())
                 acc = self._modes.setdefault(label, [0.0, 0.0])
                 acc[0] += h.duration_s
                 acc[1] += h.duration_s * h.frequency_hz
@@ -386,7 +386,7 @@ class Listener:
             if not early:
                 return Level.WARN, f"heard squeak at {f:.0f} Hz, none predicted"
             modes = [m for p in early for m in p.modes]
-            label = _nearest_mode(f, modes)
+            label = _matched_label(f, modes)
             match = [m for m in modes if m[0] == label]
             what = f" ({label} {match[0][1]:.0f} Hz)" if match else ""
             return Level.OK, f"heard squeak at {f:.0f} Hz, predicted{what}"
@@ -488,7 +488,7 @@ def _share(part: float, whole: float) -> float | None:
     return part / whole if whole > 0 else None
 
 
-def _nearest_mode(f: float, modes: Sequence[tuple[str, float]]) -> str:
-    """Label of the mode nearest to `f` within `MATCH_TOLERANCE`, '' when none."""
-    best = min(modes, key=lambda m: abs(m[1] - f), default=None)
+def _matched_label(f: float, modes: Sequence[tuple[str, float]]) -> str:
+    """Label of the mode nearest to `f` if it matches (`agreement.nearest_mode`), '' if none."""
+    best = nearest_mode(f, modes)
     return best[0] if best is not None and abs(best[1] - f) <= MATCH_TOLERANCE * f else ""

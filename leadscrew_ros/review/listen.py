@@ -270,7 +270,7 @@ class PredictionTrace:
         tuple of (Agreement, float)
             The agreement, and the time [s] with the most unstable mode outside the band.
         """
-        from ..model.acoustics import agreement
+        from ..model.acoustics.agreement import agreement
 
         start = np.frombuffer(self.mode_start, np.int64)
         has_modes = np.diff(start) > 0

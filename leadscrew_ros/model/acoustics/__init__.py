@@ -2,10 +2,11 @@
 """The bench microphone: ECMA-418-1 tone prominence on short-time spectra (`tonality`), squeak
 episodes that do not follow the motor orders, offline and streaming (`detection`), agreement
 of predictions with what was heard (`agreement`), and a simulated microphone (`synthesis`).
-numpy/scipy only; MOSQITO (loudness) is imported only when a calibrated episode needs it.
+The function `agreement` is not re-exported: `acoustics.agreement` stays the module of that
+name. numpy/scipy only; MOSQITO (loudness) is imported only when a calibrated episode needs it.
 """
 
-from .agreement import Agreement, FrequencyMatch, agreement
+from .agreement import Agreement, FrequencyMatch
 from .detection import AudioError, Detection, Episode, StreamingDetector, detect, frames_heard
 from .settings import DetectorSettings
 from .synthesis import microphone
@@ -19,7 +20,6 @@ __all__ = [
     "Episode",
     "FrequencyMatch",
     "StreamingDetector",
-    "agreement",
     "detect",
     "frames_heard",
     "microphone",

@@ -105,6 +105,24 @@ class Agreement:
         return asdict(self)
 
 
+def nearest_mode(f_hz: float, modes: Sequence[tuple[str, float]]) -> tuple[str, float] | None:
+    """The predicted mode nearest in frequency to a heard tone.
+
+    Parameters
+    ----------
+    f_hz : float
+        The heard frequency [Hz].
+    modes : sequence of (str, float)
+        (label, frequency [Hz]) of the predicted squeak modes.
+
+    Returns
+    -------
+    tuple of (str, float) or None
+        The nearest mode (matched when within `MATCH_TOLERANCE` of `f_hz`); None without modes.
+    """
+    return min(modes, key=lambda m: abs(m[1] - f_hz), default=None)
+
+
 def _probabilities(probability: ArrayLike, n: int) -> np.ndarray:
     p = np.array(
         [
@@ -201,8 +219,9 @@ def agreement(
             for lab, f in predicted_modes[jj]
             if math.isfinite(float(f))
         ]
-        if modes:
-            lab, f = min(modes, key=lambda m: abs(m[1] - ep.frequency_hz))
+        nearest = nearest_mode(ep.frequency_hz, modes)
+        if nearest is not None:
+            lab, f = nearest
             err = (f - ep.frequency_hz) / ep.frequency_hz
             matches.append(
                 FrequencyMatch(
