@@ -31,7 +31,7 @@ from pathlib import Path
 
 from leadscrew_ros.bag.virtual_bench import BenchSettings, run
 from leadscrew_ros.model import ScrewParameters, SqueakModel
-from leadscrew_ros.review.listen import FORMULATIONS, ListenSettings
+from leadscrew_ros.review.listen import FORMULATIONS, SoundSettings
 from leadscrew_ros.review.replay import ReplaySettings, replay
 
 
@@ -40,7 +40,7 @@ def _replay(log: Path, out: Path, model: SqueakModel, sound: bool) -> dict:
         log,
         model,
         out,
-        ReplaySettings(workers=0, progress=False, listen=ListenSettings(enabled=sound)),
+        ReplaySettings(workers=0, progress=False, listen=SoundSettings(enabled=sound)),
     )
     return json.loads((out / "summary.json").read_text())
 

@@ -30,8 +30,8 @@ from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.review.listen import (
     CLIP_PAD_S,
     COLLAR_S,
-    ListenSettings,
     PredictionTrace,
+    SoundSettings,
     SpeedTrace,
 )
 from leadscrew_ros.review.replay import ReplaySettings, replay
@@ -62,7 +62,7 @@ def _replay(log, out, params=None, **listen):
         log,
         SqueakModel(params or ScrewParameters()),
         out,
-        ReplaySettings(workers=0, progress=False, listen=ListenSettings(**listen)),
+        ReplaySettings(workers=0, progress=False, listen=SoundSettings(**listen)),
     )
 
 

@@ -22,7 +22,7 @@ from ..bag.logfile import (
 )
 from ..live.settings import JointSettings, LiveSettings
 from ..model.physics.metadata import help_text
-from ..review.listen import ListenSettings
+from ..review.listen import SoundSettings
 from ..review.replay import ReplaySettings
 from ..review.timeline import InputSettings
 from .args import (
@@ -48,7 +48,7 @@ REPLAY_SETTINGS = {
     if f.name in REPLAY_INPUTS
 }
 LIVE_OPTIONS = ("rate", "loop", "start_offset", "topics", "remap", "no_wait", "ros_args")
-# option dest -> ListenSettings field (the audio options of replay and review)
+# option dest -> SoundSettings field (the audio options of replay and review)
 AUDIO_OPTIONS = {
     "audio_topic": "topic",
     "audio_info_topic": "info_topic",
@@ -59,7 +59,7 @@ AUDIO_OPTIONS = {
     "audio_scale": "scale_pa",
     "compare_formulations": "compare_formulations",
 }
-LISTEN_SETTINGS = {f.name: f for f in fields(ListenSettings)}
+LISTEN_SETTINGS = {f.name: f for f in fields(SoundSettings)}
 
 
 def _topic(name: str) -> str:
@@ -109,8 +109,8 @@ OFFLINE_OPTIONS = (
 )
 
 
-def listen_settings(args: argparse.Namespace, wav_must_exist: bool = True) -> ListenSettings:
-    """ListenSettings of the audio options (`add_audio_options`); CliError for options that
+def listen_settings(args: argparse.Namespace, wav_must_exist: bool = True) -> SoundSettings:
+    """SoundSettings of the audio options (`add_audio_options`); CliError for options that
     exclude each other or values out of range (and, with `wav_must_exist`, a missing WAV)."""
     given = {
         dest: getattr(args, dest)
@@ -131,7 +131,7 @@ def listen_settings(args: argparse.Namespace, wav_must_exist: bool = True) -> Li
     elif "audio_start" in given:
         raise CliError("--audio-start needs --audio FILE.wav")
     try:
-        return ListenSettings(
+        return SoundSettings(
             enabled=not args.no_audio, **{AUDIO_OPTIONS[dest]: v for dest, v in given.items()}
         )
     except ValueError as exc:
@@ -444,7 +444,7 @@ def add_input_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
 
 
 def _listen_help(name: str, description: str | None = None) -> str:
-    """argparse help of the audio option that sets ListenSettings field `name`."""
+    """argparse help of the audio option that sets SoundSettings field `name`."""
     f = LISTEN_SETTINGS[name]
     text = (
         (description or f.metadata["description"])

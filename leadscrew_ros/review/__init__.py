@@ -6,7 +6,7 @@ The function `replay` is not re-exported here: `review.replay` stays the module 
 
 from .fleet import FleetRun, FleetSettings, review_logs
 from .fleetreport import write_fleet
-from .listen import Heard, ListenSettings
+from .listen import Heard, SoundSettings
 from .plots import (
     plot_fleet,
     plot_frequencies,
@@ -27,7 +27,7 @@ __all__ = [
     "FleetSettings",
     "Heard",
     "InputSettings",
-    "ListenSettings",
+    "SoundSettings",
     "ReplayResult",
     "ReplaySettings",
     "plot_fleet",

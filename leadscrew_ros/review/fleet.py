@@ -53,7 +53,7 @@ from ..model.physics.metadata import check, setting
 from ..model.uncertainty.scatter import LIVE_SAMPLES, Scatter
 from .decimation import Reservoir
 from .jsonsafe import json_safe
-from .listen import CLIPS_DIR, ListenSettings
+from .listen import CLIPS_DIR, SoundSettings
 from .progress import progress_bar
 from .replay import ReplayResult, ReplaySettings, log_name, replay
 from .timeline import InputSettings
@@ -96,7 +96,7 @@ class FleetSettings:
         Write each log's PNG report.
     summary_only : bool
         Keep only summary.json and summary.txt of each log.
-    listen : ListenSettings
+    listen : SoundSettings
         Where each log's sound is (a relative WAV file beside each log) and its scale.
     """
 
@@ -110,7 +110,7 @@ class FleetSettings:
     use_log_params: bool = False
     report: bool = True
     summary_only: bool = False
-    listen: ListenSettings = field(default_factory=ListenSettings)
+    listen: SoundSettings = field(default_factory=SoundSettings)
 
     def __post_init__(self) -> None:
         ReplaySettings(self.inputs, self.namespace, self.out_namespace)  # checks the names

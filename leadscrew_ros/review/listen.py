@@ -2,7 +2,7 @@
 """Heard vs predicted: the log's microphone through the squeak detector, compared with the
 replay's own predictions.
 
-A replay with sound (`ListenSettings`) records, while it runs, two compact series of its own:
+A replay with sound (`SoundSettings`) records, while it runs, two compact series of its own:
 per recompute the time, the nominal verdict, P(squeak), the squeak modes (label, frequency) and
 the operating point (`PredictionTrace`, about 60 bytes a recompute), and the speed samples it
 took, kept where they move (`SpeedTrace`). Once the log is read, `listen` reads the audio
@@ -63,7 +63,7 @@ SPEED_FLOOR_RAD_S = 1.0  # ... of at least this speed
 
 @documented
 @dataclass(frozen=True)
-class ListenSettings:
+class SoundSettings:
     """Where a replay finds the sound of the drive and how it is scaled (`listen`); empty texts
     and zeros are 'not given'."""
 
@@ -118,7 +118,7 @@ class ListenSettings:
     def __post_init__(self) -> None:
         check(self)
 
-    def beside(self, log: Path) -> ListenSettings:
+    def beside(self, log: Path) -> SoundSettings:
         """These settings with a relative `file` resolved beside `log` (in a bag directory,
         or in the folder of a log file): the review's per-log WAV.
 
@@ -129,7 +129,7 @@ class ListenSettings:
 
         Returns
         -------
-        ListenSettings
+        SoundSettings
             A copy, `file` absolute when given.
         """
         if not self.file or Path(self.file).is_absolute():
@@ -138,7 +138,7 @@ class ListenSettings:
         return replace(self, file=str(where / self.file))
 
 
-def has_sound(topics: dict[str, Topic], settings: ListenSettings) -> bool:
+def has_sound(topics: dict[str, Topic], settings: SoundSettings) -> bool:
     """True when there is sound to read: a WAV file given, or an audio-typed topic in the log
     (audio_common messages, or std_msgs/Float32MultiArray)."""
     return bool(settings.file) or any(
@@ -586,7 +586,7 @@ def listen(
     log: Path,
     topics: dict[str, Topic],
     out_dir: Path,
-    settings: ListenSettings,
+    settings: SoundSettings,
     trace: PredictionTrace,
     speed: SpeedTrace,
     end_s: float,
@@ -604,7 +604,7 @@ def listen(
         Its topics (`logsource.log_topics`).
     out_dir : Path
         The replay's output directory (the clips go to `clips/` in it).
-    settings : ListenSettings
+    settings : SoundSettings
         Where the sound is, its scale, the comparison of formulations.
     trace : PredictionTrace
         The replay's recomputes.

@@ -57,7 +57,7 @@ from ..model import Prediction, SqueakModel, Validity
 from ..model.uncertainty.scatter import LOG_NORMAL
 from .decimation import Envelope, Reservoir
 from .jsonsafe import json_safe
-from .listen import Heard, ListenSettings, PredictionTrace, SpeedTrace, listen, write_heard
+from .listen import Heard, PredictionTrace, SoundSettings, SpeedTrace, listen, write_heard
 from .plots import plot_timeline
 from .progress import progress_bar
 from .timeline import (
@@ -103,7 +103,7 @@ class ReplaySettings:
         Prediction processes for long logs (0: all in this process).
     progress : bool
         A progress bar on stderr (a terminal only).
-    listen : ListenSettings
+    listen : SoundSettings
         Where the sound of the drive is, its scale, the comparison of formulations.
     """
 
@@ -115,7 +115,7 @@ class ReplaySettings:
     # mostly at rest) the second one idles.
     workers: int = 2
     progress: bool = True
-    listen: ListenSettings = field(default_factory=ListenSettings)
+    listen: SoundSettings = field(default_factory=SoundSettings)
 
     def __post_init__(self) -> None:
         for what, ns in (("namespace", self.namespace), ("output namespace", self.out_namespace)):
