@@ -19,6 +19,7 @@ from leadscrew_ros.bag.virtual_bench import (
     MIC_TOPIC,
     TRUTH,
     BenchSettings,
+    draw_params,
     run,
     simulate_unit,
 )
@@ -220,3 +221,41 @@ def test_cli(tmp_path, capsys):
         assert main(["bench", "--out", str(tmp_path / "c"), *argv]) == 2
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_population_other_than_the_prior(tmp_path, capsys):
+    """--population / --population-scatter: the units are drawn from that population (truth's
+    nominal and scatter), the logs still carry the prior (truth's prior), as a real unit's."""
+    argv = ["bench", "--units", "2", "--duration", "2", "--out", str(tmp_path / "p"), "--quiet"]
+    pop = ["--population", "mu_static=0.28", "--population", "modal_damping=0.002"]
+    assert main([*argv, *pop, "--population-scatter", "mu_kinetic=0.1"]) == 0
+    truth = json.loads((tmp_path / "p" / TRUTH).read_text())
+    prior = ScrewParameters(formulation="paper")
+    assert truth["prior"] == {"nominal": prior.as_dict(), "scatter": dict(Scatter().sd)}
+    assert truth["nominal"] == prior.with_(mu_static=0.28, modal_damping=0.002).as_dict()
+    assert truth["scatter"] == {**Scatter().sd, "mu_kinetic": 0.1}
+    assert truth["settings"]["population"] == {"mu_static": 0.28, "modal_damping": 0.002}
+    for unit in truth["units"]:
+        record = logmeta.read(sorted((tmp_path / "p" / unit["log"]).glob("*.mcap"))[0])
+        assert record.params == prior.as_dict()
+        assert record.scatter == {**Scatter().sd, "samples": 1024}
+    settings = BenchSettings(population={"mu_static": 0.28, "modal_damping": 0.002})
+    rng = np.random.default_rng(0)
+    draws = [
+        draw_params(settings.population_params, settings.population_sd, rng) for _ in range(2000)
+    ]
+    mu_s = np.array([d.mu_static for d in draws])
+    damping = np.log([d.modal_damping for d in draws])
+    assert mu_s.mean() == pytest.approx(0.28, abs=4 * 0.014 / np.sqrt(2000))
+    assert mu_s.std() == pytest.approx(0.05 * 0.28, rel=0.1)
+    assert damping.mean() == pytest.approx(np.log(0.002), abs=4 * 0.35 / np.sqrt(2000))
+    for bad, message in (
+        (["--population", "radius=1"], "radius is not a scatterable parameter"),
+        (["--population", "mu_kinetic=0.3"], "exceeds mu_static"),
+        (["--population", "mu_static=nan"], "'nan' is not a finite number"),
+        (["--population-scatter", "mu_static=2"], "scatter.mu_static = 2.0 must be a number"),
+        (["--population-scatter", "mu_static"], "expected NAME=VALUE"),
+    ):
+        assert main([*argv, *bad]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err

@@ -3,11 +3,14 @@
 
 Each of `BenchSettings.units` units is one seat stroke (`live.profile.StrokeProfile`, with a
 per-unit peak speed, load range and start position drawn from the seed) of a drive whose
-friction and damping are drawn from the default unit-to-unit scatter (`Scatter()`:
-mu_static, mu_kinetic, friction_decay_s_m, modal_damping): the hidden truth. A unit's
-recording is what the node would have recorded on the bench (a rosbag2 bag directory written
-by `Recorder`, the `leadscrew_ros` metadata record carrying the NOMINAL parameters, as a real
-unit's recording would, and its unit id), holding:
+friction and damping are drawn from the bench's generating population: by default the
+package's nominal parameters (Table 1) with the default unit-to-unit scatter (`Scatter()`:
+mu_static, mu_kinetic, friction_decay_s_m, modal_damping), or another population
+(`BenchSettings.population`, `population_scatter`: a fleet the prior does not describe, for
+calibration): the hidden truth. A unit's recording is what the node would have recorded on the
+bench (a rosbag2 bag directory written by `Recorder`, the `leadscrew_ros` metadata record
+carrying the package's NOMINAL parameters and default scatter, the prior, as a real unit's
+recording would, and its unit id), holding:
 
 - `/motor_speed`, `/axial_load`, `/nut_position` (std_msgs/Float64) at `input_rate_hz`, with
   the sensor noise of `synthetic.DutyCycle`;
@@ -28,8 +31,9 @@ microphone's scale `audio_scale_pa_per_fs` (Pa per full-scale unit: -20 dBFS = 9
 gives 14.1 Pa/FS).
 
 `DIR/truth.json` holds what the logs must not: per unit the drawn parameters and stroke,
-where it squeaks and at which frequency, with the formulation, seed, settings and audio
-scale. Nothing of it is written into the logs.
+where it squeaks and at which frequency, the generating population (`nominal`, `scatter`) and
+the prior the logs carry (`prior`), with the formulation, seed, settings and audio scale.
+Nothing of it is written into the logs.
 """
 
 from __future__ import annotations
@@ -37,7 +41,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -49,7 +53,13 @@ from ..model import ScrewParameters, SqueakModel
 from ..model.physics.metadata import check, setting
 from ..model.physics.parameters import ParameterError
 from ..model.studies.fields import growth_field
-from ..model.uncertainty.scatter import LIVE_SAMPLES, Scatter, valid_mask
+from ..model.uncertainty.scatter import (
+    DEFAULT_SCATTER,
+    LIVE_SAMPLES,
+    Scatter,
+    scatterable,
+    valid_mask,
+)
 from . import audiomsgs, logmeta
 from .cdr import FLOAT64, encode_float64
 from .recorder import Recorder, RecordSettings, ensure_directory
@@ -124,9 +134,54 @@ class BenchSettings:
         0.0,
         194.0,
     )
+    population: dict[str, float] = field(
+        default_factory=dict,
+        metadata={
+            "help": "the nominal value of a scatterable parameter in the population the "
+            "units are drawn from, in the field's unit (default: the package's nominal, "
+            "Table 1)"
+        },
+    )
+    population_scatter: dict[str, float] = field(
+        default_factory=dict,
+        metadata={
+            "help": "the scatter of a parameter in that population: relative SD, SD of ln "
+            "for modal_damping, 0 fixes it (default: the package's default scatter)"
+        },
+    )
 
     def __post_init__(self) -> None:
         check(self, ParameterError, "bench.")
+        for what, values in (
+            ("population", self.population),
+            ("population_scatter", self.population_scatter),
+        ):
+            for name in values:
+                if name not in scatterable():
+                    raise ParameterError(
+                        f"bench.{what}: {name} is not a scatterable parameter; one of "
+                        f"{', '.join(scatterable())}"
+                    )
+        try:
+            _ = (self.population_params, self.population_sd)
+        except ParameterError as exc:
+            raise ParameterError(f"bench population: {exc}") from None
+
+    @property
+    def prior(self) -> tuple[ScrewParameters, Scatter]:
+        """What the logs' metadata record carries, as a real unit's would: the package's
+        nominal parameters (of the bench's formulation) and default scatter."""
+        return ScrewParameters(formulation=self.formulation), Scatter()
+
+    @property
+    def population_params(self) -> ScrewParameters:
+        """The generating population's nominal parameters (the prior's with `population`)."""
+        return self.prior[0].with_(**self.population)
+
+    @property
+    def population_sd(self) -> Scatter:
+        """The generating population's scatter (the default with `population_scatter`)."""
+        return Scatter({**DEFAULT_SCATTER, **self.population_scatter})
 
     @property
     def squeak_amplitude_fs(self) -> float:
@@ -274,7 +329,8 @@ def write_unit(
     rng: np.random.Generator,
 ) -> Path:
     """Record one unit's stroke (inputs with sensor noise, the microphone) into a new bag
-    directory under `directory`; returns the bag."""
+    directory under `directory`, its metadata record carrying `nominal` and `scatter` (the
+    prior, `BenchSettings.prior`); returns the bag."""
     # here, not at the top: the CLI's parser reads BenchSettings, and model.acoustics pulls
     # in scipy.signal (~70 ms at every command's start)
     from ..model.acoustics.synthesis import microphone
@@ -378,7 +434,7 @@ def run(
     Parameters
     ----------
     settings : BenchSettings
-        Units, formulation, seed, stroke and microphone.
+        Units, formulation, seed, stroke, microphone and the generating population.
     out : path
         Output directory: one bag directory per unit and truth.json.
     progress : callable, optional
@@ -397,14 +453,14 @@ def run(
         The scatter's valid domain is never hit.
     """
     out = ensure_directory(str(out))
-    nominal = ScrewParameters(formulation=settings.formulation)
-    scatter = Scatter()
+    nominal, scatter = settings.population_params, settings.population_sd
+    prior, prior_scatter = settings.prior
     rng = np.random.default_rng(settings.seed)
     units = []
     for k in range(settings.units):
         unit_rng, record_rng = (np.random.default_rng(s) for s in rng.integers(2**63, size=2))
         unit = simulate_unit(settings, k, unit_rng, nominal, scatter)
-        bag = write_unit(settings, unit, out, nominal, scatter, record_rng)
+        bag = write_unit(settings, unit, out, prior, prior_scatter, record_rng)
         if progress:
             progress(k, unit, bag)
         units.append(
@@ -423,6 +479,7 @@ def run(
         "settings": asdict(settings),
         "nominal": nominal.as_dict(),
         "scatter": dict(scatter.sd),
+        "prior": {"nominal": prior.as_dict(), "scatter": dict(prior_scatter.sd)},
         "audio": {
             "topic": MIC_TOPIC,
             "info_topic": MIC_INFO_TOPIC,

@@ -10,9 +10,21 @@ from dataclasses import fields
 from pathlib import Path
 
 from ..model.physics.metadata import help_text
-from .args import Parser, finite, print_json
+from .args import CliError, Parser, finite, finite_float, print_json
 
 _OPTIONS = ("units", "formulation", "seed", "duration_s")
+_POPULATION = ("population", "population_scatter")  # NAME=VALUE options, repeatable
+
+
+def name_values(items: list[str], option: str) -> dict[str, float]:
+    """`NAME=VALUE` items of a repeatable option -> {name: finite value} (the later wins)."""
+    out = {}
+    for item in items:
+        name, sep, text = (part.strip() for part in item.partition("="))
+        if not sep or not name:
+            raise CliError(f"{option}: expected NAME=VALUE, got {item!r}")
+        out[name] = finite_float(text, f"{option} {name}")
+    return out
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
@@ -20,7 +32,11 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from ..bag.virtual_bench import TRUTH, BenchSettings, Unit, run
 
     settings = BenchSettings(
-        **{name: getattr(args, name) for name in _OPTIONS if getattr(args, name) is not None}
+        **{name: getattr(args, name) for name in _OPTIONS if getattr(args, name) is not None},
+        **{
+            name: name_values(getattr(args, name), "--" + name.replace("_", "-"))
+            for name in _POPULATION
+        },
     )
     start = time.perf_counter()
 
@@ -77,5 +93,14 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
         metavar="S",
         help=help_text(spec["duration_s"]),
     )
+    for name, metavar in zip(_POPULATION, ("NAME=VALUE", "NAME=SD"), strict=True):
+        p.add_argument(
+            "--" + name.replace("_", "-"),
+            action="append",
+            default=[],
+            metavar=metavar,
+            help=spec[name].metadata["help"] + " (repeatable; the logs still carry the "
+            "package's nominal parameters and default scatter, the prior; truth.json has both)",
+        )
     p.add_argument("--quiet", action="store_true", help="print nothing")
     p.set_defaults(run=cmd_bench)

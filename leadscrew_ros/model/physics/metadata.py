@@ -126,8 +126,11 @@ def check_value(name: str, value: Any, f: Field) -> str:
 
 
 def check(obj: Any, error: type[Exception] = ValueError, prefix: str = "") -> None:
-    """Raise `error` with the first field of dataclass `obj` whose value is not allowed."""
+    """Raise `error` with the first field of dataclass `obj` whose value is not allowed (the
+    fields declared with `setting`; the owner checks any other)."""
     for f in fields(obj):
+        if "unit" not in f.metadata:
+            continue
         reason = check_value(prefix + f.name, getattr(obj, f.name), f)
         if reason:
             raise error(reason)
