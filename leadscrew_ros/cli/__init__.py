@@ -3,16 +3,19 @@
 ROS 2 demo (`demo`: predictor node + actuator simulator) and the simulator alone (`simulate`);
 the nonlinear time-domain simulation (`transient`); MCAP logs: offline replay (`replay`),
 playback (`replay --publish`), `recover` and `info`; many logs on a Dask cluster (`review`);
-recordings of simulated units with a microphone (`bench`).
+each unit's friction and the fleet's population from heard squeak (`calibrate`); recordings of
+simulated units with a microphone (`bench`).
 
 One module per command group holds its commands and adds their parsers: `model` (modes,
 predict, sweep, map), `transient` (the nonlinear time-domain simulation), `figures`, `ros`
-(demo, simulate), `logs` (replay, recover, info), `fleet` (review), `bench`; `args` holds what they
-share. Heavy or ROS modules are imported only by the command that needs them.
+(demo, simulate), `logs` (replay, recover, info), `fleet` (review), `calibrate`, `bench`; `args`
+holds what they share. Heavy or ROS modules are imported only by the command that needs them.
 
 Every error a user can cause (bad option, invalid parameter or operating point, unreadable
 file) is reported as one line `leadscrew-squeak: error: <message>` with exit code 2
-(`review` returns 10 + the number of failed logs when some logs fail: `fleet.exit_status`).
+(`review` returns 10 + the number of failed logs when some logs fail: `fleet.exit_status`;
+`calibrate` 3 or 4 when it wrote a calibration that did not fully converge or that some inputs
+could not take part in: `calibrate.exit_status`).
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from collections.abc import Callable, Sequence
 from ..bag.logfile import LogError
 from ..model.physics.parameters import ParameterError
 from ..model.squeak_model import OperatingPointError
-from . import bench, figures, fleet, logs, model, ros, transient
+from . import bench, calibrate, figures, fleet, logs, model, ros, transient
 from .args import PROG, CliError, Parser, common_parser
 
 __all__ = ["CliError", "build_parser", "main", "split_ros_args"]
@@ -51,7 +54,7 @@ def build_parser() -> Parser:
     sub = parser.add_subparsers(
         dest="command", required=True, metavar="COMMAND", parser_class=Parser
     )
-    for group in (model, transient, figures, ros, logs, fleet, bench):
+    for group in (model, transient, figures, ros, logs, fleet, calibrate, bench):
         group.add_parsers(sub, common)
     return parser
 
@@ -100,7 +103,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     -------
     int
         The exit code: 0 ok, 2 bad input, 130 interrupted, 141 closed pipe (`review`: 10 + the
-        number of failed logs when some fail). The long-running ROS commands (demo, simulate,
+        number of failed logs when some fail; `calibrate`: 3 not converged, 4 some inputs
+        unusable). The long-running ROS commands (demo, simulate,
         replay --publish) return 0 when stopped by SIGINT/SIGTERM
         (`ros_env.StopSignals.exit_status`); 130 is Ctrl-C of the others or a second Ctrl-C.
     """

@@ -453,6 +453,53 @@ def common_parser() -> Parser:
     return common
 
 
+# ----------------------------------------------------------------------------- settings
+def add_settings_options(group: Any, cls: type, skip: Sequence[str] = ()) -> None:
+    """One option per `setting` field of dataclass `cls` (not in `skip`): --<name with
+    dashes>, dest the field's name, its type, choices and help from the field metadata; an
+    option not given is None (the field's default applies, `settings_from`)."""
+    for f in fields(cls):
+        if "unit" not in f.metadata or f.name in skip:
+            continue
+        md, kind = f.metadata, type(f.default)
+        option = "--" + f.name.replace("_", "-")
+        text = help_text(f).replace("%", "%%")
+        if kind is bool:
+            group.add_argument(
+                option, dest=f.name, action=argparse.BooleanOptionalAction, help=text
+            )
+        elif kind is str:
+            group.add_argument(
+                option,
+                dest=f.name,
+                choices=md["choices"] or None,
+                metavar="TEXT" if not md["choices"] else None,
+                help=text,
+            )
+        else:
+            group.add_argument(
+                option,
+                dest=f.name,
+                type=int if kind is int else finite,
+                metavar="N" if kind is int else "X",
+                help=text,
+            )
+
+
+def settings_from(args: argparse.Namespace, cls: type, **fixed: Any) -> Any:
+    """An instance of `cls` from the options of `add_settings_options` that were given (and
+    `fixed` fields); CliError with the reason when a value is not allowed."""
+    given = {
+        f.name: getattr(args, f.name)
+        for f in fields(cls)
+        if "unit" in f.metadata and getattr(args, f.name, None) is not None
+    }
+    try:
+        return cls(**{**given, **fixed})
+    except (TypeError, ValueError) as exc:
+        raise CliError(" ".join(str(exc).split())) from None
+
+
 # ----------------------------------------------------------------------------- output
 def print_json(obj: Any) -> None:
     """Print `obj` as one line of strict JSON (non-finite numbers as null)."""

@@ -68,13 +68,11 @@ def _settings(args: argparse.Namespace) -> FleetSettings:
         raise CliError(str(exc)) from None
 
 
-def cmd_review(args: argparse.Namespace) -> int:
-    """`review`: replay a fleet's logs and write the fleet report; exit status."""
+def cluster_options(args: argparse.Namespace) -> tuple[int | None, ClusterSettings]:
+    """The worker count of a local cluster (None with --scheduler) and how to reach a running
+    one, from the options of `add_cluster_options`, checked before any work."""
     if args.workers is not None and not 1 <= args.workers <= 1024:
         raise CliError(f"argument --workers: must be in [1, 1024], got {args.workers}")
-    settings = _settings(args)
-    from ..review.fleet import cluster, find_logs, review_logs
-
     if args.connect_timeout is not None and not args.scheduler:
         raise CliError("--connect-timeout is for --scheduler")
     try:
@@ -83,6 +81,19 @@ def cmd_review(args: argparse.Namespace) -> int:
         )
     except ClusterError as exc:
         raise CliError(str(exc)) from None
+    return args.workers or (None if args.scheduler else os.cpu_count() or 1), reach
+
+
+def cluster_text(args: argparse.Namespace, workers: int | None) -> str:
+    """Where the work ran, for the summary line."""
+    return args.scheduler or f"LocalCluster of {workers} worker(s) on 127.0.0.1"
+
+
+def cmd_review(args: argparse.Namespace) -> int:
+    """`review`: replay a fleet's logs and write the fleet report; exit status."""
+    workers, reach = cluster_options(args)
+    settings = _settings(args)
+    from ..review.fleet import cluster, find_logs, review_logs
     from ..review.fleetreport import write_fleet
 
     out = output_directory(args.out)
@@ -100,13 +111,12 @@ def cmd_review(args: argparse.Namespace) -> int:
         )
     if left_out and not args.quiet:
         print(f"review: the output folder {out} is inside {inside[0]}: left out of the inputs")
-    workers = args.workers or (None if args.scheduler else os.cpu_count() or 1)
     try:
         with cluster(workers, args.scheduler, reach) as client:
             run = review_logs(logs, out, settings, client, progress=not args.quiet)
     except ClusterError as exc:  # raised before the review starts
         raise CliError(str(exc)) from None
-    where = args.scheduler or f"LocalCluster of {workers} worker(s) on 127.0.0.1"
+    where = cluster_text(args, workers)
     paths = write_fleet(
         run,
         out,
@@ -125,6 +135,31 @@ def cmd_review(args: argparse.Namespace) -> int:
             print(f"  ... {len(errors) - _ERRORS_SHOWN} more in {paths[0]}")
         print("wrote: " + ", ".join(str(p) for p in paths))
     return exit_status(run.failed)
+
+
+def add_cluster_options(p: argparse.ArgumentParser) -> None:
+    """--workers N | --scheduler ADDRESS, --connect-timeout S (`cluster_options`)."""
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="Dask worker processes of a local cluster on 127.0.0.1, one "
+        "thread each (default: one per core)",
+    )
+    where.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="a running Dask scheduler, tcp://HOST:PORT (`dask scheduler`, "
+        "`dask worker`); its workers must see the logs and DIR at the same "
+        "paths and have leadscrew_ros installed",
+    )
+    p.add_argument(
+        "--connect-timeout",
+        type=finite,
+        metavar="S",
+        help=help_text(_CONNECT_TIMEOUT, "with --scheduler: how long to wait for it to answer"),
+    )
 
 
 def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
@@ -150,27 +185,7 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
         help="output directory: <log name>/ per log (the replay's outputs), "
         "fleet.csv, fleet.json, fleet.png and the resume index",
     )
-    where = p.add_mutually_exclusive_group()
-    where.add_argument(
-        "--workers",
-        type=int,
-        metavar="N",
-        help="Dask worker processes of a local cluster on 127.0.0.1, one "
-        "thread each (default: one per core)",
-    )
-    where.add_argument(
-        "--scheduler",
-        metavar="ADDRESS",
-        help="a running Dask scheduler, tcp://HOST:PORT (`dask scheduler`, "
-        "`dask worker`); its workers must see the logs and DIR at the same "
-        "paths and have leadscrew_ros installed",
-    )
-    p.add_argument(
-        "--connect-timeout",
-        type=finite,
-        metavar="S",
-        help=help_text(_CONNECT_TIMEOUT, "with --scheduler: how long to wait for it to answer"),
-    )
+    add_cluster_options(p)
     g = add_input_options(p)
     g.add_argument(
         "--summary-only",

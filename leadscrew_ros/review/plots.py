@@ -888,3 +888,234 @@ def _heard_panels(rows: list[dict], e: Axes, f: Axes) -> None:
     f.set_xlabel("squeak frequency [Hz]")
     f.set_ylabel("logs")
     f.set_title("heard against predicted squeak frequencies")
+
+
+# ----------------------------------------------------------------------------- calibration
+_FOREST_UNITS = 60  # units drawn in a posterior panel (the first ones)
+
+
+def _unit_samples(post: Any, name: str) -> np.ndarray | None:
+    """A posterior's samples of `name` (friction_drop: mu_static - mu_kinetic)."""
+    names = list(post.names)
+    if name in names:
+        return post.samples[:, names.index(name)]
+    if name == "friction_drop" and {"mu_static", "mu_kinetic"} <= set(names):
+        return (
+            post.samples[:, names.index("mu_static")] - post.samples[:, names.index("mu_kinetic")]
+        )
+    return None
+
+
+def _population_samples(
+    params: Any, scatter: dict[str, float], names: Sequence[str], count: int = 4096
+) -> dict[str, np.ndarray]:
+    """Draws of a population of units (nominal `params`, `scatter`) for `names`, with
+    friction_drop; a name without scatter is its nominal value."""
+    from ..model.uncertainty.scatter import Scatter, draw
+
+    values = draw(params, Scatter({n: scatter.get(n, 0.0) for n in names}), count).values
+    out = {
+        n: values[n].ravel() if n in values else np.full(count, float(getattr(params, n)))
+        for n in names
+    }
+    if {"mu_static", "mu_kinetic"} <= set(out):
+        out["friction_drop"] = out["mu_static"] - out["mu_kinetic"]
+    return out
+
+
+def plot_posteriors(result: Any, name: str, *, ax: Axes | None = None) -> Figure:
+    """The units' posterior marginals of one calibrated parameter (or friction_drop): mean and
+    90 % interval per unit (held-out units hollow), the fleet mean's 90 % interval shaded, the
+    prior's nominal value dashed.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        The calibration (`review.calibration.run.calibrate`).
+    name : str
+        A calibrated parameter, or 'friction_drop'.
+    ax : Axes, optional
+        The axes to draw into; default: a new figure.
+
+    Returns
+    -------
+    Figure
+        The figure drawn into.
+    """
+    fig, ax = _axes(ax, figsize=(4, 5), layout="constrained")
+    run = result.run
+    rows = [(u, _unit_samples(u.reported, name)) for u in run.units if u.reported is not None]
+    rows = [(u, s) for u, s in rows if s is not None][:_FOREST_UNITS]
+    for k, (u, s) in enumerate(rows):
+        lo, hi = np.quantile(s, [0.05, 0.95])
+        colour = "C0" if u.calibrated else "0.6"
+        ax.hlines(k, lo, hi, color=colour, lw=1.5)
+        ax.plot(
+            s.mean(), k, "o", ms=4, color=colour, mfc="white" if u.held_out else colour, mew=1.2
+        )
+    ax.set_yticks(range(len(rows)), [u.unit_id for u, _ in rows], fontsize=6)
+    ax.invert_yaxis()
+    pop = run.population.summary().get(name) if run.population is not None else None
+    if pop is not None:
+        m = pop["mean"]
+        ax.axvspan(m["q05"], m["q95"], color="C1", alpha=0.25, lw=0, label="fleet mean, 90 %")
+    prior = _population_samples(run.prior.params, dict(run.prior.scatter), result.settings.names)
+    if name in prior:
+        ax.axvline(float(np.median(prior[name])), color="0.3", ls="--", lw=1, label="prior")
+    ax.set_xlabel(name)
+    ax.set_title(f"{name}: units' 90 % posteriors", fontsize=9)
+    ax.legend(fontsize=6, loc="lower right")
+    return fig
+
+
+def plot_population(result: Any, name: str, *, ax: Axes | None = None) -> Figure:
+    """The prior's unit-to-unit distribution of one parameter (or friction_drop) against the
+    calibrated fleet population's (`Population.params_and_scatter`), as densities of draws.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        The calibration.
+    name : str
+        A calibrated parameter, or 'friction_drop'.
+    ax : Axes, optional
+        The axes to draw into; default: a new figure.
+
+    Returns
+    -------
+    Figure
+        The figure drawn into.
+    """
+    fig, ax = _axes(ax, figsize=(4, 3), layout="constrained")
+    run, names = result.run, result.settings.names
+    curves = [("prior", "0.3", run.prior.params, dict(run.prior.scatter))]
+    if run.params is not None and run.scatter is not None:
+        curves.append(("fleet (calibrated)", "C1", run.params, dict(run.scatter.sd)))
+    drawn = [(label, c, _population_samples(p, s, names)) for label, c, p, s in curves]
+    values = np.concatenate([d[name] for _, _, d in drawn if name in d])
+    if values.size and np.ptp(values) > 0:
+        bins = np.linspace(*np.quantile(values, [0.001, 0.999]), 60)
+        for label, colour, d in drawn:
+            ax.hist(d[name], bins=bins, density=True, histtype="step", color=colour, label=label)
+    ax.set_xlabel(name)
+    ax.set_yticks([])
+    ax.set_title(f"{name}: prior vs fleet", fontsize=9)
+    ax.legend(fontsize=6)
+    return fig
+
+
+def plot_reliability(result: Any, *, ax: Axes | None = None) -> Figure:
+    """The held-out reliability curve: predicted P(squeak) against the share of frames heard,
+    in bins of P, with the prior and with the calibrated population (marker area by frames),
+    the diagonal of a perfect forecast.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        The calibration.
+    ax : Axes, optional
+        The axes to draw into; default: a new figure.
+
+    Returns
+    -------
+    Figure
+        The figure drawn into.
+    """
+    fig, ax = _axes(ax, figsize=(4.5, 4.5), layout="constrained")
+    h = result.run.held_out
+    ax.plot([0, 1], [0, 1], color="0.6", ls="--", lw=1, label="perfect")
+    curves = h.reliability(result.settings.reliability_bins)
+    total = max(h.frames, 1)
+    for key, colour, brier in (
+        ("prior", "0.3", h.brier_prior),
+        ("calibrated", "C1", h.brier_calibrated),
+    ):
+        rows = curves[key]
+        if not rows:
+            continue
+        p = [r["p"] for r in rows]
+        f = [r["heard"] for r in rows]
+        size = [20 + 400 * r["frames"] / total for r in rows]
+        ax.plot(p, f, color=colour, lw=1)
+        ax.scatter(p, f, s=size, color=colour, label=f"{key} (Brier {brier:.3f})", zorder=3)
+    ax.set_xlim(-0.02, 1.02)
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_xlabel("predicted P(squeak)")
+    ax.set_ylabel("share of frames heard")
+    ax.set_title(f"held-out reliability ({len(h.units)} units, {h.frames} frames)", fontsize=9)
+    ax.legend(fontsize=7, loc="upper left")
+    return fig
+
+
+def plot_calibration(result: Any, *, fig: Figure | None = None) -> Figure:
+    """calibration.png: per calibrated parameter and friction_drop the units' posteriors
+    (`plot_posteriors`) over the prior against the fleet (`plot_population`), and the
+    held-out reliability curve (`plot_reliability`).
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        The calibration (`review.calibration.run.calibrate`).
+    fig : Figure, optional
+        The figure to draw the panels into; default: a new figure.
+
+    Returns
+    -------
+    Figure
+        The figure drawn into.
+    """
+    names = [*result.settings.names]
+    if {"mu_static", "mu_kinetic"} <= set(names):
+        names.append("friction_drop")
+    n = len(names)
+    rows = min(max(len(result.run.units), 4), _FOREST_UNITS)
+    fig = (
+        fig
+        if fig is not None
+        else new_figure(figsize=(3.2 * n, 3.2 + 0.12 * rows + 6.5), layout="constrained")
+    )
+    grid = fig.add_gridspec(3, n, height_ratios=[1.5 + 0.05 * rows, 1.0, 1.6])
+    for k, name in enumerate(names):
+        plot_posteriors(result, name, ax=fig.add_subplot(grid[0, k]))
+        plot_population(result, name, ax=fig.add_subplot(grid[1, k]))
+    half = max(n // 2, 1)
+    plot_reliability(result, ax=fig.add_subplot(grid[2, :half]))
+    if n > half:
+        _held_out_panel(result, fig.add_subplot(grid[2, half:]))
+    run = result.run
+    comparison = result.comparison
+    fig.suptitle(
+        f"calibration: {len(run.units)} units, formulation {run.formulation}"
+        + (
+            f" (supported {comparison.strength})"
+            if comparison is not None and comparison.supported
+            else ""
+        )
+    )
+    return fig
+
+
+def _held_out_panel(result: Any, ax: Axes) -> None:
+    """The held-out units' Brier scores, prior against calibrated (with both formulations,
+    each formulation's calibrated score)."""
+    runs = result.runs
+    units = result.run.held_out.units
+    series = [("prior", "0.3", {u: v[0] for u, v in result.run.held_out.per_unit.items()})]
+    for name, run in runs.items():
+        label = f"calibrated ({name})" if len(runs) > 1 else "calibrated"
+        colour = "C1" if name == result.chosen else "C0"
+        series.append((label, colour, {u: v[1] for u, v in run.held_out.per_unit.items()}))
+    width = 0.8 / len(series)
+    x = np.arange(len(units))
+    for k, (label, colour, scores) in enumerate(series):
+        ax.bar(
+            x + (k - (len(series) - 1) / 2) * width,
+            [scores.get(u, np.nan) for u in units],
+            width,
+            color=colour,
+            label=label,
+        )
+    ax.set_xticks(x, units, fontsize=6, rotation=45, ha="right")
+    ax.set_ylabel("Brier score")
+    ax.set_title("held-out units: Brier score (lower is better)", fontsize=9)
+    ax.legend(fontsize=7)

@@ -11,7 +11,6 @@ and config/leadscrew.yaml (`config_yaml`, written by tools/gen_config.py).
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterator
 from dataclasses import Field, dataclass, fields
 from typing import Any, NamedTuple
@@ -22,7 +21,7 @@ from ..bag.logmeta import LogMetadata
 from ..bag.recorder import RecordSettings
 from ..live.settings import JointSettings, ListenSettings, LiveSettings
 from ..model.acoustics.settings import DetectorSettings
-from ..model.physics.display import exact
+from ..model.physics.display import exact, yaml_value
 from ..model.physics.metadata import check, check_value, documented, range_text, setting
 from ..model.physics.parameters import ParameterError, ScrewParameters
 from ..model.uncertainty.scatter import ScatterSettings
@@ -239,21 +238,6 @@ def help_lines() -> list[str]:
         )
         lines.append(f"{text}: {md['description']}" + (f" ({notes})" if notes else ""))
     return lines
-
-
-def yaml_value(value: Any) -> str:
-    """A default as YAML that PyYAML and rcl read back with its type: floats always with a
-    decimal point (ROS rejects an integer YAML value for a double parameter; YAML 1.1 reads
-    '1e-05' as text)."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        text = repr(value)
-        mantissa, e, exponent = text.partition("e")
-        return text if "." in mantissa or not e else f"{mantissa}.0e{exponent}"
-    if isinstance(value, str):
-        return json.dumps(value)
-    return str(value)
 
 
 def yaml_comment(spec: Spec) -> str:

@@ -1,7 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Numbers in messages: short, yet never rounded onto the limit they violate."""
+"""Numbers in messages and parameter files: short, yet never rounded onto the limit they
+violate; as YAML that reads back with its type."""
 
 from __future__ import annotations
+
+import json
 
 
 def exact(value: float) -> str:
@@ -18,3 +21,18 @@ def exact(value: float) -> str:
                 text = f"{v:.{digits - 1}e}"  # not 10000001
             return text
     return repr(v)
+
+
+def yaml_value(value: object) -> str:
+    """A value as YAML that PyYAML and rcl read back with its type: floats always with a
+    decimal point (ROS rejects an integer YAML value for a double parameter; YAML 1.1 reads
+    '1e-05' as text), text quoted."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        text = repr(value)
+        mantissa, e, exponent = text.partition("e")
+        return text if "." in mantissa or not e else f"{mantissa}.0e{exponent}"
+    if isinstance(value, str):
+        return json.dumps(value)
+    return str(value)

@@ -1,0 +1,174 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The calibration command: `calibrate` (each unit's friction and damping from what was heard,
+the fleet's population, the held-out check; `review.calibration`).
+
+Exit status: 0 every unit calibrated (or keeping the prior, with nothing to learn) and every
+sampler converged; 2 a bad command line or input, or no input with observations (nothing
+written); NOT_CONVERGED (3) written, but a unit's or the population's sampler did not converge
+or there is no population (then no calibrated.yaml): the numbers are not to be trusted as they
+are; UNUSABLE (4) written and converged, but some inputs gave no observations (no sound,
+unreadable: their reasons in calibration.json). 3 wins over 4.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import asdict
+from typing import TYPE_CHECKING
+
+from .args import (
+    CliError,
+    Parser,
+    add_settings_options,
+    build_model,
+    output_directory,
+    settings_from,
+)
+from .fleet import add_cluster_options, cluster_options, cluster_text
+from .logs import _topic, add_input_options, listen_settings, replay_inputs
+
+if TYPE_CHECKING:
+    from ..review.calibration.run import CalibrationResult
+
+NOT_CONVERGED, UNUSABLE = 3, 4
+
+
+def exit_status(result: CalibrationResult) -> int:
+    """The module's exit status of a written calibration."""
+    if not result.converged:
+        return NOT_CONVERGED
+    return UNUSABLE if result.unusable else 0
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    """`calibrate`: gather, calibrate, write; exit status."""
+    from ..model.calibration import CalibrationError, DetectionErrors, ThinSettings
+    from ..review.calibration.sampling import SamplerSettings
+    from ..review.calibration.settings import BOTH, DEFAULT_NAMES, CalibrationSettings
+
+    workers, reach = cluster_options(args)
+    settings = settings_from(
+        args,
+        CalibrationSettings,
+        names=tuple(args.calibrate) or DEFAULT_NAMES,
+        errors=settings_from(args, DetectionErrors),
+        sampler=settings_from(args, SamplerSettings),
+    )
+    # the prior: the model options; with both formulations each gets the prior's values
+    prior = build_model(
+        argparse.Namespace(**{**vars(args), "formulation": None})
+        if settings.formulation == BOTH
+        else args
+    )
+    from ..review.calibration.gather import GatherSettings, find_inputs, gather
+    from ..review.calibration.output import text, write
+    from ..review.calibration.run import calibrate
+    from ..review.fleet import ClusterError, cluster
+
+    try:
+        gathering = GatherSettings(
+            prior.params,
+            replay_inputs(args),
+            args.namespace and _topic(args.namespace),
+            listen_settings(args, wav_must_exist=False),
+            settings_from(args, ThinSettings),
+        )
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    out = output_directory(args.out)
+    inputs = find_inputs(args.paths, skip=out)
+    if not inputs:
+        raise CliError(
+            f"no logs (.mcap, .db3, bag directories) or replay outputs (summary.json) in "
+            f"{' '.join(args.paths)}"
+        )
+    try:
+        with cluster(workers, args.scheduler, reach) as client:
+            gathered = gather(inputs, out.resolve(), gathering, client)
+            result = calibrate(gathered, prior, settings, client, gathering.thin)
+    except ClusterError as exc:  # raised before any work
+        raise CliError(str(exc)) from None
+    except CalibrationError as exc:
+        raise CliError(str(exc)) from None
+    context = {
+        "inputs": args.paths,
+        "prior": {
+            "params": prior.params.as_dict(),
+            "scatter": dict(prior.scatter.sd),
+            "samples": prior.sample_count,
+        },
+        "replay": {
+            "inputs": asdict(gathering.inputs),
+            "namespace": gathering.namespace,
+            "listen": asdict(gathering.listen),
+            "thin": asdict(gathering.thin),
+        },
+        "run": {"out": str(out.resolve()), "cluster": cluster_text(args, workers)},
+    }
+    write(result, out, context, plot=not args.no_report)
+    if not args.quiet:
+        print(text(result, out))
+    return exit_status(result)
+
+
+def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
+    """Add `calibrate` (with the model options `common`: the prior) to `sub`."""
+    from ..model.calibration import DetectionErrors, ThinSettings
+    from ..review.calibration.sampling import SamplerSettings
+    from ..review.calibration.settings import DEFAULT_NAMES, CalibrationSettings
+
+    p = sub.add_parser(
+        "calibrate",
+        parents=common,
+        conflict_handler="resolve",  # --formulation: also 'both'
+        help="calibrate each unit's friction and damping from the heard squeak of its logs, "
+        "the fleet's population (DIR/calibrated.yaml, a params file for the node and every "
+        "command), a held-out check: calibration.json, .txt, .png",
+    )
+    p.add_argument(
+        "paths",
+        nargs="+",
+        metavar="PATH",
+        help="logs with sound (.mcap, .db3, bag directories, folders, glob patterns, as "
+        "review takes them) or replay outputs (a directory with summary.json from replay or "
+        "review, or the file); the logs of one unit_id are one unit",
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="output directory: calibration.json, calibration.txt, calibration.png, "
+        "calibrated.yaml and replays/<log name>/ (the replay of each log, with its heard "
+        "episodes: an input of a later calibrate)",
+    )
+    add_cluster_options(p)
+    g = p.add_argument_group("calibration")
+    g.add_argument(
+        "--calibrate",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help=f"{CalibrationSettings.__dataclass_fields__['names'].metadata['help']} "
+        f"(repeatable; default {', '.join(DEFAULT_NAMES)})",
+    )
+    add_settings_options(g, CalibrationSettings)
+    add_settings_options(
+        p.add_argument_group("detection errors (the likelihood's model of the detector)"),
+        DetectionErrors,
+    )
+    add_settings_options(p.add_argument_group("sampler (emcee)"), SamplerSettings)
+    add_settings_options(
+        p.add_argument_group("distinct operating points (the bins frames are thinned to)"),
+        ThinSettings,
+    )
+    add_input_options(p)
+    p.add_argument("--quiet", action="store_true", help="no summary")
+    p.epilog = (
+        "The model options are the prior (--formulation both: each formulation with the "
+        "prior's values). Exit status: 0 calibrated and converged; 2 bad command line or "
+        f"input, nothing to calibrate from; {NOT_CONVERGED} written, but some sampler did "
+        "not converge or there is no population (no calibrated.yaml); "
+        f"{UNUSABLE} written and converged, but some inputs gave no observations "
+        f"(no sound, unreadable). {NOT_CONVERGED} wins over {UNUSABLE}."
+    )
+    p.set_defaults(run=cmd_calibrate)

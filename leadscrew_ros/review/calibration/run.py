@@ -1,0 +1,630 @@
+# SPDX-License-Identifier: Apache-2.0
+"""A whole calibration run: logs -> units -> per-unit posteriors -> the fleet's population ->
+the held-out check (and, with both formulations, which one the data supports).
+
+1. `gather.gather`: every input (log or replay output) to its observations, one Dask task each;
+   `gather.by_unit` groups them into units (a unit's logs merged).
+2. The units with observations are split, seeded (`CalibrationSettings.holdout`, the sampler's
+   seed), into training and held-out units.
+3. Per unit, one Dask task (`calibrate_task`): `sampling.calibrate_unit` (a unit with nothing
+   to learn keeps the prior and says so; its seed derives from the run's and its unit id), and
+   the heard frequencies matched with the unstable modes predicted at its posterior mean
+   (`acoustics.agreement.MATCH_TOLERANCE`).
+4. The population (`sampling.fit_population`) from the training units that were calibrated
+   and converged; their hierarchical posteriors are the ones reported.
+5. The held-out check: P(squeak) at each distinct operating point of the held-out units as the
+   node computes it (`Prediction.probability`, the live estimate, `timeline.predict_jobs`),
+   with the calibrated population (`Population.params_and_scatter`) and with the prior; the
+   Brier score over their frames, per unit and together, and the reliability curve (predicted
+   P against the heard share of frames, in bins of P).
+6. With both formulations, steps 3-5 run for each. The supported formulation has the lower
+   held-out Brier score; how strongly is the paired difference over the held-out units
+   against its standard error (`strength`): `STRONG_Z` standard errors or more 'strongly',
+   `WEAK_Z` or more 'weakly', less 'not distinguishably'. The frequency match is reported beside
+   it and, when it favours the other formulation by more than `FREQUENCY_MARGIN`, said so.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ...model import ScrewParameters, SqueakModel
+from ...model.acoustics.agreement import MATCH_TOLERANCE, nearest_mode
+from ...model.calibration import CalibrationError, DetectionErrors, Observations, ThinSettings
+from ...model.calibration.posterior import Population, UnitPosterior
+from ...model.physics.parameters import ParameterError
+from ...model.uncertainty.scatter import LIVE_SAMPLES, Scatter
+from ..timeline import ModelSpec, predict_jobs
+from .gather import Gathered, by_unit
+from .sampling import SamplerSettings, calibrate_unit, fit_population
+from .settings import CalibrationSettings
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+STRONG_Z, WEAK_Z = 2.0, 1.0  # paired held-out Brier difference / its standard error
+FREQUENCY_MARGIN = 0.05  # a frequency match better by more than this is worth a word
+CALIBRATED = "calibrated"
+
+
+# ---------------------------------------------------------------------- per unit (tasks)
+def _model(spec: ModelSpec) -> SqueakModel:
+    return SqueakModel(spec.params, Scatter(dict(spec.scatter)), spec.samples)
+
+
+def probabilities(spec: ModelSpec, obs: Observations) -> np.ndarray:
+    """P(squeak) at each distinct operating point of `obs` as the node computes it (the live
+    estimate of `spec`'s model), nan where the model is not valid.
+
+    Parameters
+    ----------
+    spec : ModelSpec
+        The model (parameters, scatter, live samples).
+    obs : Observations
+        A unit's points.
+
+    Returns
+    -------
+    numpy.ndarray
+        (P,) probabilities.
+    """
+    preds = predict_jobs(spec, obs.speed_rad_s, obs.load_n, obs.nut_position_m)
+    return np.array([math.nan if p.probability is None else p.probability for p in preds])
+
+
+def frequency_match(params: ScrewParameters, obs: Observations) -> tuple[int, int]:
+    """How the heard frequencies match the unstable modes predicted at `params` (nominal, no
+    scatter): a point's heard frames match when an unstable mode there lies within
+    `MATCH_TOLERANCE` of its heard frequency.
+
+    Parameters
+    ----------
+    params : ScrewParameters
+        E.g. a unit's posterior mean.
+    obs : Observations
+        Its points.
+
+    Returns
+    -------
+    tuple of (int, int)
+        (heard frames matched, heard frames with a frequency).
+    """
+    idx = np.flatnonzero((obs.heard > 0) & np.isfinite(obs.heard_hz))
+    if not idx.size:
+        return 0, 0
+    spec = ModelSpec(params, (), LIVE_SAMPLES)
+    preds = predict_jobs(spec, obs.speed_rad_s[idx], obs.load_n[idx], obs.nut_position_m[idx])
+    matched = 0
+    for i, p in zip(idx.tolist(), preds, strict=True):
+        f = float(obs.heard_hz[i])
+        near = nearest_mode(f, [(m.label, m.frequency_hz) for m in p.squeak_modes])
+        if near is not None and abs(near[1] - f) <= MATCH_TOLERANCE * f:
+            matched += int(obs.heard[i])
+    return matched, int(obs.heard[idx].sum())
+
+
+@dataclass
+class UnitTask:
+    """What a unit's task returns.
+
+    Attributes
+    ----------
+    posterior : UnitPosterior or None
+        The unit's own posterior (the prior's draws when it has nothing to learn); None when
+        the calibration failed.
+    status : str
+        Its status, or why it failed.
+    matched_frames, heard_frames : int
+        `frequency_match` at the posterior mean.
+    """
+
+    posterior: UnitPosterior | None
+    status: str
+    matched_frames: int = 0
+    heard_frames: int = 0
+
+
+def calibrate_task(
+    spec: ModelSpec,
+    obs: Observations,
+    names: tuple[str, ...],
+    errors: DetectionErrors,
+    sampler: SamplerSettings,
+) -> UnitTask:
+    """One unit (the body of a Dask task): `calibrate_unit` and, when it learned something,
+    the frequency match at its posterior mean; what goes wrong is the unit's status, never an
+    exception.
+
+    Parameters
+    ----------
+    spec : ModelSpec
+        The prior: nominal parameters, scatter, live samples.
+    obs : Observations
+        The unit's frames.
+    names : tuple of str
+        The calibrated parameters.
+    errors : DetectionErrors
+        The detection error model.
+    sampler : SamplerSettings
+        Walkers, steps, the run's seed.
+
+    Returns
+    -------
+    UnitTask
+    """
+    try:
+        post = calibrate_unit(_model(spec), obs, names, errors, sampler)
+        if not post.learned or not len(post.samples):
+            return UnitTask(post, post.status)
+        mean = post.samples.mean(axis=0)
+        try:
+            params = spec.params.with_(
+                **{n: float(v) for n, v in zip(post.names, mean, strict=True)}
+            )
+        except ParameterError:  # a mean outside the domain: no frequency to match there
+            return UnitTask(post, post.status, 0, int(obs.heard.sum()))
+        return UnitTask(post, post.status, *frequency_match(params, obs))
+    except Exception as exc:  # this unit's reason, not the run's end
+        return UnitTask(None, f"not calibrated: {type(exc).__name__}: {' '.join(str(exc).split())}")
+
+
+@dataclass
+class UnitResult:
+    """One unit of a formulation's calibration.
+
+    Attributes
+    ----------
+    unit_id : str
+    logs : list of str
+        Its inputs.
+    status : str
+        'calibrated', or why not (no sound, nothing to learn, not converged, ...).
+    posterior : UnitPosterior or None
+        Its own posterior (None without observations).
+    hierarchical : UnitPosterior or None
+        Its population-informed posterior (a training unit in the population fit).
+    held_out : bool
+        Held out of the population fit.
+    observations : Observations or None
+    matched_frames, heard_frames : int
+        The frequency match at its posterior mean.
+    """
+
+    unit_id: str
+    logs: list[str]
+    status: str
+    posterior: UnitPosterior | None = None
+    hierarchical: UnitPosterior | None = None
+    held_out: bool = False
+    observations: Observations | None = None
+    matched_frames: int = 0
+    heard_frames: int = 0
+
+    @property
+    def reported(self) -> UnitPosterior | None:
+        """The posterior in calibration.json: the hierarchical one where there is one."""
+        return self.hierarchical or self.posterior
+
+    @property
+    def calibrated(self) -> bool:
+        """Calibrated, and its sampler converged."""
+        return self.status == CALIBRATED
+
+    def as_dict(self) -> dict[str, Any]:
+        """calibration.json's unit."""
+        post = self.reported
+        return {
+            "unit_id": self.unit_id,
+            "logs": self.logs,
+            "status": self.status,
+            "posterior": post.summary() if post is not None else None,
+            "held_out": self.held_out,
+            "convergence": None
+            if post is None
+            else {
+                "ess": post.ess,
+                "converged": post.converged,
+                "reexpansions": post.reexpansions,
+                "evaluations": post.evaluations,
+                "posterior": "hierarchical" if self.hierarchical is not None else "unit",
+            },
+        }
+
+
+@dataclass
+class HeldOut:
+    """The held-out check of one formulation.
+
+    Attributes
+    ----------
+    units : list of str
+        The held-out units (with observations).
+    frames : int
+        Their frames counted (at valid operating points of both models).
+    brier_prior, brier_calibrated : float or None
+        Brier score of P(squeak) over those frames (None without held-out frames).
+    per_unit : dict of str to (float, float)
+        Unit -> (prior, calibrated) Brier score.
+    points : numpy.ndarray
+        Rows (P prior, P calibrated, frames, heard) of every distinct point counted.
+    """
+
+    units: list[str] = field(default_factory=list)
+    frames: int = 0
+    brier_prior: float | None = None
+    brier_calibrated: float | None = None
+    per_unit: dict[str, tuple[float, float]] = field(default_factory=dict)
+    points: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+
+    def reliability(self, bins: int) -> dict[str, list[dict[str, float]]]:
+        """Predicted P against the heard share of frames, in `bins` equal bins of P: per bin
+        the frame-weighted mean P, the heard share and the frames, for the prior and the
+        calibrated population (empty bins left out)."""
+        out: dict[str, list[dict[str, float]]] = {}
+        frames, heard = self.points[:, 2], self.points[:, 3]
+        for col, key in ((0, "prior"), (1, "calibrated")):
+            p = self.points[:, col]
+            k = np.minimum((p * bins).astype(int), bins - 1)
+            rows = []
+            for b in range(bins):
+                sel = k == b
+                n = float(frames[sel].sum())
+                if n > 0:
+                    rows.append(
+                        {
+                            "p": float((p[sel] * frames[sel]).sum() / n),
+                            "heard": float(heard[sel].sum() / n),
+                            "frames": n,
+                        }
+                    )
+            out[key] = rows
+        return out
+
+
+def brier(p: np.ndarray, frames: np.ndarray, heard: np.ndarray) -> float:
+    """Brier score over frames: at a point with P, `heard` frames score (1 - P)^2 and the
+    others P^2."""
+    return float(np.sum(heard * (1 - p) ** 2 + (frames - heard) * p**2) / np.sum(frames))
+
+
+def held_out_check(
+    units: list[UnitResult], prior: np.ndarray | list, calibrated: np.ndarray | list
+) -> HeldOut:
+    """The held-out check from each held-out unit's P at its points (prior, calibrated)."""
+    rows, per_unit = [], {}
+    for u, pp, pc in zip(units, prior, calibrated, strict=True):
+        obs = u.observations
+        assert obs is not None  # held-out units have observations
+        ok = np.isfinite(pp) & np.isfinite(pc)
+        if not ok.any():
+            continue
+        f, h = obs.frames[ok].astype(float), obs.heard[ok].astype(float)
+        per_unit[u.unit_id] = (brier(pp[ok], f, h), brier(pc[ok], f, h))
+        rows.append(np.column_stack([pp[ok], pc[ok], f, h]))
+    if not rows:
+        return HeldOut([u.unit_id for u in units])
+    pts = np.concatenate(rows)
+    return HeldOut(
+        [u.unit_id for u in units],
+        int(pts[:, 2].sum()),
+        brier(pts[:, 0], pts[:, 2], pts[:, 3]),
+        brier(pts[:, 1], pts[:, 2], pts[:, 3]),
+        per_unit,
+        pts,
+    )
+
+
+@dataclass
+class FormulationRun:
+    """The calibration with one formulation.
+
+    Attributes
+    ----------
+    formulation : str
+    prior : ModelSpec
+        The prior: nominal parameters (of this formulation), scatter, live samples.
+    units : list of UnitResult
+        Every unit, in order of first appearance.
+    population : Population or None
+        The fleet's population (None with fewer than two usable training units).
+    population_status : str
+        'calibrated', or why there is no (converged) population.
+    params : ScrewParameters or None
+        The calibrated nominal parameters (`Population.params_and_scatter`).
+    scatter : Scatter or None
+        The calibrated scatter (the prior's for the parameters not calibrated).
+    held_out : HeldOut
+    """
+
+    formulation: str
+    prior: ModelSpec
+    units: list[UnitResult]
+    population: Population | None = None
+    population_status: str = ""
+    params: ScrewParameters | None = None
+    scatter: Scatter | None = None
+    held_out: HeldOut = field(default_factory=HeldOut)
+
+    @property
+    def frequency_match(self) -> float | None:
+        """Share of the heard frames (with a frequency) of the calibrated units matched by an
+        unstable mode at their posterior mean; None when nothing was heard."""
+        heard = sum(u.heard_frames for u in self.units)
+        return sum(u.matched_frames for u in self.units) / heard if heard else None
+
+    @property
+    def score(self) -> float | None:
+        """The held-out Brier score with the calibrated population (lower is better)."""
+        return self.held_out.brier_calibrated
+
+
+@dataclass
+class Comparison:
+    """Which formulation the data supports (module docstring: the rule).
+
+    Attributes
+    ----------
+    supported : str or None
+        None without a held-out score of both.
+    strength : str
+        'strongly', 'weakly', 'not distinguishably', or why there is no comparison.
+    z : float or None
+        Mean paired held-out Brier difference (other - supported) over its standard error.
+    note : str
+        The frequency match, when it favours the other formulation.
+    """
+
+    supported: str | None
+    strength: str
+    z: float | None = None
+    note: str = ""
+
+
+def compare(runs: dict[str, FormulationRun]) -> Comparison:
+    """The module's rule over the formulations' held-out checks."""
+    scored = {k: r for k, r in runs.items() if r.score is not None}
+    if len(scored) < len(runs):
+        return Comparison(None, "no held-out score for every formulation")
+    best = min(runs, key=lambda k: (runs[k].score, k))
+    other = next(k for k in runs if k != best)
+    a, b = runs[best].held_out.per_unit, runs[other].held_out.per_unit
+    d = np.array([b[u][1] - a[u][1] for u in a if u in b])
+    if d.size >= 2 and np.std(d, ddof=1) > 0:
+        z = float(d.mean() / (np.std(d, ddof=1) / math.sqrt(d.size)))
+    else:
+        z = math.inf if d.size and d.mean() > 0 else 0.0
+    strength = "strongly" if z >= STRONG_Z else "weakly" if z >= WEAK_Z else "not distinguishably"
+    fa, fb = runs[best].frequency_match, runs[other].frequency_match
+    note = (
+        f"but {other} matches the heard frequencies better ({fb:.2f} vs {fa:.2f})"
+        if fa is not None and fb is not None and fb > fa + FREQUENCY_MARGIN
+        else ""
+    )
+    return Comparison(best, strength, z if math.isfinite(z) else None, note)
+
+
+@dataclass
+class CalibrationResult:
+    """A calibration run (`calibrate`): per formulation its units, population and held-out
+    check; the one reported (the supported one with both); what was read.
+
+    Attributes
+    ----------
+    runs : dict of str to FormulationRun
+    chosen : str
+        The formulation of the reported units, population and calibrated.yaml.
+    comparison : Comparison or None
+        With both formulations.
+    gathered : list of Gathered
+        Every input, read.
+    settings : CalibrationSettings
+    wall_s : float
+        Wall time of the run [s].
+    """
+
+    runs: dict[str, FormulationRun]
+    chosen: str
+    comparison: Comparison | None
+    gathered: list[Gathered]
+    settings: CalibrationSettings
+    wall_s: float = math.nan
+
+    @property
+    def run(self) -> FormulationRun:
+        """The reported formulation's run."""
+        return self.runs[self.chosen]
+
+    @property
+    def unusable(self) -> list[Gathered]:
+        """Inputs that gave no observations."""
+        return [g for g in self.gathered if g.observations is None]
+
+    @property
+    def converged(self) -> bool:
+        """Every calibrated unit's sampler and the population's converged (every
+        formulation)."""
+        return all(
+            r.population is not None
+            and r.population_status == CALIBRATED
+            and not any(u.status.startswith("not converged") for u in r.units)
+            for r in self.runs.values()
+        )
+
+    def plot(self, fig: Figure | None = None) -> Figure:
+        """calibration.png (`plots.plot_calibration`).
+
+        Parameters
+        ----------
+        fig : Figure, optional
+            The figure to draw into; default: a new figure.
+
+        Returns
+        -------
+        Figure
+        """
+        from ..plots import plot_calibration
+
+        return plot_calibration(self, fig=fig)
+
+
+# ---------------------------------------------------------------------- the run
+def _split(units: list[str], fraction: float, seed: int) -> set[str]:
+    """The held-out units: round(fraction * n) of them, at least one left for training,
+    drawn with `seed` (independent of the order the units came in)."""
+    n_out = min(int(round(fraction * len(units))), max(len(units) - 1, 0))
+    pick = np.random.default_rng(seed).permutation(len(units))[:n_out]
+    ordered = sorted(units)
+    return {ordered[i] for i in pick.tolist()}
+
+
+def _not_converged(post: UnitPosterior) -> str:
+    low = {n: v for n, v in post.ess.items() if not (v == v and v > 0)}
+    ess = ", ".join(f"{n} {v:.0f}" for n, v in post.ess.items() if v == v)
+    return (
+        "not converged"
+        + (f" (effective sample size {ess})" if ess else "")
+        + (f"; no estimate for {', '.join(low)}" if low else "")
+    )
+
+
+def calibrate_formulation(
+    formulation: str,
+    prior: SqueakModel,
+    units: dict[str, tuple[list[Gathered], Observations | None, str]],
+    held: set[str],
+    settings: CalibrationSettings,
+    client: Any,
+) -> FormulationRun:
+    """Steps 3-5 of the module with one formulation, the units' tasks on `client`'s cluster."""
+    spec = ModelSpec(
+        prior.params.with_(formulation=formulation),
+        tuple(prior.scatter.sd.items()),
+        prior.sample_count,
+    )
+    results = [
+        UnitResult(
+            unit_id,
+            [g.log for g in items],
+            reasons or "no observations",
+            held_out=unit_id in held,
+            observations=obs,
+        )
+        for unit_id, (items, obs, reasons) in units.items()
+    ]
+    futures = {
+        u.unit_id: client.submit(
+            calibrate_task,
+            spec,
+            u.observations,
+            settings.names,
+            settings.errors,
+            settings.sampler,
+            pure=False,
+        )
+        for u in results
+        if u.observations is not None
+    }
+    for u in results:
+        if u.unit_id not in futures:
+            continue
+        try:
+            task = futures[u.unit_id].result()
+        except Exception as exc:  # the task did not finish (its workers died)
+            u.status = f"not calibrated: {type(exc).__name__}: {' '.join(str(exc).split())}"
+            continue
+        u.posterior, u.status = task.posterior, task.status
+        u.matched_frames, u.heard_frames = task.matched_frames, task.heard_frames
+    run = FormulationRun(formulation, spec, results)
+    training = [u for u in results if u.calibrated and not u.held_out]
+    if len(training) < 2:
+        run.population_status = (
+            f"no population: {len(training)} calibrated training unit(s), at least 2 needed"
+        )
+    else:
+        try:
+            population, hierarchical = fit_population(
+                [u.posterior for u in training if u.posterior is not None],
+                _model(spec),
+                settings.sampler,
+            )
+        except CalibrationError as exc:
+            run.population_status = f"no population: {exc}"
+        else:
+            for u, h in zip(training, hierarchical, strict=True):
+                u.hierarchical = h
+            run.population, run.population_status = population, population.status
+            run.params, run.scatter = population.params_and_scatter(spec.params)
+    held_units = [u for u in results if u.held_out and u.observations is not None]
+    if run.params is not None and run.scatter is not None and held_units:
+        calibrated = ModelSpec(run.params, tuple(run.scatter.sd.items()), prior.sample_count)
+        jobs = [
+            (
+                client.submit(probabilities, spec, u.observations, pure=False),
+                client.submit(probabilities, calibrated, u.observations, pure=False),
+            )
+            for u in held_units
+        ]
+        p_prior = [a.result() for a, _ in jobs]
+        p_cal = [b.result() for _, b in jobs]
+        run.held_out = held_out_check(held_units, p_prior, p_cal)
+    else:
+        run.held_out = HeldOut([u.unit_id for u in held_units])
+    return run
+
+
+def calibrate(
+    gathered: list[Gathered],
+    prior: SqueakModel,
+    settings: CalibrationSettings,
+    client: Any,
+    thin: ThinSettings | None = None,
+) -> CalibrationResult:
+    """The module's steps 2-6 over what `gather.gather` read.
+
+    Parameters
+    ----------
+    gathered : list of Gathered
+        Every input, read.
+    prior : SqueakModel
+        The prior: nominal parameters and scatter (its formulation is replaced by each one
+        calibrated), live sample count.
+    settings : CalibrationSettings
+        What is calibrated and how.
+    client : distributed.Client
+        Of the cluster that runs the units' tasks.
+    thin : ThinSettings, optional
+        The bins the inputs were thinned with (`GatherSettings.thin`), for merging a unit's.
+
+    Returns
+    -------
+    CalibrationResult
+
+    Raises
+    ------
+    CalibrationError
+        No input gave observations.
+    """
+    t0 = time.perf_counter()
+    units = by_unit(gathered, thin)
+    usable = [u for u, (_, obs, _) in units.items() if obs is not None]
+    if not usable:
+        reasons = "; ".join(f"{g.source}: {g.reason}" for g in gathered[:3])
+        more = f" (and {len(gathered) - 3} more)" if len(gathered) > 3 else ""
+        raise CalibrationError(f"nothing to calibrate from: {reasons}{more}")
+    held = _split(usable, settings.holdout, settings.sampler.seed)
+    runs = {
+        f: calibrate_formulation(f, prior, units, held, settings, client)
+        for f in settings.formulations
+    }
+    comparison = compare(runs) if len(runs) > 1 else None
+    chosen = (
+        comparison.supported
+        if comparison is not None and comparison.supported is not None
+        else settings.formulations[0]
+    )
+    return CalibrationResult(runs, chosen, comparison, gathered, settings, time.perf_counter() - t0)
