@@ -261,6 +261,47 @@ CASES = [
     (["review", "{d}/logs", "--out", "{d}/v", "--connect-timeout", "1"], 2),
     (["review", "{d}/logs", "--out", "{d}/v", "--warn-probability", "nan"], 2),
     (["review", "{d}/logs", "--out", "{d}/v", "--use-log-params", "--param", "radius_m=1"], 2),
+    # calibrate (refused before any work, but the log without sound: after its replay)
+    (["calibrate", "{d}/missing", "--out", "{d}/k"], 2),
+    (["calibrate", "{d}/folder", "--out", "{d}/k"], 2),
+    (["calibrate", LOG, "--out", "{d}/picture.png"], 2),
+    (["calibrate", LOG, "--out", "{d}/k", "--workers", "1"], 2),  # no sound: nothing to learn from
+    *[
+        (["calibrate", LOG, "--out", "{d}/k", "--holdout", v], 2)
+        for v in ("1.5", "1", "-0.1", "nan")
+    ],
+    *[
+        (["calibrate", LOG, "--out", "{d}/k", option, v], 2)
+        for option in ("--false-alarm", "--miss", "--prior-widen", "--speed-step-rad-s")
+        for v in ("nan", "inf", "-1", "0.5e308")
+    ],
+    *[(["calibrate", LOG, "--out", "{d}/k", "--steps", v], 2) for v in ("-1", "2.5", "nan")],
+    (["calibrate", LOG, "--out", "{d}/k", "--steps", "100", "--burn", "100"], 2),
+    (["calibrate", LOG, "--out", "{d}/k", "--walkers", "33"], 2),
+    *[
+        (["calibrate", LOG, "--out", "{d}/k", "--calibrate", n], 2)
+        for n in ("radius", "nut_position_m", "formulation")
+    ],
+    (
+        [
+            "calibrate",
+            LOG,
+            "--out",
+            "{d}/k",
+            "--calibrate",
+            "mu_static",
+            "--calibrate",
+            "mu_static",
+        ],
+        2,
+    ),
+    (["calibrate", LOG, "--out", "{d}/k", "--formulation", "bogus"], 2),
+    (["calibrate", LOG, "--out", "{d}/k", "--scatter", "mu_static=nan"], 2),
+    (["calibrate", LOG, "--out", "{d}/k", "--param", "mu_static=nan"], 2),
+    (["calibrate", LOG, "--out", "{d}/k", "--params-file", "{d}/picture.png"], 2),
+    (["calibrate", LOG, "--out", "{d}/k", "--connect-timeout", "1"], 2),
+    (["calibrate", LOG, "--out", "{d}/k", "--scheduler", "tcp://127.0.0.1"], 2),
+    (["calibrate", LOG, "--out", "{d}/k", "--workers", "0"], 2),
 ]
 
 

@@ -25,11 +25,11 @@ from pathlib import Path
 from typing import Any
 
 from ... import __version__
+from ...model.calibration.posterior import DROP
 from ...model.physics.display import yaml_value
 from ...model.uncertainty.scatter import LOG_NORMAL, scatterable
 from ..jsonsafe import json_safe
-from ...model.calibration.posterior import DROP
-from .run import STRONG_Z, WEAK_Z, CalibrationResult, FormulationRun
+from .run import FREQUENCY_DECISIVE, STRONG_Z, WEAK_Z, CalibrationResult, FormulationRun
 
 JSON_FILE, TEXT_FILE, PNG_FILE, YAML_FILE = (
     "calibration.json",
@@ -38,9 +38,11 @@ JSON_FILE, TEXT_FILE, PNG_FILE, YAML_FILE = (
     "calibrated.yaml",
 )
 RULE = (
-    f"the supported formulation has the lower held-out Brier score; 'strongly' when the mean "
-    f"paired difference over the held-out units is at least {STRONG_Z:g} standard errors, "
-    f"'weakly' at least {WEAK_Z:g}, else 'not distinguishably'"
+    f"frequency match (share of the heard frames at an unstable mode predicted at the units' "
+    f"posterior means) differing by {FREQUENCY_DECISIVE:g} or more decides, strongly unless "
+    f"the held-out Brier score favours the other by {WEAK_Z:g} standard errors; otherwise the "
+    f"lower held-out Brier score, strongly at a mean paired difference over the held-out units "
+    f"of {STRONG_Z:g} standard errors or more, weakly at {WEAK_Z:g}, else not distinguishably"
 )
 _LISTED = 12  # units and logs named in the text and the YAML header
 
@@ -103,8 +105,8 @@ def document(result: CalibrationResult, context: dict[str, Any]) -> dict[str, An
             },
             "supported": c.supported,
             "strength": c.strength,
+            "decided_by": c.decided_by,
             "z": c.z,
-            "note": c.note,
             "rule": RULE,
         }
     doc["inputs"] = [
@@ -203,9 +205,9 @@ def text(result: CalibrationResult, out: Path | None = None) -> str:
         )
         lines.append(
             f"formulations: {c.supported or 'none'} supported {c.strength}"
-            + (f" (z = {c.z:.1f})" if c.z is not None else "")
+            + (f" by the {c.decided_by}" if c.decided_by else "")
+            + (f" (held-out z = {c.z:.1f})" if c.z is not None else "")
             + f"; {scores}"
-            + (f"; {c.note}" if c.note else "")
         )
     shown = [u for u in units if u.reported is not None][:_LISTED]
     if shown:

@@ -17,11 +17,15 @@ the held-out check (and, with both formulations, which one the data supports).
    with the calibrated population (`Population.params_and_scatter`) and with the prior; the
    Brier score over their frames, per unit and together, and the reliability curve (predicted
    P against the heard share of frames, in bins of P).
-6. With both formulations, steps 3-5 run for each. The supported formulation has the lower
-   held-out Brier score; how strongly is the paired difference over the held-out units
-   against its standard error (`strength`): `STRONG_Z` standard errors or more 'strongly',
-   `WEAK_Z` or more 'weakly', less 'not distinguishably'. The frequency match is reported beside
-   it and, when it favours the other formulation by more than `FREQUENCY_MARGIN`, said so.
+6. With both formulations, steps 3-5 run for each, and the data's support (`compare`): the
+   frequency match F (share of the heard frames, over all units, at an unstable mode predicted
+   at the unit's posterior mean) and the held-out Brier score B with the calibrated
+   population. When the F of the two differ by `FREQUENCY_DECISIVE` or more, the heard tones
+   are at one formulation's modes and not the other's: that one is supported, 'strongly'
+   unless B favours the other by `WEAK_Z` standard errors or more (then 'weakly, against the
+   held-out score'). Otherwise the one with the lower B is supported; how strongly is the mean
+   paired difference of B over the held-out units against its standard error z: 'strongly'
+   at `STRONG_Z` or more, 'weakly' at `WEAK_Z` or more, else 'not distinguishably'.
 """
 
 from __future__ import annotations
@@ -48,7 +52,7 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 STRONG_Z, WEAK_Z = 2.0, 1.0  # paired held-out Brier difference / its standard error
-FREQUENCY_MARGIN = 0.05  # a frequency match better by more than this is worth a word
+FREQUENCY_DECISIVE = 0.25  # a difference of the frequency match that decides alone
 CALIBRATED = "calibrated"
 
 
@@ -365,47 +369,78 @@ class FormulationRun:
 
 @dataclass
 class Comparison:
-    """Which formulation the data supports (module docstring: the rule).
+    """Which formulation the data supports (module docstring, step 6: the rule).
 
     Attributes
     ----------
     supported : str or None
-        None without a held-out score of both.
+        None without a held-out score or a frequency match for both.
     strength : str
-        'strongly', 'weakly', 'not distinguishably', or why there is no comparison.
+        'strongly', 'weakly', 'weakly, against the held-out score', 'not distinguishably',
+        or why there is no comparison.
+    decided_by : str
+        'frequency match' or 'held-out score' ('' without a comparison).
     z : float or None
         Mean paired held-out Brier difference (other - supported) over its standard error.
-    note : str
-        The frequency match, when it favours the other formulation.
     """
 
     supported: str | None
     strength: str
+    decided_by: str = ""
     z: float | None = None
-    note: str = ""
+
+
+def _paired_z(a: FormulationRun, b: FormulationRun) -> float | None:
+    """Mean paired held-out Brier difference (b - a) over its standard error (inf or 0 when
+    the differences do not scatter); None without a common held-out unit."""
+    pa, pb = a.held_out.per_unit, b.held_out.per_unit
+    d = np.array([pb[u][1] - pa[u][1] for u in pa if u in pb])
+    if not d.size:
+        return None
+    sd = float(np.std(d, ddof=1)) if d.size >= 2 else 0.0
+    if sd > 0:
+        return float(d.mean() / (sd / math.sqrt(d.size)))
+    return math.inf if d.mean() > 0 else -math.inf if d.mean() < 0 else 0.0
 
 
 def compare(runs: dict[str, FormulationRun]) -> Comparison:
-    """The module's rule over the formulations' held-out checks."""
-    scored = {k: r for k, r in runs.items() if r.score is not None}
-    if len(scored) < len(runs):
-        return Comparison(None, "no held-out score for every formulation")
-    best = min(runs, key=lambda k: (runs[k].score, k))
-    other = next(k for k in runs if k != best)
-    a, b = runs[best].held_out.per_unit, runs[other].held_out.per_unit
-    d = np.array([b[u][1] - a[u][1] for u in a if u in b])
-    if d.size >= 2 and np.std(d, ddof=1) > 0:
-        z = float(d.mean() / (np.std(d, ddof=1) / math.sqrt(d.size)))
-    else:
-        z = math.inf if d.size and d.mean() > 0 else 0.0
-    strength = "strongly" if z >= STRONG_Z else "weakly" if z >= WEAK_Z else "not distinguishably"
-    fa, fb = runs[best].frequency_match, runs[other].frequency_match
-    note = (
-        f"but {other} matches the heard frequencies better ({fb:.2f} vs {fa:.2f})"
-        if fa is not None and fb is not None and fb > fa + FREQUENCY_MARGIN
-        else ""
-    )
-    return Comparison(best, strength, z if math.isfinite(z) else None, note)
+    """The module's rule (step 6) over two formulations' runs.
+
+    Parameters
+    ----------
+    runs : dict of str to FormulationRun
+        The two formulations' calibrations.
+
+    Returns
+    -------
+    Comparison
+    """
+    (na, a), (nb, b) = runs.items()
+    fa, fb = a.frequency_match, b.frequency_match
+    if fa is not None and fb is not None and abs(fa - fb) >= FREQUENCY_DECISIVE:
+        best, other = (na, nb) if fa > fb else (nb, na)
+        z = _paired_z(runs[best], runs[other])
+        against = z is not None and z <= -WEAK_Z
+        return Comparison(
+            best,
+            "weakly, against the held-out score" if against else "strongly",
+            "frequency match",
+            _finite(z),
+        )
+    if a.score is None or b.score is None:
+        return Comparison(
+            None,
+            "no held-out score for both formulations and no decisive frequency match",
+        )
+    best, other = (na, nb) if (a.score, na) <= (b.score, nb) else (nb, na)
+    z = _paired_z(runs[best], runs[other])
+    zz = 0.0 if z is None else z
+    strength = "strongly" if zz >= STRONG_Z else "weakly" if zz >= WEAK_Z else "not distinguishably"
+    return Comparison(best, strength, "held-out score", _finite(z))
+
+
+def _finite(z: float | None) -> float | None:
+    return z if z is not None and math.isfinite(z) else None
 
 
 @dataclass
@@ -492,15 +527,45 @@ def _not_converged(post: UnitPosterior) -> str:
     )
 
 
-def calibrate_formulation(
+def population_task(
+    spec: ModelSpec, posteriors: list[UnitPosterior], sampler: SamplerSettings
+) -> tuple[Population | None, list[UnitPosterior], str]:
+    """The population of the training units (the body of a Dask task): `fit_population`,
+    or why there is none, never an exception.
+
+    Parameters
+    ----------
+    spec : ModelSpec
+        The prior the units were calibrated with.
+    posteriors : list of UnitPosterior
+        The training units' own posteriors.
+    sampler : SamplerSettings
+        The population sampler's settings.
+
+    Returns
+    -------
+    tuple of (Population or None, list of UnitPosterior, str)
+        The population, the units' hierarchical posteriors (in order), its status.
+    """
+    if len(posteriors) < 2:
+        return (
+            None,
+            [],
+            (f"no population: {len(posteriors)} calibrated training unit(s), at least 2 needed"),
+        )
+    try:
+        population, hierarchical = fit_population(posteriors, _model(spec), sampler)
+    except Exception as exc:  # the run's reason, not its end
+        return None, [], f"no population: {' '.join(str(exc).split())}"
+    return population, hierarchical, population.status
+
+
+def _units(
     formulation: str,
     prior: SqueakModel,
     units: dict[str, tuple[list[Gathered], Observations | None, str]],
     held: set[str],
-    settings: CalibrationSettings,
-    client: Any,
 ) -> FormulationRun:
-    """Steps 3-5 of the module with one formulation, the units' tasks on `client`'s cluster."""
     spec = ModelSpec(
         prior.params.with_(formulation=formulation),
         tuple(prior.scatter.sd.items()),
@@ -516,65 +581,98 @@ def calibrate_formulation(
         )
         for unit_id, (items, obs, reasons) in units.items()
     ]
-    futures = {
-        u.unit_id: client.submit(
-            calibrate_task,
-            spec,
-            u.observations,
-            settings.names,
-            settings.errors,
+    return FormulationRun(formulation, spec, results)
+
+
+def _result(future: Any) -> Any:
+    """A task's result, or the exception when the task did not finish (its workers died)."""
+    try:
+        return future.result()
+    except Exception as exc:
+        return exc
+
+
+def _failed(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+
+
+def _calibrate_runs(runs: list[FormulationRun], settings: CalibrationSettings, client: Any) -> None:
+    """Steps 3-5 of the module for every formulation on `client`'s cluster: each step's tasks
+    of all formulations submitted together, so that the workers never wait for one."""
+    futures = [
+        {
+            u.unit_id: client.submit(
+                calibrate_task,
+                run.prior,
+                u.observations,
+                settings.names,
+                settings.errors,
+                settings.sampler,
+                pure=False,
+            )
+            for u in run.units
+            if u.observations is not None
+        }
+        for run in runs
+    ]
+    for run, tasks in zip(runs, futures, strict=True):
+        for u in run.units:
+            if u.unit_id in tasks:
+                task = _result(tasks[u.unit_id])
+                if isinstance(task, BaseException):
+                    u.status = f"not calibrated: {_failed(task)}"
+                    continue
+                u.posterior, u.status = task.posterior, task.status
+                u.matched_frames, u.heard_frames = task.matched_frames, task.heard_frames
+    training = [[u for u in run.units if u.calibrated and not u.held_out] for run in runs]
+    populations = [
+        client.submit(
+            population_task,
+            run.prior,
+            [u.posterior for u in units],
             settings.sampler,
             pure=False,
         )
-        for u in results
-        if u.observations is not None
-    }
-    for u in results:
-        if u.unit_id not in futures:
+        for run, units in zip(runs, training, strict=True)
+    ]
+    for run, units, future in zip(runs, training, populations, strict=True):
+        done = _result(future)
+        if isinstance(done, BaseException):
+            run.population_status = f"no population: {_failed(done)}"
             continue
-        try:
-            task = futures[u.unit_id].result()
-        except Exception as exc:  # the task did not finish (its workers died)
-            u.status = f"not calibrated: {type(exc).__name__}: {' '.join(str(exc).split())}"
+        run.population, hierarchical, run.population_status = done
+        for u, h in zip(units, hierarchical, strict=False):
+            u.hierarchical = h
+        if run.population is not None:
+            run.params, run.scatter = run.population.params_and_scatter(run.prior.params)
+    checks = []
+    for run in runs:
+        held = [u for u in run.units if u.held_out and u.observations is not None]
+        if run.params is None or run.scatter is None or not held:
+            checks.append((held, []))
             continue
-        u.posterior, u.status = task.posterior, task.status
-        u.matched_frames, u.heard_frames = task.matched_frames, task.heard_frames
-    run = FormulationRun(formulation, spec, results)
-    training = [u for u in results if u.calibrated and not u.held_out]
-    if len(training) < 2:
-        run.population_status = (
-            f"no population: {len(training)} calibrated training unit(s), at least 2 needed"
-        )
-    else:
-        try:
-            population, hierarchical = fit_population(
-                [u.posterior for u in training if u.posterior is not None],
-                _model(spec),
-                settings.sampler,
-            )
-        except CalibrationError as exc:
-            run.population_status = f"no population: {exc}"
-        else:
-            for u, h in zip(training, hierarchical, strict=True):
-                u.hierarchical = h
-            run.population, run.population_status = population, population.status
-            run.params, run.scatter = population.params_and_scatter(spec.params)
-    held_units = [u for u in results if u.held_out and u.observations is not None]
-    if run.params is not None and run.scatter is not None and held_units:
-        calibrated = ModelSpec(run.params, tuple(run.scatter.sd.items()), prior.sample_count)
-        jobs = [
+        calibrated = ModelSpec(run.params, tuple(run.scatter.sd.items()), run.prior.samples)
+        checks.append(
             (
-                client.submit(probabilities, spec, u.observations, pure=False),
-                client.submit(probabilities, calibrated, u.observations, pure=False),
+                held,
+                [
+                    (
+                        client.submit(probabilities, run.prior, u.observations, pure=False),
+                        client.submit(probabilities, calibrated, u.observations, pure=False),
+                    )
+                    for u in held
+                ],
             )
-            for u in held_units
-        ]
-        p_prior = [a.result() for a, _ in jobs]
-        p_cal = [b.result() for _, b in jobs]
-        run.held_out = held_out_check(held_units, p_prior, p_cal)
-    else:
-        run.held_out = HeldOut([u.unit_id for u in held_units])
-    return run
+        )
+    for run, (held, jobs) in zip(runs, checks, strict=True):
+        if not jobs:
+            run.held_out = HeldOut([u.unit_id for u in held])
+            continue
+        p = [(_result(a), _result(b)) for a, b in jobs]
+        if any(isinstance(x, BaseException) for pair in p for x in pair):
+            run.held_out = HeldOut([u.unit_id for u in held])
+            continue
+        run.held_out = held_out_check(held, [a for a, _ in p], [b for _, b in p])
 
 
 def calibrate(
@@ -617,10 +715,8 @@ def calibrate(
         more = f" (and {len(gathered) - 3} more)" if len(gathered) > 3 else ""
         raise CalibrationError(f"nothing to calibrate from: {reasons}{more}")
     held = _split(usable, settings.holdout, settings.sampler.seed)
-    runs = {
-        f: calibrate_formulation(f, prior, units, held, settings, client)
-        for f in settings.formulations
-    }
+    runs = {f: _units(f, prior, units, held) for f in settings.formulations}
+    _calibrate_runs(list(runs.values()), settings, client)
     comparison = compare(runs) if len(runs) > 1 else None
     chosen = (
         comparison.supported
