@@ -311,6 +311,25 @@ class GrowthLikelihood:
         self.evaluations += len(theta)
         return theta
 
+    def _changes(self, theta: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The draws' changes from the centre: level and slope at the active points (W, A)
+        and the linear names' (W, F); empty arrays for what is not calibrated."""
+        w = len(theta)
+        if self._friction:
+            dl, ds = self._level_slope_change(theta)
+        else:
+            dl = ds = np.zeros((w, len(self.active)))
+        return dl, ds, theta[:, self._linear] - self.centre[self._linear]
+
+    def _growth(self, changes: tuple[np.ndarray, ...], pairs: np.ndarray) -> np.ndarray:
+        """(W, len(pairs)) expanded growth beyond the threshold of (point, mode) pairs."""
+        dl, ds, dlin = changes
+        at, rates = self._column[pairs], self._rates[:, pairs]
+        growth = self._margin[pairs] + dl[:, at] * rates[0]
+        growth += ds[:, at] * rates[1]
+        growth += dlin @ rates[2:]
+        return growth
+
     def _active_squeaks(self, theta: np.ndarray) -> np.ndarray:
         """(W, len(active)) verdicts at the active points. Each pair (point, mode) is first
         taken at the batch's mean change, with a bound of how far the batch's draws stray from
@@ -320,34 +339,51 @@ class GrowthLikelihood:
         out = np.zeros((len(theta), len(self.active)), bool)
         if not len(self.active):
             return out
+        changes = self._changes(theta)
         column, rates = self._column, self._rates
         mean = self._margin.copy()
         bound = np.zeros(len(mean))
-        if self._friction:
-            dl, ds = self._level_slope_change(theta)
-            for k, change in ((0, dl), (1, ds)):
-                centre = change.mean(axis=0)
-                mean += rates[k] * centre[column]
-                bound += np.abs(rates[k]) * np.abs(change - centre).max(axis=0)[column]
-        if self._linear:
-            dlin = theta[:, self._linear] - self.centre[self._linear]
-            centre = dlin.mean(axis=0)
-            mean += centre @ rates[2:]
-            bound += np.abs(dlin - centre).max(axis=0) @ np.abs(rates[2:])
+        for k, change in enumerate(changes[:2]):
+            centre = change.mean(axis=0)
+            mean += rates[k] * centre[column]
+            bound += np.abs(rates[k]) * np.abs(change - centre).max(axis=0)[column]
+        centre = changes[2].mean(axis=0)
+        mean += centre @ rates[2:]
+        bound += np.abs(changes[2] - centre).max(axis=0) @ np.abs(rates[2:])
         sure = np.maximum.reduceat(mean - bound, self._starts) > 0
         out[:, sure] = True
         pairs = np.flatnonzero((mean + bound > 0) & ~sure[column])
-        if not len(pairs):
-            return out
-        at = column[pairs]
-        growth = np.broadcast_to(self._margin[pairs], (len(theta), len(pairs))).copy()
-        if self._friction:
-            growth += dl[:, at] * rates[0, pairs]
-            growth += ds[:, at] * rates[1, pairs]
-        if self._linear:
-            growth += dlin @ rates[2:, pairs]
-        points, starts = np.unique(at, return_index=True)
-        out[:, points] = np.maximum.reduceat(growth, starts, axis=1) > 0
+        if len(pairs):
+            points, starts = np.unique(column[pairs], return_index=True)
+            out[:, points] = np.maximum.reduceat(self._growth(changes, pairs), starts, axis=1) > 0
+        return out
+
+    def margins(self, theta: np.ndarray) -> np.ndarray:
+        """Per draw and point, the largest expanded growth rate beyond the squeak threshold
+        over the modes kept (> 0: squeak), as `squeaks` decides it (which skips most pairs).
+
+        Parameters
+        ----------
+        theta : numpy.ndarray
+            (W, D) values of `names` in the fields' units.
+
+        Returns
+        -------
+        numpy.ndarray
+            (W, P) [1/s]: +inf where every draw of the reach squeaks, -inf where none can,
+            nan where the model does not hold.
+
+        Raises
+        ------
+        CalibrationError
+            theta of the wrong shape or not finite.
+        """
+        theta = self._check(theta)
+        out = np.where(self.fixed, np.inf, np.where(self.valid, -np.inf, np.nan))
+        out = np.broadcast_to(out, (len(theta), self.obs.points)).copy()
+        if len(self.active):
+            growth = self._growth(self._changes(theta), np.arange(len(self._margin)))
+            out[:, self.active] = np.maximum.reduceat(growth, self._starts, axis=1)
         return out
 
     def log_likelihood(self, theta: np.ndarray) -> np.ndarray:

@@ -15,10 +15,11 @@ Per unit:
 1. Nothing to learn? `SamplerSettings.check_draws` draws of the interim prior: if the
    log-likelihood is the same for all (never heard, and no draw squeaks where the unit ran;
    or no valid operating point), the status says so and the prior is kept.
-2. Re-expansion: run the ensemble (`steps`, the first `burn` discarded), take the posterior
-   mean, re-expand the likelihood there (`GrowthLikelihood.recentred`), run again from the
-   last positions, until the mean is within `recentre_tolerance` posterior SDs of the
-   expansion centre it was sampled with, or `max_reexpansions` are done.
+2. Re-expansion: run the ensemble for `first_steps` (the first `burn` discarded), take the
+   posterior mean, re-expand the likelihood there (`GrowthLikelihood.recentred`), run again
+   from the last positions, until the mean is within `recentre_tolerance` posterior SDs of
+   the expansion centre it was sampled with, or `max_reexpansions` are done; that run is
+   continued to `steps`, and its kept steps are the samples.
 3. Convergence: the integrated autocorrelation time tau of each name (emcee's estimator over
    the kept steps); ESS = walkers * kept steps / tau. Converged when the re-expansion settled,
    the kept steps are at least `autocorr_multiple` tau for every name and every ESS is at
@@ -48,6 +49,8 @@ from ...model.physics.metadata import check, documented, setting
 from ...model.physics.parameters import ParameterError, ScrewParameters
 from ...model.squeak_model import SqueakModel
 
+PRIOR_SAMPLES = 2000  # prior draws that stand for a unit with nothing to learn
+
 
 @documented
 @dataclass(frozen=True)
@@ -64,6 +67,13 @@ class SamplerSettings:
     )
     steps: int = setting(600, "1", "steps of each run of a unit's walkers", 10, 10**6)
     burn: int = setting(200, "1", "steps discarded at the start of each run", 0, 10**6)
+    first_steps: int = setting(
+        300,
+        "1",
+        "steps of a run before its re-expansion check (a settled run is continued to steps)",
+        10,
+        10**6,
+    )
     seed: int = setting(
         0, "1", "seed of the run (a unit's seed derives from it and its id)", 0, 2**31 - 1
     )
@@ -78,7 +88,7 @@ class SamplerSettings:
         4, "1", "re-expansions of the likelihood about the posterior mean, at most", 0, 100
     )
     recentre_tolerance: float = setting(
-        0.2,
+        0.5,
         "1",
         "the posterior mean settled: within this many posterior SDs of the expansion centre",
         0.0,
@@ -99,13 +109,13 @@ class SamplerSettings:
         512, "1", "interim-prior draws that decide whether a unit has anything to learn", 16, 10**6
     )
     population_samples: int = setting(
-        500, "1", "samples of each unit that enter the population's hyper-likelihood", 10, 10**6
+        256, "1", "samples of each unit that enter the population's hyper-likelihood", 10, 10**6
     )
     hyper_walkers: int = setting(
         32, "1", "emcee walkers of the population (even, > 4 per name)", 8, 4096
     )
-    hyper_steps: int = setting(1500, "1", "steps of the population's walkers", 10, 10**6)
-    hyper_burn: int = setting(500, "1", "population steps discarded at the start", 0, 10**6)
+    hyper_steps: int = setting(1000, "1", "steps of the population's walkers", 10, 10**6)
+    hyper_burn: int = setting(300, "1", "population steps discarded at the start", 0, 10**6)
     hyper_draws: int = setting(
         400, "1", "hyper-posterior draws that reweight the units' samples", 10, 10**6
     )
@@ -123,6 +133,11 @@ class SamplerSettings:
                     f"sampler.{burn} = {getattr(self, burn)} must be below "
                     f"sampler.{steps} = {getattr(self, steps)}"
                 )
+        if not self.burn < self.first_steps <= self.steps:
+            raise ParameterError(
+                f"need sampler.burn < sampler.first_steps <= sampler.steps, got {self.burn}, "
+                f"{self.first_steps} and {self.steps}"
+            )
 
 
 def unit_seed(seed: int, unit_id: str, purpose: str = "unit") -> np.random.SeedSequence:
@@ -241,7 +256,7 @@ def calibrate_unit(
     u = interim.draw(settings.check_draws, rng)
     log_like = likelihood.log_likelihood(interim.from_u(u))
     if np.ptp(log_like) == 0.0:
-        count = settings.population_samples * 4
+        count = PRIOR_SAMPLES
         kept = prior.draw(count, rng)
         return result(
             _nothing_to_learn(obs, likelihood),
@@ -254,19 +269,30 @@ def calibrate_unit(
         )
     position = _start(u, log_like + interim.log_density_u(u), settings.walkers)
     kept_steps = settings.steps - settings.burn
-    for reexpansions in range(settings.max_reexpansions + 1):
-        sampler = _ensemble(log_prob, settings.walkers, len(interim.names), rng)
-        sampler.run_mcmc(position, settings.steps)
-        chain = sampler.get_chain(discard=settings.burn)  # (kept, walkers, D) in u
-        position = sampler.get_last_sample().coords
+
+    def moments(sampler: emcee.EnsembleSampler) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The kept chain (steps, walkers, D) in u, and how far the mean is from the
+        expansion centre in posterior SDs (D,)."""
+        chain = sampler.get_chain(discard=settings.burn)
         theta = interim.from_u(chain.reshape(-1, chain.shape[-1]))
         mean, sd = theta.mean(axis=0), theta.std(axis=0)
-        moved = np.abs(mean - likelihood.centre) / np.where(sd > 0, sd, np.inf)
-        settled = bool(np.all(moved < settings.recentre_tolerance))
-        if settled or reexpansions == settings.max_reexpansions:
+        return chain, mean, np.abs(mean - likelihood.centre) / np.where(sd > 0, sd, np.inf)
+
+    for reexpansions in range(settings.max_reexpansions + 1):
+        sampler = _ensemble(log_prob, settings.walkers, len(interim.names), rng)
+        sampler.run_mcmc(position, settings.first_steps)
+        chain, mean, moved = moments(sampler)
+        if np.all(moved < settings.recentre_tolerance) or (
+            reexpansions == settings.max_reexpansions
+        ):
+            sampler.run_mcmc(None, settings.steps - settings.first_steps)  # the same chain
+            chain, mean, moved = moments(sampler)
             break
+        position = sampler.get_last_sample().coords
         evaluations += likelihood.evaluations
         likelihood = likelihood.recentred(interim.values(mean))
+    settled = bool(np.all(moved < settings.recentre_tolerance))
+    theta = interim.from_u(chain)
     tau = _tau(chain)
     ess = settings.walkers * kept_steps / tau
     reasons = []
@@ -285,7 +311,7 @@ def calibrate_unit(
     thin = max(1, int(tau.min() / 2))
     return result(
         "calibrated" if not reasons else "not converged: " + "; ".join(reasons),
-        theta.reshape(chain.shape)[::thin].reshape(-1, chain.shape[-1]),
+        theta[::thin].reshape(-1, chain.shape[-1]),
         ess,
         not reasons,
         reexpansions,
