@@ -56,6 +56,7 @@ setup(
         "lz4",
         "threadpoolctl",  # eigen-solves run single-threaded (live/recompute.py)
         "dask[distributed]",  # `review`: fleet review on a Dask cluster (review/fleet.py)
+        "emcee",  # `calibrate`: the posterior samplers (review/calibration/sampling.py)
     ],
     extras_require={
         "ros": ROS,

@@ -30,11 +30,13 @@ PACKAGES = (
     "leadscrew_ros.model.physics",
     "leadscrew_ros.model.uncertainty",
     "leadscrew_ros.model.studies",
+    "leadscrew_ros.model.calibration",
     "leadscrew_ros.model.nonlinear",
     "leadscrew_ros.model.acoustics",
     "leadscrew_ros.live",
     "leadscrew_ros.bag",
     "leadscrew_ros.review",
+    "leadscrew_ros.review.calibration",
     "leadscrew_ros.ros",
     "leadscrew_ros.cli",
 )

@@ -17,7 +17,15 @@ PACKAGE = REPO / "leadscrew_ros"
 LAYERS = ("model", "live", "bag", "review", "ros", "cli")
 ROS_FREE = LAYERS[:4]
 # Inside `model`, the same one-way rule between its sub-packages (squeak_model is a module).
-MODEL_PARTS = ("physics", "acoustics", "uncertainty", "squeak_model", "studies", "nonlinear")
+MODEL_PARTS = (
+    "physics",
+    "acoustics",
+    "uncertainty",
+    "squeak_model",
+    "studies",
+    "calibration",
+    "nonlinear",
+)
 
 
 def _modules(layer: str) -> list[str]:

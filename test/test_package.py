@@ -52,6 +52,7 @@ ROSDEP_KEYS = {
     "lz4": ["python3-lz4"],
     "threadpoolctl": ["python3-threadpoolctl"],
     "dask[distributed]": ["python3-dask", "python3-distributed"],
+    "emcee": ["python3-emcee"],
     "ros-jazzy-rclpy[fastrtps]": ["rclpy"],
     "ros-jazzy-common-interfaces": [
         "std_msgs",

@@ -7,7 +7,8 @@ episodes, agreement with predictions, a simulated microphone; needs only `physic
 `uncertainty` (scatter, the live P(squeak) estimator) ->
 `squeak_model` (`SqueakModel`: one operating point -> `Prediction`) -> `studies` (Monte Carlo
 reference, sensitivities, countermeasures, advice, sweeps and maps, mode tracking) ->
-`nonlinear` (the time-domain check).
+`calibration` (heard squeak -> the likelihood of friction and damping, the population's
+densities) -> `nonlinear` (the time-domain check).
 """
 
 from .physics import (

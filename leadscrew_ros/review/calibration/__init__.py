@@ -2,7 +2,8 @@
 """Calibration from heard squeak (`leadscrew-squeak calibrate`): what each log says
 (`gather`), the per-unit posteriors and the fleet's population (`sampling`, emcee), the whole
 run with its held-out check and the comparison of the formulations (`run`), the files it
-writes (`output`: calibration.json, .txt, .png and calibrated.yaml)."""
+writes (`output`: calibration.json, .txt, .png and calibrated.yaml). Imports `model`, `live`,
+`bag` and `review`."""
 
 from ...model.calibration.posterior import Population, UnitPosterior
 from .gather import Gathered, GatherSettings, find_inputs, gather, gather_one, observe_replay

@@ -1,0 +1,22 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Calibration from heard squeak: a unit's heard / not-heard detector frames thinned to
+distinct operating points (`observations`), the cheap first-order likelihood of them given
+friction and damping (`likelihood`), the prior in standardised coordinates (`prior`), the
+hierarchical population's densities (`population`) and posterior summaries (`summaries`).
+numpy/scipy only: the sampler (emcee) runs in `review.calibration`. Imports `physics`,
+`uncertainty` and `squeak_model`."""
+
+from .likelihood import DetectionErrors, GrowthLikelihood
+from .observations import CalibrationError, Observations, ThinSettings, merge, thin
+from .prior import Prior
+
+__all__ = [
+    "CalibrationError",
+    "DetectionErrors",
+    "GrowthLikelihood",
+    "Observations",
+    "Prior",
+    "ThinSettings",
+    "merge",
+    "thin",
+]

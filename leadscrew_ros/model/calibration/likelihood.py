@@ -1,0 +1,449 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The cheap likelihood of heard / not-heard frames given calibrated parameters theta.
+
+Squeak at a point: some oscillatory mode's growth rate beyond the threshold of
+`stability.unstable_mask` (Re lambda > GROWTH_TOL |lambda|), the live estimator's rule. At a
+fixed operating point friction and damping enter the state matrix only through the friction
+level l, the friction slope s (`kernels.level_slope`) and the damping ratio xi, and A is affine
+in them. So each distinct point gets one eigen-solve at the expansion centre (the model's
+parameters at the point's nut position; one geometry per nut bin), and a draw costs only
+
+    Re lambda(theta) = Re lambda_0 + r_l (l(theta) - l_0) + r_s (s(theta) - s_0)
+                       + r_xi (xi - xi_0) + sum_f r_f (theta_f - theta_f0)
+
+with l and s of every draw computed exactly (the friction law is the nonlinear part) and the
+rates r = Re(y^H dA x) of `EigenPairs`; any other calibrated (geometry) field f enters by a
+first-order dA/df (`perturbation.geometry_derivative`). The expansion is exact at its centre
+and first order around it: `recentred` re-expands about new parameters (the sampler does so
+about the posterior mean until it no longer moves).
+
+A mode that no draw within `REACH_SIGMAS` SDs of the reach prior (the interim prior) can push
+across the threshold is pruned at its point; a point where none is left has a fixed verdict.
+
+Detection error model (`DetectionErrors`): a frame is heard with probability
+
+    P(heard) = false_alarm + (1 - false_alarm - miss) * squeak
+
+Frames are not independent trials: consecutive frames share most of their samples (a
+`DetectorSettings.frame_s` = 0.1 s window every hop of 0.01 s) and a detection, right or
+wrong, is an episode of at least `min_duration_s`. Each frame therefore counts
+hop / `correlation_s` (at most 1) of a Bernoulli trial: with the default 0.1 s (the frame
+length), one trial per window of sound, a 12-s stroke ~120 trials. Counting every frame
+would make the posteriors about sqrt(10) times too narrow.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+import numpy as np
+from scipy.stats import qmc
+
+from ..physics.assembly import build_geometry
+from ..physics.kernels import level_slope
+from ..physics.metadata import check, documented, setting
+from ..physics.parameters import ParameterError, ScrewParameters
+from ..physics.stability import GROWTH_TOL
+from ..squeak_model import SqueakModel, Validity
+from ..uncertainty.perturbation import EigenPairs, geometry_derivative
+from .observations import CalibrationError, Observations
+from .prior import DAMPING, FRICTION, INTERIM_WIDEN, Prior, check_names
+
+REACH_SIGMAS = 4.0  # pruning: the box of +- this many SDs of the reach prior
+_REACH_POINTS = 256  # Sobol points in that box (plus its corners) that bound the reach
+
+
+@documented
+@dataclass(frozen=True)
+class DetectionErrors:
+    """The detector's error rates and the correlation of its frames (module docstring).
+
+    Defaults: the virtual bench's detector (a -20 dBFS tone in the motor noise) misses mostly
+    the frames at an episode's onset and end (about half a frame length each, a few per cent of
+    a squeak's frames) and hears orders or noise as squeak rarely; the rates also absorb the
+    model's and the binning's error at a band edge. A rate of 0 would let one mislabelled frame
+    rule a parameter set out, so both must be > 0.
+    """
+
+    false_alarm: float = setting(
+        0.02,
+        "1",
+        "share of frames heard as squeak where the drive does not squeak",
+        0.0,
+        0.5,
+        lo_open=True,
+        hi_open=True,
+    )
+    miss: float = setting(
+        0.05,
+        "1",
+        "share of frames not heard where the drive squeaks",
+        0.0,
+        0.5,
+        lo_open=True,
+        hi_open=True,
+    )
+    correlation_s: float = setting(
+        0.1,
+        "s",
+        "correlation time of the detector's frames: a frame counts hop / this (at most 1) "
+        "of an independent trial",
+        1e-4,
+        60.0,
+    )
+
+    def __post_init__(self) -> None:
+        check(self, ParameterError, "errors.")
+
+    def heard_probability(self, squeak: np.ndarray) -> np.ndarray:
+        """P(frame heard) given the model's verdict.
+
+        Parameters
+        ----------
+        squeak : numpy.ndarray
+            Bool (or 0/1) verdicts.
+
+        Returns
+        -------
+        numpy.ndarray
+            false_alarm + (1 - false_alarm - miss) * squeak.
+        """
+        return self.false_alarm + (1.0 - self.false_alarm - self.miss) * np.asarray(squeak, float)
+
+    def frame_weight(self, hop_s: float) -> float:
+        """What one frame counts of an independent trial: min(1, hop / correlation_s).
+
+        Parameters
+        ----------
+        hop_s : float
+            Time between frames [s].
+
+        Returns
+        -------
+        float
+            The weight in (0, 1].
+        """
+        return min(1.0, hop_s / self.correlation_s)
+
+
+class GrowthLikelihood:
+    """Log-likelihood of a unit's observations over draws of the calibrated parameters.
+
+    Parameters
+    ----------
+    model : SqueakModel
+        Its parameters are the expansion centre (and give every field not calibrated); its
+        scatter is the prior that bounds the pruning when `reach` is None.
+    obs : Observations
+        The unit's frames at distinct operating points.
+    names : sequence of str
+        The calibrated parameters, the columns of theta.
+    errors : DetectionErrors, optional
+        The detection error model; the defaults when None.
+    reach : Prior, optional
+        Draws within `REACH_SIGMAS` of its SDs bound the modes kept (pruning); the model's
+        prior widened by `prior.INTERIM_WIDEN` when None.
+
+    Raises
+    ------
+    ParameterError
+        A name that cannot be calibrated or has no prior SD.
+
+    Attributes
+    ----------
+    params : ScrewParameters
+        The expansion centre.
+    names : tuple of str
+        The calibrated parameters.
+    valid : numpy.ndarray
+        (P,) bool: the points where the model holds at the centre (`Validity.OK`, the nut on
+        the screw, the eigen-solve converged); the others carry no information.
+    active : numpy.ndarray
+        Indices of the points whose verdict some draw within the reach can change.
+    evaluations : int
+        Draws (rows of theta) evaluated so far.
+    calls : int
+        Calls of `log_likelihood` / `squeaks` so far.
+    """
+
+    def __init__(
+        self,
+        model: SqueakModel,
+        obs: Observations,
+        names: Sequence[str],
+        errors: DetectionErrors | None = None,
+        reach: Prior | None = None,
+    ):
+        self.model, self.obs, self.names = model, obs, check_names(names)
+        self.errors = errors or DetectionErrors()
+        self.params = model.params
+        self.reach = reach or Prior(model.params, model.scatter, self.names).widened(INTERIM_WIDEN)
+        if self.reach.names != self.names:
+            raise ParameterError("the reach prior must have the calibrated names, in order")
+        self.evaluations = self.calls = 0
+        self._friction = [k for k, n in enumerate(self.names) if n in FRICTION]
+        self._linear = [k for k, n in enumerate(self.names) if n not in FRICTION]
+        self.centre = np.array([float(getattr(self.params, n)) for n in self.names])
+        self._fields = self.params.as_dict()
+        # the contact's angular length b / (R tan beta): one for every nut position
+        self._alpha = build_geometry(self.params).contact.alpha
+        self._expand()
+
+    # ---------------------------------------------------------------- construction
+    def _expand(self) -> None:
+        """One eigen-solve per valid point at the centre: growth margins and rates of every
+        oscillatory mode, then the pruning and the likelihood's per-point terms."""
+        obs, p = self.obs, self.params
+        speed, load, nut = obs.speed_rad_s, obs.load_n, obs.nut_position_m
+        valid = np.asarray(self.model.validity_code(speed, load) == Validity.OK)
+        valid &= (nut >= 0) & (nut <= p.nut_travel_m)
+        point, margin, rates = [], [], []
+        for z in np.unique(nut[valid]).tolist():
+            at = p.with_(nut_position_m=z)
+            geometry = build_geometry(at)
+            for i in np.flatnonzero(valid & (nut == z)).tolist():
+                try:
+                    pairs = EigenPairs.solve(geometry, float(speed[i]), float(load[i]))
+                except np.linalg.LinAlgError:
+                    valid[i] = False
+                    continue
+                point.append(np.full(len(pairs.lam), i))
+                margin.append(pairs.lam.real - GROWTH_TOL * np.abs(pairs.lam))
+                rates.append(self._mode_rates(pairs, at, float(speed[i]), float(load[i])))
+        self.valid = valid
+        point_k = np.concatenate(point) if point else np.zeros(0, int)
+        margin_k = np.concatenate(margin) if margin else np.zeros(0)
+        rates_k = np.concatenate(rates, axis=1) if rates else np.zeros((2 + len(self._linear), 0))
+        keep = np.abs(margin_k) <= self._reach(point_k, rates_k)
+        fixed = np.zeros(obs.points, bool)  # squeaks for every draw in the reach
+        fixed[point_k[~keep & (margin_k > 0)]] = True
+        keep &= ~fixed[point_k]
+        self._point, self._margin, self._rates = point_k[keep], margin_k[keep], rates_k[:, keep]
+        self.active, starts = np.unique(self._point, return_index=True)
+        self._starts = starts
+        self._column = np.searchsorted(self.active, self._point)  # pair -> active column
+        self._level0, self._slope0 = level_slope(
+            p, speed[self.active], load[self.active], self._alpha
+        )
+        # log-likelihood per point: base (no squeak) and the change when it squeaks
+        w = self.errors.frame_weight(obs.frame_s)
+        heard = w * obs.heard * valid
+        quiet = w * (obs.frames - obs.heard) * valid
+        q0, q1 = self.errors.heard_probability(np.array([0.0, 1.0]))
+        base = heard * math.log(q0) + quiet * math.log1p(-q0)
+        self._delta = heard * math.log(q1 / q0) + quiet * (math.log1p(-q1) - math.log1p(-q0))
+        self.fixed = fixed
+        self._constant = float(base.sum() + self._delta[fixed].sum())
+
+    def _mode_rates(
+        self, pairs: EigenPairs, at: ScrewParameters, speed: float, load: float
+    ) -> np.ndarray:
+        """(2 + len(linear), M) d Re(lambda) per unit of l, s and each linear name."""
+        r = pairs.unit_rates.real  # per unit W1, W5q, W3, W5qdot, Omega coefficient
+        out = [
+            math.copysign(1.0, speed) * r[0] + r[2] / abs(speed),  # W1 = sign l, W3 = l/|Om|
+            speed * r[1] + r[3],  # W5q = Omega s, W5qdot = s
+        ]
+        for k in self._linear:
+            name = self.names[k]
+            if name == DAMPING:
+                out.append(pairs.damping_rate().real)
+            else:
+                out.append(pairs.matrix_rate(geometry_derivative(at, name, speed, load)).real)
+        return np.array(out)
+
+    def _reach(self, point: np.ndarray, rates: np.ndarray) -> np.ndarray:
+        """Per (point, mode) pair, the largest growth change of a draw within the reach box."""
+        box = self._box()
+        change = np.abs(box - self.centre).max(axis=0)  # (D,)
+        reach = np.zeros(len(point))
+        if self._friction and len(point):
+            used = np.unique(point)
+            dl, ds = self._level_slope_change(box, used)
+            at = np.searchsorted(used, point)
+            reach += np.abs(rates[0]) * np.abs(dl).max(axis=0)[at]
+            reach += np.abs(rates[1]) * np.abs(ds).max(axis=0)[at]
+        for j, k in enumerate(self._linear):
+            reach += np.abs(rates[2 + j]) * change[k]
+        return reach
+
+    def _box(self) -> np.ndarray:
+        """Values (B, D) on the box of +-REACH_SIGMAS SDs of the reach prior: Sobol points
+        and, for up to 8 names, the corners."""
+        d = len(self.names)
+        unit = 2.0 * qmc.Sobol(d, scramble=True, seed=0).random(_REACH_POINTS) - 1.0
+        if d <= 8:
+            corners = np.array(np.meshgrid(*[[-1.0, 1.0]] * d, indexing="ij")).reshape(d, -1).T
+            unit = np.vstack([unit, corners])
+        return self.reach.from_u(REACH_SIGMAS * self.reach.widen * unit)
+
+    def _level_slope_change(
+        self, theta: np.ndarray, points: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(W, len(points)) changes of the friction level and slope from the centre's, at
+        `points` (the active points when None)."""
+        fields = dict(self._fields)
+        for k in self._friction:
+            fields[self.names[k]] = theta[:, k : k + 1]
+        if points is None:
+            points, level0, slope0 = self.active, self._level0, self._slope0
+        else:
+            level0, slope0 = level_slope(
+                self.params, self.obs.speed_rad_s[points], self.obs.load_n[points], self._alpha
+            )
+        speed, load = self.obs.speed_rad_s[points], self.obs.load_n[points]
+        level, slope = level_slope(SimpleNamespace(**fields), speed, load, self._alpha)
+        return level - level0, slope - slope0
+
+    # ---------------------------------------------------------------- evaluation
+    def _check(self, theta: np.ndarray) -> np.ndarray:
+        theta = np.asarray(theta, float)
+        if theta.ndim != 2 or theta.shape[1] != len(self.names):
+            raise CalibrationError(
+                f"theta must have shape (walkers, {len(self.names)}), got {theta.shape}"
+            )
+        if not np.all(np.isfinite(theta)):
+            raise CalibrationError("theta is not finite: no likelihood of NaN parameters")
+        self.calls += 1
+        self.evaluations += len(theta)
+        return theta
+
+    def _changes(self, theta: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The draws' changes from the centre: level and slope at the active points (W, A)
+        and the linear names' (W, F); empty arrays for what is not calibrated."""
+        w = len(theta)
+        if self._friction:
+            dl, ds = self._level_slope_change(theta)
+        else:
+            dl = ds = np.zeros((w, len(self.active)))
+        return dl, ds, theta[:, self._linear] - self.centre[self._linear]
+
+    def _growth(self, changes: tuple[np.ndarray, ...], pairs: np.ndarray) -> np.ndarray:
+        """(W, len(pairs)) expanded growth beyond the threshold of (point, mode) pairs."""
+        dl, ds, dlin = changes
+        at, rates = self._column[pairs], self._rates[:, pairs]
+        growth = self._margin[pairs] + dl[:, at] * rates[0]
+        growth += ds[:, at] * rates[1]
+        growth += dlin @ rates[2:]
+        return growth
+
+    def _active_squeaks(self, theta: np.ndarray) -> np.ndarray:
+        """(W, len(active)) verdicts at the active points. Each pair (point, mode) is first
+        taken at the batch's mean change, with a bound of how far the batch's draws stray from
+        it (cheap, per pair): a point where some mode's lower bound is above the threshold
+        squeaks for every draw, a pair whose upper bound is below never squeaks, and only the
+        rest is evaluated per draw. Exact for the expansion."""
+        out = np.zeros((len(theta), len(self.active)), bool)
+        if not len(self.active):
+            return out
+        changes = self._changes(theta)
+        column, rates = self._column, self._rates
+        mean = self._margin.copy()
+        bound = np.zeros(len(mean))
+        for k, change in enumerate(changes[:2]):
+            centre = change.mean(axis=0)
+            mean += rates[k] * centre[column]
+            bound += np.abs(rates[k]) * np.abs(change - centre).max(axis=0)[column]
+        centre = changes[2].mean(axis=0)
+        mean += centre @ rates[2:]
+        bound += np.abs(changes[2] - centre).max(axis=0) @ np.abs(rates[2:])
+        sure = np.maximum.reduceat(mean - bound, self._starts) > 0
+        out[:, sure] = True
+        pairs = np.flatnonzero((mean + bound > 0) & ~sure[column])
+        if len(pairs):
+            points, starts = np.unique(column[pairs], return_index=True)
+            out[:, points] = np.maximum.reduceat(self._growth(changes, pairs), starts, axis=1) > 0
+        return out
+
+    def margins(self, theta: np.ndarray) -> np.ndarray:
+        """Per draw and point, the largest expanded growth rate beyond the squeak threshold
+        over the modes kept (> 0: squeak), as `squeaks` decides it (which skips most pairs).
+
+        Parameters
+        ----------
+        theta : numpy.ndarray
+            (W, D) values of `names` in the fields' units.
+
+        Returns
+        -------
+        numpy.ndarray
+            (W, P) [1/s]: +inf where every draw of the reach squeaks, -inf where none can,
+            nan where the model does not hold.
+
+        Raises
+        ------
+        CalibrationError
+            theta of the wrong shape or not finite.
+        """
+        theta = self._check(theta)
+        out = np.where(self.fixed, np.inf, np.where(self.valid, -np.inf, np.nan))
+        out = np.broadcast_to(out, (len(theta), self.obs.points)).copy()
+        if len(self.active):
+            growth = self._growth(self._changes(theta), np.arange(len(self._margin)))
+            out[:, self.active] = np.maximum.reduceat(growth, self._starts, axis=1)
+        return out
+
+    def log_likelihood(self, theta: np.ndarray) -> np.ndarray:
+        """Log-likelihood of the observations at each row of theta.
+
+        Parameters
+        ----------
+        theta : numpy.ndarray
+            (W, D) values of `names` in the fields' units.
+
+        Returns
+        -------
+        numpy.ndarray
+            (W,) log-likelihood; -inf where a row is outside the valid domain.
+
+        Raises
+        ------
+        CalibrationError
+            theta of the wrong shape or not finite.
+        """
+        theta = self._check(theta)
+        out = self._constant + self._active_squeaks(theta) @ self._delta[self.active]
+        return np.where(self.reach.valid(theta), out, -np.inf)
+
+    def squeaks(self, theta: np.ndarray) -> np.ndarray:
+        """The model's verdict at every point for each row of theta (False where not valid).
+
+        Parameters
+        ----------
+        theta : numpy.ndarray
+            (W, D) values of `names` in the fields' units.
+
+        Returns
+        -------
+        numpy.ndarray
+            (W, P) bool.
+
+        Raises
+        ------
+        CalibrationError
+            theta of the wrong shape or not finite.
+        """
+        theta = self._check(theta)
+        out = np.broadcast_to(self.fixed, (len(theta), self.obs.points)).copy()
+        out[:, self.active] = self._active_squeaks(theta)
+        return out
+
+    def recentred(self, params: ScrewParameters) -> GrowthLikelihood:
+        """The likelihood expanded about other parameters (same observations, names, errors
+        and reach).
+
+        Parameters
+        ----------
+        params : ScrewParameters
+            The new expansion centre.
+
+        Returns
+        -------
+        GrowthLikelihood
+            A new likelihood (its counters start at 0).
+        """
+        model = SqueakModel(params, self.model.scatter, self.model.sample_count)
+        return GrowthLikelihood(model, self.obs, self.names, self.errors, self.reach)

@@ -1,0 +1,73 @@
+# SPDX-License-Identifier: Apache-2.0
+"""Synthetic units for the calibration tests: a drive drawn from a population, one seat stroke
+of it (the virtual bench's stroke draw), its exact verdict at every detector frame (the bench's
+`squeak_frequencies`: the model at the unit's parameters, no scatter), and what a detector with
+the error model heard: errors in blocks of one correlation time (`DetectionErrors`), as the
+likelihood's effective count assumes."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from leadscrew_ros.bag.virtual_bench import (
+    BenchSettings,
+    draw_params,
+    draw_stroke,
+    squeak_frequencies,
+)
+from leadscrew_ros.model import ScrewParameters
+from leadscrew_ros.model.calibration import DetectionErrors, Observations, thin
+from leadscrew_ros.model.uncertainty.scatter import Scatter
+
+HOP_S = 0.01  # the detector's default hop
+# A population unlike the default prior (Table 1 friction, damping 3e-3): a larger friction
+# drop (0.07 rather than 0.05) and a smaller damping (2e-3), the default scatter around it.
+POPULATION = ScrewParameters().with_(mu_static=0.265, mu_kinetic=0.195, modal_damping=0.002)
+
+
+class SyntheticUnit(NamedTuple):
+    """A unit's truth and observations."""
+
+    truth: ScrewParameters
+    obs: Observations
+    squeaks: np.ndarray  # exact verdict per frame
+
+
+def frames_of(
+    truth: ScrewParameters, duration_s: float, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """Frame centres of one drawn stroke of `truth` and the operating point (3, n) there."""
+    stroke = draw_stroke(BenchSettings(duration_s=duration_s), truth, rng)
+    times = np.arange(HOP_S / 2, duration_s, HOP_S)
+    return times, np.array([stroke.state(t)[:3] for t in times.tolist()]).T
+
+
+def heard_by(squeaks: np.ndarray, errors: DetectionErrors, rng: np.random.Generator) -> np.ndarray:
+    """What the detector heard: the verdicts flipped in blocks of one correlation time."""
+    block = max(int(round(errors.correlation_s / HOP_S)), 1)
+    count = -(-len(squeaks) // block)
+    miss = np.repeat(rng.random(count) < errors.miss, block)[: len(squeaks)]
+    false_alarm = np.repeat(rng.random(count) < errors.false_alarm, block)[: len(squeaks)]
+    return np.where(squeaks, ~miss, false_alarm)
+
+
+def synthetic_unit(
+    unit_id: str,
+    rng: np.random.Generator,
+    population: ScrewParameters = POPULATION,
+    scatter: Scatter | None = None,
+    errors: DetectionErrors | None = None,
+    duration_s: float = 12.0,
+) -> SyntheticUnit:
+    """One unit drawn from `population` with `scatter` (the default scatter when None)."""
+    truth = draw_params(population, Scatter() if scatter is None else scatter, rng)
+    times, (speed, load, nut) = frames_of(truth, duration_s, rng)
+    squeaks = np.isfinite(squeak_frequencies(truth, speed, load, nut))
+    heard = heard_by(squeaks, errors or DetectionErrors(), rng)
+    obs = thin(
+        unit_id, [f"{unit_id}.mcap"], times, speed, load, nut, heard,
+        np.where(heard, 224.0, np.nan), HOP_S,
+    )  # fmt: skip
+    return SyntheticUnit(truth, obs, squeaks)
