@@ -31,22 +31,31 @@ from leadscrew_ros.cli.calibrate import NOT_CONVERGED, UNUSABLE
 from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.model.uncertainty.scatter import Scatter, draw
 
-POPULATION = {"mu_static": 0.27, "mu_kinetic": 0.19, "modal_damping": 0.002}
-FLEET = BenchSettings(units=20, formulation="consistent", seed=11, population=POPULATION)
-SPEED, LOAD = 20.0, 200.0  # where the node and predict are compared
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _tool():
+    """tools/calibration_example.py: the bench and calibration of doc/user/calibration.md."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "calibration_example", ROOT / "tools" / "calibration_example.py"
+    )
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    return tool
+
+
+EXAMPLE = _tool()
+FLEET, POPULATION = EXAMPLE.BENCH, EXAMPLE.POPULATION
+SPEED, LOAD = EXAMPLE.SPEED, EXAMPLE.LOAD  # where the node and predict are compared
 
 
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory):
-    """The bench and its calibration with both formulations: (truth, calibration.json, exit
-    status, output directory)."""
-    bench = tmp_path_factory.mktemp("fleet")
-    truth = run(FLEET, bench)
-    out = tmp_path_factory.mktemp("calibration")
-    code = main(
-        ["calibrate", str(bench), "--out", str(out), "--formulation", "both", "--quiet"]
-        + ["--workers", "2"]
-    )
+    """The bench and its calibration with both formulations (the documentation's example):
+    (truth, calibration.json, exit status, output directory)."""
+    truth, out, code = EXAMPLE.make(tmp_path_factory.mktemp("fleet"))
     assert code in (0, NOT_CONVERGED), code
     return truth, json.loads((out / "calibration.json").read_text()), code, out
 
@@ -118,6 +127,18 @@ def test_the_formulation_that_made_the_bench_is_the_one_supported(fleet):
     assert set(f) >= {"paper", "consistent", "supported", "strength", "rule"}
 
 
+def test_the_calibration_page_shows_what_the_example_prints(fleet):
+    """doc/user/calibration.md's worked example is tools/calibration_example.py's output of
+    this very run."""
+    truth, _, code, out = fleet
+    page = (ROOT / "doc" / "user" / "calibration.md").read_text(encoding="utf-8")
+    shown = page.split("% calibration_example: begin\n", 1)[1].split(
+        "\n% calibration_example: end"
+    )[0]
+    assert shown == EXAMPLE.markdown(truth, out, code)
+    assert EXAMPLE.bench_command() in page
+
+
 def test_exit_status_follows_the_convergence(fleet):
     _, doc, code, out = fleet
     not_converged = [u for u in doc["units"] if u["status"].startswith("not converged")]
@@ -185,7 +206,18 @@ def test_the_node_publishes_the_risk_predict_gives_with_calibrated_yaml(fleet):
 
 # ----------------------------------------------------------------------------- small runs
 SMALL = BenchSettings(units=4, duration_s=6.0, seed=3, population=POPULATION)
-QUICK = ["--steps", "160", "--burn", "60", "--hyper-steps", "300", "--hyper-burn", "100"]
+QUICK = [
+    "--steps",
+    "160",
+    "--first-steps",
+    "100",
+    "--burn",
+    "60",
+    "--hyper-steps",
+    "300",
+    "--hyper-burn",
+    "100",
+]
 
 
 @pytest.fixture(scope="module")

@@ -198,7 +198,7 @@ def test_the_doc_build_writes_every_table(tmp_path):
     """doc/conf.py calls `write` on builder-inited: one file per table, each the rendered table;
     an unchanged table is not rewritten."""
     paths = param_tables.write(tmp_path / "_generated")
-    names = [*param_tables.TABLES, param_tables.TOPIC_TABLE]
+    names = [*param_tables.TABLES, *param_tables.OPTION_TABLES, param_tables.TOPIC_TABLE]
     assert [p.name for p in paths] == [f"{n}.md" for n in names]
     for name, path in zip(names, paths, strict=True):
         rendered = (
@@ -217,7 +217,9 @@ def test_the_doc_build_writes_every_table(tmp_path):
     assert "builder-inited" in conf and '"reference" / "_generated"' in conf
 
 
-@pytest.mark.parametrize("name", [*param_tables.TABLES, param_tables.TOPIC_TABLE])
+@pytest.mark.parametrize(
+    "name", [*param_tables.TABLES, *param_tables.OPTION_TABLES, param_tables.TOPIC_TABLE]
+)
 def test_the_reference_pages_include_every_table(name):
     include = "```{include} _generated/" + name + ".md\n```"
     pages = "\n".join(p.read_text(encoding="utf-8") for p in (DOC / "reference").glob("*.md"))

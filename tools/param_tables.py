@@ -6,7 +6,9 @@
     .venv/bin/python tools/param_tables.py --write doc/reference/_generated  # as doc/conf.py
 
 One markdown table per entry of `TABLES` (parameter, unit, default, allowed values, meaning),
-and the node's topic table (`topic_table`: names and types from the code, QoS and meaning from
+one per entry of `OPTION_TABLES` (a command's options made from settings metadata by
+`cli.args.add_settings_options`: option, unit, default, allowed values, meaning), and the node's
+topic table (`topic_table`: names and types from the code, QoS and meaning from
 `TOPICS`, the diagnostic key-values from the `KEY_*` constants). Nothing is pasted: the Sphinx
 build (doc/conf.py, on `builder-inited`) writes each table with `write` into
 doc/reference/_generated/<name>.md (git-ignored), which the pages include; test/test_settings.py
@@ -16,6 +18,7 @@ checks that every table is rendered and included.
 from __future__ import annotations
 
 import sys
+from dataclasses import fields
 from pathlib import Path
 
 from leadscrew_ros.bag import messages
@@ -24,9 +27,11 @@ from leadscrew_ros.bag.recorder import RecordSettings
 from leadscrew_ros.live import listen, status
 from leadscrew_ros.live.settings import JointSettings, ListenSettings, LiveSettings
 from leadscrew_ros.model.acoustics.settings import DetectorSettings
+from leadscrew_ros.model.calibration import DetectionErrors, ThinSettings
 from leadscrew_ros.model.physics.metadata import default_text, range_text
 from leadscrew_ros.model.physics.parameters import ScrewParameters
 from leadscrew_ros.model.uncertainty.scatter import ScatterSettings
+from leadscrew_ros.review.calibration import CalibrationSettings, SamplerSettings
 from leadscrew_ros.ros import diagnostics
 from leadscrew_ros.ros.node import AUDIO_COMMON_TOPICS, INPUTS, SOUND_INPUTS
 from leadscrew_ros.ros.parameters import (
@@ -47,6 +52,10 @@ TABLES = {
     "model": (ScrewParameters,),
 }
 NODE_TABLES = ("node", "scatter", "record", "listen")  # the node's own parameters, not the model's
+# table name -> the settings dataclasses whose `setting` fields are a command's options
+OPTION_TABLES = {
+    "calibrate": (CalibrationSettings, DetectionErrors, SamplerSettings, ThinSettings),
+}
 HEADER = ["| parameter | unit | default | allowed | meaning |", "|---|---|---|---|---|"]
 TOPIC_TABLE = "topics"  # file name of `topic_table` in `write`
 
@@ -180,8 +189,12 @@ def _cell(text: str) -> str:
 
 def row(spec: Spec) -> str:
     """One table row of parameter `spec`."""
-    md, default = spec.md, spec.default
-    shown = f"`{default}`" if isinstance(default, str) and default else default_text(spec.field)
+    return _row(f"`{spec.name}`", spec.field)
+
+
+def _row(name: str, field) -> str:
+    md, default = field.metadata, field.default
+    shown = f"`{default}`" if isinstance(default, str) and default else default_text(field)
     allowed = (
         ", ".join(f"`{c}`" for c in md["choices"])
         if md["choices"]
@@ -190,12 +203,20 @@ def row(spec: Spec) -> str:
         else ""
     )
     meaning = md["description"] + (f" ({READ_ONLY_NOTE})" if md["read_only"] else "")
-    cells = [f"`{spec.name}`", md["unit"], shown, allowed, meaning]
+    cells = [name, md["unit"], shown, allowed, meaning]
     return "| " + " | ".join(_cell(c) for c in cells) + " |"
 
 
 def table(name: str) -> str:
-    """Markdown table `name` of `TABLES` (no trailing newline)."""
+    """Markdown table `name` of `TABLES` or `OPTION_TABLES` (no trailing newline)."""
+    if name in OPTION_TABLES:
+        rows = [
+            _row(f"`--{f.name.replace('_', '-')}`", f)
+            for cls in OPTION_TABLES[name]
+            for f in fields(cls)
+            if "unit" in f.metadata
+        ]
+        return "\n".join(["| option" + HEADER[0][len("| parameter") :], HEADER[1], *rows])
     groups = tuple(g for cls in TABLES[name] for g in GROUPS if g.cls is cls)
     return "\n".join(HEADER + [row(s) for s in specs(groups)])
 
@@ -242,7 +263,7 @@ def write(directory: Path | str) -> list[Path]:
     Returns the paths."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    texts = {**{n: table(n) for n in TABLES}, TOPIC_TABLE: topic_table()}
+    texts = {**{n: table(n) for n in (*TABLES, *OPTION_TABLES)}, TOPIC_TABLE: topic_table()}
     paths = []
     for name, text in texts.items():
         path = directory / f"{name}.md"
@@ -265,14 +286,15 @@ def main(argv: list[str] | None = None) -> int:
     if names == [TOPIC_TABLE]:
         print(topic_table())
         return 0
-    unknown = set(names) - set(TABLES)
+    known = (*TABLES, *OPTION_TABLES)
+    unknown = set(names) - set(known)
     if unknown:
         print(
-            f"unknown table(s) {', '.join(sorted(unknown))}; known: {', '.join(TABLES)}",
+            f"unknown table(s) {', '.join(sorted(unknown))}; known: {', '.join(known)}",
             file=sys.stderr,
         )
         return 2
-    print("\n\n".join(table(n) for n in names or TABLES))
+    print("\n\n".join(table(n) for n in names or known))
     return 0
 
 

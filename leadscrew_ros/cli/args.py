@@ -412,8 +412,11 @@ def _scatter_help() -> str:
     )
 
 
-def common_parser() -> Parser:
-    """The parent parser of the commands that build a model: the model parameter options."""
+def common_parser(more_formulations: dict[str, str] | None = None) -> Parser:
+    """The parent parser of the commands that build a model: the model parameter options;
+    `more_formulations` (choice -> its help) adds choices to --formulation (calibrate's
+    'both'): a parser of its own, as argparse shares a parent's actions."""
+    more = more_formulations or {}
     common = Parser(add_help=False)
     group = common.add_argument_group("model parameters")
     group.add_argument(
@@ -425,9 +428,10 @@ def common_parser() -> Parser:
     )
     group.add_argument(
         "--formulation",
-        choices=FORMULATIONS,
+        choices=(*FORMULATIONS, *more),
         help="friction matrices: Appendix A as printed (paper, the default) or "
-        "the first-principles linearisation (consistent)",
+        "the first-principles linearisation (consistent)"
+        + "".join(f"; {choice}: {text}" for choice, text in more.items()),
     )
     group.add_argument(
         "--params-file",
@@ -461,7 +465,8 @@ def add_settings_options(group: Any, cls: type, skip: Sequence[str] = ()) -> Non
     for f in fields(cls):
         if "unit" not in f.metadata or f.name in skip:
             continue
-        md, kind = f.metadata, type(f.default)
+        default: Any = f.default
+        md, kind = f.metadata, type(default)
         option = "--" + f.name.replace("_", "-")
         text = help_text(f).replace("%", "%%")
         if kind is bool:

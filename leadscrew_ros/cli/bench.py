@@ -8,6 +8,7 @@ import argparse
 import time
 from dataclasses import fields
 from pathlib import Path
+from typing import Any
 
 from ..model.physics.metadata import help_text
 from .args import CliError, Parser, finite, finite_float, print_json
@@ -31,13 +32,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
     """`bench`: simulate and record the units; prints one line per unit and a JSON summary."""
     from ..bag.virtual_bench import TRUTH, BenchSettings, Unit, run
 
-    settings = BenchSettings(
-        **{name: getattr(args, name) for name in _OPTIONS if getattr(args, name) is not None},
-        **{
-            name: name_values(getattr(args, name), "--" + name.replace("_", "-"))
-            for name in _POPULATION
-        },
-    )
+    values: dict[str, Any] = {
+        name: getattr(args, name) for name in _OPTIONS if getattr(args, name) is not None
+    }
+    for name in _POPULATION:
+        values[name] = name_values(getattr(args, name), "--" + name.replace("_", "-"))
+    settings = BenchSettings(**values)
     start = time.perf_counter()
 
     def progress(k: int, unit: Unit, bag: Path) -> None:

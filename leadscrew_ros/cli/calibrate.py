@@ -21,6 +21,7 @@ from .args import (
     Parser,
     add_settings_options,
     build_model,
+    common_parser,
     output_directory,
     settings_from,
 )
@@ -112,15 +113,18 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
-    """Add `calibrate` (with the model options `common`: the prior) to `sub`."""
+    """Add `calibrate` to `sub`, with the model options (the prior) of a `common_parser` of its
+    own whose --formulation also takes 'both' (so `common` is not used)."""
     from ..model.calibration import DetectionErrors, ThinSettings
     from ..review.calibration.sampling import SamplerSettings
-    from ..review.calibration.settings import DEFAULT_NAMES, CalibrationSettings
+    from ..review.calibration.settings import BOTH, DEFAULT_NAMES, CalibrationSettings
 
+    spec = CalibrationSettings.__dataclass_fields__
+    both = spec["formulation"].metadata["description"].partition("both: ")[2]
     p = sub.add_parser(
         "calibrate",
-        parents=common,
-        conflict_handler="resolve",  # --formulation: also 'both'
+        # the model options with a --formulation that also takes 'both' (`common` has none)
+        parents=[common_parser({BOTH: both})],
         help="calibrate each unit's friction and damping from the heard squeak of its logs, "
         "the fleet's population (DIR/calibrated.yaml, a params file for the node and every "
         "command), a held-out check: calibration.json, .txt, .png",
@@ -148,10 +152,9 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
         action="append",
         default=[],
         metavar="NAME",
-        help=f"{CalibrationSettings.__dataclass_fields__['names'].metadata['help']} "
-        f"(repeatable; default {', '.join(DEFAULT_NAMES)})",
+        help=f"{spec['names'].metadata['help']} (repeatable; default {', '.join(DEFAULT_NAMES)})",
     )
-    add_settings_options(g, CalibrationSettings)
+    add_settings_options(g, CalibrationSettings, skip=("formulation",))
     add_settings_options(
         p.add_argument_group("detection errors (the likelihood's model of the detector)"),
         DetectionErrors,

@@ -944,8 +944,11 @@ def plot_posteriors(result: Any, name: str, *, ax: Axes | None = None) -> Figure
     """
     fig, ax = _axes(ax, figsize=(4, 5), layout="constrained")
     run = result.run
-    rows = [(u, _unit_samples(u.reported, name)) for u in run.units if u.reported is not None]
-    rows = [(u, s) for u, s in rows if s is not None][:_FOREST_UNITS]
+    rows: list[tuple[Any, np.ndarray]] = []
+    for u in run.units:
+        s = None if u.reported is None else _unit_samples(u.reported, name)
+        if s is not None and len(rows) < _FOREST_UNITS:
+            rows.append((u, s))
     for k, (u, s) in enumerate(rows):
         lo, hi = np.quantile(s, [0.05, 0.95])
         colour = "C0" if u.calibrated else "0.6"
@@ -994,7 +997,8 @@ def plot_population(result: Any, name: str, *, ax: Axes | None = None) -> Figure
     drawn = [(label, c, _population_samples(p, s, names)) for label, c, p, s in curves]
     values = np.concatenate([d[name] for _, _, d in drawn if name in d])
     if values.size and np.ptp(values) > 0:
-        bins = np.linspace(*np.quantile(values, [0.001, 0.999]), 60)
+        lo, hi = np.quantile(values, [0.001, 0.999]).tolist()
+        bins = np.linspace(lo, hi, 60).tolist()
         for label, colour, d in drawn:
             ax.hist(d[name], bins=bins, density=True, histtype="step", color=colour, label=label)
     ax.set_xlabel(name)

@@ -209,7 +209,9 @@ def counted(
     return ok
 
 
-def _pass(annotated: Path, params: ScrewParameters, inputs: InputSettings, heard_topic: str):
+def _pass(
+    annotated: Path, params: ScrewParameters, inputs: InputSettings, heard_topic: str
+) -> tuple[np.ndarray, float | None]:
     """One pass over the annotated log: the recomputes (time [s], speed, load, the nut the
     contact is integrated at) and the time of the first heard-flag message [s]."""
     source = open_log(annotated)

@@ -209,21 +209,21 @@ def text(result: CalibrationResult, out: Path | None = None) -> str:
             + (f" (held-out z = {c.z:.1f})" if c.z is not None else "")
             + f"; {scores}"
         )
-    shown = [u for u in units if u.reported is not None][:_LISTED]
-    if shown:
+    listed = [u for u in units if u.reported is not None][:_LISTED]
+    if listed:
         lines.append(f"per unit, {DROP} mean [90 %]:")
-        for u in shown:
+        for u in listed:
             post = u.reported
             assert post is not None
-            s = post.summary().get(DROP)
-            drop = _interval(s) if s else "n/a"
+            own = post.summary().get(DROP)
+            drop = _interval(own) if own else "n/a"
             flag = " (held out)" if u.held_out else ""
             state = "" if u.calibrated else f"  {u.status}"
             lines.append(f"  {u.unit_id:<20} {drop}{flag}{state}")
     rest = [u for u in units if u.reported is None]
     for u in rest[:_LISTED]:
         lines.append(f"  {u.unit_id:<20} {u.status}")
-    more = len(units) - len(shown) - min(len(rest), _LISTED)
+    more = len(units) - len(listed) - min(len(rest), _LISTED)
     if more > 0:
         lines.append(f"  ... {more} more units in {JSON_FILE}")
     where = f"{out}/" if out is not None else ""
@@ -315,7 +315,7 @@ def write(
         The files written.
     """
     out.mkdir(parents=True, exist_ok=True)
-    date = datetime.datetime.now(datetime.UTC).replace(microsecond=0).isoformat()
+    date = datetime.datetime.now(datetime.timezone.utc).replace(microsecond=0).isoformat()
     context = {**context, "run": {**context.get("run", {}), "date": date}}
     paths = [out / JSON_FILE, out / TEXT_FILE]
     paths[0].write_text(

@@ -220,7 +220,14 @@ class UnitResult:
         return self.status == CALIBRATED
 
     def as_dict(self) -> dict[str, Any]:
-        """calibration.json's unit."""
+        """calibration.json's unit.
+
+        Returns
+        -------
+        dict
+            unit_id, logs, status, posterior (the reported one's summary, None without),
+            held_out, convergence.
+        """
         post = self.reported
         return {
             "unit_id": self.unit_id,
@@ -266,9 +273,19 @@ class HeldOut:
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
 
     def reliability(self, bins: int) -> dict[str, list[dict[str, float]]]:
-        """Predicted P against the heard share of frames, in `bins` equal bins of P: per bin
-        the frame-weighted mean P, the heard share and the frames, for the prior and the
-        calibrated population (empty bins left out)."""
+        """Predicted P against the heard share of frames, in equal bins of P.
+
+        Parameters
+        ----------
+        bins : int
+            Bins over [0, 1].
+
+        Returns
+        -------
+        dict
+            'prior' and 'calibrated': per non-empty bin the frame-weighted mean P ('p'), the
+            heard share of its frames ('heard') and its frames ('frames').
+        """
         out: dict[str, list[dict[str, float]]] = {}
         frames, heard = self.points[:, 2], self.points[:, 3]
         for col, key in ((0, "prior"), (1, "calibrated")):
@@ -645,7 +662,7 @@ def _calibrate_runs(runs: list[FormulationRun], settings: CalibrationSettings, c
             u.hierarchical = h
         if run.population is not None:
             run.params, run.scatter = run.population.params_and_scatter(run.prior.params)
-    checks = []
+    checks: list[tuple[list[UnitResult], list[tuple[Any, Any]]]] = []
     for run in runs:
         held = [u for u in run.units if u.held_out and u.observations is not None]
         if run.params is None or run.scatter is None or not held:

@@ -49,7 +49,8 @@ class CalibrationSettings:
     formulation: str = setting(
         "paper",
         "",
-        "friction formulation calibrated; both: each, compared by the held-out check",
+        "friction formulation calibrated; both: each, compared by the frequency match and "
+        "the held-out check",
         choices=(*FORMULATIONS, BOTH),
     )
     reliability_bins: int = setting(
@@ -68,5 +69,11 @@ class CalibrationSettings:
         return FORMULATIONS if self.formulation == BOTH else (self.formulation,)
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready (calibration.json's settings)."""
+        """calibration.json's settings.
+
+        Returns
+        -------
+        dict
+            Every field, the nested settings as dicts, JSON-ready.
+        """
         return json_safe(asdict(self))
