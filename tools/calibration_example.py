@@ -2,7 +2,7 @@
 """Numbers for doc/user/calibration.md: a virtual-bench fleet that the prior does not describe,
 calibrated with both formulations, and the calibrated params file at one operating point.
 
-    .venv/bin/python tools/calibration_example.py
+    .venv/bin/python tools/calibration_example.py [--keep DIR]
 
 Makes the bench of `BENCH` (`leadscrew-squeak bench`, `bench_command`) and calibrates it
 (`leadscrew-squeak calibrate BENCH --out OUT` with `CALIBRATE`) in a temp directory, then prints
@@ -29,9 +29,9 @@ from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.model.uncertainty.scatter import LOG_NORMAL, Scatter, draw
 
 POPULATION = {"mu_static": 0.27, "mu_kinetic": 0.19, "modal_damping": 0.002}
-BENCH = BenchSettings(units=20, formulation="consistent", seed=11, population=POPULATION)
+BENCH = BenchSettings(units=20, seed=11, population=POPULATION)
 CALIBRATE = ["--formulation", "both", "--workers", "2"]
-SPEED, LOAD = 20.0, 200.0  # the operating point of the last table [rad/s], [N]
+SPEED, LOAD = 60.0, 200.0  # the operating point of the last line: near the prior's band edge
 DROP = "friction_drop"
 
 
@@ -68,11 +68,30 @@ def _spread(name: str, params: dict[str, Any], scatter: dict[str, float]) -> str
     return f"{_fmt(params[name])} (SD {_fmt(sd * params[name])})"
 
 
-def _drop(params: dict[str, Any], scatter: dict[str, float]) -> str:
+def _drops(params: dict[str, Any], scatter: dict[str, float]) -> np.ndarray:
     values = draw(ScrewParameters(**params), Scatter(scatter), 8192).values
-    d = values["mu_static"] - values["mu_kinetic"]
+    return values["mu_static"] - values["mu_kinetic"]
+
+
+def _drop(params: dict[str, Any], scatter: dict[str, float]) -> str:
+    d = _drops(params, scatter)
     q05, q95 = np.quantile(d, [0.05, 0.95])
     return f"{_fmt(float(d.mean()))} (90 % of units {_fmt(q05)}-{_fmt(q95)})"
+
+
+def _widths(doc: dict[str, Any]) -> tuple[float, float, float]:
+    """The 90 % width of the fleet mean's drop, and its ratios to the prior's 90 % width of a
+    unit's drop and to the hierarchical prior's of the fleet mean (the population centre's
+    hyper-prior: the prior's SDs widened by prior_widen)."""
+    mean = doc["population"][DROP]["mean"]
+    width = mean["q95"] - mean["q05"]
+    prior = doc["settings"]["prior"]
+    p, s = prior["params"], prior["scatter"]
+    q05, q95 = np.quantile(_drops(p, s), [0.05, 0.95])
+    hyper = doc["settings"]["sampler"]["prior_widen"] * np.hypot(
+        p["mu_static"] * s["mu_static"], p["mu_kinetic"] * s["mu_kinetic"]
+    )
+    return width, width / (q95 - q05), width / (2 * 1.6448536269514722 * hyper)
 
 
 def markdown(truth: dict[str, Any], out: Path, code: int) -> str:
@@ -114,6 +133,7 @@ def markdown(truth: dict[str, Any], out: Path, code: int) -> str:
     p_cal = calibrated.predict(SPEED, LOAD).probability
     # up to the per-unit lines (the rest: units, paths and the wall time)
     shown = text[: next((k for k, line in enumerate(text) if line.startswith("per unit")), -1)]
+    width, to_unit, to_hyper = _widths(doc)
     return "\n".join(
         [
             f"The bench draws its units from mu_static {_fmt(truth['nominal']['mu_static'])}, "
@@ -128,7 +148,10 @@ def markdown(truth: dict[str, Any], out: Path, code: int) -> str:
             *rows,
             "",
             f"Per unit, the 90 % interval of the friction drop covers the unit's own drop "
-            f"(truth.json) in {covered} of {len(doc['units'])} units. The held-out check "
+            f"(truth.json) in {covered} of {len(doc['units'])} units. The fleet mean's 90 % "
+            f"interval of the drop is {_fmt(width)} wide: {to_unit:.2f} of the prior's 90 % "
+            f"interval of a unit's drop, {to_hyper:.2f} of the hierarchical model's prior of "
+            f"the fleet mean (the population centre's hyper-prior). The held-out check "
             f"({len(h['units'])} units, {h['frames']} frames): Brier score "
             f"{h['brier_prior']:.4f} with the prior, {h['brier_calibrated']:.4f} with the "
             f"calibrated fleet. Formulations: {f['supported']} supported {f['strength']} "
@@ -156,7 +179,15 @@ def example(tmp: Path) -> str:
     return markdown(*make(tmp))
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    args = sys.argv[1:] if argv is None else argv
+    if args[:1] == ["--keep"] and len(args) == 2:  # the run kept, for `markdown` again
+        keep = Path(args[1])
+        keep.mkdir(parents=True, exist_ok=True)
+        truth, out, code = make(keep)
+        (keep / "exit_status").write_text(f"{code}\n")
+        print(markdown(truth, out, code))
+        return 0
     with tempfile.TemporaryDirectory(prefix="calibration_example_") as tmp:
         print(example(Path(tmp)))
     return 0

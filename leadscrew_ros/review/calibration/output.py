@@ -5,7 +5,8 @@
   with friction_drop, held_out, convergence), `population` ({name: {mean: {mean, q05, q95}, sd:
   {...}}} with friction_drop; null without one) and `population_convergence`, `held_out` (units,
   brier_prior, brier_calibrated, frames, per_unit, reliability), `formulations` (with both:
-  paper and consistent {score, frequency_match, ...}, supported, strength, z, note, rule),
+  paper and consistent {score, frequency_match, brier_prior, population_status, not_converged,
+  population}, supported, strength, decided_by, z, rule),
   `inputs` (each input's unit and what it gave), `settings` (what the run was made with;
   `settings.run` holds what differs between identical runs: date, output path, wall times);
   strict JSON (`jsonsafe`);
@@ -99,6 +100,9 @@ def document(result: CalibrationResult, context: dict[str, Any]) -> dict[str, An
                     "frequency_match": r.frequency_match,
                     "brier_prior": r.held_out.brier_prior,
                     "population_status": r.population_status,
+                    "not_converged": [
+                        u.unit_id for u in r.units if u.status.startswith("not converged")
+                    ],
                     "population": r.population.summary() if r.population is not None else None,
                 }
                 for name, r in result.runs.items()
@@ -209,6 +213,12 @@ def text(result: CalibrationResult, out: Path | None = None) -> str:
             + (f" (held-out z = {c.z:.1f})" if c.z is not None else "")
             + f"; {scores}"
         )
+        for name, other in result.runs.items():
+            stuck = sum(u.status.startswith("not converged") for u in other.units)
+            if name != result.chosen and (stuck or other.population_status != "calibrated"):
+                lines.append(
+                    f"{name}: {stuck} units not converged; population: {other.population_status}"
+                )
     listed = [u for u in units if u.reported is not None][:_LISTED]
     if listed:
         lines.append(f"per unit, {DROP} mean [90 %]:")
