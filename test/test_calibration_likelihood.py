@@ -349,3 +349,22 @@ def test_bad_theta_and_missing_prior_are_one_clear_line(likelihood, unit):
             Prior(NOMINAL, Scatter(), names)
     with pytest.raises(ParameterError, match="errors.miss"):
         DetectionErrors(miss=0.0)
+
+
+def test_the_consistent_formulation_is_first_order_too(unit):
+    """formulation 'consistent': the thread factor c = 1 / (1 + s mu_o tan beta) of each draw
+    is exact in l and s; small changes match exact eigen-solves as for 'paper'."""
+    nominal = NOMINAL.with_(formulation="consistent")
+    lik = GrowthLikelihood(SqueakModel(nominal), unit.obs, NAMES)
+    margins = lik.margins(lik.centre[None])[0]
+    points = np.flatnonzero(np.isfinite(margins) & (margins > -5.0))[::25]
+    assert len(points) > 10
+    assert np.allclose(
+        margins[points], exact_margins(nominal, unit.obs, points), rtol=1e-9, atol=1e-9
+    )
+    theta = perturbed(lik.centre, 0.003)
+    exact = exact_margins(nominal.with_(**dict(zip(NAMES, theta, strict=True))), unit.obs, points)
+    change = exact - margins[points]
+    error = lik.margins(theta[None])[0][points] - exact
+    assert np.all(np.abs(change) > 0.01)
+    assert np.all(np.abs(error) <= 2e-3 * np.abs(change))

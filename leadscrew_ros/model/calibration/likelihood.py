@@ -17,8 +17,10 @@ first-order dA/df (`perturbation.geometry_derivative`). The expansion is exact a
 and first order around it: `recentred` re-expands about new parameters (the sampler does so
 about the posterior mean until it no longer moves).
 
-A mode that no draw within `REACH_SIGMAS` SDs of the reach prior (the interim prior) can push
-across the threshold is pruned at its point; a point where none is left has a fixed verdict.
+A mode that no draw within the box `bounds` of +-`REACH_SIGMAS` SDs of the reach prior (the
+interim prior: 0.3 % of its mass per name is outside) can push across the threshold is
+pruned at its point; a point where none is left has a fixed verdict. Outside the box the
+log-likelihood is -inf (the interim prior truncated there), so the pruning is exact.
 
 Detection error model (`DetectionErrors`): a frame is heard with probability
 
@@ -52,7 +54,7 @@ from ..uncertainty.perturbation import EigenPairs, geometry_derivative
 from .observations import CalibrationError, Observations
 from .prior import DAMPING, FRICTION, INTERIM_WIDEN, Prior, check_names
 
-REACH_SIGMAS = 4.0  # pruning: the box of +- this many SDs of the reach prior
+REACH_SIGMAS = 3.0  # pruning and truncation: the box of +- this many SDs of the reach prior
 _REACH_POINTS = 256  # Sobol points in that box (plus its corners) that bound the reach
 
 
@@ -144,8 +146,9 @@ class GrowthLikelihood:
     errors : DetectionErrors, optional
         The detection error model; the defaults when None.
     reach : Prior, optional
-        Draws within `REACH_SIGMAS` of its SDs bound the modes kept (pruning); the model's
-        prior widened by `prior.INTERIM_WIDEN` when None.
+        Its prior, used for the valid domain and, within `REACH_SIGMAS` of its SDs, as the
+        box that bounds the modes kept (pruning); the model's prior widened by
+        `prior.INTERIM_WIDEN` when None.
 
     Raises
     ------
@@ -162,7 +165,10 @@ class GrowthLikelihood:
         (P,) bool: the points where the model holds at the centre (`Validity.OK`, the nut on
         the screw, the eigen-solve converged); the others carry no information.
     active : numpy.ndarray
-        Indices of the points whose verdict some draw within the reach can change.
+        Indices of the points whose verdict some draw within `bounds` can change.
+    bounds : tuple of numpy.ndarray
+        (lo, hi), each (D,) in the fields' units: the box of +-`REACH_SIGMAS` SDs of the
+        reach prior; the log-likelihood is -inf outside it.
     evaluations : int
         Draws (rows of theta) evaluated so far.
     calls : int
@@ -188,6 +194,8 @@ class GrowthLikelihood:
         self._linear = [k for k, n in enumerate(self.names) if n not in FRICTION]
         self.centre = np.array([float(getattr(self.params, n)) for n in self.names])
         self._fields = self.params.as_dict()
+        u = np.full(len(self.names), REACH_SIGMAS * self.reach.widen)
+        self.bounds = (self.reach.from_u(-u), self.reach.from_u(u))
         # the contact's angular length b / (R tan beta): one for every nut position
         self._alpha = build_geometry(self.params).contact.alpha
         self._expand()
@@ -214,19 +222,29 @@ class GrowthLikelihood:
                 margin.append(pairs.lam.real - GROWTH_TOL * np.abs(pairs.lam))
                 rates.append(self._mode_rates(pairs, at, float(speed[i]), float(load[i])))
         self.valid = valid
-        point_k = np.concatenate(point) if point else np.zeros(0, int)
-        margin_k = np.concatenate(margin) if margin else np.zeros(0)
-        rates_k = np.concatenate(rates, axis=1) if rates else np.zeros((2 + len(self._linear), 0))
+        self._solved = (
+            np.concatenate(point) if point else np.zeros(0, int),
+            np.concatenate(margin) if margin else np.zeros(0),
+            np.concatenate(rates, axis=1) if rates else np.zeros((2 + len(self._linear), 0)),
+        )
+        self._prune()
+
+    def _prune(self) -> None:
+        """The (point, mode) pairs that a draw in the box can push across the threshold,
+        the points they leave fixed, and the likelihood's per-point terms."""
+        obs, p, valid = self.obs, self.params, self.valid
+        point_k, margin_k, rates_k = self._solved
         keep = np.abs(margin_k) <= self._reach(point_k, rates_k)
-        fixed = np.zeros(obs.points, bool)  # squeaks for every draw in the reach
+        fixed = np.zeros(obs.points, bool)  # squeaks for every draw in the box
         fixed[point_k[~keep & (margin_k > 0)]] = True
         keep &= ~fixed[point_k]
         self._point, self._margin, self._rates = point_k[keep], margin_k[keep], rates_k[:, keep]
+        self._abs_rates = np.abs(self._rates)
         self.active, starts = np.unique(self._point, return_index=True)
         self._starts = starts
         self._column = np.searchsorted(self.active, self._point)  # pair -> active column
         self._level0, self._slope0 = level_slope(
-            p, speed[self.active], load[self.active], self._alpha
+            p, obs.speed_rad_s[self.active], obs.load_n[self.active], self._alpha
         )
         # log-likelihood per point: base (no squeak) and the change when it squeaks
         w = self.errors.frame_weight(obs.frame_s)
@@ -271,14 +289,15 @@ class GrowthLikelihood:
         return reach
 
     def _box(self) -> np.ndarray:
-        """Values (B, D) on the box of +-REACH_SIGMAS SDs of the reach prior: Sobol points
-        and, for up to 8 names, the corners."""
+        """Values (B, D) in the box `bounds`: Sobol points and, for up to 8 names, the
+        corners."""
         d = len(self.names)
-        unit = 2.0 * qmc.Sobol(d, scramble=True, seed=0).random(_REACH_POINTS) - 1.0
+        unit = qmc.Sobol(d, scramble=True, seed=0).random(_REACH_POINTS)
         if d <= 8:
-            corners = np.array(np.meshgrid(*[[-1.0, 1.0]] * d, indexing="ij")).reshape(d, -1).T
+            corners = np.array(np.meshgrid(*[[0.0, 1.0]] * d, indexing="ij")).reshape(d, -1).T
             unit = np.vstack([unit, corners])
-        return self.reach.from_u(REACH_SIGMAS * self.reach.widen * unit)
+        lo, hi = self.bounds
+        return lo + (hi - lo) * unit
 
     def _level_slope_change(
         self, theta: np.ndarray, points: np.ndarray | None = None
@@ -312,22 +331,23 @@ class GrowthLikelihood:
         return theta
 
     def _changes(self, theta: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The draws' changes from the centre: level and slope at the active points (W, A)
-        and the linear names' (W, F); empty arrays for what is not calibrated."""
-        w = len(theta)
+        """The draws' changes from the centre, draws along the last axis: level and slope at
+        the active points (A, W) and the linear names' (F, W); zeros for what is not
+        calibrated."""
         if self._friction:
-            dl, ds = self._level_slope_change(theta)
+            dl, ds = (np.ascontiguousarray(c.T) for c in self._level_slope_change(theta))
         else:
-            dl = ds = np.zeros((w, len(self.active)))
-        return dl, ds, theta[:, self._linear] - self.centre[self._linear]
+            dl = ds = np.zeros((len(self.active), len(theta)))
+        return dl, ds, (theta[:, self._linear] - self.centre[self._linear]).T
 
     def _growth(self, changes: tuple[np.ndarray, ...], pairs: np.ndarray) -> np.ndarray:
-        """(W, len(pairs)) expanded growth beyond the threshold of (point, mode) pairs."""
+        """(len(pairs), W) expanded growth beyond the threshold of (point, mode) pairs."""
         dl, ds, dlin = changes
         at, rates = self._column[pairs], self._rates[:, pairs]
-        growth = self._margin[pairs] + dl[:, at] * rates[0]
-        growth += ds[:, at] * rates[1]
-        growth += dlin @ rates[2:]
+        growth = dl[at] * rates[0, :, None]
+        growth += ds[at] * rates[1, :, None]
+        growth += rates[2:].T @ dlin
+        growth += self._margin[pairs, None]
         return growth
 
     def _active_squeaks(self, theta: np.ndarray) -> np.ndarray:
@@ -336,27 +356,27 @@ class GrowthLikelihood:
         it (cheap, per pair): a point where some mode's lower bound is above the threshold
         squeaks for every draw, a pair whose upper bound is below never squeaks, and only the
         rest is evaluated per draw. Exact for the expansion."""
-        out = np.zeros((len(theta), len(self.active)), bool)
+        out = np.zeros((len(self.active), len(theta)), bool)
         if not len(self.active):
-            return out
+            return out.T
         changes = self._changes(theta)
-        column, rates = self._column, self._rates
+        column, rates, size = self._column, self._rates, self._abs_rates
         mean = self._margin.copy()
         bound = np.zeros(len(mean))
         for k, change in enumerate(changes[:2]):
-            centre = change.mean(axis=0)
+            centre = change.mean(axis=1)
             mean += rates[k] * centre[column]
-            bound += np.abs(rates[k]) * np.abs(change - centre).max(axis=0)[column]
-        centre = changes[2].mean(axis=0)
+            bound += size[k] * np.abs(change - centre[:, None]).max(axis=1)[column]
+        centre = changes[2].mean(axis=1)
         mean += centre @ rates[2:]
-        bound += np.abs(changes[2] - centre).max(axis=0) @ np.abs(rates[2:])
+        bound += np.abs(changes[2] - centre[:, None]).max(axis=1) @ size[2:]
         sure = np.maximum.reduceat(mean - bound, self._starts) > 0
-        out[:, sure] = True
+        out[sure] = True
         pairs = np.flatnonzero((mean + bound > 0) & ~sure[column])
         if len(pairs):
             points, starts = np.unique(column[pairs], return_index=True)
-            out[:, points] = np.maximum.reduceat(self._growth(changes, pairs), starts, axis=1) > 0
-        return out
+            out[points] = np.maximum.reduceat(self._growth(changes, pairs), starts, axis=0) > 0
+        return out.T
 
     def margins(self, theta: np.ndarray) -> np.ndarray:
         """Per draw and point, the largest expanded growth rate beyond the squeak threshold
@@ -383,7 +403,7 @@ class GrowthLikelihood:
         out = np.broadcast_to(out, (len(theta), self.obs.points)).copy()
         if len(self.active):
             growth = self._growth(self._changes(theta), np.arange(len(self._margin)))
-            out[:, self.active] = np.maximum.reduceat(growth, self._starts, axis=1)
+            out[:, self.active] = np.maximum.reduceat(growth, self._starts, axis=0).T
         return out
 
     def log_likelihood(self, theta: np.ndarray) -> np.ndarray:
@@ -397,7 +417,8 @@ class GrowthLikelihood:
         Returns
         -------
         numpy.ndarray
-            (W,) log-likelihood; -inf where a row is outside the valid domain.
+            (W,) log-likelihood; -inf where a row is outside the valid domain or the
+            box `bounds`.
 
         Raises
         ------
@@ -406,7 +427,8 @@ class GrowthLikelihood:
         """
         theta = self._check(theta)
         out = self._constant + self._active_squeaks(theta) @ self._delta[self.active]
-        return np.where(self.reach.valid(theta), out, -np.inf)
+        inside = np.all((theta >= self.bounds[0]) & (theta <= self.bounds[1]), axis=1)
+        return np.where(inside & self.reach.valid(theta), out, -np.inf)
 
     def squeaks(self, theta: np.ndarray) -> np.ndarray:
         """The model's verdict at every point for each row of theta (False where not valid).

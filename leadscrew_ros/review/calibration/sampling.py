@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import emcee
 import numpy as np
 from emcee.autocorr import integrated_time
+from threadpoolctl import threadpool_limits
 
 from ...model.calibration.likelihood import DetectionErrors, GrowthLikelihood
 from ...model.calibration.observations import CalibrationError, Observations
@@ -57,18 +58,22 @@ PRIOR_SAMPLES = 2000  # prior draws that stand for a unit with nothing to learn
 class SamplerSettings:
     """Walkers, steps, seeds and rules of the calibration's samplers (module docstring).
 
-    Defaults measured on Table 1 units of 12-s strokes (four names): the autocorrelation time
-    is ~20-40 steps, so 32 walkers x 1000 steps (300 burnt) give an ESS of ~600-1000 per name,
-    and two or three re-expansions settle the mean.
+    Defaults measured on synthetic Table 1 units of 12-s strokes (four names, ~750 distinct
+    points): the autocorrelation time is ~20-35 steps, so 32 walkers x 500 steps (150 burnt)
+    give an ESS of ~400-500 per name (the rule asks 100 and 10 autocorrelation times); the
+    walkers start at the best of `check_draws` interim-prior draws, burn in within ~5
+    autocorrelation times, and one or two re-expansions settle the mean (0.5 posterior SD: the
+    expansion's error is second order in the distance from its centre, and the posterior spans
+    +-2 SDs anyway). About 1.3-2.2 s of one core per unit; the population fit ~2 s.
     """
 
     walkers: int = setting(
         32, "1", "emcee walkers per unit (even, at least 2 per name + 2)", 4, 4096
     )
-    steps: int = setting(600, "1", "steps of each run of a unit's walkers", 10, 10**6)
-    burn: int = setting(200, "1", "steps discarded at the start of each run", 0, 10**6)
+    steps: int = setting(500, "1", "steps of each run of a unit's walkers", 10, 10**6)
+    burn: int = setting(150, "1", "steps discarded at the start of each run", 0, 10**6)
     first_steps: int = setting(
-        300,
+        250,
         "1",
         "steps of a run before its re-expansion check (a settled run is continued to steps)",
         10,
@@ -223,6 +228,18 @@ def calibrate_unit(
     ParameterError
         A name that cannot be calibrated, or one without a prior SD (``--scatter NAME=SD``).
     """
+    with threadpool_limits(limits=1, user_api="blas"):  # small products: threads only spin
+        return _calibrate_unit(model, obs, names, errors, settings, centre)
+
+
+def _calibrate_unit(
+    model: SqueakModel,
+    obs: Observations,
+    names: Sequence[str],
+    errors: DetectionErrors | None,
+    settings: SamplerSettings | None,
+    centre: ScrewParameters | None,
+) -> UnitPosterior:
     start_time = time.perf_counter()
     settings, errors = settings or SamplerSettings(), errors or DetectionErrors()
     prior = Prior(model.params, model.scatter, names)
@@ -255,7 +272,8 @@ def calibrate_unit(
 
     u = interim.draw(settings.check_draws, rng)
     log_like = likelihood.log_likelihood(interim.from_u(u))
-    if np.ptp(log_like) == 0.0:
+    possible = log_like[np.isfinite(log_like)]
+    if not len(possible) or np.ptp(possible) == 0.0:
         count = PRIOR_SAMPLES
         kept = prior.draw(count, rng)
         return result(
@@ -367,6 +385,13 @@ def fit_population(
     CalibrationError
         No unit learned anything, or the units have different names.
     """
+    with threadpool_limits(limits=1, user_api="blas"):  # small products: threads only spin
+        return _fit_population(units, model, settings)
+
+
+def _fit_population(
+    units: list[UnitPosterior], model: SqueakModel, settings: SamplerSettings | None
+) -> tuple[Population, list[UnitPosterior]]:
     start_time = time.perf_counter()
     settings = settings or SamplerSettings()
     if not units or len({u.names for u in units}) != 1:
