@@ -181,7 +181,7 @@ def _predict(params_file: Path) -> dict:
 
 
 def test_calibrated_yaml_is_a_params_file_of_the_calibrated_population(fleet):
-    _, doc, _, out = fleet
+    truth, doc, _, out = fleet
     path = out / "calibrated.yaml"
     text = path.read_text()
     [key] = (loaded := yaml.safe_load(text))
@@ -200,6 +200,13 @@ def test_calibrated_yaml_is_a_params_file_of_the_calibrated_population(fleet):
     d = _predict(path)
     assert d["probability_live"] == model.predict(SPEED, LOAD).probability
     assert 0.0 <= d["probability_live"] <= 1.0
+    # replay (and so review) takes it as it is: the model and scatter of the file
+    log = out.parent / "bench" / truth["units"][0]["log"]  # where `EXAMPLE.make` put the bench
+    replayed = out.parent / "replayed"
+    argv = ["replay", str(log), "--out", str(replayed), "--params-file", str(path)]
+    assert main([*argv, "--no-report", "--quiet", "--workers", "0", "--no-audio"]) == 0
+    summary = json.loads((replayed / "summary.json").read_text())
+    assert summary["scatter"] == dict(model.scatter.sd)
 
 
 def test_the_node_publishes_the_risk_predict_gives_with_calibrated_yaml(fleet):
@@ -223,7 +230,7 @@ def test_the_node_publishes_the_risk_predict_gives_with_calibrated_yaml(fleet):
 
 # ----------------------------------------------------------------------------- small runs
 SMALL = BenchSettings(
-    units=4, duration_s=6.0, formulation="consistent", seed=3, population=POPULATION
+    units=3, duration_s=5.0, formulation="consistent", seed=3, population=POPULATION
 )
 QUICK = [
     "--steps",
@@ -241,7 +248,7 @@ QUICK = [
 
 @pytest.fixture(scope="module")
 def small(tmp_path_factory):
-    """A 4-unit bench of 6-s strokes and a log without sound."""
+    """A 3-unit bench of 5-s strokes (consistent formulation) and a log without sound."""
     d = tmp_path_factory.mktemp("small")
     run(SMALL, d / "bench")
     silent = write_log(DutyCycle(duration_s=3.0, rate_hz=50.0, rest_s=0.5), d / "silent")
@@ -250,7 +257,7 @@ def small(tmp_path_factory):
 
 def _calibrate(argv: list[str]) -> tuple[int, dict]:
     out = Path(argv[argv.index("--out") + 1])
-    code = main(["calibrate", *argv, "--workers", "2", "--quiet", *QUICK])
+    code = main(["calibrate", *argv, "--workers", "2", "--quiet", "--no-report", *QUICK])
     return code, json.loads((out / "calibration.json").read_text())
 
 
