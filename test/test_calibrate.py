@@ -1,14 +1,14 @@
 # SPDX-License-Identifier: Apache-2.0
 """`leadscrew-squeak calibrate` on the virtual bench (issue 22): a fleet of 20 units drawn from a
 population the prior does not describe (a larger friction drop mu_s - mu_k, a smaller damping),
-made with the paper formulation, calibrated with both (the documentation's worked example); a
-small bench made with the consistent formulation; the truth stays in truth.json.
+made with the paper formulation and calibrated (the documentation's worked example); a small
+bench made with the consistent formulation, calibrated with both; the truth stays in truth.json.
 
 - each unit's 90 % interval of its friction drop covers its truth in >= 80 % of the units;
 - the 90 % interval of the fleet's mean friction drop covers the population's and is at most
   half as wide as the prior's (the hierarchical model's prior of the fleet mean);
 - the held-out Brier score is lower with the calibrated population than with the prior;
-- the comparison of the formulations picks the one that made the bench, each way;
+- the comparison of the formulations picks the one that made the (consistent) bench;
 - calibrated.yaml loads in `predict` and in the node (namespaced, as the shipped config), and the
   node's squeak/risk is predict's probability_live at the same point;
 - the same seed gives the same calibration.json (from the logs or from their replays), another
@@ -53,7 +53,7 @@ SPEED, LOAD = EXAMPLE.SPEED, EXAMPLE.LOAD  # where the node and predict are comp
 
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory):
-    """The bench and its calibration with both formulations (the documentation's example):
+    """The bench and its calibration (the documentation's example):
     (truth, calibration.json, exit status, output directory)."""
     truth, out, code = EXAMPLE.make(tmp_path_factory.mktemp("fleet"))
     assert code in (0, NOT_CONVERGED), code
@@ -125,15 +125,6 @@ def test_the_held_out_units_are_predicted_better_with_the_calibrated_population(
     )
     bins = h["reliability"]["calibrated"]
     assert bins and math.isclose(sum(b["frames"] for b in bins), h["frames"])
-
-
-def test_the_formulation_that_made_the_bench_is_the_one_supported(fleet):
-    _, doc, _, _ = fleet
-    f = doc["formulations"]
-    assert f["supported"] == FLEET.formulation, f
-    assert doc["settings"]["reported_formulation"] == FLEET.formulation
-    assert f["paper"]["frequency_match"] > f["consistent"]["frequency_match"]
-    assert set(f) >= {"paper", "consistent", "supported", "strength", "rule"}
 
 
 def test_the_calibration_page_shows_what_the_example_prints(fleet):

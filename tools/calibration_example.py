@@ -1,15 +1,17 @@
 # SPDX-License-Identifier: Apache-2.0
 """Numbers for doc/user/calibration.md: a virtual-bench fleet that the prior does not describe,
-calibrated with both formulations, and the calibrated params file at one operating point.
+calibrated, the calibrated params file at one operating point, and the same fleet calibrated
+with both formulations.
 
     .venv/bin/python tools/calibration_example.py [--keep DIR]
 
 Makes the bench of `BENCH` (`leadscrew-squeak bench`, `bench_command`) and calibrates it
-(`leadscrew-squeak calibrate BENCH --out OUT` with `CALIBRATE`) in a temp directory, then prints
-the page's Markdown between its `calibration_example` markers from what the run wrote
-(calibration.json, calibration.txt, calibrated.yaml) and the truth. test_calibrate runs the same
-bench and calibration (its fleet fixture uses `BENCH` and `CALIBRATE`) and checks the page
-shows `markdown` of them.
+(`leadscrew-squeak calibrate BENCH --out OUT` with `CALIBRATE`) in a temp directory (or DIR),
+then prints the page's Markdown between its `calibration_example` markers from what the run
+wrote (calibration.json, calibration.txt, calibrated.yaml) and the truth; then calibrates the
+bench again with `BOTH` and prints the Markdown between its `calibration_formulations`
+markers. test_calibrate runs the first bench and calibration (its fleet fixture uses `make`)
+and checks the page shows `markdown` of them; the second is this tool's only.
 """
 
 from __future__ import annotations
@@ -30,7 +32,8 @@ from leadscrew_ros.model.uncertainty.scatter import LOG_NORMAL, Scatter, draw
 
 POPULATION = {"mu_static": 0.27, "mu_kinetic": 0.19, "modal_damping": 0.002}
 BENCH = BenchSettings(units=20, seed=11, population=POPULATION)
-CALIBRATE = ["--formulation", "both", "--workers", "2"]
+CALIBRATE = ["--workers", "2"]
+BOTH = ["--formulation", "both", "--workers", "2"]
 SPEED, LOAD = 60.0, 200.0  # the operating point of the last line: near the prior's band edge
 DROP = "friction_drop"
 
@@ -50,6 +53,13 @@ def make(tmp: Path) -> tuple[dict[str, Any], Path, int]:
     out = tmp / "calibration"
     code = cli(["calibrate", str(tmp / "bench"), "--out", str(out), *CALIBRATE, "--quiet"])
     return truth, out, code
+
+
+def make_both(tmp: Path) -> tuple[Path, int]:
+    """The bench of `make` in `tmp` calibrated with both formulations: (output directory,
+    exit status)."""
+    out = tmp / "both"
+    return out, cli(["calibrate", str(tmp / "bench"), "--out", str(out), *BOTH, "--quiet"])
 
 
 def _fmt(x: float) -> str:
@@ -122,7 +132,7 @@ def markdown(truth: dict[str, Any], out: Path, code: int) -> str:
         u["posterior"][DROP]["q05"] <= drops[u["unit_id"]] <= u["posterior"][DROP]["q95"]
         for u in doc["units"]
     )
-    h, f = doc["held_out"], doc["formulations"]
+    h = doc["held_out"]
     calibrated = SqueakModel(
         ScrewParameters(**{k: v for k, v in values.items() if k != "scatter"}),
         Scatter({k: v for k, v in values["scatter"].items() if k != "samples"}),
@@ -154,12 +164,7 @@ def markdown(truth: dict[str, Any], out: Path, code: int) -> str:
             f"the fleet mean (the population centre's hyper-prior). The held-out check "
             f"({len(h['units'])} units, {h['frames']} frames): Brier score "
             f"{h['brier_prior']:.4f} with the prior, {h['brier_calibrated']:.4f} with the "
-            f"calibrated fleet. Formulations: {f['supported']} supported {f['strength']} "
-            f"by the {f['decided_by']} (frequency match paper "
-            f"{f['paper']['frequency_match']:.3f}, consistent "
-            f"{f['consistent']['frequency_match']:.3f}; held-out Brier paper "
-            f"{f['paper']['score']:.4f}, consistent {f['consistent']['score']:.4f}). Exit "
-            f"status {code}.",
+            f"calibrated fleet. Exit status {code}.",
             "",
             "calibration.txt begins:",
             "",
@@ -174,22 +179,46 @@ def markdown(truth: dict[str, Any], out: Path, code: int) -> str:
     )
 
 
-def example(tmp: Path) -> str:
-    """The page's Markdown (the bench and the calibration made in `tmp`)."""
-    return markdown(*make(tmp))
+def formulations(out: Path, code: int) -> str:
+    """The Markdown of the calibration with both formulations (`make_both`)."""
+    doc = json.loads((out / "calibration.json").read_text())
+    f = doc["formulations"]
+    rows = [
+        f"| {name} | {f[name]['frequency_match']:.3f} | {f[name]['score']:.4f} | "
+        f"{f[name]['brier_prior']:.4f} | {_interval(f[name]['population'][DROP]['mean'])} |"
+        for name in ("paper", "consistent")
+    ]
+    return "\n".join(
+        [
+            "| formulation | frequency match | held-out Brier, calibrated | held-out Brier, prior "
+            "| fleet mean friction drop [90 %] |",
+            "|---|---:|---:|---:|---|",
+            *rows,
+            "",
+            f"{f['supported']} supported {f['strength']} by the {f['decided_by']}"
+            + (f" (held-out z = {f['z']:.1f})" if f["z"] is not None else "")
+            + f"; exit status {code}. The rule: {f['rule']}.",
+        ]
+    )
+
+
+def example(tmp: Path) -> tuple[str, str]:
+    """The page's two blocks (the bench and the calibrations made in `tmp`)."""
+    first = markdown(*make(tmp))
+    return first, formulations(*make_both(tmp))
 
 
 def main(argv: list[str] | None = None) -> int:
     args = sys.argv[1:] if argv is None else argv
-    if args[:1] == ["--keep"] and len(args) == 2:  # the run kept, for `markdown` again
+    if args[:1] == ["--keep"] and len(args) == 2:  # the runs kept, for `markdown` again
         keep = Path(args[1])
         keep.mkdir(parents=True, exist_ok=True)
-        truth, out, code = make(keep)
-        (keep / "exit_status").write_text(f"{code}\n")
-        print(markdown(truth, out, code))
-        return 0
-    with tempfile.TemporaryDirectory(prefix="calibration_example_") as tmp:
-        print(example(Path(tmp)))
+        first, second = example(keep)
+    else:
+        with tempfile.TemporaryDirectory(prefix="calibration_example_") as tmp:
+            first, second = example(Path(tmp))
+    print(f"% calibration_example: begin\n{first}\n% calibration_example: end\n")
+    print(f"% calibration_formulations: begin\n{second}\n% calibration_formulations: end")
     return 0
 
 
