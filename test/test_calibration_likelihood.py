@@ -44,16 +44,22 @@ def likelihood(unit):
     return GrowthLikelihood(SqueakModel(NOMINAL), unit.obs, NAMES)
 
 
-def exact_margins(params: ScrewParameters, obs, points) -> np.ndarray:
-    """Largest growth rate beyond the squeak threshold over the oscillatory modes, from an
-    eigen-solve of the model's state matrix at `params` (numpy, not the expansion's LAPACK
-    call), at the points' nut positions."""
+def exact_margins(
+    params: ScrewParameters, obs, points, band: tuple[float, float] | None = None
+) -> np.ndarray:
+    """Largest growth rate beyond the squeak threshold over the oscillatory modes the
+    detector hears (`band` [Hz], the default detector's when None), from an eigen-solve of
+    the model's state matrix at `params` (numpy, not the expansion's LAPACK call), at the
+    points' nut positions; -inf where no mode is in the band."""
+    errors = DetectionErrors()
+    lo, hi = band or (errors.band_lo_hz, errors.band_hi_hz)
     out = []
     for i in points:
         model = SqueakModel(params.with_(nut_position_m=float(obs.nut_position_m[i])), Scatter({}))
         lam = np.linalg.eigvals(model.state_matrix(float(obs.speed_rad_s[i]), float(obs.load_n[i])))
-        lam = lam[oscillatory_mask(lam)]
-        out.append(float((lam.real - GROWTH_TOL * np.abs(lam)).max()))
+        hz = lam.imag / (2 * math.pi)
+        lam = lam[oscillatory_mask(lam) & (hz >= lo) & (hz <= hi)]
+        out.append(float((lam.real - GROWTH_TOL * np.abs(lam)).max()) if lam.size else -np.inf)
     return np.array(out)
 
 
@@ -368,3 +374,25 @@ def test_the_consistent_formulation_is_first_order_too(unit):
     error = lik.margins(theta[None])[0][points] - exact
     assert np.all(np.abs(change) > 0.01)
     assert np.all(np.abs(error) <= 2e-3 * np.abs(change))
+
+
+def test_a_squeak_outside_the_detector_band_is_not_heard(unit, likelihood):
+    """With a band that leaves out the first y-bending mode (~224 Hz), its squeak does not
+    count: points where only it squeaks have no squeak, as the exact modes in the band say."""
+    band = (300.0, 20000.0)
+    narrow = GrowthLikelihood(
+        SqueakModel(NOMINAL),
+        unit.obs,
+        NAMES,
+        DetectionErrors(band_lo_hz=band[0], band_hi_hz=band[1]),
+    )
+    wide, cut = (
+        likelihood.squeaks(likelihood.centre[None])[0],
+        narrow.squeaks(narrow.centre[None])[0],
+    )
+    lost = np.flatnonzero(wide & ~cut)
+    assert len(lost) >= 3 and not np.any(cut & ~wide)  # the second mode squeaks too, mostly
+    assert np.all(exact_margins(NOMINAL, unit.obs, lost, band) <= 0)
+    assert np.all(exact_margins(NOMINAL, unit.obs, lost) > 0)
+    with pytest.raises(ParameterError, match="band_lo_hz"):
+        DetectionErrors(band_lo_hz=5000.0, band_hi_hz=4000.0)

@@ -255,3 +255,10 @@ def test_params_and_scatter_clip_to_the_valid_ranges():
     assert any("mu_kinetic" in n for n in notes) and any(
         "scatter.modal_damping" in n for n in notes
     )
+
+
+def test_the_population_refuses_units_of_another_prior(fleet):
+    with pytest.raises(CalibrationError, match="another model's prior"):
+        fit_population(fleet[1], SqueakModel(NOMINAL.with_(mu_static=0.3)), FAST)
+    with pytest.raises(CalibrationError, match="another model's prior"):
+        fit_population(fleet[1], SqueakModel(NOMINAL, Scatter({**Scatter().sd, "mu_static": 0.1})))

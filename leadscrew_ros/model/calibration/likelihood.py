@@ -2,7 +2,10 @@
 """The cheap likelihood of heard / not-heard frames given calibrated parameters theta.
 
 Squeak at a point: some oscillatory mode's growth rate beyond the threshold of
-`stability.unstable_mask` (Re lambda > GROWTH_TOL |lambda|), the live estimator's rule. At a
+`stability.unstable_mask` (Re lambda > GROWTH_TOL |lambda|), the live estimator's rule, among
+the modes the detector can hear: those whose frequency at the expansion centre lies in its
+band (`DetectionErrors.band_lo_hz` .. `band_hi_hz`, the detector's f_lo_hz .. f_hi_hz; a
+squeak above or below it is not heard, so its unheard frames say nothing against it). At a
 fixed operating point friction and damping enter the state matrix only through the friction
 level l, the friction slope s (`kernels.level_slope`) and the damping ratio xi, and A is affine
 in them. So each distinct point gets one eigen-solve at the expansion centre (the model's
@@ -44,6 +47,7 @@ from types import SimpleNamespace
 import numpy as np
 from scipy.stats import qmc
 
+from ..acoustics.settings import DetectorSettings
 from ..physics.assembly import build_geometry
 from ..physics.kernels import level_slope
 from ..physics.metadata import check, documented, setting
@@ -97,8 +101,29 @@ class DetectionErrors:
         60.0,
     )
 
+    band_lo_hz: float = setting(
+        DetectorSettings.f_lo_hz,
+        "Hz",
+        "lowest squeak frequency the detector hears (its f_lo_hz): a mode below squeaks unheard",
+        0.0,
+        1e6,
+    )
+    band_hi_hz: float = setting(
+        DetectorSettings.f_hi_hz,
+        "Hz",
+        "highest squeak frequency the detector hears (its f_hi_hz, or less below Nyquist)",
+        0.0,
+        1e6,
+        lo_open=True,
+    )
+
     def __post_init__(self) -> None:
         check(self, ParameterError, "errors.")
+        if self.band_lo_hz >= self.band_hi_hz:
+            raise ParameterError(
+                f"errors.band_lo_hz = {self.band_lo_hz:g} Hz is not below "
+                f"errors.band_hi_hz = {self.band_hi_hz:g} Hz"
+            )
 
     def heard_probability(self, squeak: np.ndarray) -> np.ndarray:
         """P(frame heard) given the model's verdict.
@@ -209,6 +234,7 @@ class GrowthLikelihood:
         valid = np.asarray(self.model.validity_code(speed, load) == Validity.OK)
         valid &= (nut >= 0) & (nut <= p.nut_travel_m)
         point, margin, rates = [], [], []
+        band = 2 * math.pi * np.array([self.errors.band_lo_hz, self.errors.band_hi_hz])
         for z in np.unique(nut[valid]).tolist():
             at = p.with_(nut_position_m=z)
             geometry = build_geometry(at)
@@ -218,9 +244,11 @@ class GrowthLikelihood:
                 except np.linalg.LinAlgError:
                     valid[i] = False
                     continue
-                point.append(np.full(len(pairs.lam), i))
-                margin.append(pairs.lam.real - GROWTH_TOL * np.abs(pairs.lam))
-                rates.append(self._mode_rates(pairs, at, float(speed[i]), float(load[i])))
+                heard = (pairs.lam.imag >= band[0]) & (pairs.lam.imag <= band[1])
+                lam = pairs.lam[heard]
+                point.append(np.full(len(lam), i))
+                margin.append(lam.real - GROWTH_TOL * np.abs(lam))
+                rates.append(self._mode_rates(pairs, at, float(speed[i]), float(load[i]))[:, heard])
         self.valid = valid
         self._solved = (
             np.concatenate(point) if point else np.zeros(0, int),

@@ -86,7 +86,8 @@ class UnitPosterior:
         Wall time of the calibration [s].
     prior : Prior
         The prior the samples are a posterior under: the interim prior, or the prior itself
-        when nothing was learned (the population step divides it out).
+        when nothing was learned (the population step divides it out). A hierarchical
+        posterior (`fit_population`) keeps its unit's: it is not an input to another fit.
     learned : bool
         The likelihood varies over the prior's draws: the data say something.
     """

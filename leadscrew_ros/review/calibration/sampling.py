@@ -383,7 +383,8 @@ def fit_population(
     Raises
     ------
     CalibrationError
-        No unit learned anything, or the units have different names.
+        No unit learned anything, the units have different names, or they were calibrated
+        with another prior than `model`'s.
     """
     with threadpool_limits(limits=1, user_api="blas"):  # small products: threads only spin
         return _fit_population(units, model, settings)
@@ -398,6 +399,8 @@ def _fit_population(
         raise CalibrationError("the population needs units calibrated with one set of names")
     names = units[0].names
     prior = Prior(model.params, model.scatter, names)
+    if any(u.prior.nominal != model.params or u.prior.scatter != model.scatter for u in units):
+        raise CalibrationError("the units were calibrated with another model's prior")
     used = [u for u in units if u.learned]
     if not used:
         raise CalibrationError("no unit has anything to learn: no population can be fitted")
@@ -408,8 +411,8 @@ def _fit_population(
             for u in used
         ]
     )
-    log_interim = np.stack([_log_own(u, prior, x) for u, x in zip(used, u_all, strict=True)])
-    hyper_model = HyperModel(prior, settings.prior_widen, u_all, log_interim)
+    log_interim = np.stack([_log_own(u, x) for u, x in zip(used, u_all, strict=True)])
+    hyper_model = HyperModel(prior, max(u.prior.widen for u in used), u_all, log_interim)
     rng = np.random.default_rng(unit_seed(settings.seed, "", "population"))
     d = len(names)
     means = u_all.mean(axis=1)  # each unit's posterior mean in u
@@ -448,7 +451,7 @@ def _fit_population(
     return population, posteriors
 
 
-def _log_own(unit: UnitPosterior, prior: Prior, u: np.ndarray) -> np.ndarray:
+def _log_own(unit: UnitPosterior, u: np.ndarray) -> np.ndarray:
     """Log density of samples u under the prior the unit was sampled with (in the prior's u:
     the same centre and SDs, widened), up to a constant of the unit."""
     return -0.5 * np.sum((u / unit.prior.widen) ** 2, axis=-1)
@@ -459,7 +462,7 @@ def _hierarchical(
 ) -> UnitPosterior:
     """The unit's samples reweighted by the population and resampled (seeded by its id)."""
     u = prior.to_u(unit.samples)
-    w = reweighted(model, draws, u, _log_own(unit, prior, u))
+    w = reweighted(model, draws, u, _log_own(unit, u))
     rng = np.random.default_rng(unit_seed(seed, unit.unit_id, "hierarchical"))
     pick = rng.choice(len(u), size=len(u), p=w)
     kish = 1.0 / float(np.sum(w * w))
