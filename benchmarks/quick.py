@@ -111,7 +111,7 @@ def rows() -> list[tuple[str, str, float, str, bool | None]]:
         (
             f"replay of a {REPLAY_LOG_S:g} s duty-cycle log, one process: real time / wall time "
             f"(opening and closing the bags dominate so short a log; the target ≥ "
-            f"{bench_replay.TARGET_X_REAL_TIME:g}× is for the 1 h log)",
+            f"{bench_replay.TARGET_X_REAL_TIME['duty']:g}× is for the 1 h log)",
             "bench_replay.py",
             x_real_time,
             "–",

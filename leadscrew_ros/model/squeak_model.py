@@ -18,7 +18,7 @@ from .physics.display import exact
 from .physics.friction import mu_o
 from .physics.parameters import ScrewParameters, field_info
 from .physics.stability import Eigen, ModeResult, classify, eig_both
-from .uncertainty.perturbation import EigenPairs, FirstOrderProbability, estimate, geometry_fields
+from .uncertainty.perturbation import FirstOrderProbability, geometry_fields
 from .uncertainty.scatter import LIVE_SAMPLES, Samples, Scatter, check_count, involved, samples_for
 
 _LOAD_LIMIT_N = field_info("axial_load_n")["hi"]
@@ -481,8 +481,8 @@ class SqueakModel:
         validity, reason = self.validity(speed, load)
         if validity is not Validity.OK:
             return Prediction(speed, load, self.params.formulation, validity, reason)
-        try:
-            eigen = eig_both(self.state_matrix(speed, load), self.scatter.names != ())
+        try:  # right vectors (the labels); P(squeak) gets the left ones from them
+            eigen = eig_both(self.state_matrix(speed, load), False)
         except np.linalg.LinAlgError as exc:  # LAPACK gave up: say so, no number
             return Prediction(
                 speed,
@@ -531,9 +531,8 @@ class SqueakModel:
         ]
         if ok:
             matrices = self.geometry.state_matrices(speeds[ok], loads[ok])
-            left = self.scatter.names != ()  # the probability needs them
             for k, i in enumerate(ok):
-                out[i] = self._prediction(*points[i], eig_both(matrices[k], left))
+                out[i] = self._prediction(*points[i], eig_both(matrices[k], False))
         return out
 
     def _prediction(self, speed: float, load: float, eigen: Eigen) -> Prediction:
@@ -542,9 +541,7 @@ class SqueakModel:
         if self._probability is None:
             probability, stderr = float(squeak), None
         else:  # the same eigen-solve gives the first-order expansion
-            probability, stderr = estimate(
-                self._probability.hits(EigenPairs(self.geometry, speed, eigen), load)
-            )
+            probability, stderr = self._probability.probability(speed, load, eigen)
         return Prediction(
             speed,
             load,

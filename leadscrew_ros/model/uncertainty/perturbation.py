@@ -7,7 +7,8 @@ For a simple eigenvalue lambda of the state matrix A with right and left eigenve
     d lambda = y^H (dA) x
 
 `EigenPairs` holds the oscillatory eigenvalues (Im > 0) of one eigen-solve with x and y^H
-(`stability.eig_both`), so the prediction and the probability share one LAPACK call.
+(`stability.eig_both`, or the right vectors alone and `stability.left_rows`), so the prediction
+and the probability share one LAPACK call.
 
 `FirstOrderProbability` is the live estimator of P(squeak) over scatter samples. Friction and
 damping enter A only through three scalars at a fixed operating point: the friction level
@@ -20,6 +21,17 @@ geometries and interpolated between them (`FirstOrderProbability`). P is the sha
 in which some mode's expanded growth rate exceeds the squeak threshold of
 `stability.unstable_mask`, so the modes' correlation (one friction scatter drives them all)
 is kept.
+
+Only the modes that some sample can move across the threshold are expanded over the samples:
+a mode's growth is linear in the three changes, so its largest (smallest) growth over the
+samples is at most (at least) the sum over the changes of the rate times the change's larger
+(smaller) end, and a mode whose bound stays below the threshold is never a hit, one whose lower
+bound is above it makes every sample a hit (P = 1). The bound is exact arithmetic on the
+mode's own rates, no heuristic: which modes are skipped cannot change P. (Skipping the left
+vectors too, by a bound on the rates without them, does not pay here: the modes' sensitivities
+range over orders of magnitude across operating points, and the damping scatter reaches the
+threshold of every lightly damped mode unless the sign of its rate is known; see
+doc/development/benchmarks.md.)
 """
 
 from __future__ import annotations
@@ -35,7 +47,7 @@ from numpy.typing import ArrayLike
 from ..physics.assembly import Geometry, build_geometry
 from ..physics.kernels import level_slope
 from ..physics.parameters import ParameterError, ScrewParameters, field_info
-from ..physics.stability import GROWTH_TOL, Eigen, eig_both
+from ..physics.stability import GROWTH_TOL, Eigen, eig_both, left_rows
 from .scatter import Samples, Scatter
 
 GEOMETRY_STEP = 1e-6  # relative step of a state-matrix difference in a geometry field
@@ -54,13 +66,21 @@ class EigenPairs:
     speed : float
         Screw speed of A [rad/s].
     eigen : Eigen
-        The eigen-solve of A with the oscillatory modes' vectors (`stability.eig_both`).
+        The eigen-solve of A (`stability.eig_both`); without left vectors they come from the
+        right ones (`stability.left_rows`).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        Without left vectors: the right ones are not a basis (a defective A).
     """
 
     def __init__(self, geometry: Geometry, speed: float, eigen: Eigen):
         self.geometry, self.speed = geometry, speed
         self.lam, self.x = eigen.lam[eigen.osc], eigen.right
-        assert eigen.left is not None, "the expansion needs the left vectors (eig_both)"
+        if eigen.left is None:
+            self.y_h = left_rows(eigen)  # normalised by construction
+            return
         y_h = eigen.left.conj().T
         self.y_h = y_h / np.einsum("ij,ji->i", y_h, self.x)[:, None]  # y_i^H x_i = 1
 
@@ -136,13 +156,56 @@ class _Expansion:
 
     def __init__(self, geometry: Geometry, friction: dict[str, np.ndarray]):
         self.geometry, self.params, n = geometry, geometry.params, geometry.n
-        self.sampled = SimpleNamespace(**{**self.params.as_dict(), **friction})
-        damping = np.zeros((n, 2 * n))
-        damping[np.arange(n), n + np.arange(n)] = -2 * geometry.basis.omega_rad_s  # (A.1)
-        # dA per unit coefficient (W1, W5q, W3, W5qdot) and per unit of xi, lower half
+        # the nominal friction first, then the samples': one friction-law call for both
+        self.friction = SimpleNamespace(
+            **{
+                **self.params.as_dict(),
+                **{k: np.concatenate(([getattr(self.params, k)], v)) for k, v in friction.items()},
+            }
+        )
+        # dA per unit coefficient (W1, W5q, W3, W5qdot) and per unit of xi: -[0; U_k] and
+        # [0; -2 diag(omega)] (A.1); the first two act on the displacements q of x = [q; lam q],
+        # the others on the velocities lam q, so on q they are (5N, N), real (a complex q
+        # multiplies them as a real view)
+        units = geometry.lower_half_units.reshape(5, n, 2 * n)
+        damping = np.diag(-2 * geometry.basis.omega_rad_s)
         self.units = np.concatenate(
-            [-geometry.lower_half_units[:4].reshape(4 * n, 2 * n), damping]
-        ).astype(complex)  # dA = -[0; U_k], [0; damping]
+            [-units[0, :, :n], -units[1, :, :n], -units[2, :, n:], -units[3, :, n:], damping]
+        )
+
+    def rates(
+        self, speed: float, lam: np.ndarray, q: np.ndarray, y_lower: np.ndarray
+    ) -> np.ndarray:
+        """d Re(lambda) per unit friction level l, slope s and damping ratio xi, shape (3, M),
+        of the eigenvalues `lam` (M,) from the displacement halves `q` (N, M) of their right
+        vectors and the lower halves of y^H (M, N): y^H dA x = y_lower dA_lower [q; lam q]."""
+        n, m = self.geometry.n, len(lam)
+        q = np.ascontiguousarray(q)
+        uq = (self.units @ q.view(np.float64)).view(np.complex128).reshape(5, n, m)
+        r = np.einsum("ki,cik->ck", y_lower, uq)
+        r[2:] *= lam  # the velocity terms
+        # level l: W1 = sign l, W3 = l / |Omega|; slope s: W5q = Omega s, W5qdot = s
+        return (
+            np.array(
+                [
+                    [math.copysign(1.0, speed), 0.0, 1.0 / abs(speed), 0.0, 0.0],
+                    [0.0, speed, 0.0, 1.0, 0.0],
+                    [0.0, 0.0, 0.0, 0.0, 1.0],
+                ]
+            )
+            @ r.real
+        )
+
+    def changes(self, speed: ArrayLike, load: ArrayLike, damping: np.ndarray) -> np.ndarray:
+        """The samples' changes of friction level, slope and damping ratio from the nominal,
+        shape (3, ..., count) for speeds and loads of shape (...) [rad/s], [N]."""
+        speed, load = np.asarray(speed, float)[..., None], np.asarray(load, float)[..., None]
+        level, slope = level_slope(self.friction, speed, load, self.geometry.contact.alpha)
+        change = np.empty((3,) + np.broadcast_shapes(speed.shape, damping.shape))
+        np.subtract(level[..., 1:], level[..., :1], out=change[0])
+        np.subtract(slope[..., 1:], slope[..., :1], out=change[1])
+        change[2] = damping
+        return change
 
     def margins(
         self,
@@ -156,27 +219,9 @@ class _Expansion:
         modes [1/s] (> 0: squeak); `damping` holds the samples' damping-ratio changes. `prune`
         leaves out the modes that cannot reach the threshold (then -inf where none can):
         right for the sign, not for interpolation. Thread-safe: nothing shared is written."""
-        speed, n = pairs.speed, self.geometry.n
-        change = np.empty((3, len(damping)))  # level, slope, damping ratio
-        change[2] = damping
-        alpha = self.geometry.contact.alpha
-        level0, slope0 = level_slope(self.params, speed, load, alpha)
-        level, slope = level_slope(self.sampled, speed, load, alpha)
-        np.subtract(level, level0, out=change[0])
-        np.subtract(slope, slope0, out=change[1])
-        # d lambda per unit coefficient: y^H dA x over the lower half of A (one product)
-        r = np.einsum("ij,kji->ki", pairs.y_h[:, n:], (self.units @ pairs.x).reshape(5, n, -1)).real
-        # level l: W1 = sign l, W3 = l / |Omega|; slope s: W5q = Omega s, W5qdot = s
-        rates = (
-            np.array(
-                [
-                    [math.copysign(1.0, speed), 0.0, 1.0 / abs(speed), 0.0, 0.0],
-                    [0.0, speed, 0.0, 1.0, 0.0],
-                    [0.0, 0.0, 0.0, 0.0, 1.0],
-                ]
-            )
-            @ r
-        )  # (3, M)
+        n = self.geometry.n
+        change = self.changes(pairs.speed, load, damping)
+        rates = self.rates(pairs.speed, pairs.lam, pairs.x[:n], pairs.y_h[:, n:])
         threshold = GROWTH_TOL * np.abs(pairs.lam) - pairs.lam.real  # growth beyond it
         reach = [abs(change[0]).max(), abs(change[1]).max(), reach_damping]
         candidates = (
@@ -189,6 +234,24 @@ class _Expansion:
         growth = rates[:, candidates].T @ change  # (Mc, count)
         growth -= threshold[candidates, None]
         return growth.max(axis=0)
+
+
+def hits_of(rates: np.ndarray, threshold: np.ndarray, change: np.ndarray) -> np.ndarray | bool:
+    """Which samples squeak by the first-order growth: `rates` (3, M) per unit change, the
+    modes' `threshold` (M,) (growth needed to squeak), the samples' `change` (3, count).
+    False (no sample) or True (every sample) when the bounds of the module docstring decide
+    it, else the (count,) verdicts from the modes that some sample can move across."""
+    hi, lo = change.max(axis=1)[:, None], change.min(axis=1)[:, None]
+    up, down = rates * hi, rates * lo  # each term at the two ends of its change
+    most = np.maximum(up, down).sum(axis=0)  # >= the growth change of every sample
+    if (np.minimum(up, down).sum(axis=0) > threshold).any():
+        return True  # a mode beyond the threshold in every sample
+    candidates = np.flatnonzero(most > threshold)
+    if not len(candidates):
+        return False
+    growth = rates[:, candidates].T @ change  # (Mc, count)
+    growth -= threshold[candidates, None]
+    return growth.max(axis=0) > 0
 
 
 class FirstOrderProbability:
@@ -325,6 +388,54 @@ class FirstOrderProbability:
         at = np.array(rows)
         columns = np.arange(self.samples.count)
         return sum((w * at[index, columns] for index, w in corners), np.zeros(self.samples.count))
+
+    def probability(self, speed: float, load: float, eigen: Eigen) -> tuple[float, float]:
+        """P(squeak) and its standard error at an operating point, from its eigen-solve.
+
+        Parameters
+        ----------
+        speed : float
+            Screw speed Omega [rad/s].
+        load : float
+            Axial load F_z [N].
+        eigen : Eigen
+            The eigen-solve of the nominal state matrix there (`stability.eig_both`; without
+            left vectors, `stability.left_rows` gives them).
+
+        Returns
+        -------
+        tuple of float
+            P(squeak) in [0, 1] and its standard error (`estimate`).
+        """
+        if self._nodes is not None:
+            return estimate(self.hits(self._pairs(speed, load, eigen), load))
+        expansion, n, osc = self._nominal, self._nominal.geometry.n, eigen.osc
+        lam = eigen.lam[osc]
+        try:
+            y_lower = (
+                left_rows(eigen, n)
+                if eigen.left is None
+                else self._pairs(speed, load, eigen).y_h[:, n:]
+            )
+        except np.linalg.LinAlgError:  # defective: LAPACK's own left vectors
+            eigen = eig_both(expansion.geometry.state_matrices(speed, load))
+            return self.probability(speed, load, eigen)
+        hits = hits_of(
+            expansion.rates(speed, lam, eigen.vr[:n, osc] + 1j * eigen.vr[:n, osc + 1], y_lower),
+            GROWTH_TOL * np.abs(lam) - lam.real,
+            expansion.changes(speed, load, self._damping),
+        )
+        if hits is True or hits is False:
+            return float(hits), 0.0  # what `estimate` gives for equal replicates
+        return estimate(hits.reshape(self._shape))
+
+    def _pairs(self, speed: float, load: float, eigen: Eigen) -> EigenPairs:
+        """The nominal eigenpairs of `eigen`; LAPACK's left vectors where the right ones are
+        not a basis."""
+        try:
+            return EigenPairs(self._nominal.geometry, speed, eigen)
+        except np.linalg.LinAlgError:
+            return EigenPairs.solve(self._nominal.geometry, speed, load)
 
     def hits(self, pairs: EigenPairs, load: float) -> np.ndarray:
         """Whether each sample squeaks at the operating point of `pairs`, by the expansion.
