@@ -47,7 +47,15 @@ from numpy.typing import ArrayLike
 from ..physics.assembly import Geometry, build_geometry
 from ..physics.kernels import level_slope
 from ..physics.parameters import ParameterError, ScrewParameters, field_info
-from ..physics.stability import GROWTH_TOL, Eigen, eig_both, left_rows
+from ..physics.stability import (
+    GROWTH_TOL,
+    Eigen,
+    _by_mode_count,
+    displacements,
+    eig_both,
+    left_rows,
+    left_rows_many,
+)
 from .scatter import Samples, Scatter
 
 GEOMETRY_STEP = 1e-6  # relative step of a state-matrix difference in a geometry field
@@ -155,7 +163,7 @@ class _Expansion:
     parameters (arrays), the rest of the parameters are the geometry's."""
 
     def __init__(self, geometry: Geometry, friction: dict[str, np.ndarray]):
-        self.geometry, self.params, n = geometry, geometry.params, geometry.n
+        self.geometry, self.params = geometry, geometry.params
         # the nominal friction first, then the samples': one friction-law call for both
         self.friction = SimpleNamespace(
             **{
@@ -163,38 +171,7 @@ class _Expansion:
                 **{k: np.concatenate(([getattr(self.params, k)], v)) for k, v in friction.items()},
             }
         )
-        # dA per unit coefficient (W1, W5q, W3, W5qdot) and per unit of xi: -[0; U_k] and
-        # [0; -2 diag(omega)] (A.1); the first two act on the displacements q of x = [q; lam q],
-        # the others on the velocities lam q, so on q they are (5N, N), real (a complex q
-        # multiplies them as a real view)
-        units = geometry.lower_half_units.reshape(5, n, 2 * n)
-        damping = np.diag(-2 * geometry.basis.omega_rad_s)
-        self.units = np.concatenate(
-            [-units[0, :, :n], -units[1, :, :n], -units[2, :, n:], -units[3, :, n:], damping]
-        )
-
-    def rates(
-        self, speed: float, lam: np.ndarray, q: np.ndarray, y_lower: np.ndarray
-    ) -> np.ndarray:
-        """d Re(lambda) per unit friction level l, slope s and damping ratio xi, shape (3, M),
-        of the eigenvalues `lam` (M,) from the displacement halves `q` (N, M) of their right
-        vectors and the lower halves of y^H (M, N): y^H dA x = y_lower dA_lower [q; lam q]."""
-        n, m = self.geometry.n, len(lam)
-        q = np.ascontiguousarray(q)
-        uq = (self.units @ q.view(np.float64)).view(np.complex128).reshape(5, n, m)
-        r = np.einsum("ki,cik->ck", y_lower, uq)
-        r[2:] *= lam  # the velocity terms
-        # level l: W1 = sign l, W3 = l / |Omega|; slope s: W5q = Omega s, W5qdot = s
-        return (
-            np.array(
-                [
-                    [math.copysign(1.0, speed), 0.0, 1.0 / abs(speed), 0.0, 0.0],
-                    [0.0, speed, 0.0, 1.0, 0.0],
-                    [0.0, 0.0, 0.0, 0.0, 1.0],
-                ]
-            )
-            @ r.real
-        )
+        self.units = units_on_displacements(geometry.lower_half_units, geometry.basis.omega_rad_s)
 
     def changes(self, speed: ArrayLike, load: ArrayLike, damping: np.ndarray) -> np.ndarray:
         """The samples' changes of friction level, slope and damping ratio from the nominal,
@@ -221,7 +198,9 @@ class _Expansion:
         right for the sign, not for interpolation. Thread-safe: nothing shared is written."""
         n = self.geometry.n
         change = self.changes(pairs.speed, load, damping)
-        rates = self.rates(pairs.speed, pairs.lam, pairs.x[:n], pairs.y_h[:, n:])
+        rates = growth_rates(
+            self.units, [pairs.speed], pairs.lam[None], pairs.x[None, :n], pairs.y_h[None, :, n:]
+        )[0]
         threshold = GROWTH_TOL * np.abs(pairs.lam) - pairs.lam.real  # growth beyond it
         reach = [abs(change[0]).max(), abs(change[1]).max(), reach_damping]
         candidates = (
@@ -236,22 +215,74 @@ class _Expansion:
         return growth.max(axis=0)
 
 
-def hits_of(rates: np.ndarray, threshold: np.ndarray, change: np.ndarray) -> np.ndarray | bool:
-    """Which samples squeak by the first-order growth: `rates` (3, M) per unit change, the
-    modes' `threshold` (M,) (growth needed to squeak), the samples' `change` (3, count).
-    False (no sample) or True (every sample) when the bounds of the module docstring decide
-    it, else the (count,) verdicts from the modes that some sample can move across."""
-    hi, lo = change.max(axis=1)[:, None], change.min(axis=1)[:, None]
+def units_on_displacements(lower_half_units: np.ndarray, omega_rad_s: np.ndarray) -> np.ndarray:
+    """dA per unit coefficient (W1, W5q, W3, W5qdot) and per unit of xi, -[0; U_k] and
+    [0; -2 diag(omega)] (A.1), as they act on the displacements q of a right vector
+    x = [q; lam q]: the first two act on q, the others on the velocities lam q. From
+    `Geometry.lower_half_units` (..., 5, N * 2N): shape (..., 5N, N), real (a complex q
+    multiplies them as a real view)."""
+    n = len(omega_rad_s)
+    units = lower_half_units.reshape(lower_half_units.shape[:-2] + (5, n, 2 * n))
+    damping = np.broadcast_to(np.diag(-2 * omega_rad_s), units.shape[:-3] + (n, n))
+    return np.concatenate(
+        [
+            -units[..., 0, :, :n],
+            -units[..., 1, :, :n],
+            -units[..., 2, :, n:],
+            -units[..., 3, :, n:],
+            damping,
+        ],
+        axis=-2,
+    )
+
+
+def growth_rates(
+    units: np.ndarray, speeds: ArrayLike, lam: np.ndarray, q: np.ndarray, y_lower: np.ndarray
+) -> np.ndarray:
+    """d Re(lambda) per unit friction level l, slope s and damping ratio xi at G operating
+    points with M modes each, shape (G, 3, M): from the eigenvalues `lam` (G, M), the
+    displacement halves `q` (G, N, M) of their right vectors and the lower halves of y^H
+    (G, M, N), y^H dA x = y_lower dA_lower [q; lam q]; `units` as `units_on_displacements`
+    gives them, (5N, N) or each point's (G, 5N, N); `speeds` (G,) [rad/s]."""
+    g, n, m = q.shape
+    q = np.ascontiguousarray(q)
+    uq = (units @ q.view(np.float64)).view(np.complex128).reshape(g, 5, n, m)
+    r = np.einsum("gki,gcik->gck", y_lower, uq)
+    r[:, 2:] *= lam[:, None, :]  # the velocity terms
+    # level l: W1 = sign l, W3 = l / |Omega|; slope s: W5q = Omega s, W5qdot = s
+    speeds = np.asarray(speeds, float)
+    terms = np.zeros((g, 3, 5))
+    terms[:, 0, 0] = np.sign(speeds)
+    terms[:, 0, 2] = 1.0 / np.abs(speeds)
+    terms[:, 1, 1] = speeds
+    terms[:, 1, 3] = terms[:, 2, 4] = 1.0
+    return terms @ r.real
+
+
+def sample_hits(
+    rates: np.ndarray, threshold: np.ndarray, change: np.ndarray
+) -> list[np.ndarray | bool]:
+    """Which samples squeak by the first-order growth at G operating points: `rates`
+    (G, 3, M) per unit change, the modes' `threshold` (G, M) (growth needed to squeak), the
+    samples' `change` (3, G, count). Per point False (no sample) or True (every sample) when
+    the bounds of the module docstring decide it, else the (count,) verdicts from the modes
+    that some sample can move across."""
+    hi, lo = change.max(axis=2).T[:, :, None], change.min(axis=2).T[:, :, None]
     up, down = rates * hi, rates * lo  # each term at the two ends of its change
-    most = np.maximum(up, down).sum(axis=0)  # >= the growth change of every sample
-    if (np.minimum(up, down).sum(axis=0) > threshold).any():
-        return True  # a mode beyond the threshold in every sample
-    candidates = np.flatnonzero(most > threshold)
-    if not len(candidates):
-        return False
-    growth = rates[:, candidates].T @ change  # (Mc, count)
-    growth -= threshold[candidates, None]
-    return growth.max(axis=0) > 0
+    reach = np.maximum(up, down).sum(axis=1) > threshold  # some sample may cross
+    sure = (np.minimum(up, down).sum(axis=1) > threshold).any(axis=1)  # every sample does
+    out: list[np.ndarray | bool] = []
+    for j, (certain, some) in enumerate(
+        zip(sure.tolist(), reach.any(axis=1).tolist(), strict=True)
+    ):
+        if certain or not some:
+            out.append(certain)
+            continue
+        candidates = np.flatnonzero(reach[j])
+        growth = rates[j][:, candidates].T @ change[:, j]  # (Mc, count)
+        growth -= threshold[j, candidates, None]
+        out.append(growth.max(axis=0) > 0)
+    return out
 
 
 class FirstOrderProbability:
@@ -389,7 +420,9 @@ class FirstOrderProbability:
         columns = np.arange(self.samples.count)
         return sum((w * at[index, columns] for index, w in corners), np.zeros(self.samples.count))
 
-    def probability(self, speed: float, load: float, eigen: Eigen) -> tuple[float, float]:
+    def probability(
+        self, speed: float, load: float, eigen: Eigen, matrix: np.ndarray | None = None
+    ) -> tuple[float, float]:
         """P(squeak) and its standard error at an operating point, from its eigen-solve.
 
         Parameters
@@ -401,6 +434,8 @@ class FirstOrderProbability:
         eigen : Eigen
             The eigen-solve of the nominal state matrix there (`stability.eig_both`; without
             left vectors, `stability.left_rows` gives them).
+        matrix : numpy.ndarray, optional
+            That state matrix (built again when needed and not given: a defective one).
 
         Returns
         -------
@@ -409,25 +444,107 @@ class FirstOrderProbability:
         """
         if self._nodes is not None:
             return estimate(self.hits(self._pairs(speed, load, eigen), load))
-        expansion, n, osc = self._nominal, self._nominal.geometry.n, eigen.osc
-        lam = eigen.lam[osc]
-        try:
-            y_lower = (
-                left_rows(eigen, n)
-                if eigen.left is None
-                else self._pairs(speed, load, eigen).y_h[:, n:]
-            )
-        except np.linalg.LinAlgError:  # defective: LAPACK's own left vectors
-            eigen = eig_both(expansion.geometry.state_matrices(speed, load))
-            return self.probability(speed, load, eigen)
-        hits = hits_of(
-            expansion.rates(speed, lam, eigen.vr[:n, osc] + 1j * eigen.vr[:n, osc + 1], y_lower),
-            GROWTH_TOL * np.abs(lam) - lam.real,
-            expansion.changes(speed, load, self._damping),
+        return self.probabilities(
+            np.array([speed]), np.array([load]), [eigen], None if matrix is None else matrix[None]
+        )[0]
+
+    def probabilities(
+        self,
+        speeds: np.ndarray,
+        loads: np.ndarray,
+        eigens: list[Eigen],
+        matrices: np.ndarray | None = None,
+        units: np.ndarray | None = None,
+    ) -> list[tuple[float, float]]:
+        """`probability` at many operating points (J,) at once: the samples' friction at all
+        of them in one step, the points with the same number of modes in one array step each
+        (left vectors, rates, bounds); the growth over the samples only where a mode can cross.
+
+        Parameters
+        ----------
+        speeds, loads : numpy.ndarray
+            The operating points [rad/s], [N].
+        eigens : list of Eigen
+            Their eigen-solves.
+        matrices : numpy.ndarray, optional
+            Their state matrices (J, 2N, 2N) (built again when needed and not given).
+        units : numpy.ndarray, optional
+            Each point's `Geometry.lower_half_units` (J, 5, N * 2N), when its contact is not
+            this estimate's (`assembly.lower_half_units_at`); the samples are the same.
+
+        Returns
+        -------
+        list of tuple of float
+            P(squeak) and its standard error at each point.
+
+        Raises
+        ------
+        ParameterError
+            `units` with scattered geometry fields (their nodes are this geometry's).
+        """
+        if self._nodes is not None:
+            if units is not None:
+                raise ParameterError("scattered geometry: one estimate per nut position")
+            return [
+                self.probability(s, f, e, None if matrices is None else matrices[j])
+                for j, (s, f, e) in enumerate(
+                    zip(speeds.tolist(), loads.tolist(), eigens, strict=True)
+                )
+            ]
+        expansion = self._nominal
+        n = expansion.geometry.n
+        own = (
+            None
+            if units is None
+            else units_on_displacements(units, expansion.geometry.basis.omega_rad_s)
         )
-        if hits is True or hits is False:
-            return float(hits), 0.0  # what `estimate` gives for equal replicates
-        return estimate(hits.reshape(self._shape))
+        change = expansion.changes(speeds, loads, self._damping)  # (3, J, count)
+        hits: list = [None] * len(eigens)
+        for group in _by_mode_count(eigens):
+            vr = np.array([eigens[i].vr for i in group])
+            osc = np.array([eigens[i].osc for i in group]).reshape(len(group), -1)
+            lam = np.take_along_axis(np.array([eigens[i].lam for i in group]), osc, 1)
+            try:
+                y_lower = left_rows_many(vr, osc, n)
+            except np.linalg.LinAlgError:  # some solve is defective: one at a time
+                y_lower = np.array([self._left(i, speeds, loads, eigens, matrices) for i in group])
+            rates = growth_rates(
+                expansion.units if own is None else own[group],
+                speeds[group],
+                lam,
+                displacements(vr, osc, n),
+                y_lower,
+            )
+            found = sample_hits(rates, GROWTH_TOL * np.abs(lam) - lam.real, change[:, group])
+            for i, h in zip(group, found, strict=True):
+                hits[i] = h
+        return [
+            (float(h), 0.0)  # what `estimate` gives for equal replicates
+            if h is True or h is False
+            else estimate(h.reshape(self._shape))
+            for h in hits
+        ]
+
+    def _left(
+        self,
+        i: int,
+        speeds: np.ndarray,
+        loads: np.ndarray,
+        eigens: list[Eigen],
+        matrices: np.ndarray | None,
+    ) -> np.ndarray:
+        """The lower halves of y^H of solve `i`: from its right vectors, or LAPACK's left ones
+        where those are not a basis (a defective matrix)."""
+        n = self._nominal.geometry.n
+        try:
+            return left_rows(eigens[i], n)
+        except np.linalg.LinAlgError:
+            a = (
+                self._nominal.geometry.state_matrices(float(speeds[i]), float(loads[i]))
+                if matrices is None
+                else matrices[i]
+            )
+            return EigenPairs(self._nominal.geometry, float(speeds[i]), eig_both(a)).y_h[:, n:]
 
     def _pairs(self, speed: float, load: float, eigen: Eigen) -> EigenPairs:
         """The nominal eigenpairs of `eigen`; LAPACK's left vectors where the right ones are
