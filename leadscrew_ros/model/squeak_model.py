@@ -17,7 +17,7 @@ from .physics.assembly import build_geometry, lower_half_units_at
 from .physics.display import exact
 from .physics.friction import mu_o
 from .physics.parameters import ParameterError, ScrewParameters, field_info
-from .physics.stability import ModeResult, classify, classify_many, eig_both
+from .physics.stability import ModeResult, classify_solves, eig_both, solves_of
 from .uncertainty.perturbation import FirstOrderProbability, geometry_fields
 from .uncertainty.scatter import LIVE_SAMPLES, Samples, Scatter, check_count, involved, samples_for
 
@@ -486,12 +486,8 @@ class SqueakModel:
             eigen = eig_both(matrix, False)
         except np.linalg.LinAlgError as exc:  # LAPACK gave up: say so, no number
             return self._failed(speed, load, exc)
-        estimate = (
-            None
-            if self._probability is None
-            else self._probability.probability(speed, load, eigen, matrix)
-        )
-        return self._valid(speed, load, classify(eigen, self.labels), estimate)
+        (p,) = self._solved([(speed, load)], [eigen], matrix[None])
+        return p
 
     def predict_many(
         self,
@@ -545,35 +541,56 @@ class SqueakModel:
             if validity is not Validity.OK:
                 out[i] = Prediction(*points[i], self.params.formulation, validity, reason)
         ok = [i for i in ok if out[i] is None]
-        if ok:
-            matrices = self.geometry.state_matrices(
-                speeds[ok], loads[ok], units=None if units is None else units[ok]
+        matrices = self.geometry.state_matrices(
+            speeds[ok], loads[ok], units=None if units is None else units[ok]
+        )
+        solved, eigens = [], []
+        for k, i in enumerate(ok):
+            try:
+                eigens.append(eig_both(matrices[k], False))
+                solved.append(k)
+            except np.linalg.LinAlgError as exc:
+                out[i] = self._failed(*points[i], exc)
+        at = np.asarray(ok, int)[solved].tolist()
+        if at:
+            valid = self._solved(
+                [points[i] for i in at],
+                eigens,
+                matrices[solved],
+                None if units is None else units[at],
             )
-            solved, eigens = [], []
-            for k, i in enumerate(ok):
-                try:
-                    eigens.append(eig_both(matrices[k], False))
-                    solved.append(k)
-                except np.linalg.LinAlgError as exc:
-                    out[i] = self._failed(*points[i], exc)
-            at = np.asarray(ok)[solved]
-            estimates = (
-                [None] * len(solved)
-                if self._probability is None
-                else self._probability.probabilities(
-                    speeds[at],
-                    loads[at],
-                    eigens,
-                    matrices[solved],
-                    None if units is None else units[at],
-                )
-            )
-            classified = classify_many(eigens, self.labels)
-            for i, c, estimate in zip(at.tolist(), classified, estimates, strict=True):
-                out[i] = self._valid(*points[i], c, estimate)
+            for i, p in zip(at, valid, strict=True):
+                out[i] = p
         filled = [p for p in out if p is not None]
         assert len(filled) == len(out)  # every point got its verdict
         return filled
+
+    def _solved(
+        self,
+        points: list[tuple[float, float]],
+        eigens: list,
+        matrices: np.ndarray,
+        units: np.ndarray | None = None,
+    ) -> list[Prediction]:
+        """The valid predictions at `points` from their eigen-solves (right vectors) and state
+        matrices: labels and P(squeak) in array steps over the solves of equal mode count
+        (`units`: each point's contact, see `predict_many`)."""
+        groups = solves_of(eigens, self.geometry.n)
+        if self._probability is None:
+            estimates: list = [None] * len(points)
+        elif self._probability.interpolates:  # one point at a time
+            estimates = [
+                self._probability.probability(s, f, e, a)
+                for (s, f), e, a in zip(points, eigens, matrices, strict=True)
+            ]
+        else:
+            speeds, loads = (np.array(v, float) for v in zip(*points, strict=True))
+            estimates = self._probability.estimates(speeds, loads, groups, matrices, units)
+        out: list = [None] * len(points)
+        for index, solves in groups:
+            for i, classified in zip(index, classify_solves(solves, self.labels), strict=True):
+                out[i] = self._valid(*points[i], classified, estimates[i])
+        return out
 
     def _contact_at(
         self, nuts: np.ndarray, points: list[tuple[float, float]], out: list

@@ -78,12 +78,6 @@ class Eigen(NamedTuple):
         gives them (unpacked on demand: a prediction without scatter needs only `dominant`)."""
         return self.vr[:, self.osc] + 1j * self.vr[:, self.osc + 1]
 
-    def dominant(self, n: int) -> np.ndarray:
-        """Row of the largest |x_i| among the first `n` rows of each oscillatory vector
-        (|x|^2 from the packed parts: no complex copy)."""
-        re, im = self.vr[:n, self.osc], self.vr[:n, self.osc + 1]
-        return (re * re + im * im).argmax(axis=0)
-
 
 def eig_both(a: np.ndarray, left: bool = True) -> Eigen:
     """Eigenvalues with right and left eigenvectors of a real matrix (LAPACK dgeev). Only the
@@ -109,44 +103,84 @@ def eig_both(a: np.ndarray, left: bool = True) -> Eigen:
     return Eigen(lam, osc, vr, vl[:, osc] + 1j * vl[:, osc + 1] if left else None)
 
 
-def left_rows(eigen: Eigen, start: int = 0) -> np.ndarray:
-    """Left eigenvectors y_i^H (rows) of the oscillatory modes of `eigen`, normalised so that
-    y_i^H x_i = 1 for the right vectors x_i of `Eigen.right`, their entries from `start` on
-    (e.g. the lower half of the state vector): `left_rows_many` of one solve.
+class Solves(NamedTuple):
+    """G eigen-solves with the same number M of oscillatory modes, stacked for array steps
+    (`solves_of`).
+
+    Attributes
+    ----------
+    eigvals : numpy.ndarray
+        (G, 2N) all eigenvalues [1/s].
+    osc : numpy.ndarray
+        (G, M) indices of the oscillatory ones (`Eigen.osc`).
+    lam : numpy.ndarray
+        (G, M) the oscillatory eigenvalues [1/s].
+    vr : numpy.ndarray
+        (G, 2N, 2N) LAPACK's packed right vectors.
+    q : numpy.ndarray
+        (G, N, M) the displacement halves of the oscillatory right vectors (x = [q; lam q]).
+    """
+
+    eigvals: np.ndarray
+    osc: np.ndarray
+    lam: np.ndarray
+    vr: np.ndarray
+    q: np.ndarray
+
+
+def solves_of(eigens: Sequence[Eigen], n: int) -> list[tuple[list[int], Solves]]:
+    """`eigens` grouped by their number of oscillatory modes and stacked: (indices into
+    `eigens`, their `Solves`) per group; `n` = N, the displacement entries. One solve is
+    taken as it is (views, no copies: a live prediction)."""
+    if len(eigens) == 1:
+        e = eigens[0]
+        osc, vr = e.osc, e.vr
+        q = vr[:n, osc] + 1j * vr[:n, osc + 1]
+        return [([0], Solves(e.lam[None], osc[None], e.lam[osc][None], vr[None], q[None]))]
+    groups: dict[int, list[int]] = {}
+    for i, e in enumerate(eigens):
+        groups.setdefault(len(e.osc), []).append(i)
+    out = []
+    for index in groups.values():
+        osc = np.array([eigens[i].osc for i in index]).reshape(len(index), -1)
+        eigvals = np.array([eigens[i].lam for i in index])
+        vr = np.array([eigens[i].vr for i in index])
+        top, cols = vr[:, :n], osc[:, None, :]
+        q = np.take_along_axis(top, cols, 2) + 1j * np.take_along_axis(top, cols + 1, 2)
+        out.append((index, Solves(eigvals, osc, np.take_along_axis(eigvals, osc, 1), vr, q)))
+    return out
+
+
+def left_rows(
+    solves: Solves, start: int = 0, matrices: Sequence[np.ndarray] | None = None
+) -> np.ndarray:
+    """Left eigenvectors y_i^H (rows) of the oscillatory modes of each solve, normalised so
+    that y_i^H x_i = 1 for their right vectors x_i (`Eigen.right`), the entries from `start`
+    on (e.g. the lower half of the state vector): (G, M, 2N - start). The rows of X^-1, X the
+    matrix of all right vectors: LAPACK packs a complex pair x, conj(x) as its real and
+    imaginary parts, V = X S, so X^-1 = S V^-1 and the row of x is (V^-1[i] - 1j V^-1[i + 1])
+    / 2: one real solve with V, no complex arithmetic (measured: 0.08x a bare
+    `numpy.linalg.eig`; LAPACK's own left vectors cost 0.19x). Where V is singular (a
+    defective matrix) LAPACK's left vectors of the solve's state matrix in `matrices`.
 
     Raises
     ------
     numpy.linalg.LinAlgError
-        The right vectors are not a basis (a defective matrix).
+        Some V is singular and `matrices` is None.
     """
-    return left_rows_many(eigen.vr[None], eigen.osc[None], start)[0]
-
-
-def left_rows_many(vr: np.ndarray, osc: np.ndarray, start: int = 0) -> np.ndarray:
-    """`left_rows` of G eigen-solves with the same number M of oscillatory modes: LAPACK's
-    packed right vectors `vr` (G, 2N, 2N) and the oscillatory indices `osc` (G, M); shape
-    (G, M, 2N - start). The rows of X^-1, X the matrix of all right vectors: LAPACK packs a
-    complex pair x, conj(x) as its real and imaginary parts, V = X S, so X^-1 = S V^-1 and the
-    row of x is (V^-1[i] - 1j V^-1[i + 1]) / 2: one real solve with V each, no complex
-    arithmetic (measured: 0.08x a bare `numpy.linalg.eig`, LAPACK's own left vectors 0.19x).
-
-    Raises
-    ------
-    numpy.linalg.LinAlgError
-        Some V is singular (a defective matrix: no basis of eigenvectors).
-    """
-    inverse = np.linalg.solve(vr, _unit_columns(vr.shape[-1], start))
-    rows = osc[:, :, None]
-    return (
-        np.take_along_axis(inverse, rows, 1) - 1j * np.take_along_axis(inverse, rows + 1, 1)
-    ) * 0.5
-
-
-def displacements(vr: np.ndarray, osc: np.ndarray, n: int) -> np.ndarray:
-    """The displacement halves q (first `n` entries) of the right vectors of the oscillatory
-    modes, from G solves' packed `vr` (G, 2N, 2N) and indices `osc` (G, M): (G, n, M)."""
-    top, cols = vr[:, :n], osc[:, None, :]
-    return np.take_along_axis(top, cols, 2) + 1j * np.take_along_axis(top, cols + 1, 2)
+    size = solves.vr.shape[-1]
+    out = np.empty(solves.lam.shape + (size - start,), complex)
+    for g, (vr, osc) in enumerate(zip(solves.vr, solves.osc, strict=True)):
+        _, _, inverse, info = lapack.dgesv(vr, _unit_columns(size, start))
+        if info == 0:
+            out[g] = (inverse[osc] - 1j * inverse[osc + 1]) * 0.5
+            continue
+        if matrices is None:
+            raise np.linalg.LinAlgError("the right eigenvectors are not a basis (defective)")
+        e = eig_both(matrices[g])  # the same eigenvalues and right vectors, and the left
+        y_h = e.left.conj().T
+        out[g] = (y_h / np.einsum("ij,ji->i", y_h, e.right)[:, None])[:, start:]
+    return out
 
 
 @lru_cache(maxsize=16)
@@ -187,53 +221,52 @@ def classify(
     A mode is labelled by its dominant modal coordinate (largest |q_i| in the displacement half
     of the state eigenvector; the basis is mass-normalised so amplitudes are comparable).
     """
-    return classify_many([eigen], labels)[0]
+    return classify_solves(solves_of([eigen], len(labels))[0][1], labels)[0]
 
 
 def classify_many(
     eigens: Sequence[Eigen], labels: tuple[str, ...]
 ) -> list[tuple[tuple[ModeResult, ...], tuple[float, ...]]]:
-    """`classify` of many eigen-solves: the solves with the same number of oscillatory modes
-    in one array step each (sort, frequencies, damping ratios, labels), the same IEEE
-    operations per mode as one at a time."""
+    """`classify` of many eigen-solves (`classify_solves` of each group of `solves_of`)."""
     out: list = [None] * len(eigens)
-    n, two_pi = len(labels), 2 * math.pi
-    for group in _by_mode_count(eigens):
-        osc = np.array([eigens[i].osc for i in group]).reshape(len(group), -1)
-        lam = np.array([eigens[i].lam for i in group])
-        lam = np.take_along_axis(lam, osc, 1)
-        order = np.argsort(-lam.real, axis=1, kind="stable")
-        lam = np.take_along_axis(lam, order, 1)
-        re, mag = lam.real, np.abs(lam)
-        vr = np.array([eigens[i].vr for i in group])
-        q = displacements(vr, osc, n)
-        dominant = np.take_along_axis((q.real * q.real + q.imag * q.imag).argmax(axis=1), order, 1)
-        columns = zip(
-            dominant.tolist(),
-            (lam.imag / two_pi).tolist(),
-            re.tolist(),
-            (-re / mag).tolist(),
-            (re > GROWTH_TOL * mag).tolist(),
-            strict=True,
-        )
-        for i, (d, f, r, z, u) in zip(group, columns, strict=True):
-            rows = zip(map(labels.__getitem__, d), f, r, z, u, strict=True)
-            out[i] = (tuple(map(_mode, rows)), _divergence(eigens[i].lam))
+    for index, solves in solves_of(eigens, len(labels)):
+        for i, c in zip(index, classify_solves(solves, labels), strict=True):
+            out[i] = c
     return out
+
+
+def classify_solves(
+    solves: Solves, labels: tuple[str, ...]
+) -> list[tuple[tuple[ModeResult, ...], tuple[float, ...]]]:
+    """`classify` of stacked solves: sort, frequencies, damping ratios and labels in one
+    array step each, the same IEEE operations per mode as one at a time."""
+    order = np.argsort(-solves.lam.real, axis=1, kind="stable")
+    rows = np.arange(len(order))[:, None]
+    lam = solves.lam[rows, order]
+    re, mag = lam.real, np.abs(lam)
+    q = solves.q
+    dominant = (q.real * q.real + q.imag * q.imag).argmax(axis=1)[rows, order]
+    columns = zip(
+        dominant.tolist(),
+        (lam.imag / (2 * math.pi)).tolist(),
+        re.tolist(),
+        (-re / mag).tolist(),
+        (re > GROWTH_TOL * mag).tolist(),
+        strict=True,
+    )
+    return [
+        (
+            tuple(map(_mode, zip(map(labels.__getitem__, d), f, r, z, u, strict=True))),
+            _divergence(eigvals),
+        )
+        for (d, f, r, z, u), eigvals in zip(columns, solves.eigvals, strict=True)
+    ]
 
 
 def _mode(fields: tuple) -> ModeResult:
     """A ModeResult of its five fields (what `ModeResult._make` does, without its Python-level
     length check: every row here has five)."""
     return tuple.__new__(ModeResult, fields)
-
-
-def _by_mode_count(eigens: Sequence[Eigen]) -> list[list[int]]:
-    """Indices of `eigens` grouped by their number of oscillatory modes (arrays stack)."""
-    groups: dict[int, list[int]] = {}
-    for i, e in enumerate(eigens):
-        groups.setdefault(len(e.osc), []).append(i)
-    return list(groups.values())
 
 
 def _divergence(eigvals: np.ndarray) -> tuple[float, ...]:

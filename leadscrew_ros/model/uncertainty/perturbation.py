@@ -47,15 +47,7 @@ from numpy.typing import ArrayLike
 from ..physics.assembly import Geometry, build_geometry
 from ..physics.kernels import level_slope
 from ..physics.parameters import ParameterError, ScrewParameters, field_info
-from ..physics.stability import (
-    GROWTH_TOL,
-    Eigen,
-    _by_mode_count,
-    displacements,
-    eig_both,
-    left_rows,
-    left_rows_many,
-)
+from ..physics.stability import GROWTH_TOL, Eigen, Solves, eig_both, left_rows, solves_of
 from .scatter import Samples, Scatter
 
 GEOMETRY_STEP = 1e-6  # relative step of a state-matrix difference in a geometry field
@@ -86,8 +78,8 @@ class EigenPairs:
     def __init__(self, geometry: Geometry, speed: float, eigen: Eigen):
         self.geometry, self.speed = geometry, speed
         self.lam, self.x = eigen.lam[eigen.osc], eigen.right
-        if eigen.left is None:
-            self.y_h = left_rows(eigen)  # normalised by construction
+        if eigen.left is None:  # normalised by construction
+            self.y_h = left_rows(solves_of([eigen], geometry.n)[0][1])[0]
             return
         y_h = eigen.left.conj().T
         self.y_h = y_h / np.einsum("ij,ji->i", y_h, self.x)[:, None]  # y_i^H x_i = 1
@@ -332,6 +324,12 @@ class FirstOrderProbability:
         fields = geometry_fields(scatter)
         self._nodes = self._geometry_nodes(fields, values) if fields else None
 
+    @property
+    def interpolates(self) -> bool:
+        """Geometry fields scatter: the estimate interpolates between node geometries, one
+        operating point at a time (`probability`; `estimates` takes none)."""
+        return self._nodes is not None
+
     def with_geometry(self, params: ScrewParameters, geometry: Geometry) -> FirstOrderProbability:
         """The estimate for other parameters that differ from this one's only in geometry
         fields that do not scatter (a moved nut): the samples' friction and damping are the
@@ -444,30 +442,34 @@ class FirstOrderProbability:
         """
         if self._nodes is not None:
             return estimate(self.hits(self._pairs(speed, load, eigen), load))
-        return self.probabilities(
-            np.array([speed]), np.array([load]), [eigen], None if matrix is None else matrix[None]
+        n = self._nominal.geometry.n
+        return self.estimates(
+            np.array([speed]),
+            np.array([load]),
+            solves_of([eigen], n),
+            None if matrix is None else matrix[None],
         )[0]
 
-    def probabilities(
+    def estimates(
         self,
         speeds: np.ndarray,
         loads: np.ndarray,
-        eigens: list[Eigen],
+        groups: list[tuple[list[int], Solves]],
         matrices: np.ndarray | None = None,
         units: np.ndarray | None = None,
     ) -> list[tuple[float, float]]:
         """`probability` at many operating points (J,) at once: the samples' friction at all
-        of them in one step, the points with the same number of modes in one array step each
-        (left vectors, rates, bounds); the growth over the samples only where a mode can cross.
+        of them in one step, the solves with the same number of modes in one array step each
+        (rates, bounds), the growth over the samples only where a mode can cross.
 
         Parameters
         ----------
         speeds, loads : numpy.ndarray
             The operating points [rad/s], [N].
-        eigens : list of Eigen
-            Their eigen-solves.
+        groups : list of (list of int, Solves)
+            Their eigen-solves, grouped (`stability.solves_of`).
         matrices : numpy.ndarray, optional
-            Their state matrices (J, 2N, 2N) (built again when needed and not given).
+            Their state matrices (J, 2N, 2N) (built again where needed and not given).
         units : numpy.ndarray, optional
             Each point's `Geometry.lower_half_units` (J, 5, N * 2N), when its contact is not
             this estimate's (`assembly.lower_half_units_at`); the samples are the same.
@@ -480,17 +482,11 @@ class FirstOrderProbability:
         Raises
         ------
         ParameterError
-            `units` with scattered geometry fields (their nodes are this geometry's).
+            Scattered geometry fields (their estimate interpolates between node geometries:
+            `probability`, one point at a time).
         """
         if self._nodes is not None:
-            if units is not None:
-                raise ParameterError("scattered geometry: one estimate per nut position")
-            return [
-                self.probability(s, f, e, None if matrices is None else matrices[j])
-                for j, (s, f, e) in enumerate(
-                    zip(speeds.tolist(), loads.tolist(), eigens, strict=True)
-                )
-            ]
+            raise ParameterError("scattered geometry: one point at a time (probability)")
         expansion = self._nominal
         n = expansion.geometry.n
         own = (
@@ -499,24 +495,27 @@ class FirstOrderProbability:
             else units_on_displacements(units, expansion.geometry.basis.omega_rad_s)
         )
         change = expansion.changes(speeds, loads, self._damping)  # (3, J, count)
-        hits: list = [None] * len(eigens)
-        for group in _by_mode_count(eigens):
-            vr = np.array([eigens[i].vr for i in group])
-            osc = np.array([eigens[i].osc for i in group]).reshape(len(group), -1)
-            lam = np.take_along_axis(np.array([eigens[i].lam for i in group]), osc, 1)
+        hits: list = [None] * len(speeds)
+        for index, solves in groups:
             try:
-                y_lower = left_rows_many(vr, osc, n)
-            except np.linalg.LinAlgError:  # some solve is defective: one at a time
-                y_lower = np.array([self._left(i, speeds, loads, eigens, matrices) for i in group])
+                y_lower = left_rows(
+                    solves, n, None if matrices is None else [matrices[i] for i in index]
+                )
+            except np.linalg.LinAlgError:  # a defective solve, and no matrices given
+                y_lower = left_rows(
+                    solves,
+                    n,
+                    [expansion.geometry.state_matrices(speeds[i], loads[i]) for i in index],
+                )
             rates = growth_rates(
-                expansion.units if own is None else own[group],
-                speeds[group],
-                lam,
-                displacements(vr, osc, n),
+                expansion.units if own is None else own[index],
+                speeds[index],
+                solves.lam,
+                solves.q,
                 y_lower,
             )
-            found = sample_hits(rates, GROWTH_TOL * np.abs(lam) - lam.real, change[:, group])
-            for i, h in zip(group, found, strict=True):
+            threshold = GROWTH_TOL * np.abs(solves.lam) - solves.lam.real
+            for i, h in zip(index, sample_hits(rates, threshold, change[:, index]), strict=True):
                 hits[i] = h
         return [
             (float(h), 0.0)  # what `estimate` gives for equal replicates
@@ -524,27 +523,6 @@ class FirstOrderProbability:
             else estimate(h.reshape(self._shape))
             for h in hits
         ]
-
-    def _left(
-        self,
-        i: int,
-        speeds: np.ndarray,
-        loads: np.ndarray,
-        eigens: list[Eigen],
-        matrices: np.ndarray | None,
-    ) -> np.ndarray:
-        """The lower halves of y^H of solve `i`: from its right vectors, or LAPACK's left ones
-        where those are not a basis (a defective matrix)."""
-        n = self._nominal.geometry.n
-        try:
-            return left_rows(eigens[i], n)
-        except np.linalg.LinAlgError:
-            a = (
-                self._nominal.geometry.state_matrices(float(speeds[i]), float(loads[i]))
-                if matrices is None
-                else matrices[i]
-            )
-            return EigenPairs(self._nominal.geometry, float(speeds[i]), eig_both(a)).y_h[:, n:]
 
     def _pairs(self, speed: float, load: float, eigen: Eigen) -> EigenPairs:
         """The nominal eigenpairs of `eigen`; LAPACK's left vectors where the right ones are
