@@ -17,7 +17,15 @@ from .physics.assembly import build_geometry, lower_half_units_at
 from .physics.display import exact
 from .physics.friction import mu_o
 from .physics.parameters import ParameterError, ScrewParameters, field_info
-from .physics.stability import ModeResult, classify_solves, eig_both, solves_of
+from .physics.stability import (
+    Eigen,
+    ModeResult,
+    Solves,
+    classify_solves,
+    eig_both,
+    eig_right_many,
+    solves_of,
+)
 from .uncertainty.perturbation import FirstOrderProbability, geometry_fields
 from .uncertainty.scatter import LIVE_SAMPLES, Samples, Scatter, check_count, involved, samples_for
 
@@ -486,8 +494,7 @@ class SqueakModel:
             eigen = eig_both(matrix, False)
         except np.linalg.LinAlgError as exc:  # LAPACK gave up: say so, no number
             return self._failed(speed, load, exc)
-        (p,) = self._solved([(speed, load)], [eigen], matrix[None])
-        return p
+        return self._solved([(speed, load)], solves_of([eigen], self.geometry.n), matrix[None])[0]
 
     def predict_many(
         self,
@@ -544,23 +551,14 @@ class SqueakModel:
         matrices = self.geometry.state_matrices(
             speeds[ok], loads[ok], units=None if units is None else units[ok]
         )
-        solved, eigens = [], []
-        for k, i in enumerate(ok):
-            try:
-                eigens.append(eig_both(matrices[k], False))
-                solved.append(k)
-            except np.linalg.LinAlgError as exc:
-                out[i] = self._failed(*points[i], exc)
-        at = np.asarray(ok, int)[solved].tolist()
-        if at:
-            valid = self._solved(
-                [points[i] for i in at],
-                eigens,
-                matrices[solved],
-                None if units is None else units[at],
-            )
-            for i, p in zip(at, valid, strict=True):
-                out[i] = p
+        groups, failed = eig_right_many(matrices, self.geometry.n)
+        for k, exc in failed.items():
+            out[ok[k]] = self._failed(*points[ok[k]], exc)
+        if len(failed) < len(ok):
+            for k, p in self._solved(
+                [points[i] for i in ok], groups, matrices, None if units is None else units[ok]
+            ).items():
+                out[ok[k]] = p
         filled = [p for p in out if p is not None]
         assert len(filled) == len(out)  # every point got its verdict
         return filled
@@ -568,25 +566,26 @@ class SqueakModel:
     def _solved(
         self,
         points: list[tuple[float, float]],
-        eigens: list,
+        groups: list[tuple[list[int], Solves]],
         matrices: np.ndarray,
         units: np.ndarray | None = None,
-    ) -> list[Prediction]:
-        """The valid predictions at `points` from their eigen-solves (right vectors) and state
-        matrices: labels and P(squeak) in array steps over the solves of equal mode count
-        (`units`: each point's contact, see `predict_many`)."""
-        groups = solves_of(eigens, self.geometry.n)
+    ) -> dict[int, Prediction]:
+        """The valid predictions at the `points` the solves `groups` (right vectors, grouped:
+        `stability.solves_of`) cover, by index: labels and P(squeak) in array steps over the
+        solves of equal mode count; `matrices` the points' state matrices, `units` each
+        point's contact (see `predict_many`)."""
         if self._probability is None:
             estimates: list = [None] * len(points)
         elif self._probability.interpolates:  # one point at a time
-            estimates = [
-                self._probability.probability(s, f, e, a)
-                for (s, f), e, a in zip(points, eigens, matrices, strict=True)
-            ]
+            estimates = [None] * len(points)
+            for index, solves in groups:
+                for g, i in enumerate(index):
+                    eigen = Eigen(solves.eigvals[g], solves.osc[g], solves.vr[g], None)
+                    estimates[i] = self._probability.probability(*points[i], eigen, matrices[i])
         else:
             speeds, loads = (np.array(v, float) for v in zip(*points, strict=True))
             estimates = self._probability.estimates(speeds, loads, groups, matrices, units)
-        out: list = [None] * len(points)
+        out = {}
         for index, solves in groups:
             for i, classified in zip(index, classify_solves(solves, self.labels), strict=True):
                 out[i] = self._valid(*points[i], classified, estimates[i])
@@ -610,8 +609,10 @@ class SqueakModel:
             except ParameterError:
                 allowed[d] = False
         for i in np.flatnonzero(~allowed[inverse]).tolist():
+            speed, load = points[i]
             out[i] = Prediction(
-                *points[i],
+                speed,
+                load,
                 self.params.formulation,
                 Validity.PARAMETERS_REJECTED,
                 f"nut position {exact(float(nuts[i]))} m is not allowed by the parameters",

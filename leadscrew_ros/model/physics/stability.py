@@ -5,8 +5,9 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from functools import lru_cache
+from itertools import repeat
 from typing import NamedTuple
 
 import numpy as np
@@ -137,14 +138,51 @@ def solves_of(eigens: Sequence[Eigen], n: int) -> list[tuple[list[int], Solves]]
         osc, vr = e.osc, e.vr
         q = vr[:n, osc] + 1j * vr[:n, osc + 1]
         return [([0], Solves(e.lam[None], osc[None], e.lam[osc][None], vr[None], q[None]))]
-    groups: dict[int, list[int]] = {}
+    lam = np.array([e.lam for e in eigens])
+    mask = np.zeros(lam.shape, bool)
     for i, e in enumerate(eigens):
-        groups.setdefault(len(e.osc), []).append(i)
+        mask[i, e.osc] = True
+    vt = np.array([e.vr.T for e in eigens])
+    return _grouped(lam, mask, vt, n, range(len(eigens)))
+
+
+def eig_right_many(
+    a: np.ndarray, n: int
+) -> tuple[list[tuple[list[int], Solves]], dict[int, np.linalg.LinAlgError]]:
+    """`eig_both` without left vectors of each state matrix of `a` (J, 2N, 2N), one LAPACK
+    call each, straight into stacked arrays: the solves grouped as `solves_of` groups them
+    (`n` = N), and the matrices LAPACK gave up on (index -> error)."""
+    j, m = a.shape[0], a.shape[-1]
+    wr, wi = np.zeros((j, m)), np.zeros((j, m))
+    vt = np.empty((j, m, m))  # transposed: each solve's vectors stay Fortran-ordered
+    failed: dict[int, np.linalg.LinAlgError] = {}
+    for k in range(j):
+        if not math.isfinite(a[k].sum()):  # NaN or inf anywhere
+            failed[k] = np.linalg.LinAlgError("the state matrix is not finite")
+            continue
+        wr[k], wi[k], _, vr, info = lapack.dgeev(a[k], compute_vl=0, compute_vr=1)
+        if info != 0:
+            failed[k] = np.linalg.LinAlgError(f"LAPACK dgeev did not converge (info {info})")
+            continue
+        vt[k] = vr.T
+    lam = wr + 1j * wi
+    mask = wi > _IMAG_TOL * np.abs(lam)  # oscillatory_mask: the first of each pair
+    return _grouped(lam, mask, vt, n, [k for k in range(j) if k not in failed]), failed
+
+
+def _grouped(
+    lam: np.ndarray, mask: np.ndarray, vt: np.ndarray, n: int, rows: Iterable[int]
+) -> list[tuple[list[int], Solves]]:
+    """The solves `rows` of the stacks (eigenvalues `lam`, oscillatory `mask`, transposed
+    right vectors `vt`) by their number of oscillatory modes."""
+    counts = mask.sum(axis=1).tolist()
+    groups: dict[int, list[int]] = {}
+    for i in rows:
+        groups.setdefault(counts[i], []).append(i)
     out = []
-    for index in groups.values():
-        osc = np.array([eigens[i].osc for i in index]).reshape(len(index), -1)
-        eigvals = np.array([eigens[i].lam for i in index])
-        vr = np.array([eigens[i].vr for i in index])
+    for count, index in groups.items():
+        eigvals, osc = lam[index], np.nonzero(mask[index])[1].reshape(len(index), count)
+        vr = vt[index].transpose(0, 2, 1)
         top, cols = vr[:, :n], osc[:, None, :]
         q = np.take_along_axis(top, cols, 2) + 1j * np.take_along_axis(top, cols + 1, 2)
         out.append((index, Solves(eigvals, osc, np.take_along_axis(eigvals, osc, 1), vr, q)))
@@ -178,6 +216,7 @@ def left_rows(
         if matrices is None:
             raise np.linalg.LinAlgError("the right eigenvectors are not a basis (defective)")
         e = eig_both(matrices[g])  # the same eigenvalues and right vectors, and the left
+        assert e.left is not None  # asked for
         y_h = e.left.conj().T
         out[g] = (y_h / np.einsum("ij,ji->i", y_h, e.right)[:, None])[:, start:]
     return out
@@ -252,27 +291,27 @@ def classify_solves(
         re.tolist(),
         (-re / mag).tolist(),
         (re > GROWTH_TOL * mag).tolist(),
+        (solves.eigvals.real.max(axis=1) > 0).tolist(),  # a divergence to look for
         strict=True,
     )
     return [
         (
-            tuple(map(_mode, zip(map(labels.__getitem__, d), f, r, z, u, strict=True))),
-            _divergence(eigvals),
+            # ModeResult._make without its Python-level check of the five fields
+            tuple(
+                map(
+                    tuple.__new__,
+                    repeat(ModeResult),
+                    zip(map(labels.__getitem__, d), f, r, z, u, strict=True),
+                )
+            ),
+            _divergence(eigvals) if grows else (),
         )
-        for (d, f, r, z, u), eigvals in zip(columns, solves.eigvals, strict=True)
+        for (d, f, r, z, u, grows), eigvals in zip(columns, solves.eigvals, strict=True)
     ]
-
-
-def _mode(fields: tuple) -> ModeResult:
-    """A ModeResult of its five fields (what `ModeResult._make` does, without its Python-level
-    length check: every row here has five)."""
-    return tuple.__new__(ModeResult, fields)
 
 
 def _divergence(eigvals: np.ndarray) -> tuple[float, ...]:
     """Real eigenvalues > 0 (non-oscillatory growth), descending."""
-    if eigvals.real.max() <= 0:  # the common case: nothing grows
-        return ()
     mag = np.abs(eigvals)
     real = eigvals.real[
         (np.abs(eigvals.imag) <= _IMAG_TOL * mag) & (eigvals.real > GROWTH_TOL * mag)

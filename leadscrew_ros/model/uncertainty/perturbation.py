@@ -443,12 +443,14 @@ class FirstOrderProbability:
         if self._nodes is not None:
             return estimate(self.hits(self._pairs(speed, load, eigen), load))
         n = self._nominal.geometry.n
-        return self.estimates(
+        (found,) = self.estimates(
             np.array([speed]),
             np.array([load]),
             solves_of([eigen], n),
             None if matrix is None else matrix[None],
-        )[0]
+        )
+        assert found is not None  # the one solve is its own group
+        return found
 
     def estimates(
         self,
@@ -457,7 +459,7 @@ class FirstOrderProbability:
         groups: list[tuple[list[int], Solves]],
         matrices: np.ndarray | None = None,
         units: np.ndarray | None = None,
-    ) -> list[tuple[float, float]]:
+    ) -> list[tuple[float, float] | None]:
         """`probability` at many operating points (J,) at once: the samples' friction at all
         of them in one step, the solves with the same number of modes in one array step each
         (rates, bounds), the growth over the samples only where a mode can cross.
@@ -476,8 +478,8 @@ class FirstOrderProbability:
 
         Returns
         -------
-        list of tuple of float
-            P(squeak) and its standard error at each point.
+        list of tuple of float or None
+            P(squeak) and its standard error at each point (None at a point in no group).
 
         Raises
         ------
@@ -518,7 +520,9 @@ class FirstOrderProbability:
             for i, h in zip(index, sample_hits(rates, threshold, change[:, index]), strict=True):
                 hits[i] = h
         return [
-            (float(h), 0.0)  # what `estimate` gives for equal replicates
+            None
+            if h is None  # a point of no group
+            else (float(h), 0.0)  # what `estimate` gives for equal replicates
             if h is True or h is False
             else estimate(h.reshape(self._shape))
             for h in hits
