@@ -21,10 +21,10 @@ from .physics.stability import (
     Eigen,
     ModeResult,
     Solves,
+    classify,
     classify_solves,
     eig_both,
     eig_right_many,
-    solves_of,
 )
 from .uncertainty.perturbation import FirstOrderProbability, geometry_fields
 from .uncertainty.scatter import LIVE_SAMPLES, Samples, Scatter, check_count, involved, samples_for
@@ -494,7 +494,12 @@ class SqueakModel:
             eigen = eig_both(matrix, False)
         except np.linalg.LinAlgError as exc:  # LAPACK gave up: say so, no number
             return self._failed(speed, load, exc)
-        return self._solved([(speed, load)], solves_of([eigen], self.geometry.n), matrix[None])[0]
+        estimate = (
+            None
+            if self._probability is None
+            else self._probability.probability(speed, load, eigen, matrix)
+        )
+        return self._valid(speed, load, classify(eigen, self.labels), estimate)
 
     def predict_many(
         self,

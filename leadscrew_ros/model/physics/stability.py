@@ -189,37 +189,25 @@ def _grouped(
     return out
 
 
-def left_rows(
-    solves: Solves, start: int = 0, matrices: Sequence[np.ndarray] | None = None
-) -> np.ndarray:
-    """Left eigenvectors y_i^H (rows) of the oscillatory modes of each solve, normalised so
-    that y_i^H x_i = 1 for their right vectors x_i (`Eigen.right`), the entries from `start`
-    on (e.g. the lower half of the state vector): (G, M, 2N - start). The rows of X^-1, X the
-    matrix of all right vectors: LAPACK packs a complex pair x, conj(x) as its real and
-    imaginary parts, V = X S, so X^-1 = S V^-1 and the row of x is (V^-1[i] - 1j V^-1[i + 1])
-    / 2: one real solve with V, no complex arithmetic (measured: 0.08x a bare
-    `numpy.linalg.eig`; LAPACK's own left vectors cost 0.19x). Where V is singular (a
-    defective matrix) LAPACK's left vectors of the solve's state matrix in `matrices`.
+def left_rows(vr: np.ndarray, osc: np.ndarray, start: int = 0) -> np.ndarray:
+    """Left eigenvectors y_i^H (rows) of the oscillatory modes `osc` of one eigen-solve,
+    normalised so that y_i^H x_i = 1 for their right vectors x_i (`Eigen.right`), the entries
+    from `start` on (e.g. the lower half of the state vector): (M, 2N - start), from LAPACK's
+    packed right vectors `vr` (2N, 2N). The rows of X^-1, X the matrix of all right vectors:
+    LAPACK packs a complex pair x, conj(x) as its real and imaginary parts, V = X S, so
+    X^-1 = S V^-1 and the row of x is (V^-1[i] - 1j V^-1[i + 1]) / 2: one real solve with V,
+    no complex arithmetic (measured: 0.08x a bare `numpy.linalg.eig`; LAPACK's own left
+    vectors cost 0.19x).
 
     Raises
     ------
     numpy.linalg.LinAlgError
-        Some V is singular and `matrices` is None.
+        V is singular (a defective matrix: no basis of eigenvectors).
     """
-    size = solves.vr.shape[-1]
-    out = np.empty(solves.lam.shape + (size - start,), complex)
-    for g, (vr, osc) in enumerate(zip(solves.vr, solves.osc, strict=True)):
-        _, _, inverse, info = lapack.dgesv(vr, _unit_columns(size, start))
-        if info == 0:
-            out[g] = (inverse[osc] - 1j * inverse[osc + 1]) * 0.5
-            continue
-        if matrices is None:
-            raise np.linalg.LinAlgError("the right eigenvectors are not a basis (defective)")
-        e = eig_both(matrices[g])  # the same eigenvalues and right vectors, and the left
-        assert e.left is not None  # asked for
-        y_h = e.left.conj().T
-        out[g] = (y_h / np.einsum("ij,ji->i", y_h, e.right)[:, None])[:, start:]
-    return out
+    _, _, inverse, info = lapack.dgesv(vr, _unit_columns(len(vr), start))
+    if info != 0:
+        raise np.linalg.LinAlgError("the right eigenvectors are not a basis (defective matrix)")
+    return (inverse[osc] - 1j * inverse[osc + 1]) * 0.5
 
 
 @lru_cache(maxsize=16)

@@ -23,11 +23,11 @@ in which some mode's expanded growth rate exceeds the squeak threshold of
 is kept.
 
 Only the modes that some sample can move across the threshold are expanded over the samples:
-a mode's growth is linear in the three changes, so its largest (smallest) growth over the
-samples is at most (at least) the sum over the changes of the rate times the change's larger
-(smaller) end, and a mode whose bound stays below the threshold is never a hit, one whose lower
-bound is above it makes every sample a hit (P = 1). The bound is exact arithmetic on the
-mode's own rates, no heuristic: which modes are skipped cannot change P. (Skipping the left
+a mode's growth is linear in the three changes, so its largest growth over the samples is at
+most the sum over the changes of the rate times the change's larger or smaller end, whichever
+gives more, and a mode whose bound stays below the threshold is never a hit (no mode left: P =
+0 at once). The bound is exact arithmetic on the mode's own rates, no heuristic: which modes
+are skipped cannot change P. (Skipping the left
 vectors too, by a bound on the rates without them, does not pay here: the modes' sensitivities
 range over orders of magnitude across operating points, and the damping scatter reaches the
 threshold of every lightly damped mode unless the sign of its rate is known; see
@@ -47,7 +47,7 @@ from numpy.typing import ArrayLike
 from ..physics.assembly import Geometry, build_geometry
 from ..physics.kernels import level_slope
 from ..physics.parameters import ParameterError, ScrewParameters, field_info
-from ..physics.stability import GROWTH_TOL, Eigen, Solves, eig_both, left_rows, solves_of
+from ..physics.stability import GROWTH_TOL, Eigen, Solves, eig_both, left_rows
 from .scatter import Samples, Scatter
 
 GEOMETRY_STEP = 1e-6  # relative step of a state-matrix difference in a geometry field
@@ -79,7 +79,7 @@ class EigenPairs:
         self.geometry, self.speed = geometry, speed
         self.lam, self.x = eigen.lam[eigen.osc], eigen.right
         if eigen.left is None:  # normalised by construction
-            self.y_h = left_rows(solves_of([eigen], geometry.n)[0][1])[0]
+            self.y_h = left_rows(eigen.vr, eigen.osc)
             return
         y_h = eigen.left.conj().T
         self.y_h = y_h / np.einsum("ij,ji->i", y_h, self.x)[:, None]  # y_i^H x_i = 1
@@ -156,23 +156,19 @@ class _Expansion:
 
     def __init__(self, geometry: Geometry, friction: dict[str, np.ndarray]):
         self.geometry, self.params = geometry, geometry.params
-        # the nominal friction first, then the samples': one friction-law call for both
-        self.friction = SimpleNamespace(
-            **{
-                **self.params.as_dict(),
-                **{k: np.concatenate(([getattr(self.params, k)], v)) for k, v in friction.items()},
-            }
-        )
+        self.sampled = SimpleNamespace(**{**self.params.as_dict(), **friction})
         self.units = units_on_displacements(geometry.lower_half_units, geometry.basis.omega_rad_s)
 
     def changes(self, speed: ArrayLike, load: ArrayLike, damping: np.ndarray) -> np.ndarray:
         """The samples' changes of friction level, slope and damping ratio from the nominal,
         shape (3, ..., count) for speeds and loads of shape (...) [rad/s], [N]."""
         speed, load = np.asarray(speed, float)[..., None], np.asarray(load, float)[..., None]
-        level, slope = level_slope(self.friction, speed, load, self.geometry.contact.alpha)
-        change = np.empty((3,) + np.broadcast_shapes(speed.shape, damping.shape))
-        np.subtract(level[..., 1:], level[..., :1], out=change[0])
-        np.subtract(slope[..., 1:], slope[..., :1], out=change[1])
+        alpha = self.geometry.contact.alpha
+        level0, slope0 = level_slope(self.params, speed, load, alpha)
+        level, slope = level_slope(self.sampled, speed, load, alpha)
+        change = np.empty((3,) + np.broadcast_shapes(level.shape, damping.shape))
+        np.subtract(level, level0, out=change[0])
+        np.subtract(slope, slope0, out=change[1])
         change[2] = damping
         return change
 
@@ -191,8 +187,8 @@ class _Expansion:
         n = self.geometry.n
         change = self.changes(pairs.speed, load, damping)
         rates = growth_rates(
-            self.units, [pairs.speed], pairs.lam[None], pairs.x[None, :n], pairs.y_h[None, :, n:]
-        )[0]
+            self.units, float(pairs.speed), pairs.lam, pairs.x[:n], pairs.y_h[:, n:]
+        )
         threshold = GROWTH_TOL * np.abs(pairs.lam) - pairs.lam.real  # growth beyond it
         reach = [abs(change[0]).max(), abs(change[1]).max(), reach_damping]
         candidates = (
@@ -229,52 +225,54 @@ def units_on_displacements(lower_half_units: np.ndarray, omega_rad_s: np.ndarray
 
 
 def growth_rates(
-    units: np.ndarray, speeds: ArrayLike, lam: np.ndarray, q: np.ndarray, y_lower: np.ndarray
+    units: np.ndarray, speed: ArrayLike, lam: np.ndarray, q: np.ndarray, y_lower: np.ndarray
 ) -> np.ndarray:
-    """d Re(lambda) per unit friction level l, slope s and damping ratio xi at G operating
-    points with M modes each, shape (G, 3, M): from the eigenvalues `lam` (G, M), the
-    displacement halves `q` (G, N, M) of their right vectors and the lower halves of y^H
-    (G, M, N), y^H dA x = y_lower dA_lower [q; lam q]; `units` as `units_on_displacements`
-    gives them, (5N, N) or each point's (G, 5N, N); `speeds` (G,) [rad/s]."""
-    g, n, m = q.shape
+    """d Re(lambda) per unit friction level l, slope s and damping ratio xi of M modes,
+    shape (..., 3, M): from the eigenvalues `lam` (..., M), the displacement halves `q`
+    (..., N, M) of their right vectors and the lower halves of y^H (..., M, N),
+    y^H dA x = y_lower dA_lower [q; lam q]; `units` as `units_on_displacements` gives them,
+    (5N, N) or each point's (..., 5N, N); `speed` [rad/s] one per point (a float for one)."""
+    n, m = q.shape[-2:]
     q = np.ascontiguousarray(q)
-    uq = (units @ q.view(np.float64)).view(np.complex128).reshape(g, 5, n, m)
-    r = np.einsum("gki,gcik->gck", y_lower, uq)
-    r[:, 2:] *= lam[:, None, :]  # the velocity terms
-    # level l: W1 = sign l, W3 = l / |Omega|; slope s: W5q = Omega s, W5qdot = s
-    speeds = np.asarray(speeds, float)
-    terms = np.zeros((g, 3, 5))
-    terms[:, 0, 0] = np.sign(speeds)
-    terms[:, 0, 2] = 1.0 / np.abs(speeds)
-    terms[:, 1, 1] = speeds
-    terms[:, 1, 3] = terms[:, 2, 4] = 1.0
-    return terms @ r.real
+    uq = (units @ q.view(np.float64)).view(np.complex128).reshape(q.shape[:-2] + (5, n, m))
+    r = np.einsum("...ki,...cik->...ck", y_lower, uq)
+    r[..., 2:, :] *= lam[..., None, :]  # the velocity terms
+    return _rate_terms(speed) @ r.real
 
 
-def sample_hits(
-    rates: np.ndarray, threshold: np.ndarray, change: np.ndarray
-) -> list[np.ndarray | bool]:
-    """Which samples squeak by the first-order growth at G operating points: `rates`
-    (G, 3, M) per unit change, the modes' `threshold` (G, M) (growth needed to squeak), the
-    samples' `change` (3, G, count). Per point False (no sample) or True (every sample) when
-    the bounds of the module docstring decide it, else the (count,) verdicts from the modes
-    that some sample can move across."""
-    hi, lo = change.max(axis=2).T[:, :, None], change.min(axis=2).T[:, :, None]
-    up, down = rates * hi, rates * lo  # each term at the two ends of its change
-    reach = np.maximum(up, down).sum(axis=1) > threshold  # some sample may cross
-    sure = (np.minimum(up, down).sum(axis=1) > threshold).any(axis=1)  # every sample does
-    out: list[np.ndarray | bool] = []
-    for j, (certain, some) in enumerate(
-        zip(sure.tolist(), reach.any(axis=1).tolist(), strict=True)
-    ):
-        if certain or not some:
-            out.append(certain)
-            continue
-        candidates = np.flatnonzero(reach[j])
-        growth = rates[j][:, candidates].T @ change[:, j]  # (Mc, count)
-        growth -= threshold[j, candidates, None]
-        out.append(growth.max(axis=0) > 0)
-    return out
+def _rate_terms(speed: ArrayLike) -> np.ndarray:
+    """d (W1, W5q, W3, W5qdot, xi) / d (l, s, xi): level l: W1 = sign l, W3 = l / |Omega|;
+    slope s: W5q = Omega s, W5qdot = s; (3, 5), or (G, 3, 5) for G speeds [rad/s]."""
+    if isinstance(speed, float):
+        return np.array(
+            [
+                [math.copysign(1.0, speed), 0.0, 1.0 / abs(speed), 0.0, 0.0],
+                [0.0, speed, 0.0, 1.0, 0.0],
+                [0.0, 0.0, 0.0, 0.0, 1.0],
+            ]
+        )
+    speeds = np.asarray(speed, float)
+    terms = np.zeros(speeds.shape + (3, 5))
+    terms[..., 0, 0] = np.copysign(1.0, speeds)
+    terms[..., 0, 2] = 1.0 / np.abs(speeds)
+    terms[..., 1, 1] = speeds
+    terms[..., 1, 3] = terms[..., 2, 4] = 1.0
+    return terms
+
+
+def hits_of(rates: np.ndarray, threshold: np.ndarray, change: np.ndarray) -> np.ndarray | None:
+    """Which samples squeak by the first-order growth at one operating point: `rates` (3, M)
+    per unit change, the modes' `threshold` (M,) (growth needed to squeak), the samples'
+    `change` (3, count). None where no mode can reach its threshold in any sample (by the
+    bound of the module docstring: no sample squeaks), else the (count,) verdicts from the
+    modes that can."""
+    hi, lo = change.max(axis=1)[:, None], change.min(axis=1)[:, None]
+    candidates = np.flatnonzero(np.maximum(rates * hi, rates * lo).sum(axis=0) > threshold)
+    if not len(candidates):
+        return None
+    growth = rates[:, candidates].T @ change  # (Mc, count)
+    growth -= threshold[candidates, None]
+    return growth.max(axis=0) > 0
 
 
 class FirstOrderProbability:
@@ -442,15 +440,18 @@ class FirstOrderProbability:
         """
         if self._nodes is not None:
             return estimate(self.hits(self._pairs(speed, load, eigen), load))
-        n = self._nominal.geometry.n
-        (found,) = self.estimates(
-            np.array([speed]),
-            np.array([load]),
-            solves_of([eigen], n),
-            None if matrix is None else matrix[None],
+        expansion = self._nominal
+        n, osc, vr = expansion.geometry.n, eigen.osc, eigen.vr
+        lam = eigen.lam[osc]
+        y_lower = self._left(eigen.vr, osc, speed, load, matrix)
+        q = vr[:n, osc] + 1j * vr[:n, osc + 1]
+        hits = hits_of(
+            growth_rates(expansion.units, float(speed), lam, q, y_lower),
+            GROWTH_TOL * np.abs(lam) - lam.real,
+            expansion.changes(speed, load, self._damping),
         )
-        assert found is not None  # the one solve is its own group
-        return found
+        # no sample: (0, 0) as `estimate` gives it for equal replicates
+        return (0.0, 0.0) if hits is None else estimate(hits.reshape(self._shape))
 
     def estimates(
         self,
@@ -461,8 +462,8 @@ class FirstOrderProbability:
         units: np.ndarray | None = None,
     ) -> list[tuple[float, float] | None]:
         """`probability` at many operating points (J,) at once: the samples' friction at all
-        of them in one step, the solves with the same number of modes in one array step each
-        (rates, bounds), the growth over the samples only where a mode can cross.
+        of them in one step, the rates of the solves with the same number of modes in one
+        array step each, the growth over the samples only where a mode can cross.
 
         Parameters
         ----------
@@ -490,25 +491,22 @@ class FirstOrderProbability:
         if self._nodes is not None:
             raise ParameterError("scattered geometry: one point at a time (probability)")
         expansion = self._nominal
-        n = expansion.geometry.n
         own = (
             None
             if units is None
             else units_on_displacements(units, expansion.geometry.basis.omega_rad_s)
         )
         change = expansion.changes(speeds, loads, self._damping)  # (3, J, count)
-        hits: list = [None] * len(speeds)
+        out: list[tuple[float, float] | None] = [None] * len(speeds)
         for index, solves in groups:
-            try:
-                y_lower = left_rows(
-                    solves, n, None if matrices is None else [matrices[i] for i in index]
-                )
-            except np.linalg.LinAlgError:  # a defective solve, and no matrices given
-                y_lower = left_rows(
-                    solves,
-                    n,
-                    [expansion.geometry.state_matrices(speeds[i], loads[i]) for i in index],
-                )
+            y_lower = np.array(
+                [
+                    self._left(
+                        vr, osc, speeds[i], loads[i], None if matrices is None else matrices[i]
+                    )
+                    for i, vr, osc in zip(index, solves.vr, solves.osc, strict=True)
+                ]
+            )
             rates = growth_rates(
                 expansion.units if own is None else own[index],
                 speeds[index],
@@ -517,16 +515,27 @@ class FirstOrderProbability:
                 y_lower,
             )
             threshold = GROWTH_TOL * np.abs(solves.lam) - solves.lam.real
-            for i, h in zip(index, sample_hits(rates, threshold, change[:, index]), strict=True):
-                hits[i] = h
-        return [
-            None
-            if h is None  # a point of no group
-            else (float(h), 0.0)  # what `estimate` gives for equal replicates
-            if h is True or h is False
-            else estimate(h.reshape(self._shape))
-            for h in hits
-        ]
+            for g, i in enumerate(index):
+                hits = hits_of(rates[g], threshold[g], change[:, i])
+                out[i] = (0.0, 0.0) if hits is None else estimate(hits.reshape(self._shape))
+        return out
+
+    def _left(
+        self,
+        vr: np.ndarray,
+        osc: np.ndarray,
+        speed: float,
+        load: float,
+        matrix: np.ndarray | None,
+    ) -> np.ndarray:
+        """The lower halves of y^H of one solve: from its right vectors, or LAPACK's left ones
+        where those are not a basis (a defective `matrix`, built again if not given)."""
+        n = self._nominal.geometry.n
+        try:
+            return left_rows(vr, osc, n)
+        except np.linalg.LinAlgError:
+            a = self._nominal.geometry.state_matrices(speed, load) if matrix is None else matrix
+            return EigenPairs(self._nominal.geometry, float(speed), eig_both(a)).y_h[:, n:]
 
     def _pairs(self, speed: float, load: float, eigen: Eigen) -> EigenPairs:
         """The nominal eigenpairs of `eigen`; LAPACK's left vectors where the right ones are
