@@ -180,16 +180,84 @@ def bench_scatter_point(model: SqueakModel, rounds: int, loops: int) -> dict:
     )
 
 
-def profile_predict(model: SqueakModel, loops: int = 20, top: int = 25) -> str:
-    """cProfile of `predict` with the model's scatter at the random points: where the time
-    goes (tottime per call of predict, the functions that take most of it)."""
+def profile_predict(model: SqueakModel, loops: int = 20) -> str:
+    """Where the time of `predict` with the model's scatter goes at the random points: each
+    stage's share (time in the functions that do it, the calls wrapped with a timer), then
+    the cProfile entries that take most of it."""
     import cProfile
     import io
     import pstats
+    from unittest import mock
+
+    from leadscrew_ros.model import squeak_model
+    from leadscrew_ros.model.uncertainty.perturbation import FirstOrderProbability
+
+    # stage -> the functions that do it (also those of the code before issue 23, for --src)
+    stages = {
+        "state matrix (rescale)": [(SqueakModel, "state_matrix")],
+        "eigen-solve (LAPACK dgeev)": [(squeak_model, "eig_both")],
+        "labels and modes (`classify`)": [(squeak_model, "classify")],
+        "P(squeak) (first-order estimate over the samples)": [
+            (FirstOrderProbability, "probability"),
+            (FirstOrderProbability, "hits"),
+            (squeak_model, "EigenPairs"),
+        ],
+    }
+    spent = dict.fromkeys(stages, 0.0)
+
+    def timed(name, fn):
+        def call(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                spent[name] += time.perf_counter() - t0
+
+        return call
 
     points = random_points()
+    mats = [model.state_matrix(s, f) for s, f in points]
     for s, f in points:
         model.predict(s, f)
+    patches = [
+        mock.patch.object(owner, attr, timed(name, getattr(owner, attr)))
+        for name, targets in stages.items()
+        for owner, attr in targets
+        if hasattr(owner, attr)
+    ]
+    for patch in patches:
+        patch.start()
+    try:
+        t0 = time.perf_counter()
+        for _ in range(loops):
+            for s, f in points:
+                model.predict(s, f)
+        total = time.perf_counter() - t0
+    finally:
+        for patch in patches:
+            patch.stop()
+    t0 = time.perf_counter()
+    for _ in range(loops):
+        for a in mats:
+            np.linalg.eig(a)
+    eig = time.perf_counter() - t0
+    calls = loops * len(points)
+    rows = [
+        f"| {name} | {t / calls * 1e6:.1f} µs | {t / total:.0%} | {t / eig:.2f}× |"
+        for name, t in spent.items()
+    ]
+    rest = total - sum(spent.values())
+    rows.append(
+        f"| the rest (checks, validity, `Prediction`) | {rest / calls * 1e6:.1f} µs | "
+        f"{rest / total:.0%} | {rest / eig:.2f}× |"
+    )
+    rows.append(f"| **`predict`** | {total / calls * 1e6:.1f} µs | 100% | {total / eig:.2f}× |")
+    rows.append(f"| bare `numpy.linalg.eig` (after it) | {eig / calls * 1e6:.1f} µs | | 1.00× |")
+    head = (
+        f"Where `predict` spends its time ({calls} calls, default scatter, random points; the "
+        "stages timed inside it, one run):\n\n| stage | per call | share | / bare `eig` |\n"
+        "|---|---:|---:|---:|\n"
+    )
     prof = cProfile.Profile()
     prof.enable()
     for _ in range(loops):
@@ -197,10 +265,8 @@ def profile_predict(model: SqueakModel, loops: int = 20, top: int = 25) -> str:
             model.predict(s, f)
     prof.disable()
     out = io.StringIO()
-    stats = pstats.Stats(prof, stream=out)
-    stats.sort_stats("tottime").print_stats(top)
-    head = f"cProfile of {loops * len(points)} predict calls (default scatter, random points):"
-    return head + "\n" + out.getvalue()
+    pstats.Stats(prof, stream=out).strip_dirs().sort_stats("tottime").print_stats(15)
+    return head + "\n".join(rows) + "\n\ncProfile (tottime):\n" + out.getvalue()
 
 
 def naive_state_matrix(model: SqueakModel, speed: float, load: float) -> np.ndarray:

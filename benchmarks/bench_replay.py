@@ -5,6 +5,7 @@ peak memory against log length.
     .venv/bin/python benchmarks/bench_replay.py [--cases duty dense] [--hours H] [--minutes M]
         [--workers N] [--rounds R] [--src DIR] [--report] [--json OUT.json]
     .venv/bin/python benchmarks/bench_replay.py --rss [--minutes 10 60] [--rate HZ] [--src DIR]
+    .venv/bin/python benchmarks/bench_replay.py --profile [--cases dense]
 
 Two logs (`synthetic.DutyCycle`, small sensor noise, recorded by our `Recorder`: zstd, 10-minute
 splits, on /motor_speed, /axial_load (std_msgs/Float64) and /joint_states
@@ -16,7 +17,9 @@ splits, on /motor_speed, /axial_load (std_msgs/Float64) and /joint_states
   no two alike, so no nut position or operating point comes back), and the nut position also
   published (/nut_position, every sample): the operating point and the nut move at almost
   every message.
-Each is generated once and cached in the temp directory (`--regenerate` to rebuild). One
+`--profile`: only where a prediction worker's time goes on a log (the stages of `replay.solve`
+timed inside it, in this process; with PYTHONPATH set, another checkout's). Each log is
+generated once and cached in the temp directory (`--regenerate` to rebuild). One
 `replay.replay` per case and round (default parameters and deadbands, the log's screw joint as
 `joint_name`) runs in a fresh child process; the ratio is log duration / wall time, and the CPU
 time (the replaying process and its prediction workers, user + system) is given per log hour.
@@ -269,6 +272,109 @@ def floor_lines(res: dict, solve_us: dict[str, float]) -> str:
     return "\n".join(lines)
 
 
+def profile_solve(bag: Path, cycle: DutyCycle, batches: int = 40) -> str:
+    """Where a prediction worker's time goes on `bag`: its first `batches` segments of jobs
+    (`replay._BATCH_JOBS` each, the timeline of the log as the replay makes it) solved in this
+    process (BLAS on one thread), each stage timed inside (wrapped with a timer); the code of
+    this checkout or of the one before issue 23 (the stages of either are looked up)."""
+    from unittest import mock
+
+    from threadpoolctl import threadpool_limits
+
+    from leadscrew_ros.bag import messages
+    from leadscrew_ros.bag.logsource import open_log, topic_types
+    from leadscrew_ros.model import SqueakModel, squeak_model
+    from leadscrew_ros.model.physics.assembly import Geometry
+    from leadscrew_ros.model.uncertainty.perturbation import FirstOrderProbability
+    from leadscrew_ros.review import replay as rp
+    from leadscrew_ros.review.timeline import InputSettings, ModelSpec, Timeline
+
+    stages = {
+        "contact at the nut positions": [
+            (squeak_model, "lower_half_units_at"),
+            (SqueakModel, "with_params"),
+        ],
+        "state matrices": [(Geometry, "state_matrices")],
+        "eigen-solves (LAPACK dgeev)": [
+            (squeak_model, "eig_right_many"),
+            (squeak_model, "eig_both"),
+        ],
+        "labels and modes": [(squeak_model, "classify_solves"), (squeak_model, "classify")],
+        "P(squeak)": [
+            (FirstOrderProbability, "estimates"),
+            (FirstOrderProbability, "hits"),
+            (squeak_model, "EigenPairs"),
+        ],
+        "CDR payloads": [(messages, "prediction_payloads")],
+        "verdicts kept": [(rp.Verdict, "of")],
+    }
+    spent = dict.fromkeys(stages, 0.0)
+
+    def timed(name, fn):
+        def call(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                spent[name] += time.perf_counter() - t0
+
+        return call
+
+    model = SqueakModel()
+    source = open_log(bag)
+    timeline = Timeline(
+        model.params, InputSettings(joint_name=cycle.joint_name).resolved("/"), topic_types(source)
+    )
+    jobs = []
+    for i, (_, m) in enumerate(source.messages()):
+        job = timeline.feed(m, i)
+        if job is not None:
+            jobs.append(job)
+        if len(jobs) >= batches * rp._BATCH_JOBS:
+            break
+    spec = ModelSpec.of(model)
+    args = [
+        [
+            np.array([getattr(j, f) for j in jobs[k : k + rp._BATCH_JOBS]])
+            for f in ("speed_rad_s", "load_n", "model_nut_m")
+        ]
+        for k in range(0, len(jobs), rp._BATCH_JOBS)
+    ]
+    with threadpool_limits(1):
+        rp.solve(spec, *args[0])  # the model built, caches warm
+        patches = [
+            mock.patch.object(owner, attr, timed(name, getattr(owner, attr)))
+            for name, targets in stages.items()
+            for owner, attr in targets
+            if hasattr(owner, attr)
+        ]
+        for patch in patches:
+            patch.start()
+        try:
+            t0 = time.perf_counter()
+            for a in args:
+                rp.solve(spec, *a)
+            total = time.perf_counter() - t0
+        finally:
+            for patch in patches:
+                patch.stop()
+    n = len(jobs)
+    rows = [f"| {k} | {t / n * 1e6:.0f} µs | {t / total:.0%} |" for k, t in spent.items()]
+    rest = total - sum(spent.values())
+    rows.append(
+        f"| the rest (batching, validity, `Prediction`) | {rest / n * 1e6:.0f} µs | "
+        f"{rest / total:.0%} |"
+    )
+    rows.append(
+        f"| **a prediction of the worker (`replay.solve`)** | {total / n * 1e6:.0f} µs | 100% |"
+    )
+    return (
+        f"Where a prediction worker's time goes ({n} jobs of {bag.name}, in segments of "
+        f"{rp._BATCH_JOBS}; stages timed inside, one run, load avg {os.getloadavg()[0]:.2f}):"
+        "\n\n| stage | per prediction | share |\n|---|---:|---:|\n" + "\n".join(rows)
+    )
+
+
 def peak_rss(bag: Path, workers: int, src: str | None) -> dict:
     """Replay + report of `bag` in a fresh child process: its peak memory and wall time."""
     env = dict(os.environ)  # the child runs in `out`: `-c` puts its cwd first on the path
@@ -359,11 +465,20 @@ def main(argv: list[str] | None = None) -> int:
         metavar="DIR",
         help="also replay with the package of this checkout (--rss: instead)",
     )
+    ap.add_argument(
+        "--profile",
+        action="store_true",
+        help="only where a prediction worker's time goes, on the first case's log",
+    )
     args = ap.parse_args(argv)
     if args.rss:
         args.minutes = args.minutes or [10.0, 60.0]
         return rss_main(args)
     args.minutes = args.minutes or [10.0]
+    if args.profile:
+        cycle = cycle_of(args.cases[-1], args)
+        print(profile_solve(cached_log(cycle, args.regenerate)[0], cycle))
+        return 0
     packages = {"this checkout": None, **({args.src: args.src} if args.src else {})}
     res = dict(
         env=environment(), rate_hz=args.rate, workers=args.workers, rounds=args.rounds, cases={}
