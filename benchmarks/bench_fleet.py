@@ -3,14 +3,16 @@
 cluster of 1 and 2 workers, on the same generated logs.
 
     .venv/bin/python benchmarks/bench_fleet.py [--logs N] [--minutes M] [--quick]
-        [--workers 1 2] [--regenerate] [--json OUT.json]
+        [--workers 1 2] [--no-serial] [--src DIR] [--regenerate] [--json OUT.json]
 
 The logs are bench_replay's `dense` case (`bench_replay.cycle_of`: back-to-back 12 s strokes,
 the nut position published, 100 Hz, recorded by our `Recorder`), `--logs` of them (default 100,
 `--quick`: 10) of `--minutes` each (default 2), each with its own noise seed; generated once
 and cached in the temp directory. Every run writes what `replay` writes (annotated MCAP,
 episodes.json, summary.json/.txt; no PNG report on either side) with the default parameters and
-the logs' screw joint as `joint_name`.
+the logs' screw joint as `joint_name`. `--src DIR` runs the review's Dask workers with the
+package of another checkout (PYTHONPATH of the worker processes; the serial loop needs
+`--no-serial` then), for a before / after comparison on the same logs.
 
 - serial: `replay.replay` of one log after the other in this process (no prediction
   workers, BLAS limited to one thread as Dask's worker processes are: one core, the same
@@ -56,12 +58,14 @@ MACHINES = 10  # of the cluster estimate
 
 def cached_logs(count: int, minutes: float, rate_hz: float, regenerate: bool) -> list[Path]:
     """`count` dense logs (seeds 0..count-1), generated if not cached."""
+    base = cycle_of("dense", argparse.Namespace(minutes=[minutes], rate=rate_hz))
     root = (
-        Path(tempfile.gettempdir()) / "leadscrew_ros_bench_fleet" / f"{minutes:g}min_{rate_hz:g}Hz"
+        Path(tempfile.gettempdir())
+        / "leadscrew_ros_bench_fleet"
+        / f"{minutes:g}min_{rate_hz:g}Hz_spread{base.stroke_spread:g}"
     )
     if regenerate:
         shutil.rmtree(root, ignore_errors=True)
-    base = cycle_of("dense", argparse.Namespace(minutes=[minutes], rate=rate_hz))
     logs = []
     for seed in range(count):
         folder = root / f"log{seed:04d}"
@@ -93,6 +97,8 @@ def review(logs: list[Path], joint: str, workers: int) -> dict:
         t0 = time.perf_counter()
         with cluster(workers) as client:
             start = time.perf_counter() - t0
+            packages = set(client.run(lambda: __import__("leadscrew_ros").__file__).values())
+            print(f"workers' package: {', '.join(sorted(packages))}", file=sys.stderr)
             run = review_logs(logs, out, settings, client, progress=False)
     if run.failed:
         raise SystemExit(f"{run.failed} logs failed: {run.rows[0]['error']}")
@@ -101,18 +107,23 @@ def review(logs: list[Path], joint: str, workers: int) -> dict:
 
 def table(res: dict) -> str:
     n, serial_s = res["logs"], res["serial_s"]
-    rate = {"serial": 60.0 * n / serial_s}
+    rate = {} if serial_s is None else {"serial": 60.0 * n / serial_s}
     lines = [
         "| run | wall | logs per minute | vs serial | cluster start |",
         "|---|---:|---:|---:|---:|",
-        f"| serial loop of `replay` (one process) | {serial_s:.1f} s | "
-        f"{rate['serial']:.1f} | 1.00× | – |",
     ]
+    if serial_s is not None:
+        lines.append(
+            f"| serial loop of `replay` (one process) | {serial_s:.1f} s | "
+            f"{rate['serial']:.1f} | 1.00× | – |"
+        )
+    package = f" (package of {res['src']})" if res.get("src") else ""
     for w, r in res["review"].items():
         rate[w] = 60.0 * n / r["wall_s"]
+        versus = "–" if serial_s is None else f"{serial_s / r['wall_s']:.2f}×"
         lines.append(
-            f"| `review`, LocalCluster {w} worker(s) | {r['wall_s']:.1f} s | "
-            f"{rate[w]:.1f} | {serial_s / r['wall_s']:.2f}× | {r['start_s']:.1f} s |"
+            f"| `review`, LocalCluster {w} worker(s){package} | {r['wall_s']:.1f} s | "
+            f"{rate[w]:.1f} | {versus} | {r['start_s']:.1f} s |"
         )
     one = res["review"].get("1")
     if one:
@@ -125,6 +136,7 @@ def table(res: dict) -> str:
         f"A replay in a task of {w} worker(s) took {r['task_s'] / serial_s:.2f}× its time "
         f"in the serial loop."
         for w, r in res["review"].items()
+        if serial_s is not None
     ]
     best = max((w for w in res["review"]), key=lambda w: rate[w])
     per_core = rate[best] / int(best)
@@ -153,6 +165,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rate", type=float, default=100.0, help="sample rate [Hz]")
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--quick", action="store_true", help="10 logs")
+    ap.add_argument("--no-serial", action="store_true", help="only the review on the cluster")
+    ap.add_argument(
+        "--src", metavar="DIR", help="the review's workers with the package of this checkout"
+    )
     ap.add_argument("--regenerate", action="store_true")
     ap.add_argument("--json", metavar="OUT.json")
     args = ap.parse_args(argv)
@@ -175,10 +191,14 @@ def main(argv: list[str] | None = None) -> int:
         "minutes": args.minutes,
         "rate_hz": args.rate,
         "messages": 4 * int(round(args.minutes * 60 * args.rate)),
-        "serial_s": serial(logs, joint),
+        "serial_s": None if args.no_serial else serial(logs, joint),
         "review": {},
+        "src": args.src,
     }
-    print(f"serial: {res['serial_s']:.1f} s", file=sys.stderr)
+    if res["serial_s"] is not None:
+        print(f"serial: {res['serial_s']:.1f} s", file=sys.stderr)
+    if args.src:  # the Dask workers are spawned with this process's sys.path: there first
+        sys.path.insert(0, str(Path(args.src).resolve()))
     for w in args.workers:
         res["review"][str(w)] = review(logs, joint, w)
         print(f"review, {w} worker(s): {res['review'][str(w)]['wall_s']:.1f} s", file=sys.stderr)

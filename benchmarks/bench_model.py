@@ -4,11 +4,13 @@
     .venv/bin/python benchmarks/bench_model.py [--quick] [--json OUT.json]
 
 Prints a Markdown table: (1) one operating-point update, `SqueakModel.predict`, against a bare
-`numpy.linalg.eig` of the same state matrix; (2) the throughput of a speed x load map with
-`growth_field` against bare batched `numpy.linalg.eigvals` on the same pre-built matrices, and
-against a naive map that integrates the contact again at every point; (3) the uncached
-geometry precompute. Calls being compared alternate within each round, so a load change on
-the machine hits both; ratios are medians of the per-round ratios. See benchmarks/README.md.
+`numpy.linalg.eig` of the same state matrix, without scatter on 16 points and with the default
+scatter (P(squeak) from 1024 samples) on random operating points; (2) the throughput of a
+speed x load map with `growth_field` against bare batched `numpy.linalg.eigvals` on the same
+pre-built matrices, and against a naive map that integrates the contact again at every point;
+(3) the uncached geometry precompute. Calls being compared alternate within each round, so a
+load change on the machine hits both; ratios are medians of the per-round ratios. See
+benchmarks/README.md.
 """
 
 from __future__ import annotations
@@ -38,6 +40,9 @@ from leadscrew_ros.model.studies.work import _CHUNK
 from leadscrew_ros.model.uncertainty.scatter import Scatter
 
 TARGET_POINT_RATIO = 1.5  # predict / bare eig
+TARGET_SCATTER_RATIO = 1.0  # predict with the default scatter / bare eig (issue 23)
+RANDOM_POINTS = 64  # random operating points of the scatter row
+RANDOM_SPEED_RAD_S, RANDOM_LOAD_N = (1.0, 150.0), (10.0, 500.0)
 TARGET_MAP_RATIO = 1.2  # growth_field / bare eigvals, per point
 TARGET_REFINED_MAP_RATIO = 1.1  # stability_map (grid + refined boundary) / bare eigvals
 
@@ -134,6 +139,134 @@ def bench_point(model: SqueakModel, rounds: int, loops: int) -> dict:
         median_us={k: median(v) for k, v in us.items()},
         ratio=paired_ratio(us["predict"], us["eig"]),
     )
+
+
+def random_points(n: int = RANDOM_POINTS, seed: int = 0) -> list[tuple[float, float]]:
+    """n operating points drawn uniformly: speed in RANDOM_SPEED_RAD_S, load in RANDOM_LOAD_N."""
+    rng = np.random.default_rng(seed)
+    speeds = rng.uniform(*RANDOM_SPEED_RAD_S, n)
+    loads = rng.uniform(*RANDOM_LOAD_N, n)
+    return list(zip(speeds.tolist(), loads.tolist(), strict=True))
+
+
+def bench_scatter_point(model: SqueakModel, rounds: int, loops: int) -> dict:
+    """`predict` with the model's scatter (the default: P(squeak) from 1024 samples) at random
+    operating points against a bare `eig` of the same pre-built state matrices."""
+    points = random_points()
+    mats = [model.state_matrix(s, f) for s, f in points]
+    predictions = [model.predict(s, f) for s, f in points]  # samples drawn, estimator built
+
+    def predict():
+        for _ in range(loops):
+            for s, f in points:
+                model.predict(s, f)
+
+    def eig():
+        for _ in range(loops):
+            for a in mats:
+                np.linalg.eig(a)
+
+    calls = loops * len(points)
+    raw, _ = interleaved(dict(predict=predict, eig=eig), rounds)
+    us = {k: [t / calls * 1e6 for t in v] for k, v in raw.items()}
+    between = sum(0.0 < (p.probability or 0.0) < 1.0 for p in predictions)
+    return dict(
+        points=points,
+        calls_per_sample=calls,
+        samples_us=us,
+        median_us={k: median(v) for k, v in us.items()},
+        ratio=paired_ratio(us["predict"], us["eig"]),
+        uncertain=between,
+    )
+
+
+def profile_predict(model: SqueakModel, loops: int = 20) -> str:
+    """Where the time of `predict` with the model's scatter goes at the random points: each
+    stage's share (time in the functions that do it, the calls wrapped with a timer), then
+    the cProfile entries that take most of it."""
+    import cProfile
+    import io
+    import pstats
+    from unittest import mock
+
+    from leadscrew_ros.model import squeak_model
+    from leadscrew_ros.model.uncertainty.perturbation import FirstOrderProbability
+
+    # stage -> the functions that do it (also those of the code before issue 23, for --src)
+    stages = {
+        "state matrix (rescale)": [(SqueakModel, "state_matrix")],
+        "eigen-solve (LAPACK dgeev)": [(squeak_model, "eig_both")],
+        "labels and modes (`classify`)": [(squeak_model, "classify")],
+        "P(squeak) (first-order estimate over the samples)": [
+            (FirstOrderProbability, "probability"),
+            (FirstOrderProbability, "hits"),
+            (squeak_model, "EigenPairs"),
+        ],
+    }
+    spent = dict.fromkeys(stages, 0.0)
+
+    def timed(name, fn):
+        def call(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                spent[name] += time.perf_counter() - t0
+
+        return call
+
+    points = random_points()
+    mats = [model.state_matrix(s, f) for s, f in points]
+    for s, f in points:
+        model.predict(s, f)
+    patches = [
+        mock.patch.object(owner, attr, timed(name, getattr(owner, attr)))
+        for name, targets in stages.items()
+        for owner, attr in targets
+        if hasattr(owner, attr)
+    ]
+    for patch in patches:
+        patch.start()
+    try:
+        t0 = time.perf_counter()
+        for _ in range(loops):
+            for s, f in points:
+                model.predict(s, f)
+        total = time.perf_counter() - t0
+    finally:
+        for patch in patches:
+            patch.stop()
+    t0 = time.perf_counter()
+    for _ in range(loops):
+        for a in mats:
+            np.linalg.eig(a)
+    eig = time.perf_counter() - t0
+    calls = loops * len(points)
+    rows = [
+        f"| {name} | {t / calls * 1e6:.1f} µs | {t / total:.0%} | {t / eig:.2f}× |"
+        for name, t in spent.items()
+    ]
+    rest = total - sum(spent.values())
+    rows.append(
+        f"| the rest (checks, validity, `Prediction`) | {rest / calls * 1e6:.1f} µs | "
+        f"{rest / total:.0%} | {rest / eig:.2f}× |"
+    )
+    rows.append(f"| **`predict`** | {total / calls * 1e6:.1f} µs | 100% | {total / eig:.2f}× |")
+    rows.append(f"| bare `numpy.linalg.eig` (after it) | {eig / calls * 1e6:.1f} µs | | 1.00× |")
+    head = (
+        f"Where `predict` spends its time ({calls} calls, default scatter, random points; the "
+        "stages timed inside it, one run):\n\n| stage | per call | share | / bare `eig` |\n"
+        "|---|---:|---:|---:|\n"
+    )
+    prof = cProfile.Profile()
+    prof.enable()
+    for _ in range(loops):
+        for s, f in points:
+            model.predict(s, f)
+    prof.disable()
+    out = io.StringIO()
+    pstats.Stats(prof, stream=out).strip_dirs().sort_stats("tottime").print_stats(15)
+    return head + "\n".join(rows) + "\n\ncProfile (tottime):\n" + out.getvalue()
 
 
 def naive_state_matrix(model: SqueakModel, speed: float, load: float) -> np.ndarray:
@@ -254,6 +387,7 @@ def verdict(ratio: float, target: float) -> str:
 
 def table(res: dict) -> str:
     pt, mp, geo, env = res["point"], res["map"], res["geometry"], res["env"]
+    sp = res["scatter_point"]
     u, pps, ms = pt["median_us"], mp["median_points_per_s"], geo["median_ms"]
     g = "×".join(map(str, mp["grid"]))
     rows = [
@@ -275,6 +409,17 @@ def table(res: dict) -> str:
             "",
         ),
         ("", "… of which labels (`classify`, timed alone)", f"{u['label']:.1f} µs", "", "", ""),
+        (
+            "1 per point",
+            f"`predict` with the default scatter (P(squeak), {sp['samples']} samples), "
+            f"{len(sp['points'])} random points (speed {RANDOM_SPEED_RAD_S[0]:g}–"
+            f"{RANDOM_SPEED_RAD_S[1]:g} rad/s, load {RANDOM_LOAD_N[0]:g}–{RANDOM_LOAD_N[1]:g} N; "
+            f"{sp['uncertain']} with 0 < P < 1)",
+            f"{sp['median_us']['predict']:.1f} µs",
+            f"bare `eig` {sp['median_us']['eig']:.1f} µs",
+            f"{sp['ratio']:.2f}×",
+            verdict(sp["ratio"], TARGET_SCATTER_RATIO),
+        ),
         (
             "2 map",
             f"`growth_field` {g} speed×load",
@@ -333,10 +478,30 @@ def table(res: dict) -> str:
     return f"{head}\n{body}\n\n{envline}"
 
 
+def scatter_line(res: dict) -> str:
+    """The scatter row alone, with the environment."""
+    sp, env = res["scatter_point"], res["env"]
+    return (
+        f"`predict` with the default scatter at {len(sp['points'])} random points "
+        f"({sp['uncertain']} with 0 < P < 1): {sp['median_us']['predict']:.1f} µs, bare `eig` "
+        f"{sp['median_us']['eig']:.1f} µs: **{sp['ratio']:.2f}×** "
+        f"({verdict(sp['ratio'], TARGET_SCATTER_RATIO)}) · load avg "
+        f"{env['load_avg_1min_start']:.2f} → {env['load_avg_1min_end']:.2f} · {res['wall_s']:.1f} s"
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller run (~5 s)")
     ap.add_argument("--json", metavar="OUT.json", help="also write the raw numbers here")
+    ap.add_argument(
+        "--only-scatter",
+        action="store_true",
+        help="only the row of predict with the default scatter at random points",
+    )
+    ap.add_argument(
+        "--profile", action="store_true", help="also print a cProfile table of that predict"
+    )
     args = ap.parse_args(argv)
     mode = "quick" if args.quick else "default"
     cfg = CONFIGS[mode]
@@ -349,16 +514,26 @@ def main(argv: list[str] | None = None) -> int:
         n_modes=model.params.n_modes,
         targets=dict(
             point_ratio=TARGET_POINT_RATIO,
+            scatter_ratio=TARGET_SCATTER_RATIO,
             map_ratio=TARGET_MAP_RATIO,
             refined_map_ratio=TARGET_REFINED_MAP_RATIO,
         ),
     )
-    res["point"] = bench_point(model, cfg["point_rounds"], cfg["point_loops"])
-    res["map"] = bench_map(model, cfg["map_grid"], cfg["map_rounds"], cfg["naive_points"])
-    res["geometry"] = bench_geometry(model, cfg["geometry_rounds"])
-    res["wall_s"] = time.perf_counter() - t0
-    res["env"]["load_avg_1min_end"] = os.getloadavg()[0]
-    print(table(res))
+    res["scatter_point"] = bench_scatter_point(model, cfg["point_rounds"], cfg["point_loops"])
+    res["scatter_point"]["samples"] = model.sample_count
+    if args.only_scatter:
+        res["wall_s"] = time.perf_counter() - t0
+        res["env"]["load_avg_1min_end"] = os.getloadavg()[0]
+        print(scatter_line(res))
+    else:
+        res["point"] = bench_point(model, cfg["point_rounds"], cfg["point_loops"])
+        res["map"] = bench_map(model, cfg["map_grid"], cfg["map_rounds"], cfg["naive_points"])
+        res["geometry"] = bench_geometry(model, cfg["geometry_rounds"])
+        res["wall_s"] = time.perf_counter() - t0
+        res["env"]["load_avg_1min_end"] = os.getloadavg()[0]
+        print(table(res))
+    if args.profile:
+        print("\n" + profile_predict(model))
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(res, fh, indent=1)

@@ -80,10 +80,8 @@ def safe_speed_payload(speed_rad_s: float) -> bytes:
 
 def frequencies_payload(p: Prediction) -> bytes:
     """squeak/unstable_frequencies: squeak frequencies [Hz], most unstable first."""
-    n = len(p.unstable_frequencies_hz)
-    return cdr.encode_float64_multi_array(
-        (cdr.Dimension("frequency_hz", n, n),), [float(f) for f in p.unstable_frequencies_hz]
-    )
+    hz = [float(f) for f in p.unstable_frequencies_hz]
+    return cdr.encode_float64_multi_array((cdr.Dimension("frequency_hz", len(hz), len(hz)),), hz)
 
 
 def modes_payload(p: Prediction) -> bytes:

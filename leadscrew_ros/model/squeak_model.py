@@ -13,12 +13,20 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .physics.assembly import build_geometry
+from .physics.assembly import build_geometry, lower_half_units_at
 from .physics.display import exact
 from .physics.friction import mu_o
-from .physics.parameters import ScrewParameters, field_info
-from .physics.stability import Eigen, ModeResult, classify, eig_both
-from .uncertainty.perturbation import EigenPairs, FirstOrderProbability, estimate, geometry_fields
+from .physics.parameters import ParameterError, ScrewParameters, field_info
+from .physics.stability import (
+    Eigen,
+    ModeResult,
+    Solves,
+    classify,
+    classify_solves,
+    eig_both,
+    eig_right_many,
+)
+from .uncertainty.perturbation import FirstOrderProbability, geometry_fields
 from .uncertainty.scatter import LIVE_SAMPLES, Samples, Scatter, check_count, involved, samples_for
 
 _LOAD_LIMIT_N = field_info("axial_load_n")["hi"]
@@ -130,9 +138,9 @@ class Prediction:
         """No squeak mode and no divergence; None when the point is not valid."""
         if not self.valid:
             return None
-        return not self.divergence_rates and not any(m.unstable for m in self.modes)
+        return not self.divergence_rates and not self.squeak_modes
 
-    @property
+    @cached_property  # every published prediction asks several times (a frozen dataclass)
     def squeak_modes(self) -> tuple[ModeResult, ...]:
         """The unstable oscillatory modes (squeak), most unstable first."""
         return tuple(m for m in self.modes if m.unstable)
@@ -153,7 +161,7 @@ class Prediction:
         """Least damping ratio -Re(lambda)/|lambda| of the oscillatory modes (dimensionless):
         the deterministic stability margin, negative when a mode squeaks; None when not valid
         or without oscillatory modes."""
-        return min(m.damping_ratio for m in self.modes) if self.valid and self.modes else None
+        return min([m.damping_ratio for m in self.modes]) if self.valid and self.modes else None
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready summary.
@@ -481,20 +489,27 @@ class SqueakModel:
         validity, reason = self.validity(speed, load)
         if validity is not Validity.OK:
             return Prediction(speed, load, self.params.formulation, validity, reason)
-        try:
-            eigen = eig_both(self.state_matrix(speed, load), self.scatter.names != ())
+        matrix = self.state_matrix(speed, load)
+        try:  # right vectors (the labels); P(squeak) gets the left ones from them
+            eigen = eig_both(matrix, False)
         except np.linalg.LinAlgError as exc:  # LAPACK gave up: say so, no number
-            return Prediction(
-                speed,
-                load,
-                self.params.formulation,
-                Validity.SOLVER_FAILED,
-                f"eigen-solver failed at this operating point: {exc}",
-            )
-        return self._prediction(speed, load, eigen)
+            return self._failed(speed, load, exc)
+        estimate = (
+            None
+            if self._probability is None
+            else self._probability.probability(speed, load, eigen, matrix)
+        )
+        return self._valid(speed, load, classify(eigen, self.labels), estimate)
 
-    def predict_many(self, speeds_rad_s: ArrayLike, loads_n: ArrayLike) -> list[Prediction]:
-        """Predictions at many operating points: one batched rescale, then an eigen-solve each.
+    def predict_many(
+        self,
+        speeds_rad_s: ArrayLike,
+        loads_n: ArrayLike,
+        nut_positions_m: ArrayLike | None = None,
+    ) -> list[Prediction]:
+        """Predictions at many operating points: their state matrices in one vectorised step,
+        then an eigen-solve each, and P(squeak) with the samples' friction at all of them at
+        once.
 
         Parameters
         ----------
@@ -502,6 +517,11 @@ class SqueakModel:
             Screw speeds [rad/s].
         loads_n : array_like
             Axial loads [N], broadcast against `speeds_rad_s`.
+        nut_positions_m : array_like, optional
+            The nut position z_o [m] of each point (broadcast): the contact is integrated
+            there, the rest is this model's (parameters, scatter samples). A position the
+            parameters do not allow gives `Validity.PARAMETERS_REJECTED`. Default: this
+            model's nut position.
 
         Returns
         -------
@@ -512,39 +532,125 @@ class SqueakModel:
         ------
         OperatingPointError
             Any speed or load is not a finite real number of plausible magnitude.
+        ParameterError
+            `nut_positions_m` with scattered geometry fields (their estimate is per nut
+            position: `with_params`).
         """
-        speeds, loads = (
-            a.ravel()
-            for a in np.broadcast_arrays(
-                np.asarray(speeds_rad_s, float), np.asarray(loads_n, float)
-            )
-        )
+        arrays = [np.asarray(speeds_rad_s, float), np.asarray(loads_n, float)]
+        if nut_positions_m is not None:
+            arrays.append(np.asarray(nut_positions_m, float))
+        speeds, loads, *nuts = (a.ravel() for a in np.broadcast_arrays(*arrays))
         points = [
             check_operating_point(s, f)
             for s, f in zip(speeds.tolist(), loads.tolist(), strict=True)
         ]
-        verdicts = [self.validity(s, f) for s, f in points]
-        ok = [i for i, (v, _) in enumerate(verdicts) if v is Validity.OK]
-        out = [
-            Prediction(s, f, self.params.formulation, *v)
-            for (s, f), v in zip(points, verdicts, strict=True)
-        ]
-        if ok:
-            matrices = self.geometry.state_matrices(speeds[ok], loads[ok])
-            left = self.scatter.names != ()  # the probability needs them
-            for k, i in enumerate(ok):
-                out[i] = self._prediction(*points[i], eig_both(matrices[k], left))
+        out: list[Prediction | None] = [None] * len(points)
+        ok, units = list(range(len(points))), None
+        if nuts:
+            ok, units = self._contact_at(nuts[0], points, out)
+        for i in ok:
+            validity, reason = self.validity(*points[i])
+            if validity is not Validity.OK:
+                out[i] = Prediction(*points[i], self.params.formulation, validity, reason)
+        ok = [i for i in ok if out[i] is None]
+        matrices = self.geometry.state_matrices(
+            speeds[ok], loads[ok], units=None if units is None else units[ok]
+        )
+        groups, failed = eig_right_many(matrices, self.geometry.n)
+        for k, exc in failed.items():
+            out[ok[k]] = self._failed(*points[ok[k]], exc)
+        if len(failed) < len(ok):
+            for k, p in self._solved(
+                [points[i] for i in ok], groups, matrices, None if units is None else units[ok]
+            ).items():
+                out[ok[k]] = p
+        filled = [p for p in out if p is not None]
+        assert len(filled) == len(out)  # every point got its verdict
+        return filled
+
+    def _solved(
+        self,
+        points: list[tuple[float, float]],
+        groups: list[tuple[list[int], Solves]],
+        matrices: np.ndarray,
+        units: np.ndarray | None = None,
+    ) -> dict[int, Prediction]:
+        """The valid predictions at the `points` the solves `groups` (right vectors, grouped:
+        `stability.solves_of`) cover, by index: labels and P(squeak) in array steps over the
+        solves of equal mode count; `matrices` the points' state matrices, `units` each
+        point's contact (see `predict_many`)."""
+        if self._probability is None:
+            estimates: list = [None] * len(points)
+        elif self._probability.interpolates:  # one point at a time
+            estimates = [None] * len(points)
+            for index, solves in groups:
+                for g, i in enumerate(index):
+                    eigen = Eigen(solves.eigvals[g], solves.osc[g], solves.vr[g], None)
+                    estimates[i] = self._probability.probability(*points[i], eigen, matrices[i])
+        else:
+            speeds, loads = (np.array(v, float) for v in zip(*points, strict=True))
+            estimates = self._probability.estimates(speeds, loads, groups, matrices, units)
+        out = {}
+        for index, solves in groups:
+            for i, classified in zip(index, classify_solves(solves, self.labels), strict=True):
+                out[i] = self._valid(*points[i], classified, estimates[i])
         return out
 
-    def _prediction(self, speed: float, load: float, eigen: Eigen) -> Prediction:
-        modes, divergence = classify(eigen, self.labels)
-        squeak = any(m.unstable for m in modes)
-        if self._probability is None:
-            probability, stderr = float(squeak), None
-        else:  # the same eigen-solve gives the first-order expansion
-            probability, stderr = estimate(
-                self._probability.hits(EigenPairs(self.geometry, speed, eigen), load)
+    def _contact_at(
+        self, nuts: np.ndarray, points: list[tuple[float, float]], out: list
+    ) -> tuple[list[int], np.ndarray]:
+        """The points whose nut position the parameters allow (the others get their verdict in
+        `out`) and every point's `lower_half_units` (rows of the allowed points only)."""
+        if geometry_fields(self.scatter):
+            raise ParameterError(
+                "scattered geometry fields: predict each nut position with its own model "
+                "(with_params)"
             )
+        distinct, inverse = np.unique(nuts, return_inverse=True)
+        allowed = np.ones(len(distinct), bool)
+        for d, z in enumerate(distinct.tolist()):
+            try:
+                self.params.with_(nut_position_m=z)
+            except ParameterError:
+                allowed[d] = False
+        for i in np.flatnonzero(~allowed[inverse]).tolist():
+            speed, load = points[i]
+            out[i] = Prediction(
+                speed,
+                load,
+                self.params.formulation,
+                Validity.PARAMETERS_REJECTED,
+                f"nut position {exact(float(nuts[i]))} m is not allowed by the parameters",
+            )
+        rows = np.full(len(distinct), -1)
+        rows[allowed] = np.arange(int(allowed.sum()))
+        units = lower_half_units_at(self.params, distinct[allowed])
+        return np.flatnonzero(allowed[inverse]).tolist(), units[np.maximum(rows[inverse], 0)]
+
+    def _failed(self, speed: float, load: float, exc: Exception) -> Prediction:
+        """The verdict where LAPACK gave up: say so, no number."""
+        return Prediction(
+            speed,
+            load,
+            self.params.formulation,
+            Validity.SOLVER_FAILED,
+            f"eigen-solver failed at this operating point: {exc}",
+        )
+
+    def _valid(
+        self,
+        speed: float,
+        load: float,
+        classified: tuple[tuple[ModeResult, ...], tuple[float, ...]],
+        estimate: tuple[float, float] | None,
+    ) -> Prediction:
+        """The valid prediction of the `classified` modes and divergence rates; `estimate`:
+        P(squeak) and its standard error, None without scatter (then P is the verdict)."""
+        modes, divergence = classified
+        if estimate is None:
+            probability, stderr = float(any(m.unstable for m in modes)), None
+        else:
+            probability, stderr = estimate
         return Prediction(
             speed,
             load,

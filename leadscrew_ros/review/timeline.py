@@ -47,6 +47,7 @@ from ..model import (
 )
 from ..model.physics.display import exact
 from ..model.squeak_model import check_operating_point
+from ..model.uncertainty.perturbation import geometry_fields
 from ..model.uncertainty.scatter import Scatter
 from .decimation import Envelope
 
@@ -443,14 +444,19 @@ def _model_at(spec: ModelSpec, nut: float) -> SqueakModel | None:
 def predict_jobs(
     spec: ModelSpec, speeds: np.ndarray, loads: np.ndarray, model_nuts: np.ndarray
 ) -> list[Prediction]:
-    """Predictions at the jobs' operating points: one batched eigen-solve per nut position.
-    Outside validity a prediction has `valid=False` and the reason."""
+    """Predictions at the jobs' operating points, each with the contact at its nut position:
+    the state matrices of all of them in one vectorised step (`SqueakModel.predict_many`).
+    Outside validity a prediction has `valid=False` and the reason. With scattered geometry
+    fields the estimate is per nut position: one model (cached) and batch each."""
+    model = _spec_model(spec)
+    if not geometry_fields(model.scatter):
+        return model.predict_many(speeds, loads, model_nuts)
     out: list[Prediction | None] = [None] * len(speeds)
     nuts, inverse = np.unique(model_nuts, return_inverse=True)
     for k, nut in enumerate(nuts.tolist()):
         idx = np.flatnonzero(inverse == k)
-        model = _model_at(spec, nut)
-        if model is None:
+        at = _model_at(spec, nut)
+        if at is None:
             preds = [
                 Prediction(
                     float(speeds[i]),
@@ -462,7 +468,7 @@ def predict_jobs(
                 for i in idx
             ]
         else:
-            preds = model.predict_many(speeds[idx], loads[idx])
+            preds = at.predict_many(speeds[idx], loads[idx])
         for i, p in zip(idx.tolist(), preds, strict=True):
             out[i] = p
     filled = [p for p in out if p is not None]

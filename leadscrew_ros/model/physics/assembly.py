@@ -129,6 +129,7 @@ class Geometry:
         speed_rad_s: ArrayLike,
         load_n: ArrayLike,
         scattered: Mapping[str, np.ndarray] | None = None,
+        units: np.ndarray | None = None,
     ) -> np.ndarray:
         """First-order state matrices [[0, I], [-K, -D]] of (27) for arrays of operating points
         (broadcast). One matrix product rescales all precomputed parts.
@@ -143,17 +144,24 @@ class Geometry:
             Arrays of non-geometry parameters (friction, damping; broadcast with the operating
             points) that replace the nominal values: they enter only through the scale
             factors and the damping diagonal, so samples of them cost one product each.
+        units : ndarray, optional
+            `lower_half_units` of each point's own contact, shape (..., 5, N * 2N) broadcast
+            with the points (`lower_half_units_at`: other nut positions), instead of these.
 
         Returns
         -------
         ndarray
             Shape (..., 2N, 2N).
         """
-        if not scattered and (
-            type(speed_rad_s) is float
-            and type(load_n) is float
-            or np.ndim(speed_rad_s) == 0
-            and np.ndim(load_n) == 0
+        if (
+            not scattered
+            and units is None
+            and (
+                type(speed_rad_s) is float
+                and type(load_n) is float
+                or np.ndim(speed_rad_s) == 0
+                and np.ndim(load_n) == 0
+            )
         ):
             return self._state_matrix(float(cast(float, speed_rad_s)), float(cast(float, load_n)))
         speed = np.asarray(speed_rad_s, float)
@@ -176,7 +184,11 @@ class Geometry:
         n = self.n
         # einsum, not @: a BLAS matmul here wakes OpenBLAS threads that keep spinning on the
         # other core through the following eigen-solve (measured: 1.8 CPU-s per wall-s).
-        lower = np.einsum("...k,kj->...j", coef, self.lower_half_units)
+        lower = (
+            np.einsum("...k,kj->...j", coef, self.lower_half_units)
+            if units is None
+            else np.einsum("...k,...kj->...j", coef, units)
+        )
         lower = lower.reshape(coef.shape[:-1] + (n, 2 * n))
         out = np.empty(lower.shape[:-2] + (2 * n, 2 * n))
         out[...] = self._template
@@ -271,24 +283,55 @@ def build_geometry(params: ScrewParameters) -> Geometry:
     return geometry if geometry.params is params else replace(geometry, params=params)
 
 
+def lower_half_units_at(params: ScrewParameters, nut_positions_m: ArrayLike) -> np.ndarray:
+    """`Geometry.lower_half_units` of `params` with the nut at each of `nut_positions_m` (D,)
+    [m] instead: shape (D, 5, N * 2N), in one vectorised step (the modal basis and kernels are
+    the screw's, cached; the positions are not checked against the parameters' rules).
+
+    Parameters
+    ----------
+    params : ScrewParameters
+        The screw, nut length and formulation.
+    nut_positions_m : array_like
+        Nut positions z_o [m].
+
+    Returns
+    -------
+    numpy.ndarray
+        The state-matrix parts of each nut position, as `Geometry.state_matrices` takes them.
+    """
+    screw = _screw_of(_Key(params, _SCREW_FIELDS))
+    nuts = np.asarray(nut_positions_m, float).ravel()
+    return _halves(screw, screw.helix.exponentials(nuts, params.nut_length_m))
+
+
+def _halves(screw: _Screw, exponentials: np.ndarray) -> np.ndarray:
+    """lower_half_units of the contact `exponentials` (D, 4M, P) of D nut positions: one
+    table of every nut's kind blocks (`HelixContact.table`, columns nut by nut), then the
+    entries of each."""
+    d, rows, pairs = len(exponentials), len(screw.kernels), exponentials.shape[2]
+    columns = np.ascontiguousarray(exponentials.transpose(1, 0, 2)).reshape(-1, d * pairs)
+    blocks = screw.helix.table(columns, screw.kernels).reshape(rows, d, pairs)
+    table = np.empty((d, rows * pairs + 1))
+    table[:, :-1].reshape(d, rows, pairs)[...] = blocks.transpose(1, 0, 2)
+    table[:, -1] = 0.0  # where `index` points outside the contact rows
+    halves = np.empty((d, 5, screw.G_half.size))
+    halves[:, :4] = table[:, screw.index]
+    halves[:, 4] = screw.G_half
+    return halves
+
+
 @lru_cache(maxsize=256)
 def _geometry_of(key: _Key) -> Geometry:
     params = key.params
     screw = _screw_of(_Key(params, _SCREW_FIELDS))
     contact = screw.helix.integrals(params.nut_position_m, params.nut_length_m)
-    e = contact.exponentials
-    table = np.empty(len(screw.kernels) * e.shape[1] + 1)
-    table[-1] = 0.0
-    screw.helix.table(e, screw.kernels, out=table[:-1].reshape(len(screw.kernels), -1))
-    halves = np.empty((5, screw.G_half.size))
-    np.take(table, screw.index, out=halves[:4])
-    halves[4] = screw.G_half
     return Geometry(
         params=params,
         basis=screw.basis,
         contact=contact,
         G_unit=screw.G_unit,
-        lower_half_units=halves,
+        lower_half_units=_halves(screw, contact.exponentials[None])[0],
     )
 
 

@@ -88,31 +88,46 @@ class HelixContact:
     def integrals(self, nut_position_m: float, nut_length_m: float) -> ContactIntegrals:
         """The contact integrals of a nut at z_o = `nut_position_m` of length b =
         `nut_length_m` [m]."""
-        lead, u = self.lead_per_rad_m, len(self.wavenumber)
-        alpha_o, alpha = nut_position_m / lead, nut_length_m / lead
-        z, half, h = nut_position_m + nut_length_m / 2, nut_length_m / 2, alpha / 2
-        # e^{i k_i x} e^{-+i k_j x} for x = z_c and b / 2 (rows of `single`: -z, z, -b/2, b/2)
-        single = np.exp(
-            np.multiply.outer((-1j * z, 1j * z, -1j * half, 1j * half), self.wavenumber)
+        lead = self.lead_per_rad_m
+        return ContactIntegrals(
+            alpha_o=nut_position_m / lead,
+            alpha=nut_length_m / lead,
+            helix=self,
+            exponentials=self.exponentials(np.array([nut_position_m]), nut_length_m)[0],
         )
-        pq = (single[1::2, None, :, None] * single.reshape(2, 2, 1, u)).reshape(2, 1, -1)
+
+    def exponentials(self, nut_positions_m: np.ndarray, nut_length_m: float) -> np.ndarray:
+        """`ContactIntegrals.exponentials` of nuts of length b = `nut_length_m` at each of the
+        positions z_o = `nut_positions_m` (D,) [m], in one vectorised step: (D, 4M, P). Only
+        the phases depend on the position; the same operations per element as for one nut."""
+        lead, u = self.lead_per_rad_m, len(self.wavenumber)
+        alpha, half = nut_length_m / lead, nut_length_m / 2
+        h = alpha / 2
+        z = nut_positions_m + half  # z_c
+        # e^{i k_i x} e^{-+i k_j x} for x = z_c (per nut) and b / 2 (rows: -x, x)
+        at_z = np.exp(np.multiply.outer(np.stack((-1j * z, 1j * z), axis=-1), self.wavenumber))
+        at_half = np.exp(np.multiply.outer((-1j * half, 1j * half), self.wavenumber))
+        pq_z = (at_z[:, 1, None, :, None] * at_z[:, :, None, :]).reshape(len(z), 1, -1)
+        pq_half = (at_half[1, None, :, None] * at_half[:, None, :]).reshape(1, -1)
         turn = _harmonics(h)  # e^{i m alpha / 2}
-        sin_x = (turn * pq[1]).imag  # sin(omega alpha / 2)
-        phase = (_harmonics(alpha_o) * turn) * pq[0]  # e^{i omega theta_c}
+        sin_x = (turn * pq_half).imag  # sin(omega alpha / 2)
+        starts = np.stack([_harmonics(float(zo) / lead) for zo in nut_positions_m.tolist()])
+        phase = (starts * turn) * pq_z  # e^{i omega theta_c}, (D, M, 2P)
         g = (sin_x * self.weight + h * self.level).reshape(_M, 2, -1)
-        # sign A A F(omega) / 2 = phase g, stored (M, 2 signs, Re / Im, P)
-        out = np.empty((_M, 2, 2, u * u))
-        np.multiply(phase.real.reshape(g.shape), g, out=out[:, :, 0])
-        np.multiply(phase.imag.reshape(g.shape), g, out=out[:, :, 1])
+        # sign A A F(omega) / 2 = phase g, stored (D, M, 2 signs, Re / Im, P)
+        out = np.empty((len(z), _M, 2, 2, u * u))
+        np.multiply(phase.real.reshape((-1,) + g.shape), g, out=out[:, :, :, 0])
+        np.multiply(phase.imag.reshape((-1,) + g.shape), g, out=out[:, :, :, 1])
         n = np.searchsorted(self.near_abs, _DIRECT / h)
         if n:  # sin from the split loses digits near 0
             x = self.near_omega[:n] * h
-            f = phase.take(self.near[:n]) * (h * self.near_amplitude[:n]) * (np.sin(x) / x)
-            out.put(self.near_out[:n], f.real)
-            out.put(self.near_out[:n] + u * u, f.imag)
-        return ContactIntegrals(
-            alpha_o=alpha_o, alpha=alpha, helix=self, exponentials=out.reshape(4 * _M, -1)
-        )
+            f = phase.reshape(len(z), -1)[:, self.near[:n]] * (
+                (h * self.near_amplitude[:n]) * (np.sin(x) / x)
+            )
+            flat = out.reshape(len(z), -1)
+            flat[:, self.near_out[:n]] = f.real
+            flat[:, self.near_out[:n] + u * u] = f.imag
+        return out.reshape(len(z), 4 * _M, -1)
 
     def table(
         self, exponentials: np.ndarray, kernels: np.ndarray, out: np.ndarray | None = None

@@ -7,7 +7,8 @@ For a simple eigenvalue lambda of the state matrix A with right and left eigenve
     d lambda = y^H (dA) x
 
 `EigenPairs` holds the oscillatory eigenvalues (Im > 0) of one eigen-solve with x and y^H
-(`stability.eig_both`), so the prediction and the probability share one LAPACK call.
+(`stability.eig_both`, or the right vectors alone and `stability.left_rows`), so the prediction
+and the probability share one LAPACK call.
 
 `FirstOrderProbability` is the live estimator of P(squeak) over scatter samples. Friction and
 damping enter A only through three scalars at a fixed operating point: the friction level
@@ -20,6 +21,17 @@ geometries and interpolated between them (`FirstOrderProbability`). P is the sha
 in which some mode's expanded growth rate exceeds the squeak threshold of
 `stability.unstable_mask`, so the modes' correlation (one friction scatter drives them all)
 is kept.
+
+Only the modes that some sample can move across the threshold are expanded over the samples:
+a mode's growth is linear in the three changes, so its largest growth over the samples is at
+most the sum over the changes of the rate times the change's larger or smaller end, whichever
+gives more, and a mode whose bound stays below the threshold is never a hit (no mode left: P =
+0 at once). The bound is exact arithmetic on the mode's own rates, no heuristic: which modes
+are skipped cannot change P. (Skipping the left
+vectors too, by a bound on the rates without them, does not pay here: the modes' sensitivities
+range over orders of magnitude across operating points, and the damping scatter reaches the
+threshold of every lightly damped mode unless the sign of its rate is known; see
+doc/development/benchmarks.md.)
 """
 
 from __future__ import annotations
@@ -35,7 +47,7 @@ from numpy.typing import ArrayLike
 from ..physics.assembly import Geometry, build_geometry
 from ..physics.kernels import level_slope
 from ..physics.parameters import ParameterError, ScrewParameters, field_info
-from ..physics.stability import GROWTH_TOL, Eigen, eig_both
+from ..physics.stability import GROWTH_TOL, Eigen, Solves, eig_both, left_rows
 from .scatter import Samples, Scatter
 
 GEOMETRY_STEP = 1e-6  # relative step of a state-matrix difference in a geometry field
@@ -54,13 +66,21 @@ class EigenPairs:
     speed : float
         Screw speed of A [rad/s].
     eigen : Eigen
-        The eigen-solve of A with the oscillatory modes' vectors (`stability.eig_both`).
+        The eigen-solve of A (`stability.eig_both`); without left vectors they come from the
+        right ones (`stability.left_rows`).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        Without left vectors: the right ones are not a basis (a defective A).
     """
 
     def __init__(self, geometry: Geometry, speed: float, eigen: Eigen):
         self.geometry, self.speed = geometry, speed
         self.lam, self.x = eigen.lam[eigen.osc], eigen.right
-        assert eigen.left is not None, "the expansion needs the left vectors (eig_both)"
+        if eigen.left is None:  # normalised by construction
+            self.y_h = left_rows(eigen.vr, eigen.osc)
+            return
         y_h = eigen.left.conj().T
         self.y_h = y_h / np.einsum("ij,ji->i", y_h, self.x)[:, None]  # y_i^H x_i = 1
 
@@ -135,14 +155,22 @@ class _Expansion:
     parameters (arrays), the rest of the parameters are the geometry's."""
 
     def __init__(self, geometry: Geometry, friction: dict[str, np.ndarray]):
-        self.geometry, self.params, n = geometry, geometry.params, geometry.n
+        self.geometry, self.params = geometry, geometry.params
         self.sampled = SimpleNamespace(**{**self.params.as_dict(), **friction})
-        damping = np.zeros((n, 2 * n))
-        damping[np.arange(n), n + np.arange(n)] = -2 * geometry.basis.omega_rad_s  # (A.1)
-        # dA per unit coefficient (W1, W5q, W3, W5qdot) and per unit of xi, lower half
-        self.units = np.concatenate(
-            [-geometry.lower_half_units[:4].reshape(4 * n, 2 * n), damping]
-        ).astype(complex)  # dA = -[0; U_k], [0; damping]
+        self.units = units_on_displacements(geometry.lower_half_units, geometry.basis.omega_rad_s)
+
+    def changes(self, speed: ArrayLike, load: ArrayLike, damping: np.ndarray) -> np.ndarray:
+        """The samples' changes of friction level, slope and damping ratio from the nominal,
+        shape (3, ..., count) for speeds and loads of shape (...) [rad/s], [N]."""
+        speed, load = np.asarray(speed, float)[..., None], np.asarray(load, float)[..., None]
+        alpha = self.geometry.contact.alpha
+        level0, slope0 = level_slope(self.params, speed, load, alpha)
+        level, slope = level_slope(self.sampled, speed, load, alpha)
+        change = np.empty((3,) + np.broadcast_shapes(level.shape, damping.shape))
+        np.subtract(level, level0, out=change[0])
+        np.subtract(slope, slope0, out=change[1])
+        change[2] = damping
+        return change
 
     def margins(
         self,
@@ -156,27 +184,11 @@ class _Expansion:
         modes [1/s] (> 0: squeak); `damping` holds the samples' damping-ratio changes. `prune`
         leaves out the modes that cannot reach the threshold (then -inf where none can):
         right for the sign, not for interpolation. Thread-safe: nothing shared is written."""
-        speed, n = pairs.speed, self.geometry.n
-        change = np.empty((3, len(damping)))  # level, slope, damping ratio
-        change[2] = damping
-        alpha = self.geometry.contact.alpha
-        level0, slope0 = level_slope(self.params, speed, load, alpha)
-        level, slope = level_slope(self.sampled, speed, load, alpha)
-        np.subtract(level, level0, out=change[0])
-        np.subtract(slope, slope0, out=change[1])
-        # d lambda per unit coefficient: y^H dA x over the lower half of A (one product)
-        r = np.einsum("ij,kji->ki", pairs.y_h[:, n:], (self.units @ pairs.x).reshape(5, n, -1)).real
-        # level l: W1 = sign l, W3 = l / |Omega|; slope s: W5q = Omega s, W5qdot = s
-        rates = (
-            np.array(
-                [
-                    [math.copysign(1.0, speed), 0.0, 1.0 / abs(speed), 0.0, 0.0],
-                    [0.0, speed, 0.0, 1.0, 0.0],
-                    [0.0, 0.0, 0.0, 0.0, 1.0],
-                ]
-            )
-            @ r
-        )  # (3, M)
+        n = self.geometry.n
+        change = self.changes(pairs.speed, load, damping)
+        rates = growth_rates(
+            self.units, float(pairs.speed), pairs.lam, pairs.x[:n], pairs.y_h[:, n:]
+        )
         threshold = GROWTH_TOL * np.abs(pairs.lam) - pairs.lam.real  # growth beyond it
         reach = [abs(change[0]).max(), abs(change[1]).max(), reach_damping]
         candidates = (
@@ -189,6 +201,78 @@ class _Expansion:
         growth = rates[:, candidates].T @ change  # (Mc, count)
         growth -= threshold[candidates, None]
         return growth.max(axis=0)
+
+
+def units_on_displacements(lower_half_units: np.ndarray, omega_rad_s: np.ndarray) -> np.ndarray:
+    """dA per unit coefficient (W1, W5q, W3, W5qdot) and per unit of xi, -[0; U_k] and
+    [0; -2 diag(omega)] (A.1), as they act on the displacements q of a right vector
+    x = [q; lam q]: the first two act on q, the others on the velocities lam q. From
+    `Geometry.lower_half_units` (..., 5, N * 2N): shape (..., 5N, N), real (a complex q
+    multiplies them as a real view)."""
+    n = len(omega_rad_s)
+    units = lower_half_units.reshape(lower_half_units.shape[:-2] + (5, n, 2 * n))
+    damping = np.broadcast_to(np.diag(-2 * omega_rad_s), units.shape[:-3] + (n, n))
+    return np.concatenate(
+        [
+            -units[..., 0, :, :n],
+            -units[..., 1, :, :n],
+            -units[..., 2, :, n:],
+            -units[..., 3, :, n:],
+            damping,
+        ],
+        axis=-2,
+    )
+
+
+def growth_rates(
+    units: np.ndarray, speed: ArrayLike, lam: np.ndarray, q: np.ndarray, y_lower: np.ndarray
+) -> np.ndarray:
+    """d Re(lambda) per unit friction level l, slope s and damping ratio xi of M modes,
+    shape (..., 3, M): from the eigenvalues `lam` (..., M), the displacement halves `q`
+    (..., N, M) of their right vectors and the lower halves of y^H (..., M, N),
+    y^H dA x = y_lower dA_lower [q; lam q]; `units` as `units_on_displacements` gives them,
+    (5N, N) or each point's (..., 5N, N); `speed` [rad/s] one per point (a float for one)."""
+    n, m = q.shape[-2:]
+    q = np.ascontiguousarray(q)
+    uq = (units @ q.view(np.float64)).view(np.complex128).reshape(q.shape[:-2] + (5, n, m))
+    r = np.einsum("...ki,...cik->...ck", y_lower, uq)
+    r[..., 2:, :] *= lam[..., None, :]  # the velocity terms
+    return _rate_terms(speed) @ r.real
+
+
+def _rate_terms(speed: ArrayLike) -> np.ndarray:
+    """d (W1, W5q, W3, W5qdot, xi) / d (l, s, xi): level l: W1 = sign l, W3 = l / |Omega|;
+    slope s: W5q = Omega s, W5qdot = s; (3, 5), or (G, 3, 5) for G speeds [rad/s]."""
+    if isinstance(speed, float):
+        return np.array(
+            [
+                [math.copysign(1.0, speed), 0.0, 1.0 / abs(speed), 0.0, 0.0],
+                [0.0, speed, 0.0, 1.0, 0.0],
+                [0.0, 0.0, 0.0, 0.0, 1.0],
+            ]
+        )
+    speeds = np.asarray(speed, float)
+    terms = np.zeros(speeds.shape + (3, 5))
+    terms[..., 0, 0] = np.copysign(1.0, speeds)
+    terms[..., 0, 2] = 1.0 / np.abs(speeds)
+    terms[..., 1, 1] = speeds
+    terms[..., 1, 3] = terms[..., 2, 4] = 1.0
+    return terms
+
+
+def hits_of(rates: np.ndarray, threshold: np.ndarray, change: np.ndarray) -> np.ndarray | None:
+    """Which samples squeak by the first-order growth at one operating point: `rates` (3, M)
+    per unit change, the modes' `threshold` (M,) (growth needed to squeak), the samples'
+    `change` (3, count). None where no mode can reach its threshold in any sample (by the
+    bound of the module docstring: no sample squeaks), else the (count,) verdicts from the
+    modes that can."""
+    hi, lo = change.max(axis=1)[:, None], change.min(axis=1)[:, None]
+    candidates = np.flatnonzero(np.maximum(rates * hi, rates * lo).sum(axis=0) > threshold)
+    if not len(candidates):
+        return None
+    growth = rates[:, candidates].T @ change  # (Mc, count)
+    growth -= threshold[candidates, None]
+    return growth.max(axis=0) > 0
 
 
 class FirstOrderProbability:
@@ -237,6 +321,12 @@ class FirstOrderProbability:
         self._nominal = _Expansion(geometry, self._friction)
         fields = geometry_fields(scatter)
         self._nodes = self._geometry_nodes(fields, values) if fields else None
+
+    @property
+    def interpolates(self) -> bool:
+        """Geometry fields scatter: the estimate interpolates between node geometries, one
+        operating point at a time (`probability`; `estimates` takes none)."""
+        return self._nodes is not None
 
     def with_geometry(self, params: ScrewParameters, geometry: Geometry) -> FirstOrderProbability:
         """The estimate for other parameters that differ from this one's only in geometry
@@ -325,6 +415,135 @@ class FirstOrderProbability:
         at = np.array(rows)
         columns = np.arange(self.samples.count)
         return sum((w * at[index, columns] for index, w in corners), np.zeros(self.samples.count))
+
+    def probability(
+        self, speed: float, load: float, eigen: Eigen, matrix: np.ndarray | None = None
+    ) -> tuple[float, float]:
+        """P(squeak) and its standard error at an operating point, from its eigen-solve.
+
+        Parameters
+        ----------
+        speed : float
+            Screw speed Omega [rad/s].
+        load : float
+            Axial load F_z [N].
+        eigen : Eigen
+            The eigen-solve of the nominal state matrix there (`stability.eig_both`; without
+            left vectors, `stability.left_rows` gives them).
+        matrix : numpy.ndarray, optional
+            That state matrix (built again when needed and not given: a defective one).
+
+        Returns
+        -------
+        tuple of float
+            P(squeak) in [0, 1] and its standard error (`estimate`).
+        """
+        if self._nodes is not None:
+            return estimate(self.hits(self._pairs(speed, load, eigen), load))
+        expansion = self._nominal
+        n, osc, vr = expansion.geometry.n, eigen.osc, eigen.vr
+        lam = eigen.lam[osc]
+        y_lower = self._left(eigen.vr, osc, speed, load, matrix)
+        q = vr[:n, osc] + 1j * vr[:n, osc + 1]
+        hits = hits_of(
+            growth_rates(expansion.units, float(speed), lam, q, y_lower),
+            GROWTH_TOL * np.abs(lam) - lam.real,
+            expansion.changes(speed, load, self._damping),
+        )
+        # no sample: (0, 0) as `estimate` gives it for equal replicates
+        return (0.0, 0.0) if hits is None else estimate(hits.reshape(self._shape))
+
+    def estimates(
+        self,
+        speeds: np.ndarray,
+        loads: np.ndarray,
+        groups: list[tuple[list[int], Solves]],
+        matrices: np.ndarray | None = None,
+        units: np.ndarray | None = None,
+    ) -> list[tuple[float, float] | None]:
+        """`probability` at many operating points (J,) at once: the samples' friction at all
+        of them in one step, the rates of the solves with the same number of modes in one
+        array step each, the growth over the samples only where a mode can cross.
+
+        Parameters
+        ----------
+        speeds, loads : numpy.ndarray
+            The operating points [rad/s], [N].
+        groups : list of (list of int, Solves)
+            Their eigen-solves, grouped (`stability.solves_of`).
+        matrices : numpy.ndarray, optional
+            Their state matrices (J, 2N, 2N) (built again where needed and not given).
+        units : numpy.ndarray, optional
+            Each point's `Geometry.lower_half_units` (J, 5, N * 2N), when its contact is not
+            this estimate's (`assembly.lower_half_units_at`); the samples are the same.
+
+        Returns
+        -------
+        list of tuple of float or None
+            P(squeak) and its standard error at each point (None at a point in no group).
+
+        Raises
+        ------
+        ParameterError
+            Scattered geometry fields (their estimate interpolates between node geometries:
+            `probability`, one point at a time).
+        """
+        if self._nodes is not None:
+            raise ParameterError("scattered geometry: one point at a time (probability)")
+        expansion = self._nominal
+        own = (
+            None
+            if units is None
+            else units_on_displacements(units, expansion.geometry.basis.omega_rad_s)
+        )
+        change = expansion.changes(speeds, loads, self._damping)  # (3, J, count)
+        out: list[tuple[float, float] | None] = [None] * len(speeds)
+        for index, solves in groups:
+            y_lower = np.array(
+                [
+                    self._left(
+                        vr, osc, speeds[i], loads[i], None if matrices is None else matrices[i]
+                    )
+                    for i, vr, osc in zip(index, solves.vr, solves.osc, strict=True)
+                ]
+            )
+            rates = growth_rates(
+                expansion.units if own is None else own[index],
+                speeds[index],
+                solves.lam,
+                solves.q,
+                y_lower,
+            )
+            threshold = GROWTH_TOL * np.abs(solves.lam) - solves.lam.real
+            for g, i in enumerate(index):
+                hits = hits_of(rates[g], threshold[g], change[:, i])
+                out[i] = (0.0, 0.0) if hits is None else estimate(hits.reshape(self._shape))
+        return out
+
+    def _left(
+        self,
+        vr: np.ndarray,
+        osc: np.ndarray,
+        speed: float,
+        load: float,
+        matrix: np.ndarray | None,
+    ) -> np.ndarray:
+        """The lower halves of y^H of one solve: from its right vectors, or LAPACK's left ones
+        where those are not a basis (a defective `matrix`, built again if not given)."""
+        n = self._nominal.geometry.n
+        try:
+            return left_rows(vr, osc, n)
+        except np.linalg.LinAlgError:
+            a = self._nominal.geometry.state_matrices(speed, load) if matrix is None else matrix
+            return EigenPairs(self._nominal.geometry, float(speed), eig_both(a)).y_h[:, n:]
+
+    def _pairs(self, speed: float, load: float, eigen: Eigen) -> EigenPairs:
+        """The nominal eigenpairs of `eigen`; LAPACK's left vectors where the right ones are
+        not a basis."""
+        try:
+            return EigenPairs(self._nominal.geometry, speed, eigen)
+        except np.linalg.LinAlgError:
+            return EigenPairs.solve(self._nominal.geometry, speed, load)
 
     def hits(self, pairs: EigenPairs, load: float) -> np.ndarray:
         """Whether each sample squeaks at the operating point of `pairs`, by the expansion.
