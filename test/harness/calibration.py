@@ -32,7 +32,7 @@ class SyntheticUnit(NamedTuple):
 
     truth: ScrewParameters
     obs: Observations
-    squeaks: np.ndarray  # exact verdict per frame
+    squeaks: np.ndarray  # exact verdict per frame: a squeak the detector can hear
 
 
 def frames_of(
@@ -64,8 +64,10 @@ def synthetic_unit(
     """One unit drawn from `population` with `scatter` (the default scatter when None)."""
     truth = draw_params(population, Scatter() if scatter is None else scatter, rng)
     times, (speed, load, nut) = frames_of(truth, duration_s, rng)
-    squeaks = np.isfinite(squeak_frequencies(truth, speed, load, nut))
-    heard = heard_by(squeaks, errors or DetectionErrors(), rng)
+    errors = errors or DetectionErrors()
+    hz = squeak_frequencies(truth, speed, load, nut)  # of the most unstable mode, as the bench
+    squeaks = (hz >= errors.band_lo_hz) & (hz <= errors.band_hi_hz)  # nan: no squeak
+    heard = heard_by(squeaks, errors, rng)
     obs = thin(
         unit_id, [f"{unit_id}.mcap"], times, speed, load, nut, heard,
         np.where(heard, 224.0, np.nan), HOP_S,

@@ -2,10 +2,11 @@
 """The cheap likelihood of heard / not-heard frames given calibrated parameters theta.
 
 Squeak at a point: some oscillatory mode's growth rate beyond the threshold of
-`stability.unstable_mask` (Re lambda > GROWTH_TOL |lambda|), the live estimator's rule, among
-the modes the detector can hear: those whose frequency at the expansion centre lies in its
-band (`DetectionErrors.band_lo_hz` .. `band_hi_hz`, the detector's f_lo_hz .. f_hi_hz; a
-squeak above or below it is not heard, so its unheard frames say nothing against it). At a
+`stability.unstable_mask` (Re lambda > GROWTH_TOL |lambda|), the live estimator's rule. It is
+heard when the most unstable mode (whose limit cycle takes over; the one the virtual bench
+sounds) lies in the detector's band (`DetectionErrors.band_lo_hz` .. `band_hi_hz`, its f_lo_hz
+.. f_hi_hz at the expansion centre): a squeak above or below it is not heard, so its unheard
+frames say nothing against it. At a
 fixed operating point friction and damping enter the state matrix only through the friction
 level l, the friction slope s (`kernels.level_slope`) and the damping ratio xi, and A is affine
 in them. So each distinct point gets one eigen-solve at the expansion centre (the model's
@@ -233,7 +234,7 @@ class GrowthLikelihood:
         speed, load, nut = obs.speed_rad_s, obs.load_n, obs.nut_position_m
         valid = np.asarray(self.model.validity_code(speed, load) == Validity.OK)
         valid &= (nut >= 0) & (nut <= p.nut_travel_m)
-        point, margin, rates = [], [], []
+        point, margin, rates, inband = [], [], [], []
         band = 2 * math.pi * np.array([self.errors.band_lo_hz, self.errors.band_hi_hz])
         for z in np.unique(nut[valid]).tolist():
             at = p.with_(nut_position_m=z)
@@ -244,16 +245,17 @@ class GrowthLikelihood:
                 except np.linalg.LinAlgError:
                     valid[i] = False
                     continue
-                heard = (pairs.lam.imag >= band[0]) & (pairs.lam.imag <= band[1])
-                lam = pairs.lam[heard]
+                lam = pairs.lam
                 point.append(np.full(len(lam), i))
                 margin.append(lam.real - GROWTH_TOL * np.abs(lam))
-                rates.append(self._mode_rates(pairs, at, float(speed[i]), float(load[i]))[:, heard])
+                rates.append(self._mode_rates(pairs, at, float(speed[i]), float(load[i])))
+                inband.append((lam.imag >= band[0]) & (lam.imag <= band[1]))
         self.valid = valid
         self._solved = (
             np.concatenate(point) if point else np.zeros(0, int),
             np.concatenate(margin) if margin else np.zeros(0),
             np.concatenate(rates, axis=1) if rates else np.zeros((2 + len(self._linear), 0)),
+            np.concatenate(inband) if inband else np.zeros(0, bool),
         )
         self._prune()
 
@@ -261,8 +263,35 @@ class GrowthLikelihood:
         """The (point, mode) pairs that a draw in the box can push across the threshold,
         the points they leave fixed, and the likelihood's per-point terms."""
         obs, p, valid = self.obs, self.params, self.valid
-        point_k, margin_k, rates_k = self._solved
-        keep = np.abs(margin_k) <= self._reach(point_k, rates_k)
+        point_k, margin_k, rates_k, inband_k = self._solved
+        reach_k = self._reach(point_k, rates_k)
+        can = margin_k + reach_k > 0  # unstable for some draw in the box
+        # The squeak heard is the most unstable mode's (the bench sounds that one, and its
+        # limit cycle takes over): where a mode outside the band can be unstable as well as
+        # one inside, the verdict is a contest between them, decided per draw.
+        contest = np.zeros(obs.points, bool)
+        contest[point_k[can & ~inband_k]] = True
+        has_heard = np.zeros(obs.points, bool)
+        has_heard[point_k[can & inband_k]] = True
+        contest &= has_heard
+        pairs = np.flatnonzero(contest[point_k] & can)
+        pairs = pairs[np.argsort(point_k[pairs], kind="stable")]
+        self.contested, starts_c = np.unique(point_k[pairs], return_index=True)
+        self._contest = (
+            np.searchsorted(self.contested, point_k[pairs]),
+            margin_k[pairs],
+            rates_k[:, pairs],
+            inband_k[pairs],
+            starts_c,
+        )
+        plain = inband_k & ~contest[point_k]  # elsewhere only the modes in the band count
+        point_k, margin_k, rates_k, reach_k = (
+            point_k[plain],
+            margin_k[plain],
+            rates_k[:, plain],
+            reach_k[plain],
+        )
+        keep = np.abs(margin_k) <= reach_k
         fixed = np.zeros(obs.points, bool)  # squeaks for every draw in the box
         fixed[point_k[~keep & (margin_k > 0)]] = True
         keep &= ~fixed[point_k]
@@ -283,6 +312,21 @@ class GrowthLikelihood:
         self._delta = heard * math.log(q1 / q0) + quiet * (math.log1p(-q1) - math.log1p(-q0))
         self.fixed = fixed
         self._constant = float(base.sum() + self._delta[fixed].sum())
+
+    def _contest_margins(self, theta: np.ndarray) -> np.ndarray:
+        """(W, len(contested)) margin of the heard squeak at the contested points: the
+        largest growth in the band, or less by how much a mode outside it grows faster
+        (> 0: heard)."""
+        column, margin, rates, inband, starts = self._contest
+        if not len(self.contested):
+            return np.zeros((len(theta), 0))
+        dl, ds = self._level_slope_change(theta, self.contested)
+        growth = dl[:, column] * rates[0] + ds[:, column] * rates[1]
+        growth += (theta[:, self._linear] - self.centre[self._linear]) @ rates[2:]
+        growth += margin
+        g_in = np.maximum.reduceat(np.where(inband, growth, -np.inf), starts, axis=1)
+        g_out = np.maximum.reduceat(np.where(inband, -np.inf, growth), starts, axis=1)
+        return np.minimum(g_in, g_in - g_out)
 
     def _mode_rates(
         self, pairs: EigenPairs, at: ScrewParameters, speed: float, load: float
@@ -432,6 +476,7 @@ class GrowthLikelihood:
         if len(self.active):
             growth = self._growth(self._changes(theta), np.arange(len(self._margin)))
             out[:, self.active] = np.maximum.reduceat(growth, self._starts, axis=0).T
+        out[:, self.contested] = self._contest_margins(theta)
         return out
 
     def log_likelihood(self, theta: np.ndarray) -> np.ndarray:
@@ -455,6 +500,8 @@ class GrowthLikelihood:
         """
         theta = self._check(theta)
         out = self._constant + self._active_squeaks(theta) @ self._delta[self.active]
+        if len(self.contested):
+            out += (self._contest_margins(theta) > 0) @ self._delta[self.contested]
         inside = np.all((theta >= self.bounds[0]) & (theta <= self.bounds[1]), axis=1)
         return np.where(inside & self.reach.valid(theta), out, -np.inf)
 
@@ -479,6 +526,7 @@ class GrowthLikelihood:
         theta = self._check(theta)
         out = np.broadcast_to(self.fixed, (len(theta), self.obs.points)).copy()
         out[:, self.active] = self._active_squeaks(theta)
+        out[:, self.contested] = self._contest_margins(theta) > 0
         return out
 
     def recentred(self, params: ScrewParameters) -> GrowthLikelihood:
