@@ -33,6 +33,10 @@ from leadscrew_ros.model.uncertainty.scatter import Scatter
 
 ROOT = Path(__file__).resolve().parents[1]
 
+# The module fixture builds and calibrates a 20-unit bench: minutes on a loaded 2-core
+# machine. The timeout is there to catch a hang, not to time the work.
+pytestmark = pytest.mark.timeout(900)
+
 
 def _tool():
     """tools/calibration_example.py: the bench and calibration of doc/user/calibration.md."""

@@ -23,6 +23,10 @@ from leadscrew_ros.review.calibration import (
     unit_seed,
 )
 
+# The module fixtures sample a synthetic fleet of 20 units: a minute or more on a loaded
+# 2-core machine. The timeout is there to catch a hang, not to time the work.
+pytestmark = pytest.mark.timeout(900)
+
 NOMINAL = ScrewParameters()
 MODEL = SqueakModel(NOMINAL)  # the prior: Table 1 and the default scatter
 UNITS = 20

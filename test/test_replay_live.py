@@ -404,7 +404,9 @@ def test_sigterm_stops_a_replay_cleanly_before_its_end(log, collector, tmp_path)
     t0 = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     out, stderr = finish(proc, err)
-    assert time.monotonic() - t0 < 2.0
+    # a stall, not a speed: fewer than all messages (below) shows it stopped before its end;
+    # the exit (rclpy shutdown, coverage) took 2.35 s on a loaded machine
+    assert time.monotonic() - t0 < 15.0
     c.spin_for(0.2)
     assert proc.returncode == 0 and "Traceback" not in stderr, (out, stderr)  # asked: success
     lines = out.splitlines()
