@@ -157,6 +157,25 @@ class DetectionErrors:
         return min(1.0, hop_s / self.correlation_s)
 
 
+def _expanded(
+    dl: np.ndarray,
+    ds: np.ndarray,
+    dlin: np.ndarray,
+    column: np.ndarray,
+    rates: np.ndarray,
+    margin: np.ndarray,
+) -> np.ndarray:
+    """(pairs, W) first-order growth beyond the threshold of (point, mode) pairs (module
+    docstring): `dl`, `ds` (points, W) level and slope changes, `dlin` (F, W) the linear
+    names' changes, `column` each pair's point row, `rates` (2 + F, pairs), `margin` (pairs,)
+    at the centre."""
+    growth = dl[column] * rates[0, :, None]
+    growth += ds[column] * rates[1, :, None]
+    growth += rates[2:].T @ dlin
+    growth += margin[:, None]
+    return growth
+
+
 class GrowthLikelihood:
     """Log-likelihood of a unit's observations over draws of the calibrated parameters.
 
@@ -262,7 +281,7 @@ class GrowthLikelihood:
     def _prune(self) -> None:
         """The (point, mode) pairs that a draw in the box can push across the threshold,
         the points they leave fixed, and the likelihood's per-point terms."""
-        obs, p, valid = self.obs, self.params, self.valid
+        obs, valid = self.obs, self.valid
         point_k, margin_k, rates_k, inband_k = self._solved
         reach_k = self._reach(point_k, rates_k)
         can = margin_k + reach_k > 0  # unstable for some draw in the box
@@ -284,6 +303,7 @@ class GrowthLikelihood:
             inband_k[pairs],
             starts_c,
         )
+        self._contest_at = self._centre_at(self.contested)
         plain = inband_k & ~contest[point_k]  # elsewhere only the modes in the band count
         point_k, margin_k, rates_k, reach_k = (
             point_k[plain],
@@ -300,9 +320,7 @@ class GrowthLikelihood:
         self.active, starts = np.unique(self._point, return_index=True)
         self._starts = starts
         self._column = np.searchsorted(self.active, self._point)  # pair -> active column
-        self._level0, self._slope0 = level_slope(
-            p, obs.speed_rad_s[self.active], obs.load_n[self.active], self._alpha
-        )
+        self._active_at = self._centre_at(self.active)
         # log-likelihood per point: base (no squeak) and the change when it squeaks
         w = self.errors.frame_weight(obs.frame_s)
         heard = w * obs.heard * valid
@@ -320,13 +338,10 @@ class GrowthLikelihood:
         column, margin, rates, inband, starts = self._contest
         if not len(self.contested):
             return np.zeros((len(theta), 0))
-        dl, ds = self._level_slope_change(theta, self.contested)
-        growth = dl[:, column] * rates[0] + ds[:, column] * rates[1]
-        growth += (theta[:, self._linear] - self.centre[self._linear]) @ rates[2:]
-        growth += margin
-        g_in = np.maximum.reduceat(np.where(inband, growth, -np.inf), starts, axis=1)
-        g_out = np.maximum.reduceat(np.where(inband, -np.inf, growth), starts, axis=1)
-        return np.minimum(g_in, g_in - g_out)
+        growth = _expanded(*self._changes(theta, self._contest_at), column, rates, margin)
+        g_in = np.maximum.reduceat(np.where(inband[:, None], growth, -np.inf), starts, axis=0)
+        g_out = np.maximum.reduceat(np.where(inband[:, None], -np.inf, growth), starts, axis=0)
+        return np.minimum(g_in, g_in - g_out).T
 
     def _mode_rates(
         self, pairs: EigenPairs, at: ScrewParameters, speed: float, load: float
@@ -352,7 +367,7 @@ class GrowthLikelihood:
         reach = np.zeros(len(point))
         if self._friction and len(point):
             used = np.unique(point)
-            dl, ds = self._level_slope_change(box, used)
+            dl, ds = self._level_slope_change(box, self._centre_at(used))
             at = np.searchsorted(used, point)
             reach += np.abs(rates[0]) * np.abs(dl).max(axis=0)[at]
             reach += np.abs(rates[1]) * np.abs(ds).max(axis=0)[at]
@@ -371,20 +386,23 @@ class GrowthLikelihood:
         lo, hi = self.bounds
         return lo + (hi - lo) * unit
 
+    def _centre_at(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`points` with the centre's friction level and slope there (computed once, not per
+        sampler call)."""
+        level0, slope0 = level_slope(
+            self.params, self.obs.speed_rad_s[points], self.obs.load_n[points], self._alpha
+        )
+        return points, level0, slope0
+
     def _level_slope_change(
-        self, theta: np.ndarray, points: np.ndarray | None = None
+        self, theta: np.ndarray, at: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
-        """(W, len(points)) changes of the friction level and slope from the centre's, at
-        `points` (the active points when None)."""
+        """(W, len(points)) changes of the friction level and slope from the centre's at the
+        points of `at` (`_centre_at`; the active points when None)."""
         fields = dict(self._fields)
         for k in self._friction:
             fields[self.names[k]] = theta[:, k : k + 1]
-        if points is None:
-            points, level0, slope0 = self.active, self._level0, self._slope0
-        else:
-            level0, slope0 = level_slope(
-                self.params, self.obs.speed_rad_s[points], self.obs.load_n[points], self._alpha
-            )
+        points, level0, slope0 = self._active_at if at is None else at
         speed, load = self.obs.speed_rad_s[points], self.obs.load_n[points]
         level, slope = level_slope(SimpleNamespace(**fields), speed, load, self._alpha)
         return level - level0, slope - slope0
@@ -402,25 +420,25 @@ class GrowthLikelihood:
         self.evaluations += len(theta)
         return theta
 
-    def _changes(self, theta: np.ndarray) -> tuple[np.ndarray, ...]:
+    def _changes(
+        self, theta: np.ndarray, at: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The draws' changes from the centre, draws along the last axis: level and slope at
-        the active points (A, W) and the linear names' (F, W); zeros for what is not
-        calibrated."""
+        the points of `at` (the active points when None) (A, W) and the linear names' (F, W);
+        zeros for what is not calibrated."""
         if self._friction:
-            dl, ds = (np.ascontiguousarray(c.T) for c in self._level_slope_change(theta))
+            dl, ds = (np.ascontiguousarray(c.T) for c in self._level_slope_change(theta, at))
         else:
-            dl = ds = np.zeros((len(self.active), len(theta)))
+            points = (self._active_at if at is None else at)[0]
+            dl = ds = np.zeros((len(points), len(theta)))
         return dl, ds, (theta[:, self._linear] - self.centre[self._linear]).T
 
     def _growth(self, changes: tuple[np.ndarray, ...], pairs: np.ndarray) -> np.ndarray:
         """(len(pairs), W) expanded growth beyond the threshold of (point, mode) pairs."""
         dl, ds, dlin = changes
-        at, rates = self._column[pairs], self._rates[:, pairs]
-        growth = dl[at] * rates[0, :, None]
-        growth += ds[at] * rates[1, :, None]
-        growth += rates[2:].T @ dlin
-        growth += self._margin[pairs, None]
-        return growth
+        return _expanded(
+            dl, ds, dlin, self._column[pairs], self._rates[:, pairs], self._margin[pairs]
+        )
 
     def _active_squeaks(self, theta: np.ndarray) -> np.ndarray:
         """(W, len(active)) verdicts at the active points. Each pair (point, mode) is first
