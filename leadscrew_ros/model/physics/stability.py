@@ -251,17 +251,6 @@ def classify(
     return classify_solves(solves_of([eigen], len(labels))[0][1], labels)[0]
 
 
-def classify_many(
-    eigens: Sequence[Eigen], labels: tuple[str, ...]
-) -> list[tuple[tuple[ModeResult, ...], tuple[float, ...]]]:
-    """`classify` of many eigen-solves (`classify_solves` of each group of `solves_of`)."""
-    out: list = [None] * len(eigens)
-    for index, solves in solves_of(eigens, len(labels)):
-        for i, c in zip(index, classify_solves(solves, labels), strict=True):
-            out[i] = c
-    return out
-
-
 def classify_solves(
     solves: Solves, labels: tuple[str, ...]
 ) -> list[tuple[tuple[ModeResult, ...], tuple[float, ...]]]:
