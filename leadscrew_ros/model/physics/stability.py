@@ -207,7 +207,10 @@ def left_rows(vr: np.ndarray, osc: np.ndarray, start: int = 0) -> np.ndarray:
     _, _, inverse, info = lapack.dgesv(vr, _unit_columns(len(vr), start))
     if info != 0:
         raise np.linalg.LinAlgError("the right eigenvectors are not a basis (defective matrix)")
-    return (inverse[osc] - 1j * inverse[osc + 1]) * 0.5
+    rows = np.empty((len(osc), inverse.shape[1]), complex)
+    np.multiply(inverse[osc], 0.5, out=rows.real)
+    np.multiply(inverse[osc + 1], -0.5, out=rows.imag)
+    return rows
 
 
 @lru_cache(maxsize=16)

@@ -464,7 +464,8 @@ class FirstOrderProbability:
         n, osc, vr = expansion.geometry.n, eigen.osc, eigen.vr
         lam = eigen.lam[osc]
         y_lower = self._left(eigen.vr, osc, speed, load, matrix)
-        q = vr[:n, osc] + 1j * vr[:n, osc + 1]
+        q = np.empty((n, len(osc)), complex)  # the displacement halves, C-ordered
+        q.real, q.imag = vr[:n, osc], vr[:n, osc + 1]
         hits = hits_of(
             growth_rates(expansion.units, float(speed), lam, q, y_lower),
             GROWTH_TOL * np.abs(lam) - lam.real,
