@@ -486,12 +486,13 @@ def main(argv: list[str] | None = None) -> int:
             "import sys; from pathlib import Path; import bench_replay; "
             "print(bench_replay.profile_solve(Path(sys.argv[1]), sys.argv[2]))"
         )
-        env = dict(
-            os.environ,
-            PYTHONPATH=os.pathsep.join([str(Path(args.src).resolve()), str(Path(__file__).parent)]),
-        )
+        # `-c` puts its cwd first on the path: run in benchmarks/ (no package there)
+        env = dict(os.environ, PYTHONPATH=str(Path(args.src).resolve()))
         done = subprocess.run(
-            [sys.executable, "-c", child, str(bag), cycle.joint_name], env=env, text=True
+            [sys.executable, "-c", child, str(bag), cycle.joint_name],
+            env=env,
+            cwd=Path(__file__).resolve().parent,
+            text=True,
         )
         return done.returncode
     packages = {"this checkout": None, **({args.src: args.src} if args.src else {})}
