@@ -90,8 +90,18 @@ def serial(logs: list[Path], joint: str) -> float:
         return time.perf_counter() - t0
 
 
+def _cpu_s() -> float:
+    """User + system CPU seconds of this process (run in each Dask worker)."""
+    import resource
+
+    u = resource.getrusage(resource.RUSAGE_SELF)
+    return u.ru_utime + u.ru_stime
+
+
 def review(logs: list[Path], joint: str, workers: int) -> dict:
-    """Wall times of starting a LocalCluster of `workers` and of the review on it."""
+    """Wall times of starting a LocalCluster of `workers` and of the review on it, and the
+    CPU time its worker processes spent (user + system: less sensitive to other load on the
+    machine than the wall time)."""
     settings = FleetSettings(inputs=InputSettings(joint_name=joint), report=False)
     with tempfile.TemporaryDirectory(prefix="bench_fleet_review_") as out:
         t0 = time.perf_counter()
@@ -99,23 +109,30 @@ def review(logs: list[Path], joint: str, workers: int) -> dict:
             start = time.perf_counter() - t0
             packages = set(client.run(lambda: __import__("leadscrew_ros").__file__).values())
             print(f"workers' package: {', '.join(sorted(packages))}", file=sys.stderr)
+            cpu0 = sum(client.run(_cpu_s).values())
             run = review_logs(logs, out, settings, client, progress=False)
+            cpu = sum(client.run(_cpu_s).values()) - cpu0
     if run.failed:
         raise SystemExit(f"{run.failed} logs failed: {run.rows[0]['error']}")
-    return {"start_s": start, "wall_s": run.wall_s, "task_s": sum(r["wall_s"] for r in run.rows)}
+    return {
+        "start_s": start,
+        "wall_s": run.wall_s,
+        "task_s": sum(r["wall_s"] for r in run.rows),
+        "cpu_s": cpu,
+    }
 
 
 def table(res: dict) -> str:
     n, serial_s = res["logs"], res["serial_s"]
     rate = {} if serial_s is None else {"serial": 60.0 * n / serial_s}
     lines = [
-        "| run | wall | logs per minute | vs serial | cluster start |",
-        "|---|---:|---:|---:|---:|",
+        "| run | wall | logs per minute | vs serial | cluster start | workers' CPU per log |",
+        "|---|---:|---:|---:|---:|---:|",
     ]
     if serial_s is not None:
         lines.append(
             f"| serial loop of `replay` (one process) | {serial_s:.1f} s | "
-            f"{rate['serial']:.1f} | 1.00× | – |"
+            f"{rate['serial']:.1f} | 1.00× | – | – |"
         )
     package = f" (package of {res['src']})" if res.get("src") else ""
     for w, r in res["review"].items():
@@ -123,7 +140,7 @@ def table(res: dict) -> str:
         versus = "–" if serial_s is None else f"{serial_s / r['wall_s']:.2f}×"
         lines.append(
             f"| `review`, LocalCluster {w} worker(s){package} | {r['wall_s']:.1f} s | "
-            f"{rate[w]:.1f} | {versus} | {r['start_s']:.1f} s |"
+            f"{rate[w]:.1f} | {versus} | {r['start_s']:.1f} s | {r['cpu_s'] / n:.2f} s |"
         )
     one = res["review"].get("1")
     if one:

@@ -18,7 +18,8 @@ splits, on /motor_speed, /axial_load (std_msgs/Float64) and /joint_states
   published (/nut_position, every sample): the operating point and the nut move at almost
   every message.
 `--profile`: only where a prediction worker's time goes on a log (the stages of `replay.solve`
-timed inside it, in this process; with PYTHONPATH set, another checkout's). Each log is
+timed inside it, in this process; with `--src DIR` in a child process with that checkout's
+package). Each log is
 generated once and cached in the temp directory (`--regenerate` to rebuild). One
 `replay.replay` per case and round (default parameters and deadbands, the log's screw joint as
 `joint_name`) runs in a fresh child process; the ratio is log duration / wall time, and the CPU
@@ -272,7 +273,7 @@ def floor_lines(res: dict, solve_us: dict[str, float]) -> str:
     return "\n".join(lines)
 
 
-def profile_solve(bag: Path, cycle: DutyCycle, batches: int = 40) -> str:
+def profile_solve(bag: Path, joint: str, batches: int = 40) -> str:
     """Where a prediction worker's time goes on `bag`: its first `batches` segments of jobs
     (`replay._BATCH_JOBS` each, the timeline of the log as the replay makes it) solved in this
     process (BLAS on one thread), each stage timed inside (wrapped with a timer); the code of
@@ -323,7 +324,7 @@ def profile_solve(bag: Path, cycle: DutyCycle, batches: int = 40) -> str:
     model = SqueakModel()
     source = open_log(bag)
     timeline = Timeline(
-        model.params, InputSettings(joint_name=cycle.joint_name).resolved("/"), topic_types(source)
+        model.params, InputSettings(joint_name=joint).resolved("/"), topic_types(source)
     )
     jobs = []
     for i, (_, m) in enumerate(source.messages()):
@@ -477,8 +478,23 @@ def main(argv: list[str] | None = None) -> int:
     args.minutes = args.minutes or [10.0]
     if args.profile:
         cycle = cycle_of(args.cases[-1], args)
-        print(profile_solve(cached_log(cycle, args.regenerate)[0], cycle))
-        return 0
+        bag = cached_log(cycle, args.regenerate)[0]
+        if not args.src:
+            print(profile_solve(bag, cycle.joint_name))
+            return 0
+        child = (
+            "import sys; from pathlib import Path; import bench_replay; "
+            "print(bench_replay.profile_solve(Path(sys.argv[1]), sys.argv[2]))"
+        )
+        # `-c` puts its cwd first on the path: run in benchmarks/ (no package there)
+        env = dict(os.environ, PYTHONPATH=str(Path(args.src).resolve()))
+        done = subprocess.run(
+            [sys.executable, "-c", child, str(bag), cycle.joint_name],
+            env=env,
+            cwd=Path(__file__).resolve().parent,
+            text=True,
+        )
+        return done.returncode
     packages = {"this checkout": None, **({args.src: args.src} if args.src else {})}
     res = dict(
         env=environment(), rate_hz=args.rate, workers=args.workers, rounds=args.rounds, cases={}

@@ -213,3 +213,23 @@ def test_predictions_are_those_of_the_code_before(log):
     assert compared > 1000  # both paths at hundreds of points
     print(f"{log}: P equal in {equal} of {compared}, largest difference {worst:g}")
     assert equal >= EQUAL_SHARE * compared and worst <= MAX_P_DIFF, (equal, compared, worst)
+
+
+def test_the_dense_benchmark_logs_strokes_differ_and_keep_the_nut_on_the_screw():
+    """`DutyCycle.stroke_spread`: every stroke its own peak speed and load, the nut within
+    [0, L - b]; without a spread the samples are those of identical strokes."""
+    import argparse
+
+    cycle = cycle_of("dense", argparse.Namespace(minutes=[2.0], rate=100.0))
+    s = samples(cycle)
+    travel = cycle.stroke.max_nut_position_m
+    assert 0.0 <= s.nut_position_m.min() and s.nut_position_m.max() <= travel + 1e-9
+    moving = np.flatnonzero(np.abs(s.speed_rad_s) > 1.0)
+    strokes = np.split(moving, np.flatnonzero(np.diff(moving) > 1) + 1)
+    peaks = [np.abs(s.speed_rad_s[k]).max() for k in strokes]
+    loads = [s.load_n[k].max() for k in strokes]
+    assert len(peaks) >= 8 and len(set(np.round(peaks, 1))) == len(peaks)
+    assert np.ptp(peaks) > 10.0 and np.ptp(loads) > 10.0
+    alike = samples(DutyCycle(duration_s=60.0, rest_s=0.0))
+    first, second = alike.speed_rad_s[:1200], alike.speed_rad_s[2400:3600]  # strokes 1 and 3
+    np.testing.assert_allclose(np.abs(first), np.abs(second), atol=0.2)  # only the noise differs

@@ -545,23 +545,22 @@ class SqueakModel:
             for s, f in zip(speeds.tolist(), loads.tolist(), strict=True)
         ]
         out: list[Prediction | None] = [None] * len(points)
-        ok, units = list(range(len(points))), None
+        ok, units, rows = list(range(len(points))), None, None
         if nuts:
-            ok, units = self._contact_at(nuts[0], points, out)
+            ok, units, rows = self._contact_at(nuts[0], points, out)
         for i in ok:
             validity, reason = self.validity(*points[i])
             if validity is not Validity.OK:
                 out[i] = Prediction(*points[i], self.params.formulation, validity, reason)
         ok = [i for i in ok if out[i] is None]
-        matrices = self.geometry.state_matrices(
-            speeds[ok], loads[ok], units=None if units is None else units[ok]
-        )
+        rows = None if rows is None else rows[ok]
+        matrices = self.geometry.state_matrices(speeds[ok], loads[ok], units=units, rows=rows)
         groups, failed = eig_right_many(matrices, self.geometry.n)
         for k, exc in failed.items():
             out[ok[k]] = self._failed(*points[ok[k]], exc)
         if len(failed) < len(ok):
             for k, p in self._solved(
-                [points[i] for i in ok], groups, matrices, None if units is None else units[ok]
+                [points[i] for i in ok], groups, matrices, units, rows
             ).items():
                 out[ok[k]] = p
         filled = [p for p in out if p is not None]
@@ -574,11 +573,12 @@ class SqueakModel:
         groups: list[tuple[list[int], Solves]],
         matrices: np.ndarray,
         units: np.ndarray | None = None,
+        rows: np.ndarray | None = None,
     ) -> dict[int, Prediction]:
         """The valid predictions at the `points` the solves `groups` (right vectors, grouped:
         `stability.solves_of`) cover, by index: labels and P(squeak) in array steps over the
-        solves of equal mode count; `matrices` the points' state matrices, `units` each
-        point's contact (see `predict_many`)."""
+        solves of equal mode count; `matrices` the points' state matrices, `units` their
+        contacts and `rows` each point's (see `predict_many`)."""
         if self._probability is None:
             estimates: list = [None] * len(points)
         elif self._probability.interpolates:  # one point at a time
@@ -589,7 +589,7 @@ class SqueakModel:
                     estimates[i] = self._probability.probability(*points[i], eigen, matrices[i])
         else:
             speeds, loads = (np.array(v, float) for v in zip(*points, strict=True))
-            estimates = self._probability.estimates(speeds, loads, groups, matrices, units)
+            estimates = self._probability.estimates(speeds, loads, groups, matrices, units, rows)
         out = {}
         for index, solves in groups:
             for i, classified in zip(index, classify_solves(solves, self.labels), strict=True):
@@ -598,9 +598,10 @@ class SqueakModel:
 
     def _contact_at(
         self, nuts: np.ndarray, points: list[tuple[float, float]], out: list
-    ) -> tuple[list[int], np.ndarray]:
+    ) -> tuple[list[int], np.ndarray, np.ndarray]:
         """The points whose nut position the parameters allow (the others get their verdict in
-        `out`) and every point's `lower_half_units` (rows of the allowed points only)."""
+        `out`), the `lower_half_units` of the allowed positions, and every point's row in them
+        (meaningful for the allowed points only)."""
         if geometry_fields(self.scatter):
             raise ParameterError(
                 "scattered geometry fields: predict each nut position with its own model "
@@ -625,7 +626,7 @@ class SqueakModel:
         rows = np.full(len(distinct), -1)
         rows[allowed] = np.arange(int(allowed.sum()))
         units = lower_half_units_at(self.params, distinct[allowed])
-        return np.flatnonzero(allowed[inverse]).tolist(), units[np.maximum(rows[inverse], 0)]
+        return np.flatnonzero(allowed[inverse]).tolist(), units, np.maximum(rows[inverse], 0)
 
     def _failed(self, speed: float, load: float, exc: Exception) -> Prediction:
         """The verdict where LAPACK gave up: say so, no number."""

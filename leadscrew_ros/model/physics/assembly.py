@@ -130,6 +130,7 @@ class Geometry:
         load_n: ArrayLike,
         scattered: Mapping[str, np.ndarray] | None = None,
         units: np.ndarray | None = None,
+        rows: np.ndarray | None = None,
     ) -> np.ndarray:
         """First-order state matrices [[0, I], [-K, -D]] of (27) for arrays of operating points
         (broadcast). One matrix product rescales all precomputed parts.
@@ -146,7 +147,11 @@ class Geometry:
             factors and the damping diagonal, so samples of them cost one product each.
         units : ndarray, optional
             `lower_half_units` of each point's own contact, shape (..., 5, N * 2N) broadcast
-            with the points (`lower_half_units_at`: other nut positions), instead of these.
+            with the points (`lower_half_units_at`: other nut positions), instead of these;
+            with `rows`, those of D contacts (D, 5, N * 2N).
+        rows : ndarray, optional
+            Of one-dimensional points: each point's contact, a row of `units` (the points of
+            one contact rescale it in one product, no copy per point).
 
         Returns
         -------
@@ -184,11 +189,15 @@ class Geometry:
         n = self.n
         # einsum, not @: a BLAS matmul here wakes OpenBLAS threads that keep spinning on the
         # other core through the following eigen-solve (measured: 1.8 CPU-s per wall-s).
-        lower = (
-            np.einsum("...k,kj->...j", coef, self.lower_half_units)
-            if units is None
-            else np.einsum("...k,...kj->...j", coef, units)
-        )
+        if units is None:
+            lower = np.einsum("...k,kj->...j", coef, self.lower_half_units)
+        elif rows is None:
+            lower = np.einsum("...k,...kj->...j", coef, units)
+        else:
+            lower = np.empty(coef.shape[:-1] + units.shape[-1:])
+            for row in np.unique(rows).tolist():
+                at = rows == row
+                lower[at] = np.einsum("...k,kj->...j", coef[at], units[row])
         lower = lower.reshape(coef.shape[:-1] + (n, 2 * n))
         out = np.empty(lower.shape[:-2] + (2 * n, 2 * n))
         out[...] = self._template

@@ -207,7 +207,10 @@ def left_rows(vr: np.ndarray, osc: np.ndarray, start: int = 0) -> np.ndarray:
     _, _, inverse, info = lapack.dgesv(vr, _unit_columns(len(vr), start))
     if info != 0:
         raise np.linalg.LinAlgError("the right eigenvectors are not a basis (defective matrix)")
-    return (inverse[osc] - 1j * inverse[osc + 1]) * 0.5
+    rows = np.empty((len(osc), inverse.shape[1]), complex)
+    np.multiply(inverse[osc], 0.5, out=rows.real)
+    np.multiply(inverse[osc + 1], -0.5, out=rows.imag)
+    return rows
 
 
 @lru_cache(maxsize=16)
@@ -248,27 +251,40 @@ def classify(
     A mode is labelled by its dominant modal coordinate (largest |q_i| in the displacement half
     of the state eigenvector; the basis is mass-normalised so amplitudes are comparable).
     """
-    return classify_solves(solves_of([eigen], len(labels))[0][1], labels)[0]
+    osc, vr, n = eigen.osc, eigen.vr, len(labels)
+    lam = eigen.lam[osc]
+    order = np.argsort(-lam.real, kind="stable")
+    re, im = vr[:n, osc], vr[:n, osc + 1]  # |q|^2 from the packed parts: no complex copy
+    dominant = (re * re + im * im).argmax(axis=0)[order]
+    return _modes(lam[order][None], dominant[None], eigen.lam[None], labels)[0]
 
 
 def classify_solves(
     solves: Solves, labels: tuple[str, ...]
 ) -> list[tuple[tuple[ModeResult, ...], tuple[float, ...]]]:
-    """`classify` of stacked solves: sort, frequencies, damping ratios and labels in one
-    array step each, the same IEEE operations per mode as one at a time."""
+    """`classify` of stacked solves: sort, labels, frequencies and damping ratios in one array
+    step each, the same IEEE operations per mode as one at a time."""
     order = np.argsort(-solves.lam.real, axis=1, kind="stable")
     rows = np.arange(len(order))[:, None]
-    lam = solves.lam[rows, order]
-    re, mag = lam.real, np.abs(lam)
     q = solves.q
     dominant = (q.real * q.real + q.imag * q.imag).argmax(axis=1)[rows, order]
+    return _modes(solves.lam[rows, order], dominant, solves.eigvals, labels)
+
+
+def _modes(
+    lam: np.ndarray, dominant: np.ndarray, eigvals: np.ndarray, labels: tuple[str, ...]
+) -> list[tuple[tuple[ModeResult, ...], tuple[float, ...]]]:
+    """Per solve its ModeResults and divergence rates, from the sorted oscillatory eigenvalues
+    `lam` (G, M), the rows of their largest displacement `dominant` (G, M) and all
+    eigenvalues `eigvals` (G, 2N)."""
+    re, mag = lam.real, np.abs(lam)
     columns = zip(
         dominant.tolist(),
         (lam.imag / (2 * math.pi)).tolist(),
         re.tolist(),
         (-re / mag).tolist(),
         (re > GROWTH_TOL * mag).tolist(),
-        (solves.eigvals.real.max(axis=1) > 0).tolist(),  # a divergence to look for
+        (eigvals.real.max(axis=1) > 0).tolist(),  # a divergence to look for
         strict=True,
     )
     return [
@@ -281,9 +297,9 @@ def classify_solves(
                     zip(map(labels.__getitem__, d), f, r, z, u, strict=True),
                 )
             ),
-            _divergence(eigvals) if grows else (),
+            _divergence(values) if grows else (),
         )
-        for (d, f, r, z, u, grows), eigvals in zip(columns, solves.eigvals, strict=True)
+        for (d, f, r, z, u, grows), values in zip(columns, eigvals, strict=True)
     ]
 
 

@@ -40,6 +40,7 @@ import copy
 import math
 from functools import cached_property
 from types import SimpleNamespace
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -162,11 +163,17 @@ class _Expansion:
     def changes(self, speed: ArrayLike, load: ArrayLike, damping: np.ndarray) -> np.ndarray:
         """The samples' changes of friction level, slope and damping ratio from the nominal,
         shape (3, ..., count) for speeds and loads of shape (...) [rad/s], [N]."""
-        speed, load = np.asarray(speed, float)[..., None], np.asarray(load, float)[..., None]
+        if np.ndim(speed):  # a column of samples per point (one point: floats, the cheaper)
+            speed, load = np.asarray(speed, float)[..., None], np.asarray(load, float)[..., None]
         alpha = self.geometry.contact.alpha
         level0, slope0 = level_slope(self.params, speed, load, alpha)
         level, slope = level_slope(self.sampled, speed, load, alpha)
-        change = np.empty((3,) + np.broadcast_shapes(level.shape, damping.shape))
+        shape = (
+            level.shape
+            if level.shape[-1:] == damping.shape
+            else np.broadcast_shapes(level.shape, damping.shape)
+        )  # (unless no friction field scatters)
+        change = np.empty((3,) + shape)
         np.subtract(level, level0, out=change[0])
         np.subtract(slope, slope0, out=change[1])
         change[2] = damping
@@ -266,8 +273,21 @@ def hits_of(rates: np.ndarray, threshold: np.ndarray, change: np.ndarray) -> np.
     `change` (3, count). None where no mode can reach its threshold in any sample (by the
     bound of the module docstring: no sample squeaks), else the (count,) verdicts from the
     modes that can."""
-    hi, lo = change.max(axis=1)[:, None], change.min(axis=1)[:, None]
-    candidates = np.flatnonzero(np.maximum(rates * hi, rates * lo).sum(axis=0) > threshold)
+    reach = _reach(rates, change.max(axis=1)[:, None], change.min(axis=1)[:, None], threshold)
+    return _hits(rates, threshold, np.flatnonzero(reach), change)
+
+
+def _reach(rates: np.ndarray, hi: np.ndarray, lo: np.ndarray, threshold: np.ndarray) -> np.ndarray:
+    """The modes some sample may move across the threshold: the bound of the module docstring
+    from the rates (..., 3, M) and the changes' larger and smaller ends (..., 3, 1)."""
+    return np.maximum(rates * hi, rates * lo).sum(axis=-2) > threshold
+
+
+def _hits(
+    rates: np.ndarray, threshold: np.ndarray, candidates: np.ndarray, change: np.ndarray
+) -> np.ndarray | None:
+    """The samples' verdicts from the growth of the `candidates` among the modes (None: no
+    candidate, no sample squeaks)."""
     if not len(candidates):
         return None
     growth = rates[:, candidates].T @ change  # (Mc, count)
@@ -444,7 +464,8 @@ class FirstOrderProbability:
         n, osc, vr = expansion.geometry.n, eigen.osc, eigen.vr
         lam = eigen.lam[osc]
         y_lower = self._left(eigen.vr, osc, speed, load, matrix)
-        q = vr[:n, osc] + 1j * vr[:n, osc + 1]
+        q = np.empty((n, len(osc)), complex)  # the displacement halves, C-ordered
+        q.real, q.imag = vr[:n, osc], vr[:n, osc + 1]
         hits = hits_of(
             growth_rates(expansion.units, float(speed), lam, q, y_lower),
             GROWTH_TOL * np.abs(lam) - lam.real,
@@ -460,6 +481,7 @@ class FirstOrderProbability:
         groups: list[tuple[list[int], Solves]],
         matrices: np.ndarray | None = None,
         units: np.ndarray | None = None,
+        rows: np.ndarray | None = None,
     ) -> list[tuple[float, float] | None]:
         """`probability` at many operating points (J,) at once: the samples' friction at all
         of them in one step, the rates of the solves with the same number of modes in one
@@ -474,8 +496,11 @@ class FirstOrderProbability:
         matrices : numpy.ndarray, optional
             Their state matrices (J, 2N, 2N) (built again where needed and not given).
         units : numpy.ndarray, optional
-            Each point's `Geometry.lower_half_units` (J, 5, N * 2N), when its contact is not
-            this estimate's (`assembly.lower_half_units_at`); the samples are the same.
+            `Geometry.lower_half_units` of other contacts (D, 5, N * 2N) than this estimate's
+            (`assembly.lower_half_units_at`: other nut positions); the samples are the same.
+        rows : numpy.ndarray, optional
+            With `units`: each point's contact, a row of `units` (J,); without, `units` has
+            one per point (J, 5, N * 2N).
 
         Returns
         -------
@@ -497,6 +522,7 @@ class FirstOrderProbability:
             else units_on_displacements(units, expansion.geometry.basis.omega_rad_s)
         )
         change = expansion.changes(speeds, loads, self._damping)  # (3, J, count)
+        hi, lo = change.max(axis=2).T, change.min(axis=2).T  # (J, 3): the ends of each change
         out: list[tuple[float, float] | None] = [None] * len(speeds)
         for index, solves in groups:
             y_lower = np.array(
@@ -508,15 +534,25 @@ class FirstOrderProbability:
                 ]
             )
             rates = growth_rates(
-                expansion.units if own is None else own[index],
+                expansion.units
+                if own is None
+                else own[index]
+                if rows is None
+                else own[rows[index]],
                 speeds[index],
                 solves.lam,
                 solves.q,
                 y_lower,
             )
             threshold = GROWTH_TOL * np.abs(solves.lam) - solves.lam.real
-            for g, i in enumerate(index):
-                hits = hits_of(rates[g], threshold[g], change[:, i])
+            reach = _reach(rates, hi[index][:, :, None], lo[index][:, :, None], threshold)
+            some = cast("list[bool]", reach.any(axis=1).tolist())
+            for g, (i, crosses) in enumerate(zip(index, some, strict=True)):
+                hits = (
+                    _hits(rates[g], threshold[g], np.flatnonzero(reach[g]), change[:, i])
+                    if crosses
+                    else None
+                )
                 out[i] = (0.0, 0.0) if hits is None else estimate(hits.reshape(self._shape))
         return out
 
