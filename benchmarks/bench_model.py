@@ -28,12 +28,13 @@ from statistics import median
 
 import numpy as np
 import scipy
+from scipy.linalg import lapack
 
 from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.model.physics import assembly
 from leadscrew_ros.model.physics.contact import contact_integrals
 from leadscrew_ros.model.physics.modes import modal_basis
-from leadscrew_ros.model.physics.stability import classify, eig_both
+from leadscrew_ros.model.physics.stability import classify, eig_both, left_rows, oscillatory_mask
 from leadscrew_ros.model.studies.fields import growth_field
 from leadscrew_ros.model.studies.stability_map import stability_map
 from leadscrew_ros.model.studies.work import _CHUNK
@@ -43,6 +44,7 @@ TARGET_POINT_RATIO = 1.5  # predict / bare eig
 TARGET_SCATTER_RATIO = 1.0  # predict with the default scatter / bare eig (issue 23)
 RANDOM_POINTS = 64  # random operating points of the scatter row
 RANDOM_SPEED_RAD_S, RANDOM_LOAD_N = (1.0, 150.0), (10.0, 500.0)
+SHIFT = 2.0**-50  # relative shift of an eigenvalue for its inverse iteration (~4.5 ulp)
 TARGET_MAP_RATIO = 1.2  # growth_field / bare eigvals, per point
 TARGET_REFINED_MAP_RATIO = 1.1  # stability_map (grid + refined boundary) / bare eigvals
 
@@ -267,6 +269,95 @@ def profile_predict(model: SqueakModel, loops: int = 20) -> str:
     out = io.StringIO()
     pstats.Stats(prof, stream=out).strip_dirs().sort_stats("tottime").print_stats(15)
     return head + "\n".join(rows) + "\n\ncProfile (tottime):\n" + out.getvalue()
+
+
+def inverse_iteration(a: np.ndarray, n: int, left: bool) -> tuple[np.ndarray, ...]:
+    """Issue 23's eigenvalues-first alternative to the vectors of LAPACK: `dgeev` without
+    vectors, then each oscillatory mode's displacement half q (Q(lam) q = 0, Q(lam) = lam^2 I +
+    lam D + K from the lower half [-K, -D] of the state matrix `a`) by one step of inverse
+    iteration, Q(lam (1 + SHIFT)) z = 1, all modes in one batched `numpy.linalg.solve`; with
+    `left` also the lower halves y2^H of the left vectors (y2^H Q(lam) = 0) by the transposed
+    systems in the same call, normalised y^H x = y2^H (2 lam I + D) q = 1. The shift is a few
+    ulp: the LU is not exactly singular (at lam itself it can be), and the error of a vector,
+    about SHIFT |lam| / the distance to the nearest other eigenvalue, stays ~1e-10 for the
+    whirl pairs (their eigenvalues ~1e-5 |lam| apart). Returns (lam, osc, q (N, M), y2^H (M, N)
+    or None)."""
+    wr, wi, _, _, info = lapack.dgeev(a, compute_vl=0, compute_vr=0)
+    assert info == 0
+    lam = wr + 1j * wi
+    osc = np.flatnonzero(oscillatory_mask(lam))
+    shift = lam[osc] * (1.0 + SHIFT)
+    m, lower = len(osc), a[n:]
+    q = np.empty(((1 + left) * m, n, n), complex)
+    np.multiply(shift[:, None, None], lower[:, n:], out=q[:m])  # -lam D
+    q[:m] += lower[:, :n]  # -K
+    np.negative(q[:m], out=q[:m])
+    q[:m].reshape(m, n * n)[:, :: n + 1] += (shift * shift)[:, None]
+    if left:
+        q[m:] = q[:m].transpose(0, 2, 1)  # Q^T conj(y2) = 0: the rows y2^H
+    z = np.linalg.solve(q, np.ones(((1 + left) * m, n, 1)))[..., 0]
+    if not left:
+        return lam, osc, z.T, None
+    right, rows = z[:m], z[m:]
+    dq = 2 * shift[:, None] * right - np.einsum("ij,mj->mi", lower[:, n:], right)  # (2 lam + D) q
+    return lam, osc, right.T, rows / np.einsum("mi,mi->m", rows, dq)[:, None]
+
+
+def bench_eigen_paths(model: SqueakModel, rounds: int) -> str:
+    """The eigen-solve of `predict` with scatter (LAPACK's right vectors, the left ones from
+    their inverse) against issue 23's eigenvalues-first alternative (`inverse_iteration`) at
+    the random points, interleaved; first checked: the alternative's labels are LAPACK's, its
+    eigenvalues the same to the bit, its left vectors `left_rows`' to 1e-9."""
+    n, points = model.geometry.n, random_points()
+    mats = [model.state_matrix(s, f) for s, f in points]
+    worst = 0.0
+    for a in mats:
+        e = eig_both(a, False)
+        lam, osc, q, y_h = inverse_iteration(a, n, True)
+        x = e.vr[:n, e.osc] + 1j * e.vr[:n, e.osc + 1]
+        assert np.array_equal(lam, e.lam) and np.array_equal(osc, e.osc)
+        dominant = np.abs(x).argmax(axis=0)
+        assert np.array_equal(np.abs(q).argmax(axis=0), dominant), "labels differ"
+        cols = np.arange(len(osc))
+        scale = q[dominant, cols] / x[dominant, cols]  # q = scale x: y2^H scales by 1 / scale
+        reference = left_rows(e.vr, e.osc, n)
+        error = np.abs(y_h * scale[:, None] - reference).max(axis=1)
+        worst = max(worst, float((error / np.abs(reference).max(axis=1)).max()))
+    assert worst < 1e-9, worst
+
+    def run(fn):
+        return lambda: [fn(a) for a in mats]
+
+    def with_left(a):
+        e = eig_both(a, False)
+        return e, left_rows(e.vr, e.osc, n)
+
+    fns = {
+        "bare `numpy.linalg.eig`": run(np.linalg.eig),
+        "`dgeev`, eigenvalues only": run(lambda a: lapack.dgeev(a, compute_vl=0, compute_vr=0)),
+        "`dgeev`, right vectors (the labels)": run(lambda a: eig_both(a, False)),
+        "`predict`'s: `dgeev` right vectors + `left_rows`": run(with_left),
+        "`dgeev` eigenvalues + right vectors by inverse iteration": run(
+            lambda a: inverse_iteration(a, n, False)
+        ),
+        "… + left vectors by the transposed solves (one call)": run(
+            lambda a: inverse_iteration(a, n, True)
+        ),
+    }
+    wall, cpu = interleaved(fns, rounds)
+    bare = wall["bare `numpy.linalg.eig`"]
+    rows = [
+        f"| {name} | {median(t) / len(mats) * 1e6:.1f} µs | {paired_ratio(t, bare):.2f}× | "
+        f"{paired_ratio(cpu[name], t):.2f} |"
+        for name, t in wall.items()
+    ]
+    return (
+        f"The eigen-solve with scatter and issue 23's eigenvalues-first alternative ({len(mats)} "
+        f"random points, {rounds} interleaved rounds; the alternative's labels equal LAPACK's, "
+        f"its left vectors within {worst:.1e} of `left_rows`):\n\n"
+        "| eigen-solve | per point | / bare `eig` | CPU / wall |\n|---|---:|---:|---:|\n"
+        + "\n".join(rows)
+    )
 
 
 def naive_state_matrix(model: SqueakModel, speed: float, load: float) -> np.ndarray:
@@ -534,6 +625,7 @@ def main(argv: list[str] | None = None) -> int:
         print(table(res))
     if args.profile:
         print("\n" + profile_predict(model))
+        print("\n" + bench_eigen_paths(model, cfg["point_rounds"]))
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(res, fh, indent=1)

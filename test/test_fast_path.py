@@ -233,3 +233,37 @@ def test_the_dense_benchmark_logs_strokes_differ_and_keep_the_nut_on_the_screw()
     alike = samples(DutyCycle(duration_s=60.0, rest_s=0.0))
     first, second = alike.speed_rad_s[:1200], alike.speed_rad_s[2400:3600]  # strokes 1 and 3
     np.testing.assert_allclose(np.abs(first), np.abs(second), atol=0.2)  # only the noise differs
+
+
+@pytest.mark.parametrize("formulation", ["paper", "consistent"])
+def test_the_eigenvalues_first_alternative_gives_lapacks_labels_and_left_vectors(formulation):
+    """bench_model.py's `inverse_iteration` (dgeev without vectors, then each mode's vectors by
+    one batched inverse-iteration solve of its quadratic pencil), the alternative its profile
+    times against `predict`'s eigen-solve, is a fair one: on a speed x load x nut grid its
+    eigenvalues are those of dgeev with vectors (rel 1e-12), its labels LAPACK's on every
+    oscillatory mode and its left vectors `left_rows`' to 1e-9."""
+    from bench_model import inverse_iteration
+
+    model = SqueakModel(ScrewParameters(formulation=formulation))
+    n, modes = model.geometry.n, 0
+    for nut in (0.0, 0.08, 0.16, 0.24):
+        m = model.with_params(nut_position_m=nut)
+        for speed in (1.0, 3.0, 10.0, 30.0, 60.0, 100.0, 150.0, -5.0, -50.0):
+            for load in (10.0, 50.0, 200.0, 500.0, -200.0):
+                if m.validity(speed, load)[0] is not Validity.OK:
+                    continue
+                a = m.state_matrix(speed, load)
+                e = eig_both(a, False)
+                lam, osc, q, y_h = inverse_iteration(a, n, True)
+                np.testing.assert_array_equal(osc, e.osc)
+                np.testing.assert_allclose(lam, e.lam, rtol=REL, atol=0.0)
+                x = e.vr[:n, osc] + 1j * e.vr[:n, osc + 1]
+                dominant = np.abs(x).argmax(axis=0)
+                np.testing.assert_array_equal(np.abs(q).argmax(axis=0), dominant)
+                cols = np.arange(len(osc))
+                scale = q[dominant, cols] / x[dominant, cols]  # q = scale x
+                reference = left_rows(e.vr, osc, n)
+                error = np.abs(y_h * scale[:, None] - reference).max(axis=1)
+                assert np.all(error <= 1e-9 * np.abs(reference).max(axis=1))
+                modes += len(osc)
+    assert modes > 2000
