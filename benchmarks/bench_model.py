@@ -34,7 +34,13 @@ from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.model.physics import assembly
 from leadscrew_ros.model.physics.contact import contact_integrals
 from leadscrew_ros.model.physics.modes import modal_basis
-from leadscrew_ros.model.physics.stability import classify, eig_both, left_rows, oscillatory_mask
+from leadscrew_ros.model.physics.stability import (
+    classify,
+    eig_both,
+    eig_right_many,
+    left_rows,
+    oscillatory_mask,
+)
 from leadscrew_ros.model.studies.fields import growth_field
 from leadscrew_ros.model.studies.stability_map import stability_map
 from leadscrew_ros.model.studies.work import _CHUNK
@@ -44,7 +50,7 @@ TARGET_POINT_RATIO = 1.5  # predict / bare eig
 TARGET_SCATTER_RATIO = 1.0  # predict with the default scatter / bare eig (issue 23)
 RANDOM_POINTS = 64  # random operating points of the scatter row
 RANDOM_SPEED_RAD_S, RANDOM_LOAD_N = (1.0, 150.0), (10.0, 500.0)
-SHIFT = 2.0**-50  # relative shift of an eigenvalue for its inverse iteration (~4.5 ulp)
+SHIFT = 2.0**-50  # relative shift of an eigenvalue for its inverse iteration (4 ulp of 1)
 TARGET_MAP_RATIO = 1.2  # growth_field / bare eigvals, per point
 TARGET_REFINED_MAP_RATIO = 1.1  # stability_map (grid + refined boundary) / bare eigvals
 
@@ -282,12 +288,29 @@ def inverse_iteration(a: np.ndarray, n: int, left: bool) -> tuple[np.ndarray, ..
     about SHIFT |lam| / the distance to the nearest other eigenvalue, stays ~1e-10 for the
     whirl pairs (their eigenvalues ~1e-5 |lam| apart). Returns (lam, osc, q (N, M), y2^H (M, N)
     or None)."""
+    lam, osc = eigenvalues(a)
+    shift = lam[osc] * (1.0 + SHIFT)
+    m, lower = len(osc), a[n:]
+    z = np.linalg.solve(pencils(a, n, shift, left), np.ones(((1 + left) * m, n, 1)))[..., 0]
+    if not left:
+        return lam, osc, z.T, None
+    right, rows = z[:m], z[m:]
+    dq = 2 * shift[:, None] * right - np.einsum("ij,mj->mi", lower[:, n:], right)  # (2 lam + D) q
+    return lam, osc, right.T, rows / np.einsum("mi,mi->m", rows, dq)[:, None]
+
+
+def eigenvalues(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """All eigenvalues of `a` by `dgeev` without vectors, and the indices of the oscillatory."""
     wr, wi, _, _, info = lapack.dgeev(a, compute_vl=0, compute_vr=0)
     assert info == 0
     lam = wr + 1j * wi
-    osc = np.flatnonzero(oscillatory_mask(lam))
-    shift = lam[osc] * (1.0 + SHIFT)
-    m, lower = len(osc), a[n:]
+    return lam, np.flatnonzero(oscillatory_mask(lam))
+
+
+def pencils(a: np.ndarray, n: int, shift: np.ndarray, left: bool) -> np.ndarray:
+    """Q(shift) = shift^2 I + shift D + K of the state matrix `a` (lower half [-K, -D]) at each
+    of the M `shift`s, (M, N, N) complex, and with `left` their transposes after them."""
+    m, lower = len(shift), a[n:]
     q = np.empty(((1 + left) * m, n, n), complex)
     np.multiply(shift[:, None, None], lower[:, n:], out=q[:m])  # -lam D
     q[:m] += lower[:, :n]  # -K
@@ -295,12 +318,7 @@ def inverse_iteration(a: np.ndarray, n: int, left: bool) -> tuple[np.ndarray, ..
     q[:m].reshape(m, n * n)[:, :: n + 1] += (shift * shift)[:, None]
     if left:
         q[m:] = q[:m].transpose(0, 2, 1)  # Q^T conj(y2) = 0: the rows y2^H
-    z = np.linalg.solve(q, np.ones(((1 + left) * m, n, 1)))[..., 0]
-    if not left:
-        return lam, osc, z.T, None
-    right, rows = z[:m], z[m:]
-    dq = 2 * shift[:, None] * right - np.einsum("ij,mj->mi", lower[:, n:], right)  # (2 lam + D) q
-    return lam, osc, right.T, rows / np.einsum("mi,mi->m", rows, dq)[:, None]
+    return q
 
 
 def bench_eigen_paths(model: SqueakModel, rounds: int) -> str:
@@ -332,6 +350,20 @@ def bench_eigen_paths(model: SqueakModel, rounds: int) -> str:
         e = eig_both(a, False)
         return e, left_rows(e.vr, e.osc, n)
 
+    stack = np.array(mats)
+
+    def batch():  # predict_many's: the solves stacked, the left vectors of each
+        groups, failed = eig_right_many(stack, n)
+        assert not failed
+        return [
+            left_rows(vr, osc, n) for _, g in groups for vr, osc in zip(g.vr, g.osc, strict=True)
+        ]
+
+    def batch_inverse():  # every point's pencils (right and left) in one stacked solve
+        shifts = [lam[osc] * (1.0 + SHIFT) for lam, osc in map(eigenvalues, mats)]
+        q = np.concatenate([pencils(a, n, s, True) for a, s in zip(mats, shifts, strict=True)])
+        return np.linalg.solve(q, np.ones((len(q), n, 1)))
+
     fns = {
         "bare `numpy.linalg.eig`": run(np.linalg.eig),
         "`dgeev`, eigenvalues only": run(lambda a: lapack.dgeev(a, compute_vl=0, compute_vr=0)),
@@ -343,6 +375,9 @@ def bench_eigen_paths(model: SqueakModel, rounds: int) -> str:
         "… + left vectors by the transposed solves (one call)": run(
             lambda a: inverse_iteration(a, n, True)
         ),
+        "batch (`predict_many`'s): `eig_right_many` + `left_rows` of each": batch,
+        "batch alternative: eigenvalues of each, all points' pencils (right + left) in one "
+        "stacked solve": batch_inverse,
     }
     wall, cpu = interleaved(fns, rounds)
     bare = wall["bare `numpy.linalg.eig`"]
