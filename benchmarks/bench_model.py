@@ -8,7 +8,9 @@ Prints a Markdown table: (1) one operating-point update, `SqueakModel.predict`, 
 scatter (P(squeak) from 1024 samples) on random operating points; (2) the throughput of a
 speed x load map with `growth_field` against bare batched `numpy.linalg.eigvals` on the same
 pre-built matrices, and against a naive map that integrates the contact again at every point;
-(3) the uncached geometry precompute. Calls being compared alternate within each round, so a
+(3) the uncached geometry precompute. `--profile` adds where the time of `predict` with scatter
+goes, and its eigen-solve against issue 23's eigenvalues-first alternative (`inverse_iteration`)
+for one point and for the batch path. Calls being compared alternate within each round, so a
 load change on the machine hits both; ratios are medians of the per-round ratios. See
 benchmarks/README.md.
 """
@@ -644,7 +646,9 @@ def main(argv: list[str] | None = None) -> int:
         help="only the row of predict with the default scatter at random points",
     )
     ap.add_argument(
-        "--profile", action="store_true", help="also print a cProfile table of that predict"
+        "--profile",
+        action="store_true",
+        help="also print where that predict spends its time and its eigen-solve's alternatives",
     )
     args = ap.parse_args(argv)
     mode = "quick" if args.quick else "default"
