@@ -31,6 +31,7 @@ import contextlib
 import cProfile
 import datetime
 import faulthandler
+import gc
 import io
 import json
 import math
@@ -360,6 +361,7 @@ def _bench_in_process(cfg: dict, domain: int, profile: bool, record_dir: str | N
         ex.add_node(node)
         ex.add_node(probe)
         connect(ex, probe, CLEAR_SPEED)
+        gc.freeze()  # as node.main does before it spins
         if not profile:
             res = both_runs(ex, probe, cfg)
         else:
@@ -375,6 +377,7 @@ def _bench_in_process(cfg: dict, domain: int, profile: bool, record_dir: str | N
         res["recomputes"] = node.live.recomputes
         return res
     finally:
+        gc.unfreeze()
         if ex is not None:
             ex.shutdown()
         for n in (probe, node):

@@ -27,6 +27,7 @@ table in `ros.parameters`, the /diagnostics updater and the recording verdict in
 from __future__ import annotations
 
 import contextlib
+import gc
 import sys
 import time
 from functools import partial
@@ -761,6 +762,9 @@ def main(args: list[str] | None = None) -> int:
             node = SqueakPredictorNode()
             executor = make_executor()
             executor.add_node(node)
+            # Startup's objects (rclpy, numpy, scipy, the model) out of the collector's
+            # generations: a full collection of them stalled a callback by ~60 ms (bench_node).
+            gc.freeze()
             while not stop.signum:
                 executor.spin_once(timeout_sec=0.1)  # stops after the current callback
         except (ParameterError, ParameterException) as exc:
