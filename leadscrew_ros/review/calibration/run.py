@@ -11,12 +11,16 @@ the held-out check (and, with both formulations, which one the data supports).
    the heard frequencies matched with the unstable modes predicted at its posterior mean
    (`acoustics.agreement.MATCH_TOLERANCE`).
 4. The population (`sampling.fit_population`) from the training units that were calibrated
-   and converged; their hierarchical posteriors are the ones reported.
+   and converged.
 5. The held-out check: P(squeak) at each distinct operating point of the held-out units as the
    node computes it (`Prediction.probability`, the live estimate, `timeline.predict_jobs`),
-   with the calibrated population (`Population.params_and_scatter`) and with the prior; the
-   Brier score over their frames, per unit and together, and the reliability curve (predicted
-   P against the heard share of frames, in bins of P).
+   with the training units' population (`Population.params_and_scatter`) and with the prior;
+   the Brier score over their frames, per unit and together, and the reliability curve
+   (predicted P against the heard share of frames, in bins of P).
+7. The reported population (calibration.json, calibrated.yaml) is fitted again from every
+   calibrated unit, the held-out ones included: the check of step 5 is done, and the held-out
+   units' information narrows the fleet's estimate. Every calibrated unit's hierarchical
+   posterior under it is the one reported.
 6. With both formulations, steps 3-5 run for each, and the data's support (`compare`): the
    frequency match F (share of the heard frames, over all units, at an unstable mode predicted
    at the unit's posterior mean) and the held-out Brier score B with the calibrated
@@ -690,6 +694,47 @@ def _calibrate_runs(runs: list[FormulationRun], settings: CalibrationSettings, c
             run.held_out = HeldOut([u.unit_id for u in held])
             continue
         run.held_out = held_out_check(held, [a for a, _ in p], [b for _, b in p])
+    _populations_of_all(runs, settings, client)
+
+
+def _populations_of_all(
+    runs: list[FormulationRun], settings: CalibrationSettings, client: Any
+) -> None:
+    """Step 7: the reported population from every calibrated unit, the held-out ones too
+    (their check is done; leaving them out would only widen the fleet's estimate); where that
+    fit fails, the training units' population stays, and says so."""
+    jobs = []
+    for run in runs:
+        every = [u for u in run.units if u.calibrated]
+        extra = any(u.held_out for u in every)
+        jobs.append(
+            (
+                every,
+                client.submit(
+                    population_task,
+                    run.prior,
+                    [u.posterior for u in every],
+                    settings.sampler,
+                    pure=False,
+                )
+                if extra and run.population is not None
+                else None,
+            )
+        )
+    for run, (every, future) in zip(runs, jobs, strict=True):
+        if future is None:
+            continue
+        done = _result(future)
+        if isinstance(done, BaseException) or done[0] is None:
+            why = _failed(done) if isinstance(done, BaseException) else done[2]
+            run.population_status += f" (of the training units; with all units: {why})"
+            continue
+        run.population, hierarchical, run.population_status = done
+        for u in run.units:
+            u.hierarchical = None
+        for u, h in zip(every, hierarchical, strict=False):
+            u.hierarchical = h
+        run.params, run.scatter = run.population.params_and_scatter(run.prior.params)
 
 
 def calibrate(
