@@ -20,11 +20,7 @@ the held-out check (and, with both formulations, which one the data supports).
    the heard share of frames, in bins of P). Where every squeak mode lies in the band (the
    paper formulation's first bending modes) it is the node's P(squeak); the consistent
    formulation also squeaks unheard, above the band.
-7. The reported population (calibration.json, calibrated.yaml) is fitted again from every
-   calibrated unit, the held-out ones included: the check of step 5 is done, and the held-out
-   units' information narrows the fleet's estimate. Every calibrated unit's hierarchical
-   posterior under it is the one reported.
-6. With both formulations, steps 3-5 run for each, and the data's support (`compare`): the
+6. With both formulations, steps 3-5 (and 7) run for each, and the data's support (`compare`): the
    frequency match F (share of the heard frames, over all units, at an unstable mode predicted
    at the unit's posterior mean) and the held-out Brier score B with the calibrated
    population. When the F of the two differ by `FREQUENCY_DECISIVE` or more, the heard tones
@@ -33,6 +29,10 @@ the held-out check (and, with both formulations, which one the data supports).
    held-out score'). Otherwise the one with the lower B is supported; how strongly is the mean
    paired difference of B over the held-out units against its standard error z: 'strongly'
    at `STRONG_Z` or more, 'weakly' at `WEAK_Z` or more, else 'not distinguishably'.
+7. The reported population (calibration.json, calibrated.yaml) is fitted again from every
+   calibrated unit, the held-out ones included: the check of step 5 is done, and the held-out
+   units' information narrows the fleet's estimate. Every calibrated unit's hierarchical
+   posterior under it is the one reported.
 """
 
 from __future__ import annotations
