@@ -21,6 +21,7 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -220,6 +221,38 @@ def test_the_node_publishes_the_risk_predict_gives_with_calibrated_yaml(fleet):
         risk = world.wait_for("squeak/risk", lambda m: m.data == live, timeout=30.0)
         assert risk.data == live
         assert not world.violations
+
+
+def test_the_held_out_check_scores_the_squeak_the_detector_can_hear():
+    """The held-out P is of a heard squeak (the most unstable mode in the detector's band):
+    with the paper formulation (its squeak modes in the band) the node's P(squeak) within
+    Monte Carlo error; with the consistent one, where its most unstable mode lies above the
+    band (T3, ~13 kHz), well below the node's P(squeak) of any mode, which those silent
+    frames would score as false alarms."""
+    from harness.calibration import synthetic_unit
+    from leadscrew_ros.bag.virtual_bench import squeak_frequencies
+    from leadscrew_ros.model.calibration import DetectionErrors
+    from leadscrew_ros.model.calibration.prior import DEFAULT_NAMES
+    from leadscrew_ros.review.calibration.run import heard_probabilities
+    from leadscrew_ros.review.timeline import ModelSpec, predict_jobs
+
+    obs, errors = synthetic_unit("held-0", np.random.default_rng(7)).obs, DetectionErrors()
+    for formulation in ("paper", "consistent"):
+        nominal = ScrewParameters(formulation=formulation)
+        spec = ModelSpec(nominal, tuple(Scatter().sd.items()), 256)
+        heard = heard_probabilities(spec, obs, DEFAULT_NAMES, errors, 0)
+        preds = predict_jobs(spec, obs.speed_rad_s, obs.load_n, obs.nut_position_m)
+        node = np.array([np.nan if p.probability is None else p.probability for p in preds])
+        hz = squeak_frequencies(nominal, obs.speed_rad_s, obs.load_n, obs.nut_position_m)
+        above = hz > errors.band_hi_hz
+        ok = np.isfinite(heard) & np.isfinite(node) & ~above
+        assert ok.sum() > 0.9 * obs.points
+        if formulation == "paper":
+            assert not above.any()
+            assert np.mean(np.abs(heard - node)[ok]) < 0.03
+        else:
+            assert above.sum() >= 10
+            assert np.mean(heard[above]) < np.mean(node[above]) - 0.3
 
 
 # ----------------------------------------------------------------------------- small runs
