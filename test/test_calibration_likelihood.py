@@ -14,6 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from harness.calibration import HOP_S, synthetic_unit
+from leadscrew_ros.bag.virtual_bench import squeak_frequencies
 from leadscrew_ros.live.settings import LiveSettings
 from leadscrew_ros.model import ParameterError, ScrewParameters, SqueakModel
 from leadscrew_ros.model.calibration import (
@@ -420,3 +421,25 @@ def test_a_faster_mode_above_the_band_silences_the_one_in_it(unit):
     clear = np.abs(exact) > 0.5  # away from a tie, where first order decides as exact does
     assert clear.sum() > 0.5 * len(points)
     assert np.array_equal(lik.squeaks(theta[None])[0][points][clear], exact[clear] > 0)
+
+
+def test_the_consistent_expansion_from_the_prior_gives_the_truths_verdicts(unit):
+    """Expanded about the prior's centre, the likelihood's verdict at a unit's true parameters
+    (formulation 'consistent', its truth some prior SDs away) is the exact model's at its
+    operating points: the bench's rule (`virtual_bench.squeak_frequencies`: the most unstable
+    mode, heard in the detector's band), at >= 99 % of the points (measured: all, on a
+    20-unit consistent bench, with either centre). The consistent calibration's bias is not
+    the expansion's."""
+    errors = DetectionErrors()
+    nominal = NOMINAL.with_(formulation="consistent")
+    truth = unit.truth.with_(formulation="consistent")
+    lik = GrowthLikelihood(SqueakModel(nominal), unit.obs, NAMES, errors)
+    theta = np.array([[getattr(truth, n) for n in NAMES]])
+    assert np.linalg.norm(Prior(nominal, Scatter(), NAMES).to_u(theta)) > 1.0  # off centre
+    obs = unit.obs
+    hz = squeak_frequencies(truth, obs.speed_rad_s, obs.load_n, obs.nut_position_m)
+    exact = (hz >= errors.band_lo_hz) & (hz <= errors.band_hi_hz)
+    valid = lik.valid
+    assert exact[valid].sum() > 20 and (~exact[valid]).sum() > 20  # both verdicts occur
+    agree = lik.squeaks(theta)[0] == exact
+    assert agree[valid].mean() >= 0.99, np.flatnonzero(valid & ~agree)

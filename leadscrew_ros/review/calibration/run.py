@@ -11,13 +11,16 @@ the held-out check (and, with both formulations, which one the data supports).
    the heard frequencies matched with the unstable modes predicted at its posterior mean
    (`acoustics.agreement.MATCH_TOLERANCE`).
 4. The population (`sampling.fit_population`) from the training units that were calibrated
-   and converged; their hierarchical posteriors are the ones reported.
-5. The held-out check: P(squeak) at each distinct operating point of the held-out units as the
-   node computes it (`Prediction.probability`, the live estimate, `timeline.predict_jobs`),
-   with the calibrated population (`Population.params_and_scatter`) and with the prior; the
-   Brier score over their frames, per unit and together, and the reliability curve (predicted
-   P against the heard share of frames, in bins of P).
-6. With both formulations, steps 3-5 run for each, and the data's support (`compare`): the
+   and converged.
+5. The held-out check: P(a heard squeak) at each distinct operating point of the held-out
+   units (`heard_probabilities`: the share of the population's draws whose most unstable
+   mode squeaks in the detector's band, the event the frames record), with the training
+   units' population (`Population.params_and_scatter`) and with the prior; the Brier score
+   over their frames, per unit and together, and the reliability curve (predicted P against
+   the heard share of frames, in bins of P). Where every squeak mode lies in the band (the
+   paper formulation's first bending modes) it is the node's P(squeak); the consistent
+   formulation also squeaks unheard, above the band.
+6. With both formulations, steps 3-5 (and 7) run for each, and the data's support (`compare`): the
    frequency match F (share of the heard frames, over all units, at an unstable mode predicted
    at the unit's posterior mean) and the held-out Brier score B with the calibrated
    population. When the F of the two differ by `FREQUENCY_DECISIVE` or more, the heard tones
@@ -26,6 +29,10 @@ the held-out check (and, with both formulations, which one the data supports).
    held-out score'). Otherwise the one with the lower B is supported; how strongly is the mean
    paired difference of B over the held-out units against its standard error z: 'strongly'
    at `STRONG_Z` or more, 'weakly' at `WEAK_Z` or more, else 'not distinguishably'.
+7. The reported population (calibration.json, calibrated.yaml) is fitted again from every
+   calibrated unit, the held-out ones included: the check of step 5 is done, and the held-out
+   units' information narrows the fleet's estimate. Every calibrated unit's hierarchical
+   posterior under it is the one reported.
 """
 
 from __future__ import annotations
@@ -39,13 +46,20 @@ import numpy as np
 
 from ...model import ScrewParameters, SqueakModel
 from ...model.acoustics.agreement import MATCH_TOLERANCE, nearest_mode
-from ...model.calibration import CalibrationError, DetectionErrors, Observations, ThinSettings
+from ...model.calibration import (
+    CalibrationError,
+    DetectionErrors,
+    GrowthLikelihood,
+    Observations,
+    Prior,
+    ThinSettings,
+)
 from ...model.calibration.posterior import Population, UnitPosterior
 from ...model.physics.parameters import ParameterError
 from ...model.uncertainty.scatter import LIVE_SAMPLES, Scatter
 from ..timeline import ModelSpec, predict_jobs
 from .gather import Gathered, by_unit
-from .sampling import SamplerSettings, calibrate_unit, fit_population
+from .sampling import SamplerSettings, calibrate_unit, fit_population, unit_seed
 from .settings import CalibrationSettings
 
 if TYPE_CHECKING:
@@ -61,24 +75,45 @@ def _model(spec: ModelSpec) -> SqueakModel:
     return SqueakModel(spec.params, Scatter(dict(spec.scatter)), spec.samples)
 
 
-def probabilities(spec: ModelSpec, obs: Observations) -> np.ndarray:
-    """P(squeak) at each distinct operating point of `obs` as the node computes it (the live
-    estimate of `spec`'s model), nan where the model is not valid.
+def heard_probabilities(
+    spec: ModelSpec,
+    obs: Observations,
+    names: tuple[str, ...],
+    errors: DetectionErrors,
+    seed: int,
+) -> np.ndarray:
+    """P(a heard squeak) at each distinct operating point of `obs` under `spec`'s population:
+    the share of `spec.samples` draws of `names` from its nominal values and scatter (seeded
+    by `seed` and the unit) whose most unstable mode squeaks in the detector's band, as the
+    likelihood decides it (`GrowthLikelihood.squeaks`, expanded at the population's centre),
+    nan where the model does not hold. The event the frames record: a squeak the detector
+    cannot hear (above its band, the consistent formulation's T3 at ~13 kHz) is silence to
+    it, so the node's P(squeak) of any mode would score a right prediction as a false alarm.
 
     Parameters
     ----------
     spec : ModelSpec
-        The model (parameters, scatter, live samples).
+        The population (parameters, scatter, number of draws).
     obs : Observations
         A unit's points.
+    names : tuple of str
+        The calibrated parameters (drawn; the others at `spec`'s values).
+    errors : DetectionErrors
+        The detector's band.
+    seed : int
+        The run's seed.
 
     Returns
     -------
     numpy.ndarray
         (P,) probabilities.
     """
-    preds = predict_jobs(spec, obs.speed_rad_s, obs.load_n, obs.nut_position_m)
-    return np.array([math.nan if p.probability is None else p.probability for p in preds])
+    model = _model(spec)
+    prior = Prior(spec.params, model.scatter, names)
+    likelihood = GrowthLikelihood(model, obs, names, errors)
+    rng = np.random.default_rng(unit_seed(seed, obs.unit_id, "held-out"))
+    squeaks = likelihood.squeaks(prior.from_u(prior.draw(spec.samples, rng)))
+    return np.where(likelihood.valid, squeaks.mean(axis=0), math.nan)
 
 
 def frequency_match(params: ScrewParameters, obs: Observations) -> tuple[int, int]:
@@ -673,9 +708,17 @@ def _calibrate_runs(runs: list[FormulationRun], settings: CalibrationSettings, c
             (
                 held,
                 [
-                    (
-                        client.submit(probabilities, run.prior, u.observations, pure=False),
-                        client.submit(probabilities, calibrated, u.observations, pure=False),
+                    tuple(
+                        client.submit(
+                            heard_probabilities,
+                            spec,
+                            u.observations,
+                            settings.names,
+                            settings.errors,
+                            settings.sampler.seed,
+                            pure=False,
+                        )
+                        for spec in (run.prior, calibrated)
                     )
                     for u in held
                 ],
@@ -690,6 +733,47 @@ def _calibrate_runs(runs: list[FormulationRun], settings: CalibrationSettings, c
             run.held_out = HeldOut([u.unit_id for u in held])
             continue
         run.held_out = held_out_check(held, [a for a, _ in p], [b for _, b in p])
+    _populations_of_all(runs, settings, client)
+
+
+def _populations_of_all(
+    runs: list[FormulationRun], settings: CalibrationSettings, client: Any
+) -> None:
+    """Step 7: the reported population from every calibrated unit, the held-out ones too
+    (their check is done; leaving them out would only widen the fleet's estimate); where that
+    fit fails, the training units' population stays, and says so."""
+    jobs = []
+    for run in runs:
+        every = [u for u in run.units if u.calibrated]
+        extra = any(u.held_out for u in every)
+        jobs.append(
+            (
+                every,
+                client.submit(
+                    population_task,
+                    run.prior,
+                    [u.posterior for u in every],
+                    settings.sampler,
+                    pure=False,
+                )
+                if extra and run.population is not None
+                else None,
+            )
+        )
+    for run, (every, future) in zip(runs, jobs, strict=True):
+        if future is None:
+            continue
+        done = _result(future)
+        if isinstance(done, BaseException) or done[0] is None:
+            why = _failed(done) if isinstance(done, BaseException) else done[2]
+            run.population_status += f" (of the training units; with all units: {why})"
+            continue
+        run.population, hierarchical, run.population_status = done
+        for u in run.units:
+            u.hierarchical = None
+        for u, h in zip(every, hierarchical, strict=False):
+            u.hierarchical = h
+        run.params, run.scatter = run.population.params_and_scatter(run.prior.params)
 
 
 def calibrate(
