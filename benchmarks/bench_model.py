@@ -430,6 +430,47 @@ def bench_eigen_paths(model: SqueakModel, rounds: int) -> str:
     )
 
 
+def bench_paced(model: SqueakModel, rounds: int, period_s: float = 0.005) -> str:
+    """`predict` at the random points back to back against the same calls with a pause of one
+    200 Hz input period before each (sleeping, as a node between its inputs, or spinning):
+    the per-call cost the node sees on this machine. Rounds interleave the three."""
+    points = random_points()
+
+    def paced(pause):
+        times = []
+        for s, f in points:
+            pause()
+            t = time.perf_counter()
+            model.predict(s, f)
+            times.append(time.perf_counter() - t)
+        return times
+
+    def spin():
+        end = time.perf_counter() + period_s
+        while time.perf_counter() < end:
+            pass
+
+    kinds = {
+        "back to back": lambda: None,
+        f"after a {period_s * 1e3:g} ms sleep": lambda: time.sleep(period_s),
+        f"after {period_s * 1e3:g} ms of spinning": spin,
+    }
+    samples: dict[str, list[float]] = {k: [] for k in kinds}
+    for _ in range(rounds):
+        for name, pause in kinds.items():
+            samples[name] += paced(pause)
+    base = median(samples["back to back"])
+    rows = [
+        f"| {name} | {median(t) * 1e6:.1f} µs | {median(t) / base:.2f}× |"
+        for name, t in samples.items()
+    ]
+    return (
+        f"`predict` (default scatter) paced as a node's inputs ({len(points)} random points, "
+        f"{rounds} interleaved rounds, median per call):\n\n"
+        "| calls | per call | / back to back |\n|---|---:|---:|\n" + "\n".join(rows)
+    )
+
+
 def naive_state_matrix(model: SqueakModel, speed: float, load: float) -> np.ndarray:
     """State matrix with every contact-matrix entry integrated again (no precomputation)."""
     g = model.geometry
@@ -698,6 +739,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.profile:
         print("\n" + profile_predict(model))
         print("\n" + bench_eigen_paths(model, cfg["point_rounds"]))
+        print("\n" + bench_paced(model, cfg["point_rounds"]))
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(res, fh, indent=1)
