@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -677,26 +678,12 @@ def _calibrate_runs(runs: list[FormulationRun], settings: CalibrationSettings, c
                 u.posterior, u.status = task.posterior, task.status
                 u.matched_frames, u.heard_frames = task.matched_frames, task.heard_frames
     training = [[u for u in run.units if u.calibrated and not u.held_out] for run in runs]
-    populations = [
-        client.submit(
-            population_task,
-            run.prior,
-            [u.posterior for u in units],
-            settings.sampler,
-            pure=False,
-        )
-        for run, units in zip(runs, training, strict=True)
-    ]
-    for run, units, future in zip(runs, training, populations, strict=True):
-        done = _result(future)
+    fits = _fit_populations(runs, training, settings, client)
+    for run, units, done in zip(runs, training, fits, strict=True):
         if isinstance(done, BaseException):
             run.population_status = f"no population: {_failed(done)}"
             continue
-        run.population, hierarchical, run.population_status = done
-        for u, h in zip(units, hierarchical, strict=False):
-            u.hierarchical = h
-        if run.population is not None:
-            run.params, run.scatter = run.population.params_and_scatter(run.prior.params)
+        _install(run, units, done)
     checks: list[tuple[list[UnitResult], list[tuple[Any, Any]]]] = []
     for run in runs:
         held = [u for u in run.units if u.held_out and u.observations is not None]
@@ -736,44 +723,62 @@ def _calibrate_runs(runs: list[FormulationRun], settings: CalibrationSettings, c
     _populations_of_all(runs, settings, client)
 
 
+def _fit_populations(
+    runs: list[FormulationRun],
+    unit_sets: Sequence[list[UnitResult] | None],
+    settings: CalibrationSettings,
+    client: Any,
+) -> list[Any]:
+    """Each run's population from its set of units (None: no fit), all submitted together:
+    per run `population_task`'s result, the exception that ended it, or None."""
+    futures = [
+        None
+        if units is None
+        else client.submit(
+            population_task,
+            run.prior,
+            [u.posterior for u in units],
+            settings.sampler,
+            pure=False,
+        )
+        for run, units in zip(runs, unit_sets, strict=True)
+    ]
+    return [None if f is None else _result(f) for f in futures]
+
+
+def _install(run: FormulationRun, units: list[UnitResult], done: tuple) -> None:
+    """`population_task`'s result `done` as the run's population, with the hierarchical
+    posteriors of `units` (the units it was fitted from, in order) and none for the others."""
+    run.population, hierarchical, run.population_status = done
+    for u in run.units:
+        u.hierarchical = None
+    for u, h in zip(units, hierarchical, strict=False):
+        u.hierarchical = h
+    if run.population is not None:
+        run.params, run.scatter = run.population.params_and_scatter(run.prior.params)
+
+
 def _populations_of_all(
     runs: list[FormulationRun], settings: CalibrationSettings, client: Any
 ) -> None:
     """Step 7: the reported population from every calibrated unit, the held-out ones too
     (their check is done; leaving them out would only widen the fleet's estimate); where that
     fit fails, the training units' population stays, and says so."""
-    jobs = []
-    for run in runs:
-        every = [u for u in run.units if u.calibrated]
-        extra = any(u.held_out for u in every)
-        jobs.append(
-            (
-                every,
-                client.submit(
-                    population_task,
-                    run.prior,
-                    [u.posterior for u in every],
-                    settings.sampler,
-                    pure=False,
-                )
-                if extra and run.population is not None
-                else None,
-            )
-        )
-    for run, (every, future) in zip(runs, jobs, strict=True):
-        if future is None:
+    every = [
+        [u for u in run.units if u.calibrated]
+        if run.population is not None and any(u.held_out and u.calibrated for u in run.units)
+        else None
+        for run in runs
+    ]
+    fits = _fit_populations(runs, every, settings, client)
+    for run, units, done in zip(runs, every, fits, strict=True):
+        if units is None:
             continue
-        done = _result(future)
         if isinstance(done, BaseException) or done[0] is None:
             why = _failed(done) if isinstance(done, BaseException) else done[2]
             run.population_status += f" (of the training units; with all units: {why})"
             continue
-        run.population, hierarchical, run.population_status = done
-        for u in run.units:
-            u.hierarchical = None
-        for u, h in zip(every, hierarchical, strict=False):
-            u.hierarchical = h
-        run.params, run.scatter = run.population.params_and_scatter(run.prior.params)
+        _install(run, units, done)
 
 
 def calibrate(
