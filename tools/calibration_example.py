@@ -89,7 +89,7 @@ def _drop(params: dict[str, Any], scatter: dict[str, float]) -> str:
     return f"{_fmt(float(d.mean()))} (90 % of units {_fmt(q05)}-{_fmt(q95)})"
 
 
-def _widths(doc: dict[str, Any]) -> tuple[float, float, float]:
+def widths(doc: dict[str, Any]) -> tuple[float, float, float]:
     """The 90 % width of the fleet mean's drop, and its ratios to the prior's 90 % width of a
     unit's drop and to the hierarchical prior's of the fleet mean (the population centre's
     hyper-prior: the prior's SDs widened by prior_widen)."""
@@ -146,7 +146,7 @@ def markdown(truth: dict[str, Any], out: Path, code: int) -> str:
     p_cal = calibrated.predict(SPEED, LOAD).probability
     # up to the per-unit lines (the rest: units, paths and the wall time)
     shown = text[: next((k for k, line in enumerate(text) if line.startswith("per unit")), -1)]
-    width, to_unit, to_hyper = _widths(doc)
+    width, to_unit, to_hyper = widths(doc)
     return "\n".join(
         [
             f"The bench draws its units from mu_static {_fmt(truth['nominal']['mu_static'])}, "
