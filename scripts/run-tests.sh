@@ -26,10 +26,10 @@ fi
 # coverage per layer (tools/coverage_by_layer.py).
 rm -f .coverage .coverage.*
 status=0
-# Two worker processes (pytest-xdist; a test file stays in one worker): most tests wait on
-# ROS, child processes or Dask rather than compute, so two halve the wall time even beside a
-# busy core. PYTEST_WORKERS=0 runs in this process.
-timeout 1500 .venv/bin/python -m pytest -q -n "${PYTEST_WORKERS:-2}" --dist loadfile \
+# Three worker processes on two cores (pytest-xdist; a test file stays in one worker): most
+# tests wait on ROS, child processes or Dask rather than compute, and a third worker fills
+# those waits, also beside a busy core. PYTEST_WORKERS=0 runs in this process.
+timeout 1500 .venv/bin/python -m pytest -q -n "${PYTEST_WORKERS:-3}" --dist loadfile \
     --durations=15 --cov=leadscrew_ros --cov-branch --cov-report=term "$@" || status=$?
 if [[ -e .coverage ]]; then
     .venv/bin/python tools/coverage_by_layer.py || true

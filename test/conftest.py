@@ -14,8 +14,8 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 # One domain per test process: test processes sharing a domain discover each other's
 # participants, and Fast DDS teardown was seen to deadlock then; 1..200, never the default 0.
 os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 200 + 1))
-# pytest-xdist workers (scripts/run-tests.sh: -n 2) inherit the session's domain: each takes
-# its own, 100 apart (Fast DDS allows 0..232).
+# pytest-xdist workers (scripts/run-tests.sh: -n 3) inherit the session's domain: each takes
+# its own, 100 apart modulo 230 (Fast DDS allows 0..232): distinct for any three.
 _worker = os.environ.get("PYTEST_XDIST_WORKER", "")
 if _worker.startswith("gw"):
     _base = int(os.environ["ROS_DOMAIN_ID"]) - 1

@@ -12,8 +12,8 @@ where it squeaks in the detector's band, at its true parameters and at changed o
   kept), and each of them alone;
 - at each calibration's posterior mean of the unit.
 
-and, per calibration, its fleet mean of the drop against the units' and how many of the units'
-90 % intervals of the drop cover their truths.
+and, per calibration, its fleet mean of the drop against the units', how many of the units'
+90 % intervals of the drop cover their truths, and its held-out Brier scores.
 
 It prints the share of the stroke whose verdict changes and that change per squeak edge in ms,
 to set beside the detector's frame (`DetectorSettings.frame_s`) and the collar of frames not
@@ -152,7 +152,9 @@ def main(argv: list[str] | None = None) -> None:
         print(
             f"- `{c.name}`: fleet mean drop {m['mean']:.4g} [{m['q05']:.4g}, {m['q95']:.4g}], "
             f"{widths(doc)[1]:.2f} of the prior's 90 % interval of a unit's drop; the units' "
-            f"90 % intervals cover their drops in {sum(hits)} of {len(hits)}."
+            f"90 % intervals cover their drops in {sum(hits)} of {len(hits)}; held-out Brier "
+            f"score {doc['held_out']['brier_prior']:.4f} with the prior, "
+            f"{doc['held_out']['brier_calibrated']:.4f} calibrated."
         )
 
 
