@@ -28,7 +28,8 @@ POPULATION = {"mu_static": 0.27, "mu_kinetic": 0.19, "modal_damping": 0.002}
 
 @pytest.fixture(scope="module")
 def changes():
-    """`ratio_changes` of three units of a consistent bench of the worked example's population."""
+    """`changes` along the ratio (`ratio_variants`) of three units of a consistent bench of the
+    worked example's population."""
     settings = BenchSettings(units=3, seed=11, formulation="consistent", population=POPULATION)
     nominal = ScrewParameters(formulation="consistent", **POPULATION)
     rng = np.random.default_rng(settings.seed)
@@ -37,8 +38,12 @@ def changes():
         unit = simulate_unit(settings, i, rng, nominal, Scatter())
         stroke = {k: getattr(unit.stroke, k) for k in RIDGE.STROKE}
         out.append(
-            RIDGE.ratio_changes(
-                unit.params, stroke, settings.input_rate_hz, RIDGE.DetectorSettings.f_hi_hz
+            RIDGE.changes(
+                unit.params,
+                RIDGE.ratio_variants(unit.params),
+                stroke,
+                settings.input_rate_hz,
+                RIDGE.DetectorSettings.f_hi_hz,
             )
         )
     return out

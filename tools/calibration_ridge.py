@@ -55,35 +55,38 @@ CHANGES = (
 def heard(params: ScrewParameters, stroke: dict[str, float], rate_hz: float, hi_hz: float) -> Any:
     """Where a stroke (`STROKE` fields) squeaks at a frequency the detector hears (bool per
     sample at `rate_hz`)."""
-    profile = StrokeProfile.for_params(params, **stroke)
-    times = np.arange(int(round(profile.duration_s * rate_hz)) + 1) / rate_hz
-    speed, load, nut, _ = (
-        np.array(a) for a in zip(*(profile.state(t) for t in times.tolist()), strict=True)
-    )
+    _, speed, load, nut = StrokeProfile.for_params(params, **stroke).sampled(rate_hz)
     f = squeak_frequencies(params, speed, load, nut)
     return np.isfinite(f) & (f >= DetectorSettings.f_lo_hz) & (f <= hi_hz)
 
 
-def change(base: Any, other: Any, rate_hz: float) -> tuple[float, float]:
-    """The share of the stroke whose verdict differs, and that time per squeak edge [ms]."""
-    edges = max(int(np.count_nonzero(np.diff(base.astype(int)))), 1)
-    changed = float(np.mean(base != other))
-    return changed, 1e3 * changed * len(base) / rate_hz / edges
-
-
-def ratio_changes(
-    params: ScrewParameters, stroke: dict[str, float], rate_hz: float, hi_hz: float
-) -> dict[str, tuple[float, float]]:
-    """`change` of each of `CHANGES` from `params` along the stroke, by label."""
-    h0 = heard(params, stroke, rate_hz, hi_hz)
+def ratio_variants(params: ScrewParameters) -> dict[str, ScrewParameters]:
+    """`params` changed as each of `CHANGES` says, by label (mu_k kept)."""
     drop = params.mu_static - params.mu_kinetic
-    out = {}
-    for label, f_drop, f_damping in CHANGES:
-        q = params.with_(
+    return {
+        label: params.with_(
             mu_static=params.mu_kinetic + f_drop * drop,
             modal_damping=f_damping * params.modal_damping,
         )
-        out[label] = change(h0, heard(q, stroke, rate_hz, hi_hz), rate_hz)
+        for label, f_drop, f_damping in CHANGES
+    }
+
+
+def changes(
+    params: ScrewParameters,
+    variants: dict[str, ScrewParameters],
+    stroke: dict[str, float],
+    rate_hz: float,
+    hi_hz: float,
+) -> dict[str, tuple[float, float]]:
+    """Per variant: the share of the stroke whose verdict differs from that of `params`, and
+    that time per squeak edge of `params` [ms]."""
+    base = heard(params, stroke, rate_hz, hi_hz)
+    edges = max(int(np.count_nonzero(np.diff(base.astype(int)))), 1)
+    out = {}
+    for label, q in variants.items():
+        changed = float(np.mean(base != heard(q, stroke, rate_hz, hi_hz)))
+        out[label] = changed, 1e3 * changed * len(base) / rate_hz / edges
     return out
 
 
@@ -103,32 +106,24 @@ def main(argv: list[str] | None = None) -> None:
     truth = json.loads((args.bench / "truth.json").read_text())
     rate = float(truth["settings"]["input_rate_hz"])
     units = truth["units"][: args.units]
-    posteriors = [
-        {
-            u["unit_id"]: u["posterior"]
-            for u in json.loads((c / "calibration.json").read_text())["units"]
-        }
-        for c in args.calibrations
-    ]
+    docs = [json.loads((c / "calibration.json").read_text()) for c in args.calibrations]
+    posteriors = [{u["unit_id"]: u["posterior"] for u in doc["units"]} for doc in docs]
     rows: dict[str, tuple[list[float], list[float]]] = {}
-
-    def add(label: str, changed: tuple[float, float]) -> None:
-        rows.setdefault(label, ([], []))
-        rows[label][0].append(changed[0])
-        rows[label][1].append(changed[1])
-
     for unit in units:
         p = ScrewParameters(formulation=truth["formulation"], **unit["params"])
-        stroke = {k: unit["stroke"][k] for k in STROKE}
-        for label, changed in ratio_changes(p, stroke, rate, args.band_hi_hz).items():
-            add(label, changed)
-        h0 = heard(p, stroke, rate, args.band_hi_hz)
+        variants = ratio_variants(p)
         for c, post in zip(args.calibrations, posteriors, strict=True):
-            mean = post[unit["unit_id"]]
-            if mean:
-                q = p.with_(**{n: mean[n]["mean"] for n in NAMES})
-                h1 = heard(q, stroke, rate, args.band_hi_hz)
-                add(f"the posterior mean of `{c.name}`", change(h0, h1, rate))
+            if mean := post[unit["unit_id"]]:
+                variants[f"the posterior mean of `{c.name}`"] = p.with_(
+                    **{n: mean[n]["mean"] for n in NAMES}
+                )
+        stroke = {k: unit["stroke"][k] for k in STROKE}
+        for label, (changed, edge_ms) in changes(
+            p, variants, stroke, rate, args.band_hi_hz
+        ).items():
+            shares, per_edge = rows.setdefault(label, ([], []))
+            shares.append(changed)
+            per_edge.append(edge_ms)
     print(
         f"{truth['formulation']} bench, {len(units)} units: the heard verdict along the stroke "
         f"at the truth vs changed parameters (detector frame {DetectorSettings.frame_s:g} s, "
@@ -140,8 +135,7 @@ def main(argv: list[str] | None = None) -> None:
         print(row(label, changed, edge_ms))
     drops = {u["unit_id"]: u["params"]["mu_static"] - u["params"]["mu_kinetic"] for u in units}
     print(f"\nThe {len(units)} units' mean friction drop is {np.mean(list(drops.values())):.4g}.")
-    for c, post in zip(args.calibrations, posteriors, strict=True):
-        doc = json.loads((c / "calibration.json").read_text())
+    for c, doc, post in zip(args.calibrations, docs, posteriors, strict=True):
         fleet = doc["population"]["friction_drop"]
         hits = [
             post[k]["friction_drop"]["q05"] <= v <= post[k]["friction_drop"]["q95"]

@@ -294,13 +294,7 @@ def simulate_unit(
     """Unit `index`: draw its parameters and stroke and evaluate its model along the stroke."""
     params = draw_params(nominal, scatter, rng)
     stroke = draw_stroke(settings, params, rng)
-    times = (
-        np.arange(int(round(settings.duration_s * settings.input_rate_hz)) + 1)
-        / settings.input_rate_hz
-    )
-    speed, load, nut, _ = (
-        np.array(a) for a in zip(*(stroke.state(t) for t in times.tolist()), strict=True)
-    )
+    times, speed, load, nut = stroke.sampled(settings.input_rate_hz)  # duration_s: the bench's
     return Unit(
         f"bench-{index:03d}",
         params,

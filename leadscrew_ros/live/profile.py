@@ -205,6 +205,25 @@ class StrokeProfile:
             sign * self.peak_speed_rad_s * self._speed_fraction(tau), load, nut, angle
         )
 
+    def sampled(self, rate_hz: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The stroke at `rate_hz` from its start to its end, both included.
+
+        Parameters
+        ----------
+        rate_hz : float
+            Sample rate [Hz].
+
+        Returns
+        -------
+        times, speed, load, nut : numpy.ndarray
+            Times [s], speed [rad/s], load [N] and nut position [m] of `state` at them.
+        """
+        times = np.arange(int(round(self.duration_s * rate_hz)) + 1) / rate_hz
+        speed, load, nut, _ = (
+            np.array(a) for a in zip(*(self.state(t) for t in times.tolist()), strict=True)
+        )
+        return times, speed, load, nut
+
 
 def state(t: float, profile: StrokeProfile | None = None, loop: bool = False) -> ActuatorState:
     """`StrokeProfile.state` of the default profile (or of `profile`)."""

@@ -70,10 +70,7 @@ def stroke_microphone(
     from ..model.acoustics.synthesis import microphone  # scipy.signal: only when used
 
     params = params or ScrewParameters()
-    times = np.arange(int(round(profile.duration_s * _SCHEDULE_RATE_HZ)) + 1) / _SCHEDULE_RATE_HZ
-    speed, load, nut, _ = (
-        np.array(a) for a in zip(*(profile.state(t) for t in times.tolist()), strict=True)
-    )
+    times, speed, load, nut = profile.sampled(_SCHEDULE_RATE_HZ)
     squeak_hz = squeak_frequencies(params, speed, load, nut)
     return (
         microphone(times, speed, squeak_hz, MIC_SQUEAK_LEVEL, sample_rate_hz, seed=seed),
