@@ -54,6 +54,7 @@ TARGET_SCATTER_RATIO = 1.0  # predict with the default scatter / bare eig (issue
 RANDOM_POINTS = 64  # random operating points of the scatter row
 RANDOM_SPEED_RAD_S, RANDOM_LOAD_N = (1.0, 150.0), (10.0, 500.0)
 SHIFT = 2.0**-50  # relative shift of an eigenvalue for its inverse iteration (4 ulp of 1)
+SHIFT_TURNS = (1.0, 1j, -1.0, -1j)  # the shift's directions, tried in turn
 TARGET_MAP_RATIO = 1.2  # growth_field / bare eigvals, per point
 TARGET_REFINED_MAP_RATIO = 1.1  # stability_map (grid + refined boundary) / bare eigvals
 
@@ -289,17 +290,31 @@ def inverse_iteration(a: np.ndarray, n: int, left: bool) -> tuple[np.ndarray, ..
     systems in the same call, normalised y^H x = y2^H (2 lam I + D) q = 1. The shift is a few
     ulp: the LU is not exactly singular (at lam itself it can be), and the error of a vector,
     about SHIFT |lam| / the distance to the nearest other eigenvalue, stays ~1e-10 for the
-    whirl pairs (their eigenvalues ~1e-5 |lam| apart). Returns (lam, osc, q (N, M), y2^H (M, N)
-    or None)."""
+    whirl pairs (their eigenvalues ~1e-5 |lam| apart). Some BLAS kernels round one mode's LU
+    at lam (1 + SHIFT) to an exact zero pivot (a point of the test grid on OpenBLAS SkylakeX):
+    the shift turns by a quarter turn, same size, until every LU is regular
+    (`shifted_solve`). Returns (lam, osc, q (N, M), y2^H (M, N) or None)."""
     lam, osc = eigenvalues(a)
-    shift = lam[osc] * (1.0 + SHIFT)
     m, lower = len(osc), a[n:]
-    z = np.linalg.solve(pencils(a, n, shift, left), np.ones(((1 + left) * m, n, 1)))[..., 0]
+    z, turn = shifted_solve(lambda turn: pencils(a, n, lam[osc] * (1.0 + turn * SHIFT), left))
+    shift, z = lam[osc] * (1.0 + turn * SHIFT), z[..., 0]
     if not left:
         return lam, osc, z.T, None
     right, rows = z[:m], z[m:]
     dq = 2 * shift[:, None] * right - np.einsum("ij,mj->mi", lower[:, n:], right)  # (2 lam + D) q
     return lam, osc, right.T, rows / np.einsum("mi,mi->m", rows, dq)[:, None]
+
+
+def shifted_solve(pencils_at: Callable[[complex], np.ndarray]) -> tuple[np.ndarray, complex]:
+    """Q z = 1 for the stack of pencils `pencils_at(turn)` gives at the shifts lam (1 + turn
+    SHIFT), the first turn of `SHIFT_TURNS` whose every LU is regular; (z, that turn)."""
+    for turn in SHIFT_TURNS:
+        q = pencils_at(turn)
+        try:
+            return np.linalg.solve(q, np.ones((*q.shape[:2], 1))), turn
+        except np.linalg.LinAlgError:
+            continue
+    raise np.linalg.LinAlgError("every shift of the inverse iteration met a singular LU")
 
 
 def eigenvalues(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -373,9 +388,12 @@ def bench_eigen_paths(model: SqueakModel, rounds: int) -> str:
         ]
 
     def batch_inverse():  # every point's pencils (right and left) in one stacked solve
-        shifts = [lam[osc] * (1.0 + SHIFT) for lam, osc in map(eigenvalues, mats)]
-        q = np.concatenate([pencils(a, n, s, True) for a, s in zip(mats, shifts, strict=True)])
-        return np.linalg.solve(q, np.ones((len(q), n, 1)))
+        points = [(a, lam[osc]) for a, (lam, osc) in zip(mats, map(eigenvalues, mats), strict=True)]
+        return shifted_solve(
+            lambda turn: np.concatenate(
+                [pencils(a, n, lam * (1.0 + turn * SHIFT), True) for a, lam in points]
+            )
+        )[0]
 
     fns = {
         "bare `numpy.linalg.eig`": run(np.linalg.eig),

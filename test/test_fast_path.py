@@ -8,19 +8,21 @@ bounds over the samples, and many operating points with their own nut positions 
   verdict, on a speed x load x nut grid of both formulations, default and 3x scatter;
 - on the recomputes of the demo stroke and of the dense benchmark log (bench_replay.py's,
   every 10th of its 10 minutes): the verdict, labels, frequencies, growth rates and damping
-  ratios as before (rel 1e-12), P(squeak) equal in >= 99 % and within 0.005 everywhere,
-  for the node's path (`predict`) and the replay's (`predict_many` with nut positions).
+  ratios as before (1e-12 of each mode's |lambda|, harness/compare.py: not bit for bit, which
+  no LAPACK promises across code paths or BLAS kernels), P(squeak) equal in >= 99 % and within
+  0.005 everywhere, for the node's path (`predict`) and the replay's (`predict_many` with nut
+  positions).
 """
 
 from __future__ import annotations
 
-import math
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from harness.compare import REL, mode_differences, prediction_differences
 from harness.reference_prediction import reference
 from leadscrew_ros.bag.synthetic import DutyCycle, samples
 from leadscrew_ros.live.profile import StrokeProfile
@@ -39,20 +41,7 @@ SCATTERS = {
     "default": Scatter(),
     "3x": Scatter({k: min(3 * s, MAX_SCATTER) for k, s in DEFAULT_SCATTER.items()}),
 }
-EQUAL_SHARE, MAX_P_DIFF, REL = 0.99, 0.005, 1e-12  # issue 23
-
-
-def _same_modes(a: tuple, b: tuple) -> bool:
-    """Labels, verdicts equal; frequencies, growth rates, damping ratios within REL."""
-    return len(a) == len(b) and all(
-        x[0] == y[0]
-        and x[4] == y[4]
-        and all(
-            math.isclose(u, v, rel_tol=REL, abs_tol=0.0)
-            for u, v in zip(x[1:4], y[1:4], strict=True)
-        )
-        for x, y in zip(a, b, strict=True)
-    )
+EQUAL_SHARE, MAX_P_DIFF = 0.99, 0.005  # issue 23
 
 
 @pytest.mark.parametrize("formulation", ["paper", "consistent"])
@@ -112,15 +101,21 @@ def test_the_left_vectors_from_the_right_ones_are_lapacks():
 
 
 def test_the_contact_at_many_nut_positions_is_each_positions_own():
-    """`lower_half_units_at` in one step: to the bit what a geometry per nut position gives."""
+    """`lower_half_units_at` in one step: what a geometry per nut position gives, to rounding
+    of the largest entry (the batched and the single sums round differently on some BLAS
+    kernels: 1 ulp of 7e5 measured); each position's own, not a neighbour's (those differ in
+    the leading digits)."""
     for formulation in ("paper", "consistent"):
         p = ScrewParameters(formulation=formulation)
         nuts = np.linspace(0.0, p.nut_travel_m, 13)
         units = lower_half_units_at(p, nuts)
-        for z, u in zip(nuts.tolist(), units, strict=True):
-            np.testing.assert_array_equal(
-                u, build_geometry(p.with_(nut_position_m=z)).lower_half_units
-            )
+        for k, z in enumerate(nuts.tolist()):
+            own = build_geometry(p.with_(nut_position_m=z)).lower_half_units
+            scale = np.abs(own).max()
+            np.testing.assert_allclose(units[k], own, rtol=0, atol=1e-13 * scale)
+            for other in (k - 1, k + 1):
+                if 0 <= other < len(nuts):
+                    assert np.abs(units[other] - own).max() > 1e-6 * scale
 
 
 def test_many_points_with_their_own_nut_positions_equal_a_model_per_position():
@@ -133,7 +128,8 @@ def test_many_points_with_their_own_nut_positions_equal_a_model_per_position():
         if z > model.params.nut_travel_m:
             assert p.validity is Validity.PARAMETERS_REJECTED and "nut position" in p.reason
             continue
-        assert p == model.with_params(nut_position_m=z).predict(s, f)
+        own = model.with_params(nut_position_m=z)
+        assert not prediction_differences(p, own.predict(s, f), own.samples.count)
 
 
 def _recomputes(params: ScrewParameters, steps, joint: str = "") -> list[tuple]:
@@ -204,7 +200,7 @@ def test_predictions_are_those_of_the_code_before(log):
             continue
         modes, divergence, p, stderr = reference(m, s, f)
         for new in (single, fast):
-            assert _same_modes(new.modes, modes)
+            assert not mode_differences(new.modes, modes)
             assert new.divergence_rates == pytest.approx(divergence, rel=REL)
             assert new.stable == (not divergence and not any(x[4] for x in modes))
             compared += 1
