@@ -21,16 +21,28 @@ if [[ $# -eq 0 ]]; then
     set -- test
 fi
 # A hang fails by name instead of eating CI's time: pytest-timeout, faulthandler and a watchdog
-# (setup.cfg, test/conftest.py), the outer `timeout` as the last resort. The 15 slowest tests
-# and the coverage (branches, child processes too: .coveragerc) are in the output; then the
-# coverage per layer (tools/coverage_by_layer.py).
+# (setup.cfg, test/conftest.py). A slow machine ends the session itself: no test starts after
+# SESSION_DEADLINE_S, and pytest still prints what failed and what never ran (conftest.py).
+# The outer `timeout` is the last resort (deadline + the longest a running test may take,
+# 300 s): it prints the failures the log had by then. The 15 slowest tests and the coverage
+# (branches, child processes too: .coveragerc) are in the output; then the coverage per layer
+# (tools/coverage_by_layer.py).
 rm -f .coverage .coverage.*
+export SESSION_DEADLINE_S="${SESSION_DEADLINE_S:-1140}"
+FAILURES_FILE="$ROS_LOG_DIR/failures.txt"
+export FAILURES_FILE
 status=0
 # Three worker processes on two cores (pytest-xdist; a test file stays in one worker): most
 # tests wait on ROS, child processes or Dask rather than compute, and a third worker fills
 # those waits, also beside a busy core. PYTEST_WORKERS=0 runs in this process.
-timeout 1500 .venv/bin/python -m pytest -q -n "${PYTEST_WORKERS:-3}" --dist loadfile \
+timeout "$((SESSION_DEADLINE_S + 360))" .venv/bin/python -m pytest -q \
+    -n "${PYTEST_WORKERS:-3}" --dist loadfile \
     --durations=15 --cov=leadscrew_ros --cov-branch --cov-report=term "$@" || status=$?
+if [[ $status -eq 124 ]]; then
+    echo "run-tests.sh: pytest killed by the outer timeout (${SESSION_DEADLINE_S} s deadline + 360 s);" \
+        "failures before it:" >&2
+    cat "$FAILURES_FILE" >&2 2>/dev/null || echo "  none recorded" >&2
+fi
 if [[ -e .coverage ]]; then
     .venv/bin/python tools/coverage_by_layer.py || true
 fi

@@ -78,6 +78,18 @@ def pytest_runtest_protocol(item, nextitem):
             timer.cancel()
 
 
+# ----------------------------------------------------------------------------- session deadline
+# The suite ends itself on a slow machine, with its summary (harness/session_deadline.py).
+from harness.session_deadline import (  # noqa: E402, F401  # hooks, found by name
+    pytest_collection_finish,
+    pytest_configure,
+    pytest_runtest_logfinish,
+    pytest_runtest_logreport,
+    pytest_sessionstart,
+    pytest_terminal_summary,
+    pytest_xdist_node_collection_finished,
+)
+
 # ----------------------------------------------------------------------------- ROS fixtures
 # One implementation of the launch-free harness (test/harness/); imported lazily, so rclpy is
 # loaded only by the tests that use it, after the environment above is set.

@@ -44,7 +44,7 @@ def test_long_running_commands_stop_with_exit_0_and_one_line(command, sig, bag, 
     proc = None
     try:
         proc = start(argv(command, bag), domain(7), tmp_path, "cmd")
-        wait_initialised([proc], timeout=30.0)  # rclpy is up: the handlers are in place
+        wait_initialised([proc])  # rclpy is up: the handlers are in place
         time.sleep(0.5)  # and it runs (spins, publishes)
         assert proc.poll() is None, output(proc)
         proc.send_signal(sig)

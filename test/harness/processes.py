@@ -84,8 +84,9 @@ def stop(*procs, grace_s: float = 0.0) -> None:
             )
 
 
-def wait_initialised(procs: list[subprocess.Popen], timeout: float = 10.0) -> None:
-    """Wait until each process has run rclpy.init (its log file exists in ROS_LOG_DIR)."""
+def wait_initialised(procs: list[subprocess.Popen], timeout: float = 60.0) -> None:
+    """Wait until each process has run rclpy.init (its log file exists in ROS_LOG_DIR); a
+    child's imports took over 10 s with the machine's load at 9 on 2 cores."""
     log_dir, deadline = Path(os.environ["ROS_LOG_DIR"]), time.monotonic() + timeout
     for proc in procs:
         while not any(log_dir.glob(f"*_{proc.pid}_*.log")):
