@@ -305,6 +305,30 @@ def test_without_subscriber_it_publishes_after_the_wait_with_a_status_line(
     assert "waiting" not in capsys.readouterr().out
 
 
+def test_a_subscriber_of_another_type_stops_the_replay_naming_both_types(log, collector):
+    """DDS never matches a Float64 publisher with a String subscriber: instead of waiting for
+    a subscriber and publishing to nobody, the replay names both types (from the ROS graph)
+    and publishes nothing."""
+    space = ns()
+    c = collector({f"{space}/motor_speed": String})
+    r = Replay(
+        log,
+        topics=["/motor_speed"],
+        remap={"/motor_speed": f"{space}/motor_speed"},
+        wait_for_subscriber_s=60.0,  # far longer than discovery: the graph check ends it
+    )
+    r.start()
+    c.spin_until(lambda: not r.is_alive(), 90.0, "the replay to refuse")
+    r.join()
+    assert isinstance(r.error, ValueError), r.error
+    problem = str(r.error)
+    assert problem.startswith(
+        f"{space}/motor_speed: the log's /motor_speed is std_msgs/msg/Float64"
+    )
+    assert "/collector takes std_msgs/msg/String" in problem and "\n" not in problem
+    assert r.result is None and c.messages(f"{space}/motor_speed") == []
+
+
 def test_end_to_end_the_predictor_node_answers_a_replayed_log(log, collector):
     """The real node in-process, its inputs fed from the log; its risk follows the log."""
     space = ns()

@@ -151,7 +151,7 @@ def publish_log(
                 for t, out in plan.outputs.items()
             }
             _announce(plan, pubs, rate, loop)
-            _wait_for_subscriber(list(pubs.values()), wait_for_subscriber_s, stop)
+            _wait_for_subscriber(node, plan, pubs, wait_for_subscriber_s, stop)
             status = _Status(progress and sys.stderr.isatty(), plan.span_ns / 1e9, rate, loop)
             player = _Player(plan, pubs, rate, loop, stop, status)
             player.run()
@@ -358,16 +358,36 @@ def _announce(plan: _Plan, pubs: dict[str, Publisher], rate: float, loop: bool) 
     )
 
 
-def _wait_for_subscriber(pubs: list[Publisher], timeout_s: float, stop: StopSignals) -> None:
+def _check_subscriber_types(node: Node, plan: _Plan, pubs: dict[str, Publisher]) -> None:
+    """ValueError if a subscriber in the ROS graph takes another type on a topic to publish
+    (DDS never matches them: it would wait for a subscriber, then publish to nobody)."""
+    for t, pub in pubs.items():
+        ours = plan.topics[t].type_name
+        for sub in node.get_subscriptions_info_by_topic(pub.topic_name):
+            if sub.topic_type != ours:
+                who = f"{sub.node_namespace.rstrip('/')}/{sub.node_name}"
+                raise ValueError(
+                    f"{pub.topic_name}: the log's {t} is {ours}, but its subscriber {who} "
+                    f"takes {sub.topic_type}; nothing published (choose --topics, or "
+                    f"--remap {t}:=ANOTHER)"
+                )
+
+
+def _wait_for_subscriber(
+    node: Node, plan: _Plan, pubs: dict[str, Publisher], timeout_s: float, stop: StopSignals
+) -> None:
     """Until every publisher has a subscriber, or MATCH_GRACE_S after the first one matched,
-    or `timeout_s` passed (then publish anyway: a subscriber may still come)."""
+    or `timeout_s` passed (then publish anyway: a subscriber may still come); ValueError as
+    soon as the graph shows a subscriber of another type (`_check_subscriber_types`)."""
+    _check_subscriber_types(node, plan, pubs)
     if timeout_s <= 0:
         return
     print(f"waiting up to {timeout_s:g} s for a subscriber ...", flush=True)
     deadline, first = time.monotonic() + timeout_s, None
     while not stop.signum:
         now = time.monotonic()
-        matched = [p.get_subscription_count() > 0 for p in pubs]
+        _check_subscriber_types(node, plan, pubs)
+        matched = [p.get_subscription_count() > 0 for p in pubs.values()]
         if any(matched) and first is None:
             first = now
         if all(matched) or (first is not None and now - first >= MATCH_GRACE_S):
