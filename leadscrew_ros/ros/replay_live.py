@@ -365,9 +365,11 @@ def _check_subscriber_types(node: Node, plan: _Plan, pubs: dict[str, Publisher])
         ours = plan.topics[t].type_name
         for sub in node.get_subscriptions_info_by_topic(pub.topic_name):
             if sub.topic_type != ours:
-                who = f"{sub.node_namespace.rstrip('/')}/{sub.node_name}"
+                # discovery may show the endpoint before its node's name
+                known = not sub.node_name.startswith("_NODE_NAME_UNKNOWN")
+                who = f" {sub.node_namespace.rstrip('/')}/{sub.node_name}" if known else ""
                 raise ValueError(
-                    f"{pub.topic_name}: the log's {t} is {ours}, but its subscriber {who} "
+                    f"{pub.topic_name}: the log's {t} is {ours}, but its subscriber{who} "
                     f"takes {sub.topic_type}; nothing published (choose --topics, or "
                     f"--remap {t}:=ANOTHER)"
                 )
