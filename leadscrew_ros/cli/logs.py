@@ -633,7 +633,8 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
         "log",
         metavar="BAGDIR|FILE",
         help="bag directory, one .mcap file (its bag's metadata.yaml is regenerated "
-        "too), or a record directory (every cut-off bag in it)",
+        "too), or a record directory (every cut-off bag in it); a .db3 log needs no "
+        "recovery (SQLite keeps it consistent): one line says so",
     )
     p.add_argument(
         "-o",
