@@ -34,8 +34,10 @@ from std_msgs.msg import Float64, String
 from harness.cdr_reference import write_message
 from harness.processes import stop
 from harness.ros import RosWorld, unique_ns
+from harness.rosbag2_bags import SERVICE_EVENT, drive_messages, write_bag
 from leadscrew_ros.bag import msgdefs
 from leadscrew_ros.bag.logfile import LogError, log_files, read_log
+from leadscrew_ros.bag.logsource import open_log
 from leadscrew_ros.bag.recorder import Recorder, RecordSettings
 from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.ros import replay_live
@@ -185,6 +187,23 @@ def test_default_selection_republishes_the_inputs_unchanged_and_in_order(log, co
     for topic in set(TYPES) - set(INPUTS):  # look-alikes and the node's own outputs
         assert c.got[topic] == [], topic
     assert r.result == len(INPUTS) * STEPS
+
+
+def test_a_db3_bag_is_republished_as_an_mcap_one(tmp_path, collector):
+    """rosbag2 sqlite3 storage (legacy type names, `nut_position` stored without its leading
+    slash, a service event that is not an input): the inputs, unchanged, in stored order."""
+    bag = write_bag(tmp_path / "bag", "sqlite3", 5, splits=2, legacy_types=True, steps=20)
+    written = drive_messages(20, legacy_types=True)
+    topics = {"/motor_speed": Float64, "/nut_position": Float64, SERVICE_EVENT[0]: Float64}
+    c = collector(topics)
+    r = replay(c, open_log(bag.path).files, rate=20.0)
+    for topic in ("/motor_speed", "/nut_position"):
+        assert [m.data for m in c.messages(topic)] == [
+            deserialize_message(m.data, Float64).data
+            for m in written
+            if "/" + m.topic.lstrip("/") == topic
+        ]
+    assert c.got[SERVICE_EVENT[0]] == [] and r.result == 3 * 20  # with /axial_load
 
 
 @pytest.mark.parametrize("rate", [2.0, 8.0])

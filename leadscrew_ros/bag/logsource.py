@@ -103,11 +103,40 @@ class LogSource:
             return [inspect(f) for f in self.files]
         infos = []
         for f in self.files:
-            info = LogInfo(f, storage="sqlite3", complete=True)
+            info = LogInfo(f)
             for _ in _db3_messages(f, info):
                 pass
             infos.append(info)
         return infos
+
+
+def file_messages(
+    path: Path, topics: set[str] | None = None, info: LogInfo | None = None
+) -> Iterator[LogMessage]:
+    """The messages of one file of a log (`LogSource.files`) in file order, read strictly: a
+    .db3 file, or an MCAP file (`logfile.read_messages`: LogError without footer).
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+    topics : set of str, optional
+        Only these topics (fully qualified names).
+    info : LogInfo, optional
+        Receives what reading found (topics, counts, times).
+
+    Returns
+    -------
+    iterator of LogMessage
+        The file's messages.
+    """
+    info = info if info is not None else LogInfo(path)
+    if path.suffix != DB3:
+        yield from read_messages(path, topics, strict=True, info=info)
+        return
+    for m in _db3_messages(path, info):
+        if topics is None or m.topic.name in topics:
+            yield m
 
 
 def open_log(path: Path | str) -> LogSource:
@@ -275,6 +304,7 @@ def _db3_topics(path: Path, con: sqlite3.Connection) -> dict[int, Topic]:
 
 
 def _db3_messages(path: Path, info: LogInfo) -> Iterator[LogMessage]:
+    info.storage, info.complete = "sqlite3", True  # SQLite commits whole transactions
     with _connect(path) as con:
         # a name in two rows (two types): each its own topic, as two MCAP channels are
         topics = {tid: info.add_topic(t) for tid, t in _db3_topics(path, con).items()}

@@ -14,7 +14,6 @@ from ..bag.logfile import (
     bag_of,
     cut_off_bags,
     live_recordings,
-    log_files,
     metadata_problem,
     recover,
     recover_bag,
@@ -157,7 +156,7 @@ def _publish(args: argparse.Namespace) -> int:
     publish_log, wait_s = live.publish_log, live.WAIT_FOR_SUBSCRIBER_S
     try:
         publish_log(
-            log_files(args.log),
+            open_log(args.log).files,
             rate=1.0 if args.rate is None else args.rate,
             loop=args.loop,
             start_offset_s=0.0 if args.start_offset is None else args.start_offset,
@@ -567,7 +566,7 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     p.add_argument(
         "log",
         metavar="LOG",
-        help="MCAP file, or a directory of split .mcap files (offline also rosbag2 sqlite3 .db3)",
+        help="MCAP or rosbag2 sqlite3 (.db3) file, or a bag directory of split files",
     )
     p.add_argument(
         "--out",

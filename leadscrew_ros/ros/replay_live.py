@@ -37,7 +37,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 from rclpy.validate_full_topic_name import validate_full_topic_name
 
-from ..bag.logfile import LogError, LogInfo, LogMessage, Topic, read_messages
+from ..bag.logfile import LogError, LogInfo, LogMessage, Topic
+from ..bag.logsource import file_messages
 from ..review.timeline import INPUTS, resolve
 from ..review.timeline import is_input as _is_input  # the offline replay's rule, shared
 from .env import StopSignals, close, confine_to_localhost, init_context
@@ -101,7 +102,7 @@ def publish_log(
     Parameters
     ----------
     paths : list of Path
-        The log's files, in order.
+        The log's files, in order (MCAP or rosbag2 sqlite3 .db3: `LogSource.files`).
     rate : float
         Speed-up of the log's time (1: real time).
     loop : bool
@@ -297,7 +298,7 @@ def _scan(paths: list[Path], selected: Callable[[Topic], bool]) -> _Scan:
     scan, rejected = _Scan(), set()
     for path in paths:
         info = LogInfo(path)
-        for m in read_messages(path, strict=True, info=info):
+        for m in file_messages(path, info=info):
             name, t = m.topic.name, m.log_time_ns
             if name not in scan.classes and name not in rejected:
                 if selected(m.topic):
@@ -466,7 +467,7 @@ class _Player:
         """One pass over the log; False when stopped before its end."""
         plan, base_ns = self.plan, self.passes * self.plan.span_ns
         for path in plan.files:
-            for m in read_messages(path, set(plan.outputs), strict=True):
+            for m in file_messages(path, set(plan.outputs)):
                 if m.log_time_ns < plan.origin_ns:
                     continue  # before the start offset
                 due = self.started + (base_ns + m.log_time_ns - plan.origin_ns) / 1e9 / self.rate
