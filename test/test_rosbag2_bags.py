@@ -28,6 +28,7 @@ from harness.rosbag2_bags import (
     write_wal_db3,
 )
 from leadscrew_ros.bag.logsource import open_log
+from leadscrew_ros.review.fleet import content_hash, stat_key
 
 # (storage, metadata version or None, split files, sqlite3 generation, legacy type names,
 # MCAP chunk compression)
@@ -205,6 +206,22 @@ def test_a_wal_mode_db3_is_read_with_its_wal_and_left_unchanged(tmp_path, capsys
     assert code == 0, err
     assert json.loads(out)[0]["messages"] == len(messages)
     assert checksums(tmp_path) == before
+
+
+def test_review_sees_a_change_of_the_wal_alone(tmp_path):
+    """Two recordings of one WAL-mode .db3, the same database file, more messages in the
+    second's -wal: review's resume keys differ (a new message is never skipped as unchanged)."""
+    messages = drive_messages(40)
+    first = write_wal_db3(_mkdir(tmp_path / "a") / "wal.db3", messages[:-10], checkpointed=50)
+    later = write_wal_db3(_mkdir(tmp_path / "b") / "wal.db3", messages, checkpointed=50)
+    assert first.read_bytes() == later.read_bytes()  # the condition of the test
+    assert content_hash(first) != content_hash(later)
+    assert stat_key(first)[1][:2] != stat_key(later)[1][:2]  # the -wal's name and size
+
+
+def _mkdir(path: Path) -> Path:
+    path.mkdir()
+    return path
 
 
 def test_a_topic_without_leading_slash_is_found_either_way(tmp_path, capsys):
