@@ -163,8 +163,9 @@ def open_log(path: Path | str) -> LogSource:
         refuse_compressed(path)
     if path.is_dir() and not any(path.glob("*.mcap")):
         db3 = sorted(path.glob(f"*{DB3}"), key=lambda p: _split_key(p.with_suffix(".mcap")))
-        if db3:
-            return LogSource(path, db3, sqlite=True)
+        if not db3:
+            raise LogError(path, f"directory holds no .mcap or {DB3} files")
+        return LogSource(path, db3, sqlite=True)
     if path.is_file() and path.suffix == DB3:
         return LogSource(path, [path], sqlite=True)
     return LogSource(path, log_files(path))
