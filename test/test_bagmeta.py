@@ -10,7 +10,7 @@ import yaml
 from rosbags.rosbag2 import Reader as RosbagsReader
 
 from harness.logs import f64, write_mcap
-from leadscrew_ros.bag.bagmeta import METADATA, BagStats, FileStats, TopicStats
+from leadscrew_ros.bag.bagmeta import METADATA, BagStats, FileStats, TopicStats, disagreement
 
 T0 = 1_700_000_000_000_000_000
 
@@ -67,6 +67,19 @@ def test_an_empty_bag_starts_and_lasts_zero():
     assert info["starting_time"] == {"nanoseconds_since_epoch": 0}
     assert info["duration"] == {"nanoseconds": 0} and info["message_count"] == 0
     assert info["files"] == [] and info["topics_with_message_count"] == []
+
+
+def test_an_empty_bag_agrees_with_rosbag2s_largest_start_time_but_a_full_one_does_not():
+    """rosbag2 writes an empty bag's start as the largest time point (its empty_bag test
+    resource): that is no disagreement; with messages, another start is one."""
+    empty = BagStats(files=[FileStats(Path("b_0.db3"))]).info()["rosbag2_bagfile_information"]
+    rosbag2 = {**empty, "starting_time": {"nanoseconds_since_epoch": 2**63 - 1}}
+    assert disagreement(rosbag2, empty) == ""
+    full = BagStats(files=[FileStats(Path("b_0.db3"), T0, T0 + 10, 2)]).info()
+    full = full["rosbag2_bagfile_information"]
+    assert disagreement({**full, "starting_time": rosbag2["starting_time"]}, full).startswith(
+        "starting_time {'nanoseconds_since_epoch': 9223372036854775807} is not the messages'"
+    )
 
 
 @pytest.mark.parametrize("splits", [1, 3])

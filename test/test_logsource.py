@@ -153,7 +153,7 @@ def test_mcap_is_preferred_when_a_directory_holds_both(tmp_path):
     "make, problem",
     [
         (lambda d: d / "nothing.mcap", "no such file or directory"),
-        (lambda d: d, "directory holds no .mcap files"),
+        (lambda d: d, "directory holds no .mcap or .db3 files"),
     ],
 )
 def test_no_log_is_one_error_naming_the_path(tmp_path, make, problem):

@@ -504,7 +504,10 @@ def test_cli_replay_takes_node_parameters_from_the_params_file(short_log, tmp_pa
     "make, problem",
     [
         (lambda d: d / "missing.mcap", "no such file or directory"),
-        (lambda d: (d / "empty_dir").mkdir() or d / "empty_dir", "directory holds no .mcap files"),
+        (
+            lambda d: (d / "empty_dir").mkdir() or d / "empty_dir",
+            "directory holds no .mcap or .db3 files",
+        ),
         (lambda d: d / "image.png", "not an MCAP file (bad magic)"),
         (lambda d: d / "notes.txt", "not an MCAP file (bad magic)"),
         (

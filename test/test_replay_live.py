@@ -34,8 +34,10 @@ from std_msgs.msg import Float64, String
 from harness.cdr_reference import write_message
 from harness.processes import stop
 from harness.ros import RosWorld, unique_ns
+from harness.rosbag2_bags import SERVICE_EVENT, drive_messages, write_bag
 from leadscrew_ros.bag import msgdefs
 from leadscrew_ros.bag.logfile import LogError, log_files, read_log
+from leadscrew_ros.bag.logsource import open_log
 from leadscrew_ros.bag.recorder import Recorder, RecordSettings
 from leadscrew_ros.model import SqueakModel
 from leadscrew_ros.ros import replay_live
@@ -187,6 +189,23 @@ def test_default_selection_republishes_the_inputs_unchanged_and_in_order(log, co
     assert r.result == len(INPUTS) * STEPS
 
 
+def test_a_db3_bag_is_republished_as_an_mcap_one(tmp_path, collector):
+    """rosbag2 sqlite3 storage (legacy type names, `nut_position` stored without its leading
+    slash, a service event that is not an input): the inputs, unchanged, in stored order."""
+    bag = write_bag(tmp_path / "bag", "sqlite3", 5, splits=2, legacy_types=True, steps=20)
+    written = drive_messages(20, legacy_types=True)
+    topics = {"/motor_speed": Float64, "/nut_position": Float64, SERVICE_EVENT[0]: Float64}
+    c = collector(topics)
+    r = replay(c, open_log(bag.path).files, rate=20.0)
+    for topic in ("/motor_speed", "/nut_position"):
+        assert [m.data for m in c.messages(topic)] == [
+            deserialize_message(m.data, Float64).data
+            for m in written
+            if "/" + m.topic.lstrip("/") == topic
+        ]
+    assert c.got[SERVICE_EVENT[0]] == [] and r.result == 3 * 20  # with /axial_load
+
+
 @pytest.mark.parametrize("rate", [2.0, 8.0])
 def test_timing_follows_the_log_divided_by_rate(log, collector, rate, monkeypatch):
     """The schedule, taken in the replay's thread (free of delivery latency): due times at the
@@ -303,6 +322,34 @@ def test_without_subscriber_it_publishes_after_the_wait_with_a_status_line(
     )
     assert sys.stderr.getvalue() == ""
     assert "waiting" not in capsys.readouterr().out
+
+
+def test_a_subscriber_of_another_type_stops_the_replay_naming_both_types(log, collector):
+    """DDS never matches a Float64 publisher with a String subscriber: instead of waiting for
+    a subscriber and publishing to nobody, the replay names both types (from the ROS graph)
+    and publishes nothing."""
+    space = ns()
+    c = collector({f"{space}/motor_speed": String})
+    r = Replay(
+        log,
+        topics=["/motor_speed"],
+        remap={"/motor_speed": f"{space}/motor_speed"},
+        wait_for_subscriber_s=60.0,  # far longer than discovery: the graph check ends it
+    )
+    r.start()
+    c.spin_until(lambda: not r.is_alive(), 90.0, "the replay to refuse")
+    r.join()
+    assert isinstance(r.error, ValueError), r.error
+    problem = str(r.error)
+    assert problem.startswith(
+        f"{space}/motor_speed: the log's /motor_speed is std_msgs/msg/Float64"
+    )
+    assert problem.endswith(
+        "takes std_msgs/msg/String; nothing published (choose --topics, or "
+        "--remap /motor_speed:=ANOTHER)"
+    )
+    assert "\n" not in problem
+    assert r.result is None and c.messages(f"{space}/motor_speed") == []
 
 
 def test_end_to_end_the_predictor_node_answers_a_replayed_log(log, collector):

@@ -210,7 +210,8 @@ def topic_counts(info: dict) -> dict[str, int]:
 
 def disagreement(old: dict, new: dict) -> str:
     """What a metadata mapping `old` says differently from `new` (that of the bag's files,
-    `BagStats.info`): files, message count, per-topic counts, start, duration; '' if nothing."""
+    `BagStats.info`): files, message count, per-topic counts, start, duration (of a bag with
+    messages); '' if nothing."""
     listed = [Path(str(n)).name for n in old.get("relative_file_paths") or []]
     if listed != new["relative_file_paths"]:
         missing = [n for n in new["relative_file_paths"] if n not in listed]
@@ -235,6 +236,8 @@ def disagreement(old: dict, new: dict) -> str:
             + ", ".join(shown[:3])
             + (f" and {len(shown) - 3} more" if len(shown) > 3 else "")
         )
+    if not new["message_count"]:  # no time span: rosbag2 writes the largest time point
+        return ""
     for key in ("starting_time", "duration"):
         if old.get(key) != new[key]:
             return f"{key} {old.get(key)} is not the messages' {new[key]}"

@@ -75,18 +75,49 @@ class LogError(Exception):
 class Topic:
     """A channel of a log with its schema: what a copy needs to write it back verbatim."""
 
-    name: str
-    type_name: str  # 'pkg/msg/Type'
+    name: str  # fully qualified ('/motor_speed'), as ROS 2 resolves the stored name
+    type_name: str  # 'pkg/msg/Type', 'pkg/srv/Type_Event'
     schema_encoding: str
     schema: str  # complete message definition
     message_encoding: str
     metadata: dict[str, str]
     schema_name: str = ""  # as stored (e.g. 'pkg/Type'); copies keep it verbatim
+    topic_name: str = ""  # as stored (e.g. 'motor_speed'), when it differs from `name`
 
     @property
     def stored_schema_name(self) -> str:
         """The schema name as stored, or the type name when the log stored none."""
         return self.schema_name or self.type_name
+
+    @property
+    def stored_name(self) -> str:
+        """The topic name as stored: copies and metadata.yaml keep it verbatim."""
+        return self.topic_name or self.name
+
+
+def log_topic(
+    name: str,
+    stored_type: str,
+    schema_encoding: str,
+    schema: str,
+    message_encoding: str,
+    metadata: dict[str, str],
+) -> Topic:
+    """The `Topic` of a channel or .db3 `topics` row as stored: its name fully qualified (a
+    name stored without the leading slash, as rosbags and other writers allow, is relative to
+    the root namespace) and its type in the 'pkg/<interface kind>/Type' form (legacy
+    'pkg/Type' names are messages), the stored spellings kept for verbatim copies."""
+    full = name if name.startswith("/") else "/" + name
+    return Topic(
+        full,
+        _full_type(stored_type),
+        schema_encoding,
+        schema,
+        message_encoding,
+        metadata,
+        stored_type,
+        name if name != full else "",
+    )
 
 
 @dataclass(frozen=True)
@@ -105,6 +136,7 @@ class LogInfo:
     """What reading a file found: header, topics, counts, and where it stopped if damaged."""
 
     path: Path
+    storage: str = "mcap"  # or 'sqlite3' (rosbag2 .db3)
     profile: str = ""
     library: str = ""
     topics: dict[str, Topic] = field(default_factory=dict)
@@ -224,9 +256,9 @@ def read_messages(
     strict: bool = True,
     info: LogInfo | None = None,
 ) -> Iterator[LogMessage]:
-    """Messages of one MCAP file in file order (topics: only these). strict=True raises
-    LogError for a file without footer; strict=False stops quietly at the first damaged or
-    missing record and notes why in `info.damage`."""
+    """Messages of one MCAP file in file order (topics: only these, fully qualified names).
+    strict=True raises LogError for a file without footer; strict=False stops quietly at the
+    first damaged or missing record and notes why in `info.damage`."""
     path = Path(path)
     info = info if info is not None else LogInfo(path)
     if strict and path.is_file() and not is_complete(path):
@@ -260,13 +292,13 @@ def _incomplete(path: Path) -> str:
 
 
 def bag_of(path: Path | str) -> Path | None:
-    """The rosbag2 bag directory an MCAP file belongs to (its parent holds `metadata.yaml`, or
-    the file is named `<directory name>_<index>.mcap` as rosbag2 and our recorder name splits);
-    None for a loose file."""
+    """The rosbag2 bag directory a log file belongs to (its parent holds `metadata.yaml`, or
+    the file is named `<directory name>_<index>.mcap` (or `.db3`) as rosbag2 and our recorder
+    name splits); None for a loose file."""
     path = Path(path)
     parent = path.parent
     if (parent / METADATA).is_file() or re.fullmatch(
-        re.escape(parent.name) + r"_\d+\.mcap", path.name
+        re.escape(parent.name) + r"_\d+\.(mcap|db3)", path.name
     ):
         return parent
     return None
@@ -378,9 +410,6 @@ def _channel(
     topics: set[str] | None,
     info: LogInfo,
 ) -> None:
-    if topics is not None and c.topic not in topics:
-        channels[c.id] = None
-        return
     if c.schema_id not in schemas:
         raise _Damage(f"channel {c.topic!r} refers to unknown schema {c.schema_id}")
     name, encoding, text = schemas[c.schema_id]
@@ -390,15 +419,17 @@ def _channel(
             f"foreign MCAP: topic {c.topic} is {c.message_encoding!r} with "
             f"a {encoding!r} schema, expected cdr with ros2msg",
         )
-    topic = Topic(
-        c.topic, _full_type(name), encoding, text, c.message_encoding, dict(c.metadata), name
-    )
+    topic = log_topic(c.topic, name, encoding, text, c.message_encoding, dict(c.metadata))
+    if topics is not None and topic.name not in topics:
+        channels[c.id] = None
+        return
     channels[c.id] = info.add_topic(topic)
 
 
 def _full_type(name: str) -> str:
+    """'pkg/msg/Type' of a legacy 'pkg/Type'; 'pkg/srv/Type_Event' and the like stay."""
     parts = name.split("/")
-    return f"{parts[0]}/msg/{parts[-1]}" if len(parts) in (2, 3) else name
+    return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else name
 
 
 def _message(
@@ -563,7 +594,7 @@ def _rewrite(
 
 def _register(writer: Writer, t: Topic) -> int:
     schema = writer.register_schema(t.stored_schema_name, t.schema_encoding, t.schema.encode())
-    return writer.register_channel(t.name, t.message_encoding, schema, t.metadata)
+    return writer.register_channel(t.stored_name, t.message_encoding, schema, t.metadata)
 
 
 # ----------------------------------------------------------------------------- bag recovery
@@ -776,9 +807,9 @@ def bag_stats(infos: list[LogInfo], old: dict | None = None) -> BagStats:
         stats.files.append(FileStats(info.path, info.start_ns, info.end_ns, info.messages))
         for t, n in info.type_counts():
             key = (t.name, t.type_name)
-            if key not in topics:
-                qos = old_qos.get(t.name) or t.metadata.get("offered_qos_profiles", "")
-                topics[key] = TopicStats(t.name, t.type_name, 0, str(qos))
+            if key not in topics:  # the name as stored: what rosbags and ros2 bag read
+                qos = old_qos.get(t.stored_name) or t.metadata.get("offered_qos_profiles", "")
+                topics[key] = TopicStats(t.stored_name, t.type_name, 0, str(qos))
             topics[key].count += n
     stats.topics = list(topics.values())
     return stats

@@ -13,13 +13,12 @@ from ..bag.logfile import (
     LogInfo,
     bag_of,
     cut_off_bags,
-    inspect,
     live_recordings,
-    log_files,
     metadata_problem,
     recover,
     recover_bag,
 )
+from ..bag.logsource import DB3, LogSource, open_log
 from ..live.settings import JointSettings, LiveSettings
 from ..model.physics.metadata import help_text
 from ..review.listen import SoundSettings
@@ -157,7 +156,7 @@ def _publish(args: argparse.Namespace) -> int:
     publish_log, wait_s = live.publish_log, live.WAIT_FOR_SUBSCRIBER_S
     try:
         publish_log(
-            log_files(args.log),
+            open_log(args.log).files,
             rate=1.0 if args.rate is None else args.rate,
             loop=args.loop,
             start_offset_s=0.0 if args.start_offset is None else args.start_offset,
@@ -250,9 +249,45 @@ def _record_directory(path: Path) -> bool:
     )
 
 
+def _metadata_problem(path: Path, infos: list[LogInfo]) -> str:
+    """`metadata_problem` of the bag of `path` (a bag directory's metadata.yaml against its
+    files as read into `infos`; a file's bag: the metadata alone); '' for a loose file or one
+    still being recorded."""
+    bag = path if path.is_dir() else bag_of(path)
+    if bag is None or any(i.live for i in infos):
+        return ""
+    return metadata_problem(bag, infos if bag == path else None)
+
+
+def _sqlite_log(path: Path) -> LogSource | None:
+    """The rosbag2 sqlite3 log at `path` (a .db3 file or a bag directory of them), or None."""
+    if (path.is_file() and path.suffix == DB3) or (path.is_dir() and any(path.glob("*" + DB3))):
+        source = open_log(path)
+        return source if source.sqlite else None
+    return None
+
+
+def _recover_sqlite(source: LogSource, output: str | None) -> int:
+    """`recover` of a .db3 log: nothing to do, SQLite's transactions keep it consistent."""
+    what = f"{source.path} is a rosbag2 sqlite3 (.db3) log"
+    if output:
+        raise CliError(f"{what}: nothing to recover into {output} (SQLite keeps it consistent)")
+    infos = source.inspect()
+    problem = _metadata_problem(source.path, infos)
+    print(
+        f"nothing to recover: {what}, which SQLite keeps consistent "
+        f"({sum(i.messages for i in infos)} messages readable)"
+        + (f"; {problem}" if problem else "")
+    )
+    return 0
+
+
 def cmd_recover(args: argparse.Namespace) -> int:
     """`recover`: repair a cut-off log or bag; exit status."""
     src = Path(args.log)
+    sqlite = _sqlite_log(src)
+    if sqlite is not None:
+        return _recover_sqlite(sqlite, args.output)
     if args.output:  # a copy elsewhere; the input stays as it is
         if src.is_dir():
             raise CliError("-o/--output is for one file; a bag directory is recovered in place")
@@ -287,19 +322,15 @@ def cmd_recover(args: argparse.Namespace) -> int:
 def cmd_info(args: argparse.Namespace) -> int:
     """`info`: print what a log contains; exit status."""
     path = Path(args.log)
-    infos = [inspect(f) for f in log_files(path)]
+    infos = open_log(path).inspect()
+    problem = _metadata_problem(path, infos)
     bag = path if path.is_dir() else bag_of(path)
-    # a bag directory's metadata.yaml against its files; a file's bag: the file alone
-    problem = (
-        ""
-        if bag is None or any(i.live for i in infos)
-        else metadata_problem(bag, infos if bag == path else None)
-    )
     if args.json:
         print_json(
             [
                 {
                     "file": str(i.path),
+                    "storage": i.storage,
                     "complete": i.complete,
                     "damage": i.damage,
                     "live": i.live,
@@ -319,6 +350,11 @@ def cmd_info(args: argparse.Namespace) -> int:
         )
         return 0
     for i in infos:
+        if i.storage != "mcap":
+            print(f"{i.path}: rosbag2 {i.storage} storage")
+            print(f"  {i.messages} messages, {_span(i)}")
+            print("\n".join(_topic_lines(i)))
+            continue
         if i.complete:
             state = "complete"
         elif i.live:  # not cut off: the rest is still to come
@@ -530,7 +566,7 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     p.add_argument(
         "log",
         metavar="LOG",
-        help="MCAP file, or a directory of split .mcap files (offline also rosbag2 sqlite3 .db3)",
+        help="MCAP or rosbag2 sqlite3 (.db3) file, or a bag directory of split files",
     )
     p.add_argument(
         "--out",
@@ -596,7 +632,8 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
         "log",
         metavar="BAGDIR|FILE",
         help="bag directory, one .mcap file (its bag's metadata.yaml is regenerated "
-        "too), or a record directory (every cut-off bag in it)",
+        "too), or a record directory (every cut-off bag in it); a .db3 log needs no "
+        "recovery (SQLite keeps it consistent): one line says so",
     )
     p.add_argument(
         "-o",
@@ -608,8 +645,13 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     p.set_defaults(run=cmd_recover)
 
     p = sub.add_parser(
-        "info", help="topics, types, counts, time span of an MCAP log; complete or truncated"
+        "info",
+        help="topics, types, counts, time span of a log (MCAP or .db3); complete or truncated",
     )
-    p.add_argument("log", metavar="LOG", help="MCAP file or directory of split files")
+    p.add_argument(
+        "log",
+        metavar="LOG",
+        help="MCAP or rosbag2 sqlite3 (.db3) file, or a bag directory of split files",
+    )
     p.add_argument("--json", action="store_true", help="print JSON (one object per file)")
     p.set_defaults(run=cmd_info)

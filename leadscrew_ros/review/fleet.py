@@ -47,7 +47,7 @@ import numpy as np
 from .. import __version__
 from ..bag import logmeta
 from ..bag.logfile import LogError, is_complete, recover
-from ..bag.logsource import DB3, open_log
+from ..bag.logsource import DB3, open_log, sidecars
 from ..model import ScrewParameters, SqueakModel
 from ..model.physics.metadata import check, setting
 from ..model.uncertainty.scatter import LIVE_SAMPLES, Scatter
@@ -277,19 +277,27 @@ def log_files(log: Path) -> list[Path]:
     return open_log(log).files
 
 
+def _content_files(log: Path) -> list[Path]:
+    """The log's files and, after a .db3 file, its WAL or journal (`logsource.sidecars`): the
+    newest messages of a WAL-mode .db3 are there."""
+    return [g for f in log_files(log) for g in [f, *(sidecars(f) if f.suffix == DB3 else [])]]
+
+
 def stat_key(log: Path) -> list[list]:
-    """(name, size, modification time in ns) of each of the log's files: a quick change check."""
+    """(name, size, modification time in ns) of each of the log's files (`_content_files`): a
+    quick change check."""
     out = []
-    for f in log_files(log):
+    for f in _content_files(log):
         s = f.stat()
         out.append([f.name, s.st_size, s.st_mtime_ns])
     return out
 
 
 def content_hash(log: Path) -> str:
-    """BLAKE2b (128 bit) of the bytes of the log's files in split order, with their names."""
+    """BLAKE2b (128 bit) of the bytes of the log's files (`_content_files`) in split order, with
+    their names."""
     h = hashlib.blake2b(digest_size=16)
-    for f in log_files(log):
+    for f in _content_files(log):
         h.update(f.name.encode() + b"\0")
         with open(f, "rb") as fh:
             while block := fh.read(_HASH_BLOCK):

@@ -37,7 +37,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 from rclpy.validate_full_topic_name import validate_full_topic_name
 
-from ..bag.logfile import LogError, LogInfo, LogMessage, Topic, read_messages
+from ..bag.logfile import LogError, LogInfo, LogMessage, Topic
+from ..bag.logsource import file_messages
 from ..review.timeline import INPUTS, resolve
 from ..review.timeline import is_input as _is_input  # the offline replay's rule, shared
 from .env import StopSignals, close, confine_to_localhost, init_context
@@ -101,7 +102,7 @@ def publish_log(
     Parameters
     ----------
     paths : list of Path
-        The log's files, in order.
+        The log's files, in order (MCAP or rosbag2 sqlite3 .db3: `LogSource.files`).
     rate : float
         Speed-up of the log's time (1: real time).
     loop : bool
@@ -151,7 +152,7 @@ def publish_log(
                 for t, out in plan.outputs.items()
             }
             _announce(plan, pubs, rate, loop)
-            _wait_for_subscriber(list(pubs.values()), wait_for_subscriber_s, stop)
+            _wait_for_subscriber(node, plan, pubs, wait_for_subscriber_s, stop)
             status = _Status(progress and sys.stderr.isatty(), plan.span_ns / 1e9, rate, loop)
             player = _Player(plan, pubs, rate, loop, stop, status)
             player.run()
@@ -297,7 +298,7 @@ def _scan(paths: list[Path], selected: Callable[[Topic], bool]) -> _Scan:
     scan, rejected = _Scan(), set()
     for path in paths:
         info = LogInfo(path)
-        for m in read_messages(path, strict=True, info=info):
+        for m in file_messages(path, info=info):
             name, t = m.topic.name, m.log_time_ns
             if name not in scan.classes and name not in rejected:
                 if selected(m.topic):
@@ -358,16 +359,38 @@ def _announce(plan: _Plan, pubs: dict[str, Publisher], rate: float, loop: bool) 
     )
 
 
-def _wait_for_subscriber(pubs: list[Publisher], timeout_s: float, stop: StopSignals) -> None:
+def _check_subscriber_types(node: Node, plan: _Plan, pubs: dict[str, Publisher]) -> None:
+    """ValueError if a subscriber in the ROS graph takes another type on a topic to publish
+    (DDS never matches them: it would wait for a subscriber, then publish to nobody)."""
+    for t, pub in pubs.items():
+        ours = plan.topics[t].type_name
+        for sub in node.get_subscriptions_info_by_topic(pub.topic_name):
+            if sub.topic_type != ours:
+                # discovery may show the endpoint before its node's name
+                known = not sub.node_name.startswith("_NODE_NAME_UNKNOWN")
+                who = f" {sub.node_namespace.rstrip('/')}/{sub.node_name}" if known else ""
+                raise ValueError(
+                    f"{pub.topic_name}: the log's {t} is {ours}, but its subscriber{who} "
+                    f"takes {sub.topic_type}; nothing published (choose --topics, or "
+                    f"--remap {t}:=ANOTHER)"
+                )
+
+
+def _wait_for_subscriber(
+    node: Node, plan: _Plan, pubs: dict[str, Publisher], timeout_s: float, stop: StopSignals
+) -> None:
     """Until every publisher has a subscriber, or MATCH_GRACE_S after the first one matched,
-    or `timeout_s` passed (then publish anyway: a subscriber may still come)."""
+    or `timeout_s` passed (then publish anyway: a subscriber may still come); ValueError as
+    soon as the graph shows a subscriber of another type (`_check_subscriber_types`)."""
+    _check_subscriber_types(node, plan, pubs)
     if timeout_s <= 0:
         return
     print(f"waiting up to {timeout_s:g} s for a subscriber ...", flush=True)
     deadline, first = time.monotonic() + timeout_s, None
     while not stop.signum:
         now = time.monotonic()
-        matched = [p.get_subscription_count() > 0 for p in pubs]
+        _check_subscriber_types(node, plan, pubs)
+        matched = [p.get_subscription_count() > 0 for p in pubs.values()]
         if any(matched) and first is None:
             first = now
         if all(matched) or (first is not None and now - first >= MATCH_GRACE_S):
@@ -444,7 +467,7 @@ class _Player:
         """One pass over the log; False when stopped before its end."""
         plan, base_ns = self.plan, self.passes * self.plan.span_ns
         for path in plan.files:
-            for m in read_messages(path, set(plan.outputs), strict=True):
+            for m in file_messages(path, set(plan.outputs)):
                 if m.log_time_ns < plan.origin_ns:
                     continue  # before the start offset
                 due = self.started + (base_ns + m.log_time_ns - plan.origin_ns) / 1e9 / self.rate
