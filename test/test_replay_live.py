@@ -425,7 +425,7 @@ def test_loop_repeats_until_sigint_then_exits_cleanly(log, collector, tmp_path):
     c = collector({topic: Float64})
     proc, err = child(log, 10.0, "loop", topic, tmp_path)
     c.spin_until(
-        lambda: len(c.got[topic]) >= 2 * STEPS + 10 or proc.poll() is not None, 15.0, "two passes"
+        lambda: len(c.got[topic]) >= 2 * STEPS + 10 or proc.poll() is not None, 60.0, "two passes"
     )
     proc.send_signal(signal.SIGINT)
     out, stderr = finish(proc, err)
@@ -446,7 +446,7 @@ def test_sigterm_stops_a_replay_cleanly_before_its_end(log, collector, tmp_path)
     c = collector({topic: Float64})
     proc, err = child(log, 0.5, "once", topic, tmp_path)  # 4 s of replay
     c.spin_until(
-        lambda: len(c.got[topic]) >= 5 or proc.poll() is not None, 15.0, "the first messages"
+        lambda: len(c.got[topic]) >= 5 or proc.poll() is not None, 60.0, "the first messages"
     )
     t0 = time.monotonic()
     proc.send_signal(signal.SIGTERM)
