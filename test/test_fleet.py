@@ -578,3 +578,51 @@ def _group_alive(pgid: int) -> bool:
         if int(fields[2]) == pgid and fields[0] != "Z":  # after 'pid (comm)': state ppid pgrp
             return True
     return False
+
+
+def test_a_ctrl_c_while_the_cluster_starts_or_closes_is_held_till_after():
+    """`fleet._ctrl_c_held`: a SIGINT inside does not interrupt (Dask half started or half
+    closed prints tracebacks); it is raised as KeyboardInterrupt when the block ends, and the
+    handler before is back."""
+    before = signal.getsignal(signal.SIGINT)
+    finished = False
+    with pytest.raises(KeyboardInterrupt):
+        with fleet._ctrl_c_held():
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)  # the handler has run: nothing raised here
+            finished = True
+    assert finished and signal.getsignal(signal.SIGINT) is before
+    with fleet._ctrl_c_held():
+        pass  # no Ctrl-C: nothing raised
+
+
+class _Done:
+    """A Dask future that finished (or, `interrupt`: whose result a Ctrl-C cut short)."""
+
+    def __init__(self, value, interrupt=False):
+        self.value, self.interrupt = value, interrupt
+
+    def done(self):
+        return not self.interrupt
+
+    def result(self):
+        if self.interrupt:
+            raise KeyboardInterrupt
+        return self.value
+
+
+def test_a_ctrl_c_of_calibrate_says_how_many_inputs_were_gathered(tmp_path):
+    from leadscrew_ros.review.calibration.gather import gather
+
+    class Client:
+        def __init__(self):
+            self.n = 0
+
+        def submit(self, fn, *args, **kwargs):
+            self.n += 1
+            return _Done(self.n, interrupt=self.n == 3)
+
+    inputs = [(tmp_path / f"log{k}", False) for k in range(5)]
+    with pytest.raises(KeyboardInterrupt) as caught:
+        gather(inputs, tmp_path, None, Client())
+    assert str(caught.value) == ("4 of 5 inputs gathered, nothing calibrated; a rerun starts over")
