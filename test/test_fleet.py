@@ -537,7 +537,8 @@ def test_ctrl_c_ends_a_review_with_one_line_and_exit_130_and_a_rerun_resumes(tmp
         write_log(cycle(k), logs / f"unit{k:02d}")
     out = tmp_path / "out"
     argv = CLI + ["review", str(logs), "--out", str(out), "--joint-name", JOINT, "--quiet"]
-    argv += ["--workers", "2", "--summary-only"]  # as `review` below: the same parameters
+    workers = str(min(2, local_workers(None)[0]))  # two, unless capped (a line more)
+    argv += ["--workers", workers, "--summary-only"]  # as `review` below: the same parameters
     proc = start(argv, domain(7), tmp_path, "review", new_session=True)
     try:
         index, deadline = out / INDEX_FILE, time.monotonic() + 300
@@ -563,7 +564,7 @@ def test_ctrl_c_ends_a_review_with_one_line_and_exit_130_and_a_rerun_resumes(tmp
     done = len({json.loads(x)["row"]["log"] for x in index.read_text().splitlines()})
     assert line == f"leadscrew-squeak: interrupted: {done} of 16 logs reviewed, rerun to resume"
     assert 1 <= done < 16
-    assert review(logs, out, "--workers", 2, "--summary-only") == 0
+    assert review(logs, out, "--workers", workers, "--summary-only") == 0
     doc = json.loads((out / "fleet.json").read_text())
     assert (doc["logs"], doc["ok"], doc["reviewed"], doc["skipped"]) == (16, 16, 16 - done, done)
 
