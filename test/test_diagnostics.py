@@ -31,6 +31,7 @@ from leadscrew_ros.ros.diagnostics import (
     TOPIC,
     DiagnosticStatusWrapper,
     Updater,
+    key_dds_rejected_on,
     key_lost_on,
     recording_status,
     status_task,
@@ -217,7 +218,10 @@ NO_CRASH = SimpleNamespace(message="", level=Level.OK, pending=[])
                 active=True,
                 path="p",
                 lost=3,
-                losses={"/a": SimpleNamespace(lost=3), "/b": SimpleNamespace(lost=0)},
+                losses={
+                    "/a": SimpleNamespace(lost=3, dds_rejected=""),
+                    "/b": SimpleNamespace(lost=0, dds_rejected="total_count -1: negative"),
+                },
             ),
             NO_CRASH,
             Level.WARN,
@@ -238,6 +242,7 @@ def test_recording_status(rec, crash, expected_level, words):
     assert stat.values[KEY_LOST] == str(rec.lost)
     for topic, loss in rec.losses.items():
         assert stat.values[key_lost_on(topic)] == str(loss.lost)
+        assert stat.values.get(key_dds_rejected_on(topic)) == (loss.dds_rejected or None)
     assert stat.values.get(KEY_CUT_OFF_BAGS) == (" ".join(crash.pending) if crash.message else None)
 
 

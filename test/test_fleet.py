@@ -11,6 +11,7 @@ of two workers, from an external `dask scheduler` with two `dask worker` process
 run whose worker is killed in the middle; a second run into the same directory reviews nothing.
 """
 
+import contextlib
 import csv
 import json
 import os
@@ -28,6 +29,7 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from harness.logs import rosbags_log
+from harness.processes import CLI, domain, output, start, stop
 from leadscrew_ros.bag import logmeta
 from leadscrew_ros.bag.logfile import recover
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
@@ -35,7 +37,15 @@ from leadscrew_ros.cli import main
 from leadscrew_ros.cli.fleet import exit_status
 from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.review import fleet
-from leadscrew_ros.review.fleet import INDEX_FILE, find_logs, output_names, squeak_frequencies
+from leadscrew_ros.review.fleet import (
+    INDEX_FILE,
+    ClusterSettings,
+    Machine,
+    find_logs,
+    local_workers,
+    output_names,
+    squeak_frequencies,
+)
 from leadscrew_ros.review.replay import ReplaySettings, log_name, replay
 from leadscrew_ros.review.timeline import InputSettings
 
@@ -425,3 +435,195 @@ def test_external_cluster_and_a_worker_killed_mid_run(logs, expected, external_c
     assert table(out) == reference
     check_table(out, expected)
     shutil.rmtree(out)
+
+
+# ----------------------------------------------------------------------------- workers, Ctrl-C
+GB = 10**9
+
+
+@pytest.mark.parametrize(
+    "requested, machine, expected",
+    [
+        (1000, Machine(2, 64 * GB), (2, "this machine's cores")),
+        (1024, Machine(16, 3 * GB), (3, "what this machine's available memory holds (3.0 GB")),
+        (2, Machine(2, 64 * GB), (2, "")),
+        (1, Machine(8, 64 * GB), (1, "")),
+        (None, Machine(8, 64 * GB), (8, "")),  # the default: what the machine runs
+        (None, Machine(8, 2 * GB), (2, "")),
+        (4, Machine(8, GB // 10), (1, "what this machine's available memory holds (0.1 GB")),
+    ],
+)
+def test_local_workers_are_capped_at_what_the_machine_runs(requested, machine, expected):
+    """Issue 29: `--workers 1000` on 2 cores did no work in 300 s (1000 processes starting)."""
+    count, why = local_workers(requested, ClusterSettings(), machine)
+    assert count == expected[0]
+    assert why.startswith(expected[1]) and bool(why) == bool(expected[1])
+    if "memory" in why:
+        assert f"at {ClusterSettings().worker_memory_gb:g} GB a worker" in why
+
+
+def _rss_bytes() -> int:
+    import psutil
+
+    return psutil.Process().memory_info().rss
+
+
+def test_a_worker_that_reviewed_a_log_holds_well_within_its_memory_budget(logs, tmp_path):
+    """`ClusterSettings.worker_memory_gb` counts each local worker at 1 GB: one that has
+    reviewed a log (with its report) holds less than half of it (measured about 0.23 GB)."""
+    model = SqueakModel()
+    settings = fleet.FleetSettings(
+        model.params, dict(model.scatter.sd), model.sample_count, InputSettings(), {}, None, None
+    )
+    with fleet.cluster(1) as client:
+        [log] = find_logs([str(logs / "bench" / "station0")])
+        run = fleet.review_logs([log], tmp_path, settings, client, False)
+        [rss] = client.run(_rss_bytes).values()
+    assert [r["status"] for r in run.rows] == ["ok"]
+    assert rss < ClusterSettings().worker_memory_gb * GB / 2, rss
+
+
+class FakeCluster:
+    """Stands in for `distributed.LocalCluster`: keeps its arguments and starts nothing."""
+
+    calls: list[dict] = []
+
+    def __init__(self, **kwargs):
+        FakeCluster.calls.append(kwargs)
+        raise OSError("no cluster in this test")
+
+
+@pytest.mark.parametrize("command", ["review", "calibrate"])
+def test_the_local_cluster_gets_the_capped_count_on_loopback_without_dashboard(
+    command, logs, tmp_path, monkeypatch, capsys
+):
+    import distributed
+
+    monkeypatch.setattr(fleet.Machine, "now", classmethod(lambda cls: Machine(2, 64 * GB)))
+    monkeypatch.setattr(distributed, "LocalCluster", FakeCluster)
+    FakeCluster.calls = []
+    log = str(logs / "bench" / "station0")
+    code = main([command, log, "--out", str(tmp_path / "o"), "--workers", "1000", "--quiet"])
+    err = capsys.readouterr().err.splitlines()
+    assert code == 2 and err[-1] == "leadscrew-squeak: error: no cluster in this test"
+    assert err[0] == "leadscrew-squeak: --workers 1000: capped at 2, this machine's cores"
+    [kwargs] = FakeCluster.calls
+    assert kwargs["n_workers"] == 2 and kwargs["threads_per_worker"] == 1
+    assert kwargs["host"] == "127.0.0.1" and kwargs["dashboard_address"] is None
+    assert kwargs["scheduler_kwargs"] == {"dashboard": False, "dashboard_address": "127.0.0.1:0"}
+
+
+@pytest.fixture
+def port_8787():
+    """127.0.0.1:8787, Dask's default HTTP port, in use while the test runs (by this socket,
+    or by whatever holds it already)."""
+    with socket.socket() as s:
+        try:
+            s.bind(("127.0.0.1", 8787))
+            s.listen()
+        except OSError:
+            pass  # taken already: in use all the same
+        yield
+
+
+def test_ctrl_c_ends_a_review_with_one_line_and_exit_130_and_a_rerun_resumes(tmp_path, port_8787):
+    """Issue 29: a Ctrl-C of `review` gave 466 tracebacks (of the workers, which a terminal's
+    Ctrl-C reaches too, and of a cluster closed half started). SIGINT to the process group of a
+    `review` child once its first log is in the index: the one line saying how far it got,
+    exit 130, no worker left, nothing else on stderr (no Dask warning, no port 8787 notice);
+    a rerun reviews only the rest."""
+    logs = tmp_path / "logs"
+    for k in range(16):
+        write_log(cycle(k), logs / f"unit{k:02d}")
+    out = tmp_path / "out"
+    argv = CLI + ["review", str(logs), "--out", str(out), "--joint-name", JOINT, "--quiet"]
+    workers = str(min(2, local_workers(None)[0]))  # two, unless capped (a line more)
+    argv += ["--workers", workers, "--summary-only"]  # as `review` below: the same parameters
+    proc = start(argv, domain(7), tmp_path, "review", new_session=True)
+    try:
+        index, deadline = out / INDEX_FILE, time.monotonic() + 300
+        while not (index.exists() and index.read_text().strip()):
+            assert proc.poll() is None, output(proc)
+            assert time.monotonic() < deadline, "no log reviewed in 300 s"
+            time.sleep(0.02)
+        os.killpg(proc.pid, signal.SIGINT)
+        proc.wait(timeout=120)
+        _, err = output(proc)
+        # nothing of its process group is left (workers, Dask's fork server)
+        deadline = time.monotonic() + 60
+        while _group_alive(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _group_alive(proc.pid)
+    finally:
+        if _group_alive(proc.pid):
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(proc.pid, signal.SIGKILL)
+        stop(proc)
+    assert proc.returncode == 130, err
+    [line] = err.splitlines()
+    done = len({json.loads(x)["row"]["log"] for x in index.read_text().splitlines()})
+    assert line == f"leadscrew-squeak: interrupted: {done} of 16 logs reviewed, rerun to resume"
+    assert 1 <= done < 16
+    assert review(logs, out, "--workers", workers, "--summary-only") == 0
+    doc = json.loads((out / "fleet.json").read_text())
+    assert (doc["logs"], doc["ok"], doc["reviewed"], doc["skipped"]) == (16, 16, 16 - done, done)
+
+
+def _group_alive(pgid: int) -> bool:
+    """A process of group `pgid` still runs (zombies left to a non-reaping init do not)."""
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:  # gone meanwhile
+            continue
+        if int(fields[2]) == pgid and fields[0] != "Z":  # after 'pid (comm)': state ppid pgrp
+            return True
+    return False
+
+
+def test_a_ctrl_c_while_the_cluster_starts_or_closes_is_held_till_after():
+    """`fleet._ctrl_c_held`: a SIGINT inside does not interrupt (Dask half started or half
+    closed prints tracebacks); it is raised as KeyboardInterrupt when the block ends, and the
+    handler before is back."""
+    before = signal.getsignal(signal.SIGINT)
+    finished = False
+    with pytest.raises(KeyboardInterrupt):
+        with fleet._ctrl_c_held():
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)  # the handler has run: nothing raised here
+            finished = True
+    assert finished and signal.getsignal(signal.SIGINT) is before
+    with fleet._ctrl_c_held():
+        pass  # no Ctrl-C: nothing raised
+
+
+class _Done:
+    """A Dask future that finished (or, `interrupt`: whose result a Ctrl-C cut short)."""
+
+    def __init__(self, value, interrupt=False):
+        self.value, self.interrupt = value, interrupt
+
+    def done(self):
+        return not self.interrupt
+
+    def result(self):
+        if self.interrupt:
+            raise KeyboardInterrupt
+        return self.value
+
+
+def test_a_ctrl_c_of_calibrate_says_how_many_inputs_were_gathered(tmp_path):
+    from leadscrew_ros.review.calibration.gather import gather
+
+    class Client:
+        def __init__(self):
+            self.n = 0
+
+        def submit(self, fn, *args, **kwargs):
+            self.n += 1
+            return _Done(self.n, interrupt=self.n == 3)
+
+    inputs = [(tmp_path / f"log{k}", False) for k in range(5)]
+    with pytest.raises(KeyboardInterrupt) as caught:
+        gather(inputs, tmp_path, None, Client())
+    assert str(caught.value) == ("4 of 5 inputs gathered, nothing calibrated; a rerun starts over")

@@ -50,6 +50,7 @@ from leadscrew_ros.bag.recorder import (
     TopicLoss,
 )
 from leadscrew_ros.live.status import Level
+from leadscrew_ros.ros.diagnostics import key_dds_rejected_on
 from leadscrew_ros.ros.node import OUTPUT_CLASSES
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
@@ -636,24 +637,121 @@ def test_topic_loss_counts_sequence_gaps_of_one_publisher():
     loss.received(1, lambda: 1)  # a new publisher starts at 1: nothing lost
     loss.received(2, lambda: 1)
     assert loss.lost == 14
-    loss.dds_lost = 20  # DDS events are a subset of the gaps...
-    assert loss.lost == 20  # ...unless they saw more (the larger counts)
+    assert (loss.numbered, loss.taken) == (20 + 2, 8)
+    assert loss.dds_event(12, 12) == ""  # DDS events are a subset of the gaps
+    assert loss.dds_lost == 12 and loss.lost == 14
     several = TopicLoss()
     for seq in (1, 1, 2, 2, 5):  # two publishers interleave: no gap counting
         several.received(seq, lambda: 2)
-    several.dds_lost = 3
+    assert several.dds_event(3, 3) == ""
     assert not several.sequence_checked and several.lost == 3
     assert TopicLoss().as_dict() == {
         "lost": 0,
         "sequence_gaps": 0,
         "dds_lost": 0,
+        "dds_rejected": "",
         "sequence_checked": True,
     }
 
 
-def test_lost_inputs_are_in_the_recording_diagnostic_and_the_metadata(ros, tmp_path):
+class LostInfo:
+    """What rclpy hands a message-lost callback (QoSMessageLostInfo): two counts."""
+
+    def __init__(self, total_count, total_count_change):
+        self.total_count, self.total_count_change = total_count, total_count_change
+
+
+WRAPPED = 2**64 - 2**31  # the count of the hostile trial (issue 29): int32 -2**31 as size_t
+# 13 of 40 numbered messages lost (9..15, 30..35), as the trial lost 11-15
+GAPPY = [*range(1, 9), *range(16, 30), *range(36, 41)]
+# event (total_count, total_count_change) -> what it is: a count or why not
+FAKE_EVENTS = {
+    "wrapped": ((WRAPPED, WRAPPED), "beyond DDS's 32-bit count"),
+    "negative": ((-5, -5), "negative"),
+    "more than the publisher sent": ((30, 30), "more than the publisher could have lost"),
+    "not integers": ((2.5, 2.5), "not integers"),
+    "change above total": ((4, 7), "the change is larger than the total"),
+    "valid": ((13, 13), ""),
+}
+
+
+@pytest.mark.parametrize("name", FAKE_EVENTS)
+def test_a_dds_lost_count_is_taken_only_when_it_is_one(name):
+    """Issue 29: a DDS message-lost event said 2**64 - 2**31 while 13 were lost; the larger of
+    the two counts was reported. A count that is none is said once and ignored for good (the
+    DDS total is cumulative), the sequence gaps count."""
+    (total, change), fault = FAKE_EVENTS[name]
+    loss = TopicLoss()
+    for seq in GAPPY:
+        loss.received(seq, lambda: 1)
+    assert loss.sequence_gaps == 13
+    assert loss.dds_event(total, change) == loss.dds_rejected
+    assert (fault in loss.dds_rejected) if fault else loss.dds_rejected == ""
+    assert loss.lost == 13
+    assert loss.as_dict()["dds_rejected"] == loss.dds_rejected
+    if fault:
+        assert str(total) in loss.dds_rejected and "sequence numbers" in loss.dds_rejected
+        assert loss.dds_event(13, 0) == ""  # said once; later totals build on the bad one
+        assert loss.dds_lost == 0 and loss.lost == 13
+    else:
+        assert loss.dds_lost == 13
+
+
+def test_a_dds_count_that_shrinks_is_rejected_and_the_last_valid_one_stays_without_numbers():
+    """Several publishers (no gap counting): the DDS total is the count; one below an earlier
+    total, or wrapped, is rejected and the last valid total stays the count."""
+    several = TopicLoss()
+    for seq in (1, 1, 2, 2, 6):
+        several.received(seq, lambda: 2)
+    assert several.dds_event(4, 4) == "" and several.lost == 4
+    reason = several.dds_event(3, 0)
+    assert "below the earlier total 4" in reason and "last valid DDS total (4)" in reason
+    assert several.dds_event(WRAPPED, WRAPPED) == ""  # said once
+    assert several.lost == 4
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(st.integers(1, 60), max_size=40),
+    st.lists(st.tuples(st.integers(-(2**65), 2**65), st.integers(-(2**65), 2**65)), max_size=6),
+)
+def test_no_dds_event_makes_the_count_more_than_the_publisher_could_have_lost(numbers, events):
+    """Whatever a single publisher's numbers and the events say, the loss count is in
+    [gaps, messages numbered - messages taken], and a rejection is said at most once."""
+    loss = TopicLoss()
+    said = 0
+    for i in range(max(len(numbers), len(events))):
+        if i < len(events):  # an event before the i-th message: the first before any
+            said += bool(loss.dds_event(*events[i]))
+        if i < len(numbers):
+            loss.received(numbers[i], lambda: 1)
+    assert said <= 1
+    assert loss.sequence_gaps <= loss.lost <= max(loss.numbered - loss.taken, loss.sequence_gaps)
+    assert 0 <= loss.dds_lost < 2**31
+
+
+class _WarnSpy:
+    """A node logger that also keeps what was logged at WARN."""
+
+    def __init__(self, logger):
+        self._logger, self.warnings = logger, []
+
+    def warning(self, message, **kwargs):
+        self.warnings.append(message)
+        return self._logger.warning(message, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self._logger, name)
+
+
+@pytest.mark.parametrize("event", ["wrapped", "negative", "valid"])
+def test_lost_inputs_are_in_the_recording_diagnostic_and_the_metadata(ros, tmp_path, event):
     """While the recorder is busy (its lock held: the recording thread waits) the 5-deep DDS
-    queue of the recording subscription overflows; the gap shows at the next message."""
+    queue of the recording subscription overflows; the gap shows at the next message. Then a
+    DDS message-lost event (a fake QoSMessageLostInfo given to the recording's callback) that
+    is no count (issue 29: 2**64 - 2**31; negative) is logged once and changes nothing; a valid
+    one (the gaps seen) is taken. The diagnostic and metadata.yaml count exactly what was sent
+    and not recorded."""
     node = ros.start(
         **{"record.enabled": True, "record.directory": str(tmp_path), "record.queue_depth": 5}
     )
@@ -676,28 +774,53 @@ def test_lost_inputs_are_in_the_recording_diagnostic_and_the_metadata(ros, tmp_p
     loss = node.recorder.losses[pub.topic_name]
     ros.spin_until(lambda: recorded().count + loss.lost == sent, 5.0, "the loss count")
     assert loss.lost >= 300 - 5 - 1, loss
+    missing = sent - recorded().count  # nothing is published from here on
+    total = {"wrapped": WRAPPED, "negative": -7, "valid": loss.sequence_gaps}[event]
+    recording = node._input_recording
+    [entry] = [e for e in recording._inputs if e.topic == pub.topic_name]
+    recording._logger = spy = _WarnSpy(recording._logger)
+    for _ in range(2):  # the middleware repeats its cumulative count
+        recording._dds_lost(entry, LostInfo(total, total))
+    assert loss.lost == missing and recorded().count + missing == sent
+    rejected = key_dds_rejected_on(pub.topic_name)
+    if event == "valid":
+        assert spy.warnings == [] and loss.dds_lost == total and not loss.dds_rejected
+    else:
+        [warning] = spy.warnings
+        assert warning.startswith(f"{pub.topic_name}: ") and str(total) in warning
     # the diagnostic is periodic: one published while the gap was still being counted can
     # carry a smaller number, so wait for the one after the count settled
-    final = f"{loss.lost} input message(s) lost"
+    final = f"{missing} input message(s) lost"
     status = recording_status(
-        ros, lambda s: s.level == bytes([Level.WARN]) and final in s.message, timeout=5.0
+        ros,
+        lambda s: (
+            s.level == bytes([Level.WARN])
+            and final in s.message
+            and (event == "valid" or any(kv.key == rejected for kv in s.values))
+        ),
+        timeout=5.0,
     )
     values = {kv.key: kv.value for kv in status.values}
     assert final in status.message, status.message
-    assert f"{pub.topic_name} {loss.lost}" in status.message
-    assert values["lost"] == str(loss.lost) and values[f"lost {pub.topic_name}"] == str(loss.lost)
+    assert f"{pub.topic_name} {missing}" in status.message
+    assert values["lost"] == str(missing) and values[f"lost {pub.topic_name}"] == str(missing)
+    assert (rejected in values) == (event != "valid")
+    if event != "valid":
+        assert str(total) in values[rejected] and "sequence numbers" in values[rejected]
     bag = node.recorder.bag
     assert node.set_parameters([Parameter("record.enabled", value=False)])[0].successful
     meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     custom = meta["custom_data"]
-    assert custom[LOST_KEY] == str(loss.lost)
-    assert json.loads(custom[LOST_BY_TOPIC_KEY])[pub.topic_name]["lost"] == loss.lost
+    assert custom[LOST_KEY] == str(missing)
+    by_topic = json.loads(custom[LOST_BY_TOPIC_KEY])[pub.topic_name]
+    assert by_topic["lost"] == missing
+    assert (str(total) in by_topic["dds_rejected"]) == (event != "valid")
     [topic] = [
         t
         for t in meta["topics_with_message_count"]
         if t["topic_metadata"]["name"] == pub.topic_name
     ]
-    assert topic["message_count"] + loss.lost == sent
+    assert topic["message_count"] + missing == sent
 
 
 # ----------------------------------------------------------------------------- sim time

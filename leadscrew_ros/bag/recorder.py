@@ -124,6 +124,11 @@ class RecordSettings:
             raise ValueError("directory must not be empty")
 
 
+# DDS status counts (SampleLostStatus.total_count) are 32-bit signed: rmw hands them on as size_t,
+# so a count that went negative in the middleware arrives as 2**64 - n
+DDS_COUNT_LIMIT = 2**31
+
+
 @dataclass
 class TopicLoss:
     """Messages of one recorded topic that never reached the recorder.
@@ -133,11 +138,21 @@ class TopicLoss:
     transport); `dds_lost` counts DDS message-lost events (Fast DDS reports transport gaps, not
     queue overflow). With several publishers on a topic their numbers interleave and rclpy gives
     no publisher id, so only the DDS events count there (`sequence_checked` False).
+
+    A DDS count is taken only when it is one (`dds_event`): an integer in [0, 2**31), never below
+    an earlier total, and, while the sequence numbers are checked, at most the messages the
+    publisher numbered that the recorder did not get. The first that is not makes the topic's
+    DDS counts untrusted (`dds_rejected` says why; they are cumulative, so every later total
+    carries the error): the loss count is then the sequence gaps (with several publishers: the
+    last valid DDS total).
     """
 
     sequence_gaps: int = 0
     dds_lost: int = 0
     sequence_checked: bool = True
+    dds_rejected: str = ""  # why the DDS counts of this topic are not trusted ('' if they are)
+    numbered: int = 0  # messages the publisher sent up to the last number taken (all its runs)
+    taken: int = 0  # messages taken while the sequence numbers were checked
     _last: int | None = None
 
     def received(self, sequence: int | None, publishers: Callable[[], int]) -> None:
@@ -146,19 +161,83 @@ class TopicLoss:
         last, self._last = self._last, sequence
         if sequence is None:  # the middleware does not number its messages
             self.sequence_checked = False
-        if not self.sequence_checked or last is None or sequence == last + 1:
+        if not self.sequence_checked:
             return
         assert sequence is not None  # a None sequence is unchecked: returned above
+        self.taken += 1
+        if last is None or sequence == last + 1:  # RTPS numbers a writer's messages from 1
+            self.numbered += sequence - (last or 0)  # a first number counts those before it
+            return
         if publishers() > 1:
             self.sequence_checked = False
         elif sequence > last + 1:
             self.sequence_gaps += sequence - last - 1
-        # a lower number from a single publisher: a new publisher, nothing lost
+            self.numbered += sequence - last
+        else:  # a lower number from a single publisher: a new publisher, nothing lost
+            self.numbered += sequence
+
+    def dds_event(self, total_count: object, total_count_change: object) -> str:
+        """Take the totals of a DDS message-lost event (rclpy's QoSMessageLostInfo) if they are
+        a count; else mark the topic's DDS counts untrusted.
+
+        Parameters
+        ----------
+        total_count, total_count_change
+            The event's cumulative count of lost messages and its increase since the last event.
+
+        Returns
+        -------
+        str
+            Why the DDS counts are ignored from now on, when this event made them untrusted
+            (to be said once), else ''.
+        """
+        if self.dds_rejected:
+            return ""
+        why = self._dds_fault(total_count, total_count_change)
+        if not why:
+            assert isinstance(total_count, int)  # checked by _dds_fault
+            self.dds_lost = total_count
+            return ""
+        fallback = (
+            "the loss count comes from the sequence numbers"
+            if self.sequence_checked
+            else f"the loss count stays at the last valid DDS total ({self.dds_lost})"
+        )
+        self.dds_rejected = (
+            f"DDS message-lost event with total_count {total_count!r}, total_count_change "
+            f"{total_count_change!r}: {why}; DDS loss counts ignored, {fallback}"
+        )
+        return self.dds_rejected
+
+    def _dds_fault(self, total: object, change: object) -> str:
+        """What makes an event's totals no count ('' when they are one)."""
+        if not all(isinstance(n, int) and not isinstance(n, bool) for n in (total, change)):
+            return "not integers"
+        assert isinstance(total, int) and isinstance(change, int)
+        if min(total, change) < 0:
+            return "negative"
+        if max(total, change) >= DDS_COUNT_LIMIT:
+            return (
+                f"beyond DDS's 32-bit count ({DDS_COUNT_LIMIT - 1}): a negative count wrapped "
+                "around in the middleware"
+            )
+        if change > total:
+            return "the change is larger than the total"
+        if total < self.dds_lost:
+            return f"below the earlier total {self.dds_lost} (the count only grows)"
+        if self.sequence_checked and total > self.numbered - self.taken:
+            return (
+                f"more than the publisher could have lost: it numbered {self.numbered} "
+                f"messages, {self.taken} of which were recorded"
+            )
+        return ""
 
     @property
     def lost(self) -> int:
         """Best count of the lost messages (the DDS events are a subset of the gaps)."""
-        return max(self.sequence_gaps, self.dds_lost) if self.sequence_checked else self.dds_lost
+        if not self.sequence_checked:
+            return self.dds_lost
+        return self.sequence_gaps if self.dds_rejected else max(self.sequence_gaps, self.dds_lost)
 
     def as_dict(self) -> dict:
         """The counts as a JSON-ready dict."""
@@ -166,6 +245,7 @@ class TopicLoss:
             "lost": self.lost,
             "sequence_gaps": self.sequence_gaps,
             "dds_lost": self.dds_lost,
+            "dds_rejected": self.dds_rejected,
             "sequence_checked": self.sequence_checked,
         }
 

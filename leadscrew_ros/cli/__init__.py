@@ -131,6 +131,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MemoryError:  # beyond the up-front estimates: still one line, no traceback
         print(f"{PROG}: error: out of memory; use fewer points", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:  # with what was done when a command says (`review`)
+        print(f"{PROG}: interrupted" + (f": {exc}" if exc.args else ""), file=sys.stderr)
         return 130

@@ -25,7 +25,7 @@ from .args import (
     output_directory,
     settings_from,
 )
-from .fleet import add_cluster_options, cluster_options, cluster_text
+from .fleet import CLUSTER_BUSY, add_cluster_options, cluster_options, cluster_text
 from .logs import _topic, add_input_options, listen_settings, replay_inputs
 
 if TYPE_CHECKING:
@@ -86,9 +86,19 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     try:
         with cluster(workers, args.scheduler, reach) as client:
             gathered = gather(inputs, out.resolve(), gathering, client)
-            result = calibrate(gathered, prior, settings, client, gathering.thin)
+            try:
+                result = calibrate(gathered, prior, settings, client, gathering.thin)
+            except KeyboardInterrupt:
+                raise KeyboardInterrupt(
+                    f"all {len(gathered)} inputs gathered, calibrating: nothing written; "
+                    "a rerun starts over"
+                ) from None
     except ClusterError as exc:  # raised before any work
         raise CliError(str(exc)) from None
+    except KeyboardInterrupt as exc:  # gather and calibrate say how far it got
+        raise (
+            exc if exc.args else KeyboardInterrupt(f"{CLUSTER_BUSY}; a rerun starts over")
+        ) from None
     except CalibrationError as exc:
         raise CliError(str(exc)) from None
     context = {

@@ -11,14 +11,14 @@ that shells and signals use (126 and up).
 from __future__ import annotations
 
 import argparse
-import os
+import sys
 from dataclasses import fields
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..model.physics.metadata import help_text
-from ..review.fleet import ClusterError, ClusterSettings
-from .args import CliError, Parser, build_model, finite, output_directory
+from ..review.fleet import ClusterError, ClusterSettings, local_workers
+from .args import PROG, CliError, Parser, build_model, finite, output_directory
 from .logs import REPLAY_INPUTS, _topic, add_input_options, listen_settings, replay_inputs
 
 if TYPE_CHECKING:
@@ -28,6 +28,8 @@ FAILED_BASE = 10
 FAILED_CAP = 100
 _ERRORS_SHOWN = 10
 _MODEL_OPTIONS = ("param", "params_file", "formulation", "scatter", "samples")
+# a Ctrl-C while the cluster started or closed (`cluster` takes it after)
+CLUSTER_BUSY = "while the Dask cluster started or closed"
 _CONNECT_TIMEOUT = next(f for f in fields(ClusterSettings) if f.name == "connect_timeout_s")
 
 
@@ -69,8 +71,9 @@ def _settings(args: argparse.Namespace) -> FleetSettings:
 
 
 def cluster_options(args: argparse.Namespace) -> tuple[int | None, ClusterSettings]:
-    """The worker count of a local cluster (None with --scheduler) and how to reach a running
-    one, from the options of `add_cluster_options`, checked before any work."""
+    """The worker count of a local cluster (None with --scheduler: `local_workers`, the line
+    on stderr when it cuts --workers) and how to reach a running one, from the options of
+    `add_cluster_options`, checked before any work."""
     if args.workers is not None and not 1 <= args.workers <= 1024:
         raise CliError(f"argument --workers: must be in [1, 1024], got {args.workers}")
     if args.connect_timeout is not None and not args.scheduler:
@@ -80,8 +83,13 @@ def cluster_options(args: argparse.Namespace) -> tuple[int | None, ClusterSettin
             **({} if args.connect_timeout is None else {"connect_timeout_s": args.connect_timeout})
         )
     except ClusterError as exc:
-        raise CliError(str(exc)) from None
-    return args.workers or (None if args.scheduler else os.cpu_count() or 1), reach
+        raise CliError(f"--connect-timeout: {exc}") from None
+    if args.scheduler:
+        return None, reach
+    workers, why = local_workers(args.workers, reach)
+    if why:
+        print(f"{PROG}: --workers {args.workers}: capped at {workers}, {why}", file=sys.stderr)
+    return workers, reach
 
 
 def cluster_text(args: argparse.Namespace, workers: int | None) -> str:
@@ -116,6 +124,8 @@ def cmd_review(args: argparse.Namespace) -> int:
             run = review_logs(logs, out, settings, client, progress=not args.quiet)
     except ClusterError as exc:  # raised before the review starts
         raise CliError(str(exc)) from None
+    except KeyboardInterrupt as exc:  # review_logs says how far it got
+        raise exc if exc.args else KeyboardInterrupt(f"{CLUSTER_BUSY}, rerun to resume") from None
     where = cluster_text(args, workers)
     paths = write_fleet(
         run,
@@ -145,7 +155,7 @@ def add_cluster_options(p: argparse.ArgumentParser) -> None:
         type=int,
         metavar="N",
         help="Dask worker processes of a local cluster on 127.0.0.1, one "
-        "thread each (default: one per core)",
+        "thread each (default and most: one per core, as the available memory allows)",
     )
     where.add_argument(
         "--scheduler",

@@ -30,10 +30,13 @@ import contextlib
 import glob
 import hashlib
 import json
+import logging
 import math
 import re
 import shutil
+import signal
 import statistics
+import threading
 import time
 import uuid
 from collections import Counter
@@ -535,14 +538,103 @@ class ClusterError(ValueError):
 
 @dataclass(frozen=True)
 class ClusterSettings:
-    """How `review` reaches a running scheduler (`--scheduler`)."""
+    """How `review` reaches a running scheduler (`--scheduler`) or sizes a local cluster."""
 
     connect_timeout_s: float = setting(
         5.0, "s", "how long to wait for the scheduler to answer", 0.0, 3600.0, lo_open=True
     )
+    worker_memory_gb: float = setting(
+        1.0,
+        "GB",
+        "memory each worker process of a local cluster is counted at: no more workers start "
+        "than the machine's available memory holds (a worker that has reviewed a log holds "
+        "less than half of it, test_fleet.py)",
+        0.01,
+        1e4,
+    )
 
     def __post_init__(self) -> None:
-        check(self, ClusterError, "--connect-timeout: ")
+        check(self, ClusterError)
+
+
+@dataclass(frozen=True)
+class Machine:
+    """What this machine can run: its usable cores and available memory [bytes]."""
+
+    cores: int
+    memory_bytes: int
+
+    @classmethod
+    def now(cls) -> Machine:
+        """Dask's count of the cores this process may use (CPU affinity and cgroup quota) and
+        the memory available now (no more than Dask's memory limit: cgroup, RLIMIT_RSS)."""
+        import psutil
+        from dask.system import cpu_count
+        from distributed.system import MEMORY_LIMIT
+
+        return cls(cpu_count(), min(psutil.virtual_memory().available, MEMORY_LIMIT))
+
+
+def local_workers(
+    requested: int | None,
+    settings: ClusterSettings = ClusterSettings(),
+    machine: Machine | None = None,
+) -> tuple[int, str]:
+    """Worker processes of a local cluster: `requested` (None: as many as the machine runs), at
+    most one per usable core and as many as the available memory holds at
+    `settings.worker_memory_gb` each (at least one): more only wait for a core and keep a
+    review from starting. Returns the count and, when `requested` was cut, why ('' if not)."""
+    m = machine or Machine.now()
+    by_memory = max(1, int(m.memory_bytes // (settings.worker_memory_gb * 1e9)))
+    limit = max(1, min(m.cores, by_memory))
+    if requested is None or requested <= limit:
+        return requested or limit, ""
+    if m.cores <= by_memory:
+        return limit, "this machine's cores"
+    return limit, (
+        f"what this machine's available memory holds ({m.memory_bytes / 1e9:.1f} GB at "
+        f"{settings.worker_memory_gb:g} GB a worker)"
+    )
+
+
+@contextlib.contextmanager
+def _ctrl_c_held() -> Iterator[None]:
+    """A Ctrl-C (SIGINT) meanwhile is held and raised (KeyboardInterrupt) once this ends, so
+    that Dask's start and close are never cut in the middle (a cluster half started or half
+    closed prints tracebacks). Only the main thread gets signals: elsewhere, nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught:
+        raise KeyboardInterrupt
+
+
+def _workers_ignore_ctrl_c() -> None:
+    """Make the worker processes of a local cluster ignore SIGINT, which a terminal's Ctrl-C
+    sends to the whole process group: the client stops them (a worker interrupted on its own
+    prints tracebacks). They fork from multiprocessing's fork server, which gives every child
+    the SIGINT handling it started with; started here with SIGINT ignored (a process started
+    so keeps ignoring it), every worker, a restarted one too, ignores it. The fork server
+    starts in milliseconds: a Ctrl-C within them is lost."""
+    import multiprocessing.forkserver
+
+    from distributed.utils import get_mp_context
+
+    get_mp_context()  # Dask's preload of the fork server (distributed and its dependencies)
+    if threading.current_thread() is not threading.main_thread():
+        multiprocessing.forkserver.ensure_running()
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        multiprocessing.forkserver.ensure_running()
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 async def _probe(address: str, timeout_s: float) -> None:
@@ -560,9 +652,12 @@ def cluster(
     scheduler: str | None = None,
     settings: ClusterSettings = ClusterSettings(),
 ) -> Iterator[Any]:
-    """A Dask client: of a new `distributed.LocalCluster` (`workers` processes, default one
-    per core, one thread each, everything on 127.0.0.1, no dashboard), or connected to the
-    running scheduler at `scheduler` (``tcp://HOST:PORT``) within `settings.connect_timeout_s`.
+    """A Dask client: of a new `distributed.LocalCluster` (`workers` processes, default
+    `local_workers`, one thread each, everything on 127.0.0.1, no dashboard, its HTTP routes
+    on a free port; the workers ignore SIGINT, `_workers_ignore_ctrl_c`; a Ctrl-C while it
+    starts or closes takes effect after, `_ctrl_c_held`), closed on the way out, or
+    connected to the running scheduler at `scheduler` (``tcp://HOST:PORT``) within
+    `settings.connect_timeout_s`.
 
     Raises
     ------
@@ -570,6 +665,7 @@ def cluster(
         `scheduler` is not an address Dask takes, or nothing answered there in time (raised
         before the client is yielded: never for a failure of the work done with it).
     """
+    import dask
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
@@ -586,17 +682,56 @@ def cluster(
         with Client(scheduler, timeout=timeout) as client:
             yield client
         return
-    with (
-        LocalCluster(
-            n_workers=workers,
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",
-            dashboard_address=None,
-        ) as local,
-        Client(local) as client,
-    ):
-        yield client
+    if workers is None:
+        workers, _ = local_workers(None, settings)
+    local = client = None
+    stopped = True  # by an exception (Ctrl-C) while tasks may run
+    try:
+        with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
+            _workers_ignore_ctrl_c()
+            with _ctrl_c_held():
+                local = LocalCluster(
+                    n_workers=workers,
+                    threads_per_worker=1,
+                    processes=True,
+                    host="127.0.0.1",
+                    dashboard_address=None,
+                    # the scheduler serves its HTTP routes even without a dashboard, by default on
+                    # 8787 (taken by any other Dask: a warning): a free port of 127.0.0.1 instead
+                    scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+                )
+                client = Client(local)
+            yield client
+        stopped = False
+    finally:
+        with _ctrl_c_held():
+            _close(client, local, quietly=stopped)
+
+
+def _quiet_dask() -> None:
+    """Dask's log lines off in this process (a worker's, by `Client.run`)."""
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)
+
+
+def _close(client: Any, local: Any, quietly: bool) -> None:
+    """Close the client, then the local cluster. `quietly`: tasks may still run (the review was
+    interrupted or failed), and Dask logs their cancellation and kills (with a warning) the
+    workers that do not stop within 4 s: expected here, so its log lines are off, in this
+    process and in the workers."""
+    dask_log = logging.getLogger("distributed")
+    level = dask_log.level
+    if quietly:
+        dask_log.setLevel(logging.CRITICAL)
+        if client is not None:
+            with contextlib.suppress(Exception):  # a worker gone already: nothing to quieten
+                client.run(_quiet_dask, on_error="ignore")
+    try:
+        if client is not None:
+            client.close()
+        if local is not None:
+            local.close()
+    finally:
+        dask_log.setLevel(level)
 
 
 # ---------------------------------------------------------------------- the index
@@ -737,47 +872,57 @@ def review_logs(
         by_future[fut] = job
         return fut
 
+    def record(fut: Any, index_file: Any) -> None:
+        """A finished task's row into `rows` and a line of the index."""
+        nonlocal skipped
+        log, name, stat, known = by_future.pop(fut)
+        retry = False
+        try:
+            res = fut.result()
+        except Exception as exc:  # the task did not finish: workers died under it
+            res = {"content": known, "row": error_row(log, name, _one_line(exc)), "points": []}
+            retry = True
+        fut.release()
+        if res.get("unchanged"):
+            res = {**index[str(log)], "content": res["content"]}
+            skipped += 1
+        row = res["row"]
+        rows[str(log)] = row
+        points.add(res["points"])
+        index_file.write(
+            json.dumps(
+                json_safe(
+                    {
+                        "params": digest,
+                        "stat": stat,
+                        "content": res["content"],
+                        "retry": retry,
+                        "row": row,
+                        "points": res["points"],
+                    }
+                ),
+                allow_nan=False,
+            )
+            + "\n"
+        )
+        index_file.flush()
+
     bar_or_none = (
         progress_bar(len(todo), "review", unit="log") if progress else contextlib.nullcontext()
     )
-    with open(index_path, "a", encoding="utf-8") as index_file, bar_or_none as bar:
-        ac = as_completed([submit(j) for j in _take(pending, in_flight)])
-        for fut in ac:
-            log, name, stat, known = by_future.pop(fut)
-            retry = False
-            try:
-                res = fut.result()
-            except Exception as exc:  # the task did not finish: workers died under it
-                res = {"content": known, "row": error_row(log, name, _one_line(exc)), "points": []}
-                retry = True
-            fut.release()
-            if res.get("unchanged"):
-                res = {**index[str(log)], "content": res["content"]}
-                skipped += 1
-            row = res["row"]
-            rows[str(log)] = row
-            points.add(res["points"])
-            index_file.write(
-                json.dumps(
-                    json_safe(
-                        {
-                            "params": digest,
-                            "stat": stat,
-                            "content": res["content"],
-                            "retry": retry,
-                            "row": row,
-                            "points": res["points"],
-                        }
-                    ),
-                    allow_nan=False,
-                )
-                + "\n"
-            )
-            index_file.flush()
-            if bar is not None:
-                bar(1)
-            for job in _take(pending, 1):
-                ac.add(submit(job))
+    try:
+        with open(index_path, "a", encoding="utf-8") as index_file, bar_or_none as bar:
+            ac = as_completed([submit(j) for j in _take(pending, in_flight)])
+            for fut in ac:
+                record(fut, index_file)
+                if bar is not None:
+                    bar(1)
+                for job in _take(pending, 1):
+                    ac.add(submit(job))
+    except KeyboardInterrupt:  # the index holds every log finished: a rerun resumes there
+        raise KeyboardInterrupt(
+            f"{len(rows)} of {len(logs)} logs reviewed, rerun to resume"
+        ) from None
     _compact(index_path)
     return FleetRun(
         [rows[str(log)] for log in logs],

@@ -40,6 +40,7 @@ KEY_BAG = "bag"
 KEY_FILES = "files"
 KEY_MESSAGES = "messages"
 KEY_LOST = "lost"
+KEY_DDS_REJECTED = "dds_lost_rejected"  # + topic: why its DDS message-lost counts are ignored
 KEY_CUT_OFF_BAGS = "cut_off_bags"
 # What the log line and the status say when a recording stopped on its own
 RESUME_HINT = (
@@ -51,6 +52,11 @@ RESUME_HINT = (
 def key_lost_on(topic: str) -> str:
     """Key of the count of input messages lost on one topic."""
     return f"{KEY_LOST} {topic}"
+
+
+def key_dds_rejected_on(topic: str) -> str:
+    """Key of why the DDS message-lost counts of one topic are ignored (present only then)."""
+    return f"{KEY_DDS_REJECTED} {topic}"
 
 
 @dataclass
@@ -152,7 +158,7 @@ def recording_status(
 ) -> DiagnosticStatusWrapper:
     """ERROR when recording failed or a file was lost under the recorder (never OK while
     data went nowhere), WARN when input messages were lost or bags of an earlier run are cut
-    off, else OK; the counts as key-values."""
+    off, else OK; the counts as key-values (and why a topic's DDS loss counts are ignored)."""
     r = recorder
     if r.error:
         stat.summary(Level.ERROR, f"{r.error}; {RESUME_HINT}")
@@ -167,6 +173,8 @@ def recording_status(
     losses = {t: loss for t, loss in list(r.losses.items()) if loss.lost}
     for topic, loss in r.losses.items():
         stat.add(key_lost_on(topic), loss.lost)
+        if loss.dds_rejected:
+            stat.add(key_dds_rejected_on(topic), loss.dds_rejected)
     if losses:
         stat.merge_summary(
             Level.WARN,

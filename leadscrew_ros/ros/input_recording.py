@@ -9,7 +9,8 @@ history (`RecordSettings.queue_depth`), in a hidden helper node spun by its own 
 separate thread, so that recording never waits for the model. Each wake-up takes everything
 queued on the subscription. What still never arrives is counted per topic
 (`recorder.TopicLoss`): gaps in the publishers' sequence numbers (message info) and DDS
-message-lost events.
+message-lost events, whose counts are checked before they are believed (a count that is none is
+logged once and ignored).
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ class InputRecording:
 
     def __init__(self, node: Node, inputs: dict[str, type], recorder: Recorder):
         self._recorder = recorder
+        self._logger = node.get_logger()
         # Hidden helper node: no global arguments (a `__node:=` remap or a params file is the
         # main node's), no rosout, no parameter services. Topics are absolute already.
         self._node = Node(
@@ -157,6 +159,11 @@ class InputRecording:
             e.topic, e.type_name, data, publish_time_ns=info.get("source_timestamp") or None
         )
 
-    @staticmethod
-    def _dds_lost(e: _Input, info: QoSMessageLostInfo) -> None:
-        e.loss.dds_lost = info.total_count
+    def _dds_lost(self, e: _Input, info: QoSMessageLostInfo) -> None:
+        """Judge the event's count against what was taken: first the messages queued now (the
+        one that revealed the loss among them), then `TopicLoss.dds_event`; a count that is
+        none is said once."""
+        self._take_queued(e, until_stopped=True)
+        rejected = e.loss.dds_event(info.total_count, info.total_count_change)
+        if rejected:
+            self._logger.warning(f"{e.topic}: {rejected}")

@@ -36,11 +36,19 @@ def env_for(domain_id: int) -> dict:
     )
 
 
-def start(argv, domain_id, tmp_path, name) -> subprocess.Popen:
-    """`argv` in the repository on `domain_id`, stdout and stderr to files read by `output`."""
+def start(argv, domain_id, tmp_path, name, new_session: bool = False) -> subprocess.Popen:
+    """`argv` in the repository on `domain_id`, stdout and stderr to files read by `output`;
+    `new_session`: in a process group of its own with its children (what a terminal's Ctrl-C
+    reaches: `os.killpg`)."""
     out, err = (open(tmp_path / f"{name}.{s}", "w+") for s in ("out", "err"))
     proc = subprocess.Popen(
-        argv, cwd=REPO, env=env_for(domain_id), stdout=out, stderr=err, text=True
+        argv,
+        cwd=REPO,
+        env=env_for(domain_id),
+        stdout=out,
+        stderr=err,
+        text=True,
+        start_new_session=new_session,
     )
     proc.files = (out, err)
     return proc

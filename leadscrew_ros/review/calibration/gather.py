@@ -400,11 +400,17 @@ def gather(
         for (p, replayed), n in zip(inputs, names, strict=True)
     ]
     out = []
-    for (p, _), n, fut in zip(inputs, names, futures, strict=True):
-        try:
-            out.append(fut.result())
-        except Exception as exc:  # the task did not finish (its workers died)
-            out.append(Gathered(str(p), n, str(p), "", None, f"{type(exc).__name__}: {exc}"))
+    try:
+        for (p, _), n, fut in zip(inputs, names, futures, strict=True):
+            try:
+                out.append(fut.result())
+            except Exception as exc:  # the task did not finish (its workers died)
+                out.append(Gathered(str(p), n, str(p), "", None, f"{type(exc).__name__}: {exc}"))
+    except KeyboardInterrupt:  # nothing is kept between runs: a rerun starts over
+        done = sum(f.done() for f in futures)
+        raise KeyboardInterrupt(
+            f"{done} of {len(inputs)} inputs gathered, nothing calibrated; a rerun starts over"
+        ) from None
     return out
 
 
