@@ -20,11 +20,11 @@ from ..bag.logfile import (
     recover,
     recover_bag,
 )
-from ..live.settings import JointSettings, LiveSettings
+from ..live.settings import InputField, JointSettings, LiveSettings
 from ..model.physics.metadata import help_text
 from ..review.listen import SoundSettings
 from ..review.replay import ReplaySettings
-from ..review.timeline import InputSettings
+from ..review.timeline import FIELD_SETTINGS, InputSettings, input_parameters
 from .args import (
     PROG,
     ROS_ARGS_HELP,
@@ -72,18 +72,29 @@ def _setting_help(name: str, description: str | None = None) -> str:
     return help_text(REPLAY_SETTINGS[name], description).replace("%", "%%")
 
 
+def _field_help(name: str, description: str) -> str:
+    """argparse help of a --<input>-field / --<input>-scale option (node parameter
+    `inputs.<input>.<name>`: its metadata gives the default and range)."""
+    f = next(f for f in fields(InputField) if f.name == name)
+    return help_text(f, description).replace("%", "%%")
+
+
 def replay_inputs(args: argparse.Namespace) -> InputSettings:
-    """InputSettings: defaults <- node parameters of --params-file <- options. Topic names
-    stay as given: relative ones resolve in the input namespace (--namespace, or the log's)."""
-    values = yaml_parameters(args.params_file) if args.params_file else {}
-    values = {name: values[name] for name in REPLAY_INPUTS if name in values}
+    """InputSettings: defaults <- node parameters of --params-file (`inputs.<input>.field`
+    and `.scale` too) <- options. Topic names stay as given: relative ones resolve in the
+    input namespace (--namespace, or the log's)."""
+    values = input_parameters(yaml_parameters(args.params_file) if args.params_file else {})
     values.update(
         {name: getattr(args, name) for name in REPLAY_INPUTS if getattr(args, name) is not None}
     )
     try:
         return InputSettings(**values)
     except (TypeError, ValueError) as exc:
-        raise CliError(f"replay inputs: {exc}") from None
+        text = str(exc)
+        for name in FIELD_SETTINGS:  # 'speed_field: ...' -> '--speed-field: ...'
+            if text.startswith(name):
+                raise CliError("--" + name.replace("_", "-") + text[len(name) :]) from None
+        raise CliError(f"replay inputs: {text}") from None
 
 
 def _parse_remap(items: list[str]) -> dict[str, str]:
@@ -346,19 +357,37 @@ def add_input_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
         "inputs (defaults: the node's topics, relative names in the input "
         "namespace; node parameters from --params-file)"
     )
-    g.add_argument(
-        "--speed-topic",
-        metavar="TOPIC",
-        help="std_msgs/Float64 speed [rad/s] (default motor_speed)",
-    )
-    g.add_argument(
-        "--load-topic", metavar="TOPIC", help="std_msgs/Float64 axial load [N] (default axial_load)"
-    )
-    g.add_argument(
-        "--nut-topic",
-        metavar="TOPIC",
-        help="std_msgs/Float64 nut position [m] (default nut_position)",
-    )
+    for name, what, default in (
+        ("speed", "speed [rad/s]", "motor_speed"),
+        ("load", "axial load [N]", "axial_load"),
+        ("nut", "nut position [m]", "nut_position"),
+    ):
+        g.add_argument(
+            f"--{name}-topic",
+            metavar="TOPIC",
+            help=f"{what}: std_msgs/Float64, or any type with --{name}-field (default {default})",
+        )
+        g.add_argument(
+            f"--{name}-field",
+            metavar="PATH",
+            help=_field_help(
+                "field",
+                f"path of the {what.split(' [')[0]} in the messages of --{name}-topic, any "
+                f"type the log has a definition for: data (std_msgs numbers), "
+                f"twist.twist.angular.z (nav_msgs/Odometry), velocity[2] (an array element); "
+                f"a header stamp orders the messages",
+            ),
+        )
+        g.add_argument(
+            f"--{name}-scale",
+            type=finite,
+            metavar="X",
+            help=_field_help(
+                "scale",
+                f"the {what} is this times the field (rpm to rad/s: 0.10472; a gear ratio; "
+                f"negative reverses)",
+            ),
+        )
     g.add_argument(
         "--joint-states-topic",
         metavar="TOPIC",
