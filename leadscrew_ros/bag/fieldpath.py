@@ -53,6 +53,10 @@ class FieldPathError(ValueError):
     """A path that is not a field path, or does not lead to a number of its type (one line)."""
 
 
+class BeyondArray(CdrError):
+    """A message whose array is shorter than the path's index: it holds no such number."""
+
+
 @dataclass(frozen=True)
 class Step:
     """One segment of a path: the field (its position among its type's fields) and the
@@ -213,8 +217,8 @@ class FieldPath:
         Raises
         ------
         CdrError
-            The payload is malformed or cut off before the number, or an index is beyond a
-            sequence's length in this message.
+            The payload is malformed or cut off before the number; `BeyondArray` when an
+            index is beyond a sequence's length in this message.
         """
         buf = data if isinstance(data, bytes) else bytes(data)
         endian = _ENCAPSULATION.get(buf[:2]) if len(buf) >= _HEADER else None
@@ -245,7 +249,7 @@ class FieldPath:
         else:
             n, pos = r.count(pos, PRIMITIVES[f.type][1] if primitive else 1, what)
         if index >= n:
-            raise CdrError(f"{what}: index {index} is beyond its {n} elements")
+            raise BeyondArray(f"{what}: index {index} is beyond its {n} elements")
         if primitive:
             size = PRIMITIVES[f.type][1]
             return r._align(pos, size) + index * size

@@ -341,6 +341,30 @@ class InputRules:
         self.inputs.nut_position_m = z
         return self._taken("nut")
 
+    def missing(self, kind: str, path: str, detail: str) -> Outcome:
+        """A message of input `kind` ('speed', 'load', 'nut') without the number at its field
+        path `path` (an index beyond an array of that message): rejected as a bad value is,
+        the previous good one stays.
+
+        Parameters
+        ----------
+        kind : str
+            The input.
+        path : str
+            Its field path.
+        detail : str
+            What the message lacks, one line.
+
+        Returns
+        -------
+        Outcome
+            The rejection.
+        """
+        return self._reject(
+            kind,
+            Rejection(f"{kind} field {path} not in the message", f"{kind} field {path}: {detail}"),
+        )
+
     def _operating_value(self, kind: str, value: object) -> Outcome:
         try:
             if kind == "speed":

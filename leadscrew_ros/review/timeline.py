@@ -48,6 +48,7 @@ import numpy as np
 
 from ..bag.cdr import decode_float64, decode_joint_state
 from ..bag.fieldpath import (
+    BeyondArray,
     FieldPathError,
     compile_path,
     split_path,
@@ -475,7 +476,11 @@ class Timeline:
         setter = self._setters[kind]
 
         def apply(data: bytes) -> bool:
-            return self._count(setter(scale * read(data)))
+            try:
+                value = read(data)
+            except BeyondArray as exc:  # this message's array is shorter
+                return self._count(self.rules.missing(kind, path, str(exc)))
+            return self._count(setter(scale * value))
 
         return _Handler(apply, self._stamp(topic, name))
 
