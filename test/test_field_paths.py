@@ -367,7 +367,7 @@ OPTIONS = [
     "--nut-scale",
     "0.001",
 ]
-EXPECTED = InputSettings(
+EXPECTED = dict(
     speed_topic="/odom",
     speed_field="twist.twist.angular.z",
     speed_scale=RPM,
@@ -403,7 +403,7 @@ def test_review_and_calibrate_take_the_field_options(tmp_path, capsys, monkeypat
     assert code == 2 and "stopped by the test" in err
     code, _, err = cli(capsys, "calibrate", log, "--out", tmp_path / "c", *OPTIONS)
     assert code == 2 and "stopped by the test" in err
-    assert seen["review"].inputs == seen["calibrate"].inputs == EXPECTED
+    assert seen["review"].inputs == seen["calibrate"].inputs == InputSettings(**EXPECTED)
     # --use-log-params: a recording's node parameters inputs.<input>.field / .scale
     node = {"inputs.speed.field": "twist.twist.angular.z", "inputs.speed.scale": RPM}
     meta = logmeta.LogMetadata({}, {}, {**node, "inputs.speed.type": "nav_msgs/msg/Odometry"})
