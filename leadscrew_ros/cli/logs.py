@@ -39,7 +39,8 @@ from .args import (
     yaml_parameters,
 )
 
-REPLAY_INPUTS = [f.name for f in fields(InputSettings)]  # = option dests, node parameters
+# = option dests, node parameters (`inputs.<input>.field`, `.scale` for `<input>_field`, ...)
+REPLAY_INPUTS = [f.name for f in fields(InputSettings)]
 # The node's settings that replay options mirror: their metadata gives the help and the range
 REPLAY_SETTINGS = {
     f.name: f

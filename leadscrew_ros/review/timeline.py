@@ -255,7 +255,18 @@ class InputSettings:
                 raise ValueError(f"{name}_field: {exc}") from None
 
     def field_of(self, name: str) -> tuple[str, float]:
-        """(field path, scale) of input `name` ('speed', 'load', 'nut')."""
+        """Where input `name` is in its messages.
+
+        Parameters
+        ----------
+        name : str
+            'speed', 'load' or 'nut'.
+
+        Returns
+        -------
+        tuple of (str, float)
+            Its field path and scale.
+        """
         return getattr(self, f"{name}_field"), getattr(self, f"{name}_scale")
 
     @property

@@ -84,9 +84,10 @@ def input_reader(name: str, settings: InputField) -> InputReader:
         raise ParameterError(f"{prefix}field {settings.field}: {exc}") from None
     scale = settings.scale
     value = get if scale == 1.0 else (lambda msg: scale * get(msg))
-    return InputReader(msg_type, value, _stamp_ns if stamped else None)
+    return InputReader(msg_type, value, stamp_ns if stamped else None)
 
 
-def _stamp_ns(msg: Any) -> int:
+def stamp_ns(msg: Any) -> int:
+    """The header stamp [ns] of a message with a std_msgs/Header `header` (0: not stamped)."""
     stamp = msg.header.stamp
     return stamp.sec * 1_000_000_000 + stamp.nanosec

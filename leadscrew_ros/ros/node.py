@@ -89,7 +89,7 @@ from .diagnostics import (
     status_task,
 )
 from .env import StopSignals, checked_ros_args, confine_to_localhost
-from .input_fields import InputReader, input_reader
+from .input_fields import InputReader, input_reader, stamp_ns
 from .input_recording import InputRecording
 from .parameters import (
     GROUPS,
@@ -586,16 +586,8 @@ class SqueakPredictorNode(Node):
         """Speed, load or nut: the number at the input's field path times its scale
         (`inputs.<kind>.*`); a stamped message older than the last one taken is stale."""
         reader, now = self.readers[kind], time.monotonic()
-        if reader.stamp is not None:
-            stamp_ns = reader.stamp(msg)
-            back = self.order.step_back_ns(topic, stamp_ns) if stamp_ns else None
-            if back:
-                self.get_logger().warning(
-                    f"input not taken: {topic} header stamp {back / 1e9:.6g} s older than the "
-                    f"last one taken",
-                    throttle_duration_sec=2.0,
-                )
-                return
+        if reader.stamp is not None and self._stale(topic, reader.stamp(msg)):
+            return
         try:
             value = reader.value(msg)
         except IndexError as exc:  # an array of this message is shorter than the path's index
@@ -607,10 +599,24 @@ class SqueakPredictorNode(Node):
     def _on_joint_states(self, topic: str, msg: JointState) -> None:
         """The screw joint's speed and nut position (`live.rules`: ignored while joint_name is
         '' or without that joint), then one recompute decision."""
+        if self._stale(topic, stamp_ns(msg)):
+            return
         now = time.monotonic()
         outcome = self.live.set_joint_state(msg.name, msg.position, msg.velocity, now, self.joint)
         if not outcome.ignored:
             self._input(topic, msg, outcome.error, now)
+
+    def _stale(self, topic: str, stamp: int) -> bool:
+        """A message stamped `stamp` [ns] earlier than the last one taken on `topic` (0: not
+        stamped, never stale), as the replay orders samples (`live.rules.SampleOrder`)."""
+        back = self.order.step_back_ns(topic, stamp) if stamp else None
+        if back:
+            self.get_logger().warning(
+                f"input not taken: {topic} header stamp {back / 1e9:.6g} s older than the last "
+                f"one taken",
+                throttle_duration_sec=2.0,
+            )
+        return bool(back)
 
     def _input(self, topic: str, msg: object, error: str, now: float | None = None) -> None:
         now = time.monotonic() if now is None else now
