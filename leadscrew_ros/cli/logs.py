@@ -358,10 +358,10 @@ def add_input_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
         "inputs (defaults: the node's topics, relative names in the input "
         "namespace; node parameters from --params-file)"
     )
-    for name, what, default in (
-        ("speed", "speed [rad/s]", "motor_speed"),
-        ("load", "axial load [N]", "axial_load"),
-        ("nut", "nut position [m]", "nut_position"),
+    for name, what, default, scale in (
+        ("speed", "speed [rad/s]", "motor_speed", "rpm to rad/s: 0.10472; a gear ratio"),
+        ("load", "axial load [N]", "axial_load", "kN to N: 1000"),
+        ("nut", "nut position [m]", "nut_position", "mm to m: 0.001"),
     ):
         g.add_argument(
             f"--{name}-topic",
@@ -373,10 +373,12 @@ def add_input_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
             metavar="PATH",
             help=_field_help(
                 "field",
-                f"path of the {what.split(' [')[0]} in the messages of --{name}-topic, any "
-                f"type the log has a definition for: data (std_msgs numbers), "
-                f"twist.twist.angular.z (nav_msgs/Odometry), velocity[2] (an array element); "
-                f"a header stamp orders the messages",
+                f"path of the number in the messages of --{name}-topic, any type the log has a "
+                f"definition for: data (std_msgs numbers), twist.twist.angular.z "
+                f"(nav_msgs/Odometry), velocity[2] (an array element); a header stamp orders "
+                f"the messages"
+                if name == "speed"
+                else f"path of the number in the messages of --{name}-topic (as --speed-field)",
             ),
         )
         g.add_argument(
@@ -384,9 +386,7 @@ def add_input_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
             type=finite,
             metavar="X",
             help=_field_help(
-                "scale",
-                f"the {what} is this times the field (rpm to rad/s: 0.10472; a gear ratio; "
-                f"negative reverses)",
+                "scale", f"the {what} is this times the field ({scale}; negative reverses)"
             ),
         )
     g.add_argument(
