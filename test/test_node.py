@@ -627,6 +627,13 @@ def test_node_processes_answer_and_exit_cleanly_on_sigterm_and_sigint(tmp_path, 
         ("nut_position_m:=0.25", ["z_o + b <= L"]),
         ("scatter.mu_kinetic:=2.0", ["scatter.mu_kinetic", "out of range"]),
         ("scatter.samples:=100", ["scatter.samples = 100", "power of 2"]),
+        (
+            "inputs.speed.field:=twist.x",
+            [
+                "inputs.speed.field twist.x: ",
+                "std_msgs/msg/Float64 has no field 'twist' (fields: data)",
+            ],
+        ),
     ],
 )
 def test_node_process_with_an_invalid_parameter_exits_with_one_line(param, words):

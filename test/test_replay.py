@@ -420,17 +420,17 @@ def test_invalid_inputs_are_counted_never_predicted(tmp_path):
 
 
 def test_wrong_input_type_is_a_one_line_error(tmp_path, capsys):
-    js = TYPESTORE.serialize_cdr(
-        TYPESTORE.types["std_msgs/msg/Float64"](1.0), "std_msgs/msg/Float64"
-    )
+    string = "std_msgs/msg/String"
+    text = TYPESTORE.serialize_cdr(TYPESTORE.types[string]("1.0"), string)
     log = write_mcap(
         tmp_path / "typed.mcap",
-        [("/motor_speed", "std_msgs/msg/Float32", js[:8], 1), f64("/axial_load", 1.0, 2)],
+        [("/motor_speed", string, bytes(text), 1), f64("/axial_load", 1.0, 2)],
     )
     code, _, err = cli(capsys, "replay", log, "--out", tmp_path / "out", "--quiet")
     assert code == 2 and len(err.splitlines()) == 1
     assert (
-        f"{log}: topic /motor_speed is std_msgs/msg/Float32, expected std_msgs/msg/Float64" in err
+        f"{log}: --speed-field data: {string}: data is a string, not a number "
+        "(topic /motor_speed)" in err
     )
 
 

@@ -146,6 +146,9 @@ def test_descriptors_carry_the_metadata():
         "hardware_id",
         "unit_id",
         "input_queue_depth",
+        "inputs.speed.type",
+        "inputs.load.type",
+        "inputs.nut.type",
         "record.auto_recover",
         "listen.enabled",
     ]

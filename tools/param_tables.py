@@ -25,7 +25,12 @@ from leadscrew_ros.bag import messages
 from leadscrew_ros.bag.msgdefs import type_name
 from leadscrew_ros.bag.recorder import RecordSettings
 from leadscrew_ros.live import listen, status
-from leadscrew_ros.live.settings import JointSettings, ListenSettings, LiveSettings
+from leadscrew_ros.live.settings import (
+    INPUT_FIELDS,
+    JointSettings,
+    ListenSettings,
+    LiveSettings,
+)
 from leadscrew_ros.model.acoustics.settings import DetectorSettings
 from leadscrew_ros.model.calibration import DetectionErrors, ThinSettings
 from leadscrew_ros.model.physics.metadata import default_text, range_text
@@ -46,12 +51,19 @@ from leadscrew_ros.ros.parameters import (
 # table name -> the settings dataclasses it lists, in the node's parameter order
 TABLES = {
     "node": (LiveSettings, JointSettings, NodeSettings),
+    "inputs": tuple(INPUT_FIELDS.values()),
     "scatter": (ScatterSettings,),
     "record": (RecordingControl, RecordSettings),
     "listen": (ListenSettings, DetectorSettings),
     "model": (ScrewParameters,),
 }
-NODE_TABLES = ("node", "scatter", "record", "listen")  # the node's own parameters, not the model's
+NODE_TABLES = (
+    "node",
+    "inputs",
+    "scatter",
+    "record",
+    "listen",
+)  # the node's own parameters, not the model's
 # table name -> the settings dataclasses whose `setting` fields are a command's options
 OPTION_TABLES = {
     "calibrate": (CalibrationSettings, DetectionErrors, SamplerSettings, ThinSettings),
@@ -93,9 +105,22 @@ _MEASUREMENT = (
 )
 # topic (relative to the node's namespace, as the code names it) -> (direction, QoS, meaning)
 TOPICS = {
-    "motor_speed": ("in", SENSOR, "screw speed, rad/s, sign = direction"),
-    "axial_load": ("in", "sensor data", "axial load, N (sign = loaded flank)"),
-    "nut_position": ("in, optional", "sensor data", "nut position z_o along the screw, m"),
+    "motor_speed": (
+        "in",
+        SENSOR,
+        "screw speed, rad/s, sign = direction; the type shown or any installed type with "
+        "the speed at a field path (`inputs.speed.*`)",
+    ),
+    "axial_load": (
+        "in",
+        "sensor data",
+        "axial load, N (sign = loaded flank); or any type (`inputs.load.*`)",
+    ),
+    "nut_position": (
+        "in, optional",
+        "sensor data",
+        "nut position z_o along the screw, m; or any type (`inputs.nut.*`)",
+    ),
     "joint_states": (
         "in, optional",
         "sensor data",

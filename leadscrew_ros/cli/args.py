@@ -300,8 +300,9 @@ def read_params_file(path: str) -> dict[str, Any]:
 
 
 def yaml_parameters(path: str) -> dict[str, Any]:
-    """Every `ros__parameters` value of a parameter file already checked by read_params_file."""
-    return _ros_parameters(yaml.safe_load(Path(path).read_text(encoding="utf-8")))
+    """Every `ros__parameters` value of a parameter file already checked by read_params_file,
+    nested names dotted ('inputs.speed.field')."""
+    return _flat(_ros_parameters(yaml.safe_load(Path(path).read_text(encoding="utf-8"))))
 
 
 def _scatter_value(item: str) -> tuple[str, float]:

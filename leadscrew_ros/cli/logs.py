@@ -19,11 +19,11 @@ from ..bag.logfile import (
     recover_bag,
 )
 from ..bag.logsource import DB3, LogSource, open_log
-from ..live.settings import JointSettings, LiveSettings
+from ..live.settings import InputField, JointSettings, LiveSettings
 from ..model.physics.metadata import help_text
 from ..review.listen import SoundSettings
 from ..review.replay import ReplaySettings
-from ..review.timeline import InputSettings
+from ..review.timeline import FIELD_SETTINGS, InputSettings, input_parameters
 from .args import (
     PROG,
     ROS_ARGS_HELP,
@@ -38,7 +38,8 @@ from .args import (
     yaml_parameters,
 )
 
-REPLAY_INPUTS = [f.name for f in fields(InputSettings)]  # = option dests, node parameters
+# = option dests, node parameters (`inputs.<input>.field`, `.scale` for `<input>_field`, ...)
+REPLAY_INPUTS = [f.name for f in fields(InputSettings)]
 # The node's settings that replay options mirror: their metadata gives the help and the range
 REPLAY_SETTINGS = {
     f.name: f
@@ -71,18 +72,29 @@ def _setting_help(name: str, description: str | None = None) -> str:
     return help_text(REPLAY_SETTINGS[name], description).replace("%", "%%")
 
 
+def _field_help(name: str, description: str) -> str:
+    """argparse help of a --<input>-field / --<input>-scale option (node parameter
+    `inputs.<input>.<name>`: its metadata gives the default and range)."""
+    f = next(f for f in fields(InputField) if f.name == name)
+    return help_text(f, description).replace("%", "%%")
+
+
 def replay_inputs(args: argparse.Namespace) -> InputSettings:
-    """InputSettings: defaults <- node parameters of --params-file <- options. Topic names
-    stay as given: relative ones resolve in the input namespace (--namespace, or the log's)."""
-    values = yaml_parameters(args.params_file) if args.params_file else {}
-    values = {name: values[name] for name in REPLAY_INPUTS if name in values}
+    """InputSettings: defaults <- node parameters of --params-file (`inputs.<input>.field`
+    and `.scale` too) <- options. Topic names stay as given: relative ones resolve in the
+    input namespace (--namespace, or the log's)."""
+    values = input_parameters(yaml_parameters(args.params_file) if args.params_file else {})
     values.update(
         {name: getattr(args, name) for name in REPLAY_INPUTS if getattr(args, name) is not None}
     )
     try:
         return InputSettings(**values)
     except (TypeError, ValueError) as exc:
-        raise CliError(f"replay inputs: {exc}") from None
+        text = str(exc)
+        for name in FIELD_SETTINGS:  # 'speed_field: ...' -> '--speed-field: ...'
+            if text.startswith(name):
+                raise CliError("--" + name.replace("_", "-") + text[len(name) :]) from None
+        raise CliError(f"replay inputs: {text}") from None
 
 
 def _parse_remap(items: list[str]) -> dict[str, str]:
@@ -382,19 +394,37 @@ def add_input_options(p: argparse.ArgumentParser) -> argparse._ArgumentGroup:
         "inputs (defaults: the node's topics, relative names in the input "
         "namespace; node parameters from --params-file)"
     )
-    g.add_argument(
-        "--speed-topic",
-        metavar="TOPIC",
-        help="std_msgs/Float64 speed [rad/s] (default motor_speed)",
-    )
-    g.add_argument(
-        "--load-topic", metavar="TOPIC", help="std_msgs/Float64 axial load [N] (default axial_load)"
-    )
-    g.add_argument(
-        "--nut-topic",
-        metavar="TOPIC",
-        help="std_msgs/Float64 nut position [m] (default nut_position)",
-    )
+    for name, what, default, scale in (
+        ("speed", "speed [rad/s]", "motor_speed", "rpm to rad/s: 0.10472; a gear ratio"),
+        ("load", "axial load [N]", "axial_load", "kN to N: 1000"),
+        ("nut", "nut position [m]", "nut_position", "mm to m: 0.001"),
+    ):
+        g.add_argument(
+            f"--{name}-topic",
+            metavar="TOPIC",
+            help=f"{what}: std_msgs/Float64, or any type with --{name}-field (default {default})",
+        )
+        g.add_argument(
+            f"--{name}-field",
+            metavar="PATH",
+            help=_field_help(
+                "field",
+                f"path of the number in the messages of --{name}-topic, any type the log has a "
+                f"definition for: data (std_msgs numbers), twist.twist.angular.z "
+                f"(nav_msgs/Odometry), velocity[2] (an array element); a header stamp orders "
+                f"the messages"
+                if name == "speed"
+                else f"path of the number in the messages of --{name}-topic (as --speed-field)",
+            ),
+        )
+        g.add_argument(
+            f"--{name}-scale",
+            type=finite,
+            metavar="X",
+            help=_field_help(
+                "scale", f"the {what} is this times the field ({scale}; negative reverses)"
+            ),
+        )
     g.add_argument(
         "--joint-states-topic",
         metavar="TOPIC",

@@ -26,6 +26,10 @@ Rules:
   or a `position` / `velocity` that is neither empty nor one entry per name (sensor_msgs'
   rule). Both values are taken first, then one recompute decision follows, none if either was
   rejected.
+- Order (`SampleOrder`): per input topic, a message whose sample time is earlier than that of
+  the last one taken is stale and not taken. The replay's sample time is the header stamp of a
+  type with a std_msgs/Header (not zero), else the log time; the node checks header stamps
+  only (without one, arrival order is the order).
 - Operating point (speed, load, nut): none until both a speed and a load were taken; the nut
   is `ScrewParameters.nut_position_m` until a nut input was taken.
 - A recompute is due when the point moved more than a deadband (`LiveSettings`) from the point
@@ -211,6 +215,24 @@ def _real(value: object) -> float | None:
         return None
 
 
+class SampleOrder:
+    """Per input topic, the sample time [ns] of the last message taken: which messages are
+    stale (earlier than it), in the node and in the replay alike."""
+
+    def __init__(self) -> None:
+        self.last: dict[str, int] = {}
+
+    def step_back_ns(self, topic: str, t_ns: int) -> int | None:
+        """How far sample time `t_ns` on `topic` is behind the last one taken there [ns]:
+        None when it is later (or the first; it becomes the last), 0 for the same time (taken),
+        > 0 for a stale sample (not taken; the last one stays)."""
+        last = self.last.get(topic)
+        if last is not None and t_ns <= last:
+            return last - t_ns
+        self.last[topic] = t_ns
+        return None
+
+
 class InputRules:
     """Latest accepted inputs, the point last computed and where the contact is integrated.
 
@@ -318,6 +340,30 @@ class InputRules:
             )
         self.inputs.nut_position_m = z
         return self._taken("nut")
+
+    def missing(self, kind: str, path: str, detail: str) -> Outcome:
+        """A message of input `kind` ('speed', 'load', 'nut') without the number at its field
+        path `path` (an index beyond an array of that message): rejected as a bad value is,
+        the previous good one stays.
+
+        Parameters
+        ----------
+        kind : str
+            The input.
+        path : str
+            Its field path.
+        detail : str
+            What the message lacks, one line.
+
+        Returns
+        -------
+        Outcome
+            The rejection.
+        """
+        return self._reject(
+            kind,
+            Rejection(f"{kind} field {path} not in the message", f"{kind} field {path}: {detail}"),
+        )
 
     def _operating_value(self, kind: str, value: object) -> Outcome:
         try:

@@ -135,3 +135,72 @@ class ListenSettings:
 
     def __post_init__(self) -> None:
         check(self)
+
+
+@documented
+@dataclass(frozen=True)
+class InputField:
+    """Where an input's number is in the messages of its topic: the input is `scale` times the
+    number at the path `field` in a message of type `type` (`bag.fieldpath`; the path is
+    checked against the type's definition when the node starts or the parameter is set).
+
+    A message whose type has a std_msgs/Header `header` is ordered by its header stamp (one
+    older than the last taken on that input is stale and not taken; a zero stamp counts as
+    none), else by its arrival (the node) or its log time (the replay).
+    """
+
+    type: str = setting(
+        "std_msgs/msg/Float64",
+        "",
+        "message type of the input topic, pkg/msg/Type (any installed message type)",
+        read_only=True,
+    )
+    field: str = setting(
+        "data",
+        "",
+        "path of the number in the message, e.g. data, twist.twist.angular.z, velocity[2]",
+    )
+    scale: float = setting(
+        1.0,
+        "1",
+        "factor from the field's unit to the input's SI unit (rpm to rad/s: 0.10472; a gear "
+        "ratio; negative reverses the direction)",
+        -1e6,
+        1e6,
+    )
+
+    def __post_init__(self) -> None:
+        check(self)
+        for name in ("type", "field"):
+            if not getattr(self, name).strip():
+                raise ValueError(f"{name} must not be empty")
+        if self.scale == 0.0:
+            raise ValueError("scale must not be 0")
+
+
+@documented
+@dataclass(frozen=True)
+class SpeedInput(InputField):
+    """The speed input (motor_speed) [rad/s]."""
+
+
+@documented
+@dataclass(frozen=True)
+class LoadInput(InputField):
+    """The axial load input (axial_load) [N]."""
+
+
+@documented
+@dataclass(frozen=True)
+class NutInput(InputField):
+    """The nut position input (nut_position) [m]."""
+
+
+# Input -> its settings class (node parameters `inputs.<input>.<field>`, replay options
+# `--<input>-field`, `--<input>-scale`, `InputSettings.<input>_field`, ...).
+INPUT_FIELDS: dict[str, type[InputField]] = {
+    "speed": SpeedInput,
+    "load": LoadInput,
+    "nut": NutInput,
+}
+INPUTS_PREFIX = "inputs."

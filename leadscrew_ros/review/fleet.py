@@ -59,7 +59,7 @@ from .jsonsafe import json_safe
 from .listen import CLIPS_DIR, SoundSettings
 from .progress import progress_bar
 from .replay import ReplayResult, ReplaySettings, log_name, replay
-from .timeline import InputSettings
+from .timeline import InputSettings, input_parameters
 
 INDEX_FILE = "review-index.jsonl"
 RECOVERED_DIR = "recovered"  # in a log's outputs: the readable copy of a cut-off recording
@@ -177,8 +177,7 @@ class FleetSettings:
             )
         scatter = dict(meta.scatter)
         samples = int(scatter.pop("samples", self.samples))
-        known = {f.name for f in fields(InputSettings)}
-        recorded = {k: v for k, v in meta.node.items() if k in known}
+        recorded = input_parameters(meta.node)
         try:
             inputs = InputSettings(**{**recorded, **self.input_options})
         except (TypeError, ValueError) as exc:

@@ -358,16 +358,18 @@ class ReplayResult:
 
     @property
     def warnings(self) -> list[str]:
-        """Log-time problems: stale (backwards) and duplicated input times, per topic; a
+        """Sample-time problems: stale (backwards) and duplicated input times (header stamps
+        or log times, `timeline`), per topic; a
         broken metadata.yaml."""
         tl, out = self.timeline, [self.metadata_problem] if self.metadata_problem else []
+        clock = {t: "header stamp" if t in tl.stamped else "log time" for t in tl.inputs}
         for topic, n in sorted(tl.backwards.items()):
             out.append(
-                f"log time goes backwards {n} time(s) on {topic} (up to "
+                f"{clock[topic]} goes backwards {n} time(s) on {topic} (up to "
                 f"{tl.backwards_max_s:.6g} s): those messages were not applied"
             )
         for topic, n in sorted(tl.duplicates.items()):
-            out.append(f"log time repeats {n} time(s) on {topic} (the later value applied)")
+            out.append(f"{clock[topic]} repeats {n} time(s) on {topic} (the later value applied)")
         return out + self.audio_warnings
 
     @property
@@ -1108,6 +1110,11 @@ def attach(
         out.finish()
 
 
+def _field_text(path: str) -> str:
+    """Where an input's number is, for the missing-input error."""
+    return "std_msgs/Float64" if path == "data" else f"field {path}"
+
+
 def _check_inputs(log: Path, timeline: Timeline, counts: dict[str, int]) -> None:
     """A log without speed or load gives no prediction at all: say which topics it has, which
     of the input topics exist without messages, and how to choose others."""
@@ -1117,12 +1124,17 @@ def _check_inputs(log: Path, timeline: Timeline, counts: dict[str, int]) -> None
         for what, where, topics, value in (
             (
                 "speed",
-                f"std_msgs/Float64 on {s.speed_topic} or a joint velocity on "
+                f"{_field_text(s.speed_field)} on {s.speed_topic} or a joint velocity on "
                 f"{s.joint_states_topic}",
                 (s.speed_topic, s.joint_states_topic),
                 timeline.speed,
             ),
-            ("axial load", f"std_msgs/Float64 on {s.load_topic}", (s.load_topic,), timeline.load),
+            (
+                "axial load",
+                f"{_field_text(s.load_field)} on {s.load_topic}",
+                (s.load_topic,),
+                timeline.load,
+            ),
         )
         if value is None
     ]

@@ -16,27 +16,48 @@ Topics are found as `replay --publish` finds them (`is_input`): relative input n
 defaults `motor_speed`, ...) resolve in a namespace, as a node's do under `__ns`; the log's
 single input namespace by default (`input_namespaces`).
 
-Log time: messages are taken in file order (the order the node received them). An input
-message whose log time is earlier than the previous one on its topic is stale (a clock reset,
-merged recordings): it is counted and not applied; one with the same log time as the previous
-is counted and applied (the later value wins). Times of recomputes, episodes and plots are the
-latest log time seen so far, so they never run backwards.
+Speed, load and nut position are numbers at a field path (`speed_field`, ...; default `data`)
+in messages of any type the log has a definition for (its schema text, else the installed one),
+times a scale (`speed_scale`, ...): `bag.fieldpath`. A path that does not fit the topic's type
+is an `InputError` naming the type, its fields and the path (a topic recorded with several
+types: the messages of a type the path does not fit are counted as rejected, and with a
+std_msgs/Float64 among its types only those are the input).
+
+Sample time and log time: messages are taken in file order (the order the node received them).
+An input message's sample time is its header stamp when its type has a std_msgs/Header `header`
+with a stamp other than zero, else its log time. A message whose sample time is earlier than
+that of the previous one on its topic is stale (a clock reset, merged recordings, a late
+delivery of a stamped sample): it is counted and not applied; one with the same sample time as
+the previous is counted and applied (the later value wins). Stamps are compared only with
+stamps of the same topic (the node does the same, `live.rules.SampleOrder`): they may come
+from another clock than the log's (the robot's, sim time). Times of recomputes, episodes,
+plots and the predictions in the annotated log are log times (the latest seen so far, so they
+never run backwards): the one clock every topic shares.
 """
 
 from __future__ import annotations
 
 import math
 from collections import Counter, OrderedDict
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
 from functools import lru_cache
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from ..bag.cdr import decode_float64, decode_joint_state
+from ..bag.fieldpath import (
+    BeyondArray,
+    FieldPathError,
+    compile_path,
+    split_path,
+    stamp_path,
+    topic_schema,
+)
 from ..bag.logfile import LogMessage, Topic
-from ..live.rules import InputRules, Outcome
-from ..live.settings import JointSettings, LiveSettings
+from ..live.rules import InputRules, Outcome, SampleOrder
+from ..live.settings import INPUT_FIELDS, INPUTS_PREFIX, JointSettings, LiveSettings
 from ..model import (
     OperatingPointError,
     ParameterError,
@@ -63,6 +84,10 @@ INPUTS = {
 # Namespaces of the node's and the replay's own outputs: never inputs.
 OWN_NAMESPACES = {"squeak", "replay"}
 TOPIC_FIELDS = ("speed_topic", "load_topic", "nut_topic", "joint_states_topic")
+# Inputs read at a field path (live.settings.INPUT_FIELDS): their InputSettings field names
+FIELD_SETTINGS = {
+    f"{name}_{attr}": (name, attr) for name in INPUT_FIELDS for attr in ("field", "scale")
+}
 
 
 def matches(topic: Topic, relative: str, type_name: str) -> str | None:
@@ -82,21 +107,55 @@ def is_input(topic: Topic) -> bool:
     return any(matches(topic, base, type_name) for base, type_name in INPUTS.items())
 
 
+def fits(topic: Topic, path: str) -> bool:
+    """The field path `path` leads to a number in `topic`'s type (`bag.fieldpath`)."""
+    try:
+        compile_path(topic_schema(topic.type_name, topic.schema), path)
+    except FieldPathError:
+        return False
+    return True
+
+
 def input_namespaces(topics: Iterable[Topic], settings: InputSettings) -> list[str]:
-    """The namespaces in which some relative input topic of `settings` exists, sorted."""
+    """The namespaces in which some relative input topic of `settings` exists, sorted: a
+    JointState by its type, speed, load and nut as std_msgs/Float64 or any type their field
+    path fits."""
     needs = [
-        (getattr(settings, f), type_name)
-        for f, type_name in zip(TOPIC_FIELDS, (FLOAT64, FLOAT64, FLOAT64, JOINT_STATE), strict=True)
+        (getattr(settings, f), type_name, path)
+        for f, type_name, path in zip(
+            TOPIC_FIELDS,
+            (FLOAT64, FLOAT64, FLOAT64, JOINT_STATE),
+            (settings.speed_field, settings.load_field, settings.nut_field, None),
+            strict=True,
+        )
         if not getattr(settings, f).startswith("/")
     ]
     return sorted(
         {
             ns
             for t in topics
-            for rel, type_name in needs
+            for rel, type_name, path in needs
             if (ns := matches(t, rel, type_name)) is not None
+            or (
+                path is not None
+                and (ns := matches(t, rel, t.type_name)) is not None
+                and fits(t, path)
+            )
         }
     )
+
+
+def input_parameters(values: Mapping[str, Any]) -> dict[str, Any]:
+    """The `InputSettings` fields among node parameter values `values` (a params file's, a
+    recording's): by their own names, and `inputs.<input>.field` / `.scale` as
+    `<input>_field` / `<input>_scale` (`inputs.<input>.type` is the node's: offline the
+    log says the type)."""
+    out = {k: v for k, v in values.items() if k in InputSettings.__dataclass_fields__}
+    for name, (kind, attr) in FIELD_SETTINGS.items():
+        key = f"{INPUTS_PREFIX}{kind}.{attr}"
+        if key in values:
+            out[name] = values[key]
+    return out
 
 
 def resolve(name: str, namespace: str) -> str:
@@ -105,7 +164,24 @@ def resolve(name: str, namespace: str) -> str:
 
 
 class InputError(ValueError):
-    """An input topic whose type is not the one the input needs."""
+    """An input topic whose type is not the one the input needs, or whose type its field
+    path does not fit."""
+
+
+class _Handler(NamedTuple):
+    """How an input topic's messages are taken: `apply` the payload (True when a recompute
+    decision follows), `stamp` its header stamp [ns] (None: the type has no header)."""
+
+    apply: Callable[[bytes], bool]
+    stamp: Callable[[bytes], int] | None
+
+
+def _not_taken(topic: str, type_name: str, input_type: str) -> str:
+    """Why the messages of one type of a topic recorded with two are not taken."""
+    return (
+        f"{topic}: {type_name} messages not taken (the topic is recorded with two types; its "
+        f"{input_type} messages are the input)"
+    )
 
 
 @dataclass(frozen=True)
@@ -117,8 +193,13 @@ class InputSettings:
     Attributes
     ----------
     speed_topic, load_topic, nut_topic : str
-        std_msgs/Float64 inputs: speed [rad/s], axial load [N], nut position [m]. Relative
-        names resolve in the input namespace (`resolved`), absolute ones stay.
+        Speed [rad/s], axial load [N], nut position [m] inputs. Relative names resolve in the
+        input namespace (`resolved`), absolute ones stay.
+    speed_field, load_field, nut_field : str
+        Path of the input's number in its messages (`bag.fieldpath`; default `data`, as in
+        std_msgs/Float64), as the node's `inputs.<input>.field`.
+    speed_scale, load_scale, nut_scale : float
+        The input is this factor times that number, as the node's `inputs.<input>.scale`.
     joint_states_topic : str
         sensor_msgs/JointState input.
     joint_name : str
@@ -137,6 +218,12 @@ class InputSettings:
     load_topic: str = "axial_load"
     nut_topic: str = "nut_position"
     joint_states_topic: str = "joint_states"
+    speed_field: str = INPUT_FIELDS["speed"].field
+    speed_scale: float = INPUT_FIELDS["speed"].scale
+    load_field: str = INPUT_FIELDS["load"].field
+    load_scale: float = INPUT_FIELDS["load"].scale
+    nut_field: str = INPUT_FIELDS["nut"].field
+    nut_scale: float = INPUT_FIELDS["nut"].scale
     joint_name: str = JointSettings.joint_name
     nut_position_at_zero_angle_m: float = JointSettings.nut_position_at_zero_angle_m
     speed_deadband_rad_s: float = LiveSettings.speed_deadband_rad_s
@@ -156,6 +243,31 @@ class InputSettings:
             except OperatingPointError as exc:
                 raise ValueError(f"nominal {exc}") from None
         _ = self.live, self.joints  # built to be checked: their ranges raise ValueError
+        for name, cls in INPUT_FIELDS.items():
+            field, scale = self.field_of(name)
+            try:
+                cls(field=field, scale=scale)  # "scale = 0 ...", "field = 3 must be text"
+            except ValueError as exc:
+                raise ValueError(f"{name}_{exc}") from None
+            try:
+                split_path(field)
+            except FieldPathError as exc:
+                raise ValueError(f"{name}_field: {exc}") from None
+
+    def field_of(self, name: str) -> tuple[str, float]:
+        """Where input `name` is in its messages.
+
+        Parameters
+        ----------
+        name : str
+            'speed', 'load' or 'nut'.
+
+        Returns
+        -------
+        tuple of (str, float)
+            Its field path and scale.
+        """
+        return getattr(self, f"{name}_field"), getattr(self, f"{name}_scale")
 
     @property
     def live(self) -> LiveSettings:
@@ -246,21 +358,28 @@ class Timeline:
         self.ignored: Counter[str] = Counter()  # messages ignored, by reason
         self.ignored_example: dict[str, str] = {}  # reason -> the first one's joints
         self.backwards: Counter[str] = Counter()  # stale inputs (not applied), by topic
-        self.backwards_max_s = 0.0  # largest step back in log time
-        self.duplicates: Counter[str] = Counter()  # same log time as the previous
+        self.backwards_max_s = 0.0  # largest step back in sample time
+        self.duplicates: Counter[str] = Counter()  # same sample time as the previous
+        self.stamped: set[str] = set()  # input topics ordered by header stamps
         self.recomputes = 0
         self.start_ns: int | None = None  # first message: t = 0
         self.now_ns = 0  # latest log time seen
         self.trace = Envelope(3)
-        self._last_ns: dict[str, int] = {}  # per input topic
-        self._routes: dict[str, tuple[str, Callable[[bytes], bool]]] = {
-            settings.speed_topic: (FLOAT64, self._on_speed),
-            settings.load_topic: (FLOAT64, self._on_load),
-            settings.nut_topic: (FLOAT64, self._on_nut),
-            settings.joint_states_topic: (JOINT_STATE, self._on_joint_states),
+        self.order = SampleOrder()
+        # input topic -> its input ('speed', 'load', 'nut', or 'joint_states')
+        self._routes = {
+            settings.speed_topic: "speed",
+            settings.load_topic: "load",
+            settings.nut_topic: "nut",
+            settings.joint_states_topic: "joint_states",
+        }
+        self._setters = {
+            "speed": self.rules.set_speed,
+            "load": self.rules.set_load,
+            "nut": self.rules.set_nut_position,
         }
         # (topic, type) -> its handler; None: not an input; a str: the reason it is rejected
-        self._handlers: dict[tuple[str, str], Callable[[bytes], bool] | str | None] = {}
+        self._handlers: dict[tuple[str, str], _Handler | str | None] = {}
 
     @property
     def speed(self) -> float | None:
@@ -301,24 +420,29 @@ class Timeline:
         try:
             handler = self._handlers[key]
         except KeyError:  # a topic and type not seen yet
-            handler = self._handlers[key] = self._handler(*key)
+            handler = self._handlers[key] = self._handler(m.topic)
         if handler is None:
             return None
-        if isinstance(handler, str):  # the other type of an input recorded with two
+        if isinstance(handler, str):  # a type of an input recorded with several, not taken
             self.rejected[handler] += 1
             return None
         name = m.topic.name
         self.inputs[name] += 1
-        last = self._last_ns.get(name)
-        if last is not None and m.log_time_ns <= last:
-            if m.log_time_ns < last:  # stale: the newer value stays
-                self.backwards[name] += 1
-                self.backwards_max_s = max(self.backwards_max_s, (last - m.log_time_ns) / 1e9)
-                return None
+        t_ns = m.log_time_ns
+        if handler.stamp is not None:
+            try:
+                t_ns = handler.stamp(m.data) or t_ns  # a zero stamp: none
+            except ValueError:  # the value's reading rejects the payload
+                pass
+        back = self.order.step_back_ns(name, t_ns)
+        if back:  # stale: the newer value stays
+            self.backwards[name] += 1
+            self.backwards_max_s = max(self.backwards_max_s, back / 1e9)
+            return None
+        if back == 0:
             self.duplicates[name] += 1
-        self._last_ns[name] = m.log_time_ns
         try:
-            accepted = handler(m.data)
+            accepted = handler.apply(m.data)
         except ValueError:
             self.rejected[f"{name}: undecodable payload"] += 1
             accepted = False
@@ -331,18 +455,60 @@ class Timeline:
         )
         return self._recompute(index, m.log_time_ns) if accepted else None
 
-    def _handler(self, topic: str, type_name: str) -> Callable[[bytes], bool] | str | None:
-        route = self._routes.get(topic)
-        if route is None:
+    def _handler(self, topic: Topic) -> _Handler | str | None:
+        """How messages of `topic` (its name and type) are taken: None if it is no input, a
+        reason if its type is one of several and not the input's."""
+        name, type_name = topic.name, topic.type_name
+        kind = self._routes.get(name)
+        if kind is None:
             return None
-        if type_name != route[0] and route[0] in self._types.get(topic, ()):
-            return (
-                f"{topic}: {type_name} messages not taken (the topic is recorded with two "
-                f"types; its {route[0]} messages are the input)"
-            )
-        if type_name != route[0]:
-            raise InputError(f"topic {topic} is {type_name}, expected {route[0]}")
-        return route[1]
+        types = self._types.get(name, ())
+        if kind == "joint_states":
+            if type_name != JOINT_STATE:
+                if JOINT_STATE in types:
+                    return _not_taken(name, type_name, JOINT_STATE)
+                raise InputError(f"topic {name} is {type_name}, expected {JOINT_STATE}")
+            return _Handler(self._on_joint_states, self._stamp(topic, name))
+        path, scale = self.settings.field_of(kind)
+        if path == "data" and FLOAT64 in types and type_name != FLOAT64:
+            return _not_taken(name, type_name, FLOAT64)  # as the node's default subscription
+        if path == "data" and type_name == FLOAT64:
+            read: Callable[[bytes], float] = decode_float64  # the default, without a schema
+        else:
+            try:
+                read = compile_path(topic_schema(type_name, topic.schema), path).read
+            except FieldPathError as exc:
+                if len(types) > 1:
+                    return (
+                        f"{name}: {type_name} messages not taken (the topic is recorded with "
+                        f"several types; --{kind}-field {path} does not fit this one: {exc})"
+                    )
+                raise InputError(f"--{kind}-field {path}: {exc} (topic {name})") from None
+        setter = self._setters[kind]
+
+        def apply(data: bytes) -> bool:
+            try:
+                value = read(data)
+            except BeyondArray as exc:  # this message's array is shorter
+                return self._count(self.rules.missing(kind, path, str(exc)))
+            return self._count(setter(scale * value))
+
+        return _Handler(apply, self._stamp(topic, name))
+
+    def _stamp(self, topic: Topic, name: str) -> Callable[[bytes], int] | None:
+        """The header stamp [ns] of a message of `topic`, if its type has a std_msgs/Header
+        `header` (the topic then counts as `stamped`)."""
+        if topic.type_name == FLOAT64:
+            return None
+        try:
+            paths = stamp_path(topic_schema(topic.type_name, topic.schema))
+        except FieldPathError:  # no usable definition: log time
+            return None
+        if paths is None:
+            return None
+        self.stamped.add(name)
+        sec, nanosec = paths
+        return lambda data: int(sec.read(data)) * 1_000_000_000 + int(nanosec.read(data))
 
     def _count(self, outcome: Outcome) -> bool:
         """Count the values a message had rejected; True when a recompute decision follows."""
@@ -350,15 +516,6 @@ class Timeline:
             self.rejected[r.reason] += 1
             self.rejected_example.setdefault(r.reason, r.message)
         return outcome.applies
-
-    def _on_speed(self, data: bytes) -> bool:
-        return self._count(self.rules.set_speed(decode_float64(data)))
-
-    def _on_load(self, data: bytes) -> bool:
-        return self._count(self.rules.set_load(decode_float64(data)))
-
-    def _on_nut(self, data: bytes) -> bool:
-        return self._count(self.rules.set_nut_position(decode_float64(data)))
 
     def _on_joint_states(self, data: bytes) -> bool:
         js = decode_joint_state(data)

@@ -1,8 +1,10 @@
 # SPDX-License-Identifier: Apache-2.0
 """ROS 2 node `squeak_predictor`: live squeak prediction beside an actuator controller.
 
-Subscribes (sensor-data QoS): motor_speed (std_msgs/Float64, rad/s), axial_load (Float64, N),
-nut_position (Float64, m) and joint_states (sensor_msgs/JointState, joint `joint_name`).
+Subscribes (sensor-data QoS): motor_speed (rad/s), axial_load (N), nut_position (m), each a
+std_msgs/Float64 or any installed type with the number at a field path times a scale
+(`inputs.<input>.type`, `.field`, `.scale`: `ros.input_fields`), and joint_states
+(sensor_msgs/JointState, joint `joint_name`).
 Publishes (reliable, transient local, depth 1): squeak/risk (P(squeak) over the parameter
 scatter, `scatter.*` parameters), squeak/margin (least damping ratio at the nominal parameters),
 squeak/unstable_frequencies, squeak/active, squeak/modes, squeak/safe_speed (nearest speed with
@@ -65,7 +67,14 @@ from ..bag.crash_recovery import CrashRecovery
 from ..bag.recorder import Recorder, RecordSettings, ensure_directory
 from ..live.listen import Decoder, Listener
 from ..live.recompute import LivePredictor
-from ..live.settings import JointSettings, ListenSettings, LiveSettings
+from ..live.rules import SampleOrder
+from ..live.settings import (
+    INPUT_FIELDS,
+    INPUTS_PREFIX,
+    JointSettings,
+    ListenSettings,
+    LiveSettings,
+)
 from ..live.status import Status
 from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel
 from ..model.acoustics.settings import DetectorSettings
@@ -80,6 +89,7 @@ from .diagnostics import (
     status_task,
 )
 from .env import StopSignals, checked_ros_args, confine_to_localhost
+from .input_fields import InputReader, input_reader, stamp_ns
 from .input_recording import InputRecording
 from .parameters import (
     GROUPS,
@@ -109,12 +119,16 @@ LATCHED = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
 )
 
+# Input topic -> its default message class (`inputs.<input>.type` chooses another for the
+# first three).
 INPUTS = {
     "motor_speed": Float64,
     "axial_load": Float64,
     "nut_position": Float64,
     "joint_states": JointState,
 }
+FIELD_TOPICS = {"motor_speed": "speed", "axial_load": "load", "nut_position": "nut"}
+SETTERS = {"speed": "set_speed", "load": "set_load", "nut": "set_nut_position"}  # LivePredictor's
 LISTEN_CLASSES = {
     topic: {msgdefs.type_name(c): c for c in (Float64, Bool)}[type_name]
     for topic, type_name in messages.LISTEN_TYPES.items()
@@ -235,6 +249,9 @@ class SqueakPredictorNode(Node):
         self._declare_parameters()
         self.live = LivePredictor(self._model({}), self._live_settings({}))
         self.joint = self._settings(JointSettings, {})
+        # speed, load, nut: message class, precompiled field getter, header stamp
+        self.readers = {name: self._reader(name, {}) for name in INPUT_FIELDS}
+        self.order = SampleOrder()  # header stamps of the stamped inputs
         self.recorder = self._new_recorder(bag_prefix(self.get_namespace()), self._metadata())
         own, control = self._settings(NodeSettings, {}), self._settings(RecordingControl, {})
         self._input_recording: InputRecording | None = None
@@ -272,13 +289,9 @@ class SqueakPredictorNode(Node):
         def publisher(msg_type, topic):
             return self.create_publisher(msg_type, topic, LATCHED, event_callbacks=pub_events)
 
-        for topic, callback in (
-            ("motor_speed", self._on_speed),
-            ("axial_load", self._on_load),
-            ("nut_position", self._on_nut_position),
-            ("joint_states", self._on_joint_states),
-        ):
-            subscribe(INPUTS[topic], topic, callback)
+        for topic, name in FIELD_TOPICS.items():
+            subscribe(self.readers[name].msg_type, topic, partial(self._on_field, kind=name))
+        subscribe(INPUTS["joint_states"], "joint_states", self._on_joint_states)
         self.output_pubs = {topic: publisher(cls, topic) for topic, cls in OUTPUT_CLASSES.items()}
         self.listen_pubs = {}
         if self.listener is not None:
@@ -394,6 +407,13 @@ class SqueakPredictorNode(Node):
             raise ParameterError(f"scatter: {exc}") from None
         return model
 
+    def _reader(self, name: str, changes: dict) -> InputReader:
+        """The reader of input `name` from the parameters with `changes` applied."""
+        return input_reader(name, self._settings(INPUT_FIELDS[name], changes))
+
+    def _field(self, name: str) -> str:
+        return self.get_parameter(f"{INPUTS_PREFIX}{name}.field").value
+
     def _live_settings(self, changes: dict) -> LiveSettings:
         return self._settings(LiveSettings, changes)
 
@@ -410,6 +430,9 @@ class SqueakPredictorNode(Node):
                 build(group.cls, values)
             if set(changes) & (names_of(ScrewParameters) | names_of(ScatterSettings)):
                 self._model(changes)
+            for name, cls in INPUT_FIELDS.items():  # a field path must fit its type
+                if set(changes) & names_of(cls):
+                    self._reader(name, changes)
             recording = names_of(RecordSettings) | names_of(RecordingControl)
             if values["record.enabled"] and recording & set(changes):
                 ensure_directory(values["record.directory"])  # mkdir -p, writable
@@ -444,6 +467,12 @@ class SqueakPredictorNode(Node):
             self._recompute(time.monotonic())
         if names & names_of(JointSettings):
             self.joint = self._settings(JointSettings, {})
+        for name, cls in INPUT_FIELDS.items():  # the type is read-only: same subscription
+            if names & names_of(cls):
+                self.readers[name] = self._reader(name, {})
+        # speed, load, nut: message class, precompiled field getter, header stamp
+        self.readers = {name: self._reader(name, {}) for name in INPUT_FIELDS}
+        self.order = SampleOrder()  # header stamps of the stamped inputs
         if names & names_of(NodeSettings):
             self.diagnostics.period_s = self._settings(NodeSettings, {}).diagnostics_period_s
         if self.listener is not None and names & (
@@ -553,22 +582,41 @@ class SqueakPredictorNode(Node):
             )
 
     # ---------------------------------------------------------------- inputs
-    def _on_speed(self, topic: str, msg: Float64) -> None:
-        self._input(topic, msg, self.live.set_speed(msg.data, time.monotonic()))
-
-    def _on_load(self, topic: str, msg: Float64) -> None:
-        self._input(topic, msg, self.live.set_load(msg.data, time.monotonic()))
-
-    def _on_nut_position(self, topic: str, msg: Float64) -> None:
-        self._input(topic, msg, self.live.set_nut_position(msg.data, time.monotonic()))
+    def _on_field(self, topic: str, msg: Any, kind: str) -> None:
+        """Speed, load or nut: the number at the input's field path times its scale
+        (`inputs.<kind>.*`); a stamped message older than the last one taken is stale."""
+        reader, now = self.readers[kind], time.monotonic()
+        if reader.stamp is not None and self._stale(topic, reader.stamp(msg)):
+            return
+        try:
+            value = reader.value(msg)
+        except IndexError as exc:  # an array of this message is shorter than the path's index
+            outcome = self.live.rules.missing(kind, self._field(kind), str(exc))
+            self._input(topic, msg, outcome.error, now)
+            return
+        self._input(topic, msg, getattr(self.live, SETTERS[kind])(value, now), now)
 
     def _on_joint_states(self, topic: str, msg: JointState) -> None:
         """The screw joint's speed and nut position (`live.rules`: ignored while joint_name is
         '' or without that joint), then one recompute decision."""
+        if self._stale(topic, stamp_ns(msg)):
+            return
         now = time.monotonic()
         outcome = self.live.set_joint_state(msg.name, msg.position, msg.velocity, now, self.joint)
         if not outcome.ignored:
             self._input(topic, msg, outcome.error, now)
+
+    def _stale(self, topic: str, stamp: int) -> bool:
+        """A message stamped `stamp` [ns] earlier than the last one taken on `topic` (0: not
+        stamped, never stale), as the replay orders samples (`live.rules.SampleOrder`)."""
+        back = self.order.step_back_ns(topic, stamp) if stamp else None
+        if back:
+            self.get_logger().warning(
+                f"input not taken: {topic} header stamp {back / 1e9:.6g} s older than the last "
+                f"one taken",
+                throttle_duration_sec=2.0,
+            )
+        return bool(back)
 
     def _input(self, topic: str, msg: object, error: str, now: float | None = None) -> None:
         now = time.monotonic() if now is None else now
@@ -694,8 +742,9 @@ def usage() -> str:
         "",
         "Subscribes (sensor-data QoS, relative to the namespace):",
         "  motor_speed (std_msgs/Float64) [rad/s], axial_load (std_msgs/Float64) [N],",
-        "  nut_position (std_msgs/Float64) [m], joint_states (sensor_msgs/JointState, joint "
-        "`joint_name`),",
+        "  nut_position (std_msgs/Float64) [m] (or any installed type: inputs.<input>.type, "
+        "a number at inputs.<input>.field times inputs.<input>.scale),",
+        "  joint_states (sensor_msgs/JointState, joint `joint_name`),",
         "  with listen.enabled: microphone (std_msgs/Float32MultiArray chunks, full scale -1..1, "
         "at listen.sample_rate_hz)",
         "Publishes (reliable, transient local, depth 1):",

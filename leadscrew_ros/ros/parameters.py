@@ -19,7 +19,13 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 
 from ..bag.logmeta import LogMetadata
 from ..bag.recorder import RecordSettings
-from ..live.settings import JointSettings, ListenSettings, LiveSettings
+from ..live.settings import (
+    INPUT_FIELDS,
+    INPUTS_PREFIX,
+    JointSettings,
+    ListenSettings,
+    LiveSettings,
+)
 from ..model.acoustics.settings import DetectorSettings
 from ..model.physics.display import exact, yaml_value
 from ..model.physics.metadata import check, check_value, documented, range_text, setting
@@ -96,6 +102,14 @@ GROUPS = (
     Group(LiveSettings, "", "node: recompute policy and verdict"),
     Group(JointSettings, "", "node: joint_states mapping"),
     Group(NodeSettings, "", "node: diagnostics, identity and inputs"),
+    *(
+        Group(
+            cls,
+            f"{INPUTS_PREFIX}{name}.",
+            f"node: where the {name} input's number is in its messages (type, field path, scale)",
+        )
+        for name, cls in INPUT_FIELDS.items()
+    ),
     Group(
         ScatterSettings,
         "scatter.",
@@ -268,15 +282,20 @@ COMMENT_COLUMN = 40
 
 
 def config_yaml() -> str:
-    """config/leadscrew.yaml: every parameter with its default, `record.*` as a nested
-    `record:` mapping, a comment with unit, description and range per entry."""
-    lines, nested = [], None
+    """config/leadscrew.yaml: every parameter with its default, a dotted prefix as nested
+    mappings (`record.*` under `record:`, `inputs.speed.*` under `inputs:` `speed:`), a
+    comment with unit, description and range per entry."""
+    lines: list[str] = []
+    nested: list[str] = []
     for group in GROUPS:
-        prefix = group.prefix.rstrip(".")
-        indent = "      " if prefix else "    "
-        if prefix and prefix != nested:
-            lines.append(f"    {prefix}:")
-            nested = prefix
+        parts = [p for p in group.prefix.split(".") if p]
+        common = 0
+        while common < min(len(parts), len(nested)) and parts[common] == nested[common]:
+            common += 1
+        for depth in range(common, len(parts)):
+            lines.append(f"{'  ' * (depth + 2)}{parts[depth]}:")
+        nested = parts
+        indent = "  " * (len(parts) + 2)
         lines.append(f"{indent}# --- {group.title}")
         for spec in specs((group,)):
             entry = f"{indent}{spec.field.name}: {yaml_value(spec.default)}"
