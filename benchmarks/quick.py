@@ -13,8 +13,10 @@ duty-cycle log.
 A ratio above its target prints "MISSED" and the exit code stays 0: the runs are short
 and the machine may be busy, so a slowdown shows in every CI log (.ci/run) without failing it.
 Only a ratio worse than `FAIL_FACTOR` (2) times its target prints "FAILED" and exits 1 (so
-does a crash): a lost factor stops CI, noise does not. Read a MISSED against the load, then run
-the full benchmark (its name is in the table) before concluding anything.
+does a crash): a lost factor stops CI, noise does not. A ratio over that line is measured again
+up to `RETRIES` times and fails only if every run is over it (the scatter row, above its
+target even on a quiet machine, came out over it once at load 6). Read a MISSED against the
+load, then run the full benchmark (its name is in the table) before concluding anything.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import os
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from statistics import median
 
 import bench_contact
@@ -39,6 +42,7 @@ MAP_GRID = 48  # speed x load points per side (the full benchmark: 200)
 REPLAY_LOG_S = 120.0  # the duty-cycle log of bench_replay.py, shortened
 REPLAY_ROUNDS = 1
 FAIL_FACTOR = 2.0  # a ratio above this multiple of its target fails the run (exit 1)
+RETRIES = 2  # more runs of a row above that line: it fails only if all are above
 
 
 def replay_ratio(duration_s: float, rounds: int) -> float:
@@ -73,41 +77,63 @@ def verdict(ratio: float, target: float | None) -> str:
     return "met" if ratio <= target else "MISSED"
 
 
-def rows() -> list[tuple[str, str, float, float | None]]:
-    """(what, full benchmark, ratio, target: its upper bound, None without one) per
-    measurement."""
+Row = tuple[str, str, float, "float | None", "Callable[[], float] | None"]
+
+
+def rows() -> list[Row]:
+    """(what, full benchmark, ratio, target: its upper bound or None, a function measuring
+    the ratio again or None) per measurement."""
     model = SqueakModel()
-    point = bench_model.bench_point(model, rounds=9, loops=2)
-    scatter = bench_model.bench_scatter_point(model, rounds=9, loops=1)
-    mp = bench_model.bench_map(model.with_scatter(Scatter({})), MAP_GRID, rounds=3, naive_points=4)
-    _, _, live = bench_probability.live_update_ratio(SqueakModel(), rounds=5, repeat=50)
-    contact = bench_contact.run(6, rounds=15, calls=30)  # 5 rounds: 0.27-0.69x at load 10
+    no_scatter = model.with_scatter(Scatter({}))
+
+    def point() -> float:
+        return bench_model.bench_point(model, rounds=9, loops=2)["ratio"]
+
+    def scatter() -> float:
+        return bench_model.bench_scatter_point(model, rounds=9, loops=1)["ratio"]
+
+    def live() -> float:
+        return bench_probability.live_update_ratio(SqueakModel(), rounds=5, repeat=50)[2]
+
+    def map_ratio(key: str) -> Callable[[], float]:
+        return lambda: bench_model.bench_map(no_scatter, MAP_GRID, rounds=3, naive_points=4)[key]
+
+    def contact() -> float:  # 15 rounds: 5 gave 0.27-0.69x in one minute at load 10
+        return bench_contact.run(6, rounds=15, calls=30)["rebuild_ratio"]
+
+    first_point, first_scatter, first_live = point(), scatter(), live()
+    mp = bench_model.bench_map(no_scatter, MAP_GRID, rounds=3, naive_points=4)
+    first_contact = contact()
     x_real_time = replay_ratio(REPLAY_LOG_S, REPLAY_ROUNDS)
     return [
         (
             "`predict` without scatter / bare `eig`",
             "bench_model.py 1",
-            point["ratio"],
+            first_point,
             bench_model.TARGET_POINT_RATIO,
+            point,
         ),
         (
-            f"`predict` with the default scatter at {len(scatter['points'])} random points / "
-            "bare `eig`",
+            f"`predict` with the default scatter at {len(bench_model.random_points())} random "
+            "points / bare `eig`",
             "bench_model.py 1",
-            scatter["ratio"],
+            first_scatter,
             bench_model.TARGET_SCATTER_RATIO,
+            scatter,
         ),
         (
             "live update with P(squeak) (`predict`) / bare `eig`",
             "bench_probability.py",
-            live,
+            first_live,
             bench_probability.TARGET_LIVE_RATIO,
+            live,
         ),
         (
             f"`growth_field` {MAP_GRID}×{MAP_GRID} map / bare batched `eigvals`",
             "bench_model.py 2",
             mp["ratio"],
             bench_model.TARGET_MAP_RATIO,
+            map_ratio("ratio"),
         ),
         (
             f"`stability_map` {MAP_GRID}×{MAP_GRID} (grid + refined boundary, "
@@ -116,12 +142,14 @@ def rows() -> list[tuple[str, str, float, float | None]]:
             "bench_model.py 2",
             mp["refined_ratio"],
             bench_model.TARGET_REFINED_MAP_RATIO,
+            map_ratio("refined_ratio"),
         ),
         (
             "new nut position (model rebuild) / bare `eig`",
             "bench_contact.py",
-            contact["rebuild_ratio"],
+            first_contact,
             bench_contact.TARGET,
+            contact,
         ),
         (
             f"replay of a {REPLAY_LOG_S:g} s duty-cycle log, one process: real time / wall time "
@@ -130,8 +158,17 @@ def rows() -> list[tuple[str, str, float, float | None]]:
             "bench_replay.py",
             x_real_time,
             None,
+            None,
         ),
     ]
+
+
+def confirmed(ratio: float, target: float | None, again: Callable[[], float] | None) -> list:
+    """The runs of a row: `ratio`, and while each run is FAILED, up to `RETRIES` more."""
+    runs = [ratio]
+    while again is not None and verdict(runs[-1], target) == "FAILED" and len(runs) <= RETRIES:
+        runs.append(again())
+    return runs
 
 
 def main() -> int:
@@ -139,16 +176,19 @@ def main() -> int:
     table = rows()
     print("| measure | full benchmark | ratio | target |\n|---|---|---:|---|")
     failed = []
-    for what, full, ratio, target in table:
-        v = verdict(ratio, target)
+    for what, full, ratio, target, again in table:
+        runs = confirmed(ratio, target, again)
+        v = verdict(min(runs), target)
         shown = "–" if target is None else f"≤ {target:g}× {v}"
-        print(f"| {what} | {full} | {ratio:.2f}× | {shown} |")
+        if len(runs) > 1:
+            shown += " (runs: " + ", ".join(f"{r:.2f}×" for r in runs) + ")"
+        print(f"| {what} | {full} | {min(runs):.2f}× | {shown} |")
         if v == "FAILED":
-            failed.append(f"{what}: {ratio:.2f}× against ≤ {target:g}×")
+            failed.append(f"{what}: {min(runs):.2f}× against ≤ {target:g}×")
     print(
         f"\nquick mode (ratios from this run; MISSED never fails, FAILED above {FAIL_FACTOR:g}× "
-        f"a target) · {os.cpu_count()} CPUs · load avg {load0:.2f} → {os.getloadavg()[0]:.2f} "
-        f"· {time.perf_counter() - t0:.1f} s"
+        f"a target in {RETRIES + 1} runs) · {os.cpu_count()} CPUs · load avg {load0:.2f} → "
+        f"{os.getloadavg()[0]:.2f} · {time.perf_counter() - t0:.1f} s"
     )
     for line in failed:
         print(f"quick.py: FAILED, more than {FAIL_FACTOR:g}× the target: {line}", file=sys.stderr)
