@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike
 from .physics.assembly import build_geometry, lower_half_units_at
 from .physics.display import exact
 from .physics.friction import mu_o
-from .physics.parameters import ParameterError, ScrewParameters, field_info
+from .physics.parameters import GEOMETRY_FIELDS, ParameterError, ScrewParameters, field_info
 from .physics.stability import (
     Eigen,
     ModeResult,
@@ -319,7 +319,7 @@ class SqueakModel:
             # the samples do not depend on the changed fields: share them (and, for geometry
             # changes, the estimate's per-sample friction), a moved nut costs its contact only
             model.samples = self.samples
-            if self._probability is not None and all(field_info(k)["geometry"] for k in changes):
+            if self._probability is not None and GEOMETRY_FIELDS.issuperset(changes):
                 model._probability = self._probability.with_geometry(model.params, model.geometry)
         return model
 

@@ -12,7 +12,7 @@ costs only the closed-form contact integrals.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from functools import cached_property, lru_cache
 from types import SimpleNamespace
 from typing import cast
@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike
 from .contact import ContactIntegrals, HelixContact, helix_contact
 from .kernels import MATRICES, scales
 from .modes import KIND_X, KIND_Y, ModalBasis, modal_basis
-from .parameters import ScrewParameters
+from .parameters import GEOMETRY_FIELDS, ScrewParameters, field_names
 
 
 def gyroscopic_unit(basis: ModalBasis) -> np.ndarray:
@@ -233,7 +233,7 @@ class Geometry:
         return (n + np.arange(n)) * (2 * n) + np.arange(n)
 
 
-_GEOMETRY_FIELDS = tuple(f.name for f in fields(ScrewParameters) if f.metadata["geometry"])
+_GEOMETRY_FIELDS = tuple(n for n in field_names() if n in GEOMETRY_FIELDS)
 _SCREW_FIELDS = tuple(n for n in _GEOMETRY_FIELDS if n not in ("nut_position_m", "nut_length_m"))
 
 
@@ -315,17 +315,14 @@ def lower_half_units_at(params: ScrewParameters, nut_positions_m: ArrayLike) -> 
 
 
 def _halves(screw: _Screw, exponentials: np.ndarray) -> np.ndarray:
-    """lower_half_units of the contact `exponentials` (D, 4M, P) of D nut positions: one
-    table of every nut's kind blocks (`HelixContact.table`, columns nut by nut), then the
-    entries of each."""
+    """lower_half_units of the contact `exponentials` (D, 4M, P) of D nut positions: each
+    nut's table of kind blocks (`HelixContact.table`), then the entries of each."""
     d, rows, pairs = len(exponentials), len(screw.kernels), exponentials.shape[2]
-    columns = np.ascontiguousarray(exponentials.transpose(1, 0, 2)).reshape(-1, d * pairs)
-    blocks = screw.helix.table(columns, screw.kernels).reshape(rows, d, pairs)
     table = np.empty((d, rows * pairs + 1))
-    table[:, :-1].reshape(d, rows, pairs)[...] = blocks.transpose(1, 0, 2)
     table[:, -1] = 0.0  # where `index` points outside the contact rows
+    screw.helix.table(exponentials, screw.kernels, out=table[:, :-1].reshape(d, rows, pairs))
     halves = np.empty((d, 5, screw.G_half.size))
-    halves[:, :4] = table[:, screw.index]
+    np.take(table, screw.index, axis=1, out=halves[:, :4])
     halves[:, 4] = screw.G_half
     return halves
 

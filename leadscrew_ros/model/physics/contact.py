@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import cmath
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
 
 import numpy as np
 
@@ -43,6 +43,8 @@ from .parameters import ScrewParameters
 _DIRECT = 0.1  # |x| = |omega alpha / 2| below which sin(x) / x is taken directly
 _M = len(HARMONICS)
 _BLAS_ONE_THREAD = 65536 * 4  # m n k of a product below which OpenBLAS uses one thread
+_SIGNS = np.array([-1j, 1j])  # e^{-i x}, e^{i x}
+_I_HARMONICS = 1j * HARMONICS  # e^{i m angle} = exp(angle * this)
 
 
 def contact_angles(p: ScrewParameters) -> tuple[float, float]:
@@ -99,52 +101,79 @@ class HelixContact:
     def exponentials(self, nut_positions_m: np.ndarray, nut_length_m: float) -> np.ndarray:
         """`ContactIntegrals.exponentials` of nuts of length b = `nut_length_m` at each of the
         positions z_o = `nut_positions_m` (D,) [m], in one vectorised step: (D, 4M, P). Only
-        the phases depend on the position; the same operations per element as for one nut."""
-        lead, u = self.lead_per_rad_m, len(self.wavenumber)
-        alpha, half = nut_length_m / lead, nut_length_m / 2
-        h = alpha / 2
-        z = nut_positions_m + half  # z_c
-        # e^{i k_i x} e^{-+i k_j x} for x = z_c (per nut) and b / 2 (rows: -x, x)
-        at_z = np.exp(np.multiply.outer(np.stack((-1j * z, 1j * z), axis=-1), self.wavenumber))
-        at_half = np.exp(np.multiply.outer((-1j * half, 1j * half), self.wavenumber))
-        pq_z = (at_z[:, 1, None, :, None] * at_z[:, :, None, :]).reshape(len(z), 1, -1)
-        pq_half = (at_half[1, None, :, None] * at_half[:, None, :]).reshape(1, -1)
-        turn = _harmonics(h)  # e^{i m alpha / 2}
-        sin_x = (turn * pq_half).imag  # sin(omega alpha / 2)
-        starts = np.stack([_harmonics(float(zo) / lead) for zo in nut_positions_m.tolist()])
-        phase = (starts * turn) * pq_z  # e^{i omega theta_c}, (D, M, 2P)
-        g = (sin_x * self.weight + h * self.level).reshape(_M, 2, -1)
+        the phases depend on the position (what depends on the length alone is `_nut_terms`,
+        cached); the same operations per element for one nut as for many."""
+        nut = _nut_terms(self, nut_length_m)
+        d, pairs = len(nut_positions_m), len(self.wavenumber) ** 2
+        z_c = nut_positions_m + nut_length_m / 2  # the contact's middle
+        at_z = np.exp(np.multiply.outer(np.multiply.outer(z_c, _SIGNS), self.wavenumber))
+        pq_z = at_z[:, 1, None, :, None] * at_z[:, :, None, :]  # e^{i k_i z_c} e^{-+i k_j z_c}
+        starts = np.exp(np.multiply.outer(nut_positions_m / self.lead_per_rad_m, _I_HARMONICS))
+        starts *= nut.turn  # e^{i m alpha_o} e^{i m alpha / 2}, (D, M)
+        phase = starts[:, :, None] * pq_z.reshape(d, 1, -1)  # e^{i omega theta_c}, (D, M, 2P)
         # sign A A F(omega) / 2 = phase g, stored (D, M, 2 signs, Re / Im, P)
-        out = np.empty((len(z), _M, 2, 2, u * u))
-        np.multiply(phase.real.reshape((-1,) + g.shape), g, out=out[:, :, :, 0])
-        np.multiply(phase.imag.reshape((-1,) + g.shape), g, out=out[:, :, :, 1])
-        n = np.searchsorted(self.near_abs, _DIRECT / h)
-        if n:  # sin from the split loses digits near 0
-            x = self.near_omega[:n] * h
-            f = phase.reshape(len(z), -1)[:, self.near[:n]] * (
-                (h * self.near_amplitude[:n]) * (np.sin(x) / x)
-            )
-            flat = out.reshape(len(z), -1)
-            flat[:, self.near_out[:n]] = f.real
-            flat[:, self.near_out[:n] + u * u] = f.imag
-        return out.reshape(len(z), 4 * _M, -1)
+        out = np.empty((d, _M, 2, 2, pairs))
+        wide = phase.reshape(d, _M, 2, pairs)
+        np.multiply(wide.real, nut.g, out=out[:, :, :, 0])
+        np.multiply(wide.imag, nut.g, out=out[:, :, :, 1])
+        if len(nut.near):  # sin from the split loses digits near 0
+            f = phase.reshape(d, -1)[:, nut.near] * nut.near_factor
+            flat = out.reshape(d, -1)
+            flat[:, nut.near_out] = f.real
+            flat[:, nut.near_out + pairs] = f.imag
+        return out.reshape(d, 4 * _M, -1)
 
     def table(
         self, exponentials: np.ndarray, kernels: np.ndarray, out: np.ndarray | None = None
     ) -> np.ndarray:
         """Every kind block (a, b) of every matrix of `kernels` (rows: combinations of the
         rows of `self.kernels`) over the distinct pairs, Re sum_m c_m A A (F^- - F^+) / 2:
-        (rows of `kernels`, U * U), written to `out` when given.
+        (rows of `kernels`, U * U), or (D, rows, U * U) of D nuts' `exponentials` (D, 4M,
+        U * U); written to `out` when given.
 
         In column blocks small enough that OpenBLAS stays on one thread: woken, its threads
         spin on the other core through the eigen-solve that follows (and on a loaded 2-core
         machine a threaded product of this size took 10-30x longer, measured at 20/20 modes)."""
         if out is None:
-            out = np.empty((len(kernels), exponentials.shape[1]))
+            out = np.empty(exponentials.shape[:-2] + (len(kernels), exponentials.shape[-1]))
         step = max(1, _BLAS_ONE_THREAD // kernels.size)
-        for c in range(0, exponentials.shape[1], step):
-            np.matmul(kernels, exponentials[:, c : c + step], out=out[:, c : c + step])
+        for c in range(0, exponentials.shape[-1], step):
+            np.matmul(kernels, exponentials[..., c : c + step], out=out[..., c : c + step])
         return out
+
+
+@dataclass(frozen=True, eq=False)
+class _NutTerms:
+    """The part of the contact terms that depends on the nut's length b, not on its position:
+    (M, 2, P) as `HelixContact` lays them out."""
+
+    turn: np.ndarray  # (M,) e^{i m alpha / 2}
+    g: np.ndarray  # (M, 2, P) sign A_i A_j sin(omega alpha / 2) / omega; alpha / 2 sign A A at 0
+    near: np.ndarray  # flat (M, 2P) indices of the terms whose sin(x) / x is taken directly
+    near_out: np.ndarray  # their flat indices (real parts) in (M, 2 signs, Re / Im, P)
+    near_factor: np.ndarray  # their alpha / 2 sign A A sin(x) / x
+
+
+@lru_cache(maxsize=16)
+def _nut_terms(helix: HelixContact, nut_length_m: float) -> _NutTerms:
+    """`_NutTerms` of a nut of length b = `nut_length_m` [m] on `helix`'s screw: computed
+    once per length (a moved nut keeps its length)."""
+    h = nut_length_m / helix.lead_per_rad_m / 2
+    half = nut_length_m / 2
+    # e^{i k_i x} e^{-+i k_j x} for x = b / 2
+    at_half = np.exp(np.multiply.outer(half * _SIGNS, helix.wavenumber))
+    pq_half = (at_half[1, None, :, None] * at_half[:, None, :]).reshape(1, -1)
+    turn = _harmonics(h)  # e^{i m alpha / 2}
+    sin_x = (turn * pq_half).imag  # sin(omega alpha / 2)
+    n = np.searchsorted(helix.near_abs, _DIRECT / h)
+    x = helix.near_omega[:n] * h
+    return _NutTerms(
+        turn=turn.ravel(),
+        g=(sin_x * helix.weight + h * helix.level).reshape(_M, 2, -1),
+        near=helix.near[:n],
+        near_out=helix.near_out[:n],
+        near_factor=(h * helix.near_amplitude[:n]) * (np.sin(x) / x),
+    )
 
 
 @dataclass(frozen=True, eq=False)

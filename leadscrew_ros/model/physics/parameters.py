@@ -183,7 +183,7 @@ class ScrewParameters:
         dict[str, Any]
             Field name to value, in the field's unit.
         """
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        return {name: getattr(self, name) for name in _FIELD_BY_NAME}
 
 
 _FIELDS = fields(ScrewParameters)
@@ -192,6 +192,9 @@ _FIELDS = fields(ScrewParameters)
 # (`uncertainty`'s samples): what the friction law and the kernels broadcast over.
 ParamsLike: TypeAlias = "ScrewParameters | SimpleNamespace"
 _FIELD_BY_NAME = {f.name: f for f in _FIELDS}
+# The fields the modes and the contact depend on (metadata "geometry"); the others only
+# rescale the precomputed matrices at an operating point
+GEOMETRY_FIELDS = frozenset(f.name for f in _FIELDS if f.metadata["geometry"])
 
 
 def field_names() -> list[str]:

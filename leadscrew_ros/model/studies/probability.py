@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..physics.parameters import field_info
+from ..physics.parameters import GEOMETRY_FIELDS
 from ..physics.stability import unstable_mask
 from ..squeak_model import SqueakModel, Validity, check_operating_point
 from ..uncertainty.perturbation import EigenPairs, FirstOrderProbability, estimate
@@ -90,7 +90,7 @@ def squeaks(
     shape = np.broadcast_shapes(*(np.shape(v) for v in values.values()))
     flat = {k: np.broadcast_to(v, shape).ravel() for k, v in values.items()}
     count = len(next(iter(flat.values())))
-    geometry = [k for k in flat if field_info(k)["geometry"]]
+    geometry = [k for k in flat if k in GEOMETRY_FIELDS]
     if geometry:  # a model per sample: the reference, not the live path
         out = np.array(
             [

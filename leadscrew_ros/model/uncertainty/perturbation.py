@@ -47,7 +47,7 @@ from numpy.typing import ArrayLike
 
 from ..physics.assembly import Geometry, build_geometry
 from ..physics.kernels import level_slope
-from ..physics.parameters import ParameterError, ScrewParameters, field_info
+from ..physics.parameters import GEOMETRY_FIELDS, ParameterError, ScrewParameters
 from ..physics.stability import GROWTH_TOL, Eigen, Solves, eig_both, left_rows
 from .scatter import Samples, Scatter
 
@@ -140,7 +140,7 @@ def geometry_fields(scatter: Scatter) -> list[str]:
     ParameterError
         More than `MAX_GEOMETRY_FIELDS` geometry fields scatter.
     """
-    fields = [k for k in scatter.names if field_info(k)["geometry"]]
+    fields = [k for k in scatter.names if k in GEOMETRY_FIELDS]
     if len(fields) > MAX_GEOMETRY_FIELDS:
         raise ParameterError(
             f"{len(fields)} geometry fields scatter ({', '.join(fields)}); the live "
@@ -218,17 +218,12 @@ def units_on_displacements(lower_half_units: np.ndarray, omega_rad_s: np.ndarray
     multiplies them as a real view)."""
     n = len(omega_rad_s)
     units = lower_half_units.reshape(lower_half_units.shape[:-2] + (5, n, 2 * n))
-    damping = np.broadcast_to(np.diag(-2 * omega_rad_s), units.shape[:-3] + (n, n))
-    return np.concatenate(
-        [
-            -units[..., 0, :, :n],
-            -units[..., 1, :, :n],
-            -units[..., 2, :, n:],
-            -units[..., 3, :, n:],
-            damping,
-        ],
-        axis=-2,
-    )
+    out = np.zeros(units.shape[:-3] + (5, n, n))
+    np.negative(units[..., :2, :, :n], out=out[..., :2, :, :])
+    np.negative(units[..., 2:4, :, n:], out=out[..., 2:4, :, :])
+    damping = out[..., 4, :, :].reshape(out.shape[:-3] + (n * n,))  # a view
+    damping[..., :: n + 1] = -2 * omega_rad_s
+    return out.reshape(out.shape[:-3] + (5 * n, n))
 
 
 def growth_rates(
