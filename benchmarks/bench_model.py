@@ -50,7 +50,7 @@ from leadscrew_ros.model.uncertainty.scatter import Scatter
 from selective_vectors import SelectiveSolver
 
 TARGET_POINT_RATIO = 1.5  # predict / bare eig
-TARGET_SCATTER_RATIO = 1.3  # predict with the default scatter / bare eig (issue 34; 1.0 of issue 23 withdrawn)
+TARGET_SCATTER_RATIO = 1.3  # predict with the default scatter / bare eig (issue 34)
 RANDOM_POINTS = 64  # random operating points of the scatter row
 RANDOM_SPEED_RAD_S, RANDOM_LOAD_N = (1.0, 150.0), (10.0, 500.0)
 SHIFT = 2.0**-50  # relative shift of an eigenvalue for its inverse iteration (4 ulp of 1)
