@@ -260,8 +260,8 @@ def observe_replay(
     fallback = log_name(Path(log))
     if heard is None:
         status = heard_status(summary)
-        why = "no audio topic or WAV file" if status == "no sound" else status
-        return Gathered(str(directory), name, log, fallback, None, f"no sound: {why}")
+        why = " (no audio topic or WAV file)" if status == "no sound" else f": {status}"
+        return Gathered(str(directory), name, log, fallback, None, f"no sound{why}")
     found = sorted(directory.glob(_ANNOTATED))
     if not found:
         return Gathered(
