@@ -8,8 +8,14 @@ import numpy as np
 import pytest
 from scipy.io import wavfile
 
-from leadscrew_ros.bag import audiomsgs, schema
-from leadscrew_ros.bag.audio import AudioError, AudioSettings, LiveAudio, read_audio
+from leadscrew_ros.bag import audiomsgs, logmeta, schema
+from leadscrew_ros.bag.audio import (
+    AudioError,
+    AudioSettings,
+    LiveAudio,
+    MissingRateError,
+    read_audio,
+)
 from leadscrew_ros.bag.cdr import FLOAT64, encode_float64
 from leadscrew_ros.bag.recorder import Recorder, RecordSettings
 
@@ -26,14 +32,15 @@ F32MA_SCHEMA = schema.parse(
 )
 
 
-def _write(tmp_path, messages, schemas=SCHEMAS):
+def _write(tmp_path, messages, schemas=SCHEMAS, metadata=None):
     """A bag of (topic, type, payload, log time [ns]) in that order, with a Float64 topic's
-    first message at T0 (the log's time origin)."""
+    first message at T0 (the log's time origin) and the MCAP metadata records `metadata`."""
     rec = Recorder(
         RecordSettings(
             directory=str(tmp_path), split_size_mb=0.0, split_duration_s=0.0, compression="none"
         ),
         schemas=schemas,
+        metadata=metadata or {},
     )
     assert rec.start(T0)
     rec.write_serialized("/motor_speed", FLOAT64, encode_float64(1.0), T0)
@@ -189,23 +196,40 @@ def test_mgonzs13_flat_layout_and_wrong_array(tmp_path):
     ]
 
 
-def test_float32_multi_array_needs_the_rate(tmp_path):
-    x = _tone(4000, 800.0)
-    msgs = [
+def _f32ma_chunks(x, rate=RATE):
+    return [
         (
             "/mic",
             F32MA,
             F32MA_SCHEMA.encode({"data": x[k : k + 1000]}),
-            T0 + int((k + 1000) / RATE * 1e9),
+            T0 + int((k + 1000) / rate * 1e9),
         )
-        for k in range(0, 4000, 1000)
+        for k in range(0, x.size, 1000)
     ]
-    log = _write(tmp_path, msgs)
-    with pytest.raises(AudioError, match="carries no sample rate: give sample_rate_hz"):
+
+
+def test_float32_multi_array_needs_the_rate(tmp_path):
+    x = _tone(4000, 800.0)
+    log = _write(tmp_path, _f32ma_chunks(x))
+    with pytest.raises(MissingRateError, match="carries no sample rate.*listen.sample_rate_hz"):
         read_audio(log)
     track = read_audio(log, sample_rate_hz=RATE)
     np.testing.assert_array_equal(track.samples, x)
     assert track.t0_s == pytest.approx(0.0, abs=1e-6) and track.warnings == []
+
+
+def test_float32_multi_array_rate_from_the_nodes_record(tmp_path):
+    """The node's own recording (microphone as Float32MultiArray) carries its
+    listen.sample_rate_hz in the metadata record: read at that rate, a given one wins."""
+    rate = 16000
+    x = _tone(4000, 800.0, rate=rate)
+    record = logmeta.LogMetadata({}, {}, {"listen.sample_rate_hz": float(rate)}).record()
+    log = _write(tmp_path, _f32ma_chunks(x, rate), metadata={logmeta.RECORD_NAME: record})
+    track = read_audio(log)
+    assert track.sample_rate_hz == rate and track.warnings == []
+    np.testing.assert_array_equal(track.samples, x)
+    assert track.duration_s == pytest.approx(x.size / rate, rel=1e-9)
+    assert read_audio(log, sample_rate_hz=RATE).sample_rate_hz == RATE
 
 
 @pytest.mark.parametrize("dtype", [np.int16, np.int32, np.float32, np.uint8])

@@ -23,9 +23,9 @@ from leadscrew_ros.bag.cdr import encode_diagnostic_array
 from leadscrew_ros.bag.logfile import inspect, log_files, read_log
 from leadscrew_ros.bag.recorder import LOST_BY_TOPIC_KEY
 from leadscrew_ros.live.recompute import LivePredictor
-from leadscrew_ros.live.status import KEY_VALIDITY
+from leadscrew_ros.live.status import KEY_VALIDITY, Level
 from leadscrew_ros.model import SqueakModel, Validity
-from leadscrew_ros.ros.demo import SqueakMonitor, status_line
+from leadscrew_ros.ros.demo import SqueakMonitor, SqueakRecord, status_line
 from leadscrew_ros.ros.diagnostics import DiagnosticStatusWrapper, status_task
 from leadscrew_ros.ros.node import LATCHED
 
@@ -78,14 +78,15 @@ def test_demo_runs_a_stroke_and_summarises_it(tmp_path):
     assert all(
         re.fullmatch(
             r"t +\d+\.\d s (.* rad/s .* N nut .* m|\s*waiting for the predictor)"
-            r" \| (no prediction.*|(ok|SQUEAK) +P\(squeak\) \d\.\d\d"
-            r"( margin ([-+]\d\.\d{4}|none))?( safe .*)?( \| .*)?)",
+            r" \| (no prediction.*|(quiet|SQUEAK) at nominal, +P\(squeak\) \d\.\d\d"
+            r" (OK|WARN|ERROR|STALE) *( margin ([-+]\d\.\d{4}|none))?( safe .*)?( \| .*)?)",
             line,
         )
         for line in status
     ), status
     assert any(
-        re.search(r"\| SQUEAK P\(squeak\) 1\.00 margin -0\.\d{4}", line) for line in status
+        re.search(r"\| SQUEAK at nominal, P\(squeak\) 1\.00 \w+ +margin -0\.\d{4}", line)
+        for line in status
     ), status
     v = summary_values(out)
     # About 40 % of the stroke squeaks (the model along the profile says the same).
@@ -231,6 +232,15 @@ def test_the_monitor_takes_validity_from_its_key_not_from_the_message(speed, wor
     assert not r.valid and r.validity is Validity[stat.values[KEY_VALIDITY]]
     assert r.validity.label.startswith(words)
     assert status_line(1.0, None, r).endswith(f"| no prediction ({r.validity.label})")
+
+
+def test_the_status_line_says_what_its_verdict_refers_to():
+    """'ok' next to P(squeak) 0.41 read as a contradiction of the WARN level: the verdict is
+    the nominal parameters', P(squeak) carries the level the diagnostics gave it."""
+    r = SqueakRecord(probability=0.41, margin=0.0012, safe_speed=47.5, valid=True, level=Level.WARN)
+    line = status_line(3.0, None, r)
+    assert re.search(r"\| quiet at nominal, +P\(squeak\) 0\.41 WARN +margin \+0\.0012 safe", line)
+    assert " ok " not in line
 
 
 def test_demo_with_a_microphone_says_heard_against_predicted(tmp_path):

@@ -186,7 +186,8 @@ def test_wav_beside_the_log_and_float32_multi_array_give_the_topics_result(
     _same_heard(_summary(tmp_path / "a")["heard"], topic)
     _replay(array, tmp_path / "norate")  # no rate: the predictions without it
     s = _summary(tmp_path / "norate")
-    assert s["heard"] is None and any("carries no sample rate" in w for w in s["warnings"])
+    assert s["heard"] is None
+    assert any("carries no sample rate" in w and "--audio-rate" in w for w in s["warnings"])
 
 
 def _f32(k, topic, data, t):
@@ -327,25 +328,36 @@ def test_calibrated_levels_and_loudness(paper_bench, tmp_path):
 
 
 def test_fleet_columns_are_each_logs_summary(paper_bench, tmp_path, capsys):
+    """... and a log whose sound was not analysed (Float32MultiArray, no rate given or
+    recorded) says so in its heard_status and on the console."""
     logs, _ = paper_bench
+    unheard = as_float32_multi_array(logs[0], tmp_path / "f32")
     code = main(
         [
             "review",
             *map(str, logs),
+            str(unheard),
             "--out",
-            str(tmp_path),
+            str(tmp_path / "out"),
             "--workers",
             "1",
             "--no-report",
-            "--quiet",
             "--compare-formulations",
         ]
     )
     assert code == 0
+    console = capsys.readouterr().out
+    tmp_path = tmp_path / "out"
     with open(tmp_path / "fleet.csv", encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))
-    assert len(rows) == len(logs)
+    assert len(rows) == len(logs) + 1
+    last = rows.pop()
+    why = last["heard_status"]
+    assert why.startswith("audio not analysed: ") and "--audio-rate" in why
+    assert why in _summary(tmp_path / last["name"])["warnings"]
+    assert sum(why in line for line in console.splitlines()) == 1
     for row in rows:
+        assert row["heard_status"] == "analysed"
         heard = _summary(tmp_path / row["name"])["heard"]
         a = heard["agreement"]
         assert float(row["heard_s"]) == a["both_s"] + a["heard_only_s"]

@@ -123,3 +123,25 @@ def test_nothing_is_written(tmp_path, monkeypatch, speed_sweep):
     monkeypatch.chdir(tmp_path)
     plots.plot_sweep(speed_sweep).canvas.draw()
     assert not list(tmp_path.iterdir())
+
+
+def test_the_fleet_panels_count_logs_as_their_titles_say():
+    """5 logs, 1 error: '1 error' (not '1 errors'); the squeak panel's title and its bars'
+    shares both of all 5 logs; whole-number log ticks; the error log named in the
+    time-in-squeak panel."""
+    rows = [
+        {"status": "ok", "episodes": 2, "time_in_squeak_s": t, "unit_id": f"u{k}"}
+        for k, t in enumerate([2.5, 2.6, 1.9, 3.1])
+    ]
+    rows.append({"status": "error", "unit_id": "broken", "error": "not a log"})
+    run = FleetRun(rows=rows, points=FLEET.points, reviewed=5, skipped=0)
+    fig = plots.plot_fleet(run)
+    fig.canvas.draw()
+    a, _, c, _ = fig.axes[:4]
+    assert fig.get_suptitle() == "fleet review: 5 logs, 1 error"
+    assert a.get_title() == "4 of 5 logs squeak"
+    assert [t.get_text() for t in a.texts] == ["4 (80 %)", "0 (0 %)", "1 (20 %)"]
+    ticks = [t for t in a.get_yticks() if a.get_ylim()[0] <= t <= a.get_ylim()[1]]
+    assert ticks and all(float(t).is_integer() for t in ticks)
+    labels = [t.get_text() for t in c.get_yticklabels()]
+    assert labels[0] == "broken" and "error" in [t.get_text().strip() for t in c.texts]

@@ -28,6 +28,7 @@ from leadscrew_ros.bag.synthetic import DutyCycle, write_log
 from leadscrew_ros.live.profile import StrokeProfile
 from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.model.physics.stability import GROWTH_TOL
+from leadscrew_ros.review.replay import ratio_text
 from leadscrew_ros.review.report import QUICK, write_report
 from leadscrew_ros.review.timeline import InputSettings
 
@@ -449,6 +450,7 @@ def test_cli_replay_with_report(bag, tmp_path, capsys):
     )
     assert code == 0, err
     assert "squeak episodes:" in out and "x real time" in out and "wrote:" in out
+    assert not re.search(r"\(0x real time\)", out)
     names = {p.name for p in tmp_path.iterdir()}
     assert {
         f"{bag.name}.annotated.mcap",
@@ -676,3 +678,11 @@ def test_default_output_directory(short_log, tmp_path, monkeypatch, capsys):
     code, _, err = cli(capsys, "replay", "run.mcap", "--no-report", "--quiet")
     assert code == 0, err
     assert (tmp_path / "run_replay" / "run.annotated.mcap").is_file()
+
+
+@pytest.mark.parametrize(
+    "ratio,text", [(12.0 / 61.11, "0.20x"), (0.004, "0.0040x"), (3.46, "3.5x"), (154.2, "154x")]
+)
+def test_a_slower_than_real_time_replay_says_so(ratio, text):
+    """A 12 s log replayed in 61 s printed '(0x real time)'."""
+    assert ratio_text(ratio) == text

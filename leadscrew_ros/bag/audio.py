@@ -13,7 +13,8 @@
    `info.format`, a PortAudio constant; both the nested `audio.audio_data`/`audio.info` layout
    of the repository and a flat `audio`/`info` one);
 3. `std_msgs/Float32MultiArray` chunks (no sample rate in the message: `sample_rate_hz`
-   must be given; a 2-d layout is frames x channels);
+   when given, else the `listen.sample_rate_hz` the node recorded in the log's `leadscrew_ros`
+   metadata (`logmeta`); a 2-d layout is frames x channels);
 4. a WAV file (`wav`, scipy.io.wavfile: int16, int32, uint8, float32/64), starting
    `wav_start_s` after the log's first message.
 
@@ -33,7 +34,7 @@ sample format that does not divide the data (partial frame dropped), empty or un
 messages (counted), header stamps of zero, a sample rate, channel count or format changing
 mid-log (the first one's segment kept). What cannot be read at all raises `AudioError`, one
 line: no audio topic or several, an unknown sample format, a coding format other than PCM /
-wave (e.g. mp3), no AudioInfo, no sample rate for Float32MultiArray.
+wave (e.g. mp3), no AudioInfo, no sample rate for Float32MultiArray (`MissingRateError`).
 
 Memory: a 10-min 48 kHz mono log is 29 M samples (115 MB float32); chunks are converted with
 numpy as they are read and concatenated once.
@@ -50,12 +51,14 @@ from typing import Any
 import numpy as np
 
 from ..model.physics.metadata import check, setting
-from . import audiomsgs, schema
+from . import audiomsgs, logmeta, schema
 from .audiomsgs import PA_FLOAT32, PA_INT8, PA_INT16, PA_INT24, PA_INT32, PA_UINT8
 from .logfile import LogError, Topic
 from .logsource import LogSource, log_topics, open_log
 
 PCM_CODINGS = ("", "wave", "wav", "pcm", "raw")
+# The node parameter (in the log's metadata record) that gives Float32MultiArray audio its rate
+RECORDED_RATE = "listen.sample_rate_hz"
 # sample_format -> (numpy dtype, offset, full scale): x = (raw - offset) / scale
 SAMPLE_FORMATS: dict[str, tuple[str, float, float]] = {
     "S8": ("i1", 0, 2.0**7),
@@ -96,6 +99,11 @@ DRIVERS, DRIVERS_UNSTAMPED, MGONZS13, MULTI_ARRAY, INFO = (
 
 class AudioError(LogError):
     """Audio that cannot be read at all; the message is one line naming the log or file."""
+
+
+class MissingRateError(AudioError):
+    """Float32MultiArray audio whose rate neither the caller nor the log's metadata gives;
+    `problem` says so without naming how to give it (each caller names its own option)."""
 
 
 @dataclass(frozen=True)
@@ -217,8 +225,9 @@ def read_audio(
     channel : int
         Which channel of interleaved frames (0 first).
     sample_rate_hz : float, optional
-        Sample rate of Float32MultiArray chunks (required for them; ignored with a warning
-        for typed audio that carries its own).
+        Sample rate of Float32MultiArray chunks (default: the node's `listen.sample_rate_hz`
+        in the log's metadata record; ignored with a warning for typed audio that carries
+        its own).
     wav : path, optional
         Read this WAV file instead of the log's audio topics.
     wav_start_s : float
@@ -233,9 +242,11 @@ def read_audio(
 
     Raises
     ------
+    MissingRateError
+        Float32MultiArray audio and no sample rate, given or recorded (give `sample_rate_hz`).
     AudioError
         No audio to read, several audio topics and none chosen, an unknown sample format, a
-        compressed coding format (mp3), no AudioInfo, no sample rate, a bad channel.
+        compressed coding format (mp3), no AudioInfo, a bad channel.
     LogError
         The log itself cannot be read.
     """
@@ -253,10 +264,12 @@ def read_audio(
     kind = kinds[name]
     if kind == MULTI_ARRAY:
         if sample_rate_hz is None:
-            raise AudioError(
+            sample_rate_hz = _recorded_rate(source)
+        if sample_rate_hz is None:
+            raise MissingRateError(
                 source.path,
-                f"{name} is std_msgs/Float32MultiArray, which "
-                "carries no sample rate: give sample_rate_hz",
+                f"{name} is std_msgs/Float32MultiArray, which carries no sample rate, and the "
+                f"log's metadata records no {RECORDED_RATE}",
             )
         if not (sample_rate_hz > 0 and np.isfinite(sample_rate_hz)):
             raise AudioError(source.path, f"sample_rate_hz = {sample_rate_hz!r} must be > 0")
@@ -300,6 +313,18 @@ def read_audio(
     return AudioTrack(
         samples, rate, (t0_ns - (first_ns or 0)) / 1e9, name, warnings + problems.lines() + ended
     )
+
+
+def _recorded_rate(source: LogSource) -> float | None:
+    """The node's `listen.sample_rate_hz` from the log's `leadscrew_ros` metadata record (the
+    rate its microphone input was analysed at), or None: no MCAP record, or none readable."""
+    mcaps = [f for f in source.files if f.suffix == ".mcap"]
+    try:
+        meta = logmeta.read(mcaps[0]) if mcaps else None
+    except (OSError, ValueError):  # the replay reports an unreadable record elsewhere
+        return None
+    rate = meta.node.get(RECORDED_RATE) if meta else None
+    return float(rate) if isinstance(rate, (int, float)) and not isinstance(rate, bool) else None
 
 
 # ----------------------------------------------------------------------------- topics

@@ -103,6 +103,7 @@ def cmd_review(args: argparse.Namespace) -> int:
     settings = _settings(args)
     from ..review.fleet import cluster, find_logs, review_logs
     from ..review.fleetreport import write_fleet
+    from ..review.listen import NOT_ANALYSED
 
     out = output_directory(args.out)
     logs = find_logs(args.paths, skip=out)
@@ -143,6 +144,11 @@ def cmd_review(args: argparse.Namespace) -> int:
             print(f"  error: {r['error']}")
         if len(errors) > _ERRORS_SHOWN:
             print(f"  ... {len(errors) - _ERRORS_SHOWN} more in {paths[0]}")
+        unheard = [r for r in run.rows if str(r.get("heard_status")).startswith(NOT_ANALYSED)]
+        for r in unheard[:_ERRORS_SHOWN]:
+            print(f"  {r['name']}: {r['heard_status']}")
+        if len(unheard) > _ERRORS_SHOWN:
+            print(f"  ... {len(unheard) - _ERRORS_SHOWN} more not heard, in {paths[0]}")
         print("wrote: " + ", ".join(str(p) for p in paths))
     return exit_status(run.failed)
 

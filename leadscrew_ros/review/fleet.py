@@ -56,7 +56,7 @@ from ..model.physics.metadata import check, setting
 from ..model.uncertainty.scatter import LIVE_SAMPLES, Scatter
 from .decimation import Reservoir
 from .jsonsafe import json_safe
-from .listen import CLIPS_DIR, SoundSettings
+from .listen import CLIPS_DIR, SoundSettings, heard_status
 from .progress import progress_bar
 from .replay import ReplayResult, ReplaySettings, log_name, replay
 from .timeline import InputSettings, input_parameters
@@ -351,10 +351,14 @@ def heard_columns(summary: dict[str, Any]) -> dict[str, Any]:
     """The fleet row's heard-vs-predicted columns from a replay's summary: heard squeak time
     [s] (in the span the agreement counts), recall, precision, Brier score and the distinct
     heard frequencies [Hz] (each episode's, within 3 % of a lower one dropped); None
-    without sound."""
+    without sound; and `heard_status` (`listen.heard_status`: analysed, no sound, or why not)."""
     heard = summary["heard"]
+    status = {"heard_status": heard_status(summary)}
     if heard is None:
-        return dict.fromkeys(("heard_s", "recall", "precision", "brier", "heard_frequencies_hz"))
+        return {
+            **dict.fromkeys(("heard_s", "recall", "precision", "brier", "heard_frequencies_hz")),
+            **status,
+        }
     a = heard["agreement"]
     freqs: list[float] = []
     for f in sorted(e["frequency_hz"] for e in heard["episodes"]):
@@ -366,6 +370,7 @@ def heard_columns(summary: dict[str, Any]) -> dict[str, Any]:
         "precision": a["precision"],
         "brier": a["brier"],
         "heard_frequencies_hz": freqs,
+        **status,
     }
 
 

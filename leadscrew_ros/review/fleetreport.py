@@ -31,6 +31,7 @@ COLUMNS = [
     "peak_probability",
     "time_above_warn_s",
     "time_above_error_s",
+    "heard_status",
     "heard_s",
     "recall",
     "precision",

@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..bag import cdr, msgdefs
-from ..bag.audio import FLOAT32_MULTI_ARRAY, AudioError, read_audio
+from ..bag.audio import FLOAT32_MULTI_ARRAY, AudioError, MissingRateError, read_audio
 from ..bag.logfile import LogError, Topic
 from ..model.physics.metadata import check, documented, setting
 
@@ -57,6 +57,8 @@ SPECTROGRAM_COLUMNS = 600  # time columns at most (a long log: frames further ap
 SPECTROGRAM_ROWS = 160  # log-spaced frequency rows
 SPECTROGRAM_FRAME = 4096  # samples per spectrogram frame (11.7 Hz bins at 48 kHz)
 COLLAR_S = 0.05  # frames this close to a heard edge are not compared (half a frame)
+# How a replay's warning (summary.json, summary.txt) starts when the log's sound is not analysed
+NOT_ANALYSED = "audio not analysed"
 SPEED_TOLERANCE = 0.002  # a speed sample is kept when it moved this much (relative)
 SPEED_FLOOR_RAD_S = 1.0  # ... of at least this speed
 
@@ -88,7 +90,8 @@ class SoundSettings:
     rate_hz: float = setting(
         0.0,
         "Hz",
-        "sample rate of std_msgs/Float32MultiArray audio, which carries none (0: not given)",
+        "sample rate of std_msgs/Float32MultiArray audio, which carries none (0: the "
+        "listen.sample_rate_hz in the log's metadata, where the node recorded it)",
         0.0,
         1e6,
     )
@@ -582,6 +585,27 @@ def _other_verdicts(
     return out
 
 
+def heard_status(summary: dict[str, Any]) -> str:
+    """Whether a replay heard its log, from its summary (`summary.json`): 'analysed', 'no sound'
+    (no audio topic or WAV file, or the audio off) or the warning saying why the sound was
+    not analysed (`NOT_ANALYSED`...).
+
+    Parameters
+    ----------
+    summary : dict
+        The replay's summary (`ReplayResult.summary`).
+
+    Returns
+    -------
+    str
+        One line.
+    """
+    if summary.get("heard") is not None:
+        return "analysed"
+    why = [w for w in summary.get("warnings", []) if w.startswith(NOT_ANALYSED)]
+    return why[0] if why else "no sound"
+
+
 def listen(
     log: Path,
     topics: dict[str, Topic],
@@ -642,8 +666,10 @@ def listen(
             settings.file or None,
             settings.start_s,
         )
+    except MissingRateError as exc:
+        return None, [f"{NOT_ANALYSED}: {exc}: give its rate with --audio-rate HZ"]
     except (AudioError, LogError) as exc:
-        return None, [f"audio not analysed: {' '.join(str(exc).split())}"]
+        return None, [f"{NOT_ANALYSED}: {' '.join(str(exc).split())}"]
     scale = settings.scale_pa or None
     t0 = time.perf_counter()
     speed_t, speed_v = speed.arrays()
@@ -657,7 +683,7 @@ def listen(
             scale_pa=scale,
         )
     except DetectorError as exc:
-        return None, [f"audio not analysed ({track.source}): {exc}"]
+        return None, [f"{NOT_ANALYSED} ({track.source}): {exc}"]
     detect_s = time.perf_counter() - t0
     band = (
         DetectorSettings.f_lo_hz,

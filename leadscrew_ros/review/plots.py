@@ -46,6 +46,7 @@ if TYPE_CHECKING:
     from .listen import Heard
     from .replay import ReplayResult
 
+ERROR_GREY = "0.6"  # logs that could not be reviewed, in the fleet's panels
 Overlay = Callable[["Axes"], list]  # draws on a finished plot, returns legend handles
 
 
@@ -815,6 +816,8 @@ def plot_fleet(run: FleetRun, *, fig: Figure | None = None) -> Figure:
     Figure
         The figure drawn into.
     """
+    from matplotlib.ticker import MaxNLocator
+
     ok = [r for r in run.rows if r["status"] == "ok"]
     squeaks = [r for r in ok if r["episodes"]]
     heard = [r for r in ok if r.get("heard_s") is not None]
@@ -828,10 +831,12 @@ def plot_fleet(run: FleetRun, *, fig: Figure | None = None) -> Figure:
     if heard:
         _heard_panels(heard, *panels[2])
     counts = [len(squeaks), len(ok) - len(squeaks), run.failed]
-    bars = a.bar(["squeak", "no squeak", "error"], counts, color=["C3", "C2", "0.6"])
+    bars = a.bar(["squeak", "no squeak", "error"], counts, color=["C3", "C2", ERROR_GREY])
+    # shares of all logs, as the title counts them
     a.bar_label(bars, [f"{n} ({100 * n / max(len(run.rows), 1):.0f} %)" for n in counts])
     a.set_ylabel("logs")
-    a.set_title(f"{len(squeaks)} of {len(ok)} reviewed logs squeak")
+    a.yaxis.set_major_locator(MaxNLocator(integer=True))
+    a.set_title(f"{len(squeaks)} of {_counted(len(run.rows), 'log')} squeak")
     pts = np.array(run.points, dtype=float).reshape(-1, 3)
     if len(pts):
         b.hist(pts[:, 2], bins=min(50, max(5, len(pts) // 20)), color="C3")
@@ -840,12 +845,20 @@ def plot_fleet(run: FleetRun, *, fig: Figure | None = None) -> Figure:
     b.set_title("squeak frequencies over the fleet")
     ranked = sorted(ok, key=lambda r: -r["time_in_squeak_s"])
     times = [r["time_in_squeak_s"] for r in ranked]
-    if len(ranked) <= _NAMED_BARS:
-        c.barh([r["unit_id"] for r in ranked][::-1], times[::-1], color="C3")
+    errors = [r for r in run.rows if r["status"] != "ok"]
+    if len(ranked) + len(errors) <= _NAMED_BARS:
+        # error logs at the bottom, with no bar: no time in squeak is known for them
+        labels = [str(r.get("unit_id", r.get("name", "?"))) for r in ranked + errors]
+        c.barh(labels[::-1], ([0.0] * len(errors) + times[::-1]), color="C3")
+        for k in range(len(errors)):
+            c.text(0, len(errors) - 1 - k, " error", va="center", color=ERROR_GREY, fontsize=8)
         c.tick_params(axis="y", labelsize=7)
     else:
         c.plot(np.arange(1, len(times) + 1), times, color="C3")
-        c.set_xlabel("logs, ranked")
+        c.xaxis.set_major_locator(MaxNLocator(integer=True))
+        c.set_xlabel(
+            "logs, ranked" + (f" ({_counted(len(errors), 'error')} not shown)" if errors else "")
+        )
     c.set_title("time in squeak per log [s]")
     if len(pts):
         sc = d.scatter(np.abs(pts[:, 0]), np.abs(pts[:, 1]), c=pts[:, 2], s=6, cmap="viridis")
@@ -853,13 +866,20 @@ def plot_fleet(run: FleetRun, *, fig: Figure | None = None) -> Figure:
     d.set_xlabel(r"rotation speed $|\Omega|$ [rad/s]")
     d.set_ylabel("axial load $|F_z|$ [N]")
     d.set_title("where the fleet squeaked (sample of predictions)")
-    fig.suptitle(f"fleet review: {len(run.rows)} logs, {run.failed} errors")
+    fig.suptitle(f"fleet review: {_counted(len(run.rows), 'log')}, {_counted(run.failed, 'error')}")
     return fig
+
+
+def _counted(n: int, noun: str) -> str:
+    """'1 log', '5 logs', '0 errors'."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
 def _heard_panels(rows: list[dict], e: Axes, f: Axes) -> None:
     """Heard vs predicted squeak time per log (`e`) and the logs' heard and predicted squeak
     frequencies (`f`)."""
+    from matplotlib.ticker import MaxNLocator
+
     predicted = np.array([r["time_in_squeak_s"] for r in rows], float)
     heard = np.array([r["heard_s"] for r in rows], float)
     e.scatter(predicted, heard, s=14, color="C0")
@@ -887,6 +907,7 @@ def _heard_panels(rows: list[dict], e: Axes, f: Axes) -> None:
         f.legend(fontsize=7)
     f.set_xlabel("squeak frequency [Hz]")
     f.set_ylabel("logs")
+    f.yaxis.set_major_locator(MaxNLocator(integer=True))
     f.set_title("heard against predicted squeak frequencies")
 
 

@@ -497,9 +497,17 @@ class ReplayResult:
                 for reason, n in sorted(counts.items())
             ]
         lines += [f"warning: {w}" for w in self.warnings]
-        lines.append(f"wall time {self.wall_s:.2f} s ({self.x_real_time:.0f}x real time)")
+        lines.append(f"wall time {self.wall_s:.2f} s ({ratio_text(self.x_real_time)} real time)")
         lines.append(f"annotated log: {self.annotated}")
         return "\n".join(lines)
+
+
+def ratio_text(x: float) -> str:
+    """A speed-up such as 'x real time' to two significant digits, whole above 10: '0.20x',
+    '0.0040x', '3.5x', '154x' (a slow replay is never '0x')."""
+    if not (math.isfinite(x) and x > 0):
+        return f"{x:g}x"
+    return f"{x:.{max(0, 1 - math.floor(math.log10(x)))}f}x"
 
 
 def log_name(path: Path) -> str:

@@ -186,7 +186,8 @@ class SqueakMonitor(Node):
 
 # ----------------------------------------------------------------------------- text
 def status_line(t: float, s: ActuatorState | None, r: SqueakRecord) -> str:
-    """One line: time, inputs | verdict, P(squeak), margin, safe speed | squeak modes (most
+    """One line: time, inputs | nominal verdict, P(squeak) and its diagnostics level, margin,
+    safe speed | squeak modes (most
     unstable first). The least important part comes last, where a narrow terminal cuts it
     off."""
     head = (
@@ -199,8 +200,12 @@ def status_line(t: float, s: ActuatorState | None, r: SqueakRecord) -> str:
         return f"{head} | no prediction" + (f" ({why})" if why else " yet")
     safe = "" if r.safe_speed is None else f" safe {r.safe_speed:5.1f} rad/s"
     margin = "" if r.margin is None else f" margin {_margin_text(r.margin)}"
+    # the verdict at the nominal parameters (squeak/active) and, apart from it, P(squeak) over
+    # the scatter with the diagnostics level it gives (WARN/ERROR from their thresholds)
+    nominal = "SQUEAK at nominal" if r.active else "quiet at nominal"
     line = (
-        f"{head} | {'SQUEAK' if r.active else 'ok':<6} P(squeak) {r.probability:.2f}{margin}{safe}"
+        f"{head} | {nominal + ',':<18} P(squeak) {r.probability:.2f} {r.level.name:<5}"
+        f"{margin}{safe}"
     )
     if r.active:
         modes = [f"{label} {f:.0f} Hz" for label, f in r.squeak_modes] or [

@@ -172,9 +172,9 @@ def float32_chunk(data: bytes) -> tuple[np.ndarray, None]:
     return x, None
 
 
-# Sound inputs (topic -> kind) subscribed with `listen.enabled`. Another kind, e.g.
-# audio_common_msgs/AudioDataStamped where that package is importable, is one more entry here
-# with its decoder (samples and rate from the payload; `bag.audio` reads that format from logs).
+# Sound inputs (topic -> kind) subscribed with `listen.enabled` (AudioDataStamped, which needs
+# an optional package, is subscribed apart: `AUDIO_COMMON_TOPICS`). Another kind is one more
+# entry here with its decoder (samples and, when the payload carries it, the rate).
 SOUND_INPUTS = {"microphone": SoundInput(Float32MultiArray, float32_chunk)}
 # ros-drivers audio_common (released into Jazzy, not on PyPI): where its `audio_common_msgs` is
 # importable, the node also hears the AudioDataStamped chunks of its audio_capture node, with

@@ -50,7 +50,7 @@ from ...model.acoustics.settings import DetectorSettings
 from ...model.calibration import Observations, ThinSettings, merge, thin
 from ...model.uncertainty.scatter import Scatter
 from ..fleet import find_logs, output_names
-from ..listen import CLIPS_DIR, COLLAR_S, HEARD, SoundSettings
+from ..listen import CLIPS_DIR, COLLAR_S, HEARD, SoundSettings, heard_status
 from ..replay import ReplaySettings, log_name, replay
 from ..timeline import InputSettings, Timeline
 
@@ -259,15 +259,9 @@ def observe_replay(
         return Gathered(str(directory), name, str(directory), "", None, f"{SUMMARY}: {exc}")
     fallback = log_name(Path(log))
     if heard is None:
-        why = [w for w in summary.get("warnings", []) if w.startswith("audio not analysed")]
-        return Gathered(
-            str(directory),
-            name,
-            log,
-            fallback,
-            None,
-            f"no sound: {why[0]}" if why else "no sound (no audio topic or WAV file)",
-        )
+        status = heard_status(summary)
+        why = " (no audio topic or WAV file)" if status == "no sound" else f": {status}"
+        return Gathered(str(directory), name, log, fallback, None, f"no sound{why}")
     found = sorted(directory.glob(_ANNOTATED))
     if not found:
         return Gathered(
