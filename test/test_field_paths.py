@@ -97,6 +97,15 @@ def write_bag(path, rows):
     return path
 
 
+def one_odometry_bag(path):
+    """A load and one Odometry message on /odom: enough for the option checks."""
+    rows = [
+        ("/axial_load", "std_msgs/msg/Float64", f64(200.0), T0),
+        ("/odom", "nav_msgs/msg/Odometry", odometry(20.0, T0), T0 + 1),
+    ]
+    return write_bag(path, rows)
+
+
 def f64(value: float):
     return T["std_msgs/msg/Float64"](value)
 
@@ -286,11 +295,7 @@ def test_header_stamps_order_the_samples_of_their_topic(tmp_path):
     ],
 )
 def test_a_wrong_path_is_one_line_and_exit_2(tmp_path, capsys, options, line):
-    rows = [
-        ("/axial_load", "std_msgs/msg/Float64", f64(200.0), T0),
-        ("/odom", "nav_msgs/msg/Odometry", odometry(20.0, T0), T0 + 1),
-    ]
-    log = write_bag(tmp_path / "bag", rows)
+    log = one_odometry_bag(tmp_path / "bag")
     code, out, err = cli(
         capsys,
         "replay",
@@ -418,11 +423,7 @@ def test_params_file_inputs_reach_the_replay(tmp_path, capsys):
         "/**:\n  ros__parameters:\n    inputs:\n      speed:\n"
         "        type: nav_msgs/msg/Odometry\n        field: twist.twist.angular.w\n"
     )
-    rows = [
-        ("/axial_load", "std_msgs/msg/Float64", f64(200.0), T0),
-        ("/odom", "nav_msgs/msg/Odometry", odometry(20.0, T0), T0 + 1),
-    ]
-    log = write_bag(tmp_path / "bag", rows)
+    log = one_odometry_bag(tmp_path / "bag")
     code, _, err = cli(
         capsys,
         "replay",
