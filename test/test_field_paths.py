@@ -497,6 +497,12 @@ def test_node_with_an_odometry_speed_predicts_as_with_float64():
         msg.header.stamp.sec, msg.pose.pose.position.x = 7, 30.0 / RPM
         node._on_field(topic, msg, kind="speed")
         assert node.live.inputs.speed_rad_s == pytest.approx(30.0, rel=1e-12)
+        # the stamps taken so far outlive a parameter change: an older one stays stale
+        [result] = node.set_parameters([Parameter("inputs.speed.scale", value=RPM)])
+        assert result.successful
+        msg.header.stamp.sec, msg.pose.pose.position.x = 6, 50.0 / RPM
+        node._on_field(topic, msg, kind="speed")
+        assert node.live.inputs.speed_rad_s == pytest.approx(30.0, rel=1e-12)
         # the type is read-only (it is the subscription's)
         [result] = node.set_parameters(
             [Parameter("inputs.speed.type", value="std_msgs/msg/Float64")]

@@ -470,9 +470,6 @@ class SqueakPredictorNode(Node):
         for name, cls in INPUT_FIELDS.items():  # the type is read-only: same subscription
             if names & names_of(cls):
                 self.readers[name] = self._reader(name, {})
-        # speed, load, nut: message class, precompiled field getter, header stamp
-        self.readers = {name: self._reader(name, {}) for name in INPUT_FIELDS}
-        self.order = SampleOrder()  # header stamps of the stamped inputs
         if names & names_of(NodeSettings):
             self.diagnostics.period_s = self._settings(NodeSettings, {}).diagnostics_period_s
         if self.listener is not None and names & (
