@@ -75,6 +75,7 @@ setup(
             "mcap-ros2-support",  # an independent decoder of our logs (tests only)
             "rosbags",
             "mosqito",  # acoustics tests: TNR/PR and loudness reference
+            "selenium",  # test_doc_browser.py drives Debian's headless Chromium
         ],
         "doc": [  # the Sphinx documentation in doc/ (doc/development/documentation.md)
             "sphinx",
