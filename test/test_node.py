@@ -366,6 +366,19 @@ def test_accepted_parameter_is_applied_and_republished(ros):
     assert node._rate_timer.timer_period_ns == 50_000_000
 
 
+def test_a_whole_number_for_a_double_parameter_is_that_double(ros):
+    """A YAML `48000` for listen.sample_rate_hz (an override) and a later set of `20` for
+    max_rate_hz: ROS would refuse both by type; a string for a double is still refused."""
+    node = ros.start(**{"listen.sample_rate_hz": 48000})
+    value = node.get_parameter("listen.sample_rate_hz").value
+    assert isinstance(value, float) and value == 48000.0
+    [result] = node.set_parameters([Parameter("max_rate_hz", value=20)])
+    assert result.successful and node.live.settings.max_rate_hz == 20.0
+    assert isinstance(node.get_parameter("max_rate_hz").value, float)
+    [result] = node.set_parameters([Parameter("max_rate_hz", value="20")])
+    assert not result.successful and node.get_parameter("max_rate_hz").value == 20.0
+
+
 # ----------------------------------------------------------------------------- bad input
 GOOD = {
     "motor_speed": SQUEAK,

@@ -259,3 +259,24 @@ def test_a_population_other_than_the_prior(tmp_path, capsys):
         assert main([*argv, *bad]) == 2
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_a_bench_is_not_written_over_another(tmp_path, capsys, monkeypatch):
+    """A non-empty --out is refused (the old logs would stay beside the new truth.json under
+    the same unit ids); --force empties it first; the working directory is never emptied."""
+    argv = ["bench", "--units", "1", "--duration", "2", "--quiet", "--out", str(tmp_path / "b")]
+    assert main([*argv, "--seed", "1"]) == 0
+    old_logs = {p.name for p in (tmp_path / "b").iterdir()}
+    (tmp_path / "b" / "notes.txt").write_text("mine")
+    assert main([*argv, "--seed", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "is not empty" in err and "--force" in err and len(err.strip().splitlines()) == 1
+    assert json.loads((tmp_path / "b" / TRUTH).read_text())["seed"] == 1  # untouched
+    assert main([*argv, "--seed", "2", "--force"]) == 0
+    assert json.loads((tmp_path / "b" / TRUTH).read_text())["seed"] == 2
+    new = {p.name for p in (tmp_path / "b").iterdir()}
+    assert "notes.txt" not in new and new != old_logs and len(new) == len(old_logs)
+    monkeypatch.chdir(tmp_path / "b")
+    assert main(["bench", "--units", "1", "--duration", "2", "--out", ".", "--force"]) == 2
+    assert "does not empty the working" in capsys.readouterr().err
+    assert (tmp_path / "b" / TRUTH).is_file()

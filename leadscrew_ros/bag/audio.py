@@ -260,7 +260,7 @@ def read_audio(
     source = open_log(log)
     topics = _topics(source)
     kinds = {name: k for name, t in topics.items() if (k := _kind(t)) is not None}
-    name = _choose_topic(source.path, topics, kinds, topic)
+    name, info_name = _choose_topics(source.path, topics, kinds, topic, info_topic)
     kind = kinds[name]
     if kind == MULTI_ARRAY:
         if sample_rate_hz is None:
@@ -273,11 +273,6 @@ def read_audio(
             )
         if not (sample_rate_hz > 0 and np.isfinite(sample_rate_hz)):
             raise AudioError(source.path, f"sample_rate_hz = {sample_rate_hz!r} must be > 0")
-    info_name = (
-        _choose_info(source.path, kinds, name, info_topic)
-        if kind in (DRIVERS, DRIVERS_UNSTAMPED)
-        else None
-    )
     problems = _Problems()
     warnings: list[str] = []
     if sample_rate_hz is not None and kind != MULTI_ARRAY:
@@ -391,6 +386,52 @@ def _kind(topic: Topic) -> str | None:
     ):
         return MGONZS13
     return None
+
+
+def audio_topics(
+    log: str | Path, topic: str | None = None, info_topic: str | None = None
+) -> tuple[str, str | None]:
+    """The audio topic `read_audio` reads from `log` and its AudioInfo topic (None for types
+    that carry their rate, or none), from the log's index alone: a wrong name is found before
+    any work.
+
+    Parameters
+    ----------
+    log : path
+        The log (as `read_audio`).
+    topic, info_topic : str, optional
+        As `read_audio`.
+
+    Returns
+    -------
+    tuple of (str, str or None)
+        The audio topic and the AudioInfo topic.
+
+    Raises
+    ------
+    AudioError
+        As `read_audio` for the choice of topics: none, several and none chosen, a name that is
+        not an audio (AudioInfo) topic of the log, with the log's audio topics listed.
+    LogError
+        The log itself cannot be read.
+    """
+    source = open_log(log)
+    topics = _topics(source)
+    kinds = {name: k for name, t in topics.items() if (k := _kind(t)) is not None}
+    return _choose_topics(source.path, topics, kinds, topic, info_topic)
+
+
+def _choose_topics(
+    path: Path,
+    topics: dict[str, Topic],
+    kinds: dict[str, str],
+    topic: str | None,
+    info_topic: str | None,
+) -> tuple[str, str | None]:
+    name = _choose_topic(path, topics, kinds, topic)
+    if kinds[name] in (DRIVERS, DRIVERS_UNSTAMPED):
+        return name, _choose_info(path, kinds, name, info_topic)
+    return name, None
 
 
 def _choose_topic(

@@ -5,13 +5,14 @@ hidden truth in DIR/truth.json; `bag.virtual_bench`)."""
 from __future__ import annotations
 
 import argparse
+import shutil
 import time
 from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
 from ..model.physics.metadata import help_text
-from .args import CliError, Parser, finite, finite_float, print_json
+from .args import CliError, Parser, finite, finite_float, output_directory, print_json
 
 _OPTIONS = ("units", "formulation", "seed", "duration_s")
 _POPULATION = ("population", "population_scatter")  # NAME=VALUE options, repeatable
@@ -28,6 +29,35 @@ def name_values(items: list[str], option: str) -> dict[str, float]:
     return out
 
 
+def empty_output(path: str, force: bool) -> None:
+    """Make `--out` an empty (or new) directory: a bench written over another would leave the
+    old logs beside a new truth.json under the same unit ids. A non-empty directory is refused
+    unless `force`, which empties it (never the working directory, home or a parent of them).
+
+    Raises
+    ------
+    CliError
+        `path` is a file, or a non-empty directory without `force`, or one `force` may not empty.
+    """
+    out = output_directory(path)
+    if not out.is_dir() or not any(out.iterdir()):
+        return
+    if not force:
+        raise CliError(
+            f"--out {path} is not empty: its logs would mix with the new bench's "
+            "(give an empty directory, or --force to empty it)"
+        )
+    resolved = out.resolve()
+    protected = {Path.home().resolve(), *Path.cwd().resolve().parents, Path.cwd().resolve()}
+    if resolved in protected:
+        raise CliError(f"--out {path}: --force does not empty the working or home directory")
+    for entry in resolved.iterdir():
+        if entry.is_dir() and not entry.is_symlink():
+            shutil.rmtree(entry)
+        else:
+            entry.unlink()
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     """`bench`: simulate and record the units; prints one line per unit and a JSON summary."""
     from ..bag.virtual_bench import TRUTH, BenchSettings, Unit, run
@@ -38,6 +68,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     for name in _POPULATION:
         values[name] = name_values(getattr(args, name), "--" + name.replace("_", "-"))
     settings = BenchSettings(**values)
+    empty_output(args.out, args.force)
     start = time.perf_counter()
 
     def progress(k: int, unit: Unit, bag: Path) -> None:
@@ -102,5 +133,10 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
             help=spec[name].metadata["help"] + " (repeatable; the logs still carry the "
             "package's nominal parameters and default scatter, the prior; truth.json has both)",
         )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="empty a non-empty --out first (without it such a directory is refused)",
+    )
     p.add_argument("--quiet", action="store_true", help="print nothing")
     p.set_defaults(run=cmd_bench)

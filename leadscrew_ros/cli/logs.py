@@ -137,6 +137,8 @@ def listen_settings(args: argparse.Namespace, wav_must_exist: bool = True) -> So
                 raise CliError(
                     f"{option[dest]} is for the log's audio topics, not --audio FILE.wav"
                 )
+        if wav_must_exist and Path(args.audio).is_dir():
+            raise CliError(f"--audio {args.audio}: a directory, not a WAV file")
         if wav_must_exist and not Path(args.audio).is_file():
             raise CliError(f"--audio {args.audio}: no such file")
     elif "audio_start" in given:
@@ -208,6 +210,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise CliError(str(exc)) from None
     out = output_directory(args.out or f"{log_name(Path(args.log))}_replay")
+    _check_audio_topics(args)
     result = replay(args.log, model, out, settings)
     if not args.no_report:
         from ..review.report import write_report
@@ -227,6 +230,19 @@ def cmd_replay(args: argparse.Namespace) -> int:
             print(f"  ... {result.episode_count - args.episodes} more in episodes.json")
         print("wrote: " + ", ".join(str(p) for p in result.outputs))
     return 0
+
+
+def _check_audio_topics(args: argparse.Namespace) -> None:
+    """A named audio source that is not there ends the replay before any work, the log's
+    topic as the WAV file (`listen_settings`): one rule for what the user named."""
+    if not (args.audio_topic or args.audio_info_topic):
+        return
+    from ..bag.audio import AudioError, audio_topics
+
+    try:
+        audio_topics(args.log, args.audio_topic or None, args.audio_info_topic or None)
+    except AudioError as exc:
+        raise CliError(" ".join(str(exc).split())) from None
 
 
 def _span(info: LogInfo) -> str:

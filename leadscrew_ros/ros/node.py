@@ -97,6 +97,7 @@ from .parameters import (
     PARAMETERS,
     NodeSettings,
     RecordingControl,
+    as_declared_type,
     build,
     descriptor,
     help_lines,
@@ -378,8 +379,15 @@ class SqueakPredictorNode(Node):
 
     # ---------------------------------------------------------------- parameters
     def _declare_parameters(self) -> None:
+        # rclpy offers no hook between the overrides (--params-file, parameter_overrides)
+        # and their type check at declaration: whole numbers for doubles are converted here,
+        # later sets in the pre-set callback.
+        overrides = self._parameter_overrides
+        for name, parameter in overrides.items():
+            overrides[name] = as_declared_type(parameter)
         for spec in PARAMETERS:
             self.declare_parameter(spec.name, spec.default, descriptor(spec))
+        self.add_pre_set_parameters_callback(lambda ps: [as_declared_type(p) for p in ps])
 
     def _values(self, changes: dict) -> dict:
         return {**{p.name: p.value for p in self.get_parameters(PARAMETER_NAMES)}, **changes}

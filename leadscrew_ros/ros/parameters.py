@@ -16,6 +16,7 @@ from dataclasses import Field, dataclass, fields
 from typing import Any, NamedTuple
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.parameter import Parameter
 
 from ..bag.logmeta import LogMetadata
 from ..bag.recorder import RecordSettings
@@ -232,6 +233,23 @@ def descriptor(spec: Spec) -> ParameterDescriptor:
     elif md["lo"] is not None and isinstance(default, int):
         d.integer_range = [IntegerRange(from_value=int(md["lo"]), to_value=int(md["hi"]), step=1)]
     return d
+
+
+SPECS = {s.name: s for s in PARAMETERS}
+
+
+def as_declared_type(parameter: Parameter) -> Parameter:
+    """`parameter` with a whole number given for a double parameter (a YAML `48000`, a
+    `params set NAME 2`) as that double: ROS refuses it by type otherwise, a surprise for a
+    sample rate in Hz. Anything else as it is (a wrong type is still refused)."""
+    spec = SPECS.get(parameter.name)
+    if (
+        spec is not None
+        and isinstance(spec.default, float)
+        and parameter.type_ == Parameter.Type.INTEGER
+    ):
+        return Parameter(parameter.name, Parameter.Type.DOUBLE, float(parameter.value))
+    return parameter
 
 
 def help_lines() -> list[str]:
