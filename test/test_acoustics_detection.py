@@ -175,9 +175,17 @@ def test_bad_input_never_raises():
     d = detect(x, FS)
     assert len(d.episodes) == 1 and d.episodes[0].start_s == pytest.approx(0.5, abs=0.05)
     assert d.episodes[0].end_s == pytest.approx(1.0, abs=0.05)
-    assert [w for w in d.warnings if "non-finite" in w] == [
+    assert [w for w in d.warnings if w.startswith("11 non-finite")] == [
         "11 non-finite samples (NaN/inf) set to 0; the frames holding them are dropped "
         "(tracks bridge one frame length of them)"
+    ]
+    # each of the two runs of NaN/inf spoils the frame_s / hop_s frames holding it: not scored
+    frames = DetectorSettings().frame_s / DetectorSettings().hop_s
+    assert d.unusable_s == pytest.approx(2 * frames * d.hop_s, abs=1.5 * d.hop_s)
+    assert d.usable.size == d.frame_times_s.size
+    assert [w for w in d.warnings if w.startswith("sound unusable")] == [
+        f"sound unusable for {d.unusable_s:.2f} of {d.frame_times_s.size * d.hop_s:.2f} s "
+        f"(non-finite samples {d.unusable_s:.2f} s, constant or silent 0.00 s): not scored"
     ]
     long_gap = gated_tone(898.0, 20.0, 0)
     long_gap[33600:38400] = np.nan  # 0.1 s of them: the episode splits
@@ -200,6 +208,50 @@ def test_bad_input_never_raises():
         with pytest.raises(AudioError):
             detect(x, rate)
     assert issubclass(AudioError, ValueError)
+
+
+def test_a_constant_microphone_is_no_usable_sound_said_once():
+    """A muted channel (a DC offset, no noise) and digital silence: no episode (the float
+    rounding of the spectra once gave tones near -200 dBFS with a TNR near 100 dB), every
+    frame unusable and not scored, the reason said once."""
+    for level in (0.1, -0.37, 0.0):
+        d = detect(np.full(3 * FS, level, np.float32), FS)
+        assert d.episodes == [] and not d.heard.any()
+        assert not d.usable.any() and d.unusable_s == pytest.approx(d.frame_times_s.size * d.hop_s)
+        said = [w for w in d.warnings if w.startswith("no usable sound")]
+        assert len(said) == 1 and "constant or digitally silent" in said[0]
+    x = gated_tone(898.0, 20.0, 0)
+    x[FS:] = 0.25  # the microphone goes mute after the tone: only that part unusable
+    d = detect(x, FS)
+    assert len(d.episodes) == 1 and d.usable[d.frame_times_s < 0.9].all()
+    assert not d.usable[d.frame_times_s > 1.06].any()
+
+
+@pytest.mark.parametrize("bits", [16, 24, None])
+def test_quantisation_and_rounding_never_make_episodes(bits):
+    """A clean 1 kHz tone, as float or quantised to 16/24-bit PCM: that tone and nothing else
+    (quantisation peaks near -109 dBFS and float noise near -190 dBFS were episodes; with 8
+    candidate slots filled by them the tone itself was lost)."""
+    t = np.arange(3 * FS) / FS
+    x = 0.3 * np.sin(2 * np.pi * 1000.0 * t)
+    if bits:
+        x = np.round(x * 2 ** (bits - 1)) / 2 ** (bits - 1)
+    d = detect(x.astype(np.float32), FS)
+    assert [round(e.frequency_hz) for e in d.episodes] == [1000]
+    assert d.usable.all() and d.unusable_s == 0.0
+
+
+def test_a_tone_of_a_few_quantisation_steps_is_still_heard():
+    """The floor is the format's own noise (10 dB over 16-bit quantisation noise, -91 dB re
+    full scale mean square): a tone of 2 steps' amplitude (-87 dB) stands over it, one of
+    0.6 steps (rounded to a pattern of -1, 0, 1) does not."""
+    t = np.arange(3 * FS) / FS
+    step = 2.0**-15
+    rng = np.random.default_rng(3)
+    for amplitude, found in ((2.0, [1500]), (0.6, [])):
+        x = amplitude * step * np.sin(2 * np.pi * 1500.0 * t + rng.uniform(0, 2 * np.pi))
+        d = detect((np.round(x / step) * step).astype(np.float32), FS)
+        assert [round(e.frequency_hz) for e in d.episodes] == found, amplitude
 
 
 def test_detection_is_json_safe():

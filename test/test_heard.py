@@ -27,6 +27,7 @@ from leadscrew_ros.bag import audiomsgs
 from leadscrew_ros.bag.virtual_bench import MIC_INFO_TOPIC, MIC_TOPIC, START_NS, BenchSettings, run
 from leadscrew_ros.cli import main
 from leadscrew_ros.model import ScrewParameters, SqueakModel
+from leadscrew_ros.model.acoustics import DetectorSettings
 from leadscrew_ros.review.listen import (
     CLIP_PAD_S,
     COLLAR_S,
@@ -275,6 +276,52 @@ def test_hostile_audio_is_a_warning_never_a_traceback(
     assert all("\n" not in w for w in warnings)
     if change is _truncated:
         assert any("partial frame" in w for w in warnings), warnings
+
+
+def _muted_from(seconds: float, value: float):
+    """The microphone's S16LE samples from `seconds` on: NaN (as F32LE, a broken driver) or a
+    constant (a muted channel with a DC offset)."""
+
+    def change(k, topic, data, t):
+        fmt = "F32LE" if np.isnan(value) else "S16LE"
+        if topic == MIC_INFO_TOPIC:
+            info = audiomsgs.encode_audio_info(1, 48000, fmt, 0, "wave")
+            return [(topic, audiomsgs.AUDIO_INFO, info, t)]
+        stamp, x = samples_of(data)
+        if t >= START_NS + int(seconds * 1e9):
+            x = np.full_like(x, value)
+        raw = x.astype("<f4") if fmt == "F32LE" else np.round(x * 32768).astype("<i2")
+        payload = audiomsgs.encode_audio_data_stamped(stamp, raw.view(np.uint8))
+        return [(topic, audiomsgs.AUDIO_DATA_STAMPED, payload, t)]
+
+    return change
+
+
+@pytest.mark.parametrize("value", [0.05, np.nan], ids=["constant", "nan"])
+def test_sound_that_is_not_there_is_not_scored(paper_bench, tmp_path, value):
+    """A microphone that goes mute (a constant) or NaN for the log's last 4 s: nothing is heard
+    there, those frames are not scored (the agreement counts fewer frames, not 4 s of silence),
+    and the summary says how long the sound was unusable."""
+    log = paper_bench[0][0]
+    _replay(log, tmp_path / "whole")
+    whole = _summary(tmp_path / "whole")["heard"]
+    mute_s = whole["duration_s"] - 4.0
+    changed = rewrite(log, tmp_path / "in", _muted_from(mute_s, value))
+    _replay(changed, tmp_path / "out")
+    heard = _summary(tmp_path / "out")["heard"]
+    hop = DetectorSettings().hop_s
+    assert heard["unusable_s"] == pytest.approx(4.0, abs=DetectorSettings().frame_s + 2 * hop)
+    assert all(e["start_s"] < mute_s for e in heard["episodes"])
+    # every unusable frame is lost to the agreement, except those the whole log did not count
+    # either: within COLLAR_S of its episodes' edges
+    edges = sum(x >= mute_s for e in whole["episodes"] for x in (e["start_s"], e["end_s"]))
+    lost = whole["agreement"]["frames"] - heard["agreement"]["frames"]
+    assert lost * hop == pytest.approx(heard["unusable_s"] - edges * 2 * COLLAR_S, abs=2.5 * hop)
+    text = (tmp_path / "out" / "summary.txt").read_text()
+    assert f"sound unusable for {heard['unusable_s']:.1f} s of" in text
+    if not np.isnan(value):
+        said = [w for w in heard["warnings"] if w.startswith("no usable sound")]
+        assert len(said) == 1
 
 
 def test_annotated_log_carries_the_heard_episodes_and_clips(paper_bench, tmp_path):

@@ -30,6 +30,7 @@ from leadscrew_ros.live.listen import (
     KEY_HEARD_FREQUENCY,
     KEY_HEARD_S,
     KEY_MALFORMED,
+    KEY_UNUSABLE_S,
     Listener,
 )
 from leadscrew_ros.live.settings import ListenSettings
@@ -288,7 +289,7 @@ def test_listener_counts_malformed_chunks_and_stops():
 def test_listener_places_chunks_on_the_clock():
     """Contiguous chunks despite jitter; a gap (or chunks dropped before) starts anew."""
     listener = Listener(ListenSettings(enabled=True))
-    chunk = np.zeros(4800, np.float32)
+    chunk = np.random.default_rng(0).normal(0.0, 0.01, 4800).astype(np.float32)
     try:
         for k, jitter in enumerate((0.0, 0.05, -0.05, 0.0)):
             listener.offer(b"", 100.1 + 0.1 * k + jitter, lambda _: (chunk, None))
@@ -298,6 +299,34 @@ def test_listener_places_chunks_on_the_clock():
         times = [h.time_s for h in listener._analysed]
         assert times[:4] == pytest.approx([100.05 + 0.1 * k for k in range(4)])
         assert listener._detector.warnings[-1].startswith("audio discontinuity")
+    finally:
+        listener.close()
+
+
+def test_a_muted_microphone_is_not_scored_and_said():
+    """Chunks of a constant signal (a muted channel with an offset): nothing heard, nothing
+    scored (analysed_s stays 0), their time in unusable_s and a WARN note; then a tone is
+    heard and scored as before."""
+    listener = Listener(ListenSettings(enabled=True, window_s=0.5))
+    mute = np.full(4800, 0.2, np.float32)
+    t = np.arange(4800) / RATE
+    try:
+        for k in range(10):
+            listener.offer(b"", 100.1 + 0.1 * k, lambda _: (mute, None))
+        _wait(lambda: listener.analysed == 10)
+        listener.collect()
+        s = listener.status(101.0)
+        assert s.values[KEY_UNUSABLE_S] == "1.000" and s.values[KEY_ANALYSED_S] == "0.000"
+        assert s.level >= Level.WARN and "no usable sound (1.0 s in all" in s.message
+        assert s.values[KEY_HEARD] == "false"
+        for k in range(10, 20):
+            tone = (0.1 * np.sin(2 * np.pi * TONE_HZ * (t + 0.1 * k))).astype(np.float32)
+            listener.offer(b"", 100.1 + 0.1 * k, lambda _, x=tone: (x, None))
+        _wait(lambda: listener.analysed == 20)
+        listener.collect()
+        s = listener.status(102.0)
+        assert s.values[KEY_HEARD] == "true" and float(s.values[KEY_ANALYSED_S]) > 0.5
+        assert s.values[KEY_UNUSABLE_S] == "1.000" and "no usable sound" not in s.message
     finally:
         listener.close()
 

@@ -74,6 +74,7 @@ KEY_CHUNKS = "chunks"  # chunks received
 KEY_DROPPED = "dropped_chunks"  # chunks dropped: the analysis could not keep up
 KEY_MALFORMED = "malformed_chunks"  # chunks that did not decode
 KEY_DETECTOR_WARNING = "detector_warning"  # the detector's latest warning ('' when none)
+KEY_UNUSABLE_S = "unusable_s"  # sound without usable samples (NaN, constant), not scored [s]
 
 #: How a chunk's payload becomes samples: (samples in full scale, sample rate [Hz] or None for
 #: `ListenSettings.sample_rate_hz`); ValueError when it is malformed.
@@ -174,7 +175,8 @@ class Listener:
         self._speeds: deque[tuple[float, float]] = deque(maxlen=SPEED_HISTORY)
         self.received = self.dropped = self.malformed = self.analysed = 0
         self.last_arrival: float | None = None
-        self._last_drop = self._last_malformed = -math.inf
+        self._last_drop = self._last_malformed = self._last_unusable = -math.inf
+        self.unusable_s = 0.0  # sound received that held nothing to analyse [s]
         self.error = ""  # why the latest malformed chunk was
         self.warning = ""  # the detector's latest warning
         # worker thread -> collect (deque appends and pops are atomic)
@@ -359,6 +361,7 @@ class Listener:
             KEY_DROPPED: str(self.dropped),
             KEY_MALFORMED: str(self.malformed),
             KEY_DETECTOR_WARNING: self.warning,
+            KEY_UNUSABLE_S: f"{self.unusable_s:.3f}",
         }
         if self.last_arrival is None:
             level, message = Level.STALE, "no sound received yet"
@@ -373,6 +376,11 @@ class Listener:
             notes.append(f"{self.dropped} chunk(s) dropped in all: the analysis cannot keep up")
         if now - self._last_malformed <= w:
             notes.append(f"{self.malformed} malformed chunk(s) in all ({self.error})")
+        if now - self._last_unusable <= w:
+            notes.append(
+                f"no usable sound ({self.unusable_s:.1f} s in all: NaN samples, or a constant "
+                "or silent signal, a muted microphone?): not scored"
+            )
         if notes:
             level, message = max(level, Level.WARN), "; ".join([message, *notes])
         return Status(level, message, values)
@@ -474,7 +482,10 @@ class Listener:
         self._audio_end, self._chunk_s = t0 + duration, duration
         if det.warnings:
             self.warning = det.warnings[-1]
-        if det.frames_done:
+        if det.frames_done and not det.usable_now:  # NaN or a muted microphone: not scored
+            self.unusable_s += duration
+            self._last_unusable = chunk.arrival
+        elif det.frames_done:
             latest = float(det.frame_time(det.frames_done - 1))
             self._analysed.append(Heard(latest, duration, det.heard_now, det.frequency_now_hz))
         self.analysed += 1

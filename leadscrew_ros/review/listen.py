@@ -431,6 +431,7 @@ class Heard:
             "scale": self.scale,
             "level_unit": "dB SPL" if self.scale == "Pa" else "dB re full scale",
             "duration_s": self.duration_s,
+            "unusable_s": self.detection.unusable_s,
             "episodes": [e.as_dict() for e in self.detection.episodes],
             "agreement": self.agreement.as_dict(),
             "band_hz": list(self.band_hz),
@@ -496,6 +497,12 @@ class Heard:
         ]
         if a.frequency_match:
             lines.append("; ".join(_match_text(m) for m in _first_per_frequency(a.frequency_match)))
+        unusable = self.detection.unusable_s
+        if unusable > 0:
+            lines.append(
+                f"sound unusable for {unusable:.1f} s of {self.duration_s:.1f} s (NaN/inf "
+                "samples, a constant or silent microphone): those frames are not scored"
+            )
         outside = self.out_of_band_s[self.formulation]
         if outside > 0:
             lines.append(

@@ -188,6 +188,8 @@ def agreement(
         return Agreement(0.0, 0.0, 0.0, 0.0, None, None, None)
     end = tp[-1] if valid_until_s is None else float(valid_until_s)
     counted = (t >= max(t[0], tp[0])) & (t <= min(t[-1], end))
+    if detection.usable is not None and detection.usable.size == t.size:
+        counted &= detection.usable  # no sound to judge by: NaN samples, a muted microphone
     if collar_s > 0 and detection.episodes:
         edges = np.sort([x for e in detection.episodes for x in (e.start_s, e.end_s)])
         k = np.searchsorted(edges, t)

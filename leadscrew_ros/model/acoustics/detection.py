@@ -41,6 +41,15 @@ from .settings import DetectorSettings
 from .tonality import ToneAnalyzer, hann, short_time_psd
 
 P_REF_PA = 20e-6  #: reference sound pressure of dB SPL
+#: Relative spacing of float32 numbers: the rounding of the samples the detector analyses.
+FLOAT32_STEP = 2.0**-23
+#: A frame whose varying part is within 6 dB of its rounding noise holds no sound (a constant,
+#: muted or digitally silent signal): it is not analysed and not scored.
+SILENT_FACTOR = 4.0
+#: A tone candidate stands 10 dB over the rounding (quantisation) noise of its frame, all of it.
+TONE_FLOOR_FACTOR = 10.0
+# Full-scale integer PCM grids, coarsest first: 8, 16, 24 bits (x 2^(b-1) and 2^(b-1) - 1).
+_PCM_GRIDS = (128.0, 127.0, 32768.0, 32767.0, 8388608.0)
 LOUDNESS_RATE_HZ = 48000  #: ISO 532-1 after MOSQITO wants 48 kHz; other rates are resampled
 _BLOCK_FRAMES = 256  # frames analysed per FFT block (bounded memory, same in every mode)
 _MAX_WARNINGS = 100
@@ -143,6 +152,9 @@ class Detection:
         What was wrong with the input (non-finite samples, clipping, too short, ...).
     rejected : list of Episode
         Tones that followed the motor orders.
+    usable : numpy.ndarray of bool, optional
+        Per frame: it holds usable sound (no non-finite sample, not constant or digitally
+        silent); None: all.
     """
 
     frame_times_s: np.ndarray
@@ -153,6 +165,15 @@ class Detection:
     scale: str
     warnings: list[str]
     rejected: list[Episode] = field(default_factory=list)
+    usable: np.ndarray | None = None
+
+    @property
+    def unusable_s(self) -> float:
+        """Time whose frames hold no usable sound (non-finite samples, a constant or
+        digitally silent signal): not scored [s]."""
+        if self.usable is None or self.usable.size < 2:
+            return 0.0
+        return float(np.count_nonzero(~self.usable)) * self.hop_s
 
     @property
     def hop_s(self) -> float:
@@ -176,7 +197,70 @@ class Detection:
             sample_rate_hz=self.sample_rate_hz,
             scale=self.scale,
             warnings=list(self.warnings),
+            unusable_s=self.unusable_s,
         )
+
+
+def format_step(samples: np.ndarray) -> float | None:
+    """Quantisation step of the samples' format in full-scale units: 1/2^(b-1) (or
+    1/(2^(b-1) - 1)) for b-bit integer PCM, 0.0 for floating point (the rounding is then
+    relative, `FLOAT32_STEP`); None when a chunk cannot tell (fewer than 256 non-zero samples).
+
+    Parameters
+    ----------
+    samples : numpy.ndarray
+        Samples in full-scale units (-1..1).
+
+    Returns
+    -------
+    float or None
+    """
+    nonzero = samples[samples != 0][:4096].astype(np.float64)
+    if nonzero.size < 256:
+        return None
+    for grid in _PCM_GRIDS:
+        y = nonzero * grid
+        # on the grid within float32 rounding of the scaled value, never a coarser grid's
+        # fraction (a 16-bit step is 1/256 of an 8-bit one)
+        if np.all(np.abs(y - np.rint(y)) <= 2.0**-20 * np.maximum(np.abs(y), 1.0)):
+            return 1.0 / grid
+    return 0.0
+
+
+def frame_powers(
+    samples: np.ndarray, frame_len: int, hop: int, frames: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame (``samples[i * hop : i * hop + frame_len]``) the mean square of its varying
+    part (its variance) and its mean square [unit^2]: from running sums, and from the frame
+    itself where it is nearly constant (a constant signal has a variance of 0 exactly).
+
+    Parameters
+    ----------
+    samples : numpy.ndarray
+        1-D signal.
+    frame_len, hop, frames : int
+        Frame length and hop [samples]; the number of frames.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        (variance, mean square), each (frames,).
+    """
+    x = np.asarray(samples, dtype=np.float64)
+    shift = float(x.mean()) if x.size else 0.0
+    c1 = np.concatenate([[0.0], np.cumsum(x - shift)])
+    c2 = np.concatenate([[0.0], np.cumsum((x - shift) ** 2)])
+    starts = np.arange(frames) * hop
+    m1 = (c1[starts + frame_len] - c1[starts]) / frame_len
+    m2 = (c2[starts + frame_len] - c2[starts]) / frame_len
+    variance = np.maximum(m2 - m1 * m1, 0.0)
+    mean_square = np.maximum(m2 + 2.0 * shift * m1 + shift * shift, 0.0)
+    # The running sums cancel to ~1e-16 of their size: where that could matter (a frame
+    # near its rounding noise), the variance again from the frame itself.
+    near = np.flatnonzero(variance <= 1e-12 * np.maximum(mean_square, 1e-300) + 1e-24)
+    for i in near.tolist():
+        variance[i] = float(np.var(x[i * hop : i * hop + frame_len]))
+    return variance, mean_square
 
 
 def _check_rate(sample_rate_hz: Any) -> float:
@@ -279,6 +363,11 @@ class StreamingDetector:
         self.warnings: deque[str] = deque(maxlen=_MAX_WARNINGS)
         self.rejected: deque[Episode] = deque(maxlen=_MAX_WARNINGS)
         self._loudness_missing = False
+        self._format_step = 0.0  # of the latest chunk that told (`format_step`)
+        self.unusable_frames = {"non-finite": 0, "silent": 0}  #: frames not analysed, by cause
+        #: per frame of the current segment, usable sound (1) or not (0), when not None
+        #: (`detect` keeps it; the node's detector does not: bounded memory)
+        self.usable_log: bytearray | None = None
         self._reset(_check_rate(sample_rate_hz))
 
     # -- state -------------------------------------------------------------------------------
@@ -332,6 +421,9 @@ class StreamingDetector:
         self._speed_v = np.zeros(0)
         self._heard_now = False
         self._frequency_now = math.nan
+        self._usable_now = True
+        if self.usable_log is not None:
+            self.usable_log = bytearray()
 
     def _warn(self, text: str) -> None:
         if not self.warnings or self.warnings[-1] != text:
@@ -343,6 +435,11 @@ class StreamingDetector:
         covers the latest frame: provisional (the order test re-run as the track grows by an
         eighth), the episode is decided when it closes."""
         return self._heard_now
+
+    @property
+    def usable_now(self) -> bool:
+        """The latest frame held usable sound (no non-finite sample, not constant or silent)."""
+        return self._usable_now
 
     @property
     def frequency_now_hz(self) -> float:
@@ -449,6 +546,9 @@ class StreamingDetector:
                 "them are dropped (tracks bridge one frame length of them)"
             )
             x = np.where(bad, np.float32(0.0), x)
+        step = format_step(x)
+        if step is not None:
+            self._format_step = step
         n_clip = int(np.count_nonzero(np.abs(x) >= self.settings.clip_level))
         if n_clip:
             self._warn(
@@ -546,8 +646,11 @@ class StreamingDetector:
         seg = self._buf[s0 : s0 + (i1 - i0 - 1) * hop + n]
         if self.analyzer.empty:
             return []
+        variance, mean_square = frame_powers(seg, n, hop, i1 - i0)
+        rounding = np.maximum(self._format_step, FLOAT32_STEP * np.sqrt(mean_square)) ** 2 / 12
         cand = self.analyzer.candidates(
-            short_time_psd(seg, self.sample_rate_hz, n, hop, self._window)
+            short_time_psd(seg, self.sample_rate_hz, n, hop, self._window),
+            floor=TONE_FLOOR_FACTOR * rounding,
         )
         bad = self._bad[s0 : s0 + seg.size]
         if bad.any():
@@ -556,6 +659,7 @@ class StreamingDetector:
             dropped = bad_cum[starts + n] - bad_cum[starts] > 0
         else:
             dropped = np.zeros(i1 - i0, bool)
+        self._note_usable(i0, dropped, ~dropped & (variance <= SILENT_FACTOR * rounding))
         prominent = cand.prominent & ~dropped[:, None]
         frame_t = self.frame_time(np.arange(i0, i1))
         if self._speed_t.size:
@@ -588,6 +692,22 @@ class StreamingDetector:
             ]
             closed += self._step(i0 + j, found, float(f1[j]))
         return closed
+
+    def _note_usable(self, i0: int, dropped: np.ndarray, silent: np.ndarray) -> None:
+        """Count the frames without usable sound; say once when the signal is constant."""
+        n_silent = int(np.count_nonzero(silent))
+        if n_silent and not self.unusable_frames["silent"]:
+            t = float(self.frame_time(i0 + int(np.argmax(silent))))
+            self._warn(
+                f"no usable sound from {t:.3f} s: the signal is constant or digitally silent "
+                "(a muted or disconnected microphone?); such frames are not scored"
+            )
+        self.unusable_frames["silent"] += n_silent
+        if dropped.size:
+            self._usable_now = not (dropped[-1] or silent[-1])
+        self.unusable_frames["non-finite"] += int(np.count_nonzero(dropped))
+        if self.usable_log is not None:
+            self.usable_log += (~(dropped | silent)).astype(np.uint8).tobytes()
 
     def _step(
         self, i: int, found: list[tuple[float, float, float, float]], f1: float
@@ -785,6 +905,7 @@ def detect(
         For an invalid sample rate (or `scale_pa`).
     """
     det = StreamingDetector(settings, sample_rate_hz, scale_pa)
+    det.usable_log = bytearray()
     if speed_rad_s is not None and speed_times_s is None and np.ndim(speed_rad_s) > 0:
         det._warn("speed_rad_s without speed_times_s: ignored")
         speed_rad_s = None
@@ -801,6 +922,15 @@ def detect(
         )
     times = det.frame_time(np.arange(det.frames_done)).astype(float)
     heard, freq = frames_heard(times, episodes)
+    usable = np.frombuffer(bytes(det.usable_log), dtype=np.uint8).astype(bool)
+    if usable.size and not usable.all():
+        hop_s, counts = det.hop_s, det.unusable_frames
+        warnings.append(
+            f"sound unusable for {np.count_nonzero(~usable) * hop_s:.2f} of "
+            f"{usable.size * hop_s:.2f} s (non-finite samples "
+            f"{counts['non-finite'] * hop_s:.2f} s, constant or silent "
+            f"{counts['silent'] * hop_s:.2f} s): not scored"
+        )
     return Detection(
         frame_times_s=times,
         heard=heard,
@@ -810,6 +940,7 @@ def detect(
         scale="Pa" if scale_pa is not None else "full scale",
         warnings=warnings,
         rejected=list(det.rejected),
+        usable=usable,
     )
 
 

@@ -238,8 +238,11 @@ class ToneAnalyzer:
         """No bin in the analysed range (the sample rate is too low for it)."""
         return self.k_hi < self.k_lo
 
-    def candidates(self, psd: np.ndarray) -> ToneCandidates:
-        """The tone candidates of every frame of `psd` (frames, bins), see `ToneCandidates`."""
+    def candidates(self, psd: np.ndarray, floor: np.ndarray | None = None) -> ToneCandidates:
+        """The tone candidates of every frame of `psd` (frames, bins), see `ToneCandidates`.
+
+        `floor` (per frame, mean square [unit^2]): peaks weaker than it are no candidates, so
+        that rounding noise never takes a candidate's place (`max_peaks`) from a real tone."""
         n_frames = psd.shape[0]
         n_peaks = min(self.max_peaks, max(self.k_hi - self.k_lo + 1, 0))
         if n_frames == 0 or n_peaks == 0:
@@ -256,6 +259,8 @@ class ToneAnalyzer:
         # rank the peaks by a cheap TNR (three-bin tone) against their TNR limit
         tone3 = (mid + p[:, lo - 1 : hi - 1] + p[:, lo + 1 : hi + 1]) * self.df
         density = np.maximum(band - tone3, _TINY) / (np.maximum(self.b - self.a - 3, 1) * self.df)
+        if floor is not None:
+            peak &= tone3 >= np.asarray(floor, dtype=np.float64)[:, None]
         score = np.where(peak, tone3 / (density * self._rank_scale), 0.0)
         if n_peaks < score.shape[1]:
             rel = np.argpartition(-score, n_peaks - 1, axis=1)[:, :n_peaks]
