@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.io import wavfile
 
+from harness.audio_logs import DRIVERS_DATA
 from leadscrew_ros.bag import audiomsgs, logmeta, schema
 from leadscrew_ros.bag.audio import (
     AudioError,
@@ -297,9 +298,10 @@ def test_nan_and_beyond_full_scale_float_samples_are_warned(tmp_path):
     x[600] = 3.0
     log = _write(tmp_path, _drivers(x, fmt="F32LE", to_bytes=lambda a: a.astype("<f4").tobytes()))
     track = read_audio(log)
-    assert np.isfinite(track.samples).all() and track.samples[10] == 0.0
+    assert np.isnan(track.samples[[10, 11, 12, 500]]).all()
+    assert np.isfinite(np.delete(track.samples, [10, 11, 12, 500])).all()
     assert track.warnings == [
-        "4 NaN/inf samples set to 0",
+        "4 NaN/inf samples: the detector frames holding them are not scored",
         "float samples beyond full scale (peak 3): wrong sample format or scaling?",
     ]
 
@@ -360,14 +362,91 @@ def test_gaps_are_filled_and_a_long_one_ends_the_track(tmp_path):
     msgs.remove([m for m in msgs if m[0] == "/microphone"][1])  # the second chunk lost
     track = read_audio(_write(tmp_path / "a", msgs))
     assert track.samples.size == x.size
-    assert (track.samples[4800:9600] == 0).all()
-    assert track.warnings == ["1 gaps between chunks filled with zeros (0.1 s in all)"]
+    assert np.isnan(track.samples[4800:9600]).all() and np.isfinite(track.samples[9600:]).all()
+    assert track.warnings == ["1 gaps between chunks (0.1 s in all): no sound there, not scored"]
     track = read_audio(_write(tmp_path / "b", msgs), settings=AudioSettings(max_gap_s=0.05))
     assert track.samples.size == 4800
     assert track.warnings == [
         "a gap of 0.1 s at t = 0.300 s (> max_gap_s 0.05 s): the track "
         "ends there, 2 messages after it ignored"
     ]
+
+
+def _stamped(msgs, stamp_of):
+    """`msgs` with each microphone message's header stamp replaced by stamp_of(k, stamp)."""
+    out, k = [], 0
+    for topic, type_name, payload, t in msgs:
+        if topic == "/microphone":
+            msg = DRIVERS_DATA.decode(payload)
+            stamp = msg["header"]["stamp"]
+            ns = stamp_of(k, int(stamp["sec"]) * 1_000_000_000 + int(stamp["nanosec"]))
+            raw = np.asarray(msg["audio"]["data"], np.uint8)
+            payload = audiomsgs.encode_audio_data_stamped(ns, raw)
+            k += 1
+        out.append((topic, type_name, payload, t))
+    return out
+
+
+def test_stamps_on_another_clock_are_placed_by_the_log_times(tmp_path):
+    """Header stamps from a device's boot clock (1.77e9 s off the log's): every chunk placed by
+    its log time, so the track starts where the log says (it started at t = -1.77e9 s)."""
+    x = _tone(10 * 4800)
+    msgs = _drivers(x)
+    right = read_audio(_write(tmp_path / "a", msgs))
+    track = read_audio(_write(tmp_path / "b", _stamped(msgs, lambda k, ns: ns - T0 + 12_345)))
+    assert track.t0_s == pytest.approx(right.t0_s, abs=1e-6)
+    assert np.array_equal(track.samples, right.samples)
+    assert track.warnings == [
+        "the audio's header stamps are -1.767e+09 s off the log's clock (another clock?): "
+        "every chunk placed by its log time"
+    ]
+
+
+@pytest.mark.parametrize("jump_s", [-3.0, 5.0])
+@pytest.mark.parametrize("first", [7, 3])
+def test_a_stamp_jump_is_placed_by_the_log_time(tmp_path, jump_s, first):
+    """From the 8th (4th) of 10 chunks on the stamps jump back 3 s (a clock reset) or ahead
+    5 s while the log times run on: those chunks are placed by their log times (most chunks
+    jumped: the stamps are taken as another clock), nothing is dropped (the track ended at the
+    jump: of 12 s only 4 s used)."""
+    x = _tone(10 * 4800)
+    msgs = _drivers(x)
+    right = read_audio(_write(tmp_path / "a", msgs))
+    jumped = _stamped(msgs, lambda k, ns: ns + int(jump_s * 1e9) if k >= first else ns)
+    track = read_audio(_write(tmp_path / "b", jumped))
+    assert track.t0_s == pytest.approx(right.t0_s, abs=1e-6)
+    assert np.array_equal(track.samples, right.samples)
+    said = (
+        f"{10 - first} audio messages stamped more than resync_s off their log time (a stamp "
+        f"jump, stamps running backwards; first at t = {0.1 * (first + 1):.3f} s): placed by "
+        "their log times"
+        if first > 5
+        else f"the audio's header stamps are {jump_s:+.4g} s off the log's clock (another "
+        "clock?): every chunk placed by its log time"
+    )
+    assert track.warnings == [said]
+
+
+def test_a_dropout_of_seconds_is_no_sound_not_the_end(tmp_path):
+    """The microphone silent for 5 s (no messages, stamps and log times both): kept as NaN,
+    not scored, the rest of the stroke read (max_gap_s 60 s)."""
+    x = _tone(20 * 4800)
+    msgs = [
+        (
+            topic,
+            kind,
+            payload,
+            t + (int(5e9) if topic == "/microphone" and t > T0 + int(1e9) else 0),
+        )
+        for topic, kind, payload, t in _stamped(
+            _drivers(x), lambda k, ns: ns + (int(5e9) if k >= 9 else 0)
+        )
+    ]
+    track = read_audio(_write(tmp_path, msgs))
+    assert track.samples.size == x.size + 5 * RATE
+    gap = np.isnan(track.samples)
+    assert gap.sum() == 5 * RATE and gap[9 * 4800 : 9 * 4800 + 5 * RATE].all()
+    assert track.warnings == ["1 gaps between chunks (5 s in all): no sound there, not scored"]
 
 
 def test_sample_rate_change_keeps_the_first_segment(tmp_path):

@@ -28,6 +28,7 @@ from leadscrew_ros.bag.virtual_bench import MIC_INFO_TOPIC, MIC_TOPIC, START_NS,
 from leadscrew_ros.cli import main
 from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.model.acoustics import DetectorSettings
+from leadscrew_ros.review.calibration.gather import observe_replay
 from leadscrew_ros.review.listen import (
     CLIP_PAD_S,
     COLLAR_S,
@@ -251,7 +252,7 @@ def _two_mics(k, topic, data, t):
 @pytest.mark.parametrize(
     "change,heard,warning",
     [
-        (_f32, True, "NaN/inf samples set to 0"),
+        (_f32, True, "NaN/inf samples: the detector frames holding them are not scored"),
         (_info(fmt="S13LE"), False, "audio not analysed: "),
         (_info(coding="mp3"), False, "coded as 'mp3' (compressed)"),
         (_truncated, True, "empty audio messages"),
@@ -403,8 +404,9 @@ def test_fleet_columns_are_each_logs_summary(paper_bench, tmp_path, capsys):
     assert why.startswith("audio not analysed: ") and "--audio-rate" in why
     assert why in _summary(tmp_path / last["name"])["warnings"]
     assert sum(why in line for line in console.splitlines()) == 1
+    assert last["sound_share"] == ""
     for row in rows:
-        assert row["heard_status"] == "analysed"
+        assert row["heard_status"] == "analysed" and float(row["sound_share"]) == 1.0
         heard = _summary(tmp_path / row["name"])["heard"]
         a = heard["agreement"]
         assert float(row["heard_s"]) == a["both_s"] + a["heard_only_s"]
@@ -417,6 +419,81 @@ def test_fleet_columns_are_each_logs_summary(paper_bench, tmp_path, capsys):
     doc = json.loads((tmp_path / "fleet.json").read_text())
     assert doc["parameters"]["listen"]["compare_formulations"] is True
     assert (tmp_path / "fleet.png").stat().st_size > 0
+
+
+def test_a_log_heard_in_part_says_so_everywhere(paper_bench, tmp_path, capsys):
+    """The microphone stops 2 s into a 6-s log: replay's console and summary.txt, summary.json,
+    fleet.csv and review's console say how much of the log was heard (the agreement covers
+    only that: it said recall 1.00 and nothing more)."""
+    log = paper_bench[0][0]
+    part = rewrite(
+        log,
+        tmp_path / "in",
+        lambda k, topic, data, t: (
+            []
+            if t >= START_NS + 2e9
+            else [
+                (
+                    topic,
+                    audiomsgs.AUDIO_DATA_STAMPED if topic == MIC_TOPIC else audiomsgs.AUDIO_INFO,
+                    data,
+                    t,
+                )
+            ]
+        ),
+    )
+    argv = ["--no-report", "--workers", "0"]
+    assert main(["replay", str(part), "--out", str(tmp_path / "r"), *argv]) == 0
+    console = capsys.readouterr().out
+    heard = _summary(tmp_path / "r")["heard"]
+    frames = (heard["log_s"] - DetectorSettings().frame_s) / DetectorSettings().hop_s + 1
+    assert heard["sound_share"] == pytest.approx(
+        heard["usable_s"] / (int(frames) * DetectorSettings().hop_s)
+    )
+    assert 0.25 < heard["sound_share"] < 0.35  # 2 s of 6 s, less a frame
+    line = (
+        f"heard only {heard['usable_s']:.1f} s of the log's {heard['log_s']:.1f} s "
+        f"({100 * heard['sound_share']:.0f} %): heard vs predicted covers only that"
+    )
+    assert line in console and line in (tmp_path / "r" / "summary.txt").read_text()
+    code = main(
+        ["review", str(part), "--out", str(tmp_path / "f"), "--workers", "1", "--no-report"]
+    )
+    assert code == 0
+    console = capsys.readouterr().out
+    with open(tmp_path / "f" / "fleet.csv", encoding="utf-8") as fh:
+        [row] = list(csv.DictReader(fh))
+    assert float(row["sound_share"]) == pytest.approx(heard["sound_share"], rel=1e-12)
+    assert f"{row['name']}: heard only {100 * heard['sound_share']:.0f} % of the log" in console
+
+
+def test_calibration_takes_no_observation_where_there_was_no_sound(paper_bench, tmp_path):
+    """The microphone mute (a constant) for the last 4 s: its frames are no observations (they
+    read as 'not heard': a less squeaky drive), a log mute throughout has none and says why,
+    and calibration.txt names the inputs heard in part."""
+    log = paper_bench[0][0]
+    _replay(log, tmp_path / "whole")
+    whole = observe_replay(tmp_path / "whole")
+    mute_s = _summary(tmp_path / "whole")["heard"]["duration_s"] - 4.0
+    _replay(rewrite(log, tmp_path / "in", _muted_from(mute_s, 0.05)), tmp_path / "part")
+    part = observe_replay(tmp_path / "part")
+    assert part.observations is not None and whole.observations is not None
+    assert part.sound_share == pytest.approx(_summary(tmp_path / "part")["heard"]["sound_share"])
+    assert 0.2 < part.sound_share < 0.5 and whole.sound_share == 1.0
+    spans = _summary(tmp_path / "part")["heard"]["unusable_spans"]
+    assert spans and spans[-1][0] == pytest.approx(
+        mute_s + DetectorSettings().frame_s / 2, abs=0.02
+    )
+    frames_part = int(part.observations.frames.sum())
+    assert 0 < frames_part < 0.6 * int(whole.observations.frames.sum())
+    _replay(rewrite(log, tmp_path / "in0", _muted_from(0.0, 0.05)), tmp_path / "mute")
+    mute = observe_replay(tmp_path / "mute")
+    assert mute.observations is None and mute.reason.startswith("no usable sound")
+    out = tmp_path / "cal"
+    argv = [str(tmp_path / d) for d in ("whole", "part", "mute")]
+    main(["calibrate", *argv, "--out", str(out), "--workers", "1", "--quiet", "--no-report"])
+    text = (out / "calibration.txt").read_text()
+    assert f"2 inputs heard in part only: part {100 * part.sound_share:.0f} %, mute 0 %" in text
 
 
 @pytest.mark.parametrize(

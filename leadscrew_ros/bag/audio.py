@@ -23,16 +23,21 @@ centred first), floats as they are; the channel `channel` is taken out of the in
 frames. Time: a chunk's header stamp is the time of its first sample (for messages without a
 header, the log time minus the chunk's duration: a capture node publishes a chunk once it is
 full); `t0_s` is the first sample's time after the log's first message (any topic), the
-replay's time origin. Chunks are placed one after the other; where a stamp says a chunk starts
-later than the samples before it end (beyond `AudioSettings.stamp_tolerance_s`), the gap is
-filled with zeros (counted) up to `max_gap_s`; a longer gap ends the track there; a chunk
-stamped earlier has its overlap trimmed (counted).
+replay's time origin. Header stamps are checked against the log times first: stamps off them by
+more than `AudioSettings.resync_s` as a whole are another clock (every chunk is then placed by its
+log time), a single chunk off the stream's usual offset by more than that (a jump, stamps
+running backwards) is placed by its log time plus that offset. Chunks are placed one after the
+other; where a stamp says a chunk starts later than the samples before it end (beyond
+`stamp_tolerance_s`), the gap is kept as NaN (no sound: the detector does not score it, counted)
+up to `max_gap_s`; a longer gap ends the track there; a chunk stamped earlier has its overlap
+trimmed (counted).
 
-Everything questionable in the data is one line in `AudioTrack.warnings`: NaN/inf samples (set
-to 0), float samples beyond full scale, a data array other than the one the format names, a
-sample format that does not divide the data (partial frame dropped), empty or undecodable
-messages (counted), header stamps of zero, a sample rate, channel count or format changing
-mid-log (the first one's segment kept). What cannot be read at all raises `AudioError`, one
+Everything questionable in the data is one line in `AudioTrack.warnings`: NaN/inf samples
+(kept as NaN: the detector does not score the frames holding them), float samples beyond full
+scale, a data array other than the one the format names, a sample format that does not divide
+the data (partial frame dropped), empty or undecodable messages (counted), header stamps of
+zero or off the log's clock (placed by log time), a sample rate, channel count or format
+changing mid-log (the first one's segment kept). What cannot be read at all raises `AudioError`, one
 line: no audio topic or several, an unknown sample format, a coding format other than PCM /
 wave (e.g. mp3), no AudioInfo, no sample rate for Float32MultiArray (`MissingRateError`).
 
@@ -97,6 +102,10 @@ DRIVERS, DRIVERS_UNSTAMPED, MGONZS13, MULTI_ARRAY, INFO = (
 )
 
 
+#: The warning of non-finite samples: kept as NaN, the detector frames holding them not scored.
+NONFINITE = "{n} NaN/inf samples: the detector frames holding them are not scored"
+
+
 class AudioError(LogError):
     """Audio that cannot be read at all; the message is one line naming the log or file."""
 
@@ -119,12 +128,22 @@ class AudioSettings:
         10.0,
     )
     max_gap_s: float = setting(
-        1.0,
+        60.0,
         "s",
-        "gaps between chunks up to this long are filled with zeros; a longer one "
-        "ends the track (warned)",
+        "gaps between chunks up to this long are kept as no sound (NaN: not scored); a "
+        "longer one ends the track (warned, and the share of the log heard is reported)",
         0.0,
         3600.0,
+    )
+    resync_s: float = setting(
+        1.0,
+        "s",
+        "a chunk whose header stamp is more than this off its log time (less the stream's "
+        "usual offset) is placed by its log time; stamps off by more than this as a whole "
+        "are another clock, and every chunk is placed by its log time",
+        0.0,
+        3600.0,
+        lo_open=True,
     )
 
     def __post_init__(self) -> None:
@@ -163,9 +182,10 @@ class AudioTrack:
 
 @dataclass
 class _Chunk:
-    stamp_ns: int
+    stamp_ns: int  # of the first sample: the header stamp (else from the log time)
     samples: np.ndarray  # float32, the chosen channel
     key: tuple  # (rate, channels, format): a change ends the segment
+    sent_ns: int  # the log time less the chunk's duration: its stamp on the log's clock
 
 
 @dataclass
@@ -185,11 +205,15 @@ class _Problems:
             "empty": "{n} empty audio messages",
             "partial": "{n} audio messages end in a partial frame of {e}, dropped (truncated "
             "or wrong sample format?)",
-            "nonfinite": "{n} NaN/inf samples set to 0",
+            "nonfinite": NONFINITE,
             "beyond": "float samples beyond full scale (peak {e}): wrong sample format or scaling?",
             "array": "{n} messages fill another array than their format names ({e}); used it",
             "zero_stamp": "{n} audio messages have a zero header stamp; their log times used",
-            "gap": "{n} gaps between chunks filled with zeros ({e} s in all)",
+            "gap": "{n} gaps between chunks ({e} s in all): no sound there, not scored",
+            "clock": "the audio's header stamps are {e} s off the log's clock (another clock?): "
+            "every chunk placed by its log time",
+            "restamped": "{n} audio messages stamped more than resync_s off their log time "
+            "(a stamp jump, stamps running backwards; first at {e}): placed by their log times",
             "overlap": "{n} chunks overlap the samples before them; {e} samples trimmed",
         }
         out = []
@@ -522,15 +546,17 @@ class _Context:
         return frames[:usable].reshape(-1, channels)[:, self.channel]
 
 
-def _stamp(context: _Context, msg: dict, log_time_ns: int, n: int, rate: float) -> int:
+def _chunk(context: _Context, msg: dict, log_time_ns: int, x: np.ndarray, key: tuple) -> _Chunk:
+    """The chunk of samples `x` (rate key[0]) and its time: header stamp and log time."""
+    sent = log_time_ns - int(round(x.size / key[0] * 1e9))
     header = msg.get("header")
     if header is not None:
         stamp = header["stamp"]
         ns = int(stamp["sec"]) * 1_000_000_000 + int(stamp["nanosec"])
         if ns:
-            return ns
+            return _Chunk(ns, x, key, sent)
         context.problems.add("zero_stamp")
-    return log_time_ns - int(round(n / rate * 1e9))
+    return _Chunk(sent, x, key, sent)
 
 
 def _finite(context: _Context, x: np.ndarray, is_float: bool) -> np.ndarray:
@@ -539,8 +565,8 @@ def _finite(context: _Context, x: np.ndarray, is_float: bool) -> np.ndarray:
     bad = ~np.isfinite(x)
     if bad.any():
         context.problems.add("nonfinite", n=int(bad.sum()))
-        x = np.where(bad, np.float32(0), x)
-    peak = float(np.max(np.abs(x)))
+        x = np.where(bad, np.float32(np.nan), x)  # kept: the detector does not score them
+    peak = float(np.nanmax(np.abs(x))) if not bad.all() else 0.0
     if peak > 1.0:
         context.problems.add("beyond", f"{peak:.3g}")
     return x
@@ -594,8 +620,7 @@ def _drivers(context: _Context, log_time_ns: int, msg: dict) -> _Chunk | None:
         context, _to_float(np.ascontiguousarray(data), dtype, offset, scale), fmt.startswith("F")
     )
     x = context.pick(x, channels, context.topic)
-    stamp = _stamp(context, msg, log_time_ns, x.size, rate)
-    return _Chunk(stamp, x, (rate, channels, fmt))
+    return _chunk(context, msg, log_time_ns, x, (rate, channels, fmt))
 
 
 def _mgonzs13(context: _Context, log_time_ns: int, msg: dict) -> _Chunk | None:
@@ -630,8 +655,7 @@ def _mgonzs13(context: _Context, log_time_ns: int, msg: dict) -> _Chunk | None:
             else values.astype(np.float32)
         )
     x = context.pick(_finite(context, x, name == "float32_data"), channels, context.topic)
-    stamp = _stamp(context, msg, log_time_ns, x.size, rate)
-    return _Chunk(stamp, x, (float(rate), channels, name))
+    return _chunk(context, msg, log_time_ns, x, (float(rate), channels, name))
 
 
 def _multi_array(context: _Context, log_time_ns: int, msg: dict) -> _Chunk | None:
@@ -642,7 +666,7 @@ def _multi_array(context: _Context, log_time_ns: int, msg: dict) -> _Chunk | Non
     channels = int(dims[1]["size"]) if len(dims) == 2 and dims[1]["size"] > 0 else 1
     x = context.pick(_finite(context, data.astype(np.float32), True), channels, context.topic)
     rate = float(context.sample_rate_hz or 0)
-    return _Chunk(_stamp(context, msg, log_time_ns, x.size, rate), x, (rate, channels, "F32"))
+    return _chunk(context, msg, log_time_ns, x, (rate, channels, "F32"))
 
 
 # ----------------------------------------------------------------------------- timeline
@@ -650,7 +674,7 @@ def _assemble(
     chunks: list[_Chunk], settings: AudioSettings, problems: _Problems, first_ns: int
 ) -> tuple[np.ndarray, float, int, list[str]]:
     """Place the chunks of the first (rate, channels, format) segment on one sample grid."""
-    chunks = sorted(chunks, key=lambda c: c.stamp_ns)  # stable: file order for ties
+    chunks = sorted(_on_log_clock(chunks, settings, problems, first_ns), key=lambda c: c.stamp_ns)
     key = chunks[0].key
     rate = key[0]
     t0_ns = chunks[0].stamp_ns
@@ -680,7 +704,7 @@ def _assemble(
                     f"{len(chunks) - k} messages after it ignored"
                 )
                 break
-            pieces.append(np.zeros(offset, np.float32))
+            pieces.append(np.full(offset, np.nan, np.float32))
             placed += offset
             gap_samples += offset
             problems.add("gap", "0")
@@ -696,6 +720,28 @@ def _assemble(
     if trimmed:
         problems.first["overlap"] = str(trimmed)
     return np.concatenate(pieces) if len(pieces) > 1 else pieces[0].copy(), rate, t0_ns, ended
+
+
+def _on_log_clock(
+    chunks: list[_Chunk], settings: AudioSettings, problems: _Problems, first_ns: int
+) -> list[_Chunk]:
+    """The chunks with header stamps the log's clock can vouch for: stamps that are off the
+    log times by more than `resync_s` as a whole (another clock: a device's boot time, sim
+    time) are all replaced by the log times; single chunks off by more than that from the
+    stream's usual offset (a jump, stamps running backwards) by their log time plus it."""
+    offsets = np.array([c.stamp_ns - c.sent_ns for c in chunks], dtype=np.float64)
+    usual = float(np.median(offsets))
+    limit = settings.resync_s * 1e9
+    if abs(usual) > limit:
+        problems.add("clock", f"{usual / 1e9:+.4g}")
+        return [replace(c, stamp_ns=c.sent_ns) for c in chunks]
+    out = []
+    for c, offset in zip(chunks, offsets.tolist(), strict=True):
+        if abs(offset - usual) > limit:
+            problems.add("restamped", f"t = {(c.sent_ns - first_ns) / 1e9:.3f} s")
+            c = replace(c, stamp_ns=c.sent_ns + int(round(usual)))
+        out.append(c)
+    return out
 
 
 def _describe_change(old: tuple, new: tuple) -> str:
@@ -734,9 +780,9 @@ def _read_wav(path: Path, channel: int, start_s: float) -> AudioTrack:
     if kind.kind == "f":
         bad = ~np.isfinite(x)
         if bad.any():
-            warnings.append(f"{int(bad.sum())} NaN/inf samples set to 0")
-            x = np.where(bad, np.float32(0), x)
-        peak = float(np.max(np.abs(x))) if x.size else 0.0
+            warnings.append(NONFINITE.format(n=int(bad.sum())))
+            x = np.where(bad, np.float32(np.nan), x)
+        peak = float(np.nanmax(np.abs(x))) if x.size and not bad.all() else 0.0
         if peak > 1.0:
             warnings.append(f"float samples beyond full scale (peak {peak:.3g}): wrong scaling?")
     if x.size == 0:

@@ -103,7 +103,7 @@ def cmd_review(args: argparse.Namespace) -> int:
     settings = _settings(args)
     from ..review.fleet import cluster, find_logs, review_logs
     from ..review.fleetreport import write_fleet
-    from ..review.listen import NOT_ANALYSED
+    from ..review.listen import FULL_SHARE, NOT_ANALYSED
 
     out = output_directory(args.out)
     logs = find_logs(args.paths, skip=out)
@@ -149,6 +149,15 @@ def cmd_review(args: argparse.Namespace) -> int:
             print(f"  {r['name']}: {r['heard_status']}")
         if len(unheard) > _ERRORS_SHOWN:
             print(f"  ... {len(unheard) - _ERRORS_SHOWN} more not heard, in {paths[0]}")
+        part = [
+            r
+            for r in run.rows
+            if (r.get("sound_share") is not None) and r["sound_share"] < FULL_SHARE
+        ]
+        for r in part[:_ERRORS_SHOWN]:
+            print(f"  {r['name']}: heard only {100 * r['sound_share']:.0f} % of the log")
+        if len(part) > _ERRORS_SHOWN:
+            print(f"  ... {len(part) - _ERRORS_SHOWN} more heard in part, in {paths[0]}")
         print("wrote: " + ", ".join(str(p) for p in paths))
     return exit_status(run.failed)
 

@@ -351,12 +351,15 @@ def heard_columns(summary: dict[str, Any]) -> dict[str, Any]:
     """The fleet row's heard-vs-predicted columns from a replay's summary: heard squeak time
     [s] (in the span the agreement counts), recall, precision, Brier score and the distinct
     heard frequencies [Hz] (each episode's, within 3 % of a lower one dropped); None
-    without sound; and `heard_status` (`listen.heard_status`: analysed, no sound, or why not)."""
+    without sound; `heard_status` (`listen.heard_status`: analysed, no sound, or why not) and
+    `sound_share` (`listen.Heard.sound_share`: how much of the log was heard)."""
     heard = summary["heard"]
     status = {"heard_status": heard_status(summary)}
     if heard is None:
         return {
-            **dict.fromkeys(("heard_s", "recall", "precision", "brier", "heard_frequencies_hz")),
+            **dict.fromkeys(
+                ("heard_s", "recall", "precision", "brier", "heard_frequencies_hz", "sound_share")
+            ),
             **status,
         }
     a = heard["agreement"]
@@ -370,6 +373,7 @@ def heard_columns(summary: dict[str, Any]) -> dict[str, Any]:
         "precision": a["precision"],
         "brier": a["brier"],
         "heard_frequencies_hz": freqs,
+        "sound_share": heard.get("sound_share"),
         **status,
     }
 

@@ -32,6 +32,7 @@ COLUMNS = [
     "time_above_warn_s",
     "time_above_error_s",
     "heard_status",
+    "sound_share",
     "heard_s",
     "recall",
     "precision",

@@ -56,6 +56,7 @@ SPECTROGRAM_F_HZ = (89.1, 11200.0)  # ECMA-418-1's analysis range: the panel's a
 SPECTROGRAM_COLUMNS = 600  # time columns at most (a long log: frames further apart)
 SPECTROGRAM_ROWS = 160  # log-spaced frequency rows
 SPECTROGRAM_FRAME = 4096  # samples per spectrogram frame (11.7 Hz bins at 48 kHz)
+FULL_SHARE = 0.99  # below this share of the log heard, every report says how much
 COLLAR_S = 0.05  # frames this close to a heard edge are not compared (half a frame)
 # How a replay's warning (summary.json, summary.txt) starts when the log's sound is not analysed
 NOT_ANALYSED = "audio not analysed"
@@ -399,6 +400,8 @@ class Heard:
     out_of_band_s : dict of str to float
         Per formulation compared (the replay's at least): time [s] with squeak predicted
         whose most unstable mode lies outside `band_hz` (not counted).
+    log_s : float
+        Duration of the log [s]: the span the sound should cover (`sound_share`).
     """
 
     source: str
@@ -416,6 +419,31 @@ class Heard:
     detect_s: float = 0.0
     band_hz: tuple[float, float] = (0.0, 0.0)
     out_of_band_s: dict[str, float] = field(default_factory=dict)
+    log_s: float = 0.0
+
+    @property
+    def usable_s(self) -> float:
+        """Sound usable for the comparison within the log's span [0, log_s] [s]: frames of
+        the track there, less those without usable samples (NaN, gaps, a muted microphone)."""
+        d = self.detection
+        if d.frame_times_s.size < 2:
+            return 0.0
+        inside = (d.frame_times_s >= 0.0) & (d.frame_times_s <= self.log_s)
+        if d.usable is not None:
+            inside &= d.usable
+        return float(np.count_nonzero(inside)) * d.hop_s
+
+    @property
+    def sound_share(self) -> float | None:
+        """How much of the log was heard: `usable_s` over the frames that a microphone
+        recording all of the log would give (None for a log shorter than a frame)."""
+        from ..model.acoustics import DetectorSettings
+
+        d = self.detection
+        frame_s = DetectorSettings().frame_s  # the replay's detector (`listen`)
+        hop_s = d.hop_s if d.frame_times_s.size > 1 else DetectorSettings().hop_s
+        possible = math.floor((self.log_s - frame_s) / hop_s + 1e-9) + 1
+        return min(self.usable_s / (possible * hop_s), 1.0) if possible > 0 else None
 
     def as_dict(self) -> dict[str, Any]:
         """summary.json's `heard`: source, rate, scale, episodes, agreement, warnings.
@@ -432,6 +460,10 @@ class Heard:
             "level_unit": "dB SPL" if self.scale == "Pa" else "dB re full scale",
             "duration_s": self.duration_s,
             "unusable_s": self.detection.unusable_s,
+            "unusable_spans": [list(s) for s in self.detection.unusable_spans()],
+            "usable_s": self.usable_s,
+            "log_s": self.log_s,
+            "sound_share": self.sound_share,
             "episodes": [e.as_dict() for e in self.detection.episodes],
             "agreement": self.agreement.as_dict(),
             "band_hz": list(self.band_hz),
@@ -501,7 +533,13 @@ class Heard:
         if unusable > 0:
             lines.append(
                 f"sound unusable for {unusable:.1f} s of {self.duration_s:.1f} s (NaN/inf "
-                "samples, a constant or silent microphone): those frames are not scored"
+                "samples, gaps, a constant or silent microphone): those frames are not scored"
+            )
+        share = self.sound_share
+        if share is not None and share < FULL_SHARE:
+            lines.append(
+                f"heard only {self.usable_s:.1f} s of the log's {self.log_s:.1f} s "
+                f"({100 * share:.0f} %): heard vs predicted covers only that"
             )
         outside = self.out_of_band_s[self.formulation]
         if outside > 0:
@@ -692,6 +730,8 @@ def listen(
     except DetectorError as exc:
         return None, [f"{NOT_ANALYSED} ({track.source}): {exc}"]
     detect_s = time.perf_counter() - t0
+    # NaN samples (not scored by the detector) are silence in the picture and the clips
+    audible = np.nan_to_num(track.samples) if np.isnan(track.samples).any() else track.samples
     band = (
         DetectorSettings.f_lo_hz,
         StreamingDetector(sample_rate_hz=track.sample_rate_hz).analyzer.f_hi_hz,
@@ -720,15 +760,16 @@ def listen(
         formulation,
         by,
         list(track.warnings) + list(detection.warnings),
-        spectrogram(track.samples, track.sample_rate_hz, track.t0_s, scale or 1.0),
+        spectrogram(audible, track.sample_rate_hz, track.t0_s, scale or 1.0),
         points,
         duration_s=track.duration_s,
         detect_s=detect_s,
         band_hz=band,
         out_of_band_s=out_of_band,
+        log_s=end_s,
     )
     heard.clips = write_clips(
-        track.samples, track.sample_rate_hz, track.t0_s, detection.episodes, out_dir / CLIPS_DIR
+        audible, track.sample_rate_hz, track.t0_s, detection.episodes, out_dir / CLIPS_DIR
     )
     return heard, []
 

@@ -175,6 +175,24 @@ class Detection:
             return 0.0
         return float(np.count_nonzero(~self.usable)) * self.hop_s
 
+    def unusable_spans(self) -> list[tuple[float, float]]:
+        """The runs of frames without usable sound as (start, end) [s], each frame standing
+        for one hop around its centre.
+
+        Returns
+        -------
+        list of (float, float)
+        """
+        if self.usable is None or self.usable.size < 2 or self.usable.all():
+            return []
+        bad = np.concatenate([[False], ~self.usable, [False]])
+        edges = np.flatnonzero(bad[1:] != bad[:-1])
+        t, half = self.frame_times_s, self.hop_s / 2
+        return [
+            (float(t[a] - half), float(t[b - 1] + half))
+            for a, b in zip(edges[::2], edges[1::2], strict=True)
+        ]
+
     @property
     def hop_s(self) -> float:
         """Spacing of the frames [s] (nan with fewer than two)."""

@@ -110,6 +110,8 @@ class Gathered:
         Heard squeak in the frames counted [s].
     episodes : int
         Heard episodes of the replay.
+    sound_share : float or None
+        How much of the log was heard (`listen.Heard.sound_share`; None: no sound).
     """
 
     source: str
@@ -120,6 +122,7 @@ class Gathered:
     reason: str = ""
     heard_s: float = 0.0
     episodes: int = 0
+    sound_share: float | None = None
 
 
 # ---------------------------------------------------------------------- finding the inputs
@@ -283,11 +286,14 @@ def observe_replay(
         episodes = _episodes(heard)
         frame_t = _frame_times(first_s if first_s is not None else 0.0, heard)
         use = counted(frame_t, points[:, 0], float(summary["duration_s"]), episodes)
+        for a, b in heard.get("unusable_spans", []):  # no sound there: not an observation
+            use &= (frame_t < a) | (frame_t > b)
         j = np.searchsorted(points[:, 0], frame_t, side="right") - 1
         at = points[np.maximum(j, 0)]
         model = SqueakModel(params, Scatter({}))
         use &= model.validity_code(at[:, 1], at[:, 2]) == Validity.OK
         flags, hz = frames_heard(frame_t, episodes)
+        share = heard.get("sound_share")
         if not use.any():
             return Gathered(
                 str(directory),
@@ -295,9 +301,12 @@ def observe_replay(
                 log,
                 unit_id,
                 None,
-                "no detector frame at a valid operating point (the drive never moved "
+                "no usable sound (NaN samples, gaps, a constant or silent microphone)"
+                if share == 0
+                else "no detector frame at a valid operating point (the drive never moved "
                 "within the model's validity while the sound was recorded)",
                 episodes=len(episodes),
+                sound_share=share,
             )
         obs = thin(
             unit_id,
@@ -315,7 +324,15 @@ def observe_replay(
         return Gathered(str(directory), name, log, fallback, None, " ".join(str(exc).split()))
     hop = DetectorSettings().hop_s
     return Gathered(
-        str(directory), name, log, unit_id, obs, "", float(flags[use].sum() * hop), len(episodes)
+        str(directory),
+        name,
+        log,
+        unit_id,
+        obs,
+        "",
+        float(flags[use].sum() * hop),
+        len(episodes),
+        share,
     )
 
 

@@ -30,6 +30,7 @@ from ...model.calibration.posterior import DROP
 from ...model.physics.display import yaml_value
 from ...model.uncertainty.scatter import LOG_NORMAL, scatterable
 from ..jsonsafe import json_safe
+from ..listen import FULL_SHARE
 from .run import FREQUENCY_DECISIVE, STRONG_Z, WEAK_Z, CalibrationResult, FormulationRun
 
 JSON_FILE, TEXT_FILE, PNG_FILE, YAML_FILE = (
@@ -120,6 +121,7 @@ def document(result: CalibrationResult, context: dict[str, Any]) -> dict[str, An
             "unit_id": g.unit_id,
             "status": "ok" if g.observations is not None else g.reason,
             "heard_s": g.heard_s,
+            "sound_share": g.sound_share,
             "episodes": g.episodes,
             "points": None if g.observations is None else int(g.observations.frames.size),
             "frames": None if g.observations is None else int(g.observations.frames.sum()),
@@ -219,6 +221,17 @@ def text(result: CalibrationResult, out: Path | None = None) -> str:
                 lines.append(
                     f"{name}: {stuck} units not converged; population: {other.population_status}"
                 )
+    part = [
+        (g.name, g.sound_share)
+        for g in result.gathered
+        if g.sound_share is not None and g.sound_share < FULL_SHARE
+    ]
+    if part:
+        lines.append(
+            f"{len(part)} inputs heard in part only: "
+            + ", ".join(f"{name} {100 * share:.0f} %" for name, share in part[:_LISTED])
+            + (f", ... ({len(part) - _LISTED} more in {JSON_FILE})" if len(part) > _LISTED else "")
+        )
     listed = [u for u in units if u.reported is not None][:_LISTED]
     if listed:
         lines.append(f"per unit, {DROP} mean [90 %]:")
