@@ -331,6 +331,29 @@ def test_a_muted_microphone_is_not_scored_and_said():
         listener.close()
 
 
+@pytest.mark.parametrize("speedup, rate", [(1.0, 44100.0), (10.0, 48000.0), (1.0, 48000.0)])
+def test_a_sound_arriving_off_its_rate_is_a_warning(speedup, rate):
+    """48 kHz chunks analysed as 44.1 kHz, or played at 10x real time: the measurement status
+    says so (it said OK, 'heard squeak at 825 Hz, predicted'); at its own pace nothing."""
+    listener = Listener(ListenSettings(enabled=True, window_s=0.5, sample_rate_hz=rate))
+    chunk = np.random.default_rng(1).normal(0.0, 0.01, 4800).astype(np.float32)
+    step = 0.1 / speedup  # 4800 samples of 48 kHz sound every step seconds
+    n = int(5.0 / step) + 1
+    try:
+        for k in range(n):  # one at a time: a full queue would drop chunks
+            listener.offer(b"", 100.0 + k * step, lambda _: (chunk, None))
+            _wait(lambda k=k: listener.analysed == k + 1)
+        s = listener.status(100.0 + (n - 1) * step)
+        said = "samples/s but is analysed at"
+        if speedup == 1.0 and rate == 48000.0:
+            assert listener.pace is None and said not in s.message
+        else:
+            assert s.level >= Level.WARN and said in s.message
+            assert listener.pace[0] == pytest.approx(48000.0 * speedup, rel=0.01)
+    finally:
+        listener.close()
+
+
 def test_audio_common_classes_only_where_ros_drivers_audio_common_is_installed(monkeypatch):
     """Not installed here: no audio_stamped input. With ros-drivers' audio_common_msgs its two
     classes; with the incompatible package of the same name (no AudioDataStamped), none."""

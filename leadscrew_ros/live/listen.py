@@ -82,6 +82,12 @@ Decoder = Callable[[bytes], tuple[np.ndarray, "float | None"]]
 
 
 SPEED_HISTORY = 4096  # speed inputs kept for the detector (4 s at 1 kHz)
+#: The sound's own pace is judged over this much arrival time [s] (arrival jitter of tens of
+#: ms is then under 1 %) ...
+RATE_CHECK_S = 4.0
+#: ... and a pace this far off the analysed sample rate is a mismatch: 48 kHz analysed as
+#: 44.1 kHz is 8.8 % off, audio replayed at another speed more.
+RATE_TOLERANCE = 0.03
 
 
 class _Chunk(NamedTuple):
@@ -176,6 +182,9 @@ class Listener:
         self.received = self.dropped = self.malformed = self.analysed = 0
         self.last_arrival: float | None = None
         self._last_drop = self._last_malformed = self._last_unusable = -math.inf
+        # worker: (arrival [s], samples) of the recent chunks, and the pace found off the rate
+        self._paces: deque[tuple[float, int]] = deque()
+        self.pace: tuple[float, float, float] | None = None  # (samples/s, rate, when) if off
         self.unusable_s = 0.0  # sound received that held nothing to analyse [s]
         self.error = ""  # why the latest malformed chunk was
         self.warning = ""  # the detector's latest warning
@@ -376,6 +385,13 @@ class Listener:
             notes.append(f"{self.dropped} chunk(s) dropped in all: the analysis cannot keep up")
         if now - self._last_malformed <= w:
             notes.append(f"{self.malformed} malformed chunk(s) in all ({self.error})")
+        if self.pace is not None and now - self.pace[2] <= w:
+            pace, rate, _ = self.pace
+            notes.append(
+                f"the sound arrives at {pace:.0f} samples/s but is analysed at {rate:.0f} Hz "
+                "(a wrong listen.sample_rate_hz, or audio replayed at another speed): its "
+                "frequencies and times are wrong"
+            )
         if now - self._last_unusable <= w:
             notes.append(
                 f"no usable sound ({self.unusable_s:.1f} s in all: NaN samples, or a constant "
@@ -478,6 +494,7 @@ class Listener:
             self.error = str(exc)
             self._last_malformed = chunk.arrival
             return
+        self._check_pace(chunk, n, rate)
         self._seen_dropped = chunk.dropped_before
         self._audio_end, self._chunk_s = t0 + duration, duration
         if det.warnings:
@@ -489,6 +506,23 @@ class Listener:
             latest = float(det.frame_time(det.frames_done - 1))
             self._analysed.append(Heard(latest, duration, det.heard_now, det.frequency_now_hz))
         self.analysed += 1
+
+
+    def _check_pace(self, chunk: _Chunk, n: int, rate: float) -> None:
+        """Compare the samples arriving per second with the rate they are analysed at, over
+        the last `RATE_CHECK_S` of arrivals without a dropped chunk (worker thread)."""
+        if chunk.dropped_before != self._seen_dropped:
+            self._paces.clear()
+        paces = self._paces
+        paces.append((chunk.arrival, n))
+        while paces[0][0] < chunk.arrival - RATE_CHECK_S:
+            paces.popleft()
+        span = paces[-1][0] - paces[0][0]
+        if span < 0.75 * RATE_CHECK_S:
+            return
+        pace = sum(k for _, k in list(paces)[1:]) / span  # samples after the first arrival
+        if abs(pace / rate - 1.0) > RATE_TOLERANCE:
+            self.pace = (pace, rate, chunk.arrival)
 
 
 def _rounded(f: float) -> float | None:
