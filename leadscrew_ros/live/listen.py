@@ -507,7 +507,6 @@ class Listener:
             self._analysed.append(Heard(latest, duration, det.heard_now, det.frequency_now_hz))
         self.analysed += 1
 
-
     def _check_pace(self, chunk: _Chunk, n: int, rate: float) -> None:
         """Compare the samples arriving per second with the rate they are analysed at, over
         the last `RATE_CHECK_S` of arrivals without a dropped chunk (worker thread)."""
