@@ -496,6 +496,47 @@ def test_calibration_takes_no_observation_where_there_was_no_sound(paper_bench, 
     assert f"2 inputs heard in part only: part {100 * part.sound_share:.0f} %, mute 0 %" in text
 
 
+def test_detector_settings_from_the_params_file_and_the_command_line(paper_bench, tmp_path):
+    """listen.f_lo_hz above the unit's 224 Hz squeak (a parameters file, as the node reads
+    it, or --listen-param): only the 898 Hz squeak is heard; the option wins over the file;
+    summary.json records the settings used."""
+    log = str(paper_bench[0][0])
+    argv = ["--no-report", "--quiet", "--workers", "0"]
+    assert main(["replay", log, "--out", str(tmp_path / "d"), *argv]) == 0
+    both = {round(e["frequency_hz"]) for e in _summary(tmp_path / "d")["heard"]["episodes"]}
+    assert both == {224, 898}
+    params = tmp_path / "p.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    listen:\n      f_lo_hz: 400\n")
+    for extra, f_lo in (
+        (["--params-file", str(params)], 400.0),
+        (["--listen-param", "listen.f_lo_hz=400"], 400.0),
+        (["--params-file", str(params), "--listen-param", "f_lo_hz=100"], 100.0),
+    ):
+        out = tmp_path / f"o{len(extra)}{f_lo:g}"
+        assert main(["replay", log, "--out", str(out), *argv, *extra]) == 0
+        heard = _summary(out)["heard"]
+        assert heard["detector"]["f_lo_hz"] == f_lo and heard["band_hz"][0] == f_lo
+        found = {round(e["frequency_hz"]) for e in heard["episodes"]}
+        assert found == ({898} if f_lo == 400.0 else both)
+
+
+@pytest.mark.parametrize("command", ["replay", "review", "calibrate"])
+@pytest.mark.parametrize(
+    "setting,message",
+    [
+        ("bogus=1", "--listen-param: 'bogus' is not a detector setting; known: frame_s, hop_s"),
+        ("frame_s", "--listen-param: expected NAME=VALUE, got 'frame_s'"),
+        ("max_peaks=2.5", "--listen-param max_peaks: '2.5' is not an integer"),
+        ("hop_s=x", "--listen-param hop_s: 'x' is not a number"),
+        ("hop_s=5", "listen.hop_s = 5 is out of range, allowed [0.001, 0.5] s"),
+    ],
+)
+def test_listen_param_errors_are_one_line(tmp_path, capsys, command, setting, message):
+    code = main([command, str(tmp_path), "--out", str(tmp_path / "o"), "--listen-param", setting])
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1, err
+
+
 @pytest.mark.parametrize(
     "args,message",
     [

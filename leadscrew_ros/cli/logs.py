@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import fields
 from pathlib import Path
+from typing import Any
 
 from ..bag.livelock import LIVE
 from ..bag.logfile import (
@@ -20,6 +21,7 @@ from ..bag.logfile import (
 )
 from ..bag.logsource import DB3, LogSource, open_log
 from ..live.settings import InputField, JointSettings, LiveSettings
+from ..model.acoustics.settings import DetectorSettings
 from ..model.physics.metadata import help_text
 from ..review.listen import SoundSettings
 from ..review.replay import ReplaySettings
@@ -60,6 +62,57 @@ AUDIO_OPTIONS = {
     "compare_formulations": "compare_formulations",
 }
 LISTEN_SETTINGS = {f.name: f for f in fields(SoundSettings)}
+# The detector's settings: the node's `listen.<name>` parameters, offline as live
+DETECTOR_SETTINGS = {f.name: f for f in fields(DetectorSettings)}
+LISTEN_PREFIX = "listen."
+
+
+def _detector_value(name: str, value: Any, where: str) -> Any:
+    """A detector setting's value from a parameters file or `--listen-param` text, of the
+    field's type (a whole number for a float setting is that float, as the node takes it)."""
+    kind: type = int if isinstance(DETECTOR_SETTINGS[name].default, int) else float
+    if isinstance(value, str):
+        try:
+            return kind(value.strip())
+        except ValueError:
+            raise CliError(
+                f"{where} {name}: {value!r} is not {'an integer' if kind is int else 'a number'}"
+            ) from None
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    return value
+
+
+def detector_settings(args: argparse.Namespace) -> DetectorSettings:
+    """DetectorSettings: defaults <- the `listen.*` detector parameters of --params-file (as
+    the node reads them) <- --listen-param NAME=VALUE (repeatable; `listen.` optional).
+
+    Raises
+    ------
+    CliError
+        An unknown name, a value of the wrong type or out of range (one line).
+    """
+    values: dict[str, Any] = {}
+    if getattr(args, "params_file", None):
+        for key, value in yaml_parameters(args.params_file).items():
+            name = key.removeprefix(LISTEN_PREFIX)
+            if key.startswith(LISTEN_PREFIX) and name in DETECTOR_SETTINGS:
+                values[name] = _detector_value(name, value, "--params-file listen.")
+    for item in getattr(args, "listen_param", None) or []:
+        name, sep, text = (part.strip() for part in item.partition("="))
+        name = name.removeprefix(LISTEN_PREFIX)
+        if not sep or not name:
+            raise CliError(f"--listen-param: expected NAME=VALUE, got {item!r}")
+        if name not in DETECTOR_SETTINGS:
+            raise CliError(
+                f"--listen-param: {name!r} is not a detector setting; known: "
+                + ", ".join(DETECTOR_SETTINGS)
+            )
+        values[name] = _detector_value(name, text, "--listen-param")
+    try:
+        return DetectorSettings(**values)
+    except (TypeError, ValueError) as exc:
+        raise CliError(f"listen.{' '.join(str(exc).split())}") from None
 
 
 def _topic(name: str) -> str:
@@ -143,9 +196,16 @@ def listen_settings(args: argparse.Namespace, wav_must_exist: bool = True) -> So
             raise CliError(f"--audio {args.audio}: no such file")
     elif "audio_start" in given:
         raise CliError("--audio-start needs --audio FILE.wav")
+    detector = detector_settings(args)
+    if "audio_scale" not in given and getattr(args, "params_file", None):
+        scale = yaml_parameters(args.params_file).get(LISTEN_PREFIX + "scale_pa")
+        if isinstance(scale, (int, float)) and not isinstance(scale, bool) and scale > 0:
+            given["audio_scale"] = float(scale)  # the node's calibration, offline too
     try:
         return SoundSettings(
-            enabled=not args.no_audio, **{AUDIO_OPTIONS[dest]: v for dest, v in given.items()}
+            enabled=not args.no_audio,
+            detector=detector,
+            **{AUDIO_OPTIONS[dest]: v for dest, v in given.items()},
         )
     except ValueError as exc:
         text = str(exc)
@@ -586,6 +646,16 @@ def add_audio_options(p: argparse.ArgumentParser) -> None:
         ),
     )
     g.add_argument("--audio-scale", type=finite, metavar="PA", help=_listen_help("scale_pa"))
+    g.add_argument(
+        "--listen-param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a squeak detector setting, as the node's listen.NAME parameter (repeatable; "
+        "also read from --params-file): "
+        + ", ".join(DETECTOR_SETTINGS)
+        + " (doc: Reference, parameters)",
+    )
     g.add_argument(
         "--no-audio", action="store_true", help="ignore the log's sound (no heard vs predicted)"
     )

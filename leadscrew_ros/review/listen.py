@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from array import array
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -39,6 +39,7 @@ import numpy as np
 from ..bag import cdr, msgdefs
 from ..bag.audio import FLOAT32_MULTI_ARRAY, AudioError, MissingRateError, read_audio
 from ..bag.logfile import LogError, Topic
+from ..model.acoustics.settings import DetectorSettings
 from ..model.physics.metadata import check, documented, setting
 
 if TYPE_CHECKING:
@@ -68,7 +69,14 @@ SPEED_FLOOR_RAD_S = 1.0  # ... of at least this speed
 @dataclass(frozen=True)
 class SoundSettings:
     """Where a replay finds the sound of the drive and how it is scaled (`listen`); empty texts
-    and zeros are 'not given'."""
+    and zeros are 'not given'.
+
+    Attributes
+    ----------
+    detector : DetectorSettings
+        The squeak detector's settings (the node's `listen.*`: `--params-file`,
+        `--listen-param`).
+    """
 
     enabled: bool = setting(
         True,
@@ -118,6 +126,7 @@ class SoundSettings:
         "",
         "also predict the log with the other friction formulation and compare both with the sound",
     )
+    detector: DetectorSettings = field(default_factory=DetectorSettings)
 
     def __post_init__(self) -> None:
         check(self)
@@ -402,6 +411,8 @@ class Heard:
         whose most unstable mode lies outside `band_hz` (not counted).
     log_s : float
         Duration of the log [s]: the span the sound should cover (`sound_share`).
+    detector : DetectorSettings
+        The detector's settings.
     """
 
     source: str
@@ -420,6 +431,7 @@ class Heard:
     band_hz: tuple[float, float] = (0.0, 0.0)
     out_of_band_s: dict[str, float] = field(default_factory=dict)
     log_s: float = 0.0
+    detector: DetectorSettings = field(default_factory=DetectorSettings)
 
     @property
     def usable_s(self) -> float:
@@ -437,11 +449,9 @@ class Heard:
     def sound_share(self) -> float | None:
         """How much of the log was heard: `usable_s` over the frames that a microphone
         recording all of the log would give (None for a log shorter than a frame)."""
-        from ..model.acoustics import DetectorSettings
-
         d = self.detection
-        frame_s = DetectorSettings().frame_s  # the replay's detector (`listen`)
-        hop_s = d.hop_s if d.frame_times_s.size > 1 else DetectorSettings().hop_s
+        frame_s = self.detector.frame_s
+        hop_s = d.hop_s if d.frame_times_s.size > 1 else self.detector.hop_s
         possible = math.floor((self.log_s - frame_s) / hop_s + 1e-9) + 1
         return min(self.usable_s / (possible * hop_s), 1.0) if possible > 0 else None
 
@@ -464,6 +474,7 @@ class Heard:
             "usable_s": self.usable_s,
             "log_s": self.log_s,
             "sound_share": self.sound_share,
+            "detector": asdict(self.detector),
             "episodes": [e.as_dict() for e in self.detection.episodes],
             "agreement": self.agreement.as_dict(),
             "band_hz": list(self.band_hz),
@@ -697,7 +708,7 @@ def listen(
     import time
 
     from ..model.acoustics import AudioError as DetectorError
-    from ..model.acoustics import DetectorSettings, StreamingDetector, detect
+    from ..model.acoustics import StreamingDetector, detect
 
     if not settings.enabled or not has_sound(topics, settings):
         return None, []
@@ -726,6 +737,7 @@ def listen(
             speed_times_s=speed_t if speed_t.size else None,
             speed_rad_s=speed_v if speed_v.size else None,
             scale_pa=scale,
+            settings=settings.detector,
         )
     except DetectorError as exc:
         return None, [f"{NOT_ANALYSED} ({track.source}): {exc}"]
@@ -733,8 +745,8 @@ def listen(
     # NaN samples (not scored by the detector) are silence in the picture and the clips
     audible = np.nan_to_num(track.samples) if np.isnan(track.samples).any() else track.samples
     band = (
-        DetectorSettings.f_lo_hz,
-        StreamingDetector(sample_rate_hz=track.sample_rate_hz).analyzer.f_hi_hz,
+        settings.detector.f_lo_hz,
+        StreamingDetector(settings.detector, sample_rate_hz=track.sample_rate_hz).analyzer.f_hi_hz,
     )
     agreement, outside = trace.compare(detection, end_s, band)
     formulation = model.params.formulation
@@ -767,6 +779,7 @@ def listen(
         band_hz=band,
         out_of_band_s=out_of_band,
         log_s=end_s,
+        detector=settings.detector,
     )
     heard.clips = write_clips(
         audible, track.sample_rate_hz, track.t0_s, detection.episodes, out_dir / CLIPS_DIR

@@ -183,10 +183,16 @@ def _episodes(heard: dict[str, Any]) -> list[Episode]:
     ]
 
 
+def _detector(heard: dict[str, Any]) -> DetectorSettings:
+    """The detector settings a replay heard with (its `heard.detector`; the defaults for a
+    replay written before they were recorded)."""
+    return DetectorSettings(**heard.get("detector", {}))
+
+
 def _frame_times(first_s: float, heard: dict[str, Any]) -> np.ndarray:
     """The detector's frame centres [s]: from the first, every hop, for the audio's
     duration (`StreamingDetector`'s frame and hop in samples)."""
-    d, rate = DetectorSettings(), float(heard["sample_rate_hz"])
+    d, rate = _detector(heard), float(heard["sample_rate_hz"])
     frame, hop = max(int(round(d.frame_s * rate)), 8), max(int(round(d.hop_s * rate)), 1)
     n = (int(round(heard["duration_s"] * rate)) - frame) // hop + 1
     return first_s + np.arange(max(n, 0)) * hop / rate
@@ -317,12 +323,12 @@ def observe_replay(
             at[use, 3],
             flags[use],
             hz[use],
-            DetectorSettings().hop_s,
+            _detector(heard).hop_s,
             settings,
         )
     except (OSError, ValueError, LogError) as exc:
         return Gathered(str(directory), name, log, fallback, None, " ".join(str(exc).split()))
-    hop = DetectorSettings().hop_s
+    hop = _detector(heard).hop_s
     return Gathered(
         str(directory),
         name,
