@@ -24,8 +24,9 @@ from leadscrew_ros.cli import main as cli
 from leadscrew_ros.live.status import Level
 from leadscrew_ros.ros.parameters import PARAMETERS
 from leadscrew_ros.ros.remote import format_value, normalise_namespace, parse_value
-from leadscrew_ros.ros.watch import CLEAR, run_watch
+from leadscrew_ros.ros.watch import CLEAR, LABEL_WIDTH, ROWS, run_watch
 
+REPO = Path(__file__).resolve().parents[1]
 WAIT_S = 60.0  # generous: discovery took up to 3 s with the machine's load at 6 on 2 cores
 # A verdict that stays as it is while the commands run (no STALE after the default 1 s)
 STEADY = {"stale_timeout_s": 3600.0}
@@ -309,3 +310,19 @@ def test_a_namespace_is_normalised_or_refused_in_one_line(text):
         assert len(str(exc).splitlines()) == 1
         return
     assert ns.startswith("/") and (ns == "/" or not ns.endswith("/"))
+
+
+# ----------------------------------------------------------------------------- the page
+def test_the_watch_page_holds_a_capture_of_the_current_view():
+    """doc/user/watch.md's capture (tools/watch_capture.py) shows the view as `view_lines`
+    writes it now: every row, in order, in the node the page starts."""
+    page = (REPO / "doc" / "user" / "watch.md").read_text(encoding="utf-8")
+    block = page.split("% watch_capture: begin\n", 1)[1].split("% watch_capture: end\n", 1)[0]
+    commands = block.split("\n$ leadscrew-squeak ")
+    [watch] = [c for c in commands if c.startswith("watch ")]
+    lines = watch.splitlines()[1:]
+    assert lines[0].startswith("squeak_node /seat_left/squeak_predictor (ROS_DOMAIN_ID ")
+    labels = [line[:LABEL_WIDTH].strip() for line in lines[1:] if line.strip()]
+    assert [label for label in labels if label] == list(ROWS), watch
+    for name in ("record on", "record status", "params get", "params set", "record off"):
+        assert any(c.startswith(name) for c in commands), name

@@ -52,6 +52,8 @@ from .remote import (
 REFRESH_S = 0.5  # the view's period
 OUTPUT_WAIT_S = 10.0  # longest wait for the node's latched outputs once it is found
 CLEAR = "\x1b[H\x1b[J"  # ANSI: cursor home, clear to the end of the screen
+# The view's rows, in order (the diagnostics take one line per status)
+ROWS = ("inputs", "P(squeak)", "unstable", "safe speed", "diagnostics", "recording", "listening")
 LABEL_WIDTH = 12
 
 
@@ -140,58 +142,48 @@ def _quantity(text: str, unit: str) -> str:
 
 
 def view_lines(node: WatchNode) -> list[str]:
-    """The view of the predictor's state (without the header)."""
+    """The view of the predictor's state (without the header): one row per entry of `ROWS`,
+    one more per further diagnostic status."""
     r, inputs = node.record, node.values(PREDICTION_TASK)
-
-    def row(label: str, text: str) -> str:
-        return f"{label:<{LABEL_WIDTH}}{text}"
-
-    lines = [
-        row(
-            "inputs",
-            f"speed {_quantity(inputs.get(KEY_SPEED, ''), 'rad/s')}, "
-            f"load {_quantity(inputs.get(KEY_LOAD, ''), 'N')}, "
-            f"nut {_quantity(inputs.get(KEY_NUT_POSITION, ''), 'm')}",
-        )
-    ]
-    if r.probability is None:
-        lines.append(row("P(squeak)", "no prediction yet"))
-    else:
+    texts = {
+        "inputs": f"speed {_quantity(inputs.get(KEY_SPEED, ''), 'rad/s')}, "
+        f"load {_quantity(inputs.get(KEY_LOAD, ''), 'N')}, "
+        f"nut {_quantity(inputs.get(KEY_NUT_POSITION, ''), 'm')}",
+        "P(squeak)": "no prediction yet",
+        "unstable": "no prediction yet",
+    }
+    if r.probability is not None:
         active = (
             "yes (a mode squeaks at the nominal parameters)"
             if r.active
             else "no (every mode stable at the nominal parameters)"
         )
         margin = inputs.get(KEY_MARGIN, "")
-        lines.append(
-            row("P(squeak)", f"{r.probability:.3f}   active: {active}")
-            + (f"   margin {margin}" if margin else "")
+        texts["P(squeak)"] = f"{r.probability:.3f}   active: {active}" + (
+            f"   margin {margin}" if margin else ""
         )
         modes = [f"{label} {f:.1f} Hz" for label, f in r.squeak_modes] or [
             f"{f:.1f} Hz" for f in r.frequencies
         ]
-        lines.append(row("unstable", ", ".join(modes) or "none"))
-    safe = "none yet" if r.safe_speed is None else f"{r.safe_speed:.2f} rad/s"
+        texts["unstable"] = ", ".join(modes) or "none"
+    texts["safe speed"] = "none yet" if r.safe_speed is None else f"{r.safe_speed:.2f} rad/s"
     if inputs.get(KEY_SAFE_SPEED_PENDING) == "true":
-        safe += " (a new search is under way)"
-    lines.append(row("safe speed", safe))
-    statuses = list(node.statuses.items()) or [("", None)]
-    for i, (task, status) in enumerate(statuses):
-        text = (
-            "none yet"
-            if status is None
-            else f"{Level(status.level[0]).name:<5} {task}: {status.message}"
-        )
-        lines.append(row("diagnostics" if i == 0 else "", text))
+        texts["safe speed"] += " (a new search is under way)"
     recording = node.statuses.get(RECORDING_TASK)
-    lines.append(
-        row(
-            "recording",
-            RecordingState.from_status(recording).text() if recording else "no status yet",
-        )
+    texts["recording"] = (
+        RecordingState.from_status(recording).text() if recording else "no status yet"
     )
-    lines.append(row("listening", _listening(node)))
-    return lines
+    texts["listening"] = _listening(node)
+    statuses = [
+        f"{Level(status.level[0]).name:<5} {task}: {status.message}"
+        for task, status in node.statuses.items()
+    ]
+    rows = {**{label: [text] for label, text in texts.items()}, "diagnostics": statuses}
+    return [
+        f"{label if i == 0 else '':<{LABEL_WIDTH}}{text}"
+        for label in ROWS
+        for i, text in enumerate(rows[label] or ["none yet"])
+    ]
 
 
 def _listening(node: WatchNode) -> str:
