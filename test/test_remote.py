@@ -19,7 +19,7 @@ from rcl_interfaces.msg import ParameterType
 
 from harness.processes import CLI, domain, output, start, stop, wait_initialised
 from harness.ros import Spinner, unique_ns
-from harness.squeak import SQUEAK, at
+from harness.squeak import SQUEAK, SqueakWorld, at
 from leadscrew_ros.cli import main as cli
 from leadscrew_ros.live.status import Level
 from leadscrew_ros.ros.parameters import PARAMETERS
@@ -57,7 +57,8 @@ def live(ros):
     def start_node(**params):
         ros.start(**{**STEADY, **params})
         at(ros, SQUEAK)
-        spinners.append(Spinner(ros.executor))
+        ros.spinner = Spinner(ros.executor)
+        spinners.append(ros.spinner)
         return ros
 
     yield start_node
@@ -130,6 +131,37 @@ def test_watch_redraws_in_place_on_a_terminal_and_appends_otherwise(live, tty):
     if not tty:  # appended only when it changed
         bodies = [view.split("\n", 1)[1] for view in views]
         assert all(a != b for a, b in zip(bodies, bodies[1:], strict=False)), text
+
+
+def test_watch_marks_a_node_that_went_away_and_keeps_its_last_outputs(tmp_path):
+    """`watch` in a process of its own on this test's domain, its output a file (plain views
+    appended); the node in a world of its own, closed as a node process ends: its participant
+    leaves the graph (destroying the node alone, its context still up, did not show there)."""
+    world, proc, spinner, closed = SqueakWorld(), None, None, False
+    try:
+        world.start(**STEADY)
+        at(world, SQUEAK)
+        probability = f"P(squeak)   {world.node.live.prediction.probability:.3f}"
+        spinner = Spinner(world.executor)
+        argv = CLI + ["watch", "--namespace", world.ns]
+        proc = start(argv, int(os.environ["ROS_DOMAIN_ID"]), tmp_path, "watch")
+        until(lambda: probability in output(proc)[0], "the first view", 120.0)
+        spinner.stop()
+        world.close()
+        closed = True
+        until(lambda: "   NOT FOUND since " in output(proc)[0], "the node marked gone")
+        proc.send_signal(signal.SIGINT)
+        code = proc.wait(timeout=30)
+        out, err = output(proc)
+    finally:
+        if spinner is not None:
+            spinner.stop()
+        if not closed:
+            world.close()
+        stop(proc)
+    last = out.split("\n\n")[-1]
+    assert "NOT FOUND since" in last.splitlines()[0] and probability in last, last
+    assert code == 130 and err.splitlines()[-1] == "leadscrew-squeak: interrupted", (code, err)
 
 
 def test_watch_says_when_no_node_is_found_and_how_to_start_one(capsys):

@@ -70,7 +70,8 @@ def normalise_namespace(namespace: str) -> str:
     try:
         validate_namespace(ns)
     except InvalidNamespaceException as exc:
-        reason = str(exc).splitlines()[0]
+        # "Invalid namespace: <reason>:" above the name with a caret: the reason
+        reason = str(exc).splitlines()[0].removeprefix("Invalid namespace: ").rstrip(":")
         raise ValueError(f"namespace {namespace!r} is invalid: {reason}") from None
     return ns
 

@@ -201,8 +201,9 @@ def _listening(node: WatchNode) -> str:
     return f"{heard}; {measurement.message}"
 
 
-def header(target: str, found: bool, seen_at: float | None) -> str:
-    """First line: which node, on which domain, and whether it is there."""
+def header(target: str, found: bool, seen_at: float | None) -> tuple[str, str]:
+    """The first line, on either side of the time of the view: which node on which domain, and
+    '' or '   NOT FOUND since HH:MM:SS' (the node's last sighting)."""
     state = (
         ""
         if found
@@ -211,29 +212,29 @@ def header(target: str, found: bool, seen_at: float | None) -> str:
     )
     return (
         f"squeak_node {target} (ROS_DOMAIN_ID {os.environ.get('ROS_DOMAIN_ID') or 0}, "
-        f"discovery {os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE', '')})   "
-        f"{time.strftime('%H:%M:%S')}{state}"
+        f"discovery {os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE', '')})",
+        state,
     )
 
 
 class Screen:
     """Where the view goes: on a terminal redrawn in place (lines cut to its width), else
-    appended as plain text when it changed."""
+    appended as plain text when it changed (the time aside)."""
 
     def __init__(self, out: TextIO):
         self.out, self.tty = out, out.isatty()
         self._last: list[str] | None = None
 
-    def show(self, head: str, lines: list[str]) -> None:
-        """Show the view: `head` (its first line) and `lines`."""
+    def show(self, head: tuple[str, str], lines: list[str]) -> None:
+        """Show the view: the first line from `head` (`header`) with the time, then `lines`."""
+        view = [f"{head[0]}   {time.strftime('%H:%M:%S')}{head[1]}", *lines]
         if self.tty:
             width = shutil.get_terminal_size().columns
-            text = "\n".join(line[: width - 1] for line in [head, *lines])
-            self.out.write(f"{CLEAR}{text}\n")
-        elif lines != self._last:  # a blank line between two views
+            self.out.write(CLEAR + "\n".join(line[: width - 1] for line in view) + "\n")
+        elif [*head, *lines] != self._last:  # a blank line between two views
             blank = [""] if self._last is not None else []
-            self.out.write("\n".join([*blank, head, *lines]) + "\n")
-        self._last = lines
+            self.out.write("\n".join([*blank, *view]) + "\n")
+        self._last = [*head, *lines]
         self.out.flush()
 
 
