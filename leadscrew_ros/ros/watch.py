@@ -218,7 +218,7 @@ def header(target: str, found: bool, seen_at: float | None) -> tuple[str, str]:
 
 
 class Screen:
-    """Where the view goes: on a terminal redrawn in place (lines cut to its width), else
+    """Where the view goes: on a terminal redrawn in place (cut to its width and height), else
     appended as plain text when it changed (the time aside)."""
 
     def __init__(self, out: TextIO):
@@ -228,9 +228,10 @@ class Screen:
     def show(self, head: tuple[str, str], lines: list[str]) -> None:
         """Show the view: the first line from `head` (`header`) with the time, then `lines`."""
         view = [f"{head[0]}   {time.strftime('%H:%M:%S')}{head[1]}", *lines]
-        if self.tty:
-            width = shutil.get_terminal_size().columns
-            self.out.write(CLEAR + "\n".join(line[: width - 1] for line in view) + "\n")
+        if self.tty:  # within the terminal: a longer view would scroll away the cursor's home
+            width, height = shutil.get_terminal_size()
+            fits = [line[: width - 1] for line in view[: max(height - 1, 1)]]
+            self.out.write(CLEAR + "\n".join(fits) + "\n")
         elif [*head, *lines] != self._last:  # a blank line between two views
             blank = [""] if self._last is not None else []
             self.out.write("\n".join([*blank, *view]) + "\n")
