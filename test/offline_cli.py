@@ -25,7 +25,14 @@ from leadscrew_ros.bag import msgdefs
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
 from leadscrew_ros.cli import main
 
-ROS_COMMANDS = [["demo"], ["simulate"], ["replay", "LOG", "--publish"]]
+ROS_COMMANDS = [
+    ["demo"],
+    ["simulate"],
+    ["replay", "LOG", "--publish"],
+    ["watch", "--once"],
+    ["record", "status"],
+    ["params"],
+]
 
 
 def commands(work: Path, log: Path) -> list[list[str]]:

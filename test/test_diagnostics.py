@@ -20,8 +20,10 @@ from harness.ros import COLLECT, RosWorld
 from harness.squeak import SQUEAK, at
 from leadscrew_ros.live.status import Level, Status
 from leadscrew_ros.ros.diagnostics import (
+    KEY_ACTIVE,
     KEY_BAG,
     KEY_CUT_OFF_BAGS,
+    KEY_FILE,
     KEY_FILES,
     KEY_LOST,
     KEY_MESSAGES,
@@ -238,7 +240,10 @@ NO_CRASH = SimpleNamespace(message="", level=Level.OK, pending=[])
 def test_recording_status(rec, crash, expected_level, words):
     stat = recording_status(DiagnosticStatusWrapper(), rec, crash)
     assert stat.level == expected_level and stat.message == words
-    assert list(stat.values)[:4] == [KEY_BAG, KEY_FILES, KEY_MESSAGES, KEY_LOST]
+    keys = [KEY_BAG, KEY_FILES, KEY_MESSAGES, KEY_LOST, KEY_ACTIVE, KEY_FILE]
+    assert list(stat.values)[:6] == keys
+    assert stat.values[KEY_ACTIVE] == str(rec.active).lower()
+    assert stat.values[KEY_FILE] == (rec.path or "")
     assert stat.values[KEY_LOST] == str(rec.lost)
     for topic, loss in rec.losses.items():
         assert stat.values[key_lost_on(topic)] == str(loss.lost)

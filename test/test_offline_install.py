@@ -90,7 +90,7 @@ def _by_name(report: dict) -> dict:
 def _check_commands(report: dict, work: Path) -> None:
     """Every offline command: exit 0 and its expected output; every ROS command: one line."""
     runs = _by_name(report)
-    for name in ("demo", "simulate", "replay --publish"):
+    for name in ("demo", "simulate", "replay --publish", "watch", "record", "params"):
         c = runs.pop(name)
         assert (c["code"], c["stdout"], c["stderr"]) == (
             2,

@@ -103,10 +103,10 @@ def needs_ros(command: str) -> str:
 
 
 def import_ros(command: str, module: str) -> Any:
-    """`leadscrew_ros.ros.<module>` for `command` (demo, simulate, replay --publish,
-    squeak_node): the only way the CLI reaches the ROS layer, so that a core install without the
-    ROS 2 wheels (or with part of them) says in one line what to install (a CliError) instead of
-    a traceback. Any other import error is ours and propagates."""
+    """`leadscrew_ros.ros.<module>` for `command` (demo, simulate, replay --publish, watch,
+    record, params, squeak_node): the only way the CLI reaches the ROS layer, so that a core
+    install without the ROS 2 wheels (or with part of them) says in one line what to install (a
+    CliError) instead of a traceback. Any other import error is ours and propagates."""
     try:
         return importlib.import_module(f"{__package__.rpartition('.')[0]}.ros.{module}")
     except ImportError as exc:  # ModuleNotFoundError, or an extension that fails to load

@@ -21,7 +21,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TextIO
+from typing import Any, TextIO
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.logging import LoggingSeverity
@@ -87,10 +87,10 @@ class SqueakMonitor(Node):
     counts while the latest diagnostics say the prediction is valid and lists frequencies.
     The squeak/* outputs arrive serialized and are decoded by `bag.messages`' codec, the one
     the predictor encodes them with; a payload that does not decode is counted (`malformed`)
-    and otherwise ignored."""
+    and otherwise ignored. `name`: the node's name (`watch` runs one of its own)."""
 
-    def __init__(self, **kwargs):
-        super().__init__("squeak_monitor", **kwargs)
+    def __init__(self, name: str = "squeak_monitor", **kwargs: Any):
+        super().__init__(name, **kwargs)
         # The predictor's latched QoS (reliable, transient local), with room for bursts.
         qos = QoSProfile(
             depth=100,

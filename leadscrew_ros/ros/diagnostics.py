@@ -40,6 +40,8 @@ KEY_BAG = "bag"
 KEY_FILES = "files"
 KEY_MESSAGES = "messages"
 KEY_LOST = "lost"
+KEY_ACTIVE = "active"  # "true" while recording (what `leadscrew-squeak record status` reads)
+KEY_FILE = "file"  # the file being written ('' when not recording)
 KEY_DDS_REJECTED = "dds_lost_rejected"  # + topic: why its DDS message-lost counts are ignored
 KEY_CUT_OFF_BAGS = "cut_off_bags"
 # What the log line and the status say when a recording stopped on its own
@@ -170,6 +172,8 @@ def recording_status(
     stat.add(KEY_FILES, len(r.files))
     stat.add(KEY_MESSAGES, r.messages)
     stat.add(KEY_LOST, r.lost)
+    stat.add(KEY_ACTIVE, str(r.active).lower())
+    stat.add(KEY_FILE, r.path or "")
     losses = {t: loss for t, loss in list(r.losses.items()) if loss.lost}
     for topic, loss in r.losses.items():
         stat.add(key_lost_on(topic), loss.lost)

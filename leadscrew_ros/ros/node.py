@@ -107,6 +107,7 @@ from .parameters import (
 
 NODE_NAME = "squeak_predictor"
 PROG = "squeak_node"  # the executable: its one-line errors name it, as argparse does
+RECORD_SERVICE = "record"  # ~/record: std_srvs/SetBool, in the node's private namespace
 HOUSEKEEPING_PERIOD_S = 0.05
 # Output topic (`bag.messages`) -> rclpy class of its type (the payloads are CDR bytes).
 OUTPUT_CLASSES = {
@@ -359,7 +360,7 @@ class SqueakPredictorNode(Node):
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(HOUSEKEEPING_PERIOD_S, self._housekeeping, clock=self._steady)
         self._rate_timer = self._create_rate_timer()
-        self.create_service(SetBool, "~/record", self._on_record_service)
+        self.create_service(SetBool, f"~/{RECORD_SERVICE}", self._on_record_service)
         self._crash_recovery = CrashRecovery(self.recorder.settings.directory, self.recorder.name)
         if self._crash_recovery.bags and control.auto_recover:
             self._crash_recovery.start()

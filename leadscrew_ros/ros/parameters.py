@@ -217,12 +217,26 @@ def constraints(spec: Spec) -> str:
     return ""
 
 
+def with_unit(description: str, unit: str) -> str:
+    """A descriptor's description: 'text [unit]' ('text' without a unit); `split_unit` reads
+    it back."""
+    return f"{description} [{unit}]" if unit else description
+
+
+def split_unit(description: str) -> tuple[str, str]:
+    """(text, unit) of a descriptor's description written by `with_unit` (unit '' if none)."""
+    text, bracket, unit = description.rpartition(" [")
+    if bracket and unit.endswith("]") and "[" not in unit:
+        return text, unit[:-1]
+    return description, ""
+
+
 def descriptor(spec: Spec) -> ParameterDescriptor:
     """ROS descriptor of a parameter: description with unit, range, read-only."""
     md, default = spec.md, spec.default
     d = ParameterDescriptor(
         name=spec.name,
-        description=f"{md['description']} [{md['unit']}]" if md["unit"] else md["description"],
+        description=with_unit(md["description"], md["unit"]),
         read_only=md["read_only"],
         additional_constraints=constraints(spec),
     )
