@@ -657,7 +657,7 @@ def _probability_panel(result: ReplayResult, axes: Sequence[Axes]) -> None:
     ax.set_xlabel("time since the log's first message [s]")
 
 
-HEARD_COLOR = "lime"
+HEARD_COLOR = "deepskyblue"  # apart from the grey level and the plasma P(squeak) colours
 _HEARD_MARKED = 500  # heard episodes drawn (the first ones)
 
 
@@ -735,7 +735,7 @@ def plot_heard(heard: Heard, *, ax: Axes | None = None) -> Figure:
             label="heard episode: frequency",
         )
         span = ax.axvspan(
-            e.start_s, e.end_s, color=HEARD_COLOR, alpha=0.15, lw=0, label="heard episode: time"
+            e.start_s, e.end_s, color=HEARD_COLOR, alpha=0.2, lw=0, label="heard episode: time"
         )
         handles += [line, span] if k == 0 else []
     ax.set_yscale("log")
@@ -1108,8 +1108,8 @@ def plot_reliability(result: Any, *, ax: Axes | None = None) -> Figure:
         p = [r["p"] for r in rows]
         f = [r["heard"] for r in rows]
         size = [20 + 400 * r["frames"] / total for r in rows]
-        ax.plot(p, f, color=colour, lw=1)
-        ax.scatter(p, f, s=size, color=colour, label=f"{key} (Brier {brier:.3f})", zorder=3)
+        ax.plot(p, f, color=colour, lw=1, marker="o", ms=5, label=f"{key} (Brier {brier:.3f})")
+        ax.scatter(p, f, s=size, color=colour, zorder=3)  # area: the bin's frames
     ax.set_xlim(-0.02, 1.02)
     ax.set_ylim(-0.02, 1.02)
     ax.set_xlabel("predicted P(squeak) [-]")
@@ -1117,7 +1117,7 @@ def plot_reliability(result: Any, *, ax: Axes | None = None) -> Figure:
     ax.set_title(
         f"held-out reliability ({_counted(len(h.units), 'unit')}, {h.frames} frames)", fontsize=9
     )
-    ax.legend(fontsize=8, loc="upper left")
+    ax.legend(fontsize=8, loc="best", title="marker area: frames", title_fontsize=8)
     return fig
 
 
