@@ -79,11 +79,22 @@ def test_figures_quick_is_legible_at_its_saved_size(saved):
     assert width >= 600 and height >= 440, (width, height)
 
 
-def test_the_replay_of_a_bench_log_has_its_sound_panel(saved):
-    """The bench log is heard: the timeline draws the spectrogram with one PSD colourbar."""
-    fig, _ = saved.named("timeline.png")
-    labels = [ax.get_ylabel() for ax in fig.findobj(match=lambda a: hasattr(a, "get_ylabel"))]
-    assert sum("PSD" in label for label in labels) == 1, labels
+def test_the_replay_of_a_bench_log_has_its_sound_panel_with_stacked_colourbars(saved):
+    """The bench log is heard: the timeline draws the spectrogram, its level's and P(squeak)'s
+    colourbars one above the other (issue 32: side by side they crowded the panel), and no
+    heard-episode mark confined to the bottom edge (it read as a 100 Hz tone)."""
+    fig, dpi = saved.named("timeline.png")
+    pictures.figure_problems(fig, dpi)  # drawn at the saved dpi: the extents below are of it
+    (sound,) = [ax for ax in fig.axes if ax.get_yscale() == "log"]
+    bars = [ax.get_window_extent() for ax in sound.child_axes]
+    assert len(bars) == 2
+    top, bottom = sorted(bars, key=lambda b: -b.y0)
+    assert bottom.y1 < top.y0 and abs(top.x0 - bottom.x0) < 1.0, (top, bottom)
+    edges = [p for p in sound.patches if p.get_label() == "heard episode: time"]
+    assert edges and all(
+        np.isclose(np.ptp(p.get_patch_transform().transform(p.get_path().vertices)[:, 1]), 1.0)
+        for p in edges
+    )  # each episode's time span over the whole height
 
 
 # ----------------------------------------------------------------------------- each rule fails
