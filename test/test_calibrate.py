@@ -25,8 +25,9 @@ import numpy as np
 import pytest
 import yaml
 
+from harness.calibration import QUICK_SAMPLER, SMALL_BENCH
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log
-from leadscrew_ros.bag.virtual_bench import BenchSettings, run
+from leadscrew_ros.bag.virtual_bench import run
 from leadscrew_ros.cli import main
 from leadscrew_ros.cli.calibrate import NOT_CONVERGED, UNUSABLE
 from leadscrew_ros.model import ScrewParameters, SqueakModel
@@ -256,21 +257,7 @@ def test_the_held_out_check_scores_the_squeak_the_detector_can_hear():
 
 
 # ----------------------------------------------------------------------------- small runs
-SMALL = BenchSettings(
-    units=3, duration_s=5.0, formulation="consistent", seed=3, population=POPULATION
-)
-QUICK = [
-    "--steps",
-    "160",
-    "--first-steps",
-    "100",
-    "--burn",
-    "60",
-    "--hyper-steps",
-    "300",
-    "--hyper-burn",
-    "100",
-]
+SMALL, QUICK = SMALL_BENCH, QUICK_SAMPLER
 
 
 @pytest.fixture(scope="module")

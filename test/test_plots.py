@@ -145,3 +145,21 @@ def test_the_fleet_panels_count_logs_as_their_titles_say():
     assert ticks and all(float(t).is_integer() for t in ticks)
     labels = [t.get_text() for t in c.get_yticklabels()]
     assert labels[0] == "broken" and "error" in [t.get_text().strip() for t in c.texts]
+
+
+def test_a_maps_colourbar_ticks_are_round_and_its_contour_labels_upright(speed_map):
+    """Issue 32: the colourbar was ticked at its contour levels (454.2, 363.4, ...) and a
+    '90 %' label read top to bottom once the layout had changed the axes' aspect."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = plots.plot_map(speed_map, overlay=plots.probability_overlay(speed_map))
+    FigureCanvasAgg(fig).draw()
+    bar = fig.axes[1]
+    lo, hi = bar.get_ylim()
+    ticks = [t for t in bar.get_yticks() if lo <= t <= hi]
+    assert 0.0 in ticks and len(ticks) >= 4
+    assert all(float(f"{t:.1g}") == t or float(f"{t:.2g}") == t and t % 5 == 0 for t in ticks)
+    # read left to right, or bottom to top: none steeper than 60 degrees top to bottom (the
+    # labels of this map were at -69, -65 and -88 degrees)
+    angles = [(t.get_rotation() + 180.0) % 360.0 - 180.0 for t in fig.axes[0].texts]
+    assert angles and all(-60.0 <= a <= 90.0 for a in angles), angles

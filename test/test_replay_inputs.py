@@ -295,7 +295,11 @@ def test_the_nut_is_drawn_only_when_measured(tmp_path):
     r = run_replay(plain, tmp_path / "a")
     assert not r.timeline.nut_measured and np.isnan(r.timeline.trace.series()[1][:, 2]).all()
     fig = r.plot()
-    assert [ax.get_ylabel() for ax in fig.axes] == ["speed [rad/s]", "axial load [N]", "P(squeak)"]
+    assert [ax.get_ylabel() for ax in fig.axes] == [
+        "speed [rad/s]",
+        "axial load [N]",
+        "P(squeak) [-]",
+    ]
     assert "no nut input" in fig.axes[0].get_title()
 
     cycle = DutyCycle(duration_s=6.0, rate_hz=25.0, rest_s=1.0)

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from matplotlib.lines import Line2D
 from rosbags.rosbag2 import Reader
 
 from harness.logs import TYPESTORE, cli, decoded, f64, write_mcap
@@ -248,8 +249,9 @@ def test_report_draws_p_squeak_with_the_thresholds(log, tmp_path):
     paths = report.write_report(r, SqueakModel(), tmp_path, report.QUICK)
     assert paths[0].name == "timeline.png" and paths[0].read_bytes().startswith(b"\x89PNG")
     ax = r.plot().axes[-1]
-    assert ax.get_ylabel() == "P(squeak)"
+    assert ax.get_ylabel() == "P(squeak) [-]"
     assert ax.get_title() == r.probability_text()
+    assert ax.get_ylim()[0] == 0.0  # no P below 0 drawn (issue 32: the bars were below it)
     dashed = {
         line.get_label(): line.get_ydata()[0]
         for line in ax.get_lines()
@@ -266,13 +268,23 @@ def test_report_draws_p_squeak_with_the_thresholds(log, tmp_path):
         "ERROR 0.7",
         "peak",
     ]
-    # the bars under the curve cover the time at or above WARN and ERROR (bin resolution)
+    # P(squeak) is a curve: a line in the legend, not a patch (issue 32)
+    assert isinstance(ax.get_legend().legend_handles[0], Line2D)
+    # the areas under the thresholds cover the time at or above WARN and ERROR (bin
+    # resolution), from 0 up to their level
+
     for name, seconds in (
         ("WARN", r.probability.above_warn_s),
         ("ERROR", r.probability.above_error_s),
     ):
         bars = [p for p in ax.patches if p.get_label() == f"P >= {name}"]
         x = [p.get_patch_transform().transform(p.get_path().vertices)[:, 0] for p in bars]
+        level = r.warn_probability if name == "WARN" else r.error_probability
+        lo, hi = ax.get_ylim()
+        for p in bars:  # a span's y is in axes fraction
+            y = lo + (hi - lo) * p.get_patch_transform().transform(p.get_path().vertices)[:, 1]
+            assert y.min() == pytest.approx(0.0, abs=1e-9)
+            assert y.max() == pytest.approx(level, abs=1e-9)
         assert sum(v.max() - v.min() for v in x) == pytest.approx(
             seconds, abs=4 * r.plot_data.probability.bin_s
         )

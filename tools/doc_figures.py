@@ -11,7 +11,13 @@
    --y load_n:5:600:60 --probability --plot stability_map.png`;
 3. a small fleet review (five synthetic logs of different strokes, loads and seeds, each with
    a unit id in its `leadscrew_ros` metadata record; 1 worker):
-   `leadscrew-squeak review LOGS --out DIR --workers 1` -> fleet.png.
+   `leadscrew-squeak review LOGS --out DIR --workers 1` -> fleet.png;
+4. a virtual-bench unit heard: `leadscrew-squeak bench --units 1 --out BENCH`, then
+   `leadscrew-squeak replay BENCH/LOG --out DIR` -> listening_timeline.png (the replay's
+   timeline with its spectrogram panel and the heard episodes);
+5. a small virtual-bench fleet calibrated: `leadscrew-squeak bench` of `CALIBRATION_BENCH`
+   (the population of doc/user/calibration.md's example, `calibration_example.POPULATION`),
+   then `leadscrew-squeak calibrate BENCH --out DIR --workers 1` -> calibration.png.
 
 The PNGs are written smaller (palette PNG, at most `MAX_BYTES` each) so that they can live in
 git. doc/images/transient.png comes from tools/transient_table.py --plot (about 5 min).
@@ -20,6 +26,7 @@ git. doc/images/transient.png comes from tools/transient_table.py --plot (about 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
 import subprocess
@@ -30,11 +37,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "doc" / "images"
 MAX_BYTES = 300_000
+CALIBRATION_BENCH = ["--units", "6", "--duration", "6", "--seed", "11"]
 MAP_ARGS = ["map", "--x", "speed_rad_s:1:100:80", "--y", "load_n:5:600:60", "--probability"]
 
 
-def _cli(*args: str) -> None:
-    """Run `leadscrew-squeak ARGS` of this checkout in a child process (as a user would)."""
+def _cli(*args: str, ok: tuple[int, ...] = (0,)) -> None:
+    """Run `leadscrew-squeak ARGS` of this checkout in a child process (as a user would); an
+    exit status not in `ok` is an error."""
     env = {
         **os.environ,
         "MPLBACKEND": "Agg",
@@ -42,7 +51,9 @@ def _cli(*args: str) -> None:
     }
     cmd = [sys.executable, "-m", "leadscrew_ros.cli", *args]
     print("$ leadscrew-squeak " + " ".join(args), file=sys.stderr)
-    subprocess.run(cmd, check=True, env=env, cwd=ROOT, stdout=subprocess.DEVNULL)
+    done = subprocess.run(cmd, env=env, cwd=ROOT, stdout=subprocess.DEVNULL)
+    if done.returncode not in ok:
+        raise subprocess.CalledProcessError(done.returncode, cmd)
 
 
 def _small(src: Path, dst: Path) -> None:
@@ -95,6 +106,34 @@ def _logs(work: Path) -> list[Path]:
     return logs
 
 
+def _bench_logs(bench: Path) -> list[Path]:
+    """The logs of a `leadscrew-squeak bench` output directory (its truth.json's order)."""
+    truth = json.loads((bench / "truth.json").read_text(encoding="utf-8"))
+    return [bench / unit["log"] for unit in truth["units"]]
+
+
+def _listening(work: Path, out: Path) -> None:
+    """listening_timeline.png: the replay of one virtual-bench unit, heard."""
+    bench = work / "bench_one"
+    _cli("bench", "--units", "1", "--out", str(bench), "--quiet")
+    listen = work / "listening"
+    _cli("replay", str(_bench_logs(bench)[0]), "--out", str(listen), "--quiet")
+    _small(listen / "timeline.png", out / "listening_timeline.png")
+
+
+def _calibration(work: Path, out: Path) -> None:
+    """calibration.png of a small virtual-bench fleet (exit status 3, not converged, is a
+    picture too: it is drawn the same way)."""
+    from calibration_example import POPULATION
+
+    bench = work / "bench_fleet"
+    population = [f"--population={k}={v:g}" for k, v in POPULATION.items()]
+    _cli("bench", *CALIBRATION_BENCH, *population, "--out", str(bench), "--quiet")
+    result = work / "calibration"
+    _cli("calibrate", str(bench), "--out", str(result), "--workers", "1", "--quiet", ok=(0, 3, 4))
+    _small(result / "calibration.png", out / "calibration.png")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=OUT, help="directory of the PNGs")
@@ -127,6 +166,8 @@ def main(argv: list[str] | None = None) -> int:
             "--quiet",
         )
         _small(fleet / "fleet.png", args.out / "fleet.png")
+        _listening(work, args.out)
+        _calibration(work, args.out)
     finally:
         if args.keep is None:
             shutil.rmtree(work, ignore_errors=True)

@@ -30,12 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
-from leadscrew_ros.cli.transient import plot_transient
 from leadscrew_ros.model import ScrewParameters
 from leadscrew_ros.model.nonlinear.transient import TransientSettings, simulate
 from leadscrew_ros.model.nonlinear.transient_analysis import analyse, linear_counterparts
 from leadscrew_ros.model.physics.assembly import build_geometry
 from leadscrew_ros.model.physics.modes import KIND_T
+from leadscrew_ros.review.plots import plot_transient
 
 POINTS = ((20.0, 200.0, 0.2), (5.0, 200.0, 0.1), (40.0, 300.0, 0.35), (60.0, 200.0, 0.1))
 MODES = (6, 12, 0)
@@ -208,8 +208,8 @@ def main() -> None:
     if args.plot:
         run, result = runs[(20.0, 200.0)]
         plot_transient(
-            run, result, args.plot, "20 rad/s, 200 N, Table 1, 18 modes: nonlinear simulation"
-        )
+            run, result, title="20 rad/s, 200 N, Table 1, 18 modes: nonlinear simulation"
+        ).savefig(args.plot, dpi=120)  # as `transient --plot`
 
 
 if __name__ == "__main__":

@@ -391,7 +391,7 @@ class Grids:
 
 
 FULL = Grids(sweep_points=500, map_x=81, map_y=101, dpi=130)
-QUICK = Grids(sweep_points=60, map_x=7, map_y=9, dpi=60)
+QUICK = Grids(sweep_points=60, map_x=7, map_y=9, dpi=100)  # text >= 8 pt on screen
 
 SWEEP_SPEEDS_RAD_S = (0.5, 120.0)  # Figs. 5 and 11: the whole band (~0.8-55 rad/s at Table 1)
 RADIUS_RANGE_M = (0.002, 0.010)

@@ -39,6 +39,7 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.colors import Colormap
     from matplotlib.figure import Figure
+    from matplotlib.text import Text
 
     from ..model.nonlinear.transient import TransientResult
     from ..model.nonlinear.transient_analysis import TransientAnalysis
@@ -204,7 +205,8 @@ def plot_map(
         lo, hi = min(float(g.min()), -1e-6), max(float(g.max()), 1e-6)
         levels = np.concatenate([np.linspace(lo, 0, 12)[:-1], np.linspace(0, hi, 16)])
         cs = ax.contourf(x, y, g, levels=levels, cmap=cmap, norm=TwoSlopeNorm(0, lo, hi))
-        fig.colorbar(cs, ax=ax, label=r"largest growth rate Re($\lambda$) [1/s]")
+        bar = fig.colorbar(cs, ax=ax, label=r"largest growth rate Re($\lambda$) [1/s]")
+        bar.set_ticks(_two_sided_ticks(lo, hi))
         if lo < 0 < hi and g.count() > 3:
             ax.contour(x, y, g, levels=[0.0], colors="k", linewidths=1.2)
     handles: list[Artist] = [
@@ -234,6 +236,25 @@ def plot_map(
     ax.set_title(title or f"Stability map ({default})", fontsize=10)
     fig.legend(handles=handles, fontsize=8, loc="outside lower center", ncols=min(len(handles), 4))
     return fig
+
+
+def _two_sided_ticks(lo: float, hi: float) -> list[float]:
+    """Round ticks of a colourbar from `lo` < 0 to `hi` > 0, zero included: each side of zero
+    is scaled on its own (`TwoSlopeNorm`), so each gets its own round steps."""
+    from matplotlib.ticker import MaxNLocator
+
+    ticks = np.r_[MaxNLocator(3).tick_values(lo, 0.0), MaxNLocator(5).tick_values(0.0, hi)]
+    return sorted({float(t) for t in ticks if lo <= t <= hi} | {0.0})
+
+
+def upright(texts: Sequence[Text]) -> None:
+    """Contour labels fixed at their angle on screen now, turned to read left to right or
+    bottom to top: a label along its line turns with the axes' aspect, which the layout
+    changes after `clabel`, and could end up reading top to bottom or upside down."""
+    for t in texts:
+        angle = (t.get_rotation() + 90.0) % 180.0 - 90.0  # [-90, 90)
+        t.set_transform_rotates_text(False)
+        t.set_rotation(90.0 if angle < -60.0 else angle)
 
 
 _LEVEL_STYLES = ("dotted", "dashed", "solid", "dashdot")  # of the PROBABILITY_LEVELS lines
@@ -276,7 +297,7 @@ def probability_overlay(result: MapResult, band: tuple[float, float] = (0.1, 0.9
             linestyles=_LEVEL_STYLES,
             linewidths=1.0,
         )
-        ax.clabel(lines, fmt=lambda v: f"{100 * v:g} %", fontsize=7)
+        upright(ax.clabel(lines, fmt=lambda v: f"{100 * v:g} %", fontsize=8))
         return [
             Patch(
                 facecolor="none",
@@ -429,7 +450,7 @@ def plot_sweep(
             x, result.probability, color="k", ls="--", lw=1.6, label="P(squeak) (right axis)"
         )
         twin.set_ylim(-0.02, 1.02)
-        twin.set_ylabel("P(squeak) over the scatter")
+        twin.set_ylabel("P(squeak) over the scatter [-]")
         anchor = 1.12
     ax.legend(handles=handles, fontsize=8, loc="upper left", bbox_to_anchor=(anchor, 1.0))
     return fig
@@ -518,19 +539,21 @@ def plot_transient(
         alpha=0.6,
         label=f"fit: {fit.mode} {fit.frequency_hz:.1f} Hz, growth {fit.growth_rate:+.1f} 1/s",
     )
-    ax[0].set_ylabel("a [m/s]")
+    ax[0].set_ylabel(r"modal energy norm $a = \sqrt{2E}$ [$\sqrt{\mathrm{J}}$]")
     ax[0].legend(loc="lower right")
     ax[0].set_title(title)
     v = run.surface_velocity_m_s
     ax[1].plot(t, v[:, 1], lw=0.5, label="tangential")
     ax[1].plot(t, v[:, 0], lw=0.5, label="radial")
     ax[1].set_ylabel("surface velocity at nut [m/s]")
+    ax[2].set_title("spectrogram of the tangential surface velocity at the nut", fontsize=10)
     ax[1].legend(loc="lower right")
     rate = 1 / (t[1] - t[0])
     nfft = 1 << max(8, int(math.log2(rate * 2e-3)))
-    ax[2].specgram(
+    image = ax[2].specgram(
         v[:, 1], NFFT=nfft, Fs=rate, noverlap=nfft // 2, cmap="magma", scale="dB", mode="magnitude"
-    )
+    )[3]
+    fig.colorbar(image, ax=ax[2], label="tangential velocity [dB re 1 m/s]")
     ax[2].set_ylim(0, min(rate / 2, 20000))
     ax[2].set_ylabel("frequency [Hz]")
     ax[2].set_xlabel("time [s]")
@@ -539,7 +562,6 @@ def plot_transient(
 
 SQUEAK_COLOR = "orange"
 WARN_COLOR, ERROR_COLOR = "goldenrod", "tab:red"
-BAR_HEIGHT = 0.07  # P(squeak) panel: the P >= WARN / ERROR bars under the curve
 
 
 def _held(last: np.ndarray, count: np.ndarray) -> np.ndarray:
@@ -576,8 +598,10 @@ def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
 
 def _probability_panel(result: ReplayResult, axes: Sequence[Axes]) -> None:
     """P(squeak) over time on the last of `axes`, with the WARN and ERROR probabilities
-    (dashed) and bars under the curve where P was at or above them; squeak at the nominal
-    parameters shaded on all of `axes`."""
+    (dashed) and, where P was at or above one, the area from 0 up to it tinted; squeak at the
+    nominal parameters shaded on all of `axes`."""
+    from matplotlib.lines import Line2D
+
     ax = axes[-1]
     envelope = result.plot_data.probability
     t, lo, hi, last, count = envelope.series()
@@ -587,25 +611,13 @@ def _probability_panel(result: ReplayResult, axes: Sequence[Axes]) -> None:
         (result.warn_probability, "WARN", WARN_COLOR),
         (result.error_probability, "ERROR", ERROR_COLOR),
     )
-    ylim = (-0.05 - BAR_HEIGHT * len(thresholds), 1.05)
-
-    def fraction(y: float) -> float:  # of the axes' height
-        return (y - ylim[0]) / (ylim[1] - ylim[0])
-
+    ylim = (0.0, 1.05)
     handles: list[Artist] = []
     if t.size:
-        handles.append(
-            ax.fill_between(
-                t,
-                lo[:, 0],
-                hi[:, 0],
-                step="mid",
-                color="tab:blue",
-                edgecolor="tab:blue",
-                lw=0.8,
-                label="P(squeak)",
-            )
-        )
+        ax.fill_between(
+            t, lo[:, 0], hi[:, 0], step="mid", color="tab:blue", edgecolor="tab:blue", lw=0.8
+        )  # a curve drawn as its min-max band per bin: a line in the legend
+        handles.append(Line2D([], [], color="tab:blue", lw=1.5, label="P(squeak)"))
         for k, (a, b) in enumerate(_runs(np.nan_to_num(hi[:, 1]) > 0)):
             for other in axes:
                 span = other.axvspan(
@@ -617,15 +629,16 @@ def _probability_panel(result: ReplayResult, axes: Sequence[Axes]) -> None:
                     label="squeak (nominal)",
                 )
             handles += [span] if k == 0 else []
-        for i, (level, name, color) in enumerate(thresholds):
-            bottom = ylim[0] + BAR_HEIGHT * i
+        for (level, name, color), hatch in zip(thresholds, ("////", "\\\\\\\\"), strict=True):
             for k, (a, b) in enumerate(_runs(np.nan_to_num(hi[:, 0], nan=-1.0) >= level)):
                 span = ax.axvspan(
                     t[a] - half,
                     t[b] + half,
-                    fraction(bottom + 0.1 * BAR_HEIGHT),
-                    fraction(bottom + 0.9 * BAR_HEIGHT),
-                    color=color,
+                    0.0,
+                    level / ylim[1],
+                    facecolor="none",
+                    edgecolor=color,
+                    hatch=hatch,
                     lw=0,
                     label=f"P >= {name}",
                 )
@@ -638,13 +651,13 @@ def _probability_panel(result: ReplayResult, axes: Sequence[Axes]) -> None:
         handles += ax.plot([pt.peak_t_s], [pt.peak], "v", color="k", ms=5, label="peak")
     ax.set_ylim(*ylim)
     ax.set_yticks([0.0, 0.2, 0.4, 0.6, 0.8, 1.0])
-    ax.set_ylabel("P(squeak)")
+    ax.set_ylabel("P(squeak) [-]")
     ax.set_title(result.probability_text(), fontsize=9)
-    ax.legend(handles=handles, loc="center left", bbox_to_anchor=(1.005, 0.5), fontsize=7)
+    ax.legend(handles=handles, loc="center left", bbox_to_anchor=(1.005, 0.5), fontsize=8)
     ax.set_xlabel("time since the log's first message [s]")
 
 
-HEARD_COLOR = "lime"
+HEARD_COLOR = "deepskyblue"  # apart from the grey level and the plasma P(squeak) colours
 _HEARD_MARKED = 500  # heard episodes drawn (the first ones)
 
 
@@ -659,7 +672,9 @@ def _edges(centres: np.ndarray) -> np.ndarray:
 def plot_heard(heard: Heard, *, ax: Axes | None = None) -> Figure:
     """The sound and the predictions: spectrogram (`listen.Spectrogram`, log frequency axis
     89 Hz - 11.2 kHz, the band maxima of bounded frames), the predicted squeak frequencies over
-    it coloured by P(squeak), the heard episodes marked at their frequency.
+    it coloured by P(squeak), the heard episodes marked at their frequency (a line) over their
+    time span (shaded over the whole height: no mark that could read as a tone). The level's
+    and P(squeak)'s colourbars are stacked on the right, apart.
 
     Parameters
     ----------
@@ -690,9 +705,10 @@ def plot_heard(heard: Heard, *, ax: Axes | None = None) -> Figure:
             shading="flat",
             rasterized=True,
         )
-        cax = ax.inset_axes((1.09, 0.0, 0.012, 1.0))
         unit = "Pa" if heard.scale == "Pa" else "FS"
-        fig.colorbar(mesh, cax=cax, label=f"PSD [dB re 1 {unit}²/Hz]")
+        fig.colorbar(
+            mesh, cax=ax.inset_axes((1.01, 0.56, 0.015, 0.44)), label=f"PSD [dB re {unit}²/Hz]"
+        )
     handles: list[Any] = []
     pts = heard.squeak_points
     if len(pts):
@@ -708,21 +724,27 @@ def plot_heard(heard: Heard, *, ax: Axes | None = None) -> Figure:
             label="predicted squeak modes",
         )
         handles.append(sc)
-        cax = ax.inset_axes((1.005, 0.0, 0.012, 1.0))
-        fig.colorbar(sc, cax=cax, label="P(squeak)")
+        fig.colorbar(sc, cax=ax.inset_axes((1.01, 0.0, 0.015, 0.44)), label="P(squeak) [-]")
     for k, e in enumerate(heard.detection.episodes[:_HEARD_MARKED]):
         line = ax.hlines(
-            e.frequency_hz, e.start_s, e.end_s, colors=HEARD_COLOR, lw=3, label="heard episodes"
+            e.frequency_hz,
+            e.start_s,
+            e.end_s,
+            colors=HEARD_COLOR,
+            lw=3,
+            label="heard episode: frequency",
         )
-        ax.axvspan(e.start_s, e.end_s, ymax=0.04, color=HEARD_COLOR, lw=0)
-        handles += [line] if k == 0 else []
+        span = ax.axvspan(
+            e.start_s, e.end_s, color=HEARD_COLOR, alpha=0.2, lw=0, label="heard episode: time"
+        )
+        handles += [line, span] if k == 0 else []
     ax.set_yscale("log")
     ax.set_ylim(*SPECTROGRAM_F_HZ)
     ax.set_ylabel("frequency [Hz]")
     ax.set_xlabel("time since the log's first message [s]")
     ax.set_title(heard.text()[0], fontsize=9)
     if handles:
-        ax.legend(handles=handles, loc="upper left", fontsize=7, framealpha=0.8)
+        ax.legend(handles=handles, loc="upper left", fontsize=8, framealpha=0.8)
     return fig
 
 
@@ -834,14 +856,14 @@ def plot_fleet(run: FleetRun, *, fig: Figure | None = None) -> Figure:
     bars = a.bar(["squeak", "no squeak", "error"], counts, color=["C3", "C2", ERROR_GREY])
     # shares of all logs, as the title counts them
     a.bar_label(bars, [f"{n} ({100 * n / max(len(run.rows), 1):.0f} %)" for n in counts])
-    a.set_ylabel("logs")
+    a.set_ylabel("number of logs [-]")
     a.yaxis.set_major_locator(MaxNLocator(integer=True))
     a.set_title(f"{len(squeaks)} of {_counted(len(run.rows), 'log')} squeak")
     pts = np.array(run.points, dtype=float).reshape(-1, 3)
     if len(pts):
         b.hist(pts[:, 2], bins=min(50, max(5, len(pts) // 20)), color="C3")
     b.set_xlabel("squeak frequency [Hz]")
-    b.set_ylabel("predictions (sample)")
+    b.set_ylabel("number of predictions (sample) [-]")
     b.set_title("squeak frequencies over the fleet")
     ranked = sorted(ok, key=lambda r: -r["time_in_squeak_s"])
     times = [r["time_in_squeak_s"] for r in ranked]
@@ -852,14 +874,18 @@ def plot_fleet(run: FleetRun, *, fig: Figure | None = None) -> Figure:
         c.barh(labels[::-1], ([0.0] * len(errors) + times[::-1]), color="C3")
         for k in range(len(errors)):
             c.text(0, len(errors) - 1 - k, " error", va="center", color=ERROR_GREY, fontsize=8)
-        c.tick_params(axis="y", labelsize=7)
+        c.tick_params(axis="y", labelsize=8)
+        c.set_xlabel("time in squeak [s]")
+        c.set_ylabel("log (unit id)")
     else:
         c.plot(np.arange(1, len(times) + 1), times, color="C3")
         c.xaxis.set_major_locator(MaxNLocator(integer=True))
         c.set_xlabel(
-            "logs, ranked" + (f" ({_counted(len(errors), 'error')} not shown)" if errors else "")
+            "rank of the log [-]"
+            + (f" ({_counted(len(errors), 'error')} not shown)" if errors else "")
         )
-    c.set_title("time in squeak per log [s]")
+        c.set_ylabel("time in squeak [s]")
+    c.set_title("time in squeak per log")
     if len(pts):
         sc = d.scatter(np.abs(pts[:, 0]), np.abs(pts[:, 1]), c=pts[:, 2], s=6, cmap="viridis")
         fig.colorbar(sc, ax=d, label="squeak frequency [Hz]")
@@ -878,7 +904,7 @@ def _counted(n: int, noun: str) -> str:
 def _heard_panels(rows: list[dict], e: Axes, f: Axes) -> None:
     """Heard vs predicted squeak time per log (`e`) and the logs' heard and predicted squeak
     frequencies (`f`)."""
-    from matplotlib.ticker import MaxNLocator
+    from matplotlib.ticker import MaxNLocator, NullFormatter
 
     predicted = np.array([r["time_in_squeak_s"] for r in rows], float)
     heard = np.array([r["heard_s"] for r in rows], float)
@@ -887,10 +913,10 @@ def _heard_panels(rows: list[dict], e: Axes, f: Axes) -> None:
     e.plot([0, top], [0, top], color="0.5", ls="--", lw=1, label="heard = predicted")
     if len(rows) <= _NAMED_BARS:
         for r, x, y in zip(rows, predicted, heard, strict=True):
-            e.annotate(r["unit_id"], (x, y), fontsize=6, xytext=(2, 2), textcoords="offset points")
+            e.annotate(r["unit_id"], (x, y), fontsize=8, xytext=(2, 2), textcoords="offset points")
     e.set_xlabel("predicted squeak time [s]")
     e.set_ylabel("heard squeak time [s]")
-    e.legend(fontsize=7)
+    e.legend(fontsize=8)
     e.set_title(f"heard vs predicted squeak per log ({len(rows)} logs with sound)")
     heard_hz = [hz for r in rows for hz in r["heard_frequencies_hz"] or []]
     predicted_hz = [hz for r in rows for hz in r["squeak_frequencies_hz"] or []]
@@ -904,9 +930,10 @@ def _heard_panels(rows: list[dict], e: Axes, f: Axes) -> None:
             label=["predicted (per log, per mode)", "heard (per log)"],
         )
         f.set_xscale("log")
-        f.legend(fontsize=7)
+        f.xaxis.set_minor_formatter(NullFormatter())  # labelled minor ticks overlap
+        f.legend(fontsize=8)
     f.set_xlabel("squeak frequency [Hz]")
-    f.set_ylabel("logs")
+    f.set_ylabel("number of logs [-]")
     f.yaxis.set_major_locator(MaxNLocator(integer=True))
     f.set_title("heard against predicted squeak frequencies")
 
@@ -927,6 +954,13 @@ def _unit_samples(post: Any, name: str) -> np.ndarray | None:
     return None
 
 
+def _unit_of(name: str) -> str:
+    """The unit of a calibrated parameter (or friction_drop) in an axis label: '-' for a
+    dimensionless one."""
+    unit = "1" if name == "friction_drop" else field_info(name)["unit"]
+    return "-" if unit in ("", "1") else unit
+
+
 def _population_samples(
     params: Any, scatter: dict[str, float], names: Sequence[str], count: int = 4096
 ) -> dict[str, np.ndarray]:
@@ -944,7 +978,9 @@ def _population_samples(
     return out
 
 
-def plot_posteriors(result: Any, name: str, *, ax: Axes | None = None) -> Figure:
+def plot_posteriors(
+    result: Any, name: str, *, legend: bool = True, ax: Axes | None = None
+) -> Figure:
     """The units' posterior marginals of one calibrated parameter (or friction_drop): mean and
     90 % interval per unit (held-out units hollow), the fleet mean's 90 % interval shaded, the
     prior's nominal value dashed.
@@ -955,6 +991,9 @@ def plot_posteriors(result: Any, name: str, *, ax: Axes | None = None) -> Figure
         The calibration (`review.calibration.run.calibrate`).
     name : str
         A calibrated parameter, or 'friction_drop'.
+    legend : bool
+        Draw the legend on the axes (else the caller draws it from the axes' legend handles:
+        the kinds of unit, the fleet mean, the prior).
     ax : Axes, optional
         The axes to draw into; default: a new figure.
 
@@ -970,14 +1009,20 @@ def plot_posteriors(result: Any, name: str, *, ax: Axes | None = None) -> Figure
         s = None if u.reported is None else _unit_samples(u.reported, name)
         if s is not None and len(rows) < _FOREST_UNITS:
             rows.append((u, s))
+    kinds: set[str] = set()
     for k, (u, s) in enumerate(rows):
         lo, hi = np.quantile(s, [0.05, 0.95])
         colour = "C0" if u.calibrated else "0.6"
+        hollow = "white" if u.held_out else colour
         ax.hlines(k, lo, hi, color=colour, lw=1.5)
-        ax.plot(
-            s.mean(), k, "o", ms=4, color=colour, mfc="white" if u.held_out else colour, mew=1.2
+        ax.plot(s.mean(), k, "o", ms=4, color=colour, mfc=hollow, mew=1.2)
+        kind = ("held-out unit" if u.held_out else "unit") + (
+            "" if u.calibrated else " (not calibrated)"
         )
-    ax.set_yticks(range(len(rows)), [u.unit_id for u, _ in rows], fontsize=6)
+        if kind not in kinds:  # a legend entry of each kind: marker and interval
+            kinds.add(kind)
+            ax.errorbar([], [], xerr=[], fmt="o", ms=4, color=colour, mfc=hollow, label=kind)
+    ax.set_yticks(range(len(rows)), [u.unit_id for u, _ in rows], fontsize=8)
     ax.invert_yaxis()
     pop = run.population.summary().get(name) if run.population is not None else None
     if pop is not None:
@@ -986,9 +1031,10 @@ def plot_posteriors(result: Any, name: str, *, ax: Axes | None = None) -> Figure
     prior = _population_samples(run.prior.params, dict(run.prior.scatter), result.settings.names)
     if name in prior:
         ax.axvline(float(np.median(prior[name])), color="0.3", ls="--", lw=1, label="prior")
-    ax.set_xlabel(name)
-    ax.set_title(f"{name}: units' 90 % posteriors", fontsize=9)
-    ax.legend(fontsize=6, loc="lower right")
+    ax.set_xlabel(f"{name} [{_unit_of(name)}]")
+    ax.set_title(f"{name}: units' mean, 90 %", fontsize=9)
+    if legend:
+        ax.legend(fontsize=8, loc="lower right")
     return fig
 
 
@@ -1022,10 +1068,11 @@ def plot_population(result: Any, name: str, *, ax: Axes | None = None) -> Figure
         bins = np.linspace(lo, hi, 60).tolist()
         for label, colour, d in drawn:
             ax.hist(d[name], bins=bins, density=True, histtype="step", color=colour, label=label)
-    ax.set_xlabel(name)
-    ax.set_yticks([])
+    unit = _unit_of(name)
+    ax.set_xlabel(f"{name} [{unit}]")
+    ax.set_ylabel("density [-]" if unit == "-" else f"density [1/({unit})]")
     ax.set_title(f"{name}: prior vs fleet", fontsize=9)
-    ax.legend(fontsize=6)
+    ax.legend(fontsize=8)
     return fig
 
 
@@ -1061,14 +1108,16 @@ def plot_reliability(result: Any, *, ax: Axes | None = None) -> Figure:
         p = [r["p"] for r in rows]
         f = [r["heard"] for r in rows]
         size = [20 + 400 * r["frames"] / total for r in rows]
-        ax.plot(p, f, color=colour, lw=1)
-        ax.scatter(p, f, s=size, color=colour, label=f"{key} (Brier {brier:.3f})", zorder=3)
+        ax.plot(p, f, color=colour, lw=1, marker="o", ms=5, label=f"{key} (Brier {brier:.3f})")
+        ax.scatter(p, f, s=size, color=colour, zorder=3)  # area: the bin's frames
     ax.set_xlim(-0.02, 1.02)
     ax.set_ylim(-0.02, 1.02)
-    ax.set_xlabel("predicted P(squeak)")
-    ax.set_ylabel("share of frames heard")
-    ax.set_title(f"held-out reliability ({len(h.units)} units, {h.frames} frames)", fontsize=9)
-    ax.legend(fontsize=7, loc="upper left")
+    ax.set_xlabel("predicted P(squeak) [-]")
+    ax.set_ylabel("share of frames heard [-]")
+    ax.set_title(
+        f"held-out reliability ({_counted(len(h.units), 'unit')}, {h.frames} frames)", fontsize=9
+    )
+    ax.legend(fontsize=8, loc="best", title="marker area: frames", title_fontsize=8)
     return fig
 
 
@@ -1101,8 +1150,11 @@ def plot_calibration(result: Any, *, fig: Figure | None = None) -> Figure:
     )
     grid = fig.add_gridspec(3, n, height_ratios=[1.5 + 0.05 * rows, 1.0, 1.6])
     for k, name in enumerate(names):
-        plot_posteriors(result, name, ax=fig.add_subplot(grid[0, k]))
+        plot_posteriors(result, name, legend=False, ax=(top := fig.add_subplot(grid[0, k])))
         plot_population(result, name, ax=fig.add_subplot(grid[1, k]))
+        if k == 0:  # the posteriors' legend, once, below the panels: no interval hidden under it
+            handles, labels = top.get_legend_handles_labels()
+            fig.legend(handles, labels, loc="outside lower center", ncols=len(labels), fontsize=8)
     half = max(n // 2, 1)
     plot_reliability(result, ax=fig.add_subplot(grid[2, :half]))
     if n > half:
@@ -1132,15 +1184,22 @@ def _held_out_panel(result: Any, ax: Axes) -> None:
         series.append((label, colour, {u: v[1] for u, v in run.held_out.per_unit.items()}))
     width = 0.8 / len(series)
     x = np.arange(len(units))
+    few = len(units) * len(series) <= 12  # the values are written on the bars
     for k, (label, colour, scores) in enumerate(series):
-        ax.bar(
+        bars = ax.bar(
             x + (k - (len(series) - 1) / 2) * width,
             [scores.get(u, np.nan) for u in units],
             width,
             color=colour,
             label=label,
         )
-    ax.set_xticks(x, units, fontsize=6, rotation=45, ha="right")
-    ax.set_ylabel("Brier score")
+        if few:
+            ax.bar_label(bars, fmt="%.3f", fontsize=8)
+    turn = len(units) > 3
+    ax.set_xticks(
+        x, units, fontsize=8, rotation=30 if turn else 0, ha="right" if turn else "center"
+    )
+    ax.margins(y=0.15)
+    ax.set_ylabel("Brier score [-]")
     ax.set_title("held-out units: Brier score (lower is better)", fontsize=9)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=8)

@@ -166,7 +166,7 @@ def write_report(
     )
     plot_map(
         result_map,
-        title=f"Replay on the speed-load stability map (Fig. 7 style)\n{where}; |speed|, |load|",
+        title=f"Replay on the stability map (Fig. 7 style), either sign of speed and load\n{where}",
         formulation=p.formulation,
         overlay=trajectory,
     ).savefig(paths[1], dpi=grids.dpi)

@@ -27,6 +27,29 @@ HOP_S = 0.01  # the detector's default hop
 POPULATION = ScrewParameters().with_(mu_static=0.265, mu_kinetic=0.195, modal_damping=0.002)
 
 
+# A 3-unit bench of 5-s strokes (consistent formulation) of the documentation's fleet
+# (tools/calibration_example.py), and sampler options that calibrate it in seconds.
+SMALL_BENCH = BenchSettings(
+    units=3,
+    duration_s=5.0,
+    formulation="consistent",
+    seed=3,
+    population={"mu_static": 0.27, "mu_kinetic": 0.19, "modal_damping": 0.002},
+)
+QUICK_SAMPLER = [
+    "--steps",
+    "160",
+    "--first-steps",
+    "100",
+    "--burn",
+    "60",
+    "--hyper-steps",
+    "300",
+    "--hyper-burn",
+    "100",
+]
+
+
 class SyntheticUnit(NamedTuple):
     """A unit's truth and observations."""
 
