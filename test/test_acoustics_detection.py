@@ -254,6 +254,65 @@ def test_a_tone_of_a_few_quantisation_steps_is_still_heard():
         assert [round(e.frequency_hz) for e in d.episodes] == found, amplitude
 
 
+def _bench_room(rest=((0.0, 1.5), (10.5, 12.0)), squeaks=((4.0, 5.0, 2480.0, 0.02),)):
+    """12 s of a room with a fan (1170 Hz), mains hum (100/200/300 Hz) and noise, the drive at
+    rest in `rest` (speed 0) and at 100 rad/s otherwise (ramps of 1.5 s), squeak tones
+    (start, end, Hz, amplitude) added."""
+    t = np.arange(12 * FS) / FS
+    x = 0.003 * np.random.default_rng(5).standard_normal(t.size)
+    room = ((1170.0, 0.01), (100.0, 0.01), (200.0, 0.005), (300.0, 0.003))
+    for f, a in room:
+        x += a * np.sin(2 * np.pi * f * t + f)
+    for start, end, f, a in squeaks:
+        x += a * np.sin(2 * np.pi * f * t) * ((t > start) & (t < end))
+    ts = np.linspace(0.0, 12.0, 1201)
+    moving = np.ones(ts.size)
+    for a, b in rest:
+        moving[(ts >= a) & (ts <= b)] = 0.0
+    speed = 100.0 * np.convolve(moving, np.ones(151) / 151, mode="same")  # 1.5-s ramps
+    speed[moving == 0] = 0.0
+    return x.astype(np.float32), ts, speed, room
+
+
+@pytest.mark.parametrize("rest", [((0.0, 1.5), (10.5, 12.0)), ((10.0, 12.0),)], ids=["both", "end"])
+def test_what_sounds_at_rest_is_background(rest):
+    """The fan and the hum sound at rest (at the start and the end, or only at the end of the
+    log): they are the log's background (their levels within 1 dB), never squeak; a squeak at
+    2480 Hz is found, and so is a squeak at the fan's frequency 15 dB louder than the fan."""
+    squeaks = ((4.0, 5.0, 2480.0, 0.02), (6.0, 7.0, 1170.0, 0.06))
+    x, ts, speed, room = _bench_room(rest, squeaks)
+    d = detect(x, FS, speed_times_s=ts, speed_rad_s=speed)
+    found = [(round(e.frequency_hz), round(e.start_s, 1), round(e.end_s, 1)) for e in d.episodes]
+    assert found == [(2480, 4.0, 5.0), (1170, 6.0, 7.0)]
+    tones = {round(b.frequency_hz): b.level_db for b in d.background}
+    assert set(tones) == {round(f) for f, _ in room}
+    for f, a in room:
+        assert tones[round(f)] == pytest.approx(10 * math.log10(a * a / 2), abs=1.0)
+    assert json.loads(json.dumps(d.as_dict()))["background"][0]["frequency_hz"] > 0
+
+
+def test_without_rest_the_room_is_not_learned():
+    """Never at rest (or no speed at all): nothing is learned as background."""
+    x, ts, speed, _ = _bench_room(rest=())
+    assert detect(x, FS, speed_times_s=ts, speed_rad_s=speed).background == []
+    assert detect(x, FS).background == []
+
+
+def test_the_live_detector_learns_the_background_while_the_drive_rests():
+    """Chunk by chunk (the node): the fan heard during the first 1.5 s at rest is learned, and
+    from then on it is not heard as squeak while the drive moves; the squeak is."""
+    x, ts, speed, _ = _bench_room(rest=((0.0, 1.5),))
+    det = StreamingDetector(DetectorSettings(), FS)
+    heard_at = {}
+    for k in range(0, x.size, 4800):
+        t0 = k / FS
+        det.push(x[k : k + 4800], t0, np.interp([t0, t0 + 0.1], ts, speed), [t0, t0 + 0.1])
+        heard_at[round(t0 + 0.1, 1)] = (det.heard_now, det.frequency_now_hz)
+    assert {round(b.frequency_hz) for b in det.background.tones()} >= {100, 1170}
+    assert not any(h for t, (h, _) in heard_at.items() if 2.0 <= t <= 3.9 or 5.2 <= t <= 12.0)
+    assert heard_at[4.5][0] and heard_at[4.5][1] == pytest.approx(2480.0, rel=0.01)
+
+
 def test_detection_is_json_safe():
     t = np.linspace(0.0, 2.0, 201)
     sq = np.where((t >= 0.5) & (t < 1.5), 3000.0, np.nan)

@@ -476,6 +476,7 @@ class Heard:
             "sound_share": self.sound_share,
             "detector": asdict(self.detector),
             "episodes": [e.as_dict() for e in self.detection.episodes],
+            "background": [t.as_dict() for t in self.detection.background],
             "agreement": self.agreement.as_dict(),
             "band_hz": list(self.band_hz),
             "collar_s": COLLAR_S,

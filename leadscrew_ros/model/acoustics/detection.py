@@ -32,11 +32,12 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from .background import BackgroundLearner, BackgroundTone
 from .settings import DetectorSettings
 from .tonality import ToneAnalyzer, hann, short_time_psd
 
@@ -88,6 +89,8 @@ class Episode:
         MOSQITO is missing.
     order : int or None
         The order it followed (rejected episodes only).
+    background_hz : float or None
+        The background tone it was (rejected episodes only; `background`) [Hz].
     track_times_s : numpy.ndarray
         Its frames' centres [s]; not in `as_dict`.
     track_hz : numpy.ndarray
@@ -102,6 +105,7 @@ class Episode:
     level_db: float
     loudness_sone: float | None = None
     order: int | None = None
+    background_hz: float | None = None
     track_times_s: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
     track_hz: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
@@ -126,6 +130,7 @@ class Episode:
             level_db=_finite_or_none(self.level_db),
             loudness_sone=_finite_or_none(self.loudness_sone),
             order=self.order,
+            background_hz=self.background_hz,
         )
 
 
@@ -155,6 +160,8 @@ class Detection:
     usable : numpy.ndarray of bool, optional
         Per frame: it holds usable sound (no non-finite sample, not constant or digitally
         silent); None: all.
+    background : list of BackgroundTone
+        The tones that sounded while the drive was at rest (`background`).
     """
 
     frame_times_s: np.ndarray
@@ -166,6 +173,7 @@ class Detection:
     warnings: list[str]
     rejected: list[Episode] = field(default_factory=list)
     usable: np.ndarray | None = None
+    background: list[BackgroundTone] = field(default_factory=list)
 
     @property
     def unusable_s(self) -> float:
@@ -216,6 +224,7 @@ class Detection:
             scale=self.scale,
             warnings=list(self.warnings),
             unusable_s=self.unusable_s,
+            background=[t.as_dict() for t in self.background],
         )
 
 
@@ -308,6 +317,7 @@ class _Track:
         "last_power",
         "checked_at",
         "order_now",
+        "level_sum",
     )
 
     def __init__(
@@ -323,6 +333,7 @@ class _Track:
         self.last_power = power
         self.checked_at = 0  # frames when `order_now` was last decided
         self.order_now: int | None = None
+        self.level_sum = 0.0  # of 10 lg(power) over its frames: its mean level
         self.add(i, f, f1, tnr, pr, power)
 
     def add(self, i: int, f: float, f1: float, tnr: float, pr: float, power: float) -> None:
@@ -339,6 +350,7 @@ class _Track:
             self.pr = max(self.pr, pr)
         self.power = max(self.power, power)
         self.last_power = power
+        self.level_sum += 10.0 * math.log10(max(power, 1e-300))
 
 
 class StreamingDetector:
@@ -387,6 +399,15 @@ class StreamingDetector:
         #: (`detect` keeps it; the node's detector does not: bounded memory)
         self.usable_log: bytearray | None = None
         self._reset(_check_rate(sample_rate_hz))
+        #: the tones heard at rest (kept across segments and rate changes)
+        self.background = BackgroundLearner(
+            1.0 / settings.frame_s,
+            settings.track_tolerance,
+            settings.background_share,
+            settings.background_margin_db,
+            self._level_offset_db,
+        )
+        self._rest_frames = 0  # consecutive frames at rest
 
     # -- state -------------------------------------------------------------------------------
     def _reset(self, rate: float) -> None:
@@ -442,6 +463,11 @@ class StreamingDetector:
         self._usable_now = True
         if self.usable_log is not None:
             self.usable_log = bytearray()
+
+    @property
+    def _level_offset_db(self) -> float:
+        """dB SPL of a mean square of 1 when calibrated, else 0 (dB re full scale)."""
+        return 0.0 if self.scale_pa is None else 20 * math.log10(self.scale_pa / P_REF_PA)
 
     def _warn(self, text: str) -> None:
         if not self.warnings or self.warnings[-1] != text:
@@ -678,15 +704,25 @@ class StreamingDetector:
         else:
             dropped = np.zeros(i1 - i0, bool)
         self._note_usable(i0, dropped, ~dropped & (variance <= SILENT_FACTOR * rounding))
-        prominent = cand.prominent & ~dropped[:, None]
+        level_db = 10 * np.log10(np.maximum(cand.power, 1e-300)) + self._level_offset_db
+        # the background learned so far is not followed (a louder tone at its frequency is)
+        background = self.background.covers(cand.frequency_hz, level_db)
+        prominent = cand.prominent & ~dropped[:, None] & ~background
+        tonal = cand.tonal & ~dropped[:, None]
         frame_t = self.frame_time(np.arange(i0, i1))
         if self._speed_t.size:
             f1 = np.abs(np.interp(frame_t, self._speed_t, self._speed_v)) / (2 * np.pi)
         else:
             f1 = np.full(frame_t.shape, np.nan)
         has = prominent.any(axis=1)
+        rest = 2 * np.pi * f1 < self.settings.motor_off_rad_s  # False where the speed is unknown
+        rest_run = max(int(round(self.settings.motor_off_min_s / self.hop_s)), 1)
         closed: list[Episode] = []
         for j in range(i1 - i0):
+            self._rest_frames = self._rest_frames + 1 if rest[j] and not dropped[j] else 0
+            if self._rest_frames >= rest_run:
+                tones = np.flatnonzero(tonal[j])
+                self.background.add(cand.frequency_hz[j, tones], cand.power[j, tones])
             if dropped[j]:
                 self._dropped_run += 1
                 if self._dropped_run <= self._max_dropped:  # a glitch: the tracks hold
@@ -814,8 +850,18 @@ class StreamingDetector:
             ep.order = k
             self.rejected.append(ep)
             return None
+        tone = self._background_tone(tr)
+        if tone is not None:
+            ep.background_hz = tone.frequency_hz
+            self.rejected.append(ep)
+            return None
         ep.loudness_sone = self._loudness(start, end)
         return ep
+
+    def _background_tone(self, tr: _Track) -> BackgroundTone | None:
+        """The background tone the track is (`background.BackgroundLearner.match`), or None."""
+        level = tr.level_sum / len(tr.hz) + self._level_offset_db
+        return self.background.match(float(np.median(tr.hz)), level)
 
     def _loudness(self, start: float, end: float) -> float | None:
         s = self.settings
@@ -875,6 +921,8 @@ class StreamingDetector:
             n = len(tr.hz)  # re-decided as the track grows by 1/8
             if n >= tr.checked_at + max(5, tr.checked_at // 8):
                 tr.order_now, tr.checked_at = self._follows_order(tr), n
+                if tr.order_now is None and self._background_tone(tr) is not None:
+                    tr.order_now = 0  # background: not heard as squeak either
             if tr.order_now is None:
                 best = tr
         self._heard_now = best is not None
@@ -927,6 +975,8 @@ def detect(
     if speed_rad_s is not None and speed_times_s is None and np.ndim(speed_rad_s) > 0:
         det._warn("speed_rad_s without speed_times_s: ignored")
         speed_rad_s = None
+    if speed_times_s is not None and speed_rad_s is not None:
+        _learn_at_rest(det, samples, t0_s, speed_times_s, speed_rad_s)
     episodes = det.push(samples, t0_s, speed_rad_s, speed_times_s)
     n_samples = det._n_samples
     episodes += det.flush()
@@ -959,7 +1009,40 @@ def detect(
         warnings=warnings,
         rejected=list(det.rejected),
         usable=usable,
+        background=det.background.tones(),
     )
+
+
+def _learn_at_rest(
+    det: StreamingDetector, samples: Any, t0_s: float, speed_times_s: Any, speed_rad_s: Any
+) -> None:
+    """Learn `det`'s background from every stretch of the recording where the drive rests for
+    at least `motor_off_min_s` (its end too) before the detection runs: a fan heard first
+    when the drive already moves is then known as background."""
+    try:
+        t = np.asarray(speed_times_s, dtype=float).reshape(-1)
+        v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
+        x = det._as_samples(samples)
+        t0 = float(t0_s)
+    except (TypeError, ValueError):
+        return  # the main pass says what is wrong with them
+    s = det.settings
+    if t.size != v.size or t.size < 2 or x.size < det.frame_len:
+        return
+    rest = np.concatenate([[False], np.isfinite(v) & (v < s.motor_off_rad_s), [False]])
+    edges = np.flatnonzero(rest[1:] != rest[:-1])
+    learner = replace(s, motor_off_min_s=0.0)  # each stretch is known to rest long enough
+    rate = det.sample_rate_hz
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        start, end = t[a], t[b - 1]
+        if end - start < s.motor_off_min_s:
+            continue
+        i, j = max(int(math.ceil((start - t0) * rate)), 0), min(int((end - t0) * rate), x.size)
+        if j - i < det.frame_len:
+            continue
+        pre = StreamingDetector(learner, rate, det.scale_pa)
+        pre.background = det.background  # learns into the main detector's background
+        pre.push(x[i:j], t0 + i / rate, 0.0)
 
 
 def frames_heard(

@@ -120,6 +120,33 @@ class DetectorSettings:
         1.0,
         lo_open=True,
     )
+    motor_off_rad_s: float = setting(
+        1.0,
+        "rad/s",
+        "the drive is at rest below this |speed|: what sounds then is background "
+        "(model.acoustics.background)",
+        0.0,
+        1e4,
+    )
+    motor_off_min_s: float = setting(
+        0.5, "s", "rest this long before its sound is learned as background", 0.0, 60.0
+    )
+    background_share: float = setting(
+        0.5,
+        "1",
+        "a tone held by at least this share of the rest frames is a background tone",
+        0.0,
+        1.0,
+        lo_open=True,
+    )
+    background_margin_db: float = setting(
+        6.0,
+        "dB",
+        "a tone at a background tone's frequency is squeak only when its mean level is "
+        "more than this above the background tone's",
+        0.0,
+        60.0,
+    )
 
     def __post_init__(self) -> None:
         check(self)

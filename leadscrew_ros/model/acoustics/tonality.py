@@ -162,6 +162,7 @@ class ToneCandidates:
     pr_db: np.ndarray  #: prominence ratio [dB]; nan where the upper band passes Nyquist
     valid: np.ndarray  #: a peak that no stronger one inside its critical band suppresses
     prominent: np.ndarray  #: valid, TNR or PR at or above its limit, not a harmonic
+    tonal: np.ndarray  #: valid, TNR or PR at or above its limit (a harmonic too)
 
 
 class ToneAnalyzer:
@@ -247,7 +248,7 @@ class ToneAnalyzer:
         n_peaks = min(self.max_peaks, max(self.k_hi - self.k_lo + 1, 0))
         if n_frames == 0 or n_peaks == 0:
             z = np.zeros((n_frames, 0))
-            return ToneCandidates(z, z, z, z, z.astype(bool), z.astype(bool))
+            return ToneCandidates(z, z, z, z, z.astype(bool), z.astype(bool), z.astype(bool))
         p = psd[:, : self.used_bins]
         cum = np.zeros((n_frames, self.used_bins + 1))
         np.cumsum(p, axis=1, dtype=np.float64, out=cum[:, 1:])
@@ -315,6 +316,7 @@ class ToneAnalyzer:
         inside = (fi >= self.f1[rel][:, None, :]) & (fi <= self.f2[rel][:, None, :])
         valid &= ~np.any(valid[:, :, None] & stronger & inside, axis=1)
         prominent = valid & ((tnr >= self.tnr_limit[rel]) | (pr >= self.pr_limit[rel]))
+        tonal = prominent.copy()
         if self.max_harmonic >= 2:
             ratio = fj / np.maximum(fi, _TINY)
             m = np.rint(ratio)
@@ -325,4 +327,4 @@ class ToneAnalyzer:
                 & (tone[:, None, :] * m**2 <= 2.25 * tone[:, :, None])
             )
             prominent &= ~np.any(prominent[:, :, None] & harmonic, axis=1)
-        return ToneCandidates(freq, tone, tnr, pr, valid, prominent)
+        return ToneCandidates(freq, tone, tnr, pr, valid, prominent, tonal)

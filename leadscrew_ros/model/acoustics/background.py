@@ -1,0 +1,178 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The background of a bench: the tones that sound while the drive does not move.
+
+A fan, mains hum and its harmonics, a neighbouring machine: whatever is prominent while the
+drive is at rest is not squeak. `BackgroundLearner` collects the prominent tone candidates of
+the detector's frames taken at rest (|speed| below `DetectorSettings.motor_off_rad_s` for at
+least `motor_off_min_s`), groups them by frequency (within `DetectorSettings.track_tolerance`
+or one and a half bins, whichever is wider) and keeps, per tone, how many rest frames held it
+and its mean level. A tone held by at least `background_share` of the rest frames is a
+background tone (`tones`). A track of the detector is background (`match`) when its median
+frequency is within that tolerance of a background tone and its mean level is not more than
+`background_margin_db` above the tone's: a squeak at the fan's frequency, clearly louder than
+the fan, is still squeak.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+_MAX_TONES = 256  # tone groups kept (the rarest are dropped first): bounded memory
+_TINY = 1e-300
+
+
+@dataclass(frozen=True)
+class BackgroundTone:
+    """One tone of the background.
+
+    Attributes
+    ----------
+    frequency_hz : float
+        Its mean frequency [Hz].
+    level_db : float
+        Its mean level over the rest frames holding it: dB SPL re 20 uPa when calibrated, else
+        dB re full scale (mean square re 1).
+    share : float
+        The share of the rest frames that held it.
+    """
+
+    frequency_hz: float
+    level_db: float
+    share: float
+
+    def as_dict(self) -> dict[str, float]:
+        """{frequency_hz, level_db, share} (JSON-ready)."""
+        return {
+            "frequency_hz": self.frequency_hz,
+            "level_db": self.level_db,
+            "share": self.share,
+        }
+
+
+class BackgroundLearner:
+    """Tones of the frames taken at rest, grouped by frequency (module notes).
+
+    Parameters
+    ----------
+    bin_hz : float
+        The detector's frequency resolution [Hz] (1 / frame_s).
+    tolerance : float
+        Relative frequency tolerance of a group.
+    share : float
+        Share of the rest frames a background tone is held by at least.
+    margin_db : float
+        How far above a background tone's level a tone at its frequency is not background.
+    level_offset_db : float
+        Added to 10 lg(power) to give the levels (the calibration: 20 lg(scale / 20 uPa)).
+    """
+
+    def __init__(
+        self,
+        bin_hz: float,
+        tolerance: float,
+        share: float,
+        margin_db: float,
+        level_offset_db: float = 0.0,
+    ) -> None:
+        self.bin_hz, self.tolerance = bin_hz, tolerance
+        self.share, self.margin_db, self.level_offset_db = share, margin_db, level_offset_db
+        self.frames = 0  #: rest frames seen
+        # per group: [sum of frequencies, frames holding it, sum of levels (dB)]
+        self._groups = np.zeros((0, 3))
+        self._tones: list[BackgroundTone] | None = None  # `tones`, until the next frame
+
+    def _width_hz(self, f: np.ndarray | float) -> np.ndarray:
+        return np.maximum(self.tolerance * np.asarray(f, dtype=float), 1.5 * self.bin_hz)
+
+    def add(self, frequency_hz: np.ndarray, power: np.ndarray) -> None:
+        """One rest frame's prominent tone candidates.
+
+        Parameters
+        ----------
+        frequency_hz : numpy.ndarray
+            Their frequencies [Hz].
+        power : numpy.ndarray
+            Their mean squares (full scale^2).
+        """
+        self.frames += 1
+        g = self._groups
+        for f, p in zip(np.asarray(frequency_hz, float), np.asarray(power, float), strict=True):
+            level = 10.0 * math.log10(max(p, _TINY)) + self.level_offset_db
+            centre = g[:, 0] / g[:, 1] if g.size else np.zeros(0)
+            near = np.abs(centre - f) <= self._width_hz(f)
+            if near.any():
+                k = int(np.argmin(np.where(near, np.abs(centre - f), np.inf)))
+                g[k] += (f, 1.0, level)
+            else:
+                g = np.vstack([g, [f, 1.0, level]])
+        if g.shape[0] > _MAX_TONES:
+            g = g[np.argsort(-g[:, 1], kind="stable")[:_MAX_TONES]]
+        self._groups, self._tones = g, None
+
+    def tones(self) -> list[BackgroundTone]:
+        """The background tones learned so far, by frequency.
+
+        Returns
+        -------
+        list of BackgroundTone
+        """
+        if not self.frames:
+            return []
+        if self._tones is not None:
+            return self._tones
+        g = self._groups
+        held = g[:, 1] >= self.share * self.frames
+        self._tones = sorted(
+            (
+                BackgroundTone(float(s / n), float(lv / n), float(n / self.frames))
+                for s, n, lv in g[held]
+            ),
+            key=lambda t: t.frequency_hz,
+        )
+        return self._tones
+
+    def covers(self, frequency_hz: np.ndarray, level_db: np.ndarray) -> np.ndarray:
+        """Which tones (any shape) are a background tone: at its frequency, not more than
+        `margin_db` above its level (vectorised `match`).
+
+        Parameters
+        ----------
+        frequency_hz, level_db : numpy.ndarray
+            The tones' frequencies [Hz] and levels, one shape.
+
+        Returns
+        -------
+        numpy.ndarray of bool
+        """
+        f = np.asarray(frequency_hz, dtype=float)
+        tones = self.tones()
+        if not tones:
+            return np.zeros(f.shape, bool)
+        fb = np.array([t.frequency_hz for t in tones])
+        lb = np.array([t.level_db for t in tones])
+        near = np.abs(f[..., None] - fb) <= self._width_hz(f)[..., None]
+        quiet = np.asarray(level_db, dtype=float)[..., None] <= lb + self.margin_db
+        return np.any(near & quiet, axis=-1)
+
+    def match(self, frequency_hz: float, level_db: float) -> BackgroundTone | None:
+        """The background tone a tone of this frequency and (mean) level is, or None.
+
+        Parameters
+        ----------
+        frequency_hz : float
+            The tone's (median) frequency [Hz].
+        level_db : float
+            Its mean level, in the levels' unit.
+
+        Returns
+        -------
+        BackgroundTone or None
+        """
+        for tone in self.tones():
+            if abs(tone.frequency_hz - frequency_hz) <= float(self._width_hz(frequency_hz)):
+                if level_db <= tone.level_db + self.margin_db:
+                    return tone
+        return None
