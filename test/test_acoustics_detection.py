@@ -313,6 +313,54 @@ def test_the_live_detector_learns_the_background_while_the_drive_rests():
     assert heard_at[4.5][0] and heard_at[4.5][1] == pytest.approx(2480.0, rel=0.01)
 
 
+def _geared_drive(ratios=((37.3, 0.01), (74.6, 0.005), (373.0, 0.003)), hold_only=False):
+    """12 s: rest, a ramp to 100 rad/s (1-3 s), a hold, a ramp down (9-11 s), rest; a geared
+    motor's tones at `ratios` x the screw's rotation frequency (not whole: a worm gear of
+    37.3, its 2nd order, a 10-segment commutator) while it turns; squeaks at 2480 Hz (4-5 s,
+    the hold) and 1000 Hz (9.3-10.3 s, the ramp down); noise. `hold_only`: the log starts in
+    the hold (no ramp, no rest)."""
+    t = np.arange(12 * FS) / FS
+    knots = ([0, 12], [100, 100]) if hold_only else ([0, 1, 3, 9, 11, 12], [0, 0, 100, 100, 0, 0])
+    ts = np.linspace(0.0, 12.0, 1201)
+    speed = np.interp(ts, *knots)
+    turns = np.cumsum(np.interp(t, ts, speed)) / FS  # screw angle [rad]
+    x = 0.003 * np.random.default_rng(9).standard_normal(t.size)
+    for r, a in ratios:
+        x += a * np.sin(r * turns) * (np.interp(t, ts, speed) > 0.5)
+    for start, end, f in ((4.0, 5.0, 2480.0), (9.3, 10.3, 1000.0)):
+        x += 0.02 * np.sin(2 * np.pi * f * t) * ((t > start) & (t < end))
+    return x.astype(np.float32), ts, speed
+
+
+def test_drive_noise_at_any_ratio_is_not_squeak():
+    """A worm-geared motor at 37.3 x the screw's speed, its 2nd order and its commutator
+    (373 x): followed as they sweep and judged whole, they are drive noise (they were cut into
+    +-2 % pieces, not whole orders, 108 false episodes on a bench); their ratios are learned
+    (`drive_orders`); the squeaks during the hold and the ramp are found."""
+    x, ts, speed = _geared_drive()
+    d = detect(x, FS, speed_times_s=ts, speed_rad_s=speed)
+    found = [(round(e.frequency_hz), round(e.start_s, 1), round(e.end_s, 1)) for e in d.episodes]
+    assert found == [(2480, 4.0, 5.0), (1000, 9.3, 10.3)]
+    learned = [o.ratio for o in d.drive_orders]
+    for r in (37.3, 373.0):  # the 2nd order is a harmonic of the 1st in every frame: not a track
+        assert any(abs(q / r - 1) < 0.005 for q in learned), (r, learned)
+    assert all(e.drive_ratio is not None for e in d.rejected)
+
+
+def test_drive_noise_at_constant_speed_by_its_known_ratios():
+    """The log starts in the hold: nothing sweeps, so nothing tells the drive from a squeak
+    by its motion; with the drive's ratios given (`drive_ratios`, the CLI's --drive-ratio)
+    its tones are drive noise, without them they are kept (37.3 is no low whole order)."""
+    x, ts, speed = _geared_drive(hold_only=True)
+    given = DetectorSettings(drive_ratios="37.3, 74.6; 373")
+    d = detect(x, FS, speed_times_s=ts, speed_rad_s=speed, settings=given)
+    assert [round(e.frequency_hz) for e in d.episodes] == [2480, 1000]
+    d = detect(x, FS, speed_times_s=ts, speed_rad_s=speed)
+    assert {round(e.frequency_hz / (100 / (2 * np.pi)), 1) for e in d.episodes} >= {37.3, 373.0}
+    with pytest.raises(ValueError, match="drive_ratios: 'x' is not a positive number"):
+        DetectorSettings(drive_ratios="37.3, x")
+
+
 def test_detection_is_json_safe():
     t = np.linspace(0.0, 2.0, 201)
     sq = np.where((t >= 0.5) & (t < 1.5), 3000.0, np.nan)

@@ -511,11 +511,15 @@ def test_detector_settings_from_the_params_file_and_the_command_line(paper_bench
         (["--params-file", str(params)], 400.0),
         (["--listen-param", "listen.f_lo_hz=400"], 400.0),
         (["--params-file", str(params), "--listen-param", "f_lo_hz=100"], 100.0),
+        (["--listen-param", "f_lo_hz=400", "--drive-ratio", "37.3", "--drive-ratio", "373"], 400.0),
     ):
         out = tmp_path / f"o{len(extra)}{f_lo:g}"
         assert main(["replay", log, "--out", str(out), *argv, *extra]) == 0
         heard = _summary(out)["heard"]
         assert heard["detector"]["f_lo_hz"] == f_lo and heard["band_hz"][0] == f_lo
+        assert heard["detector"]["drive_ratios"] == (
+            "37.3, 373" if "--drive-ratio" in extra else ""
+        )
         found = {round(e["frequency_hz"]) for e in heard["episodes"]}
         assert found == ({898} if f_lo == 400.0 else both)
 
@@ -528,6 +532,7 @@ def test_detector_settings_from_the_params_file_and_the_command_line(paper_bench
         ("frame_s", "--listen-param: expected NAME=VALUE, got 'frame_s'"),
         ("max_peaks=2.5", "--listen-param max_peaks: '2.5' is not an integer"),
         ("hop_s=x", "--listen-param hop_s: 'x' is not a number"),
+        ("drive_ratios=37.3;x", "listen.drive_ratios: 'x' is not a positive number"),
         ("hop_s=5", "listen.hop_s = 5 is out of range, allowed [0.001, 0.5] s"),
     ],
 )

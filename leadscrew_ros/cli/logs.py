@@ -70,7 +70,10 @@ LISTEN_PREFIX = "listen."
 def _detector_value(name: str, value: Any, where: str) -> Any:
     """A detector setting's value from a parameters file or `--listen-param` text, of the
     field's type (a whole number for a float setting is that float, as the node takes it)."""
-    kind: type = int if isinstance(DETECTOR_SETTINGS[name].default, int) else float
+    default = DETECTOR_SETTINGS[name].default
+    if isinstance(default, str):
+        return str(value)
+    kind: type = int if isinstance(default, int) else float
     if isinstance(value, str):
         try:
             return kind(value.strip())
@@ -85,7 +88,8 @@ def _detector_value(name: str, value: Any, where: str) -> Any:
 
 def detector_settings(args: argparse.Namespace) -> DetectorSettings:
     """DetectorSettings: defaults <- the `listen.*` detector parameters of --params-file (as
-    the node reads them) <- --listen-param NAME=VALUE (repeatable; `listen.` optional).
+    the node reads them) <- --listen-param NAME=VALUE (repeatable; `listen.` optional) <-
+    --drive-ratio R (repeatable: `drive_ratios`).
 
     Raises
     ------
@@ -109,6 +113,9 @@ def detector_settings(args: argparse.Namespace) -> DetectorSettings:
                 + ", ".join(DETECTOR_SETTINGS)
             )
         values[name] = _detector_value(name, text, "--listen-param")
+    ratios = getattr(args, "drive_ratio", None) or []
+    if ratios:
+        values["drive_ratios"] = ", ".join(f"{r:g}" for r in ratios)
     try:
         return DetectorSettings(**values)
     except (TypeError, ValueError) as exc:
@@ -655,6 +662,15 @@ def add_audio_options(p: argparse.ArgumentParser) -> None:
         "also read from --params-file): "
         + ", ".join(DETECTOR_SETTINGS)
         + " (doc: Reference, parameters)",
+    )
+    g.add_argument(
+        "--drive-ratio",
+        type=finite,
+        action="append",
+        default=[],
+        metavar="R",
+        help="a known ratio of drive noise (motor, gear, commutator) to the screw's rotation "
+        "frequency (repeatable; listen.drive_ratios): for logs too short to learn them",
     )
     g.add_argument(
         "--no-audio", action="store_true", help="ignore the log's sound (no heard vs predicted)"

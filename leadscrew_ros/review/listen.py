@@ -477,6 +477,7 @@ class Heard:
             "detector": asdict(self.detector),
             "episodes": [e.as_dict() for e in self.detection.episodes],
             "background": [t.as_dict() for t in self.detection.background],
+            "drive_orders": [o.as_dict() for o in self.detection.drive_orders],
             "agreement": self.agreement.as_dict(),
             "band_hz": list(self.band_hz),
             "collar_s": COLLAR_S,

@@ -10,18 +10,24 @@ candidate for `max_gap_s` or more is closed; shorter gaps are bridged. A closed 
 least `min_duration_s` is an episode, from half a hop before its first frame to half a hop after
 its last (frame times are frame centres).
 
-Motor and gear noise follows the shaft orders, a squeak locks to a structural mode, so each
-episode is tested once it is closed, with the shaft frequency f1 = |speed| / 2 pi interpolated
-at its frames: k = round(median(f / f1)), and the episode is on order k when k is in
-1..`max_order` and `order_share` of its frames are within `order_tolerance` of k f1. Whether it
-*follows* the order is judged from the relative rms deviations of its frequencies from k f1
-(r_order) and from their median (r_const), with a floor of a tenth of a frequency bin against
-the frequency estimate's own scatter: r_const >= 3 r_order means the tone moved with the speed
-(rejected as motor/gear noise); r_order >= 3 r_const means it stayed while the speed moved
-(kept); otherwise the speed hardly changed and frequency alone decides: rejected when
-k <= 0.25 / `order_tolerance` (12 at 2 %: the tolerance windows of neighbouring orders cover at
-most half of the frequency axis, so a constant tone lies on order k by chance only at the odds of
-a coin toss or less), kept above, where by frequency alone it cannot be told from a squeak.
+Drive noise (motor, gear, commutator) moves with the speed at a fixed ratio to the screw's
+rotation frequency f1 = |speed| / 2 pi, whatever the ratio (a worm gear of 37.3, its orders,
+373 for a commutator); a squeak locks to a structural mode. A track is followed as the speed
+moves: a frame's tone joins the track nearest either to its running median or to where its
+speed ratio (the median of its recent f / f1) puts it now, so a sweep stays one track. Each
+track is judged whole once it is closed, with f1 interpolated at its frames: r = median(f / f1)
+in [`min_drive_ratio`, `max_drive_ratio`], `order_share` of its frames within `order_tolerance`
+of r f1. Whether it *follows* the speed is judged from the relative rms deviations of its
+frequencies from r f1 (r_ratio) and from their median (r_const), with a floor of a tenth of a
+frequency bin against the frequency estimate's own scatter: r_const >= 3 r_ratio means the tone
+moved with the speed (rejected as drive noise; r is learned as one of the drive's ratios,
+`drive_orders`); r_ratio >= 3 r_const means it stayed while the speed moved (kept); otherwise
+the speed hardly changed: rejected at one of the drive's ratios (learned, or given:
+`drive_ratios`), or at a whole order k <= 0.25 / `order_tolerance` (12 at 2 %: the tolerance
+windows of neighbouring orders cover at most half of the frequency axis, so a constant tone lies
+on order k by chance only at the odds of a coin toss or less), kept otherwise, where by
+frequency alone it cannot be told from a squeak. Tones of the background (what sounds while
+the drive rests: `background`) are not followed unless clearly louder.
 
 `StreamingDetector` is the core: it frames the samples as they come, analyses each frame once,
 and runs the tracks frame by frame with bounded memory. `detect` pushes the whole signal into
@@ -64,6 +70,29 @@ def _finite_or_none(value: float | None) -> float | None:
     return None if value is None or not math.isfinite(value) else float(value)
 
 
+@dataclass(frozen=True)
+class DriveOrder:
+    """A ratio at which the drive was heard (tracks that moved with the speed).
+
+    Attributes
+    ----------
+    ratio : float
+        Frequency over the screw's rotation frequency |speed| / 2 pi.
+    level_db : float
+        Mean level of its tracks (dB SPL when calibrated, else dB re full scale).
+    tracks : int
+        Tracks heard at it.
+    """
+
+    ratio: float
+    level_db: float
+    tracks: int
+
+    def as_dict(self) -> dict[str, float]:
+        """{ratio, level_db, tracks} (JSON-ready)."""
+        return {"ratio": self.ratio, "level_db": self.level_db, "tracks": self.tracks}
+
+
 @dataclass
 class Episode:
     """One squeak episode (or, in `Detection.rejected`, a tone that followed the orders).
@@ -88,7 +117,11 @@ class Episode:
         episode, or its last `loudness_max_s` [sone]; None when uncalibrated, disabled or
         MOSQITO is missing.
     order : int or None
-        The order it followed (rejected episodes only).
+        The whole order it followed (rejected episodes only; None at a ratio that is not
+        whole).
+    drive_ratio : float or None
+        The ratio of its frequency to the screw's rotation frequency it followed (rejected
+        episodes only: drive noise).
     background_hz : float or None
         The background tone it was (rejected episodes only; `background`) [Hz].
     track_times_s : numpy.ndarray
@@ -105,6 +138,7 @@ class Episode:
     level_db: float
     loudness_sone: float | None = None
     order: int | None = None
+    drive_ratio: float | None = None
     background_hz: float | None = None
     track_times_s: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
     track_hz: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
@@ -130,6 +164,7 @@ class Episode:
             level_db=_finite_or_none(self.level_db),
             loudness_sone=_finite_or_none(self.loudness_sone),
             order=self.order,
+            drive_ratio=self.drive_ratio,
             background_hz=self.background_hz,
         )
 
@@ -162,6 +197,8 @@ class Detection:
         silent); None: all.
     background : list of BackgroundTone
         The tones that sounded while the drive was at rest (`background`).
+    drive_orders : list of DriveOrder
+        The speed ratios the drive was heard at.
     """
 
     frame_times_s: np.ndarray
@@ -174,6 +211,7 @@ class Detection:
     rejected: list[Episode] = field(default_factory=list)
     usable: np.ndarray | None = None
     background: list[BackgroundTone] = field(default_factory=list)
+    drive_orders: list[DriveOrder] = field(default_factory=list)
 
     @property
     def unusable_s(self) -> float:
@@ -225,6 +263,7 @@ class Detection:
             warnings=list(self.warnings),
             unusable_s=self.unusable_s,
             background=[t.as_dict() for t in self.background],
+            drive_orders=[d.as_dict() for d in self.drive_orders],
         )
 
 
@@ -318,6 +357,8 @@ class _Track:
         "checked_at",
         "order_now",
         "level_sum",
+        "ratios",
+        "ratio",
     )
 
     def __init__(
@@ -332,8 +373,10 @@ class _Track:
         self.tnr = self.pr = self.power = -math.inf
         self.last_power = power
         self.checked_at = 0  # frames when `order_now` was last decided
-        self.order_now: int | None = None
+        self.order_now: float | None = None
         self.level_sum = 0.0  # of 10 lg(power) over its frames: its mean level
+        self.ratios: deque[float] = deque(maxlen=window)  # recent f / f1
+        self.ratio = math.nan  # their median: where the track goes when the speed moves
         self.add(i, f, f1, tnr, pr, power)
 
     def add(self, i: int, f: float, f1: float, tnr: float, pr: float, power: float) -> None:
@@ -351,6 +394,19 @@ class _Track:
         self.power = max(self.power, power)
         self.last_power = power
         self.level_sum += 10.0 * math.log10(max(power, 1e-300))
+        if f1 > 0:  # (nan compares False)
+            self.ratios.append(f / f1)
+            q = sorted(self.ratios)
+            m = len(q)
+            self.ratio = q[m // 2] if m % 2 else 0.5 * (q[m // 2 - 1] + q[m // 2])
+
+    def distance(self, f: float, f1: float) -> float:
+        """Relative distance of a frame's tone at `f` from where this track is: its running
+        median, or where its speed ratio puts it at shaft frequency `f1` (a sweep)."""
+        d = abs(f / self.median - 1.0)
+        if f1 > 0 and self.ratio == self.ratio:
+            d = min(d, abs(f / (self.ratio * f1) - 1.0))
+        return d
 
 
 class StreamingDetector:
@@ -408,6 +464,8 @@ class StreamingDetector:
             self._level_offset_db,
         )
         self._rest_frames = 0  # consecutive frames at rest
+        # the drive's speed ratios heard: [sum of ratios, tracks, sum of levels (dB)]
+        self._ratio_groups = np.zeros((0, 3))
 
     # -- state -------------------------------------------------------------------------------
     def _reset(self, rate: float) -> None:
@@ -785,7 +843,7 @@ class StreamingDetector:
             for tr in self._tracks:
                 if tr.last == i:
                     continue
-                d = abs(f / tr.median - 1.0)
+                d = tr.distance(f, f1)
                 if d <= best_d:
                     best, best_d = tr, d
             if best is None:
@@ -796,10 +854,11 @@ class StreamingDetector:
                 best.add(i, f, f1, tnr, pr, power)
         return closed
 
-    def _follows_order(self, tr: _Track) -> int | None:
-        """The order k the track follows (rejected), else None; see the module notes."""
+    def _follows_drive(self, tr: _Track) -> float | None:
+        """The speed ratio r of the drive noise the track is (rejected), else None; see the
+        module notes."""
         s = self.settings
-        if s.order_tolerance <= 0 or s.max_order < 1:
+        if s.order_tolerance <= 0:
             return None
         f = np.asarray(tr.hz)
         f1 = np.asarray(tr.f1)
@@ -807,20 +866,59 @@ class StreamingDetector:
         if ok.sum() * 2 < f.size:
             return None
         f, f1 = f[ok], f1[ok]
-        k = int(np.rint(np.median(f / f1)))
-        if not 1 <= k <= s.max_order:
+        r = float(np.median(f / f1))
+        if not s.min_drive_ratio <= r <= s.max_drive_ratio:
             return None
-        share = float(np.mean(np.abs(f / (k * f1) - 1.0) <= s.order_tolerance))
+        share = float(np.mean(np.abs(f / (r * f1) - 1.0) <= s.order_tolerance))
         if share < s.order_share:
             return None
-        r_order = float(np.sqrt(np.mean((f / (k * f1) - 1.0) ** 2)))
+        r_ratio = float(np.sqrt(np.mean((f / (r * f1) - 1.0) ** 2)))
         r_const = float(np.sqrt(np.mean((f / np.median(f) - 1.0) ** 2)))
         floor = 0.1 * self.analyzer.df / float(np.median(f))  # a tenth of a bin
-        if r_const >= max(3 * r_order, floor):  # the tone moved with the speed
-            return k
-        if r_order >= max(3 * r_const, floor):  # it stayed while the speed moved
+        if r_const >= max(3 * r_ratio, floor):  # the tone moved with the speed
+            self._learn_ratio(r, tr)
+            return r
+        if r_ratio >= max(3 * r_const, floor):  # it stayed while the speed moved
             return None
-        return k if k <= 0.25 / s.order_tolerance else None  # by frequency alone
+        # the speed hardly changed: the drive's ratios known or learned, else a low whole order
+        if self._known_ratio(r):
+            return r
+        k = round(r)
+        whole = k >= 1 and abs(r / k - 1.0) <= s.order_tolerance
+        return r if whole and k <= 0.25 / s.order_tolerance else None
+
+    def _learn_ratio(self, r: float, tr: _Track) -> None:
+        """Count a ratio the drive was heard at (moving with the speed), with its level."""
+        level = tr.level_sum / len(tr.hz) + self._level_offset_db
+        g = self._ratio_groups
+        if g.size:
+            centre = g[:, 0] / g[:, 1]
+            k = int(np.argmin(np.abs(centre / r - 1.0)))
+            if abs(centre[k] / r - 1.0) <= self.settings.order_tolerance:
+                g[k] += (r, 1.0, level)
+                return
+        if g.shape[0] < _MAX_WARNINGS:
+            self._ratio_groups = np.vstack([g, [r, 1.0, level]])
+
+    def _known_ratio(self, r: float) -> bool:
+        """`r` is one of the drive's ratios: given (`drive_ratios`) or learned."""
+        tol = self.settings.order_tolerance
+        g = self._ratio_groups
+        known = list(self.settings.known_ratios) + list(g[:, 0] / g[:, 1] if g.size else [])
+        return any(abs(r / k - 1.0) <= tol for k in known)
+
+    @property
+    def drive_orders(self) -> list[DriveOrder]:
+        """The ratios the drive was heard at (tracks that moved with the speed), by ratio.
+
+        Returns
+        -------
+        list of DriveOrder
+        """
+        return sorted(
+            (DriveOrder(float(a / n), float(lv / n), int(n)) for a, n, lv in self._ratio_groups),
+            key=lambda d: d.ratio,
+        )
 
     def _finish(self, tr: _Track) -> Episode | None:
         if tr.last - tr.first + 1 < self._min_frames:
@@ -845,9 +943,11 @@ class StreamingDetector:
             track_times_s=self.frame_time(frames),
             track_hz=hz,
         )
-        k = self._follows_order(tr)
-        if k is not None:
-            ep.order = k
+        r = self._follows_drive(tr)
+        if r is not None:
+            ep.drive_ratio = r
+            k = round(r)
+            ep.order = k if k >= 1 and abs(r / k - 1.0) <= self.settings.order_tolerance else None
             self.rejected.append(ep)
             return None
         tone = self._background_tone(tr)
@@ -920,7 +1020,7 @@ class StreamingDetector:
                 continue
             n = len(tr.hz)  # re-decided as the track grows by 1/8
             if n >= tr.checked_at + max(5, tr.checked_at // 8):
-                tr.order_now, tr.checked_at = self._follows_order(tr), n
+                tr.order_now, tr.checked_at = self._follows_drive(tr), n
                 if tr.order_now is None and self._background_tone(tr) is not None:
                     tr.order_now = 0  # background: not heard as squeak either
             if tr.order_now is None:
@@ -1010,6 +1110,7 @@ def detect(
         rejected=list(det.rejected),
         usable=usable,
         background=det.background.tones(),
+        drive_orders=det.drive_orders,
     )
 
 

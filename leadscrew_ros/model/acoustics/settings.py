@@ -14,6 +14,7 @@ its two neighbours: its bias with a Hann window is below 0.06 bin (0.6 Hz), with
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from ..physics.metadata import check, documented, setting
@@ -61,22 +62,38 @@ class DetectorSettings:
     order_tolerance: float = setting(
         0.02,
         "1",
-        "a tone within this relative distance of k |speed| / 2 pi is on order k",
+        "a tone within this relative distance of r |speed| / 2 pi is at speed ratio r",
         0.0,
         0.2,
     )
-    max_order: int = setting(
-        60,
+    min_drive_ratio: float = setting(
+        0.5,
         "1",
-        "highest motor/gear order k considered (a gear mesh is order = teeth count "
-        "of the gear on the measured shaft)",
-        0,
-        100000,
+        "lowest ratio of a drive noise's frequency to the screw's rotation frequency",
+        0.0,
+        1e6,
+        lo_open=True,
+    )
+    max_drive_ratio: float = setting(
+        2000.0,
+        "1",
+        "highest ratio of a drive noise's frequency to the screw's rotation frequency "
+        "(a geared motor's orders, its commutator: ratio x orders x segments)",
+        0.0,
+        1e6,
+        lo_open=True,
+    )
+    drive_ratios: str = setting(
+        "",
+        "",
+        "known ratios of drive noise to the screw's rotation frequency, comma-separated "
+        "(e.g. '37.3, 74.6, 373'): tones at them are drive noise at constant speed too",
     )
     order_share: float = setting(
         0.75,
         "1",
-        "an episode follows order k when this share of its frames is on order k",
+        "a track follows ratio r when this share of its frames is within order_tolerance "
+        "of r |speed| / 2 pi",
         0.0,
         1.0,
         lo_open=True,
@@ -150,7 +167,35 @@ class DetectorSettings:
 
     def __post_init__(self) -> None:
         check(self)
+        _ = self.known_ratios  # a malformed list is refused here
         if self.hop_s > self.frame_s:
             raise ValueError(f"hop_s = {self.hop_s:g} exceeds frame_s = {self.frame_s:g}")
         if self.f_lo_hz >= self.f_hi_hz:
             raise ValueError(f"f_lo_hz = {self.f_lo_hz:g} is not below f_hi_hz = {self.f_hi_hz:g}")
+        if self.min_drive_ratio > self.max_drive_ratio:
+            raise ValueError(
+                f"min_drive_ratio = {self.min_drive_ratio:g} exceeds max_drive_ratio = "
+                f"{self.max_drive_ratio:g}"
+            )
+
+    @property
+    def known_ratios(self) -> tuple[float, ...]:
+        """`drive_ratios` as numbers.
+
+        Raises
+        ------
+        ValueError
+            An item is not a positive number.
+        """
+        out = []
+        for item in self.drive_ratios.replace(";", ",").split(","):
+            if not item.strip():
+                continue
+            try:
+                r = float(item)
+            except ValueError:
+                r = math.nan
+            if not (math.isfinite(r) and r > 0):
+                raise ValueError(f"drive_ratios: {item.strip()!r} is not a positive number")
+            out.append(r)
+        return tuple(out)
