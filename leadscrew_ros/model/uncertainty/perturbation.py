@@ -48,13 +48,14 @@ from numpy.typing import ArrayLike
 from ..physics.assembly import Geometry, build_geometry
 from ..physics.kernels import level_slope
 from ..physics.parameters import GEOMETRY_FIELDS, ParameterError, ScrewParameters
-from ..physics.stability import GROWTH_TOL, Eigen, Solves, eig_both, left_rows
+from ..physics.stability import GROWTH_TOL, Eigen, Solves, eig_both, left_rows, left_rows_many
 from .scatter import Samples, Scatter
 
 GEOMETRY_STEP = 1e-6  # relative step of a state-matrix difference in a geometry field
 MAX_GEOMETRY_FIELDS = 2  # scattered geometry fields the live estimate takes
 GEOMETRY_NODES = {1: 9, 2: 5}  # node geometries per scattered geometry field
 _OUTSIDE = -1e30  # margin of a node without a prediction (counts as no squeak)
+_STACK = 32  # points whose samples' growth is one array (32 x 18 modes x 1024: 4.7 MB)
 
 
 class EigenPairs:
@@ -157,25 +158,26 @@ class _Expansion:
 
     def __init__(self, geometry: Geometry, friction: dict[str, np.ndarray]):
         self.geometry, self.params = geometry, geometry.params
-        self.sampled = SimpleNamespace(**{**self.params.as_dict(), **friction})
+        # the samples' friction fields (count,) and the nominal ones last: one pass of the
+        # friction law gives both (two passes cost a live prediction 0.04x a bare eig)
+        self.sampled = SimpleNamespace(
+            **{
+                **self.params.as_dict(),
+                **{k: np.append(v, getattr(self.params, k)) for k, v in friction.items()},
+            }
+        )
         self.units = units_on_displacements(geometry.lower_half_units, geometry.basis.omega_rad_s)
 
     def changes(self, speed: ArrayLike, load: ArrayLike, damping: np.ndarray) -> np.ndarray:
         """The samples' changes of friction level, slope and damping ratio from the nominal,
-        shape (3, ..., count) for speeds and loads of shape (...) [rad/s], [N]."""
-        if np.ndim(speed):  # a column of samples per point (one point: floats, the cheaper)
+        shape (3, ..., count) for speeds and loads of shape (...) [rad/s], [N]; `damping`
+        (count,) the samples' damping-ratio changes."""
+        if type(speed) is not float and np.ndim(speed):  # a column of samples per point
             speed, load = np.asarray(speed, float)[..., None], np.asarray(load, float)[..., None]
-        alpha = self.geometry.contact.alpha
-        level0, slope0 = level_slope(self.params, speed, load, alpha)
-        level, slope = level_slope(self.sampled, speed, load, alpha)
-        shape = (
-            level.shape
-            if level.shape[-1:] == damping.shape
-            else np.broadcast_shapes(level.shape, damping.shape)
-        )  # (unless no friction field scatters)
-        change = np.empty((3,) + shape)
-        np.subtract(level, level0, out=change[0])
-        np.subtract(slope, slope0, out=change[1])
+        level, slope = level_slope(self.sampled, speed, load, self.geometry.contact.alpha)
+        change = np.empty((3,) + level.shape[:-1] + damping.shape)
+        np.subtract(level[..., :-1], level[..., -1:], out=change[0])
+        np.subtract(slope[..., :-1], slope[..., -1:], out=change[1])
         change[2] = damping
         return change
 
@@ -520,14 +522,6 @@ class FirstOrderProbability:
         hi, lo = change.max(axis=2).T, change.min(axis=2).T  # (J, 3): the ends of each change
         out: list[tuple[float, float] | None] = [None] * len(speeds)
         for index, solves in groups:
-            y_lower = np.array(
-                [
-                    self._left(
-                        vr, osc, speeds[i], loads[i], None if matrices is None else matrices[i]
-                    )
-                    for i, vr, osc in zip(index, solves.vr, solves.osc, strict=True)
-                ]
-            )
             rates = growth_rates(
                 expansion.units
                 if own is None
@@ -537,19 +531,46 @@ class FirstOrderProbability:
                 speeds[index],
                 solves.lam,
                 solves.q,
-                y_lower,
+                self._lefts(index, solves, speeds, loads, matrices),
             )
             threshold = GROWTH_TOL * np.abs(solves.lam) - solves.lam.real
             reach = _reach(rates, hi[index][:, :, None], lo[index][:, :, None], threshold)
-            some = cast("list[bool]", reach.any(axis=1).tolist())
-            for g, (i, crosses) in enumerate(zip(index, some, strict=True)):
-                hits = (
-                    _hits(rates[g], threshold[g], np.flatnonzero(reach[g]), change[:, i])
-                    if crosses
-                    else None
-                )
-                out[i] = (0.0, 0.0) if hits is None else estimate(hits.reshape(self._shape))
+            crossing = reach.any(axis=1)
+            for i in np.asarray(index)[~crossing].tolist():
+                out[i] = (0.0, 0.0)  # no mode can reach the threshold: no sample squeaks
+            at = np.flatnonzero(crossing)
+            for start in range(0, len(at), _STACK):  # the samples' growth in bounded stacks
+                g = at[start : start + _STACK]
+                points = np.asarray(index)[g]
+                # (G, M, count): the modes that cannot cross get an infinite threshold
+                growth = rates[g].transpose(0, 2, 1) @ change[:, points].transpose(1, 0, 2)
+                growth -= np.where(reach[g], threshold[g], np.inf)[:, :, None]
+                hits = (growth.max(axis=1) > 0).reshape((len(g),) + self._shape)
+                for i, point_hits in zip(points.tolist(), hits, strict=True):
+                    out[i] = estimate(point_hits)
         return out
+
+    def _lefts(
+        self,
+        index: list[int],
+        solves: Solves,
+        speeds: np.ndarray,
+        loads: np.ndarray,
+        matrices: np.ndarray | None,
+    ) -> np.ndarray:
+        """The lower halves of y^H of stacked solves (G, M, N): from their right vectors in
+        one stacked solve, one point at a time (`_left`) where some are not a basis."""
+        try:
+            return left_rows_many(solves.vr, solves.osc, self._nominal.geometry.n)
+        except np.linalg.LinAlgError:
+            return np.array(
+                [
+                    self._left(
+                        vr, osc, speeds[i], loads[i], None if matrices is None else matrices[i]
+                    )
+                    for i, vr, osc in zip(index, solves.vr, solves.osc, strict=True)
+                ]
+            )
 
     def _left(
         self,
