@@ -154,18 +154,13 @@ def geometry_fields(scatter: Scatter) -> list[str]:
 class _Expansion:
     """First-order growth of the oscillatory modes in the friction level, slope and damping
     ratio around one geometry's eigen-solve; `friction` holds the samples' friction
-    parameters (arrays), the rest of the parameters are the geometry's."""
+    parameters, each an array (count + 1,) whose last entry is the nominal value (one pass of
+    the friction law gives the samples and the nominal: two passes cost a live prediction
+    0.04x a bare eig); the rest of the parameters are the geometry's."""
 
     def __init__(self, geometry: Geometry, friction: dict[str, np.ndarray]):
         self.geometry, self.params = geometry, geometry.params
-        # the samples' friction fields (count,) and the nominal ones last: one pass of the
-        # friction law gives both (two passes cost a live prediction 0.04x a bare eig)
-        self.sampled = SimpleNamespace(
-            **{
-                **self.params.as_dict(),
-                **{k: np.append(v, getattr(self.params, k)) for k, v in friction.items()},
-            }
-        )
+        self.sampled = SimpleNamespace(**{**self.params.as_dict(), **friction})
         self.units = units_on_displacements(geometry.lower_half_units, geometry.basis.omega_rad_s)
 
     def changes(self, speed: ArrayLike, load: ArrayLike, damping: np.ndarray) -> np.ndarray:
@@ -326,9 +321,11 @@ class FirstOrderProbability:
         self.params, self.samples = params, samples
         count, scatter = samples.count, samples.scatter
         values = {k: v.ravel() for k, v in scatter.values(params, samples.u).items()}
+        # the samples' friction fields (count,) and the nominal value last (`_Expansion`)
         self._friction = {
-            k: np.broadcast_to(values.get(k, getattr(params, k)), (count,))
+            k: np.append(np.broadcast_to(values.get(k, getattr(params, k)), (count,)), v)
             for k in ("mu_static", "mu_kinetic", "friction_decay_s_m")
+            for v in (getattr(params, k),)
         }
         self._damping = np.broadcast_to(
             values.get("modal_damping", params.modal_damping) - params.modal_damping, (count,)
