@@ -55,7 +55,6 @@ GEOMETRY_STEP = 1e-6  # relative step of a state-matrix difference in a geometry
 MAX_GEOMETRY_FIELDS = 2  # scattered geometry fields the live estimate takes
 GEOMETRY_NODES = {1: 9, 2: 5}  # node geometries per scattered geometry field
 _OUTSIDE = -1e30  # margin of a node without a prediction (counts as no squeak)
-_STACK = 32  # points whose samples' growth is one array (32 x 18 modes x 1024: 4.7 MB)
 
 
 class EigenPairs:
@@ -532,19 +531,14 @@ class FirstOrderProbability:
             )
             threshold = GROWTH_TOL * np.abs(solves.lam) - solves.lam.real
             reach = _reach(rates, hi[index][:, :, None], lo[index][:, :, None], threshold)
-            crossing = reach.any(axis=1)
-            for i in np.asarray(index)[~crossing].tolist():
-                out[i] = (0.0, 0.0)  # no mode can reach the threshold: no sample squeaks
-            at = np.flatnonzero(crossing)
-            for start in range(0, len(at), _STACK):  # the samples' growth in bounded stacks
-                g = at[start : start + _STACK]
-                points = np.asarray(index)[g]
-                # (G, M, count): the modes that cannot cross get an infinite threshold
-                growth = rates[g].transpose(0, 2, 1) @ change[:, points].transpose(1, 0, 2)
-                growth -= np.where(reach[g], threshold[g], np.inf)[:, :, None]
-                hits = (growth.max(axis=1) > 0).reshape((len(g),) + self._shape)
-                for i, point_hits in zip(points.tolist(), hits, strict=True):
-                    out[i] = estimate(point_hits)
+            some = cast("list[bool]", reach.any(axis=1).tolist())
+            for g, (i, crosses) in enumerate(zip(index, some, strict=True)):
+                hits = (
+                    _hits(rates[g], threshold[g], np.flatnonzero(reach[g]), change[:, i])
+                    if crosses
+                    else None
+                )
+                out[i] = (0.0, 0.0) if hits is None else estimate(hits.reshape(self._shape))
         return out
 
     def _lefts(
