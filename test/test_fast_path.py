@@ -30,7 +30,13 @@ from leadscrew_ros.live.rules import InputRules
 from leadscrew_ros.live.settings import JointSettings, LiveSettings
 from leadscrew_ros.model import ScrewParameters, SqueakModel, Validity
 from leadscrew_ros.model.physics.assembly import build_geometry, lower_half_units_at
-from leadscrew_ros.model.physics.stability import GROWTH_TOL, eig_both, left_rows
+from leadscrew_ros.model.physics.stability import (
+    GROWTH_TOL,
+    eig_both,
+    eig_right_many,
+    left_rows,
+    left_rows_many,
+)
 from leadscrew_ros.model.uncertainty.perturbation import EigenPairs, growth_rates, hits_of
 from leadscrew_ros.model.uncertainty.scatter import DEFAULT_SCATTER, MAX_SCATTER, Scatter
 
@@ -98,6 +104,27 @@ def test_the_left_vectors_from_the_right_ones_are_lapacks():
         y_h = EigenPairs(model.geometry, speed, e).y_h
         error = np.abs(left_rows(e.vr, e.osc) - y_h).max(axis=1)
         assert np.all(error <= 1e-9 * np.abs(y_h).max(axis=1))  # relative to each vector
+
+
+def test_the_left_vectors_of_stacked_solves_are_each_solves_own():
+    """`left_rows_many` (the batched estimate's): each solve's `left_rows`, to the rounding of a
+    solve with V (numpy's and scipy's LAPACK calls round differently: up to 3e-11 of a vector
+    measured, V's condition times eps; the bound of the LAPACK comparison above); a stack with a
+    singular V raises, so the estimate falls back to one at a time."""
+    model = SqueakModel()
+    speeds, loads = np.array([2.0, 20.0, 90.0, -30.0]), np.array([50.0, 200.0, 450.0, 120.0])
+    groups, _ = eig_right_many(model.geometry.state_matrices(speeds, loads), model.geometry.n)
+    n = model.geometry.n
+    for _, solves in groups:
+        many = left_rows_many(solves.vr, solves.osc, n)
+        for k, (vr, osc) in enumerate(zip(solves.vr, solves.osc, strict=True)):
+            one = left_rows(vr, osc, n)
+            scale = np.abs(one).max(axis=1)[:, None]
+            assert np.all(np.abs(many[k] - one) <= 1e-9 * scale)
+    vr = solves.vr.copy()
+    vr[0][:, 1] = 0.0  # a zero column: not a basis
+    with pytest.raises(np.linalg.LinAlgError):
+        left_rows_many(vr, solves.osc, n)
 
 
 def test_the_contact_at_many_nut_positions_is_each_positions_own():

@@ -213,6 +213,24 @@ def left_rows(vr: np.ndarray, osc: np.ndarray, start: int = 0) -> np.ndarray:
     return rows
 
 
+def left_rows_many(vr: np.ndarray, osc: np.ndarray, start: int = 0) -> np.ndarray:
+    """`left_rows` of G stacked solves: `vr` (G, 2N, 2N), `osc` (G, M); (G, M, 2N - start)
+    from one stacked real solve.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        Some V is singular (then `left_rows` one at a time tells which).
+    """
+    units = _unit_columns(vr.shape[-1], start)
+    inverse = np.linalg.solve(vr, np.broadcast_to(units, vr.shape[:-1] + units.shape[-1:]))
+    rows = np.empty(osc.shape + inverse.shape[-1:], complex)
+    cols = osc[..., None]
+    np.multiply(np.take_along_axis(inverse, cols, -2), 0.5, out=rows.real)
+    np.multiply(np.take_along_axis(inverse, cols + 1, -2), -0.5, out=rows.imag)
+    return rows
+
+
 @lru_cache(maxsize=16)
 def _unit_columns(size: int, start: int) -> np.ndarray:
     """Columns `start`.. of the identity of `size` (read-only)."""

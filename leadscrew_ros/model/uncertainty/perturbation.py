@@ -48,7 +48,7 @@ from numpy.typing import ArrayLike
 from ..physics.assembly import Geometry, build_geometry
 from ..physics.kernels import level_slope
 from ..physics.parameters import GEOMETRY_FIELDS, ParameterError, ScrewParameters
-from ..physics.stability import GROWTH_TOL, Eigen, Solves, eig_both, left_rows
+from ..physics.stability import GROWTH_TOL, Eigen, Solves, eig_both, left_rows, left_rows_many
 from .scatter import Samples, Scatter
 
 GEOMETRY_STEP = 1e-6  # relative step of a state-matrix difference in a geometry field
@@ -153,7 +153,9 @@ def geometry_fields(scatter: Scatter) -> list[str]:
 class _Expansion:
     """First-order growth of the oscillatory modes in the friction level, slope and damping
     ratio around one geometry's eigen-solve; `friction` holds the samples' friction
-    parameters (arrays), the rest of the parameters are the geometry's."""
+    parameters, each an array (count + 1,) whose last entry is the nominal value (one pass of
+    the friction law gives the samples and the nominal: two passes cost a live prediction
+    0.04x a bare eig); the rest of the parameters are the geometry's."""
 
     def __init__(self, geometry: Geometry, friction: dict[str, np.ndarray]):
         self.geometry, self.params = geometry, geometry.params
@@ -162,20 +164,14 @@ class _Expansion:
 
     def changes(self, speed: ArrayLike, load: ArrayLike, damping: np.ndarray) -> np.ndarray:
         """The samples' changes of friction level, slope and damping ratio from the nominal,
-        shape (3, ..., count) for speeds and loads of shape (...) [rad/s], [N]."""
-        if np.ndim(speed):  # a column of samples per point (one point: floats, the cheaper)
+        shape (3, ..., count) for speeds and loads of shape (...) [rad/s], [N]; `damping`
+        (count,) the samples' damping-ratio changes."""
+        if type(speed) is not float and np.ndim(speed):  # a column of samples per point
             speed, load = np.asarray(speed, float)[..., None], np.asarray(load, float)[..., None]
-        alpha = self.geometry.contact.alpha
-        level0, slope0 = level_slope(self.params, speed, load, alpha)
-        level, slope = level_slope(self.sampled, speed, load, alpha)
-        shape = (
-            level.shape
-            if level.shape[-1:] == damping.shape
-            else np.broadcast_shapes(level.shape, damping.shape)
-        )  # (unless no friction field scatters)
-        change = np.empty((3,) + shape)
-        np.subtract(level, level0, out=change[0])
-        np.subtract(slope, slope0, out=change[1])
+        level, slope = level_slope(self.sampled, speed, load, self.geometry.contact.alpha)
+        change = np.empty((3,) + level.shape[:-1] + damping.shape)
+        np.subtract(level[..., :-1], level[..., -1:], out=change[0])
+        np.subtract(slope[..., :-1], slope[..., -1:], out=change[1])
         change[2] = damping
         return change
 
@@ -324,9 +320,11 @@ class FirstOrderProbability:
         self.params, self.samples = params, samples
         count, scatter = samples.count, samples.scatter
         values = {k: v.ravel() for k, v in scatter.values(params, samples.u).items()}
+        # the samples' friction fields (count,) and the nominal value last (`_Expansion`)
         self._friction = {
-            k: np.broadcast_to(values.get(k, getattr(params, k)), (count,))
+            k: np.append(np.broadcast_to(values.get(k, getattr(params, k)), (count,)), v)
             for k in ("mu_static", "mu_kinetic", "friction_decay_s_m")
+            for v in (getattr(params, k),)
         }
         self._damping = np.broadcast_to(
             values.get("modal_damping", params.modal_damping) - params.modal_damping, (count,)
@@ -520,14 +518,6 @@ class FirstOrderProbability:
         hi, lo = change.max(axis=2).T, change.min(axis=2).T  # (J, 3): the ends of each change
         out: list[tuple[float, float] | None] = [None] * len(speeds)
         for index, solves in groups:
-            y_lower = np.array(
-                [
-                    self._left(
-                        vr, osc, speeds[i], loads[i], None if matrices is None else matrices[i]
-                    )
-                    for i, vr, osc in zip(index, solves.vr, solves.osc, strict=True)
-                ]
-            )
             rates = growth_rates(
                 expansion.units
                 if own is None
@@ -537,7 +527,7 @@ class FirstOrderProbability:
                 speeds[index],
                 solves.lam,
                 solves.q,
-                y_lower,
+                self._lefts(index, solves, speeds, loads, matrices),
             )
             threshold = GROWTH_TOL * np.abs(solves.lam) - solves.lam.real
             reach = _reach(rates, hi[index][:, :, None], lo[index][:, :, None], threshold)
@@ -550,6 +540,28 @@ class FirstOrderProbability:
                 )
                 out[i] = (0.0, 0.0) if hits is None else estimate(hits.reshape(self._shape))
         return out
+
+    def _lefts(
+        self,
+        index: list[int],
+        solves: Solves,
+        speeds: np.ndarray,
+        loads: np.ndarray,
+        matrices: np.ndarray | None,
+    ) -> np.ndarray:
+        """The lower halves of y^H of stacked solves (G, M, N): from their right vectors in
+        one stacked solve, one point at a time (`_left`) where some are not a basis."""
+        try:
+            return left_rows_many(solves.vr, solves.osc, self._nominal.geometry.n)
+        except np.linalg.LinAlgError:
+            return np.array(
+                [
+                    self._left(
+                        vr, osc, speeds[i], loads[i], None if matrices is None else matrices[i]
+                    )
+                    for i, vr, osc in zip(index, solves.vr, solves.osc, strict=True)
+                ]
+            )
 
     def _left(
         self,
