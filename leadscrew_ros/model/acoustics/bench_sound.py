@@ -118,8 +118,7 @@ class BenchSound:
     audible_snr_db: float = setting(
         6.0,
         "dB",
-        "the squeak is audible (truth.json) this far over the background in its third-octave "
-        "band",
+        "the squeak is audible (truth.json) this far over the background in its third-octave band",
         0.0,
         60.0,
     )
