@@ -99,17 +99,21 @@ class BenchSound:
     commutator_level_dbfs: float = setting(
         -50.0,
         "dBFS",
-        "commutator tone at the reference (peak) speed, proportional to the speed",
+        "commutator tone at the reference (peak) speed, proportional to the speed (-200: off)",
         OFF_DB,
         0.0,
     )
     fan_hz: float = setting(1170.0, "Hz", "a fan's steady tone (0: off)", 0.0, 96000.0)
-    fan_level_dbfs: float = setting(-45.0, "dBFS", "the fan tone's level", OFF_DB, 0.0)
+    fan_level_dbfs: float = setting(-45.0, "dBFS", "the fan tone's level (-200: off)", OFF_DB, 0.0)
     mains_hz: float = setting(
         50.0, "Hz", "mains frequency: hum at 2, 4 and 6 times it (0: off)", 0.0, 1000.0
     )
     hum_level_dbfs: float = setting(
-        -45.0, "dBFS", "hum at 2 x mains; 4 x and 6 x at 1/2 and 1/3 of it", OFF_DB, 0.0
+        -45.0,
+        "dBFS",
+        "hum at 2 x mains; 4 x and 6 x at 1/2 and 1/3 of it (-200: off)",
+        OFF_DB,
+        0.0,
     )
     pink_noise_dbfs: float = setting(
         -50.0, "dBFS", "pink noise from 20 Hz to the Nyquist frequency (-200: off)", OFF_DB, 0.0
