@@ -457,3 +457,11 @@ def test_realistic_cli_switches_parts_and_refuses_them_without_realistic(tmp_pat
         assert message in err and len(err.strip().splitlines()) == 1, err
     with pytest.raises(ParameterError, match="needs realistic = true"):
         BenchSettings(sound=BenchSound(fan_hz=0.0))
+
+
+def test_realistic_same_seed_same_messages(realistic, tmp_path):
+    out, truth = realistic
+    again = run(REALISTIC, tmp_path)
+    (a,), (b,) = truth["units"], again["units"]
+    assert _messages(_bag(out, a)) == _messages(_bag(tmp_path, b))
+    assert {**a, "log": ""} == {**b, "log": ""}
