@@ -23,16 +23,24 @@ The microphone (`model.acoustics.synthesis.microphone`) holds motor orders follo
 speed, broadband noise and, whenever the unit's own model squeaks (`SqueakModel` at the
 unit's parameters, nominal verdict without scatter, at the true speed, load and nut position
 of every input sample, the nut moved in steps of the node's `nut_deadband_m`), a tone at the
-frequency of its most unstable mode with ~20 ms onset and decay.
+frequency of its most unstable mode with ~20 ms onset and decay: the clean bench, the default.
+With `BenchSettings.realistic` the bench sounds like a bench instead
+(`model.acoustics.bench_sound.bench_microphone`, its parts in `BenchSettings.sound`): the
+squeak grown by its amplitude equation from the unit's own Re(lambda) along the stroke, with
+harmonics, a geared motor, a background, a room, and `sound.rest_s` of standstill (speed 0)
+before and after the stroke; the default will switch to it once the detector hears such a
+bench (it does not yet learn the background nor reject drive orders at a non-whole ratio).
 
-Level assumption: the squeak tone's amplitude is `squeak_level_dbfs` re full scale (a
-full-scale sine is 0 dBFS) and stands for `squeak_spl_db` SPL (rms), which fixes the
+Level assumption: the squeak tone's amplitude (on the realistic bench: its saturated, limit-
+cycle amplitude) is `squeak_level_dbfs` re full scale (a full-scale sine is 0 dBFS) and stands for `squeak_spl_db` SPL (rms), which fixes the
 microphone's scale `audio_scale_pa_per_fs` (Pa per full-scale unit: -20 dBFS = 94 dB SPL
 gives 14.1 Pa/FS).
 
 `DIR/truth.json` holds what the logs must not: per unit the drawn parameters and stroke,
 where it squeaks and at which frequency, the generating population (`nominal`, `scatter`) and
-the prior the logs carry (`prior`), with the formulation, seed, settings and audio scale.
+the prior the logs carry (`prior`), with the formulation, seed, settings and audio scale; on
+the realistic bench also the sound's parts (`sound`) and per unit the squeak's envelope, the
+audible intervals and the growth truth at each onset (`_sound_truth`).
 Nothing of it is written into the logs.
 """
 
@@ -50,7 +58,7 @@ import numpy as np
 from ..live.profile import HOLD, RAMP, StrokeProfile
 from ..live.settings import LiveSettings
 from ..model import ScrewParameters, SqueakModel
-from ..model.acoustics.bench_sound import BenchAudio, BenchSound, bench_microphone
+from ..model.acoustics.bench_sound import OFF_DB, BenchAudio, BenchSound, bench_microphone
 from ..model.acoustics.synthesis import microphone
 from ..model.physics.metadata import check, setting
 from ..model.physics.parameters import ParameterError
@@ -510,7 +518,9 @@ def _sound_truth(sound: BenchAudio) -> dict[str, Any]:
     step = max(int(round(1.0 / (TRUTH_RATE_HZ * (sound.grid_s[1] - sound.grid_s[0])))), 1)
     return {
         "envelope_rate_hz": TRUTH_RATE_HZ,
-        "envelope_dbfs": np.round(20 * np.log10(sound.amplitude[::step]), 2).tolist(),
+        "envelope_dbfs": np.round(
+            20 * np.log10(np.maximum(sound.amplitude[::step], 10 ** (OFF_DB / 20))), 2
+        ).tolist(),  # OFF_DB: no mode, no squeak
         "frequency_hz": np.round(sound.frequency_hz[::step], 2).tolist(),
         "audible_intervals": _intervals(sound.grid_s, sound.audible, sound.frequency_hz),
         "audible_s": float(sound.audible.sum() * (sound.grid_s[1] - sound.grid_s[0])),
