@@ -31,10 +31,10 @@ harmonics, a geared motor, a background, a room, and `sound.rest_s` of standstil
 before and after the stroke; the default will switch to it once the detector hears such a
 bench (it does not yet learn the background nor reject drive orders at a non-whole ratio).
 
-Level assumption: the squeak tone's amplitude (on the realistic bench: its saturated, limit-
-cycle amplitude) is `squeak_level_dbfs` re full scale (a full-scale sine is 0 dBFS) and stands for `squeak_spl_db` SPL (rms), which fixes the
-microphone's scale `audio_scale_pa_per_fs` (Pa per full-scale unit: -20 dBFS = 94 dB SPL
-gives 14.1 Pa/FS).
+Level assumption: the squeak tone's amplitude (on the realistic bench: its saturated,
+limit-cycle amplitude) is `squeak_level_dbfs` re full scale (a full-scale sine is 0 dBFS) and
+stands for `squeak_spl_db` SPL (rms), which fixes the microphone's scale
+`audio_scale_pa_per_fs` (Pa per full-scale unit: -20 dBFS = 94 dB SPL gives 14.1 Pa/FS).
 
 `DIR/truth.json` holds what the logs must not: per unit the drawn parameters and stroke,
 where it squeaks and at which frequency, the generating population (`nominal`, `scatter`) and
