@@ -26,6 +26,8 @@ from leadscrew_ros.bag.virtual_bench import (
 from leadscrew_ros.cli import main
 from leadscrew_ros.live.settings import LiveSettings
 from leadscrew_ros.model import ScrewParameters, SqueakModel
+from leadscrew_ros.model.acoustics.bench_sound import BenchSound
+from leadscrew_ros.model.physics.parameters import ParameterError
 from leadscrew_ros.model.uncertainty.scatter import Scatter
 
 SETTINGS = BenchSettings(units=2, duration_s=12.0, seed=3)
@@ -280,3 +282,186 @@ def test_a_bench_is_not_written_over_another(tmp_path, capsys, monkeypatch):
     assert main(["bench", "--units", "1", "--duration", "2", "--out", ".", "--force"]) == 2
     assert "does not empty the working" in capsys.readouterr().err
     assert (tmp_path / "b" / TRUTH).is_file()
+
+
+# ----------------------------------------------------------------------------- realistic bench
+REALISTIC = BenchSettings(units=1, duration_s=12.0, seed=5, realistic=True)
+
+
+@pytest.fixture(scope="module")
+def realistic(tmp_path_factory):
+    out = tmp_path_factory.mktemp("realistic")
+    return out, run(REALISTIC, out)
+
+
+def _third_octave_dbfs(x: np.ndarray, f_hz: float, fs: float) -> float:
+    """The level [dBFS] of `x` in the third-octave band centred on `f_hz` (Welch, Hann)."""
+    import scipy.signal
+
+    f, psd = scipy.signal.welch(x, fs, nperseg=int(fs) // 4)  # density: sum * df is the power
+    band = (f >= f_hz * 2 ** (-1 / 6)) & (f < f_hz * 2 ** (1 / 6))
+    return float(10 * np.log10(2 * psd[band].sum() * (f[1] - f[0])))
+
+
+def test_realistic_bench_rests_and_keeps_the_sound_truth(realistic):
+    """Motor off for rest_s (>= 1 s) at the start and the end (the speed inputs 0 there, the
+    stroke shifted), the drive and background in truth.json, and per unit the envelope at
+    100 Hz, the audible intervals and the growth at each onset: the fitted growth of ln A within
+    5 % of the model's Re(lambda) there."""
+    out, truth = realistic
+    sound = REALISTIC.sound
+    assert truth["sound"] == {
+        "realistic": True,
+        "gear_ratio": 37.3,
+        "drive_orders": [37.3, 74.6, 373.0],
+        "background_tones_hz": [1170.0, 100.0, 200.0, 300.0],
+        "pink_noise_dbfs": -50.0,
+        "rt60_s": 0.3,
+        "saturation_dbfs": -20.0,
+        "floor_dbfs": -80.0,
+        "audible_snr_db": 6.0,
+        "rest_s": 1.5,
+    }
+    (unit,) = truth["units"]
+    assert unit["stroke_start_s"] == sound.rest_s
+    span = REALISTIC.duration_s + 2 * sound.rest_s
+    speeds = [
+        (m.log_time_ns, np.frombuffer(m.data[4:12], "<f8")[0])
+        for _, m in open_log(_bag(out, unit)).messages()
+        if m.topic.name == "/motor_speed"
+    ]
+    t = (np.array([s[0] for s in speeds]) - speeds[0][0]) / 1e9
+    v = np.array([s[1] for s in speeds])
+    assert t[-1] == pytest.approx(span, abs=1e-6)
+    rest = (t < sound.rest_s) | (t > span - sound.rest_s)
+    assert np.abs(v[rest]).max() < 0.1 < np.abs(v).max()  # sensor noise only
+    env = np.array(unit["sound"]["envelope_dbfs"])
+    assert env.size == int(round(span * 100)) + 1
+    assert env.min() >= truth["sound"]["floor_dbfs"] - 1e-9
+    assert env.max() == pytest.approx(truth["sound"]["saturation_dbfs"], abs=0.05)
+    assert env[0] == pytest.approx(truth["sound"]["floor_dbfs"], abs=1e-9)
+    onsets = unit["sound"]["onsets"]
+    assert len(onsets) == len(unit["sound"]["audible_intervals"]) >= 1
+    for onset in onsets:
+        assert onset["growth_rate_per_s"] > 0
+        assert onset["fitted_growth_per_s"] == pytest.approx(onset["growth_rate_per_s"], rel=0.05)
+    # the model squeaks first, the sound grows audible after
+    first_squeak = unit["squeak_intervals"][0]["start_s"]
+    assert first_squeak < onsets[0]["time_s"] < first_squeak + 1.0
+
+
+def test_realistic_audible_intervals_agree_with_envelope_and_background(realistic):
+    """At each onset the envelope stands audible_snr_db over the background in its band as
+    measured from the recording's first motor-off second (within 2 dB: the room's level at one
+    frequency); wherever it stands 3 dB more over it, the truth says audible."""
+    out, truth = realistic
+    (unit,) = truth["units"]
+    track = read_audio(_bag(out, unit))
+    fs = int(track.sample_rate_hz)
+    quiet = track.samples[:fs].astype(float)
+    env = np.array(unit["sound"]["envelope_dbfs"])
+    freq = np.array(unit["sound"]["frequency_hz"])
+    grid = np.arange(env.size) / 100.0
+    snr = truth["sound"]["audible_snr_db"]
+    bands = {f: _third_octave_dbfs(quiet, f, fs) for f in sorted({round(f) for f in freq})}
+    background = np.array([bands[round(f)] for f in freq])
+    for onset in unit["sound"]["onsets"]:
+        level = np.interp(onset["time_s"], grid, env)
+        band = _third_octave_dbfs(quiet, onset["frequency_hz"], fs)
+        assert level - band == pytest.approx(snr, abs=2.0), onset
+    intervals = unit["sound"]["audible_intervals"]
+    inside = np.zeros(env.size, bool)
+    for iv in intervals:
+        inside |= (grid >= iv["start_s"] - 0.01) & (grid <= iv["end_s"] + 0.01)
+    loud = env - background > snr + 3
+    assert loud.any() and np.all(inside[loud])
+
+
+def test_realistic_recording_holds_its_parts(realistic):
+    """In the recording: the fan and hum in both motor-off stretches, the motor's orders at
+    37.3 and 74.6 times the screw's rotation at the stroke's constant speed and not in the
+    rest, the squeak saturated at its level with its 2nd harmonic where truth says so."""
+    out, truth = realistic
+    (unit,) = truth["units"]
+    track = read_audio(_bag(out, unit))
+    fs = int(track.sample_rate_hz)
+    x = track.samples.astype(float)
+    span = len(unit["sound"]["envelope_dbfs"]) / 100.0
+    for start in (0.2, span - 1.2):
+        for f_hz, level in ((1170.0, -45.0), (100.0, -45.0), (200.0, -51.0)):
+            seg = x[int(start * fs) :][:fs]
+            assert 20 * np.log10(_flat_top(seg, f_hz, fs)) == pytest.approx(level, abs=3.0)
+    sim = _realistic_unit()
+    hold = np.flatnonzero(np.abs(np.diff(sim.speed_rad_s)) < 1e-9)
+    hold = hold[np.abs(sim.speed_rad_s[hold]) > 1]
+    t0 = sim.times_s[hold[len(hold) // 2]]
+    shaft_hz = abs(sim.speed_rad_s[hold[len(hold) // 2]]) / (2 * np.pi)
+    seg = x[int((t0 - 0.25) * fs) :][: fs // 2]
+    rest = x[int(0.2 * fs) :][: fs // 2]
+    for order in (37.3, 74.6):
+        assert _flat_top(seg, order * shaft_hz, fs) > 10 * _flat_top(rest, order * shaft_hz, fs)
+    env = np.array(unit["sound"]["envelope_dbfs"])
+    freq = np.array(unit["sound"]["frequency_hz"])
+    k = int(np.flatnonzero(env > -20.1)[len(np.flatnonzero(env > -20.1)) // 2])
+    seg = x[int((k / 100 - 0.1) * fs) :][: fs // 5]
+    assert 20 * np.log10(_flat_top(seg, freq[k], fs)) == pytest.approx(-20.0, abs=4.0)
+    assert 20 * np.log10(_flat_top(seg, 2 * freq[k], fs)) == pytest.approx(-32.0, abs=4.0)
+
+
+def _flat_top(seg: np.ndarray, f_hz: float, fs: float) -> float:
+    import scipy.signal
+
+    w = scipy.signal.windows.flattop(seg.size, sym=False)
+    spectrum = np.abs(np.fft.rfft(seg * w)) * 2 / w.sum()
+    i = int(round(f_hz * seg.size / fs))
+    return float(spectrum[max(i - 2, 0) : i + 3].max())
+
+
+def _realistic_unit():
+    """Unit 0 of REALISTIC, simulated again (as `run` draws it)."""
+    rng = np.random.default_rng(REALISTIC.seed)
+    unit_rng, _ = (np.random.default_rng(s) for s in rng.integers(2**63, size=2))
+    return simulate_unit(REALISTIC, 0, unit_rng, ScrewParameters(), Scatter())
+
+
+def test_realistic_cli_switches_parts_and_refuses_them_without_realistic(tmp_path, capsys):
+    argv = ["bench", "--units", "1", "--duration", "2", "--quiet", "--seed", "2"]
+    assert (
+        main(
+            [
+                *argv,
+                "--out",
+                str(tmp_path / "a"),
+                "--realistic",
+                "--fan-hz",
+                "0",
+                "--gear-ratio",
+                "12.5",
+                "--rt60-s",
+                "0",
+            ]
+        )
+        == 0
+    )
+    truth = json.loads((tmp_path / "a" / TRUTH).read_text())
+    assert truth["sound"]["background_tones_hz"] == [100.0, 200.0, 300.0]
+    assert truth["sound"]["drive_orders"] == [12.5, 25.0, 125.0]
+    assert truth["settings"]["sound"]["rt60_s"] == 0.0 and truth["settings"]["realistic"]
+    for bad, message in (
+        (["--fan-hz", "0"], "--fan-hz sets a part of the realistic bench: add --realistic"),
+        (["--realistic", "--rt60-s", "-1"], "bench.sound.rt60_s = -1 is out of range"),
+        (["--realistic", "--commutator-segments", "2.5"], "invalid int value"),
+    ):
+        assert main([*argv, "--out", str(tmp_path / "b"), *bad]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
+    with pytest.raises(ParameterError, match="needs realistic = true"):
+        BenchSettings(sound=BenchSound(fan_hz=0.0))
+
+
+def test_realistic_same_seed_same_messages(realistic, tmp_path):
+    out, truth = realistic
+    again = run(REALISTIC, tmp_path)
+    (a,), (b,) = truth["units"], again["units"]
+    assert _messages(_bag(out, a)) == _messages(_bag(tmp_path, b))
+    assert {**a, "log": ""} == {**b, "log": ""}

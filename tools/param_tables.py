@@ -31,6 +31,7 @@ from leadscrew_ros.live.settings import (
     ListenSettings,
     LiveSettings,
 )
+from leadscrew_ros.model.acoustics.bench_sound import BenchSound
 from leadscrew_ros.model.acoustics.settings import DetectorSettings
 from leadscrew_ros.model.calibration import DetectionErrors, ThinSettings
 from leadscrew_ros.model.physics.metadata import default_text, range_text
@@ -67,6 +68,7 @@ NODE_TABLES = (
 # table name -> the settings dataclasses whose `setting` fields are a command's options
 OPTION_TABLES = {
     "calibrate": (CalibrationSettings, DetectionErrors, SamplerSettings, ThinSettings),
+    "bench": (BenchSound,),
 }
 HEADER = ["| parameter | unit | default | allowed | meaning |", "|---|---|---|---|---|"]
 TOPIC_TABLE = "topics"  # file name of `topic_table` in `write`

@@ -23,16 +23,24 @@ The microphone (`model.acoustics.synthesis.microphone`) holds motor orders follo
 speed, broadband noise and, whenever the unit's own model squeaks (`SqueakModel` at the
 unit's parameters, nominal verdict without scatter, at the true speed, load and nut position
 of every input sample, the nut moved in steps of the node's `nut_deadband_m`), a tone at the
-frequency of its most unstable mode with ~20 ms onset and decay.
+frequency of its most unstable mode with ~20 ms onset and decay: the clean bench, the default.
+With `BenchSettings.realistic` the bench sounds like a bench instead
+(`model.acoustics.bench_sound.bench_microphone`, its parts in `BenchSettings.sound`): the
+squeak grown by its amplitude equation from the unit's own Re(lambda) along the stroke, with
+harmonics, a geared motor, a background, a room, and `sound.rest_s` of standstill (speed 0)
+before and after the stroke; the default will switch to it once the detector hears such a
+bench (it does not yet learn the background nor reject drive orders at a non-whole ratio).
 
-Level assumption: the squeak tone's amplitude is `squeak_level_dbfs` re full scale (a
-full-scale sine is 0 dBFS) and stands for `squeak_spl_db` SPL (rms), which fixes the
-microphone's scale `audio_scale_pa_per_fs` (Pa per full-scale unit: -20 dBFS = 94 dB SPL
-gives 14.1 Pa/FS).
+Level assumption: the squeak tone's amplitude (on the realistic bench: its saturated,
+limit-cycle amplitude) is `squeak_level_dbfs` re full scale (a full-scale sine is 0 dBFS) and
+stands for `squeak_spl_db` SPL (rms), which fixes the microphone's scale
+`audio_scale_pa_per_fs` (Pa per full-scale unit: -20 dBFS = 94 dB SPL gives 14.1 Pa/FS).
 
 `DIR/truth.json` holds what the logs must not: per unit the drawn parameters and stroke,
 where it squeaks and at which frequency, the generating population (`nominal`, `scatter`) and
-the prior the logs carry (`prior`), with the formulation, seed, settings and audio scale.
+the prior the logs carry (`prior`), with the formulation, seed, settings and audio scale; on
+the realistic bench also the sound's parts (`sound`) and per unit the squeak's envelope, the
+audible intervals and the growth truth at each onset (`_sound_truth`).
 Nothing of it is written into the logs.
 """
 
@@ -50,9 +58,11 @@ import numpy as np
 from ..live.profile import HOLD, RAMP, StrokeProfile
 from ..live.settings import LiveSettings
 from ..model import ScrewParameters, SqueakModel
+from ..model.acoustics.bench_sound import OFF_DB, BenchAudio, BenchSound, bench_microphone
+from ..model.acoustics.synthesis import microphone
 from ..model.physics.metadata import check, setting
 from ..model.physics.parameters import ParameterError
-from ..model.studies.fields import growth_field
+from ..model.studies.fields import GrowthField, growth_field
 from ..model.uncertainty.scatter import (
     DEFAULT_SCATTER,
     LIVE_SAMPLES,
@@ -67,6 +77,7 @@ from .synthetic import LOAD_TOPIC, NUT_TOPIC, SPEED_TOPIC, DutyCycle
 
 MIC_TOPIC, MIC_INFO_TOPIC = "/microphone", "/microphone_info"
 TRUTH = "truth.json"
+TRUTH_RATE_HZ = 100.0  # the realistic bench's envelope in truth.json
 START_NS = DutyCycle.start_ns
 P_REF_PA = 20e-6  # reference pressure of dB SPL
 _TOPIC_OFFSET_NS = 100_000  # topics of one input sample 0.1 ms apart (synthetic)
@@ -134,6 +145,17 @@ class BenchSettings:
         0.0,
         194.0,
     )
+    realistic: bool = setting(
+        False,
+        "",
+        "the bench sounds like a bench (`sound`: the squeak grown by its amplitude equation, "
+        "harmonics, a geared motor, a background with motor-off rest, a room); false: the "
+        "clean bench (a gated tone, whole motor orders, white noise)",
+    )
+    sound: BenchSound = field(
+        default_factory=BenchSound,
+        metadata={"help": "the realistic bench's parts (with realistic only)"},
+    )
     population: dict[str, float] = field(
         default_factory=dict,
         metadata={
@@ -152,6 +174,12 @@ class BenchSettings:
 
     def __post_init__(self) -> None:
         check(self, ParameterError, "bench.")
+        if not isinstance(self.sound, BenchSound):
+            raise ParameterError("bench.sound must be a BenchSound")
+        if not self.realistic and self.sound != BenchSound():
+            raise ParameterError(
+                "bench.sound sets the realistic bench's parts: it needs realistic = true"
+            )
         for what, values in (
             ("population", self.population),
             ("population_scatter", self.population_scatter),
@@ -213,6 +241,11 @@ class Unit:
         True (noise-free) operating points at `times_s`.
     squeak_hz : numpy.ndarray
         Frequency of the most unstable mode where the unit's model squeaks, else nan.
+    growth_rate_per_s, mode_hz : numpy.ndarray
+        Re(lambda) [1/s] and frequency [Hz] of the most unstable mode, squeaking or not; nan
+        where the model is not valid (e.g. below its minimum speed).
+    stroke_start_s : float
+        When the stroke starts [s] (the realistic bench's rest before it; 0 otherwise).
     """
 
     unit_id: str
@@ -223,6 +256,9 @@ class Unit:
     load_n: np.ndarray
     nut_position_m: np.ndarray
     squeak_hz: np.ndarray
+    growth_rate_per_s: np.ndarray
+    mode_hz: np.ndarray
+    stroke_start_s: float = 0.0
 
     @property
     def squeaks(self) -> np.ndarray:
@@ -266,6 +302,22 @@ def draw_stroke(
     )
 
 
+def mode_field(
+    params: ScrewParameters,
+    speed_rad_s: np.ndarray,
+    load_n: np.ndarray,
+    nut_position_m: np.ndarray,
+    nut_step_m: float = LiveSettings.nut_deadband_m,
+) -> GrowthField:
+    """The most unstable mode of the model of `params` (no scatter) at each operating point,
+    the nut position in steps of `nut_step_m` (points of one step share one batched
+    eigen-solve, `fields.growth_field`)."""
+    model = SqueakModel(params, Scatter({}))
+    nut = np.round(np.asarray(nut_position_m, float) / nut_step_m) * nut_step_m
+    nut = np.clip(nut, 0.0, params.nut_travel_m)
+    return growth_field(model, speed_rad_s, load_n, nut_position_m=nut)
+
+
 def squeak_frequencies(
     params: ScrewParameters,
     speed_rad_s: np.ndarray,
@@ -274,12 +326,8 @@ def squeak_frequencies(
     nut_step_m: float = LiveSettings.nut_deadband_m,
 ) -> np.ndarray:
     """Frequency [Hz] of the most unstable mode where the model of `params` (no scatter)
-    squeaks at each operating point, else nan; the nut position in steps of `nut_step_m`
-    (points of one step share one batched eigen-solve, `fields.growth_field`)."""
-    model = SqueakModel(params, Scatter({}))
-    nut = np.round(np.asarray(nut_position_m, float) / nut_step_m) * nut_step_m
-    nut = np.clip(nut, 0.0, params.nut_travel_m)
-    field = growth_field(model, speed_rad_s, load_n, nut_position_m=nut)
+    squeaks at each operating point, else nan (`mode_field`)."""
+    field = mode_field(params, speed_rad_s, load_n, nut_position_m, nut_step_m)
     squeak = field.valid & (field.max_growth_rate > 0)
     return np.where(squeak, field.peak_frequency_hz, np.nan)
 
@@ -291,10 +339,18 @@ def simulate_unit(
     nominal: ScrewParameters,
     scatter: Scatter,
 ) -> Unit:
-    """Unit `index`: draw its parameters and stroke and evaluate its model along the stroke."""
+    """Unit `index`: draw its parameters and stroke and evaluate its model along the stroke
+    (on the realistic bench with `sound.rest_s` of standstill before and after it)."""
     params = draw_params(nominal, scatter, rng)
     stroke = draw_stroke(settings, params, rng)
     times, speed, load, nut = stroke.sampled(settings.input_rate_hz)  # duration_s: the bench's
+    rest = int(round(settings.sound.rest_s * settings.input_rate_hz)) if settings.realistic else 0
+    if rest:  # the motor off: speed 0, load and nut held
+        speed = np.pad(speed, rest)
+        load, nut = (np.pad(a, rest, mode="edge") for a in (load, nut))
+        times = np.arange(speed.size) / settings.input_rate_hz
+    field = mode_field(params, speed, load, nut)
+    squeak = field.valid & (field.max_growth_rate > 0)
     return Unit(
         f"bench-{index:03d}",
         params,
@@ -303,7 +359,42 @@ def simulate_unit(
         speed,
         load,
         nut,
-        squeak_frequencies(params, speed, load, nut),
+        np.where(squeak, field.peak_frequency_hz, np.nan),
+        field.max_growth_rate,
+        field.peak_frequency_hz,
+        rest / settings.input_rate_hz,
+    )
+
+
+def _held(values: np.ndarray) -> np.ndarray:
+    """`values` with each nan replaced by the last finite value before it (before the first
+    finite one: that one); all nan stays all nan."""
+    ok = np.isfinite(values)
+    if not ok.any():
+        return values
+    index = np.maximum.accumulate(np.where(ok, np.arange(values.size), 0))
+    index[: np.flatnonzero(ok)[0]] = np.flatnonzero(ok)[0]
+    return values[index]
+
+
+def realistic_sound(settings: BenchSettings, unit: Unit, seed: int) -> BenchAudio:
+    """The realistic bench's microphone of `unit` (`bench_sound.bench_microphone`). Where the
+    unit's model is not valid (the nut at standstill, below the model's minimum speed) its
+    mode keeps the last frequency and rings down at the structure's own damping,
+    sigma = -modal_damping 2 pi f (no sliding, no friction feeding it)."""
+    f = _held(unit.mode_hz)
+    idle = -unit.params.modal_damping * 2 * math.pi * f
+    sigma = np.where(np.isfinite(unit.growth_rate_per_s), unit.growth_rate_per_s, idle)
+    return bench_microphone(
+        unit.times_s,
+        unit.speed_rad_s,
+        sigma,
+        f,
+        settings.squeak_amplitude_fs,
+        settings.peak_speed_rad_s,
+        settings.sound,
+        settings.sample_rate_hz,
+        seed,
     )
 
 
@@ -321,27 +412,28 @@ def write_unit(
     nominal: ScrewParameters,
     scatter: Scatter,
     rng: np.random.Generator,
-) -> Path:
+) -> tuple[Path, BenchAudio | None]:
     """Record one unit's stroke (inputs with sensor noise, the microphone) into a new bag
     directory under `directory`, its metadata record carrying `nominal` and `scatter` (the
-    prior, `BenchSettings.prior`); returns the bag."""
-    # here, not at the top: the CLI's parser reads BenchSettings, and model.acoustics pulls
-    # in scipy.signal (~70 ms at every command's start)
-    from ..model.acoustics.synthesis import microphone
-
+    prior, `BenchSettings.prior`); returns the bag and, on the realistic bench, its sound's
+    truth."""
     cycle = DutyCycle()
     n = unit.times_s.size
     speed = unit.speed_rad_s + rng.normal(0.0, cycle.speed_noise_rad_s, n)
     load = unit.load_n + rng.normal(0.0, cycle.load_noise_n, n)
-    amplitude = settings.squeak_amplitude_fs
-    audio = microphone(
-        unit.times_s,
-        unit.speed_rad_s,
-        unit.squeak_hz,
-        amplitude,
-        settings.sample_rate_hz,
-        seed=int(rng.integers(2**31)),
-    )
+    sound = None
+    if settings.realistic:
+        sound = realistic_sound(settings, unit, int(rng.integers(2**31)))
+        audio = sound.samples
+    else:
+        audio = microphone(
+            unit.times_s,
+            unit.speed_rad_s,
+            unit.squeak_hz,
+            settings.squeak_amplitude_fs,
+            settings.sample_rate_hz,
+            seed=int(rng.integers(2**31)),
+        )
     pcm = np.round(np.clip(audio, -1.0, 1.0) * 32767.0).astype("<i2")
     fs, chunk = settings.sample_rate_hz, settings.chunk_samples
     events: list[tuple[int, int, str, str, bytes]] = []  # (log time, order, topic, ...)
@@ -397,25 +489,67 @@ def write_unit(
     if rec.error:
         raise OSError(rec.error)
     assert rec.bag is not None
-    return rec.bag
+    return rec.bag, sound
 
 
-def _intervals(unit: Unit) -> list[dict[str, float]]:
-    """Where the unit squeaks: start and end [s] and the frequency range of each interval."""
-    on = unit.squeaks.astype(np.int8)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], on, [0]])))
+def _intervals(
+    times_s: np.ndarray, on: np.ndarray, frequency_hz: np.ndarray
+) -> list[dict[str, float]]:
+    """Runs of `on`: start and end [s] (first and last point) and the frequency range."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], on.astype(np.int8), [0]])))
     out = []
     for a, b in zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True):
-        f = unit.squeak_hz[a:b]
+        f = frequency_hz[a:b]
         out.append(
             {
-                "start_s": float(unit.times_s[a]),
-                "end_s": float(unit.times_s[b - 1]),
+                "start_s": float(times_s[a]),
+                "end_s": float(times_s[b - 1]),
                 "min_hz": float(f.min()),
                 "max_hz": float(f.max()),
             }
         )
     return out
+
+
+def _sound_truth(sound: BenchAudio) -> dict[str, Any]:
+    """A realistic unit's sound in truth.json: the envelope (the fundamental's amplitude A at
+    the source, dBFS, and its frequency) at `TRUTH_RATE_HZ`, the audible intervals (on the
+    envelope grid) and the growth truth at each onset."""
+    step = max(int(round(1.0 / (TRUTH_RATE_HZ * (sound.grid_s[1] - sound.grid_s[0])))), 1)
+    return {
+        "envelope_rate_hz": TRUTH_RATE_HZ,
+        "envelope_dbfs": np.round(
+            20 * np.log10(np.maximum(sound.amplitude[::step], 10 ** (OFF_DB / 20))), 2
+        ).tolist(),  # OFF_DB: no mode, no squeak
+        "frequency_hz": np.round(sound.frequency_hz[::step], 2).tolist(),
+        "audible_intervals": _intervals(sound.grid_s, sound.audible, sound.frequency_hz),
+        "audible_s": float(sound.audible.sum() * (sound.grid_s[1] - sound.grid_s[0])),
+        "onsets": [
+            {**asdict(o), "window_s": list(o.window_s) if o.window_s else None}
+            for o in sound.onsets
+        ],
+    }
+
+
+def _sound_settings(settings: BenchSettings) -> dict[str, Any]:
+    """truth.json's `sound`: which bench, and on the realistic one its drive and background
+    (orders of the screw speed, tone frequencies) and the squeak's saturation and floor."""
+    if not settings.realistic:
+        return {"realistic": False}
+    s = settings.sound
+    saturation = settings.squeak_level_dbfs
+    return {
+        "realistic": True,
+        "gear_ratio": s.gear_ratio,
+        "drive_orders": [k for k, _ in s.drive_orders],
+        "background_tones_hz": [f for f, _ in s.background_tones],
+        "pink_noise_dbfs": s.pink_noise_dbfs,
+        "rt60_s": s.rt60_s,
+        "saturation_dbfs": saturation,
+        "floor_dbfs": saturation + s.squeak_floor_db,
+        "audible_snr_db": s.audible_snr_db,
+        "rest_s": s.rest_s,
+    }
 
 
 def run(
@@ -454,7 +588,7 @@ def run(
     for k in range(settings.units):
         unit_rng, record_rng = (np.random.default_rng(s) for s in rng.integers(2**63, size=2))
         unit = simulate_unit(settings, k, unit_rng, nominal, scatter)
-        bag = write_unit(settings, unit, out, prior, prior_scatter, record_rng)
+        bag, sound = write_unit(settings, unit, out, prior, prior_scatter, record_rng)
         if progress:
             progress(k, unit, bag)
         units.append(
@@ -464,7 +598,12 @@ def run(
                 "params": {name: getattr(unit.params, name) for name in scatter.names},
                 "stroke": {f.name: getattr(unit.stroke, f.name) for f in fields(unit.stroke)},
                 "squeak_s": float(unit.squeaks.sum() / settings.input_rate_hz),
-                "squeak_intervals": _intervals(unit),
+                "squeak_intervals": _intervals(unit.times_s, unit.squeaks, unit.squeak_hz),
+                **(
+                    {"stroke_start_s": unit.stroke_start_s, "sound": _sound_truth(sound)}
+                    if sound
+                    else {}
+                ),
             }
         )
     truth = {
@@ -483,6 +622,7 @@ def run(
             "audio_scale_pa_per_fs": settings.audio_scale_pa_per_fs,
             "t0_s": 0.0,
         },
+        "sound": _sound_settings(settings),
         "units": units,
     }
     (out / TRUTH).write_text(json.dumps(truth, indent=1, sort_keys=True) + "\n")

@@ -12,7 +12,16 @@ from pathlib import Path
 from typing import Any
 
 from ..model.physics.metadata import help_text
-from .args import CliError, Parser, finite, finite_float, output_directory, print_json
+from .args import (
+    CliError,
+    Parser,
+    add_settings_options,
+    finite,
+    finite_float,
+    output_directory,
+    print_json,
+    settings_from,
+)
 
 _OPTIONS = ("units", "formulation", "seed", "duration_s")
 _POPULATION = ("population", "population_scatter")  # NAME=VALUE options, repeatable
@@ -61,13 +70,21 @@ def empty_output(path: str, force: bool) -> None:
 def cmd_bench(args: argparse.Namespace) -> int:
     """`bench`: simulate and record the units; prints one line per unit and a JSON summary."""
     from ..bag.virtual_bench import TRUTH, BenchSettings, Unit, run
+    from ..model.acoustics.bench_sound import BenchSound
 
     values: dict[str, Any] = {
         name: getattr(args, name) for name in _OPTIONS if getattr(args, name) is not None
     }
     for name in _POPULATION:
         values[name] = name_values(getattr(args, name), "--" + name.replace("_", "-"))
-    settings = BenchSettings(**values)
+    parts = [f.name for f in fields(BenchSound) if getattr(args, f.name) is not None]
+    if parts and not args.realistic:
+        raise CliError(
+            f"--{parts[0].replace('_', '-')} sets a part of the realistic bench: add --realistic"
+        )
+    settings = BenchSettings(
+        **values, realistic=args.realistic, sound=settings_from(args, BenchSound)
+    )
     empty_output(args.out, args.force)
     start = time.perf_counter()
 
@@ -98,6 +115,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     """Add `bench` to `sub` (no model options: every unit has its own drawn parameters)."""
     from ..bag.virtual_bench import BenchSettings
+    from ..model.acoustics.bench_sound import BenchSound
 
     spec = {f.name: f for f in fields(BenchSettings)}
     p = sub.add_parser(
@@ -133,6 +151,11 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
             help=spec[name].metadata["help"] + " (repeatable; the logs still carry the "
             "package's nominal parameters and default scatter, the prior; truth.json has both)",
         )
+    p.add_argument("--realistic", action="store_true", help=help_text(spec["realistic"]))
+    add_settings_options(
+        p.add_argument_group("the realistic bench's sound (with --realistic; levels dBFS)"),
+        BenchSound,
+    )
     p.add_argument(
         "--force",
         action="store_true",

@@ -16,6 +16,7 @@ clipping (values beyond full scale are returned as they are).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -26,6 +27,45 @@ import scipy.signal
 MOTOR_ORDERS = (1, 2, 3, 4, 6, 8, 12)
 #: The microphone is AC-coupled: an order's amplitude fades linearly to 0 below this [Hz].
 HIGH_PASS_HZ = 20.0
+
+
+def shaft_orders(
+    shaft_hz: np.ndarray,
+    sample_rate_hz: float,
+    orders: Sequence[float],
+    amplitudes: Sequence[Any],
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """Tones at `orders` of a shaft's rotation frequency, phase-continuous through speed
+    changes (integrated from the instantaneous frequency, random start), each faded out
+    linearly below `HIGH_PASS_HZ` (an AC-coupled microphone: no DC at standstill) and
+    silent above the Nyquist frequency.
+
+    Parameters
+    ----------
+    shaft_hz : numpy.ndarray
+        Shaft rotation frequency [Hz] at each sample (>= 0).
+    sample_rate_hz : float
+        Sample rate [Hz].
+    orders : sequence of float
+        Orders (multiples of the rotation frequency, whole or not).
+    amplitudes : sequence of float or numpy.ndarray
+        Amplitude [FS] of each order (per sample where an array).
+    rng : numpy.random.Generator
+        Draws one start phase per order, in order.
+
+    Returns
+    -------
+    numpy.ndarray
+        The sum of the tones (zeros without orders).
+    """
+    shaft_turns = np.cumsum(shaft_hz) / sample_rate_hz  # shaft angle [turns]
+    nyquist = sample_rate_hz / 2.0  # none above it (it would alias)
+    out = np.zeros(shaft_hz.size)
+    for k, amplitude in zip(orders, amplitudes, strict=True):
+        fade = np.clip(k * shaft_hz / HIGH_PASS_HZ, 0.0, 1.0) * (k * shaft_hz < nyquist)
+        out += fade * amplitude * np.sin(2 * np.pi * (k * shaft_turns + rng.random()))
+    return out
 
 
 def microphone(
@@ -80,11 +120,8 @@ def microphone(
     shaft_hz = np.abs(
         np.interp(t, times, np.broadcast_to(np.asarray(speed_rad_s, float), times.shape))
     ) / (2 * np.pi)
-    shaft_turns = np.cumsum(shaft_hz) / fs  # shaft angle [turns]
     out = noise_level * rng.standard_normal(n)
-    for k in motor_orders:  # faded in below HIGH_PASS_HZ (no DC at standstill)
-        fade = np.clip(k * shaft_hz / HIGH_PASS_HZ, 0.0, 1.0)
-        out += fade * motor_level / k * np.sin(2 * np.pi * (k * shaft_turns + rng.random()))
+    out += shaft_orders(shaft_hz, fs, motor_orders, [motor_level / k for k in motor_orders], rng)
     f_sq = np.broadcast_to(np.asarray(squeak_hz, float), times.shape)
     on_at = np.isfinite(f_sq)
     if on_at.any():
