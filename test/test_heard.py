@@ -467,6 +467,40 @@ def test_a_log_heard_in_part_says_so_everywhere(paper_bench, tmp_path, capsys):
     assert f"{row['name']}: heard only {100 * heard['sound_share']:.0f} % of the log" in console
 
 
+def test_a_realistic_bench_heard_not_its_room_nor_its_drive(tmp_path):
+    """`bench --realistic` (fan, mains hum, pink noise, a worm gear at 37.3x with its 2nd order
+    and a commutator at 373x, squeak grown by the amplitude equation, its harmonics, a room),
+    seeds the unit tests do not use: no false episode from the background (learned at rest),
+    at most one per unit in all (the commutator's constant-speed tone where its sweep was too
+    fast to be learned), every audible interval of 50 ms or more found. Before the background,
+    the SNR gate and the drive ratios: 101 false episodes on 4 units (fan, hum, drive)."""
+    truth = run(BenchSettings(units=3, duration_s=12.0, seed=31, realistic=True), tmp_path / "b")
+    background = truth["sound"]["background_tones_hz"]
+    false = 0
+    for k, unit in enumerate(truth["units"]):
+        _replay(tmp_path / "b" / unit["log"], tmp_path / f"r{k}")
+        heard = _summary(tmp_path / f"r{k}")["heard"]
+        audible = [
+            a for a in unit["sound"]["audible_intervals"] if a["end_s"] - a["start_s"] >= 0.05
+        ]
+        episodes = heard["episodes"]
+
+        def overlaps(e, a):
+            return e["start_s"] < a["end_s"] and e["end_s"] > a["start_s"]
+
+        wrong = [e for e in episodes if not any(overlaps(e, a) for a in audible)]
+        assert not [
+            e for e in wrong if any(abs(e["frequency_hz"] / f - 1) < 0.02 for f in background)
+        ], wrong
+        false += len(wrong)
+        assert all(any(overlaps(e, a) for e in episodes) for a in audible), (audible, episodes)
+        assert {round(b["frequency_hz"]) for b in heard["background"]} & {
+            round(f) for f in background
+        }
+        assert any(abs(o["ratio"] / 37.3 - 1) < 0.01 for o in heard["drive_orders"])
+    assert false <= len(truth["units"])
+
+
 def test_calibration_takes_no_observation_where_there_was_no_sound(paper_bench, tmp_path):
     """The microphone mute (a constant) for the last 4 s: its frames are no observations (they
     read as 'not heard': a less squeaky drive), a log mute throughout has none and says why,

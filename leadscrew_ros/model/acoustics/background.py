@@ -80,6 +80,8 @@ class BackgroundLearner:
         self.bin_hz, self.tolerance = bin_hz, tolerance
         self.share, self.margin_db, self.level_offset_db = share, margin_db, level_offset_db
         self.frames = 0  #: rest frames seen
+        self._spectrum: np.ndarray | None = None  # sum of the rest frames' PSD
+        self._spectra = 0  # rest frames summed into it
         # per group: [sum of frequencies, frames holding it, sum of levels (dB)]
         self._groups = np.zeros((0, 3))
         self._tones: list[BackgroundTone] | None = None  # `tones`, until the next frame
@@ -111,6 +113,46 @@ class BackgroundLearner:
         if g.shape[0] > _MAX_TONES:
             g = g[np.argsort(-g[:, 1], kind="stable")[:_MAX_TONES]]
         self._groups, self._tones = g, None
+
+    def add_spectrum(self, psd: np.ndarray) -> None:
+        """Rest frames' power spectral densities (frames, bins) [unit^2/Hz], bins `bin_hz`
+        apart from 0 Hz: the background's mean spectrum (`band_power`)."""
+        rows = np.asarray(psd, dtype=np.float64)
+        if rows.shape[0] == 0:
+            return
+        total = rows.sum(axis=0)
+        if self._spectrum is None or self._spectrum.shape != total.shape:
+            self._spectrum, self._spectra = np.zeros_like(total), 0
+        self._spectrum += total
+        self._spectra += rows.shape[0]
+
+    @property
+    def has_spectrum(self) -> bool:
+        """A background spectrum was learned."""
+        return self._spectra > 0
+
+    def band_power(self, frequency_hz: np.ndarray) -> np.ndarray:
+        """The background's mean power in the third-octave band around each frequency
+        ([f 2^-1/6, f 2^1/6]) [unit^2]; nan before any rest frame.
+
+        Parameters
+        ----------
+        frequency_hz : numpy.ndarray
+            Any shape [Hz].
+
+        Returns
+        -------
+        numpy.ndarray
+        """
+        f = np.asarray(frequency_hz, dtype=float)
+        if self._spectrum is None or not self._spectra:
+            return np.full(f.shape, np.nan)
+        mean = self._spectrum / self._spectra
+        cum = np.concatenate([[0.0], np.cumsum(mean)]) * self.bin_hz
+        n = mean.size
+        lo = np.clip(np.floor(f * 2 ** (-1 / 6) / self.bin_hz + 0.5), 0, n).astype(int)
+        hi = np.clip(np.floor(f * 2 ** (1 / 6) / self.bin_hz + 0.5) + 1, 0, n).astype(int)
+        return np.maximum(cum[hi] - cum[lo], _TINY)
 
     def tones(self) -> list[BackgroundTone]:
         """The background tones learned so far, by frequency.

@@ -457,7 +457,7 @@ class StreamingDetector:
         self._reset(_check_rate(sample_rate_hz))
         #: the tones heard at rest (kept across segments and rate changes)
         self.background = BackgroundLearner(
-            1.0 / settings.frame_s,
+            self.analyzer.df,
             settings.track_tolerance,
             settings.background_share,
             settings.background_margin_db,
@@ -750,10 +750,8 @@ class StreamingDetector:
             return []
         variance, mean_square = frame_powers(seg, n, hop, i1 - i0)
         rounding = np.maximum(self._format_step, FLOAT32_STEP * np.sqrt(mean_square)) ** 2 / 12
-        cand = self.analyzer.candidates(
-            short_time_psd(seg, self.sample_rate_hz, n, hop, self._window),
-            floor=TONE_FLOOR_FACTOR * rounding,
-        )
+        psd = short_time_psd(seg, self.sample_rate_hz, n, hop, self._window)
+        cand = self.analyzer.candidates(psd, floor=TONE_FLOOR_FACTOR * rounding)
         bad = self._bad[s0 : s0 + seg.size]
         if bad.any():
             bad_cum = np.concatenate([[0], np.cumsum(bad)])
@@ -765,22 +763,33 @@ class StreamingDetector:
         level_db = 10 * np.log10(np.maximum(cand.power, 1e-300)) + self._level_offset_db
         # the background learned so far is not followed (a louder tone at its frequency is)
         background = self.background.covers(cand.frequency_hz, level_db)
-        prominent = cand.prominent & ~dropped[:, None] & ~background
+        if self.background.has_spectrum:  # the gate: a stated SNR over the background's band
+            snr_db = 10 * np.log10(
+                np.maximum(cand.power, 1e-300) / self.background.band_power(cand.frequency_hz)
+            )
+            over = cand.valid & (snr_db >= self.settings.background_snr_db)
+            prominent = self.analyzer.without_harmonics(
+                cand.frequency_hz, cand.power, over & ~dropped[:, None] & ~background
+            )
+        else:  # nothing learned yet: ECMA-418-1's prominence
+            prominent = cand.prominent & ~dropped[:, None] & ~background
         tonal = cand.tonal & ~dropped[:, None]
         frame_t = self.frame_time(np.arange(i0, i1))
         if self._speed_t.size:
             f1 = np.abs(np.interp(frame_t, self._speed_t, self._speed_v)) / (2 * np.pi)
         else:
             f1 = np.full(frame_t.shape, np.nan)
-        has = prominent.any(axis=1)
+        has = np.any(prominent, axis=1, keepdims=False).astype(bool).reshape(-1)
         rest = 2 * np.pi * f1 < self.settings.motor_off_rad_s  # False where the speed is unknown
         rest_run = max(int(round(self.settings.motor_off_min_s / self.hop_s)), 1)
         closed: list[Episode] = []
+        learning: list[int] = []
         for j in range(i1 - i0):
             self._rest_frames = self._rest_frames + 1 if rest[j] and not dropped[j] else 0
             if self._rest_frames >= rest_run:
                 tones = np.flatnonzero(tonal[j])
                 self.background.add(cand.frequency_hz[j, tones], cand.power[j, tones])
+                learning.append(j)
             if dropped[j]:
                 self._dropped_run += 1
                 if self._dropped_run <= self._max_dropped:  # a glitch: the tracks hold
@@ -803,6 +812,8 @@ class StreamingDetector:
                 for c in cols
             ]
             closed += self._step(i0 + j, found, float(f1[j]))
+        if learning:
+            self.background.add_spectrum(psd[learning, : self.analyzer.used_bins])
         return closed
 
     def _note_usable(self, i0: int, dropped: np.ndarray, silent: np.ndarray) -> None:
@@ -1080,6 +1091,8 @@ def detect(
     episodes = det.push(samples, t0_s, speed_rad_s, speed_times_s)
     n_samples = det._n_samples
     episodes += det.flush()
+    if speed_times_s is not None and speed_rad_s is not None:
+        episodes = _at_drive_ratios(det, episodes, speed_times_s, speed_rad_s)
     warnings = list(det.warnings)
     if n_samples == 0:
         warnings.append("no audio samples")
@@ -1112,6 +1125,43 @@ def detect(
         background=det.background.tones(),
         drive_orders=det.drive_orders,
     )
+
+
+def _at_drive_ratios(
+    det: StreamingDetector, episodes: list[Episode], speed_times_s: Any, speed_rad_s: Any
+) -> list[Episode]:
+    """The episodes less those at one of the drive's ratios over the whole log (learned by
+    then, or given): a tone held at constant speed, or a piece of a sweep too short to be
+    judged, that closed before the ratio was heard moving (the order spectrum of the log's
+    tracks, used after the fact)."""
+    s = det.settings
+    ratios = [o.ratio for o in det.drive_orders] + list(s.known_ratios)
+    try:
+        t = np.asarray(speed_times_s, dtype=float).reshape(-1)
+        v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
+    except (TypeError, ValueError):
+        return episodes
+    if not ratios or s.order_tolerance <= 0 or t.size != v.size or t.size == 0:
+        return episodes
+    kept = []
+    for ep in episodes:
+        f1 = np.interp(ep.track_times_s, t, v) / (2 * np.pi)
+        ok = np.isfinite(ep.track_hz) & (f1 > 0)
+        share = (
+            [
+                float(np.mean(np.abs(ep.track_hz[ok] / (r * f1[ok]) - 1.0) <= s.order_tolerance))
+                for r in ratios
+            ]
+            if ok.sum() * 2 >= ep.track_hz.size and ok.any()
+            else [0.0]
+        )
+        best = int(np.argmax(share))
+        if share[best] >= s.order_share:
+            ep.drive_ratio = ratios[best]
+            det.rejected.append(ep)
+        else:
+            kept.append(ep)
+    return kept
 
 
 def _learn_at_rest(

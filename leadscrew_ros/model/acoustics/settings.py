@@ -149,12 +149,20 @@ class DetectorSettings:
         0.5, "s", "rest this long before its sound is learned as background", 0.0, 60.0
     )
     background_share: float = setting(
-        0.5,
+        0.2,
         "1",
         "a tone held by at least this share of the rest frames is a background tone",
         0.0,
         1.0,
         lo_open=True,
+    )
+    background_snr_db: float = setting(
+        10.0,
+        "dB",
+        "with a background learned, a squeak candidate is a tone this far over the "
+        "background's third-octave band at its frequency (before: ECMA-418-1 prominence)",
+        -60.0,
+        60.0,
     )
     background_margin_db: float = setting(
         6.0,

@@ -309,7 +309,7 @@ class ToneAnalyzer:
         pr = 10.0 * np.log10(np.maximum(total, _TINY) / np.maximum(0.5 * (lower + upper), _TINY))
         pr = np.where(self.pr_ok[rel], pr, np.nan)
         # a stronger peak inside the critical band suppresses a candidate (ties: lower index)
-        fi, fj = freq[:, :, None], freq[:, None, :]
+        fi = freq[:, :, None]
         stronger = (p0[:, :, None] > p0[:, None, :]) | (
             (p0[:, :, None] == p0[:, None, :]) & (rel[:, :, None] < rel[:, None, :])
         )
@@ -317,14 +317,22 @@ class ToneAnalyzer:
         valid &= ~np.any(valid[:, :, None] & stronger & inside, axis=1)
         prominent = valid & ((tnr >= self.tnr_limit[rel]) | (pr >= self.pr_limit[rel]))
         tonal = prominent.copy()
-        if self.max_harmonic >= 2:
-            ratio = fj / np.maximum(fi, _TINY)
-            m = np.rint(ratio)
-            harmonic = (
-                (m >= 2)
-                & (m <= self.max_harmonic)
-                & (np.abs(ratio - m) <= self.harmonic_tolerance * ratio)
-                & (tone[:, None, :] * m**2 <= 2.25 * tone[:, :, None])
-            )
-            prominent &= ~np.any(prominent[:, :, None] & harmonic, axis=1)
+        prominent = self.without_harmonics(freq, tone, prominent)
         return ToneCandidates(freq, tone, tnr, pr, valid, prominent, tonal)
+
+    def without_harmonics(self, freq: np.ndarray, tone: np.ndarray, kept: np.ndarray) -> np.ndarray:
+        """`kept` (frames, peaks) less the candidates at m = 2..`max_harmonic` times a kept
+        one's frequency (within `harmonic_tolerance`) whose amplitude is at most 1.5 / m of
+        it: harmonics of a tone (clipping gives 1 / m), not tones of their own."""
+        if self.max_harmonic < 2:
+            return kept
+        fi, fj = freq[:, :, None], freq[:, None, :]
+        ratio = fj / np.maximum(fi, _TINY)
+        m = np.rint(ratio)
+        harmonic = (
+            (m >= 2)
+            & (m <= self.max_harmonic)
+            & (np.abs(ratio - m) <= self.harmonic_tolerance * ratio)
+            & (tone[:, None, :] * m**2 <= 2.25 * tone[:, :, None])
+        )
+        return kept & ~np.any(kept[:, :, None] & harmonic, axis=1)
