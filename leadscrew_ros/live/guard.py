@@ -47,8 +47,6 @@ from ..model.squeak_model import SqueakModel
 from ..model.studies.advice import speed_bands
 from .recompute import band_bin, bin_centre
 
-_SAME = 1e-12  # relative change of a command that counts as the same target
-
 
 @documented
 @dataclass(frozen=True)
@@ -198,6 +196,7 @@ class GuardPolicy:
     _since: float = 0.0  # when it was commanded
     _deadline: float = math.inf  # reach it by then
     _committed: bool = False
+    _aim: float = 0.0  # the last step's target
 
     def step(
         self,
@@ -231,6 +230,7 @@ class GuardPolicy:
         s = self.settings
         if not s.enabled:
             self._v, self._a, self._t = command_rad_s, 0.0, now_s
+            self._aim = command_rad_s
             return GuardStep(command_rad_s, command_rad_s, False, "")
         dt = 0.0 if self._t is None else now_s - self._t
         if not math.isfinite(dt) or dt < 0:
@@ -241,12 +241,12 @@ class GuardPolicy:
             reason = f"command {command_rad_s!r} is not a finite number: kept {self._command:g}"
         else:
             c = max(-s.max_speed_rad_s, min(s.max_speed_rad_s, float(command_rad_s)))
-            if abs(c - self._command) > _SAME * max(1.0, abs(c)):
+            if c != self._command:
                 self._command, self._since, self._committed = c, now_s, False
                 self._deadline = now_s + reach_time(self._v, self._a, c, s) + s.max_delay_s
         c = self._command
         if c == 0.0:
-            self._v = self._a = 0.0
+            self._v = self._a = self._aim = 0.0
             return GuardStep(0.0, 0.0, False, reason, stopped=True)
         target, why = self._target(c, load_n, nut_position_m, input_age_s, arrived_s, dt)
         reason = reason or why
@@ -259,6 +259,7 @@ class GuardPolicy:
         if dt == 0:
             return GuardStep(self._v, target, target != c, reason)
         v, a = self._next(target, dt)
+        self._aim = target
         if v * c < 0 and self._v * c >= 0:  # would cross zero away from the command
             self._v = self._a = 0.0
             return GuardStep(0.0, target, target != c, reason or "no reversal", stopped=True)
@@ -308,13 +309,13 @@ class GuardPolicy:
         lo = max(-accel, a - jerk * dt)
         hi = min(accel, a + jerk * dt)
         # Stay within the braking curves of +-vmax (|v| <= vmax ever after).
-        hi = min(hi, max(lo, _curve(vmax - v, jerk, dt))) if v < vmax else lo
-        lo = max(lo, min(hi, _curve(-vmax - v, jerk, dt))) if v > -vmax else hi
+        hi = min(hi, max(lo, _curve(vmax - v, jerk, dt)))
+        lo = max(lo, min(hi, _curve(-vmax - v, jerk, dt)))
         exact = (target - v) / dt  # lands on the target in this step
         if lo <= exact <= hi and abs(exact) <= jerk * dt:
             return target, exact
-        if lo <= exact <= hi and (target - v) * a >= 0 and _within_curve(target, exact, s):
-            return target, exact  # following a command that moves within the limits
+        if v == self._aim and lo <= exact <= hi and _within_curve(target, exact, s):
+            return target, exact  # on a target that moves within the limits: follow it
         a_new = min(hi, max(lo, _curve(target - v, jerk, dt)))
         return v + a_new * dt, a_new
 
