@@ -18,12 +18,17 @@ from pathlib import Path
 
 import numpy as np
 
+from ..bag.logfile import LogError
+from ..bag.logsource import log_topics, open_log, topic_types
 from ..live.guard import GuardBands, GuardPolicy, GuardSettings
 from ..live.profile import StrokeProfile
 from ..live.recompute import band_bin
+from ..model.physics.parameters import ScrewParameters
 from ..model.squeak_model import SqueakModel
+from .timeline import InputError, InputSettings, Timeline, input_namespaces
 
 COLUMNS = ("time_s", "speed_rad_s", "load_n", "nut_position_m")
+LOG_RATE_HZ = 100.0  # a log's command is sampled at this rate (the tracker's step)
 OUT_COLUMNS = COLUMNS + ("guarded_speed_rad_s", "p_squeak_raw", "p_squeak_guarded")
 
 
@@ -101,6 +106,46 @@ def read_profile(path: Path, load_n: float | None, nut_position_m: float | None)
     if not (np.diff(columns["time_s"]) > 0).all():
         raise ProfileFileError(f"{path}: time_s must increase strictly")
     return Command(*(columns[n] for n in COLUMNS))
+
+
+def read_log(
+    path: Path,
+    params: ScrewParameters,
+    load_n: float | None,
+    nut_position_m: float | None,
+    rate_hz: float = LOG_RATE_HZ,
+) -> Command:
+    """The motor speed of a recorded log as the command, with its axial load and nut
+    position, sampled (latest value held) at `rate_hz` from the first speed on: the node's
+    inputs as `replay` reads them (`review.timeline`: default topics and field paths, the
+    log's one input namespace). `load_n` / `nut_position_m` stand in for an input the log
+    lacks (the nut position else: the parameters').
+
+    Raises
+    ------
+    LogError
+        The log cannot be read, or has no speed or no load (and no `load_n`).
+    """
+    source = open_log(path)
+    found = input_namespaces(log_topics(source).values(), InputSettings())
+    inputs = InputSettings(nominal_load_n=load_n).resolved(found[0] if found else "/")
+    timeline = Timeline(params, inputs, topic_types(source))
+    points: list[tuple[float, float, float, float]] = []
+    for f, m in source.messages():
+        try:
+            timeline.feed(m, 0)
+        except InputError as exc:
+            raise LogError(f, str(exc)) from None
+        speed, load = timeline.speed, timeline.load
+        if speed is not None and load is not None:
+            nut = timeline.nut if timeline.nut_measured or nut_position_m is None else nut_position_m
+            points.append((timeline.seconds(timeline.now_ns), speed, load, nut))
+    if len(points) < 2:
+        raise LogError(path, "no motor speed with an axial load in the log (give --load N)")
+    t, speed, load, nut = (np.array(a) for a in zip(*points, strict=True))
+    times = t[0] + np.arange(int((t[-1] - t[0]) * rate_hz) + 1) / rate_hz
+    held = np.searchsorted(t, times, side="right") - 1  # the latest value at each time
+    return Command(times - times[0], speed[held], load[held], nut[held])
 
 
 def write_profile(path: Path, command: Command) -> None:
