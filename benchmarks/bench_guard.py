@@ -57,7 +57,10 @@ def main() -> None:
         elapsed[k] = clock() - t0
         active += step.active
     us = elapsed / 1e3
-    print("| steps | active (band avoided) | median [us] | p99 [us] | p99.9 [us] | max [us] | p99 target |")
+    print(
+        "| steps | active (band avoided) | median [us] | p99 [us] | p99.9 [us] | max [us] "
+        "| p99 target |"
+    )
     print("|---|---|---|---|---|---|---|")
     p99 = float(np.percentile(us, 99))
     print(

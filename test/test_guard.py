@@ -136,9 +136,22 @@ def smooth_commands(draw, s, dt):
     v = a = 0.0
     out = []
     for j in jerks:
-        a_new = max(-0.9, min(0.9, a / s.max_accel_rad_s2 + 0.9 * j * s.max_jerk_rad_s3 * dt / s.max_accel_rad_s2)) * s.max_accel_rad_s2
+        a_new = (
+            max(
+                -0.9,
+                min(
+                    0.9,
+                    a / s.max_accel_rad_s2 + 0.9 * j * s.max_jerk_rad_s3 * dt / s.max_accel_rad_s2,
+                ),
+            )
+            * s.max_accel_rad_s2
+        )
         if abs(v + a_new * dt) > s.max_speed_rad_s / 2:
-            a_new = 0.0 if abs(a) <= s.max_jerk_rad_s3 * dt * 0.9 else a - math.copysign(0.9 * s.max_jerk_rad_s3 * dt, a)
+            a_new = (
+                0.0
+                if abs(a) <= s.max_jerk_rad_s3 * dt * 0.9
+                else a - math.copysign(0.9 * s.max_jerk_rad_s3 * dt, a)
+            )
         if abs(v + a_new * dt) > s.max_speed_rad_s / 2:
             break
         v, a = v + a_new * dt, a_new
@@ -157,8 +170,10 @@ def smooth_commands(draw, s, dt):
 def test_equals_command_where_no_band(s, dt, load, nut, data):
     """P below p_max along the way (no band at any commanded speed) and a command within the
     limits: the output is the command."""
-    assume(s.max_accel_rad_s2**2 / (2 * s.max_jerk_rad_s3) + s.max_accel_rad_s2 * dt
-           <= s.max_speed_rad_s / 2)
+    assume(
+        s.max_accel_rad_s2**2 / (2 * s.max_jerk_rad_s3) + s.max_accel_rad_s2 * dt
+        <= s.max_speed_rad_s / 2
+    )
     commands = data.draw(smooth_commands(s, dt))
     top = max((abs(c) for c in commands), default=0.0)
     policy = policy_with(s, load, nut, ((top * 1.01 + 1, top * 2 + 2),), ())
@@ -221,8 +236,9 @@ def test_band_avoided():
 def test_bad_inputs_pass_through(inputs, said):
     """The command passes through (rate limits aside): the output is the plain tracker's."""
     out, reasons = ramp_through(banded(), **inputs)
-    plain, _ = ramp_through(policy_with(GuardSettings(), 200.0, 0.1, (), ()), load_n=200.0,
-                            nut_position_m=0.1)
+    plain, _ = ramp_through(
+        policy_with(GuardSettings(), 200.0, 0.1, (), ()), load_n=200.0, nut_position_m=0.1
+    )
     np.testing.assert_allclose(out, plain, rtol=1e-12)
     assert all(said in r for r in reasons)
 

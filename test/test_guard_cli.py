@@ -64,7 +64,10 @@ def test_log_with_constant_load(tmp_path, capsys):
     for k in range(81):
         s = profile.state(k / 20)
         t = t0 + k * 50_000_000
-        messages += [f64("/motor_speed", s.speed_rad_s, t), f64("/nut_position", s.nut_position_m, t)]
+        messages += [
+            f64("/motor_speed", s.speed_rad_s, t),
+            f64("/nut_position", s.nut_position_m, t),
+        ]
     log = write_mcap(tmp_path / "stroke.mcap", messages)
     code, out, err = cli(capsys, "guard", log, "--out", tmp_path / "out", "--load", "200")
     assert code == 0, err
@@ -88,7 +91,11 @@ def test_log_with_constant_load(tmp_path, capsys):
         ("time_s,speed_rad_s\n0,1\n1,x\n", ["--load", "1", "--nut", "0.1"], "speed_rad_s"),
         ("time_s,speed_rad_s\n0,1\n", ["--load", "1", "--nut", "0.1"], "two rows"),
         ("", [], "empty"),
-        ("time_s,speed_rad_s\n0,1\n1,2\n", ["--load", "1", "--nut", "0.1", "--p-max", "0"], "p_max"),
+        (
+            "time_s,speed_rad_s\n0,1\n1,2\n",
+            ["--load", "1", "--nut", "0.1", "--p-max", "0"],
+            "p_max",
+        ),
     ],
 )
 def test_bad_profiles_are_one_line_errors(tmp_path, capsys, text, extra, said):

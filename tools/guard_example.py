@@ -5,11 +5,12 @@
     .venv/bin/python tools/guard_example.py [--plot [doc/images/guard.png]]  # ~40 s on 2 cores
 
 Each stroke (`live.profile.StrokeProfile`, sampled at 100 Hz) is written as PROFILE.csv and run
-through `leadscrew-squeak guard` (default settings, model and scatter), whose guarded.csv gives
-the table: time in squeak (P(squeak) >= p_max), peak P, travel, and the guarded stroke time for
-the raw travel against the raw stroke's (`review.guard.summary`). Issue 33's target: <= 0.3 s
-in squeak for <= 10 % longer stroke time. `--plot` copies the demo stroke's guarded.png, made by
-the command, to the doc's picture.
+through `leadscrew-squeak guard` (default settings, model and scatter), whose guarded.csv
+gives the first table: time in squeak (P(squeak) >= p_max), peak P, travel, and the guarded
+stroke time for the raw travel against the raw stroke's (`review.guard.summary`). Issue 33's
+target: <= 0.3 s in squeak for <= 10 % longer stroke time. `--plot` copies the demo stroke's
+guarded.png, made by the command, to the doc's picture. The second table is the settings'
+metadata.
 """
 
 from __future__ import annotations
@@ -19,15 +20,16 @@ import contextlib
 import io
 import shutil
 import tempfile
+from dataclasses import fields
 from pathlib import Path
+
+import numpy as np
 
 from leadscrew_ros.cli import main as cli
 from leadscrew_ros.live.guard import GuardSettings
 from leadscrew_ros.live.profile import StrokeProfile
-from leadscrew_ros.review.guard import Command, read_profile, summary, write_profile
-from leadscrew_ros.review.guard import GuardRun
-from leadscrew_ros.model import SqueakModel
-import numpy as np
+from leadscrew_ros.model.physics.metadata import default_text, range_text
+from leadscrew_ros.review.guard import Command, GuardRun, read_profile, summary, write_profile
 
 ROOT = Path(__file__).resolve().parents[1]
 PICTURE = ROOT / "doc" / "images" / "guard.png"
@@ -55,8 +57,12 @@ def run_stroke(profile: StrokeProfile, out: Path) -> tuple[GuardRun, str]:
     data = np.genfromtxt(out / "guarded.csv", delimiter=",", names=True)
     command = read_profile(out / "profile.csv", None, None)
     run = GuardRun(
-        command, data["guarded_speed_rad_s"], data["p_squeak_raw"], data["p_squeak_guarded"],
-        [], GuardSettings(),
+        command,
+        data["guarded_speed_rad_s"],
+        data["p_squeak_raw"],
+        data["p_squeak_guarded"],
+        [],
+        GuardSettings(),
     )
     return run, text.getvalue()
 
@@ -81,6 +87,17 @@ def table(rows: list[tuple[str, GuardRun]]) -> str:
     return "\n".join(lines)
 
 
+def settings_table() -> str:
+    """The settings table of doc/user/guard.md, from `GuardSettings`' field metadata."""
+    lines = ["| setting | default | allowed | meaning |", "|---|---|---|---|"]
+    for f in fields(GuardSettings):
+        md = f.metadata
+        allowed = range_text(md) if md["lo"] is not None else "true, false"
+        unit = "" if md["unit"] in ("", "1") else f" {md['unit']}"
+        lines.append(f"| `{f.name}` | {default_text(f)}{unit} | {allowed} | {md['description']} |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--plot", nargs="?", const=PICTURE, type=Path, metavar="FILE.png")
@@ -97,6 +114,8 @@ def main() -> None:
                 if args.plot:
                     shutil.copy(Path(tmp) / "stroke0" / "guarded.png", args.plot)
     print(table(rows))
+    print()
+    print(settings_table())
 
 
 if __name__ == "__main__":

@@ -18,8 +18,14 @@ CSV_NAME, PNG_NAME = "guarded.csv", "guarded.png"
 def cmd_guard(args: argparse.Namespace) -> int:
     """`guard`: read, apply the policy, write the CSV and the picture, print the summary."""
     from ..live.guard import GuardSettings
-    from ..review.guard import ProfileFileError, apply_guard, read_log, read_profile, summary
-    from ..review.guard import write_run
+    from ..review.guard import (
+        ProfileFileError,
+        apply_guard,
+        read_log,
+        read_profile,
+        summary,
+        write_run,
+    )
     from ..review.plots import plot_guard
 
     out = output_directory(args.out)
@@ -81,13 +87,9 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     )
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--load", type=finite, metavar="N", help="axial load [N] where none is given")
-    p.add_argument(
-        "--nut", type=finite, metavar="M", help="nut position [m] where none is given"
-    )
+    p.add_argument("--nut", type=finite, metavar="M", help="nut position [m] where none is given")
     for f in fields(GuardSettings):
         if f.name in ("enabled", "stale_timeout_s", "deadline_s"):
             continue  # a node's concerns: offline every input is fresh and every step on time
-        p.add_argument(
-            "--" + f.name.replace("_", "-"), type=finite, metavar="X", help=help_text(f)
-        )
+        p.add_argument("--" + f.name.replace("_", "-"), type=finite, metavar="X", help=help_text(f))
     p.set_defaults(run=cmd_guard, enabled=None, stale_timeout_s=None, deadline_s=None)

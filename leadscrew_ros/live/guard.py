@@ -57,17 +57,20 @@ class GuardSettings:
     p_max: float = setting(
         0.1, "1", "a speed is in a squeak band where P(squeak) >= this", 0.0, 1.0, lo_open=True
     )
-    margin: float = setting(
-        0.05, "1", "relative distance kept from a squeak band edge", 0.0, 0.5
-    )
+    margin: float = setting(0.05, "1", "relative distance kept from a squeak band edge", 0.0, 0.5)
     max_speed_rad_s: float = setting(
-        200.0, "rad/s", "largest |speed| the guard outputs", 0.0, 1e5, lo_open=True
+        200.0, "rad/s", "largest absolute speed the guard outputs", 0.0, 1e5, lo_open=True
     )
     max_accel_rad_s2: float = setting(
-        1000.0, "rad/s^2", "largest |acceleration| of the guarded command", 0.0, 1e7, lo_open=True
+        1000.0,
+        "rad/s^2",
+        "largest absolute acceleration of the guarded command",
+        0.0,
+        1e7,
+        lo_open=True,
     )
     max_jerk_rad_s3: float = setting(
-        50000.0, "rad/s^3", "largest |jerk| of the guarded command", 0.0, 1e9, lo_open=True
+        50000.0, "rad/s^3", "largest absolute jerk of the guarded command", 0.0, 1e9, lo_open=True
     )
     max_delay_s: float = setting(
         1.0, "s", "largest delay the guard adds to reaching a commanded speed", 0.0, 3600.0

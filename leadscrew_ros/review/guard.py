@@ -89,10 +89,9 @@ def read_profile(path: Path, load_n: float | None, nut_position_m: float | None)
         if name in header:
             k = header.index(name)
             try:
-                values = [float(r[k]) for r in rows[1:]]
+                columns[name] = np.array([float(r[k]) for r in rows[1:]])
             except (ValueError, IndexError) as exc:
                 raise ProfileFileError(f"{path}: column {name}: {exc}") from None
-            columns[name] = np.array(values)
         else:
             value, option = constants[name]
             if value is None:
@@ -138,14 +137,16 @@ def read_log(
             raise LogError(f, str(exc)) from None
         speed, load = timeline.speed, timeline.load
         if speed is not None and load is not None:
-            nut = timeline.nut if timeline.nut_measured or nut_position_m is None else nut_position_m
+            nut = (
+                timeline.nut if timeline.nut_measured or nut_position_m is None else nut_position_m
+            )
             points.append((timeline.seconds(timeline.now_ns), speed, load, nut))
     if len(points) < 2:
         raise LogError(path, "no motor speed with an axial load in the log (give --load N)")
-    t, speed, load, nut = (np.array(a) for a in zip(*points, strict=True))
+    t, *values = (np.array(a) for a in zip(*points, strict=True))
     times = t[0] + np.arange(int((t[-1] - t[0]) * rate_hz) + 1) / rate_hz
     held = np.searchsorted(t, times, side="right") - 1  # the latest value at each time
-    return Command(times - times[0], speed[held], load[held], nut[held])
+    return Command(times - times[0], *(v[held] for v in values))
 
 
 def write_profile(path: Path, command: Command) -> None:
@@ -157,7 +158,9 @@ def write_profile(path: Path, command: Command) -> None:
             w.writerow([repr(x) for x in row])
 
 
-def probabilities(model: SqueakModel, speed: np.ndarray, load: np.ndarray, nut: np.ndarray):
+def probabilities(
+    model: SqueakModel, speed: np.ndarray, load: np.ndarray, nut: np.ndarray
+) -> np.ndarray:
     """P(squeak) at each point (0 below the model's lowest valid |speed|; NaN where the model
     is not valid)."""
     p = np.zeros(len(speed))

@@ -1235,15 +1235,21 @@ def plot_guard(run: GuardRun, *, title: str = "", fig: Figure | None = None) -> 
         ax[0].plot(t, speed, color=color, ls=style, lw=1.5, label=label)
         squeak = p >= p_max
         ax[0].fill_between(
-            t, 0, speed, where=squeak, color=SQUEAK_COLOR if color != "0.45" else "0.8",
-            step="post", alpha=0.6, label=f"{label}: P(squeak) >= {p_max:g}",
+            t,
+            0,
+            speed,
+            where=squeak,
+            color=SQUEAK_COLOR if color != "0.45" else "0.8",
+            step="post",
+            alpha=0.6,
+            label=f"{label}: P(squeak) >= {p_max:g}",
         )
         ax[1].plot(t, p, color=color, ls=style, lw=1.2, label=label)
     ax[1].axhline(p_max, color="tab:red", lw=1, ls=":", label=f"p_max = {p_max:g}")
     ax[0].set_ylabel("speed command [rad/s]")
     ax[0].set_title(title)
     ax[0].legend(loc="upper right", fontsize=8)
-    ax[1].set_ylabel("P(squeak) [1]")
+    ax[1].set_ylabel("P(squeak) [-]")
     ax[1].set_ylim(-0.02, 1.02)
     ax[1].set_xlabel("time [s]")
     ax[1].legend(loc="upper right", fontsize=8)
