@@ -91,6 +91,9 @@ def test_log_with_constant_load(tmp_path, capsys):
         ("time_s,speed_rad_s\n0,1\n1,x\n", ["--load", "1", "--nut", "0.1"], "speed_rad_s"),
         ("time_s,speed_rad_s\n0,1\n", ["--load", "1", "--nut", "0.1"], "two rows"),
         ("", [], "empty"),
+        ("time_s,speed_rad_s\n0,1\n1,2\n", ["--load", "1", "--nut", "0.5"], "leave the screw"),
+        ("time_s,speed_rad_s\n0,1\n1,2\n", ["--load", "1e308", "--nut", "0.1"], "load"),
+        ("time_s,speed_rad_s\n0,1\n1,2\n", ["--load", "1", "--nut", "nan"], "nan"),
         (
             "time_s,speed_rad_s\n0,1\n1,2\n",
             ["--load", "1", "--nut", "0.1", "--p-max", "0"],

@@ -43,6 +43,12 @@ def cmd_guard(args: argparse.Namespace) -> int:
             command = read_log(source, model.params, args.load, args.nut)
     except ProfileFileError as exc:
         raise CliError(str(exc)) from None
+    travel = model.params.nut_travel_m
+    nut = command.nut_position_m
+    if not ((nut >= 0) & (nut <= travel)).all():
+        raise CliError(
+            f"nut positions {nut.min():g}..{nut.max():g} m leave the screw (0..{travel:g} m)"
+        )
     run = apply_guard(command, model, settings)
     out.mkdir(parents=True, exist_ok=True)
     write_run(out / CSV_NAME, run)
