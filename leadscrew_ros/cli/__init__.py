@@ -10,7 +10,7 @@ simulated units with a microphone (`bench`); a running node watched and steered 
 One module per command group holds its commands and adds their parsers: `model` (modes,
 predict, sweep, map), `transient` (the nonlinear time-domain simulation), `figures`, `ros`
 (demo, simulate), `remote` (watch, record, params), `logs` (replay, recover, info), `fleet`
-(review), `calibrate`, `bench`; `args`
+(review), `guard` (the squeak guard offline), `calibrate`, `bench`; `args`
 holds what they share. Heavy or ROS modules are imported only by the command that needs them.
 
 Every error a user can cause (bad option, invalid parameter or operating point, unreadable
@@ -30,7 +30,7 @@ from collections.abc import Callable, Sequence
 from ..bag.logfile import LogError
 from ..model.physics.parameters import ParameterError
 from ..model.squeak_model import OperatingPointError
-from . import bench, calibrate, figures, fleet, logs, model, remote, ros, transient
+from . import bench, calibrate, figures, fleet, guard, logs, model, remote, ros, transient
 from .args import PROG, CliError, Parser, common_parser
 
 __all__ = ["CliError", "build_parser", "main", "split_ros_args"]
@@ -56,7 +56,7 @@ def build_parser() -> Parser:
     sub = parser.add_subparsers(
         dest="command", required=True, metavar="COMMAND", parser_class=Parser
     )
-    for group in (model, transient, figures, ros, remote, logs, fleet, calibrate, bench):
+    for group in (model, transient, figures, ros, remote, logs, guard, fleet, calibrate, bench):
         group.add_parsers(sub, common)
     return parser
 

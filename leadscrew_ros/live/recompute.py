@@ -62,6 +62,36 @@ _BANDS_KEPT = 4  # bands kept for the current bin (speeds moving around within i
 _MAX_DUTY_RATIO = 2.0  # recomputes start at least this many prediction times apart
 
 
+def band_bin(load_n: float, nut_position_m: float, speed_rad_s: float) -> tuple:
+    """The bin of cached squeak bands an operating point falls in: band edges move slowly with
+    load and nut position, so bands are reused within a bin (relative load bin _LOAD_BIN, nut
+    bin _NUT_BIN_M, direction of rotation).
+
+    Parameters
+    ----------
+    load_n : float
+        Axial load [N] (finite).
+    nut_position_m : float
+        Nut position [m] (finite).
+    speed_rad_s : float
+        Speed [rad/s]: its sign is the direction.
+
+    Returns
+    -------
+    tuple
+        (load bin or None for no load, nut bin, direction +-1.0).
+    """
+    load_bin = round(math.log(abs(load_n)) / math.log(1 + _LOAD_BIN)) if load_n else None
+    return (load_bin, round(nut_position_m / _NUT_BIN_M), math.copysign(1.0, speed_rad_s))
+
+
+def bin_centre(key: tuple) -> tuple[float, float, float]:
+    """Load [N], nut position [m] and direction (+-1) at the centre of a `band_bin`."""
+    load_bin, nut_bin, direction = key
+    load = 0.0 if load_bin is None else (1 + _LOAD_BIN) ** load_bin
+    return load, nut_bin * _NUT_BIN_M, direction
+
+
 class Superseded(Exception):
     """Raised at a checkpoint of a background job that a newer request replaced."""
 
@@ -427,13 +457,7 @@ class LivePredictor:
             return self._set_advice(p.speed_rad_s, None)
         lowest, highest = model.params.min_speed_rad_s, model.critical_speed_rad_s
         margin = self.settings.safe_speed_margin
-        # Band edges move slowly with load and nut position: reuse them within a bin.
-        load_bin = round(math.log(abs(p.load_n)) / math.log(1 + _LOAD_BIN)) if p.load_n else None
-        key = (
-            load_bin,
-            round(model.params.nut_position_m / _NUT_BIN_M),
-            math.copysign(1, p.speed_rad_s),
-        )
+        key = band_bin(p.load_n, model.params.nut_position_m, p.speed_rad_s)
         for band in self._bands.get(key, ()):
             safe = band.safe_speed(p.speed_rad_s, lowest, highest, margin)
             if safe is not None:

@@ -12,7 +12,7 @@ caller saves (`fig.savefig(path, dpi=...)`).
   with its `TransientAnalysis`): the model's results have no `plot` method, as `model` may not
   import this layer (matplotlib is a review dependency); they are plotted here;
 - `plot_timeline` (a `ReplayResult`, also `ReplayResult.plot`; with sound its `plot_heard`
-  panel) and `plot_fleet` (a `FleetRun`).
+  panel), `plot_fleet` (a `FleetRun`) and `plot_guard` (a `GuardRun`).
 
 matplotlib is imported where a figure is drawn, never at import: importing this module (e.g.
 for `map --json`) neither loads matplotlib nor selects a backend. New figures are
@@ -44,6 +44,7 @@ if TYPE_CHECKING:
     from ..model.nonlinear.transient import TransientResult
     from ..model.nonlinear.transient_analysis import TransientAnalysis
     from .fleet import FleetRun
+    from .guard import GuardRun
     from .listen import Heard
     from .replay import ReplayResult
 
@@ -1203,3 +1204,53 @@ def _held_out_panel(result: Any, ax: Axes) -> None:
     ax.set_ylabel("Brier score [-]")
     ax.set_title("held-out units: Brier score (lower is better)", fontsize=9)
     ax.legend(fontsize=8)
+
+
+def plot_guard(run: GuardRun, *, title: str = "", fig: Figure | None = None) -> Figure:
+    """Two panels of the guard applied to a command (`review.guard.apply_guard`): the raw and
+    the guarded speed with the squeak (P >= p_max) of each shaded, and P(squeak) along both.
+
+    Parameters
+    ----------
+    run : GuardRun
+        The command, its guarded version and P along both.
+    title : str
+        The title of the top panel.
+    fig : Figure, optional
+        The figure to draw the panels into; default: a new figure.
+
+    Returns
+    -------
+    Figure
+        The figure drawn into.
+    """
+    t, p_max = run.command.time_s, run.settings.p_max
+    fig = fig if fig is not None else new_figure(figsize=(8, 6), layout="constrained")
+    ax = fig.subplots(2, 1, sharex=True)
+    lines = (
+        ("raw command", run.command.speed_rad_s, run.p_raw, "0.45", "--"),
+        ("guarded command", run.guarded_rad_s, run.p_guarded, "tab:blue", "-"),
+    )
+    for label, speed, p, color, style in lines:
+        ax[0].plot(t, speed, color=color, ls=style, lw=1.5, label=label)
+        squeak = p >= p_max
+        ax[0].fill_between(
+            t,
+            0,
+            speed,
+            where=squeak,
+            color=SQUEAK_COLOR if color != "0.45" else "0.8",
+            step="post",
+            alpha=0.6,
+            label=f"{label}: P(squeak) >= {p_max:g}",
+        )
+        ax[1].plot(t, p, color=color, ls=style, lw=1.2, label=label)
+    ax[1].axhline(p_max, color="tab:red", lw=1, ls=":", label=f"p_max = {p_max:g}")
+    ax[0].set_ylabel("speed command [rad/s]")
+    ax[0].set_title(title)
+    ax[0].legend(loc="upper right", fontsize=8)
+    ax[1].set_ylabel("P(squeak) [-]")
+    ax[1].set_ylim(-0.02, 1.02)
+    ax[1].set_xlabel("time [s]")
+    ax[1].legend(loc="upper right", fontsize=8)
+    return fig
