@@ -25,6 +25,7 @@ from harness.squeak import SQUEAK, STABLE, at
 from leadscrew_ros.bag import messages
 from leadscrew_ros.live.listen import (
     KEY_ANALYSED_S,
+    KEY_BACKGROUND,
     KEY_DROPPED,
     KEY_HEARD,
     KEY_HEARD_FREQUENCY,
@@ -350,6 +351,27 @@ def test_a_sound_arriving_off_its_rate_is_a_warning(speedup, rate):
         else:
             assert s.level >= Level.WARN and said in s.message
             assert listener.pace[0] == pytest.approx(48000.0 * speedup, rel=0.01)
+    finally:
+        listener.close()
+
+
+def test_the_listener_learns_the_room_while_the_drive_rests():
+    """A fan (1170 Hz) heard for 1 s with the drive at rest: the measurement's key-values list
+    it as background; then, the drive moving, it is not heard as squeak."""
+    listener = Listener(ListenSettings(enabled=True, window_s=0.5))
+    t = np.arange(4800) / RATE
+    noise = np.random.default_rng(2)
+    try:
+        for k in range(20):
+            now = 100.1 + 0.1 * k
+            listener.note_speed(now - 0.1, 0.0 if k < 10 else 50.0)
+            fan = 0.01 * np.sin(2 * np.pi * 1170.0 * (t + 0.1 * k))
+            x = (fan + 0.002 * noise.standard_normal(t.size)).astype(np.float32)
+            listener.offer(b"", now, lambda _, x=x: (x, None))
+            _wait(lambda k=k: listener.analysed == k + 1)
+        listener.collect()
+        s = listener.status(102.0)
+        assert s.values[KEY_BACKGROUND] == "1170" and s.values[KEY_HEARD] == "false"
     finally:
         listener.close()
 

@@ -75,6 +75,8 @@ KEY_DROPPED = "dropped_chunks"  # chunks dropped: the analysis could not keep up
 KEY_MALFORMED = "malformed_chunks"  # chunks that did not decode
 KEY_DETECTOR_WARNING = "detector_warning"  # the detector's latest warning ('' when none)
 KEY_UNUSABLE_S = "unusable_s"  # sound without usable samples (NaN, constant), not scored [s]
+KEY_BACKGROUND = "background_hz"  # the tones learned while the drive rested [Hz], ', '-joined
+KEY_DRIVE_ORDERS = "drive_ratios"  # the speed ratios the drive was heard at, ', '-joined
 
 #: How a chunk's payload becomes samples: (samples in full scale, sample rate [Hz] or None for
 #: `ListenSettings.sample_rate_hz`); ValueError when it is malformed.
@@ -185,6 +187,9 @@ class Listener:
         # worker: (arrival [s], samples) of the recent chunks, and the pace found off the rate
         self._paces: deque[tuple[float, int]] = deque()
         self.pace: tuple[float, float, float] | None = None  # (samples/s, rate, when) if off
+        # worker -> status: what the detector learned of the room and the drive (replaced whole)
+        self.background_hz: tuple[float, ...] = ()
+        self.drive_ratios: tuple[float, ...] = ()
         self.unusable_s = 0.0  # sound received that held nothing to analyse [s]
         self.error = ""  # why the latest malformed chunk was
         self.warning = ""  # the detector's latest warning
@@ -371,6 +376,8 @@ class Listener:
             KEY_MALFORMED: str(self.malformed),
             KEY_DETECTOR_WARNING: self.warning,
             KEY_UNUSABLE_S: f"{self.unusable_s:.3f}",
+            KEY_BACKGROUND: ", ".join(f"{f:.0f}" for f in self.background_hz),
+            KEY_DRIVE_ORDERS: ", ".join(f"{r:.4g}" for r in self.drive_ratios),
         }
         if self.last_arrival is None:
             level, message = Level.STALE, "no sound received yet"
@@ -495,6 +502,8 @@ class Listener:
             self._last_malformed = chunk.arrival
             return
         self._check_pace(chunk, n, rate)
+        self.background_hz = tuple(t.frequency_hz for t in det.background.tones())
+        self.drive_ratios = tuple(o.ratio for o in det.drive_orders)
         self._seen_dropped = chunk.dropped_before
         self._audio_end, self._chunk_s = t0 + duration, duration
         if det.warnings:
