@@ -124,6 +124,8 @@ class Episode:
         episodes only: drive noise).
     background_hz : float or None
         The background tone it was (rejected episodes only; `background`) [Hz].
+    harmonics_hz : list of float
+        Its harmonics heard with it (2 to 5 times its frequency; `with_harmonics`) [Hz].
     track_times_s : numpy.ndarray
         Its frames' centres [s]; not in `as_dict`.
     track_hz : numpy.ndarray
@@ -140,6 +142,7 @@ class Episode:
     order: int | None = None
     drive_ratio: float | None = None
     background_hz: float | None = None
+    harmonics_hz: list[float] = field(default_factory=list)
     track_times_s: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
     track_hz: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
@@ -166,6 +169,7 @@ class Episode:
             order=self.order,
             drive_ratio=self.drive_ratio,
             background_hz=self.background_hz,
+            harmonics_hz=list(self.harmonics_hz),
         )
 
 
@@ -1093,6 +1097,7 @@ def detect(
     episodes += det.flush()
     if speed_times_s is not None and speed_rad_s is not None:
         episodes = _at_drive_ratios(det, episodes, speed_times_s, speed_rad_s)
+    episodes = with_harmonics(episodes, settings.max_harmonic, settings.track_tolerance)
     warnings = list(det.warnings)
     if n_samples == 0:
         warnings.append("no audio samples")
@@ -1125,6 +1130,47 @@ def detect(
         background=det.background.tones(),
         drive_orders=det.drive_orders,
     )
+
+
+def with_harmonics(episodes: list[Episode], max_harmonic: int, tolerance: float) -> list[Episode]:
+    """The episodes with each one heard at m = 2..`max_harmonic` (at most 5) times another's
+    frequency (within `tolerance`), overlapping it for at least half its own duration, merged
+    into that one as a harmonic (`harmonics_hz`; its span joined): a squeak's overtones, also
+    where they were louder than the fundamental in a frame, are the squeak, not squeaks of
+    their own.
+
+    Parameters
+    ----------
+    episodes : list of Episode
+        Squeak episodes.
+    max_harmonic : int
+        Highest harmonic number merged (capped at 5).
+    tolerance : float
+        Relative frequency tolerance.
+
+    Returns
+    -------
+    list of Episode
+        By start time.
+    """
+    top = min(max_harmonic, 5)
+    out = sorted(episodes, key=lambda e: e.frequency_hz)
+    merged: set[int] = set()
+    for i, e in enumerate(out):  # ascending: a fundamental before its harmonics
+        if i in merged:
+            continue
+        for j in range(i + 1, len(out)):
+            h = out[j]
+            if j in merged:
+                continue
+            ratio = h.frequency_hz / e.frequency_hz
+            m = round(ratio)
+            overlap = min(e.end_s, h.end_s) - max(e.start_s, h.start_s)
+            if 2 <= m <= top and abs(ratio / m - 1) <= tolerance and overlap >= 0.5 * h.duration_s:
+                e.harmonics_hz.append(h.frequency_hz)
+                e.start_s, e.end_s = min(e.start_s, h.start_s), max(e.end_s, h.end_s)
+                merged.add(j)
+    return sorted((e for k, e in enumerate(out) if k not in merged), key=lambda e: e.start_s)
 
 
 def _at_drive_ratios(
