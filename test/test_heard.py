@@ -472,8 +472,8 @@ def test_a_realistic_bench_heard_not_its_room_nor_its_drive(tmp_path):
     and a commutator at 373x, squeak grown by the amplitude equation, its harmonics, a room),
     seeds the unit tests do not use: no false episode from the background (learned at rest),
     at most one per unit in all (the commutator's constant-speed tone where its sweep was too
-    fast to be learned), every audible interval of 50 ms or more found. Before the background,
-    the SNR gate and the drive ratios: 101 false episodes on 4 units (fan, hum, drive)."""
+    fast to be learned), every audible interval of 50 ms or more found. The detector of 0.1.0
+    heard 655 false episodes on 10 such units (424 of them the room's tones)."""
     truth = run(BenchSettings(units=3, duration_s=12.0, seed=31, realistic=True), tmp_path / "b")
     background = truth["sound"]["background_tones_hz"]
     false = 0
