@@ -228,7 +228,7 @@ def test_rejected_parameter_keeps_the_old_model(ros, name, value, words):
         (math.nan, ["scatter.mu_kinetic", "nan"]),
         (-1.0, ["scatter.mu_kinetic", "out of range"]),
         (2.0, ["scatter.mu_kinetic", "out of range"]),
-        (1, ["expected", "DOUBLE"]),  # wrong type
+        ("0.1", ["expected", "DOUBLE"]),  # wrong type (a whole number is taken as a double)
     ],
 )
 def test_a_bad_scatter_is_rejected_and_the_last_good_model_kept(ros, value, words):
