@@ -60,6 +60,7 @@ _PCM_GRIDS = (128.0, 127.0, 32768.0, 32767.0, 8388608.0)
 LOUDNESS_RATE_HZ = 48000  #: ISO 532-1 after MOSQITO wants 48 kHz; other rates are resampled
 _BLOCK_FRAMES = 256  # frames analysed per FFT block (bounded memory, same in every mode)
 _MAX_WARNINGS = 100
+_MAX_RATIOS = 100  # drive-ratio groups kept (bounded memory)
 
 
 class AudioError(ValueError):
@@ -912,7 +913,7 @@ class StreamingDetector:
             if abs(centre[k] / r - 1.0) <= self.settings.order_tolerance:
                 g[k] += (r, 1.0, level)
                 return
-        if g.shape[0] < _MAX_WARNINGS:
+        if g.shape[0] < _MAX_RATIOS:
             self._ratio_groups = np.vstack([g, [r, 1.0, level]])
 
     def _known_ratio(self, r: float) -> bool:
