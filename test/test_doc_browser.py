@@ -96,8 +96,23 @@ def browser():
     driver.quit()
 
 
-def _problems(browser, page: Path) -> list[str]:
+def _open(browser, page: Path) -> None:
+    """Load `page` and wait until it is that page, fully loaded, with its main column: on a
+    busy machine `get` has been seen to return before the new document was in place."""
+    from selenium.webdriver.support.ui import WebDriverWait
+
     browser.get(page.as_uri())
+    WebDriverWait(browser, 120, poll_frequency=0.2).until(
+        lambda b: b.execute_script(
+            "return document.readyState === 'complete' && location.href === arguments[0]"
+            " && document.querySelector('div[role=main]') !== null",
+            page.as_uri(),
+        )
+    )
+
+
+def _problems(browser, page: Path) -> list[str]:
+    _open(browser, page)
     return browser.execute_script(PROBLEMS_JS)
 
 
@@ -108,7 +123,7 @@ def test_a_page_fits_its_column_at_1280_px_and_its_pictures_load(site, browser, 
 
 
 def test_the_check_sees_a_wide_table_a_long_line_and_a_missing_picture(site, browser):
-    browser.get((site / "user" / "listening.html").as_uri())
+    _open(browser, site / "user" / "listening.html")
     browser.execute_script(
         """
         const main = document.querySelector('div[role=main]');
