@@ -478,6 +478,7 @@ class Heard:
             "episodes": [e.as_dict() for e in self.detection.episodes],
             "background": [t.as_dict() for t in self.detection.background],
             "drive_orders": [o.as_dict() for o in self.detection.drive_orders],
+            "creaks": [c.as_dict() for c in self.detection.creaks],
             "agreement": self.agreement.as_dict(),
             "band_hz": list(self.band_hz),
             "collar_s": COLLAR_S,
@@ -542,6 +543,8 @@ class Heard:
         ]
         if a.frequency_match:
             lines.append("; ".join(_match_text(m) for m in _first_per_frequency(a.frequency_match)))
+        if self.detection.creaks:
+            lines.append(_creak_text(self.detection.creaks))
         unusable = self.detection.unusable_s
         if unusable > 0:
             lines.append(
@@ -581,6 +584,17 @@ class Heard:
                 )
             )
         return lines
+
+
+def _creak_text(creaks: list[Any]) -> str:
+    """One line for the creaks: not squeak, not scored."""
+    total = sum(c.end_s - c.start_s for c in creaks)
+    rates = ", ".join(f"{c.pulse_rate_hz:.0f}" for c in creaks[:5])
+    more = ", ..." if len(creaks) > 5 else ""
+    return (
+        f"creak (stick-slip pulses) {total:.1f} s in {len(creaks)} episodes at "
+        f"{rates}{more} pulses/s: impulsive friction noise, not counted as squeak"
+    )
 
 
 def _rounded(value: float | None, none: float) -> float:

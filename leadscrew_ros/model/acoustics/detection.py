@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from .background import BackgroundLearner, BackgroundTone
+from .creak import Creak, find_creaks, sort_creaks
 from .settings import DetectorSettings
 from .tonality import ToneAnalyzer, hann, short_time_psd
 
@@ -204,6 +205,9 @@ class Detection:
         The tones that sounded while the drive was at rest (`background`).
     drive_orders : list of DriveOrder
         The speed ratios the drive was heard at.
+    creaks : list of Creak
+        Stick-slip pulse trains (`creak`; offline only): not squeak, their tonal fragments
+        taken out of `episodes`.
     """
 
     frame_times_s: np.ndarray
@@ -217,6 +221,7 @@ class Detection:
     usable: np.ndarray | None = None
     background: list[BackgroundTone] = field(default_factory=list)
     drive_orders: list[DriveOrder] = field(default_factory=list)
+    creaks: list[Creak] = field(default_factory=list)
 
     @property
     def unusable_s(self) -> float:
@@ -269,7 +274,20 @@ class Detection:
             unusable_s=self.unusable_s,
             background=[t.as_dict() for t in self.background],
             drive_orders=[d.as_dict() for d in self.drive_orders],
+            creaks=[c.as_dict() for c in self.creaks],
         )
+
+
+def _mono(samples: Any) -> np.ndarray | None:
+    """The samples as one contiguous float32 channel (several averaged over the shorter
+    axis); None when they are not numbers."""
+    try:
+        x = np.asarray(samples, dtype=np.float32)
+    except (TypeError, ValueError):
+        return None
+    if x.ndim > 1:
+        x = x.mean(axis=int(np.argmin(x.shape)))
+    return np.ascontiguousarray(x.reshape(-1))
 
 
 def format_step(samples: np.ndarray) -> float | None:
@@ -691,17 +709,13 @@ class StreamingDetector:
         return self._seg_t0 + self._n_samples / self.sample_rate_hz
 
     def _as_samples(self, samples: Any) -> np.ndarray:
-        try:
-            x = np.asarray(samples, dtype=np.float32)
-        except (TypeError, ValueError):
+        x = _mono(samples)
+        if x is None:
             self._warn("samples are not numbers: chunk ignored")
             return np.zeros(0, np.float32)
-        if x.ndim > 1:
-            axis = int(np.argmin(x.shape))
-            self._warn(f"{x.shape[axis]} channels averaged")
-            x = x.mean(axis=axis)
-            x = x.reshape(-1)
-        return np.ascontiguousarray(x.reshape(-1))
+        if np.ndim(samples) > 1:
+            self._warn(f"{min(np.shape(samples))} channels averaged")
+        return x
 
     def _add_speed(self, speed: Any, times: Any, t_start: float, t_end: float) -> None:
         if speed is None:
@@ -1099,6 +1113,13 @@ def detect(
     if speed_times_s is not None and speed_rad_s is not None:
         episodes = _at_drive_ratios(det, episodes, speed_times_s, speed_rad_s)
     episodes = with_harmonics(episodes, settings.max_harmonic, settings.track_tolerance)
+    mono = _mono(samples)
+    creaks = (
+        find_creaks(mono, det.sample_rate_hz, t0_s=t0_s, scale_pa=scale_pa, settings=settings)
+        if mono is not None
+        else []
+    )
+    episodes, creaks = sort_creaks(episodes, [*episodes, *det.rejected], creaks, settings.frame_s)
     warnings = list(det.warnings)
     if n_samples == 0:
         warnings.append("no audio samples")
@@ -1130,6 +1151,7 @@ def detect(
         usable=usable,
         background=det.background.tones(),
         drive_orders=det.drive_orders,
+        creaks=creaks,
     )
 
 

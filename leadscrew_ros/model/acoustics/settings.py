@@ -173,6 +173,41 @@ class DetectorSettings:
         60.0,
     )
 
+    creak_pulse_db: float = setting(
+        10.0,
+        "dB",
+        "a creak's pulse stands this far over the floor level (between pulses) of the high-passed "
+        "sound, and falls back as far within 20 ms (model.acoustics.creak)",
+        3.0,
+        60.0,
+    )
+    creak_min_pulses: int = setting(
+        10,
+        "1",
+        "pulses in a train before it is a creak (stick-slip noise; a squeak's reverberant "
+        "tail on a realistic bench made trains of 7)",
+        3,
+        1000,
+    )
+    creak_min_rate_hz: float = setting(
+        5.0, "Hz", "lowest pulse rate of a creak: longer pauses end a train", 0.1, 1000.0
+    )
+    creak_max_rate_hz: float = setting(
+        200.0,
+        "Hz",
+        "highest pulse rate of a creak: pulses closer than its interval are one",
+        1.0,
+        5000.0,
+    )
+    creak_highpass_hz: float = setting(
+        400.0,
+        "Hz",
+        "creak pulses are found in the sound above this frequency (away from hum and the "
+        "drive's low orders)",
+        20.0,
+        20000.0,
+    )
+
     def __post_init__(self) -> None:
         check(self)
         _ = self.known_ratios  # a malformed list is refused here
@@ -180,6 +215,11 @@ class DetectorSettings:
             raise ValueError(f"hop_s = {self.hop_s:g} exceeds frame_s = {self.frame_s:g}")
         if self.f_lo_hz >= self.f_hi_hz:
             raise ValueError(f"f_lo_hz = {self.f_lo_hz:g} is not below f_hi_hz = {self.f_hi_hz:g}")
+        if self.creak_min_rate_hz >= self.creak_max_rate_hz:
+            raise ValueError(
+                f"creak_min_rate_hz = {self.creak_min_rate_hz:g} is not below "
+                f"creak_max_rate_hz = {self.creak_max_rate_hz:g}"
+            )
         if self.min_drive_ratio > self.max_drive_ratio:
             raise ValueError(
                 f"min_drive_ratio = {self.min_drive_ratio:g} exceeds max_drive_ratio = "
