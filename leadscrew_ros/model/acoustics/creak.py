@@ -258,11 +258,12 @@ def sort_creaks(
     drive's and background's) or one of its harmonics (up to the 5th, within
     `BEAT_TOLERANCE`) held over `FRAGMENT_INSIDE` of the creak's span is that tone beating
     with another, not a creak; one with `TONAL_LINES` sustained tones following whole
-    multiples of its pulse rate is a periodic sound's waveform. Then an episode lying (`FRAGMENT_INSIDE` of it) within a
-    creak's span widened by `margin_s` (an analysis frame around a pulse sees it) at one of
-    its ringing frequencies (within `FRAGMENT_RING_TOLERANCE`), at a harmonic of its pulse
-    rate (within a tenth of the rate) or lasting at most `FRAGMENT_FRAMES` frames is the creak
-    heard as tones; its frequency goes to the creak's `fragments_hz`.
+    multiples of its pulse rate is a periodic sound's waveform. Then an episode lying
+    (`FRAGMENT_INSIDE` of it) within a creak's span widened by `margin_s` (an analysis frame
+    around a pulse sees it) at one of its ringing frequencies (within
+    `FRAGMENT_RING_TOLERANCE`), at a harmonic of its pulse rate (within a tenth of the rate)
+    or lasting at most `FRAGMENT_FRAMES` frames is the creak heard as tones; its frequency
+    goes to the creak's `fragments_hz`.
 
     Parameters
     ----------
