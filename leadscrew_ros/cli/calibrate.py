@@ -78,8 +78,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     try:  # every name needs a prior scatter: refused here, not per unit after the gathering
         Prior(prior.params, prior.scatter, settings.names)
     except ParameterError as exc:
-        can = ", ".join(prior.scatter.names)
-        raise CliError(f"--calibrate: {exc}; with this prior: {can}") from None
+        can = ", ".join(prior.scatter.names) or "none"
+        raise CliError(
+            f"--calibrate: {exc}; the parameters that can be calibrated with this prior's "
+            f"scatter: {can}"
+        ) from None
     from ..review.calibration.gather import GatherSettings, find_inputs
     from ..review.outlock import DirectoryBusy, locked
 
