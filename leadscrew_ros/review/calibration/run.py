@@ -66,8 +66,9 @@ from .settings import CalibrationSettings
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-# Fewer held-out units than this: the check says so (one or two units' Brier scores scatter by
-# more than a calibration typically changes them; measured 0.007 -> 0.020 on one unit).
+# Fewer held-out units than this: the check says so. The held-out score's standard error (and
+# the formulations' paired z) comes from the per-unit scatter: none from one unit, one degree
+# of freedom from two (a single held-out unit went 0.007 -> 0.020, exit 0, no word: issue 31).
 MIN_HELD_OUT = 3
 STRONG_Z, WEAK_Z = 2.0, 1.0  # paired held-out Brier difference / its standard error
 FREQUENCY_DECISIVE = 0.25  # a difference of the frequency match that decides alone
