@@ -168,9 +168,14 @@ class UnitPosterior:
         return out
 
     def drop_damping_correlation(self) -> float | None:
-        """Posterior correlation of the friction drop and the modal damping; None unless
-        both are calibrated (mu_static or mu_kinetic, and modal_damping) or one does not
-        vary."""
+        """Posterior correlation of the friction drop and the modal damping.
+
+        Returns
+        -------
+        float or None
+            Pearson's r of the samples; None unless both are calibrated (mu_static or
+            mu_kinetic, and modal_damping), or when one does not vary.
+        """
         if DAMPING not in self.names or not {"mu_static", "mu_kinetic"} & set(self.names):
             return None
         drop, damping = self.drop(), self.samples[:, self.names.index(DAMPING)]

@@ -260,8 +260,14 @@ class UnitResult:
         return self.status == CALIBRATED
 
     def identifiability(self) -> dict[str, Any] | None:
-        """`UnitPosterior.identifiability` of its own posterior (what its data say, before
-        the population narrows it); None when it learned nothing."""
+        """What the unit's own data identified (before the population narrows it).
+
+        Returns
+        -------
+        dict or None
+            `UnitPosterior.identifiability` of its own posterior; None when it learned
+            nothing.
+        """
         post = self.posterior
         if post is None or not post.learned or not len(post.samples):
             return None
