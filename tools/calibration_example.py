@@ -28,6 +28,7 @@ import yaml
 from leadscrew_ros.bag.virtual_bench import BenchSettings, run
 from leadscrew_ros.cli import main as cli
 from leadscrew_ros.model import ScrewParameters, SqueakModel
+from leadscrew_ros.model.calibration.posterior import PRIOR_ALONE_SD_RATIO
 from leadscrew_ros.model.uncertainty.scatter import LOG_NORMAL, Scatter, draw
 
 POPULATION = {"mu_static": 0.27, "mu_kinetic": 0.19, "modal_damping": 0.002}
@@ -144,6 +145,11 @@ def markdown(truth: dict[str, Any], out: Path, code: int) -> str:
     before = SqueakModel(ScrewParameters(**prior["params"]), Scatter(prior["scatter"]))
     p_prior = before.predict(SPEED, LOAD).probability
     p_cal = calibrated.predict(SPEED, LOAD).probability
+    # what each unit's own data identified (calibration.json's `identifiability`)
+    idents = [u["identifiability"] for u in doc["units"] if u["identifiability"] is not None]
+    alone = {n: sum(n in i["prior_alone"] for i in idents) for n in [*names, DROP]}
+    r = [i["drop_damping_correlation"] for i in idents]
+    identified = ", ".join(f"{n} {k}" for n, k in alone.items())
     # up to the per-unit lines (the rest: units, paths and the wall time)
     shown = text[: next((k for k, line in enumerate(text) if line.startswith("per unit")), -1)]
     width, to_unit, to_hyper = widths(doc)
@@ -176,6 +182,17 @@ def markdown(truth: dict[str, Any], out: Path, code: int) -> str:
             "each of them, so the prior's damping (above the bench's) pulls both up along that "
             "ratio. The per-unit coverage is therefore lower than the 90 % of a posterior whose "
             "prior is right.",
+            "",
+            f"What the units' own data identified (`identifiability`, on each unit's line of "
+            f"calibration.txt): of the {len(idents)} units, learned from the prior alone "
+            f"(posterior SD at {PRIOR_ALONE_SD_RATIO:.2f} of the prior's or more): "
+            f"{identified}. The posterior correlation of the drop and the damping is "
+            f"{min(r):+.2f} to {max(r):+.2f} (median {float(np.median(r)):+.2f})"
+            + (
+                ": the frames fix the drop mu_s - mu_k, not mu_s and mu_k each."
+                if alone[DROP] == 0 and alone["mu_static"] and alone["mu_kinetic"]
+                else "."
+            ),
             "",
             "calibration.txt begins:",
             "",

@@ -10,6 +10,7 @@ import argparse
 import importlib
 import json
 import math
+import os
 import re
 from collections.abc import Sequence
 from dataclasses import fields
@@ -237,17 +238,40 @@ def plot_file(path: str | None, option: str = "--plot") -> Path | None:
 
 def output_directory(path: str, option: str = "--out") -> Path:
     """The directory of an output option (created later by the command), checked before any
-    work: not an existing file.
+    work: not an existing file, not under one, and the nearest existing directory writable.
 
     Raises
     ------
     CliError
-        The path exists and is not a directory.
+        The path exists and is not a directory, lies under a file, or cannot be created
+        or written.
     """
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise CliError(f"{option}: {path} exists and is not a directory")
+    there = out.absolute()
+    while not there.exists() and there != there.parent:
+        there = there.parent
+    if not there.is_dir():
+        raise CliError(f"{option}: {path} cannot be created: {there} is a file")
+    if not os.access(there, os.W_OK | os.X_OK):
+        raise CliError(f"{option}: {path} cannot be written: {there} is not writable")
     return out
+
+
+def make_output_directory(out: Path, option: str = "--out") -> None:
+    """Create `out` (checked by `output_directory`) before any work: what the checks cannot
+    foresee (a read-only or virtual file system such as /proc) as one line.
+
+    Raises
+    ------
+    CliError
+        It cannot be created.
+    """
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CliError(f"{option}: {out} cannot be created: {exc.strerror or exc}") from None
 
 
 # ----------------------------------------------------------------------------- parameters

@@ -3,17 +3,24 @@
 the fleet's population, the held-out check; `review.calibration`).
 
 Exit status: 0 every unit calibrated (or keeping the prior, with nothing to learn) and every
-sampler converged; 2 a bad command line or input, or no input with observations (nothing
+sampler converged (with both formulations: those of the supported one; the other's are
+reported); 2 a bad command line or input (a parameter without a prior scatter, an --out that
+cannot be written or that another run holds), or no input with observations (nothing
 written); NOT_CONVERGED (3) written, but a unit's or the population's sampler did not converge
 or there is no population (then no calibrated.yaml): the numbers are not to be trusted as they
 are; UNUSABLE (4) written and converged, but some inputs gave no observations (no sound,
 unreadable: their reasons in calibration.json). 3 wins over 4.
+
+The output directory is held for the run (`review.outlock`, its lock file `LOCK_FILE`): a
+second run into it exits 2 naming the run (pid, start time) that holds it.
 """
 
 from __future__ import annotations
 
 import argparse
+from contextlib import ExitStack
 from dataclasses import asdict
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .args import (
@@ -22,6 +29,7 @@ from .args import (
     add_settings_options,
     build_model,
     common_parser,
+    make_output_directory,
     output_directory,
     settings_from,
 )
@@ -29,9 +37,14 @@ from .fleet import CLUSTER_BUSY, add_cluster_options, cluster_options, cluster_t
 from .logs import _topic, add_input_options, listen_settings, replay_inputs
 
 if TYPE_CHECKING:
+    from ..model import SqueakModel
+    from ..review.calibration.gather import GatherSettings
     from ..review.calibration.run import CalibrationResult
+    from ..review.calibration.settings import CalibrationSettings
+    from ..review.fleet import ClusterSettings
 
 NOT_CONVERGED, UNUSABLE = 3, 4
+LOCK_FILE = ".calibrate.lock"  # in --out while a run writes there
 
 
 def exit_status(result: CalibrationResult) -> int:
@@ -43,7 +56,8 @@ def exit_status(result: CalibrationResult) -> int:
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     """`calibrate`: gather, calibrate, write; exit status."""
-    from ..model.calibration import CalibrationError, DetectionErrors, ThinSettings
+    from ..model.calibration import DetectionErrors, Prior, ThinSettings
+    from ..model.physics.parameters import ParameterError
     from ..review.calibration.sampling import SamplerSettings
     from ..review.calibration.settings import BOTH, DEFAULT_NAMES, CalibrationSettings
 
@@ -61,10 +75,16 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         if settings.formulation == BOTH
         else args
     )
-    from ..review.calibration.gather import GatherSettings, find_inputs, gather
-    from ..review.calibration.output import text, write
-    from ..review.calibration.run import calibrate
-    from ..review.fleet import ClusterError, cluster
+    try:  # every name needs a prior scatter: refused here, not per unit after the gathering
+        Prior(prior.params, prior.scatter, settings.names)
+    except ParameterError as exc:
+        can = ", ".join(prior.scatter.names) or "none"
+        raise CliError(
+            f"--calibrate: {exc}; the parameters that can be calibrated with this prior's "
+            f"scatter: {can}"
+        ) from None
+    from ..review.calibration.gather import GatherSettings, find_inputs
+    from ..review.outlock import DirectoryBusy, locked
 
     try:
         gathering = GatherSettings(
@@ -83,6 +103,36 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             f"no logs (.mcap, .db3, bag directories) or replay outputs (summary.json) in "
             f"{' '.join(args.paths)}"
         )
+    make_output_directory(out)
+    with ExitStack() as held:
+        try:
+            note = held.enter_context(locked(out, LOCK_FILE))
+        except DirectoryBusy as exc:
+            raise CliError(f"--out: {out} {exc}") from None
+        except OSError as exc:  # the lock file: a directory that cannot be written
+            raise CliError(f"--out: {out} cannot be written: {exc.strerror or exc}") from None
+        if note and not args.quiet:
+            print(f"--out {out}: {note}")
+        return _calibrate(args, out, inputs, prior, settings, gathering, (workers, reach))
+
+
+def _calibrate(
+    args: argparse.Namespace,
+    out: Path,
+    inputs: list[tuple[Path, bool]],
+    prior: SqueakModel,
+    settings: CalibrationSettings,
+    gathering: GatherSettings,
+    cluster_of: tuple[int | None, ClusterSettings],
+) -> int:
+    """`cmd_calibrate`'s work, `out` held: gather, calibrate, write; exit status."""
+    from ..model.calibration import CalibrationError
+    from ..review.calibration.gather import gather
+    from ..review.calibration.output import text, write
+    from ..review.calibration.run import calibrate
+    from ..review.fleet import ClusterError, cluster
+
+    workers, reach = cluster_of
     try:
         with cluster(workers, args.scheduler, reach) as client:
             gathered = gather(inputs, out.resolve(), gathering, client)
@@ -178,9 +228,11 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     p.add_argument("--quiet", action="store_true", help="no summary")
     p.epilog = (
         "The model options are the prior (--formulation both: each formulation with the "
-        "prior's values). Exit status: 0 calibrated and converged; 2 bad command line or "
-        f"input, nothing to calibrate from; {NOT_CONVERGED} written, but some sampler did "
-        "not converge or there is no population (no calibrated.yaml); "
+        "prior's values). Exit status: 0 calibrated and converged (with both: the supported "
+        "formulation; the other's non-convergence is reported); 2 bad command line or "
+        "input (a --calibrate NAME without a prior scatter, an --out that cannot be written "
+        f"or that another run holds), nothing to calibrate from; {NOT_CONVERGED} written, "
+        "but some sampler did not converge or there is no population (no calibrated.yaml); "
         f"{UNUSABLE} written and converged, but some inputs gave no observations "
         f"(no sound, unreadable). {NOT_CONVERGED} wins over {UNUSABLE}."
     )

@@ -7,6 +7,13 @@ Summaries give, per calibrated name and for the friction drop mu_s - mu_k, the m
 centre and SD, each as {mean, q05, q95} over the hyper-posterior. For a log-normal name
 (`scatter.LOG_NORMAL`) the population's centre is its median exp(mean of ln) in the field's
 unit and its SD that of ln, as `scatter.*` means it.
+
+Identifiability (`UnitPosterior.identifiability`): per name the posterior SD over the SD of
+the prior the unit was sampled under, both in the prior's u (the prior truncated to the valid
+domain, as it was sampled); at `PRIOR_ALONE_SD_RATIO` or above the name is learned from the
+prior alone. And the posterior correlation of the friction drop and the damping: heard /
+not-heard frames fix their ratio (the zero crossing of the growth rate), so near +1 says the
+data fixed the ratio and not the scale.
 """
 
 from __future__ import annotations
@@ -18,9 +25,14 @@ import numpy as np
 
 from ..physics.parameters import ScrewParameters
 from ..uncertainty.scatter import MAX_SCATTER, Scatter
-from .prior import Prior
+from .prior import DAMPING, Prior
 
 DROP = "friction_drop"  # mu_static - mu_kinetic
+# A name is learned from the prior alone when its posterior SD is not below this share of the
+# prior's: at 1/sqrt(2) the data carry as much information (inverse variance) as the prior, so
+# above it the posterior is more prior than data.
+PRIOR_ALONE_SD_RATIO = 1.0 / math.sqrt(2.0)
+_PRIOR_SD_DRAWS = 4000  # draws of the (truncated) prior for its SD; a fixed seed: reproducible
 
 
 def describe(x: np.ndarray) -> dict[str, float]:
@@ -114,11 +126,13 @@ class UnitPosterior:
         numpy.ndarray
             The drops.
         """
+        return self._drop_of(self.samples)
 
+    def _drop_of(self, samples: np.ndarray) -> np.ndarray:
         def column(name: str) -> np.ndarray:
             if name in self.names:
-                return self.samples[:, self.names.index(name)]
-            return np.full(len(self.samples), float(getattr(self.prior.nominal, name)))
+                return samples[:, self.names.index(name)]
+            return np.full(len(samples), float(getattr(self.prior.nominal, name)))
 
         return column("mu_static") - column("mu_kinetic")
 
@@ -133,6 +147,58 @@ class UnitPosterior:
         out = {n: describe(self.samples[:, k]) for k, n in enumerate(self.names)}
         out[DROP] = describe(self.drop())
         return out
+
+    def sd_ratios(self) -> dict[str, float]:
+        """Each name's posterior SD over the SD of `prior` (the prior it was sampled under,
+        truncated to the valid domain), both in the prior's u; and the friction drop's (in
+        its unit) when mu_static or mu_kinetic is calibrated.
+
+        Returns
+        -------
+        dict of str to float
+            Name -> ratio (about 1: the data narrowed nothing).
+        """
+        prior_u = self.prior.draw(_PRIOR_SD_DRAWS, np.random.default_rng(0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = self.prior.to_u(self.samples).std(axis=0) / prior_u.std(axis=0)
+            out = dict(zip(self.names, ratio.tolist(), strict=True))
+            if {"mu_static", "mu_kinetic"} & set(self.names):
+                prior_drop = self._drop_of(self.prior.from_u(prior_u))
+                out[DROP] = float(np.std(self.drop()) / np.std(prior_drop))
+        return out
+
+    def drop_damping_correlation(self) -> float | None:
+        """Posterior correlation of the friction drop and the modal damping.
+
+        Returns
+        -------
+        float or None
+            Pearson's r of the samples; None unless both are calibrated (mu_static or
+            mu_kinetic, and modal_damping), or when one does not vary.
+        """
+        if DAMPING not in self.names or not {"mu_static", "mu_kinetic"} & set(self.names):
+            return None
+        drop, damping = self.drop(), self.samples[:, self.names.index(DAMPING)]
+        if len(drop) < 2 or not (np.std(drop) > 0 and np.std(damping) > 0):
+            return None
+        return float(np.corrcoef(drop, damping)[0, 1])
+
+    def identifiability(self) -> dict[str, object]:
+        """What the data identified (module docstring).
+
+        Returns
+        -------
+        dict
+            'sd_ratio' (`sd_ratios`), 'prior_alone' (the names, and the friction drop, at
+            `PRIOR_ALONE_SD_RATIO` or above), 'drop_damping_correlation'
+            (`drop_damping_correlation`).
+        """
+        ratios = self.sd_ratios()
+        return {
+            "sd_ratio": ratios,
+            "prior_alone": [n for n, r in ratios.items() if r >= PRIOR_ALONE_SD_RATIO],
+            "drop_damping_correlation": self.drop_damping_correlation(),
+        }
 
 
 @dataclass
@@ -295,4 +361,6 @@ class Population:
         if mu_k > mu_s:
             notes.append(f"mu_kinetic {mu_k:.6g} above mu_static {mu_s:.6g}: set to mu_static")
             values["mu_kinetic"] = mu_s
+            if "mu_kinetic" in sds and mu_s > 0:  # its SD in the field's unit kept
+                sds["mu_kinetic"] = min(sds["mu_kinetic"] * mu_k / mu_s, MAX_SCATTER)
         return values, sds, notes

@@ -26,12 +26,20 @@ from pathlib import Path
 from typing import Any
 
 from ... import __version__
-from ...model.calibration.posterior import DROP
+from ...model.calibration.posterior import DROP, PRIOR_ALONE_SD_RATIO
+from ...model.calibration.prior import DAMPING
 from ...model.physics.display import yaml_value
 from ...model.uncertainty.scatter import LOG_NORMAL, scatterable
 from ..jsonsafe import json_safe
 from ..listen import FULL_SHARE
-from .run import FREQUENCY_DECISIVE, STRONG_Z, WEAK_Z, CalibrationResult, FormulationRun
+from .run import (
+    FREQUENCY_DECISIVE,
+    STRONG_Z,
+    WEAK_Z,
+    CalibrationResult,
+    FormulationRun,
+    UnitResult,
+)
 
 JSON_FILE, TEXT_FILE, PNG_FILE, YAML_FILE = (
     "calibration.json",
@@ -57,6 +65,21 @@ def _run_dict(run: FormulationRun) -> dict[str, Any]:
         "brier_calibrated": h.brier_calibrated,
         "frames": h.frames,
         "per_unit": {u: {"prior": a, "calibrated": b} for u, (a, b) in h.per_unit.items()},
+        "warnings": h.warnings(),
+    }
+
+
+def _calibrated(run: FormulationRun) -> dict[str, Any] | None:
+    """calibrated.yaml's values of the calibrated names (the predictive centre and SD, after
+    clipping) and what was clipped; None without a population."""
+    if run.params is None or run.scatter is None or run.population is None:
+        return None
+    names = run.population.names
+    sd = dict(run.scatter.sd)
+    return {
+        "params": {n: getattr(run.params, n) for n in names},
+        "scatter": {n: sd.get(n, 0.0) for n in names},
+        "notes": run.notes,
     }
 
 
@@ -87,6 +110,7 @@ def document(result: CalibrationResult, context: dict[str, Any]) -> dict[str, An
             "ess": None if pop is None else pop.ess,
             "units": sum(u.hierarchical is not None for u in run.units),
         },
+        "calibrated": _calibrated(run),
         "held_out": {
             **_run_dict(run),
             "reliability": run.held_out.reliability(result.settings.reliability_bins),
@@ -152,6 +176,34 @@ def _score(value: float | None) -> str:
     return "n/a" if value is None else f"{value:.3f}"
 
 
+def _sd(name: str, sd: float) -> str:
+    """A `scatter.*` SD as it means it: of ln for a log-normal name, else relative."""
+    if name in LOG_NORMAL:
+        return f"SD of ln {sd:.3g}"
+    return f"SD {sd:.3g} rel."
+
+
+# Why calibrated.yaml differs from the population printed (and the page says the same)
+PREDICTIVE = (
+    f"{YAML_FILE}: a new unit's predictive distribution, not the population above: the centre "
+    "and spread averaged over their uncertainty (SD^2 = mean SD^2 + variance of the mean), "
+    "as the node draws units from its nominal values and scatter.*"
+)
+
+
+def _identified(u: UnitResult) -> str:
+    """A unit's identifiability on its line: r(drop, damping) and the names learned from the
+    prior alone ('' when it learned nothing)."""
+    ident = u.identifiability()
+    if ident is None:
+        return ""
+    r = ident["drop_damping_correlation"]
+    alone = ident["prior_alone"]
+    return ("" if r is None else f"  r {r:+.2f}") + (
+        f"  prior alone: {', '.join(alone)}" if alone else ""
+    )
+
+
 def text(result: CalibrationResult, out: Path | None = None) -> str:
     """calibration.txt: the run on one screen (no final newline).
 
@@ -191,18 +243,25 @@ def text(result: CalibrationResult, out: Path | None = None) -> str:
         )
         for name, s in summary.items():
             p0 = getattr(prior.params, name, None)
-            shown = (
-                ""
-                if p0 is None
-                else f"   prior {p0:.4g}, SD {'of ln ' if name in LOG_NORMAL else ''}"
-                f"{scatter.get(name, 0.0):.3g}{'' if name in LOG_NORMAL else ' rel.'}"
-            )
+            shown = "" if p0 is None else f"   prior {p0:.4g}, {_sd(name, scatter.get(name, 0.0))}"
             lines.append(f"  {name:<20} {_interval(s['mean'])}  SD {_interval(s['sd'])}{shown}")
+    written = _calibrated(run)
+    if written is not None:
+        lines.append(PREDICTIVE + ":")
+        lines.append(
+            "  "
+            + ", ".join(
+                f"{n} {v:.4g} ({_sd(n, written['scatter'][n])})"
+                for n, v in written["params"].items()
+            )
+        )
+        lines += [f"  clipped: {note}" for note in written["notes"]]
     h = run.held_out
     lines.append(
         f"held-out check ({len(h.units)} units, {h.frames} frames): Brier score prior "
         f"{_score(h.brier_prior)}, calibrated {_score(h.brier_calibrated)}"
     )
+    lines += [f"  warning: {w}" for w in h.warnings()]
     c = result.comparison
     if c is not None:
         scores = "; ".join(
@@ -217,9 +276,14 @@ def text(result: CalibrationResult, out: Path | None = None) -> str:
         )
         for name, other in result.runs.items():
             stuck = sum(u.status.startswith("not converged") for u in other.units)
-            if name != result.chosen and (stuck or other.population_status != "calibrated"):
+            if name != result.chosen and not other.converged:
                 lines.append(
                     f"{name}: {stuck} units not converged; population: {other.population_status}"
+                    + (
+                        " (not the supported formulation: reported, not an error)"
+                        if c.supported is not None
+                        else ""
+                    )
                 )
     part = [
         (g.name, g.sound_share)
@@ -234,7 +298,17 @@ def text(result: CalibrationResult, out: Path | None = None) -> str:
         )
     listed = [u for u in units if u.reported is not None][:_LISTED]
     if listed:
-        lines.append(f"per unit, {DROP} mean [90 %]:")
+        names = set(result.settings.names)
+        r = (
+            f"; r: posterior correlation of {DROP} and {DAMPING}"
+            if DAMPING in names and {"mu_static", "mu_kinetic"} & names
+            else ""
+        )
+        lines.append(
+            f"per unit, {DROP} mean [90 %]{r}; prior alone: its own posterior SD at "
+            f"{PRIOR_ALONE_SD_RATIO:.2f} of the prior's or more (less information in the "
+            "data than in the prior):"
+        )
         for u in listed:
             post = u.reported
             assert post is not None
@@ -242,7 +316,7 @@ def text(result: CalibrationResult, out: Path | None = None) -> str:
             drop = _interval(own) if own else "n/a"
             flag = " (held out)" if u.held_out else ""
             state = "" if u.calibrated else f"  {u.status}"
-            lines.append(f"  {u.unit_id:<20} {drop}{flag}{state}")
+            lines.append(f"  {u.unit_id:<20} {drop}{flag}{_identified(u)}{state}")
     rest = [u for u in units if u.reported is None]
     for u in rest[:_LISTED]:
         lines.append(f"  {u.unit_id:<20} {u.status}")
@@ -298,10 +372,14 @@ def calibrated_yaml(result: CalibrationResult, date: str) -> str:
         )
         + f"); held-out check on {len(h.units)} units: Brier score prior "
         f"{_score(h.brier_prior)}, calibrated {_score(h.brier_calibrated)}.",
-        "# Nominal values are the population's, scatter.* its unit-to-unit spread (the prior's",
-        "# for the parameters not calibrated). Keyed `/**:` as config/leadscrew.yaml: for the",
-        "# node in any namespace (squeak_node --ros-args --params-file calibrated.yaml) and for",
-        "# --params-file of predict, replay and review.",
+        "# Nominal values are the population's predictive centre, scatter.* its predictive",
+        "# spread (a new unit's distribution: the population's centre and unit-to-unit SD",
+        "# averaged over their uncertainty, so not calibration.txt's population mean and SD;",
+        "# the prior's for the parameters not calibrated).",
+        *[f"# Clipped to the valid ranges: {note}." for note in run.notes],
+        "# Keyed `/**:` as config/leadscrew.yaml: for the node in any namespace (squeak_node",
+        "# --ros-args --params-file calibrated.yaml) and for --params-file of predict, replay",
+        "# and review.",
         "# units:",
         *_listed([u.unit_id for u in used]),
         "# logs:",

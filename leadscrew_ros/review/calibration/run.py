@@ -66,6 +66,10 @@ from .settings import CalibrationSettings
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
+# Fewer held-out units than this: the check says so. The held-out score's standard error (and
+# the formulations' paired z) comes from the per-unit scatter: none from one unit, one degree
+# of freedom from two (a single held-out unit went 0.007 -> 0.020, exit 0, no word: issue 31).
+MIN_HELD_OUT = 3
 STRONG_Z, WEAK_Z = 2.0, 1.0  # paired held-out Brier difference / its standard error
 FREQUENCY_DECISIVE = 0.25  # a difference of the frequency match that decides alone
 CALIBRATED = "calibrated"
@@ -255,6 +259,20 @@ class UnitResult:
         """Calibrated, and its sampler converged."""
         return self.status == CALIBRATED
 
+    def identifiability(self) -> dict[str, Any] | None:
+        """What the unit's own data identified (before the population narrows it).
+
+        Returns
+        -------
+        dict or None
+            `UnitPosterior.identifiability` of its own posterior; None when it learned
+            nothing.
+        """
+        post = self.posterior
+        if post is None or not post.learned or not len(post.samples):
+            return None
+        return post.identifiability()
+
     def as_dict(self) -> dict[str, Any]:
         """calibration.json's unit.
 
@@ -262,7 +280,7 @@ class UnitResult:
         -------
         dict
             unit_id, logs, status, posterior (the reported one's summary, None without),
-            held_out, convergence.
+            held_out, identifiability (`identifiability`), convergence.
         """
         post = self.reported
         return {
@@ -271,6 +289,7 @@ class UnitResult:
             "status": self.status,
             "posterior": post.summary() if post is not None else None,
             "held_out": self.held_out,
+            "identifiability": self.identifiability(),
             "convergence": None
             if post is None
             else {
@@ -307,6 +326,30 @@ class HeldOut:
     brier_calibrated: float | None = None
     per_unit: dict[str, tuple[float, float]] = field(default_factory=dict)
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+
+    def warnings(self) -> list[str]:
+        """What makes the check weak or bad: fewer than `MIN_HELD_OUT` units held out, or
+        the calibrated population scoring worse than the prior ([] when neither).
+
+        Returns
+        -------
+        list of str
+            One line each.
+        """
+        out = []
+        if len(self.units) < MIN_HELD_OUT:
+            out.append(
+                f"only {len(self.units)} units held out (fewer than {MIN_HELD_OUT}): the "
+                "held-out check says little; hold out more (--holdout) or add units"
+            )
+        a, b = self.brier_prior, self.brier_calibrated
+        if a is not None and b is not None and b > a:
+            worse = sum(c > p for p, c in self.per_unit.values())
+            out.append(
+                f"the calibrated population predicts the held-out units worse than the prior "
+                f"(Brier score {b:.3f} > {a:.3f}; {worse} of {len(self.per_unit)} units worse)"
+            )
+        return out
 
     def reliability(self, bins: int) -> dict[str, list[dict[str, float]]]:
         """Predicted P against the heard share of frames, in equal bins of P.
@@ -396,6 +439,8 @@ class FormulationRun:
     scatter : Scatter or None
         The calibrated scatter (the prior's for the parameters not calibrated).
     held_out : HeldOut
+    notes : list of str
+        What `params` and `scatter` clipped to the valid ranges (`Population.notes`).
     """
 
     formulation: str
@@ -406,6 +451,16 @@ class FormulationRun:
     params: ScrewParameters | None = None
     scatter: Scatter | None = None
     held_out: HeldOut = field(default_factory=HeldOut)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def converged(self) -> bool:
+        """A converged population and no unit whose sampler did not converge."""
+        return (
+            self.population is not None
+            and self.population_status == CALIBRATED
+            and not any(u.status.startswith("not converged") for u in self.units)
+        )
 
     @property
     def frequency_match(self) -> float | None:
@@ -534,14 +589,12 @@ class CalibrationResult:
 
     @property
     def converged(self) -> bool:
-        """Every calibrated unit's sampler and the population's converged (every
-        formulation)."""
-        return all(
-            r.population is not None
-            and r.population_status == CALIBRATED
-            and not any(u.status.startswith("not converged") for u in r.units)
-            for r in self.runs.values()
-        )
+        """The reported formulation converged (`FormulationRun.converged`); with both
+        formulations and none supported, both. The other formulation's non-convergence,
+        once one is supported, is reported, not the run's failure: its numbers are not used."""
+        if self.comparison is not None and self.comparison.supported is None:
+            return all(r.converged for r in self.runs.values())
+        return self.run.converged
 
     def plot(self, fig: Figure | None = None) -> Figure:
         """calibration.png (`plots.plot_calibration`).
@@ -756,6 +809,7 @@ def _install(run: FormulationRun, units: list[UnitResult], done: tuple) -> None:
         u.hierarchical = h
     if run.population is not None:
         run.params, run.scatter = run.population.params_and_scatter(run.prior.params)
+        run.notes = run.population.notes(run.prior.params)
 
 
 def _populations_of_all(
