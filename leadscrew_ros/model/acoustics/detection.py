@@ -1339,6 +1339,8 @@ def _infer_background(
     except (TypeError, ValueError):
         ct = cv = np.zeros(0)
     if condition_times_s is not None and ct.size == cv.size and ct.size:
+        change = np.r_[True, cv[1:] != cv[:-1]]  # runs of one value: spans of frames
+        ct, cv = ct[change], cv[change]
         bounds = np.r_[max(min(ct[0], end), t0), np.clip(ct[1:], t0, end), end]
         on = [(a, b) for a, b, c in zip(bounds[:-1], bounds[1:], cv, strict=True) if c]
         off = [(a, b) for a, b, c in zip(bounds[:-1], bounds[1:], cv, strict=True) if not c]
