@@ -231,13 +231,14 @@ def test_inference_holds_on_each_side_of_the_condition():
     t = np.arange(x.size) / RATE
     x = x + 0.05 * (t >= 1.5) * np.sin(2 * np.pi * SQUEAK_HZ * t)
     settings = DetectorSettings()
-    plain = detect(x.astype(np.float32), RATE, settings=settings)
+    plain = detect(x.astype(np.float32), RATE, settings=settings, infer_background=True)
     assert plain.background_source == "inferred"
     assert _near(SQUEAK_HZ, [b.frequency_hz for b in plain.background])
     assert not plain.episodes
     cond = detect(
         x.astype(np.float32), RATE, settings=settings, condition_times_s=[0.0, 1.5],
         condition=[False, True],
+        infer_background=True,
     )
     assert cond.background_source == "inferred"
     assert not _near(SQUEAK_HZ, [b.frequency_hz for b in cond.background])
@@ -246,8 +247,12 @@ def test_inference_holds_on_each_side_of_the_condition():
 
 
 def test_nothing_to_learn_from_is_none():
-    d = detect(np.zeros(100, np.float32), RATE)
+    """Shorter than a frame; or a bare call (the node's way: every steady tone is heard)."""
+    d = detect(np.zeros(100, np.float32), RATE, infer_background=True)
     assert d.background_source == "none" and d.background == []
+    d = detect(_stationary(2.0).astype(np.float32), RATE)
+    assert d.background_source == "none" and d.background == []
+    assert {round(e.frequency_hz) for e in d.episodes} == {round(f) for f in TONES_HZ}
 
 
 # ---------------------------------------------------------------- replay --background

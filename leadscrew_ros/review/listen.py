@@ -806,6 +806,7 @@ def listen(
             settings=settings.detector,
             background=None if background is None else background.samples,
             background_rate_hz=None if background is None else background.sample_rate_hz,
+            infer_background=True,
             condition_times_s=np.asarray(trace.times) if len(trace) else None,
             condition=np.asarray(trace.squeak, bool) if len(trace) else None,
         )

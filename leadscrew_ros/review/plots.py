@@ -793,7 +793,7 @@ def plot_listened(listened: Listened, *, ax: Axes | None = None) -> Figure:
         handles += [line] if k == 0 else []
     if listened.speed is not None and d.drive_orders:
         st, sv = listened.speed
-        f1 = np.abs(sv) / (2 * np.pi)
+        f1 = np.where(np.abs(sv) > 0, np.abs(sv) / (2 * np.pi), np.nan)  # none at rest
         for k, order in enumerate(d.drive_orders):
             (line,) = ax.plot(
                 st, order.ratio * f1, color="tab:orange", lw=1.2, ls=":",

@@ -273,6 +273,7 @@ def listen_recording(
             settings=settings.detector,
             background=None if background is None else background.samples,
             background_rate_hz=None if background is None else background.sample_rate_hz,
+            infer_background=True,
         )
     except ValueError as exc:  # an invalid sample rate
         raise AudioError(wav, str(exc)) from None

@@ -35,7 +35,9 @@ either, it is inferred ('inferred'): a tone held by more than `background_infer_
 frames at a steady level (`background_level_sd_db`), whatever the speed (a tone that moves with
 it is no single tone) and, given a condition such as the prediction, on each side of it, is
 background. A recording with nothing moving is so judged as a whole: a stationary tone is
-background, a growing or intermittent one is not. 'none': no frame to learn from.
+background, a growing or intermittent one is not (`detect`'s `infer_background`: the offline
+listening of a log or a recording; the node, which hears as it goes, cannot). 'none': nothing
+learned from.
 
 `StreamingDetector` is the core: it frames the samples as they come, analyses each frame once,
 and runs the tracks frame by frame with bounded memory. `detect` pushes the whole signal into
@@ -1069,6 +1071,7 @@ def detect(
     settings: DetectorSettings = DetectorSettings(),
     background: Any = None,
     background_rate_hz: float | None = None,
+    infer_background: bool = False,
     condition_times_s: Any = None,
     condition: Any = None,
 ) -> Detection:
@@ -1096,6 +1099,10 @@ def detect(
         background first, as the motor-off stretches are.
     background_rate_hz : float, optional
         Its sample rate [Hz] (default `sample_rate_hz`; another one is resampled).
+    infer_background : bool
+        Without a background recording or motor-off time, infer the background from the
+        whole recording (module notes): what the offline listening of a log or a recording
+        does; a bare call hears every steady tone, as the node does.
     condition_times_s, condition : array_like, optional
         Times [s] and flags of a condition held until the next time (the prediction: squeak
         or not): a background inferred without motor-off time must be held on each side of it.
@@ -1124,7 +1131,11 @@ def detect(
         _learn_at_rest(det, samples, t0_s, speed_times_s, speed_rad_s)
         if source == "none" and det.background.frames > frames:
             source = "motor-off"
-    if source == "none" and _infer_background(det, samples, t0_s, condition_times_s, condition):
+    if (
+        infer_background
+        and source == "none"
+        and _infer_background(det, samples, t0_s, condition_times_s, condition)
+    ):
         source = "inferred"
     episodes = det.push(samples, t0_s, speed_rad_s, speed_times_s)
     n_samples = det._n_samples
