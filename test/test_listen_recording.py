@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 from scipy.io import wavfile
 
+from leadscrew_ros.bag import audiomsgs, cdr
 from leadscrew_ros.bag.audio import read_audio
 from leadscrew_ros.bag.logsource import open_log
 from leadscrew_ros.bag.recorder import Recorder, RecordSettings
-from leadscrew_ros.bag import audiomsgs, cdr
 from leadscrew_ros.bag.synthetic import SPEED_TOPIC
 from leadscrew_ros.bag.virtual_bench import MIC_INFO_TOPIC, BenchSettings, run
 from leadscrew_ros.cli import main
@@ -236,7 +236,10 @@ def test_inference_holds_on_each_side_of_the_condition():
     assert _near(SQUEAK_HZ, [b.frequency_hz for b in plain.background])
     assert not plain.episodes
     cond = detect(
-        x.astype(np.float32), RATE, settings=settings, condition_times_s=[0.0, 1.5],
+        x.astype(np.float32),
+        RATE,
+        settings=settings,
+        condition_times_s=[0.0, 1.5],
         condition=[False, True],
         infer_background=True,
     )
@@ -271,7 +274,9 @@ def _cut_rest(bag: Path, out_dir: Path, keep: tuple[int, int]) -> Path:
     assert rec.start(keep[0])
     for m in messages:
         if m.topic.name == MIC_INFO_TOPIC:
-            rec.write_serialized(m.topic.name, m.topic.type_name, m.data, max(m.log_time_ns, keep[0]))
+            rec.write_serialized(
+                m.topic.name, m.topic.type_name, m.data, max(m.log_time_ns, keep[0])
+            )
         elif keep[0] <= m.log_time_ns <= keep[1]:
             rec.write_serialized(m.topic.name, m.topic.type_name, m.data, m.log_time_ns)
     rec.stop()

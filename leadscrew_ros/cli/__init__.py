@@ -71,7 +71,17 @@ def build_parser() -> Parser:
         dest="command", required=True, metavar="COMMAND", parser_class=Parser
     )
     for group in (
-        model, transient, figures, ros, remote, logs, recording, guard, fleet, calibrate, bench
+        model,
+        transient,
+        figures,
+        ros,
+        remote,
+        logs,
+        recording,
+        guard,
+        fleet,
+        calibrate,
+        bench,
     ):
         group.add_parsers(sub, common)
     return parser

@@ -787,7 +787,11 @@ def plot_listened(listened: Listened, *, ax: Axes | None = None) -> Figure:
     span = (float(t[0]), float(t[-1])) if t.size else (0.0, listened.duration_s)
     for k, tone in enumerate(d.background):
         line = ax.hlines(
-            tone.frequency_hz, *span, colors="tab:green", lw=1.5, linestyles="--",
+            tone.frequency_hz,
+            *span,
+            colors="tab:green",
+            lw=1.5,
+            linestyles="--",
             label=f"background tone ({d.background_source})",
         )
         handles += [line] if k == 0 else []
@@ -795,11 +799,15 @@ def plot_listened(listened: Listened, *, ax: Axes | None = None) -> Figure:
         st, sv = listened.speed
         f1 = np.where(np.abs(sv) > 0, np.abs(sv) / (2 * np.pi), np.nan)  # none at rest
         for k, order in enumerate(d.drive_orders):
-            (line,) = ax.plot(
-                st, order.ratio * f1, color="tab:orange", lw=1.2, ls=":",
+            (drawn,) = ax.plot(
+                st,
+                order.ratio * f1,
+                color="tab:orange",
+                lw=1.2,
+                ls=":",
                 label="drive order (ratio x speed)",
             )
-            handles += [line] if k == 0 else []
+            handles += [drawn] if k == 0 else []
     handles += _episodes(ax, d.episodes)
     ax.set_xlabel("time since the recording's first sample [s]")
     ax.set_title(listened.text()[0], fontsize=9)

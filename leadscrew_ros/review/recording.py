@@ -229,7 +229,7 @@ class Listened:
 
 def listen_recording(
     wav: str | Path,
-    settings: SoundSettings = SoundSettings(),
+    settings: SoundSettings | None = None,
     speed_csv: str | Path | None = None,
 ) -> Listened:
     """The detector on a WAV file (module notes).
@@ -238,9 +238,9 @@ def listen_recording(
     ----------
     wav : str or Path
         The recording.
-    settings : SoundSettings
+    settings : SoundSettings, optional
         Its channel, scale (`scale_pa`), background recording and the detector's settings
-        (the log options are not used).
+        (the log options are not used); default: `SoundSettings()`.
     speed_csv : str or Path, optional
         The shaft speed (`read_speed_csv`).
 
@@ -255,6 +255,7 @@ def listen_recording(
     RecordingError
         The speed CSV cannot be used.
     """
+    settings = settings or SoundSettings()
     track = read_audio(wav=wav, channel=settings.channel)
     speed = None if speed_csv is None else read_speed_csv(speed_csv)
     background = read_background(settings.background) if settings.background else None

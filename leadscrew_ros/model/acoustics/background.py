@@ -200,9 +200,7 @@ class BackgroundLearner:
         list of BackgroundTone
         """
         if self._tones is None:
-            self._tones = sorted(
-                [*self.learned(), *self._given], key=lambda t: t.frequency_hz
-            )
+            self._tones = sorted([*self.learned(), *self._given], key=lambda t: t.frequency_hz)
         return self._tones
 
     def covers(self, frequency_hz: np.ndarray, level_db: np.ndarray) -> np.ndarray:

@@ -1360,7 +1360,10 @@ def _infer_background(
     kept: list[BackgroundTone] | None = None
     for spans in sides:
         learner = BackgroundLearner(
-            det.analyzer.df, s.track_tolerance, s.background_infer_share, s.background_margin_db,
+            det.analyzer.df,
+            s.track_tolerance,
+            s.background_infer_share,
+            s.background_margin_db,
             det._level_offset_db,
         )
         _learn_spans(det, learner, x, t0, spans)
@@ -1375,7 +1378,9 @@ def _infer_background(
             else [
                 t
                 for t in kept
-                if any(abs(u.frequency_hz / t.frequency_hz - 1) <= s.track_tolerance for u in steady)
+                if any(
+                    abs(u.frequency_hz / t.frequency_hz - 1) <= s.track_tolerance for u in steady
+                )
             ]
         )
     det.background.include(kept or [])
