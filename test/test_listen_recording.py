@@ -336,3 +336,32 @@ def test_a_log_as_background_recording(cut_bench, tmp_path, capsys):
     code, heard, _ = _listen(capsys, background, "--background", cut, "--out", tmp_path / "o")
     assert code == 0 and heard["background_source"] == "file"
     assert heard["background_file"] == str(Path(cut).resolve())
+
+
+def test_listen_takes_the_detector_settings_of_the_params_file(tmp_path, capsys):
+    """listen.* of --params-file, as the node reads them, and --listen-param over them: no
+    tone can be held by more than all frames (share 1), so nothing is inferred and every
+    steady tone is heard."""
+    steady = tmp_path / "steady.wav"
+    wavfile.write(steady, RATE, _stationary(3.0).astype(np.float32))
+    params = tmp_path / "p.yaml"
+    params.write_text(
+        "squeak_node:\n  ros__parameters:\n    listen:\n      background_infer_share: 1\n"
+    )
+    code, heard, _ = _listen(capsys, steady, "--params-file", params, "--out", tmp_path / "a")
+    assert code == 0 and heard["detector"]["background_infer_share"] == 1.0
+    assert heard["background"] == [] and heard["background_source"] == "inferred"
+    assert {round(e["frequency_hz"], -1) for e in heard["episodes"]} == {
+        round(f, -1) for f in TONES_HZ
+    }
+    code, heard, _ = _listen(
+        capsys,
+        steady,
+        "--params-file",
+        params,
+        "--listen-param",
+        "background_infer_share=0.5",
+        "--out",
+        tmp_path / "b",
+    )
+    assert code == 0 and heard["episodes"] == [] and len(heard["background"]) == len(TONES_HZ)
