@@ -167,9 +167,9 @@ class DetectorSettings:
     background_infer_share: float = setting(
         0.5,
         "1",
-        "without motor-off time or a background recording, a tone held by more than this "
-        "share of the frames (on each side of the prediction, when there is one) at a steady "
-        "level is inferred as background",
+        "offline (replay, listen), without motor-off time or a background recording: a tone "
+        "held by more than this share of the frames (on each side of the prediction, when "
+        "there is one) at a steady level is inferred as background",
         0.0,
         1.0,
         lo_open=True,
