@@ -165,7 +165,7 @@ class BackgroundLearner:
 
     def learned(self, share: float | None = None) -> list[BackgroundTone]:
         """The tones of the frames seen held by at least `share` of them (default: the
-        learner's), by frequency; `include`d tones are not among them.
+        learner's), by frequency; the tones given by `include` are not among them.
 
         Parameters
         ----------
