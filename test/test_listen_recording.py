@@ -365,3 +365,17 @@ def test_listen_takes_the_detector_settings_of_the_params_file(tmp_path, capsys)
         tmp_path / "b",
     )
     assert code == 0 and heard["episodes"] == [] and len(heard["background"]) == len(TONES_HZ)
+
+
+@pytest.mark.parametrize("command", ["replay", "review", "calibrate", "listen"])
+def test_every_listening_command_takes_background_and_refuses_a_missing_one(
+    tmp_path, capsys, command
+):
+    wavfile.write(tmp_path / "ok.wav", RATE, _stationary(1.0).astype(np.float32))
+    source = tmp_path / "ok.wav" if command == "listen" else tmp_path
+    code = main([command, str(source), "--out", str(tmp_path / "o"), "--background", "gone.wav"])
+    err = capsys.readouterr().err
+    assert (
+        code == 2
+        and err == "leadscrew-squeak: error: --background gone.wav: no such file or directory\n"
+    )
