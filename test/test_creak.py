@@ -126,3 +126,21 @@ def test_too_few_pulses_or_a_pause_are_no_creak():
 @pytest.mark.parametrize("samples", [np.zeros(10), np.full(48000, np.nan), np.ones(96000)])
 def test_short_silent_or_broken_input_gives_no_creak(samples):
     assert find_creaks(samples, FS) == []
+
+
+def test_listen_reports_a_creak_in_a_recording(tmp_path):
+    """`leadscrew-squeak listen FILE.wav`: heard.json's creaks and summary.txt's line."""
+    import json
+
+    from scipy.io import wavfile
+
+    from leadscrew_ros.cli import main
+
+    x, times = creak(25.0, (1400.0, 2900.0), 0.004)
+    wavfile.write(tmp_path / "creak.wav", int(FS), x.astype(np.float32))
+    assert main(["listen", str(tmp_path / "creak.wav"), "--out", str(tmp_path / "out")]) == 0
+    heard = json.loads((tmp_path / "out" / "heard.json").read_text())
+    [c] = heard["creaks"]
+    assert c["pulses"] >= 0.9 * times.size and heard["episodes"] == []
+    summary = (tmp_path / "out" / "summary.txt").read_text()
+    assert "creak (stick-slip pulses)" in summary and "not counted as squeak" in summary

@@ -28,19 +28,39 @@ PNGS = (
     "calibration.png",
     *FIGURE_FILES,
     "transient.png",
+    "spectrogram.png",
 )
+
+
+def _recording(d):
+    """A WAV and its speed CSV for `listen`: at rest 1 s, then a speed ramp with a drive tone
+    at 100x the screw's rotation frequency, a fan all along, a squeak growing from 2.5 s."""
+    from scipy.io import wavfile
+
+    rate = 16000
+    t = np.arange(5 * rate) / rate
+    speed = np.where(t >= 1.0, 10.0 + 4.0 * (t - 1.0), 0.0)
+    x = 0.005 * np.random.default_rng(2).standard_normal(t.size)
+    x += 0.03 * np.sin(2 * np.pi * 1170.0 * t)
+    x += 0.02 * (speed > 0) * np.sin(np.cumsum(100.0 * speed) / rate)
+    x += np.clip(1e-3 * np.exp(5 * (t - 2.5)), 0, 0.1) * (t >= 2.5) * np.sin(2 * np.pi * 2200 * t)
+    wavfile.write(d / "rec.wav", rate, x.astype(np.float32))
+    rows = [f"{a:.3f},{v:.3f}" for a, v in zip(t[::160], speed[::160], strict=True)]
+    (d / "speed.csv").write_text("time_s,speed_rad_s\n" + "\n".join(rows) + "\n")
+    return d / "rec.wav", d / "speed.csv"
 
 
 @pytest.fixture(scope="module")
 def saved(tmp_path_factory):
     """Every figure the commands save, run once: replay, review, map, sweep, calibrate,
-    figures --quick and transient on the small bench."""
+    figures --quick and transient on the small bench, listen on a small recording."""
     mp = pytest.MonkeyPatch()
     keep = pictures.SavedFigures().install(mp)
     d = tmp_path_factory.mktemp("pictures")
     truth = run(SMALL_BENCH, d / "bench")
     logs = [d / "bench" / u["log"] for u in truth["units"]]
     (d / "broken.mcap").write_bytes(b"not a log")  # an error row in fleet.png
+    wav, speed_csv = _recording(d)
     try:
         for argv in (
             ["replay", logs[0], "--out", d / "replay", "--quiet"],
@@ -55,6 +75,7 @@ def saved(tmp_path_factory):
             ["figures", "--quick", "--out", d / "figures"],
             ["transient", "--speed", "20", "--load", "200", "--duration", "0.02", "--modes", "6"]
             + ["--plot", d / "transient.png"],
+            ["listen", wav, "--speed-csv", speed_csv, "--out", d / "listen"],
         ):
             main([str(a) for a in argv])
     finally:

@@ -92,7 +92,9 @@ def example(tmp: Path) -> str:
     s = _replay(log, tmp / "r4", "--audio-scale", f"{scale:.4g}", "--compare-formulations")
     text = (tmp / "r4" / "summary.txt").read_text().splitlines()
     heard_lines = [
-        line for line in text if line.startswith(("heard", "levels", "paper ", "consistent "))
+        line
+        for line in text
+        if line.startswith(("heard", "background", "levels", "paper ", "consistent "))
     ]
     first = s["heard"]["episodes"][0]
     episode = {k: (round(v, 3) if isinstance(v, float) else v) for k, v in first.items()}

@@ -166,6 +166,8 @@ class AudioTrack:
         The topic name, or the WAV file's path.
     warnings : list of str
         One line per kind of problem found (see the module docstring).
+    channels : int
+        Channels of the source (a WAV file's; 1 where not known): `samples` is one of them.
     """
 
     samples: np.ndarray
@@ -173,6 +175,7 @@ class AudioTrack:
     t0_s: float
     source: str
     warnings: list[str] = field(default_factory=list)
+    channels: int = 1
 
     @property
     def duration_s(self) -> float:
@@ -761,6 +764,7 @@ def _read_wav(path: Path, channel: int, start_s: float) -> AudioTrack:
         rate, data = wavfile.read(path)
     except (OSError, ValueError, EOFError) as exc:
         raise AudioError(path, f"not a readable WAV file: {exc}") from None
+    channels = data.shape[1] if data.ndim == 2 else 1
     if data.ndim == 2:
         if channel >= data.shape[1]:
             raise AudioError(path, f"channel {channel} asked of a {data.shape[1]}-channel WAV")
@@ -787,7 +791,9 @@ def _read_wav(path: Path, channel: int, start_s: float) -> AudioTrack:
             warnings.append(f"float samples beyond full scale (peak {peak:.3g}): wrong scaling?")
     if x.size == 0:
         warnings.append("the WAV file holds no samples")
-    return AudioTrack(np.ascontiguousarray(x), float(rate), float(start_s), str(path), warnings)
+    return AudioTrack(
+        np.ascontiguousarray(x), float(rate), float(start_s), str(path), warnings, channels
+    )
 
 
 class LiveAudio:

@@ -3,13 +3,15 @@
 ROS 2 demo (`demo`: predictor node + actuator simulator) and the simulator alone (`simulate`);
 the nonlinear time-domain simulation (`transient`); MCAP logs: offline replay (`replay`),
 playback (`replay --publish`), `recover` and `info`; many logs on a Dask cluster (`review`);
-each unit's friction and the fleet's population from heard squeak (`calibrate`); recordings of
-simulated units with a microphone (`bench`); a running node watched and steered without the
+each unit's friction and the fleet's population from heard squeak (`calibrate`); squeak heard
+in a recording without a log (`listen`); recordings of simulated units with a microphone
+(`bench`); a running node watched and steered without the
 `ros2` command line (`watch`, `record`, `params`).
 
 One module per command group holds its commands and adds their parsers: `model` (modes,
 predict, sweep, map), `transient` (the nonlinear time-domain simulation), `figures`, `ros`
-(demo, simulate), `remote` (watch, record, params), `logs` (replay, recover, info), `fleet`
+(demo, simulate), `remote` (watch, record, params), `logs` (replay, recover, info),
+`recording` (listen), `fleet`
 (review), `guard` (the squeak guard offline), `calibrate`, `bench`; `args`
 holds what they share. Heavy or ROS modules are imported only by the command that needs them.
 
@@ -30,7 +32,19 @@ from collections.abc import Callable, Sequence
 from ..bag.logfile import LogError
 from ..model.physics.parameters import ParameterError
 from ..model.squeak_model import OperatingPointError
-from . import bench, calibrate, figures, fleet, guard, logs, model, remote, ros, transient
+from . import (
+    bench,
+    calibrate,
+    figures,
+    fleet,
+    guard,
+    logs,
+    model,
+    recording,
+    remote,
+    ros,
+    transient,
+)
 from .args import PROG, CliError, Parser, common_parser
 
 __all__ = ["CliError", "build_parser", "main", "split_ros_args"]
@@ -56,7 +70,19 @@ def build_parser() -> Parser:
     sub = parser.add_subparsers(
         dest="command", required=True, metavar="COMMAND", parser_class=Parser
     )
-    for group in (model, transient, figures, ros, remote, logs, guard, fleet, calibrate, bench):
+    for group in (
+        model,
+        transient,
+        figures,
+        ros,
+        remote,
+        logs,
+        recording,
+        guard,
+        fleet,
+        calibrate,
+        bench,
+    ):
         group.add_parsers(sub, common)
     return parser
 

@@ -59,6 +59,7 @@ AUDIO_OPTIONS = {
     "audio": "file",
     "audio_start": "start_s",
     "audio_scale": "scale_pa",
+    "background": "background",
     "compare_formulations": "compare_formulations",
 }
 LISTEN_SETTINGS = {f.name: f for f in fields(SoundSettings)}
@@ -203,6 +204,8 @@ def listen_settings(args: argparse.Namespace, wav_must_exist: bool = True) -> So
             raise CliError(f"--audio {args.audio}: no such file")
     elif "audio_start" in given:
         raise CliError("--audio-start needs --audio FILE.wav")
+    if "background" in given:
+        given["background"] = background_path(args.background)
     detector = detector_settings(args)
     if "audio_scale" not in given and getattr(args, "params_file", None):
         scale = yaml_parameters(args.params_file).get(LISTEN_PREFIX + "scale_pa")
@@ -223,6 +226,20 @@ def listen_settings(args: argparse.Namespace, wav_must_exist: bool = True) -> So
                 else text
             )
         raise CliError(f"argument {text}") from None
+
+
+def background_path(path: str) -> str:
+    """The absolute path of a --background recording (a WAV file or a log), checked before
+    any work: it exists.
+
+    Raises
+    ------
+    CliError
+        No such file or directory.
+    """
+    if not Path(path).exists():
+        raise CliError(f"--background {path}: no such file or directory")
+    return str(Path(path).resolve())
 
 
 def _publish(args: argparse.Namespace) -> int:
@@ -653,6 +670,31 @@ def add_audio_options(p: argparse.ArgumentParser) -> None:
         ),
     )
     g.add_argument("--audio-scale", type=finite, metavar="PA", help=_listen_help("scale_pa"))
+    add_detector_options(g)
+    g.add_argument(
+        "--no-audio", action="store_true", help="ignore the log's sound (no heard vs predicted)"
+    )
+    g.add_argument(
+        "--compare-formulations",
+        action="store_true",
+        help=_listen_help(
+            "compare_formulations",
+            "also predict the log with the other friction formulation "
+            "(paper, consistent): agreement_by_formulation in summary.json, "
+            "which describes the drive better in summary.txt",
+        ),
+    )
+
+
+def add_detector_options(g: Any) -> None:
+    """The detector's options of every command that listens (`detector_settings`): its
+    settings, the drive's known ratios, a background recording."""
+    g.add_argument(
+        "--background",
+        metavar="FILE.wav|LOG",
+        help=_listen_help("background")
+        + " (default: the motor-off stretches, else steady tones inferred)",
+    )
     g.add_argument(
         "--listen-param",
         action="append",
@@ -671,19 +713,6 @@ def add_audio_options(p: argparse.ArgumentParser) -> None:
         metavar="R",
         help="a known ratio of drive noise (motor, gear, commutator) to the screw's rotation "
         "frequency (repeatable; listen.drive_ratios): for logs too short to learn them",
-    )
-    g.add_argument(
-        "--no-audio", action="store_true", help="ignore the log's sound (no heard vs predicted)"
-    )
-    g.add_argument(
-        "--compare-formulations",
-        action="store_true",
-        help=_listen_help(
-            "compare_formulations",
-            "also predict the log with the other friction formulation "
-            "(paper, consistent): agreement_by_formulation in summary.json, "
-            "which describes the drive better in summary.txt",
-        ),
     )
 
 

@@ -37,7 +37,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..bag import cdr, msgdefs
-from ..bag.audio import FLOAT32_MULTI_ARRAY, AudioError, MissingRateError, read_audio
+from ..bag.audio import (
+    FLOAT32_MULTI_ARRAY,
+    AudioError,
+    AudioTrack,
+    MissingRateError,
+    read_audio,
+)
 from ..bag.logfile import LogError, Topic
 from ..model.acoustics.settings import DetectorSettings
 from ..model.physics.metadata import check, documented, setting
@@ -105,6 +111,12 @@ class SoundSettings:
         1e6,
     )
     file: str = setting("", "", "a WAV file to read instead of the log's audio topics")
+    background: str = setting(
+        "",
+        "",
+        "a background recording (the drive off): a WAV file, or a log whose audio is taken; "
+        "learned as background before the analysis, as motor-off stretches are",
+    )
     start_s: float = setting(
         0.0,
         "s",
@@ -149,6 +161,49 @@ class SoundSettings:
             return self
         where = log if log.is_dir() else log.parent
         return replace(self, file=str(where / self.file))
+
+
+def read_background(path: str | Path, channel: int = 0) -> AudioTrack:
+    """A background recording (`SoundSettings.background`): a WAV file (suffix .wav), else
+    the audio of a log (its only audio topic).
+
+    Parameters
+    ----------
+    path : str or Path
+        The WAV file or log.
+    channel : int
+        Channel of interleaved audio (0 the first).
+
+    Returns
+    -------
+    AudioTrack
+
+    Raises
+    ------
+    AudioError, LogError
+        It cannot be read (one line).
+    """
+    path = Path(path)
+    if path.suffix.lower() == ".wav":
+        return read_audio(wav=path, channel=channel)
+    return read_audio(path, channel=channel)
+
+
+def background_text(detection: Detection) -> str:
+    """summary.txt's line on the background: where it came from and its tones."""
+    tones = ", ".join(
+        f"{t.frequency_hz:.0f} Hz ({t.level_db:.0f} dB)" for t in detection.background[:12]
+    )
+    more = len(detection.background) - 12
+    tones = (tones + (f" and {more} more" if more > 0 else "")) or "no tone"
+    where = {
+        "file": "learned from the background recording",
+        "motor-off": "learned while the drive was off",
+        "inferred": "inferred (no motor-off time, no background recording): steady tones "
+        "held over most of the recording",
+        "none": "none (nothing to learn it from)",
+    }[detection.background_source]
+    return f"background {where}: {tones}"
 
 
 def has_sound(topics: dict[str, Topic], settings: SoundSettings) -> bool:
@@ -477,6 +532,7 @@ class Heard:
             "detector": asdict(self.detector),
             "episodes": [e.as_dict() for e in self.detection.episodes],
             "background": [t.as_dict() for t in self.detection.background],
+            "background_source": self.detection.background_source,
             "drive_orders": [o.as_dict() for o in self.detection.drive_orders],
             "creaks": [c.as_dict() for c in self.detection.creaks],
             "agreement": self.agreement.as_dict(),
@@ -544,7 +600,8 @@ class Heard:
         if a.frequency_match:
             lines.append("; ".join(_match_text(m) for m in _first_per_frequency(a.frequency_match)))
         if self.detection.creaks:
-            lines.append(_creak_text(self.detection.creaks))
+            lines.append(creak_text(self.detection.creaks))
+        lines.append(background_text(self.detection))
         unusable = self.detection.unusable_s
         if unusable > 0:
             lines.append(
@@ -586,7 +643,7 @@ class Heard:
         return lines
 
 
-def _creak_text(creaks: list[Any]) -> str:
+def creak_text(creaks: list[Any]) -> str:
     """One line for the creaks: not squeak, not scored."""
     total = sum(c.end_s - c.start_s for c in creaks)
     rates = ", ".join(f"{c.pulse_rate_hz:.0f}" for c in creaks[:5])
@@ -743,6 +800,13 @@ def listen(
     except (AudioError, LogError) as exc:
         return None, [f"{NOT_ANALYSED}: {' '.join(str(exc).split())}"]
     scale = settings.scale_pa or None
+    background, warnings = None, []
+    if settings.background:
+        try:
+            background = read_background(settings.background, settings.channel)
+            warnings += [f"background recording: {w}" for w in background.warnings]
+        except (AudioError, LogError) as exc:
+            warnings.append(f"background recording not used: {' '.join(str(exc).split())}")
     t0 = time.perf_counter()
     speed_t, speed_v = speed.arrays()
     try:
@@ -754,6 +818,11 @@ def listen(
             speed_rad_s=speed_v if speed_v.size else None,
             scale_pa=scale,
             settings=settings.detector,
+            background=None if background is None else background.samples,
+            background_rate_hz=None if background is None else background.sample_rate_hz,
+            infer_background=True,
+            condition_times_s=np.asarray(trace.times) if len(trace) else None,
+            condition=np.asarray(trace.squeak, bool) if len(trace) else None,
         )
     except DetectorError as exc:
         return None, [f"{NOT_ANALYSED} ({track.source}): {exc}"]
@@ -787,7 +856,7 @@ def listen(
         agreement,
         formulation,
         by,
-        list(track.warnings) + list(detection.warnings),
+        list(track.warnings) + warnings + list(detection.warnings),
         spectrogram(audible, track.sample_rate_hz, track.t0_s, scale or 1.0),
         points,
         duration_s=track.duration_s,

@@ -45,7 +45,8 @@ if TYPE_CHECKING:
     from ..model.nonlinear.transient_analysis import TransientAnalysis
     from .fleet import FleetRun
     from .guard import GuardRun
-    from .listen import Heard
+    from .listen import Heard, Spectrogram
+    from .recording import Listened
     from .replay import ReplayResult
 
 ERROR_GREY = "0.6"  # logs that could not be reviewed, in the fleet's panels
@@ -689,28 +690,8 @@ def plot_heard(heard: Heard, *, ax: Axes | None = None) -> Figure:
     Figure
         The figure drawn into.
     """
-    from .listen import SPECTROGRAM_F_HZ
-
     fig, ax = _axes(ax, figsize=(10, 3.2), layout="constrained")
-    sg = heard.spectrogram
-    if sg.times_s.size:
-        level = np.ma.masked_invalid(sg.level_db.T)
-        top = float(level.max()) if level.count() else 0.0
-        mesh = ax.pcolormesh(
-            _edges(sg.times_s),
-            sg.edges_hz,
-            level,
-            cmap="gray_r",
-            vmin=top - 80.0,
-            vmax=top,
-            shading="flat",
-            rasterized=True,
-        )
-        unit = "Pa" if heard.scale == "Pa" else "FS"
-        fig.colorbar(
-            mesh, cax=ax.inset_axes((1.01, 0.56, 0.015, 0.44)), label=f"PSD [dB re {unit}²/Hz]"
-        )
-    handles: list[Any] = []
+    handles = _spectrogram(fig, ax, heard.spectrogram, heard.scale)
     pts = heard.squeak_points
     if len(pts):
         sc = ax.scatter(
@@ -726,7 +707,47 @@ def plot_heard(heard: Heard, *, ax: Axes | None = None) -> Figure:
         )
         handles.append(sc)
         fig.colorbar(sc, cax=ax.inset_axes((1.01, 0.0, 0.015, 0.44)), label="P(squeak) [-]")
-    for k, e in enumerate(heard.detection.episodes[:_HEARD_MARKED]):
+    handles += _episodes(ax, heard.detection.episodes)
+    ax.set_xlabel("time since the log's first message [s]")
+    ax.set_title(heard.text()[0], fontsize=9)
+    if handles:
+        ax.legend(handles=handles, loc="upper left", fontsize=8, framealpha=0.8)
+    return fig
+
+
+def _spectrogram(fig: Figure, ax: Axes, sg: Spectrogram, scale: str) -> list[Any]:
+    """The spectrogram of a sound panel (grey, its colourbar in the upper right), the
+    frequency axis (log, ECMA-418-1's range); returns the legend handles (none yet)."""
+    from .listen import SPECTROGRAM_F_HZ
+
+    if sg.times_s.size:
+        level = np.ma.masked_invalid(sg.level_db.T)
+        top = float(level.max()) if level.count() else 0.0
+        mesh = ax.pcolormesh(
+            _edges(sg.times_s),
+            sg.edges_hz,
+            level,
+            cmap="gray_r",
+            vmin=top - 80.0,
+            vmax=top,
+            shading="flat",
+            rasterized=True,
+        )
+        unit = "Pa" if scale == "Pa" else "FS"
+        fig.colorbar(
+            mesh, cax=ax.inset_axes((1.01, 0.56, 0.015, 0.44)), label=f"PSD [dB re {unit}²/Hz]"
+        )
+    ax.set_yscale("log")
+    ax.set_ylim(*SPECTROGRAM_F_HZ)
+    ax.set_ylabel("frequency [Hz]")
+    return []
+
+
+def _episodes(ax: Axes, episodes: Sequence[Any]) -> list[Any]:
+    """The heard episodes (the first `_HEARD_MARKED`): a line at the frequency, the span
+    shaded; returns their legend handles."""
+    handles: list[Any] = []
+    for k, e in enumerate(episodes[:_HEARD_MARKED]):
         line = ax.hlines(
             e.frequency_hz,
             e.start_s,
@@ -739,11 +760,57 @@ def plot_heard(heard: Heard, *, ax: Axes | None = None) -> Figure:
             e.start_s, e.end_s, color=HEARD_COLOR, alpha=0.2, lw=0, label="heard episode: time"
         )
         handles += [line, span] if k == 0 else []
-    ax.set_yscale("log")
-    ax.set_ylim(*SPECTROGRAM_F_HZ)
-    ax.set_ylabel("frequency [Hz]")
-    ax.set_xlabel("time since the log's first message [s]")
-    ax.set_title(heard.text()[0], fontsize=9)
+    return handles
+
+
+def plot_listened(listened: Listened, *, ax: Axes | None = None) -> Figure:
+    """A recording without a log (`recording.listen_recording`): its spectrogram with the
+    heard squeak episodes (as `plot_heard`), the background tones (dashed, over the whole
+    recording) and, with a speed, the drive orders heard (ratio x |speed| / 2 pi, dotted).
+
+    Parameters
+    ----------
+    listened : Listened
+        What `listen` heard.
+    ax : Axes, optional
+        The axes to draw into; default: a new figure.
+
+    Returns
+    -------
+    Figure
+        The figure drawn into.
+    """
+    fig, ax = _axes(ax, figsize=(10, 3.6), layout="constrained")
+    handles = _spectrogram(fig, ax, listened.spectrogram, listened.scale)
+    d = listened.detection
+    t = listened.spectrogram.times_s
+    span = (float(t[0]), float(t[-1])) if t.size else (0.0, listened.duration_s)
+    for k, tone in enumerate(d.background):
+        line = ax.hlines(
+            tone.frequency_hz,
+            *span,
+            colors="tab:green",
+            lw=1.5,
+            linestyles="--",
+            label=f"background tone ({d.background_source})",
+        )
+        handles += [line] if k == 0 else []
+    if listened.speed is not None and d.drive_orders:
+        st, sv = listened.speed
+        f1 = np.where(np.abs(sv) > 0, np.abs(sv) / (2 * np.pi), np.nan)  # none at rest
+        for k, order in enumerate(d.drive_orders):
+            (drawn,) = ax.plot(
+                st,
+                order.ratio * f1,
+                color="tab:orange",
+                lw=1.2,
+                ls=":",
+                label="drive order (ratio x speed)",
+            )
+            handles += [drawn] if k == 0 else []
+    handles += _episodes(ax, d.episodes)
+    ax.set_xlabel("time since the recording's first sample [s]")
+    ax.set_title(listened.text()[0], fontsize=9)
     if handles:
         ax.legend(handles=handles, loc="upper left", fontsize=8, framealpha=0.8)
     return fig

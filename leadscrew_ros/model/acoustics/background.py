@@ -11,6 +11,10 @@ background tone (`tones`). A track of the detector is background (`match`) when 
 frequency is within that tolerance of a background tone and its mean level is not more than
 `background_margin_db` above the tone's: a squeak at the fan's frequency, clearly louder than
 the fan, is still squeak.
+
+Tones can also be given (`include`): those of a recording without motor-off time inferred as
+background (`detection`: held at a steady frequency and level over most of it), which hold no
+rest frames and no spectrum of their own.
 """
 
 from __future__ import annotations
@@ -37,11 +41,14 @@ class BackgroundTone:
         dB re full scale (mean square re 1).
     share : float
         The share of the rest frames that held it.
+    level_sd_db : float
+        Standard deviation of its level over those frames [dB]: a steady tone's is small.
     """
 
     frequency_hz: float
     level_db: float
     share: float
+    level_sd_db: float = 0.0
 
     def as_dict(self) -> dict[str, float]:
         """{frequency_hz, level_db, share} (JSON-ready)."""
@@ -82,9 +89,11 @@ class BackgroundLearner:
         self.frames = 0  #: rest frames seen
         self._spectrum: np.ndarray | None = None  # sum of the rest frames' PSD
         self._spectra = 0  # rest frames summed into it
-        # per group: [sum of frequencies, frames holding it, sum of levels (dB)]
-        self._groups = np.zeros((0, 3))
+        # per group: [sum of frequencies, frames holding it, sum of levels (dB), sum of their
+        # squares]
+        self._groups = np.zeros((0, 4))
         self._tones: list[BackgroundTone] | None = None  # `tones`, until the next frame
+        self._given: list[BackgroundTone] = []  # `include`
 
     def _width_hz(self, f: np.ndarray | float) -> np.ndarray:
         return np.maximum(self.tolerance * np.asarray(f, dtype=float), 1.5 * self.bin_hz)
@@ -107,9 +116,9 @@ class BackgroundLearner:
             near = np.abs(centre - f) <= self._width_hz(f)
             if near.any():
                 k = int(np.argmin(np.where(near, np.abs(centre - f), np.inf)))
-                g[k] += (f, 1.0, level)
+                g[k] += (f, 1.0, level, level * level)
             else:
-                g = np.vstack([g, [f, 1.0, level]])
+                g = np.vstack([g, [f, 1.0, level, level * level]])
         if g.shape[0] > _MAX_TONES:
             g = g[np.argsort(-g[:, 1], kind="stable")[:_MAX_TONES]]
         self._groups, self._tones = g, None
@@ -154,8 +163,14 @@ class BackgroundLearner:
         hi = np.clip(np.floor(f * 2 ** (1 / 6) / self.bin_hz + 0.5) + 1, 0, n).astype(int)
         return np.maximum(cum[hi] - cum[lo], _TINY)
 
-    def tones(self) -> list[BackgroundTone]:
-        """The background tones learned so far, by frequency.
+    def learned(self, share: float | None = None) -> list[BackgroundTone]:
+        """The tones of the frames seen held by at least `share` of them (default: the
+        learner's), by frequency; the tones given by `include` are not among them.
+
+        Parameters
+        ----------
+        share : float, optional
+            Share of the frames.
 
         Returns
         -------
@@ -163,17 +178,29 @@ class BackgroundLearner:
         """
         if not self.frames:
             return []
-        if self._tones is not None:
-            return self._tones
         g = self._groups
-        held = g[:, 1] >= self.share * self.frames
-        self._tones = sorted(
-            (
-                BackgroundTone(float(s / n), float(lv / n), float(n / self.frames))
-                for s, n, lv in g[held]
-            ),
-            key=lambda t: t.frequency_hz,
-        )
+        held = g[:, 1] >= (self.share if share is None else share) * self.frames
+        out = []
+        for s, n, lv, lv2 in g[held]:
+            mean = lv / n
+            sd = math.sqrt(max(lv2 / n - mean * mean, 0.0))
+            out.append(BackgroundTone(float(s / n), float(mean), float(n / self.frames), sd))
+        return sorted(out, key=lambda t: t.frequency_hz)
+
+    def include(self, tones: list[BackgroundTone]) -> None:
+        """Take `tones` as background tones too (inferred ones: module notes)."""
+        self._given = sorted([*self._given, *tones], key=lambda t: t.frequency_hz)
+        self._tones = None
+
+    def tones(self) -> list[BackgroundTone]:
+        """The background tones learned so far and those included, by frequency.
+
+        Returns
+        -------
+        list of BackgroundTone
+        """
+        if self._tones is None:
+            self._tones = sorted([*self.learned(), *self._given], key=lambda t: t.frequency_hz)
         return self._tones
 
     def covers(self, frequency_hz: np.ndarray, level_db: np.ndarray) -> np.ndarray:

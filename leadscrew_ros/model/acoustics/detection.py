@@ -29,6 +29,16 @@ on order k by chance only at the odds of a coin toss or less), kept otherwise, w
 frequency alone it cannot be told from a squeak. Tones of the background (what sounds while
 the drive rests: `background`) are not followed unless clearly louder.
 
+Where the background comes from (`Detection.background_source`): a background recording
+(`detect`'s `background`: 'file'), the recording's own motor-off stretches ('motor-off'); without
+either, it is inferred ('inferred'): a tone held by more than `background_infer_share` of the
+frames at a steady level (`background_level_sd_db`), whatever the speed (a tone that moves with
+it is no single tone) and, given a condition such as the prediction, on each side of it, is
+background. A recording with nothing moving is so judged as a whole: a stationary tone is
+background, a growing or intermittent one is not (`detect`'s `infer_background`: the offline
+listening of a log or a recording; the node, which hears as it goes, cannot). 'none': nothing
+learned from.
+
 `StreamingDetector` is the core: it frames the samples as they come, analyses each frame once,
 and runs the tracks frame by frame with bounded memory. `detect` pushes the whole signal into
 one and flushes it, so that the offline and live decisions are the same frame for frame.
@@ -208,6 +218,9 @@ class Detection:
     creaks : list of Creak
         Stick-slip pulse trains (`creak`; offline only): not squeak, their tonal fragments
         taken out of `episodes`.
+    background_source : str
+        Where `background` comes from: 'file' (a background recording), 'motor-off' (the
+        recording's rest stretches), 'inferred' (steady tones, module notes) or 'none'.
     """
 
     frame_times_s: np.ndarray
@@ -222,6 +235,7 @@ class Detection:
     background: list[BackgroundTone] = field(default_factory=list)
     drive_orders: list[DriveOrder] = field(default_factory=list)
     creaks: list[Creak] = field(default_factory=list)
+    background_source: str = "none"
 
     @property
     def unusable_s(self) -> float:
@@ -273,6 +287,7 @@ class Detection:
             warnings=list(self.warnings),
             unusable_s=self.unusable_s,
             background=[t.as_dict() for t in self.background],
+            background_source=self.background_source,
             drive_orders=[d.as_dict() for d in self.drive_orders],
             creaks=[c.as_dict() for c in self.creaks],
         )
@@ -1068,6 +1083,11 @@ def detect(
     speed_rad_s: Any = None,
     scale_pa: float | None = None,
     settings: DetectorSettings = DetectorSettings(),
+    background: Any = None,
+    background_rate_hz: float | None = None,
+    infer_background: bool = False,
+    condition_times_s: Any = None,
+    condition: Any = None,
 ) -> Detection:
     """Squeak episodes in a recording (offline; the same decisions as `StreamingDetector`).
 
@@ -1088,6 +1108,18 @@ def detect(
         Pascal per full-scale unit: levels in dB SPL and loudness computed.
     settings : DetectorSettings
         Detector settings.
+    background : array_like, optional
+        A background recording (the drive off; same microphone and scale): learned as
+        background first, as the motor-off stretches are.
+    background_rate_hz : float, optional
+        Its sample rate [Hz] (default `sample_rate_hz`; another one is resampled).
+    infer_background : bool
+        Without a background recording or motor-off time, infer the background from the
+        whole recording (module notes): what the offline listening of a log or a recording
+        does; a bare call hears every steady tone, as the node does.
+    condition_times_s, condition : array_like, optional
+        Times [s] and flags of a condition held until the next time (the prediction: squeak
+        or not): a background inferred without motor-off time must be held on each side of it.
 
     Returns
     -------
@@ -1105,8 +1137,20 @@ def detect(
     if speed_rad_s is not None and speed_times_s is None and np.ndim(speed_rad_s) > 0:
         det._warn("speed_rad_s without speed_times_s: ignored")
         speed_rad_s = None
+    source = "none"
+    if background is not None and _learn_recording(det, background, background_rate_hz):
+        source = "file"
     if speed_times_s is not None and speed_rad_s is not None:
+        frames = det.background.frames
         _learn_at_rest(det, samples, t0_s, speed_times_s, speed_rad_s)
+        if source == "none" and det.background.frames > frames:
+            source = "motor-off"
+    if (
+        infer_background
+        and source == "none"
+        and _infer_background(det, samples, t0_s, condition_times_s, condition)
+    ):
+        source = "inferred"
     episodes = det.push(samples, t0_s, speed_rad_s, speed_times_s)
     n_samples = det._n_samples
     episodes += det.flush()
@@ -1152,6 +1196,7 @@ def detect(
         background=det.background.tones(),
         drive_orders=det.drive_orders,
         creaks=creaks,
+        background_source=source,
     )
 
 
@@ -1251,18 +1296,117 @@ def _learn_at_rest(
         return
     rest = np.concatenate([[False], np.isfinite(v) & (v < s.motor_off_rad_s), [False]])
     edges = np.flatnonzero(rest[1:] != rest[:-1])
-    learner = replace(s, motor_off_min_s=0.0)  # each stretch is known to rest long enough
+    spans = [
+        (t[a], t[b - 1])
+        for a, b in zip(edges[::2], edges[1::2], strict=True)
+        if t[b - 1] - t[a] >= s.motor_off_min_s
+    ]
+    _learn_spans(det, det.background, x, t0, spans)
+
+
+def _learn_spans(
+    det: StreamingDetector,
+    learner: BackgroundLearner,
+    x: np.ndarray,
+    t0: float,
+    spans: list[tuple[float, float]],
+) -> None:
+    """Every frame of the spans (start, end) [s] of the track `x` (first sample at `t0`)
+    into `learner`, as rest frames of `det`'s settings and rate (each span is known to
+    rest long enough); spans shorter than a frame are skipped."""
+    settings = replace(det.settings, motor_off_min_s=0.0)
     rate = det.sample_rate_hz
-    for a, b in zip(edges[::2], edges[1::2], strict=True):
-        start, end = t[a], t[b - 1]
-        if end - start < s.motor_off_min_s:
-            continue
+    for start, end in spans:
         i, j = max(int(math.ceil((start - t0) * rate)), 0), min(int((end - t0) * rate), x.size)
         if j - i < det.frame_len:
             continue
-        pre = StreamingDetector(learner, rate, det.scale_pa)
-        pre.background = det.background  # learns into the main detector's background
+        pre = StreamingDetector(settings, rate, det.scale_pa)
+        pre.background = learner
         pre.push(x[i:j], t0 + i / rate, 0.0)
+
+
+def _learn_recording(det: StreamingDetector, samples: Any, rate_hz: float | None) -> bool:
+    """Learn `det`'s background from a background recording (resampled to `det`'s rate);
+    True when it gave rest frames, else a warning says why not."""
+    x = det._as_samples(samples)
+    rate = det.sample_rate_hz if rate_hz is None else float(rate_hz)
+    if not (math.isfinite(rate) and rate > 0):
+        det._warn(f"background recording: sample rate {rate_hz!r} is not valid: not used")
+        return False
+    if rate != det.sample_rate_hz and x.size:
+        from fractions import Fraction
+
+        from scipy.signal import resample_poly
+
+        r = Fraction(det.sample_rate_hz / rate).limit_denominator(1000)
+        x = resample_poly(x, r.numerator, r.denominator).astype(np.float32)
+    frames = det.background.frames
+    _learn_spans(det, det.background, x, 0.0, [(0.0, x.size / det.sample_rate_hz)])
+    if det.background.frames == frames:
+        det._warn("background recording: no frame of usable sound in it: not used")
+        return False
+    return True
+
+
+def _infer_background(
+    det: StreamingDetector, samples: Any, t0_s: float, condition_times_s: Any, condition: Any
+) -> bool:
+    """Without a background heard at rest: the tones held by more than
+    `background_infer_share` of the recording's frames at a steady level
+    (`background_level_sd_db`), on each side of the condition where both sides last at least
+    `motor_off_min_s` (module notes), included in `det`'s background. False when there was
+    nothing to learn from (fewer samples than a frame)."""
+    s = det.settings
+    try:
+        x = det._as_samples(samples)
+        t0 = float(t0_s)
+    except (TypeError, ValueError):
+        return False
+    if x.size < det.frame_len or not math.isfinite(t0):
+        return False
+    end = t0 + x.size / det.sample_rate_hz
+    sides = [[(t0, end)]]
+    try:
+        ct = np.asarray(condition_times_s, dtype=float).reshape(-1)
+        cv = np.asarray(condition, dtype=bool).reshape(-1)
+    except (TypeError, ValueError):
+        ct = cv = np.zeros(0)
+    if condition_times_s is not None and ct.size == cv.size and ct.size:
+        change = np.r_[True, cv[1:] != cv[:-1]]  # runs of one value: spans of frames
+        ct, cv = ct[change], cv[change]
+        bounds = np.r_[max(min(ct[0], end), t0), np.clip(ct[1:], t0, end), end]
+        on = [(a, b) for a, b, c in zip(bounds[:-1], bounds[1:], cv, strict=True) if c]
+        off = [(a, b) for a, b, c in zip(bounds[:-1], bounds[1:], cv, strict=True) if not c]
+        both = [side for side in (on, off) if sum(b - a for a, b in side) >= s.motor_off_min_s]
+        sides = both or sides
+    kept: list[BackgroundTone] | None = None
+    for spans in sides:
+        learner = BackgroundLearner(
+            det.analyzer.df,
+            s.track_tolerance,
+            s.background_infer_share,
+            s.background_margin_db,
+            det._level_offset_db,
+        )
+        _learn_spans(det, learner, x, t0, spans)
+        steady = [
+            t
+            for t in learner.learned()
+            if t.share > s.background_infer_share and t.level_sd_db <= s.background_level_sd_db
+        ]
+        kept = (
+            steady
+            if kept is None
+            else [
+                t
+                for t in kept
+                if any(
+                    abs(u.frequency_hz / t.frequency_hz - 1) <= s.track_tolerance for u in steady
+                )
+            ]
+        )
+    det.background.include(kept or [])
+    return True
 
 
 def frames_heard(

@@ -164,6 +164,24 @@ class DetectorSettings:
         -60.0,
         60.0,
     )
+    background_infer_share: float = setting(
+        0.5,
+        "1",
+        "offline (replay, listen), without motor-off time or a background recording: a tone "
+        "held by more than this share of the frames (on each side of the prediction, when "
+        "there is one) at a steady level is inferred as background",
+        0.0,
+        1.0,
+        lo_open=True,
+    )
+    background_level_sd_db: float = setting(
+        3.0,
+        "dB",
+        "a steady level (background_infer_share): the standard deviation of the tone's "
+        "level over the frames holding it at most this",
+        0.0,
+        60.0,
+    )
     background_margin_db: float = setting(
         6.0,
         "dB",
