@@ -32,7 +32,7 @@ def test_seconds_recall_precision_brier_by_hand():
         [1.0, 3.0, 6.0, 9.0],
         [False, True, False, False],
         [0.1, 0.8, 0.2, 0.2],
-        [[], [("b1", 1010.0)], [], []],
+        [[], [("b1", 1010.0, 12.0)], [], []],
     )
     assert a.frames == 800
     assert a.both_s == pytest.approx(1.0)  # 3-4 s
@@ -46,7 +46,23 @@ def test_seconds_recall_precision_brier_by_hand():
     (m,) = a.frequency_match
     assert (m.label, m.predicted_hz, m.matched) == ("b1", 1010.0, True)
     assert m.relative_error == pytest.approx(0.01)
+    assert m.predicted_growth_per_s == 12.0  # Re(lambda) beside the (unmeasured) growth
+    assert m.heard_growth_per_s is None and m.heard_growth_se is None
     json.dumps(a.as_dict(), allow_nan=False)
+
+
+def test_the_measured_growth_beside_the_predicted_re_lambda_at_the_onset():
+    """The episode's measured growth and the matched mode's Re(lambda) in the prediction in
+    force at its onset (not a later one)."""
+    from leadscrew_ros.model.acoustics.growth import Growth
+
+    d = _detection([(2.0, 4.0)])
+    d.episodes[0].growth = Growth(31.0, 2.5, (1.95, 2.1), 40.0)
+    modes = [[("b1", 1005.0, 25.0)], [("b1", 1010.0, 60.0), ("t1", 3000.0, 5.0)], []]
+    a = agreement(d, [1.5, 3.0, 6.0], [True, True, False], [0.9, 0.9, 0.1], modes)
+    (m,) = a.frequency_match
+    assert m.label == "b1" and m.predicted_growth_per_s == 25.0
+    assert (m.heard_growth_per_s, m.heard_growth_se) == (31.0, 2.5)
 
 
 def test_zero_order_hold_and_the_span_that_counts():
@@ -54,7 +70,7 @@ def test_zero_order_hold_and_the_span_that_counts():
     the 7 s verdict to 8.5 s."""
     d = _detection([(0.0, 6.0)])
     a = agreement(
-        d, [5.0, 7.0], [True, True], [1.0, 1.0], [[("t1", 2000.0)], []], valid_until_s=8.5
+        d, [5.0, 7.0], [True, True], [1.0, 1.0], [[("t1", 2000.0, 3.0)], []], valid_until_s=8.5
     )
     assert a.frames == 350
     assert a.both_s == pytest.approx(1.0) and a.predicted_only_s == pytest.approx(2.5)
@@ -79,7 +95,12 @@ def test_nothing_heard_or_nothing_predicted():
 
 def test_nearest_mode_of_the_predictions_during_the_episode():
     d = _detection([(2.0, 3.0)], hz=1500.0)
-    modes = [[("a", 900.0)], [("b", 1480.0), ("c", 3000.0)], [("d", 1501.0)], [("e", 1500.0)]]
+    modes = [
+        [("a", 900.0, 1.0)],
+        [("b", 1480.0, 2.0), ("c", 3000.0, 3.0)],
+        [("d", 1501.0, 4.0)],
+        [("e", 1500.0, 5.0)],
+    ]
     a = agreement(d, [0.0, 2.5, 2.9, 3.5], [True] * 4, [0.9] * 4, modes)
     (m,) = a.frequency_match  # a (in force at 2 s), b, d; e comes after the episode
     assert m.label == "d" and m.matched

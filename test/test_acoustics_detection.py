@@ -393,9 +393,11 @@ def test_detection_is_json_safe():
 
 
 def _episodes_equal(a, b):
+    """The same episodes, but for what only the offline detection measures (the growth)."""
     assert len(a) == len(b)
     for x, y in zip(a, b, strict=True):
-        assert x.as_dict() == y.as_dict()
+        keep = {k: v for k, v in x.as_dict().items() if not k.startswith("growth")}
+        assert keep == {k: v for k, v in y.as_dict().items() if not k.startswith("growth")}
         np.testing.assert_array_equal(x.track_hz, y.track_hz)
 
 

@@ -318,7 +318,9 @@ def test_a_dead_worker_is_replaced_by_solving_here():
     assert p == SqueakModel().predict(20.0, 200.0) and not p.stable
     assert (
         v == Verdict.of(p)
-        and v.squeak == tuple((m.label, m.frequency_hz) for m in p.squeak_modes) != ()
+        and v.squeak
+        == tuple((m.label, m.frequency_hz, m.growth_rate) for m in p.squeak_modes)
+        != ()
     )
     assert payloads == tuple(data for _, data in prediction_payloads(p))
 

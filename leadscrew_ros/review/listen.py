@@ -257,7 +257,7 @@ class PredictionTrace:
         self.squeak = array("b")
         self.speed, self.load, self.model_nut = array("d"), array("d"), array("d")
         self.mode_start = array("q", [0])  # recompute i: modes [start[i], start[i+1])
-        self.mode_label, self.mode_hz = array("H"), array("d")
+        self.mode_label, self.mode_hz, self.mode_growth = array("H"), array("d"), array("d")
         self.labels: list[str] = []
         self._label_index: dict[str, int] = {}
 
@@ -275,13 +275,14 @@ class PredictionTrace:
         self._modes(verdict.squeak)
 
     def _modes(self, modes: Any) -> None:
-        for label, hz in modes:
+        for label, hz, growth in modes:
             k = self._label_index.get(label)
             if k is None:
                 k = self._label_index[label] = len(self.labels)
                 self.labels.append(label)
             self.mode_label.append(k)
             self.mode_hz.append(hz)
+            self.mode_growth.append(growth)
         self.mode_start.append(len(self.mode_hz))
 
     def with_verdicts(self, verdicts: list[Any]) -> PredictionTrace:
@@ -301,11 +302,12 @@ class PredictionTrace:
 
     def modes(
         self, i: int, band_hz: tuple[float, float] = (0.0, math.inf)
-    ) -> list[tuple[str, float]]:
-        """The squeak modes (label, frequency [Hz]) of recompute `i` within `band_hz`."""
+    ) -> list[tuple[str, float, float]]:
+        """The squeak modes (label, frequency [Hz], Re(lambda) [1/s]) of recompute `i` within
+        `band_hz`."""
         lo, hi = band_hz
         return [
-            (self.labels[self.mode_label[j]], self.mode_hz[j])
+            (self.labels[self.mode_label[j]], self.mode_hz[j], self.mode_growth[j])
             for j in range(self.mode_start[i], self.mode_start[i + 1])
             if lo <= self.mode_hz[j] <= hi
         ]
@@ -690,9 +692,15 @@ def _match_text(m: Any) -> str:
     if m.label is None:
         return f"heard {m.heard_hz:.0f} Hz: no squeak predicted during it"
     verb = "matches" if m.matched else "does not match"
+    growth = ""
+    if m.heard_growth_per_s is not None and m.predicted_growth_per_s is not None:
+        growth = (
+            f", grew at {m.heard_growth_per_s:.0f} +- {m.heard_growth_se:.0f} 1/s "
+            f"(Re(lambda) {m.predicted_growth_per_s:.0f} 1/s)"
+        )
     return (
         f"heard {m.heard_hz:.0f} Hz {verb} {m.label} {m.predicted_hz:.0f} Hz "
-        f"({100 * m.relative_error:+.1f} %)"
+        f"({100 * m.relative_error:+.1f} %){growth}"
     )
 
 

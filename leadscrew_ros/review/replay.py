@@ -236,7 +236,7 @@ class PlotData:
         self.probability.add(t, probability, float(squeak))
         if p.valid:
             self.points.add(p.speed_rad_s, p.load_n, job.nut_position_m, float(squeak))
-        for _, hz in p.squeak:
+        for _, hz, _ in p.squeak:
             self.squeak.add(p.speed_rad_s, p.load_n, job.nut_position_m, hz)
 
 
@@ -598,8 +598,8 @@ class Verdict(NamedTuple):
         Largest Re(lambda) of the oscillatory modes [1/s].
     divergence_rates : tuple of float
         Real eigenvalues > 0 [1/s].
-    squeak : tuple of (str, float)
-        The squeak modes, most unstable first: label and frequency [Hz].
+    squeak : tuple of (str, float, float)
+        The squeak modes, most unstable first: label, frequency [Hz] and Re(lambda) [1/s].
     """
 
     speed_rad_s: float
@@ -608,7 +608,7 @@ class Verdict(NamedTuple):
     probability: float | None
     max_growth_rate: float | None
     divergence_rates: tuple[float, ...]
-    squeak: tuple[tuple[str, float], ...]
+    squeak: tuple[tuple[str, float, float], ...]
 
     @classmethod
     def of(cls, p: Prediction) -> Verdict:
@@ -620,7 +620,7 @@ class Verdict(NamedTuple):
             p.probability,
             p.max_growth_rate,
             p.divergence_rates,
-            tuple((m.label, m.frequency_hz) for m in p.squeak_modes),
+            tuple((m.label, m.frequency_hz, m.growth_rate) for m in p.squeak_modes),
         )
 
     @property
@@ -767,7 +767,7 @@ class _Episodes:
         e.load_range_n = (min(e.load_range_n[0], p.load_n), max(e.load_range_n[1], p.load_n))
         e.predictions += 1
         e.probability.sample(t, probability)
-        for label, hz in p.squeak:
+        for label, hz, _ in p.squeak:
             e.add_frequency(label, hz)
 
     def _end(self, t: float) -> None:

@@ -47,6 +47,12 @@ class FrequencyMatch:
         (predicted - heard) / heard.
     matched : bool
         |relative_error| <= MATCH_TOLERANCE.
+    heard_growth_per_s, heard_growth_se : float or None
+        The episode's growth rate at its onset, measured from the sound, and its standard
+        error [1/s] (`Episode.growth`); None when not measured.
+    predicted_growth_per_s : float or None
+        Re(lambda) of the nearest mode (its label) in the prediction in force at the onset, or
+        its first prediction during the episode [1/s]; None without one.
     """
 
     start_s: float
@@ -56,6 +62,9 @@ class FrequencyMatch:
     predicted_hz: float | None
     relative_error: float | None
     matched: bool
+    heard_growth_per_s: float | None = None
+    heard_growth_se: float | None = None
+    predicted_growth_per_s: float | None = None
 
 
 @dataclass
@@ -141,7 +150,7 @@ def agreement(
     pred_times_s: Any,
     predicted_squeak: Any,
     probability: ArrayLike,
-    predicted_modes: Sequence[Sequence[tuple[str, float]]],
+    predicted_modes: Sequence[Sequence[tuple[str, float, float]]],
     *,
     valid_until_s: float | None = None,
     collar_s: float = 0.0,
@@ -158,8 +167,8 @@ def agreement(
         Nominal verdict of each prediction.
     probability : sequence of float or None
         P(squeak) of each prediction (None: unknown).
-    predicted_modes : sequence of sequence of (str, float)
-        Per prediction: (label, frequency [Hz]) of its squeaking modes.
+    predicted_modes : sequence of sequence of (str, float, float)
+        Per prediction: (label, frequency [Hz], Re(lambda) [1/s]) of its squeaking modes.
     valid_until_s : float, optional
         End of the span the predictions cover (default: the last prediction's time).
     collar_s : float
@@ -215,24 +224,43 @@ def agreement(
             continue
         j0 = max(int(np.searchsorted(tp, max(ep.start_s, lo), side="right")) - 1, 0)
         j1 = int(np.searchsorted(tp, min(ep.end_s, hi), side="right"))
-        modes = [
-            (str(lab), float(f))
+        during = [
+            (str(lab), float(f), float(g))
             for jj in range(j0, j1)
-            for lab, f in predicted_modes[jj]
+            for lab, f, g in predicted_modes[jj]
             if math.isfinite(float(f))
         ]
-        nearest = nearest_mode(ep.frequency_hz, modes)
+        growth = getattr(ep, "growth", None)
+        measured = dict(
+            heard_growth_per_s=growth.rate_per_s if growth is not None else None,
+            heard_growth_se=growth.se_per_s if growth is not None else None,
+        )
+        nearest = nearest_mode(ep.frequency_hz, [(lab, f) for lab, f, _ in during])
         if nearest is not None:
             lab, f = nearest
             err = (f - ep.frequency_hz) / ep.frequency_hz
+            # the first prediction of the episode holding the mode: the one at its onset
+            sigma = next((g for m, _, g in during if m == lab), None)
             matches.append(
                 FrequencyMatch(
-                    ep.start_s, ep.end_s, ep.frequency_hz, lab, f, err, abs(err) <= MATCH_TOLERANCE
+                    ep.start_s,
+                    ep.end_s,
+                    ep.frequency_hz,
+                    lab,
+                    f,
+                    err,
+                    abs(err) <= MATCH_TOLERANCE,
+                    predicted_growth_per_s=sigma
+                    if sigma is not None and math.isfinite(sigma)
+                    else None,
+                    **measured,
                 )
             )
         else:
             matches.append(
-                FrequencyMatch(ep.start_s, ep.end_s, ep.frequency_hz, None, None, None, False)
+                FrequencyMatch(
+                    ep.start_s, ep.end_s, ep.frequency_hz, None, None, None, False, **measured
+                )
             )
     return Agreement(
         both_s=both,

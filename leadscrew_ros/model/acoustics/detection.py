@@ -55,6 +55,7 @@ import numpy as np
 
 from .background import BackgroundLearner, BackgroundTone
 from .creak import Creak, find_creaks, sort_creaks
+from .growth import Growth, growth_fields, onset_growth
 from .settings import DetectorSettings
 from .tonality import ToneAnalyzer, hann, short_time_psd
 
@@ -76,6 +77,9 @@ _MAX_RATIOS = 100  # drive-ratio groups kept (bounded memory)
 
 class AudioError(ValueError):
     """The audio cannot be analysed at all (an invalid sample rate)."""
+
+
+GROWTH_NEIGHBOUR = 0.1  # a tone within 10 % sounded in the growth measurement's band
 
 
 def _finite_or_none(value: float | None) -> float | None:
@@ -138,6 +142,9 @@ class Episode:
         The background tone it was (rejected episodes only; `background`) [Hz].
     harmonics_hz : list of float
         Its harmonics heard with it (2 to 5 times its frequency; `with_harmonics`) [Hz].
+    growth : Growth or None
+        Its growth rate at the onset, measured from the sound (`growth.onset_growth`;
+        offline only: None live).
     track_times_s : numpy.ndarray
         Its frames' centres [s]; not in `as_dict`.
     track_hz : numpy.ndarray
@@ -155,6 +162,7 @@ class Episode:
     drive_ratio: float | None = None
     background_hz: float | None = None
     harmonics_hz: list[float] = field(default_factory=list)
+    growth: Growth | None = None
     track_times_s: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
     track_hz: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
@@ -182,6 +190,7 @@ class Episode:
             drive_ratio=self.drive_ratio,
             background_hz=self.background_hz,
             harmonics_hz=list(self.harmonics_hz),
+            **growth_fields(self.growth),
         )
 
 
@@ -1164,6 +1173,8 @@ def detect(
         else []
     )
     episodes, creaks = sort_creaks(episodes, [*episodes, *det.rejected], creaks, settings.frame_s)
+    if mono is not None:
+        _measure_growth(episodes, [*episodes, *det.rejected], mono, det.sample_rate_hz, t0_s)
     warnings = list(det.warnings)
     if n_samples == 0:
         warnings.append("no audio samples")
@@ -1198,6 +1209,27 @@ def detect(
         creaks=creaks,
         background_source=source,
     )
+
+
+def _measure_growth(
+    episodes: list[Episode], tones: list[Episode], samples: np.ndarray, rate_hz: float, t0_s: float
+) -> None:
+    """Each episode's growth rate at its onset (`Episode.growth`), its quiet stretch after
+    the last tone near its frequency (within `GROWTH_NEIGHBOUR`) that ended before it."""
+    for e in episodes:
+        quiet_from = max(
+            (
+                o.end_s
+                for o in tones
+                if o is not e
+                and o.end_s <= e.start_s
+                and abs(o.frequency_hz / e.frequency_hz - 1) <= GROWTH_NEIGHBOUR
+            ),
+            default=-math.inf,
+        )
+        e.growth = onset_growth(
+            samples, rate_hz, t0_s, e.start_s, e.track_times_s, e.track_hz, quiet_from
+        )
 
 
 def with_harmonics(episodes: list[Episode], max_harmonic: int, tolerance: float) -> list[Episode]:
