@@ -1,0 +1,218 @@
+# SPDX-License-Identifier: Apache-2.0
+"""What the listening hears on a realistic bench, against the bench's truth (issue 30).
+
+    .venv/bin/python benchmarks/bench_realistic.py [--units N] [--seed S] [--duration D]
+        [--gear-ratio R] [--json OUT.json]
+
+Makes `leadscrew-squeak bench --realistic` (fan, mains hum and its harmonics, pink noise, a
+worm-geared motor with its 2nd order and commutator, a room, the squeak grown by the amplitude
+equation with its harmonics) in a temp directory and replays every unit with its sound (the
+CLI, no report). Each heard episode is judged against truth.json: a squeak when it overlaps an
+audible interval; else false, by cause: a background tone (within 2 % of one), the drive (within
+2 % of a drive ratio times the screw's rotation frequency at its start), a squeak harmonic (2-5x
+the squeak's frequency at its time), else other. Printed, in Markdown: the false episodes by
+cause, the audible intervals found, onset delays (episode start minus the interval's start,
+by the growth at the onset, >= 50 1/s or less), frame recall and precision against the
+audible frames, creaks, and the measured growth rate against the truth's at the onsets
+measured (`growth_snr_db` >= 15 dB). Nothing is asserted: the tests hold the targets.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from leadscrew_ros.bag.cdr import decode_float64
+from leadscrew_ros.bag.logsource import open_log
+from leadscrew_ros.bag.synthetic import SPEED_TOPIC
+from leadscrew_ros.cli import main as cli
+
+TOLERANCE = 0.02  # relative frequency tolerance of a cause
+FAST_GROWTH_PER_S = 50.0  # onset within 50 ms where the growth is at least this, else 150 ms
+
+
+def _speed(log: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(times [s] from the log's first message, screw speed [rad/s]) of a log."""
+    source = open_log(log)
+    t, v, first = [], [], None
+    for _, m in source.messages():
+        first = m.log_time_ns if first is None else first
+        if m.topic.name == SPEED_TOPIC:
+            t.append((m.log_time_ns - first) * 1e-9)
+            v.append(decode_float64(m.data))
+    return np.asarray(t), np.asarray(v)
+
+
+def _cause(e: dict, unit: dict, sound: dict, speed: tuple[np.ndarray, np.ndarray]) -> str:
+    f = e["frequency_hz"]
+    audible = unit["sound"]["audible_intervals"]
+    if any(e["start_s"] < a["end_s"] and e["end_s"] > a["start_s"] for a in audible):
+        return "squeak"
+    if any(abs(f / b - 1) <= TOLERANCE for b in sound["background_tones_hz"]):
+        return "background tone"
+    rotation_hz = abs(float(np.interp(e["start_s"], *speed))) / (2 * np.pi)
+    if rotation_hz > 0 and any(
+        abs(f / (r * rotation_hz) - 1) <= TOLERANCE for r in sound["drive_orders"]
+    ):
+        return "drive order"
+    squeak_hz = [
+        (a["min_hz"], a["max_hz"]) for a in audible if abs(a["start_s"] - e["start_s"]) < 1.0
+    ]
+    if any(
+        abs(f / (m * g) - 1) <= TOLERANCE
+        for lo, hi in squeak_hz
+        for g in (lo, hi)
+        for m in range(2, 6)
+    ):
+        return "squeak harmonic"
+    return "other"
+
+
+def _frames(intervals: list[tuple[float, float]], t: np.ndarray) -> np.ndarray:
+    on = np.zeros(t.size, bool)
+    for a, b in intervals:
+        on |= (t >= a) & (t < b)
+    return on
+
+
+def evaluate(root: Path, args: argparse.Namespace) -> dict:
+    bench = root / "bench"
+    argv = ["bench", "--out", str(bench), "--units", str(args.units), "--seed", str(args.seed)]
+    argv += ["--duration", str(args.duration), "--realistic", "--quiet"]
+    if args.gear_ratio:
+        argv += ["--gear-ratio", str(args.gear_ratio)]
+    if cli(argv) != 0:
+        raise SystemExit("bench failed")
+    truth = json.loads((bench / "truth.json").read_text())
+    sound = truth["sound"]
+    causes: dict[str, int] = {}
+    found = audible_n = 0
+    delays_fast, delays_slow, growth, creaks = [], [], [], 0
+    tp = fp = fn = 0
+    t0 = time.perf_counter()
+    for k, unit in enumerate(truth["units"]):
+        log = next(bench.glob(unit["log"] + "*"))
+        out = root / f"r{k}"
+        cli(["replay", str(log), "--out", str(out), "--no-report", "--quiet", "--workers", "0"])
+        heard = json.loads((out / "summary.json").read_text())["heard"]
+        speed = _speed(log)
+        for e in heard["episodes"]:
+            c = _cause(e, unit, sound, speed)
+            causes[c] = causes.get(c, 0) + 1
+        creaks += len(heard.get("creaks", []))
+        audible = [
+            a for a in unit["sound"]["audible_intervals"] if a["end_s"] - a["start_s"] >= 0.05
+        ]
+        onsets = {round(o["time_s"], 3): o for o in unit["sound"]["onsets"]}
+        for a in audible:
+            audible_n += 1
+            hits = [
+                e
+                for e in heard["episodes"]
+                if e["start_s"] < a["end_s"] and e["end_s"] > a["start_s"]
+            ]
+            if not hits:
+                continue
+            found += 1
+            first = min(hits, key=lambda e: e["start_s"])
+            onset = onsets.get(round(a["start_s"], 3))
+            rate = onset["growth_rate_per_s"] if onset else 0.0
+            (delays_fast if rate >= FAST_GROWTH_PER_S else delays_slow).append(
+                first["start_s"] - a["start_s"]
+            )
+            g = first.get("growth_rate_per_s")
+            if onset and g is not None and (first.get("growth_snr_db") or 0) >= 15.0:
+                true = onset["fitted_growth_per_s"] or onset["growth_rate_per_s"]
+                growth.append((round(a["start_s"], 2), true, g, first["growth_rate_se"]))
+        t = np.arange(0.0, heard["log_s"], 0.01)
+        truth_on = _frames(
+            [(a["start_s"], a["end_s"]) for a in unit["sound"]["audible_intervals"]], t
+        )
+        heard_on = _frames([(e["start_s"], e["end_s"]) for e in heard["episodes"]], t)
+        tp += int(np.sum(truth_on & heard_on))
+        fp += int(np.sum(~truth_on & heard_on))
+        fn += int(np.sum(truth_on & ~heard_on))
+    return dict(
+        units=len(truth["units"]),
+        seed=args.seed,
+        causes=causes,
+        false_episodes=sum(v for k, v in causes.items() if k != "squeak"),
+        audible_intervals=audible_n,
+        found=found,
+        onset_delay_fast_s=delays_fast,
+        onset_delay_slow_s=delays_slow,
+        frame_recall=tp / (tp + fn) if tp + fn else None,
+        frame_precision=tp / (tp + fp) if tp + fp else None,
+        creaks=creaks,
+        growth=growth,
+        wall_s=time.perf_counter() - t0,
+    )
+
+
+def _delays(d: list[float]) -> str:
+    if not d:
+        return "-"
+    ms = [1000 * x for x in d]
+    return f"{len(ms)}: median {statistics.median(ms):+.0f} ms, worst {max(ms, key=abs):+.0f} ms"
+
+
+def report(r: dict) -> str:
+    lines = [
+        f"{r['units']} units, seed {r['seed']}: {r['false_episodes']} false episodes "
+        f"({r['false_episodes'] / r['units']:.2f} per unit), {r['found']} of "
+        f"{r['audible_intervals']} audible intervals found, {r['creaks']} creaks",
+        "",
+        "| heard episode | count |",
+        "|---|---:|",
+        *[f"| {k} | {v} |" for k, v in sorted(r["causes"].items())],
+        "",
+        "| measure | value |",
+        "|---|---|",
+        f"| onset delay, growth >= {FAST_GROWTH_PER_S:g} 1/s "
+        f"| {_delays(r['onset_delay_fast_s'])} |",
+        f"| onset delay, slower growth | {_delays(r['onset_delay_slow_s'])} |",
+        f"| frame recall / precision (10 ms frames) | {r['frame_recall']:.3f} / "
+        f"{r['frame_precision']:.3f} |",
+    ]
+    if r["growth"]:
+        ratios = [g / t for _, t, g, _ in r["growth"]]
+        lines += [
+            "",
+            "| onset [s] | truth [1/s] | measured [1/s] | se [1/s] | measured / truth |",
+            "|---:|---:|---:|---:|---:|",
+            *[
+                f"| {s} | {t:.1f} | {g:.1f} | {se:.1f} | {g / t:.2f} |"
+                for s, t, g, se in r["growth"]
+            ],
+            "",
+            f"growth measured / truth: median {statistics.median(ratios):.2f} over "
+            f"{len(ratios)} onsets",
+        ]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--units", type=int, default=10)
+    p.add_argument("--seed", type=int, default=77)
+    p.add_argument("--duration", type=float, default=12.0, help="stroke duration [s]")
+    p.add_argument("--gear-ratio", type=float, default=0.0, help="0: the bench's default")
+    p.add_argument("--json", metavar="OUT.json")
+    args = p.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        r = evaluate(Path(tmp), args)
+    print(report(r))
+    if args.json:
+        Path(args.json).write_text(json.dumps(r, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
