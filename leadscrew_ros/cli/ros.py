@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
 """The ROS 2 commands: `demo` (predictor node driven by the actuator simulator, one process)
-and `simulate` (the simulator alone), and the `squeak_node` executable. rclpy is imported only
+and `simulate` (the simulator alone), and the `squeak_node` and `squeak_guard` executables. rclpy is imported only
 when one of them runs (`args.import_ros`: without ROS 2, one line says what to install)."""
 
 from __future__ import annotations
@@ -63,6 +63,17 @@ def squeak_node() -> int:
         node = import_ros("squeak_node", "node")
     except CliError as exc:
         print(f"squeak_node: error: {exc}", file=sys.stderr)
+        return 2
+    return node.main()
+
+
+def squeak_guard() -> int:
+    """The `squeak_guard` executable (`ros.guard_node.main`); without ROS 2 one line
+    `squeak_guard: error: ...`, exit 2."""
+    try:
+        node = import_ros("squeak_guard", "guard_node")
+    except CliError as exc:
+        print(f"squeak_guard: error: {exc}", file=sys.stderr)
         return 2
     return node.main()
 
