@@ -384,6 +384,7 @@ class BandWorker:
     def __init__(self, policy: GuardPolicy, model: SqueakModel, name: str = "squeak-guard-bands"):
         self.policy, self.model = policy, model
         self.computed = 0  # bins computed (with or without an error)
+        self._computing = False
         self._cv = threading.Condition()
         self._closed = False
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
@@ -394,6 +395,11 @@ class BandWorker:
         if self.policy.wanted:
             with self._cv:
                 self._cv.notify()
+
+    @property
+    def busy(self) -> bool:
+        """A bin is wanted or being computed."""
+        return self._computing or bool(self.policy.wanted)
 
     @property
     def alive(self) -> bool:
@@ -415,16 +421,18 @@ class BandWorker:
                 self._cv.wait_for(lambda: self._closed or bool(policy.wanted))
                 if self._closed:
                     return
+            self._computing = True
             try:
                 key = policy.wanted.pop()
             except KeyError:  # taken meanwhile
+                self._computing = False
                 continue
-            if key in policy.bands:
-                continue
-            p_max = policy.settings.p_max
-            try:
-                bands = GuardBands.compute(self.model, key, p_max)
-            except Exception as exc:  # never lost: the bin says why the guard passes through
-                bands = GuardBands(key, (), f"squeak band search failed: {exc}")
-            policy.bands[key] = bands
-            self.computed += 1
+            if key not in policy.bands:
+                p_max = policy.settings.p_max
+                try:
+                    bands = GuardBands.compute(self.model, key, p_max)
+                except Exception as exc:  # never lost: the bin says why the guard passes
+                    bands = GuardBands(key, (), f"squeak band search failed: {exc}")
+                policy.bands[key] = bands
+                self.computed += 1
+            self._computing = False
