@@ -46,6 +46,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Bool, Float64, String
 
+from ..bag import messages
 from ..live.guard import BandWorker, GuardPolicy, GuardSettings, GuardStep
 from ..live.status import Level
 from ..model import ParameterError, ScrewParameters, SqueakModel
@@ -67,8 +68,9 @@ from .parameters import (
 
 NODE_NAME = "squeak_guard"
 PROG = "squeak_guard"
-COMMAND, LOAD, NUT = "speed_command", "axial_load", "nut_position"
-GUARDED, ACTIVE, REASON = "speed_command_guarded", "guard/active", "guard/reason"
+COMMAND, GUARDED = messages.SPEED_COMMAND, messages.SPEED_COMMAND_GUARDED
+ACTIVE, REASON = messages.GUARD_ACTIVE, messages.GUARD_REASON
+LOAD, NUT = "axial_load", "nut_position"  # the predictor's input names
 GUARD_TASK = "squeak guard"
 HOUSEKEEPING_PERIOD_S = 0.05
 # The guarded command: every one delivered, not latched (a late motor controller must not
