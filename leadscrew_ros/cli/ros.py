@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: Apache-2.0
 """The ROS 2 commands: `demo` (predictor node driven by the actuator simulator, one process)
-and `simulate` (the simulator alone), and the `squeak_node` and `squeak_guard` executables. rclpy is imported only
-when one of them runs (`args.import_ros`: without ROS 2, one line says what to install)."""
+and `simulate` (the simulator alone), and the `squeak_node` and `squeak_guard` executables.
+rclpy is imported only when one of them runs (`args.import_ros`: without ROS 2, one line says
+what to install)."""
 
 from __future__ import annotations
 

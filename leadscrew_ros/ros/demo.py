@@ -20,6 +20,7 @@ import shutil
 import sys
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -518,19 +519,17 @@ class StrokeTrace(Node):
         super().__init__("stroke_trace", **kwargs)
         self.t0: float | None = None  # time.monotonic() of the stroke's start
         self.series: dict[str, list[tuple[float, float]]] = {
-            "speed_command": [],
+            messages.SPEED_COMMAND: [],
             "motor_speed": [],
             messages.RISK: [],
         }
         qos = QoSProfile(depth=1000, reliability=LATCHED.reliability)
-        for topic in ("speed_command", "motor_speed"):
-            self.create_subscription(
-                Float64, topic, lambda m, t=topic: self._add(t, m.data), qos
-            )
+        for topic in (messages.SPEED_COMMAND, "motor_speed"):
+            self.create_subscription(Float64, topic, partial(self._on_speed, topic), qos)
         self.create_subscription(
             OUTPUT_CLASSES[messages.RISK],
             messages.RISK,
-            lambda data: self._add(messages.RISK, cdr.decode_float64(data)),
+            self._on_risk,
             QoSProfile(
                 depth=100,
                 reliability=LATCHED.reliability,
@@ -539,6 +538,12 @@ class StrokeTrace(Node):
             ),
             raw=True,
         )
+
+    def _on_speed(self, topic: str, msg: Float64) -> None:
+        self._add(topic, msg.data)
+
+    def _on_risk(self, data: bytes) -> None:
+        self._add(messages.RISK, cdr.decode_float64(data))
 
     def _add(self, topic: str, value: float) -> None:
         if self.t0 is not None:
@@ -619,7 +624,7 @@ def guard_comparison(
 
     times, _, load, nut = profile.sampled(TRACE_RATE_HZ)
     run = GuardRun(
-        Command(times, raw.trace.held("speed_command", times), load, nut),
+        Command(times, raw.trace.held(messages.SPEED_COMMAND, times), load, nut),
         guarded.trace.held("motor_speed", times),
         raw.trace.held(messages.RISK, times),
         guarded.trace.held(messages.RISK, times),

@@ -43,6 +43,7 @@ from rclpy.qos import (
     qos_profile_sensor_data,
 )
 from rclpy.signals import SignalHandlerOptions
+from rclpy.timer import Timer
 from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Bool, Float64, String
 
@@ -131,7 +132,7 @@ class SqueakGuardNode(LifecycleNode):
         self._subscriptions_own: list = []
         self._outputs: dict[str, Any] = {}
         self.diagnostics: Updater | None = None
-        self._timer = None
+        self._timer: Timer | None = None
         self._shown: tuple[bool, str] | None = None  # guard/active, guard/reason published
         self._verdict: tuple | None = None  # of the last forced /diagnostics
         self._logged: set[str] = set()  # fail-safe kinds said in the log
@@ -188,7 +189,7 @@ class SqueakGuardNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Start publishing (the guarded command, guard/*, /diagnostics)."""
+        """Start publishing (the guarded command, guard/active, guard/reason, /diagnostics)."""
         self.active = True
         self._shown = self._verdict = None  # republish the state
         self._timer = self.create_timer(

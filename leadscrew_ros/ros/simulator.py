@@ -154,9 +154,7 @@ class ActuatorSimulator(Node):
             self.create_publisher(JointState, "joint_states", qos) if joint_name else None
         )
         self.command = command
-        self.command_pub = (
-            self.create_publisher(Float64, COMMAND_TOPIC, qos) if command else None
-        )
+        self.command_pub = self.create_publisher(Float64, COMMAND_TOPIC, qos) if command else None
         self.followed = 0  # guarded commands followed (published as motor_speed)
         if command == "guarded":
             self.create_subscription(Float64, GUARDED_TOPIC, self._follow, qos)
