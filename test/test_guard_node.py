@@ -17,7 +17,7 @@ import sys
 import time
 
 import pytest
-from lifecycle_msgs.msg import State, Transition
+from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 
 from harness.guard import GuardWorld

@@ -12,7 +12,15 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Bool, Float64, String
 
-from leadscrew_ros.ros.guard_node import ACTIVE, COMMAND, GUARDED, LOAD, NUT, REASON, SqueakGuardNode
+from leadscrew_ros.ros.guard_node import (
+    ACTIVE,
+    COMMAND,
+    GUARDED,
+    LOAD,
+    NUT,
+    REASON,
+    SqueakGuardNode,
+)
 
 from .ros import COLLECT, RosWorld
 
@@ -92,8 +100,9 @@ class GuardWorld(RosWorld):
         """The latest /diagnostics status of this test's guard, once it satisfies
         `predicate`."""
         self.spin_until(
-            lambda: bool(self.received["/diagnostics"])
-            and predicate(self.received["/diagnostics"][-1]),
+            lambda: (
+                bool(self.received["/diagnostics"]) and predicate(self.received["/diagnostics"][-1])
+            ),
             timeout,
             "a matching /diagnostics status",
         )
