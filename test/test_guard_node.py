@@ -296,5 +296,6 @@ def test_executable_with_a_bad_parameter_exits_2_with_one_line(tmp_path):
         timeout=120,
     )
     assert proc.returncode == 2, proc
-    errors = [ln for ln in proc.stderr.splitlines() if ln.startswith("squeak_guard: error:")]
-    assert len(errors) == 1 and "p_max" in errors[0], proc.stderr
+    lines = proc.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("squeak_guard: error:"), proc.stderr
+    assert "guard.p_max" in lines[0]

@@ -36,6 +36,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.logging import LoggingSeverity
 from rclpy.parameter import Parameter
 from rclpy.qos import (
     QoSProfile,
@@ -441,10 +442,17 @@ def main(args: list[str] | None = None) -> int:
             return 2
         node = None
         try:
-            node = SqueakGuardNode(autostart=autostart)
-            if node.error:
-                print(f"{PROG}: error: {node.error}", file=sys.stderr)
-                return 2
+            node = SqueakGuardNode(autostart=False)
+            if autostart:  # a failed configure: the one line below, not the log's too
+                logger = node.get_logger()
+                level = logger.get_effective_level()
+                logger.set_level(LoggingSeverity.FATAL)
+                configured = node.trigger_configure() == TransitionCallbackReturn.SUCCESS
+                logger.set_level(level)
+                if not configured:
+                    print(f"{PROG}: error: {node.error}", file=sys.stderr)
+                    return 2
+                node.trigger_activate()
             executor = make_executor()
             executor.add_node(node)
             while not stop.signum:
