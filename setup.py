@@ -90,6 +90,7 @@ setup(
             "leadscrew-squeak = leadscrew_ros.cli:main",
             # Through the CLI layer: without rclpy it says what to install, in one line.
             "squeak_node = leadscrew_ros.cli.ros:squeak_node",
+            "squeak_guard = leadscrew_ros.cli.ros:squeak_guard",
         ],
     },
 )

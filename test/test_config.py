@@ -1,6 +1,7 @@
 # SPDX-License-Identifier: Apache-2.0
-"""config/leadscrew.yaml holds every parameter of the node (the fields of the settings
-dataclasses in ros.parameters.GROUPS) with its default, typed for ROS; it is the text that
+"""config/leadscrew.yaml holds every parameter of the predictor node (the fields of the settings
+dataclasses in ros.parameters.GROUPS) and of the guard node (GUARD_GROUPS: the model's, the
+node's own and guard.*) with its default, typed for ROS; it is the text that
 tools/gen_config.py generates from the field metadata."""
 
 import math
@@ -11,13 +12,22 @@ import pytest
 import yaml
 
 from leadscrew_ros.model.physics.parameters import ScrewParameters, field_names
-from leadscrew_ros.ros.parameters import GROUPS, PARAMETER_NAMES, PARAMETERS, config_yaml
+from leadscrew_ros.ros.parameters import (
+    GROUPS,
+    GUARD_PARAMETER_NAMES,
+    GUARD_PARAMETERS,
+    PARAMETER_NAMES,
+    PARAMETERS,
+    config_yaml,
+)
 
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "leadscrew.yaml"
 KEY = "/**"
 FIELDS = {f.name: f for f in fields(ScrewParameters)}
-# name -> (default, type name) for every parameter the node declares
+# name -> (default, type name) for every parameter the predictor node declares
 DEFAULTS = {s.name: (s.default, type(s.default).__name__) for s in PARAMETERS}
+# and for every entry of the file: the guard node's too
+ENTRIES = {**DEFAULTS, **{s.name: (s.default, type(s.default).__name__) for s in GUARD_PARAMETERS}}
 
 
 def _flat(tree: dict, prefix: str = "") -> dict:
@@ -76,12 +86,14 @@ def test_node_parameter_types_are_plain():
 
 
 def test_keys_are_the_dataclass_fields_and_the_node_parameters():
-    assert set(_params()) == set(PARAMETER_NAMES) >= set(field_names())
+    assert set(_params()) == set(PARAMETER_NAMES) | set(GUARD_PARAMETER_NAMES)
+    assert set(PARAMETER_NAMES) >= set(field_names())
+    assert set(GUARD_PARAMETER_NAMES) >= set(field_names()) | {"guard.p_max", "scatter.samples"}
 
 
-@pytest.mark.parametrize("name", list(DEFAULTS))
+@pytest.mark.parametrize("name", list(ENTRIES))
 def test_value_is_the_default_with_the_right_type(name):
-    value, (default, typ) = _params()[name], DEFAULTS[name]
+    value, (default, typ) = _params()[name], ENTRIES[name]
     # float, never int: ROS rejects an integer YAML value for a double parameter
     assert type(value).__name__ == typ, f"{name}: {value!r} must be written as a {typ}"
     assert _same(value, default, typ), f"{name}: {value!r} != default {default!r}"
@@ -95,7 +107,7 @@ def test_every_entry_has_a_unit_comment():
         and not ln.lstrip().startswith("#")
         and not ln.rstrip().endswith(":")
     ]  # nested-name headers
-    assert len(lines) == len(DEFAULTS)
+    assert len(lines) == len(ENTRIES)
     for ln in lines:
         assert "# [" in ln and "]" in ln.split("# [", 1)[1], ln
 
@@ -118,8 +130,8 @@ def test_ros_reads_the_types_we_mean():
         node = world.make_node(
             "squeak_predictor", namespace="/", automatically_declare_parameters_from_overrides=True
         )
-        assert set(DEFAULTS) <= {p for p in node._parameters}
-        for name, (default, typ) in DEFAULTS.items():
+        assert set(ENTRIES) <= {p for p in node._parameters}
+        for name, (default, typ) in ENTRIES.items():
             p = node.get_parameter(name)
             assert p.type_ == Parameter.Type[ROS_TYPES[typ]], name
             assert _same(p.value, default, typ), name
@@ -162,4 +174,22 @@ def test_node_takes_every_value_from_the_file(tmp_path):
     path.write_text(yaml.safe_dump(doc))
     values = _node_with_params_file(path)
     for name, (default, typ) in DEFAULTS.items():
+        assert _same(values[name], changed.get(name, default), typ), name
+
+
+def test_guard_node_takes_its_values_from_the_same_file(tmp_path):
+    """The predictor's params file configures the guard node: the model's and guard.* values."""
+    from harness.ros import RosWorld
+    from leadscrew_ros.ros.guard_node import SqueakGuardNode
+
+    changed = {"radius_m": 0.006, "scatter.samples": 64, "guard.p_max": 0.2, "max_rate_hz": 50.0}
+    doc = {KEY: {"ros__parameters": {**_params(), **changed}}}
+    path = tmp_path / "changed.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    with RosWorld(args=["--ros-args", "--params-file", str(path)]) as world:
+        node = world.add(SqueakGuardNode(autostart=False, context=world.ctx))
+        values = {name: node.get_parameter(name).value for name in GUARD_PARAMETER_NAMES}
+        assert not node.has_parameter("max_rate_hz")  # the predictor's alone
+    for name in GUARD_PARAMETER_NAMES:
+        default, typ = ENTRIES[name]
         assert _same(values[name], changed.get(name, default), typ), name

@@ -267,3 +267,36 @@ def test_demo_with_a_microphone_says_heard_against_predicted(tmp_path):
     # The tone is where the node's model squeaks, so the two mostly agree (timing: loosely)
     assert float(heard[1]) > 0.3 and float(heard[3]) > 0.3 and int(heard[4]) >= 70
     assert re.search(r"B\dy \d+ Hz", heard[2]), heard[2]
+
+
+def test_demo_guard_meets_the_target_on_the_demo_stroke(tmp_path):
+    """`demo --guard`: the demo stroke without and with the squeak guard node in the loop;
+    issue 33's target: <= 0.3 s in squeak for <= 10 % longer stroke time; the picture and the
+    CSV in the output directory."""
+    from leadscrew_ros.ros.demo import GUARD_CSV, GUARD_PNG
+
+    proc = None
+    try:
+        proc = start(
+            CLI + ["demo", "--guard", "--record-dir", str(tmp_path / "out")],
+            domain(7),
+            tmp_path,
+            "demo_guard",
+        )
+        code = proc.wait(timeout=400)
+        out, err = output(proc)
+    finally:
+        stop(proc)
+    assert code == 0 and err == "", (out, err)
+    rows = {
+        m[1].strip(): (float(m[2]), float(m[3]))
+        for m in re.finditer(r"^  ([a-zA-Z(][^\d]*?) +([\d.]+) +([\d.]+)$", out, re.MULTILINE)
+    }
+    raw_squeak, guarded_squeak = rows["time in squeak [s]"]
+    raw_stroke, guarded_stroke = rows["stroke time [s]"]
+    assert raw_squeak > 2.0, out  # the demo stroke squeaks without the guard
+    assert guarded_squeak <= 0.3, out
+    assert guarded_stroke <= 1.10 * raw_stroke, out
+    assert rows["peak P(squeak)"][0] > 0.5, out
+    assert (tmp_path / "out" / GUARD_PNG).stat().st_size > 10_000
+    assert (tmp_path / "out" / GUARD_CSV).read_text().startswith("time_s,speed_rad_s")

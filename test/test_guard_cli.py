@@ -107,3 +107,32 @@ def test_bad_profiles_are_one_line_errors(tmp_path, capsys, text, extra, said):
     code, out, err = cli(capsys, "guard", profile, "--out", tmp_path / "out", *extra)
     assert code == 2 and out == ""
     assert err.startswith("leadscrew-squeak: error:") and err.count("\n") == 1 and said in err
+
+
+def _guard_example():
+    """tools/guard_example.py as a module: its strokes are the doc's."""
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location(
+        "guard_example", Path(__file__).parents[1] / "tools" / "guard_example.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+EXAMPLE = _guard_example()
+OTHER_STROKES = list(EXAMPLE.STROKES.items())[1:]  # the first is the demo stroke's
+
+
+@pytest.mark.parametrize("name, changes", OTHER_STROKES, ids=[n for n, _ in OTHER_STROKES])
+def test_target_on_three_other_strokes(tmp_path, name, changes):
+    """Other loads and nut travel (tools/guard_example.py's strokes, the doc's table): the
+    same target as on the demo stroke."""
+    assert len(OTHER_STROKES) == 3
+    run, _ = EXAMPLE.run_stroke(StrokeProfile(**changes), tmp_path)
+    raw, guarded, stroke = summary(run)
+    assert raw.time_in_squeak_s > 1.0  # the stroke squeaks without the guard
+    assert guarded.time_in_squeak_s <= EXAMPLE.TARGET_SQUEAK_S
+    assert stroke <= (1 + EXAMPLE.TARGET_LONGER) * raw.motion_time_s

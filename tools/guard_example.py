@@ -3,14 +3,17 @@
 """Numbers and picture of doc/user/guard.md: the guard on the demo stroke and three others.
 
     .venv/bin/python tools/guard_example.py [--plot [doc/images/guard.png]]  # ~40 s on 2 cores
+    .venv/bin/python tools/guard_example.py --demo [doc/images/guard_demo.png]  # ~40 s more
 
 Each stroke (`live.profile.StrokeProfile`, sampled at 100 Hz) is written as PROFILE.csv and run
 through `leadscrew-squeak guard` (default settings, model and scatter), whose guarded.csv
 gives the first table: time in squeak (P(squeak) >= p_max), peak P, travel, and the guarded
 stroke time for the raw travel against the raw stroke's (`review.guard.summary`). Issue 33's
 target: <= 0.3 s in squeak for <= 10 % longer stroke time. `--plot` copies the demo stroke's
-guarded.png, made by the command, to the doc's picture. The second table is the settings'
-metadata.
+guarded.png, made by the command, to the doc's picture. `--demo` runs `leadscrew-squeak demo
+--guard` (the ROS nodes in the loop, one process), prints its output and copies its
+guard_demo.png to the doc's picture of the node (as a palette PNG, as tools/doc_figures.py
+stores its pictures).
 """
 
 from __future__ import annotations
@@ -18,9 +21,11 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import os
 import shutil
+import subprocess
+import sys
 import tempfile
-from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -28,11 +33,11 @@ import numpy as np
 from leadscrew_ros.cli import main as cli
 from leadscrew_ros.live.guard import GuardSettings
 from leadscrew_ros.live.profile import StrokeProfile
-from leadscrew_ros.model.physics.metadata import default_text, range_text
 from leadscrew_ros.review.guard import Command, GuardRun, read_profile, summary, write_profile
 
 ROOT = Path(__file__).resolve().parents[1]
 PICTURE = ROOT / "doc" / "images" / "guard.png"
+DEMO_PICTURE = ROOT / "doc" / "images" / "guard_demo.png"
 STROKES = {  # name -> StrokeProfile changes
     "demo (120-350 N, nut 0.02-0.22 m, 12 s)": {},
     "light (60-150 N)": dict(load_min_n=60.0, load_max_n=150.0),
@@ -87,21 +92,42 @@ def table(rows: list[tuple[str, GuardRun]]) -> str:
     return "\n".join(lines)
 
 
-def settings_table() -> str:
-    """The settings table of doc/user/guard.md, from `GuardSettings`' field metadata."""
-    lines = ["| setting | default | allowed | meaning |", "|---|---|---|---|"]
-    for f in fields(GuardSettings):
-        md = f.metadata
-        allowed = range_text(md) if md["lo"] is not None else "true, false"
-        unit = "" if md["unit"] in ("", "1") else f" {md['unit']}"
-        lines.append(f"| `{f.name}` | {default_text(f)}{unit} | {allowed} | {md['description']} |")
-    return "\n".join(lines)
+def run_demo(picture: Path | None) -> str:
+    """`leadscrew-squeak demo --guard` in a child process (its own ROS_DOMAIN_ID, loopback):
+    its output from the summary on; its picture copied to `picture` as a palette PNG."""
+    from PIL import Image
+
+    with tempfile.TemporaryDirectory() as tmp:
+        env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+        done = subprocess.run(
+            [sys.executable, "-m", "leadscrew_ros.cli", "demo", "--guard", "--record-dir", tmp],
+            capture_output=True,
+            text=True,
+            env=env,
+            check=True,
+        )
+        if picture is not None:
+            image = Image.open(Path(tmp) / "guard_demo.png").convert("RGB")
+            image.quantize(256, method=Image.Quantize.MEDIANCUT).save(picture, optimize=True)
+        text = done.stdout[done.stdout.index("summary") :].replace(tmp, "squeak_demo")
+    return "```\n$ leadscrew-squeak demo --guard\n...\n" + text.rstrip() + "\n```"
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--plot", nargs="?", const=PICTURE, type=Path, metavar="FILE.png")
+    parser.add_argument(
+        "--demo",
+        nargs="?",
+        const=DEMO_PICTURE,
+        type=Path,
+        metavar="FILE.png",
+        help="only `leadscrew-squeak demo --guard`: its summary, its picture to FILE.png",
+    )
     args = parser.parse_args()
+    if args.demo:
+        print(run_demo(args.demo))
+        return
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for k, (name, changes) in enumerate(STROKES.items()):
@@ -114,8 +140,6 @@ def main() -> None:
                 if args.plot:
                     shutil.copy(Path(tmp) / "stroke0" / "guarded.png", args.plot)
     print(table(rows))
-    print()
-    print(settings_table())
 
 
 if __name__ == "__main__":

@@ -25,6 +25,7 @@ from leadscrew_ros.bag import messages
 from leadscrew_ros.bag.msgdefs import type_name
 from leadscrew_ros.bag.recorder import RecordSettings
 from leadscrew_ros.live import listen, status
+from leadscrew_ros.live.guard import GuardSettings
 from leadscrew_ros.live.settings import (
     INPUT_FIELDS,
     JointSettings,
@@ -41,7 +42,7 @@ from leadscrew_ros.review.calibration import CalibrationSettings, SamplerSetting
 from leadscrew_ros.ros import diagnostics
 from leadscrew_ros.ros.node import AUDIO_COMMON_TOPICS, INPUTS, SOUND_INPUTS
 from leadscrew_ros.ros.parameters import (
-    GROUPS,
+    ALL_GROUPS,
     READ_ONLY_NOTE,
     NodeSettings,
     RecordingControl,
@@ -57,6 +58,7 @@ TABLES = {
     "record": (RecordingControl, RecordSettings),
     "listen": (ListenSettings, DetectorSettings),
     "model": (ScrewParameters,),
+    "guard": (GuardSettings,),  # the squeak_guard node's guard.* (it takes model and scatter too)
 }
 NODE_TABLES = (
     "node",
@@ -244,7 +246,7 @@ def table(name: str) -> str:
             if "unit" in f.metadata
         ]
         return "\n".join(["| option" + HEADER[0][len("| parameter") :], HEADER[1], *rows])
-    groups = tuple(g for cls in TABLES[name] for g in GROUPS if g.cls is cls)
+    groups = tuple(g for cls in TABLES[name] for g in ALL_GROUPS if g.cls is cls)
     return "\n".join(HEADER + [row(s) for s in specs(groups)])
 
 

@@ -38,6 +38,15 @@ PREDICTION_TOPICS = (RISK, MARGIN, FREQUENCIES, ACTIVE, MODES)  # one prediction
 # With listening on (`listen.enabled`): what the microphone hears
 HEARD, HEARD_FREQUENCY = "squeak/heard", "squeak/heard_frequency"
 LISTEN_TYPES = {HEARD: cdr.BOOL, HEARD_FREQUENCY: cdr.FLOAT64}
+# The squeak guard (`ros.guard_node`): its command in and out, and why it changed it
+SPEED_COMMAND, SPEED_COMMAND_GUARDED = "speed_command", "speed_command_guarded"
+GUARD_ACTIVE, GUARD_REASON = "guard/active", "guard/reason"
+GUARD_TYPES = {
+    SPEED_COMMAND: cdr.FLOAT64,
+    SPEED_COMMAND_GUARDED: cdr.FLOAT64,
+    GUARD_ACTIVE: cdr.BOOL,
+    GUARD_REASON: "std_msgs/msg/String",
+}
 MODE_COLUMNS = ("frequency_hz", "growth_rate", "damping_ratio")
 MODES_PREFIX = "modes:"  # of the row dimension's label
 

@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: Apache-2.0
 """The ROS 2 commands: `demo` (predictor node driven by the actuator simulator, one process)
-and `simulate` (the simulator alone), and the `squeak_node` executable. rclpy is imported only
-when one of them runs (`args.import_ros`: without ROS 2, one line says what to install)."""
+and `simulate` (the simulator alone), and the `squeak_node` and `squeak_guard` executables.
+rclpy is imported only when one of them runs (`args.import_ros`: without ROS 2, one line says
+what to install)."""
 
 from __future__ import annotations
 
@@ -29,9 +30,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """`demo`: run the node against a simulated stroke; exit status."""
     profile = _stroke(args.duration)
     record_dir = None if args.no_record else output_directory(args.record_dir, "--record-dir")
-    run_demo = import_ros("demo", "demo").run_demo
+    demo = import_ros("demo", "demo")
     try:
-        return run_demo(profile.duration_s, record_dir=record_dir, microphone=args.microphone)
+        if args.guard:
+            if args.microphone:
+                raise CliError("argument --guard: not with --microphone")
+            out_dir = output_directory(args.record_dir, "--record-dir")
+            return demo.run_guard_demo(profile.duration_s, out_dir=out_dir)
+        return demo.run_demo(profile.duration_s, record_dir=record_dir, microphone=args.microphone)
     except RuntimeError as exc:  # e.g. rclpy could not start, no subscription
         raise CliError(str(exc)) from None
 
@@ -67,6 +73,17 @@ def squeak_node() -> int:
     return node.main()
 
 
+def squeak_guard() -> int:
+    """The `squeak_guard` executable (`ros.guard_node.main`); without ROS 2 one line
+    `squeak_guard: error: ...`, exit 2."""
+    try:
+        node = import_ros("squeak_guard", "guard_node")
+    except CliError as exc:
+        print(f"squeak_guard: error: {exc}", file=sys.stderr)
+        return 2
+    return node.main()
+
+
 def _duration_option(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--duration",
@@ -98,6 +115,13 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
         help="the simulator also publishes a simulated microphone (a squeak tone "
         "where the model squeaks) and the predictor listens to it; the summary "
         "says heard against predicted",
+    )
+    p.add_argument(
+        "--guard",
+        action="store_true",
+        help="run the stroke twice, without and then with the squeak guard node (the motor "
+        "following speed_command_guarded): time in squeak, peak P and stroke time side by side, "
+        "and guard_demo.png / guard_demo.csv in the --record-dir directory (no bag)",
     )
     p.set_defaults(run=cmd_demo)
 

@@ -41,6 +41,7 @@ that would cross zero to the side opposite to the command (no reversal).
 from __future__ import annotations
 
 import math
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -152,6 +153,9 @@ class GuardStep:
         neither).
     stopped : bool
         A stop: output 0 with the acceleration reset (zero command, or no reversal).
+    fault : str
+        The fail-safe's kind when a fault made the guard pass the command through (one of
+        `FAULTS`), '' otherwise (guarding, disabled, or the bin's bands not computed yet).
     """
 
     speed_rad_s: float
@@ -159,6 +163,17 @@ class GuardStep:
     active: bool
     reason: str
     stopped: bool = False
+    fault: str = ""
+
+
+# The fail-safe's kinds (`GuardStep.fault`): what a node reports as a warning, once per kind.
+NO_INPUT = "no load or nut position"
+INPUT_NOT_FINITE = "load or nut position not finite"
+INPUT_STALE = "load or nut position stale"
+DEADLINE_MISSED = "deadline missed"
+MODEL_ERROR = "model error"
+COMMAND_NOT_FINITE = "command not finite"
+FAULTS = (NO_INPUT, INPUT_NOT_FINITE, INPUT_STALE, DEADLINE_MISSED, MODEL_ERROR, COMMAND_NOT_FINITE)
 
 
 def reach_time(v: float, a: float, target: float, s: GuardSettings) -> float:
@@ -241,9 +256,10 @@ class GuardPolicy:
         if not math.isfinite(dt) or dt < 0:
             dt = 0.0  # out of order or broken time: no motion this step
         self._t = now_s if math.isfinite(now_s) else self._t
-        reason = ""
+        reason = fault = ""
         if not isinstance(command_rad_s, (int, float)) or not math.isfinite(command_rad_s):
             reason = f"command {command_rad_s!r} is not a finite number: kept {self._command:g}"
+            fault = COMMAND_NOT_FINITE
         else:
             c = max(-s.max_speed_rad_s, min(s.max_speed_rad_s, float(command_rad_s)))
             if c != self._command:
@@ -252,9 +268,9 @@ class GuardPolicy:
         c = self._command
         if c == 0.0:
             self._v = self._a = self._aim = 0.0
-            return GuardStep(0.0, 0.0, False, reason, stopped=True)
-        target, why = self._target(c, load_n, nut_position_m, input_age_s, arrived_s)
-        reason = reason or why
+            return GuardStep(0.0, 0.0, False, reason, stopped=True, fault=fault)
+        target, why, failed = self._target(c, load_n, nut_position_m, input_age_s, arrived_s)
+        reason, fault = reason or why, fault or failed
         if target != c and dt > 0:  # deflect only while c stays reachable in time
             v, a = self._next(target, dt)
             if now_s + dt + reach_time(v, a, c, s) > self._deadline:
@@ -262,14 +278,16 @@ class GuardPolicy:
         if self._committed:
             target, reason = c, reason or "max_delay_s: reaching the command"
         if dt == 0:
-            return GuardStep(self._v, target, target != c, reason)
+            return GuardStep(self._v, target, target != c, reason, fault=fault)
         v, a = self._next(target, dt)
         self._aim = target
         if v * c < 0 and self._v * c >= 0:  # would cross zero away from the command
             self._v = self._a = 0.0
-            return GuardStep(0.0, target, target != c, reason or "no reversal", stopped=True)
+            return GuardStep(
+                0.0, target, target != c, reason or "no reversal", stopped=True, fault=fault
+            )
         self._v, self._a = v, a
-        return GuardStep(v, target, target != c, reason)
+        return GuardStep(v, target, target != c, reason, fault=fault)
 
     def _target(
         self,
@@ -278,32 +296,45 @@ class GuardPolicy:
         nut: float | None,
         age: float,
         arrived: float | None,
-    ) -> tuple[float, str]:
-        """The target for command c and why it is not the guarded one ('' when guarded)."""
+    ) -> tuple[float, str, str]:
+        """The target for command c, why it is not the guarded one ('' when guarded) and the
+        fail-safe's kind ('' when no fault)."""
         s = self.settings
         if load is None or nut is None:
-            return c, "no load or nut position yet: passed through"
+            return c, "no load or nut position yet: passed through", NO_INPUT
         if not (math.isfinite(load) and math.isfinite(nut) and math.isfinite(age)):
-            return c, "load or nut position not finite: passed through"
+            return c, "load or nut position not finite: passed through", INPUT_NOT_FINITE
         if age > s.stale_timeout_s:
-            return c, f"load or nut position older than {s.stale_timeout_s:g} s: passed through"
+            return (
+                c,
+                f"load or nut position older than {s.stale_timeout_s:g} s: passed through",
+                INPUT_STALE,
+            )
         if arrived is not None and self.clock() - arrived > s.deadline_s:
-            return c, f"step later than deadline_s = {s.deadline_s:g} s: passed through"
+            return (
+                c,
+                f"step later than deadline_s = {s.deadline_s:g} s: passed through",
+                DEADLINE_MISSED,
+            )
         key = band_bin(load, nut, c)
         bands = self.bands.get(key)
         if bands is None:
             self.wanted.add(key)
-            return c, "squeak bands of this load and nut position not ready: passed through"
+            return c, "squeak bands of this load and nut position not ready: passed through", ""
         if bands.error:
-            return c, f"{bands.error}: passed through"
+            return c, f"{bands.error}: passed through", MODEL_ERROR
         w = abs(c)
         for lo, hi in bands.intervals:
             if lo <= w <= hi:
                 below = lo * (1 - s.margin)
                 above = hi * (1 + s.margin)
                 safe = below if above > s.max_speed_rad_s or w - below <= above - w else above
-                return math.copysign(safe, c), f"squeak band {lo:.3g}-{hi:.3g} rad/s avoided"
-        return c, ""
+                return (
+                    math.copysign(safe, c),
+                    f"squeak band {lo:.3g}-{hi:.3g} rad/s avoided",
+                    "",
+                )
+        return c, "", ""
 
     def _next(self, target: float, dt: float) -> tuple[float, float]:
         """Speed and acceleration after one step of dt towards `target` (limits hold)."""
@@ -328,3 +359,80 @@ def _within_curve(v: float, a: float, s: GuardSettings) -> bool:
     """(v, a) can brake at the jerk limit without passing +-max_speed."""
     stop = v + a * abs(a) / (2 * s.max_jerk_rad_s3)
     return abs(stop) <= s.max_speed_rad_s
+
+
+class BandWorker:
+    """Computes the bins a `GuardPolicy` wants (`GuardPolicy.wanted`) with `GuardBands.compute`
+    on a background thread and stores them in `GuardPolicy.bands`: a node's steps never
+    predict. rclpy-free.
+
+    `poke` after a step wakes the thread when a bin is wanted; it takes the wanted bins one by
+    one (a set pop and a dict store: atomic under the GIL, no lock shared with the step) and
+    sleeps when none is left. A `compute` that raises is stored as the bin's error (the guard
+    passes through there and says why). `close` ends the thread.
+
+    Parameters
+    ----------
+    policy : GuardPolicy
+        Whose bins to compute.
+    model : SqueakModel
+        The model the bands come from.
+    name : str
+        The thread's name.
+    """
+
+    def __init__(self, policy: GuardPolicy, model: SqueakModel, name: str = "squeak-guard-bands"):
+        self.policy, self.model = policy, model
+        self.computed = 0  # bins computed (with or without an error)
+        self._computing = False
+        self._cv = threading.Condition()
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def poke(self) -> None:
+        """Wake the thread if a bin is wanted (cheap: a set's truth value)."""
+        if self.policy.wanted:
+            with self._cv:
+                self._cv.notify()
+
+    @property
+    def busy(self) -> bool:
+        """A bin is wanted or being computed."""
+        return self._computing or bool(self.policy.wanted)
+
+    @property
+    def alive(self) -> bool:
+        """The thread runs."""
+        return self._thread.is_alive()
+
+    def close(self, timeout: float = 5.0) -> None:
+        """End the thread (after the bin being computed; joined for at most `timeout` s)."""
+        with self._cv:
+            self._closed = True
+            self._cv.notify_all()
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout)
+
+    def _run(self) -> None:
+        policy = self.policy
+        while True:
+            with self._cv:
+                self._cv.wait_for(lambda: self._closed or bool(policy.wanted))
+                if self._closed:
+                    return
+            self._computing = True
+            try:
+                key = policy.wanted.pop()
+            except KeyError:  # taken meanwhile
+                self._computing = False
+                continue
+            if key not in policy.bands:
+                p_max = policy.settings.p_max
+                try:
+                    bands = GuardBands.compute(self.model, key, p_max)
+                except Exception as exc:  # never lost: the bin says why the guard passes
+                    bands = GuardBands(key, (), f"squeak band search failed: {exc}")
+                policy.bands[key] = bands
+                self.computed += 1
+            self._computing = False

@@ -27,12 +27,14 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
+from ..bag.messages import SPEED_COMMAND, SPEED_COMMAND_GUARDED
 from ..model.physics.friction import friction_coefficient
 from ..model.physics.parameters import ScrewParameters, field_info
 from ..model.studies.fields import PROBABILITY_LEVELS
 from ..model.studies.stability_map import MapResult
 from ..model.studies.sweep import SweepResult
 from ..model.studies.tracking import track_modes
+from .commands import LABELS
 
 if TYPE_CHECKING:
     from matplotlib.artist import Artist
@@ -43,6 +45,7 @@ if TYPE_CHECKING:
 
     from ..model.nonlinear.transient import TransientResult
     from ..model.nonlinear.transient_analysis import TransientAnalysis
+    from .commands import CommandTrace
     from .fleet import FleetRun
     from .guard import GuardRun
     from .listen import Heard, Spectrogram
@@ -817,7 +820,8 @@ def plot_listened(listened: Listened, *, ax: Axes | None = None) -> Figure:
 
 
 def plot_timeline(result: ReplayResult, *, fig: Figure | None = None) -> Figure:
-    """A replay over time: speed, load, nut position (only when the log has a nut input) and
+    """A replay over time: speed (with the squeak guard's raw and guarded command when the log
+    has them, `review.commands`), load, nut position (only when the log has a nut input) and
     P(squeak), squeak at the nominal parameters shaded; the P(squeak) panel has the WARN and
     ERROR probabilities as dashed lines, bars under the curve where P was at or above them and
     the peak marked. Drawn from the replay's binned series (min-max band per bin). With sound,
@@ -866,6 +870,8 @@ def plot_timeline(result: ReplayResult, *, fig: Figure | None = None) -> Figure:
             lw=0.7,
         )
         ax.set_ylabel(label)
+    if result.commands is not None:  # the guard's command over the motor's speed
+        _commands(result.commands, axes[0])
     if heard is not None:
         sound = axes.pop(-2)
         plot_heard(heard, ax=sound)
@@ -884,6 +890,22 @@ def plot_timeline(result: ReplayResult, *, fig: Figure | None = None) -> Figure:
         fontsize=10,
     )
     return fig
+
+
+def _commands(commands: CommandTrace, ax: Axes) -> None:
+    """The raw and the guarded speed command as lines (each bin's last value, held) over the
+    speed panel, with a legend."""
+    for topic, color, style in (
+        (SPEED_COMMAND, "0.3", "--"),
+        (SPEED_COMMAND_GUARDED, "tab:orange", "-"),
+    ):
+        envelope = commands.envelopes.get(topic)
+        if envelope is None:
+            continue
+        t, lo, hi, last, count = envelope.series()
+        ax.plot(t, _held(last, count)[:, 0], color=color, ls=style, lw=1.0, label=LABELS[topic])
+    ax.plot([], [], color="tab:blue", lw=4, label="motor speed (min-max per bin)")
+    ax.legend(loc="upper right", fontsize=8)
 
 
 _NAMED_BARS = 40  # up to this many logs the time-in-squeak panel names each one

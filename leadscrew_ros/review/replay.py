@@ -55,6 +55,7 @@ from ..bag.logsource import LogSource, log_topics, open_log, topic_types
 from ..bag.mcapout import CHUNK_BYTES, McapOut
 from ..model import Prediction, SqueakModel, Validity
 from ..model.uncertainty.scatter import LOG_NORMAL
+from .commands import CommandTrace
 from .decimation import Envelope, Reservoir
 from .jsonsafe import json_safe
 from .listen import Heard, PredictionTrace, SoundSettings, SpeedTrace, listen, write_heard
@@ -305,6 +306,9 @@ class ReplayResult:
         without sound.
     audio_warnings : list of str
         Why the log's audio was not analysed, if it was not.
+    commands : CommandTrace or None
+        The squeak guard's raw and guarded speed command (`review.commands`); None when the
+        log has neither.
     metadata_problem : str
         What is wrong with the bag directory's metadata.yaml, and how to mend it ('' if
         nothing, or not a bag directory): the files were read, but other tools refuse it.
@@ -339,6 +343,7 @@ class ReplayResult:
     outputs: list[Path] = field(default_factory=list)
     heard: Heard | None = None
     audio_warnings: list[str] = field(default_factory=list)
+    commands: CommandTrace | None = None
     metadata_problem: str = ""
 
     def plot(self, fig: Figure | None = None) -> Figure:
@@ -418,6 +423,7 @@ class ReplayResult:
             "heard": self.heard.as_dict() if self.heard else None,
             "agreement_by_formulation": self.heard.by_formulation_dict() if self.heard else None,
             "detect_wall_s": self.heard.detect_s if self.heard else None,
+            "speed_commands": self.commands.as_dict() if self.commands else None,
             "squeak_share": self._share(self.time_in_squeak_s),
             "warn_share": self._share(self.probability.above_warn_s),
             "wall_s": self.wall_s,
@@ -485,6 +491,7 @@ class ReplayResult:
             self.scatter_text(),
         ]
         lines += self.heard.text() if self.heard else []
+        lines += self.commands.text() if self.commands else []
         examples = {**self.timeline.rejected_example, **self.timeline.ignored_example}
         for title, counts in (
             ("no prediction (outside the model's validity)", self.no_prediction),
@@ -825,9 +832,11 @@ class _Run:
         progress: Callable[[int], None] | None,
         listening: bool = False,
         types: dict[str, list[str]] | None = None,
+        namespace: str = "/",
     ):
         self.out, self.progress = out, progress
         self.timeline = Timeline(model.params, inputs, types)
+        self.commands = CommandTrace(namespace)  # the guard's, if the log has them
         # for `listen`: the recomputes and the speed samples, compact
         self.trace = PredictionTrace() if listening else None
         self.speeds = SpeedTrace()
@@ -856,6 +865,7 @@ class _Run:
         job = self.timeline.feed(m, len(seg.messages) - 1)
         if job is not None:
             seg.jobs.append(job)
+        self.commands.add(m, self.timeline.seconds(self.timeline.now_ns))
         if m.topic.name in self._speed_topics and self.timeline.speed is not None:
             self.speeds.add(self.timeline.seconds(self.timeline.now_ns), self.timeline.speed)
         if len(seg.jobs) >= _BATCH_JOBS or len(seg.messages) >= _SEGMENT_MESSAGES:
@@ -869,6 +879,7 @@ class _Run:
             self._write(self.queue.popleft())
         self.out.finish()
         self.episodes.close(self.duration_s)
+        self.commands.close(self.duration_s)
 
     @property
     def duration_s(self) -> float:
@@ -987,6 +998,7 @@ def replay(
                 bar if show else None,
                 settings.listen.enabled,
                 topic_types(source),
+                namespace,
             )
             for f, m in source.messages():
                 try:
@@ -1048,6 +1060,7 @@ def replay(
         scatter=dict(model.scatter.sd),
         scatter_samples=model.sample_count,
         heard=heard,
+        commands=run.commands if run.commands.found else None,
         audio_warnings=audio_warnings,
         metadata_problem=metadata_problem(log, source.infos) if log.is_dir() else "",
     )

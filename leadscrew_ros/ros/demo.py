@@ -20,18 +20,22 @@ import shutil
 import sys
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any, TextIO
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.logging import LoggingSeverity
+from rclpy.logging import LoggingSeverity, get_logger
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
+from std_msgs.msg import Float64
 
 from ..bag import cdr, messages
 from ..bag.logfile import LogError, inspect, log_files
 from ..bag.recorder import Recorder
+from ..live.guard import GuardSettings
 from ..live.listen import KEY_AGREEMENT, KEY_DROPPED, KEY_HEARD_MODES, KEY_HEARD_S, KEY_PREDICTED_S
 from ..live.profile import ActuatorState, StrokeProfile, expected_squeak
 from ..live.status import (
@@ -498,3 +502,243 @@ def run_demo(
     if predictor is not None and record_dir is not None:
         print(recording_summary(predictor.recorder), file=out, flush=True)
     return 0 if finished else stop.exit_status()
+
+
+# ----------------------------------------------------------------------------- --guard
+GUARD_PNG = "guard_demo.png"
+GUARD_CSV = "guard_demo.csv"
+BANDS_TIMEOUT_S = 300.0  # longest wait for the guard's band thread between the strokes
+TRACE_RATE_HZ = 100.0  # the runs are compared on this time grid
+
+
+class StrokeTrace(Node):
+    """Records what one stroke did, with times from the stroke's start: the command
+    (speed_command), the motor's speed (motor_speed) and P(squeak) (squeak/risk)."""
+
+    def __init__(self, **kwargs: Any):
+        super().__init__("stroke_trace", **kwargs)
+        self.t0: float | None = None  # time.monotonic() of the stroke's start
+        self.series: dict[str, list[tuple[float, float]]] = {
+            messages.SPEED_COMMAND: [],
+            "motor_speed": [],
+            messages.RISK: [],
+        }
+        qos = QoSProfile(depth=1000, reliability=LATCHED.reliability)
+        for topic in (messages.SPEED_COMMAND, "motor_speed"):
+            self.create_subscription(Float64, topic, partial(self._on_speed, topic), qos)
+        self.create_subscription(
+            OUTPUT_CLASSES[messages.RISK],
+            messages.RISK,
+            self._on_risk,
+            QoSProfile(
+                depth=100,
+                reliability=LATCHED.reliability,
+                durability=LATCHED.durability,
+                history=LATCHED.history,
+            ),
+            raw=True,
+        )
+
+    def _on_speed(self, topic: str, msg: Float64) -> None:
+        self._add(topic, msg.data)
+
+    def _on_risk(self, data: bytes) -> None:
+        self._add(messages.RISK, cdr.decode_float64(data))
+
+    def _add(self, topic: str, value: float) -> None:
+        if self.t0 is not None:
+            self.series[topic].append((time.monotonic() - self.t0, value))
+
+    def held(self, topic: str, times: np.ndarray) -> np.ndarray:
+        """The topic's latest value at each time (0 before the first)."""
+        points = self.series[topic]
+        if not points:
+            return np.zeros(len(times))
+        t, v = (np.array(a) for a in zip(*points, strict=True))
+        k = np.searchsorted(t, times, side="right") - 1
+        return np.where(k >= 0, v[np.maximum(k, 0)], 0.0)
+
+
+@dataclass
+class StrokeRun:
+    """One stroke of `run_guard_demo`: what the monitor saw and what the trace recorded."""
+
+    record: SqueakRecord
+    trace: StrokeTrace
+    elapsed_s: float
+    finished: bool
+
+
+def _one_stroke(
+    ctx: Any,
+    executor: Any,
+    profile: StrokeProfile,
+    rate_hz: float,
+    command: str,
+    stop: StopSignals,
+    out: TextIO,
+) -> StrokeRun:
+    """One simulated stroke with a predictor, monitor, trace and simulator of its own (the
+    guard node, if any, lives on); its nodes are destroyed afterwards."""
+    predictor = SqueakPredictorNode(context=ctx)
+    predictor.get_logger().set_level(LoggingSeverity.ERROR)
+    monitor, trace = SqueakMonitor(context=ctx), StrokeTrace(context=ctx)
+    sim = ActuatorSimulator(
+        profile, rate_hz=rate_hz, wait_for_subscriber=True, command=command, context=ctx
+    )
+    nodes: list[Node] = [predictor, monitor, trace, sim]
+    for node in nodes:
+        executor.add_node(node)
+    try:
+        begin = time.monotonic()
+        done_at = None
+        while not stop.signum:
+            executor.spin_once(timeout_sec=SPIN_STEP_S)
+            now = time.monotonic()
+            if sim.started_at is None and now - begin > START_TIMEOUT_S:
+                raise RuntimeError(
+                    f"the predictor or the guard did not subscribe within {START_TIMEOUT_S:g} s"
+                )
+            trace.t0 = sim.started_at
+            if sim.done and done_at is None:
+                done_at = now
+            if done_at is not None and now - done_at >= TAIL_S:
+                break
+        monitor.set_squeak(False, time.monotonic())
+        return StrokeRun(monitor.record, trace, sim.elapsed_s, sim.done)
+    finally:
+        for node in reversed(nodes):
+            executor.remove_node(node)
+        for _ in range(20):  # events queued for the removed nodes (EventsExecutor)
+            executor.spin_once(timeout_sec=0.0)
+        for node in reversed(nodes):
+            node.destroy_node()
+
+
+def guard_comparison(
+    profile: StrokeProfile, raw: StrokeRun, guarded: StrokeRun, p_max: float
+) -> tuple[Any, tuple]:
+    """Both strokes on one time grid as a `review.guard.GuardRun` (the raw run's command and P,
+    the guarded run's motor speed and P) and its `review.guard.summary`."""
+    from ..review.guard import Command, GuardRun, summary
+
+    times, _, load, nut = profile.sampled(TRACE_RATE_HZ)
+    run = GuardRun(
+        Command(times, raw.trace.held(messages.SPEED_COMMAND, times), load, nut),
+        guarded.trace.held("motor_speed", times),
+        raw.trace.held(messages.RISK, times),
+        guarded.trace.held(messages.RISK, times),
+        [],
+        GuardSettings(p_max=p_max),
+    )
+    return run, summary(run)
+
+
+def guard_summary(raw: StrokeRun, guarded: StrokeRun, numbers: tuple, bands: str) -> str:
+    """The side-by-side summary of `run_guard_demo`."""
+    m_raw, m_guarded, stroke = numbers
+    rows = [
+        ("time in squeak [s]", raw.record.squeak_time_s, guarded.record.squeak_time_s, ".2f"),
+        ("time P >= p_max [s]", m_raw.time_in_squeak_s, m_guarded.time_in_squeak_s, ".2f"),
+        ("peak P(squeak)", raw.record.max_probability or 0.0, m_guarded.peak_p, ".3f"),
+        ("travel [rad]", m_raw.travel_rad, m_guarded.travel_rad, ".1f"),
+        ("stroke time [s]", m_raw.motion_time_s, stroke, ".2f"),
+    ]
+    lines = [
+        "summary, raw against guarded (the motor following speed_command_guarded):",
+        f"  {'':24}{'raw':>10}{'guarded':>10}",
+    ]
+    lines += [f"  {label:24}{a:>10{fmt}}{b:>10{fmt}}" for label, a, b, fmt in rows]
+    longer = stroke / m_raw.motion_time_s - 1 if m_raw.motion_time_s > 0 else math.nan
+    lines.append(
+        f"  stroke time {100 * longer:+.1f} % (the guarded stroke's motion time for the raw "
+        "travel); time in squeak: the predictor's nominal verdict, as the demo counts it"
+    )
+    lines.append(f"  {bands}")
+    return "\n".join(lines)
+
+
+def run_guard_demo(
+    duration_s: float = 12.0,
+    rate_hz: float = 100.0,
+    out: TextIO | None = None,
+    out_dir: Path | None = None,
+) -> int:
+    """`demo --guard`: the simulated stroke twice, without and with the guard node
+    (`SqueakGuardNode`), each with a predictor of its own; the summary side by side and
+    `guard_demo.png` / `guard_demo.csv` in `out_dir`.
+
+    In the raw stroke the motor follows the command (speed_command) and the guard runs beside
+    it unheeded, its band thread learning the stroke's squeak bands (a drive repeats its
+    strokes); the guarded stroke starts once the bands are computed, the motor following
+    speed_command_guarded.
+
+    Returns
+    -------
+    int
+        0 when both strokes are done; after SIGINT or SIGTERM `StopSignals.exit_status`.
+    """
+    from ..review.guard import write_run
+    from ..review.plots import plot_guard
+    from .guard_node import NODE_NAME as GUARD_NODE_NAME
+    from .guard_node import SqueakGuardNode
+
+    out = out or sys.stdout
+    profile = StrokeProfile(duration_s=duration_s)
+    confine_to_localhost(private_domain=True)
+    with StopSignals() as stop:
+        ctx = init_context()
+        executor = guard = None
+        try:
+            # the status and the summary say it all: its info lines stay off the terminal
+            get_logger(GUARD_NODE_NAME).set_level(LoggingSeverity.ERROR)
+            guard = SqueakGuardNode(context=ctx)
+            if guard.error:
+                raise RuntimeError(f"the guard did not start: {guard.error}")
+            executor = make_executor(ctx)
+            executor.add_node(guard)
+            print(
+                f"leadscrew_ros demo --guard: the {duration_s:g} s stroke without, then with "
+                f"the squeak guard, ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}, "
+                f"discovery {os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE')}",
+                file=out,
+                flush=True,
+            )
+            print("stroke 1: raw (the guard learns the bands beside it)", file=out, flush=True)
+            raw = _one_stroke(ctx, executor, profile, rate_hz, "raw", stop, out)
+            assert guard.worker is not None and guard.policy is not None  # active
+            waited = time.monotonic()
+            while guard.worker.busy and not stop.signum:
+                executor.spin_once(timeout_sec=SPIN_STEP_S)
+                if time.monotonic() - waited > BANDS_TIMEOUT_S:
+                    raise RuntimeError(f"the guard's bands took over {BANDS_TIMEOUT_S:g} s")
+            waited = time.monotonic() - waited
+            bins = len(guard.policy.bands)
+            print(
+                f"stroke 2: guarded ({bins} squeak band bins, {waited:.1f} s waited for them)",
+                file=out,
+                flush=True,
+            )
+            p_max = guard.policy.settings.p_max
+            guarded = None
+            if not stop.signum:
+                guarded = _one_stroke(ctx, executor, profile, rate_hz, "guarded", stop, out)
+        finally:
+            close(ctx, executor, [guard] if guard is not None else [])
+    if guarded is None or not (raw.finished and guarded.finished):
+        print("interrupted", file=out, flush=True)
+        return stop.exit_status()
+    run, numbers = guard_comparison(profile, raw, guarded, p_max)
+    print(
+        guard_summary(raw, guarded, numbers, f"guard: {bins} band bins, p_max {p_max:g}"),
+        file=out,
+        flush=True,
+    )
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        write_run(out_dir / GUARD_CSV, run)
+        plot_guard(run, title="demo stroke: raw and guarded (live)").savefig(
+            out_dir / GUARD_PNG, dpi=110
+        )
+        print(f"  wrote {out_dir / GUARD_CSV} and {out_dir / GUARD_PNG}", file=out, flush=True)
+    return 0

@@ -1,12 +1,14 @@
 # SPDX-License-Identifier: Apache-2.0
-"""The parameters of the node `squeak_predictor`, made from the settings' field metadata.
+"""The parameters of the nodes `squeak_predictor` and `squeak_guard`, made from the settings'
+field metadata.
 
 Every parameter is a field of one settings dataclass (`model.physics.metadata.setting`: default,
-unit, range, description, read-only); `GROUPS` orders the dataclasses and gives each its name
-prefix.
-From that one table come the ROS parameter descriptors (`descriptor`), the dataclasses built
-from parameter values (`build`), the parameter lines of `squeak_node --help` (`help_lines`)
-and config/leadscrew.yaml (`config_yaml`, written by tools/gen_config.py).
+unit, range, description, read-only); `GROUPS` orders the predictor's dataclasses and gives each
+its name prefix, `GUARD_GROUPS` the guard's (the model's groups, the node's own and `guard.*`).
+From these tables come the ROS parameter descriptors (`descriptor`), the dataclasses built
+from parameter values (`build`), the parameter lines of `squeak_node --help` and
+`squeak_guard --help` (`help_lines`) and config/leadscrew.yaml (`config_yaml`, written by
+tools/gen_config.py), the one file both nodes take.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from rclpy.parameter import Parameter
 
 from ..bag.logmeta import LogMetadata
 from ..bag.recorder import RecordSettings
+from ..live.guard import GuardSettings
 from ..live.settings import (
     INPUT_FIELDS,
     INPUTS_PREFIX,
@@ -31,6 +34,7 @@ from ..model.acoustics.settings import DetectorSettings
 from ..model.physics.display import exact, yaml_value
 from ..model.physics.metadata import check, check_value, documented, range_text, setting
 from ..model.physics.parameters import ParameterError, ScrewParameters
+from ..model.squeak_model import SqueakModel
 from ..model.uncertainty.scatter import ScatterSettings
 
 READ_ONLY_NOTE = "read-only: set at start-up"
@@ -157,13 +161,26 @@ def specs(groups: tuple[Group, ...] = GROUPS) -> Iterator[Spec]:
             yield Spec(group.prefix + f.name, f, group)
 
 
-PARAMETERS = tuple(specs())
+GUARD_GROUP = Group(
+    GuardSettings, "guard.", "guard node (squeak_guard): policy and limits of the speed command"
+)
+# The guard node's parameters: the model the predictor uses (so that one params file serves
+# both), the node's own (diagnostics, identity, input queues) and its policy.
+GUARD_GROUPS = (
+    *(g for g in GROUPS if g.cls in (ScrewParameters, ScatterSettings, NodeSettings)),
+    GUARD_GROUP,
+)
+PARAMETERS = tuple(specs())  # the predictor's
 PARAMETER_NAMES = [s.name for s in PARAMETERS]
+GUARD_PARAMETERS = tuple(specs(GUARD_GROUPS))
+GUARD_PARAMETER_NAMES = [s.name for s in GUARD_PARAMETERS]
+ALL_GROUPS = (*GROUPS, GUARD_GROUP)  # config/leadscrew.yaml: every parameter of both nodes
+_ALL = tuple(specs(ALL_GROUPS))
 
 
 def names_of(cls: type) -> set[str]:
     """Parameter names of the fields of settings dataclass `cls`."""
-    return {s.name for s in PARAMETERS if s.group.cls is cls}
+    return {s.name for s in _ALL if s.group.cls is cls}
 
 
 def build(cls: type, values: dict[str, Any]) -> Any:
@@ -176,7 +193,7 @@ def build(cls: type, values: dict[str, Any]) -> Any:
         A value is not allowed (the reason names the parameter), or the class's own checks
         (e.g. cross-field) fail: what the node reports for any bad parameter.
     """
-    own = [s for s in PARAMETERS if s.group.cls is cls]
+    own = [s for s in _ALL if s.group.cls is cls]
     for s in own:  # full parameter names in the reason
         reason = check_value(s.name, values[s.name], s.field)
         if reason:
@@ -249,7 +266,7 @@ def descriptor(spec: Spec) -> ParameterDescriptor:
     return d
 
 
-SPECS = {s.name: s for s in PARAMETERS}
+SPECS = {s.name: s for s in _ALL}
 
 
 def as_declared_type(parameter: Parameter) -> Parameter:
@@ -266,11 +283,53 @@ def as_declared_type(parameter: Parameter) -> Parameter:
     return parameter
 
 
-def help_lines() -> list[str]:
-    """The parameter lines of `squeak_node --help`: name [unit] = default, range: description
-    (constraints; read-only)."""
+def declare(node: Any, parameters: tuple[Spec, ...]) -> None:
+    """Declare `parameters` on `node` with their descriptors; a whole number given for a
+    double (params file, overrides, later sets) is taken as that double (`as_declared_type`:
+    rclpy offers no hook between the overrides and their type check at declaration).
+
+    Raises
+    ------
+    rclpy.exceptions.ParameterException
+        An override out of its range or of the wrong type.
+    """
+    overrides = node._parameter_overrides
+    for name, parameter in overrides.items():
+        overrides[name] = as_declared_type(parameter)
+    for spec in parameters:
+        node.declare_parameter(spec.name, spec.default, descriptor(spec))
+    node.add_pre_set_parameters_callback(lambda ps: [as_declared_type(p) for p in ps])
+
+
+def squeak_model(values: dict[str, Any]) -> SqueakModel:
+    """The model of parameter values `values` (the model's and `scatter.*`): the screw and its
+    scatter. One prediction draws the samples and builds the estimator, so a scatter they
+    cannot take is rejected here with the reason, never later in a callback.
+
+    Raises
+    ------
+    ParameterError
+        A bad parameter or scatter.
+    """
+    scatter = build(ScatterSettings, values)
+    model = SqueakModel(
+        build(ScrewParameters, values), scatter=scatter.scatter, samples=scatter.samples
+    )
+    try:
+        model.predict(model.params.min_speed_rad_s, 0.0)
+    except ParameterError:
+        raise
+    except ValueError as exc:
+        raise ParameterError(f"scatter: {exc}") from None
+    return model
+
+
+def help_lines(parameters: tuple[Spec, ...] = PARAMETERS) -> list[str]:
+    """The parameter lines of `squeak_node --help` (or, given `GUARD_PARAMETERS`,
+    `squeak_guard --help`): name [unit] = default, range: description (constraints;
+    read-only)."""
     lines = []
-    for spec in PARAMETERS:
+    for spec in parameters:
         md, default, unit = spec.md, spec.default, spec.md["unit"]
         text = f"  {spec.name}{f' [{unit}]' if unit else ''} = " + (
             exact(default) if isinstance(default, float) else repr(default)
@@ -299,8 +358,9 @@ def yaml_comment(spec: Spec) -> str:
 
 CONFIG_HEADER = """\
 # SPDX-License-Identifier: Apache-2.0
-# Default parameters of the squeak predictor node, in SI units, generated by
-# tools/gen_config.py from the settings' field metadata (leadscrew_ros.ros.parameters.GROUPS):
+# Default parameters of the squeak predictor and squeak guard nodes, in SI units, generated by
+# tools/gen_config.py from the settings' field metadata (leadscrew_ros.ros.parameters.GROUPS,
+# GUARD_GROUP; each node takes its own and ignores the others):
 # do not edit, change the metadata and run the tool; test/test_config.py checks it is current.
 # Floats are written with a decimal point: ROS rejects an integer YAML value for a double
 # parameter.
@@ -319,7 +379,7 @@ def config_yaml() -> str:
     comment with unit, description and range per entry."""
     lines: list[str] = []
     nested: list[str] = []
-    for group in GROUPS:
+    for group in ALL_GROUPS:
         parts = [p for p in group.prefix.split(".") if p]
         common = 0
         while common < min(len(parts), len(nested)) and parts[common] == nested[common]:

@@ -2,7 +2,9 @@
 """Actuator simulator: the ROS 2 node that publishes a seat stroke (`live.profile.StrokeProfile`)
 on the predictor's input topics: std_msgs/Float64 `motor_speed` [rad/s], `axial_load` [N],
 `nut_position` [m]; optionally sensor_msgs/JointState `joint_states` and a simulated
-microphone, std_msgs/Float32MultiArray `microphone` (`stroke_microphone`).
+microphone, std_msgs/Float32MultiArray `microphone` (`stroke_microphone`). For the guard
+(`squeak_guard`) it can publish the stroke's speed as the command `speed_command` and let the
+simulated motor follow the guarded command `speed_command_guarded`.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ from ..bag.virtual_bench import squeak_frequencies
 from ..live.profile import ActuatorState, ProfileError, StrokeProfile
 from ..model import ScrewParameters
 from .env import StopSignals, close, confine_to_localhost, init_context
+from .guard_node import COMMAND as COMMAND_TOPIC
+from .guard_node import GUARDED as GUARDED_TOPIC
 
 NODE_NAME = "actuator_simulator"
 MAX_RATE_HZ = 10_000.0
@@ -33,6 +37,7 @@ MIC_RATE_HZ = 48000  # the simulated microphone's sample rate
 MIC_CHUNK_S = 0.1  # and its chunks
 MIC_SQUEAK_LEVEL = 0.05  # squeak tone amplitude [full scale] (-26 dBFS)
 _SCHEDULE_RATE_HZ = 100.0  # the model along the stroke, for the squeak tone
+COMMAND_MODES = ("", "raw", "guarded")
 
 
 def stroke_microphone(
@@ -104,6 +109,13 @@ class ActuatorSimulator(Node):
         chunks as their sound has passed) on `microphone`; not with `loop`.
     params : ScrewParameters, optional
         The screw whose model decides where the microphone squeaks (default: Table 1).
+    command : {"", "raw", "guarded"}
+        '' (default): motor_speed is the stroke's speed. 'raw': the stroke's speed is also
+        published as the command `speed_command` (Float64) and motor_speed is that command.
+        'guarded': the stroke's speed is published on `speed_command` only, and the motor
+        follows the guarded command: every `speed_command_guarded` (Float64) received is
+        published as motor_speed at once. With a command the stroke starts (with
+        `wait_for_subscriber`) when `speed_command` is subscribed too.
     **kwargs
         Passed to `rclpy.node.Node` (`node_name` too).
     """
@@ -117,12 +129,15 @@ class ActuatorSimulator(Node):
         wait_for_subscriber: bool = False,
         microphone: bool = False,
         params: ScrewParameters | None = None,
+        command: str = "",
         **kwargs: Any,
     ):
         if not (math.isfinite(rate_hz) and 0 < rate_hz <= MAX_RATE_HZ):
             raise ProfileError(f"rate_hz must be in (0, {MAX_RATE_HZ:g}] Hz, got {rate_hz!r}")
         if microphone and loop:
             raise ProfileError("the simulated microphone covers one stroke: not with loop")
+        if command not in COMMAND_MODES:
+            raise ValueError(f"command must be one of {COMMAND_MODES}, got {command!r}")
         super().__init__(kwargs.pop("node_name", NODE_NAME), **kwargs)
         self.profile = profile or StrokeProfile()
         self.loop, self.joint_name = loop, joint_name
@@ -138,6 +153,11 @@ class ActuatorSimulator(Node):
         self.joint_pub = (
             self.create_publisher(JointState, "joint_states", qos) if joint_name else None
         )
+        self.command = command
+        self.command_pub = self.create_publisher(Float64, COMMAND_TOPIC, qos) if command else None
+        self.followed = 0  # guarded commands followed (published as motor_speed)
+        if command == "guarded":
+            self.create_subscription(Float64, GUARDED_TOPIC, self._follow, qos)
         self.mic_pub = None
         self.mic_chunks = 0  # microphone chunks published
         if microphone:
@@ -181,8 +201,17 @@ class ActuatorSimulator(Node):
     def _subscribers_matched(self) -> bool:
         """Something subscribes to motor_speed, and every subscription the graph knows of has
         matched (one shown but not yet matched would miss the first samples: a recorder's)."""
-        matched = self.speed_pub.get_subscription_count()
-        return matched > 0 and matched >= self.count_subscribers(self.speed_pub.topic_name)
+        pubs = [self.speed_pub] + ([self.command_pub] if self.command_pub else [])
+        for pub in pubs:
+            matched = pub.get_subscription_count()
+            if not (matched > 0 and matched >= self.count_subscribers(pub.topic_name)):
+                return False
+        return True
+
+    def _follow(self, msg: Float64) -> None:
+        """The simulated motor follows the guarded command at once."""
+        self.speed_pub.publish(Float64(data=float(msg.data)))
+        self.followed += 1
 
     def publish(self, s: ActuatorState) -> None:
         """Publish one state on every output topic.
@@ -192,9 +221,12 @@ class ActuatorSimulator(Node):
         s : ActuatorState
             Speed, load, nut position and screw angle.
         """
-        self.speed_pub.publish(Float64(data=float(s.speed_rad_s)))
+        if self.command != "guarded":
+            self.speed_pub.publish(Float64(data=float(s.speed_rad_s)))
         self.load_pub.publish(Float64(data=float(s.load_n)))
         self.nut_pub.publish(Float64(data=float(s.nut_position_m)))
+        if self.command_pub is not None:  # after load and nut: the guard steps on the command
+            self.command_pub.publish(Float64(data=float(s.speed_rad_s)))
         if self.joint_pub is not None:
             msg = JointState(
                 name=[self.joint_name],
