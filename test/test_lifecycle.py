@@ -12,6 +12,7 @@ import os
 import signal
 import subprocess
 import threading
+import time
 import uuid
 from pathlib import Path
 
@@ -354,3 +355,23 @@ def test_the_threads_of_a_configured_node_end_on_cleanup(ros, tmp_path):
         what="the node's threads ending",
     )
     assert node.failure is None
+
+
+def test_the_node_leaves_the_graph_when_its_context_shuts_down(make_ros_world):
+    """rclpy's lifecycle state machine holds the node's handle: unless destroyed with the node,
+    the node stayed in the graph of other processes (`watch` never saw it go)."""
+    world = SqueakWorld()
+    try:
+        world.start(False)
+        observer = make_ros_world().make_node("observer")
+
+        def present() -> bool:
+            return (NODE_NAME, world.ns) in observer.get_node_names_and_namespaces()
+
+        world.spin_until(present, what="the node in the graph")
+    finally:
+        world.close()
+    deadline = time.monotonic() + 30.0
+    while present():
+        assert time.monotonic() < deadline, "the node is still in the graph"
+        time.sleep(0.05)

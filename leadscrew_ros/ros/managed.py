@@ -158,10 +158,14 @@ class ManagedNode(LifecycleNode):
             self._starting = False
 
     def destroy_node(self) -> None:
-        """Release everything (from any state), then destroy the node."""
+        """Release everything (from any state), then destroy the node and its lifecycle
+        state machine."""
         self._active = False
         self.release()
         super().destroy_node()
+        # rclpy 7.1.6 leaves the state machine, which holds the node's handle: the node would
+        # stay in the ROS graph until the process ends, also after its context shut down
+        self._state_machine.destroy_when_not_in_use()
 
     # ----------------------------------------------------------------- transitions
     def on_configure(self, state: LifecycleState) -> Result:
