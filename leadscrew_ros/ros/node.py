@@ -15,15 +15,19 @@ chunks): the callback only queues the payload, a worker thread analyses it (`liv
 the housekeeping timer publishes squeak/heard, squeak/heard_frequency and a third diagnostic
 status, the measurement (heard against predicted).
 Records inputs and outputs to MCAP (`record.*` parameters, std_srvs/SetBool `~/record`):
-inputs from subscriptions of their own that never wait for the model, with every lost message
-counted (`ros.input_recording`); outputs as the CDR bytes it publishes (`bag.messages`); every
+inputs, and the guard's topics when anyone publishes them (`bag.messages.GUARD_TYPES`), from
+subscriptions of their own that never wait for the model, with every lost message counted
+(`ros.input_recording`); outputs as the CDR bytes it publishes (`bag.messages`); every
 file begins with the `leadscrew_ros` metadata record of the parameters (`bag.logmeta`), and a
 parameter change while recording starts a new file with the new record; on start, reports (or
 recovers) its own bags cut off by an earlier crash (`bag.crash_recovery`).
-`squeak_node --help` lists the parameters and topics. The physics lives in `model`, the input
-rules in `live.rules`, the recompute policy and the verdict in `live.recompute`, the parameter
-table in `ros.parameters`, the /diagnostics updater and the recording verdict in
-`ros.diagnostics`: this class wires them and keeps its callbacks short.
+A managed (lifecycle) node (`ros.managed`): configure builds all of the above, activate
+publishes and records, deactivate stops both; `squeak_node --no-autostart` waits unconfigured
+for a lifecycle manager. `squeak_node --help` lists the parameters and topics.
+The physics lives in `model`, the input rules in `live.rules`, the recompute policy and the
+verdict in `live.recompute`, the parameter table in `ros.parameters`, the /diagnostics updater
+and the recording verdict in `ros.diagnostics`: this class wires them and keeps its callbacks
+short.
 """
 
 from __future__ import annotations
