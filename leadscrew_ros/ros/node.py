@@ -415,7 +415,7 @@ class SqueakPredictorNode(ManagedNode):
         self.own(self.create_service(SetBool, f"~/{RECORD_SERVICE}", self._on_record_service))
         if self._crash_recovery.bags and auto_recover:
             self._crash_recovery.start()
-        self._diagnose(time.monotonic(), periodic=True)
+        # /diagnostics from the first housekeeping tick: an autostart is active by then
 
     def activate(self) -> None:
         """Publish again (the last prediction at the current inputs, what was heard), record
