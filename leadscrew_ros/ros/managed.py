@@ -123,7 +123,7 @@ class ManagedNode(LifecycleNode):
 
     def destroy_owned(self, entity: object | None = None) -> None:
         """Destroy `entity` (one made by `own`), or all of them, newest first."""
-        for e in [entity] if entity is not None else reversed(self._owned):
+        for e in [entity] if entity is not None else self._owned[::-1]:
             self._owned.remove(e)
             if isinstance(e, LifecyclePublisher):
                 self.destroy_lifecycle_publisher(e)
