@@ -260,14 +260,16 @@ def test_topic_table_names_every_topic_of_the_node_with_its_type():
         | set(AUDIO_COMMON_TOPICS)
         | set(messages.LISTEN_TYPES)
         | {"/diagnostics"}
+        | set(messages.GUARD_TYPES)
     )
     assert "| `microphone` (in, with `listen.enabled`) | std_msgs/Float32MultiArray |" in "\n".join(
         rows
     )
     assert "| `squeak/risk` | std_msgs/Float64 |" in rows[4]
-    assert (
-        "key-values speed_rad_s, load_n," in rows[-1] and "bag, files, messages, lost" in rows[-1]
-    )
+    diagnostics = rows[topics.index("/diagnostics")]
+    assert "key-values speed_rad_s, load_n," in diagnostics
+    assert "bag, files, messages, lost" in diagnostics
+    assert "| `guard/reason` (recorded, from `squeak_guard`) | std_msgs/String |" in rows[-1]
 
 
 @pytest.mark.parametrize("value", [1e-05, 2.5e-07, 1e20, 0.1, 207e9, -3.0, 0.0])

@@ -86,7 +86,9 @@ _PREDICTION = (
     "898 Hz)`, `squeak possible: P(squeak) 0.12 >= 0.1`, `no squeak: P(squeak) 0 < "
     "0.1` (P is never rounded across a threshold); key-values {keys} (constants "
     "`leadscrew_ros.live.status.KEY_*`; `validity` is the `Validity` name of the "
-    "latest point, `probability_stderr` '' when not sampled)"
+    "latest point, `probability_stderr` '' when not sampled); while the node is inactive "
+    "(lifecycle) STALE with the message `" + status.INACTIVE + "`, the last values and "
+    "`lifecycle_state` `inactive`"
 )
 _RECORDING = (
     f"`/squeak_predictor: {diagnostics.RECORDING_TASK}`: OK (recording to PATH, or not "
@@ -206,6 +208,19 @@ TOPICS = {
         "fill a status; `update()` on the period, `force_update()` on a change "
         "of verdict)",
     ),
+    **{
+        topic: (
+            "recorded, from `squeak_guard`",
+            "best effort, depth `record.queue_depth`, while recording",
+            meaning,
+        )
+        for topic, meaning in (
+            (messages.SPEED_COMMAND, "the speed command the guard takes in, rad/s"),
+            (messages.SPEED_COMMAND_GUARDED, "the command the guard hands on, rad/s"),
+            (messages.GUARD_ACTIVE, "the guard changes the command now"),
+            (messages.GUARD_REASON, "why it changes it"),
+        )
+    },
 }
 
 
@@ -264,6 +279,7 @@ def topic_types() -> dict[str, str]:
         **AUDIO_COMMON_TOPICS,
         **messages.LISTEN_TYPES,
         diagnostics.TOPIC: "diagnostic_msgs/msg/DiagnosticArray",
+        **messages.GUARD_TYPES,
     }
     return {t: n.replace("/msg/", "/") for t, n in named.items()}
 

@@ -13,6 +13,12 @@ label is 'modes:' followed by the mode labels, comma separated) and squeak/safe_
 (std_msgs/Float64) [rad/s]; with listening on, squeak/heard (std_msgs/Bool) and
 squeak/heard_frequency (std_msgs/Float64) [Hz, 0 while nothing is heard]. Payloads are CDR bytes
 (`cdr`), rclpy-free.
+
+The guard's topics (`GUARD_TYPES`, published by `squeak_guard` in the same namespace), which the
+predictor records beside its own while anyone publishes them: speed_command (std_msgs/Float64)
+[rad/s], the command the guard takes in; speed_command_guarded (std_msgs/Float64) [rad/s],
+what it hands on; guard/active (std_msgs/Bool), true while it changes the command; and
+guard/reason (std_msgs/String), why.
 """
 
 from __future__ import annotations
@@ -38,14 +44,15 @@ PREDICTION_TOPICS = (RISK, MARGIN, FREQUENCIES, ACTIVE, MODES)  # one prediction
 # With listening on (`listen.enabled`): what the microphone hears
 HEARD, HEARD_FREQUENCY = "squeak/heard", "squeak/heard_frequency"
 LISTEN_TYPES = {HEARD: cdr.BOOL, HEARD_FREQUENCY: cdr.FLOAT64}
-# The squeak guard (`ros.guard_node`): its command in and out, and why it changed it
+# The squeak guard (`ros.guard_node`): its command in and out, and why it changed it;
+# the predictor records them beside its inputs (they are not inputs of the prediction)
 SPEED_COMMAND, SPEED_COMMAND_GUARDED = "speed_command", "speed_command_guarded"
 GUARD_ACTIVE, GUARD_REASON = "guard/active", "guard/reason"
 GUARD_TYPES = {
     SPEED_COMMAND: cdr.FLOAT64,
     SPEED_COMMAND_GUARDED: cdr.FLOAT64,
     GUARD_ACTIVE: cdr.BOOL,
-    GUARD_REASON: "std_msgs/msg/String",
+    GUARD_REASON: "std_msgs/msg/String",  # no codec in `cdr`: recorded as received
 }
 MODE_COLUMNS = ("frequency_hz", "growth_rate", "damping_ratio")
 MODES_PREFIX = "modes:"  # of the row dimension's label

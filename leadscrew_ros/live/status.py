@@ -31,6 +31,11 @@ KEY_SAFE_SPEED = "safe_speed_rad_s"
 KEY_SAFE_SPEED_PENDING = "safe_speed_pending"
 KEY_SAFE_SPEED_ERROR = "safe_speed_error"
 KEY_RECOMPUTES = "recomputes"
+KEY_LIFECYCLE_STATE = "lifecycle_state"  # only while the node is not active: "inactive"
+INACTIVE = (
+    "inactive (lifecycle): inputs not taken, nothing predicted, published or recorded "
+    "until activated"
+)
 
 
 class Level(IntEnum):
@@ -79,6 +84,13 @@ def prediction_status(
             Level.WARN, f"squeak possible: {prob} >= {s.warn_probability:g}{detail}", values
         )
     return Status(Level.OK, f"no squeak: {prob} < {s.warn_probability:g}{detail}", values)
+
+
+def inactive_status(last: Status) -> Status:
+    """The verdict of a managed node that is configured but not active: STALE (the outputs
+    keep their last values and are not updated), the message `INACTIVE`, the values of the
+    predictor's `last` verdict and `lifecycle_state` 'inactive'."""
+    return Status(Level.STALE, INACTIVE, {**last.values, KEY_LIFECYCLE_STATE: "inactive"})
 
 
 def value_text(v: float | None) -> str:

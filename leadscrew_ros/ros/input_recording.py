@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-"""Recording of the node's inputs from DDS readers of their own, on a thread of their own.
+"""Recording of the node's inputs from DDS readers of their own, on a thread of their own (also
+of topics the node records without taking them, such as the guard's).
 
 The model's subscriptions keep a short queue (the newest input is what matters) and wait while a
 prediction is computed; a recording needs every message. So, while recording, each input topic

@@ -15,15 +15,19 @@ chunks): the callback only queues the payload, a worker thread analyses it (`liv
 the housekeeping timer publishes squeak/heard, squeak/heard_frequency and a third diagnostic
 status, the measurement (heard against predicted).
 Records inputs and outputs to MCAP (`record.*` parameters, std_srvs/SetBool `~/record`):
-inputs from subscriptions of their own that never wait for the model, with every lost message
-counted (`ros.input_recording`); outputs as the CDR bytes it publishes (`bag.messages`); every
+inputs, and the guard's topics when anyone publishes them (`bag.messages.GUARD_TYPES`), from
+subscriptions of their own that never wait for the model, with every lost message counted
+(`ros.input_recording`); outputs as the CDR bytes it publishes (`bag.messages`); every
 file begins with the `leadscrew_ros` metadata record of the parameters (`bag.logmeta`), and a
 parameter change while recording starts a new file with the new record; on start, reports (or
 recovers) its own bags cut off by an earlier crash (`bag.crash_recovery`).
-`squeak_node --help` lists the parameters and topics. The physics lives in `model`, the input
-rules in `live.rules`, the recompute policy and the verdict in `live.recompute`, the parameter
-table in `ros.parameters`, the /diagnostics updater and the recording verdict in
-`ros.diagnostics`: this class wires them and keeps its callbacks short.
+A managed (lifecycle) node (`ros.managed`): configure builds all of the above, activate
+publishes and records, deactivate stops both; `squeak_node --no-autostart` waits unconfigured
+for a lifecycle manager. `squeak_node --help` lists the parameters and topics.
+The physics lives in `model`, the input rules in `live.rules`, the recompute policy and the
+verdict in `live.recompute`, the parameter table in `ros.parameters`, the /diagnostics updater
+and the recording verdict in `ros.diagnostics`: this class wires them and keeps its callbacks
+short.
 """
 
 from __future__ import annotations
@@ -44,7 +48,7 @@ from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallba
 from rclpy.exceptions import ParameterException
 from rclpy.executors import Executor
 from rclpy.experimental import EventsExecutor
-from rclpy.node import Node
+from rclpy.lifecycle import LifecyclePublisher
 from rclpy.parameter import Parameter
 from rclpy.publisher import Publisher
 from rclpy.qos import (
@@ -58,7 +62,7 @@ from rclpy.serialization import serialize_message
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, Float32MultiArray, Float64, Float64MultiArray
+from std_msgs.msg import Bool, Float32MultiArray, Float64, Float64MultiArray, String
 from std_srvs.srv import SetBool
 
 from ..bag import cdr, logmeta, messages, msgdefs
@@ -75,7 +79,7 @@ from ..live.settings import (
     ListenSettings,
     LiveSettings,
 )
-from ..live.status import Status
+from ..live.status import Status, inactive_status
 from ..model import ParameterError, Prediction, ScrewParameters, SqueakModel
 from ..model.acoustics.settings import DetectorSettings
 from ..model.uncertainty.scatter import ScatterSettings
@@ -91,6 +95,7 @@ from .diagnostics import (
 from .env import StopSignals, checked_ros_args, confine_to_localhost
 from .input_fields import InputReader, input_reader, stamp_ns
 from .input_recording import InputRecording
+from .managed import AUTOSTART_HELP, ManagedNode, autostart_option
 from .parameters import (
     GROUPS,
     PARAMETER_NAMES,
@@ -109,11 +114,10 @@ NODE_NAME = "squeak_predictor"
 PROG = "squeak_node"  # the executable: its one-line errors name it, as argparse does
 RECORD_SERVICE = "record"  # ~/record: std_srvs/SetBool, in the node's private namespace
 HOUSEKEEPING_PERIOD_S = 0.05
+# 'pkg/msg/Type' -> rclpy class, of the types the node publishes or records from the guard
+_CLASSES = {msgdefs.type_name(c): c for c in (Float64, Float64MultiArray, Bool, String)}
 # Output topic (`bag.messages`) -> rclpy class of its type (the payloads are CDR bytes).
-OUTPUT_CLASSES = {
-    topic: {msgdefs.type_name(c): c for c in (Float64, Float64MultiArray, Bool)}[type_name]
-    for topic, type_name in messages.OUTPUT_TYPES.items()
-}
+OUTPUT_CLASSES = {topic: _CLASSES[t] for topic, t in messages.OUTPUT_TYPES.items()}
 LATCHED = QoSProfile(
     depth=1,
     reliability=ReliabilityPolicy.RELIABLE,
@@ -131,10 +135,11 @@ INPUTS = {
 }
 FIELD_TOPICS = {"motor_speed": "speed", "axial_load": "load", "nut_position": "nut"}
 SETTERS = {"speed": "set_speed", "load": "set_load", "nut": "set_nut_position"}  # LivePredictor's
-LISTEN_CLASSES = {
-    topic: {msgdefs.type_name(c): c for c in (Float64, Bool)}[type_name]
-    for topic, type_name in messages.LISTEN_TYPES.items()
-}
+LISTEN_CLASSES = {topic: _CLASSES[t] for topic, t in messages.LISTEN_TYPES.items()}
+# The guard's topics (`bag.messages.GUARD_TYPES`): recorded while anyone publishes them
+GUARD_CLASSES = {topic: _CLASSES[t] for topic, t in messages.GUARD_TYPES.items()}
+# What ~/record answers for a start while inactive
+INACTIVE_RECORDING = "node inactive: recording starts when it is activated"
 
 
 class SoundInput(NamedTuple):
@@ -236,36 +241,81 @@ def bag_prefix(namespace: str) -> str:
     return "_".join([p for p in namespace.split("/") if p] + ["squeak"])
 
 
-class SqueakPredictorNode(Node):
+class SqueakPredictorNode(ManagedNode):
     """The `squeak_predictor` node (the module's topics, parameters and recording): wires the
     ROS interfaces to a `LivePredictor`, a `Recorder` and the /diagnostics updater.
 
+    A managed (lifecycle) node (`ros.managed`): the constructor declares the parameters;
+    configure checks them and builds the model, subscriptions, publishers, timers, the
+    ~/record service and /diagnostics; activate starts publishing (and recording with
+    `record.enabled`); deactivate stops both (the bag is finished); cleanup and shutdown
+    release what configure built. While inactive the inputs are not taken, nothing is
+    predicted, published or recorded, and /diagnostics says so (STALE).
+
     Parameters
     ----------
+    autostart : bool
+        Configure and activate at once (an unmanaged node's behaviour); a bad parameter then
+        raises `ParameterError`. False: the node stays unconfigured until a lifecycle
+        transition.
     **kwargs
-        Passed to `rclpy.node.Node` (context, namespace, parameter overrides, ...).
+        Passed to `rclpy.lifecycle.LifecycleNode` (context, namespace, parameter overrides...).
     """
 
-    def __init__(self, **kwargs):
+    # Made by `configure`, released by `release`
+    live: LivePredictor
+    joint: JointSettings
+    readers: dict[str, InputReader]
+    order: SampleOrder
+    recorder: Recorder
+    listener: Listener | None
+    diagnostics: Updater
+    output_pubs: dict[str, Publisher]
+    listen_pubs: dict[str, Publisher]
+
+    def __init__(self, autostart: bool = True, **kwargs: Any):
         super().__init__(NODE_NAME, **kwargs)
         self._declare_parameters()
-        self.live = LivePredictor(self._model({}), self._live_settings({}))
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        # Housekeeping, rate limit and recording run on a steady clock: with use_sim_time a
+        # paused /clock must not stop flushing, splitting, staleness and diagnostics (they
+        # measure wall time, time.monotonic).
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._configured = False
+        if autostart:
+            self.start()
+
+    # ---------------------------------------------------------------- lifecycle
+    def configure(self) -> None:
+        """Check the parameters and build everything the node runs on (nothing published
+        yet); a bad parameter raises `ParameterError` (`ManagedNode` releases what was
+        built)."""
+        # Every check first (a bad parameter raises here, before anything is built)
+        model, live_settings = self._model({}), self._live_settings({})
         self.joint = self._settings(JointSettings, {})
         # speed, load, nut: message class, precompiled field getter, header stamp
         self.readers = {name: self._reader(name, {}) for name in INPUT_FIELDS}
-        self.order = SampleOrder()  # header stamps of the stamped inputs
-        self.recorder = self._new_recorder(bag_prefix(self.get_namespace()), self._metadata())
-        own, control = self._settings(NodeSettings, {}), self._settings(RecordingControl, {})
+        own = self._settings(NodeSettings, {})
+        listen = self._settings(ListenSettings, {})
+        detector = self._settings(DetectorSettings, {})
+        auto_recover = self._settings(RecordingControl, {}).auto_recover
+        recorder = self._new_recorder(bag_prefix(self.get_namespace()), self._metadata())
+        # this node's bags an earlier crash cut off (found now, recovered with auto_recover)
+        self._crash_recovery = CrashRecovery(recorder.settings.directory, recorder.name)
+
+        # What runs threads (`release` ends them)
+        self.live = LivePredictor(model, live_settings)
+        self.recorder = recorder
+        self.listener = Listener(listen, detector) if listen.enabled else None
         self._input_recording: InputRecording | None = None
+        self._configured = True
+        self.order = SampleOrder()  # header stamps of the stamped inputs
         self.latched: dict[str, Latched] = {}  # topic -> last message published on it
         # Input topic -> its last accepted message, oldest first: the state a bag starts with
         self.accepted: dict[str, object] = {}
         self._incident_logged = ""
         self._diagnosed: tuple | None = None  # verdict of the last forced /diagnostics
-        listen = self._settings(ListenSettings, {})
-        self.listener = (
-            Listener(listen, self._settings(DetectorSettings, {})) if listen.enabled else None
-        )
         self._measurement: Status | None = None  # what the measurement task says
 
         sensor = QoSProfile(
@@ -278,18 +328,31 @@ class SqueakPredictorNode(Node):
         # waits on 20 fewer entities (measured: lower input-to-risk latency).
         sub_events = SubscriptionEventCallbacks(use_default_callbacks=False)
         pub_events = PublisherEventCallbacks(use_default_callbacks=False)
+        self._inputs: dict[str, type] = {}  # fully qualified input topic -> message class
 
-        def subscribe(msg_type, topic, callback):
+        def subscribe(msg_type, topic, callback, qos=sensor, raw=False, always=False):
+            """An input's subscription; its messages are taken only while active (`always`:
+            in every state)."""
             name = self.resolve_topic_name(topic)  # fully qualified
-            self.create_subscription(
-                msg_type, topic, lambda msg: callback(name, msg), sensor, event_callbacks=sub_events
+            self.own(
+                self.create_subscription(
+                    msg_type,
+                    topic,
+                    lambda msg: callback(name, msg) if always or self.active else None,
+                    qos,
+                    raw=raw,
+                    event_callbacks=sub_events,
+                )
             )
             self._inputs[name] = msg_type
 
-        self._inputs: dict[str, type] = {}  # fully qualified input topic -> message class
-
         def publisher(msg_type, topic):
-            return self.create_publisher(msg_type, topic, LATCHED, event_callbacks=pub_events)
+            """An output: a lifecycle publisher, silent while inactive."""
+            return self.own(
+                self.create_lifecycle_publisher(
+                    msg_type, topic, LATCHED, event_callbacks=pub_events
+                )
+            )
 
         for topic, name in FIELD_TOPICS.items():
             subscribe(self.readers[name].msg_type, topic, partial(self._on_field, kind=name))
@@ -304,35 +367,29 @@ class SqueakPredictorNode(Node):
                 durability=qos_profile_sensor_data.durability,
             )
             for topic, kind in SOUND_INPUTS.items():
-                self.create_subscription(
-                    kind.msg_type,
-                    topic,
-                    partial(self._on_sound, decode=kind.decode),
-                    sound,
-                    raw=True,
-                    event_callbacks=sub_events,
-                )
-                self._inputs[self.resolve_topic_name(topic)] = kind.msg_type
+                on_sound = partial(self._on_sound, decode=kind.decode)
+                subscribe(kind.msg_type, topic, on_sound, qos=sound, raw=True)
             classes = audio_common_classes()
             if classes is not None:
                 audio = LiveAudio()
                 stamped, info = classes
-                self.create_subscription(
-                    info, "audio_info", audio.info, sound, raw=True, event_callbacks=sub_events
-                )
-                self.create_subscription(
-                    stamped,
-                    "audio_stamped",
-                    partial(self._on_sound, decode=audio),
-                    sound,
-                    raw=True,
-                    event_callbacks=sub_events,
-                )
-                for topic, cls in (("audio_info", info), ("audio_stamped", stamped)):
-                    self._inputs[self.resolve_topic_name(topic)] = cls
+
+                def on_info(_topic: str, data: bytes, audio: LiveAudio = audio) -> None:
+                    audio.info(data)
+
+                # the format, kept in every state: the chunks after an activation need it
+                subscribe(info, "audio_info", on_info, qos=sound, raw=True, always=True)
+                on_sound = partial(self._on_sound, decode=audio)
+                subscribe(stamped, "audio_stamped", on_sound, qos=sound, raw=True)
             self.listen_pubs = {
                 topic: publisher(cls, topic) for topic, cls in LISTEN_CLASSES.items()
             }
+        # Recorded beside the inputs, never taken by the model: the guard's topics
+        self._recorded = {
+            **self._inputs,
+            **{self.resolve_topic_name(t): cls for t, cls in GUARD_CLASSES.items()},
+        }
+        # /diagnostics is no lifecycle publisher: it says what the node does in every state
         self.diagnostics = Updater(
             self,
             LATCHED,
@@ -341,7 +398,8 @@ class SqueakPredictorNode(Node):
             publish=lambda pub, data, stamp_ns: self._publish(pub, data, stamp_ns),
             event_callbacks=pub_events,
         )
-        self._status = self.live.status(time.monotonic())  # what the prediction task says
+        self.own(self.diagnostics.publisher)
+        self._status = self._verdict(time.monotonic())  # what the prediction task says
         self.diagnostics.add(PREDICTION_TASK, status_task(lambda: self._status))
         self.diagnostics.add(
             RECORDING_TASK, lambda stat: recording_status(stat, self.recorder, self._crash_recovery)
@@ -349,34 +407,49 @@ class SqueakPredictorNode(Node):
         if self.listener is not None:
             self._measurement = self.listener.status(time.monotonic())
             self.diagnostics.add(MEASUREMENT_TASK, status_task(self._measurement_status))
-            self._publish_heard()  # latched: nothing heard yet
 
-        self.add_on_set_parameters_callback(self._validate_parameters)
-        self.add_post_set_parameters_callback(self._apply_parameters)
         # Housekeeping (staleness, bad-input verdict, periodic diagnostics) at a fixed slow
         # rate; the rate-limit timer runs only while an input waits for the rate limit.
-        # Steady clock: with use_sim_time a paused /clock must not stop flushing, splitting,
-        # staleness and diagnostics (they measure wall time, time.monotonic).
-        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(HOUSEKEEPING_PERIOD_S, self._housekeeping, clock=self._steady)
-        self._rate_timer = self._create_rate_timer()
-        self.create_service(SetBool, f"~/{RECORD_SERVICE}", self._on_record_service)
-        self._crash_recovery = CrashRecovery(self.recorder.settings.directory, self.recorder.name)
-        if self._crash_recovery.bags and control.auto_recover:
+        self.own(self.create_timer(HOUSEKEEPING_PERIOD_S, self._housekeeping, clock=self._steady))
+        self._rate_timer = self.own(self._create_rate_timer())
+        self.own(self.create_service(SetBool, f"~/{RECORD_SERVICE}", self._on_record_service))
+        if self._crash_recovery.bags and auto_recover:
             self._crash_recovery.start()
-        if control.enabled:
+        # /diagnostics from the first housekeeping tick: an autostart is active by then
+
+    def activate(self) -> None:
+        """Publish again (the last prediction at the current inputs, what was heard), record
+        with `record.enabled`."""
+        now = time.monotonic()
+        if self.listener is not None:
+            self._publish_heard()  # latched: nothing heard yet, or what was heard last
+        if self.live.prediction is not None:  # parameters may have changed while inactive
+            self._recompute(now)
+        if self.get_parameter("record.enabled").value:
             self._set_recording(True)
             self._check_recording()
-        self._diagnose(time.monotonic(), periodic=True)
+        self._diagnose(now, periodic=False)
 
-    def destroy_node(self) -> None:
-        """Stop the predictor and the recording, then destroy the node."""
+    def deactivate(self) -> None:
+        """Stop recording (the file finished: summary, index, footer); /diagnostics says
+        inactive."""
+        if self.recorder.active:
+            self._stop_recording()
+            self.get_logger().info(f"recording stopped: {self.recorder.bag}")
+        self._diagnose(time.monotonic(), periodic=False)
+
+    def release(self) -> None:
+        """Stop the predictor, the listening and the recording (a clean file), wait for the
+        crash recovery, destroy the subscriptions, publishers, timers and the service."""
+        if not self._configured:
+            return
+        self._configured = False
         self.live.close()  # the background safe-speed search ends too
         if self.listener is not None:
             self.listener.close()  # the listening thread ends
         self._stop_recording()  # summary, index and footer: a clean file
         self._crash_recovery.join()
-        super().destroy_node()
+        super().release()
 
     # ---------------------------------------------------------------- parameters
     def _declare_parameters(self) -> None:
@@ -456,6 +529,8 @@ class SqueakPredictorNode(Node):
         return {logmeta.RECORD_NAME: log_metadata(self._values({})).record()}
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
+        if not self._configured:  # configure reads them
+            return
         names = {p.name for p in params}
         recording = names_of(RecordSettings) | names_of(RecordingControl)
         new_bag = bool(names & recording) and self._record_settings({}) != self.recorder.settings
@@ -471,9 +546,10 @@ class SqueakPredictorNode(Node):
             model = self._model({}) if names & model_names else self.live.model
             self.live.set_model(model, self._live_settings({}))
             if "max_rate_hz" in names:
-                self.destroy_timer(self._rate_timer)
-                self._rate_timer = self._create_rate_timer()
-            self._recompute(time.monotonic())
+                self.destroy_owned(self._rate_timer)
+                self._rate_timer = self.own(self._create_rate_timer())
+            if self.active:  # else at activation
+                self._recompute(time.monotonic())
         if names & names_of(JointSettings):
             self.joint = self._settings(JointSettings, {})
         for name, cls in INPUT_FIELDS.items():  # the type is read-only: same subscription
@@ -527,12 +603,13 @@ class SqueakPredictorNode(Node):
         ]
 
     def _set_recording(self, on: bool) -> None:
-        if on and not self.recorder.active:
+        """Start (only while active: else at activation) or stop recording."""
+        if on and self.active and not self.recorder.active:
             # Bags are named and split by the wall clock; log times are the node's clock.
             # A start that fails is reported by `_check_recording`.
-            if self.recorder.start(topics=tuple(self._inputs)):
+            if self.recorder.start(topics=tuple(self._recorded)):
                 self.get_logger().info(f"recording to {self.recorder.bag}")
-                self._input_recording = InputRecording(self, self._inputs, self.recorder)
+                self._input_recording = InputRecording(self, self._recorded, self.recorder)
         elif not on and self.recorder.active:
             self._stop_recording()
             self.get_logger().info(f"recording stopped: {self.recorder.bag}")
@@ -570,6 +647,7 @@ class SqueakPredictorNode(Node):
             if self.recorder.active
             else (result.reason if not result.successful else "")
             or self.recorder.error
+            or (INACTIVE_RECORDING if request.data and not self.active else "")
             or f"stopped; last bag: {self.recorder.bag}"
         )
         return response
@@ -578,7 +656,10 @@ class SqueakPredictorNode(Node):
         self, publisher: Publisher, data: bytes, publish_time_ns: int | None = None
     ) -> None:
         """Publish a CDR payload, latch it and record the same bytes (publish time: the
-        message's header stamp if it has one, else the log time)."""
+        message's header stamp if it has one, else the log time); an output's lifecycle
+        publisher while inactive: nothing."""
+        if isinstance(publisher, LifecyclePublisher) and not publisher.is_activated:
+            return
         publisher.publish(data)  # bytes: published as serialized
         latched = Latched(msgdefs.type_name(publisher.msg_type), data, publish_time_ns)
         self.latched[publisher.topic_name] = latched
@@ -638,7 +719,7 @@ class SqueakPredictorNode(Node):
         elif self.live.changed() and self._rate_timer.is_canceled():
             self._rate_timer.reset()  # held back by the rate limit: recompute later
 
-    def _on_sound(self, data: bytes, decode: Decoder) -> None:
+    def _on_sound(self, topic: str, data: bytes, decode: Decoder) -> None:
         """A sound chunk: queued for the listening thread as it is (or dropped and counted)."""
         assert self.listener is not None  # subscribed only while listening
         self.listener.offer(data, time.monotonic(), decode)
@@ -687,7 +768,7 @@ class SqueakPredictorNode(Node):
 
     def _diagnose(self, now: float, periodic: bool) -> None:
         """/diagnostics at once when the verdict changed, else (`periodic`) on its period."""
-        self._status = self.live.status(now)
+        self._status = self._verdict(now)
         m = self._measurement
         verdict = (
             self._status.level,
@@ -704,6 +785,11 @@ class SqueakPredictorNode(Node):
             self._diagnosed = verdict
         elif periodic:
             self.diagnostics.update()
+
+    def _verdict(self, now: float) -> Status:
+        """The squeak-prediction status: the predictor's verdict; while inactive, STALE."""
+        status = self.live.status(now)
+        return status if self.active else inactive_status(status)
 
     def _recompute(self, now: float) -> None:
         p = self.live.update(now)
@@ -741,10 +827,14 @@ def usage() -> str:
     """`squeak_node --help`: how to run it, its topics and every parameter with unit, default
     and range."""
     lines = [
-        "usage: squeak_node [-h] [--ros-args [-r __ns:=/NAMESPACE] [-p NAME:=VALUE] "
-        "[--params-file FILE] ...]",
+        "usage: squeak_node [-h] [--autostart | --no-autostart] [--ros-args "
+        "[-r __ns:=/NAMESPACE] [-p NAME:=VALUE] [--params-file FILE] ...]",
         "",
         __doc__.splitlines()[0].replace("`", ""),
+        "",
+        "A managed (lifecycle) node: unconfigured -> configure -> inactive -> activate -> "
+        "active (deactivate, cleanup, shutdown back).",
+        *AUTOSTART_HELP,
         "",
         "Subscribes (sensor-data QoS, relative to the namespace):",
         "  motor_speed (std_msgs/Float64) [rad/s], axial_load (std_msgs/Float64) [N],",
@@ -763,8 +853,13 @@ def usage() -> str:
         "while nothing is heard],",
         "  /diagnostics (diagnostic_msgs/DiagnosticArray: '<node>: squeak prediction', "
         "'<node>: recording';",
-        "  with listen.enabled also '<node>: measurement', heard against predicted)",
-        "Service: ~/record (std_srvs/SetBool) starts or stops recording",
+        "  with listen.enabled also '<node>: measurement', heard against predicted;",
+        "  STALE 'inactive' while inactive)",
+        "Records (with record.enabled, while active) the inputs, the outputs and, when published "
+        "in the namespace, the guard's",
+        "  " + ", ".join(f"{t} ({c.__name__})" for t, c in GUARD_CLASSES.items()),
+        "Services: ~/record (std_srvs/SetBool) starts or stops recording; the lifecycle's "
+        "~/change_state, ~/get_state (lifecycle_msgs/srv/ChangeState, GetState) ...",
         "",
         "Parameters (name [unit] = default, range: description):",
         *help_lines(),
@@ -782,7 +877,9 @@ def main(args: list[str] | None = None) -> int:
     """Run the node until SIGINT/SIGTERM; exit 0 on that requested shutdown (with the line
     `squeak_predictor: stopped by SIGTERM` (or SIGINT) on stderr, as every long-running
     command: `ros_env.StopSignals.exit_status`), 2 on bad parameters or arguments;
-    `-h`/`--help` prints `usage()` and exits 0."""
+    `-h`/`--help` prints `usage()` and exits 0. `--no-autostart`: the node starts
+    unconfigured and waits for lifecycle transitions (a configure that fails is logged, the
+    node stays unconfigured and running)."""
     argv = list(sys.argv if args is None else args)
     try:  # a bad params file or remap rule: one line, as simulate and replay --publish
         own_args = checked_ros_args(lambda: remove_ros_args(argv))[1:]
@@ -792,6 +889,7 @@ def main(args: list[str] | None = None) -> int:
     if {"-h", "--help"} & set(own_args):
         print(usage())
         return 0
+    autostart, own_args = autostart_option(own_args)
     if own_args:
         print(
             f"{PROG}: error: unrecognized arguments: {' '.join(own_args)} (ROS "
@@ -814,7 +912,11 @@ def main(args: list[str] | None = None) -> int:
             return 2
         node = None
         try:
-            node = SqueakPredictorNode()
+            node = SqueakPredictorNode(autostart=autostart)
+            if not autostart:
+                node.get_logger().info(
+                    "unconfigured: waiting for a lifecycle transition (~/change_state)"
+                )
             executor = make_executor()
             executor.add_node(node)
             # Startup's objects (rclpy, numpy, scipy, the model) out of the collector's

@@ -15,6 +15,8 @@ import uuid
 from collections.abc import Callable
 
 import rclpy
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState, GetState
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -164,3 +166,36 @@ class Spinner:
     def stop(self, timeout: float = 120.0) -> None:
         self._stop.set()
         self._thread.join(timeout=timeout)
+
+
+class LifecycleClient:
+    """A managed node's standard lifecycle services (`<node>/change_state`, `<node>/get_state`),
+    called from `client_node` of `world` as a lifecycle manager calls them (no ros2 CLI)."""
+
+    def __init__(self, world: RosWorld, client_node: Node, target: str, timeout: float = 60.0):
+        """`target`: the managed node's fully qualified name."""
+        self.world, self.timeout = world, timeout
+        self._change = client_node.create_client(ChangeState, f"{target}/change_state")
+        self._get = client_node.create_client(GetState, f"{target}/get_state")
+
+    def _call(self, client, request):
+        self.world.spin_until(
+            client.service_is_ready, self.timeout, f"the service {client.srv_name}"
+        )
+        future = client.call_async(request)
+        self.world.spin_until(future.done, self.timeout, f"the answer of {client.srv_name}")
+        return future.result()
+
+    def change(self, transition: int | str) -> bool:
+        """Trigger a transition by id (`lifecycle_msgs.msg.Transition.TRANSITION_*`) or label
+        ('configure', 'shutdown', ...); True if it succeeded."""
+        t = (
+            Transition(label=transition)
+            if isinstance(transition, str)
+            else Transition(id=transition)
+        )
+        return self._call(self._change, ChangeState.Request(transition=t)).success
+
+    def state(self) -> str:
+        """The current state's label ('unconfigured', 'inactive', 'active', 'finalized')."""
+        return self._call(self._get, GetState.Request()).current_state.label

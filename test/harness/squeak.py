@@ -95,13 +95,16 @@ class SqueakWorld(RosWorld):
     def describe(self) -> str:
         return f"; latest outputs: {self.latest}"
 
-    def start(self, **params) -> SqueakPredictorNode:
-        """The predictor in this test's namespace, with parameter overrides."""
+    def start(self, autostart: bool = True, **params) -> SqueakPredictorNode:
+        """The predictor in this test's namespace, with parameter overrides (`autostart`
+        False: unconfigured, for lifecycle transitions)."""
         overrides = [
             Parameter(k, value=v) for k, v in {"hardware_id": self.hardware_id, **params}.items()
         ]
         self.node = self.add(
-            SqueakPredictorNode(context=self.ctx, namespace=self.ns, parameter_overrides=overrides)
+            SqueakPredictorNode(
+                autostart, context=self.ctx, namespace=self.ns, parameter_overrides=overrides
+            )
         )
         return self.node
 
