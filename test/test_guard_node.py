@@ -12,6 +12,7 @@ the same bin (load, nut, direction) first lets its band thread compute the bin, 
 from __future__ import annotations
 
 import math
+import re
 import subprocess
 import sys
 import time
@@ -25,6 +26,7 @@ from leadscrew_ros.live import guard as live_guard
 from leadscrew_ros.live.guard import GuardBands
 from leadscrew_ros.live.recompute import band_bin
 from leadscrew_ros.live.status import Level
+from leadscrew_ros.model import ParameterError
 from leadscrew_ros.ros.guard_node import ACTIVE, COMMAND, GUARDED, REASON, usage
 
 LOAD, NUT = 200.0, 0.1  # a band 0.58-62 rad/s at the defaults
@@ -183,10 +185,12 @@ def test_trigger_deactivate_and_activate(guard):
     ],
 )
 def test_a_bad_parameter_fails_configure_with_the_reason(guard, param, value, words):
-    node = guard.start(**{param: value})
+    node = guard.start(autostart=False, **{param: value})
+    assert node.trigger_configure().name == "FAILURE"
     assert node._state_machine.current_state[1] == "unconfigured"
     assert words in node.error and node.policy is None
-    assert node.trigger_configure().name == "FAILURE"
+    with pytest.raises(ParameterError, match=re.escape(words)):  # autostart raises it
+        guard.start(**{param: value})
 
 
 def test_a_bad_set_is_rejected_and_a_good_one_applied(guard):

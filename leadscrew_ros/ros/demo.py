@@ -692,9 +692,10 @@ def run_guard_demo(
         try:
             # the status and the summary say it all: its info lines stay off the terminal
             get_logger(GUARD_NODE_NAME).set_level(LoggingSeverity.ERROR)
-            guard = SqueakGuardNode(context=ctx)
-            if guard.error:
-                raise RuntimeError(f"the guard did not start: {guard.error}")
+            try:
+                guard = SqueakGuardNode(context=ctx)
+            except ValueError as exc:  # a bad parameter (ParameterError)
+                raise RuntimeError(f"the guard did not start: {exc}") from exc
             executor = make_executor(ctx)
             executor.add_node(guard)
             print(

@@ -20,7 +20,8 @@ one log line), builds the model, the policy and the band thread, and creates the
 subscriptions; activate starts publishing; deactivate stops it (commands then pass nowhere:
 the motor controller is to fall back on the raw command); cleanup and shutdown release
 everything (the band thread ends). With `autostart` (the default, as `squeak_guard` runs without
-`--no-autostart`) the constructor configures and activates. Parameters are read at configure;
+`--no-autostart`) the constructor configures and activates (`ros.managed.ManagedNode.start`:
+a bad parameter raises). Parameters are read at configure;
 a set while configured is checked as a whole and applied at once (new `guard.*` settings keep
 the tracker's state; new model parameters a new model and band cache).
 """
@@ -29,14 +30,13 @@ from __future__ import annotations
 
 import sys
 import time
+from functools import partial
 from typing import Any
 
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-from rclpy.logging import LoggingSeverity
 from rclpy.parameter import Parameter
 from rclpy.qos import (
     QoSProfile,
@@ -55,6 +55,7 @@ from ..model import ParameterError, ScrewParameters, SqueakModel
 from ..model.uncertainty.scatter import ScatterSettings
 from .diagnostics import DiagnosticStatusWrapper, Updater
 from .env import StopSignals, checked_ros_args, confine_to_localhost
+from .managed import ManagedNode, autostart_option, one_line
 from .node import LATCHED, make_executor
 from .parameters import (
     GUARD_GROUPS,
@@ -91,15 +92,15 @@ KEY_UNIT = "unit_id"
 MODEL_NAMES = names_of(ScrewParameters) | names_of(ScatterSettings)
 
 
-class SqueakGuardNode(LifecycleNode):
+class SqueakGuardNode(ManagedNode):
     """The `squeak_guard` node (the module's topics, parameters and lifecycle): wires the ROS
     interfaces to a `GuardPolicy` and its `BandWorker`.
 
     Parameters
     ----------
     autostart : bool
-        Configure and activate in the constructor (a failed configure leaves the node
-        unconfigured with `error` set).
+        Configure and activate in the constructor (`ManagedNode.start`: a bad parameter
+        raises `ParameterError`).
     **kwargs
         Passed to `rclpy.lifecycle.LifecycleNode` (context, namespace, parameter overrides).
 
@@ -113,8 +114,6 @@ class SqueakGuardNode(LifecycleNode):
         The latest step.
     command : float or None
         The latest speed command taken [rad/s].
-    error : str
-        Why the last configure failed ('' if it did not).
     """
 
     def __init__(self, autostart: bool = True, **kwargs: Any):
@@ -127,10 +126,7 @@ class SqueakGuardNode(LifecycleNode):
         self.model: SqueakModel | None = None
         self.last: GuardStep | None = None
         self.command: float | None = None
-        self.error = ""
-        self.active = False
         self._inputs: dict[str, tuple[float, float]] = {}  # LOAD/NUT -> (value, monotonic s)
-        self._subscriptions_own: list = []
         self._outputs: dict[str, Any] = {}
         self.diagnostics: Updater | None = None
         self._timer: Timer | None = None
@@ -139,23 +135,25 @@ class SqueakGuardNode(LifecycleNode):
         self._logged: set[str] = set()  # fail-safe kinds said in the log
         self._unit_id = ""
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        if autostart and self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
-            self.trigger_activate()
+        if autostart:
+            self.start()
+
+    @property
+    def error(self) -> str:
+        """Why the last transition failed, in one line ('' if it did not)."""
+        return one_line(self.failure) if self.failure is not None else ""
 
     # ---------------------------------------------------------------- lifecycle
-    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+    def configure(self) -> None:
         """Read and check the parameters, build the model, the policy and the band thread;
-        create the publishers and subscriptions. A bad parameter: FAILURE, one log line."""
+        create the publishers and subscriptions (a bad parameter raises)."""
         values = self._values({})
         try:
             settings = build(GuardSettings, values)
             own = build(NodeSettings, values)
             model = squeak_model(values)
-        except (ParameterError, TypeError, ValueError) as exc:
-            self.error = " ".join(str(exc).split())
-            self.get_logger().error(f"configure failed: {self.error}")
-            return TransitionCallbackReturn.FAILURE
-        self.error = ""
+        except (TypeError, ValueError) as exc:
+            raise ParameterError(" ".join(str(exc).split())) from exc
         self.model = model
         self.policy = GuardPolicy(settings)
         self.worker = BandWorker(self.policy, model)
@@ -164,15 +162,15 @@ class SqueakGuardNode(LifecycleNode):
             reliability=qos_profile_sensor_data.reliability,
             durability=qos_profile_sensor_data.durability,
         )
-        self._subscriptions_own = [
-            self.create_subscription(Float64, COMMAND, self._on_command, sensor),
-            self.create_subscription(Float64, LOAD, lambda m: self._on_input(LOAD, m), sensor),
-            self.create_subscription(Float64, NUT, lambda m: self._on_input(NUT, m), sensor),
-        ]
+        self.own(self.create_subscription(Float64, COMMAND, self._on_command, sensor))
+        for topic in (LOAD, NUT):
+            self.own(
+                self.create_subscription(Float64, topic, partial(self._on_input, topic), sensor)
+            )
         self._outputs = {
-            GUARDED: self.create_lifecycle_publisher(Float64, GUARDED, COMMAND_QOS),
-            ACTIVE: self.create_lifecycle_publisher(Bool, ACTIVE, LATCHED),
-            REASON: self.create_lifecycle_publisher(String, REASON, LATCHED),
+            GUARDED: self.own(self.create_lifecycle_publisher(Float64, GUARDED, COMMAND_QOS)),
+            ACTIVE: self.own(self.create_lifecycle_publisher(Bool, ACTIVE, LATCHED)),
+            REASON: self.own(self.create_lifecycle_publisher(String, REASON, LATCHED)),
         }
         self.diagnostics = Updater(
             self,
@@ -181,71 +179,34 @@ class SqueakGuardNode(LifecycleNode):
             own.hardware_id,
             publish=self._publish_diagnostics,
         )
+        self.own(self.diagnostics.publisher)
         self.diagnostics.add(GUARD_TASK, self._guard_status)
         self._unit_id = own.unit_id
         self.get_logger().info(
             f"configured: p_max {settings.p_max:g}, "
             f"{'enabled' if settings.enabled else 'disabled (exact pass-through)'}"
         )
-        return TransitionCallbackReturn.SUCCESS
 
-    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+    def activate(self) -> None:
         """Start publishing (the guarded command, guard/active, guard/reason, /diagnostics)."""
-        self.active = True
         self._shown = self._verdict = None  # republish the state
-        self._timer = self.create_timer(
-            HOUSEKEEPING_PERIOD_S, self._housekeeping, clock=self._steady
+        self._timer = self.own(
+            self.create_timer(HOUSEKEEPING_PERIOD_S, self._housekeeping, clock=self._steady)
         )
-        result = super().on_activate(state)  # enables the lifecycle publishers
         self._diagnose(periodic=False)
-        return result
 
-    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+    def deactivate(self) -> None:
         """Stop publishing: commands pass nowhere until activated again."""
-        self._stop_publishing()
-        return super().on_deactivate(state)
-
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """Release everything configure made (the band thread ends)."""
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """From any state: stop publishing and release everything."""
-        self._stop_publishing()
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
-        """A transition raised: release everything, back to unconfigured."""
-        self._stop_publishing()
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def destroy_node(self) -> None:
-        """Release everything (the band thread ends), then destroy the node."""
-        self._stop_publishing()
-        self._release()
-        super().destroy_node()
-
-    def _stop_publishing(self) -> None:
-        self.active = False
-        for pub in self._outputs.values():
-            pub.on_deactivate(None)
         if self._timer is not None:
-            self.destroy_timer(self._timer)
+            self.destroy_owned(self._timer)
             self._timer = None
 
-    def _release(self) -> None:
+    def release(self) -> None:
+        """Release everything configure made (the band thread ends)."""
         if self.worker is not None:
             self.worker.close()
-        for sub in self._subscriptions_own:
-            self.destroy_subscription(sub)
-        for pub in self._outputs.values():
-            self.destroy_lifecycle_publisher(pub)
-        if self.diagnostics is not None:
-            self.destroy_publisher(self.diagnostics.publisher)
-        self._subscriptions_own, self._outputs = [], {}
+        self.destroy_owned()
+        self._outputs, self._timer = {}, None
         self.diagnostics = self.worker = self.policy = self.model = None
         self.last = self.command = None
         self._inputs.clear()
@@ -421,38 +382,30 @@ def main(args: list[str] | None = None) -> int:
     if {"-h", "--help"} & set(own_args):
         print(usage())
         return 0
-    autostart = "--no-autostart" not in own_args
-    unknown = [a for a in own_args if a != "--no-autostart"]
-    if unknown:
+    autostart, own_args = autostart_option(own_args)
+    if own_args:
         print(
-            f"{PROG}: error: unrecognized arguments: {' '.join(unknown)} (ROS "
+            f"{PROG}: error: unrecognized arguments: {' '.join(own_args)} (ROS "
             "arguments go after --ros-args; see --help)",
             file=sys.stderr,
         )
         return 2
-    ros_argv = [a for a in argv if a != "--no-autostart"]
     confine_to_localhost()
     with StopSignals() as stop:
         try:
             checked_ros_args(
-                lambda: rclpy.init(args=ros_argv, signal_handler_options=SignalHandlerOptions.NO)
+                lambda: rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
             )
         except ValueError as exc:
             print(f"{PROG}: error: {exc}", file=sys.stderr)
             return 2
         node = None
         try:
-            node = SqueakGuardNode(autostart=False)
-            if autostart:  # a failed configure: the one line below, not the log's too
-                logger = node.get_logger()
-                level = logger.get_effective_level()
-                logger.set_level(LoggingSeverity.FATAL)
-                configured = node.trigger_configure() == TransitionCallbackReturn.SUCCESS
-                logger.set_level(level)
-                if not configured:
-                    print(f"{PROG}: error: {node.error}", file=sys.stderr)
-                    return 2
-                node.trigger_activate()
+            node = SqueakGuardNode(autostart=autostart)
+            if not autostart:
+                node.get_logger().info(
+                    "unconfigured: waiting for a lifecycle transition (~/change_state)"
+                )
             executor = make_executor()
             executor.add_node(node)
             while not stop.signum:
