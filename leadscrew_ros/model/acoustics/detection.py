@@ -1287,7 +1287,7 @@ def _at_drive_ratios(
         v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
     except (TypeError, ValueError):
         return episodes
-    if not ratios or s.order_tolerance <= 0 or t.size != v.size or t.size == 0:
+    if s.order_tolerance <= 0 or t.size != v.size or t.size == 0:
         return episodes
     kept = []
     for ep in episodes:
@@ -1298,12 +1298,45 @@ def _at_drive_ratios(
                 float(np.mean(np.abs(ep.track_hz[ok] / (r * f1[ok]) - 1.0) <= s.order_tolerance))
                 for r in ratios
             ]
-            if ok.sum() * 2 >= ep.track_hz.size and ok.any()
+            if ratios and ok.sum() * 2 >= ep.track_hz.size and ok.any()
             else [0.0]
         )
         best = int(np.argmax(share))
-        if share[best] >= s.order_share:
+        if ratios and share[best] >= s.order_share:
             ep.drive_ratio = ratios[best]
+            det.rejected.append(ep)
+        else:
+            kept.append(ep)
+    return _recurring_ratios(det, kept, t, v)
+
+
+def _recurring_ratios(
+    det: StreamingDetector, episodes: list[Episode], t: np.ndarray, v: np.ndarray
+) -> list[Episode]:
+    """The episodes less those heard again at the same ratio to the screw's rotation at
+    another speed (by more than twice `order_tolerance`): each held at constant speed, too
+    short to be seen moving, but together proportional to |speed|, so drive noise (a squeak's
+    frequency is the structure's, not the speed's: at another speed it is at another ratio)."""
+    s = det.settings
+    rows = []  # (episode, its ratio, its speed)
+    for ep in episodes:
+        f1 = np.interp(ep.track_times_s, t, v) / (2 * np.pi) if t.size else np.zeros(0)
+        ok = np.isfinite(ep.track_hz) & (f1 > 0)
+        if not ok.any():
+            continue
+        r = ep.track_hz[ok] / f1[ok]
+        mid = float(np.median(r))
+        if np.mean(np.abs(r / mid - 1.0) <= s.order_tolerance) >= s.order_share:
+            rows.append((ep, mid, float(np.median(f1[ok]))))
+    drive: dict[int, float] = {}
+    for i, (a, ra, fa) in enumerate(rows):
+        for b, rb, fb in rows[i + 1 :]:
+            if abs(ra / rb - 1) <= s.order_tolerance and abs(fa / fb - 1) > 2 * s.order_tolerance:
+                drive[id(a)] = drive[id(b)] = (ra + rb) / 2
+    kept = []
+    for ep in episodes:
+        if id(ep) in drive:
+            ep.drive_ratio = drive[id(ep)]
             det.rejected.append(ep)
         else:
             kept.append(ep)
