@@ -33,19 +33,15 @@ import time
 from functools import partial
 from typing import Any
 
-import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import ParameterException
 from rclpy.parameter import Parameter
 from rclpy.qos import (
     QoSProfile,
     ReliabilityPolicy,
     qos_profile_sensor_data,
 )
-from rclpy.signals import SignalHandlerOptions
 from rclpy.timer import Timer
-from rclpy.utilities import remove_ros_args
 from std_msgs.msg import Bool, Float64, String
 
 from ..bag import messages
@@ -54,8 +50,7 @@ from ..live.status import Level
 from ..model import ParameterError, ScrewParameters, SqueakModel
 from ..model.uncertainty.scatter import ScatterSettings
 from .diagnostics import DiagnosticStatusWrapper, Updater
-from .env import StopSignals, checked_ros_args, confine_to_localhost
-from .managed import ManagedNode, autostart_option, one_line
+from .managed import ManagedNode, one_line, run
 from .node import LATCHED, make_executor
 from .parameters import (
     GUARD_GROUPS,
@@ -370,54 +365,18 @@ def usage() -> str:
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the node until SIGINT/SIGTERM; exit 0 on that requested shutdown (with the line
-    `squeak_guard: stopped by SIGTERM` (or SIGINT) on stderr), 2 on bad parameters or
-    arguments (with autostart: a configure that failed); `-h`/`--help` prints `usage()`."""
-    argv = list(sys.argv if args is None else args)
-    try:
-        own_args = checked_ros_args(lambda: remove_ros_args(argv))[1:]
-    except ValueError as exc:
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 2
-    if {"-h", "--help"} & set(own_args):
-        print(usage())
-        return 0
-    autostart, own_args = autostart_option(own_args)
-    if own_args:
-        print(
-            f"{PROG}: error: unrecognized arguments: {' '.join(own_args)} (ROS "
-            "arguments go after --ros-args; see --help)",
-            file=sys.stderr,
-        )
-        return 2
-    confine_to_localhost()
-    with StopSignals() as stop:
-        try:
-            checked_ros_args(
-                lambda: rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
-            )
-        except ValueError as exc:
-            print(f"{PROG}: error: {exc}", file=sys.stderr)
-            return 2
-        node = None
-        try:
-            node = SqueakGuardNode(autostart=autostart)
-            if not autostart:
-                node.get_logger().info(
-                    "unconfigured: waiting for a lifecycle transition (~/change_state)"
-                )
-            executor = make_executor()
-            executor.add_node(node)
-            while not stop.signum:
-                executor.spin_once(timeout_sec=0.1)
-        except (ParameterError, ParameterException) as exc:
-            print(f"{PROG}: error: {' '.join(str(exc).split())}", file=sys.stderr)
-            return 2
-        finally:
-            if node is not None:
-                node.destroy_node()
-            rclpy.try_shutdown()
-    return stop.exit_status(NODE_NAME)
+    """Run the node until SIGINT/SIGTERM (`managed.run`): exit 0 on that requested shutdown
+    (with the line `squeak_guard: stopped by SIGTERM` (or SIGINT) on stderr), 2 on bad
+    parameters or arguments (with autostart: a configure that failed); `-h`/`--help` prints
+    `usage()`."""
+    return run(
+        lambda autostart: SqueakGuardNode(autostart=autostart),
+        PROG,
+        NODE_NAME,
+        usage,
+        make_executor,
+        args,
+    )
 
 
 if __name__ == "__main__":

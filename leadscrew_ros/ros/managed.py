@@ -15,21 +15,30 @@ exception silently. Entities made by `configure` are registered with `own` and d
 activate at once, raising what made either fail, so that a process without a lifecycle manager
 behaves as an unmanaged node (exit status 2 and one line for a bad parameter).
 `autostart_option` takes `--autostart`/`--no-autostart` out of a program's own arguments;
-`AUTOSTART_HELP` is their text for `--help`.
+`AUTOSTART_HELP` is their text for `--help`. `run` is the executables' `main`.
 """
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
 from typing import Any, TypeVar
 
+import rclpy
 from rclpy.client import Client
+from rclpy.exceptions import ParameterException
+from rclpy.executors import Executor
 from rclpy.lifecycle import LifecycleNode, LifecyclePublisher, LifecycleState
 from rclpy.lifecycle import TransitionCallbackReturn as Result
 from rclpy.publisher import Publisher
 from rclpy.service import Service
+from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
+from rclpy.utilities import remove_ros_args
+
+from ..model import ParameterError
+from .env import StopSignals, checked_ros_args, confine_to_localhost
 
 AUTOSTART, NO_AUTOSTART = "--autostart", "--no-autostart"
 AUTOSTART_HELP = (
@@ -233,3 +242,90 @@ class ManagedNode(LifecycleNode):
                     else f"{name} failed: {one_line(exc)}"
                 )
             return Result.FAILURE if undo is not None else Result.ERROR
+
+
+def run(
+    make_node: Callable[[bool], ManagedNode],
+    prog: str,
+    name: str,
+    usage: Callable[[], str],
+    make_executor: Callable[[], Executor],
+    args: list[str] | None = None,
+    before_spin: Callable[[], None] | None = None,
+) -> int:
+    """An executable's `main`: parse, start the node, spin until SIGINT/SIGTERM.
+
+    Parameters
+    ----------
+    make_node : callable
+        The node from the autostart flag (`--autostart`/`--no-autostart`).
+    prog : str
+        The program's name for its error lines.
+    name : str
+        The node's name for the line a stop signal gives.
+    usage : callable
+        Its `--help` text.
+    make_executor : callable
+        The executor to spin it on.
+    args : list of str, optional
+        The command line (default `sys.argv`).
+    before_spin : callable, optional
+        Called once the node is on the executor (e.g. `gc.freeze`).
+
+    Returns
+    -------
+    int
+        0 on a requested shutdown (SIGINT/SIGTERM, one line on stderr: `StopSignals`), 2 on a
+        bad argument or parameter (one line; with autostart also a configure that failed).
+    """
+    argv = list(sys.argv if args is None else args)
+    try:  # a bad params file or remap rule: one line
+        own_args = checked_ros_args(lambda: remove_ros_args(argv))[1:]
+    except ValueError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 2
+    if {"-h", "--help"} & set(own_args):
+        print(usage())
+        return 0
+    autostart, own_args = autostart_option(own_args)
+    if own_args:
+        print(
+            f"{prog}: error: unrecognized arguments: {' '.join(own_args)} (ROS "
+            "arguments go after --ros-args; see --help)",
+            file=sys.stderr,
+        )
+        return 2
+    confine_to_localhost()
+    # SIGINT/SIGTERM only set `stop.signum`; the loop ends between callbacks. rclpy's own
+    # handlers shut the context down from another thread (a publish in flight then fails with
+    # "context is invalid", exit 1 with a traceback) or raise KeyboardInterrupt inside any
+    # callback.
+    with StopSignals() as stop:
+        try:  # unknown ROS arguments: remove_ros_args keeps them, init refuses them
+            checked_ros_args(
+                lambda: rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+            )
+        except ValueError as exc:
+            print(f"{prog}: error: {exc}", file=sys.stderr)
+            return 2
+        node = None
+        try:
+            node = make_node(autostart)
+            if not autostart:
+                node.get_logger().info(
+                    "unconfigured: waiting for a lifecycle transition (~/change_state)"
+                )
+            executor = make_executor()
+            executor.add_node(node)
+            if before_spin is not None:
+                before_spin()
+            while not stop.signum:
+                executor.spin_once(timeout_sec=0.1)  # stops after the current callback
+        except (ParameterError, ParameterException) as exc:
+            print(f"{prog}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+            return 2
+        finally:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+    return stop.exit_status(name)

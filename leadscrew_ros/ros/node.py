@@ -40,12 +40,10 @@ from functools import partial
 from typing import Any, NamedTuple
 
 import numpy as np
-import rclpy
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.context import Context
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
-from rclpy.exceptions import ParameterException
 from rclpy.executors import Executor
 from rclpy.experimental import EventsExecutor
 from rclpy.lifecycle import LifecyclePublisher
@@ -59,8 +57,6 @@ from rclpy.qos import (
     qos_profile_sensor_data,
 )
 from rclpy.serialization import serialize_message
-from rclpy.signals import SignalHandlerOptions
-from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float32MultiArray, Float64, Float64MultiArray, String
 from std_srvs.srv import SetBool
@@ -92,10 +88,9 @@ from .diagnostics import (
     recording_status,
     status_task,
 )
-from .env import StopSignals, checked_ros_args, confine_to_localhost
 from .input_fields import InputReader, input_reader, stamp_ns
 from .input_recording import InputRecording
-from .managed import AUTOSTART_HELP, ManagedNode, autostart_option
+from .managed import AUTOSTART_HELP, ManagedNode, run
 from .parameters import (
     GROUPS,
     PARAMETER_NAMES,
@@ -108,6 +103,7 @@ from .parameters import (
     help_lines,
     log_metadata,
     names_of,
+    squeak_model,
 )
 
 NODE_NAME = "squeak_predictor"
@@ -471,23 +467,10 @@ class SqueakPredictorNode(ManagedNode):
         return build(cls, self._values(changes))
 
     def _model(self, changes: dict) -> SqueakModel:
-        """The model of the parameters with `changes` applied: the screw and its scatter
-        (`scatter.*`). One prediction draws the samples and builds the estimator, so a scatter
-        they cannot take (samples that miss the valid domain, ...) is rejected here with the
-        reason, never later in a callback."""
-        scatter = self._settings(ScatterSettings, changes)
-        model = SqueakModel(
-            self._settings(ScrewParameters, changes),
-            scatter=scatter.scatter,
-            samples=scatter.samples,
-        )
-        try:
-            model.predict(model.params.min_speed_rad_s, 0.0)
-        except ParameterError:
-            raise
-        except ValueError as exc:
-            raise ParameterError(f"scatter: {exc}") from None
-        return model
+        """The model of the parameters with `changes` applied (`parameters.squeak_model`: one
+        prediction draws the scatter's samples, so a scatter they cannot take is rejected
+        here with the reason, never later in a callback)."""
+        return squeak_model(self._values(changes))
 
     def _reader(self, name: str, changes: dict) -> InputReader:
         """The reader of input `name` from the parameters with `changes` applied."""
@@ -874,64 +857,23 @@ def usage() -> str:
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the node until SIGINT/SIGTERM; exit 0 on that requested shutdown (with the line
-    `squeak_predictor: stopped by SIGTERM` (or SIGINT) on stderr, as every long-running
-    command: `ros_env.StopSignals.exit_status`), 2 on bad parameters or arguments;
-    `-h`/`--help` prints `usage()` and exits 0. `--no-autostart`: the node starts
+    """Run the node until SIGINT/SIGTERM (`managed.run`): exit 0 on that requested shutdown
+    (with the line `squeak_predictor: stopped by SIGTERM` (or SIGINT) on stderr, as every
+    long-running command: `ros_env.StopSignals.exit_status`), 2 on bad parameters or
+    arguments; `-h`/`--help` prints `usage()` and exits 0. `--no-autostart`: the node starts
     unconfigured and waits for lifecycle transitions (a configure that fails is logged, the
     node stays unconfigured and running)."""
-    argv = list(sys.argv if args is None else args)
-    try:  # a bad params file or remap rule: one line, as simulate and replay --publish
-        own_args = checked_ros_args(lambda: remove_ros_args(argv))[1:]
-    except ValueError as exc:
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 2
-    if {"-h", "--help"} & set(own_args):
-        print(usage())
-        return 0
-    autostart, own_args = autostart_option(own_args)
-    if own_args:
-        print(
-            f"{PROG}: error: unrecognized arguments: {' '.join(own_args)} (ROS "
-            "arguments go after --ros-args; see --help)",
-            file=sys.stderr,
-        )
-        return 2
-    confine_to_localhost()
-    # SIGINT/SIGTERM only set `stop.signum`; the loop ends between callbacks. rclpy's own
-    # handlers shut the context down from another thread (a publish in flight then fails with
-    # "context is invalid", exit 1 with a traceback) or raise KeyboardInterrupt inside any
-    # callback.
-    with StopSignals() as stop:
-        try:  # unknown ROS arguments: remove_ros_args keeps them, init refuses them
-            checked_ros_args(
-                lambda: rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
-            )
-        except ValueError as exc:
-            print(f"{PROG}: error: {exc}", file=sys.stderr)
-            return 2
-        node = None
-        try:
-            node = SqueakPredictorNode(autostart=autostart)
-            if not autostart:
-                node.get_logger().info(
-                    "unconfigured: waiting for a lifecycle transition (~/change_state)"
-                )
-            executor = make_executor()
-            executor.add_node(node)
-            # Startup's objects (rclpy, numpy, scipy, the model) out of the collector's
-            # generations: a full collection of them stalled a callback by ~60 ms (bench_node).
-            gc.freeze()
-            while not stop.signum:
-                executor.spin_once(timeout_sec=0.1)  # stops after the current callback
-        except (ParameterError, ParameterException) as exc:
-            print(f"{PROG}: error: {' '.join(str(exc).split())}", file=sys.stderr)
-            return 2
-        finally:
-            if node is not None:
-                node.destroy_node()
-            rclpy.try_shutdown()
-    return stop.exit_status(NODE_NAME)
+    # Startup's objects (rclpy, numpy, scipy, the model) out of the collector's generations:
+    # a full collection of them stalled a callback by ~60 ms (bench_node).
+    return run(
+        lambda autostart: SqueakPredictorNode(autostart=autostart),
+        PROG,
+        NODE_NAME,
+        usage,
+        make_executor,
+        args,
+        before_spin=gc.freeze,
+    )
 
 
 if __name__ == "__main__":
