@@ -21,12 +21,20 @@ the steps):
   a coarser step would smear. The geometry is integrated once per nut bin.
 
 A point's speed and load are its frames' means, its nut position the bin's centre.
+
+The frames also stay in time order (`Observations.sequence`: each frame's point), for the
+observation model (`amplitude`): the squeak's amplitude grows and decays along a stroke, so
+whether a frame is heard depends on the frames before it. Frames the likelihood must not count
+(at an episode's edge, `gather.counted`) still carry the amplitude; frames where the model does
+not hold (the drive standing, outside its speed range) hold no point and let it decay to the
+floor. Each heard onset's measured growth rate (`Growth`) is kept with its frame.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -104,13 +112,27 @@ class Observations:
     nut_position_m : numpy.ndarray
         (P,) nut position [m] (a multiple of `ThinSettings.nut_step_m`).
     frames : numpy.ndarray
-        (P,) int: detector frames at the point (>= 1).
+        (P,) int: detector frames counted at the point (>= 0; 0 where every frame there only
+        carries the amplitude).
     heard : numpy.ndarray
         (P,) int: of which the detector heard squeak.
     heard_hz : numpy.ndarray
         (P,) median heard frequency there [Hz], nan where none was heard.
     frame_s : float
         Detector hop: time between frames [s].
+    sequence : numpy.ndarray
+        (n,) int: every frame of the logs in time order, its point (-1 where the model does
+        not hold there); empty for observations made without their order.
+    frame_heard : numpy.ndarray
+        (n,) bool: the detector heard squeak in the frame.
+    frame_counted : numpy.ndarray
+        (n,) bool: the frame enters the likelihood (the counts above are of these).
+    frame_reset : numpy.ndarray
+        (n,) bool: a log starts here, or the frame follows a gap of more than one hop (the
+        squeak's amplitude starts from the floor).
+    onsets : numpy.ndarray
+        (m, 3): per heard onset with a measured growth rate, its frame (index into
+        `sequence`), the rate and its standard error [1/s].
     """
 
     unit_id: str
@@ -122,11 +144,32 @@ class Observations:
     heard: np.ndarray
     heard_hz: np.ndarray
     frame_s: float
+    sequence: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    frame_heard: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    frame_counted: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    frame_reset: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    onsets: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     def __post_init__(self) -> None:
-        sizes = {f.name: np.shape(getattr(self, f.name)) for f in fields(self)[2:-1]}
-        if len(set(sizes.values())) != 1 or len(next(iter(sizes.values()))) != 1:
+        sizes = {np.shape(getattr(self, name)) for name in _POINT_ARRAYS}
+        if len(sizes) != 1 or len(next(iter(sizes))) != 1:
             raise CalibrationError(f"unit {self.unit_id}: observation arrays differ in shape")
+        frames = {np.shape(getattr(self, name)) for name in _FRAME_ARRAYS}
+        if len(frames) != 1 or len(next(iter(frames))) != 1:
+            raise CalibrationError(f"unit {self.unit_id}: frame sequence arrays differ in shape")
+        n = len(self.sequence)
+        if n and (
+            np.any(self.sequence < -1)
+            or np.any(self.sequence >= self.points)
+            or not self.frame_reset[0]
+        ):
+            raise CalibrationError(
+                f"unit {self.unit_id}: the frame sequence names a point that does not exist"
+            )
+        if np.shape(self.onsets)[1:] != (3,) or (
+            len(self.onsets) and not np.all((self.onsets[:, 0] >= 0) & (self.onsets[:, 0] < n))
+        ):
+            raise CalibrationError(f"unit {self.unit_id}: onsets must be (frame, rate, se) rows")
         _finite(self.unit_id, speed_rad_s=self.speed_rad_s, load_n=self.load_n)
         _finite(self.unit_id, nut_position_m=self.nut_position_m)
         if not (isinstance(self.frame_s, float) and math.isfinite(self.frame_s)) or not (
@@ -135,15 +178,19 @@ class Observations:
             raise CalibrationError(
                 f"unit {self.unit_id}: frame_s = {self.frame_s!r} must be a number > 0 [s]"
             )
-        if np.any(self.frames < 1) or np.any(self.heard < 0) or np.any(self.heard > self.frames):
-            raise CalibrationError(
-                f"unit {self.unit_id}: need 0 <= heard <= frames and frames >= 1 at every point"
-            )
+        if np.any(self.heard < 0) or np.any(self.heard > self.frames):
+            raise CalibrationError(f"unit {self.unit_id}: need 0 <= heard <= frames at every point")
+        if not self.frames.sum():
+            raise CalibrationError(f"unit {self.unit_id}: no counted frame")
 
     @property
     def points(self) -> int:
         """Number of distinct operating points P."""
         return len(self.frames)
+
+
+_POINT_ARRAYS = ("speed_rad_s", "load_n", "nut_position_m", "frames", "heard", "heard_hz")
+_FRAME_ARRAYS = ("sequence", "frame_heard", "frame_counted", "frame_reset")
 
 
 def _finite(unit_id: str, **arrays: np.ndarray) -> None:
@@ -167,30 +214,34 @@ def _binned(
     heard_hz: np.ndarray,
     frame_s: float,
     settings: ThinSettings,
-) -> Observations:
-    """Points with equal bin keys merged: frame-weighted mean speed and load, the bin's nut,
-    summed counts, the median of the heard frequencies (each entry weighted by its heard
-    frames)."""
+) -> tuple[Observations, np.ndarray]:
+    """Points with equal bin keys merged: frame-weighted mean speed and load (the counted
+    frames', or all of them where none is counted), the bin's nut, summed counts, the median
+    of the heard frequencies (each entry weighted by its heard frames); and each input row's
+    point."""
     keys, inverse = np.unique(settings.keys(speed, load, nut), axis=0, return_inverse=True)
     inverse = inverse.ravel()
     count = np.bincount(inverse, weights=frames, minlength=len(keys))
+    weight = np.where(count[inverse] > 0, frames, 1.0)  # uncounted points: all their frames
+    total = np.bincount(inverse, weights=weight, minlength=len(keys))
     hz = np.full(len(keys), np.nan)
     with_hz = np.flatnonzero((heard > 0) & np.isfinite(heard_hz))
     order = with_hz[np.lexsort((heard_hz[with_hz], inverse[with_hz]))]
     for k, rows in zip(*_groups(inverse[order]), strict=True):  # few heard points: a loop
         w = np.cumsum(heard[order[rows]])
         hz[k] = heard_hz[order[rows]][np.searchsorted(w, w[-1] / 2)]
-    return Observations(
+    obs = Observations(
         unit_id=unit_id,
         logs=logs,
-        speed_rad_s=np.bincount(inverse, weights=frames * speed, minlength=len(keys)) / count,
-        load_n=np.bincount(inverse, weights=frames * load, minlength=len(keys)) / count,
+        speed_rad_s=np.bincount(inverse, weights=weight * speed, minlength=len(keys)) / total,
+        load_n=np.bincount(inverse, weights=weight * load, minlength=len(keys)) / total,
         nut_position_m=keys[:, 0] * settings.nut_step_m,
         frames=count.astype(np.int64),
         heard=np.bincount(inverse, weights=heard, minlength=len(keys)).astype(np.int64),
         heard_hz=hz,
         frame_s=frame_s,
     )
+    return obs, inverse
 
 
 def _groups(sorted_ids: np.ndarray) -> tuple[list[int], list[slice]]:
@@ -213,8 +264,12 @@ def thin(
     heard_hz: ArrayLike,
     frame_s: float,
     settings: ThinSettings | None = None,
+    counted: ArrayLike | None = None,
+    valid: ArrayLike | None = None,
+    onsets: Sequence[tuple[float, float, float]] = (),
 ) -> Observations:
-    """Detector frames binned to distinct operating points (module docstring).
+    """Detector frames binned to distinct operating points, and kept in order (module
+    docstring).
 
     Parameters
     ----------
@@ -226,7 +281,7 @@ def thin(
         (n,) frame centres [s], in time order.
     speed_rad_s, load_n, nut_position_m : array_like
         (n,) the operating point at each frame centre (interpolated by the caller) [rad/s],
-        [N], [m].
+        [N], [m]; finite where `valid`.
     heard : array_like
         (n,) bool: the detector heard squeak in the frame.
     heard_hz : array_like
@@ -235,6 +290,15 @@ def thin(
         Detector hop: time between frames [s].
     settings : ThinSettings, optional
         Bin steps; the defaults when None.
+    counted : array_like, optional
+        (n,) bool: the frames the likelihood counts (all valid ones when None); the others
+        only carry the amplitude.
+    valid : array_like, optional
+        (n,) bool: the model holds at the frame's operating point (all when None); the
+        others have no point.
+    onsets : sequence of (float, float, float)
+        Heard onsets' (time [s], measured growth rate [1/s], its standard error [1/s]); each
+        is kept at the frame nearest its time.
 
     Returns
     -------
@@ -244,8 +308,8 @@ def thin(
     Raises
     ------
     CalibrationError
-        Arrays of different lengths, no frames, a NaN or inf in the times or operating
-        points, times not in order, or a bad hop: one line, never a number.
+        Arrays of different lengths, no counted frame, a NaN or inf in the times or valid
+        operating points, times not in order, or a bad hop: one line, never a number.
     """
     settings = settings or ThinSettings()
     arrays = {
@@ -256,36 +320,64 @@ def thin(
         "heard_hz": np.asarray(heard_hz, float),
     }
     flags = np.asarray(heard)
-    shapes = {a.shape for a in arrays.values()} | {flags.shape}
+    masks = {
+        name: np.ones(flags.shape, bool) if m is None else np.asarray(m)
+        for name, m in (("valid", valid), ("counted", counted))
+    }
+    shapes = {a.shape for a in arrays.values()} | {flags.shape} | {m.shape for m in masks.values()}
     if len(shapes) != 1 or len(next(iter(shapes))) != 1:
         raise CalibrationError(
             f"unit {unit_id}: frame arrays must be 1-D of one length, got shapes {sorted(shapes)}"
         )
     if not flags.size:
         raise CalibrationError(f"unit {unit_id}: no detector frames")
-    if flags.dtype != bool:
-        raise CalibrationError(f"unit {unit_id}: heard must be booleans, got {flags.dtype}")
-    _finite(unit_id, **{k: v for k, v in arrays.items() if k != "heard_hz"})
-    if np.any(np.diff(arrays["times_s"]) < 0):
+    for name, a in (("heard", flags), *masks.items()):
+        if a.dtype != bool:
+            raise CalibrationError(f"unit {unit_id}: {name} must be booleans, got {a.dtype}")
+    ok = masks["valid"]
+    use = masks["counted"] & ok
+    _finite(unit_id, times_s=arrays["times_s"])
+    _finite(unit_id, **{k: v[ok] for k, v in arrays.items() if k not in ("heard_hz", "times_s")})
+    times = arrays["times_s"]
+    if np.any(np.diff(times) < 0):
         raise CalibrationError(f"unit {unit_id}: frame times are not in order")
     if isinstance(frame_s, bool) or not isinstance(frame_s, (int, float)):
         raise CalibrationError(f"unit {unit_id}: frame_s = {frame_s!r} is not a number [s]")
-    return _binned(
+    if not use.any():
+        raise CalibrationError(f"unit {unit_id}: no counted frame at a valid operating point")
+    obs, inverse = _binned(
         unit_id,
         tuple(logs),
-        arrays["speed_rad_s"],
-        arrays["load_n"],
-        arrays["nut_position_m"],
-        np.ones(flags.size),
-        flags.astype(float),
-        arrays["heard_hz"],
+        arrays["speed_rad_s"][ok],
+        arrays["load_n"][ok],
+        arrays["nut_position_m"][ok],
+        use[ok].astype(float),
+        (flags & use)[ok].astype(float),
+        arrays["heard_hz"][ok],
         float(frame_s),
         settings,
+    )
+    sequence = np.full(flags.size, -1, np.int64)
+    sequence[ok] = inverse
+    reset = np.r_[True, np.diff(times) > 1.5 * float(frame_s)]
+    rows = np.zeros((0, 3))
+    if len(onsets):
+        rows = np.array(onsets, float).reshape(-1, 3)
+        rows = rows[np.all(np.isfinite(rows), axis=1)]
+        rows[:, 0] = np.clip(np.searchsorted(times, rows[:, 0]), 0, flags.size - 1)
+    return replace(
+        obs,
+        sequence=sequence,
+        frame_heard=flags.copy(),
+        frame_counted=use,
+        frame_reset=reset,
+        onsets=rows,
     )
 
 
 def merge(observations: list[Observations], settings: ThinSettings | None = None) -> Observations:
-    """The observations of several logs of one unit as one (points in the same bins merged).
+    """The observations of several logs of one unit as one (points in the same bins merged,
+    the frame sequences one after another, each starting from the floor).
 
     Parameters
     ----------
@@ -319,7 +411,7 @@ def merge(observations: list[Observations], settings: ThinSettings | None = None
     def cat(name: str) -> np.ndarray:
         return np.concatenate([getattr(o, name) for o in observations])
 
-    return _binned(
+    obs, inverse = _binned(
         units[0],
         tuple(log for o in observations for log in o.logs),
         cat("speed_rad_s"),
@@ -330,4 +422,25 @@ def merge(observations: list[Observations], settings: ThinSettings | None = None
         cat("heard_hz"),
         hops[0],
         settings or ThinSettings(),
+    )
+    if any(not len(o.sequence) for o in observations):
+        return obs  # one without its order: the merged frames have none either
+    point0 = np.cumsum([0] + [o.points for o in observations[:-1]])
+    frame0 = np.cumsum([0] + [len(o.sequence) for o in observations[:-1]])
+    sequence = np.concatenate(
+        [
+            np.where(o.sequence >= 0, inverse[o.sequence + p0], -1)
+            for o, p0 in zip(observations, point0, strict=True)
+        ]
+    )
+    onsets = np.concatenate(
+        [o.onsets + [f0, 0.0, 0.0] for o, f0 in zip(observations, frame0, strict=True)]
+    )
+    return replace(
+        obs,
+        sequence=sequence,
+        frame_heard=cat("frame_heard"),
+        frame_counted=cat("frame_counted"),
+        frame_reset=cat("frame_reset"),
+        onsets=onsets,
     )

@@ -183,6 +183,20 @@ def _episodes(heard: dict[str, Any]) -> list[Episode]:
     ]
 
 
+def _onsets(heard: dict[str, Any]) -> list[tuple[float, float, float]]:
+    """(time [s], growth rate, its SE [1/s]) of the heard episodes whose onset growth was
+    measured (summary.json's `growth_rate_per_s`, `growth_rate_se`), at the middle of the
+    window it was fitted over: the rate is sigma's mean there, and sigma still rises at the
+    detected onset, a few frames later."""
+    out = []
+    for e in heard["episodes"]:
+        rate, se = e.get("growth_rate_per_s"), e.get("growth_rate_se")
+        if rate is not None and se is not None:
+            window = e.get("growth_window_s") or (e["start_s"], e["start_s"])
+            out.append((0.5 * (float(window[0]) + float(window[1])), float(rate), float(se)))
+    return out
+
+
 def _detector(heard: dict[str, Any]) -> DetectorSettings:
     """The detector settings a replay heard with (its `heard.detector`; the defaults for a
     replay written before they were recorded)."""
@@ -297,7 +311,9 @@ def observe_replay(
         j = np.searchsorted(points[:, 0], frame_t, side="right") - 1
         at = points[np.maximum(j, 0)]
         model = SqueakModel(params, Scatter({}))
-        use &= model.validity_code(at[:, 1], at[:, 2]) == Validity.OK
+        valid = (model.validity_code(at[:, 1], at[:, 2]) == Validity.OK) & (j >= 0)
+        use &= valid
+        span = (j >= 0) & (frame_t <= float(summary["duration_s"]))
         flags, hz = frames_heard(frame_t, episodes)
         share = heard.get("sound_share")
         if not use.any():
@@ -317,14 +333,17 @@ def observe_replay(
         obs = thin(
             unit_id,
             (log,),
-            frame_t[use],
-            at[use, 1],
-            at[use, 2],
-            at[use, 3],
-            flags[use],
-            hz[use],
+            frame_t[span],
+            at[span, 1],
+            at[span, 2],
+            at[span, 3],
+            flags[span],
+            hz[span],
             _detector(heard).hop_s,
             settings,
+            counted=use[span],
+            valid=valid[span],
+            onsets=_onsets(heard),
         )
     except (OSError, ValueError, LogError) as exc:
         return Gathered(str(directory), name, log, fallback, None, " ".join(str(exc).split()))
