@@ -176,6 +176,28 @@ def _expanded(
     return growth
 
 
+def _batch_bounds(
+    changes: tuple[np.ndarray, ...],
+    column: np.ndarray,
+    rates: np.ndarray,
+    size: np.ndarray,
+    margin: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(pairs,) each pair's expanded growth at a batch's mean change, and a bound of how far
+    the batch's draws stray from it (`size` = |rates|): cheap per pair, so that only the pairs
+    the bounds cannot decide are evaluated per draw."""
+    mean = margin.copy()
+    bound = np.zeros(len(mean))
+    for k, change in enumerate(changes[:2]):
+        centre = change.mean(axis=1)
+        mean += rates[k] * centre[column]
+        bound += size[k] * np.abs(change - centre[:, None]).max(axis=1)[column]
+    centre = changes[2].mean(axis=1)
+    mean += centre @ rates[2:]
+    bound += np.abs(changes[2] - centre[:, None]).max(axis=1) @ size[2:]
+    return mean, bound
+
+
 class GrowthLikelihood:
     """Log-likelihood of a unit's observations over draws of the calibrated parameters.
 
@@ -285,6 +307,7 @@ class GrowthLikelihood:
         point_k, margin_k, rates_k, inband_k = self._solved
         reach_k = self._reach(point_k, rates_k)
         can = margin_k + reach_k > 0  # unstable for some draw in the box
+        self._rates_of(point_k, margin_k, rates_k, inband_k, reach_k)
         # The squeak heard is the most unstable mode's (the bench sounds that one, and its
         # limit cycle takes over): where a mode outside the band can be unstable as well as
         # one inside, the verdict is a contest between them, decided per draw.
@@ -330,6 +353,85 @@ class GrowthLikelihood:
         self._delta = heard * math.log(q1 / q0) + quiet * (math.log1p(-q1) - math.log1p(-q0))
         self.fixed = fixed
         self._constant = float(base.sum() + self._delta[fixed].sum())
+
+    def _rates_of(
+        self,
+        point_k: np.ndarray,
+        margin_k: np.ndarray,
+        rates_k: np.ndarray,
+        inband_k: np.ndarray,
+        reach_k: np.ndarray,
+    ) -> None:
+        """What `growth_rates` needs: the (point, mode) pairs that can be unstable in the box,
+        sorted by point, and per point the strongest of the others at the centre (their
+        growth varies too little to cross zero: the decay rate they give is held). A pair
+        that no draw in the box can make the strongest of its band at its point is dropped
+        (exact: its upper bound is under another pair's lower bound)."""
+        points = self.obs.points
+        can = margin_k + reach_k > 0
+        rest = np.full((2, points), -np.inf)  # in band, outside it
+        other = ~can
+        np.maximum.at(rest, (np.where(inband_k[other], 0, 1), point_k[other]), margin_k[other])
+        floor = np.full((2, points), -np.inf)  # the largest lower bound of a pair
+        band = np.where(inband_k, 0, 1)
+        np.maximum.at(floor, (band[can], point_k[can]), (margin_k - reach_k)[can])
+        can &= margin_k + reach_k >= floor[band, point_k]
+        pairs = np.flatnonzero(can)
+        at = np.unique(point_k[pairs])
+        self._candidates = (
+            np.searchsorted(at, point_k[pairs]),
+            margin_k[pairs],
+            rates_k[:, pairs],
+            band[pairs],  # 0 in the band, 1 outside it
+        )
+        self._candidates_at = self._centre_at(at)
+        self._rest = rest
+
+    def growth_rates(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per draw and point, the growth rate of the most unstable mode and whether it is in
+        the detector's band: what the squeak's amplitude follows (`amplitude`).
+
+        Parameters
+        ----------
+        theta : numpy.ndarray
+            (W, D) values of `names` in the fields' units.
+
+        Returns
+        -------
+        sigma : numpy.ndarray
+            (W, P) Re(lambda) [1/s] of the most unstable mode (first order about the centre
+            where a draw in the box can make some mode unstable, the centre's elsewhere);
+            -inf where the model does not hold.
+        in_band : numpy.ndarray
+            (W, P) bool: that mode's frequency is in the band.
+
+        Raises
+        ------
+        CalibrationError
+            theta of the wrong shape or not finite.
+        """
+        theta = self._check(theta)
+        w = len(theta)
+        best = np.broadcast_to(self._rest[:, None, :], (2, w, self.obs.points)).copy()
+        column, margin, rates, band = self._candidates
+        if len(margin):
+            at = self._candidates_at
+            changes = self._changes(theta, at)
+            mean, bound = _batch_bounds(changes, column, rates, np.abs(rates), margin)
+            # a pair under another's lower bound in its band for the whole batch is not the max
+            floor = np.full((2, len(at[0])), -np.inf)
+            np.maximum.at(floor, (band, column), mean - bound)
+            pairs = np.flatnonzero(mean + bound >= floor[band, column])
+            group = column[pairs] * 2 + band[pairs]
+            pairs = pairs[np.argsort(group, kind="stable")]
+            cells, starts = np.unique(column[pairs] * 2 + band[pairs], return_index=True)
+            growth = _expanded(*changes, column[pairs], rates[:, pairs], margin[pairs])
+            g = np.maximum.reduceat(growth, starts, axis=0)  # (cells, W)
+            best[cells % 2, :, at[0][cells // 2]] = np.maximum(
+                best[cells % 2, :, at[0][cells // 2]], g
+            )
+        sigma = np.where(self.valid, np.maximum(best[0], best[1]), -np.inf)
+        return sigma, (best[0] >= best[1]) & self.valid
 
     def _contest_margins(self, theta: np.ndarray) -> np.ndarray:
         """(W, len(contested)) margin of the heard squeak at the contested points: the
@@ -450,16 +552,8 @@ class GrowthLikelihood:
         if not len(self.active):
             return out.T
         changes = self._changes(theta)
-        column, rates, size = self._column, self._rates, self._abs_rates
-        mean = self._margin.copy()
-        bound = np.zeros(len(mean))
-        for k, change in enumerate(changes[:2]):
-            centre = change.mean(axis=1)
-            mean += rates[k] * centre[column]
-            bound += size[k] * np.abs(change - centre[:, None]).max(axis=1)[column]
-        centre = changes[2].mean(axis=1)
-        mean += centre @ rates[2:]
-        bound += np.abs(changes[2] - centre[:, None]).max(axis=1) @ size[2:]
+        column = self._column
+        mean, bound = _batch_bounds(changes, column, self._rates, self._abs_rates, self._margin)
         sure = np.maximum.reduceat(mean - bound, self._starts) > 0
         out[sure] = True
         pairs = np.flatnonzero((mean + bound > 0) & ~sure[column])
