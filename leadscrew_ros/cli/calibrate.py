@@ -56,7 +56,7 @@ def exit_status(result: CalibrationResult) -> int:
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     """`calibrate`: gather, calibrate, write; exit status."""
-    from ..model.calibration import DetectionErrors, Prior, ThinSettings
+    from ..model.calibration import DetectionErrors, HearingPrior, Prior, ThinSettings
     from ..model.physics.parameters import ParameterError
     from ..review.calibration.sampling import SamplerSettings
     from ..review.calibration.settings import BOTH, DEFAULT_NAMES, CalibrationSettings
@@ -67,6 +67,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         CalibrationSettings,
         names=tuple(args.calibrate) or DEFAULT_NAMES,
         errors=settings_from(args, DetectionErrors),
+        hearing=settings_from(args, HearingPrior),
         sampler=settings_from(args, SamplerSettings),
     )
     # the prior: the model options; with both formulations each gets the prior's values
@@ -175,7 +176,7 @@ def _calibrate(
 def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     """Add `calibrate` to `sub`, with the model options (the prior) of a `common_parser` of its
     own whose --formulation also takes 'both' (so `common` is not used)."""
-    from ..model.calibration import DetectionErrors, ThinSettings
+    from ..model.calibration import DetectionErrors, HearingPrior, ThinSettings
     from ..review.calibration.sampling import SamplerSettings
     from ..review.calibration.settings import BOTH, DEFAULT_NAMES, CalibrationSettings
 
@@ -218,6 +219,13 @@ def add_parsers(sub: argparse._SubParsersAction, common: list[Parser]) -> None:
     add_settings_options(
         p.add_argument_group("detection errors (the likelihood's model of the detector)"),
         DetectionErrors,
+    )
+    add_settings_options(
+        p.add_argument_group(
+            "hearing (the observation model's prior of the bench's detection threshold and "
+            "floor depth, and of the onset growth rates)"
+        ),
+        HearingPrior,
     )
     add_settings_options(p.add_argument_group("sampler (emcee)"), SamplerSettings)
     add_settings_options(

@@ -95,4 +95,14 @@ def synthetic_unit(
         unit_id, [f"{unit_id}.mcap"], times, speed, load, nut, heard,
         np.where(heard, 224.0, np.nan), HOP_S,
     )  # fmt: skip
-    return SyntheticUnit(truth, obs, squeaks)
+    # heard where it squeaks, at once: the frames without their order, which the likelihood
+    # then takes as heard where the model squeaks (`GrowthLikelihood`), as they were made
+    return SyntheticUnit(truth, unordered(obs), squeaks)
+
+
+def unordered(obs: Observations) -> Observations:
+    """The observations without their frame sequence."""
+    return Observations(
+        obs.unit_id, obs.logs, obs.speed_rad_s, obs.load_n, obs.nut_position_m, obs.frames,
+        obs.heard, obs.heard_hz, obs.frame_s,
+    )  # fmt: skip

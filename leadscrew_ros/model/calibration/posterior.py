@@ -102,6 +102,10 @@ class UnitPosterior:
         posterior (`fit_population`) keeps its unit's: it is not an input to another fit.
     learned : bool
         The likelihood varies over the prior's draws: the data say something.
+    grid_weights : numpy.ndarray or None
+        (S, K) per sample the posterior weights of the observation model's grid of detection
+        threshold and floor depth (`amplitude.AmplitudeLikelihood.responsibilities`,
+        flattened), under the grid weights it was sampled with; None without that model.
     """
 
     unit_id: str
@@ -116,6 +120,7 @@ class UnitPosterior:
     seconds: float
     prior: Prior
     learned: bool
+    grid_weights: np.ndarray | None = None
 
     def drop(self) -> np.ndarray:
         """(S,) the friction drop mu_s - mu_k of each sample (a name not calibrated at its

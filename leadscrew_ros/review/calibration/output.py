@@ -111,6 +111,7 @@ def document(result: CalibrationResult, context: dict[str, Any]) -> dict[str, An
             "units": sum(u.hierarchical is not None for u in run.units),
         },
         "calibrated": _calibrated(run),
+        "hearing": None if run.hearing is None else result.settings.hearing.summary(run.hearing),
         "held_out": {
             **_run_dict(run),
             "reliability": run.held_out.reliability(result.settings.reliability_bins),
@@ -256,6 +257,20 @@ def text(result: CalibrationResult, out: Path | None = None) -> str:
             )
         )
         lines += [f"  clipped: {note}" for note in written["notes"]]
+    if run.hearing is not None:
+        g = result.settings.hearing.summary(run.hearing)
+        lines.append(
+            "bench hearing (the observation model's grid, from the training units; prior mean "
+            "+- SD): "
+            + "; ".join(
+                f"{label} {v['mean']:.0f} dB [{v['q05']:.0f}, {v['q95']:.0f}] "
+                f"(prior {v['prior_mean']:.0f} +- {v['prior_sd']:.0f})"
+                for label, v in (
+                    ("detection threshold over the floor", g["threshold_db"]),
+                    ("limit cycle over the floor", g["depth_db"]),
+                )
+            )
+        )
     h = run.held_out
     lines.append(
         f"held-out check ({len(h.units)} units, {h.frames} frames): Brier score prior "

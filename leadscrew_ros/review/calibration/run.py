@@ -55,12 +55,13 @@ from ...model.calibration import (
     Prior,
     ThinSettings,
 )
+from ...model.calibration.amplitude import HearingPrior
 from ...model.calibration.posterior import Population, UnitPosterior
 from ...model.physics.parameters import ParameterError
 from ...model.uncertainty.scatter import LIVE_SAMPLES, Scatter
 from ..timeline import ModelSpec, predict_jobs
 from .gather import Gathered, by_unit
-from .sampling import SamplerSettings, calibrate_unit, fit_population, unit_seed
+from .sampling import SamplerSettings, calibrate_unit, fit_population, share_hearing, unit_seed
 from .settings import CalibrationSettings
 
 if TYPE_CHECKING:
@@ -179,6 +180,7 @@ def calibrate_task(
     names: tuple[str, ...],
     errors: DetectionErrors,
     sampler: SamplerSettings,
+    hearing: HearingPrior | None = None,
 ) -> UnitTask:
     """One unit (the body of a Dask task): `calibrate_unit` and, when it learned something,
     the frequency match at its posterior mean; what goes wrong is the unit's status, never an
@@ -196,13 +198,15 @@ def calibrate_task(
         The detection error model.
     sampler : SamplerSettings
         Walkers, steps, the run's seed.
+    hearing : HearingPrior, optional
+        The observation model's grid prior; the defaults when None.
 
     Returns
     -------
     UnitTask
     """
     try:
-        post = calibrate_unit(_model(spec), obs, names, errors, sampler)
+        post = calibrate_unit(_model(spec), obs, names, errors, sampler, hearing=hearing)
         if not post.learned or not len(post.samples):
             return UnitTask(post, post.status)
         mean = post.samples.mean(axis=0)
@@ -441,6 +445,10 @@ class FormulationRun:
     held_out : HeldOut
     notes : list of str
         What `params` and `scatter` clipped to the valid ranges (`Population.notes`).
+    hearing : numpy.ndarray or None
+        (Kd, Kh) the bench's log posterior over the observation model's grid of detection
+        threshold and floor depth, from the training units (`sampling.share_hearing`); None
+        without that model.
     """
 
     formulation: str
@@ -452,6 +460,7 @@ class FormulationRun:
     scatter: Scatter | None = None
     held_out: HeldOut = field(default_factory=HeldOut)
     notes: list[str] = field(default_factory=list)
+    hearing: np.ndarray | None = None
 
     @property
     def converged(self) -> bool:
@@ -714,6 +723,7 @@ def _calibrate_runs(runs: list[FormulationRun], settings: CalibrationSettings, c
                 settings.names,
                 settings.errors,
                 settings.sampler,
+                settings.hearing,
                 pure=False,
             )
             for u in run.units
@@ -731,6 +741,14 @@ def _calibrate_runs(runs: list[FormulationRun], settings: CalibrationSettings, c
                 u.posterior, u.status = task.posterior, task.status
                 u.matched_frames, u.heard_frames = task.matched_frames, task.heard_frames
     training = [[u for u in run.units if u.calibrated and not u.held_out] for run in runs]
+    for run, units in zip(runs, training, strict=True):
+        run.hearing, shared = share_hearing(
+            [u.posterior for u in units if u.posterior is not None],
+            settings.hearing,
+            settings.sampler.seed,
+        )
+        for u, post in zip([u for u in units if u.posterior is not None], shared, strict=True):
+            u.posterior = post
     fits = _fit_populations(runs, training, settings, client)
     for run, units, done in zip(runs, training, fits, strict=True):
         if isinstance(done, BaseException):

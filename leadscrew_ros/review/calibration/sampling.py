@@ -34,13 +34,14 @@ from __future__ import annotations
 import hashlib
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import emcee
 import numpy as np
 from emcee.autocorr import integrated_time
 from threadpoolctl import threadpool_limits
 
+from ...model.calibration.amplitude import AmplitudeLikelihood, HearingPrior, bench_posterior
 from ...model.calibration.likelihood import DetectionErrors, GrowthLikelihood
 from ...model.calibration.observations import CalibrationError, Observations
 from ...model.calibration.population import HyperModel, reweighted
@@ -198,6 +199,7 @@ def calibrate_unit(
     errors: DetectionErrors | None = None,
     settings: SamplerSettings | None = None,
     centre: ScrewParameters | None = None,
+    hearing: HearingPrior | None = None,
 ) -> UnitPosterior:
     """One unit's posterior of `names` given its observations (module docstring).
 
@@ -217,6 +219,10 @@ def calibrate_unit(
     centre : ScrewParameters, optional
         The first expansion centre; the model's parameters when None (the answer does not
         depend on it beyond the sampling error).
+    hearing : HearingPrior, optional
+        The observation model's grid prior (`amplitude`); the defaults when None. Used when
+        the observations keep their frame sequence; without it the frames are taken as heard
+        where the model squeaks (`GrowthLikelihood`).
 
     Returns
     -------
@@ -229,7 +235,33 @@ def calibrate_unit(
         A name that cannot be calibrated, or one without a prior SD (``--scatter NAME=SD``).
     """
     with threadpool_limits(limits=1, user_api="blas"):  # small products: threads only spin
-        return _calibrate_unit(model, obs, names, errors, settings, centre)
+        return _calibrate_unit(model, obs, names, errors, settings, centre, hearing)
+
+
+Likelihood = GrowthLikelihood | AmplitudeLikelihood
+
+
+def _likelihood(
+    model: SqueakModel,
+    obs: Observations,
+    names: Sequence[str],
+    errors: DetectionErrors,
+    reach: Prior,
+    hearing: HearingPrior | None,
+) -> Likelihood:
+    """The observation model where the frames keep their order, else heard-where-it-squeaks."""
+    growth = GrowthLikelihood(model, obs, names, errors, reach)
+    return AmplitudeLikelihood(growth, hearing) if len(obs.sequence) else growth
+
+
+def _grid_weights(likelihood: Likelihood, samples: np.ndarray) -> np.ndarray | None:
+    """(S, K) the samples' grid responsibilities (None without the observation model)."""
+    if not isinstance(likelihood, AmplitudeLikelihood):
+        return None
+    chunks = [
+        likelihood.responsibilities(samples[k : k + 256]) for k in range(0, len(samples), 256)
+    ]
+    return np.concatenate(chunks).reshape(len(samples), -1)
 
 
 def _calibrate_unit(
@@ -239,6 +271,7 @@ def _calibrate_unit(
     errors: DetectionErrors | None,
     settings: SamplerSettings | None,
     centre: ScrewParameters | None,
+    hearing: HearingPrior | None = None,
 ) -> UnitPosterior:
     start_time = time.perf_counter()
     settings, errors = settings or SamplerSettings(), errors or DetectionErrors()
@@ -246,7 +279,7 @@ def _calibrate_unit(
     interim = prior.widened(settings.prior_widen)
     rng = np.random.default_rng(unit_seed(settings.seed, obs.unit_id))
     centre_model = model if centre is None else SqueakModel(centre, model.scatter)
-    likelihood = GrowthLikelihood(centre_model, obs, interim.names, errors, interim)
+    likelihood = _likelihood(centre_model, obs, interim.names, errors, interim, hearing)
     evaluations = 0
 
     def log_prob(u: np.ndarray) -> np.ndarray:  # the likelihood is -inf outside the domain
@@ -268,6 +301,7 @@ def _calibrate_unit(
             seconds=time.perf_counter() - start_time,
             prior=density,
             learned=learned,
+            grid_weights=_grid_weights(likelihood, samples),
         )
 
     u = interim.draw(settings.check_draws, rng)
@@ -338,7 +372,7 @@ def _calibrate_unit(
     )
 
 
-def _nothing_to_learn(obs: Observations, likelihood: GrowthLikelihood) -> str:
+def _nothing_to_learn(obs: Observations, likelihood: Likelihood) -> str:
     valid = likelihood.valid
     heard = int(obs.heard[valid].sum())
     if not valid.any():
@@ -351,6 +385,64 @@ def _nothing_to_learn(obs: Observations, likelihood: GrowthLikelihood) -> str:
         f"nothing to learn: {what}, and no prior draw changes the predicted squeak at the "
         f"{int(valid.sum())} valid operating points; the prior is kept"
     )
+
+
+def share_hearing(
+    units: list[UnitPosterior], hearing: HearingPrior | None = None, seed: int = 0
+) -> tuple[np.ndarray | None, list[UnitPosterior]]:
+    """The bench's detection threshold and floor depth from all its units, and each unit's
+    samples re-weighted to it (`amplitude`: the grid is the bench's, not the unit's).
+
+    A unit was sampled with the grid's prior; its posterior given the other units' data is
+    its samples re-weighted by sum_k r_k(theta) p_-u(k) / p(k), with r_k the sample's grid
+    responsibilities and p_-u the bench's grid posterior from the other units (its own data
+    are in its likelihood already), then resampled (seeded by its id).
+
+    Parameters
+    ----------
+    units : list of UnitPosterior
+        The units of one bench (one run, one formulation).
+    hearing : HearingPrior, optional
+        The grid's prior; the defaults when None.
+    seed : int
+        The run's seed.
+
+    Returns
+    -------
+    log_posterior : numpy.ndarray or None
+        (Kd, Kh) the bench's grid log posterior from all units; None when no unit has the
+        observation model.
+    units : list of UnitPosterior
+        In order; the re-weighted ones with their ESS capped at the weights' (Kish) size.
+    """
+    hearing = hearing or HearingPrior()
+    _, _, log_prior = hearing.grid()
+    grid = [k for k, u in enumerate(units) if u.grid_weights is not None and len(u.samples)]
+    if not grid:
+        return None, units
+    own = [np.asarray(units[k].grid_weights).mean(axis=0) for k in grid]
+    flat = log_prior.ravel()
+    finite = np.isfinite(flat)
+    out = list(units)
+    for j, k in enumerate(grid if len(grid) > 1 else []):
+        unit = units[k]
+        others = bench_posterior(flat, own[:j] + own[j + 1 :])
+        ratio = np.where(finite, np.exp(others - np.where(finite, flat, 0.0)), 0.0)
+        weights = np.asarray(unit.grid_weights)
+        w = weights @ ratio
+        if not (np.all(np.isfinite(w)) and w.sum() > 0):
+            continue
+        w = w / w.sum()
+        rng = np.random.default_rng(unit_seed(seed, unit.unit_id, "hearing"))
+        pick = rng.choice(len(w), size=len(w), p=w)
+        kish = 1.0 / float(np.sum(w * w))
+        out[k] = replace(
+            unit,
+            samples=unit.samples[pick],
+            grid_weights=weights[pick],
+            ess={n: min(e, kish) for n, e in unit.ess.items()},
+        )
+    return bench_posterior(flat, own).reshape(log_prior.shape), out
 
 
 def fit_population(
@@ -479,4 +571,5 @@ def _hierarchical(
         seconds=unit.seconds,
         prior=unit.prior,
         learned=unit.learned,
+        grid_weights=None if unit.grid_weights is None else unit.grid_weights[pick],
     )

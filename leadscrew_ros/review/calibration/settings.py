@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from ...model.calibration import DetectionErrors
+from ...model.calibration import DetectionErrors, HearingPrior
 from ...model.calibration.prior import DEFAULT_NAMES, check_names
 from ...model.physics.metadata import check, setting
 from ...model.physics.parameters import FORMULATIONS, ParameterError
@@ -29,6 +29,8 @@ class CalibrationSettings:
         See the field metadata.
     errors : DetectionErrors
         The detector's false-alarm and miss rates in the likelihood.
+    hearing : HearingPrior
+        The observation model's prior of the bench's detection threshold and floor depth.
     sampler : SamplerSettings
         The sampler (its seed also seeds the hold-out split).
     """
@@ -57,6 +59,7 @@ class CalibrationSettings:
         10, "1", "bins of predicted P(squeak) in the held-out reliability curve", 2, 100
     )
     errors: DetectionErrors = field(default_factory=DetectionErrors)
+    hearing: HearingPrior = field(default_factory=HearingPrior)
     sampler: SamplerSettings = field(default_factory=SamplerSettings)
 
     def __post_init__(self) -> None:

@@ -1,0 +1,303 @@
+# SPDX-License-Identifier: Apache-2.0
+"""The calibration's observation model (model/calibration/amplitude.py): the scan of the
+amplitude equation against a frame-by-frame loop, the slow passage's onset delay against its
+closed form, the grid likelihood against the error model written out, the bench's threshold
+recovered from frames it generated, the onset growth rates as data, the bench's grid posterior,
+and the frame sequence kept by thin and merge."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from leadscrew_ros.model.calibration import (
+    AmplitudeLikelihood,
+    CalibrationError,
+    DetectionErrors,
+    HearingPrior,
+    Observations,
+    merge,
+    thin,
+)
+from leadscrew_ros.model.calibration.amplitude import NP_PER_DB, bench_posterior
+
+HOP_S = 0.01
+
+
+class StubGrowth:
+    """What AmplitudeLikelihood needs of a GrowthLikelihood: sigma per point is the point's
+    base rate times theta[:, 0] (+ theta[:, 1] when given), every mode in the band."""
+
+    def __init__(self, obs: Observations, base: np.ndarray, in_band: np.ndarray | None = None):
+        self.obs, self.base = obs, np.asarray(base, float)
+        self.in_band = np.ones(obs.points, bool) if in_band is None else in_band
+        self.errors = DetectionErrors()
+        self.names = ("scale", "offset")
+        self.centre = np.array([1.0, 0.0])
+        self.bounds = (np.array([0.0, -1e3]), np.array([10.0, 1e3]))
+        self.valid = np.ones(obs.points, bool)
+        self.evaluations = 0
+        self.reach = SimpleNamespace(valid=lambda theta: np.ones(len(theta), bool))
+
+    def growth_rates(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        theta = np.atleast_2d(theta)
+        sigma = theta[:, :1] * self.base + theta[:, 1:2]
+        return sigma, np.broadcast_to(self.in_band, sigma.shape)
+
+
+def observations(
+    sequence: np.ndarray,
+    heard: np.ndarray,
+    reset: np.ndarray | None = None,
+    onsets: np.ndarray | None = None,
+    counted: np.ndarray | None = None,
+) -> Observations:
+    """Observations of `points = max(sequence) + 1` points with the given frame sequence."""
+    points = int(sequence.max()) + 1
+    n = len(sequence)
+    counted = np.ones(n, bool) if counted is None else counted
+    use = counted & (sequence >= 0)
+    frames = np.bincount(sequence[use], minlength=points)
+    hits = np.bincount(sequence[use & heard], minlength=points)
+    reset = np.r_[True, np.zeros(n - 1, bool)] if reset is None else reset
+    return Observations(
+        unit_id="u",
+        logs=("log",),
+        speed_rad_s=np.linspace(5.0, 20.0, points),
+        load_n=np.full(points, 100.0),
+        nut_position_m=np.zeros(points),
+        frames=frames,
+        heard=hits,
+        heard_hz=np.full(points, np.nan),
+        frame_s=HOP_S,
+        sequence=sequence.astype(np.int64),
+        frame_heard=heard,
+        frame_counted=counted,
+        frame_reset=reset,
+        onsets=np.zeros((0, 3)) if onsets is None else onsets,
+    )
+
+
+def likelihood(obs: Observations, base: np.ndarray, **kw: Any) -> AmplitudeLikelihood:
+    return AmplitudeLikelihood(StubGrowth(obs, base), **kw)  # type: ignore[arg-type]
+
+
+def loop_amplitude(
+    sigma: np.ndarray, sequence: np.ndarray, reset: np.ndarray, depth: float
+) -> np.ndarray:
+    """(A1) frame by frame: the reference the scan must equal."""
+    a, out = 0.0, []
+    for point, new in zip(sequence.tolist(), reset.tolist(), strict=True):
+        if new:
+            a = 0.0
+        a = 0.0 if point < 0 else min(max(a + sigma[point] * HOP_S, 0.0), depth)
+        out.append(a)
+    return np.array(out)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), depth=st.floats(0.5, 12.0))
+def test_the_scan_is_the_amplitude_equation_frame_by_frame(seed, depth):
+    rng = np.random.default_rng(seed)
+    n, points = int(rng.integers(2, 600)), int(rng.integers(1, 8))
+    # runs of a few frames at one point, some without a point, some resets
+    sequence = np.repeat(rng.integers(-1, points, n), rng.integers(1, 30, n))[:n]
+    sequence[0] = max(sequence[0], 0)
+    sequence[sequence.argmax()] = points - 1
+    reset = rng.random(n) < 0.01
+    reset[0] = True
+    base = rng.uniform(-300.0, 300.0, points)
+    obs = observations(sequence, np.zeros(n, bool), reset)
+    lik = likelihood(obs, base)
+    theta = np.array([[1.0, 0.0], [0.3, 5.0]])
+    for row in range(len(theta)):
+        a, _ = lik.amplitude(theta, depth)
+        sigma = theta[row, 0] * base + theta[row, 1]
+        expected = loop_amplitude(sigma, sequence, reset, depth)
+        np.testing.assert_allclose(a[row], expected, rtol=1e-12, atol=1e-9 * depth)
+
+
+def test_slow_passage_delays_the_onset_to_the_closed_form():
+    """sigma = s t from t = 0: a reaches h at sqrt(2 h / s) (module docstring's delay)."""
+    s, h_db = 20.0, 26.0
+    n = 200
+    times = (np.arange(n) + 1) * HOP_S
+    obs = observations(np.arange(n), np.zeros(n, bool))
+    lik = likelihood(obs, s * (times - HOP_S / 2))  # sigma held over each frame: the midpoint
+    a, _ = lik.amplitude(np.array([[1.0, 0.0]]), 60 * NP_PER_DB)
+    onset = times[np.argmax(a[0] >= h_db * NP_PER_DB)]
+    assert onset == pytest.approx(math.sqrt(2 * h_db * NP_PER_DB / s), abs=HOP_S)
+    assert onset > 0.5  # half a second after sigma crossed zero: not heard where sigma > 0
+
+
+def test_the_grid_likelihood_is_the_error_model_written_out():
+    rng = np.random.default_rng(3)
+    n, points = 480, 40
+    sequence = np.repeat(np.arange(points), n // points)
+    heard = rng.random(n) < 0.4
+    counted = rng.random(n) < 0.9
+    base = np.sin(np.arange(points) / 4.0) * 60.0
+    in_band = rng.random(points) < 0.8
+    obs = observations(sequence, heard, counted=counted)
+    growth = StubGrowth(obs, base, in_band)
+    lik = AmplitudeLikelihood(growth)  # type: ignore[arg-type]
+    theta = np.array([[1.0, 0.0], [1.5, -10.0]])
+    grid = lik.grid_log_likelihood(theta)
+    errors, w = growth.errors, growth.errors.frame_weight(HOP_S)
+    for row in range(len(theta)):
+        for d, depth in enumerate(lik.depth_np):
+            a, hearable = lik.amplitude(theta, depth)
+            for k, h in enumerate(lik.threshold_np):
+                q = errors.heard_probability((a[row] >= h) & hearable[row])
+                expected = w * np.sum(counted * np.where(heard, np.log(q), np.log1p(-q)))
+                assert grid[row, d, k] == pytest.approx(expected, rel=1e-10, abs=1e-9)
+
+
+def test_the_bench_threshold_is_recovered_from_the_frames_it_made():
+    """Frames heard where a >= h_true (depth 55 dB): the grid's posterior favours the cell
+    nearest h_true over cells 2 grid steps away, at the true parameters."""
+    hearing = HearingPrior(threshold_points=8, depth_points=1)
+    h_grid = hearing.grid()[0]
+    truth = float(h_grid[4])
+    t = np.arange(1200) * HOP_S
+    sigma = 40.0 * np.sin(2 * np.pi * t / 4.0)  # two squeaks a stroke, slow passages
+    sequence = np.arange(len(t))
+    obs = observations(sequence, np.zeros(len(t), bool))
+    lik = likelihood(obs, sigma, hearing=hearing)
+    a, _ = lik.amplitude(np.array([[1.0, 0.0]]), float(lik.depth_np[0]))
+    obs = observations(sequence, a[0] >= truth)
+    lik = likelihood(obs, sigma, hearing=hearing)
+    r = lik.responsibilities(np.array([[1.0, 0.0]]))[0, 0]
+    assert int(np.argmax(r)) == 4
+    assert r[4] > 10 * max(r[2], r[6])
+
+
+def test_onset_rates_favour_the_sigma_that_matches_them():
+    n = 100
+    sequence = np.arange(n)
+    onsets = np.array([[30.0, 50.0, 2.0], [70.0, 50.0, 2.0]])
+    obs = observations(sequence, np.zeros(n, bool), onsets=onsets)
+    lik = likelihood(obs, np.full(n, 50.0))
+    ll = lik.log_likelihood(np.array([[1.0, 0.0], [1.5, 0.0], [3.0, 0.0]]))
+    assert ll[0] > ll[1] > ll[2]
+    # an outlier costs a bounded amount: the mixture's floor, not a Gaussian's tail
+    grid_only = logsumexp_grid(lik, np.array([[10.0, 0.0]]))
+    outlier = 2 * math.log(lik.hearing.onset_outlier / lik.hearing.max_rate_per_s)
+    assert lik.log_likelihood(np.array([[10.0, 0.0]]))[0] - grid_only == pytest.approx(
+        outlier, rel=1e-3
+    )
+
+
+def logsumexp_grid(lik: AmplitudeLikelihood, theta: np.ndarray) -> float:
+    from scipy.special import logsumexp
+
+    return float(logsumexp(lik.grid_log_likelihood(theta)[0] + lik.log_weight))
+
+
+def test_the_bench_posterior_multiplies_the_units():
+    hearing = HearingPrior(threshold_points=4, depth_points=2)
+    log_prior = hearing.grid()[2]
+    rng = np.random.default_rng(0)
+    units = []
+    for _ in range(3):
+        p = np.where(np.isfinite(log_prior), rng.random(log_prior.shape), 0.0)
+        units.append(p / p.sum())
+    post = np.exp(bench_posterior(log_prior, units))
+    prior = np.exp(log_prior)
+    expected = np.where(
+        prior > 0, units[0] * units[1] * units[2] / np.where(prior > 0, prior, 1) ** 2, 0
+    )
+    np.testing.assert_allclose(post, expected / expected.sum(), rtol=1e-10, atol=1e-15)
+    np.testing.assert_allclose(np.exp(bench_posterior(log_prior, [])), prior, rtol=1e-12)
+
+
+def test_the_grid_prior_keeps_the_threshold_under_the_limit_cycle():
+    h, depth, log_weight = HearingPrior(threshold_db=40, depth_db=45).grid()
+    assert math.isclose(float(np.exp(log_weight).sum()), 1.0)
+    allowed = np.isfinite(log_weight)
+    assert np.all(h[None, :][allowed.any(axis=0, keepdims=True)] > 0)
+    assert np.all((h[None, :] <= depth[:, None] - 3 * NP_PER_DB)[allowed])
+    assert not allowed.all()  # some cells have the threshold over the depth: no mass
+    with pytest.raises(Exception, match="no threshold lies under the depth"):
+        HearingPrior(threshold_db=150, threshold_sd_db=1, depth_db=40, depth_sd_db=1).grid()
+
+
+def test_thin_keeps_the_frames_in_order_and_merge_chains_the_logs():
+    n = 50
+    times = np.arange(n) * HOP_S
+    speed = np.where(np.arange(n) < 10, 0.0, 10.0 + np.arange(n) * 0.5)
+    valid = speed > 0
+    counted = valid & (np.arange(n) % 7 != 0)
+    heard = (np.arange(n) > 30) & (np.arange(n) < 40)
+    onsets = [(0.31, 40.0, 3.0), (math.nan, 1.0, 1.0)]
+    obs = thin(
+        "u",
+        ["a"],
+        times,
+        np.where(valid, speed, np.nan),
+        np.full(n, 100.0),
+        np.full(n, 0.01),
+        heard,
+        np.where(heard, 900.0, np.nan),
+        HOP_S,
+        counted=counted,
+        valid=valid,
+        onsets=onsets,
+    )
+    assert np.all(obs.sequence[~valid] == -1) and np.all(obs.sequence[valid] >= 0)
+    np.testing.assert_allclose(obs.speed_rad_s[obs.sequence[valid]], speed[valid], rtol=0.02)
+    assert int(obs.frames.sum()) == int(counted.sum())
+    assert int(obs.heard.sum()) == int((heard & counted).sum())
+    assert obs.onsets.tolist() == [[31.0, 40.0, 3.0]]  # the NaN row dropped
+    assert obs.frame_reset.tolist() == [True] + [False] * (n - 1)
+    both = merge([obs, obs])
+    assert len(both.sequence) == 2 * n
+    assert both.frame_reset[0] and both.frame_reset[n] and both.frame_reset.sum() == 2
+    assert both.onsets[:, 0].tolist() == [31.0, 31.0 + n]
+    for half in (slice(0, n), slice(n, 2 * n)):
+        mapped = both.sequence[half][valid]
+        np.testing.assert_allclose(both.speed_rad_s[mapped], obs.speed_rad_s[obs.sequence[valid]])
+    assert int(both.frames.sum()) == 2 * int(counted.sum())
+
+
+def test_a_gap_between_frames_restarts_from_the_floor():
+    times = np.r_[np.arange(10) * HOP_S, 5.0 + np.arange(10) * HOP_S]
+    obs = thin(
+        "u",
+        ["a"],
+        times,
+        np.full(20, 10.0),
+        np.full(20, 50.0),
+        np.zeros(20),
+        np.zeros(20, bool),
+        np.full(20, np.nan),
+        HOP_S,
+    )
+    assert np.flatnonzero(obs.frame_reset).tolist() == [0, 10]
+
+
+def test_observations_without_their_order_are_refused_by_the_observation_model():
+    obs = observations(np.arange(5), np.zeros(5, bool))
+    plain = Observations(
+        "u",
+        ("l",),
+        obs.speed_rad_s,
+        obs.load_n,
+        obs.nut_position_m,
+        obs.frames,
+        obs.heard,
+        obs.heard_hz,
+        HOP_S,
+    )
+    with pytest.raises(CalibrationError, match="no frame sequence"):
+        likelihood(plain, np.zeros(5))
+    with pytest.raises(CalibrationError, match="point that does not exist"):
+        observations(np.array([0, 1, 7]), np.zeros(3, bool)).__class__(
+            **{**obs.__dict__, "sequence": np.array([0, 1, 9, 2, 3])}
+        )
