@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from ..bag.messages import SPEED_COMMAND, SPEED_COMMAND_GUARDED
+from ..model.calibration.amplitude import NP_PER_DB, AmplitudeLikelihood
 from ..model.physics.friction import friction_coefficient
 from ..model.physics.parameters import ScrewParameters, field_info
 from ..model.studies.fields import PROBABILITY_LEVELS
@@ -1342,4 +1343,63 @@ def plot_guard(run: GuardRun, *, title: str = "", fig: Figure | None = None) -> 
     ax[1].set_ylim(-0.02, 1.02)
     ax[1].set_xlabel("time [s]")
     ax[1].legend(loc="upper right", fontsize=8)
+    return fig
+
+
+def plot_amplitude(
+    likelihood: AmplitudeLikelihood,
+    theta: np.ndarray,
+    log_weight: np.ndarray | None = None,
+    *,
+    ax: Axes | None = None,
+) -> Figure:
+    """One unit's heard frames with the observation model's squeak amplitude over them
+    (`model.calibration.amplitude`): the log-amplitude over the floor along the frames at the
+    parameters `theta`, for the grid cell (detection threshold h, floor depth) of largest
+    weight, h as a line, the heard frames shaded; frames not scored are left blank.
+
+    Parameters
+    ----------
+    likelihood : AmplitudeLikelihood
+        The unit's likelihood (its observations).
+    theta : numpy.ndarray
+        (D,) the parameters, in the order of `likelihood.names`.
+    log_weight : numpy.ndarray, optional
+        (Kd, Kh) the grid's weights (the bench's posterior); the likelihood's when None.
+    ax : Axes, optional
+        The axes to draw into; default: a new figure.
+
+    Returns
+    -------
+    Figure
+        The figure drawn into.
+    """
+    fig, ax = _axes(ax, figsize=(10, 3.0), layout="constrained")
+    weight = likelihood.log_weight if log_weight is None else log_weight
+    d, k = np.unravel_index(int(np.argmax(weight)), weight.shape)
+    db = 1.0 / NP_PER_DB
+    depth, h = float(likelihood.depth_np[d]), float(likelihood.threshold_np[k])
+    a, hearable = likelihood.amplitude(np.asarray(theta, float)[None, :], depth)
+    frames = likelihood.scored
+    t = frames * likelihood.obs.frame_s
+    gap = np.r_[False, np.diff(frames) > 1]  # break the line where frames are not scored
+    line = np.where(hearable[0], a[0] * db, np.nan)
+    ax.plot(
+        np.insert(t, np.flatnonzero(gap), np.nan),
+        np.insert(line, np.flatnonzero(gap), np.nan),
+        color="C3",
+        lw=1.4,
+        label="model: squeak level over its floor (mode in the band)",
+    )
+    heard = likelihood.obs.frame_heard[frames]
+    for first, last in _runs(heard):
+        ax.axvspan(t[first], t[last], color="C0", alpha=0.25, lw=0)
+    ax.axhline(h * db, color="k", ls="--", lw=1, label=f"detection threshold h = {h * db:.0f} dB")
+    ax.axhline(depth * db, color="0.5", ls=":", lw=1, label=f"limit cycle {depth * db:.0f} dB")
+    ax.fill_between([], [], color="C0", alpha=0.25, label="heard frames")
+    ax.set_ylim(-2.0, depth * db * 1.08)
+    ax.set_xlabel("time since the unit's first frame [s]")
+    ax.set_ylabel("level over the floor [dB]")
+    ax.set_title(f"unit {likelihood.obs.unit_id}: heard frames and the model's squeak", fontsize=9)
+    ax.legend(loc="upper left", fontsize=8, framealpha=0.8)
     return fig
