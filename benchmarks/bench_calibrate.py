@@ -3,10 +3,11 @@
 cluster, timed by phase.
 
     .venv/bin/python benchmarks/bench_calibrate.py [--units 20] [--duration 12] [--workers 2]
-        [--formulation paper|consistent|both] [--json OUT.json]
+        [--formulation paper|consistent|both] [--clean] [--json OUT.json]
 
 The bench (`bag.virtual_bench.run`, seed 0, drawn from the worked example's population:
-tools/calibration_example.py) is made first and not timed. Then, as `leadscrew-squeak
+tools/calibration_example.py; the realistic bench, whose squeak grows from its floor, unless
+--clean) is made first and not timed. Then, as `leadscrew-squeak
 calibrate` runs it: a new LocalCluster (`fleet.cluster`, its start timed apart), the gather
 (`gather.gather`: each log replayed with its sound and read, one task per log) and the
 calibration (`run.calibrate`: the units' tasks, the population fits, the held-out check).
@@ -51,6 +52,7 @@ def measure(args: argparse.Namespace, root: Path) -> dict:
         formulation="paper" if args.formulation == "both" else args.formulation,
         seed=0,
         population=POPULATION,
+        realistic=not args.clean,
     )
     run(bench, root / "bench")
     prior = SqueakModel(ScrewParameters())
@@ -92,6 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--duration", type=float, default=12.0, help="stroke duration [s]")
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--formulation", default="paper", choices=("paper", "consistent", "both"))
+    p.add_argument("--clean", action="store_true", help="the clean bench (a tone at once)")
     p.add_argument("--json", metavar="OUT.json")
     args = p.parse_args(argv)
     load0 = os.getloadavg()[0]

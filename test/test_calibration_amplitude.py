@@ -301,3 +301,40 @@ def test_observations_without_their_order_are_refused_by_the_observation_model()
         observations(np.array([0, 1, 7]), np.zeros(3, bool)).__class__(
             **{**obs.__dict__, "sequence": np.array([0, 1, 9, 2, 3])}
         )
+
+
+def test_units_share_the_bench_threshold_learned_from_the_others():
+    """share_hearing: a unit whose own frames cannot tell h has its samples re-weighted to
+    the cell the other units favour; the bench's posterior is the product of the units'."""
+    from leadscrew_ros.model.calibration.posterior import UnitPosterior
+    from leadscrew_ros.review.calibration.sampling import share_hearing
+
+    hearing = HearingPrior(threshold_points=2, depth_points=1)
+    log_prior = hearing.grid()[2]
+
+    def unit(uid: str, samples: np.ndarray, weights: np.ndarray) -> UnitPosterior:
+        return UnitPosterior(
+            uid, (uid,), "calibrated", ("x",), samples[:, None], {"x": float(len(samples))}, True, 0, 0,
+            0.0, None, True, weights,  # type: ignore[arg-type]
+        )  # fmt: skip
+
+    n = 4000
+    x = np.linspace(0.0, 1.0, n)
+    # unit a: x < 0.5 goes with cell 0, x >= 0.5 with cell 1, half its samples each
+    a = unit("a", x, np.column_stack([x < 0.5, x >= 0.5]).astype(float))
+    # units b and c favour cell 1, 9:1 each
+    b = unit("b", x, np.tile([0.1, 0.9], (n, 1)))
+    c = unit("c", x, np.tile([0.1, 0.9], (n, 1)))
+    bench, shared = share_hearing([a, b, c], hearing, seed=1)
+    assert bench is not None
+    cell1 = float(np.exp(bench).ravel()[1])
+    assert cell1 == pytest.approx(0.5 * 0.9**2 / (0.5 * 0.9**2 + 0.5 * 0.1**2), rel=1e-9)
+    # a's samples: re-weighted 81:1 towards x >= 0.5
+    share = float(np.mean(shared[0].samples[:, 0] >= 0.5))
+    assert share == pytest.approx(81 / 82, abs=0.01)
+    assert shared[0].ess["x"] == pytest.approx(n * 82**2 / (2 * (1 + 81**2)), rel=1e-6)  # Kish
+    assert shared[1].unit_id == "b" and np.all(
+        shared[0].grid_weights[:, 1] == (shared[0].samples[:, 0] >= 0.5)
+    )
+    one, alone = share_hearing([a], hearing)
+    assert alone[0] is a and one is not None
