@@ -245,7 +245,7 @@ def test_the_held_out_check_scores_the_squeak_the_detector_can_hear():
     for formulation in ("paper", "consistent"):
         nominal = ScrewParameters(formulation=formulation)
         spec = ModelSpec(nominal, tuple(Scatter().sd.items()), 256)
-        heard = heard_probabilities(spec, obs, DEFAULT_NAMES, errors, 0)
+        heard = heard_probabilities(spec, obs, DEFAULT_NAMES, errors, 0)[:, 0]  # per point
         preds = predict_jobs(spec, obs.speed_rad_s, obs.load_n, obs.nut_position_m)
         node = np.array([np.nan if p.probability is None else p.probability for p in preds])
         hz = squeak_frequencies(nominal, obs.speed_rad_s, obs.load_n, obs.nut_position_m)

@@ -61,13 +61,15 @@ class HearingPrior:
     """The prior of the bench's detection threshold and floor depth, and of the growth data
     (module docstring).
 
-    The defaults describe a squeak whose limit cycle stands 40-70 dB over the level it grows
-    from and that is heard some 10-40 dB over that level: the squeak's floor lies under the
-    room's background, which the detector needs a tone to exceed by its TNR threshold.
+    The defaults are wide: a squeak whose limit cycle stands some 15-65 dB over the level it
+    grows from and that is heard 0-40 dB over that level (the squeak's floor lies under the
+    room's background, which the detector needs a tone to exceed by its TNR threshold), down
+    to a tone heard almost at once (a low threshold and a shallow floor: a bench whose tone
+    starts and stops within a frame).
     """
 
     threshold_db: float = setting(
-        25.0,
+        20.0,
         "dB",
         "prior mean of the detection threshold h: the squeak's level over its floor at which "
         "the detector hears it",
@@ -76,10 +78,10 @@ class HearingPrior:
         lo_open=True,
     )
     threshold_sd_db: float = setting(
-        10.0, "dB", "prior SD of the detection threshold", 0.0, 100.0, lo_open=True
+        12.0, "dB", "prior SD of the detection threshold", 0.0, 100.0, lo_open=True
     )
     depth_db: float = setting(
-        55.0,
+        40.0,
         "dB",
         "prior mean of the floor's depth: the limit cycle's level over the floor",
         0.0,
@@ -87,7 +89,7 @@ class HearingPrior:
         lo_open=True,
     )
     depth_sd_db: float = setting(
-        10.0, "dB", "prior SD of the floor's depth", 0.0, 100.0, lo_open=True
+        20.0, "dB", "prior SD of the floor's depth", 0.0, 100.0, lo_open=True
     )
     headroom_db: float = setting(
         3.0,
@@ -100,7 +102,7 @@ class HearingPrior:
     threshold_points: int = setting(
         8, "1", "grid points of the threshold (at equal prior mass)", 1, 64
     )
-    depth_points: int = setting(3, "1", "grid points of the depth (at equal prior mass)", 1, 16)
+    depth_points: int = setting(4, "1", "grid points of the depth (at equal prior mass)", 1, 16)
     onset_error: float = setting(
         0.3,
         "1",
@@ -429,6 +431,33 @@ class AmplitudeLikelihood:
         grid = self.grid_log_likelihood(theta) + self.log_weight
         flat = grid.reshape(len(grid), -1)
         return np.exp(flat - logsumexp(flat, axis=1, keepdims=True)).reshape(grid.shape)
+
+    def heard_probability(self, theta: np.ndarray, batch: int = 64) -> np.ndarray:
+        """Per scored frame, the share of the draws (and of the grid, by its weights) whose
+        squeak stands over the threshold in the detector's band there.
+
+        Parameters
+        ----------
+        theta : numpy.ndarray
+            (W, D) draws of `names` in the fields' units.
+        batch : int
+            Draws per vectorised pass.
+
+        Returns
+        -------
+        numpy.ndarray
+            (m,) P(heard) at the frames of `scored`.
+        """
+        weight = np.exp(self.log_weight - logsumexp(self.log_weight))
+        out = np.zeros(len(self._used))
+        for k in range(0, len(theta), batch):
+            sigma, in_band = self.growth.growth_rates(theta[k : k + batch])
+            hearable = self._hearable(in_band)
+            for d, a in enumerate(self._amplitudes(sigma, self.depth_np)):
+                for j, h in enumerate(self.threshold_np.tolist()):
+                    if weight[d, j] > 0:
+                        out += weight[d, j] * np.sum((a >= h) & hearable, axis=0)
+        return out / max(len(theta), 1)
 
     def recentred(self, params: ScrewParameters) -> AmplitudeLikelihood:
         """The likelihood expanded about other parameters (same observations and grid).

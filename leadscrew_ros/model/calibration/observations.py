@@ -133,6 +133,10 @@ class Observations:
     onsets : numpy.ndarray
         (m, 3): per heard onset with a measured growth rate, its frame (index into
         `sequence`), the rate and its standard error [1/s].
+    motor_off_frames : int
+        Frames where the drive stood (below the model's minimum speed): no squeak there.
+    motor_off_heard : int
+        Of which the detector heard squeak: its own false alarms in the room.
     """
 
     unit_id: str
@@ -149,6 +153,8 @@ class Observations:
     frame_counted: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     frame_reset: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     onsets: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    motor_off_frames: int = 0
+    motor_off_heard: int = 0
 
     def __post_init__(self) -> None:
         sizes = {np.shape(getattr(self, name)) for name in _POINT_ARRAYS}
@@ -267,6 +273,7 @@ def thin(
     counted: ArrayLike | None = None,
     valid: ArrayLike | None = None,
     onsets: Sequence[tuple[float, float, float]] = (),
+    motor_off: ArrayLike | None = None,
 ) -> Observations:
     """Detector frames binned to distinct operating points, and kept in order (module
     docstring).
@@ -299,6 +306,9 @@ def thin(
     onsets : sequence of (float, float, float)
         Heard onsets' (time [s], measured growth rate [1/s], its standard error [1/s]); each
         is kept at the frame nearest its time.
+    motor_off : array_like, optional
+        (n,) bool: the drive stood (none when None): counted with its heard frames apart
+        (`Observations.motor_off_frames`), the detector's false alarms.
 
     Returns
     -------
@@ -321,8 +331,12 @@ def thin(
     }
     flags = np.asarray(heard)
     masks = {
-        name: np.ones(flags.shape, bool) if m is None else np.asarray(m)
-        for name, m in (("valid", valid), ("counted", counted))
+        name: np.full(flags.shape, default) if m is None else np.asarray(m)
+        for name, m, default in (
+            ("valid", valid, True),
+            ("counted", counted, True),
+            ("motor_off", motor_off, False),
+        )
     }
     shapes = {a.shape for a in arrays.values()} | {flags.shape} | {m.shape for m in masks.values()}
     if len(shapes) != 1 or len(next(iter(shapes))) != 1:
@@ -365,6 +379,7 @@ def thin(
         rows = np.array(onsets, float).reshape(-1, 3)
         rows = rows[np.all(np.isfinite(rows), axis=1)]
         rows[:, 0] = np.clip(np.searchsorted(times, rows[:, 0]), 0, flags.size - 1)
+    off = masks["motor_off"]
     return replace(
         obs,
         sequence=sequence,
@@ -372,6 +387,8 @@ def thin(
         frame_counted=use,
         frame_reset=reset,
         onsets=rows,
+        motor_off_frames=int(off.sum()),
+        motor_off_heard=int((off & flags).sum()),
     )
 
 
@@ -422,6 +439,11 @@ def merge(observations: list[Observations], settings: ThinSettings | None = None
         cat("heard_hz"),
         hops[0],
         settings or ThinSettings(),
+    )
+    obs = replace(
+        obs,
+        motor_off_frames=sum(o.motor_off_frames for o in observations),
+        motor_off_heard=sum(o.motor_off_heard for o in observations),
     )
     if any(not len(o.sequence) for o in observations):
         return obs  # one without its order: the merged frames have none either

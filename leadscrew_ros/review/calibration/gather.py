@@ -306,12 +306,15 @@ def observe_replay(
         episodes = _episodes(heard)
         frame_t = _frame_times(first_s if first_s is not None else 0.0, heard)
         use = counted(frame_t, points[:, 0], float(summary["duration_s"]), episodes)
+        ok_sound = np.ones(frame_t.shape, bool)
         for a, b in heard.get("unusable_spans", []):  # no sound there: not an observation
-            use &= (frame_t < a) | (frame_t > b)
+            ok_sound &= (frame_t < a) | (frame_t > b)
+        use &= ok_sound
         j = np.searchsorted(points[:, 0], frame_t, side="right") - 1
         at = points[np.maximum(j, 0)]
         model = SqueakModel(params, Scatter({}))
-        valid = (model.validity_code(at[:, 1], at[:, 2]) == Validity.OK) & (j >= 0)
+        code = model.validity_code(at[:, 1], at[:, 2])
+        valid = (code == Validity.OK) & (j >= 0)
         use &= valid
         span = (j >= 0) & (frame_t <= float(summary["duration_s"]))
         flags, hz = frames_heard(frame_t, episodes)
@@ -344,6 +347,7 @@ def observe_replay(
             counted=use[span],
             valid=valid[span],
             onsets=_onsets(heard),
+            motor_off=((code == Validity.BELOW_MIN_SPEED) & ok_sound)[span],
         )
     except (OSError, ValueError, LogError) as exc:
         return Gathered(str(directory), name, log, fallback, None, " ".join(str(exc).split()))

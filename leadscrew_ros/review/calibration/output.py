@@ -65,6 +65,8 @@ def _run_dict(run: FormulationRun) -> dict[str, Any]:
         "brier_calibrated": h.brier_calibrated,
         "frames": h.frames,
         "per_unit": {u: {"prior": a, "calibrated": b} for u, (a, b) in h.per_unit.items()},
+        "frequency_match": {"prior": h.frequency_match[0], "calibrated": h.frequency_match[1]},
+        "motor_off": {"heard": h.background[0], "frames": h.background[1]},
         "warnings": h.warnings(),
     }
 
@@ -276,6 +278,18 @@ def text(result: CalibrationResult, out: Path | None = None) -> str:
         f"held-out check ({len(h.units)} units, {h.frames} frames): Brier score prior "
         f"{_score(h.brier_prior)}, calibrated {_score(h.brier_calibrated)}"
     )
+    m_prior, m_cal = h.frequency_match
+    if m_prior is not None and m_cal is not None:
+        lines.append(
+            f"  frequency match of the held-out units' heard frames: prior {m_prior:.3f}, "
+            f"calibrated {m_cal:.3f}"
+        )
+    heard_off, off = h.background
+    if off:
+        lines.append(
+            f"  heard with the motor off (the detector's own false alarms): {heard_off} of "
+            f"{off} frames ({100 * heard_off / off:.1f} %)"
+        )
     lines += [f"  warning: {w}" for w in h.warnings()]
     c = result.comparison
     if c is not None:

@@ -55,7 +55,7 @@ from ...model.calibration import (
     Prior,
     ThinSettings,
 )
-from ...model.calibration.amplitude import HearingPrior
+from ...model.calibration.amplitude import AmplitudeLikelihood, HearingPrior
 from ...model.calibration.posterior import Population, UnitPosterior
 from ...model.physics.parameters import ParameterError
 from ...model.uncertainty.scatter import LIVE_SAMPLES, Scatter
@@ -87,39 +87,55 @@ def heard_probabilities(
     names: tuple[str, ...],
     errors: DetectionErrors,
     seed: int,
+    hearing: HearingPrior | None = None,
+    log_weight: np.ndarray | None = None,
 ) -> np.ndarray:
-    """P(a heard squeak) at each distinct operating point of `obs` under `spec`'s population:
-    the share of `spec.samples` draws of `names` from its nominal values and scatter (seeded
-    by `seed` and the unit) whose most unstable mode squeaks in the detector's band, as the
-    likelihood decides it (`GrowthLikelihood.squeaks`, expanded at the population's centre),
-    nan where the model does not hold. The event the frames record: a squeak the detector
-    cannot hear (above its band, the consistent formulation's T3 at ~13 kHz) is silence to
-    it, so the node's P(squeak) of any mode would score a right prediction as a false alarm.
+    """P(a heard squeak) for a held-out unit's frames under `spec`'s population: the share of
+    `spec.samples` draws of `names` from its nominal values and scatter (seeded by `seed` and
+    the unit) whose squeak the detector hears. With the frames in order, under the
+    observation model (`AmplitudeLikelihood.heard_probability`, the bench's threshold and
+    depth by `log_weight`), per scored frame; without, per distinct point where the most
+    unstable mode squeaks in the detector's band (`GrowthLikelihood.squeaks`), nan where the
+    model does not hold. Both expanded at the population's centre. The event the frames
+    record: a squeak the detector cannot hear (above its band, the consistent formulation's
+    T3 at ~13 kHz) is silence to it, so the node's P(squeak) of any mode would score a right
+    prediction as a false alarm.
 
     Parameters
     ----------
     spec : ModelSpec
         The population (parameters, scatter, number of draws).
     obs : Observations
-        A unit's points.
+        A unit's frames.
     names : tuple of str
         The calibrated parameters (drawn; the others at `spec`'s values).
     errors : DetectionErrors
         The detector's band.
     seed : int
         The run's seed.
+    hearing : HearingPrior, optional
+        The observation model's grid; the defaults when None.
+    log_weight : numpy.ndarray, optional
+        The grid's weights (the bench's posterior); the prior's when None.
 
     Returns
     -------
     numpy.ndarray
-        (P,) probabilities.
+        (rows, 3): P, frames, heard frames, per scored frame or distinct point.
     """
     model = _model(spec)
     prior = Prior(spec.params, model.scatter, names)
-    likelihood = GrowthLikelihood(model, obs, names, errors)
+    growth = GrowthLikelihood(model, obs, names, errors)
     rng = np.random.default_rng(unit_seed(seed, obs.unit_id, "held-out"))
-    squeaks = likelihood.squeaks(prior.from_u(prior.draw(spec.samples, rng)))
-    return np.where(likelihood.valid, squeaks.mean(axis=0), math.nan)
+    theta = prior.from_u(prior.draw(spec.samples, rng))
+    if not len(obs.sequence):
+        p = np.where(growth.valid, growth.squeaks(theta).mean(axis=0), math.nan)
+        return np.column_stack([p, obs.frames, obs.heard]).astype(float)
+    likelihood = AmplitudeLikelihood(growth, hearing, log_weight)
+    heard = obs.frame_heard[likelihood.scored]
+    return np.column_stack(
+        [likelihood.heard_probability(theta), np.ones(len(heard)), heard]
+    ).astype(float)
 
 
 def frequency_match(params: ScrewParameters, obs: Observations) -> tuple[int, int]:
@@ -321,7 +337,15 @@ class HeldOut:
     per_unit : dict of str to (float, float)
         Unit -> (prior, calibrated) Brier score.
     points : numpy.ndarray
-        Rows (P prior, P calibrated, frames, heard) of every distinct point counted.
+        Rows (P prior, P calibrated, frames, heard) of every scored frame (or distinct point,
+        for observations without their order).
+    background : tuple of (int, int)
+        (heard, frames) of the held-out units' frames with the motor off: the detector's own
+        false alarms in the room (no squeak can be there).
+    frequency_match : tuple of (float or None, float or None)
+        Share of the held-out units' heard frames (with a frequency) at an unstable mode of the
+        prior's and of the calibrated population's centre (`frequency_match`); None when
+        nothing was heard.
     """
 
     units: list[str] = field(default_factory=list)
@@ -330,6 +354,8 @@ class HeldOut:
     brier_calibrated: float | None = None
     per_unit: dict[str, tuple[float, float]] = field(default_factory=dict)
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    background: tuple[int, int] = (0, 0)
+    frequency_match: tuple[float | None, float | None] = (None, None)
 
     def warnings(self) -> list[str]:
         """What makes the check weak or bad: fewer than `MIN_HELD_OUT` units held out, or
@@ -397,21 +423,32 @@ def brier(p: np.ndarray, frames: np.ndarray, heard: np.ndarray) -> float:
 
 
 def held_out_check(
-    units: list[UnitResult], prior: np.ndarray | list, calibrated: np.ndarray | list
+    units: list[UnitResult],
+    prior: list[np.ndarray],
+    calibrated: list[np.ndarray],
+    matches: list[tuple[tuple[int, int], tuple[int, int]]] | None = None,
 ) -> HeldOut:
-    """The held-out check from each held-out unit's P at its points (prior, calibrated)."""
+    """The held-out check from each held-out unit's rows (P, frames, heard) of
+    `heard_probabilities` (prior, calibrated) and its `frequency_match` at the prior's and the
+    calibrated population's centres."""
     rows, per_unit = [], {}
     for u, pp, pc in zip(units, prior, calibrated, strict=True):
-        obs = u.observations
-        assert obs is not None  # held-out units have observations
-        ok = np.isfinite(pp) & np.isfinite(pc)
+        ok = np.isfinite(pp[:, 0]) & np.isfinite(pc[:, 0])
         if not ok.any():
             continue
-        f, h = obs.frames[ok].astype(float), obs.heard[ok].astype(float)
-        per_unit[u.unit_id] = (brier(pp[ok], f, h), brier(pc[ok], f, h))
-        rows.append(np.column_stack([pp[ok], pc[ok], f, h]))
+        f, h = pp[ok, 1], pp[ok, 2]
+        per_unit[u.unit_id] = (brier(pp[ok, 0], f, h), brier(pc[ok, 0], f, h))
+        rows.append(np.column_stack([pp[ok, 0], pc[ok, 0], f, h]))
+    off = [u.observations for u in units if u.observations is not None]
+    background = (
+        sum(o.motor_off_heard for o in off),
+        sum(o.motor_off_frames for o in off),
+    )
+    matched = [sum(m[k][0] for m in matches or []) for k in (0, 1)]
+    heard = sum(m[0][1] for m in matches or [])
+    match = (matched[0] / heard, matched[1] / heard) if heard else (None, None)
     if not rows:
-        return HeldOut([u.unit_id for u in units])
+        return HeldOut([u.unit_id for u in units], background=background, frequency_match=match)
     pts = np.concatenate(rows)
     return HeldOut(
         [u.unit_id for u in units],
@@ -420,6 +457,8 @@ def held_out_check(
         brier(pts[:, 1], pts[:, 2], pts[:, 3]),
         per_unit,
         pts,
+        background,
+        match,
     )
 
 
@@ -774,8 +813,14 @@ def _calibrate_runs(runs: list[FormulationRun], settings: CalibrationSettings, c
                             settings.names,
                             settings.errors,
                             settings.sampler.seed,
+                            settings.hearing,
+                            run.hearing,
                             pure=False,
                         )
+                        for spec in (run.prior, calibrated)
+                    )
+                    + tuple(
+                        client.submit(frequency_match, spec.params, u.observations, pure=False)
                         for spec in (run.prior, calibrated)
                     )
                     for u in held
@@ -786,11 +831,13 @@ def _calibrate_runs(runs: list[FormulationRun], settings: CalibrationSettings, c
         if not jobs:
             run.held_out = HeldOut([u.unit_id for u in held])
             continue
-        p = [(_result(a), _result(b)) for a, b in jobs]
-        if any(isinstance(x, BaseException) for pair in p for x in pair):
+        p = [tuple(_result(f) for f in job) for job in jobs]
+        if any(isinstance(x, BaseException) for job in p for x in job):
             run.held_out = HeldOut([u.unit_id for u in held])
             continue
-        run.held_out = held_out_check(held, [a for a, _ in p], [b for _, b in p])
+        run.held_out = held_out_check(
+            held, [j[0] for j in p], [j[1] for j in p], [(j[2], j[3]) for j in p]
+        )
     _populations_of_all(runs, settings, client)
 
 
