@@ -117,6 +117,50 @@ def test_the_fleet_mean_of_the_drop_is_found_and_narrower_than_the_prior(fleet):
     )
 
 
+def test_the_calibrated_units_are_closer_to_their_truth_than_the_prior(fleet):
+    """Not only better scored: on the realistic bench (a squeak grown from its floor, a
+    geared motor, a fan, mains hum, a room) each name's posterior means are closer to the
+    units' own values than the prior's centre, on average over the units, and the friction
+    drop and the damping are in most units."""
+    truth, doc, _, _ = fleet
+    prior = doc["settings"]["prior"]["params"]
+    units = {u["unit_id"]: u for u in doc["units"]}
+    log = {"modal_damping", "friction_decay_s_m"}
+
+    def error(name: str, value: float, true: float) -> float:
+        return abs(math.log(value / true)) if name in log else abs(value - true)
+
+    for name in ("friction_drop", "modal_damping", "friction_decay_s_m"):
+        rows = []
+        for t in truth["units"]:
+            p = t["params"]
+            value = units[t["unit_id"]]["posterior"][name]["mean"]
+            if name == "friction_drop":
+                true, before = (
+                    p["mu_static"] - p["mu_kinetic"],
+                    prior["mu_static"] - prior["mu_kinetic"],
+                )
+            else:
+                true, before = p[name], prior[name]
+            rows.append((error(name, value, true), error(name, before, true)))
+        calibrated, before = np.mean(rows, axis=0)
+        assert calibrated < before, (name, calibrated, before)
+        if name != "friction_decay_s_m":
+            assert sum(c < b for c, b in rows) >= 0.75 * len(rows), (name, rows)
+
+
+def test_the_held_out_check_reports_the_frequency_match_and_the_motor_off_frames(fleet):
+    _, doc, _, out = fleet
+    h = doc["held_out"]
+    assert h["frequency_match"]["calibrated"] is not None
+    assert h["motor_off"]["frames"] > 0  # the realistic bench rests before and after a stroke
+    assert 0 <= h["motor_off"]["heard"] <= h["motor_off"]["frames"]
+    text = (out / "calibration.txt").read_text()
+    assert "heard with the motor off" in text and "frequency match of the held-out" in text
+    g = doc["hearing"]
+    assert "bench hearing" in text and g["threshold_db"]["q05"] <= g["threshold_db"]["mean"]
+
+
 def test_the_held_out_units_are_predicted_better_with_the_calibrated_population(fleet):
     _, doc, _, _ = fleet
     h = doc["held_out"]

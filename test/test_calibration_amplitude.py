@@ -120,7 +120,8 @@ def test_the_scan_is_the_amplitude_equation_frame_by_frame(seed, depth):
         a, _ = lik.amplitude(theta, depth)
         sigma = theta[row, 0] * base + theta[row, 1]
         expected = loop_amplitude(sigma, sequence, reset, depth)
-        np.testing.assert_allclose(a[row], expected, rtol=1e-12, atol=1e-9 * depth)
+        np.testing.assert_allclose(a[row], expected[lik.scored], rtol=1e-12, atol=1e-9 * depth)
+    assert np.array_equal(lik.scored, np.flatnonzero(sequence >= 0))
 
 
 def test_slow_passage_delays_the_onset_to_the_closed_form():
@@ -155,7 +156,8 @@ def test_the_grid_likelihood_is_the_error_model_written_out():
             a, hearable = lik.amplitude(theta, depth)
             for k, h in enumerate(lik.threshold_np):
                 q = errors.heard_probability((a[row] >= h) & hearable[row])
-                expected = w * np.sum(counted * np.where(heard, np.log(q), np.log1p(-q)))
+                y = heard[lik.scored]
+                expected = w * np.sum(np.where(y, np.log(q), np.log1p(-q)))
                 assert grid[row, d, k] == pytest.approx(expected, rel=1e-10, abs=1e-9)
 
 
@@ -310,11 +312,11 @@ def test_units_share_the_bench_threshold_learned_from_the_others():
     from leadscrew_ros.review.calibration.sampling import share_hearing
 
     hearing = HearingPrior(threshold_points=2, depth_points=1)
-    log_prior = hearing.grid()[2]
 
     def unit(uid: str, samples: np.ndarray, weights: np.ndarray) -> UnitPosterior:
         return UnitPosterior(
-            uid, (uid,), "calibrated", ("x",), samples[:, None], {"x": float(len(samples))}, True, 0, 0,
+            uid, (uid,), "calibrated", ("x",), samples[:, None], {"x": float(len(samples))},
+            True, 0, 0,
             0.0, None, True, weights,  # type: ignore[arg-type]
         )  # fmt: skip
 

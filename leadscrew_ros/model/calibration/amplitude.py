@@ -181,7 +181,8 @@ class HearingPrior:
         ):
             db = values / NP_PER_DB
             cdf = np.cumsum(marginal)
-            q05, q95 = (float(db[min(np.searchsorted(cdf, q), len(db) - 1)]) for q in (0.05, 0.95))
+            at = np.minimum(np.searchsorted(cdf, [0.05, 0.95]), len(db) - 1)
+            q05, q95 = (float(x) for x in db[at])
             out[name] = {
                 "mean": float(marginal @ db),
                 "q05": q05,
