@@ -301,3 +301,30 @@ def test_a_posterior_as_wide_as_its_prior_is_prior_alone_and_a_narrow_one_is_not
     assert ident["prior_alone"] == ["mu_static", "mu_kinetic", DROP]
     assert ident["sd_ratio"]["friction_decay_s_m"] == pytest.approx(0.1, rel=0.1)
     assert ident["drop_damping_correlation"] is None
+
+
+def test_the_growth_rate_match_decides_between_formulations_when_the_tones_do_not():
+    """compare: the frequency match equal, the growth-rate match 0.9 vs 0.3 decides for the
+    first; with no onsets the held-out score decides as before."""
+    from leadscrew_ros.review.calibration.run import FormulationRun, UnitResult, compare
+    from leadscrew_ros.review.timeline import ModelSpec
+
+    def run(name: str, onsets: tuple[int, int], brier: float) -> FormulationRun:
+        units = [
+            UnitResult(f"u{k}", ["l"], "calibrated", matched_frames=90, heard_frames=100,
+                       matched_onsets=onsets[0], onsets=onsets[1])
+            for k in range(3)
+        ]  # fmt: skip
+        spec = ModelSpec(ScrewParameters(formulation=name), (), 64)
+        r = FormulationRun(name, spec, units)
+        r.held_out = HeldOut(["u0"], 100, 0.1, brier, {"u0": (0.1, brier)})
+        return r
+
+    c = compare(
+        {"paper": run("paper", (9, 10), 0.05), "consistent": run("consistent", (3, 10), 0.04)}
+    )
+    assert (c.supported, c.decided_by) == ("paper", "growth-rate match")
+    c = compare(
+        {"paper": run("paper", (0, 0), 0.05), "consistent": run("consistent", (0, 0), 0.04)}
+    )
+    assert (c.supported, c.decided_by) == ("consistent", "held-out score")

@@ -50,7 +50,9 @@ JSON_FILE, TEXT_FILE, PNG_FILE, YAML_FILE = (
 RULE = (
     f"frequency match (share of the heard frames at an unstable mode predicted at the units' "
     f"posterior means) differing by {FREQUENCY_DECISIVE:g} or more decides, strongly unless "
-    f"the held-out Brier score favours the other by {WEAK_Z:g} standard errors; otherwise the "
+    f"the held-out Brier score favours the other by {WEAK_Z:g} standard errors; then the "
+    f"growth-rate match (share of the onsets' measured growth rates within two SDs of "
+    f"Re(lambda) there) the same way; otherwise the "
     f"lower held-out Brier score, strongly at a mean paired difference over the held-out units "
     f"of {STRONG_Z:g} standard errors or more, weakly at {WEAK_Z:g}, else not distinguishably"
 )
@@ -126,6 +128,7 @@ def document(result: CalibrationResult, context: dict[str, Any]) -> dict[str, An
                 name: {
                     "score": r.score,
                     "frequency_match": r.frequency_match,
+                    "growth_match": r.growth_match,
                     "brier_prior": r.held_out.brier_prior,
                     "population_status": r.population_status,
                     "not_converged": [
@@ -295,6 +298,7 @@ def text(result: CalibrationResult, out: Path | None = None) -> str:
     if c is not None:
         scores = "; ".join(
             f"{k}: held-out Brier {_score(r.score)}, frequency match {_score(r.frequency_match)}"
+            f", growth-rate match {_score(r.growth_match)}"
             for k, r in result.runs.items()
         )
         lines.append(

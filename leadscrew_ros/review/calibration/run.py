@@ -26,7 +26,9 @@ the held-out check (and, with both formulations, which one the data supports).
    population. When the F of the two differ by `FREQUENCY_DECISIVE` or more, the heard tones
    are at one formulation's modes and not the other's: that one is supported, 'strongly'
    unless B favours the other by `WEAK_Z` standard errors or more (then 'weakly, against the
-   held-out score'). Otherwise the one with the lower B is supported; how strongly is the mean
+   held-out score'). Then the growth-rate match G (share of the onsets' measured growth
+   rates within two SDs of Re(lambda) at the unit's posterior mean) decides the same way.
+   Otherwise the one with the lower B is supported; how strongly is the mean
    paired difference of B over the held-out units against its standard error z: 'strongly'
    at `STRONG_Z` or more, 'weakly' at `WEAK_Z` or more, else 'not distinguishably'.
 7. The reported population (calibration.json, calibrated.yaml) is fitted again from every
@@ -58,7 +60,7 @@ from ...model.calibration import (
 from ...model.calibration.amplitude import AmplitudeLikelihood, HearingPrior
 from ...model.calibration.posterior import Population, UnitPosterior
 from ...model.physics.parameters import ParameterError
-from ...model.uncertainty.scatter import LIVE_SAMPLES, Scatter
+from ...model.uncertainty.scatter import DEFAULT_SCATTER, LIVE_SAMPLES, Scatter
 from ..timeline import ModelSpec, predict_jobs
 from .gather import Gathered, by_unit
 from .sampling import SamplerSettings, calibrate_unit, fit_population, share_hearing, unit_seed
@@ -169,6 +171,42 @@ def frequency_match(params: ScrewParameters, obs: Observations) -> tuple[int, in
     return matched, int(obs.heard[idx].sum())
 
 
+def growth_match(
+    params: ScrewParameters, obs: Observations, hearing: HearingPrior | None = None
+) -> tuple[int, int]:
+    """How the onsets' measured growth rates match Re(lambda) of the most unstable mode at
+    `params` (nominal, no scatter) at their frames: within two SDs of (A2)'s spread
+    (`HearingPrior.onset_error` relative, the rate's own standard error).
+
+    Parameters
+    ----------
+    params : ScrewParameters
+        E.g. a unit's posterior mean.
+    obs : Observations
+        Its frames and onsets.
+    hearing : HearingPrior, optional
+        The model error of a rate; the defaults when None.
+
+    Returns
+    -------
+    tuple of (int, int)
+        (onsets matched, onsets at a valid point).
+    """
+    if not len(obs.onsets) or not len(obs.sequence):
+        return 0, 0
+    point = obs.sequence[obs.onsets[:, 0].astype(int)]
+    keep = point >= 0
+    if not keep.any():
+        return 0, 0
+    names = ("modal_damping",)
+    growth = GrowthLikelihood(SqueakModel(params, Scatter(dict(DEFAULT_SCATTER))), obs, names)
+    sigma = growth.growth_rates(growth.centre[None, :])[0][0, point[keep]]
+    rate, se = obs.onsets[keep, 1], obs.onsets[keep, 2]
+    e = (hearing or HearingPrior()).onset_error
+    near = np.abs(rate - sigma) <= 2.0 * np.sqrt(se**2 + (e * rate) ** 2)
+    return int(np.sum(near & np.isfinite(sigma))), int(keep.sum())
+
+
 @dataclass
 class UnitTask:
     """What a unit's task returns.
@@ -182,12 +220,16 @@ class UnitTask:
         Its status, or why it failed.
     matched_frames, heard_frames : int
         `frequency_match` at the posterior mean.
+    matched_onsets, onsets : int
+        `growth_match` at the posterior mean.
     """
 
     posterior: UnitPosterior | None
     status: str
     matched_frames: int = 0
     heard_frames: int = 0
+    matched_onsets: int = 0
+    onsets: int = 0
 
 
 def calibrate_task(
@@ -232,7 +274,12 @@ def calibrate_task(
             )
         except ParameterError:  # a mean outside the domain: no frequency to match there
             return UnitTask(post, post.status, 0, int(obs.heard.sum()))
-        return UnitTask(post, post.status, *frequency_match(params, obs))
+        return UnitTask(
+            post,
+            post.status,
+            *frequency_match(params, obs),
+            *growth_match(params, obs, hearing),
+        )
     except Exception as exc:  # this unit's reason, not the run's end
         return UnitTask(None, f"not calibrated: {type(exc).__name__}: {' '.join(str(exc).split())}")
 
@@ -257,6 +304,8 @@ class UnitResult:
     observations : Observations or None
     matched_frames, heard_frames : int
         The frequency match at its posterior mean.
+    matched_onsets, onsets : int
+        The growth-rate match at its posterior mean.
     """
 
     unit_id: str
@@ -268,6 +317,8 @@ class UnitResult:
     observations: Observations | None = None
     matched_frames: int = 0
     heard_frames: int = 0
+    matched_onsets: int = 0
+    onsets: int = 0
 
     @property
     def reported(self) -> UnitPosterior | None:
@@ -518,6 +569,13 @@ class FormulationRun:
         return sum(u.matched_frames for u in self.units) / heard if heard else None
 
     @property
+    def growth_match(self) -> float | None:
+        """Share of the measured onset growth rates of the calibrated units within two SDs of
+        Re(lambda) at their posterior mean (`growth_match`); None without onsets."""
+        onsets = sum(u.onsets for u in self.units)
+        return sum(u.matched_onsets for u in self.units) / onsets if onsets else None
+
+    @property
     def score(self) -> float | None:
         """The held-out Brier score with the calibrated population (lower is better)."""
         return self.held_out.brier_calibrated
@@ -583,10 +641,22 @@ def compare(runs: dict[str, FormulationRun]) -> Comparison:
             "frequency match",
             _finite(z),
         )
+    ga, gb = a.growth_match, b.growth_match
+    if ga is not None and gb is not None and abs(ga - gb) >= FREQUENCY_DECISIVE:
+        best, other = (na, nb) if ga > gb else (nb, na)
+        z = _paired_z(runs[best], runs[other])
+        against = z is not None and z <= -WEAK_Z
+        return Comparison(
+            best,
+            "weakly, against the held-out score" if against else "strongly",
+            "growth-rate match",
+            _finite(z),
+        )
     if a.score is None or b.score is None:
         return Comparison(
             None,
-            "no held-out score for both formulations and no decisive frequency match",
+            "no held-out score for both formulations and no decisive frequency or growth-rate "
+            "match",
         )
     best, other = (na, nb) if (a.score, na) <= (b.score, nb) else (nb, na)
     z = _paired_z(runs[best], runs[other])
@@ -779,6 +849,7 @@ def _calibrate_runs(runs: list[FormulationRun], settings: CalibrationSettings, c
                     continue
                 u.posterior, u.status = task.posterior, task.status
                 u.matched_frames, u.heard_frames = task.matched_frames, task.heard_frames
+                u.matched_onsets, u.onsets = task.matched_onsets, task.onsets
     training = [[u for u in run.units if u.calibrated and not u.held_out] for run in runs]
     for run, units in zip(runs, training, strict=True):
         run.hearing, shared = share_hearing(
