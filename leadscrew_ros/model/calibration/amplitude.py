@@ -493,9 +493,8 @@ def bench_posterior(log_prior: np.ndarray, unit_posteriors: list[np.ndarray]) ->
     numpy.ndarray
         (Kd, Kh) log posterior, normalised (the prior when no unit is given).
     """
+    mass = np.isfinite(log_prior)  # cells without prior mass stay without
     out = log_prior.copy()
-    with np.errstate(divide="ignore"):
-        for p in unit_posteriors:
-            out = out + np.log(np.maximum(p, 1e-300)) - log_prior
-    out = np.where(np.isfinite(log_prior), out, -np.inf)
+    for p in unit_posteriors:
+        out[mass] += np.log(np.maximum(np.asarray(p)[mass], 1e-300)) - log_prior[mass]
     return out - logsumexp(out)
