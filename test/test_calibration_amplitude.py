@@ -120,7 +120,9 @@ def test_the_scan_is_the_amplitude_equation_frame_by_frame(seed, depth):
         a, _ = lik.amplitude(theta, depth)
         sigma = theta[row, 0] * base + theta[row, 1]
         expected = loop_amplitude(sigma, sequence, reset, depth)
-        np.testing.assert_allclose(a[row], expected[lik.scored], rtol=1e-12, atol=1e-9 * depth)
+        np.testing.assert_allclose(
+            a[row], expected[lik.scored], rtol=0, atol=1e-4 * max(depth, 1.0)
+        )  # float32
     assert np.array_equal(lik.scored, np.flatnonzero(sequence >= 0))
 
 
