@@ -366,9 +366,9 @@ def test_same_seed_same_calibration_from_the_logs_or_their_replays_and_the_formu
 
 
 def test_both_formulations_exit_0_when_the_supported_one_converged(small, tmp_path, capsys):
-    """The small bench with both formulations: the paper formulation (not the bench's) does
-    not converge (units and population), the consistent one does and is supported: exit 0,
-    the paper run's non-convergence a line of calibration.txt and stdout (it was exit 3)."""
+    """The small bench with both formulations: the consistent one (the bench's) converges and
+    is supported: exit 0 whether or not the paper run converged; where it did not (units or
+    population), that is a line of calibration.txt and stdout, not an error (it was exit 3)."""
     d, _ = small
     out = tmp_path / "both"
     argv = [str(d / "bench"), "--out", str(out), "--formulation", "both", "--workers", "2"]
@@ -378,14 +378,17 @@ def test_both_formulations_exit_0_when_the_supported_one_converged(small, tmp_pa
     doc = json.loads((out / "calibration.json").read_text())
     f = doc["formulations"]
     assert f["supported"] == "consistent", f
-    assert f["paper"]["not_converged"] or f["paper"]["population_status"] != "calibrated", f
     assert not f["consistent"]["not_converged"]
     assert f["consistent"]["population_status"] == "calibrated", f
     assert code == 0
     text = (out / "calibration.txt").read_text()
-    [line] = [x for x in text.splitlines() if x.startswith("paper: ")]
-    assert "not converged" in line and "not the supported formulation" in line
-    assert line in printed.splitlines()
+    paper = [x for x in text.splitlines() if x.startswith("paper: ")]
+    if f["paper"]["not_converged"] or f["paper"]["population_status"] != "calibrated":
+        [line] = paper
+        assert "not converged" in line and "not the supported formulation" in line
+        assert line in printed.splitlines()
+    else:
+        assert not paper, paper
     # three units, one held out: the held-out check says it says little
     assert any(x.startswith("  warning: only 1 units held out") for x in printed.splitlines()), (
         printed
