@@ -6,13 +6,25 @@ against a brute-force eigen-solve of every sample's own state matrix (error of s
 the scatter, verdicts the same)."""
 
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from leadscrew_ros.model import ParameterError, SqueakModel
+from leadscrew_ros.model.physics.friction import (
+    SteadyFriction,
+    friction_coefficient,
+    friction_slope,
+    sliding_speed,
+)
 from leadscrew_ros.model.physics.kernels import scales
-from leadscrew_ros.model.physics.stability import GROWTH_TOL, oscillatory_mask
+from leadscrew_ros.model.physics.stability import (
+    GROWTH_TOL,
+    eig_both,
+    left_columns,
+    oscillatory_mask,
+)
 from leadscrew_ros.model.uncertainty.perturbation import (
     EigenPairs,
     FirstOrderProbability,
@@ -20,6 +32,8 @@ from leadscrew_ros.model.uncertainty.perturbation import (
     estimate,
     geometry_derivative,
     geometry_fields,
+    growth_rates,
+    units_on_states,
 )
 from leadscrew_ros.model.uncertainty.scatter import DEFAULT_SCATTER, Scatter, draw
 
@@ -126,6 +140,55 @@ def test_damping_rate_and_the_stiffness_speed_term_are_those_of_their_matrices()
         pairs.speed_rate_of_stiffness(), pairs.matrix_rate(stiffness), rtol=1e-12
     )
     assert om.min() > speed
+
+
+@pytest.mark.parametrize(
+    ("speed", "load"), [(20.0, LOAD), (55.0, LOAD), (-40.0, 350.0), (3.0, -80.0)]
+)
+def test_the_estimates_real_rates_are_the_complex_first_order_rates(speed, load):
+    """`growth_rates` (the live estimate's: real products of LAPACK's packed right vectors and
+    their inverse, `left_columns`) against Re(y^H dA x) of the same modes from LAPACK's own
+    left vectors (`EigenPairs.solve`) and the coefficients' derivatives in l, s and xi
+    (`kernels.scales`: W1 = sign l, W3 = l / |Omega|, W5q = Omega s, W5qdot = s)."""
+    n = GEOMETRY.n
+    e = eig_both(GEOMETRY.state_matrices(speed, load), False)
+    pairs = EigenPairs.solve(GEOMETRY, speed, load)
+    units = units_on_states(GEOMETRY.lower_half_units, GEOMETRY.basis.omega_rad_s)
+    rates = growth_rates(units, speed, e.vr, e.osc, left_columns(e.vr, n))
+    w1, w5q, w3, w5qdot = pairs.unit_rates[:4]
+    expected = np.array(
+        [
+            (np.sign(speed) * w1 + w3 / abs(speed)).real,
+            (speed * w5q + w5qdot).real,
+            pairs.damping_rate().real,
+        ]
+    )
+    assert rates.shape == expected.shape == (3, len(e.osc))
+    scale = np.abs(expected).max(axis=1, keepdims=True)  # each row in its own unit
+    assert np.all(np.abs(rates - expected) <= 1e-9 * scale)
+
+
+def test_the_friction_law_with_its_speed_free_factors_once_is_the_law():
+    """`SteadyFriction` (the estimate's samples at every point) is (12) at the steady sliding
+    speed: mu_o = mu(|Vc|), gamma = cos(beta) dmu/d|Vc|, for nominal parameters and arrays of
+    samples, at one speed and at many."""
+    p = MODEL.params
+    samples = SimpleNamespace(
+        **{
+            **p.as_dict(),
+            "mu_static": p.mu_static * np.array([0.9, 1.0, 1.2]),
+            "friction_decay_s_m": p.friction_decay_s_m * np.array([1.1, 0.8, 1.0]),
+        }
+    )
+    for params in (p, samples):
+        law = SteadyFriction(params)
+        for speed in (0.5, 20.0, -60.0, np.array([[1.0], [-150.0]])):
+            v = sliding_speed(params, speed)
+            mu, gamma = law(speed)
+            np.testing.assert_allclose(mu, friction_coefficient(params, v), rtol=1e-13)
+            np.testing.assert_allclose(
+                gamma, np.cos(params.helix_angle_rad) * friction_slope(params, v), rtol=1e-13
+            )
 
 
 def test_coefficient_rates_give_the_eigenvalue_change_with_the_load():
