@@ -43,7 +43,7 @@ def analyse(m: SqueakModel, speed: float, load: float) -> dict:
     n, lam = m.geometry.n, pairs.lam
     q = np.abs(pairs.x[:n])
     expansion = m._probability._nominal  # the estimate's units and samples
-    rates = growth_rates(expansion.units, speed, pairs.vr, pairs.osc, pairs.left[:, n:])
+    rates = growth_rates(expansion.units, speed, lam, pairs.x[:n], pairs.y_h[:, n:])
     level, slope = level_slope(m.params, speed, load, m.geometry.contact.alpha)
     nominal = np.array([level, slope, m.params.modal_damping])[:, None]
     a = m.state_matrix(speed, load)

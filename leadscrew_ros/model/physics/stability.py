@@ -189,50 +189,28 @@ def _grouped(
     return out
 
 
-def left_columns(vr: np.ndarray, start: int = 0) -> np.ndarray:
-    """The left eigenvectors of one eigen-solve packed as LAPACK packs the right ones: the
-    columns `start`.. (e.g. the lower half of the state vector) of V^-1 / 2, (2N, 2N - start)
-    real, from LAPACK's packed right vectors `vr` = V (2N, 2N). LAPACK packs a complex pair
-    x, conj(x) as its real and imaginary parts, V = X S, so X^-1 = S V^-1: the left vector of
-    the pair i, i + 1 (y^H x = 1 with x = vr[:, i] + 1j vr[:, i + 1]) is
-    y^H = out[i] - 1j out[i + 1]. One real solve with V, no complex arithmetic (measured:
-    0.08x a bare `numpy.linalg.eig`; LAPACK's own left vectors cost 0.19x).
-
-    Raises
-    ------
-    numpy.linalg.LinAlgError
-        V is singular (a defective matrix: no basis of eigenvectors).
-    """
-    _, _, inverse, info = lapack.dgesv(vr, _half_unit_columns(len(vr), start))
-    if info != 0:
-        raise np.linalg.LinAlgError("the right eigenvectors are not a basis (defective matrix)")
-    return inverse
-
-
-def left_columns_many(vr: np.ndarray, start: int = 0) -> np.ndarray:
-    """`left_columns` of G stacked solves: `vr` (G, 2N, 2N); (G, 2N, 2N - start) from one
-    stacked real solve.
-
-    Raises
-    ------
-    numpy.linalg.LinAlgError
-        Some V is singular (then `left_columns` one at a time tells which).
-    """
-    units = _half_unit_columns(vr.shape[-1], start)
-    return np.linalg.solve(vr, np.broadcast_to(units, vr.shape[:-1] + units.shape[-1:]))
-
-
 def left_rows(vr: np.ndarray, osc: np.ndarray, start: int = 0) -> np.ndarray:
     """Left eigenvectors y_i^H (rows) of the oscillatory modes `osc` of one eigen-solve,
     normalised so that y_i^H x_i = 1 for their right vectors x_i (`Eigen.right`), the entries
-    from `start` on: (M, 2N - start) complex, from `left_columns`.
+    from `start` on (e.g. the lower half of the state vector): (M, 2N - start), from LAPACK's
+    packed right vectors `vr` (2N, 2N). The rows of X^-1, X the matrix of all right vectors:
+    LAPACK packs a complex pair x, conj(x) as its real and imaginary parts, V = X S, so
+    X^-1 = S V^-1 and the row of x is (V^-1[i] - 1j V^-1[i + 1]) / 2: one real solve with V,
+    no complex arithmetic (measured: 0.08x a bare `numpy.linalg.eig`; LAPACK's own left
+    vectors cost 0.19x).
 
     Raises
     ------
     numpy.linalg.LinAlgError
         V is singular (a defective matrix: no basis of eigenvectors).
     """
-    return packed_rows(left_columns(vr, start), osc)
+    _, _, inverse, info = lapack.dgesv(vr, _unit_columns(len(vr), start))
+    if info != 0:
+        raise np.linalg.LinAlgError("the right eigenvectors are not a basis (defective matrix)")
+    rows = np.empty((len(osc), inverse.shape[1]), complex)
+    np.multiply(inverse[osc], 0.5, out=rows.real)
+    np.multiply(inverse[osc + 1], -0.5, out=rows.imag)
+    return rows
 
 
 def left_rows_many(vr: np.ndarray, osc: np.ndarray, start: int = 0) -> np.ndarray:
@@ -244,33 +222,19 @@ def left_rows_many(vr: np.ndarray, osc: np.ndarray, start: int = 0) -> np.ndarra
     numpy.linalg.LinAlgError
         Some V is singular (then `left_rows` one at a time tells which).
     """
-    return packed_rows(left_columns_many(vr, start), osc)
-
-
-def packed_rows(left: np.ndarray, osc: np.ndarray) -> np.ndarray:
-    """The complex rows y_i^H = left[i] - 1j left[i + 1] of the pairs `osc` (..., M) of packed
-    left vectors `left` (..., 2N, K) (`left_columns`): (..., M, K)."""
-    rows = np.empty(osc.shape + left.shape[-1:], complex)
+    units = _unit_columns(vr.shape[-1], start)
+    inverse = np.linalg.solve(vr, np.broadcast_to(units, vr.shape[:-1] + units.shape[-1:]))
+    rows = np.empty(osc.shape + inverse.shape[-1:], complex)
     cols = osc[..., None]
-    rows.real = np.take_along_axis(left, cols, -2)
-    np.negative(np.take_along_axis(left, cols + 1, -2), out=rows.imag)
+    np.multiply(np.take_along_axis(inverse, cols, -2), 0.5, out=rows.real)
+    np.multiply(np.take_along_axis(inverse, cols + 1, -2), -0.5, out=rows.imag)
     return rows
 
 
-def packed_columns(rows: np.ndarray, osc: np.ndarray, size: int) -> np.ndarray:
-    """The inverse of `packed_rows` for one solve: the packed left vectors (size, K) of the
-    complex rows `rows` (M, K) of the pairs `osc` (M,) (0 in the rows of no pair)."""
-    out = np.zeros((size, rows.shape[-1]))
-    out[osc] = rows.real
-    out[osc + 1] = -rows.imag
-    return out
-
-
 @lru_cache(maxsize=16)
-def _half_unit_columns(size: int, start: int) -> np.ndarray:
-    """Columns `start`.. of the identity of `size`, halved (read-only): the solve with them is
-    V^-1 / 2 exactly (a power of 2 scales every rounding alike)."""
-    out = 0.5 * np.eye(size)[:, start:]
+def _unit_columns(size: int, start: int) -> np.ndarray:
+    """Columns `start`.. of the identity of `size` (read-only)."""
+    out = np.eye(size)[:, start:]
     out.setflags(write=False)
     return out
 

@@ -49,16 +49,7 @@ from ..physics.assembly import Geometry, build_geometry
 from ..physics.friction import SteadyFriction
 from ..physics.kernels import level_slope
 from ..physics.parameters import GEOMETRY_FIELDS, ParameterError, ScrewParameters
-from ..physics.stability import (
-    GROWTH_TOL,
-    Eigen,
-    Solves,
-    eig_both,
-    left_columns,
-    left_columns_many,
-    packed_columns,
-    packed_rows,
-)
+from ..physics.stability import GROWTH_TOL, Eigen, Solves, eig_both, left_rows, left_rows_many
 from .scatter import Samples, Scatter
 
 GEOMETRY_STEP = 1e-6  # relative step of a state-matrix difference in a geometry field
@@ -84,26 +75,16 @@ class EigenPairs:
     ------
     numpy.linalg.LinAlgError
         Without left vectors: the right ones are not a basis (a defective A).
-
-    Attributes
-    ----------
-    lam, x, y_h : numpy.ndarray
-        The oscillatory eigenvalues (M,), their right vectors (2N, M) and left rows (M, 2N).
-    vr, osc, left : numpy.ndarray
-        The same packed as LAPACK packs the right vectors (`stability.left_columns`).
     """
 
     def __init__(self, geometry: Geometry, speed: float, eigen: Eigen):
         self.geometry, self.speed = geometry, speed
-        self.vr, self.osc = eigen.vr, eigen.osc
         self.lam, self.x = eigen.lam[eigen.osc], eigen.right
         if eigen.left is None:  # normalised by construction
-            self.left = left_columns(eigen.vr)
-            self.y_h = packed_rows(self.left, eigen.osc)
+            self.y_h = left_rows(eigen.vr, eigen.osc)
             return
         y_h = eigen.left.conj().T
         self.y_h = y_h / np.einsum("ij,ji->i", y_h, self.x)[:, None]  # y_i^H x_i = 1
-        self.left = packed_columns(self.y_h, eigen.osc, len(eigen.vr))
 
     @classmethod
     def solve(cls, geometry: Geometry, speed: float, load: float) -> EigenPairs:
@@ -181,7 +162,7 @@ class _Expansion:
         self.geometry, self.params = geometry, geometry.params
         self.sampled = SimpleNamespace(**{**self.params.as_dict(), **friction})
         self.friction = SteadyFriction(self.sampled)
-        self.units = units_on_states(geometry.lower_half_units, geometry.basis.omega_rad_s)
+        self.units = units_on_displacements(geometry.lower_half_units, geometry.basis.omega_rad_s)
 
     def changes(self, speed: ArrayLike, load: ArrayLike, damping: np.ndarray) -> np.ndarray:
         """The samples' changes of friction level, slope and damping ratio from the nominal,
@@ -212,7 +193,9 @@ class _Expansion:
         right for the sign, not for interpolation. Thread-safe: nothing shared is written."""
         n = self.geometry.n
         change = self.changes(pairs.speed, load, damping)
-        rates = growth_rates(self.units, float(pairs.speed), pairs.vr, pairs.osc, pairs.left[:, n:])
+        rates = growth_rates(
+            self.units, float(pairs.speed), pairs.lam, pairs.x[:n], pairs.y_h[:, n:]
+        )
         threshold = GROWTH_TOL * np.abs(pairs.lam) - pairs.lam.real  # growth beyond it
         reach = [abs(change[0]).max(), abs(change[1]).max(), reach_damping]
         candidates = (
@@ -227,41 +210,36 @@ class _Expansion:
         return growth.max(axis=0)
 
 
-def units_on_states(lower_half_units: np.ndarray, omega_rad_s: np.ndarray) -> np.ndarray:
-    """The lower halves of dA per unit coefficient (W1, W5q, W3, W5qdot) and per unit of xi,
-    -U_k and [0 | -2 diag(omega)] (A.1), each N x 2N acting on a state vector, from
-    `Geometry.lower_half_units` (..., 5, N * 2N): the same shape (the xi unit in the place of
-    the gyroscopic one)."""
+def units_on_displacements(lower_half_units: np.ndarray, omega_rad_s: np.ndarray) -> np.ndarray:
+    """dA per unit coefficient (W1, W5q, W3, W5qdot) and per unit of xi, -[0; U_k] and
+    [0; -2 diag(omega)] (A.1), as they act on the displacements q of a right vector
+    x = [q; lam q]: the first two act on q, the others on the velocities lam q. From
+    `Geometry.lower_half_units` (..., 5, N * 2N): shape (..., 5N, N), real (a complex q
+    multiplies them as a real view)."""
     n = len(omega_rad_s)
-    out = np.negative(lower_half_units)
-    out[..., 4, :] = 0.0
-    out[..., 4, n :: 2 * n + 1] = -2 * omega_rad_s  # entries (i, N + i)
-    return out
+    units = lower_half_units.reshape(lower_half_units.shape[:-2] + (5, n, 2 * n))
+    out = np.zeros(units.shape[:-3] + (5, n, n))
+    np.negative(units[..., :2, :, :n], out=out[..., :2, :, :])
+    np.negative(units[..., 2:4, :, n:], out=out[..., 2:4, :, :])
+    damping = out[..., 4, :, :].reshape(out.shape[:-3] + (n * n,))  # a view
+    damping[..., :: n + 1] = -2 * omega_rad_s
+    return out.reshape(out.shape[:-3] + (5 * n, n))
 
 
 def growth_rates(
-    units: np.ndarray, speed: ArrayLike, vr: np.ndarray, osc: np.ndarray, left: np.ndarray
+    units: np.ndarray, speed: ArrayLike, lam: np.ndarray, q: np.ndarray, y_lower: np.ndarray
 ) -> np.ndarray:
-    """d Re(lambda) per unit friction level l, slope s and damping ratio xi of the modes
-    `osc` (..., M), shape (..., 3, M), from LAPACK's packed right vectors `vr` (..., 2N, 2N)
-    and the lower-half columns of the packed left ones `left` (..., 2N, N)
-    (`stability.left_columns`). With x = vr[:, i] + 1j vr[:, i + 1] and
-    y^H = left[i] - 1j left[i + 1] for the pair i, Re(y^H dA x) = left[i] dA_lower vr[:, i] +
-    left[i + 1] dA_lower vr[:, i + 1]: real products only, each unit combined first with
-    d (W1, W5q, W3, W5qdot, xi) / d (l, s, xi) of the speed. `units` as `units_on_states`
-    gives them, (5, N * 2N) or each point's (..., 5, N * 2N); `speed` [rad/s] one per point
-    (a float for one)."""
-    stack, size = vr.shape[:-2], vr.shape[-1]
-    n = size // 2
-    per = (_rate_terms(speed) @ units).reshape(stack + (3 * n, size))
-    image = (per @ vr).reshape(stack + (3, n, size))  # dA_lower V per unit
-    products = np.einsum("...jb,...cbj->...cj", left, image)  # (..., 3, 2N)
-    if osc.ndim == 1:
-        rates = products[:, osc]
-        rates += products[:, osc + 1]
-        return rates
-    cols = osc[..., None, :]
-    return np.take_along_axis(products, cols, -1) + np.take_along_axis(products, cols + 1, -1)
+    """d Re(lambda) per unit friction level l, slope s and damping ratio xi of M modes,
+    shape (..., 3, M): from the eigenvalues `lam` (..., M), the displacement halves `q`
+    (..., N, M) of their right vectors and the lower halves of y^H (..., M, N),
+    y^H dA x = y_lower dA_lower [q; lam q]; `units` as `units_on_displacements` gives them,
+    (5N, N) or each point's (..., 5N, N); `speed` [rad/s] one per point (a float for one)."""
+    n, m = q.shape[-2:]
+    q = np.ascontiguousarray(q)
+    uq = (units @ q.view(np.float64)).view(np.complex128).reshape(q.shape[:-2] + (5, n, m))
+    r = np.einsum("...ki,...cik->...ck", y_lower, uq)
+    r[..., 2:, :] *= lam[..., None, :]  # the velocity terms
+    return _rate_terms(speed) @ r.real
 
 
 def _rate_terms(speed: ArrayLike) -> np.ndarray:
@@ -480,12 +458,13 @@ class FirstOrderProbability:
         if self._nodes is not None:
             return estimate(self.hits(self._pairs(speed, load, eigen), load))
         expansion = self._nominal
-        osc, vr = eigen.osc, eigen.vr
+        n, osc, vr = expansion.geometry.n, eigen.osc, eigen.vr
         lam = eigen.lam[osc]
+        y_lower = self._left(eigen.vr, osc, speed, load, matrix)
+        q = np.empty((n, len(osc)), complex)  # the displacement halves, C-ordered
+        q.real, q.imag = vr[:n, osc], vr[:n, osc + 1]
         hits = hits_of(
-            growth_rates(
-                expansion.units, float(speed), vr, osc, self._left(vr, speed, load, matrix)
-            ),
+            growth_rates(expansion.units, float(speed), lam, q, y_lower),
             GROWTH_TOL * np.abs(lam) - lam.real,
             expansion.changes(speed, load, self._damping),
         )
@@ -535,7 +514,9 @@ class FirstOrderProbability:
             raise ParameterError("scattered geometry: one point at a time (probability)")
         expansion = self._nominal
         own = (
-            None if units is None else units_on_states(units, expansion.geometry.basis.omega_rad_s)
+            None
+            if units is None
+            else units_on_displacements(units, expansion.geometry.basis.omega_rad_s)
         )
         change = expansion.changes(speeds, loads, self._damping)  # (3, J, count)
         hi, lo = change.max(axis=2).T, change.min(axis=2).T  # (J, 3): the ends of each change
@@ -548,8 +529,8 @@ class FirstOrderProbability:
                 if rows is None
                 else own[rows[index]],
                 speeds[index],
-                solves.vr,
-                solves.osc,
+                solves.lam,
+                solves.q,
                 self._lefts(index, solves, speeds, loads, matrices),
             )
             threshold = GROWTH_TOL * np.abs(solves.lam) - solves.lam.real
@@ -572,31 +553,36 @@ class FirstOrderProbability:
         loads: np.ndarray,
         matrices: np.ndarray | None,
     ) -> np.ndarray:
-        """The lower-half columns of the packed left vectors of stacked solves (G, 2N, N): from
-        their right vectors in one stacked solve, one point at a time (`_left`) where some are
-        not a basis."""
+        """The lower halves of y^H of stacked solves (G, M, N): from their right vectors in
+        one stacked solve, one point at a time (`_left`) where some are not a basis."""
         try:
-            return left_columns_many(solves.vr, self._nominal.geometry.n)
+            return left_rows_many(solves.vr, solves.osc, self._nominal.geometry.n)
         except np.linalg.LinAlgError:
             return np.array(
                 [
-                    self._left(vr, speeds[i], loads[i], None if matrices is None else matrices[i])
-                    for i, vr in zip(index, solves.vr, strict=True)
+                    self._left(
+                        vr, osc, speeds[i], loads[i], None if matrices is None else matrices[i]
+                    )
+                    for i, vr, osc in zip(index, solves.vr, solves.osc, strict=True)
                 ]
             )
 
     def _left(
-        self, vr: np.ndarray, speed: float, load: float, matrix: np.ndarray | None
+        self,
+        vr: np.ndarray,
+        osc: np.ndarray,
+        speed: float,
+        load: float,
+        matrix: np.ndarray | None,
     ) -> np.ndarray:
-        """The lower-half columns of the packed left vectors of one solve (2N, N): from its
-        right vectors, or LAPACK's left ones where those are not a basis (a defective
-        `matrix`, built again if not given)."""
+        """The lower halves of y^H of one solve: from its right vectors, or LAPACK's left ones
+        where those are not a basis (a defective `matrix`, built again if not given)."""
         n = self._nominal.geometry.n
         try:
-            return left_columns(vr, n)
+            return left_rows(vr, osc, n)
         except np.linalg.LinAlgError:
             a = self._nominal.geometry.state_matrices(speed, load) if matrix is None else matrix
-            return EigenPairs(self._nominal.geometry, float(speed), eig_both(a)).left[:, n:]
+            return EigenPairs(self._nominal.geometry, float(speed), eig_both(a)).y_h[:, n:]
 
     def _pairs(self, speed: float, load: float, eigen: Eigen) -> EigenPairs:
         """The nominal eigenpairs of `eigen`; LAPACK's left vectors where the right ones are
