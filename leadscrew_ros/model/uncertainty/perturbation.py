@@ -158,10 +158,21 @@ class _Expansion:
     the friction law gives the samples and the nominal: two passes cost a live prediction
     0.04x a bare eig); the rest of the parameters are the geometry's."""
 
-    def __init__(self, geometry: Geometry, friction: dict[str, np.ndarray]):
+    def __init__(
+        self,
+        geometry: Geometry,
+        friction: dict[str, np.ndarray],
+        like: _Expansion | None = None,
+    ):
         self.geometry, self.params = geometry, geometry.params
         self.sampled = SimpleNamespace(**{**self.params.as_dict(), **friction})
-        self.friction = SteadyFriction(self.sampled)
+        # the law's factors take the friction fields, the radius and the helix angle: `like`'s
+        # (the same samples) serve a moved nut
+        same = like is not None and (like.params.radius_m, like.params.helix_angle_rad) == (
+            self.params.radius_m,
+            self.params.helix_angle_rad,
+        )
+        self.friction = like.friction if same else SteadyFriction(self.sampled)
         self.units = units_on_displacements(geometry.lower_half_units, geometry.basis.omega_rad_s)
 
     def changes(self, speed: ArrayLike, load: ArrayLike, damping: np.ndarray) -> np.ndarray:
@@ -366,7 +377,7 @@ class FirstOrderProbability:
         if self._nodes is not None:
             return FirstOrderProbability(params, geometry, self.samples)
         new = copy.copy(self)
-        new.params, new._nominal = params, _Expansion(geometry, self._friction)
+        new.params, new._nominal = params, _Expansion(geometry, self._friction, self._nominal)
         return new
 
     def _geometry_nodes(self, fields: list[str], values: dict) -> tuple:
