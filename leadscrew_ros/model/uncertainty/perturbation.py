@@ -168,11 +168,13 @@ class _Expansion:
         self.sampled = SimpleNamespace(**{**self.params.as_dict(), **friction})
         # the law's factors take the friction fields, the radius and the helix angle: `like`'s
         # (the same samples) serve a moved nut
-        same = like is not None and (like.params.radius_m, like.params.helix_angle_rad) == (
-            self.params.radius_m,
-            self.params.helix_angle_rad,
+        self.friction: SteadyFriction = (
+            like.friction
+            if like is not None
+            and (like.params.radius_m, like.params.helix_angle_rad)
+            == (self.params.radius_m, self.params.helix_angle_rad)
+            else SteadyFriction(self.sampled)
         )
-        self.friction = like.friction if same else SteadyFriction(self.sampled)
         self.units = units_on_displacements(geometry.lower_half_units, geometry.basis.omega_rad_s)
 
     def changes(self, speed: ArrayLike, load: ArrayLike, damping: np.ndarray) -> np.ndarray:
