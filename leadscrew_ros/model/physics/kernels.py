@@ -259,9 +259,9 @@ def scales(
 def coefficients(speed_rad_s: Any, level: Any, slope: Any) -> tuple[Any, Any, Any, Any]:
     """The factors of (W1 = W2, W3 = W4, W5q, W5qdot) from the friction level and slope at
     the screw speed [rad/s] (`level_slope`; module docstring): floats for a float speed (a
-    live point's state matrix), else arrays."""
-    if type(speed_rad_s) is float:
-        sign = math.copysign(1.0, speed_rad_s) if speed_rad_s else 0.0
+    live point's state matrix), else arrays (at zero speed numpy's inf, as for arrays)."""
+    if type(speed_rad_s) is float and speed_rad_s:
+        sign = math.copysign(1.0, speed_rad_s)
         return sign * level, level / abs(speed_rad_s), speed_rad_s * slope, slope
     return (
         np.sign(speed_rad_s) * level,
