@@ -18,7 +18,7 @@ from leadscrew_ros.model.physics.friction import (
     friction_slope,
     sliding_speed,
 )
-from leadscrew_ros.model.physics.kernels import scales
+from leadscrew_ros.model.physics.kernels import coefficients, scales
 from leadscrew_ros.model.physics.stability import (
     GROWTH_TOL,
     eig_both,
@@ -191,6 +191,18 @@ def test_the_friction_law_with_its_speed_free_factors_once_is_the_law():
             np.testing.assert_allclose(
                 gamma, np.cos(params.helix_angle_rad) * friction_slope(params, v), rtol=1e-13
             )
+
+
+def test_a_live_points_coefficients_are_those_of_the_arrays():
+    """`kernels.coefficients` on Python floats (a live point's state matrix) gives the factors
+    of the array path, and at zero speed numpy's inf (no exception), as arrays do."""
+    for speed in (0.3, 20.0, -57.5, 149.0):
+        floats = coefficients(speed, 0.7, -1.3)
+        arrays = coefficients(np.array([speed]), np.array([0.7]), np.array([-1.3]))
+        np.testing.assert_allclose(np.ravel(floats), np.ravel(arrays), rtol=1e-15)
+    with np.errstate(divide="ignore"):
+        at_rest = coefficients(0.0, 0.7, -1.3)
+    assert np.isinf(at_rest[1]) and at_rest[0] == 0.0
 
 
 def test_coefficient_rates_give_the_eigenvalue_change_with_the_load():
