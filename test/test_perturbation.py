@@ -6,13 +6,25 @@ against a brute-force eigen-solve of every sample's own state matrix (error of s
 the scatter, verdicts the same)."""
 
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from leadscrew_ros.model import ParameterError, SqueakModel
-from leadscrew_ros.model.physics.kernels import scales
-from leadscrew_ros.model.physics.stability import GROWTH_TOL, oscillatory_mask
+from leadscrew_ros.model.physics.friction import (
+    SteadyFriction,
+    friction_coefficient,
+    friction_slope,
+    sliding_speed,
+)
+from leadscrew_ros.model.physics.kernels import coefficients, scales
+from leadscrew_ros.model.physics.stability import (
+    GROWTH_TOL,
+    eig_both,
+    left_rows,
+    oscillatory_mask,
+)
 from leadscrew_ros.model.uncertainty.perturbation import (
     EigenPairs,
     FirstOrderProbability,
@@ -20,6 +32,8 @@ from leadscrew_ros.model.uncertainty.perturbation import (
     estimate,
     geometry_derivative,
     geometry_fields,
+    growth_rates,
+    units_on_displacements,
 )
 from leadscrew_ros.model.uncertainty.scatter import DEFAULT_SCATTER, Scatter, draw
 
@@ -126,6 +140,69 @@ def test_damping_rate_and_the_stiffness_speed_term_are_those_of_their_matrices()
         pairs.speed_rate_of_stiffness(), pairs.matrix_rate(stiffness), rtol=1e-12
     )
     assert om.min() > speed
+
+
+@pytest.mark.parametrize(
+    ("speed", "load"), [(20.0, LOAD), (55.0, LOAD), (-40.0, 350.0), (3.0, -80.0)]
+)
+def test_the_estimates_rates_are_those_of_lapacks_left_vectors(speed, load):
+    """`growth_rates` as the live estimate calls it (the left vectors from the inverse of the
+    right ones, `left_rows`; the units on the displacement halves) against Re(y^H dA x) of
+    the same modes from LAPACK's own left vectors (`EigenPairs.solve`) and the coefficients'
+    derivatives in l, s and xi (`kernels.scales`: W1 = sign l, W3 = l / |Omega|,
+    W5q = Omega s, W5qdot = s)."""
+    n = GEOMETRY.n
+    e = eig_both(GEOMETRY.state_matrices(speed, load), False)
+    pairs = EigenPairs.solve(GEOMETRY, speed, load)
+    units = units_on_displacements(GEOMETRY.lower_half_units, GEOMETRY.basis.omega_rad_s)
+    lam, q = e.lam[e.osc], e.vr[:n, e.osc] + 1j * e.vr[:n, e.osc + 1]
+    rates = growth_rates(units, speed, lam, q, left_rows(e.vr, e.osc, n))
+    w1, w5q, w3, w5qdot = pairs.unit_rates[:4]
+    expected = np.array(
+        [
+            (np.sign(speed) * w1 + w3 / abs(speed)).real,
+            (speed * w5q + w5qdot).real,
+            pairs.damping_rate().real,
+        ]
+    )
+    assert rates.shape == expected.shape == (3, len(e.osc))
+    scale = np.abs(expected).max(axis=1, keepdims=True)  # each row in its own unit
+    assert np.all(np.abs(rates - expected) <= 1e-9 * scale)
+
+
+def test_the_friction_law_with_its_speed_free_factors_once_is_the_law():
+    """`SteadyFriction` (the estimate's samples at every point) is (12) at the steady sliding
+    speed: mu_o = mu(|Vc|), gamma = cos(beta) dmu/d|Vc|, for nominal parameters and arrays of
+    samples, at one speed and at many."""
+    p = MODEL.params
+    samples = SimpleNamespace(
+        **{
+            **p.as_dict(),
+            "mu_static": p.mu_static * np.array([0.9, 1.0, 1.2]),
+            "friction_decay_s_m": p.friction_decay_s_m * np.array([1.1, 0.8, 1.0]),
+        }
+    )
+    for params in (p, samples):
+        law = SteadyFriction(params)
+        for speed in (0.5, 20.0, -60.0, np.array([[1.0], [-150.0]])):
+            v = sliding_speed(params, speed)
+            mu, gamma = law(speed)
+            np.testing.assert_allclose(mu, friction_coefficient(params, v), rtol=1e-13)
+            np.testing.assert_allclose(
+                gamma, np.cos(params.helix_angle_rad) * friction_slope(params, v), rtol=1e-13
+            )
+
+
+def test_a_live_points_coefficients_are_those_of_the_arrays():
+    """`kernels.coefficients` on Python floats (a live point's state matrix) gives the factors
+    of the array path, and at zero speed numpy's inf (no exception), as arrays do."""
+    for speed in (0.3, 20.0, -57.5, 149.0):
+        floats = coefficients(speed, 0.7, -1.3)
+        arrays = coefficients(np.array([speed]), np.array([0.7]), np.array([-1.3]))
+        np.testing.assert_allclose(np.ravel(floats), np.ravel(arrays), rtol=1e-15)
+    with np.errstate(divide="ignore"):
+        at_rest = coefficients(0.0, 0.7, -1.3)
+    assert np.isinf(at_rest[1]) and at_rest[0] == 0.0
 
 
 def test_coefficient_rates_give_the_eigenvalue_change_with_the_load():

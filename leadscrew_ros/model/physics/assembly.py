@@ -21,7 +21,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .contact import ContactIntegrals, HelixContact, helix_contact
-from .kernels import MATRICES, scales
+from .friction import SteadyFriction
+from .kernels import MATRICES, coefficients, level_slope, scales
 from .modes import KIND_X, KIND_Y, ModalBasis, modal_basis
 from .parameters import GEOMETRY_FIELDS, ScrewParameters, field_names
 
@@ -212,13 +213,19 @@ class Geometry:
     def _state_matrix(self, speed: float, load: float) -> np.ndarray:
         """`state_matrices` at one operating point: the same operations without broadcasting
         (a live prediction's share of the cost)."""
-        s = scales(self.params, speed, load, self.contact.alpha)
-        coef = np.array((s["W1"], s["W5q"], s["W3"], s["W5qdot"], speed))
+        level, slope = level_slope(self.params, speed, load, self.contact.alpha, self._friction)
+        w1, w3, w5q, w5qdot = coefficients(speed, level, slope)
+        coef = np.array((w1, w5q, w3, w5qdot, speed))
         n = self.n
         out = self._template.copy()
         out[n:, :] -= np.einsum("k,kj->j", coef, self.lower_half_units).reshape(n, 2 * n)
-        out.reshape(-1)[self._k_diagonal] += speed**2  # -Omega^2 I in K
+        out.reshape(-1)[self._k_diagonal] += speed * speed  # -Omega^2 I in K
         return out
+
+    @cached_property
+    def _friction(self) -> SteadyFriction:
+        """The friction law of `params`, its speed-free factors computed once."""
+        return SteadyFriction(self.params)
 
     @cached_property
     def _d_diagonal(self) -> np.ndarray:

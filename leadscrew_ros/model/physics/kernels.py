@@ -31,12 +31,13 @@ trigonometric polynomial of degree 2, k_ab(theta) = sum_{m=-2..2} c_m e^{i m the
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .friction import steady_friction
+from .friction import SteadyFriction
 from .modes import KIND_T, KIND_X, KIND_Y
 from .parameters import ParamsLike
 
@@ -224,16 +225,25 @@ def thread_factors(
 
 
 def level_slope(
-    p: ParamsLike, speed_rad_s: ArrayLike, load_n: ArrayLike, alpha: float
+    p: ParamsLike,
+    speed_rad_s: ArrayLike,
+    load_n: ArrayLike,
+    alpha: float,
+    friction: SteadyFriction | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Friction level l = mu_o |F_z| c_f / (alpha R) (W1-W4) and friction slope
     s = gamma |F_z| c_5 / alpha (W5), broadcast over speed, load and the fields of `p` (arrays
-    of scattered friction parameters too)."""
-    speed = np.asarray(speed_rad_s, dtype=float)
-    load = np.abs(np.asarray(load_n, dtype=float))
-    m0, g = steady_friction(p, speed)
+    of scattered friction parameters too); `friction` the law of `p` when it is at hand
+    (`SteadyFriction`: its speed-free factors computed once)."""
+    if type(speed_rad_s) is float and type(load_n) is float:  # a live point: no 0-d arrays
+        speed, load = speed_rad_s, abs(load_n)
+    else:
+        speed = np.asarray(speed_rad_s, dtype=float)
+        load = np.abs(np.asarray(load_n, dtype=float))
+    m0, g = (SteadyFriction(p) if friction is None else friction)(speed)
     c_f, c_5, _ = thread_factors(p, m0, speed, load_n)
-    return m0 * load / (alpha * p.radius_m) * c_f, g * load / alpha * c_5
+    # the operating point's factors first: one operation on the samples each (paper)
+    return m0 * (load / (alpha * p.radius_m) * c_f), g * (load / alpha * c_5)
 
 
 def scales(
@@ -242,11 +252,20 @@ def scales(
     """Scalar factors of W1..W5qdot at operating points (broadcast over speed and load)."""
     speed = np.asarray(speed_rad_s, dtype=float)
     level, slope = level_slope(p, speed, load_n, alpha)
-    return {
-        "W1": np.sign(speed) * level,
-        "W2": np.sign(speed) * level,
-        "W3": level / np.abs(speed),
-        "W4": level / np.abs(speed),
-        "W5q": speed * slope,
-        "W5qdot": slope,
-    }
+    w1, w3, w5q, w5qdot = coefficients(speed, level, slope)
+    return {"W1": w1, "W2": w1, "W3": w3, "W4": w3, "W5q": w5q, "W5qdot": w5qdot}
+
+
+def coefficients(speed_rad_s: Any, level: Any, slope: Any) -> tuple[Any, Any, Any, Any]:
+    """The factors of (W1 = W2, W3 = W4, W5q, W5qdot) from the friction level and slope at
+    the screw speed [rad/s] (`level_slope`; module docstring): floats for a float speed (a
+    live point's state matrix), else arrays (at zero speed numpy's inf, as for arrays)."""
+    if type(speed_rad_s) is float and speed_rad_s:
+        sign = math.copysign(1.0, speed_rad_s)
+        return sign * level, level / abs(speed_rad_s), speed_rad_s * slope, slope
+    return (
+        np.sign(speed_rad_s) * level,
+        level / np.abs(speed_rad_s),
+        speed_rad_s * slope,
+        slope,
+    )

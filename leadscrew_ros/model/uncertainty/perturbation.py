@@ -46,6 +46,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..physics.assembly import Geometry, build_geometry
+from ..physics.friction import SteadyFriction
 from ..physics.kernels import level_slope
 from ..physics.parameters import GEOMETRY_FIELDS, ParameterError, ScrewParameters
 from ..physics.stability import GROWTH_TOL, Eigen, Solves, eig_both, left_rows, left_rows_many
@@ -157,9 +158,23 @@ class _Expansion:
     the friction law gives the samples and the nominal: two passes cost a live prediction
     0.04x a bare eig); the rest of the parameters are the geometry's."""
 
-    def __init__(self, geometry: Geometry, friction: dict[str, np.ndarray]):
+    def __init__(
+        self,
+        geometry: Geometry,
+        friction: dict[str, np.ndarray],
+        like: _Expansion | None = None,
+    ):
         self.geometry, self.params = geometry, geometry.params
         self.sampled = SimpleNamespace(**{**self.params.as_dict(), **friction})
+        # the law's factors take the friction fields, the radius and the helix angle: `like`'s
+        # (the same samples) serve a moved nut
+        self.friction: SteadyFriction = (
+            like.friction
+            if like is not None
+            and (like.params.radius_m, like.params.helix_angle_rad)
+            == (self.params.radius_m, self.params.helix_angle_rad)
+            else SteadyFriction(self.sampled)
+        )
         self.units = units_on_displacements(geometry.lower_half_units, geometry.basis.omega_rad_s)
 
     def changes(self, speed: ArrayLike, load: ArrayLike, damping: np.ndarray) -> np.ndarray:
@@ -168,7 +183,9 @@ class _Expansion:
         (count,) the samples' damping-ratio changes."""
         if type(speed) is not float and np.ndim(speed):  # a column of samples per point
             speed, load = np.asarray(speed, float)[..., None], np.asarray(load, float)[..., None]
-        level, slope = level_slope(self.sampled, speed, load, self.geometry.contact.alpha)
+        level, slope = level_slope(
+            self.sampled, speed, load, self.geometry.contact.alpha, self.friction
+        )
         change = np.empty((3,) + level.shape[:-1] + damping.shape)
         np.subtract(level[..., :-1], level[..., -1:], out=change[0])
         np.subtract(slope[..., :-1], slope[..., -1:], out=change[1])
@@ -362,7 +379,7 @@ class FirstOrderProbability:
         if self._nodes is not None:
             return FirstOrderProbability(params, geometry, self.samples)
         new = copy.copy(self)
-        new.params, new._nominal = params, _Expansion(geometry, self._friction)
+        new.params, new._nominal = params, _Expansion(geometry, self._friction, self._nominal)
         return new
 
     def _geometry_nodes(self, fields: list[str], values: dict) -> tuple:
