@@ -381,6 +381,32 @@ def test_a_ratio_heard_again_at_another_speed_is_drive_noise():
     assert {round(e.frequency_hz / 100) for e in drive} == {47, 38}
 
 
+def test_a_tone_lasting_exactly_a_constant_speed_stretch_is_drive_noise():
+    """One hold at 100 rad/s reached and left by steps too fast to follow (no other speed to
+    compare with): a commutator at 373 x the screw's rotation sounds exactly while the speed
+    holds (5 such false episodes on 10 realistic-bench units, seed 77); it is drive noise. In
+    the same hold a squeak at 2480 Hz growing from 1.7 s and one at 1100 Hz growing from
+    5.3 s that rings on (decays) after the drive stops at 6 s are kept: a squeak starts
+    when it has grown, not when the speed settles, and outlasts the speed's change."""
+    t = np.arange(8 * FS) / FS
+    ts = np.linspace(0.0, 8.0, 801)
+    speed = np.interp(ts, [0, 1, 1.01, 6, 6.01, 8], [0, 0, 100, 100, 0, 0])
+    turns = np.cumsum(np.interp(t, ts, speed)) / FS
+    x = 0.003 * np.random.default_rng(6).standard_normal(t.size)
+    x += 0.005 * np.sin(373.0 * turns) * (np.interp(t, ts, speed) > 0.5)
+    for start, end, f in ((1.7, 3.0, 2480.0), (5.3, 6.0, 1100.0)):
+        grow = np.minimum(np.exp(40.0 * (t - start - 0.2)), 1.0)  # 35 dB in 0.2 s, saturates
+        ring = np.exp(-np.maximum(t - end, 0.0) / 0.1)  # 35 dB down 0.4 s after `end`
+        x += 0.02 * grow * ring * np.sin(2 * np.pi * f * t) * (t > start) * (t < end + 0.4)
+    d = detect(x.astype(np.float32), FS, speed_times_s=ts, speed_rad_s=speed)
+    assert [round(e.frequency_hz) for e in d.episodes] == [2480, 1100]
+    drive = [e for e in d.rejected if e.drive_ratio is not None]
+    assert [round(e.drive_ratio) for e in drive] == [373]
+    assert [round(o.ratio) for o in d.drive_orders] == [373]  # learned: its sweeps are known
+    assert drive[0].start_s == pytest.approx(1.0, abs=0.1)
+    assert drive[0].end_s == pytest.approx(6.0, abs=0.1)
+
+
 def test_a_squeaks_harmonics_belong_to_its_episode():
     """A squeak at 700 Hz with its 2nd and 3rd harmonics, the 2nd louder than the fundamental
     from 0.9 s on (a frame then holds the harmonic stronger: not suppressed as one, it was a

@@ -930,7 +930,7 @@ class StreamingDetector:
         r_const = float(np.sqrt(np.mean((f / np.median(f) - 1.0) ** 2)))
         floor = 0.1 * self.analyzer.df / float(np.median(f))  # a tenth of a bin
         if r_const >= max(3 * r_ratio, floor):  # the tone moved with the speed
-            self._learn_ratio(r, tr)
+            self._learn_ratio(r, tr.level_sum / len(tr.hz) + self._level_offset_db)
             return r
         if r_ratio >= max(3 * r_const, floor):  # it stayed while the speed moved
             return None
@@ -941,9 +941,9 @@ class StreamingDetector:
         whole = k >= 1 and abs(r / k - 1.0) <= s.order_tolerance
         return r if whole and k <= 0.25 / s.order_tolerance else None
 
-    def _learn_ratio(self, r: float, tr: _Track) -> None:
-        """Count a ratio the drive was heard at (moving with the speed), with its level."""
-        level = tr.level_sum / len(tr.hz) + self._level_offset_db
+    def _learn_ratio(self, r: float, level: float) -> None:
+        """Count a ratio the drive was heard at (moving with the speed, or held exactly as
+        long as the speed), with its track's level [dB]."""
         g = self._ratio_groups
         if g.size:
             centre = g[:, 0] / g[:, 1]
@@ -1279,9 +1279,9 @@ def _at_drive_ratios(
     """The episodes less those at one of the drive's ratios over the whole log (learned by
     then, or given): a tone held at constant speed, or a piece of a sweep too short to be
     judged, that closed before the ratio was heard moving (the order spectrum of the log's
-    tracks, used after the fact)."""
+    tracks, used after the fact), or heard held exactly as long as the speed held
+    (`_held_with_speed`, judged first: a piece of its sweep into the hold is then known)."""
     s = det.settings
-    ratios = [o.ratio for o in det.drive_orders] + list(s.known_ratios)
     try:
         t = np.asarray(speed_times_s, dtype=float).reshape(-1)
         v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
@@ -1289,6 +1289,8 @@ def _at_drive_ratios(
         return episodes
     if s.order_tolerance <= 0 or t.size != v.size or t.size == 0:
         return episodes
+    episodes = _held_with_speed(det, episodes, t, v)
+    ratios = [o.ratio for o in det.drive_orders] + list(s.known_ratios)
     kept = []
     for ep in episodes:
         f1 = np.interp(ep.track_times_s, t, v) / (2 * np.pi)
@@ -1341,6 +1343,72 @@ def _recurring_ratios(
         else:
             kept.append(ep)
     return kept
+
+
+def _held_with_speed(
+    det: StreamingDetector, episodes: list[Episode], t: np.ndarray, v: np.ndarray
+) -> list[Episode]:
+    """The episodes less the tones that lasted exactly as long as the speed held still: tracks
+    at constant speed (their frames' |speed| within `order_tolerance` of its median for
+    `order_share` of them) at one ratio r to the screw's rotation that together start within
+    `frame_s` of the speed arriving there and end within `frame_s` of the speed leaving (by
+    more than `order_tolerance` either way), never more than half a frame outside that
+    stretch, which is long enough for a track to touch neither end (two frames and
+    `min_duration_s`: a ramp passing through is no stretch). Drive noise at any ratio does so:
+    its frequency is r |speed| / 2 pi, it stops sweeping (is resolved in a frame) as the speed
+    settles and moves off as the speed leaves, at once. A squeak's frequency is the mode's,
+    which hardly depends on the speed: it starts when its growth from the floor has made it
+    loud (not when the speed settles) and rings on at its frequency as the speed leaves until
+    it decays. The speed is median-filtered over a frame (an encoder's noise does not end a
+    stretch). Their ratio is learned (`drive_orders`). A tone at constant speed that does not
+    so end is kept: by frequency alone it cannot be told from a squeak."""
+    s = det.settings
+    if s.order_tolerance <= 0 or t.size < 2 or not episodes:
+        return episodes
+    from scipy.ndimage import median_filter
+
+    hop = det.hop_s
+    grid = np.arange(float(t[0]), float(t[-1]) + hop / 2, hop)
+    f1 = median_filter(np.interp(grid, t, v), size=max(int(round(s.frame_s / hop)), 1))
+    f1 = f1 / (2 * np.pi)
+    # per held track: (episode, ratio, first and last frame time, the stretch's ends)
+    held: list[tuple[Episode, float, float, float, float, float]] = []
+    for ep in episodes:
+        ok = np.isfinite(ep.track_hz)
+        times = ep.track_times_s[ok]
+        at = np.interp(times, grid, f1)
+        if times.size == 0 or 2 * np.pi * float(np.median(at)) < s.motor_off_rad_s:
+            continue
+        speed = float(np.median(at))
+        r = float(np.median(ep.track_hz[ok] / np.maximum(at, 1e-300)))
+        off = np.abs(f1 / speed - 1.0) > s.order_tolerance
+        mid = float(np.median(times))
+        before, after = grid[off & (grid < mid)], grid[off & (grid > mid)]
+        if (
+            s.min_drive_ratio <= r <= s.max_drive_ratio
+            and np.mean(np.abs(at / speed - 1.0) <= s.order_tolerance) >= s.order_share
+            and before.size
+            and after.size
+        ):
+            held.append((ep, r, float(times[0]), float(times[-1]), before[-1], after[0]))
+    drive: set[int] = set()
+    for ep, r, _, _, a, b in held:  # the pieces at its ratio in its stretch, together
+        group = [
+            h for h in held if h[4] == a and h[5] == b and abs(h[1] / r - 1) <= s.order_tolerance
+        ]
+        first, last = min(h[2] for h in group), max(h[3] for h in group)
+        if (
+            b - a >= 2 * s.frame_s + s.min_duration_s
+            and -s.frame_s / 2 <= first - a <= s.frame_s
+            and -s.frame_s / 2 <= b - last <= s.frame_s
+        ):
+            drive.add(id(ep))
+    for ep, r, *_ in held:
+        if id(ep) in drive:
+            ep.drive_ratio = r
+            det._learn_ratio(r, ep.level_db)  # its largest level: a held tone is steady
+    det.rejected.extend(ep for ep in episodes if id(ep) in drive)
+    return [ep for ep in episodes if id(ep) not in drive]
 
 
 def _learn_at_rest(
