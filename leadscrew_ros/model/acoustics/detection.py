@@ -802,7 +802,8 @@ class StreamingDetector:
             dropped = bad_cum[starts + n] - bad_cum[starts] > 0
         else:
             dropped = np.zeros(i1 - i0, bool)
-        self._note_usable(i0, dropped, ~dropped & (variance <= SILENT_FACTOR * rounding))
+        silent = ~dropped & (variance <= SILENT_FACTOR * rounding)
+        self._note_usable(i0, dropped, silent)
         level_db = 10 * np.log10(np.maximum(cand.power, 1e-300)) + self._level_offset_db
         # the background learned so far is not followed (a louder tone at its frequency is)
         background = self.background.covers(cand.frequency_hz, level_db)
@@ -829,7 +830,7 @@ class StreamingDetector:
         learning: list[int] = []
         for j in range(i1 - i0):
             self._rest_frames = self._rest_frames + 1 if rest[j] and not dropped[j] else 0
-            if self._rest_frames >= rest_run:
+            if self._rest_frames >= rest_run and not silent[j]:  # no sound is no background
                 tones = np.flatnonzero(tonal[j])
                 self.background.add(cand.frequency_hz[j, tones], cand.power[j, tones])
                 learning.append(j)
@@ -1415,8 +1416,10 @@ def _learn_at_rest(
     det: StreamingDetector, samples: Any, t0_s: float, speed_times_s: Any, speed_rad_s: Any
 ) -> None:
     """Learn `det`'s background from every stretch of the recording where the drive rests for
-    at least `motor_off_min_s` (its end too) before the detection runs: a fan heard first
-    when the drive already moves is then known as background."""
+    at least `motor_off_min_s` (its end too) before the detection runs, from its first
+    `motor_off_min_s` on, as the node does: a fan heard first when the drive already moves
+    is then known as background, and what rings on as the drive stops (a squeak decaying,
+    the room's tail) is not."""
     try:
         t = np.asarray(speed_times_s, dtype=float).reshape(-1)
         v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
@@ -1430,7 +1433,7 @@ def _learn_at_rest(
     rest = np.concatenate([[False], np.isfinite(v) & (v < s.motor_off_rad_s), [False]])
     edges = np.flatnonzero(rest[1:] != rest[:-1])
     spans = [
-        (t[a], t[b - 1])
+        (t[a] + s.motor_off_min_s, t[b - 1])
         for a, b in zip(edges[::2], edges[1::2], strict=True)
         if t[b - 1] - t[a] >= s.motor_off_min_s
     ]
