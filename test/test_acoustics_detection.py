@@ -316,6 +316,24 @@ def test_what_rings_on_as_the_drive_stops_is_not_background():
     assert found[0] == (2480, 4.0, 5.0) and len(found) == 2, found
 
 
+def test_a_band_holds_a_background_tone_only_when_the_tone_is_in_it():
+    """Mains hum at 200 Hz: the third-octave band of 224.75 Hz starts at 200.2 Hz, so it holds
+    the noise only (within 1 dB), though the 10-Hz bin at 200 Hz holds both the hum and the
+    band's edge; the band of 210 Hz (from 187 Hz) holds the hum with its whole power."""
+    t = np.arange(3 * FS) / FS
+    x = 0.003 * np.random.default_rng(2).standard_normal(t.size) + 0.01 * np.sin(
+        2 * np.pi * 200.0 * t
+    )
+    det = StreamingDetector(DetectorSettings(), FS)
+    det.push(x.astype(np.float32), 0.0, 0.0)
+    assert [round(b.frequency_hz) for b in det.background.tones()] == [200]
+    f = np.array([224.75, 210.0])
+    noise = 0.003**2 * f * (2 ** (1 / 6) - 2 ** (-1 / 6)) / (FS / 2)
+    got = det.background.band_power(f)
+    assert 10 * math.log10(got[0] / noise[0]) == pytest.approx(0.0, abs=1.0)
+    assert 10 * math.log10(got[1] / (noise[1] + 0.01**2 / 2)) == pytest.approx(0.0, abs=0.5)
+
+
 def test_without_rest_the_room_is_not_learned():
     """Never at rest (or no speed at all): nothing is learned as background."""
     x, ts, speed, _ = _bench_room(rest=())
