@@ -450,6 +450,35 @@ def test_a_tone_lasting_exactly_a_constant_speed_stretch_is_drive_noise():
     assert drive[0].end_s == pytest.approx(6.0, abs=0.1)
 
 
+def test_a_piece_of_a_sweep_is_judged_by_where_its_sound_went():
+    """A 60-ms track at 390 Hz on a ramp (the speed falling 50 %/s): too short to be seen
+    moving (a 2nd motor order at the start of a ramp down: one false episode on a realistic
+    bench, seed 2024, 12.4 gear). Followed three frames beyond its ends, a drive tone's sound
+    goes on along r |speed| / 2 pi (rejected, `drive_ratio` r), a squeak's stays at 390 Hz
+    (kept)."""
+    from leadscrew_ros.model.acoustics.detection import Episode, _went_with_speed
+
+    t = np.arange(3 * FS) / FS
+    ts = np.linspace(0.0, 3.0, 301)
+    speed = 100.0 * np.exp(-0.5 * ts)  # rad/s, -50 %/s
+    f1 = speed / (2 * np.pi)
+    r = 390.0 / float(np.interp(1.5, ts, f1))
+    turns = np.cumsum(np.interp(t, ts, speed)) / FS
+    noise = 0.003 * np.random.default_rng(8).standard_normal(t.size)
+    frames = 1.5 + np.arange(-3, 3) * 0.01
+    track = r * np.interp(frames, ts, f1)
+    for tone, drive in (
+        (0.01 * np.sin(r * turns), True),
+        (0.01 * np.sin(2 * np.pi * 390 * t), False),
+    ):
+        ep = Episode(frames[0] - 0.005, frames[-1] + 0.005, 390.0, 20.0, 20.0, -40.0)
+        ep.track_times_s, ep.track_hz = frames, track
+        det = StreamingDetector(DetectorSettings(), FS)
+        kept = _went_with_speed(det, [ep], ts, speed, (noise + tone).astype(np.float32), 0.0)
+        assert (kept == []) == drive
+        assert (ep.drive_ratio == pytest.approx(r, rel=0.01)) if drive else ep.drive_ratio is None
+
+
 def test_a_224_hz_squeak_12_db_over_its_band_is_found_within_100_ms():
     """Issue 30: a 224 Hz squeak 12 dB over its third-octave background is found within
     100 ms of becoming so. The background (white noise) is learned at rest (the first 1 s);

@@ -80,6 +80,7 @@ class AudioError(ValueError):
 
 
 GROWTH_NEIGHBOUR = 0.1  # a tone within 10 % sounded in the growth measurement's band
+PATH_FRAMES = 3  #: a piece of a sweep is followed this many frame lengths beyond its ends
 
 
 def _finite_or_none(value: float | None) -> float | None:
@@ -1164,10 +1165,12 @@ def detect(
     episodes = det.push(samples, t0_s, speed_rad_s, speed_times_s)
     n_samples = det._n_samples
     episodes += det.flush()
+    mono = _mono(samples)
     if speed_times_s is not None and speed_rad_s is not None:
         episodes = _at_drive_ratios(det, episodes, speed_times_s, speed_rad_s)
+        if mono is not None:
+            episodes = _went_with_speed(det, episodes, speed_times_s, speed_rad_s, mono, t0_s)
     episodes = with_harmonics(episodes, settings.max_harmonic, settings.track_tolerance)
-    mono = _mono(samples)
     creaks = (
         find_creaks(mono, det.sample_rate_hz, t0_s=t0_s, scale_pa=scale_pa, settings=settings)
         if mono is not None
@@ -1311,6 +1314,79 @@ def _at_drive_ratios(
         else:
             kept.append(ep)
     return _recurring_ratios(det, kept, t, v)
+
+
+def _went_with_speed(
+    det: StreamingDetector,
+    episodes: list[Episode],
+    speed_times_s: Any,
+    speed_rad_s: Any,
+    samples: np.ndarray,
+    t0_s: float,
+) -> list[Episode]:
+    """The episodes less the pieces of a sweep: a track at one ratio r to the screw's
+    rotation over its frames (too short, or the speed too steady, to be seen moving) whose
+    sound, followed beyond its ends for `PATH_FRAMES` frame lengths, went on along r |speed| /
+    2 pi rather than staying at its own frequency f0: at the frames there where the two are
+    more than twice `order_tolerance` apart (at least three), the median power of the
+    Hann-windowed frame at r |speed| / 2 pi is four times (6 dB) that at f0 or more. Drive
+    noise does so (its frequency is the speed's); a squeak's sound, before its growth and
+    while it decays, stays at the mode's frequency."""
+    s = det.settings
+    try:
+        t = np.asarray(speed_times_s, dtype=float).reshape(-1)
+        v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
+        t0 = float(t0_s)
+    except (TypeError, ValueError):
+        return episodes
+    if s.order_tolerance <= 0 or t.size != v.size or t.size < 2 or not math.isfinite(t0):
+        return episodes
+    rate, n = det.sample_rate_hz, det.frame_len
+    window = det._window.astype(np.float64)
+    offsets = np.arange(n) / rate
+    reach = PATH_FRAMES * s.frame_s
+    kept = []
+    for ep in episodes:
+        ok = np.isfinite(ep.track_hz)
+        f1 = np.interp(ep.track_times_s[ok], t, v) / (2 * np.pi)
+        if not ok.any() or np.any(f1 <= 0):
+            kept.append(ep)
+            continue
+        ratios = ep.track_hz[ok] / f1
+        r, f0 = float(np.median(ratios)), float(np.median(ep.track_hz[ok]))
+        if np.mean(np.abs(ratios / r - 1.0) <= s.order_tolerance) < s.order_share:
+            kept.append(ep)  # it did not stay at one ratio: not a piece of a sweep
+            continue
+        centres = np.concatenate(
+            [
+                np.arange(ep.start_s - reach, ep.start_s, det.hop_s),
+                np.arange(ep.end_s + det.hop_s, ep.end_s + reach, det.hop_s),
+            ]
+        )
+        path = r * np.interp(centres, t, v) / (2 * np.pi)
+        first = np.rint((centres - t0) * rate - n / 2).astype(int)
+        use = (
+            (np.abs(path / f0 - 1.0) > 2 * s.order_tolerance)
+            & (first >= 0)
+            & (first + n <= samples.size)
+        )
+        if np.count_nonzero(use) < 3:
+            kept.append(ep)
+            continue
+        powers = []
+        for a, fp in zip(first[use].tolist(), path[use].tolist(), strict=True):
+            frame = samples[a : a + n].astype(np.float64) * window
+            phase = -2j * np.pi * offsets
+            powers.append(
+                (abs(frame @ np.exp(phase * fp)) ** 2, abs(frame @ np.exp(phase * f0)) ** 2)
+            )
+        along, stayed = np.median(np.asarray(powers), axis=0)
+        if along >= 4.0 * stayed:
+            ep.drive_ratio = r
+            det.rejected.append(ep)
+        else:
+            kept.append(ep)
+    return kept
 
 
 def _recurring_ratios(
