@@ -296,8 +296,8 @@ def test_what_sounds_at_rest_is_background(rest):
 
 def test_what_rings_on_as_the_drive_stops_is_not_background():
     """A loud squeak at 2480 Hz rings on for 0.4 s after the drive stops (10.5 s): the rest
-    after it is learned as background only from `motor_off_min_s` on, as the node does, so
-    its band stays the noise's (within 1 dB; learning the whole rest put it 29 dB higher,
+    after it is learned as background only from where its sound has settled, so its band
+    stays the noise's (within 1 dB; learning the whole rest put it 29 dB higher,
     and recall on a realistic bench, seed 77, was 0.898, now 0.96) and a quieter squeak at
     the same frequency, 14 dB over the band, is found."""
     x, ts, speed, _ = _bench_room(squeaks=((4.0, 5.0, 2480.0, 0.0), (9.0, 10.9, 2480.0, 0.05)))

@@ -1492,10 +1492,11 @@ def _learn_at_rest(
     det: StreamingDetector, samples: Any, t0_s: float, speed_times_s: Any, speed_rad_s: Any
 ) -> None:
     """Learn `det`'s background from every stretch of the recording where the drive rests for
-    at least `motor_off_min_s` (its end too) before the detection runs, from its first
-    `motor_off_min_s` on, as the node does: a fan heard first when the drive already moves
-    is then known as background, and what rings on as the drive stops (a squeak decaying,
-    the room's tail) is not."""
+    at least `motor_off_min_s` (its end too) before the detection runs, from where its sound
+    has settled on: the first frame whose level is within `background_level_sd_db` of the
+    stretch's median frame level (a steady level). A fan heard first when the drive already
+    moves is then known as background, and what rings on as the drive stops (a squeak
+    decaying, the room's tail) is not."""
     try:
         t = np.asarray(speed_times_s, dtype=float).reshape(-1)
         v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
@@ -1509,11 +1510,27 @@ def _learn_at_rest(
     rest = np.concatenate([[False], np.isfinite(v) & (v < s.motor_off_rad_s), [False]])
     edges = np.flatnonzero(rest[1:] != rest[:-1])
     spans = [
-        (t[a] + s.motor_off_min_s, t[b - 1])
+        (_settled(det, x, t0, t[a], t[b - 1]), t[b - 1])
         for a, b in zip(edges[::2], edges[1::2], strict=True)
         if t[b - 1] - t[a] >= s.motor_off_min_s
     ]
     _learn_spans(det, det.background, x, t0, spans)
+
+
+def _settled(det: StreamingDetector, x: np.ndarray, t0: float, start: float, end: float) -> float:
+    """Where the sound of the span (start, end) [s] of `x` (first sample at `t0`) has settled
+    [s]: the centre of its first frame whose level (mean square of its varying part) is
+    within `background_level_sd_db` of the span's median frame level; `start` when it has
+    fewer than two frames."""
+    rate, n, hop = det.sample_rate_hz, det.frame_len, det.hop
+    i, j = max(int(math.ceil((start - t0) * rate)), 0), min(int((end - t0) * rate), x.size)
+    frames = (j - i - n) // hop + 1 if j - i >= n else 0
+    if frames < 2:
+        return start
+    variance, _ = frame_powers(x[i:j], n, hop, frames)
+    level = 10 * np.log10(np.maximum(variance, 1e-300))
+    steady = level <= float(np.median(level)) + det.settings.background_level_sd_db
+    return start + (int(np.argmax(steady)) * hop) / rate
 
 
 def _learn_spans(
