@@ -2,7 +2,7 @@
 """What the listening hears on a realistic bench, against the bench's truth (issue 30).
 
     .venv/bin/python benchmarks/bench_realistic.py [--units N] [--seed S] [--duration D]
-        [--gear-ratio R] [--json OUT.json]
+        [--gear-ratio R] [--fan-hz F] [--mains-hz F] [--json OUT.json]
 
 Makes `leadscrew-squeak bench --realistic` (fan, mains hum and its harmonics, pink noise, a
 worm-geared motor with its 2nd order and commutator, a room, the squeak grown by the amplitude
@@ -86,8 +86,13 @@ def evaluate(root: Path, args: argparse.Namespace) -> dict:
     bench = root / "bench"
     argv = ["bench", "--out", str(bench), "--units", str(args.units), "--seed", str(args.seed)]
     argv += ["--duration", str(args.duration), "--realistic", "--quiet"]
-    if args.gear_ratio:
-        argv += ["--gear-ratio", str(args.gear_ratio)]
+    for option, value in (
+        ("--gear-ratio", args.gear_ratio),
+        ("--fan-hz", args.fan_hz),
+        ("--mains-hz", args.mains_hz),
+    ):
+        if value:
+            argv += [option, str(value)]
     if cli(argv) != 0:
         raise SystemExit("bench failed")
     truth = json.loads((bench / "truth.json").read_text())
@@ -204,6 +209,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=77)
     p.add_argument("--duration", type=float, default=12.0, help="stroke duration [s]")
     p.add_argument("--gear-ratio", type=float, default=0.0, help="0: the bench's default")
+    p.add_argument("--fan-hz", type=float, default=0.0, help="the fan's tone; 0: the default")
+    p.add_argument("--mains-hz", type=float, default=0.0, help="hum at 2, 4, 6 x; 0: default")
     p.add_argument("--json", metavar="OUT.json")
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:

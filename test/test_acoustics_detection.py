@@ -254,12 +254,15 @@ def test_a_tone_of_a_few_quantisation_steps_is_still_heard():
         assert [round(e.frequency_hz) for e in d.episodes] == found, amplitude
 
 
+SIGMA_ROOM = 0.003  # the room's white noise (rms)
+
+
 def _bench_room(rest=((0.0, 1.5), (10.5, 12.0)), squeaks=((4.0, 5.0, 2480.0, 0.02),)):
     """12 s of a room with a fan (1170 Hz), mains hum (100/200/300 Hz) and noise, the drive at
     rest in `rest` (speed 0) and at 100 rad/s otherwise (ramps of 1.5 s), squeak tones
     (start, end, Hz, amplitude) added."""
     t = np.arange(12 * FS) / FS
-    x = 0.003 * np.random.default_rng(5).standard_normal(t.size)
+    x = SIGMA_ROOM * np.random.default_rng(5).standard_normal(t.size)
     room = ((1170.0, 0.01), (100.0, 0.01), (200.0, 0.005), (300.0, 0.003))
     for f, a in room:
         x += a * np.sin(2 * np.pi * f * t + f)
@@ -289,6 +292,46 @@ def test_what_sounds_at_rest_is_background(rest):
     for f, a in room:
         assert tones[round(f)] == pytest.approx(10 * math.log10(a * a / 2), abs=1.0)
     assert json.loads(json.dumps(d.as_dict()))["background"][0]["frequency_hz"] > 0
+
+
+def test_what_rings_on_as_the_drive_stops_is_not_background():
+    """A loud squeak at 2480 Hz rings on for 0.4 s after the drive stops (10.5 s): the rest
+    after it is learned as background only from where its sound has settled, so its band
+    stays the noise's (within 1 dB; learning the whole rest put it 29 dB higher,
+    and recall on a realistic bench, seed 77, was 0.898, now 0.96) and a quieter squeak at
+    the same frequency, 14 dB over the band, is found."""
+    x, ts, speed, _ = _bench_room(squeaks=((4.0, 5.0, 2480.0, 0.0), (9.0, 10.9, 2480.0, 0.05)))
+    band = SIGMA_ROOM**2 * 2480.0 * (2 ** (1 / 6) - 2 ** (-1 / 6)) / (FS / 2)
+    t = np.arange(x.size) / FS
+    quiet = np.sqrt(2 * band * 10 ** (14 / 10))
+    x = x + (quiet * np.sin(2 * np.pi * 2480.0 * t) * ((t > 4.0) & (t < 5.0))).astype(np.float32)
+    det = StreamingDetector(DetectorSettings(), FS)
+    from leadscrew_ros.model.acoustics.detection import _learn_at_rest
+
+    _learn_at_rest(det, x, 0.0, ts, speed)
+    learned = float(det.background.band_power(np.array([2480.0]))[0])
+    assert 10 * math.log10(learned / band) == pytest.approx(0.0, abs=1.0)
+    d = detect(x, FS, speed_times_s=ts, speed_rad_s=speed)
+    found = [(round(e.frequency_hz), round(e.start_s, 1), round(e.end_s, 1)) for e in d.episodes]
+    assert found[0] == (2480, 4.0, 5.0) and len(found) == 2, found
+
+
+def test_a_band_holds_a_background_tone_only_when_the_tone_is_in_it():
+    """Mains hum at 200 Hz: the third-octave band of 224.75 Hz starts at 200.2 Hz, so it holds
+    the noise only (within 1 dB), though the 10-Hz bin at 200 Hz holds both the hum and the
+    band's edge; the band of 210 Hz (from 187 Hz) holds the hum with its whole power."""
+    t = np.arange(3 * FS) / FS
+    x = 0.003 * np.random.default_rng(2).standard_normal(t.size) + 0.01 * np.sin(
+        2 * np.pi * 200.0 * t
+    )
+    det = StreamingDetector(DetectorSettings(), FS)
+    det.push(x.astype(np.float32), 0.0, 0.0)
+    assert [round(b.frequency_hz) for b in det.background.tones()] == [200]
+    f = np.array([224.75, 210.0])
+    noise = 0.003**2 * f * (2 ** (1 / 6) - 2 ** (-1 / 6)) / (FS / 2)
+    got = det.background.band_power(f)
+    assert 10 * math.log10(got[0] / noise[0]) == pytest.approx(0.0, abs=1.0)
+    assert 10 * math.log10(got[1] / (noise[1] + 0.01**2 / 2)) == pytest.approx(0.0, abs=0.5)
 
 
 def test_without_rest_the_room_is_not_learned():
@@ -379,6 +422,94 @@ def test_a_ratio_heard_again_at_another_speed_is_drive_noise():
     drive = [e for e in d.rejected if e.drive_ratio is not None]
     assert drive and all(abs(e.drive_ratio / 297.0 - 1) < 0.01 for e in drive)
     assert {round(e.frequency_hz / 100) for e in drive} == {47, 38}
+
+
+def test_a_tone_lasting_exactly_a_constant_speed_stretch_is_drive_noise():
+    """One hold at 100 rad/s reached and left by steps too fast to follow (no other speed to
+    compare with): a commutator at 373 x the screw's rotation sounds exactly while the speed
+    holds (5 such false episodes on 10 realistic-bench units, seed 77); it is drive noise. In
+    the same hold a squeak at 2480 Hz growing from 1.7 s and one at 1100 Hz growing from
+    5.3 s that rings on (decays) after the drive stops at 6 s are kept: a squeak starts
+    when it has grown, not when the speed settles, and outlasts the speed's change."""
+    t = np.arange(8 * FS) / FS
+    ts = np.linspace(0.0, 8.0, 801)
+    speed = np.interp(ts, [0, 1, 1.01, 6, 6.01, 8], [0, 0, 100, 100, 0, 0])
+    turns = np.cumsum(np.interp(t, ts, speed)) / FS
+    x = 0.003 * np.random.default_rng(6).standard_normal(t.size)
+    x += 0.005 * np.sin(373.0 * turns) * (np.interp(t, ts, speed) > 0.5)
+    for start, end, f in ((1.7, 3.0, 2480.0), (5.3, 6.0, 1100.0)):
+        grow = np.minimum(np.exp(40.0 * (t - start - 0.2)), 1.0)  # 35 dB in 0.2 s, saturates
+        ring = np.exp(-np.maximum(t - end, 0.0) / 0.1)  # 35 dB down 0.4 s after `end`
+        x += 0.02 * grow * ring * np.sin(2 * np.pi * f * t) * (t > start) * (t < end + 0.4)
+    d = detect(x.astype(np.float32), FS, speed_times_s=ts, speed_rad_s=speed)
+    assert [round(e.frequency_hz) for e in d.episodes] == [2480, 1100]
+    drive = [e for e in d.rejected if e.drive_ratio is not None]
+    assert [round(e.drive_ratio) for e in drive] == [373]
+    assert [round(o.ratio) for o in d.drive_orders] == [373]  # learned: its sweeps are known
+    assert drive[0].start_s == pytest.approx(1.0, abs=0.1)
+    assert drive[0].end_s == pytest.approx(6.0, abs=0.1)
+
+
+def test_a_piece_of_a_sweep_is_judged_by_where_its_sound_went():
+    """A 60-ms track at 390 Hz on a ramp (the speed falling 50 %/s): too short to be seen
+    moving (a 2nd motor order at the start of a ramp down: one false episode on a realistic
+    bench, seed 2024, 12.4 gear). Followed three frames beyond its ends, a drive tone's sound
+    goes on along r |speed| / 2 pi (rejected, `drive_ratio` r), a squeak's stays at 390 Hz
+    (kept)."""
+    from leadscrew_ros.model.acoustics.detection import Episode, _went_with_speed
+
+    t = np.arange(3 * FS) / FS
+    ts = np.linspace(0.0, 3.0, 301)
+    speed = 100.0 * np.exp(-0.5 * ts)  # rad/s, -50 %/s
+    f1 = speed / (2 * np.pi)
+    r = 390.0 / float(np.interp(1.5, ts, f1))
+    turns = np.cumsum(np.interp(t, ts, speed)) / FS
+    noise = 0.003 * np.random.default_rng(8).standard_normal(t.size)
+    frames = 1.5 + np.arange(-3, 3) * 0.01
+    track = r * np.interp(frames, ts, f1)
+    for tone, drive in (
+        (0.01 * np.sin(r * turns), True),
+        (0.01 * np.sin(2 * np.pi * 390 * t), False),
+    ):
+        ep = Episode(frames[0] - 0.005, frames[-1] + 0.005, 390.0, 20.0, 20.0, -40.0)
+        ep.track_times_s, ep.track_hz = frames, track
+        det = StreamingDetector(DetectorSettings(), FS)
+        kept = _went_with_speed(det, [ep], ts, speed, (noise + tone).astype(np.float32), 0.0)
+        assert (kept == []) == drive
+        assert (ep.drive_ratio == pytest.approx(r, rel=0.01)) if drive else ep.drive_ratio is None
+
+
+def test_a_224_hz_squeak_12_db_over_its_band_is_found_within_100_ms():
+    """Issue 30: a 224 Hz squeak 12 dB over its third-octave background is found within
+    100 ms of becoming so. The background (white noise) is learned at rest (the first 1 s);
+    the squeak grows at 20 1/s (a slow onset: 1.7 dB per 10 ms) from 5 dB under the band at
+    2 s and saturates 30 dB over it; it is found (offline: the episode's start; live:
+    `heard_now` at the first frame whose samples have all arrived) at most 100 ms after it
+    stands 12 dB over the band, for every noise draw."""
+    dur, sigma, f, rate = 4.0, 0.003, 224.0, 20.0
+    t = np.arange(int(dur * FS)) / FS
+    band = sigma**2 * f * (2 ** (1 / 6) - 2 ** (-1 / 6)) / (FS / 2)  # noise power in the band
+    top = np.sqrt(2 * band * 10 ** (30 / 10))  # amplitude 30 dB over the band
+    # from 5 dB under the band at 2 s, +8.7 dB per e-fold: 12 dB over it at t12
+    amplitude = top * np.minimum(10 ** (-35 / 20) * np.exp(rate * (t - 2.0)), 1.0) * (t >= 2.0)
+    t12 = 2.0 + (12.0 + 5.0) / (20 * math.log10(math.e) * rate)
+    ts = np.array([0.0, 1.0, 1.01, dur])
+    speed = np.array([0.0, 0.0, 50.0, 50.0])
+    for seed in range(5):
+        rng = np.random.default_rng(seed)
+        x = (rng.normal(0.0, sigma, t.size) + amplitude * np.sin(2 * np.pi * f * t)).astype(
+            np.float32
+        )
+        d = detect(x, FS, speed_times_s=ts, speed_rad_s=speed)
+        [e] = [e for e in d.episodes if abs(e.frequency_hz / f - 1) < 0.02]
+        assert t12 - 0.3 <= e.start_s <= t12 + 0.1, (seed, e.start_s, t12)
+        det = StreamingDetector(DetectorSettings(), FS)
+        heard_at = math.inf
+        for k in range(0, x.size, 480):  # 10-ms chunks: the frames as their samples arrive
+            det.push(x[k : k + 480], k / FS, speed, ts)
+            if det.heard_now and abs(det.frequency_now_hz / f - 1) < 0.02:
+                heard_at = min(heard_at, (k + 480) / FS)
+        assert heard_at <= t12 + 0.1, (seed, heard_at, t12)
 
 
 def test_a_squeaks_harmonics_belong_to_its_episode():

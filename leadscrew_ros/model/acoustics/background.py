@@ -93,6 +93,9 @@ class BackgroundLearner:
         # squares]
         self._groups = np.zeros((0, 4))
         self._tones: list[BackgroundTone] | None = None  # `tones`, until the next frame
+        # `band_power`'s tables until the next frame: (cumulative power of the floor at the
+        # bin edges, learned tones' frequencies, their powers)
+        self._bands: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._given: list[BackgroundTone] = []  # `include`
 
     def _width_hz(self, f: np.ndarray | float) -> np.ndarray:
@@ -121,7 +124,7 @@ class BackgroundLearner:
                 g = np.vstack([g, [f, 1.0, level, level * level]])
         if g.shape[0] > _MAX_TONES:
             g = g[np.argsort(-g[:, 1], kind="stable")[:_MAX_TONES]]
-        self._groups, self._tones = g, None
+        self._groups, self._tones, self._bands = g, None, None
 
     def add_spectrum(self, psd: np.ndarray) -> None:
         """Rest frames' power spectral densities (frames, bins) [unit^2/Hz], bins `bin_hz`
@@ -134,6 +137,7 @@ class BackgroundLearner:
             self._spectrum, self._spectra = np.zeros_like(total), 0
         self._spectrum += total
         self._spectra += rows.shape[0]
+        self._bands = None
 
     @property
     def has_spectrum(self) -> bool:
@@ -142,7 +146,14 @@ class BackgroundLearner:
 
     def band_power(self, frequency_hz: np.ndarray) -> np.ndarray:
         """The background's mean power in the third-octave band around each frequency
-        ([f 2^-1/6, f 2^1/6]) [unit^2]; nan before any rest frame.
+        ([f 2^-1/6, f 2^1/6)) [unit^2]; nan before any rest frame.
+
+        The band's edges cut the bins where they fall (not at whole bins), and a learned tone
+        (`learned`) counts with its whole power where its frequency is inside the band, none
+        where it is outside: the spectrum under its main lobe (+-2 bins of the Hann window) is
+        the noise floor interpolated from the bins beside it, its excess over that floor is
+        its power. So mains hum at 200 Hz is not in the band of a tone at 225 Hz (from
+        200.4 Hz), though a 10-Hz bin holds both edges.
 
         Parameters
         ----------
@@ -156,12 +167,35 @@ class BackgroundLearner:
         f = np.asarray(frequency_hz, dtype=float)
         if self._spectrum is None or not self._spectra:
             return np.full(f.shape, np.nan)
-        mean = self._spectrum / self._spectra
-        cum = np.concatenate([[0.0], np.cumsum(mean)]) * self.bin_hz
-        n = mean.size
-        lo = np.clip(np.floor(f * 2 ** (-1 / 6) / self.bin_hz + 0.5), 0, n).astype(int)
-        hi = np.clip(np.floor(f * 2 ** (1 / 6) / self.bin_hz + 0.5) + 1, 0, n).astype(int)
-        return np.maximum(cum[hi] - cum[lo], _TINY)
+        cum, tone_hz, tone_power = self._band_tables()
+        lo, hi = f * 2 ** (-1 / 6), f * 2 ** (1 / 6)
+        edges = np.arange(cum.size) - 0.5  # bin k spans k -+ 1/2 bins
+        power = np.interp(hi / self.bin_hz, edges, cum) - np.interp(lo / self.bin_hz, edges, cum)
+        if tone_hz.size:
+            inside = (lo[..., None] <= tone_hz) & (tone_hz < hi[..., None])
+            power = power + np.sum(np.where(inside, tone_power, 0.0), axis=-1)
+        return np.maximum(power, _TINY)
+
+    def _band_tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if self._bands is None:
+            assert self._spectrum is not None
+            mean = self._spectrum / self._spectra
+            k = np.arange(mean.size)
+            tones = [t.frequency_hz for t in self.learned()]
+            centre = np.rint(np.asarray(tones) / self.bin_hz).astype(int)
+            lobe = np.zeros(mean.size, bool)
+            for c in centre.tolist():
+                lobe[max(c - 2, 0) : c + 3] = True
+            floor = mean.copy()
+            if lobe.any() and not lobe.all():
+                floor[lobe] = np.interp(k[lobe], k[~lobe], mean[~lobe])
+            excess = np.maximum(mean - floor, 0.0) * self.bin_hz
+            power = np.array(
+                [excess[max(c - 2, 0) : c + 3].sum() for c in centre.tolist()], dtype=float
+            )
+            cum = np.concatenate([[0.0], np.cumsum(floor)]) * self.bin_hz
+            self._bands = (cum, np.asarray(tones, dtype=float), power)
+        return self._bands
 
     def learned(self, share: float | None = None) -> list[BackgroundTone]:
         """The tones of the frames seen held by at least `share` of them (default: the

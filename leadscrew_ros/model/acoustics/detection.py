@@ -80,6 +80,7 @@ class AudioError(ValueError):
 
 
 GROWTH_NEIGHBOUR = 0.1  # a tone within 10 % sounded in the growth measurement's band
+PATH_FRAMES = 3  #: a piece of a sweep is followed this many frame lengths beyond its ends
 
 
 def _finite_or_none(value: float | None) -> float | None:
@@ -802,7 +803,8 @@ class StreamingDetector:
             dropped = bad_cum[starts + n] - bad_cum[starts] > 0
         else:
             dropped = np.zeros(i1 - i0, bool)
-        self._note_usable(i0, dropped, ~dropped & (variance <= SILENT_FACTOR * rounding))
+        silent = ~dropped & (variance <= SILENT_FACTOR * rounding)
+        self._note_usable(i0, dropped, silent)
         level_db = 10 * np.log10(np.maximum(cand.power, 1e-300)) + self._level_offset_db
         # the background learned so far is not followed (a louder tone at its frequency is)
         background = self.background.covers(cand.frequency_hz, level_db)
@@ -829,7 +831,7 @@ class StreamingDetector:
         learning: list[int] = []
         for j in range(i1 - i0):
             self._rest_frames = self._rest_frames + 1 if rest[j] and not dropped[j] else 0
-            if self._rest_frames >= rest_run:
+            if self._rest_frames >= rest_run and not silent[j]:  # no sound is no background
                 tones = np.flatnonzero(tonal[j])
                 self.background.add(cand.frequency_hz[j, tones], cand.power[j, tones])
                 learning.append(j)
@@ -930,7 +932,7 @@ class StreamingDetector:
         r_const = float(np.sqrt(np.mean((f / np.median(f) - 1.0) ** 2)))
         floor = 0.1 * self.analyzer.df / float(np.median(f))  # a tenth of a bin
         if r_const >= max(3 * r_ratio, floor):  # the tone moved with the speed
-            self._learn_ratio(r, tr)
+            self._learn_ratio(r, tr.level_sum / len(tr.hz) + self._level_offset_db)
             return r
         if r_ratio >= max(3 * r_const, floor):  # it stayed while the speed moved
             return None
@@ -941,9 +943,9 @@ class StreamingDetector:
         whole = k >= 1 and abs(r / k - 1.0) <= s.order_tolerance
         return r if whole and k <= 0.25 / s.order_tolerance else None
 
-    def _learn_ratio(self, r: float, tr: _Track) -> None:
-        """Count a ratio the drive was heard at (moving with the speed), with its level."""
-        level = tr.level_sum / len(tr.hz) + self._level_offset_db
+    def _learn_ratio(self, r: float, level: float) -> None:
+        """Count a ratio the drive was heard at (moving with the speed, or held exactly as
+        long as the speed), with its track's level [dB]."""
         g = self._ratio_groups
         if g.size:
             centre = g[:, 0] / g[:, 1]
@@ -1163,10 +1165,12 @@ def detect(
     episodes = det.push(samples, t0_s, speed_rad_s, speed_times_s)
     n_samples = det._n_samples
     episodes += det.flush()
+    mono = _mono(samples)
     if speed_times_s is not None and speed_rad_s is not None:
         episodes = _at_drive_ratios(det, episodes, speed_times_s, speed_rad_s)
+        if mono is not None:
+            episodes = _went_with_speed(det, episodes, speed_times_s, speed_rad_s, mono, t0_s)
     episodes = with_harmonics(episodes, settings.max_harmonic, settings.track_tolerance)
-    mono = _mono(samples)
     creaks = (
         find_creaks(mono, det.sample_rate_hz, t0_s=t0_s, scale_pa=scale_pa, settings=settings)
         if mono is not None
@@ -1279,9 +1283,9 @@ def _at_drive_ratios(
     """The episodes less those at one of the drive's ratios over the whole log (learned by
     then, or given): a tone held at constant speed, or a piece of a sweep too short to be
     judged, that closed before the ratio was heard moving (the order spectrum of the log's
-    tracks, used after the fact)."""
+    tracks, used after the fact), or heard held exactly as long as the speed held
+    (`_held_with_speed`, judged first: a piece of its sweep into the hold is then known)."""
     s = det.settings
-    ratios = [o.ratio for o in det.drive_orders] + list(s.known_ratios)
     try:
         t = np.asarray(speed_times_s, dtype=float).reshape(-1)
         v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
@@ -1289,6 +1293,8 @@ def _at_drive_ratios(
         return episodes
     if s.order_tolerance <= 0 or t.size != v.size or t.size == 0:
         return episodes
+    episodes = _held_with_speed(det, episodes, t, v)
+    ratios = [o.ratio for o in det.drive_orders] + list(s.known_ratios)
     kept = []
     for ep in episodes:
         f1 = np.interp(ep.track_times_s, t, v) / (2 * np.pi)
@@ -1308,6 +1314,79 @@ def _at_drive_ratios(
         else:
             kept.append(ep)
     return _recurring_ratios(det, kept, t, v)
+
+
+def _went_with_speed(
+    det: StreamingDetector,
+    episodes: list[Episode],
+    speed_times_s: Any,
+    speed_rad_s: Any,
+    samples: np.ndarray,
+    t0_s: float,
+) -> list[Episode]:
+    """The episodes less the pieces of a sweep: a track at one ratio r to the screw's
+    rotation over its frames (too short, or the speed too steady, to be seen moving) whose
+    sound, followed beyond its ends for `PATH_FRAMES` frame lengths, went on along r |speed| /
+    2 pi rather than staying at its own frequency f0: at the frames there where the two are
+    more than twice `order_tolerance` apart (at least three), the median power of the
+    Hann-windowed frame at r |speed| / 2 pi is four times (6 dB) that at f0 or more. Drive
+    noise does so (its frequency is the speed's); a squeak's sound, before its growth and
+    while it decays, stays at the mode's frequency."""
+    s = det.settings
+    try:
+        t = np.asarray(speed_times_s, dtype=float).reshape(-1)
+        v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
+        t0 = float(t0_s)
+    except (TypeError, ValueError):
+        return episodes
+    if s.order_tolerance <= 0 or t.size != v.size or t.size < 2 or not math.isfinite(t0):
+        return episodes
+    rate, n = det.sample_rate_hz, det.frame_len
+    window = det._window.astype(np.float64)
+    offsets = np.arange(n) / rate
+    reach = PATH_FRAMES * s.frame_s
+    kept = []
+    for ep in episodes:
+        ok = np.isfinite(ep.track_hz)
+        f1 = np.interp(ep.track_times_s[ok], t, v) / (2 * np.pi)
+        if not ok.any() or np.any(f1 <= 0):
+            kept.append(ep)
+            continue
+        ratios = ep.track_hz[ok] / f1
+        r, f0 = float(np.median(ratios)), float(np.median(ep.track_hz[ok]))
+        if np.mean(np.abs(ratios / r - 1.0) <= s.order_tolerance) < s.order_share:
+            kept.append(ep)  # it did not stay at one ratio: not a piece of a sweep
+            continue
+        centres = np.concatenate(
+            [
+                np.arange(ep.start_s - reach, ep.start_s, det.hop_s),
+                np.arange(ep.end_s + det.hop_s, ep.end_s + reach, det.hop_s),
+            ]
+        )
+        path = r * np.interp(centres, t, v) / (2 * np.pi)
+        first = np.rint((centres - t0) * rate - n / 2).astype(int)
+        use = (
+            (np.abs(path / f0 - 1.0) > 2 * s.order_tolerance)
+            & (first >= 0)
+            & (first + n <= samples.size)
+        )
+        if np.count_nonzero(use) < 3:
+            kept.append(ep)
+            continue
+        powers = []
+        for a, fp in zip(first[use].tolist(), path[use].tolist(), strict=True):
+            frame = samples[a : a + n].astype(np.float64) * window
+            phase = -2j * np.pi * offsets
+            powers.append(
+                (abs(frame @ np.exp(phase * fp)) ** 2, abs(frame @ np.exp(phase * f0)) ** 2)
+            )
+        along, stayed = np.median(np.asarray(powers), axis=0)
+        if along >= 4.0 * stayed:
+            ep.drive_ratio = r
+            det.rejected.append(ep)
+        else:
+            kept.append(ep)
+    return kept
 
 
 def _recurring_ratios(
@@ -1343,12 +1422,81 @@ def _recurring_ratios(
     return kept
 
 
+def _held_with_speed(
+    det: StreamingDetector, episodes: list[Episode], t: np.ndarray, v: np.ndarray
+) -> list[Episode]:
+    """The episodes less the tones that lasted exactly as long as the speed held still: tracks
+    at constant speed (their frames' |speed| within `order_tolerance` of its median for
+    `order_share` of them) at one ratio r to the screw's rotation that together start within
+    `frame_s` of the speed arriving there and end within `frame_s` of the speed leaving (by
+    more than `order_tolerance` either way), never more than half a frame outside that
+    stretch, which is long enough for a track to touch neither end (two frames and
+    `min_duration_s`: a ramp passing through is no stretch). Drive noise at any ratio does so:
+    its frequency is r |speed| / 2 pi, it stops sweeping (is resolved in a frame) as the speed
+    settles and moves off as the speed leaves, at once. A squeak's frequency is the mode's,
+    which hardly depends on the speed: it starts when its growth from the floor has made it
+    loud (not when the speed settles) and rings on at its frequency as the speed leaves until
+    it decays. The speed is median-filtered over a frame (an encoder's noise does not end a
+    stretch). Their ratio is learned (`drive_orders`). A tone at constant speed that does not
+    so end is kept: by frequency alone it cannot be told from a squeak."""
+    s = det.settings
+    if s.order_tolerance <= 0 or t.size < 2 or not episodes:
+        return episodes
+    from scipy.ndimage import median_filter
+
+    hop = det.hop_s
+    grid = np.arange(float(t[0]), float(t[-1]) + hop / 2, hop)
+    f1 = median_filter(np.interp(grid, t, v), size=max(int(round(s.frame_s / hop)), 1))
+    f1 = f1 / (2 * np.pi)
+    # per held track: (episode, ratio, first and last frame time, the stretch's ends)
+    held: list[tuple[Episode, float, float, float, float, float]] = []
+    for ep in episodes:
+        ok = np.isfinite(ep.track_hz)
+        times = ep.track_times_s[ok]
+        at = np.interp(times, grid, f1)
+        if times.size == 0 or 2 * np.pi * float(np.median(at)) < s.motor_off_rad_s:
+            continue
+        speed = float(np.median(at))
+        r = float(np.median(ep.track_hz[ok] / np.maximum(at, 1e-300)))
+        off = np.abs(f1 / speed - 1.0) > s.order_tolerance
+        mid = float(np.median(times))
+        before, after = grid[off & (grid < mid)], grid[off & (grid > mid)]
+        if (
+            s.min_drive_ratio <= r <= s.max_drive_ratio
+            and np.mean(np.abs(at / speed - 1.0) <= s.order_tolerance) >= s.order_share
+            and before.size
+            and after.size
+        ):
+            held.append((ep, r, float(times[0]), float(times[-1]), before[-1], after[0]))
+    drive: set[int] = set()
+    for ep, r, _, _, a, b in held:  # the pieces at its ratio in its stretch, together
+        group = [
+            h for h in held if h[4] == a and h[5] == b and abs(h[1] / r - 1) <= s.order_tolerance
+        ]
+        first, last = min(h[2] for h in group), max(h[3] for h in group)
+        if (
+            b - a >= 2 * s.frame_s + s.min_duration_s
+            and -s.frame_s / 2 <= first - a <= s.frame_s
+            and -s.frame_s / 2 <= b - last <= s.frame_s
+        ):
+            drive.add(id(ep))
+    for ep, r, *_ in held:
+        if id(ep) in drive:
+            ep.drive_ratio = r
+            det._learn_ratio(r, ep.level_db)  # its largest level: a held tone is steady
+    det.rejected.extend(ep for ep in episodes if id(ep) in drive)
+    return [ep for ep in episodes if id(ep) not in drive]
+
+
 def _learn_at_rest(
     det: StreamingDetector, samples: Any, t0_s: float, speed_times_s: Any, speed_rad_s: Any
 ) -> None:
     """Learn `det`'s background from every stretch of the recording where the drive rests for
-    at least `motor_off_min_s` (its end too) before the detection runs: a fan heard first
-    when the drive already moves is then known as background."""
+    at least `motor_off_min_s` (its end too) before the detection runs, from where its sound
+    has settled on: the first frame whose level is within `background_level_sd_db` of the
+    stretch's median frame level (a steady level). A fan heard first when the drive already
+    moves is then known as background, and what rings on as the drive stops (a squeak
+    decaying, the room's tail) is not."""
     try:
         t = np.asarray(speed_times_s, dtype=float).reshape(-1)
         v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
@@ -1362,11 +1510,27 @@ def _learn_at_rest(
     rest = np.concatenate([[False], np.isfinite(v) & (v < s.motor_off_rad_s), [False]])
     edges = np.flatnonzero(rest[1:] != rest[:-1])
     spans = [
-        (t[a], t[b - 1])
+        (_settled(det, x, t0, t[a], t[b - 1]), t[b - 1])
         for a, b in zip(edges[::2], edges[1::2], strict=True)
         if t[b - 1] - t[a] >= s.motor_off_min_s
     ]
     _learn_spans(det, det.background, x, t0, spans)
+
+
+def _settled(det: StreamingDetector, x: np.ndarray, t0: float, start: float, end: float) -> float:
+    """Where the sound of the span (start, end) [s] of `x` (first sample at `t0`) has settled
+    [s]: the centre of its first frame whose level (mean square of its varying part) is
+    within `background_level_sd_db` of the span's median frame level; `start` when it has
+    fewer than two frames."""
+    rate, n, hop = det.sample_rate_hz, det.frame_len, det.hop
+    i, j = max(int(math.ceil((start - t0) * rate)), 0), min(int((end - t0) * rate), x.size)
+    frames = (j - i - n) // hop + 1 if j - i >= n else 0
+    if frames < 2:
+        return start
+    variance, _ = frame_powers(x[i:j], n, hop, frames)
+    level = 10 * np.log10(np.maximum(variance, 1e-300))
+    steady = level <= float(np.median(level)) + det.settings.background_level_sd_db
+    return start + (int(np.argmax(steady)) * hop) / rate
 
 
 def _learn_spans(
