@@ -98,9 +98,9 @@ def test_each_units_interval_of_its_friction_drop_covers_the_truth(fleet):
 
 def test_the_fleet_mean_of_the_drop_is_found_and_narrower_than_the_prior(fleet):
     """The fleet mean's 90 % interval lies near the population's drop (the known gap below)
-    and is at most half as wide as the prior's 90 % interval of a unit's drop mu_s - mu_k (the strict reading: the
-    prior itself, not the wider hyper-prior of the population centre), normal about the
-    nominal drop with SD sqrt((mu_s s_s)^2 + (mu_k s_k)^2)."""
+    and is at most half as wide as the prior's 90 % interval of a unit's drop mu_s - mu_k (the
+    strict reading: the prior itself, not the wider hyper-prior of the population centre),
+    normal about the nominal drop with SD sqrt((mu_s s_s)^2 + (mu_k s_k)^2)."""
     truth, doc, _, _ = fleet
     population = truth["nominal"]
     true_drop = population["mu_static"] - population["mu_kinetic"]

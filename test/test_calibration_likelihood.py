@@ -443,3 +443,28 @@ def test_the_consistent_expansion_from_the_prior_gives_the_truths_verdicts(unit)
     assert exact[valid].sum() > 20 and (~exact[valid]).sum() > 20  # both verdicts occur
     agree = lik.squeaks(theta)[0] == exact
     assert agree[valid].mean() >= 0.99, np.flatnonzero(valid & ~agree)
+
+
+def test_growth_rates_are_the_expansions_max_over_every_mode(likelihood, unit):
+    """growth_rates skips the pairs that cannot be the max; the answer is the max over every
+    mode of the first-order expansion (the candidates') or the centre's value (the others'),
+    and in_band says whether that max lies in the detector's band."""
+    from leadscrew_ros.model.calibration.likelihood import _expanded
+
+    prior = Prior(NOMINAL, SqueakModel(NOMINAL).scatter, NAMES)
+    theta = prior.from_u(prior.draw(12, np.random.default_rng(5)) * 0.5)
+    sigma, in_band = likelihood.growth_rates(theta)
+    point, margin, rates, inband = likelihood._solved
+    reach = likelihood._reach(point, rates)
+    used = np.unique(point)
+    changes = likelihood._changes(theta, likelihood._centre_at(used))
+    full = _expanded(*changes, np.searchsorted(used, point), rates, margin)  # (pairs, W)
+    # modes no draw in the box can make unstable are held at the centre
+    full = np.where((margin + reach > 0)[:, None], full, margin[:, None])
+    for i in np.flatnonzero(likelihood.valid)[::7].tolist():
+        rows = np.flatnonzero(point == i)
+        best = full[rows].max(axis=0)
+        np.testing.assert_allclose(sigma[:, i], best, rtol=1e-12, atol=1e-9)
+        top = rows[np.argmax(full[rows], axis=0)]
+        assert np.array_equal(in_band[:, i], inband[top])
+    assert np.all(sigma[:, ~likelihood.valid] == -np.inf)

@@ -107,7 +107,7 @@ class HearingPrior:
     threshold_points: int = setting(
         8, "1", "grid points of the threshold (at equal prior mass)", 1, 64
     )
-    depth_points: int = setting(4, "1", "grid points of the depth (at equal prior mass)", 1, 16)
+    depth_points: int = setting(3, "1", "grid points of the depth (at equal prior mass)", 1, 16)
     onset_error: float = setting(
         0.3,
         "1",

@@ -385,6 +385,7 @@ class GrowthLikelihood:
             band[pairs],  # 0 in the band, 1 outside it
         )
         self._candidates_at = self._centre_at(at)
+        self._candidate_starts = np.flatnonzero(np.r_[True, np.diff(point_k[pairs]) > 0])
         self._rest = rest
 
     def growth_rates(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -418,10 +419,10 @@ class GrowthLikelihood:
             at = self._candidates_at
             changes = self._changes(theta, at)
             mean, bound = _batch_bounds(changes, column, rates, np.abs(rates), margin)
-            # a pair under another's lower bound in its band for the whole batch is not the max
-            floor = np.full((2, len(at[0])), -np.inf)
-            np.maximum.at(floor, (band, column), mean - bound)
-            pairs = np.flatnonzero(mean + bound >= floor[band, column])
+            # a pair under another's lower bound at its point for the whole batch is not the
+            # max there, and cannot decide the band (the max's band holds its max pair)
+            floor = np.maximum.reduceat(mean - bound, self._candidate_starts)
+            pairs = np.flatnonzero(mean + bound >= floor[column])
             group = column[pairs] * 2 + band[pairs]
             pairs = pairs[np.argsort(group, kind="stable")]
             cells, starts = np.unique(column[pairs] * 2 + band[pairs], return_index=True)
