@@ -109,9 +109,10 @@ class HearingPrior:
     )
     depth_points: int = setting(3, "1", "grid points of the depth (at equal prior mass)", 1, 16)
     onset_error: float = setting(
-        0.3,
+        0.15,
         "1",
-        "relative model error of a measured onset growth rate against sigma at the onset",
+        "relative model error of a measured onset growth rate against sigma at the middle of "
+        "its fit window (on the realistic bench, at the units' own parameters, within ~8 %)",
         0.0,
         10.0,
     )
