@@ -134,7 +134,8 @@ class Observations:
         (m, 3): per heard onset with a measured growth rate, its frame (index into
         `sequence`), the rate and its standard error [1/s].
     motor_off_frames : int
-        Frames where the drive stood (below the model's minimum speed): no squeak there.
+        Frames where the drive stood (below the model's minimum speed) and had stood long
+        enough for a squeak to ring down (`gather.RING_DOWN_S`): no squeak there.
     motor_off_heard : int
         Of which the detector heard squeak: its own false alarms in the room.
     """

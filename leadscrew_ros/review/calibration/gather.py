@@ -57,6 +57,10 @@ from ..timeline import InputSettings, Timeline
 SUMMARY = "summary.json"
 REPLAYS_DIR = "replays"  # in the calibration's output: one replay output per log
 _ANNOTATED = "*.annotated.mcap"
+# A squeak rings down at its mode's damping once the drive stops (zeta omega ~ 10 1/s at
+# Table 1's first bending modes: 60 dB in ~0.7 s): motor-off frames count as the detector's
+# false alarms only this long after the drive stopped [s].
+RING_DOWN_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -181,6 +185,14 @@ def _episodes(heard: dict[str, Any]) -> list[Episode]:
         Episode(e["start_s"], e["end_s"], e["frequency_hz"], math.nan, math.nan, -math.inf)
         for e in heard["episodes"]
     ]
+
+
+def _rested(frame_t: np.ndarray, stands: np.ndarray) -> np.ndarray:
+    """Frames where the drive stands and has stood for `RING_DOWN_S` (a squeak rings down at
+    its mode's damping after the drive stops: there it is not the detector's false alarm)."""
+    moving = np.where(~stands, frame_t, -np.inf)
+    last = np.maximum.accumulate(moving) if moving.size else moving
+    return stands & (frame_t - last >= RING_DOWN_S)
 
 
 def _onsets(heard: dict[str, Any]) -> list[tuple[float, float, float]]:
@@ -347,7 +359,7 @@ def observe_replay(
             counted=use[span],
             valid=valid[span],
             onsets=_onsets(heard),
-            motor_off=((code == Validity.BELOW_MIN_SPEED) & ok_sound)[span],
+            motor_off=_rested(frame_t, code == Validity.BELOW_MIN_SPEED)[span] & ok_sound[span],
         )
     except (OSError, ValueError, LogError) as exc:
         return Gathered(str(directory), name, log, fallback, None, " ".join(str(exc).split()))
