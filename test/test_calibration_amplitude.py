@@ -342,3 +342,14 @@ def test_units_share_the_bench_threshold_learned_from_the_others():
     )
     one, alone = share_hearing([a], hearing)
     assert alone[0] is a and one is not None
+
+
+def test_motor_off_frames_count_once_a_squeak_has_rung_down():
+    from leadscrew_ros.review.calibration.gather import RING_DOWN_S, _rested
+
+    t = np.arange(0.0, 6.0, HOP_S)
+    stands = (t < 1.0) | (t >= 3.0)  # rest, a stroke from 1 to 3 s, rest
+    rested = _rested(t, stands)
+    assert np.all(rested[t < 1.0])  # before the first movement: nothing rings
+    assert not rested[(t >= 1.0) & (t < 3.0 + RING_DOWN_S - HOP_S / 2)].any()
+    assert np.all(rested[t >= 3.0 + RING_DOWN_S + HOP_S / 2])
