@@ -351,5 +351,6 @@ def test_motor_off_frames_count_once_a_squeak_has_rung_down():
     stands = (t < 1.0) | (t >= 3.0)  # rest, a stroke from 1 to 3 s, rest
     rested = _rested(t, stands)
     assert np.all(rested[t < 1.0])  # before the first movement: nothing rings
-    assert not rested[(t >= 1.0) & (t < 3.0 + RING_DOWN_S - HOP_S / 2)].any()
-    assert np.all(rested[t >= 3.0 + RING_DOWN_S + HOP_S / 2])
+    moved = 3.0 - HOP_S  # the last moving frame
+    assert not rested[(t >= 1.0) & (t < moved + RING_DOWN_S - HOP_S / 2)].any()
+    assert np.all(rested[t >= moved + RING_DOWN_S + HOP_S / 2])
