@@ -1356,7 +1356,8 @@ def plot_amplitude(
     """One unit's heard frames with the observation model's squeak amplitude over them
     (`model.calibration.amplitude`): the log-amplitude over the floor along the frames at the
     parameters `theta`, for the grid cell (detection threshold h, floor depth) of largest
-    weight, h as a line, the heard frames shaded; frames not scored are left blank.
+    weight, h as a line, the heard frames shaded; the line is left blank where the model does
+    not hold (the drive standing).
 
     Parameters
     ----------
@@ -1379,10 +1380,10 @@ def plot_amplitude(
     d, k = np.unravel_index(int(np.argmax(weight)), weight.shape)
     db = 1.0 / NP_PER_DB
     depth, h = float(likelihood.depth_np[d]), float(likelihood.threshold_np[k])
-    a, hearable = likelihood.amplitude(np.asarray(theta, float)[None, :], depth)
-    frames = likelihood.scored
+    a, hearable = likelihood.amplitude(np.asarray(theta, float)[None, :], depth, every=True)
+    frames = np.flatnonzero(likelihood.obs.sequence >= 0)
     t = frames * likelihood.obs.frame_s
-    gap = np.r_[False, np.diff(frames) > 1]  # break the line where frames are not scored
+    gap = np.r_[False, np.diff(frames) > 1]  # break the line where the model does not hold
     line = np.where(hearable[0], a[0] * db, np.nan)
     ax.plot(
         np.insert(t, np.flatnonzero(gap), np.nan),
@@ -1397,9 +1398,9 @@ def plot_amplitude(
     ax.axhline(h * db, color="k", ls="--", lw=1, label=f"detection threshold h = {h * db:.0f} dB")
     ax.axhline(depth * db, color="0.5", ls=":", lw=1, label=f"limit cycle {depth * db:.0f} dB")
     ax.fill_between([], [], color="C0", alpha=0.25, label="heard frames")
-    ax.set_ylim(-2.0, depth * db * 1.08)
+    ax.set_ylim(-0.35 * depth * db, depth * db * 1.08)
     ax.set_xlabel("time since the unit's first frame [s]")
     ax.set_ylabel("level over the floor [dB]")
     ax.set_title(f"unit {likelihood.obs.unit_id}: heard frames and the model's squeak", fontsize=9)
-    ax.legend(loc="upper left", fontsize=8, framealpha=0.8)
+    ax.legend(loc="lower center", ncol=4, fontsize=7, framealpha=0.9)
     return fig

@@ -287,7 +287,7 @@ class AmplitudeLikelihood:
         self._run_len = np.diff(np.r_[self._run_start, seq.size])
         self._run_point = seq[self._run_start]
         self._run_reset = reset[self._run_start]
-        frame_run = np.cumsum(new_run) - 1
+        frame_run = self._all_run = np.cumsum(new_run) - 1
         # only the counted frames at a point are scored: the amplitude is needed there alone
         self._used = np.flatnonzero(obs.frame_counted & (seq >= 0))
         self._frame_run = frame_run[self._used]
@@ -330,7 +330,9 @@ class AmplitudeLikelihood:
         """Draws evaluated so far."""
         return self.growth.evaluations
 
-    def amplitude(self, theta: np.ndarray, depth_np: float) -> tuple[np.ndarray, np.ndarray]:
+    def amplitude(
+        self, theta: np.ndarray, depth_np: float, every: bool = False
+    ) -> tuple[np.ndarray, np.ndarray]:
         """The log-amplitude over the floor at every frame, (A1) with one depth.
 
         Parameters
@@ -339,16 +341,21 @@ class AmplitudeLikelihood:
             (W, D) values of `names` in the fields' units.
         depth_np : float
             The limit cycle's level over the floor [Np].
+        every : bool
+            At every frame at a point (`Observations.sequence` >= 0), not only the scored
+            ones.
 
         Returns
         -------
         a : numpy.ndarray
-            (W, m) [Np] at each scored frame (`scored`).
+            (W, m) [Np] at each scored frame (`scored`), or at every frame at a point.
         hearable : numpy.ndarray
             (W, m) bool: the most unstable mode there is in the detector's band.
         """
         sigma, in_band = self.growth.growth_rates(theta)
-        return self._amplitudes(sigma, np.array([depth_np]))[0], self._hearable(in_band)
+        frames = np.flatnonzero(self.obs.sequence >= 0) if every else self._used
+        a = self._amplitudes(sigma, np.array([depth_np]), frames)[0]
+        return a, in_band[:, self.obs.sequence[frames]]
 
     @property
     def scored(self) -> np.ndarray:
@@ -364,8 +371,11 @@ class AmplitudeLikelihood:
         ok = (point >= 0) & np.isfinite(step)
         return np.where(ok, np.maximum(step, FLOOR_STEP), FLOOR_STEP).astype(np.float32)
 
-    def _amplitudes(self, sigma: np.ndarray, depths: np.ndarray) -> np.ndarray:
-        """(Kd, W, n) a per depth, draw and frame: one scan of the runs' maps for all."""
+    def _amplitudes(
+        self, sigma: np.ndarray, depths: np.ndarray, frames: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(Kd, W, m) a per depth, draw and scored frame (or `frames`): one scan of the runs'
+        maps for all."""
         step = self._steps(sigma)
         total = step * self._run_len.astype(np.float32)
         depth = depths.astype(np.float32)[:, None, None]
@@ -380,8 +390,12 @@ class AmplitudeLikelihood:
         start = np.zeros_like(end)
         start[..., 1:] = end[..., :-1]
         start[..., reset] = 0.0
-        run = self._frame_run
-        a = start[..., run] + self._frame_k.astype(np.float32) * step[:, run]
+        if frames is None:
+            run, k = self._frame_run, self._frame_k
+        else:
+            run = self._all_run[frames]
+            k = frames - self._run_start[run] + 1
+        a = start[..., run] + k.astype(np.float32) * step[:, run]
         return np.minimum(np.maximum(a, zero), depth)
 
     def _hearable(self, in_band: np.ndarray) -> np.ndarray:

@@ -351,6 +351,7 @@ class UnitResult:
         -------
         dict
             unit_id, logs, status, posterior (the reported one's summary, None without),
+            own (its own posterior's summary: what its data say, before the population),
             held_out, identifiability (`identifiability`), convergence.
         """
         post = self.reported
@@ -359,6 +360,7 @@ class UnitResult:
             "logs": self.logs,
             "status": self.status,
             "posterior": post.summary() if post is not None else None,
+            "own": self.posterior.summary() if self.posterior is not None else None,
             "held_out": self.held_out,
             "identifiability": self.identifiability(),
             "convergence": None
