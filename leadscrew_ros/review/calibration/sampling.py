@@ -394,8 +394,8 @@ def share_hearing(
     samples re-weighted to it (`amplitude`: the grid is the bench's, not the unit's).
 
     A unit was sampled with the grid's prior; its posterior given the other units' data is
-    its samples re-weighted by sum_k r_k(theta) p_-u(k) / p(k), with r_k the sample's grid
-    responsibilities and p_-u the bench's grid posterior from the other units (its own data
+    its samples re-weighted by sum_k r_k(theta) q(k) / p(k), with r_k the sample's grid
+    responsibilities and q the bench's grid posterior from the other units (its own data
     are in its likelihood already), then resampled (seeded by its id).
 
     Parameters
