@@ -8,7 +8,6 @@ and the frame sequence kept by thin and merge."""
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -43,7 +42,9 @@ class StubGrowth:
         self.bounds = (np.array([0.0, -1e3]), np.array([10.0, 1e3]))
         self.valid = np.ones(obs.points, bool)
         self.evaluations = 0
-        self.reach = SimpleNamespace(valid=lambda theta: np.ones(len(theta), bool))
+
+    def in_domain(self, theta: np.ndarray) -> np.ndarray:
+        return np.all((theta >= self.bounds[0]) & (theta <= self.bounds[1]), axis=1)
 
     def growth_rates(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         theta = np.atleast_2d(theta)

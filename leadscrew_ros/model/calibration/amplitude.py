@@ -458,9 +458,7 @@ class AmplitudeLikelihood:
         sigma, in_band = self.growth.growth_rates(theta)
         grid = self._grid(sigma, in_band) + self.log_weight
         out = logsumexp(grid.reshape(len(theta), -1), axis=1) + self._onset_term(sigma)
-        g = self.growth
-        inside = np.all((theta >= g.bounds[0]) & (theta <= g.bounds[1]), axis=1)
-        return np.where(inside & g.reach.valid(theta), out, -np.inf)
+        return np.where(self.growth.in_domain(theta), out, -np.inf)
 
     def responsibilities(self, theta: np.ndarray) -> np.ndarray:
         """Per draw, the posterior weights of the grid cells (they sum to 1).

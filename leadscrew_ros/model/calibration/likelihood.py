@@ -615,8 +615,23 @@ class GrowthLikelihood:
         out = self._constant + self._active_squeaks(theta) @ self._delta[self.active]
         if len(self.contested):
             out += (self._contest_margins(theta) > 0) @ self._delta[self.contested]
+        return np.where(self.in_domain(theta), out, -np.inf)
+
+    def in_domain(self, theta: np.ndarray) -> np.ndarray:
+        """(W,) bool: the rows inside the box `bounds` and the reach prior's valid domain
+        (elsewhere the log-likelihood is -inf).
+
+        Parameters
+        ----------
+        theta : numpy.ndarray
+            (W, D) values of `names` in the fields' units.
+
+        Returns
+        -------
+        numpy.ndarray
+        """
         inside = np.all((theta >= self.bounds[0]) & (theta <= self.bounds[1]), axis=1)
-        return np.where(inside & self.reach.valid(theta), out, -np.inf)
+        return np.asarray(inside & self.reach.valid(theta))
 
     def squeaks(self, theta: np.ndarray) -> np.ndarray:
         """The model's verdict at every point for each row of theta (False where not valid).

@@ -632,28 +632,20 @@ def compare(runs: dict[str, FormulationRun]) -> Comparison:
     Comparison
     """
     (na, a), (nb, b) = runs.items()
-    fa, fb = a.frequency_match, b.frequency_match
-    if fa is not None and fb is not None and abs(fa - fb) >= FREQUENCY_DECISIVE:
-        best, other = (na, nb) if fa > fb else (nb, na)
-        z = _paired_z(runs[best], runs[other])
-        against = z is not None and z <= -WEAK_Z
-        return Comparison(
-            best,
-            "weakly, against the held-out score" if against else "strongly",
-            "frequency match",
-            _finite(z),
-        )
-    ga, gb = a.growth_match, b.growth_match
-    if ga is not None and gb is not None and abs(ga - gb) >= FREQUENCY_DECISIVE:
-        best, other = (na, nb) if ga > gb else (nb, na)
-        z = _paired_z(runs[best], runs[other])
-        against = z is not None and z <= -WEAK_Z
-        return Comparison(
-            best,
-            "weakly, against the held-out score" if against else "strongly",
-            "growth-rate match",
-            _finite(z),
-        )
+    for label, (ma, mb) in (
+        ("frequency match", (a.frequency_match, b.frequency_match)),
+        ("growth-rate match", (a.growth_match, b.growth_match)),
+    ):
+        if ma is not None and mb is not None and abs(ma - mb) >= FREQUENCY_DECISIVE:
+            best, other = (na, nb) if ma > mb else (nb, na)
+            z = _paired_z(runs[best], runs[other])
+            against = z is not None and z <= -WEAK_Z
+            return Comparison(
+                best,
+                "weakly, against the held-out score" if against else "strongly",
+                label,
+                _finite(z),
+            )
     if a.score is None or b.score is None:
         return Comparison(
             None,
