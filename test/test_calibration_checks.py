@@ -328,3 +328,29 @@ def test_the_growth_rate_match_decides_between_formulations_when_the_tones_do_no
         {"paper": run("paper", (0, 0), 0.05), "consistent": run("consistent", (0, 0), 0.04)}
     )
     assert (c.supported, c.decided_by) == ("consistent", "held-out score")
+
+
+def test_the_growth_rate_match_counts_onsets_near_the_predicted_growth_rate():
+    """growth_match: an onset rate at the predicted Re(lambda) of the most unstable mode
+    matches, one three times it does not; an onset where the model does not hold is not
+    counted."""
+    from leadscrew_ros.model import SqueakModel
+    from leadscrew_ros.model.calibration import thin
+    from leadscrew_ros.review.calibration.run import growth_match
+
+    n, hop = 40, 0.01
+    t = np.arange(n) * hop
+    speed = np.where(t < 0.1, 0.0, 10.0)  # standing first: no point there
+    nut = 0.1  # a multiple of the nut bin: the point is where it was predicted
+    sigma = SqueakModel(ScrewParameters(nut_position_m=nut)).predict(10.0, 200.0).max_growth_rate
+    assert sigma is not None and sigma > 0
+
+    def obs(rate: float):
+        return thin(
+            "g", ["g"], t, np.where(speed > 0, speed, np.nan), np.full(n, 200.0),
+            np.full(n, nut), np.zeros(n, bool), np.full(n, np.nan), hop,
+            valid=speed > 0, onsets=[(0.3, rate, 1.0), (0.02, rate, 1.0)],
+        )  # fmt: skip
+
+    assert growth_match(ScrewParameters(), obs(sigma)) == (1, 1)
+    assert growth_match(ScrewParameters(), obs(3.0 * sigma)) == (0, 1)
