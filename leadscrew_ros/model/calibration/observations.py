@@ -165,13 +165,13 @@ class Observations:
         if len(frames) != 1 or len(next(iter(frames))) != 1:
             raise CalibrationError(f"unit {self.unit_id}: frame sequence arrays differ in shape")
         n = len(self.sequence)
-        if n and (
-            np.any(self.sequence < -1)
-            or np.any(self.sequence >= self.points)
-            or not self.frame_reset[0]
-        ):
+        if n and (np.any(self.sequence < -1) or np.any(self.sequence >= self.points)):
             raise CalibrationError(
                 f"unit {self.unit_id}: the frame sequence names a point that does not exist"
+            )
+        if n and not self.frame_reset[0]:
+            raise CalibrationError(
+                f"unit {self.unit_id}: the frame sequence must start a log (frame_reset[0])"
             )
         if np.shape(self.onsets)[1:] != (3,) or (
             len(self.onsets) and not np.all((self.onsets[:, 0] >= 0) & (self.onsets[:, 0] < n))
