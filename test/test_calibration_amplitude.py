@@ -199,6 +199,26 @@ def test_onset_rates_favour_the_sigma_that_matches_them():
     )
 
 
+def test_an_onset_rate_within_two_standard_errors_of_zero_is_no_growth_and_left_out():
+    """A rate heard again after a dropout, 10 +- 20 1/s where the model decays at 40 1/s,
+    says nothing of sigma: it moves no draw's likelihood. At 10 +- 2 1/s it is a growth."""
+    n = 100
+    sequence = np.arange(n)
+    theta = np.array([[1.0, 0.0], [1.0, -80.0], [0.3, 0.0]])  # sigma 40, -40, 12 1/s
+
+    def onset_term(rate: float, se: float, hearing: HearingPrior | None = None) -> np.ndarray:
+        obs = observations(sequence, np.zeros(n, bool), onsets=np.array([[50.0, rate, se]]))
+        lik = likelihood(obs, np.full(n, 40.0), hearing=hearing)
+        return lik.log_likelihood(theta) - np.array([logsumexp_grid(lik, t[None]) for t in theta])
+
+    assert np.all(onset_term(10.0, 20.0) == 0.0)
+    assert np.all(onset_term(-5.0, 1.0) == 0.0)  # a falling level is no growth either
+    resolved = onset_term(10.0, 2.0)
+    assert resolved[2] > resolved[0] + 5.0  # sigma 12 against 40: the measured 10 decides
+    # the rule is a setting: with onset_min_t 0 the weak rate enters (A2) too
+    assert np.ptp(onset_term(10.0, 20.0, HearingPrior(onset_min_t=0.0))) > 0.1
+
+
 def logsumexp_grid(lik: AmplitudeLikelihood, theta: np.ndarray) -> float:
     from scipy.special import logsumexp
 

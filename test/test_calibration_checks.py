@@ -354,3 +354,10 @@ def test_the_growth_rate_match_counts_onsets_near_the_predicted_growth_rate():
 
     assert growth_match(ScrewParameters(), obs(sigma)) == (1, 1)
     assert growth_match(ScrewParameters(), obs(3.0 * sigma)) == (0, 1)
+    # a rate within two SEs of zero is no growth measured: not counted, as in (A2)
+    weak = thin(
+        "g", ["g"], t, np.where(speed > 0, speed, np.nan), np.full(n, 200.0),
+        np.full(n, nut), np.zeros(n, bool), np.full(n, np.nan), hop,
+        valid=speed > 0, onsets=[(0.3, sigma, sigma)],
+    )  # fmt: skip
+    assert growth_match(ScrewParameters(), weak) == (0, 0)

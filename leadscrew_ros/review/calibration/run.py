@@ -176,7 +176,7 @@ def growth_match(
 ) -> tuple[int, int]:
     """How the onsets' measured growth rates match Re(lambda) of the most unstable mode
     predicted at `params` (nominal, no scatter) at their frames' points: within two SDs of
-    (A2)'s spread (`HearingPrior.onset_error` relative, the rate's own standard error).
+    (A2)'s spread (`HearingPrior.onset_sd`); the resolved growths only, as in (A2).
 
     Parameters
     ----------
@@ -194,15 +194,17 @@ def growth_match(
     """
     if not len(obs.onsets) or not len(obs.sequence):
         return 0, 0
+    hearing = hearing or HearingPrior()
     point = obs.sequence[obs.onsets[:, 0].astype(int)]
-    keep = point >= 0
+    keep = (point >= 0) & hearing.resolved(obs.onsets[:, 1], obs.onsets[:, 2])
+    if not keep.any():
+        return 0, 0
     idx = point[keep]
     spec = ModelSpec(params, (), LIVE_SAMPLES)
     preds = predict_jobs(spec, obs.speed_rad_s[idx], obs.load_n[idx], obs.nut_position_m[idx])
     sigma = np.array([math.nan if p.max_growth_rate is None else p.max_growth_rate for p in preds])
     rate, se = obs.onsets[keep, 1], obs.onsets[keep, 2]
-    e = (hearing or HearingPrior()).onset_error
-    near = np.abs(rate - sigma) <= 2.0 * np.sqrt(se**2 + (e * rate) ** 2)
+    near = np.abs(rate - sigma) <= 2.0 * hearing.onset_sd(rate, se)
     return int(np.sum(near)), int(np.sum(np.isfinite(sigma)))
 
 
