@@ -4,9 +4,11 @@ population the prior does not describe (a larger friction drop mu_s - mu_k, a sm
 made with the paper formulation and calibrated (the documentation's worked example); a small
 bench made with the consistent formulation, calibrated with both; the truth stays in truth.json.
 
-- each unit's 90 % interval of its friction drop covers its truth in >= 80 % of the units;
-- the 90 % interval of the fleet's mean friction drop covers the population's and is at most
-  half as wide as the prior's 90 % interval of a unit's drop;
+- each unit's own 90 % interval of its friction drop covers its truth in >= 80 % of the units,
+  the reported (population-informed) one in >= 75 %;
+- the 90 % interval of the fleet's mean friction drop covers the units' mean, lies within one
+  half-width of the population's, and is at most half as wide as the prior's 90 % interval of
+  a unit's drop;
 - the held-out Brier score is lower with the calibrated population than with the prior;
 - the comparison of the formulations picks the one that made the (consistent) bench;
 - calibrated.yaml loads in `predict` and in the node (namespaced, as the shipped config), and the
@@ -75,22 +77,23 @@ def _drops(truth: dict) -> dict[str, float]:
 
 
 def test_each_units_interval_of_its_friction_drop_covers_the_truth(fleet):
-    """Each unit's own posterior (what its data say) covers its drop in >= 80 % of the units.
-    Known gap (issue 31, calibration.md): the population-informed posteriors reported in
-    `posterior` are pulled low by the population fit on this bench and cover fewer."""
+    """Each unit's own posterior (what its data say) covers its drop in >= 80 % of the units;
+    the reported, population-informed `posterior` in >= 75 % (13 of 16 in the example, one
+    unit of sampling noise allowed: the population's pull on the rest is tested below)."""
     truth, doc, _, _ = fleet
     drops = _drops(truth)
     units = doc["units"]
     assert [u["unit_id"] for u in units] == list(drops)
-    covered = [
-        u["own"]["friction_drop"]["q05"] <= drops[u["unit_id"]] <= u["own"]["friction_drop"]["q95"]
-        for u in units
-    ]
-    assert sum(covered) >= 0.8 * len(units), [
-        (u["unit_id"], drops[u["unit_id"]], u["own"]["friction_drop"], u["status"])
-        for u, c in zip(units, covered, strict=True)
-        if not c
-    ]
+    for key, share in (("own", 0.8), ("posterior", 0.75)):
+        covered = [
+            u[key]["friction_drop"]["q05"] <= drops[u["unit_id"]] <= u[key]["friction_drop"]["q95"]
+            for u in units
+        ]
+        assert sum(covered) >= share * len(units), [
+            (key, u["unit_id"], drops[u["unit_id"]], u[key]["friction_drop"], u["status"])
+            for u, c in zip(units, covered, strict=True)
+            if not c
+        ]
     for u in units:  # the issue's summary of every calibrated name and the drop
         assert set(u["posterior"]) == {*doc["settings"]["names"], "friction_drop"}
         for s in u["posterior"].values():
@@ -98,19 +101,19 @@ def test_each_units_interval_of_its_friction_drop_covers_the_truth(fleet):
 
 
 def test_the_fleet_mean_of_the_drop_is_found_and_narrower_than_the_prior(fleet):
-    """The fleet mean's 90 % interval lies near the population's drop (the known gap below)
-    and is at most half as wide as the prior's 90 % interval of a unit's drop mu_s - mu_k (the
-    strict reading: the prior itself, not the wider hyper-prior of the population centre),
-    normal about the nominal drop with SD sqrt((mu_s s_s)^2 + (mu_k s_k)^2)."""
+    """The fleet mean's 90 % interval covers the units' mean drop, lies within one half-width of
+    the population's (calibration.md: it ends ~0.002 under it) and is at most half as wide as
+    the prior's 90 % interval of a unit's drop mu_s - mu_k (the strict reading: the prior
+    itself, not the wider hyper-prior of the population centre), normal about the nominal drop
+    with SD sqrt((mu_s s_s)^2 + (mu_k s_k)^2)."""
     truth, doc, _, _ = fleet
     population = truth["nominal"]
     true_drop = population["mu_static"] - population["mu_kinetic"]
     mean = doc["population"]["friction_drop"]["mean"]
-    # Known gap (issue 31, calibration.md): on the realistic bench the fleet mean's interval
-    # ends ~0.004 under the population's drop (the units' own posteriors are within ~4 %,
-    # the population fit pulls them down); asserted: within two of its half-widths.
+    units_drop = float(np.mean(list(_drops(truth).values())))
+    assert mean["q05"] <= units_drop <= mean["q95"], (units_drop, mean)
     half = 0.5 * (mean["q95"] - mean["q05"])
-    assert mean["q05"] - 2 * half <= true_drop <= mean["q95"] + 2 * half, (true_drop, mean)
+    assert mean["q05"] - half <= true_drop <= mean["q95"] + half, (true_drop, mean)
     prior = doc["settings"]["prior"]
     p, s = prior["params"], prior["scatter"]
     sd = math.hypot(p["mu_static"] * s["mu_static"], p["mu_kinetic"] * s["mu_kinetic"])
