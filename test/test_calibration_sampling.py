@@ -222,6 +222,49 @@ def test_a_short_run_says_it_did_not_converge(one_unit):
     assert len(post.samples) > 0 and post.learned
 
 
+class ScriptedSampler:
+    """An ensemble whose walkers' positions in u are scripted per run: N(mean, 0.3) in every
+    name, the mean per step from `means(step)` (what `_ensemble` returns, in its place)."""
+
+    def __init__(self, walkers: int, dims: int, means, rng: np.random.Generator):
+        self.walkers, self.dims, self.means, self.rng = walkers, dims, means, rng
+        self.steps: list[np.ndarray] = []
+
+    def run_mcmc(self, position, steps: int) -> None:
+        for _ in range(steps):
+            mean = self.means(len(self.steps))
+            self.steps.append(mean + 0.3 * self.rng.standard_normal((self.walkers, self.dims)))
+
+    def get_chain(self, discard: int = 0) -> np.ndarray:
+        return np.array(self.steps[discard:])
+
+    def get_last_sample(self):
+        return type("State", (), {"coords": self.steps[-1]})()
+
+
+def test_a_run_that_moves_after_its_check_is_re_expanded(one_unit, monkeypatch):
+    """The first run's first steps sit at the expansion centre, its continued steps 0.6 prior
+    SDs off (a wide posterior's short run looked settled by chance): the kept run decides, so
+    the likelihood is re-expanded there, and the next run, centred, converges."""
+    from leadscrew_ros.review.calibration import sampling
+
+    settings = SamplerSettings(walkers=16, steps=120, first_steps=80, burn=40)
+    rng = np.random.default_rng(3)
+    runs: list[ScriptedSampler] = []
+
+    def scripted(log_prob, walkers, dims, _rng):
+        if not runs:  # 0 until its check, then 0.6: the kept steps' mean 0.3, SD ~0.42
+            runs.append(ScriptedSampler(walkers, dims, lambda k: 0.0 if k < 80 else 0.6, rng))
+        else:
+            runs.append(ScriptedSampler(walkers, dims, lambda k: 0.3, rng))
+        return runs[-1]
+
+    monkeypatch.setattr(sampling, "_ensemble", scripted)
+    post = calibrate_unit(MODEL, one_unit.obs, settings=settings)
+    assert len(runs) == 2 and post.reexpansions == 1
+    assert post.converged and post.status == "calibrated", post.status
+
+
 def test_a_field_without_prior_scatter_asks_for_one(one_unit):
     with pytest.raises(ParameterError, match=r"--scatter radius_m=SD"):
         calibrate_unit(MODEL, one_unit.obs, names=("mu_static", "radius_m"))

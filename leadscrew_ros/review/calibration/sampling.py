@@ -19,7 +19,9 @@ Per unit:
    posterior mean, re-expand the likelihood there (`GrowthLikelihood.recentred`), run again
    from the last positions, until the mean is within `recentre_tolerance` posterior SDs of
    the expansion centre it was sampled with, or `max_reexpansions` are done; that run is
-   continued to `steps`, and its kept steps are the samples.
+   continued to `steps`, and its kept steps are the samples. If the continued run's mean is
+   no longer within the tolerance (a wide posterior's short run can look settled by chance),
+   it is re-expanded there too while re-expansions are left.
 3. Convergence: the integrated autocorrelation time tau of each name (emcee's estimator over
    the kept steps); ESS = walkers * kept steps / tau. Converged when the re-expansion settled,
    the kept steps are at least `autocorr_multiple` tau for every name and every ESS is at
@@ -334,12 +336,13 @@ def _calibrate_unit(
         sampler = _ensemble(log_prob, settings.walkers, len(interim.names), rng)
         sampler.run_mcmc(position, settings.first_steps)
         chain, mean, moved = moments(sampler)
-        if np.all(moved < settings.recentre_tolerance) or (
-            reexpansions == settings.max_reexpansions
-        ):
+        last = reexpansions == settings.max_reexpansions
+        if np.all(moved < settings.recentre_tolerance) or last:
             sampler.run_mcmc(None, settings.steps - settings.first_steps)  # the same chain
             chain, mean, moved = moments(sampler)
-            break
+            # a wide posterior's short run can look settled by chance: the kept run decides
+            if np.all(moved < settings.recentre_tolerance) or last:
+                break
         position = sampler.get_last_sample().coords
         evaluations += likelihood.evaluations
         likelihood = likelihood.recentred(interim.values(mean))
