@@ -16,12 +16,10 @@ from harness.mosqito_signals import SIGNALS, growing_tone, mosqito_samples, writ
 from leadscrew_ros.cli import main
 
 SQUEAK_HZ = 1250.0  # in no file, no harmonic of their tones
-FLOOR, SATURATION = 1e-4, 0.1  # full scale: 60 dB of growth, then held
-# The squeak starts growing half-way through: held for less than half of the file. Held
-# longer, steady, with nothing moving, it is inferred as background (issue 30: "a tone held at
-# constant frequency and level ... over most of the log is background"), as a tone switched on
-# and held would be (test_listen_recording.test_inference_holds_on_each_side_of_the_condition).
-START_SHARE = 0.5
+FLOOR, SATURATION = 1e-4, 0.2  # full scale: 66 dB of growth, then held
+# From a fifth of the file on: once saturated the squeak holds, steady, over most of the file,
+# which made it an inferred background (no episode) before its measured growth told it apart.
+START_SHARE = 0.2
 TOLERANCE = 0.02  # relative: the detector's track tolerance
 STATIONARY = ["white_noise_442_1768_Hz_stationary", "white_noise_200_2000_Hz_stationary"]
 
@@ -72,6 +70,7 @@ def test_a_growing_tone_is_squeak_beside_the_stationary_tones(
     assert episode["frequency_hz"] == pytest.approx(SQUEAK_HZ, rel=TOLERANCE)
     saturated_s = start_s + math.log(SATURATION / FLOOR) / growth_rate_per_s
     assert start_s <= episode["start_s"] <= saturated_s
+    assert episode["growth_rate_per_s"] == pytest.approx(growth_rate_per_s, rel=0.15)
     assert episode["end_s"] >= signal.duration_s - 0.1
     background = _background_hz(heard)
     assert all(_near(f, background) for f in signal.steady_hz), background

@@ -34,10 +34,13 @@ Where the background comes from (`Detection.background_source`): a background re
 either, it is inferred ('inferred'): a tone held by more than `background_infer_share` of the
 frames at a steady level (`background_level_sd_db`), whatever the speed (a tone that moves with
 it is no single tone) and, given a condition such as the prediction, on each side of it, is
-background. A recording with nothing moving is so judged as a whole: a stationary tone is
-background, a growing or intermittent one is not (`detect`'s `infer_background`: the offline
-listening of a log or a recording; the node, which hears as it goes, cannot). 'none': nothing
-learned from.
+background, unless it grew: where it comes in after an absence, its growth at that onset is
+measured (`growth.onset_growth`) and has a rate (a squeak grows at Re(lambda) from the floor,
+then may saturate and hold over most of the recording; a tone switched on, a step, or one whose
+onset cannot be measured stays background). A recording with nothing moving is so judged as a
+whole: a stationary tone is background, a growing or intermittent one is not
+(`detect`'s `infer_background`: the offline listening of a log or a recording; the node, which
+hears as it goes, cannot). 'none': nothing learned from.
 
 `StreamingDetector` is the core: it frames the samples as they come, analyses each frame once,
 and runs the tracks frame by frame with bounded memory. `detect` pushes the whole signal into
@@ -1623,6 +1626,7 @@ def _infer_background(
             for t in learner.learned()
             if t.share > s.background_infer_share and t.level_sd_db <= s.background_level_sd_db
         ]
+        steady = [t for t in steady if not _grew(det, x, t0, spans, t.frequency_hz)]
         kept = (
             steady
             if kept is None
@@ -1636,6 +1640,46 @@ def _infer_background(
         )
     det.background.include(kept or [])
     return True
+
+
+def _grew(
+    det: StreamingDetector, x: np.ndarray, t0: float, spans: list[tuple[float, float]], f: float
+) -> bool:
+    """Whether the tone at `f` [Hz] grew out of the noise within the spans (start, end) [s] of
+    `x` (first sample at `t0`): where it comes in after an absence (its level more than
+    `background_margin_db` under its median: the power at its frequency in consecutive
+    frames of the detector's length and window), its growth is measured
+    (`growth.onset_growth`) and has a rate. A squeak grows at Re(lambda) from the floor and
+    may then hold, steady, over most of a recording; a tone switched on (a step the band
+    cannot resolve) or there all along is background when held so."""
+    n, rate = det.frame_len, det.sample_rate_hz
+    k = np.arange(n) / rate
+    basis = (hann(n)[:, None] * np.exp(-2j * np.pi * f * k)[:, None]).astype(np.complex64)
+    step = format_step(x) or 0.0
+    times, levels = [], []
+    for start, end in spans:
+        i, j = max(int(math.ceil((start - t0) * rate)), 0), min(int((end - t0) * rate), x.size)
+        for b in range(i, j - n + 1, n * _BLOCK_FRAMES):
+            frames = x[b : min(b + n * _BLOCK_FRAMES, j - (j - b) % n)].reshape(-1, n)
+            ms = np.mean(np.square(frames, dtype=np.float64), axis=1)
+            rounding = np.maximum(step, FLOAT32_STEP * np.sqrt(ms)) ** 2 / 12
+            usable = np.isfinite(ms) & (
+                np.var(frames, axis=1, dtype=np.float64) > SILENT_FACTOR * rounding
+            )
+            z = (frames[usable] @ basis)[:, 0]
+            levels.append(10 * np.log10(np.maximum(np.abs(z) ** 2, 1e-300)))
+            times.append(t0 + (b + (np.flatnonzero(usable) + 0.5) * n) / rate)
+    level, t = np.concatenate([np.zeros(0), *levels]), np.concatenate([np.zeros(0), *times])
+    if level.size < 2:
+        return False
+    absent = level < np.median(level) - det.settings.background_margin_db
+    adjacent = np.diff(t) < 1.5 * n / rate  # not across a span's end or an unusable frame
+    onsets = np.flatnonzero(absent[:-1] & ~absent[1:] & adjacent) + 1
+    for o in onsets.tolist():
+        g = onset_growth(x, rate, t0, float(t[o]) - n / (2 * rate), np.array([t[o]]), np.array([f]))
+        if g.rate_per_s is not None:
+            return True
+    return False
 
 
 def frames_heard(
