@@ -1530,7 +1530,13 @@ def _settled(det: StreamingDetector, x: np.ndarray, t0: float, start: float, end
     frames = (j - i - n) // hop + 1 if j - i >= n else 0
     if frames < 2:
         return start
-    variance, _ = frame_powers(x[i:j], n, hop, frames)
+    variance = np.concatenate(  # by blocks of frames: memory bounded whatever the span
+        [
+            frame_powers(x[i + a * hop : i + (a + m - 1) * hop + n], n, hop, m)[0]
+            for a in range(0, frames, _BLOCK_FRAMES)
+            for m in [min(_BLOCK_FRAMES, frames - a)]
+        ]
+    )
     level = 10 * np.log10(np.maximum(variance, 1e-300))
     steady = level <= float(np.median(level)) + det.settings.background_level_sd_db
     return start + (int(np.argmax(steady)) * hop) / rate
