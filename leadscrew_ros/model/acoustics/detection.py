@@ -336,12 +336,17 @@ def format_step(samples: np.ndarray) -> float | None:
     if nonzero.size < 256:
         return None
     for grid in _PCM_GRIDS:
-        y = nonzero * grid
-        # on the grid within float32 rounding of the scaled value, never a coarser grid's
-        # fraction (a 16-bit step is 1/256 of an 8-bit one)
-        if np.all(np.abs(y - np.rint(y)) <= 2.0**-20 * np.maximum(np.abs(y), 1.0)):
+        # the first 256 refuse most grids at a sixteenth of the cost (every chunk is asked)
+        if _on_grid(nonzero[:256], grid) and _on_grid(nonzero, grid):
             return 1.0 / grid
     return 0.0
+
+
+def _on_grid(x: np.ndarray, grid: float) -> bool:
+    """All of `x` on the grid 1 / `grid` within float32 rounding of the scaled value, never
+    a coarser grid's fraction (a 16-bit step is 1/256 of an 8-bit one)."""
+    y = x * grid
+    return bool(np.all(np.abs(y - np.rint(y)) <= 2.0**-20 * np.maximum(np.abs(y), 1.0)))
 
 
 def frame_powers(
