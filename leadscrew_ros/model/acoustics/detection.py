@@ -332,7 +332,13 @@ def format_step(samples: np.ndarray) -> float | None:
     -------
     float or None
     """
-    nonzero = samples[samples != 0][:4096].astype(np.float64)
+    nonzero = np.zeros(0)  # the first 4096 non-zero samples, found without a whole copy
+    for a in range(0, samples.size, 1 << 16):
+        piece = samples[a : a + (1 << 16)]
+        told = piece[(piece != 0) & np.isfinite(piece)]  # NaN/inf are set to 0 by `push`
+        nonzero = np.concatenate([nonzero, told[: 4096 - nonzero.size]])
+        if nonzero.size >= 4096:
+            break
     if nonzero.size < 256:
         return None
     for grid in _PCM_GRIDS:
@@ -696,27 +702,35 @@ class StreamingDetector:
             self._new_segment(t0)
         t_end = self._seg_t0 + (self._n_samples + x.size) / self.sample_rate_hz
         self._add_speed(speed_rad_s, speed_times_s, self._expected_t0(), t_end)
-        bad = ~np.isfinite(x)
-        n_bad = int(bad.sum())
+        # A long chunk (offline: the whole recording) goes through in pieces of a block of
+        # frames each: no copy of it is made whatever its length
+        piece = _BLOCK_FRAMES * self.hop
+        pieces = range(0, x.size, piece)
+        n_bad = sum(int(np.count_nonzero(~np.isfinite(x[a : a + piece]))) for a in pieces)
         if n_bad:
             self._warn(
                 f"{n_bad} non-finite samples (NaN/inf) set to 0; the frames holding "
                 "them are dropped (tracks bridge one frame length of them)"
             )
-            x = np.where(bad, np.float32(0.0), x)
         step = format_step(x)
         if step is not None:
             self._format_step = step
-        n_clip = int(np.count_nonzero(np.abs(x) >= self.settings.clip_level))
+        clip = self.settings.clip_level
+        n_clip = sum(int(np.count_nonzero(np.abs(x[a : a + piece]) >= clip)) for a in pieces)
         if n_clip:
             self._warn(
                 f"clipped: {n_clip} samples at or beyond {self.settings.clip_level:g} "
                 "of full scale (harmonics of clipped tones are not counted as squeak)"
             )
-        self._buf = np.concatenate([self._buf, x])
-        self._bad = np.concatenate([self._bad, bad])
-        self._n_samples += x.size
-        closed += self._run_frames()
+        for a in pieces:
+            y = x[a : a + piece]
+            bad = ~np.isfinite(y)
+            if n_bad:
+                y = np.where(bad, np.float32(0.0), y)
+            self._buf = np.concatenate([self._buf, y])
+            self._bad = np.concatenate([self._bad, bad])
+            self._n_samples += y.size
+            closed += self._run_frames()
         return closed
 
     def flush(self) -> list[Episode]:
