@@ -329,8 +329,8 @@ def read_audio(
     }[kind]
     context = _Context(source.path, name, channel, sample_rate_hz, infos, info_name, problems)
     chunks = []
-    for k, (t, msg) in enumerate(raw):
-        raw[k] = None  # each message released once converted: one copy of the sound at a time
+    for index, (t, msg) in enumerate(raw):
+        raw[index] = None  # each message released once converted: one copy of the sound at a time
         c = convert(context, t, msg)
         if c is not None:
             chunks.append(c)
