@@ -2,6 +2,7 @@
 """Peak memory of `leadscrew-squeak replay` against log length, with and without the report.
 
     .venv/bin/python benchmarks/bench_replay_rss.py [--minutes 10 60] [--rate HZ] [--src DIR]
+    .venv/bin/python benchmarks/bench_replay_rss.py --sound [--minutes 10 60]
 
 For each log length (the duty cycle of `bench_replay.py` in one MCAP file, as rosbag2 records
 without `--max-bag-duration`; `--split-s` for split files; generated once and cached in the temp
@@ -11,7 +12,9 @@ samples /proc/self/status every 20 ms and prints the peak resident memory VmHWM 
 file-backed (RssFile) and anonymous (RssAnon) parts it saw; the prediction workers' peak comes
 from RUSAGE_CHILDREN. Streaming means equal peaks: target 60-minute peak <= 1.2 x the 10-minute
 peak, both ways. `--src DIR` runs the package of another checkout (e.g. `git archive` of an old
-commit) on the same logs.
+commit) on the same logs. `--sound`: instead, a virtual-bench unit (`bench`, seed 0) whose one
+stroke lasts the log's length, with its 48 kHz microphone, replayed with its sound (issue 30:
+the replay's memory grew with the audio).
 """
 
 from __future__ import annotations
@@ -66,6 +69,21 @@ def cached_log(cycle: DutyCycle, split_s: float) -> Path:
     return write_log(cycle, root, split_duration_s=split_s)
 
 
+def cached_bench_log(minutes: float) -> tuple[Path, str]:
+    """(bag directory, joint name) of a one-unit virtual bench whose stroke lasts `minutes`,
+    with its microphone; generated if not cached."""
+    from leadscrew_ros.bag.virtual_bench import BenchSettings, run
+
+    settings = BenchSettings(units=1, duration_s=minutes * 60.0, seed=0)
+    key = hashlib.sha256(repr(settings).encode()).hexdigest()[:12]
+    root = Path(tempfile.gettempdir()) / "leadscrew_ros_bench_replay_rss" / f"sound_{key}"
+    truth_path = root / "truth.json"
+    if not truth_path.is_file():
+        run(settings, root)
+    truth = json.loads(truth_path.read_text())
+    return root / truth["units"][0]["log"], DutyCycle().joint_name
+
+
 def replay_peak(
     bag: Path, joint: str, report: bool, src: str | None = None, extra: tuple[str, ...] = ()
 ) -> dict:
@@ -110,13 +128,21 @@ def main(argv: list[str] | None = None) -> int:
         help="split the logs into files of this duration [s] (default 0: one file)",
     )
     ap.add_argument("--src", metavar="DIR", help="run the package of this checkout instead")
+    ap.add_argument(
+        "--sound",
+        action="store_true",
+        help="virtual-bench logs with a 48 kHz microphone, replayed with their sound",
+    )
     args = ap.parse_args(argv)
     rows = []
     for minutes in args.minutes:
-        cycle = DutyCycle(duration_s=minutes * 60.0, rate_hz=args.rate)
-        bag = cached_log(cycle, args.split_s)
+        if args.sound:
+            bag, joint = cached_bench_log(minutes)
+        else:
+            cycle = DutyCycle(duration_s=minutes * 60.0, rate_hz=args.rate)
+            bag, joint = cached_log(cycle, args.split_s), cycle.joint_name
         for report in (True, False):
-            r = replay_peak(bag, cycle.joint_name, report, args.src)
+            r = replay_peak(bag, joint, report, args.src)
             r.update(minutes=minutes, report=report, log_mb=size_mb(bag))
             rows.append(r)
             print(
@@ -129,8 +155,9 @@ def main(argv: list[str] | None = None) -> int:
         "peak RSS (a worker) |\n|---|---|---:|---:|---:|---:|---:|"
     )
     for r in rows:
+        what = "with 48 kHz sound" if args.sound else f"at {args.rate:g} Hz"
         print(
-            f"| {r['minutes']:g} min at {args.rate:g} Hz | {'yes' if r['report'] else 'no'} | "
+            f"| {r['minutes']:g} min {what} | {'yes' if r['report'] else 'no'} | "
             f"{r['log_mb']:.0f} MB | {r['peak_mb']:.0f} MB | {r['rss_file_mb']:.0f} MB | "
             f"{r['rss_anon_mb']:.0f} MB | {r['workers_peak_mb']:.0f} MB |"
         )

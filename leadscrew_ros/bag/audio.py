@@ -306,7 +306,7 @@ def read_audio(
         warnings.append(f"sample_rate_hz = {sample_rate_hz:g} ignored: {name} carries its own")
     parsed = {n: _schema(source.path, topics[n]) for n in (name, info_name) if n}
     first_ns: int | None = None
-    raw: list[tuple[int, Any]] = []  # (log time, decoded message) of the audio topic
+    raw: list[Any] = []  # (log time, decoded message) of the audio topic; None once converted
     infos: list[tuple[int, dict]] = []
     for _, m in source.messages():
         if first_ns is None:
@@ -328,7 +328,13 @@ def read_audio(
         MULTI_ARRAY: _multi_array,
     }[kind]
     context = _Context(source.path, name, channel, sample_rate_hz, infos, info_name, problems)
-    chunks = [c for c in (convert(context, t, msg) for t, msg in raw) if c is not None]
+    chunks = []
+    for index, (t, msg) in enumerate(raw):
+        raw[index] = None  # each message released once converted: one copy of the sound at a time
+        c = convert(context, t, msg)
+        if c is not None:
+            chunks.append(c)
+    del raw
     if not chunks:
         raise AudioError(source.path, f"audio topic {name} holds no samples")
     samples, rate, t0_ns, ended = _assemble(chunks, settings, problems, first_ns or 0)
@@ -673,11 +679,19 @@ def _multi_array(context: _Context, log_time_ns: int, msg: dict) -> _Chunk | Non
 
 
 # ----------------------------------------------------------------------------- timeline
+_RELEASED = np.zeros(0, np.float32)  # a placed piece, copied into the track
+
+
 def _assemble(
     chunks: list[_Chunk], settings: AudioSettings, problems: _Problems, first_ns: int
 ) -> tuple[np.ndarray, float, int, list[str]]:
-    """Place the chunks of the first (rate, channels, format) segment on one sample grid."""
-    chunks = sorted(_on_log_clock(chunks, settings, problems, first_ns), key=lambda c: c.stamp_ns)
+    """Place the chunks of the first (rate, channels, format) segment on one sample grid.
+    `chunks` is emptied: their samples move into the track, each released once copied."""
+    given, chunks = (
+        chunks,
+        sorted(_on_log_clock(chunks, settings, problems, first_ns), key=lambda c: c.stamp_ns),
+    )
+    given.clear()
     key = chunks[0].key
     rate = key[0]
     t0_ns = chunks[0].stamp_ns
@@ -722,7 +736,14 @@ def _assemble(
         problems.first["gap"] = str(gap_samples / rate)
     if trimmed:
         problems.first["overlap"] = str(trimmed)
-    return np.concatenate(pieces) if len(pieces) > 1 else pieces[0].copy(), rate, t0_ns, ended
+    del chunks
+    samples = np.empty(placed, np.float32)
+    at_sample = 0
+    for k, piece in enumerate(pieces):
+        samples[at_sample : at_sample + piece.size] = piece
+        at_sample += piece.size
+        pieces[k] = _RELEASED
+    return samples, rate, t0_ns, ended
 
 
 def _on_log_clock(

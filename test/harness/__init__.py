@@ -8,6 +8,7 @@
 - `logs`: MCAP / rosbag2 test logs and the replay entry points.
 - `blocker`: a Python prelude that makes every ROS package unimportable.
 - `cdr_reference`, `contact_quadrature`: independent reference implementations.
+- `mosqito_signals`: MoSQITo's tonality test signals made again (no network in CI).
 
 Test modules import from here, never from each other; conftest.py wraps the worlds as
 fixtures (`ros_world`, `make_ros_world`, `ros`, `ns`).

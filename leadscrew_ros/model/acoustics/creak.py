@@ -29,6 +29,7 @@ two analysis frames out of the squeak episodes. numpy/scipy only.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -38,6 +39,7 @@ from scipy import signal
 from .settings import DetectorSettings
 
 BLOCK_S = 0.5e-3  # envelope resolution: a slip's click lasts about a millisecond
+CHUNK_SAMPLES = 1 << 18  # the high-pass filter runs over pieces this long: bounded memory
 FLOOR_S = 0.025  # the floor: a low percentile of each FLOOR_S segment, median of FLOOR_SEGMENTS
 FLOOR_PERCENTILE = 20  # the troughs between dense pulses (steady noise: ~1 dB under its mean)
 FLOOR_SEGMENTS = 9
@@ -147,16 +149,20 @@ def find_creaks(
         By start time.
     """
     fs = float(sample_rate_hz)
-    x = np.nan_to_num(np.asarray(samples, dtype=float), nan=0.0, posinf=0.0, neginf=0.0)
+    x = np.asarray(samples).reshape(-1)
     block = max(1, round(fs * BLOCK_S))
     seg = max(1, round(FLOOR_S / BLOCK_S))
     if x.size < 2 * seg * block:
         return []
     hp = min(settings.creak_highpass_hz, 0.45 * fs)
     sos = signal.butter(4, hp, btype="highpass", fs=fs, output="sos")
-    y = signal.sosfilt(sos, x)
     n_blocks = x.size // block
-    energy = np.mean(y[: n_blocks * block].reshape(n_blocks, block) ** 2, axis=1)
+    energy = np.concatenate(
+        [
+            np.mean(y[: y.size - y.size % block].reshape(-1, block) ** 2, axis=1)
+            for _, y in _highpassed(x[: n_blocks * block], sos, block)
+        ]
+    )
     ref = (scale_pa / 20e-6) ** 2 if scale_pa is not None else 1.0
     level = 10 * np.log10(energy * ref + 1e-30)
     n_seg = n_blocks // seg
@@ -202,7 +208,7 @@ def find_creaks(
                 end_s=float(t[-1]),
                 pulse_rate_hz=1.0 / interval,
                 pulses=int(main.size),
-                ringing_hz=_ringing(y, fs, main * block, interval),
+                ringing_hz=_ringing(x, sos, fs, main * block, interval),
                 level_db=float(np.median(level[main])),
                 pulse_times_s=t,
             )
@@ -228,16 +234,38 @@ def _period(at: np.ndarray, shortest: float, longest: float) -> float:
     return float(lags[np.argmax(share >= PERIOD_SHARE * share.max())])
 
 
-def _ringing(y: np.ndarray, fs: float, starts: np.ndarray, interval_s: float) -> list[float]:
-    """The peaks of the pulses' mean power spectrum (the high-passed sound, each pulse from
-    its block's start over min(`RING_S`, 0.8 interval)), `RING_PROMINENCE_DB` over their
-    spectral neighbourhood and within `RING_RANGE_DB` of the strongest [Hz], strongest
-    first."""
+def _highpassed(x: np.ndarray, sos: np.ndarray, block: int) -> Iterator[tuple[int, np.ndarray]]:
+    """`x` (non-finite samples as 0) through the filter `sos`, as (offset, piece) pieces of
+    about `CHUNK_SAMPLES` (a multiple of `block`), the filter's state carried over: the same
+    output as one `sosfilt` of the whole, with memory bounded whatever its length."""
+    state = np.zeros((sos.shape[0], 2))
+    step = max(CHUNK_SAMPLES // block, 1) * block
+    for i in range(0, x.size, step):
+        piece = np.nan_to_num(
+            np.asarray(x[i : i + step], dtype=float), nan=0.0, posinf=0.0, neginf=0.0
+        )
+        y, state = signal.sosfilt(sos, piece, zi=state)
+        yield i, y
+
+
+def _ringing(
+    x: np.ndarray, sos: np.ndarray, fs: float, starts: np.ndarray, interval_s: float
+) -> list[float]:
+    """The peaks of the pulses' mean power spectrum (the sound `x` high-passed by `sos`, each
+    pulse from its block's start over min(`RING_S`, 0.8 interval)), `RING_PROMINENCE_DB`
+    over their spectral neighbourhood and within `RING_RANGE_DB` of the strongest [Hz],
+    strongest first."""
     n = max(8, round(fs * min(RING_S, 0.8 * interval_s)))
-    starts = starts[starts + n <= y.size]
+    starts = starts[starts + n <= x.size]
     if starts.size == 0:
         return []
-    segments = y[starts[:, None] + np.arange(n)] * np.hanning(n)
+    segments = np.zeros((starts.size, n))
+    end = int(starts.max()) + n
+    for i, y in _highpassed(x[:end], sos, 1):  # the pulses' pieces only are kept
+        for k in np.flatnonzero((starts < i + y.size) & (starts + n > i)).tolist():
+            a, b = max(int(starts[k]), i), min(int(starts[k]) + n, i + y.size)
+            segments[k, a - int(starts[k]) : b - int(starts[k])] = y[a - i : b - i]
+    segments *= np.hanning(n)
     nfft = 1 << max(10, math.ceil(math.log2(n)))
     power = np.mean(np.abs(np.fft.rfft(segments, nfft, axis=1)) ** 2, axis=0)
     db = 10 * np.log10(power + 1e-30 * power.max() + 1e-300)

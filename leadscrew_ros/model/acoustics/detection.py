@@ -34,10 +34,13 @@ Where the background comes from (`Detection.background_source`): a background re
 either, it is inferred ('inferred'): a tone held by more than `background_infer_share` of the
 frames at a steady level (`background_level_sd_db`), whatever the speed (a tone that moves with
 it is no single tone) and, given a condition such as the prediction, on each side of it, is
-background. A recording with nothing moving is so judged as a whole: a stationary tone is
-background, a growing or intermittent one is not (`detect`'s `infer_background`: the offline
-listening of a log or a recording; the node, which hears as it goes, cannot). 'none': nothing
-learned from.
+background, unless it grew: where it comes in after an absence, its growth at that onset is
+measured (`growth.onset_growth`) and has a rate (a squeak grows at Re(lambda) from the floor,
+then may saturate and hold over most of the recording; a tone switched on, a step, or one whose
+onset cannot be measured stays background). A recording with nothing moving is so judged as a
+whole: a stationary tone is background, a growing or intermittent one is not
+(`detect`'s `infer_background`: the offline listening of a log or a recording; the node, which
+hears as it goes, cannot). 'none': nothing learned from.
 
 `StreamingDetector` is the core: it frames the samples as they come, analyses each frame once,
 and runs the tracks frame by frame with bounded memory. `detect` pushes the whole signal into
@@ -329,16 +332,27 @@ def format_step(samples: np.ndarray) -> float | None:
     -------
     float or None
     """
-    nonzero = samples[samples != 0][:4096].astype(np.float64)
+    nonzero = np.zeros(0)  # the first 4096 non-zero samples, found without a whole copy
+    for a in range(0, samples.size, 1 << 16):
+        piece = samples[a : a + (1 << 16)]
+        told = piece[(piece != 0) & np.isfinite(piece)]  # NaN/inf are set to 0 by `push`
+        nonzero = np.concatenate([nonzero, told[: 4096 - nonzero.size]])
+        if nonzero.size >= 4096:
+            break
     if nonzero.size < 256:
         return None
     for grid in _PCM_GRIDS:
-        y = nonzero * grid
-        # on the grid within float32 rounding of the scaled value, never a coarser grid's
-        # fraction (a 16-bit step is 1/256 of an 8-bit one)
-        if np.all(np.abs(y - np.rint(y)) <= 2.0**-20 * np.maximum(np.abs(y), 1.0)):
+        # the first 256 refuse most grids at a sixteenth of the cost (every chunk is asked)
+        if _on_grid(nonzero[:256], grid) and _on_grid(nonzero, grid):
             return 1.0 / grid
     return 0.0
+
+
+def _on_grid(x: np.ndarray, grid: float) -> bool:
+    """All of `x` on the grid 1 / `grid` within float32 rounding of the scaled value, never
+    a coarser grid's fraction (a 16-bit step is 1/256 of an 8-bit one)."""
+    y = x * grid
+    return bool(np.all(np.abs(y - np.rint(y)) <= 2.0**-20 * np.maximum(np.abs(y), 1.0)))
 
 
 def frame_powers(
@@ -688,27 +702,35 @@ class StreamingDetector:
             self._new_segment(t0)
         t_end = self._seg_t0 + (self._n_samples + x.size) / self.sample_rate_hz
         self._add_speed(speed_rad_s, speed_times_s, self._expected_t0(), t_end)
-        bad = ~np.isfinite(x)
-        n_bad = int(bad.sum())
+        # A long chunk (offline: the whole recording) goes through in pieces of a block of
+        # frames each: no copy of it is made whatever its length
+        piece = _BLOCK_FRAMES * self.hop
+        pieces = range(0, x.size, piece)
+        n_bad = sum(int(np.count_nonzero(~np.isfinite(x[a : a + piece]))) for a in pieces)
         if n_bad:
             self._warn(
                 f"{n_bad} non-finite samples (NaN/inf) set to 0; the frames holding "
                 "them are dropped (tracks bridge one frame length of them)"
             )
-            x = np.where(bad, np.float32(0.0), x)
         step = format_step(x)
         if step is not None:
             self._format_step = step
-        n_clip = int(np.count_nonzero(np.abs(x) >= self.settings.clip_level))
+        clip = self.settings.clip_level
+        n_clip = sum(int(np.count_nonzero(np.abs(x[a : a + piece]) >= clip)) for a in pieces)
         if n_clip:
             self._warn(
                 f"clipped: {n_clip} samples at or beyond {self.settings.clip_level:g} "
                 "of full scale (harmonics of clipped tones are not counted as squeak)"
             )
-        self._buf = np.concatenate([self._buf, x])
-        self._bad = np.concatenate([self._bad, bad])
-        self._n_samples += x.size
-        closed += self._run_frames()
+        for a in pieces:
+            y = x[a : a + piece]
+            bad = ~np.isfinite(y)
+            if n_bad:
+                y = np.where(bad, np.float32(0.0), y)
+            self._buf = np.concatenate([self._buf, y])
+            self._bad = np.concatenate([self._bad, bad])
+            self._n_samples += y.size
+            closed += self._run_frames()
         return closed
 
     def flush(self) -> list[Episode]:
@@ -1527,7 +1549,13 @@ def _settled(det: StreamingDetector, x: np.ndarray, t0: float, start: float, end
     frames = (j - i - n) // hop + 1 if j - i >= n else 0
     if frames < 2:
         return start
-    variance, _ = frame_powers(x[i:j], n, hop, frames)
+    variance = np.concatenate(  # by blocks of frames: memory bounded whatever the span
+        [
+            frame_powers(x[i + a * hop : i + (a + m - 1) * hop + n], n, hop, m)[0]
+            for a in range(0, frames, _BLOCK_FRAMES)
+            for m in [min(_BLOCK_FRAMES, frames - a)]
+        ]
+    )
     level = 10 * np.log10(np.maximum(variance, 1e-300))
     steady = level <= float(np.median(level)) + det.settings.background_level_sd_db
     return start + (int(np.argmax(steady)) * hop) / rate
@@ -1623,6 +1651,7 @@ def _infer_background(
             for t in learner.learned()
             if t.share > s.background_infer_share and t.level_sd_db <= s.background_level_sd_db
         ]
+        steady = [t for t in steady if not _grew(det, x, t0, spans, t.frequency_hz)]
         kept = (
             steady
             if kept is None
@@ -1636,6 +1665,46 @@ def _infer_background(
         )
     det.background.include(kept or [])
     return True
+
+
+def _grew(
+    det: StreamingDetector, x: np.ndarray, t0: float, spans: list[tuple[float, float]], f: float
+) -> bool:
+    """Whether the tone at `f` [Hz] grew out of the noise within the spans (start, end) [s] of
+    `x` (first sample at `t0`): where it comes in after an absence (its level more than
+    `background_margin_db` under its median: the power at its frequency in consecutive
+    frames of the detector's length and window), its growth is measured
+    (`growth.onset_growth`) and has a rate. A squeak grows at Re(lambda) from the floor and
+    may then hold, steady, over most of a recording; a tone switched on (a step the band
+    cannot resolve) or there all along is background when held so."""
+    n, rate = det.frame_len, det.sample_rate_hz
+    k = np.arange(n) / rate
+    basis = (hann(n)[:, None] * np.exp(-2j * np.pi * f * k)[:, None]).astype(np.complex64)
+    step = format_step(x) or 0.0
+    times, levels = [], []
+    for start, end in spans:
+        i, j = max(int(math.ceil((start - t0) * rate)), 0), min(int((end - t0) * rate), x.size)
+        for b in range(i, j - n + 1, n * _BLOCK_FRAMES):
+            frames = x[b : min(b + n * _BLOCK_FRAMES, j - (j - b) % n)].reshape(-1, n)
+            ms = np.mean(np.square(frames, dtype=np.float64), axis=1)
+            rounding = np.maximum(step, FLOAT32_STEP * np.sqrt(ms)) ** 2 / 12
+            usable = np.isfinite(ms) & (
+                np.var(frames, axis=1, dtype=np.float64) > SILENT_FACTOR * rounding
+            )
+            z = (frames[usable] @ basis)[:, 0]
+            levels.append(10 * np.log10(np.maximum(np.abs(z) ** 2, 1e-300)))
+            times.append(t0 + (b + (np.flatnonzero(usable) + 0.5) * n) / rate)
+    level, t = np.concatenate([np.zeros(0), *levels]), np.concatenate([np.zeros(0), *times])
+    if level.size < 2:
+        return False
+    absent = level < np.median(level) - det.settings.background_margin_db
+    adjacent = np.diff(t) < 1.5 * n / rate  # not across a span's end or an unusable frame
+    onsets = np.flatnonzero(absent[:-1] & ~absent[1:] & adjacent) + 1
+    for o in onsets.tolist():
+        g = onset_growth(x, rate, t0, float(t[o]) - n / (2 * rate), np.array([t[o]]), np.array([f]))
+        if g.rate_per_s is not None:
+            return True
+    return False
 
 
 def frames_heard(

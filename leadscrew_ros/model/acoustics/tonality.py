@@ -269,9 +269,8 @@ class ToneAnalyzer:
             rel = np.broadcast_to(np.arange(score.shape[1]), score.shape).copy()
         valid = np.take_along_axis(score, rel, axis=1) > 0.0
         k = rel + lo  # absolute peak bins
-        near = np.stack(
-            [np.take_along_axis(p, k + d, axis=1) for d in (-2, -1, 0, 1, 2)], axis=-1
-        ).astype(np.float64)
+        rows = np.arange(n_frames)[:, None, None]
+        near = p[rows, k[..., None] + np.arange(-2, 3)].astype(np.float64)  # (frames, peaks, 5)
         p0 = near[..., 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             ln = np.log(np.maximum(near[..., 1:4], _TINY))
