@@ -92,6 +92,22 @@ def test_a_weak_onset_gives_no_rate_and_says_why():
     assert g.rate_per_s is None and g.reason == "no frequency track"
 
 
+def test_a_tone_switched_on_is_a_step_not_a_growth():
+    """A tone switched on at once, 30 dB over the noise: no rate, and a step (the sound crossed
+    the fit's range within the band's window); one growing at 20 1/s from under the noise is
+    no step."""
+    rng = np.random.default_rng(4)
+    t = np.arange(int(3.0 * FS)) / FS
+    noise = rng.normal(0, 0.003, t.size)
+    track_t = np.arange(ON_S, 2.5, 0.01)
+    switched = 0.3 * (t >= ON_S) * np.sin(2 * np.pi * 1000.0 * t) + noise
+    g = onset_growth(switched, FS, 0.0, ON_S, track_t, np.full(track_t.size, 1000.0))
+    assert g.rate_per_s is None and g.step and "a step" in g.reason, g
+    grown = 0.3 * np.minimum(np.exp(20.0 * (t - 2.0)), 1.0) * np.sin(2 * np.pi * 1000.0 * t)
+    g = onset_growth(grown + noise, FS, 0.0, 1.85, track_t, np.full(track_t.size, 1000.0))
+    assert g.rate_per_s == pytest.approx(20.0, rel=0.15) and not g.step, g
+
+
 def test_the_episode_fields_are_json_safe_and_live_says_not_measured():
     from leadscrew_ros.model.acoustics import StreamingDetector
 

@@ -38,9 +38,10 @@ background, unless it grew: where it comes in after an absence, its growth at th
 measured (`growth.onset_growth`) and has a rate (a squeak grows at Re(lambda) from the floor,
 then may saturate and hold over most of the recording; a tone switched on, a step, or one whose
 onset cannot be measured stays background). A recording with nothing moving is so judged as a
-whole: a stationary tone is background, a growing or intermittent one is not
-(`detect`'s `infer_background`: the offline listening of a log or a recording; the node, which
-hears as it goes, cannot). 'none': nothing learned from.
+whole: a stationary tone is background, and so is an intermittent one that comes in at once (a
+step: switched on, `Growth.step`); one that grows is not (`detect`'s `infer_background`: the
+offline listening of a log or a recording; the node, which hears as it goes, cannot).
+'none': nothing learned from.
 
 `StreamingDetector` is the core: it frames the samples as they come, analyses each frame once,
 and runs the tracks frame by frame with bounded memory. `detect` pushes the whole signal into
@@ -1201,6 +1202,10 @@ def detect(
     episodes, creaks = sort_creaks(episodes, [*episodes, *det.rejected], creaks, settings.frame_s)
     if mono is not None:
         _measure_growth(episodes, [*episodes, *det.rejected], mono, det.sample_rate_hz, t0_s)
+        nothing_moves = speed_rad_s is None and condition_times_s is None
+        if infer_background and source in ("none", "inferred") and nothing_moves:
+            episodes = _switched_on(det, episodes, n_samples / det.sample_rate_hz)
+            source = "inferred" if det.background.tones() else source
     warnings = list(det.warnings)
     if n_samples == 0:
         warnings.append("no audio samples")
@@ -1235,6 +1240,22 @@ def detect(
         creaks=creaks,
         background_source=source,
     )
+
+
+def _switched_on(
+    det: StreamingDetector, episodes: list[Episode], duration_s: float
+) -> list[Episode]:
+    """With nothing moving (no speed, no condition): the episodes whose sound came in at once
+    (a step, `Growth.step`: switched on, not grown from the floor) are background tones; the
+    rest are returned."""
+    step = [e for e in episodes if e.growth is not None and e.growth.step]
+    det.background.include(
+        [
+            BackgroundTone(e.frequency_hz, e.level_db, (e.end_s - e.start_s) / duration_s)
+            for e in step
+        ]
+    )
+    return [e for e in episodes if e not in step]
 
 
 def _measure_growth(

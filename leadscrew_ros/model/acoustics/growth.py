@@ -69,6 +69,10 @@ class Growth:
         The saturation's level over the background in the squeak's band [dB].
     reason : str
         Why there is no rate ('' with one).
+    step : bool
+        The sound came in at once: from the fit's lower bound to its upper one within the
+        band's window (its response time), or faster than the band resolves (a sound
+        switched on, not a growth from the floor).
     """
 
     rate_per_s: float | None
@@ -76,6 +80,7 @@ class Growth:
     window_s: tuple[float, float] | None
     snr_db: float | None
     reason: str = ""
+    step: bool = False
 
 
 def onset_growth(
@@ -132,6 +137,7 @@ def onset_growth(
                 g.snr_db,
                 f"faster than the band resolves ({MAX_RATE_WINDOW / window:.0f} 1/s at "
                 f"{f0:.0f} Hz): a step, not a growth",
+                step=True,
             )
     return g
 
@@ -187,7 +193,17 @@ def _measure(
     )
     run = np.flatnonzero(fit)  # noise flickers around the bounds: no contiguity asked
     if run.size < MIN_POINTS:
-        return Growth(None, None, None, snr, "too few points between the floor and saturation")
+        step = _rise_s(tp, excess, background, saturation, quiet_hi) <= window
+        return Growth(
+            None,
+            None,
+            None,
+            snr,
+            "rose within the band's response time: a step, not a growth"
+            if step
+            else "too few points between the floor and saturation",
+            step=step,
+        )
     x, y = tp[run], np.log(saturation / excess[run] - 1.0)
     slope, intercept = np.polyfit(x, y, 1)
     residual = y - (slope * x + intercept)
@@ -195,6 +211,18 @@ def _measure(
     se = math.sqrt(float(np.sum(residual**2)) / max(x.size - 2, 1) / spread) / 2.0
     se *= math.sqrt(max(window / HOP_S, 1.0))
     return Growth(-slope / 2.0, se, (float(x[0]), float(x[-1])), snr)
+
+
+def _rise_s(
+    tp: np.ndarray, excess: np.ndarray, background: float, saturation: float, after_s: float
+) -> float:
+    """How long the sound took after `after_s` [s] from the fit's lower bound to its upper
+    one (inf when it did not get there)."""
+    high = np.flatnonzero((excess > saturation * 10 ** (-FIT_UNDER_DB / 10)) & (tp >= after_s))
+    if not high.size:
+        return math.inf
+    low = np.flatnonzero(excess[: high[0]] < background * 10 ** (FIT_OVER_DB / 10))
+    return float(tp[high[0]] - tp[low[-1]]) if low.size else math.inf
 
 
 def growth_fields(growth: Growth | None) -> dict[str, Any]:
