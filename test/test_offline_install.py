@@ -2,12 +2,13 @@
 """The core install works with no ROS 2 at all: the model, log and review commands run, and the
 ROS commands say in one line what to install (exit 2).
 
-Two ways, both always run: (1) with every ROS 2 module made unimportable (a sitecustomize on
-PYTHONPATH whose finder refuses them, in the Dask workers too), which proves that nothing on the
-offline path imports rclpy or a message package, even indirectly or optionally; (2) in a fresh
-venv (no --system-site-packages) with a plain `pip install .`, which proves install_requires is
-complete without the ROS wheels and the installed package (bundled message definitions,
-version from the metadata) works. Both run every command in one process (offline_cli.py).
+Both at once, in one run of every command (offline_cli.py): in a fresh venv (no
+--system-site-packages) with a plain `pip install .`, which proves install_requires is complete
+without the ROS wheels and the installed package (bundled message definitions, version from the
+metadata) works; and there with every ROS 2 module made unimportable by a sitecustomize on
+PYTHONPATH whose finder refuses and logs them (in the Dask workers too), which proves that
+nothing on the offline path even tries to import rclpy or a message package, indirectly or
+optionally. The blocker itself and `squeak_node` are checked in this environment.
 """
 
 import json
@@ -124,9 +125,16 @@ def _check_commands(report: dict, work: Path) -> None:
 
 # ----------------------------------------------------------------------------- ROS blocked
 @pytest.fixture(scope="module")
-def blocked_env(tmp_path_factory):
+def blocked_site(tmp_path_factory) -> Path:
+    """A directory whose sitecustomize blocks every ROS 2 module."""
     site = tmp_path_factory.mktemp("no_ros_site")
     (site / "sitecustomize.py").write_text(SITECUSTOMIZE)
+    return site
+
+
+@pytest.fixture(scope="module")
+def blocked_env(blocked_site):
+    site = blocked_site
     env = dict(
         os.environ,
         PYTHONPATH=os.pathsep.join(
@@ -149,16 +157,6 @@ def test_the_blocker_blocks(blocked_env, tmp_path):
     )
     assert r.returncode == 1 and "ModuleNotFoundError: No module named 'std_msgs" in r.stderr
     assert (tmp_path / "blocked.log").read_text() == "std_msgs\n"
-
-
-def test_offline_commands_with_ros_blocked(blocked_env, tmp_path):
-    env = dict(blocked_env, LEADSCREW_BLOCKED_LOG=str(tmp_path / "blocked.log"))
-    report = _driver(sys.executable, tmp_path, env)
-    assert Path(report["package"]) == REPO / "leadscrew_ros"
-    assert report["version"] == VERSION  # from the source tree
-    _check_commands(report, tmp_path)
-    # the ROS commands did try (and were refused): the check above saw the real path
-    assert all(c["blocked"] for c in report["commands"] if c["code"] == 2)
 
 
 def test_squeak_node_with_ros_blocked(blocked_env, tmp_path):
@@ -267,14 +265,19 @@ def test_clean_venv_has_no_ros(clean_venv):
     assert importable == []
 
 
-def test_offline_commands_in_clean_venv(clean_venv, tmp_path):
+def test_offline_commands_in_clean_venv(clean_venv, blocked_site, tmp_path):
+    """Both ways at once: the installed package in the clean venv, with the blocker, so that
+    an optional attempt to import ROS 2 is seen too (the venv has none to find)."""
     venv, env = clean_venv
     work = tmp_path / "work"
+    env = dict(env, PYTHONPATH=str(blocked_site), LEADSCREW_BLOCKED_LOG=str(tmp_path / "b.log"))
     report = _driver(str(venv / "bin" / "python"), work, env)
     assert Path(report["package"]).is_relative_to(venv)  # the installed copy ...
     assert report["version"] == VERSION  # ... its version from metadata
     assert Path(report["definition_prefix"]).is_relative_to(venv)  # the bundled copy
     _check_commands(report, work)
+    # the ROS commands did try (and were refused): the check above saw the real path
+    assert all(c["blocked"] for c in report["commands"] if c["code"] == 2)
 
 
 @pytest.mark.parametrize(

@@ -54,17 +54,18 @@ class Feed:
         self.ros = RosWorld(ns=ns, executor="events")
         self.node = self.ros.make_node("feed")
         self.risk, self.recording = [], []
+        self.recording_stamps_ns: list[int] = []  # the node's clock when it sent each status
         self.node.create_subscription(Float64, "squeak/risk", self.risk.append, COLLECT)
-        self.node.create_subscription(
-            DiagnosticArray,
-            "/diagnostics",
-            lambda m: self.recording.extend(
-                s
-                for s in m.status
-                if s.hardware_id == f"hw_{ns[2:]}" and s.name.endswith(": recording")
-            ),
-            COLLECT,
-        )
+
+        def collect(m: DiagnosticArray) -> None:
+            for s in m.status:
+                if s.hardware_id == f"hw_{ns[2:]}" and s.name.endswith(": recording"):
+                    self.recording.append(s)
+                    self.recording_stamps_ns.append(
+                        m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
+                    )
+
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", collect, COLLECT)
         self.pubs = [
             self.node.create_publisher(type_, topic, 10)
             for type_, topic in (
