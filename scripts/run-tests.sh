@@ -36,7 +36,7 @@ status=0
 # tests wait on ROS, child processes or Dask rather than compute, and a third worker fills
 # those waits, also beside a busy core. PYTEST_WORKERS=0 runs in this process.
 timeout "$((SESSION_DEADLINE_S + 360))" .venv/bin/python -m pytest -q \
-    -n "${PYTEST_WORKERS:-3}" --dist loadfile \
+    -n "${PYTEST_WORKERS:-3}" --dist loadfile --no-loadscope-reorder \
     --durations=15 --cov=leadscrew_ros --cov-branch --cov-report=term "$@" || status=$?
 if [[ $status -eq 124 ]]; then
     echo "run-tests.sh: pytest killed by the outer timeout (${SESSION_DEADLINE_S} s deadline + 360 s);" \

@@ -142,3 +142,31 @@ def ns():
     from harness.ros import unique_ns
 
     return unique_ns()
+
+
+# ----------------------------------------------------------------------------- order
+# The modules that take minutes (fixtures that calibrate fleets, run every command, build
+# venvs), longest first (--durations on a loaded 2-core machine): pytest-xdist hands out whole
+# files in collection order (scripts/run-tests.sh: --dist loadfile --no-loadscope-reorder), so
+# that none of them starts late and ends the run alone. The order of the rest is kept.
+LONG_MODULES = (
+    "test_calibrate.py",
+    "test_calibration_sampling.py",
+    "test_heard.py",
+    "test_fleet.py",
+    "test_pictures.py",
+    "test_demo.py",
+    "test_probability.py",
+    "test_recording.py",
+    "test_node.py",
+    "test_replay.py",
+    "test_offline_install.py",
+)
+
+
+def pytest_collection_modifyitems(items):
+    def rank(item) -> int:
+        name = item.path.name
+        return LONG_MODULES.index(name) if name in LONG_MODULES else len(LONG_MODULES)
+
+    items.sort(key=rank)  # stable

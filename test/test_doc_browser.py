@@ -5,7 +5,8 @@ doc/_static/readable.css) and every picture loads.
 
 Chromium and ChromeDriver come from Debian (`apt-get install chromium chromium-driver`); without
 them the tests skip with that reason, except where LEADSCREW_REQUIRE_BROWSER is set (.ci/run
-installs both and sets it), where a missing browser fails."""
+installs both and sets it), where a missing browser fails. .ci/run also builds the site first
+and hands it over (LEADSCREW_DOC_HTML); without that the tests build it."""
 
 import os
 import shutil
@@ -52,7 +53,12 @@ return out;
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> Path:
-    """The doc site built from this checkout (as .ci/run builds it)."""
+    """The doc site built from this checkout, or the one .ci/run built (with -W) before the
+    tests and names in LEADSCREW_DOC_HTML: one build per CI run."""
+    built = os.environ.get("LEADSCREW_DOC_HTML")
+    if built:
+        assert (Path(built) / "index.html").is_file(), f"LEADSCREW_DOC_HTML={built}: no site"
+        return Path(built)
     out = tmp_path_factory.mktemp("html")
     subprocess.run(
         [sys.executable, "-m", "sphinx", "-q", "-b", "html", str(ROOT / "doc"), str(out)],
