@@ -14,7 +14,10 @@ the squeak's frequency at its time), else other. Printed, in Markdown: the false
 cause, the audible intervals found, onset delays (episode start minus the interval's start,
 by the growth at the onset, >= 50 1/s or less), frame recall and precision against the
 audible frames, creaks, and the measured growth rate against the truth's at the onsets
-measured (`growth_snr_db` >= 15 dB). Nothing is asserted: the tests hold the targets.
+measured (`growth_snr_db` >= 15 dB): the slope of the truth's envelope over the window the
+measurement reports (`envelope_growth`; sigma still rises after an onset on a ramp, so the
+growth within 25 ms of the onset, `Onset`, is printed beside it but is not what was measured).
+Nothing is asserted: the tests hold the targets.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from leadscrew_ros.bag.cdr import decode_float64
 from leadscrew_ros.bag.logsource import open_log
 from leadscrew_ros.bag.synthetic import SPEED_TOPIC
 from leadscrew_ros.cli import main as cli
+from leadscrew_ros.model.acoustics.bench_sound import ONSET_WINDOW_S, envelope_growth
 
 TOLERANCE = 0.02  # relative frequency tolerance of a cause
 FAST_GROWTH_PER_S = 50.0  # onset within 50 ms where the growth is at least this, else 150 ms
@@ -134,8 +138,16 @@ def evaluate(root: Path, args: argparse.Namespace) -> dict:
             )
             g = first.get("growth_rate_per_s")
             if onset and g is not None and (first.get("growth_snr_db") or 0) >= 15.0:
-                true = onset["fitted_growth_per_s"] or onset["growth_rate_per_s"]
-                growth.append((round(a["start_s"], 2), true, g, first["growth_rate_se"]))
+                true = envelope_growth(
+                    unit["sound"]["envelope_dbfs"],
+                    unit["sound"]["envelope_rate_hz"],
+                    first["growth_window_s"],
+                )
+                at_onset = onset["fitted_growth_per_s"] or onset["growth_rate_per_s"]
+                if true is not None:
+                    growth.append(
+                        (round(a["start_s"], 2), at_onset, true, g, first["growth_rate_se"])
+                    )
         t = np.arange(0.0, heard["log_s"], 0.01)
         truth_on = _frames(
             [(a["start_s"], a["end_s"]) for a in unit["sound"]["audible_intervals"]], t
@@ -187,18 +199,21 @@ def report(r: dict) -> str:
         f"{r['frame_precision']:.3f} |",
     ]
     if r["growth"]:
-        ratios = [g / t for _, t, g, _ in r["growth"]]
+        ratios = [g / t for _, _, t, g, _ in r["growth"]]
+        early = [g / o for _, o, _, g, _ in r["growth"]]
         lines += [
             "",
-            "| onset [s] | truth [1/s] | measured [1/s] | se [1/s] | measured / truth |",
-            "|---:|---:|---:|---:|---:|",
+            "| onset [s] | truth at the onset [1/s] | truth over the window [1/s] "
+            "| measured [1/s] | se [1/s] | measured / truth over the window |",
+            "|---:|---:|---:|---:|---:|---:|",
             *[
-                f"| {s} | {t:.1f} | {g:.1f} | {se:.1f} | {g / t:.2f} |"
-                for s, t, g, se in r["growth"]
+                f"| {s} | {o:.1f} | {t:.1f} | {g:.1f} | {se:.1f} | {g / t:.2f} |"
+                for s, o, t, g, se in r["growth"]
             ],
             "",
-            f"growth measured / truth: median {statistics.median(ratios):.2f} over "
-            f"{len(ratios)} onsets",
+            f"growth measured / truth over the measurement's window: median "
+            f"{statistics.median(ratios):.2f} over {len(ratios)} onsets (against the truth "
+            f"within {1000 * ONSET_WINDOW_S:g} ms of the onset: {statistics.median(early):.2f})",
         ]
     return "\n".join(lines)
 

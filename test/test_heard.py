@@ -29,6 +29,7 @@ from leadscrew_ros.bag.virtual_bench import MIC_INFO_TOPIC, MIC_TOPIC, START_NS,
 from leadscrew_ros.cli import main
 from leadscrew_ros.model import ScrewParameters, SqueakModel
 from leadscrew_ros.model.acoustics import DetectorSettings
+from leadscrew_ros.model.acoustics.bench_sound import envelope_growth
 from leadscrew_ros.review.calibration.gather import observe_replay
 from leadscrew_ros.review.listen import (
     CLIP_PAD_S,
@@ -474,10 +475,14 @@ def test_a_realistic_bench_heard_not_its_room_nor_its_drive(tmp_path):
     seeds the unit tests do not use: no false episode from the background (learned at rest),
     at most one per unit in all (the commutator's constant-speed tone where its sweep was too
     fast to be learned), every audible interval of 50 ms or more found. The detector of 0.1.0
-    heard 655 false episodes on 10 such units (424 of them the room's tones)."""
+    heard 655 false episodes on 10 such units (424 of them the room's tones). The growth rate
+    measured at each onset 15 dB or more over the background: median within 0.85-1.15 of the
+    truth's over the window it reports (issue 30; sigma still rises after these onsets, so the
+    truth within 25 ms of the onset is lower: measured 1.23x it on 10 units of seed 77)."""
     truth = run(BenchSettings(units=3, duration_s=12.0, seed=31, realistic=True), tmp_path / "b")
     background = truth["sound"]["background_tones_hz"]
     false = 0
+    ratios = []
     for k, unit in enumerate(truth["units"]):
         _replay(tmp_path / "b" / unit["log"], tmp_path / f"r{k}")
         heard = _summary(tmp_path / f"r{k}")["heard"]
@@ -500,7 +505,18 @@ def test_a_realistic_bench_heard_not_its_room_nor_its_drive(tmp_path):
         }
         assert any(abs(o["ratio"] / 37.3 - 1) < 0.01 for o in heard["drive_orders"])
         assert heard["creaks"] == []  # a squeak's reverberant tail, tones beating: no slips
+        for a in audible:  # the episode that heard the interval's onset
+            e = min((e for e in episodes if overlaps(e, a)), key=lambda e: e["start_s"])
+            if e["growth_rate_per_s"] is not None and e["growth_snr_db"] >= 15.0:
+                true = envelope_growth(
+                    unit["sound"]["envelope_dbfs"],
+                    unit["sound"]["envelope_rate_hz"],
+                    e["growth_window_s"],
+                )
+                ratios.append(e["growth_rate_per_s"] / true)
     assert false <= len(truth["units"])
+    assert len(ratios) >= len(truth["units"]), ratios
+    assert 0.85 <= float(np.median(ratios)) <= 1.15, ratios
 
 
 def test_calibration_takes_no_observation_where_there_was_no_sound(paper_bench, tmp_path):

@@ -31,6 +31,7 @@ the motor). With no background at all every squeak, the floor included, is audib
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -49,6 +50,37 @@ MOTOR_ORDER_2_DB = -6.0  #: motor order 2 re order 1
 ONSET_WINDOW_S = 0.025  #: the growth at an onset is fitted within this of it
 ONSET_UNSATURATED_DB = -20.0  #: ... where A is at least this under saturation
 ONSET_OVER_FLOOR_DB = 6.0  #: ... and this over the floor
+
+
+def envelope_growth(
+    envelope_db: Any, rate_hz: float, window_s: tuple[float, float]
+) -> float | None:
+    """The growth rate a measurement over `window_s` should find: the least-squares slope of
+    ln A [1/s] of an envelope in dB (20 log10 A, sampled at `rate_hz` [Hz] from t = 0, as
+    truth.json keeps it) over the window [s]. Where sigma still rises after the onset (a
+    ramp into the band) it exceeds the growth at the onset (`Onset`): a rate measured at one
+    time is compared at that time. None with fewer than 3 envelope points in the window.
+
+    Parameters
+    ----------
+    envelope_db : array_like
+        The envelope [dB], one value per 1 / `rate_hz`.
+    rate_hz : float
+        Its sample rate [Hz].
+    window_s : tuple of float
+        Start and end of the window [s].
+
+    Returns
+    -------
+    float or None
+        The slope [1/s].
+    """
+    level = np.asarray(envelope_db, float)
+    t = np.arange(level.size) / rate_hz
+    inside = (t >= window_s[0]) & (t <= window_s[1])
+    if np.count_nonzero(inside) < 3:
+        return None
+    return float(np.polyfit(t[inside], level[inside] * (math.log(10.0) / 20.0), 1)[0])
 
 
 def _level(db: float) -> float:
