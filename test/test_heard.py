@@ -513,6 +513,7 @@ def test_a_realistic_bench_heard_not_its_room_nor_its_drive(tmp_path):
                     unit["sound"]["envelope_rate_hz"],
                     e["growth_window_s"],
                 )
+                assert true is not None, (e["growth_window_s"], a)  # a window of >= 3 points
                 ratios.append(e["growth_rate_per_s"] / true)
     assert false <= len(truth["units"])
     assert len(ratios) >= len(truth["units"]), ratios
