@@ -2,7 +2,7 @@
 """Peak memory of `leadscrew-squeak replay` against log length, with and without the report.
 
     .venv/bin/python benchmarks/bench_replay_rss.py [--minutes 10 60] [--rate HZ] [--src DIR]
-    .venv/bin/python benchmarks/bench_replay_rss.py --sound [--minutes 10 60]
+    .venv/bin/python benchmarks/bench_replay_rss.py --sound [--minutes 10 120]
 
 For each log length (the duty cycle of `bench_replay.py` in one MCAP file, as rosbag2 records
 without `--max-bag-duration`; `--split-s` for split files; generated once and cached in the temp
@@ -14,7 +14,8 @@ from RUSAGE_CHILDREN. Streaming means equal peaks: target 60-minute peak <= 1.2 
 peak, both ways. `--src DIR` runs the package of another checkout (e.g. `git archive` of an old
 commit) on the same logs. `--sound`: instead, a virtual-bench unit (`bench`, seed 0) whose one
 stroke lasts the log's length, with its 48 kHz microphone, replayed with its sound (issue 30:
-the replay's memory grew with the audio).
+the replay's memory grew with the audio); a log longer than an hour (the bench's limit) is the
+10-minute one played over and over (`repeated_log`).
 """
 
 from __future__ import annotations
@@ -23,14 +24,20 @@ import argparse
 import hashlib
 import json
 import os
+import struct
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_replay import TARGET_RSS_RATIO, size_mb  # noqa: E402
 from leadscrew_ros.bag.synthetic import DutyCycle, write_log  # noqa: E402
+
+MAX_BENCH_MINUTES = 60.0  # `bench.duration_s` is at most an hour: a longer log repeats ...
+REPEATED_MINUTES = 10.0  # ... the bench of this length
 
 # Runs in the child: the CLI in this process, a sampler thread beside it.
 CHILD = """
@@ -82,6 +89,61 @@ def cached_bench_log(minutes: float) -> tuple[Path, str]:
         run(settings, root)
     truth = json.loads(truth_path.read_text())
     return root / truth["units"][0]["log"], DutyCycle().joint_name
+
+
+def repeated_log(bag: Path, minutes: float) -> Path:
+    """An MCAP file of `bag`'s messages played over and over for `minutes`: each repeat's log
+    times and audio header stamps shifted by the bag's duration plus 50 ms (a bench stroke is
+    at most an hour: longer sound logs are made of one). Generated once, cached beside it."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    out = bag.parent / f"repeated_{minutes:g}min.mcap"
+    if out.is_file():
+        return out
+    [src] = sorted(bag.glob("*.mcap"))
+    with open(src, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        stats = summary.statistics
+        period = stats.message_end_time - stats.message_start_time + 50_000_000
+        repeats = int(np.ceil(minutes * 60e9 / period))
+        part = out.with_suffix(".part")
+        with open(part, "wb") as g:
+            w = Writer(g)
+            w.start(profile="ros2", library="bench_replay_rss")
+            ids = {}
+            for sid, sc in summary.schemas.items():
+                ids[sid] = w.register_schema(sc.name, sc.encoding, sc.data)
+            chans = {
+                cid: w.register_channel(c.topic, c.message_encoding, ids[c.schema_id], c.metadata)
+                for cid, c in summary.channels.items()
+            }
+            stamped = {
+                cid
+                for cid, c in summary.channels.items()
+                if summary.schemas[c.schema_id].name.endswith("AudioDataStamped")
+            }
+            for m in reader.iter_metadata():
+                w.add_metadata(m.name, m.metadata)
+            for k in range(repeats):
+                shift = k * period
+                for _, channel, msg in reader.iter_messages(log_time_order=True):
+                    data = msg.data
+                    if channel.id in stamped:  # CDR: encapsulation, then header.stamp.sec
+                        sec, nsec = struct.unpack_from("<iI", data, 4)
+                        ns = sec * 1_000_000_000 + nsec + shift
+                        data = bytearray(data)
+                        struct.pack_into("<iI", data, 4, ns // 1_000_000_000, ns % 1_000_000_000)
+                    w.add_message(
+                        chans[channel.id],
+                        msg.log_time + shift,
+                        bytes(data),
+                        msg.publish_time + shift,
+                    )
+            w.finish()
+        part.rename(out)
+    return out
 
 
 def replay_peak(
@@ -137,7 +199,10 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for minutes in args.minutes:
         if args.sound:
-            bag, joint = cached_bench_log(minutes)
+            long = minutes > MAX_BENCH_MINUTES
+            bag, joint = cached_bench_log(REPEATED_MINUTES if long else minutes)
+            if long:
+                bag = repeated_log(bag, minutes)
         else:
             cycle = DutyCycle(duration_s=minutes * 60.0, rate_hz=args.rate)
             bag, joint = cached_log(cycle, args.split_s), cycle.joint_name

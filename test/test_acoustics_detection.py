@@ -16,6 +16,7 @@ from leadscrew_ros.model.acoustics import (
     frames_heard,
     microphone,
 )
+from leadscrew_ros.model.acoustics.samples import SampleTrack
 from leadscrew_ros.model.acoustics.tonality import critical_band, tnr_limit_db
 
 FS = 48000
@@ -632,3 +633,36 @@ def test_settings_are_checked():
         DetectorSettings(track_tolerance=0.5)
     with pytest.raises(ValueError, match="f_lo_hz"):
         DetectorSettings(f_lo_hz=5000.0, f_hi_hz=4000.0)
+
+
+class _SlicedTrack(SampleTrack):
+    """An array seen only through slices, the longest read kept (a log's track is on disk)."""
+
+    def __init__(self, x):
+        self.x, self.longest = x, 0
+
+    @property
+    def size(self):
+        return self.x.size
+
+    def read(self, start, stop):
+        self.longest = max(self.longest, stop - start)
+        return self.x[start:stop].copy()
+
+
+@pytest.mark.parametrize("bench", ["room", "geared"])
+def test_a_track_read_by_slices_gives_the_same_detection_without_reading_it_whole(bench):
+    """Every pass of the offline detection (background at rest or inferred, the tracks, the
+    sweeps, creaks, growth) reads a `SampleTrack` by slices, never whole, and finds exactly
+    what it finds in the array."""
+    x, ts, speed = _bench_room()[:3] if bench == "room" else _geared_drive(hold_only=True)
+    x[int(2 * FS) : int(2 * FS) + 500] = np.nan  # a dropout: not scored, either way
+    for kwargs in (dict(speed_times_s=ts, speed_rad_s=speed), dict(infer_background=True)):
+        track = _SlicedTrack(x)
+        a, b = detect(x, FS, **kwargs), detect(track, FS, **kwargs)
+        assert 0 < track.longest <= x.size // 2
+        _episodes_equal(a.episodes, b.episodes)
+        assert [e.growth for e in a.episodes] == [e.growth for e in b.episodes]
+        assert a.as_dict() == b.as_dict()
+        np.testing.assert_array_equal(a.usable, b.usable)
+        assert a.episodes or a.background

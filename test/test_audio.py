@@ -19,6 +19,7 @@ from leadscrew_ros.bag.audio import (
 )
 from leadscrew_ros.bag.cdr import FLOAT64, encode_float64
 from leadscrew_ros.bag.recorder import Recorder, RecordSettings
+from leadscrew_ros.model.acoustics.samples import SampleTrack
 
 T0 = 1_767_225_600_000_000_000
 RATE = 48000
@@ -521,3 +522,26 @@ def test_live_audio_decodes_chunks_with_the_latest_info():
     live.channel = 0
     samples, rate = live(audiomsgs.encode_audio_data_stamped(1, np.float32([0.5, -0.25]).tobytes()))
     assert rate == 44100.0 and samples.tolist() == [0.5, -0.25]
+
+
+def test_a_logs_track_is_on_disk_and_reads_by_slices_as_a_whole(tmp_path):
+    """The track of a log is a `SampleTrack` on disk (no copy of the sound in memory): any
+    slice across chunks, a gap and a trimmed overlap reads as the same stretch of the whole;
+    contiguous chunks are one piece of the file."""
+    x = _tone(6 * 480)
+    msgs = _drivers(x, chunk=480)
+    msgs.remove([m for m in msgs if m[0] == "/microphone"][2])  # a gap: NaN
+    whole = read_audio(_write(tmp_path / "a", msgs))
+    assert isinstance(whole.samples, SampleTrack) and not isinstance(whole.samples, np.ndarray)
+    assert len(whole.samples._source) == 3  # two pieces of the file and the gap between
+    a = np.asarray(whole.samples)
+    assert a.dtype == np.float32 and a.size == x.size
+    np.testing.assert_array_equal(a[:960], _s16(x[:960]) / np.float32(32768))
+    assert np.isnan(a[960:1440]).all()
+    rng = np.random.default_rng(5)
+    for i, j in rng.integers(0, a.size + 1, size=(60, 2)).tolist():
+        i, j = min(i, j), max(i, j)
+        np.testing.assert_array_equal(whole.samples[i:j], a[i:j])
+    np.testing.assert_array_equal(whole.samples.span(470, 1500)[5:600], a[475:1070])
+    np.testing.assert_array_equal(whole.samples[-10:], a[-10:])
+    assert whole.samples[5:5].size == 0 and whole.samples[a.size + 3 :].size == 0

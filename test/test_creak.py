@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from leadscrew_ros.model.acoustics import DetectorSettings, detect
+from leadscrew_ros.model.acoustics import creak as creak_module
 from leadscrew_ros.model.acoustics.creak import find_creaks
 
 FS = 48000.0
@@ -144,3 +145,26 @@ def test_listen_reports_a_creak_in_a_recording(tmp_path):
     assert c["pulses"] >= 0.9 * times.size and heard["episodes"] == []
     summary = (tmp_path / "out" / "summary.txt").read_text()
     assert "creak (stick-slip pulses)" in summary and "not counted as squeak" in summary
+
+
+@pytest.mark.parametrize("window_s", [0.7, 1.3])
+def test_a_long_recording_is_searched_in_windows_and_a_train_across_them_is_one_creak(
+    monkeypatch, window_s
+):
+    """A recording longer than a window is searched window by window (bounded memory); a
+    train crossing window boundaries is still one creak with the pulses of the whole, and a
+    second train after a pause is its own. Windows shrunk so a short test crosses several."""
+    x, times = creak(25.0, (800.0,), 0.004, span=(0.5, 3.2), dur=5.0, seed=3)
+    later, times2 = creak(60.0, (3000.0,), 0.004, span=(0.3, 0.9), dur=1.0, seed=4)
+    x[int(3.9 * FS) : int(4.9 * FS)] += later[: int(1.0 * FS)]
+    whole = find_creaks(x, FS)
+    monkeypatch.setattr(creak_module, "WINDOW_S", window_s)
+    monkeypatch.setattr(creak_module, "OVERLAP_S", 0.2)
+    windowed = find_creaks(x, FS)
+    assert len(whole) == len(windowed) == 2
+    for a, b, t in zip(whole, windowed, (times, times2 + 3.9), strict=True):
+        assert b.start_s == pytest.approx(t[0], abs=0.004)
+        assert b.end_s == pytest.approx(t[-1], abs=0.004)
+        assert abs(b.pulses - a.pulses) <= 1
+        assert b.pulse_rate_hz == pytest.approx(a.pulse_rate_hz, rel=0.02)
+        assert b.ringing_hz[0] == pytest.approx(a.ringing_hz[0], rel=0.05)

@@ -41,12 +41,18 @@ changing mid-log (the first one's segment kept). What cannot be read at all rais
 line: no audio topic or several, an unknown sample format, a coding format other than PCM /
 wave (e.g. mp3), no AudioInfo, no sample rate for Float32MultiArray (`MissingRateError`).
 
-Memory: a 10-min 48 kHz mono log is 29 M samples (115 MB float32); chunks are converted with
-numpy as they are read and concatenated once.
+Memory: a 10-min 48 kHz mono log is 29 M samples (115 MB float32), two hours 1.4 GB. Each
+message is converted as it is read and its samples appended to an anonymous temporary file
+(unlinked at once: nothing is left behind, even by a crash); the track is a table of that
+file's pieces on the sample grid (`SpilledTrack`), which the detector reads by slices. Memory
+stays bounded whatever the log's length; disk use is the track's size while it is analysed.
 """
 
 from __future__ import annotations
 
+import os
+import tempfile
+from array import array
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -55,6 +61,7 @@ from typing import Any
 
 import numpy as np
 
+from ..model.acoustics.samples import SampleTrack
 from ..model.physics.metadata import check, setting
 from . import audiomsgs, logmeta, schema
 from .audiomsgs import PA_FLOAT32, PA_INT8, PA_INT16, PA_INT24, PA_INT32, PA_UINT8
@@ -156,8 +163,9 @@ class AudioTrack:
 
     Attributes
     ----------
-    samples : numpy.ndarray
-        float32, full scale -1..1.
+    samples : numpy.ndarray or SampleTrack
+        float32, full scale -1..1 (a log's: a `SpilledTrack` on disk, read by slices; a
+        WAV's: an array).
     sample_rate_hz : float
         Samples per second.
     t0_s : float
@@ -170,7 +178,7 @@ class AudioTrack:
         Channels of the source (a WAV file's; 1 where not known): `samples` is one of them.
     """
 
-    samples: np.ndarray
+    samples: np.ndarray | SampleTrack
     sample_rate_hz: float
     t0_s: float
     source: str
@@ -305,9 +313,19 @@ def read_audio(
     if sample_rate_hz is not None and kind != MULTI_ARRAY:
         warnings.append(f"sample_rate_hz = {sample_rate_hz:g} ignored: {name} carries its own")
     parsed = {n: _schema(source.path, topics[n]) for n in (name, info_name) if n}
-    first_ns: int | None = None
-    raw: list[Any] = []  # (log time, decoded message) of the audio topic; None once converted
+    convert = {
+        DRIVERS: _drivers,
+        DRIVERS_UNSTAMPED: _drivers,
+        MGONZS13: _mgonzs13,
+        MULTI_ARRAY: _multi_array,
+    }[kind]
     infos: list[tuple[int, dict]] = []
+    context = _Context(source.path, name, channel, sample_rate_hz, infos, info_name, problems)
+    # each message converted and spilled to disk as it is read: no copy of the sound is held
+    chunks = _Spill()
+    waiting: list[tuple[int, dict]] = []  # ros-drivers chunks logged before the first info
+    first_ns: int | None = None
+    decoded = 0
     for _, m in source.messages():
         if first_ns is None:
             first_ns = m.log_time_ns
@@ -318,24 +336,22 @@ def read_audio(
         except schema.CdrError as exc:
             problems.add("undecodable", str(exc))
             continue
-        (infos if m.topic.name == info_name else raw).append((m.log_time_ns, msg))
-    if not raw:
+        if m.topic.name == info_name:
+            infos.append((m.log_time_ns, msg))
+            for t, early in waiting:  # they take the first info
+                chunks.add(convert(context, t, early))
+            waiting.clear()
+            continue
+        decoded += 1
+        if info_name and not infos:
+            waiting.append((m.log_time_ns, msg))
+        else:
+            chunks.add(convert(context, m.log_time_ns, msg))
+    if not decoded:
         raise AudioError(source.path, f"audio topic {name} has no decodable messages")
-    convert = {
-        DRIVERS: _drivers,
-        DRIVERS_UNSTAMPED: _drivers,
-        MGONZS13: _mgonzs13,
-        MULTI_ARRAY: _multi_array,
-    }[kind]
-    context = _Context(source.path, name, channel, sample_rate_hz, infos, info_name, problems)
-    chunks = []
-    for index, (t, msg) in enumerate(raw):
-        raw[index] = None  # each message released once converted: one copy of the sound at a time
-        c = convert(context, t, msg)
-        if c is not None:
-            chunks.append(c)
-    del raw
-    if not chunks:
+    for t, early in waiting:  # no info at all: `info_at` says so
+        chunks.add(convert(context, t, early))
+    if not chunks.count:
         raise AudioError(source.path, f"audio topic {name} holds no samples")
     samples, rate, t0_ns, ended = _assemble(chunks, settings, problems, first_ns or 0)
     return AudioTrack(
@@ -535,7 +551,7 @@ class _Context:
                 f"no AudioInfo message on {self.info_topic} for "
                 f"{self.topic}: sample rate and format unknown",
             )
-        if not self._info_times:
+        if len(self._info_times) != len(self.infos):  # infos arrive as the log is read
             self._info_times = [t for t, _ in self.infos]
         k = int(np.searchsorted(self._info_times, log_time_ns, side="right")) - 1
         return self.infos[max(k, 0)][1]
@@ -679,93 +695,163 @@ def _multi_array(context: _Context, log_time_ns: int, msg: dict) -> _Chunk | Non
 
 
 # ----------------------------------------------------------------------------- timeline
-_RELEASED = np.zeros(0, np.float32)  # a placed piece, copied into the track
+class _Spill:
+    """The converted chunks: their samples appended to an anonymous temporary file (deleted
+    when closed), their times, sizes and keys in compact arrays (hours of 20-ms chunks are
+    hundreds of thousands)."""
+
+    def __init__(self) -> None:
+        self.file = tempfile.TemporaryFile(prefix="leadscrew_audio_")
+        self.keys: list[tuple] = []
+        self._columns = {k: array("q") for k in ("stamp_ns", "sent_ns", "size", "offset", "key")}
+        self._written = 0  # samples
+
+    @property
+    def count(self) -> int:
+        """Chunks spilled."""
+        return len(self._columns["size"])
+
+    def add(self, c: _Chunk | None) -> None:
+        """Append a converted chunk (None: nothing to add)."""
+        if c is None:
+            return
+        x = np.ascontiguousarray(c.samples, dtype=np.float32)
+        self.file.write(x.tobytes())
+        if c.key not in self.keys:
+            self.keys.append(c.key)
+        for name, value in (
+            ("stamp_ns", c.stamp_ns),
+            ("sent_ns", c.sent_ns),
+            ("size", x.size),
+            ("offset", self._written),
+            ("key", self.keys.index(c.key)),
+        ):
+            self._columns[name].append(value)
+        self._written += x.size
+
+    def column(self, name: str) -> np.ndarray:
+        """One column of the table as an int64 array."""
+        return np.frombuffer(self._columns[name], dtype=np.int64)
+
+
+class SpilledTrack(SampleTrack):
+    """A log's track on disk: the pieces of the spill file in their places on the sample grid
+    (a gap is NaN), read by slices (`acoustics.samples`). The file is deleted when the track is
+    closed or collected."""
+
+    def __init__(self, file: Any, pieces: list[tuple[int, int]]) -> None:
+        self._file = file
+        self._source = np.array([p[0] for p in pieces], dtype=np.int64)  # -1: a gap
+        lengths = np.array([p[1] for p in pieces], dtype=np.int64)
+        self._starts = np.concatenate([[0], np.cumsum(lengths)])
+
+    @property
+    def size(self) -> int:
+        """Number of samples."""
+        return int(self._starts[-1])
+
+    def read(self, start: int, stop: int) -> np.ndarray:
+        """Samples [start, stop) as a new float32 array (NaN in gaps)."""
+        out = np.empty(stop - start, np.float32)
+        k = int(np.searchsorted(self._starts, start, side="right")) - 1
+        at = start
+        while at < stop:
+            a, b = at - int(self._starts[k]), min(stop, int(self._starts[k + 1]))
+            if self._source[k] < 0:
+                out[at - start : b - start] = np.nan
+            else:
+                first = (int(self._source[k]) + a) * 4
+                data = os.pread(self._file.fileno(), (b - at) * 4, first)
+                out[at - start : b - start] = np.frombuffer(data, np.float32)
+            at, k = b, k + 1
+        return out
+
+    def close(self) -> None:
+        """Delete the file now."""
+        self._file.close()
 
 
 def _assemble(
-    chunks: list[_Chunk], settings: AudioSettings, problems: _Problems, first_ns: int
-) -> tuple[np.ndarray, float, int, list[str]]:
-    """Place the chunks of the first (rate, channels, format) segment on one sample grid.
-    `chunks` is emptied: their samples move into the track, each released once copied."""
-    given, chunks = (
-        chunks,
-        sorted(_on_log_clock(chunks, settings, problems, first_ns), key=lambda c: c.stamp_ns),
-    )
-    given.clear()
-    key = chunks[0].key
-    rate = key[0]
-    t0_ns = chunks[0].stamp_ns
+    chunks: _Spill, settings: AudioSettings, problems: _Problems, first_ns: int
+) -> tuple[SpilledTrack, float, int, list[str]]:
+    """Place the chunks of the first (rate, channels, format) segment on one sample grid:
+    a table of pieces of the spill file (contiguous ones joined) and gaps."""
+    stamp = _on_log_clock(chunks, settings, problems, first_ns)
+    order = np.argsort(stamp, kind="stable")
+    sizes, offsets, keys = chunks.column("size"), chunks.column("offset"), chunks.column("key")
+    key = int(keys[order[0]])
+    rate = chunks.keys[key][0]
+    t0_ns = int(stamp[order[0]])
     tolerance = settings.stamp_tolerance_s * rate
-    pieces: list[np.ndarray] = []
+    pieces: list[tuple[int, int]] = []
     placed, gap_samples, trimmed = 0, 0, 0
     ended: list[str] = []
 
-    def at(c: _Chunk) -> str:
-        return f"t = {(c.stamp_ns - first_ns) / 1e9:.3f} s"
+    def at(ns: int) -> str:
+        return f"t = {(ns - first_ns) / 1e9:.3f} s"
 
-    for k, c in enumerate(chunks):
-        if c.key != key:
-            what = _describe_change(key, c.key)
+    def piece(source: int, length: int) -> None:
+        if pieces and pieces[-1][0] >= 0 and pieces[-1][0] + pieces[-1][1] == source:
+            pieces[-1] = (pieces[-1][0], pieces[-1][1] + length)  # the next in the file
+        elif length:
+            pieces.append((source, length))
+
+    for k, i in enumerate(order.tolist()):
+        if int(keys[i]) != key:
+            what = _describe_change(chunks.keys[key], chunks.keys[int(keys[i])])
             ended.append(
-                f"{what} at {at(c)}: the first segment kept, {len(chunks) - k} "
+                f"{what} at {at(int(stamp[i]))}: the first segment kept, {len(order) - k} "
                 f"messages after it ignored"
             )
             break
-        offset = int(round((c.stamp_ns - t0_ns) * rate / 1e9)) - placed
-        x = c.samples
+        offset = int(round((int(stamp[i]) - t0_ns) * rate / 1e9)) - placed
+        source, size = int(offsets[i]), int(sizes[i])
         if offset > tolerance:
             if offset > settings.max_gap_s * rate:
                 ended.append(
-                    f"a gap of {offset / rate:.3g} s at {at(c)} (> max_gap_s "
+                    f"a gap of {offset / rate:.3g} s at {at(int(stamp[i]))} (> max_gap_s "
                     f"{settings.max_gap_s:g} s): the track ends there, "
-                    f"{len(chunks) - k} messages after it ignored"
+                    f"{len(order) - k} messages after it ignored"
                 )
                 break
-            pieces.append(np.full(offset, np.nan, np.float32))
+            pieces.append((-1, offset))
             placed += offset
             gap_samples += offset
             problems.add("gap", "0")
         elif offset < -tolerance:
-            cut = min(-offset, x.size)
+            cut = min(-offset, size)
             trimmed += cut
             problems.add("overlap", "0")
-            x = x[cut:]
-        pieces.append(x)
-        placed += x.size
+            source, size = source + cut, size - cut
+        piece(source, size)
+        placed += size
     if gap_samples:
         problems.first["gap"] = str(gap_samples / rate)
     if trimmed:
         problems.first["overlap"] = str(trimmed)
-    del chunks
-    samples = np.empty(placed, np.float32)
-    at_sample = 0
-    for k, piece in enumerate(pieces):
-        samples[at_sample : at_sample + piece.size] = piece
-        at_sample += piece.size
-        pieces[k] = _RELEASED
-    return samples, rate, t0_ns, ended
+    chunks.file.flush()
+    return SpilledTrack(chunks.file, pieces), rate, t0_ns, ended
 
 
 def _on_log_clock(
-    chunks: list[_Chunk], settings: AudioSettings, problems: _Problems, first_ns: int
-) -> list[_Chunk]:
-    """The chunks with header stamps the log's clock can vouch for: stamps that are off the
+    chunks: _Spill, settings: AudioSettings, problems: _Problems, first_ns: int
+) -> np.ndarray:
+    """The chunks' stamps [ns] the log's clock can vouch for: header stamps that are off the
     log times by more than `resync_s` as a whole (another clock: a device's boot time, sim
     time) are all replaced by the log times; single chunks off by more than that from the
     stream's usual offset (a jump, stamps running backwards) by their log time plus it."""
-    offsets = np.array([c.stamp_ns - c.sent_ns for c in chunks], dtype=np.float64)
+    stamp, sent = chunks.column("stamp_ns").copy(), chunks.column("sent_ns")
+    offsets = (stamp - sent).astype(np.float64)
     usual = float(np.median(offsets))
     limit = settings.resync_s * 1e9
     if abs(usual) > limit:
         problems.add("clock", f"{usual / 1e9:+.4g}")
-        return [replace(c, stamp_ns=c.sent_ns) for c in chunks]
-    out = []
-    for c, offset in zip(chunks, offsets.tolist(), strict=True):
-        if abs(offset - usual) > limit:
-            problems.add("restamped", f"t = {(c.sent_ns - first_ns) / 1e9:.3f} s")
-            c = replace(c, stamp_ns=c.sent_ns + int(round(usual)))
-        out.append(c)
-    return out
+        return sent.copy()
+    off = np.flatnonzero(np.abs(offsets - usual) > limit)
+    if off.size:
+        problems.add("restamped", f"t = {(int(sent[off[0]]) - first_ns) / 1e9:.3f} s", off.size)
+        stamp[off] = sent[off] + int(round(usual))
+    return stamp
 
 
 def _describe_change(old: tuple, new: tuple) -> str:

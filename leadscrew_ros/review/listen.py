@@ -45,6 +45,7 @@ from ..bag.audio import (
     read_audio,
 )
 from ..bag.logfile import LogError, Topic
+from ..model.acoustics.samples import SampleTrack
 from ..model.acoustics.settings import DetectorSettings
 from ..model.physics.metadata import check, documented, setting
 
@@ -398,7 +399,7 @@ class Spectrogram:
 
 
 def spectrogram(
-    samples: np.ndarray, rate_hz: float, t0_s: float, scale: float = 1.0
+    samples: np.ndarray | SampleTrack, rate_hz: float, t0_s: float, scale: float = 1.0
 ) -> Spectrogram:
     """`Spectrogram` of a track: at most `SPECTROGRAM_COLUMNS` Hann frames of
     `SPECTROGRAM_FRAME` samples, evenly over the track (half-overlapping for short tracks),
@@ -411,7 +412,8 @@ def spectrogram(
     hop = max(n // 2, int(math.ceil((samples.size - n) / (SPECTROGRAM_COLUMNS - 1))), 1)
     starts = np.arange(0, samples.size - n + 1, hop)[:SPECTROGRAM_COLUMNS]
     window = np.hanning(n).astype(np.float32)
-    frames = samples[starts[:, None] + np.arange(n)] * window * np.float32(scale)
+    frames = np.nan_to_num(np.stack([samples[a : a + n] for a in starts.tolist()]))
+    frames *= window * np.float32(scale)
     psd = np.abs(np.fft.rfft(frames, axis=1)) ** 2 / (rate_hz * np.sum(window**2))
     psd[:, 1:-1] *= 2
     f = np.fft.rfftfreq(n, 1 / rate_hz)
@@ -835,8 +837,7 @@ def listen(
     except DetectorError as exc:
         return None, [f"{NOT_ANALYSED} ({track.source}): {exc}"]
     detect_s = time.perf_counter() - t0
-    # NaN samples (not scored by the detector) are silence in the picture and the clips
-    audible = np.nan_to_num(track.samples) if np.isnan(track.samples).any() else track.samples
+    audible = track.samples  # NaN (not scored) is silence in the picture and the clips
     band = (
         settings.detector.f_lo_hz,
         StreamingDetector(settings.detector, sample_rate_hz=track.sample_rate_hz).analyzer.f_hi_hz,
@@ -881,7 +882,11 @@ def listen(
 
 
 def write_clips(
-    samples: np.ndarray, rate_hz: float, t0_s: float, episodes: list[Any], directory: Path
+    samples: np.ndarray | SampleTrack,
+    rate_hz: float,
+    t0_s: float,
+    episodes: list[Any],
+    directory: Path,
 ) -> list[tuple[Path, float]]:
     """A float32 WAV clip of each of the first `MAX_CLIPS` episodes, `CLIP_PAD_S` before and
     after it (at most `CLIP_MAX_S` of it), into `directory` (created when there is one).
@@ -916,7 +921,7 @@ def write_clips(
             continue
         directory.mkdir(parents=True, exist_ok=True)
         path = directory / f"heard_{k:03d}_{e.start_s:.2f}s_{e.frequency_hz:.0f}Hz.wav"
-        wavfile.write(path, int(round(rate_hz)), samples[a:b])
+        wavfile.write(path, int(round(rate_hz)), np.nan_to_num(samples[a:b]))
         paths.append((path, e.start_s))
     return paths
 

@@ -87,6 +87,6 @@ def with_wav_beside(bag: Path, out_dir: Path) -> tuple[Path, Path, float]:
     wavfile.write(
         wav,
         int(track.sample_rate_hz),
-        np.round(track.samples * 32768).clip(-32768, 32767).astype("<i2"),
+        np.round(np.asarray(track.samples) * 32768).clip(-32768, 32767).astype("<i2"),
     )
     return new, wav, track.t0_s

@@ -30,16 +30,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 from scipy import signal
 
+from .samples import Samples, SampleTrack, span
 from .settings import DetectorSettings
 
 BLOCK_S = 0.5e-3  # envelope resolution: a slip's click lasts about a millisecond
 CHUNK_SAMPLES = 1 << 18  # the high-pass filter runs over pieces this long: bounded memory
+WINDOW_S = 60.0  # a long recording is searched in windows this long (bounded memory) ...
+OVERLAP_S = 5.0  # ... widened by this on each side
 FLOOR_S = 0.025  # the floor: a low percentile of each FLOOR_S segment, median of FLOOR_SEGMENTS
 FLOOR_PERCENTILE = 20  # the troughs between dense pulses (steady noise: ~1 dB under its mean)
 FLOOR_SEGMENTS = 9
@@ -120,7 +123,7 @@ class Creak:
 
 
 def find_creaks(
-    samples: np.ndarray,
+    samples: Samples,
     sample_rate_hz: float,
     *,
     t0_s: float = 0.0,
@@ -149,7 +152,61 @@ def find_creaks(
         By start time.
     """
     fs = float(sample_rate_hz)
-    x = np.asarray(samples).reshape(-1)
+    x = samples if isinstance(samples, SampleTrack) else np.asarray(samples).reshape(-1)
+    step, over = round(WINDOW_S * fs), round(OVERLAP_S * fs)
+    out: list[Creak] = []
+    for a in range(0, max(x.size - over, 1), step):
+        # each window reaches OVERLAP_S into its neighbours: a train at a boundary is seen whole
+        # by one of them, and a longer one in pieces that `_joined` puts together
+        first = max(a - over, 0)
+        found = _creaks_in(
+            span(x, first, a + step + over), fs, t0_s + first / fs, scale_pa, settings
+        )
+        out = _joined(out, found, 1.0 / settings.creak_min_rate_hz)
+    return sorted(out, key=lambda c: c.start_s)
+
+
+def _joined(before: list[Creak], found: list[Creak], longest_s: float) -> list[Creak]:
+    """The creaks of the windows so far and those of the next one, a train seen by both (it
+    crosses their boundary: it starts within `longest_s` of one's end, at a pulse rate within
+    `LAG_TOLERANCE`) joined into one: its pulses merged, the longer part's ringing and level."""
+    out = list(before)
+    for c in found:
+        k = next(
+            (
+                k
+                for k, b in enumerate(out[: len(before)])
+                if b.start_s <= c.start_s <= b.end_s + longest_s
+                and abs(c.pulse_rate_hz / b.pulse_rate_hz - 1) <= LAG_TOLERANCE
+            ),
+            None,
+        )
+        if k is None:
+            out.append(c)
+            continue
+        b = out[k]
+        extra = c.pulse_times_s[c.pulse_times_s > b.end_s + 0.5 / b.pulse_rate_hz]
+        t = np.concatenate([b.pulse_times_s, extra])
+        main = b if b.pulses >= c.pulses else c
+        out[k] = replace(
+            main,
+            start_s=float(t[0]),
+            end_s=float(t[-1]),
+            pulse_rate_hz=1.0 / float(np.median(np.diff(t))),
+            pulses=int(t.size),
+            pulse_times_s=t,
+        )
+    return out
+
+
+def _creaks_in(
+    x: Samples,
+    fs: float,
+    t0_s: float,
+    scale_pa: float | None,
+    settings: DetectorSettings,
+) -> list[Creak]:
+    """`find_creaks` in one window of the recording."""
     block = max(1, round(fs * BLOCK_S))
     seg = max(1, round(FLOOR_S / BLOCK_S))
     if x.size < 2 * seg * block:
@@ -160,7 +217,7 @@ def find_creaks(
     energy = np.concatenate(
         [
             np.mean(y[: y.size - y.size % block].reshape(-1, block) ** 2, axis=1)
-            for _, y in _highpassed(x[: n_blocks * block], sos, block)
+            for _, y in _highpassed(span(x, 0, n_blocks * block), sos, block)
         ]
     )
     ref = (scale_pa / 20e-6) ** 2 if scale_pa is not None else 1.0
@@ -234,7 +291,7 @@ def _period(at: np.ndarray, shortest: float, longest: float) -> float:
     return float(lags[np.argmax(share >= PERIOD_SHARE * share.max())])
 
 
-def _highpassed(x: np.ndarray, sos: np.ndarray, block: int) -> Iterator[tuple[int, np.ndarray]]:
+def _highpassed(x: Samples, sos: np.ndarray, block: int) -> Iterator[tuple[int, np.ndarray]]:
     """`x` (non-finite samples as 0) through the filter `sos`, as (offset, piece) pieces of
     about `CHUNK_SAMPLES` (a multiple of `block`), the filter's state carried over: the same
     output as one `sosfilt` of the whole, with memory bounded whatever its length."""
@@ -249,7 +306,7 @@ def _highpassed(x: np.ndarray, sos: np.ndarray, block: int) -> Iterator[tuple[in
 
 
 def _ringing(
-    x: np.ndarray, sos: np.ndarray, fs: float, starts: np.ndarray, interval_s: float
+    x: Samples, sos: np.ndarray, fs: float, starts: np.ndarray, interval_s: float
 ) -> list[float]:
     """The peaks of the pulses' mean power spectrum (the sound `x` high-passed by `sos`, each
     pulse from its block's start over min(`RING_S`, 0.8 interval)), `RING_PROMINENCE_DB`
@@ -261,7 +318,7 @@ def _ringing(
         return []
     segments = np.zeros((starts.size, n))
     end = int(starts.max()) + n
-    for i, y in _highpassed(x[:end], sos, 1):  # the pulses' pieces only are kept
+    for i, y in _highpassed(span(x, 0, end), sos, 1):  # the pulses' pieces only are kept
         for k in np.flatnonzero((starts < i + y.size) & (starts + n > i)).tolist():
             a, b = max(int(starts[k]), i), min(int(starts[k]) + n, i + y.size)
             segments[k, a - int(starts[k]) : b - int(starts[k])] = y[a - i : b - i]

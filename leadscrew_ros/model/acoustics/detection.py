@@ -60,6 +60,7 @@ import numpy as np
 from .background import BackgroundLearner, BackgroundTone
 from .creak import Creak, find_creaks, sort_creaks
 from .growth import Growth, growth_fields, onset_growth
+from .samples import Samples, SampleTrack, span
 from .settings import DetectorSettings
 from .tonality import ToneAnalyzer, hann, short_time_psd
 
@@ -307,9 +308,11 @@ class Detection:
         )
 
 
-def _mono(samples: Any) -> np.ndarray | None:
+def _mono(samples: Any) -> Samples | None:
     """The samples as one contiguous float32 channel (several averaged over the shorter
-    axis); None when they are not numbers."""
+    axis), a `SampleTrack` as it is (read by slices); None when they are not numbers."""
+    if isinstance(samples, SampleTrack):
+        return samples
     try:
         x = np.asarray(samples, dtype=np.float32)
     except (TypeError, ValueError):
@@ -319,7 +322,7 @@ def _mono(samples: Any) -> np.ndarray | None:
     return np.ascontiguousarray(x.reshape(-1))
 
 
-def format_step(samples: np.ndarray) -> float | None:
+def format_step(samples: Samples) -> float | None:
     """Quantisation step of the samples' format in full-scale units: 1/2^(b-1) (or
     1/(2^(b-1) - 1)) for b-bit integer PCM, 0.0 for floating point (the rounding is then
     relative, `FLOAT32_STEP`); None when a chunk cannot tell (fewer than 256 non-zero samples).
@@ -756,7 +759,7 @@ class StreamingDetector:
             return 0.0
         return self._seg_t0 + self._n_samples / self.sample_rate_hz
 
-    def _as_samples(self, samples: Any) -> np.ndarray:
+    def _as_samples(self, samples: Any) -> Samples:
         x = _mono(samples)
         if x is None:
             self._warn("samples are not numbers: chunk ignored")
@@ -1259,7 +1262,7 @@ def _switched_on(
 
 
 def _measure_growth(
-    episodes: list[Episode], tones: list[Episode], samples: np.ndarray, rate_hz: float, t0_s: float
+    episodes: list[Episode], tones: list[Episode], samples: Samples, rate_hz: float, t0_s: float
 ) -> None:
     """Each episode's growth rate at its onset (`Episode.growth`), its quiet stretch after
     the last tone near its frequency (within `GROWTH_NEIGHBOUR`) that ended before it."""
@@ -1364,7 +1367,7 @@ def _went_with_speed(
     episodes: list[Episode],
     speed_times_s: Any,
     speed_rad_s: Any,
-    samples: np.ndarray,
+    samples: Samples,
     t0_s: float,
 ) -> list[Episode]:
     """The episodes less the pieces of a sweep: a track at one ratio r to the screw's
@@ -1560,7 +1563,7 @@ def _learn_at_rest(
     _learn_spans(det, det.background, x, t0, spans)
 
 
-def _settled(det: StreamingDetector, x: np.ndarray, t0: float, start: float, end: float) -> float:
+def _settled(det: StreamingDetector, x: Samples, t0: float, start: float, end: float) -> float:
     """Where the sound of the span (start, end) [s] of `x` (first sample at `t0`) has settled
     [s]: the centre of its first frame whose level (mean square of its varying part) is
     within `background_level_sd_db` of the span's median frame level; `start` when it has
@@ -1585,7 +1588,7 @@ def _settled(det: StreamingDetector, x: np.ndarray, t0: float, start: float, end
 def _learn_spans(
     det: StreamingDetector,
     learner: BackgroundLearner,
-    x: np.ndarray,
+    x: Samples,
     t0: float,
     spans: list[tuple[float, float]],
 ) -> None:
@@ -1600,7 +1603,7 @@ def _learn_spans(
             continue
         pre = StreamingDetector(settings, rate, det.scale_pa)
         pre.background = learner
-        pre.push(x[i:j], t0 + i / rate, 0.0)
+        pre.push(span(x, i, j), t0 + i / rate, 0.0)
 
 
 def _learn_recording(det: StreamingDetector, samples: Any, rate_hz: float | None) -> bool:
@@ -1689,7 +1692,7 @@ def _infer_background(
 
 
 def _grew(
-    det: StreamingDetector, x: np.ndarray, t0: float, spans: list[tuple[float, float]], f: float
+    det: StreamingDetector, x: Samples, t0: float, spans: list[tuple[float, float]], f: float
 ) -> bool:
     """Whether the tone at `f` [Hz] grew out of the noise within the spans (start, end) [s] of
     `x` (first sample at `t0`): where it comes in after an absence (its level more than
@@ -1702,11 +1705,12 @@ def _grew(
     k = np.arange(n) / rate
     basis = (hann(n)[:, None] * np.exp(-2j * np.pi * f * k)[:, None]).astype(np.complex64)
     step = format_step(x) or 0.0
+    per = max(_BLOCK_FRAMES * det.hop // n, 1)  # whole frames per read: the main pass's piece
     times, levels = [], []
     for start, end in spans:
         i, j = max(int(math.ceil((start - t0) * rate)), 0), min(int((end - t0) * rate), x.size)
-        for b in range(i, j - n + 1, n * _BLOCK_FRAMES):
-            frames = x[b : min(b + n * _BLOCK_FRAMES, j - (j - b) % n)].reshape(-1, n)
+        for b in range(i, j - n + 1, n * per):
+            frames = x[b : min(b + n * per, j - (j - b) % n)].reshape(-1, n)
             ms = np.mean(np.square(frames, dtype=np.float64), axis=1)
             rounding = np.maximum(step, FLOAT32_STEP * np.sqrt(ms)) ** 2 / 12
             usable = np.isfinite(ms) & (

@@ -36,6 +36,8 @@ from typing import Any
 import numpy as np
 from scipy import signal
 
+from .samples import Samples
+
 HOP_S = 0.002  # P(t) every 2 ms: a fast onset (200 1/s, 17 dB in 10 ms) gets several points
 WINDOW_CYCLES = 60  # the band: a Hann window of 60 periods (+-3 %: a motor order 4 % away
 WINDOW_S = (0.01, 0.1)  # beat with it), within 10-100 ms (any keeps an exponential's slope)
@@ -84,7 +86,7 @@ class Growth:
 
 
 def onset_growth(
-    samples: np.ndarray,
+    samples: Samples,
     sample_rate_hz: float,
     t0_s: float,
     start_s: float,
@@ -96,7 +98,7 @@ def onset_growth(
 
     Parameters
     ----------
-    samples : numpy.ndarray
+    samples : numpy.ndarray or SampleTrack
         Mono samples (full scale; non-finite ones make the measurement fail with a reason).
     sample_rate_hz : float
         Sample rate [Hz].
@@ -143,7 +145,7 @@ def onset_growth(
 
 
 def _measure(
-    samples: np.ndarray,
+    samples: Samples,
     sample_rate_hz: float,
     t0_s: float,
     start_s: float,
