@@ -17,6 +17,9 @@ audible frames, creaks, and the measured growth rate against the truth's at the 
 measured (`growth_snr_db` >= 15 dB): the slope of the truth's envelope over the window the
 measurement reports (`envelope_growth`; sigma still rises after an onset on a ramp, so the
 growth within 25 ms of the onset, `Onset`, is printed beside it but is not what was measured).
+Live: each unit's sound also goes through a `StreamingDetector` in 0.1-s chunks with the speed
+known up to each chunk's end, as the node listens; its heard state at each chunk's end against
+the truth's audible intervals gives the live recall and precision.
 Nothing is asserted: the tests hold the targets.
 """
 
@@ -32,13 +35,16 @@ from pathlib import Path
 
 import numpy as np
 
+from leadscrew_ros.bag.audio import read_audio
 from leadscrew_ros.bag.cdr import decode_float64
 from leadscrew_ros.bag.logsource import open_log
 from leadscrew_ros.bag.synthetic import SPEED_TOPIC
 from leadscrew_ros.cli import main as cli
+from leadscrew_ros.model.acoustics import DetectorSettings, StreamingDetector
 from leadscrew_ros.model.acoustics.bench_sound import ONSET_WINDOW_S, envelope_growth
 
 TOLERANCE = 0.02  # relative frequency tolerance of a cause
+LIVE_CHUNK_S = 0.1  # the node's microphone chunks
 FAST_GROWTH_PER_S = 50.0  # onset within 50 ms where the growth is at least this, else 150 ms
 
 
@@ -52,6 +58,26 @@ def _speed(log: Path) -> tuple[np.ndarray, np.ndarray]:
             t.append((m.log_time_ns - first) * 1e-9)
             v.append(decode_float64(m.data))
     return np.asarray(t), np.asarray(v)
+
+
+def _live(log: Path, speed: tuple[np.ndarray, np.ndarray], audible: list[dict]) -> np.ndarray:
+    """The node's listening replayed: 0.1-s chunks pushed into a `StreamingDetector` with the
+    speed known up to each chunk's end; per chunk (heard now, audible at its end) counts as
+    [[both, heard only], [audible only, neither]]."""
+    track = read_audio(log)
+    x, fs = np.asarray(track.samples), track.sample_rate_hz
+    t, v = speed
+    det = StreamingDetector(DetectorSettings(), fs)
+    n = round(LIVE_CHUNK_S * fs)
+    counts = np.zeros((2, 2), int)
+    for a in range(0, x.size - n + 1, n):
+        start = track.t0_s + a / fs
+        known = t <= start + n / fs
+        det.push(x[a : a + n], start, v[known], speed_times_s=t[known])
+        end = start + n / fs
+        on = any(i["start_s"] <= end < i["end_s"] for i in audible)
+        counts[int(not on), int(not det.heard_now)] += 1
+    return counts
 
 
 def _cause(e: dict, unit: dict, sound: dict, speed: tuple[np.ndarray, np.ndarray]) -> str:
@@ -105,6 +131,7 @@ def evaluate(root: Path, args: argparse.Namespace) -> dict:
     found = audible_n = 0
     delays_fast, delays_slow, growth, creaks = [], [], [], 0
     tp = fp = fn = 0
+    live = np.zeros((2, 2), int)
     t0 = time.perf_counter()
     for k, unit in enumerate(truth["units"]):
         log = next(bench.glob(unit["log"] + "*"))
@@ -116,6 +143,7 @@ def evaluate(root: Path, args: argparse.Namespace) -> dict:
             c = _cause(e, unit, sound, speed)
             causes[c] = causes.get(c, 0) + 1
         creaks += len(heard.get("creaks", []))
+        live += _live(log, speed, unit["sound"]["audible_intervals"])
         audible = [
             a for a in unit["sound"]["audible_intervals"] if a["end_s"] - a["start_s"] >= 0.05
         ]
@@ -168,6 +196,8 @@ def evaluate(root: Path, args: argparse.Namespace) -> dict:
         frame_recall=tp / (tp + fn) if tp + fn else None,
         frame_precision=tp / (tp + fp) if tp + fp else None,
         creaks=creaks,
+        live_recall=float(live[0, 0] / live[0].sum()) if live[0].sum() else None,
+        live_precision=float(live[0, 0] / live[:, 0].sum()) if live[:, 0].sum() else None,
         growth=growth,
         wall_s=time.perf_counter() - t0,
     )
@@ -197,6 +227,8 @@ def report(r: dict) -> str:
         f"| onset delay, slower growth | {_delays(r['onset_delay_slow_s'])} |",
         f"| frame recall / precision (10 ms frames) | {r['frame_recall']:.3f} / "
         f"{r['frame_precision']:.3f} |",
+        f"| live (the node's heard state, {LIVE_CHUNK_S:g}-s chunks): recall / precision "
+        f"| {r['live_recall']:.3f} / {r['live_precision']:.3f} |",
     ]
     if r["growth"]:
         ratios = [g / t for _, _, t, g, _ in r["growth"]]

@@ -353,7 +353,9 @@ def test_the_live_detector_learns_the_background_while_the_drive_rests():
         det.push(x[k : k + 4800], t0, np.interp([t0, t0 + 0.1], ts, speed), [t0, t0 + 0.1])
         heard_at[round(t0 + 0.1, 1)] = (det.heard_now, det.frequency_now_hz)
     assert {round(b.frequency_hz) for b in det.background.tones()} >= {100, 1170}
-    assert not any(h for t, (h, _) in heard_at.items() if 2.0 <= t <= 3.9 or 5.2 <= t <= 12.0)
+    # nothing has slid before the drive first moves: the fan is not squeak in the first
+    # 0.5 s of rest either, before it is learned (it was, for 0.3 s of every bench unit)
+    assert not any(h for t, (h, _) in heard_at.items() if t <= 3.9 or 5.2 <= t <= 12.0)
     assert heard_at[4.5][0] and heard_at[4.5][1] == pytest.approx(2480.0, rel=0.01)
 
 

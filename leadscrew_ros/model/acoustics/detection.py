@@ -530,6 +530,10 @@ class StreamingDetector:
             self._level_offset_db,
         )
         self._rest_frames = 0  # consecutive frames at rest
+        # every frame so far at a known speed under motor_off_rad_s: nothing has slid, so
+        # nothing heard can be squeak (live, the rest's sound is not learned as background
+        # before `motor_off_min_s` of it; offline it is, first)
+        self._never_moved = True
         # the drive's speed ratios heard: [sum of ratios, tracks, sum of levels (dB)]
         self._ratio_groups = np.zeros((0, 3))
 
@@ -853,6 +857,7 @@ class StreamingDetector:
         has = np.any(prominent, axis=1, keepdims=False).astype(bool).reshape(-1)
         rest = 2 * np.pi * f1 < self.settings.motor_off_rad_s  # False where the speed is unknown
         rest_run = max(int(round(self.settings.motor_off_min_s / self.hop_s)), 1)
+        self._never_moved = self._never_moved and bool(rest.all())
         closed: list[Episode] = []
         learning: list[int] = []
         for j in range(i1 - i0):
@@ -1107,6 +1112,8 @@ class StreamingDetector:
                     tr.order_now = 0  # background: not heard as squeak either
             if tr.order_now is None:
                 best = tr
+        if self._never_moved:
+            best = None
         self._heard_now = best is not None
         self._frequency_now = best.median if best is not None else math.nan
 
