@@ -3,6 +3,7 @@
 
     .venv/bin/python benchmarks/bench_replay_rss.py [--minutes 10 60] [--rate HZ] [--src DIR]
     .venv/bin/python benchmarks/bench_replay_rss.py --sound [--minutes 10 120]
+    .venv/bin/python benchmarks/bench_replay_rss.py --listen-wav --minutes 5 30
 
 For each log length (the duty cycle of `bench_replay.py` in one MCAP file, as rosbag2 records
 without `--max-bag-duration`; `--split-s` for split files; generated once and cached in the temp
@@ -15,7 +16,8 @@ peak, both ways. `--src DIR` runs the package of another checkout (e.g. `git arc
 commit) on the same logs. `--sound`: instead, a virtual-bench unit (`bench`, seed 0) whose one
 stroke lasts the log's length, with its 48 kHz microphone, replayed with its sound (issue 30:
 the replay's memory grew with the audio); a log longer than an hour (the bench's limit) is the
-10-minute one played over and over (`repeated_log`).
+10-minute one played over and over (`repeated_log`). `--listen-wav`: `leadscrew-squeak listen
+FILE.wav` on 48 kHz 16-bit WAVs of those lengths (a tone switched on and off in noise).
 """
 
 from __future__ import annotations
@@ -146,35 +148,73 @@ def repeated_log(bag: Path, minutes: float) -> Path:
     return out
 
 
+def cached_wav(minutes: float) -> Path:
+    """A 48 kHz 16-bit mono WAV of `minutes`: noise and a 1 kHz tone switched on for the last
+    5 s of every 20 s, nothing moving; generated a minute at a time, cached."""
+    from scipy.io import wavfile
+
+    root = Path(tempfile.gettempdir()) / "leadscrew_ros_bench_replay_rss"
+    path = root / f"listen_{minutes:g}min.wav"
+    if path.is_file():
+        return path
+    root.mkdir(parents=True, exist_ok=True)
+    fs, rng = 48000, np.random.default_rng(0)
+    x = np.empty(round(minutes * 60 * fs), np.int16)
+    for a in range(0, x.size, 60 * fs):
+        t = np.arange(a, min(x.size, a + 60 * fs)) / fs
+        y = 0.01 * rng.standard_normal(t.size) + 0.05 * np.sin(2e3 * np.pi * t) * (t % 20 > 15)
+        x[a : a + t.size] = np.round(y * 32767).astype(np.int16)
+    wavfile.write(path.with_suffix(".part"), fs, x)
+    path.with_suffix(".part").rename(path)
+    return path
+
+
+def child_peak(argv: list[str], src: str | None = None) -> dict:
+    """`leadscrew-squeak ARGV` in a fresh child process (`CHILD`): its peak memory (MB)."""
+    env = dict(os.environ)  # the child runs in a temp dir: `-c` puts its cwd first on the path
+    if src:
+        env["PYTHONPATH"] = str(Path(src).resolve())
+    with tempfile.TemporaryDirectory(prefix="bench_replay_rss_") as cwd:
+        done = subprocess.run(
+            [sys.executable, "-c", CHILD, *argv], env=env, cwd=cwd, capture_output=True, text=True
+        )
+    if done.returncode:
+        raise SystemExit(f"{argv[0]} failed:\n{done.stderr[-3000:]}")
+    res = json.loads(done.stdout.splitlines()[-1])
+    if res["code"]:
+        raise SystemExit(f"{argv[0]} exited {res['code']}:\n{done.stderr[-3000:]}")
+    return res
+
+
+def listen_rows(minutes: list[float], src: str | None) -> int:
+    """`leadscrew-squeak listen FILE.wav` on WAVs of each length: the peak memory table."""
+    rows = []
+    for m in minutes:
+        wav = cached_wav(m)
+        with tempfile.TemporaryDirectory(prefix="bench_listen_rss_") as out:
+            r = child_peak(["listen", str(wav), "--out", out], src)
+        rows.append((m, size_mb(wav), r["peak_mb"]))
+        print(f"{m:g} min: {r['peak_mb']:.0f} MB", file=sys.stderr, flush=True)
+    print("| WAV (48 kHz, 16 bit) | file size | peak RSS (VmHWM) |\n|---|---:|---:|")
+    for m, size, peak in rows:
+        print(f"| {m:g} min | {size:.0f} MB | {peak:.0f} MB |")
+    ratio = rows[-1][2] / rows[0][2]
+    print(
+        f"\nlisten: peak ratio {rows[-1][0]:g} / {rows[0][0]:g} min = **{ratio:.2f}** (target <= "
+        f"{TARGET_RSS_RATIO:g}: {'met' if ratio <= TARGET_RSS_RATIO else 'MISSED'}); package "
+        f"from {src or 'this checkout'}; load avg {os.getloadavg()[0]:.2f}"
+    )
+    return 0
+
+
 def replay_peak(
     bag: Path, joint: str, report: bool, src: str | None = None, extra: tuple[str, ...] = ()
 ) -> dict:
     """`leadscrew-squeak replay BAG` (`--no-report` unless `report`) in a fresh child process:
     its peak memory (MB) as printed by `CHILD`."""
-    env = dict(os.environ)  # the child runs in `out`: `-c` puts its cwd first on the path
-    if src:
-        env["PYTHONPATH"] = str(Path(src).resolve())
     with tempfile.TemporaryDirectory(prefix="bench_replay_rss_") as out:
-        argv = [
-            "replay",
-            str(bag),
-            "--out",
-            out,
-            "--joint-name",
-            joint,
-            "--quiet",
-            *(() if report else ("--no-report",)),
-            *extra,
-        ]
-        done = subprocess.run(
-            [sys.executable, "-c", CHILD, *argv], env=env, cwd=out, capture_output=True, text=True
-        )
-    if done.returncode:
-        raise SystemExit(f"replay of {bag} failed:\n{done.stderr[-3000:]}")
-    res = json.loads(done.stdout.splitlines()[-1])
-    if res["code"]:
-        raise SystemExit(f"replay of {bag} exited {res['code']}:\n{done.stderr[-3000:]}")
-    return res
+        argv = ["replay", str(bag), "--out", out, "--joint-name", joint, "--quiet"]
+        return child_peak([*argv, *(() if report else ("--no-report",)), *extra], src)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -195,7 +235,14 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="virtual-bench logs with a 48 kHz microphone, replayed with their sound",
     )
+    ap.add_argument(
+        "--listen-wav",
+        action="store_true",
+        help="instead, `listen FILE.wav` on 48 kHz WAVs of the --minutes lengths",
+    )
     args = ap.parse_args(argv)
+    if args.listen_wav:
+        return listen_rows(args.minutes, args.src)
     rows = []
     for minutes in args.minutes:
         if args.sound:

@@ -4,6 +4,8 @@ mgonzs13 AudioStamped in both layouts, Float32MultiArray, WAV; a log written by 
 on hostile data: each problem is a one-line warning or a one-line AudioError, never a
 traceback."""
 
+import struct
+
 import numpy as np
 import pytest
 from scipy.io import wavfile
@@ -545,3 +547,39 @@ def test_a_logs_track_is_on_disk_and_reads_by_slices_as_a_whole(tmp_path):
     np.testing.assert_array_equal(whole.samples.span(470, 1500)[5:600], a[475:1070])
     np.testing.assert_array_equal(whole.samples[-10:], a[-10:])
     assert whole.samples[5:5].size == 0 and whole.samples[a.size + 3 :].size == 0
+
+
+def test_a_wav_is_read_by_slices_from_the_file_and_a_24_bit_one_whole(tmp_path):
+    """A PCM WAV's channel is a `SampleTrack` on the file (no copy in memory): its slices equal
+    the whole read, inf becomes NaN and is counted, the peak beyond full scale is said; a
+    24-bit WAV (no memory map) is read whole, to the same full scale."""
+    x = _tone(3000, 440.0, amp=0.9)
+    x[[7, 2500]] = np.inf
+    x[100] = 1.5
+    path = tmp_path / "stereo.wav"
+    wavfile.write(path, RATE, np.column_stack([x / 3, x]).astype(np.float32))
+    track = read_audio(wav=path, channel=1)
+    assert isinstance(track.samples, SampleTrack) and track.samples.size == x.size
+    whole = np.asarray(track.samples)
+    np.testing.assert_array_equal(whole[np.isfinite(x)], x[np.isfinite(x)].astype(np.float32))
+    assert np.isnan(whole[[7, 2500]]).all()
+    for i, j in ((0, 10), (5, 2999), (2499, 2501), (2990, 3000)):
+        np.testing.assert_array_equal(track.samples[i:j], whole[i:j])
+    assert track.warnings == [
+        "2 NaN/inf samples: the detector frames holding them are not scored",
+        "float samples beyond full scale (peak 1.5): wrong scaling?",
+    ]
+    v = np.round(_tone(2000, 300.0) * (2**23 - 1)).astype(np.int64)
+    data = b"".join(int(s).to_bytes(3, "little", signed=True) for s in v)
+    fmt = struct.pack("<IHHIIHH", 16, 1, 1, RATE, RATE * 3, 3, 24)
+    (tmp_path / "s24.wav").write_bytes(
+        b"RIFF"
+        + struct.pack("<I", 36 + len(data))
+        + b"WAVEfmt "
+        + fmt
+        + b"data"
+        + struct.pack("<I", len(data))
+        + data
+    )
+    s24 = read_audio(wav=tmp_path / "s24.wav")
+    np.testing.assert_allclose(s24.samples, v / 2**23, atol=1e-6)

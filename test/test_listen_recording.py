@@ -379,3 +379,18 @@ def test_every_listening_command_takes_background_and_refuses_a_missing_one(
         code == 2
         and err == "leadscrew-squeak: error: --background gone.wav: no such file or directory\n"
     )
+
+
+def test_a_tone_switched_on_again_and_again_is_one_background_tone():
+    """With nothing moving, a tone switched on and off (each time a step, not a growth) is
+    background: one tone with the shares of its stretches added, not one per stretch (a
+    5-min file listed "1000 Hz (-29 dB)" 15 times)."""
+    fs = 16000.0
+    t = np.arange(int(60 * fs)) / fs
+    x = 0.003 * np.random.default_rng(3).standard_normal(t.size)
+    x += 0.05 * np.sin(2 * np.pi * 1000.0 * t) * ((t % 20.0) > 15.0)
+    d = detect(x.astype(np.float32), fs, infer_background=True)
+    assert d.episodes == []
+    [tone] = d.background
+    assert tone.frequency_hz == pytest.approx(1000.0, rel=0.005)
+    assert tone.share == pytest.approx(0.25, abs=0.03)

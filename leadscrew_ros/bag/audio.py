@@ -15,7 +15,8 @@
 3. `std_msgs/Float32MultiArray` chunks (no sample rate in the message: `sample_rate_hz`
    when given, else the `listen.sample_rate_hz` the node recorded in the log's `leadscrew_ros`
    metadata (`logmeta`); a 2-d layout is frames x channels);
-4. a WAV file (`wav`, scipy.io.wavfile: int16, int32, uint8, float32/64), starting
+4. a WAV file (`wav`, scipy.io.wavfile: int16, int32, uint8, float32/64 read by slices from
+   the file, `WavTrack`; 24-bit, which cannot be memory-mapped, read whole), starting
    `wav_start_s` after the log's first message.
 
 Samples become float32 full scale (-1..1): integers divided by 2^(bits-1) (unsigned ones
@@ -867,40 +868,107 @@ def _describe_change(old: tuple, new: tuple) -> str:
 def _read_wav(path: Path, channel: int, start_s: float) -> AudioTrack:
     from scipy.io import wavfile
 
-    try:
-        rate, data = wavfile.read(path)
-    except (OSError, ValueError, EOFError) as exc:
+    track: WavTrack | np.ndarray
+    try:  # a memory map gives the layout; the samples are then read by slices (`WavTrack`)
+        rate, data = wavfile.read(path, mmap=True)
+        mapped = True
+    except ValueError:  # 24-bit samples cannot be mapped: read whole (as int32, shifted up)
+        mapped = False
+        try:
+            rate, data = wavfile.read(path)
+        except (OSError, ValueError, EOFError) as exc:
+            raise AudioError(path, f"not a readable WAV file: {exc}") from None
+    except (OSError, EOFError) as exc:
         raise AudioError(path, f"not a readable WAV file: {exc}") from None
-    channels = data.shape[1] if data.ndim == 2 else 1
-    if data.ndim == 2:
-        if channel >= data.shape[1]:
-            raise AudioError(path, f"channel {channel} asked of a {data.shape[1]}-channel WAV")
-        data = data[:, channel]
-    elif channel > 0:
-        raise AudioError(path, f"channel {channel} asked of a mono WAV")
-    kind = data.dtype
-    if kind == np.uint8:
-        x = ((data.astype(np.float32) - 128.0) / 128.0).astype(np.float32)
-    elif kind.kind == "i":
-        x = (data / np.float32(2.0 ** (8 * kind.itemsize - 1))).astype(np.float32)
-    elif kind.kind == "f":
-        x = data.astype(np.float32)
+    dtype, shape = data.dtype, data.shape
+    channels = shape[1] if len(shape) == 2 else 1
+    if channel >= channels:
+        raise AudioError(
+            path,
+            f"channel {channel} asked of a {channels}-channel WAV"
+            if channels > 1
+            else f"channel {channel} asked of a mono WAV",
+        )
+    if dtype.kind not in "uif" or (dtype.kind == "u" and dtype.itemsize != 1):
+        raise AudioError(path, f"WAV samples of type {dtype} are not audio")
+    if mapped:
+        offset = int(data.offset)
+        del data  # unmapped: its pages would count as the process's memory as they are read
+        track = WavTrack(path, offset, dtype, channels, channel, shape[0])
     else:
-        raise AudioError(path, f"WAV samples of type {kind} are not audio")
+        track = _pcm_to_float(data[:, channel] if channels > 1 else data)
     warnings: list[str] = []
-    if kind.kind == "f":
-        bad = ~np.isfinite(x)
-        if bad.any():
-            warnings.append(NONFINITE.format(n=int(bad.sum())))
-            x = np.where(bad, np.float32(np.nan), x)
-        peak = float(np.nanmax(np.abs(x))) if x.size and not bad.all() else 0.0
+    if dtype.kind == "f":
+        bad, peak = 0, 0.0
+        for i in range(0, track.size, WAV_BLOCK):  # one pass by blocks: bounded memory
+            x = track[i : i + WAV_BLOCK]
+            finite = np.isfinite(x)
+            bad += int(x.size - np.count_nonzero(finite))
+            if finite.any():
+                peak = max(peak, float(np.max(np.abs(x[finite]))))
+        if bad:
+            warnings.append(NONFINITE.format(n=bad))
         if peak > 1.0:
             warnings.append(f"float samples beyond full scale (peak {peak:.3g}): wrong scaling?")
-    if x.size == 0:
+    if track.size == 0:
         warnings.append("the WAV file holds no samples")
-    return AudioTrack(
-        np.ascontiguousarray(x), float(rate), float(start_s), str(path), warnings, channels
-    )
+    return AudioTrack(track, float(rate), float(start_s), str(path), warnings, channels)
+
+
+WAV_BLOCK = 1 << 20  # samples per read of a WAV's checking pass
+
+
+def _pcm_to_float(x: np.ndarray) -> np.ndarray:
+    """WAV samples as float32 full scale: integers divided by 2^(bits-1) (8-bit unsigned
+    centred first), floats with NaN for inf."""
+    if x.dtype.kind == "u":
+        return ((x.astype(np.float32) - 128.0) / 128.0).astype(np.float32)
+    if x.dtype.kind == "i":
+        return (x / np.float32(2.0 ** (8 * x.dtype.itemsize - 1))).astype(np.float32)
+    y = x.astype(np.float32)
+    return np.where(np.isfinite(y), y, np.float32(np.nan))
+
+
+class WavTrack(SampleTrack):
+    """One channel of a PCM WAV file read by slices from its data chunk (`acoustics.samples`):
+    integers divided by 2^(bits-1) (8-bit unsigned centred first), floats as float32 with
+    NaN for inf.
+
+    Parameters
+    ----------
+    path : Path
+        The WAV file (kept open).
+    offset : int
+        Byte offset of its data chunk.
+    dtype : numpy.dtype
+        The sample type (byte order included).
+    channels, channel : int
+        Interleaved channels, and the one read.
+    frames : int
+        Frames in the data chunk.
+    """
+
+    def __init__(
+        self, path: Path, offset: int, dtype: np.dtype, channels: int, channel: int, frames: int
+    ) -> None:
+        self._file = open(path, "rb")  # closed with the track (or when collected)
+        self._offset, self._dtype = offset, np.dtype(dtype)
+        self._channels, self._channel, self._frames = channels, channel, frames
+
+    @property
+    def size(self) -> int:
+        """Number of samples (frames)."""
+        return self._frames
+
+    def read(self, start: int, stop: int) -> np.ndarray:
+        """Samples [start, stop) of the channel as a new float32 array."""
+        width = self._dtype.itemsize * self._channels
+        raw = os.pread(self._file.fileno(), (stop - start) * width, self._offset + start * width)
+        return _pcm_to_float(np.frombuffer(raw, self._dtype)[self._channel :: self._channels])
+
+    def close(self) -> None:
+        """Close the file."""
+        self._file.close()
 
 
 class LiveAudio:

@@ -289,7 +289,6 @@ def listen_recording(
     except ValueError as exc:  # an invalid sample rate
         raise AudioError(wav, str(exc)) from None
     detect_s = time.perf_counter() - t0
-    audible = np.nan_to_num(track.samples)
     return Listened(
         source=str(wav),
         channel=settings.channel,
@@ -297,7 +296,7 @@ def listen_recording(
         sample_rate_hz=track.sample_rate_hz,
         scale=detection.scale,
         detection=detection,
-        spectrogram=spectrogram(audible, track.sample_rate_hz, 0.0, scale or 1.0),
+        spectrogram=spectrogram(track.samples, track.sample_rate_hz, 0.0, scale or 1.0),
         warnings=warnings + list(detection.warnings),
         duration_s=track.duration_s,
         speed=speed,

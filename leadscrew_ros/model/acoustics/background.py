@@ -222,8 +222,33 @@ class BackgroundLearner:
         return sorted(out, key=lambda t: t.frequency_hz)
 
     def include(self, tones: list[BackgroundTone]) -> None:
-        """Take `tones` as background tones too (inferred ones: module notes)."""
-        self._given = sorted([*self._given, *tones], key=lambda t: t.frequency_hz)
+        """Take `tones` as background tones too (inferred ones: module notes); a tone within
+        `_width_hz` of one taken before is that one (a tone switched on and off again: its
+        shares add up, its level is the louder)."""
+        given = list(self._given)
+        for t in tones:
+            k = next(
+                (
+                    k
+                    for k, g in enumerate(given)
+                    if abs(g.frequency_hz - t.frequency_hz) <= self._width_hz(t.frequency_hz)
+                ),
+                None,
+            )
+            if k is None:
+                given.append(t)
+                continue
+            g = given[k]
+            share = g.share + t.share
+            given[k] = BackgroundTone(
+                (g.frequency_hz * g.share + t.frequency_hz * t.share) / share
+                if share > 0
+                else g.frequency_hz,
+                max(g.level_db, t.level_db),
+                share,
+                max(g.level_sd_db, t.level_sd_db),
+            )
+        self._given = sorted(given, key=lambda t: t.frequency_hz)
         self._tones = None
 
     def tones(self) -> list[BackgroundTone]:
