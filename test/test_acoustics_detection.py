@@ -667,3 +667,31 @@ def test_a_track_read_by_slices_gives_the_same_detection_without_reading_it_whol
         assert a.as_dict() == b.as_dict()
         np.testing.assert_array_equal(a.usable, b.usable)
         assert a.episodes or a.background
+
+
+def test_live_a_drive_tone_heard_only_at_constant_speed_is_learned_at_the_end_of_its_hold():
+    """Live, chunk by chunk: a commutator (373 x the screw) loud only near full speed first
+    sounds during the hold, where nothing tells it from a squeak, so it is heard; it ends as
+    the speed leaves, exactly with the hold, so the closed episode is drive noise
+    (`learn_held`) and its ratio learned: in the next stroke's hold it is not heard. The
+    speed reads with an encoder's noise (0.05 %), which is no motion of the speed."""
+    stroke = 12 * FS
+    t = np.arange(2 * int(stroke)) / FS
+    ts = np.arange(0.0, 24.0, 0.01)
+    knots = ([0, 1, 3, 9, 11, 12], [0, 0, 100, 100, 0, 0])
+    speed = np.interp(ts % 12.0, *knots)
+    speed *= 1 + 5e-4 * np.random.default_rng(2).standard_normal(ts.size)
+    turns = np.cumsum(np.interp(t % 12.0, *knots)) / FS
+    x = 0.003 * np.random.default_rng(8).standard_normal(t.size)
+    x += 0.01 * np.sin(373.0 * turns) * (np.interp(t % 12.0, *knots) > 99.0)
+    det = StreamingDetector(DetectorSettings(), FS)
+    heard = {}
+    for k in range(0, x.size, 4800):
+        t1 = (k + 4800) / FS
+        known = ts <= t1
+        closed = det.push(x[k : k + 4800], k / FS, speed[known], ts[known])
+        det.learn_held(closed, ts[known], speed[known])
+        heard[round(t1, 1)] = det.heard_now
+    assert any(heard[round(t, 1)] for t in np.arange(4.0, 8.5, 0.1))  # the first hold
+    assert any(abs(o.ratio / 373.0 - 1) < 0.005 for o in det.drive_orders)
+    assert not any(heard[round(t, 1)] for t in np.arange(15.0, 21.0, 0.1))  # the next one

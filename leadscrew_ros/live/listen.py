@@ -493,7 +493,8 @@ class Listener:
             speeds = list(self._speeds)  # a snapshot: the node appends from its own thread
             if speeds:
                 times, values = np.array(speeds).T
-                det.push(samples, t0, values, speed_times_s=times, sample_rate_hz=rate)
+                closed = det.push(samples, t0, values, speed_times_s=times, sample_rate_hz=rate)
+                det.learn_held(closed, times, values)  # the drive's tones heard only held
             else:
                 det.push(samples, t0, self.speed_rad_s, sample_rate_hz=rate)
         except ValueError as exc:  # malformed payload, or a sample rate refused

@@ -741,6 +741,36 @@ class StreamingDetector:
             closed += self._run_frames()
         return closed
 
+    def learn_held(
+        self, episodes: list[Episode], speed_times_s: Any, speed_rad_s: Any
+    ) -> list[Episode]:
+        """Live: `episodes` (just closed by `push`) less the tones that lasted exactly as long
+        as the speed held (`_held_with_speed`, judged on the speed history given, which must
+        reach back before their stretch); their ratios are learned, so the drive's tones that
+        sound only at constant speed (a commutator quiet at low speed) are drive noise from
+        the next hold on. Offline, `detect` judges them over the whole log instead.
+
+        Parameters
+        ----------
+        episodes : list of Episode
+            Episodes closed by the last `push`.
+        speed_times_s, speed_rad_s : array_like
+            The recent speed samples: times [s], shaft speed [rad/s].
+
+        Returns
+        -------
+        list of Episode
+            The episodes that are not drive noise.
+        """
+        try:
+            t = np.asarray(speed_times_s, dtype=float).reshape(-1)
+            v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
+        except (TypeError, ValueError):
+            return episodes
+        if not episodes or t.size != v.size:
+            return episodes
+        return _held_with_speed(self, episodes, t, v)
+
     def flush(self) -> list[Episode]:
         """Close every open track (end of the stream).
 
@@ -965,7 +995,8 @@ class StreamingDetector:
         if r_const >= max(3 * r_ratio, floor):  # the tone moved with the speed
             self._learn_ratio(r, tr.level_sum / len(tr.hz) + self._level_offset_db)
             return r
-        if r_ratio >= max(3 * r_const, floor):  # it stayed while the speed moved
+        moved = float(np.max(f1) / np.min(f1)) - 1.0 > s.order_tolerance  # not just its noise
+        if moved and r_ratio >= max(3 * r_const, floor):  # it stayed while the speed moved
             return None
         # the speed hardly changed: the drive's ratios known or learned, else a low whole order
         if self._known_ratio(r):
