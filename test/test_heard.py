@@ -7,6 +7,7 @@ and never a traceback, the annotated log's heard topics and clips, the fleet's c
 log's summary, the CLI's one-line errors."""
 
 import csv
+import errno
 import json
 from pathlib import Path
 
@@ -24,7 +25,7 @@ from harness.audio_logs import (
     with_wav_beside,
 )
 from harness.calibration import QUICK_SAMPLER
-from leadscrew_ros.bag import audiomsgs
+from leadscrew_ros.bag import audio, audiomsgs
 from leadscrew_ros.bag.virtual_bench import MIC_INFO_TOPIC, MIC_TOPIC, START_NS, BenchSettings, run
 from leadscrew_ros.cli import main
 from leadscrew_ros.model import ScrewParameters, SqueakModel
@@ -144,6 +145,30 @@ def test_no_sound_is_heard_null(paper_bench, tmp_path):
     assert "heard squeak" not in (tmp_path / "out" / "summary.txt").read_text()
     _replay(paper_bench[0][0], tmp_path / "off", enabled=False)  # --no-audio
     assert _summary(tmp_path / "off")["heard"] is None
+
+
+def test_no_room_for_the_audio_track_is_one_line_and_the_replay_goes_on(
+    paper_bench, tmp_path, monkeypatch
+):
+    """The log's audio is spilled to a temporary file as it is read: a full disk there is one
+    line ("audio not analysed: ... set TMPDIR"), and the replay's predictions and summary are
+    written all the same."""
+
+    class Full:
+        def write(self, data):
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(audio.tempfile, "TemporaryFile", lambda **_: Full())
+    result = _replay(paper_bench[0][0], tmp_path / "out")
+    s = _summary(tmp_path / "out")
+    assert s["heard"] is None and result.heard is None
+    [line] = [w for w in s["warnings"] if "audio not analysed" in w]
+    assert "no room for the audio track" in line and "No space left on device" in line
+    assert "TMPDIR" in line and "\n" not in line
+    assert s["predictions"] > 0
 
 
 def _same_heard(a: dict, b: dict) -> None:

@@ -323,7 +323,7 @@ def read_audio(
     infos: list[tuple[int, dict]] = []
     context = _Context(source.path, name, channel, sample_rate_hz, infos, info_name, problems)
     # each message converted and spilled to disk as it is read: no copy of the sound is held
-    chunks = _Spill()
+    chunks = _Spill(source.path)
     waiting: list[tuple[int, dict]] = []  # ros-drivers chunks logged before the first info
     first_ns: int | None = None
     decoded = 0
@@ -701,11 +701,22 @@ class _Spill:
     when closed), their times, sizes and keys in compact arrays (hours of 20-ms chunks are
     hundreds of thousands)."""
 
-    def __init__(self) -> None:
-        self.file = tempfile.TemporaryFile(prefix="leadscrew_audio_")
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        try:
+            self.file = tempfile.TemporaryFile(prefix="leadscrew_audio_")
+        except OSError as exc:
+            raise self._error(exc) from None
         self.keys: list[tuple] = []
         self._columns = {k: array("q") for k in ("stamp_ns", "sent_ns", "size", "offset", "key")}
         self._written = 0  # samples
+
+    def _error(self, exc: OSError) -> AudioError:
+        return AudioError(
+            self.path,
+            f"no room for the audio track in the temporary directory "
+            f"({tempfile.gettempdir()}: {exc.strerror or exc}); set TMPDIR to a larger disk",
+        )
 
     @property
     def count(self) -> int:
@@ -717,7 +728,11 @@ class _Spill:
         if c is None:
             return
         x = np.ascontiguousarray(c.samples, dtype=np.float32)
-        self.file.write(x.tobytes())
+        try:
+            self.file.write(x.tobytes())
+        except OSError as exc:  # a full disk: the sound is not analysed, the rest goes on
+            self.file.close()
+            raise self._error(exc) from None
         if c.key not in self.keys:
             self.keys.append(c.key)
         for name, value in (
