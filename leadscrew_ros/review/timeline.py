@@ -41,12 +41,12 @@ import math
 from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
-from functools import lru_cache
+from functools import lru_cache, partial
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..bag.cdr import decode_float64, decode_joint_state
+from ..bag.cdr import JointStateData, decode_float64, decode_joint_state
 from ..bag.fieldpath import (
     BeyondArray,
     FieldPathError,
@@ -380,6 +380,8 @@ class Timeline:
         }
         # (topic, type) -> its handler; None: not an input; a str: the reason it is rejected
         self._handlers: dict[tuple[str, str], _Handler | str | None] = {}
+        # the JointState payload whose stamp was read last, decoded (`_joint_stamp`)
+        self._decoded: tuple[bytes, JointStateData] | None = None
 
     @property
     def speed(self) -> float | None:
@@ -468,7 +470,11 @@ class Timeline:
                 if JOINT_STATE in types:
                     return _not_taken(name, type_name, JOINT_STATE)
                 raise InputError(f"topic {name} is {type_name}, expected {JOINT_STATE}")
-            return _Handler(self._on_joint_states, self._stamp(topic, name))
+            stamp = self._stamp(topic, name)
+            return _Handler(
+                self._on_joint_states,
+                None if stamp is None else partial(self._joint_stamp, stamp),
+            )
         path, scale = self.settings.field_of(kind)
         if path == "data" and FLOAT64 in types and type_name != FLOAT64:
             return _not_taken(name, type_name, FLOAT64)  # as the node's default subscription
@@ -517,8 +523,20 @@ class Timeline:
             self.rejected_example.setdefault(r.reason, r.message)
         return outcome.applies
 
+    def _joint_stamp(self, read: Callable[[bytes], int], data: bytes) -> int:
+        """A JointState's header stamp [ns] from its decoding, which `_on_joint_states` takes
+        next (one decoding per message); `read` (the schema's stamp fields) where it does not
+        decode."""
+        try:
+            js = decode_joint_state(data)
+        except ValueError:  # the stamp may still be there; the message is counted as undecodable
+            return read(data)
+        self._decoded = (data, js)
+        return js.stamp_ns
+
     def _on_joint_states(self, data: bytes) -> bool:
-        js = decode_joint_state(data)
+        decoded, self._decoded = self._decoded, None
+        js = decoded[1] if decoded is not None and decoded[0] is data else decode_joint_state(data)
         outcome = self.rules.set_joint_state(js.name, js.position, js.velocity)
         if outcome.ignored:
             hint = "" if self.settings.joint_name else "; use --joint-name"
