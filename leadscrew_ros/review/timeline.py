@@ -69,7 +69,7 @@ from ..model import (
 from ..model.physics.display import exact
 from ..model.squeak_model import check_operating_point
 from ..model.uncertainty.perturbation import geometry_fields
-from ..model.uncertainty.scatter import Scatter
+from ..model.uncertainty.scatter import Samples, Scatter
 from .decimation import Envelope
 
 FLOAT64, JOINT_STATE = "std_msgs/msg/Float64", "sensor_msgs/msg/JointState"
@@ -588,11 +588,23 @@ class ModelSpec:
         return _spec_model(self).with_params(nut_position_m=nut_position_m)
 
 
+_shared: dict[ModelSpec, Samples] = {}  # drawn in another process (`share_samples`)
+
+
+def share_samples(spec: ModelSpec, samples: Samples) -> None:
+    """Predict with `samples` for `spec` in this process: the draw of its scatter made in
+    another process (`_spec_model`'s there, the same points), so that this one need not
+    draw them."""
+    _shared[spec] = samples
+
+
 @lru_cache(maxsize=4)
 def _spec_model(spec: ModelSpec) -> SqueakModel:
     """The model of a spec at its own nut position, whose samples the others share (kept
     here, not on the spec: the spec is pickled to the workers)."""
     model = SqueakModel(spec.params, Scatter(dict(spec.scatter)), spec.samples)
+    if spec in _shared:
+        model.samples = _shared[spec]
     _ = model.samples  # drawn once: with_params passes them on
     return model
 
