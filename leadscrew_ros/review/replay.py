@@ -798,7 +798,8 @@ class _Run:
         job = self.timeline.feed(m, len(seg.messages) - 1)
         if job is not None:
             seg.jobs.append(job)
-        self.commands.add(m, self.timeline.seconds(self.timeline.now_ns))
+        if self.commands.takes(m.topic.name):  # rarely: no clock reading per message
+            self.commands.add(m, self.timeline.seconds(self.timeline.now_ns))
         if m.topic.name in self._speed_topics and self.timeline.speed is not None:
             self.speeds.add(self.timeline.seconds(self.timeline.now_ns), self.timeline.speed)
         if len(seg.jobs) >= _BATCH_JOBS or len(seg.messages) >= _SEGMENT_MESSAGES:
