@@ -594,7 +594,15 @@ _shared: dict[ModelSpec, Samples] = {}  # drawn in another process (`share_sampl
 def share_samples(spec: ModelSpec, samples: Samples) -> None:
     """Predict with `samples` for `spec` in this process: the draw of its scatter made in
     another process (`_spec_model`'s there, the same points), so that this one need not
-    draw them."""
+    draw them.
+
+    Parameters
+    ----------
+    spec : ModelSpec
+        The parameters, scatter and sample count.
+    samples : Samples
+        Their samples.
+    """
     _shared[spec] = samples
 
 

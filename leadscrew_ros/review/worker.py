@@ -104,7 +104,15 @@ def start(spec: ModelSpec | None = None, samples: Samples | None = None) -> None
     arrays of several MB (contacts, state matrices, the samples' friction) otherwise go back
     to the kernel and come again as fresh pages, each zeroed on its first touch (measured:
     about 12 % of a worker's time on the dense bench log; glibc only, elsewhere its
-    allocator as it is)."""
+    allocator as it is).
+
+    Parameters
+    ----------
+    spec : ModelSpec, optional
+        What the worker predicts with.
+    samples : Samples, optional
+        `spec`'s scatter samples as the replaying process drew them; None: drawn here.
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if spec is not None and samples is not None:
         share_samples(spec, samples)
