@@ -56,6 +56,8 @@ GUARD_TYPES = {
 }
 MODE_COLUMNS = ("frequency_hz", "growth_rate", "damping_ratio")
 MODES_PREFIX = "modes:"  # of the row dimension's label
+_COLUMNS = len(MODE_COLUMNS)
+_COLUMNS_DIMENSION = cdr.Dimension(",".join(MODE_COLUMNS), _COLUMNS, _COLUMNS)
 
 
 class Mode(NamedTuple):
@@ -102,13 +104,15 @@ def frequencies_payload(p: Prediction) -> bytes:
 
 def modes_payload(p: Prediction) -> bytes:
     """squeak/modes of a prediction (layout in the module docstring)."""
-    rows, cols = len(p.modes), len(MODE_COLUMNS)
+    modes = p.modes
+    rows = len(modes)
     return cdr.encode_float64_multi_array(
         (
-            cdr.Dimension(MODES_PREFIX + ",".join(m.label for m in p.modes), rows, rows * cols),
-            cdr.Dimension(",".join(MODE_COLUMNS), cols, cols),
+            cdr.Dimension(MODES_PREFIX + ",".join([m.label for m in modes]), rows, rows * _COLUMNS),
+            _COLUMNS_DIMENSION,
         ),
-        [float(v) for m in p.modes for v in (m.frequency_hz, m.growth_rate, m.damping_ratio)],
+        # the floats as they are: CDR packs any real number (every prediction publishes this)
+        [v for m in modes for v in (m.frequency_hz, m.growth_rate, m.damping_ratio)],
     )
 
 

@@ -2,12 +2,18 @@
 """rclpy-free runtime: input rules, the live recompute policy and verdict, listening to a
 microphone, the seat-stroke profile. Imports `model` only."""
 
-from .listen import Listener
-from .profile import StrokeProfile
-from .recompute import LivePredictor
-from .rules import InputRules
-from .settings import JointSettings, ListenSettings, LiveSettings
+from importlib import import_module
+from typing import Any
 
+_HOMES = {
+    "InputRules": "rules",
+    "JointSettings": "settings",
+    "ListenSettings": "settings",
+    "Listener": "listen",
+    "LivePredictor": "recompute",
+    "LiveSettings": "settings",
+    "StrokeProfile": "profile",
+}
 __all__ = [
     "InputRules",
     "JointSettings",
@@ -17,3 +23,11 @@ __all__ = [
     "LiveSettings",
     "StrokeProfile",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    # Resolved on first use: the input rules (a replay's prediction worker) do not import the
+    # listener and through it the acoustics and scipy.signal (~0.5 s per process).
+    if name in _HOMES:
+        return getattr(import_module(f".{_HOMES[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -207,6 +207,8 @@ def _is_real(value: object) -> TypeGuard[numbers.Real]:
 def _real(value: object) -> float | None:
     """`value` as a float if it is a real number (not a bool) within the float range, else
     None."""
+    if type(value) is float:  # the common case, per input message: no ABC check
+        return value
     if not _is_real(value):
         return None
     try:

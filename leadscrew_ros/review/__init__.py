@@ -4,24 +4,30 @@ review, and every plot (`plots`). Imports `model`, `live` and `bag` only.
 
 The function `replay` is not re-exported here: `review.replay` stays the module of that name."""
 
-from .fleet import FleetRun, FleetSettings, review_logs
-from .fleetreport import write_fleet
-from .listen import Heard, SoundSettings
-from .plots import (
-    plot_fleet,
-    plot_frequencies,
-    plot_friction,
-    plot_heard,
-    plot_map,
-    plot_sweep,
-    plot_timeline,
-    plot_transient,
-    probability_overlay,
-)
-from .replay import ReplayResult, ReplaySettings
-from .report import write_report
-from .timeline import InputSettings
+from importlib import import_module
+from typing import Any
 
+_HOMES = {
+    "FleetRun": "fleet",
+    "FleetSettings": "fleet",
+    "Heard": "listen",
+    "InputSettings": "timeline",
+    "SoundSettings": "listen",
+    "ReplayResult": "replay",
+    "ReplaySettings": "replay",
+    "plot_fleet": "plots",
+    "plot_frequencies": "plots",
+    "plot_friction": "plots",
+    "plot_heard": "plots",
+    "plot_map": "plots",
+    "plot_sweep": "plots",
+    "plot_timeline": "plots",
+    "plot_transient": "plots",
+    "probability_overlay": "plots",
+    "review_logs": "fleet",
+    "write_fleet": "fleetreport",
+    "write_report": "report",
+}
 __all__ = [
     "FleetRun",
     "FleetSettings",
@@ -43,3 +49,11 @@ __all__ = [
     "write_fleet",
     "write_report",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    # Resolved on first use: a replay's prediction worker imports the timeline and its batch
+    # solve only, not the fleet, the plots and the acoustics (~0.5 s per process).
+    if name in _HOMES:
+        return getattr(import_module(f".{_HOMES[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -60,6 +60,11 @@ class CommandTrace:
             for t in (*COMMANDS, messages.GUARD_ACTIVE)
         }
 
+    def takes(self, topic: str) -> bool:
+        """Whether messages on `topic` (a full name) may be the guard's (`add` checks the
+        type)."""
+        return topic in self._topics
+
     def add(self, m: LogMessage, t_s: float) -> None:
         """Take `m` if it is one of the guard's topics (its type), at `t_s` [s]."""
         found = self._topics.get(m.topic.name)

@@ -34,7 +34,6 @@ import json
 import math
 import multiprocessing
 import re
-import signal
 import sys
 import textwrap
 import time
@@ -43,9 +42,8 @@ from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field, fields
-from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, BinaryIO, NamedTuple, TextIO
+from typing import TYPE_CHECKING, Any, BinaryIO, TextIO
 
 import numpy as np
 
@@ -53,8 +51,9 @@ from ..bag import logmeta, messages, msgdefs
 from ..bag.logfile import LogError, LogMessage, Topic, metadata_problem
 from ..bag.logsource import LogSource, log_topics, open_log, topic_types
 from ..bag.mcapout import CHUNK_BYTES, McapOut
-from ..model import Prediction, SqueakModel, Validity
+from ..model import SqueakModel
 from ..model.uncertainty.scatter import LOG_NORMAL
+from . import worker
 from .commands import CommandTrace
 from .decimation import Envelope, Reservoir
 from .jsonsafe import json_safe
@@ -67,9 +66,10 @@ from .timeline import (
     Job,
     ModelSpec,
     Timeline,
+    _spec_model,
     input_namespaces,
-    predict_jobs,
 )
+from .worker import Payloads, Verdict, solve
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -524,7 +524,6 @@ def log_name(path: Path) -> str:
 
 
 # ---------------------------------------------------------------------- the annotated log
-Payloads = tuple[bytes, ...]  # of `messages.PREDICTION_TOPICS`, in that order
 
 
 class _AnnotatedWriter:
@@ -588,72 +587,6 @@ class _AnnotatedWriter:
 
 
 # ---------------------------------------------------------------------- predictions
-class Verdict(NamedTuple):
-    """What the replaying process keeps of a prediction (episodes, plots, counts): small, as
-    it crosses from the workers for every recompute; the full prediction goes into the
-    annotated MCAP as its CDR payloads.
-
-    Attributes
-    ----------
-    speed_rad_s, load_n : float
-        The operating point [rad/s], [N].
-    validity : Validity
-        Whether the linearisation holds (the rest is empty or None when not).
-    probability : float or None
-        P(squeak).
-    max_growth_rate : float or None
-        Largest Re(lambda) of the oscillatory modes [1/s].
-    divergence_rates : tuple of float
-        Real eigenvalues > 0 [1/s].
-    squeak : tuple of (str, float, float)
-        The squeak modes, most unstable first: label, frequency [Hz] and Re(lambda) [1/s].
-    """
-
-    speed_rad_s: float
-    load_n: float
-    validity: Validity
-    probability: float | None
-    max_growth_rate: float | None
-    divergence_rates: tuple[float, ...]
-    squeak: tuple[tuple[str, float, float], ...]
-
-    @classmethod
-    def of(cls, p: Prediction) -> Verdict:
-        """The verdict kept of prediction `p`."""
-        return cls(
-            p.speed_rad_s,
-            p.load_n,
-            p.validity,
-            p.probability,
-            p.max_growth_rate,
-            p.divergence_rates,
-            tuple((m.label, m.frequency_hz, m.growth_rate) for m in p.squeak_modes),
-        )
-
-    @property
-    def valid(self) -> bool:
-        """True if the prediction is valid (Validity.OK)."""
-        return self.validity is Validity.OK
-
-    @property
-    def stable(self) -> bool:
-        """No squeak mode and no divergence (False outside validity: not a verdict)."""
-        return self.valid and not self.squeak and not self.divergence_rates
-
-
-def solve(
-    spec: ModelSpec, speeds: np.ndarray, loads: np.ndarray, model_nuts: np.ndarray
-) -> tuple[list[Verdict], list[Payloads | None]]:
-    """`predict_jobs` as verdicts and the valid predictions' CDR payloads (None outside
-    validity), encoded where they are solved: in a worker, the replaying process only copies
-    bytes."""
-    predictions = predict_jobs(spec, speeds, loads, model_nuts)
-    return [Verdict.of(p) for p in predictions], [
-        tuple(data for _, data in messages.prediction_payloads(p)) if p.valid else None
-        for p in predictions
-    ]
-
-
 @dataclass
 class _Segment:
     messages: list[LogMessage] = field(default_factory=list)
@@ -699,12 +632,12 @@ class _Solver:
         )
         self.batches += 1
         if self.workers and self.batches > 1 and self.pool is None:
-            # spawn, not fork: the parent holds BLAS and tqdm threads. Workers ignore SIGINT:
-            # Ctrl-C reaches the whole process group, and this process shuts the pool down.
+            # spawn, not fork: the parent holds BLAS and tqdm threads
             self.pool = ProcessPoolExecutor(
                 self.workers,
                 multiprocessing.get_context("spawn"),
-                initializer=partial(signal.signal, signal.SIGINT, signal.SIG_IGN),
+                initializer=worker.start,
+                initargs=(self.spec, _spec_model(self.spec).samples),
             )
         if self.pool is not None:
             try:
@@ -865,7 +798,8 @@ class _Run:
         job = self.timeline.feed(m, len(seg.messages) - 1)
         if job is not None:
             seg.jobs.append(job)
-        self.commands.add(m, self.timeline.seconds(self.timeline.now_ns))
+        if self.commands.takes(m.topic.name):  # rarely: no clock reading per message
+            self.commands.add(m, self.timeline.seconds(self.timeline.now_ns))
         if m.topic.name in self._speed_topics and self.timeline.speed is not None:
             self.speeds.add(self.timeline.seconds(self.timeline.now_ns), self.timeline.speed)
         if len(seg.jobs) >= _BATCH_JOBS or len(seg.messages) >= _SEGMENT_MESSAGES:

@@ -41,12 +41,12 @@ import math
 from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, replace
-from functools import lru_cache
+from functools import lru_cache, partial
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..bag.cdr import decode_float64, decode_joint_state
+from ..bag.cdr import JointStateData, decode_float64, decode_joint_state
 from ..bag.fieldpath import (
     BeyondArray,
     FieldPathError,
@@ -69,7 +69,7 @@ from ..model import (
 from ..model.physics.display import exact
 from ..model.squeak_model import check_operating_point
 from ..model.uncertainty.perturbation import geometry_fields
-from ..model.uncertainty.scatter import Scatter
+from ..model.uncertainty.scatter import Samples, Scatter
 from .decimation import Envelope
 
 FLOAT64, JOINT_STATE = "std_msgs/msg/Float64", "sensor_msgs/msg/JointState"
@@ -380,6 +380,8 @@ class Timeline:
         }
         # (topic, type) -> its handler; None: not an input; a str: the reason it is rejected
         self._handlers: dict[tuple[str, str], _Handler | str | None] = {}
+        # the JointState payload whose stamp was read last, decoded (`_joint_stamp`)
+        self._decoded: tuple[bytes, JointStateData] | None = None
 
     @property
     def speed(self) -> float | None:
@@ -468,7 +470,11 @@ class Timeline:
                 if JOINT_STATE in types:
                     return _not_taken(name, type_name, JOINT_STATE)
                 raise InputError(f"topic {name} is {type_name}, expected {JOINT_STATE}")
-            return _Handler(self._on_joint_states, self._stamp(topic, name))
+            stamp = self._stamp(topic, name)
+            return _Handler(
+                self._on_joint_states,
+                None if stamp is None else partial(self._joint_stamp, stamp),
+            )
         path, scale = self.settings.field_of(kind)
         if path == "data" and FLOAT64 in types and type_name != FLOAT64:
             return _not_taken(name, type_name, FLOAT64)  # as the node's default subscription
@@ -517,8 +523,20 @@ class Timeline:
             self.rejected_example.setdefault(r.reason, r.message)
         return outcome.applies
 
+    def _joint_stamp(self, read: Callable[[bytes], int], data: bytes) -> int:
+        """A JointState's header stamp [ns] from its decoding, which `_on_joint_states` takes
+        next (one decoding per message); `read` (the schema's stamp fields) where it does not
+        decode."""
+        try:
+            js = decode_joint_state(data)
+        except ValueError:  # the stamp may still be there; the message is counted as undecodable
+            return read(data)
+        self._decoded = (data, js)
+        return js.stamp_ns
+
     def _on_joint_states(self, data: bytes) -> bool:
-        js = decode_joint_state(data)
+        decoded, self._decoded = self._decoded, None
+        js = decoded[1] if decoded is not None and decoded[0] is data else decode_joint_state(data)
         outcome = self.rules.set_joint_state(js.name, js.position, js.velocity)
         if outcome.ignored:
             hint = "" if self.settings.joint_name else "; use --joint-name"
@@ -570,11 +588,31 @@ class ModelSpec:
         return _spec_model(self).with_params(nut_position_m=nut_position_m)
 
 
+_shared: dict[ModelSpec, Samples] = {}  # drawn in another process (`share_samples`)
+
+
+def share_samples(spec: ModelSpec, samples: Samples) -> None:
+    """Predict with `samples` for `spec` in this process: the draw of its scatter made in
+    another process (`_spec_model`'s there, the same points), so that this one need not
+    draw them.
+
+    Parameters
+    ----------
+    spec : ModelSpec
+        The parameters, scatter and sample count.
+    samples : Samples
+        Their samples.
+    """
+    _shared[spec] = samples
+
+
 @lru_cache(maxsize=4)
 def _spec_model(spec: ModelSpec) -> SqueakModel:
     """The model of a spec at its own nut position, whose samples the others share (kept
     here, not on the spec: the spec is pickled to the workers)."""
     model = SqueakModel(spec.params, Scatter(dict(spec.scatter)), spec.samples)
+    if spec in _shared:
+        model.samples = _shared[spec]
     _ = model.samples  # drawn once: with_params passes them on
     return model
 

@@ -40,7 +40,6 @@ import copy
 import math
 from functools import cached_property
 from types import SimpleNamespace
-from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -56,6 +55,7 @@ GEOMETRY_STEP = 1e-6  # relative step of a state-matrix difference in a geometry
 MAX_GEOMETRY_FIELDS = 2  # scattered geometry fields the live estimate takes
 GEOMETRY_NODES = {1: 9, 2: 5}  # node geometries per scattered geometry field
 _OUTSIDE = -1e30  # margin of a node without a prediction (counts as no squeak)
+_POINTS_PER_STEP = 64  # of `estimates`' growth over the samples: (64, modes, count) at a time
 
 
 class EigenPairs:
@@ -548,14 +548,19 @@ class FirstOrderProbability:
             )
             threshold = GROWTH_TOL * np.abs(solves.lam) - solves.lam.real
             reach = _reach(rates, hi[index][:, :, None], lo[index][:, :, None], threshold)
-            some = cast("list[bool]", reach.any(axis=1).tolist())
-            for g, (i, crosses) in enumerate(zip(index, some, strict=True)):
-                hits = (
-                    _hits(rates[g], threshold[g], np.flatnonzero(reach[g]), change[:, i])
-                    if crosses
-                    else None
+            crosses = reach.any(axis=1)
+            for i in np.asarray(index)[~crosses].tolist():
+                out[i] = (0.0, 0.0)  # no mode can reach its threshold: as `probability`
+            at = np.flatnonzero(crosses)
+            points = np.asarray(index)[at]
+            for start in range(0, len(at), _POINTS_PER_STEP):
+                g, i = (
+                    at[start : start + _POINTS_PER_STEP],
+                    points[start : start + _POINTS_PER_STEP],
                 )
-                out[i] = (0.0, 0.0) if hits is None else estimate(hits.reshape(self._shape))
+                hits = _hits_many(rates[g], threshold[g], reach[g], change.transpose(1, 0, 2)[i])
+                for k, e in zip(i.tolist(), _estimates(hits, self._shape), strict=True):
+                    out[k] = e
         return out
 
     def _lefts(
@@ -621,6 +626,34 @@ class FirstOrderProbability:
             Shape (replicates, per_replicate).
         """
         return (self.margins(pairs, load) > 0).reshape(self._shape)
+
+
+def _hits_many(
+    rates: np.ndarray, threshold: np.ndarray, reach: np.ndarray, change: np.ndarray
+) -> np.ndarray:
+    """`_hits` of P points in one array step: `rates` (P, 3, M), `threshold` (P, M), the modes
+    that can cross `reach` (P, M; some at every point), the samples' `change` (P, 3, count);
+    (P, count). Each point's candidates first, padded to the most any point has with modes
+    whose threshold is out of reach."""
+    width = int(reach.sum(axis=1).max())
+    first = np.argsort(~reach, axis=1, kind="stable")[:, :width]  # the candidates first
+    r = np.take_along_axis(rates, first[:, None, :], 2)  # (P, 3, width)
+    t = np.where(
+        np.take_along_axis(reach, first, 1), np.take_along_axis(threshold, first, 1), np.inf
+    )
+    growth = np.matmul(r.transpose(0, 2, 1), change)  # (P, width, count)
+    growth -= t[:, :, None]
+    return growth.max(axis=1) > 0
+
+
+def _estimates(hits: np.ndarray, shape: tuple[int, ...]) -> list[tuple[float, float]]:
+    """`estimate` of each row of `hits` (P, count), the samples of shape (replicates,
+    per_replicate)."""
+    replicates, per = shape
+    share = np.count_nonzero(hits.reshape(len(hits), replicates, per), axis=2) / per
+    mean = share.mean(axis=1)
+    stderr = np.sqrt(((share - mean[:, None]) ** 2).sum(axis=1) / (replicates - 1) / replicates)
+    return list(zip(mean.tolist(), stderr.tolist(), strict=True))
 
 
 def estimate(hits: np.ndarray) -> tuple[float, float]:

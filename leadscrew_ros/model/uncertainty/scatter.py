@@ -26,7 +26,6 @@ from typing import Any
 
 import numpy as np
 from scipy.special import ndtri
-from scipy.stats import qmc
 
 from ..physics.metadata import check, setting
 from ..physics.parameters import ParameterError, ParamsLike, ScrewParameters
@@ -206,6 +205,10 @@ def draw(
     ParameterError
         A bad count or replicates, or the valid domain is (almost) never hit.
     """
+    # imported here: scipy.stats costs ~0.4 s, and a process given its samples (a replay's
+    # prediction worker) never draws
+    from scipy.stats import qmc
+
     per = check_count(count, replicates) // replicates
     dim = max(len(scatter.names), 1)
     rng = np.random.default_rng(seed)
