@@ -385,7 +385,7 @@ def test_realistic_recording_holds_its_parts(realistic):
     (unit,) = truth["units"]
     track = read_audio(_bag(out, unit))
     fs = int(track.sample_rate_hz)
-    x = track.samples.astype(float)
+    x = np.asarray(track.samples, dtype=float)
     span = len(unit["sound"]["envelope_dbfs"]) / 100.0
     for start in (0.2, span - 1.2):
         for f_hz, level in ((1170.0, -45.0), (100.0, -45.0), (200.0, -51.0)):

@@ -4,7 +4,8 @@
 Each recording is a rosbag2 bag directory `<directory>/<name>_<UTC wall-clock start>/` holding
 `<bag>_<index>.mcap` files and a `metadata.yaml`; the directory is created if missing (like
 `ros2 bag record -o`). Bags are named and split by the wall clock (unique even within one
-millisecond); each message's log time is whatever the caller gives (the node's clock, which may
+millisecond; a file too old is closed by `tick` or, as rosbag2 does, by the first message
+written past the limit); each message's log time is whatever the caller gives (the node's clock, which may
 be sim time, as rosbag2 does). Files use profile `ros2`, one channel per topic, `ros2msg`
 schemas with the complete definition from the installed message packages (`msgdefs`) and `cdr`
 payloads serialized by the caller (`write_serialized`: bytes as received from DDS, or from the
@@ -308,6 +309,7 @@ class Recorder:
     _writer: Writer | None = None
     _topics: dict[str, _Topic] = field(default_factory=dict)
     _file_start_ns: int = 0
+    _base_offset_ns: int = 0  # the time base of `start` less the monotonic clock
     _last_flush_ns: int = 0
     _last_check_ns: int = 0
     _lost_files: set[Path] = field(default_factory=set)
@@ -383,7 +385,9 @@ class Recorder:
             except OSError as exc:
                 self.error = exc.strerror or str(exc)
                 return False
-            return self._open(time.monotonic_ns() if now_ns is None else now_ns)
+            now_ns = time.monotonic_ns() if now_ns is None else now_ns
+            self._base_offset_ns = now_ns - time.monotonic_ns()
+            return self._open(now_ns)
 
     def stop(self) -> None:
         """Finish the current file (summary, index, footer) and write metadata.yaml."""
@@ -420,7 +424,14 @@ class Recorder:
         with self._lock:
             if not self.active:
                 return
-            if log_time_ns is None:
+            now_ns = time.monotonic_ns() + self._base_offset_ns
+            if self.files[-1].messages and self._too_old(now_ns):
+                # as rosbag2 splits: the first message past the limit opens the next file, so
+                # no file outlasts split_duration_s however late the next `tick` runs
+                self._split(now_ns)
+                if not self.active:
+                    return
+            if log_time_ns is None:  # after the new file's state: the file stays in order
                 log_time_ns = self.clock()
             t = self._topics.get(topic)
             if t is None:
@@ -462,10 +473,7 @@ class Recorder:
                     self._writer.flush()
                     self._last_flush_ns = now_ns
                 too_big = s.split_size_mb > 0 and self._out.tell() >= s.split_size_mb * 1e6
-                too_old = (
-                    s.split_duration_s > 0
-                    and now_ns - self._file_start_ns >= s.split_duration_s * 1e9
-                )
+                too_old = self._too_old(now_ns)
                 gone = ""
                 if now_ns - self._last_check_ns >= _CHECK_PERIOD_NS:
                     self._last_check_ns = now_ns
@@ -477,6 +485,11 @@ class Recorder:
                 self._lose_file(gone, now_ns)
             elif too_big or too_old:
                 self._split(now_ns)
+
+    def _too_old(self, now_ns: int) -> bool:
+        """The file is `split_duration_s` old at `now_ns` (on the time base of `start`)."""
+        d = self.settings.split_duration_s
+        return d > 0 and now_ns - self._file_start_ns >= d * 1e9
 
     def split(self, now_ns: int | None = None) -> None:
         """Finish the current file and go on in the next one, which gets the `metadata` of now
