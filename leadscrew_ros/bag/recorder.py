@@ -5,8 +5,8 @@ Each recording is a rosbag2 bag directory `<directory>/<name>_<UTC wall-clock st
 `<bag>_<index>.mcap` files and a `metadata.yaml`; the directory is created if missing (like
 `ros2 bag record -o`). Bags are named and split by the wall clock (unique even within one
 millisecond; a file too old is closed by `tick` or, as rosbag2 does, by the first message
-written past the limit); each message's log time is whatever the caller gives (the node's clock, which may
-be sim time, as rosbag2 does). Files use profile `ros2`, one channel per topic, `ros2msg`
+written past the limit); each message's log time is whatever the caller gives (the node's
+clock, which may be sim time, as rosbag2 does). Files use profile `ros2`, one channel per topic, `ros2msg`
 schemas with the complete definition from the installed message packages (`msgdefs`) and `cdr`
 payloads serialized by the caller (`write_serialized`: bytes as received from DDS, or from the
 encoders of `cdr`).
