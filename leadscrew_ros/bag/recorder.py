@@ -6,10 +6,10 @@ Each recording is a rosbag2 bag directory `<directory>/<name>_<UTC wall-clock st
 `ros2 bag record -o`). Bags are named and split by the wall clock (unique even within one
 millisecond; a file too old is closed by `tick` or, as rosbag2 does, by the first message
 written past the limit); each message's log time is whatever the caller gives (the node's
-clock, which may be sim time, as rosbag2 does). Files use profile `ros2`, one channel per topic, `ros2msg`
-schemas with the complete definition from the installed message packages (`msgdefs`) and `cdr`
-payloads serialized by the caller (`write_serialized`: bytes as received from DDS, or from the
-encoders of `cdr`).
+clock, which may be sim time, as rosbag2 does). Files use profile `ros2`, one channel per
+topic, `ros2msg` schemas with the complete definition from the installed message packages
+(`msgdefs`) and `cdr` payloads serialized by the caller (`write_serialized`: bytes as received
+from DDS, or from the encoders of `cdr`).
 
 Every file starts with the MCAP Metadata records in `metadata` (name -> string map; the node
 puts its `leadscrew_ros` record there, `logmeta`) as they are when the file is opened, so each
