@@ -752,8 +752,8 @@ class _Spill:
 
 class SpilledTrack(SampleTrack):
     """A log's track on disk: the pieces of the spill file in their places on the sample grid
-    (a gap is NaN), read by slices (`acoustics.samples`). The file is deleted when the track is
-    closed or collected."""
+    (a gap is NaN), read by slices (`acoustics.samples`). The file (unlinked already) goes when
+    the track is collected."""
 
     def __init__(self, file: Any, pieces: list[tuple[int, int]]) -> None:
         self._file = file
@@ -781,10 +781,6 @@ class SpilledTrack(SampleTrack):
                 out[at - start : b - start] = np.frombuffer(data, np.float32)
             at, k = b, k + 1
         return out
-
-    def close(self) -> None:
-        """Delete the file now."""
-        self._file.close()
 
 
 def _assemble(
@@ -966,7 +962,7 @@ class WavTrack(SampleTrack):
     def __init__(
         self, path: Path, offset: int, dtype: np.dtype, channels: int, channel: int, frames: int
     ) -> None:
-        self._file = open(path, "rb")  # closed with the track (or when collected)
+        self._file = open(path, "rb")  # closed when the track is collected
         self._offset, self._dtype = offset, np.dtype(dtype)
         self._channels, self._channel, self._frames = channels, channel, frames
 
@@ -980,10 +976,6 @@ class WavTrack(SampleTrack):
         width = self._dtype.itemsize * self._channels
         raw = os.pread(self._file.fileno(), (stop - start) * width, self._offset + start * width)
         return _pcm_to_float(np.frombuffer(raw, self._dtype)[self._channel :: self._channels])
-
-    def close(self) -> None:
-        """Close the file."""
-        self._file.close()
 
 
 class LiveAudio:

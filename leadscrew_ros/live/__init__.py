@@ -2,8 +2,7 @@
 """rclpy-free runtime: input rules, the live recompute policy and verdict, listening to a
 microphone, the seat-stroke profile. Imports `model` only."""
 
-from importlib import import_module
-from typing import Any
+from ..model.exports import lazy
 
 _HOMES = {
     "InputRules": "rules",
@@ -25,9 +24,6 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    # Resolved on first use: the input rules (a replay's prediction worker) do not import the
-    # listener and through it the acoustics and scipy.signal (~0.5 s per process).
-    if name in _HOMES:
-        return getattr(import_module(f".{_HOMES[name]}", __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# Resolved on first use: the input rules (a replay's prediction worker) do not import the
+# listener and through it the acoustics and scipy.signal (~0.5 s per process).
+__getattr__ = lazy(__name__, _HOMES)

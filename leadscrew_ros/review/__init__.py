@@ -4,8 +4,7 @@ review, and every plot (`plots`). Imports `model`, `live` and `bag` only.
 
 The function `replay` is not re-exported here: `review.replay` stays the module of that name."""
 
-from importlib import import_module
-from typing import Any
+from ..model.exports import lazy
 
 _HOMES = {
     "FleetRun": "fleet",
@@ -51,9 +50,6 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    # Resolved on first use: a replay's prediction worker imports the timeline and its batch
-    # solve only, not the fleet, the plots and the acoustics (~0.5 s per process).
-    if name in _HOMES:
-        return getattr(import_module(f".{_HOMES[name]}", __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# Resolved on first use: a replay's prediction worker imports the timeline and its batch
+# solve only, not the fleet, the plots and the acoustics (~0.5 s per process).
+__getattr__ = lazy(__name__, _HOMES)

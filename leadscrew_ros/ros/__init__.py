@@ -3,8 +3,7 @@
 diagnostics, input recording, the actuator simulator, the demo, live replay and the shutdown
 helper."""
 
-from importlib import import_module
-from typing import Any
+from ..model.exports import lazy
 
 _HOMES = {
     "ActuatorSimulator": "simulator",
@@ -24,9 +23,6 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    # Resolved on first use: importing one module of this layer (e.g. `parameters` for the
-    # config docs) does not import the others, nor rclpy through them.
-    if name in _HOMES:
-        return getattr(import_module(f".{_HOMES[name]}", __name__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+# Resolved on first use: importing one module of this layer (e.g. `parameters` for the
+# config docs) does not import the others, nor rclpy through them.
+__getattr__ = lazy(__name__, _HOMES)
