@@ -75,6 +75,11 @@ TONE_FLOOR_FACTOR = 10.0
 # Full-scale integer PCM grids, coarsest first: 8, 16, 24 bits (x 2^(b-1) and 2^(b-1) - 1).
 _PCM_GRIDS = (128.0, 127.0, 32768.0, 32767.0, 8388608.0)
 LOUDNESS_RATE_HZ = 48000  #: ISO 532-1 after MOSQITO wants 48 kHz; other rates are resampled
+#: A tone whose level changes this much from the frame before to the frame after it (0.15 s
+#: apart) was cut or switched (`without_splatter`), not followed by another track.
+CUT_DB = 10.0
+#: A peak's three bins may hold this much less than its whole tone (`ToneCandidates.power`).
+_GATE_MARGIN_DB = 3.0
 _BLOCK_FRAMES = 256  # frames analysed per FFT block (bounded memory, same in every mode)
 _MAX_WARNINGS = 100
 _MAX_RATIOS = 100  # drive-ratio groups kept (bounded memory)
@@ -113,6 +118,15 @@ class DriveOrder:
     def as_dict(self) -> dict[str, float]:
         """{ratio, level_db, tracks} (JSON-ready)."""
         return {"ratio": self.ratio, "level_db": self.level_db, "tracks": self.tracks}
+
+
+def _scatter(f: np.ndarray, f1: np.ndarray, r: float, bin_hz: float) -> tuple[float, float, float]:
+    """A track's frequencies `f` [Hz] against r times the rotation `f1` [Hz]: their rms
+    relative scatter about r f1 (r_ratio) and about their median (r_const), and the floor of
+    both (a tenth of a bin: the frequency estimate's own scatter); module notes."""
+    r_ratio = float(np.sqrt(np.mean((f / (r * f1) - 1.0) ** 2)))
+    r_const = float(np.sqrt(np.mean((f / np.median(f) - 1.0) ** 2)))
+    return r_ratio, r_const, 0.1 * bin_hz / float(np.median(f))
 
 
 @dataclass
@@ -855,7 +869,9 @@ class StreamingDetector:
         variance, mean_square = frame_powers(seg, n, hop, i1 - i0)
         rounding = np.maximum(self._format_step, FLOAT32_STEP * np.sqrt(mean_square)) ** 2 / 12
         psd = short_time_psd(seg, self.sample_rate_hz, n, hop, self._window)
-        cand = self.analyzer.candidates(psd, floor=TONE_FLOOR_FACTOR * rounding)
+        floor = TONE_FLOOR_FACTOR * rounding
+        gated = self.background.has_spectrum
+        cand = self.analyzer.candidates(psd, floor=floor, reference=self._gate() if gated else None)
         bad = self._bad[s0 : s0 + seg.size]
         if bad.any():
             bad_cum = np.concatenate([[0], np.cumsum(bad)])
@@ -868,7 +884,7 @@ class StreamingDetector:
         level_db = 10 * np.log10(np.maximum(cand.power, 1e-300)) + self._level_offset_db
         # the background learned so far is not followed (a louder tone at its frequency is)
         background = self.background.covers(cand.frequency_hz, level_db)
-        if self.background.has_spectrum:  # the gate: a stated SNR over the background's band
+        if gated:  # the gate: a stated SNR over the background's band
             snr_db = 10 * np.log10(
                 np.maximum(cand.power, 1e-300) / self.background.band_power(cand.frequency_hz)
             )
@@ -878,7 +894,6 @@ class StreamingDetector:
             )
         else:  # nothing learned yet: ECMA-418-1's prominence
             prominent = cand.prominent & ~dropped[:, None] & ~background
-        tonal = cand.tonal & ~dropped[:, None]
         frame_t = self.frame_time(np.arange(i0, i1))
         if self._speed_t.size:
             f1 = np.abs(np.interp(frame_t, self._speed_t, self._speed_v)) / (2 * np.pi)
@@ -893,9 +908,17 @@ class StreamingDetector:
         for j in range(i1 - i0):
             self._rest_frames = self._rest_frames + 1 if rest[j] and not dropped[j] else 0
             if self._rest_frames >= rest_run and not silent[j]:  # no sound is no background
-                tones = np.flatnonzero(tonal[j])
-                self.background.add(cand.frequency_hz[j, tones], cand.power[j, tones])
                 learning.append(j)
+        if learning:
+            # the background's tones are all ECMA-418-1's, not only those over the gate
+            quiet = (
+                self.analyzer.candidates(psd[learning], floor=floor[learning]) if gated else cand
+            )
+            for r, j in enumerate(learning):
+                row = r if gated else j
+                tones = np.flatnonzero(quiet.tonal[row])
+                self.background.add(quiet.frequency_hz[row, tones], quiet.power[row, tones])
+        for j in range(i1 - i0):
             if dropped[j]:
                 self._dropped_run += 1
                 if self._dropped_run <= self._max_dropped:  # a glitch: the tracks hold
@@ -921,6 +944,14 @@ class StreamingDetector:
         if learning:
             self.background.add_spectrum(psd[learning, : self.analyzer.used_bins])
         return closed
+
+    def _gate(self) -> np.ndarray:
+        """Per analysed bin, the power a peak's three bins must reach to be a candidate: the
+        gate (`background_snr_db` over the background's band) less `_GATE_MARGIN_DB`."""
+        an = self.analyzer
+        bins_hz = np.arange(an.k_lo, an.k_hi + 1) * an.df
+        snr_db = self.settings.background_snr_db - _GATE_MARGIN_DB
+        return self.background.band_power(bins_hz) * 10 ** (snr_db / 10)
 
     def _note_usable(self, i0: int, dropped: np.ndarray, silent: np.ndarray) -> None:
         """Count the frames without usable sound; say once when the signal is constant."""
@@ -989,9 +1020,7 @@ class StreamingDetector:
         share = float(np.mean(np.abs(f / (r * f1) - 1.0) <= s.order_tolerance))
         if share < s.order_share:
             return None
-        r_ratio = float(np.sqrt(np.mean((f / (r * f1) - 1.0) ** 2)))
-        r_const = float(np.sqrt(np.mean((f / np.median(f) - 1.0) ** 2)))
-        floor = 0.1 * self.analyzer.df / float(np.median(f))  # a tenth of a bin
+        r_ratio, r_const, floor = _scatter(f, f1, r, self.analyzer.df)
         if r_const >= max(3 * r_ratio, floor):  # the tone moved with the speed
             self._learn_ratio(r, tr.level_sum / len(tr.hz) + self._level_offset_db)
             return r
@@ -1231,6 +1260,7 @@ def detect(
     episodes += det.flush()
     mono = _mono(samples)
     if speed_times_s is not None and speed_rad_s is not None:
+        episodes = _split_drive_ends(det, episodes, speed_times_s, speed_rad_s)
         episodes = _at_drive_ratios(det, episodes, speed_times_s, speed_rad_s)
         if mono is not None:
             episodes = _went_with_speed(det, episodes, speed_times_s, speed_rad_s, mono, t0_s)
@@ -1243,6 +1273,7 @@ def detect(
     episodes, creaks = sort_creaks(episodes, [*episodes, *det.rejected], creaks, settings.frame_s)
     if mono is not None:
         _measure_growth(episodes, [*episodes, *det.rejected], mono, det.sample_rate_hz, t0_s)
+        episodes = without_splatter(det, episodes, [*episodes, *det.rejected], mono, t0_s)
         nothing_moves = speed_rad_s is None and condition_times_s is None
         if infer_background and source in ("none", "inferred") and nothing_moves:
             episodes = _switched_on(det, episodes, n_samples / det.sample_rate_hz)
@@ -1318,6 +1349,109 @@ def _measure_growth(
         e.growth = onset_growth(
             samples, rate_hz, t0_s, e.start_s, e.track_times_s, e.track_hz, quiet_from
         )
+
+
+def without_splatter(
+    det: StreamingDetector, episodes: list[Episode], tones: list[Episode], x: Samples, t0: float
+) -> list[Episode]:
+    """The episodes less a louder tone's splatter (offline: it needs the sound after a cut).
+
+    A tone switched off or jumping to another frequency (a step, or a glide through the
+    spectrum within a few ms), or switched on at once, is cut within a frame: the frames whose
+    window holds the cut see its power spread over the spectrum (a step's falls only as 1 / d
+    at d bins from it), so a loud tone's cut is heard at other frequencies for at most a
+    frame. An episode lying within a frame (and a hop) of a cut of a louder tone heard for
+    longer than that (`tones`: episodes and rejected tracks; a shorter one may be a cut's
+    piece itself) is that cut, not a squeak of its own. A cut is the end of a tone whose level
+    at its frequency changed by `CUT_DB` or more from the frame before it to the frame after
+    it (a tone that sounds on where a track stopped following it was not cut), or the start
+    of an episode whose onset was a step (`Growth.step`; a squeak grows from the floor, and a
+    short tone beside its onset is its own). A cut squeak's episode takes the piece's span
+    (its frames were heard), another tone's cut piece is dropped.
+
+    Parameters
+    ----------
+    det : StreamingDetector
+        The detector that heard them (frame, hop, window).
+    episodes : list of Episode
+        Squeak episodes.
+    tones : list of Episode
+        Every tone tracked (the squeak episodes and the rejected ones).
+    x : Samples
+        The recording, its first sample at `t0` [s].
+    t0 : float
+        [s].
+
+    Returns
+    -------
+    list of Episode
+        The episodes that are not splatter, in their order.
+    """
+    frame_s, hop_s = det.frame_len / det.sample_rate_hz, det.hop_s
+    reach = frame_s + hop_s
+
+    def ends(o: Episode) -> list[tuple[float, float, float, float]]:
+        """(time of the cut, frequency, centre of the frame before it, of the frame after)."""
+        hz = o.track_hz[np.isfinite(o.track_hz)] if o.track_hz.size else np.zeros(0)
+        first, last = (hz[0], hz[-1]) if hz.size else (o.frequency_hz, o.frequency_hz)
+        # a loud tone is heard from the first frame holding its switch-on to the last
+        # holding its switch-off: the cut lies half a frame inside its episode
+        out = [(o.end_s, float(last), o.end_s - frame_s, o.end_s + frame_s / 2)]
+        if o.growth is not None and o.growth.step:  # switched on; a growing one is not cut
+            out.append((o.start_s, float(first), o.start_s - frame_s / 2, o.start_s + frame_s))
+        return out
+
+    sources = [(o, ends(o)) for o in tones if o.duration_s > reach]
+    cuts: dict[tuple[int, int], bool] = {}
+
+    def cut(o: Episode, k: int, hz: float, before: float, after: float) -> bool:
+        if (id(o), k) not in cuts:
+            levels = _levels_at(det, x, t0, hz, (before, after))
+            cuts[id(o), k] = levels is not None and abs(levels[1] - levels[0]) >= CUT_DB
+        return cuts[id(o), k]
+
+    def cut_by(e: Episode) -> Episode | None:
+        for o, marks in sources:
+            for k, (at, hz, before, after) in enumerate(marks):
+                if o is e or not (at - reach <= e.start_s and e.end_s <= at + reach):
+                    continue
+                if e.level_db < o.level_db and cut(o, k, hz, before, after):
+                    return o
+        return None
+
+    kept = []
+    for e in episodes:
+        o = cut_by(e)
+        if o is None:
+            kept.append(e)
+        elif any(o is k for k in episodes):  # its frames are the cut squeak's
+            o.start_s, o.end_s = min(o.start_s, e.start_s), max(o.end_s, e.end_s)
+    return kept
+
+
+def _levels_at(
+    det: StreamingDetector, x: Samples, t0: float, hz: float, centres_s: tuple[float, ...]
+) -> list[float] | None:
+    """The level [dB] of the tone at `hz` [Hz] (the strongest of its bin and two each side,
+    the detector's frame and window) in frames centred at `centres_s` [s]; None where a frame
+    leaves the recording or holds non-finite samples."""
+    n, rate = det.frame_len, det.sample_rate_hz
+    k = np.arange(n) / rate
+    near = hz + det.analyzer.df * np.arange(-2, 3)
+    basis = (hann(n)[:, None] * np.exp(-2j * np.pi * near[None, :] * k[:, None])).astype(
+        np.complex64
+    )
+    out = []
+    for c in centres_s:
+        a = int(round((c - t0) * rate)) - n // 2
+        if a < 0 or a + n > x.size:
+            return None
+        frame = np.asarray(x[a : a + n], dtype=np.float32)
+        if not np.all(np.isfinite(frame)):
+            return None
+        power = np.abs(frame @ basis) ** 2
+        out.append(float(10 * np.log10(max(float(power.max()), 1e-300))))
+    return out
 
 
 def with_harmonics(episodes: list[Episode], max_harmonic: int, tolerance: float) -> list[Episode]:
@@ -1398,6 +1532,76 @@ def _at_drive_ratios(
         else:
             kept.append(ep)
     return _recurring_ratios(det, kept, t, v)
+
+
+def _split_drive_ends(
+    det: StreamingDetector, episodes: list[Episode], speed_times_s: Any, speed_rad_s: Any
+) -> list[Episode]:
+    """The episodes with a drive tone's sweep split off their start or end: a track that
+    followed r |speed| / 2 pi at one ratio r (within twice `order_tolerance`, at least
+    `min_duration_s` of frames, its frequencies moving with the speed: r_const >= 3 r_ratio,
+    module notes) and then went on at
+    frequencies off that path (beyond twice `order_tolerance` in `order_share` of its frames),
+    or came from there onto it, is two
+    sounds met where the drive's tone swept through the other's frequency (the tracker follows
+    the nearest). The drive's part is rejected as drive noise (`drive_ratio` r), the rest is
+    an episode of its own from the frame it left the path."""
+    tol = det.settings.order_tolerance
+    try:
+        t = np.asarray(speed_times_s, dtype=float).reshape(-1)
+        v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
+    except (TypeError, ValueError):
+        return episodes
+    if tol <= 0 or t.size != v.size or t.size < 2:
+        return episodes
+    need = max(det._min_frames, 3)
+    out = []
+    for ep in episodes:
+        ok = np.flatnonzero(np.isfinite(ep.track_hz))
+        f1 = np.interp(ep.track_times_s[ok], t, v) / (2 * np.pi)
+        if ok.size < 2 * need or np.any(f1 <= 0):
+            out.append(ep)
+            continue
+        hz = ep.track_hz[ok]
+        split = None
+        for forward in (True, False):  # a sweep at its start, at its end
+            f, speed = (hz, f1) if forward else (hz[::-1], f1[::-1])
+            r = f / speed
+            lo, hi = np.minimum.accumulate(r), np.maximum.accumulate(r)
+            m = int(np.argmin(hi <= lo * (1 + 2 * tol)))  # the first frame off one ratio
+            if m < need or m > r.size - need:
+                continue
+            rm = float(np.median(r[:m]))
+            r_ratio, r_const, floor = _scatter(f[:m], speed[:m], rm, det.analyzer.df)
+            left = np.mean(np.abs(r[m:] / rm - 1) > 2 * tol) >= det.settings.order_share
+            if left and r_const >= max(3 * r_ratio, floor):  # it moved with the speed, then not
+                split = (m, rm) if forward else (r.size - m, -rm)
+                break
+        if split is None:
+            out.append(ep)
+            continue
+        m, rm = split
+        cut = det.hop_s / 2
+        i = ok[m]  # the first frame of the second part
+        head = replace(
+            ep,
+            end_s=float(ep.track_times_s[i - 1] + cut),
+            track_times_s=ep.track_times_s[:i],
+            track_hz=ep.track_hz[:i],
+            frequency_hz=float(np.nanmedian(ep.track_hz[:i])),
+        )
+        tail = replace(
+            ep,
+            start_s=float(ep.track_times_s[i] - cut),
+            track_times_s=ep.track_times_s[i:],
+            track_hz=ep.track_hz[i:],
+            frequency_hz=float(np.nanmedian(ep.track_hz[i:])),
+        )
+        drive, other = (head, tail) if rm > 0 else (tail, head)
+        drive.drive_ratio = abs(rm)
+        det.rejected.append(drive)
+        out.append(other)
+    return out
 
 
 def _went_with_speed(

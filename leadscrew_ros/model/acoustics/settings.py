@@ -101,7 +101,9 @@ class DetectorSettings:
     max_peaks: int = setting(
         8,
         "1",
-        "spectral peaks evaluated per frame (those with the largest TNR against its limit)",
+        "spectral peaks evaluated per frame before a background is learned (the largest TNR "
+        "against its limit; and every peak within 3 dB of its limit); with one, every peak "
+        "through its gate",
         1,
         64,
     )

@@ -21,11 +21,13 @@ interpolated peak leans to (ECMA sums the neighbours within 10 dB that keep fall
 10 Hz bins leaves up to 5 % of an off-bin tone's power in the noise and caps the TNR near
 13 dB), and the noise density excludes exactly those bins (ECMA: "the bandwidth of the tone",
 which MOSQITO takes as one bin); the tone candidates are the local
-maxima with the largest TNR against its limit (a cheap three-bin TNR ranks them), at most
-`max_peaks` per frame; a
-candidate with a stronger candidate inside its critical band is suppressed (ECMA: only the
-highest tone of a band, which also removes the Hann side lobes of a strong tone); the hearing
-threshold screening of ECMA is not applied (levels need not be calibrated).
+maxima with the largest TNR against its limit (a cheap three-bin TNR ranks them), `max_peaks`
+per frame and every one within 3 dB of its limit (given a gate, `candidates`' `reference`:
+every peak through it, and only those); a candidate with a stronger candidate inside its
+critical band is suppressed (ECMA: only the highest tone of a band, which also removes the
+Hann side lobes of a strong tone; with a gate, also one under a stronger one's side lobes
+anywhere: `hann_leakage`); the hearing threshold screening of ECMA is not applied (levels need
+not be calibrated).
 """
 
 from __future__ import annotations
@@ -38,6 +40,29 @@ import scipy.fft
 #: Below this the lower adjacent band of the PR is cut at 20 Hz and scaled to 100 Hz (D.9).
 PR_LOW_HZ = 171.4
 _TINY = 1e-30
+#: A peak whose three-bin TNR is this far (3 dB) under its limit cannot reach it.
+_NEAR_LIMIT = 10 ** (-3 / 10)
+#: A tone of its own stands 10 dB over a stronger tone's window leakage at its distance.
+_LEAKAGE_MARGIN = 10.0
+
+
+def hann_leakage(offset_bins: np.ndarray) -> np.ndarray:
+    """Envelope of the Hann window's side lobes at `offset_bins` from a tone, as a power
+    ratio to its peak: (pi x (x^2 - 1))^-2 (-32 dB at 2.5 bins, -18 dB per octave beyond),
+    1 inside the main lobe (|x| < 2).
+
+    Parameters
+    ----------
+    offset_bins : numpy.ndarray
+        Distance from the tone [bins].
+
+    Returns
+    -------
+    numpy.ndarray
+        Power ratio.
+    """
+    x = np.maximum(np.abs(np.asarray(offset_bins, dtype=float)), 2.0)
+    return np.where(x > 2.0, (np.pi * x * (x * x - 1.0)) ** -2, 1.0)
 
 
 def tnr_limit_db(f_hz: np.ndarray | float) -> np.ndarray:
@@ -153,7 +178,7 @@ def short_time_psd(
 
 @dataclass
 class ToneCandidates:
-    """Tone candidates of each frame: (frames, max_peaks) arrays, strongest first is not
+    """Tone candidates of each frame: (frames, peaks) arrays, strongest first is not
     guaranteed; entries with `valid` False are padding (no peak there)."""
 
     frequency_hz: np.ndarray  #: interpolated peak frequency [Hz]
@@ -180,7 +205,7 @@ class ToneAnalyzer:
         Highest tone frequency considered [Hz], lowered to the highest bin whose critical band
         lies below the Nyquist frequency (`self.f_hi_hz`).
     max_peaks : int
-        Peaks evaluated per frame.
+        Peaks evaluated per frame at least without a gate (`candidates`).
     harmonic_tolerance : float
         Relative tolerance of the harmonic test.
     max_harmonic : int
@@ -239,11 +264,27 @@ class ToneAnalyzer:
         """No bin in the analysed range (the sample rate is too low for it)."""
         return self.k_hi < self.k_lo
 
-    def candidates(self, psd: np.ndarray, floor: np.ndarray | None = None) -> ToneCandidates:
+    def candidates(
+        self,
+        psd: np.ndarray,
+        floor: np.ndarray | None = None,
+        reference: np.ndarray | None = None,
+    ) -> ToneCandidates:
         """The tone candidates of every frame of `psd` (frames, bins), see `ToneCandidates`.
 
-        `floor` (per frame, mean square [unit^2]): peaks weaker than it are no candidates, so
-        that rounding noise never takes a candidate's place (`max_peaks`) from a real tone."""
+        Parameters
+        ----------
+        psd : numpy.ndarray
+            (frames, bins) short-time spectra (`short_time_psd`).
+        floor : numpy.ndarray, optional
+            Per frame, mean square [unit^2]: peaks weaker than it are no candidates, so that
+            rounding noise never takes a candidate's place (`max_peaks`) from a real tone.
+        reference : numpy.ndarray, optional
+            Per analysed bin (`k_lo` .. `k_hi`), mean square [unit^2] a peak's three bins must
+            reach (a gate: the background's band power and an SNR). Given, the candidates are
+            every peak through it and only those, however many. Without it, the `max_peaks`
+            peaks with the largest TNR against its limit, and every peak within 3 dB of it.
+        """
         n_frames = psd.shape[0]
         n_peaks = min(self.max_peaks, max(self.k_hi - self.k_lo + 1, 0))
         if n_frames == 0 or n_peaks == 0:
@@ -263,6 +304,12 @@ class ToneAnalyzer:
         if floor is not None:
             peak &= tone3 >= np.asarray(floor, dtype=np.float64)[:, None]
         score = np.where(peak, tone3 / (density * self._rank_scale), 0.0)
+        if reference is None:  # the `max_peaks` best, and every peak that can be prominent
+            n_peaks = max(n_peaks, int(np.count_nonzero(score >= _NEAR_LIMIT, axis=1).max()))
+        else:  # every peak through the gate, and only those
+            score = np.where(tone3 >= reference, score, 0.0)
+            n_peaks = max(int(np.count_nonzero(score, axis=1).max()), 1)
+        n_peaks = min(n_peaks, score.shape[1])
         if n_peaks < score.shape[1]:
             rel = np.argpartition(-score, n_peaks - 1, axis=1)[:, :n_peaks]
         else:
@@ -313,11 +360,35 @@ class ToneAnalyzer:
             (p0[:, :, None] == p0[:, None, :]) & (rel[:, :, None] < rel[:, None, :])
         )
         inside = (fi >= self.f1[rel][:, None, :]) & (fi <= self.f2[rel][:, None, :])
-        valid &= ~np.any(valid[:, :, None] & stronger & inside, axis=1)
+        if reference is None:
+            valid &= ~np.any(valid[:, :, None] & stronger & inside, axis=1)
+        else:  # anything stronger in the band, not only a candidate; and a loud tone's leakage
+            gap = np.abs(k[:, :, None] - k[:, None, :])
+            leak = p0[:, None, :] < p0[:, :, None] * hann_leakage(gap) * _LEAKAGE_MARGIN
+            valid &= ~np.any(valid[:, :, None] & stronger & leak, axis=1)
+            valid &= ~self._louder_in_band(p, k, p0, valid)
         prominent = valid & ((tnr >= self.tnr_limit[rel]) | (pr >= self.pr_limit[rel]))
         tonal = prominent.copy()
         prominent = self.without_harmonics(freq, tone, prominent)
         return ToneCandidates(freq, tone, tnr, pr, valid, prominent, tonal)
+
+    def _louder_in_band(
+        self, p: np.ndarray, k: np.ndarray, p0: np.ndarray, which: np.ndarray
+    ) -> np.ndarray:
+        """(frames, peaks): where a bin of the peak's critical band is above its peak bin
+        (evaluated where `which`)."""
+        out = np.zeros(which.shape, bool)
+        f, c = np.nonzero(which)
+        if f.size == 0:
+            return out
+        kk = k[f, c]
+        a, b = self.a[kk - self.k_lo], self.b[kk - self.k_lo]  # the band's bins: a .. b - 1
+        n = np.maximum(b - a, 1)
+        starts = np.concatenate([[0], np.cumsum(n)[:-1]])
+        bins = np.repeat(a - starts, n) + np.arange(int(n.sum()))
+        top = np.maximum.reduceat(p[np.repeat(f, n), bins], starts)
+        out[f, c] = top > p0[f, c]
+        return out
 
     def without_harmonics(self, freq: np.ndarray, tone: np.ndarray, kept: np.ndarray) -> np.ndarray:
         """`kept` (frames, peaks) less the candidates at m = 2..`max_harmonic` times a kept
