@@ -578,6 +578,27 @@ def test_a_drive_sweep_the_tracker_followed_onto_a_squeak_is_split_off():
     assert swept and all(r.drive_ratio == pytest.approx(30.0, rel=0.01) for r in swept)
 
 
+def test_a_second_track_of_a_rejected_tone_is_that_tone():
+    """The drive's order 2 held at 123 Hz beside louder hum at 100 Hz (a bench of seed 31):
+    for 60 ms its peak split in two and a second track ran beside the rejected one, within 2 %
+    of it. It is that tone (rejected with its ratio); a tone 3 % off it, or outside its span,
+    is not."""
+    from leadscrew_ros.model.acoustics.detection import Episode, _inside_rejected
+
+    def track(start, end, hz, **kw):
+        tt = np.arange(start + 0.005, end, 0.01)
+        return Episode(start, end, hz, 10.0, 10.0, -50.0, track_times_s=tt,
+                       track_hz=np.full(tt.size, hz), **kw)  # fmt: skip
+
+    det = StreamingDetector(DetectorSettings(), FS)
+    order = track(6.345, 7.555, 119.8, drive_ratio=6.577)
+    det.rejected.append(order)
+    second, off, after = track(7.095, 7.155, 121.8), track(7.0, 7.1, 123.5), track(7.5, 7.6, 120)
+    kept = _inside_rejected(det, [second, off, after])
+    assert kept == [off, after]
+    assert det.rejected[-1] is second and second.drive_ratio == 6.577
+
+
 def test_a_squeaks_harmonics_belong_to_its_episode():
     """A squeak at 700 Hz with its 2nd and 3rd harmonics, the 2nd louder than the fundamental
     from 0.9 s on (a frame then holds the harmonic stronger: not suppressed as one, it was a

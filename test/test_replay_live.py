@@ -162,13 +162,25 @@ class Replay(threading.Thread):
             self.error = exc
 
 
+def settle(c: Collector, quiet_s: float = 0.3, timeout: float = 10.0) -> None:
+    """Let the last messages of a stream in: spin until none has come for `quiet_s` (on a
+    loaded machine they lag behind the publisher's end by more than a fixed wait)."""
+    deadline = time.monotonic() + timeout
+    received = -1
+    while received != (received := sum(len(v) for v in c.got.values())):
+        if time.monotonic() > deadline:
+            return
+        c.spin_for(quiet_s)
+
+
 def replay(c: Collector, files: list[Path], timeout: float = 15.0, **kwargs) -> Replay:
-    """Run a replay to its end while the collector spins; then let the last messages in."""
+    """Run a replay to its end while the collector spins; then let the last messages in (until
+    none has come for 0.3 s)."""
     r = Replay(files, **kwargs)
     r.start()
     c.spin_until(lambda: not r.is_alive(), timeout, "the replay to end")
     r.join()
-    c.spin_for(0.2)
+    settle(c)
     if r.error is not None:
         raise r.error
     return r
@@ -429,7 +441,7 @@ def test_loop_repeats_until_sigint_then_exits_cleanly(log, collector, tmp_path):
     )
     proc.send_signal(signal.SIGINT)
     out, stderr = finish(proc, err)
-    c.spin_for(0.2)
+    settle(c)
     assert proc.returncode == 0 and "Traceback" not in stderr, (out, stderr)
     got = c.messages(topic)
     passes = len(got) // STEPS
@@ -454,7 +466,7 @@ def test_sigterm_stops_a_replay_cleanly_before_its_end(log, collector, tmp_path)
     # a stall, not a speed: fewer than all messages (below) shows it stopped before its end;
     # the exit (rclpy shutdown, coverage) took 2.35 s on a loaded machine
     assert time.monotonic() - t0 < 15.0
-    c.spin_for(0.2)
+    settle(c)
     assert proc.returncode == 0 and "Traceback" not in stderr, (out, stderr)  # asked: success
     lines = out.splitlines()
     n = len(c.got[topic])

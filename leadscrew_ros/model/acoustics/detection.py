@@ -1264,6 +1264,7 @@ def detect(
         episodes = _at_drive_ratios(det, episodes, speed_times_s, speed_rad_s)
         if mono is not None:
             episodes = _went_with_speed(det, episodes, speed_times_s, speed_rad_s, mono, t0_s)
+    episodes = _inside_rejected(det, episodes)
     episodes = with_harmonics(episodes, settings.max_harmonic, settings.track_tolerance)
     creaks = (
         find_creaks(mono, det.sample_rate_hz, t0_s=t0_s, scale_pa=scale_pa, settings=settings)
@@ -1602,6 +1603,41 @@ def _split_drive_ends(
         det.rejected.append(drive)
         out.append(other)
     return out
+
+
+def _inside_rejected(det: StreamingDetector, episodes: list[Episode]) -> list[Episode]:
+    """The episodes less the second tracks of a rejected tone: an episode whose span lies
+    within a rejected track's (drive noise or background) and whose frequency stays within
+    `track_tolerance` of that track's over it is the same tone, its peak split in two for a
+    few frames (a neighbouring tone's leakage, beating), not a squeak; it is rejected as that
+    tone was."""
+    tol = det.settings.track_tolerance
+    tones = []
+    for r in det.rejected:
+        ok = np.isfinite(r.track_hz)
+        if np.count_nonzero(ok) >= 2:
+            tones.append((r, r.track_times_s[ok], r.track_hz[ok]))
+    kept = []
+    for e in episodes:
+        ok = np.isfinite(e.track_hz)
+        same = None
+        for r, rt, rf in tones:
+            if not (r.start_s <= e.start_s and e.end_s <= r.end_s) or not ok.any():
+                continue
+            along = np.interp(e.track_times_s[ok], rt, rf)
+            if np.all(np.abs(e.track_hz[ok] / along - 1.0) <= tol):
+                same = r
+                break
+        if same is None:
+            kept.append(e)
+        else:
+            e.drive_ratio, e.order, e.background_hz = (
+                same.drive_ratio,
+                same.order,
+                same.background_hz,
+            )
+            det.rejected.append(e)
+    return kept
 
 
 def _went_with_speed(
