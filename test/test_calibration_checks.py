@@ -361,3 +361,49 @@ def test_the_growth_rate_match_counts_onsets_near_the_predicted_growth_rate():
         valid=speed > 0, onsets=[(0.3, sigma, sigma)],
     )  # fmt: skip
     assert growth_match(ScrewParameters(), weak) == (0, 0)
+
+
+# ------------------------------------------------------------------ the reported population
+def test_the_reported_fit_shares_the_bench_hearing_with_the_held_out_units(monkeypatch):
+    """Step 7 fits every calibrated unit, the held-out ones too: each enters with its samples
+    re-weighted to the bench's hearing learned from the others, as the training units did,
+    not with its samples under the grid's prior (a unit of another bench). Held-out unit a
+    cannot tell the threshold (half its samples with each cell); b and c favour cell 1 9:1.
+    When that fit fails, the training units' state stays."""
+    from leadscrew_ros.model.calibration.amplitude import HearingPrior
+    from leadscrew_ros.review.calibration import run as run_module
+
+    settings = CalibrationSettings(hearing=HearingPrior(threshold_points=2, depth_points=1))
+    n = 4000
+    x = np.linspace(0.0, 1.0, n)
+
+    def unit(uid: str, weights: np.ndarray, held_out: bool = False) -> UnitResult:
+        post = UnitPosterior(
+            uid, (uid,), "calibrated", ("x",), x[:, None], {"x": float(n)}, True, 0, 0, 0.0,
+            None, True, weights,  # type: ignore[arg-type]
+        )  # fmt: skip
+        return UnitResult(uid, [uid], "calibrated", post, post, held_out=held_out)
+
+    a = unit("a", np.column_stack([x < 0.5, x >= 0.5]).astype(float), held_out=True)
+    b, c = (unit(u, np.tile([0.1, 0.9], (n, 1))) for u in "bc")
+    run = _run("paper", _population(np.zeros((10, 8))), [a, b, c])
+    trained = run.hearing = np.zeros((1, 2))  # stands for the training units' bench
+    entered: list[dict[str, UnitPosterior]] = []
+    outcome: list = [RuntimeError("the fit of all units failed")]
+
+    def fit(runs, unit_sets, _settings, _client):
+        entered.append({u.unit_id: u.posterior for u in unit_sets[0]})
+        return outcome
+
+    monkeypatch.setattr(run_module, "_fit_populations", fit)
+    run_module._populations_of_all([run], settings, None)
+    assert set(entered[0]) == {"a", "b", "c"}
+    # a's samples re-weighted 81:1 towards the cell b and c favour
+    assert np.mean(entered[0]["a"].samples[:, 0] >= 0.5) == pytest.approx(81 / 82, abs=0.01)
+    assert run.hearing is trained and a.posterior is a.sampled  # the failed fit changed nothing
+    assert "with all units: RuntimeError" in run.population_status
+    outcome[0] = (_population(np.zeros((10, 8))), [a.sampled, b.sampled, c.sampled], "calibrated")
+    run_module._populations_of_all([run], settings, None)
+    cell1 = float(np.exp(run.hearing).ravel()[1])  # the bench's hearing from all three (a: 1:1)
+    assert cell1 == pytest.approx(0.9**2 / (0.9**2 + 0.1**2), rel=1e-9)
+    assert np.mean(a.posterior.samples[:, 0] >= 0.5) == pytest.approx(81 / 82, abs=0.01)

@@ -309,3 +309,26 @@ def test_the_population_refuses_units_of_another_prior(fleet):
         fit_population(fleet[1], SqueakModel(NOMINAL.with_(mu_static=0.3)), FAST)
     with pytest.raises(CalibrationError, match="another model's prior"):
         fit_population(fleet[1], SqueakModel(NOMINAL, Scatter({**Scatter().sd, "mu_static": 0.1})))
+
+
+def test_a_units_hierarchical_posterior_averages_the_populations_each_normalised():
+    """p(u | all) is the mean over hyper draws of p(u | phi, its data), each normalised: two
+    equally likely populations N(-1, 0.5^2) and N(+1, 0.5^2), a unit whose likelihood is
+    N(u; 0.8, 0.5^2) sampled under the interim N(0, 2^2). Given each population the unit's
+    posterior is N((mu + 0.8) / 2, 1/8): -0.1 and 0.9, so the mixture's mean is 0.4 and its
+    variance 1/8 + 0.25. Weighting each population by how well it fits the unit (unnormalised
+    ratios) counts its data twice and gives ~0.86, the nearer population's alone."""
+    from leadscrew_ros.model.calibration.population import HyperModel, reweighted
+
+    names = ("modal_damping",)
+    prior = Prior(NOMINAL, Scatter(), names)
+    rng = np.random.default_rng(7)
+    var = 1.0 / (1.0 / 4.0 + 1.0 / 0.25)  # the unit's posterior under the interim prior
+    u = (0.8 / 0.25 * var + np.sqrt(var) * rng.standard_normal(200_000))[:, None]
+    log_own = -0.5 * (u[:, 0] / 2.0) ** 2
+    model = HyperModel(prior, 2.0, u[None, :1000], log_own[None, :1000])
+    hyper = np.array([[-1.0, np.log(0.5)], [1.0, np.log(0.5)]])
+    w = reweighted(model, hyper, u, log_own)
+    mean = float(w @ u[:, 0])
+    assert mean == pytest.approx(0.4, abs=0.01)
+    assert float(w @ (u[:, 0] - mean) ** 2) == pytest.approx(1.0 / 8.0 + 0.25, abs=0.01)

@@ -161,8 +161,18 @@ class HyperModel:
 def reweighted(
     model: HyperModel, hyper: np.ndarray, u: np.ndarray, log_own: np.ndarray
 ) -> np.ndarray:
-    """Normalised weights of one unit's samples for its population-informed posterior:
-    w_s proportional to the mean over hyper draws of p(u_s | phi) / p_own(u_s).
+    """Normalised weights of one unit's samples for its population-informed posterior
+    p(u | all data), the mean over hyper draws phi of p(u | phi, its data).
+
+    With r_s(phi) = p(u_s | phi) / p_own(u_s),
+
+        w_s = mean over phi of  r_s(phi) / sum_s' r_s'(phi)
+
+    Each draw's weights are normalised before they are averaged: p(u | phi, its data) is the
+    unit's likelihood times p(u | phi) over their integral E(phi) (the sum of r). Averaging r
+    unnormalised weighs each draw by E(phi) as well, the unit's own data counted a second time
+    beside the hyper-posterior that holds them already: the draws that fit this unit best
+    (for a unit near the centre, the narrow populations) decide its posterior.
 
     Parameters
     ----------
@@ -180,6 +190,7 @@ def reweighted(
     numpy.ndarray
         (S,) weights summing to 1.
     """
-    log_w = logsumexp(model.log_density(hyper, u), axis=0) - log_own
+    ratio = model.log_density(hyper, u) - log_own  # (H, S)
+    log_w = logsumexp(ratio - logsumexp(ratio, axis=1, keepdims=True), axis=0)
     w = np.exp(log_w - log_w.max())
     return w / w.sum()

@@ -265,8 +265,8 @@ def text(result: CalibrationResult, out: Path | None = None) -> str:
     if run.hearing is not None:
         g = result.settings.hearing.summary(run.hearing)
         lines.append(
-            "bench hearing (the observation model's grid, from the training units; prior mean "
-            "+- SD): "
+            "bench hearing (the observation model's grid, from the units of the population; "
+            "prior mean +- SD): "
             + "; ".join(
                 f"{label} {v['mean']:.0f} dB [{v['q05']:.0f}, {v['q95']:.0f}] "
                 f"(prior {v['prior_mean']:.0f} +- {v['prior_sd']:.0f})"

@@ -456,7 +456,8 @@ def fit_population(
     The hyper-posterior (`model.calibration.population`) is sampled with emcee from the units
     that learned something (each with `population_samples` of its samples, evenly spaced);
     every unit's samples are then reweighted by p(theta | population) / p(theta | its prior),
-    averaged over `hyper_draws` hyper-posterior draws, and resampled (seeded per unit).
+    normalised per draw and averaged over `hyper_draws` hyper-posterior draws
+    (`population.reweighted`), and resampled (seeded per unit).
 
     Parameters
     ----------
