@@ -32,19 +32,6 @@ from collections.abc import Callable, Sequence
 from ..bag.logfile import LogError
 from ..model.physics.parameters import ParameterError
 from ..model.squeak_model import OperatingPointError
-from . import (
-    bench,
-    calibrate,
-    figures,
-    fleet,
-    guard,
-    logs,
-    model,
-    recording,
-    remote,
-    ros,
-    transient,
-)
 from .args import PROG, CliError, Parser, common_parser
 
 __all__ = ["CliError", "build_parser", "main", "split_ros_args"]
@@ -61,6 +48,22 @@ def build_parser() -> Parser:
     Parser
         Its parsed namespace has `run`, the command's function.
     """
+    # the command groups here, not at import: a spawned worker re-runs the console script,
+    # which imports this package, and needs none of them
+    from . import (
+        bench,
+        calibrate,
+        figures,
+        fleet,
+        guard,
+        logs,
+        model,
+        recording,
+        remote,
+        ros,
+        transient,
+    )
+
     common = [common_parser()]
     parser = Parser(
         prog=PROG,
