@@ -1538,15 +1538,15 @@ def _at_drive_ratios(
 def _split_drive_ends(
     det: StreamingDetector, episodes: list[Episode], speed_times_s: Any, speed_rad_s: Any
 ) -> list[Episode]:
-    """The episodes with a drive tone's sweep split off their start or end: a track that
-    followed r |speed| / 2 pi at one ratio r (within twice `order_tolerance`, at least
-    `min_duration_s` of frames, its frequencies moving with the speed: r_const >= 3 r_ratio,
-    module notes) and then went on at
-    frequencies off that path (beyond twice `order_tolerance` in `order_share` of its frames),
-    or came from there onto it, is two
-    sounds met where the drive's tone swept through the other's frequency (the tracker follows
-    the nearest). The drive's part is rejected as drive noise (`drive_ratio` r), the rest is
-    an episode of its own from the frame it left the path."""
+    """The episodes with a drive tone's sweep split off their start or end.
+
+    A track that followed r |speed| / 2 pi at one ratio r (within twice `order_tolerance`, at
+    least `min_duration_s` of frames, its frequencies moving with the speed: r_const >= 3
+    r_ratio, module notes) and then went on at frequencies off that path (beyond twice
+    `order_tolerance` in `order_share` of its frames), or came from there onto it, is two
+    sounds met where the drive's tone swept through the other's frequency (the tracker
+    follows the nearest). The drive's part is rejected as drive noise (`drive_ratio` r), the
+    rest is an episode of its own from the frame it left the path."""
     tol = det.settings.order_tolerance
     try:
         t = np.asarray(speed_times_s, dtype=float).reshape(-1)
@@ -1621,8 +1621,8 @@ def _inside_rejected(det: StreamingDetector, episodes: list[Episode]) -> list[Ep
     for e in episodes:
         ok = np.isfinite(e.track_hz)
         same = None
-        for r, rt, rf in tones:
-            if not (r.start_s <= e.start_s and e.end_s <= r.end_s) or not ok.any():
+        for r, rt, rf in tones if ok.any() else []:
+            if not r.start_s <= e.start_s <= e.end_s <= r.end_s:
                 continue
             along = np.interp(e.track_times_s[ok], rt, rf)
             if np.all(np.abs(e.track_hz[ok] / along - 1.0) <= tol):
