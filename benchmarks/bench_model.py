@@ -8,9 +8,10 @@ Prints a Markdown table: (1) one operating-point update, `SqueakModel.predict`, 
 scatter (P(squeak) from 1024 samples) on random operating points; (2) the throughput of a
 speed x load map with `growth_field` against bare batched `numpy.linalg.eigvals` on the same
 pre-built matrices, and against a naive map that integrates the contact again at every point;
-(3) the uncached geometry precompute. `--profile` adds where the time of `predict` with scatter
-goes, and its eigen-solve against issue 23's eigenvalues-first alternative (`inverse_iteration`)
-for one point and for the batch path. Calls being compared alternate within each round, so a
+(3) the uncached geometry precompute. `--profile` adds the budget of `predict` with scatter
+(what it needs beside the eigen-solve, `bench_budget`), where its time goes, and its
+eigen-solve against issue 23's eigenvalues-first alternative (`inverse_iteration`) for one point
+and for the batch path. Calls being compared alternate within each round, so a
 load change on the machine hits both; ratios are medians of the per-round ratios. See
 benchmarks/README.md.
 """
@@ -448,6 +449,43 @@ def bench_eigen_paths(model: SqueakModel, rounds: int) -> str:
     )
 
 
+def bench_budget(model: SqueakModel, rounds: int) -> str:
+    """What `predict` with scatter has to spend beside its eigen-solve, interleaved at the
+    random points against a bare `numpy.linalg.eig`: the LAPACK calls it cannot skip (`dgeev`
+    with right vectors for the labels, `dgesv` for the estimate's left vectors), `predict`
+    without scatter (state matrix, eigen-solve, labels, `Prediction`: no estimate at all) and
+    with the default scatter. The target's margin over the first row is what the estimate, the
+    state matrix and the labels may take together."""
+    n, points = model.geometry.n, random_points()
+    mats = [model.state_matrix(s, f) for s, f in points]
+    bare_model = model.with_scatter(Scatter({}))
+
+    def lapack_only(a):
+        e = eig_both(a, False)
+        return left_rows(e.vr, e.osc, n)
+
+    fns = {
+        "bare `numpy.linalg.eig`": lambda: [np.linalg.eig(a) for a in mats],
+        "the LAPACK calls `predict` with scatter needs (`dgeev` right vectors + `dgesv` "
+        "for the left ones)": lambda: [lapack_only(a) for a in mats],
+        "`predict` without scatter (no estimate)": lambda: [
+            bare_model.predict(s, f) for s, f in points
+        ],
+        "`predict` with the default scatter": lambda: [model.predict(s, f) for s, f in points],
+    }
+    wall, _ = interleaved(fns, rounds)
+    bare = wall["bare `numpy.linalg.eig`"]
+    rows = [
+        f"| {name} | {median(t) / len(mats) * 1e6:.1f} µs | {paired_ratio(t, bare):.2f}× |"
+        for name, t in wall.items()
+    ]
+    return (
+        f"The budget of `predict` with scatter ({len(mats)} random points, {rounds} interleaved "
+        f"rounds; target ≤ {TARGET_SCATTER_RATIO}× a bare `eig`):\n\n"
+        "| calls | per point | / bare `eig` |\n|---|---:|---:|\n" + "\n".join(rows)
+    )
+
+
 def bench_paced(model: SqueakModel, rounds: int, period_s: float = 0.005) -> str:
     """`predict` at the random points back to back against the same calls with a pause of one
     200 Hz input period before each (sleeping, as a node between its inputs, or spinning):
@@ -755,6 +793,7 @@ def main(argv: list[str] | None = None) -> int:
         res["env"]["load_avg_1min_end"] = os.getloadavg()[0]
         print(table(res))
     if args.profile:
+        print("\n" + bench_budget(model, cfg["point_rounds"]))
         print("\n" + profile_predict(model))
         print("\n" + bench_eigen_paths(model, cfg["point_rounds"]))
         print("\n" + bench_paced(model, cfg["point_rounds"]))
