@@ -129,3 +129,30 @@ def test_low_sample_rate_limits_the_band():
     an = ToneAnalyzer(16000, 1600, 89.1, 11200.0, 8)
     assert 6000 < an.f_hi_hz < 8000
     assert ToneAnalyzer(1000, 100, 89.1, 11200.0, 8).f_hi_hz < 500
+
+
+def test_a_gate_measures_its_peaks_as_without_one():
+    """With a gate the band powers are summed at the peaks through it only, without one from
+    the cumulative sum over every bin: the same peaks get the same frequency, power, TNR, PR
+    and verdicts (six tones of 10 to 30 dB in noise, a gate below all of them)."""
+    rng = np.random.default_rng(7)
+    t = np.arange(2 * FS) / FS
+    tones = [(224.0, 10.0), (898.0, 20.0), (1503.7, 30.0), (2653.0, 15.0), (4100.0, 25.0)]
+    x = rng.normal(0.0, 0.01, t.size)
+    for f, snr in tones + [(7020.5, 12.0)]:
+        x += 0.01 * np.sqrt(2.0) * 10 ** (snr / 20) * np.sin(2 * np.pi * f * t)
+    psd = short_time_psd(x.astype(np.float32), FS, 4800, 480)
+    an = ToneAnalyzer(FS, 4800, 89.1, 11200.0, 8)
+    ungated = an.candidates(psd)
+    gate = np.full(an.k_hi - an.k_lo + 1, 1e-5)  # a tone of 10 dB here: 1.6e-4
+    gated = an.candidates(psd, reference=gate)
+    for j in range(psd.shape[0]):
+        mine = {round(f, 6): i for i, f in enumerate(gated.frequency_hz[j]) if gated.valid[j, i]}
+        theirs = np.flatnonzero(ungated.valid[j] & ungated.tonal[j])
+        assert len(theirs) == 6
+        for i in theirs:  # every tonal peak without a gate is through it, measured alike
+            k = mine[round(ungated.frequency_hz[j, i], 6)]
+            assert gated.power[j, k] == ungated.power[j, i]
+            assert gated.tnr_db[j, k] == pytest.approx(ungated.tnr_db[j, i], abs=1e-9)
+            assert gated.pr_db[j, k] == pytest.approx(ungated.pr_db[j, i], abs=1e-9)
+            assert gated.tonal[j, k] and gated.prominent[j, k] == ungated.prominent[j, i]

@@ -46,6 +46,33 @@ _NEAR_LIMIT = 10 ** (-3 / 10)
 _LEAKAGE_MARGIN = 10.0
 
 
+def _columns(selected: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The selected columns of each row of `selected` (rows, columns), in order, padded to
+    the most any row has (at least one): (columns, valid), both (rows, width)."""
+    counts = np.count_nonzero(selected, axis=1)
+    width = max(int(counts.max(initial=0)), 1)
+    f, c = np.nonzero(selected)
+    place = np.arange(f.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    columns = np.zeros((selected.shape[0], width), np.int64)
+    valid = np.zeros((selected.shape[0], width), bool)
+    columns[f, place] = c
+    valid[f, place] = True
+    return columns, valid
+
+
+def _band_sums(p: np.ndarray, rows: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """sum(p[rows[i], a[i]:b[i]]) for each i, in float64 (0 where b <= a)."""
+    n = np.maximum(b - a, 0)
+    out = np.zeros(n.size)
+    some = n > 0
+    if some.any():
+        n = n[some]
+        starts = np.cumsum(n) - n
+        bins = np.repeat(a[some] - starts, n) + np.arange(int(n.sum()))
+        out[some] = np.add.reduceat(p[np.repeat(rows[some], n), bins].astype(np.float64), starts)
+    return out
+
+
 def hann_leakage(offset_bins: np.ndarray) -> np.ndarray:
     """Envelope of the Hann window's side lobes at `offset_bins` from a tone, as a power
     ratio to its peak: (pi x (x^2 - 1))^-2 (-32 dB at 2.5 bins, -18 dB per octave beyond),
@@ -291,30 +318,46 @@ class ToneAnalyzer:
             z = np.zeros((n_frames, 0))
             return ToneCandidates(z, z, z, z, z.astype(bool), z.astype(bool), z.astype(bool))
         p = psd[:, : self.used_bins]
-        cum = np.zeros((n_frames, self.used_bins + 1))
-        np.cumsum(p, axis=1, dtype=np.float64, out=cum[:, 1:])
-        cum *= self.df
         lo, hi = self.k_lo, self.k_hi + 1
         mid = p[:, lo:hi]
         peak = (mid > p[:, lo - 1 : hi - 1]) & (mid >= p[:, lo + 1 : hi + 1])
-        band = cum[:, self.b] - cum[:, self.a]
-        # rank the peaks by a cheap TNR (three-bin tone) against their TNR limit
         tone3 = (mid + p[:, lo - 1 : hi - 1] + p[:, lo + 1 : hi + 1]) * self.df
-        density = np.maximum(band - tone3, _TINY) / (np.maximum(self.b - self.a - 3, 1) * self.df)
         if floor is not None:
             peak &= tone3 >= np.asarray(floor, dtype=np.float64)[:, None]
-        score = np.where(peak, tone3 / (density * self._rank_scale), 0.0)
-        if reference is None:  # the `max_peaks` best, and every peak that can be prominent
+        if reference is not None:
+            # every peak through the gate, and only those: no rank needed, and the band
+            # powers only at those peaks (not a cumulative sum over every bin of every frame)
+            rel, valid = _columns(peak & (tone3 >= reference) & (tone3 > 0))
+            f, c = np.nonzero(valid)
+            sums = np.zeros((3,) + rel.shape)
+            sums[:, f, c] = self.df * np.stack(
+                [
+                    _band_sums(p, f, self.a[rel[f, c]], self.b[rel[f, c]]),
+                    _band_sums(p, f, self.la[rel[f, c]], self.lb[rel[f, c]]),
+                    _band_sums(p, f, self.ua[rel[f, c]], self.ub[rel[f, c]]),
+                ]
+            )
+            total, lower, upper = sums
+        else:  # the `max_peaks` best by a cheap TNR against its limit, and every one near it
+            cum = np.zeros((n_frames, self.used_bins + 1))
+            np.cumsum(p, axis=1, dtype=np.float64, out=cum[:, 1:])
+            cum *= self.df
+            band = cum[:, self.b] - cum[:, self.a]
+            density = np.maximum(band - tone3, _TINY) / (
+                np.maximum(self.b - self.a - 3, 1) * self.df
+            )
+            score = np.where(peak, tone3 / (density * self._rank_scale), 0.0)
             n_peaks = max(n_peaks, int(np.count_nonzero(score >= _NEAR_LIMIT, axis=1).max()))
-        else:  # every peak through the gate, and only those
-            score = np.where(tone3 >= reference, score, 0.0)
-            n_peaks = max(int(np.count_nonzero(score, axis=1).max()), 1)
-        n_peaks = min(n_peaks, score.shape[1])
-        if n_peaks < score.shape[1]:
-            rel = np.argpartition(-score, n_peaks - 1, axis=1)[:, :n_peaks]
-        else:
-            rel = np.broadcast_to(np.arange(score.shape[1]), score.shape).copy()
-        valid = np.take_along_axis(score, rel, axis=1) > 0.0
+            n_peaks = min(n_peaks, score.shape[1])
+            if n_peaks < score.shape[1]:
+                rel = np.argpartition(-score, n_peaks - 1, axis=1)[:, :n_peaks]
+            else:
+                rel = np.broadcast_to(np.arange(score.shape[1]), score.shape).copy()
+            valid = np.take_along_axis(score, rel, axis=1) > 0.0
+            at = np.arange(n_frames)[:, None]
+            total = np.take_along_axis(band, rel, axis=1)
+            lower = cum[at, self.lb[rel]] - cum[at, self.la[rel]]
+            upper = cum[at, self.ub[rel]] - cum[at, self.ua[rel]]
         k = rel + lo  # absolute peak bins
         rows = np.arange(n_frames)[:, None, None]
         near = p[rows, k[..., None] + np.arange(-2, 3)].astype(np.float64)  # (frames, peaks, 5)
@@ -336,7 +379,6 @@ class ToneAnalyzer:
             + np.where(delta < 0, near[..., 0], 0.0)
         ) * self.df
         n_tone = np.where(delta != 0, 4, 3)
-        total = np.take_along_axis(band, rel, axis=1)
         a, b = self.a[rel], self.b[rel]
         noise = (
             np.maximum(total - tone, _TINY)
@@ -344,14 +386,7 @@ class ToneAnalyzer:
             / (np.maximum(b - a - n_tone, 1) * self.df)
         )
         tnr = 10.0 * np.log10(np.maximum(tone, _TINY) / noise)
-        lower = (
-            cum[np.arange(n_frames)[:, None], self.lb[rel]]
-            - cum[np.arange(n_frames)[:, None], self.la[rel]]
-        ) * self.lower_scale[rel]
-        upper = (
-            cum[np.arange(n_frames)[:, None], self.ub[rel]]
-            - cum[np.arange(n_frames)[:, None], self.ua[rel]]
-        )
+        lower = lower * self.lower_scale[rel]
         pr = 10.0 * np.log10(np.maximum(total, _TINY) / np.maximum(0.5 * (lower + upper), _TINY))
         pr = np.where(self.pr_ok[rel], pr, np.nan)
         # a stronger peak inside the critical band suppresses a candidate (ties: lower index)
