@@ -475,15 +475,30 @@ def bench_budget(model: SqueakModel, rounds: int) -> str:
     }
     wall, _ = interleaved(fns, rounds)
     bare = wall["bare `numpy.linalg.eig`"]
-    rows = [
-        f"| {name} | {median(t) / len(mats) * 1e6:.1f} µs | {paired_ratio(t, bare):.2f}× |"
-        for name, t in wall.items()
-    ]
-    return (
+    return per_call_table(
         f"The budget of `predict` with scatter ({len(mats)} random points, {rounds} interleaved "
-        f"rounds; target ≤ {TARGET_SCATTER_RATIO}× a bare `eig`):\n\n"
-        "| calls | per point | / bare `eig` |\n|---|---:|---:|\n" + "\n".join(rows)
+        f"rounds; target ≤ {TARGET_SCATTER_RATIO}× a bare `eig`)",
+        "calls | per point | / bare `eig`",
+        wall,
+        len(mats),
+        lambda t: paired_ratio(t, bare),
     )
+
+
+def per_call_table(
+    intro: str,
+    header: str,
+    times: dict[str, list[float]],
+    calls: int,
+    ratio: Callable[[list[float]], float],
+) -> str:
+    """A Markdown table after `intro`: per row its name, the median of its `times` [s] over
+    `calls` calls [µs] and its `ratio`."""
+    rows = [
+        f"| {name} | {median(t) / calls * 1e6:.1f} µs | {ratio(t):.2f}× |"
+        for name, t in times.items()
+    ]
+    return f"{intro}:\n\n| {header} |\n|---|---:|---:|\n" + "\n".join(rows)
 
 
 def bench_paced(model: SqueakModel, rounds: int, period_s: float = 0.005) -> str:
@@ -516,14 +531,13 @@ def bench_paced(model: SqueakModel, rounds: int, period_s: float = 0.005) -> str
         for name, pause in kinds.items():
             samples[name] += paced(pause)
     base = median(samples["back to back"])
-    rows = [
-        f"| {name} | {median(t) * 1e6:.1f} µs | {median(t) / base:.2f}× |"
-        for name, t in samples.items()
-    ]
-    return (
+    return per_call_table(
         f"`predict` (default scatter) paced as a node's inputs ({len(points)} random points, "
-        f"{rounds} interleaved rounds, median per call):\n\n"
-        "| calls | per call | / back to back |\n|---|---:|---:|\n" + "\n".join(rows)
+        f"{rounds} interleaved rounds, median per call)",
+        "calls | per call | / back to back",
+        samples,
+        1,
+        lambda t: median(t) / base,
     )
 
 
