@@ -94,6 +94,10 @@ class WatchNode(SqueakMonitor):
         super()._on_modes(data)
         self.received.add(messages.MODES)
 
+    def _on_active(self, data: bytes) -> None:
+        super()._on_active(data)
+        self.received.add(messages.ACTIVE)
+
     def _on_safe_speed(self, data: bytes) -> None:
         super()._on_safe_speed(data)
         self.received.add(messages.SAFE_SPEED)
@@ -129,7 +133,7 @@ class WatchNode(SqueakMonitor):
         values = self.values(PREDICTION_TASK)
         wanted = set()
         if values.get(KEY_VALID) == "true":
-            wanted |= {messages.RISK, messages.MODES}
+            wanted |= {messages.RISK, messages.MODES, messages.ACTIVE}
         if values.get(KEY_SAFE_SPEED):
             wanted.add(messages.SAFE_SPEED)
         heard = MEASUREMENT_TASK not in self.statuses or self.heard is not None
