@@ -8,7 +8,8 @@ frequency (over the last `min_duration_s`, at least 3 frames) is nearest within
 `track_tolerance`, strongest candidates first; otherwise it opens a new track. A track with no
 candidate for `max_gap_s` or more is closed; shorter gaps are bridged. A closed track of at
 least `min_duration_s` is an episode, from half a hop before its first frame to half a hop after
-its last (frame times are frame centres).
+its last (frame times are frame centres); offline, its start then moves back to where its tone
+first stood the gate at its own frequency (`_onsets_back`).
 
 Drive noise (motor, gear, commutator) moves with the speed at a fixed ratio to the screw's
 rotation frequency f1 = |speed| / 2 pi, whatever the ratio (a worm gear of 37.3, its orders,
@@ -62,7 +63,7 @@ from .creak import Creak, find_creaks, sort_creaks
 from .growth import Growth, growth_fields, onset_growth
 from .samples import Samples, SampleTrack, span
 from .settings import DetectorSettings
-from .tonality import ToneAnalyzer, hann, short_time_psd
+from .tonality import ToneAnalyzer, hann, hann_leakage, short_time_psd
 
 P_REF_PA = 20e-6  #: reference sound pressure of dB SPL
 #: Relative spacing of float32 numbers: the rounding of the samples the detector analyses.
@@ -83,6 +84,7 @@ _GATE_MARGIN_DB = 3.0
 _BLOCK_FRAMES = 256  # frames analysed per FFT block (bounded memory, same in every mode)
 _MAX_WARNINGS = 100
 _MAX_RATIOS = 100  # drive-ratio groups kept (bounded memory)
+_WALK_FRAMES = 32  # frames measured at once as an onset is walked back (`_onsets_back`)
 
 
 class AudioError(ValueError):
@@ -1279,6 +1281,9 @@ def detect(
         if infer_background and source in ("none", "inferred") and nothing_moves:
             episodes = _switched_on(det, episodes, n_samples / det.sample_rate_hz)
             source = "inferred" if det.background.tones() else source
+        _onsets_back(
+            det, episodes, [*episodes, *det.rejected], mono, t0_s, speed_times_s, speed_rad_s
+        )
     warnings = list(det.warnings)
     if n_samples == 0:
         warnings.append("no audio samples")
@@ -1407,8 +1412,10 @@ def without_splatter(
 
     def cut(o: Episode, k: int, hz: float, before: float, after: float) -> bool:
         if (id(o), k) not in cuts:
-            levels = _levels_at(det, x, t0, hz, (before, after))
-            cuts[id(o), k] = levels is not None and abs(levels[1] - levels[0]) >= CUT_DB
+            p = _tone_powers(det, x, t0, hz, np.array([before, after]), (-2, -1, 0, 1, 2))
+            p = p.max(axis=1)  # the strongest of its bin and two each side
+            change_db = 10 * np.log10(np.maximum(p[1], 1e-300) / np.maximum(p[0], 1e-300))
+            cuts[id(o), k] = bool(np.isfinite(p).all() and abs(change_db) >= CUT_DB)
         return cuts[id(o), k]
 
     def cut_by(e: Episode) -> Episode | None:
@@ -1430,28 +1437,139 @@ def without_splatter(
     return kept
 
 
-def _levels_at(
-    det: StreamingDetector, x: Samples, t0: float, hz: float, centres_s: tuple[float, ...]
-) -> list[float] | None:
-    """The level [dB] of the tone at `hz` [Hz] (the strongest of its bin and two each side,
-    the detector's frame and window) in frames centred at `centres_s` [s]; None where a frame
-    leaves the recording or holds non-finite samples."""
+def _onsets_back(
+    det: StreamingDetector,
+    episodes: list[Episode],
+    tones: list[Episode],
+    x: Samples,
+    t0: float,
+    speed_times_s: Any,
+    speed_rad_s: Any,
+) -> None:
+    """Move each episode's start back to where its tone first stood the gate (offline).
+
+    The tracker takes a tone once a frame's peak is a valid candidate through the gate
+    (`background_snr_db` over the background's band): a louder tone in its critical band
+    (mains hum 2.5 bins away), a drive order sweeping a few bins from it, or a frequency
+    estimate pulled across the band's edge by them keep a growing squeak out of the tracks for
+    frames after it stood the gate. So, frame by frame before an episode's start (the
+    detector's frames, centres a hop apart), the tone at the frequency its track began at (the
+    median of its first five frames: a squeak is a mode's tone, it does not move as it grows)
+    is measured alone, in the detector's frame and window (`_tone_powers`); the start moves
+    to the earliest frame of the run where it stands `background_snr_db` over the
+    background's band there and over the background tones' window leakage at its frequency
+    (`tonality.hann_leakage` of their mean levels: a steady tone a few bins away).
+    A frame with another sound within the window's main lobe of that frequency (two bins) over
+    the window's main weight (its centre +- a quarter frame: a sweep moves) -- a drive ratio
+    times the screw's rotation frequency, or a frame of another tone's track -- cannot tell the
+    tone from it: it is bridged, and the start is never placed there. The walk stops at the
+    end of another tone at the same frequency (within `track_tolerance`: that one's own sound),
+    at a frame without usable sound, and where the episode would outlast `max_episode_s`. No
+    episode is added or removed, its track is not extended; before a background is learned
+    (no band to stand over) nothing moves."""
+    s = det.settings
+    if not det.background.has_spectrum or not episodes:
+        return
+    hop, lobe = det.hop_s, 2.0 * det.analyzer.df
+    half = det.frame_len / det.sample_rate_hz / 2
+    ratios = np.array([o.ratio for o in det.drive_orders] + list(s.known_ratios))
+    try:
+        st = np.asarray(speed_times_s, dtype=float).reshape(-1)
+        sv = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
+    except (TypeError, ValueError):
+        st = sv = np.zeros(0)
+    if st.size != sv.size or st.size == 0:
+        st = sv = np.zeros(0)
+    background = det.background.tones()
+    tone_hz = np.array([b.frequency_hz for b in background])
+    tone_power = 10 ** ((np.array([b.level_db for b in background]) - det._level_offset_db) / 10)
+    others = []  # (episode, its frames' times, frequencies)
+    for o in tones:
+        ok = np.isfinite(o.track_hz)
+        if ok.any():
+            others.append((o, o.track_times_s[ok], o.track_hz[ok]))
+    for e in episodes:
+        ok = np.isfinite(e.track_hz)
+        if not ok.any():
+            continue
+        f0 = float(np.median(e.track_hz[ok][:5]))
+        # over the band, and over the background tones' window leakage at f0
+        band = float(det.background.band_power(np.array([f0]))[0])
+        leak = float(np.sum(tone_power * hann_leakage((f0 - tone_hz) / det.analyzer.df)))
+        need = max(band, leak) * 10 ** (s.background_snr_db / 10)
+        floor = max(
+            t0 + half - hop / 2,
+            e.end_s - s.max_episode_s,
+            *(
+                o.end_s
+                for o, _, _ in others
+                if o is not e
+                and o.end_s <= e.start_s
+                and abs(o.frequency_hz / f0 - 1) <= s.track_tolerance
+            ),
+        )
+        centres = np.arange(e.start_s - hop / 2, floor + hop / 2 - 1e-9, -hop)
+        if centres.size == 0:
+            continue
+        # a sound sweeping past is seen over the window's main weight (+- a quarter frame)
+        busy = np.zeros(centres.size, bool)
+        if ratios.size and st.size:
+            f1 = np.interp(centres[:, None] + [-half / 2, 0.0, half / 2], st, sv) / (2 * np.pi)
+            line = ratios[None, :, None] * f1[:, None, :]  # (frames, ratios, 3)
+            busy |= np.any((line.min(axis=2) - lobe < f0) & (f0 < line.max(axis=2) + lobe), axis=1)
+        for o, ot, of in others:
+            near = ot[np.abs(of - f0) < lobe] if o is not e else np.zeros(0)
+            if near.size:  # a frame of its track near f0 within that
+                busy |= np.searchsorted(near, centres + half / 2, side="right") > np.searchsorted(
+                    near, centres - half / 2, side="left"
+                )
+        start = e.start_s
+        for a in range(0, centres.size, _WALK_FRAMES):
+            block = centres[a : a + _WALK_FRAMES]
+            power = _tone_powers(det, x, t0, f0, block)[:, 0]
+            stop = False
+            for c, p, b in zip(
+                block.tolist(), power.tolist(), busy[a : a + _WALK_FRAMES], strict=True
+            ):
+                if b:
+                    continue
+                if not p >= need:  # under the gate, or no usable sound (nan)
+                    stop = True
+                    break
+                start = c - hop / 2
+            if stop:
+                break
+        e.start_s = min(e.start_s, start)
+
+
+def _tone_powers(
+    det: StreamingDetector,
+    x: Samples,
+    t0: float,
+    hz: float,
+    centres_s: np.ndarray,
+    offsets_bins: tuple[int, ...] = (0,),
+) -> np.ndarray:
+    """Per frame of the detector's length and window centred at `centres_s` [s] (rows), the
+    mean square [unit^2] of the tone at `hz` [Hz] plus each offset in bins (columns): a sine's
+    own mean square at its frequency; nan where a frame leaves the recording or holds
+    non-finite samples."""
     n, rate = det.frame_len, det.sample_rate_hz
     k = np.arange(n) / rate
-    near = hz + det.analyzer.df * np.arange(-2, 3)
-    basis = (hann(n)[:, None] * np.exp(-2j * np.pi * near[None, :] * k[:, None])).astype(
+    near = hz + det.analyzer.df * np.asarray(offsets_bins, dtype=float)
+    window = hann(n)
+    basis = (window[:, None] * np.exp(-2j * np.pi * near[None, :] * k[:, None])).astype(
         np.complex64
     )
-    out = []
-    for c in centres_s:
+    scale = 2.0 / float(np.sum(window, dtype=np.float64)) ** 2  # a sine of amplitude a: a^2/2
+    out = np.full((np.size(centres_s), near.size), np.nan)
+    for j, c in enumerate(np.asarray(centres_s, dtype=float).reshape(-1).tolist()):
         a = int(round((c - t0) * rate)) - n // 2
         if a < 0 or a + n > x.size:
-            return None
+            continue
         frame = np.asarray(x[a : a + n], dtype=np.float32)
-        if not np.all(np.isfinite(frame)):
-            return None
-        power = np.abs(frame @ basis) ** 2
-        out.append(float(10 * np.log10(max(float(power.max()), 1e-300))))
+        if np.all(np.isfinite(frame)):
+            out[j] = scale * np.abs(frame @ basis) ** 2
     return out
 
 
