@@ -546,6 +546,8 @@ def test_a_squeak_beside_louder_hum_starts_where_it_stood_the_gate(hum_db):
         [e] = d.episodes
         assert e.frequency_hz == pytest.approx(f, rel=0.01)
         assert e.start_s == pytest.approx(t_gate, abs=0.02), (seed, e.start_s, t_gate)
+        assert e.tracked_start_s is not None and e.tracked_start_s > e.start_s + 0.05
+        assert e.as_dict()["tracked_start_s"] == e.tracked_start_s  # what calibration reads
 
 
 def _room_at_rest_first(tones, dur=5.0, seed=3):

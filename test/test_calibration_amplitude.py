@@ -375,3 +375,25 @@ def test_motor_off_frames_count_once_a_squeak_has_rung_down():
     moved = 3.0 - HOP_S  # the last moving frame
     assert not rested[(t >= 1.0) & (t < moved + RING_DOWN_S - HOP_S / 2)].any()
     assert np.all(rested[t >= moved + RING_DOWN_S + HOP_S / 2])
+
+
+def test_the_hearing_model_counts_an_episode_from_where_the_tracker_took_it():
+    """An onset walked back offline (`Episode.tracked_start_s`) is reported earlier, but the
+    calibration's frames start the episode where the tracker took it, as it ends it; an
+    episode the walk did not move, or a summary written before it, keeps its start."""
+    from leadscrew_ros.review.calibration.gather import _episodes
+
+    heard = {
+        "episodes": [
+            {"start_s": 2.0, "end_s": 3.0, "frequency_hz": 224.0, "tracked_start_s": 2.15},
+            {"start_s": 5.0, "end_s": 6.0, "frequency_hz": 898.0, "tracked_start_s": None},
+            {"start_s": 0.0, "end_s": 0.5, "frequency_hz": 224.0, "tracked_start_s": 0.0},
+            {"start_s": 7.0, "end_s": 7.5, "frequency_hz": 224.0},
+        ]
+    }
+    assert [(e.start_s, e.end_s) for e in _episodes(heard)] == [
+        (2.15, 3.0),
+        (5.0, 6.0),
+        (0.0, 0.5),
+        (7.0, 7.5),
+    ]

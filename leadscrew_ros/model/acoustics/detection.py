@@ -171,6 +171,11 @@ class Episode:
         Its frames' centres [s]; not in `as_dict`.
     track_hz : numpy.ndarray
         Its frames' frequencies [Hz] (nan in bridged gaps); not in `as_dict`.
+    tracked_start_s : float or None
+        Where the tracker took it [s], when the offline pass `_onsets_back` moved `start_s`
+        earlier (to where the tone alone first stood the gate); None when it did not. The
+        calibration's hearing model counts the tracker's crossings: they start and end an
+        episode by one rule.
     """
 
     start_s: float
@@ -187,6 +192,7 @@ class Episode:
     growth: Growth | None = None
     track_times_s: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
     track_hz: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+    tracked_start_s: float | None = None
 
     @property
     def duration_s(self) -> float:
@@ -212,6 +218,7 @@ class Episode:
             drive_ratio=self.drive_ratio,
             background_hz=self.background_hz,
             harmonics_hz=list(self.harmonics_hz),
+            tracked_start_s=self.tracked_start_s,
             **growth_fields(self.growth),
         )
 
@@ -1539,7 +1546,8 @@ def _onsets_back(
                 start = c - hop / 2
             if stop:
                 break
-        e.start_s = min(e.start_s, start)
+        if start < e.start_s:
+            e.tracked_start_s, e.start_s = e.start_s, start
 
 
 def _tone_powers(
