@@ -785,14 +785,10 @@ class StreamingDetector:
         list of Episode
             The episodes that are not drive noise.
         """
-        try:
-            t = np.asarray(speed_times_s, dtype=float).reshape(-1)
-            v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
-        except (TypeError, ValueError):
+        profile = _speed_profile(speed_times_s, speed_rad_s)
+        if not episodes or profile is None:
             return episodes
-        if not episodes or t.size != v.size:
-            return episodes
-        return _held_with_speed(self, episodes, t, v)
+        return _held_with_speed(self, episodes, *profile)
 
     def flush(self) -> list[Episode]:
         """Close every open track (end of the stream).
@@ -1480,13 +1476,7 @@ def _onsets_back(
     hop, lobe = det.hop_s, 2.0 * det.analyzer.df
     half = det.frame_len / det.sample_rate_hz / 2
     ratios = np.array([o.ratio for o in det.drive_orders] + list(s.known_ratios))
-    try:
-        st = np.asarray(speed_times_s, dtype=float).reshape(-1)
-        sv = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
-    except (TypeError, ValueError):
-        st = sv = np.zeros(0)
-    if st.size != sv.size or st.size == 0:
-        st = sv = np.zeros(0)
+    st, sv = _speed_profile(speed_times_s, speed_rad_s) or (np.zeros(0), np.zeros(0))
     background = det.background.tones()
     tone_hz = np.array([b.frequency_hz for b in background])
     tone_power = 10 ** ((np.array([b.level_db for b in background]) - det._level_offset_db) / 10)
@@ -1622,6 +1612,18 @@ def with_harmonics(episodes: list[Episode], max_harmonic: int, tolerance: float)
     return sorted((e for k, e in enumerate(out) if k not in merged), key=lambda e: e.start_s)
 
 
+def _speed_profile(speed_times_s: Any, speed_rad_s: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """(times [s], |speed| [rad/s]) as flat float arrays of one size, or None where they are
+    not numbers or differ in size (the passes that need the speed then leave the episodes
+    as they are; the main pass says what is wrong)."""
+    try:
+        t = np.asarray(speed_times_s, dtype=float).reshape(-1)
+        v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
+    except (TypeError, ValueError):
+        return None
+    return (t, v) if t.size == v.size else None
+
+
 def _at_drive_ratios(
     det: StreamingDetector, episodes: list[Episode], speed_times_s: Any, speed_rad_s: Any
 ) -> list[Episode]:
@@ -1631,13 +1633,10 @@ def _at_drive_ratios(
     tracks, used after the fact), or heard held exactly as long as the speed held
     (`_held_with_speed`, judged first: a piece of its sweep into the hold is then known)."""
     s = det.settings
-    try:
-        t = np.asarray(speed_times_s, dtype=float).reshape(-1)
-        v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
-    except (TypeError, ValueError):
+    profile = _speed_profile(speed_times_s, speed_rad_s)
+    if s.order_tolerance <= 0 or profile is None or profile[0].size == 0:
         return episodes
-    if s.order_tolerance <= 0 or t.size != v.size or t.size == 0:
-        return episodes
+    t, v = profile
     episodes = _held_with_speed(det, episodes, t, v)
     ratios = [o.ratio for o in det.drive_orders] + list(s.known_ratios)
     kept = []
@@ -1674,13 +1673,10 @@ def _split_drive_ends(
     follows the nearest). The drive's part is rejected as drive noise (`drive_ratio` r), the
     rest is an episode of its own from the frame it left the path."""
     tol = det.settings.order_tolerance
-    try:
-        t = np.asarray(speed_times_s, dtype=float).reshape(-1)
-        v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
-    except (TypeError, ValueError):
+    profile = _speed_profile(speed_times_s, speed_rad_s)
+    if tol <= 0 or profile is None or profile[0].size < 2:
         return episodes
-    if tol <= 0 or t.size != v.size or t.size < 2:
-        return episodes
+    t, v = profile
     need = max(det._min_frames, 3)
     out = []
     for ep in episodes:
@@ -1783,14 +1779,14 @@ def _went_with_speed(
     noise does so (its frequency is the speed's); a squeak's sound, before its growth and
     while it decays, stays at the mode's frequency."""
     s = det.settings
+    profile = _speed_profile(speed_times_s, speed_rad_s)
     try:
-        t = np.asarray(speed_times_s, dtype=float).reshape(-1)
-        v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
         t0 = float(t0_s)
     except (TypeError, ValueError):
         return episodes
-    if s.order_tolerance <= 0 or t.size != v.size or t.size < 2 or not math.isfinite(t0):
+    if s.order_tolerance <= 0 or profile is None or profile[0].size < 2 or not math.isfinite(t0):
         return episodes
+    t, v = profile
     rate, n = det.sample_rate_hz, det.frame_len
     window = det._window.astype(np.float64)
     offsets = np.arange(n) / rate
@@ -1947,16 +1943,16 @@ def _learn_at_rest(
     stretch's median frame level (a steady level). A fan heard first when the drive already
     moves is then known as background, and what rings on as the drive stops (a squeak
     decaying, the room's tail) is not."""
+    profile = _speed_profile(speed_times_s, speed_rad_s)
     try:
-        t = np.asarray(speed_times_s, dtype=float).reshape(-1)
-        v = np.abs(np.asarray(speed_rad_s, dtype=float).reshape(-1))
         x = det._as_samples(samples)
         t0 = float(t0_s)
     except (TypeError, ValueError):
         return  # the main pass says what is wrong with them
     s = det.settings
-    if t.size != v.size or t.size < 2 or x.size < det.frame_len:
+    if profile is None or profile[0].size < 2 or x.size < det.frame_len:
         return
+    t, v = profile
     rest = np.concatenate([[False], np.isfinite(v) & (v < s.motor_off_rad_s), [False]])
     edges = np.flatnonzero(rest[1:] != rest[:-1])
     spans = [

@@ -60,16 +60,24 @@ def _columns(selected: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return columns, valid
 
 
+def _ranges(
+    p: np.ndarray, rows: np.ndarray, a: np.ndarray, b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """p[rows[i], a[i]:b[i]] (at least one bin each) of every i, one after the other, and
+    where each begins: for a `ufunc.reduceat` over them."""
+    n = np.maximum(b - a, 1)
+    starts = np.cumsum(n) - n
+    bins = np.repeat(a - starts, n) + np.arange(int(n.sum()))
+    return p[np.repeat(rows, n), bins], starts
+
+
 def _band_sums(p: np.ndarray, rows: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """sum(p[rows[i], a[i]:b[i]]) for each i, in float64 (0 where b <= a)."""
-    n = np.maximum(b - a, 0)
-    out = np.zeros(n.size)
-    some = n > 0
+    out = np.zeros(np.size(a))
+    some = b > a
     if some.any():
-        n = n[some]
-        starts = np.cumsum(n) - n
-        bins = np.repeat(a[some] - starts, n) + np.arange(int(n.sum()))
-        out[some] = np.add.reduceat(p[np.repeat(rows[some], n), bins].astype(np.float64), starts)
+        values, starts = _ranges(p, rows[some], a[some], b[some])
+        out[some] = np.add.reduceat(values.astype(np.float64), starts)
     return out
 
 
@@ -416,13 +424,9 @@ class ToneAnalyzer:
         f, c = np.nonzero(which)
         if f.size == 0:
             return out
-        kk = k[f, c]
-        a, b = self.a[kk - self.k_lo], self.b[kk - self.k_lo]  # the band's bins: a .. b - 1
-        n = np.maximum(b - a, 1)
-        starts = np.concatenate([[0], np.cumsum(n)[:-1]])
-        bins = np.repeat(a - starts, n) + np.arange(int(n.sum()))
-        top = np.maximum.reduceat(p[np.repeat(f, n), bins], starts)
-        out[f, c] = top > p0[f, c]
+        kk = k[f, c] - self.k_lo
+        values, starts = _ranges(p, f, self.a[kk], self.b[kk])  # the band's bins: a .. b - 1
+        out[f, c] = np.maximum.reduceat(values, starts) > p0[f, c]
         return out
 
     def without_harmonics(self, freq: np.ndarray, tone: np.ndarray, kept: np.ndarray) -> np.ndarray:

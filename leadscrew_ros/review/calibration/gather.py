@@ -184,7 +184,7 @@ def _episodes(heard: dict[str, Any]) -> list[Episode]:
     from where the tracker took it (`Episode.tracked_start_s`): the hearing model's threshold
     is crossed by one rule at both ends. Started where the tone alone first stood the gate
     (the reported onset) but ended where the tracker lost it, the paper bench's reported
-    damping intervals covered 11 of 16 units, 13 so."""
+    damping intervals covered 11 of 16 units instead of 13."""
     return [
         Episode(
             e["start_s"] if e.get("tracked_start_s") is None else e["tracked_start_s"],
