@@ -36,10 +36,8 @@ from statistics import median
 
 import numpy as np
 
+from bench_realistic import speed_of
 from leadscrew_ros.bag.audio import read_audio
-from leadscrew_ros.bag.cdr import decode_float64
-from leadscrew_ros.bag.logsource import open_log
-from leadscrew_ros.bag.synthetic import SPEED_TOPIC
 from leadscrew_ros.cli import main as cli
 from leadscrew_ros.model.acoustics import DetectorSettings, StreamingDetector, detect, microphone
 from leadscrew_ros.model.acoustics.tonality import ToneAnalyzer, short_time_psd
@@ -71,13 +69,8 @@ def realistic_unit(root: Path, seed: int) -> tuple[np.ndarray, np.ndarray, np.nd
     unit = json.loads((out / "truth.json").read_text())["units"][0]
     log = next(out.glob(unit["log"] + "*"))
     track = read_audio(log)
-    t, v, first = [], [], None
-    for _, m in open_log(log).messages():  # times from the log's first message, as the audio's
-        first = m.log_time_ns if first is None else first
-        if m.topic.name == SPEED_TOPIC:
-            t.append((m.log_time_ns - first) * 1e-9)
-            v.append(decode_float64(m.data))
-    return np.asarray(t), np.asarray(v), np.asarray(track.samples), track.t0_s
+    t, v = speed_of(log)  # from the log's first message, as the audio's times
+    return t, v, np.asarray(track.samples), track.t0_s
 
 
 def cases(seconds: float, root: Path) -> dict:

@@ -50,7 +50,7 @@ LIVE_SPEED_S = 40.0  # the speed history the node keeps (`live.listen.SPEED_HIST
 FAST_GROWTH_PER_S = 50.0  # onset within 50 ms where the growth is at least this, else 150 ms
 
 
-def _speed(log: Path) -> tuple[np.ndarray, np.ndarray]:
+def speed_of(log: Path) -> tuple[np.ndarray, np.ndarray]:
     """(times [s] from the log's first message, screw speed [rad/s]) of a log."""
     source = open_log(log)
     t, v, first = [], [], None
@@ -146,7 +146,7 @@ def evaluate(root: Path, args: argparse.Namespace) -> dict:
         out = root / f"r{k}"
         cli(["replay", str(log), "--out", str(out), "--no-report", "--quiet", "--workers", "0"])
         heard = json.loads((out / "summary.json").read_text())["heard"]
-        speed = _speed(log)
+        speed = speed_of(log)
         for e in heard["episodes"]:
             c = _cause(e, unit, sound, speed)
             causes[c] = causes.get(c, 0) + 1
