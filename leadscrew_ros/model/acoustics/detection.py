@@ -1540,6 +1540,16 @@ def _onsets_back(
             e.tracked_start_s, e.start_s = e.start_s, start
 
 
+def _tone_basis(n: int, rate_hz: float, hz: np.ndarray) -> np.ndarray:
+    """(n, len(hz)) complex64 columns: the Hann window of `n` samples at `rate_hz` times the
+    conjugate phasor of each frequency [Hz]; a frame times a column is that frequency's DFT
+    value."""
+    k = np.arange(n) / rate_hz
+    return (hann(n)[:, None] * np.exp(-2j * np.pi * np.asarray(hz)[None, :] * k[:, None])).astype(
+        np.complex64
+    )
+
+
 def _tone_powers(
     det: StreamingDetector,
     x: Samples,
@@ -1553,14 +1563,9 @@ def _tone_powers(
     own mean square at its frequency; nan where a frame leaves the recording or holds
     non-finite samples."""
     n, rate = det.frame_len, det.sample_rate_hz
-    k = np.arange(n) / rate
-    near = hz + det.analyzer.df * np.asarray(offsets_bins, dtype=float)
-    window = hann(n)
-    basis = (window[:, None] * np.exp(-2j * np.pi * near[None, :] * k[:, None])).astype(
-        np.complex64
-    )
-    scale = 2.0 / float(np.sum(window, dtype=np.float64)) ** 2  # a sine of amplitude a: a^2/2
-    out = np.full((np.size(centres_s), near.size), np.nan)
+    basis = _tone_basis(n, rate, hz + det.analyzer.df * np.asarray(offsets_bins, dtype=float))
+    scale = 2.0 / float(np.sum(hann(n), dtype=np.float64)) ** 2  # a sine of amplitude a: a^2/2
+    out = np.full((np.size(centres_s), basis.shape[1]), np.nan)
     for j, c in enumerate(np.asarray(centres_s, dtype=float).reshape(-1).tolist()):
         a = int(round((c - t0) * rate)) - n // 2
         if a < 0 or a + n > x.size:
@@ -2102,8 +2107,7 @@ def _grew(
     may then hold, steady, over most of a recording; a tone switched on (a step the band
     cannot resolve) or there all along is background when held so."""
     n, rate = det.frame_len, det.sample_rate_hz
-    k = np.arange(n) / rate
-    basis = (hann(n)[:, None] * np.exp(-2j * np.pi * f * k)[:, None]).astype(np.complex64)
+    basis = _tone_basis(n, rate, np.array([f]))
     step = format_step(x) or 0.0
     per = max(_BLOCK_FRAMES * det.hop // n, 1)  # whole frames per read: the main pass's piece
     times, levels = [], []
