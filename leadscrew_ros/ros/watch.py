@@ -51,6 +51,7 @@ from .remote import (
 
 REFRESH_S = 0.5  # the view's period
 OUTPUT_WAIT_S = 10.0  # longest wait for the node's latched outputs once it is found
+SETTLE_S = 0.05  # `--once` prints after a spin this long takes no message (latched history)
 CLEAR = "\x1b[H\x1b[J"  # ANSI: cursor home, clear to the end of the screen
 # The view's rows, in order (the diagnostics take one line per status)
 ROWS = ("inputs", "P(squeak)", "unstable", "safe speed", "diagnostics", "recording", "listening")
@@ -86,6 +87,16 @@ class WatchNode(SqueakMonitor):
             )
 
     # ------------------------------------------------------------------ callbacks
+    def _decoding(self, callback):
+        """`SqueakMonitor._decoding`, each message counted (`taken`)."""
+        run = super()._decoding(callback)
+
+        def counted(data: bytes) -> None:
+            self.taken = getattr(self, "taken", 0) + 1
+            run(data)
+
+        return counted
+
     def _on_risk(self, data: bytes) -> None:
         super()._on_risk(data)
         self.received.add(messages.RISK)
@@ -111,6 +122,7 @@ class WatchNode(SqueakMonitor):
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         """Keep the statuses of `target` only (every node publishes on /diagnostics), the
         prediction's first, as `SqueakMonitor` reads it."""
+        self.taken = getattr(self, "taken", 0) + 1
         prefix = f"{self.target}: "
         own = [s for s in msg.status if s.name.startswith(prefix)]
         if not own:
@@ -307,6 +319,8 @@ def run_watch(
                     said_missing = True
             # the first view once the node's latched outputs are in (or they are late)
             if found_at is not None and (shown or node.ready() or now - found_at >= OUTPUT_WAIT_S):
+                if once and not _settled(node, executor) and now - found_at < OUTPUT_WAIT_S:
+                    continue  # a latched history still coming in: judged on its newest
                 if once:
                     screen.tty = False  # plain text, also on a terminal
                     screen.show(header(remote.target, True, seen_at), view_lines(node))
@@ -320,6 +334,17 @@ def run_watch(
     if stop.signum == signal.SIGINT:
         raise KeyboardInterrupt
     return stop.exit_status()
+
+
+def _settled(node: WatchNode, executor: Any) -> bool:
+    """Spin until a spin of `SETTLE_S` takes no message: True when `node` is still ready
+    then. A node's latched /diagnostics come as a history, oldest first; an older status (the
+    advice search of the first prediction under way) must not decide what `--once` shows."""
+    taken = None
+    while taken != getattr(node, "taken", 0):
+        taken = getattr(node, "taken", 0)
+        executor.spin_once(timeout_sec=SETTLE_S)
+    return node.ready()
 
 
 def _watch_node(context: Context, namespace: str) -> WatchNode:
