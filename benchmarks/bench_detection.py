@@ -14,8 +14,10 @@ one unit of `leadscrew-squeak bench --realistic` (seed 77, made in a temp direct
 stretches whose background is learned (then every spectral peak through the gate is a tone
 candidate), a geared motor, fan and mains hum, a room, the squeak grown from the noise floor,
 offline also the growth measured at each onset: what `replay` and `listen` analyse. Each row is
-the median over rounds of the signal's duration divided by the wall time (target >= 100x real
-time for 1, 2, 5 and 6). The threads
+the median over rounds of the signal's duration divided by the wall time. Issue 30's targets:
+detection >= 100x real time (1 and 5, as `replay` and `listen` run it over a fleet's logs), and
+the node's listening at most 10 % of one core (the streaming push, 2 and 6: >= 10x here; the
+node's whole listening, callback and thread, is measured by bench_listen.py). The threads
 of OpenBLAS and scipy.fft are limited to one (the environment variables below; scipy.fft uses
 one worker unless told otherwise).
 """
@@ -43,7 +45,8 @@ from leadscrew_ros.model.acoustics import DetectorSettings, StreamingDetector, d
 from leadscrew_ros.model.acoustics.tonality import ToneAnalyzer, short_time_psd
 
 FS = 48000
-TARGET = 100.0  # x real time
+TARGET = 100.0  # x real time, offline detection
+NODE_TARGET = 10.0  # x real time: the node's listening at most 10 % of one core
 
 
 def stroke(seconds: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -156,7 +159,8 @@ def main(argv: list[str] | None = None) -> int:
     print("| measure | x real time (48 kHz mono, one core) |")
     print("|---|---:|")
     for i, (name, ratio) in enumerate(res.items()):
-        target = f" (target ≥ {TARGET:g}×)" if i < 2 or i > 3 else ""
+        goal = {0: TARGET, 1: NODE_TARGET, 4: TARGET, 5: NODE_TARGET}.get(i)
+        target = f" (target ≥ {goal:g}×)" if goal else ""
         print(f"| {name} | {ratio:,.0f}×{target} |")
     print(
         f"\n{args.rounds} rounds of a {args.seconds:g} s stroke; {os.cpu_count()} CPUs; "

@@ -403,11 +403,14 @@ def frame_powers(
     """
     x = np.asarray(samples, dtype=np.float64)
     shift = float(x.mean()) if x.size else 0.0
-    c1 = np.concatenate([[0.0], np.cumsum(x - shift)])
-    c2 = np.concatenate([[0.0], np.cumsum((x - shift) ** 2)])
-    starts = np.arange(frames) * hop
-    m1 = (c1[starts + frame_len] - c1[starts]) / frame_len
-    m2 = (c2[starts + frame_len] - c2[starts]) / frame_len
+    # running sums over pieces of gcd(frame, hop) samples (a hop's when it divides the frame)
+    g = math.gcd(frame_len, hop)
+    pieces = (x[: max((frames - 1) * hop + frame_len, 0)] - shift).reshape(-1, g)
+    c1 = np.concatenate([[0.0], np.cumsum(pieces.sum(axis=1))])
+    c2 = np.concatenate([[0.0], np.cumsum(np.einsum("ij,ij->i", pieces, pieces))])
+    starts = np.arange(frames) * (hop // g)
+    m1 = (c1[starts + frame_len // g] - c1[starts]) / frame_len
+    m2 = (c2[starts + frame_len // g] - c2[starts]) / frame_len
     variance = np.maximum(m2 - m1 * m1, 0.0)
     mean_square = np.maximum(m2 + 2.0 * shift * m1 + shift * shift, 0.0)
     # The running sums cancel to ~1e-16 of their size: where that could matter (a frame
@@ -553,6 +556,9 @@ class StreamingDetector:
             self._level_offset_db,
         )
         self._rest_frames = 0  # consecutive frames at rest
+        #: the frames at rest are learned as background as they come (live); `detect` learns
+        #: every motor-off stretch before its main pass instead
+        self.learns_at_rest = True
         # every frame so far at a known speed under motor_off_rad_s: nothing has slid, so
         # nothing heard can be squeak (live, the rest's sound is not learned as background
         # before `motor_off_min_s` of it; offline it is, first)
@@ -596,6 +602,9 @@ class StreamingDetector:
             + self.frame_len
         )
         self._window = hann(self.frame_len)
+        # Rest frames learned as background half a frame apart: Hann frames overlapping by
+        # half are nearly independent (Welch's choice), the frames between add only cost
+        self.learn_stride = max(self.frame_len // (2 * self.hop), 1)
         self._new_segment(None)
 
     def _new_segment(self, t0_s: float | None) -> None:
@@ -871,20 +880,11 @@ class StreamingDetector:
         seg = self._buf[s0 : s0 + (i1 - i0 - 1) * hop + n]
         if self.analyzer.empty:
             return []
-        variance, mean_square = frame_powers(seg, n, hop, i1 - i0)
-        rounding = np.maximum(self._format_step, FLOAT32_STEP * np.sqrt(mean_square)) ** 2 / 12
-        psd = short_time_psd(seg, self.sample_rate_hz, n, hop, self._window)
-        floor = TONE_FLOOR_FACTOR * rounding
+        psd, floor, dropped, silent = self._spectra(
+            seg, self._bad[s0 : s0 + seg.size], hop, i1 - i0, self._format_step
+        )
         gated = self.background.has_spectrum
         cand = self.analyzer.candidates(psd, floor=floor, reference=self._gate() if gated else None)
-        bad = self._bad[s0 : s0 + seg.size]
-        if bad.any():
-            bad_cum = np.concatenate([[0], np.cumsum(bad)])
-            starts = np.arange(i1 - i0) * hop
-            dropped = bad_cum[starts + n] - bad_cum[starts] > 0
-        else:
-            dropped = np.zeros(i1 - i0, bool)
-        silent = ~dropped & (variance <= SILENT_FACTOR * rounding)
         self._note_usable(i0, dropped, silent)
         level_db = 10 * np.log10(np.maximum(cand.power, 1e-300)) + self._level_offset_db
         # the background learned so far is not followed (a louder tone at its frequency is)
@@ -904,25 +904,30 @@ class StreamingDetector:
             f1 = np.abs(np.interp(frame_t, self._speed_t, self._speed_v)) / (2 * np.pi)
         else:
             f1 = np.full(frame_t.shape, np.nan)
-        has = np.any(prominent, axis=1, keepdims=False).astype(bool).reshape(-1)
         rest = 2 * np.pi * f1 < self.settings.motor_off_rad_s  # False where the speed is unknown
         rest_run = max(int(round(self.settings.motor_off_min_s / self.hop_s)), 1)
         self._never_moved = self._never_moved and bool(rest.all())
         closed: list[Episode] = []
         learning: list[int] = []
+        stride = self.learn_stride
         for j in range(i1 - i0):
             self._rest_frames = self._rest_frames + 1 if rest[j] and not dropped[j] else 0
-            if self._rest_frames >= rest_run and not silent[j]:  # no sound is no background
+            if (
+                self._rest_frames >= rest_run
+                and not silent[j]  # no sound is no background
+                and (i0 + j) % stride == 0
+                and self.learns_at_rest
+            ):
                 learning.append(j)
         if learning:
-            # the background's tones are all ECMA-418-1's, not only those over the gate
-            quiet = (
-                self.analyzer.candidates(psd[learning], floor=floor[learning]) if gated else cand
-            )
-            for r, j in enumerate(learning):
-                row = r if gated else j
-                tones = np.flatnonzero(quiet.tonal[row])
-                self.background.add(quiet.frequency_hz[row, tones], quiet.power[row, tones])
+            self._learn_tones(self.background, psd[learning], floor[learning])
+        # per frame, its prominent candidates strongest first (ties: by column), as Python
+        # floats: the tracks are followed frame by frame
+        order = np.argsort(np.where(prominent, -cand.power, np.inf), axis=1, kind="stable")
+        counts = np.count_nonzero(prominent, axis=1).tolist()
+        fields = np.stack([cand.frequency_hz, cand.tnr_db, cand.pr_db, cand.power], axis=-1)
+        ranked = np.take_along_axis(fields, order[..., None], axis=1).tolist()
+        speeds = f1.tolist()
         for j in range(i1 - i0):
             if dropped[j]:
                 self._dropped_run += 1
@@ -932,23 +937,42 @@ class StreamingDetector:
                     continue
             else:
                 self._dropped_run = 0
-            if not has[j] and not self._tracks:
+            if not counts[j] and not self._tracks:
                 continue
-            cols = np.nonzero(prominent[j])[0]
-            cols = cols[np.argsort(-cand.power[j, cols], kind="stable")]
-            found = [
-                (
-                    float(cand.frequency_hz[j, c]),
-                    float(cand.tnr_db[j, c]),
-                    float(cand.pr_db[j, c]),
-                    float(cand.power[j, c]),
-                )
-                for c in cols
-            ]
-            closed += self._step(i0 + j, found, float(f1[j]))
+            closed += self._step(i0 + j, ranked[j][: counts[j]], speeds[j])
         if learning:
             self.background.add_spectrum(psd[learning, : self.analyzer.used_bins])
         return closed
+
+    def _spectra(
+        self, seg: np.ndarray, bad: np.ndarray, hop: int, frames: int, step: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(psd, tone floor [unit^2], dropped, silent) of the `frames` frames `hop` apart of
+        `seg` (`bad`: its non-finite samples, set to 0; `step`: the format's quantisation
+        step): a frame holding a bad sample is dropped, one whose varying part is within
+        `SILENT_FACTOR` of its rounding noise is silent."""
+        n = self.frame_len
+        variance, mean_square = frame_powers(seg, n, hop, frames)
+        rounding = np.maximum(step, FLOAT32_STEP * np.sqrt(mean_square)) ** 2 / 12
+        psd = short_time_psd(
+            seg, self.sample_rate_hz, n, hop, self._window, self.analyzer.used_bins
+        )
+        if bad.any():
+            bad_cum = np.concatenate([[0], np.cumsum(bad)])
+            starts = np.arange(frames) * hop
+            dropped = bad_cum[starts + n] - bad_cum[starts] > 0
+        else:
+            dropped = np.zeros(frames, bool)
+        silent = ~dropped & (variance <= SILENT_FACTOR * rounding)
+        return psd, TONE_FLOOR_FACTOR * rounding, dropped, silent
+
+    def _learn_tones(self, learner: BackgroundLearner, psd: np.ndarray, floor: np.ndarray) -> None:
+        """Rest frames' tones into `learner`: all of ECMA-418-1's, not only those over the
+        gate (`psd`: their spectra; `floor`: their tone floors)."""
+        quiet = self.analyzer.candidates(psd, floor=floor)
+        for row in range(psd.shape[0]):
+            tones = np.flatnonzero(quiet.tonal[row])
+            learner.add(quiet.frequency_hz[row, tones], quiet.power[row, tones])
 
     def _gate(self) -> np.ndarray:
         """Per analysed bin, the power a peak's three bins must reach to be a candidate: the
@@ -974,9 +998,9 @@ class StreamingDetector:
         if self.usable_log is not None:
             self.usable_log += (~(dropped | silent)).astype(np.uint8).tobytes()
 
-    def _step(
-        self, i: int, found: list[tuple[float, float, float, float]], f1: float
-    ) -> list[Episode]:
+    def _step(self, i: int, found: list[list[float]], f1: float) -> list[Episode]:
+        """Frame `i`: close the tracks it ends, then each tone found ([frequency, TNR, PR,
+        power], strongest first) joins the nearest open track or opens one."""
         closed = []
         keep = []
         for tr in self._tracks:
@@ -1252,6 +1276,7 @@ def detect(
     if speed_times_s is not None and speed_rad_s is not None:
         frames = det.background.frames
         _learn_at_rest(det, samples, t0_s, speed_times_s, speed_rad_s)
+        det.learns_at_rest = False
         if source == "none" and det.background.frames > frames:
             source = "motor-off"
     if (
@@ -1643,7 +1668,18 @@ def _at_drive_ratios(
         return episodes
     t, v = profile
     episodes = _held_with_speed(det, episodes, t, v)
+    return _recurring_ratios(det, _at_known_ratios(det, episodes, t, v), t, v)
+
+
+def _at_known_ratios(
+    det: StreamingDetector, episodes: list[Episode], t: np.ndarray, v: np.ndarray
+) -> list[Episode]:
+    """The episodes less those at one of the drive's ratios learned so far or given
+    (`order_share` of their frames within `order_tolerance` of it) at the speed (`t`, `v`)."""
+    s = det.settings
     ratios = [o.ratio for o in det.drive_orders] + list(s.known_ratios)
+    if not ratios:
+        return episodes
     kept = []
     for ep in episodes:
         f1 = np.interp(ep.track_times_s, t, v) / (2 * np.pi)
@@ -1653,16 +1689,16 @@ def _at_drive_ratios(
                 float(np.mean(np.abs(ep.track_hz[ok] / (r * f1[ok]) - 1.0) <= s.order_tolerance))
                 for r in ratios
             ]
-            if ratios and ok.sum() * 2 >= ep.track_hz.size and ok.any()
+            if ok.sum() * 2 >= ep.track_hz.size and ok.any()
             else [0.0]
         )
         best = int(np.argmax(share))
-        if ratios and share[best] >= s.order_share:
+        if share[best] >= s.order_share:
             ep.drive_ratio = ratios[best]
             det.rejected.append(ep)
         else:
             kept.append(ep)
-    return _recurring_ratios(det, kept, t, v)
+    return kept
 
 
 def _split_drive_ends(
@@ -1782,7 +1818,8 @@ def _went_with_speed(
     more than twice `order_tolerance` apart (at least three), the median power of the
     Hann-windowed frame at r |speed| / 2 pi is four times (6 dB) that at f0 or more. Drive
     noise does so (its frequency is the speed's); a squeak's sound, before its growth and
-    while it decays, stays at the mode's frequency."""
+    while it decays, stays at the mode's frequency. The ratio is then learned
+    (`drive_orders`): the episodes left at it are held drive noise (`_at_known_ratios`)."""
     s = det.settings
     profile = _speed_profile(speed_times_s, speed_rad_s)
     try:
@@ -1824,20 +1861,20 @@ def _went_with_speed(
         if np.count_nonzero(use) < 3:
             kept.append(ep)
             continue
-        powers = []
-        for a, fp in zip(first[use].tolist(), path[use].tolist(), strict=True):
-            frame = samples[a : a + n].astype(np.float64) * window
-            phase = -2j * np.pi * offsets
-            powers.append(
-                (abs(frame @ np.exp(phase * fp)) ** 2, abs(frame @ np.exp(phase * f0)) ** 2)
-            )
-        along, stayed = np.median(np.asarray(powers), axis=0)
+        frames = np.stack([samples[a : a + n] for a in first[use].tolist()]) * window
+        along = np.abs(
+            np.einsum("ij,ij->i", frames, np.exp(-2j * np.pi * path[use, None] * offsets))
+        )
+        stayed = np.abs(frames @ np.exp(-2j * np.pi * f0 * offsets))
+        along, stayed = np.median(along**2), np.median(stayed**2)
         if along >= 4.0 * stayed:
             ep.drive_ratio = r
             det.rejected.append(ep)
+            if s.min_drive_ratio <= r <= s.max_drive_ratio:
+                det._learn_ratio(r, ep.level_db)
         else:
             kept.append(ep)
-    return kept
+    return _at_known_ratios(det, kept, t, v) if len(kept) < len(episodes) else kept
 
 
 def _recurring_ratios(
@@ -1997,18 +2034,29 @@ def _learn_spans(
     t0: float,
     spans: list[tuple[float, float]],
 ) -> None:
-    """Every frame of the spans (start, end) [s] of the track `x` (first sample at `t0`)
-    into `learner`, as rest frames of `det`'s settings and rate (each span is known to
-    rest long enough); spans shorter than a frame are skipped."""
-    settings = replace(det.settings, motor_off_min_s=0.0)
-    rate = det.sample_rate_hz
+    """The frames of the spans (start, end) [s] of the track `x` (first sample at `t0`) into
+    `learner`, as `det` learns rest frames (each span is known to rest long enough): every
+    `learn_stride`-th frame from the span's start, its tones and its spectrum, unless it holds
+    a non-finite sample or no usable sound; spans shorter than a frame are skipped."""
+    rate, n = det.sample_rate_hz, det.frame_len
+    hop = det.hop * det.learn_stride
+    if det.analyzer.empty:
+        return
     for start, end in spans:
         i, j = max(int(math.ceil((start - t0) * rate)), 0), min(int((end - t0) * rate), x.size)
-        if j - i < det.frame_len:
-            continue
-        pre = StreamingDetector(settings, rate, det.scale_pa)
-        pre.background = learner
-        pre.push(span(x, i, j), t0 + i / rate, 0.0)
+        frames = (j - i - n) // hop + 1 if j - i >= n else 0
+        step = format_step(span(x, i, j)) or 0.0
+        per = max(_BLOCK_FRAMES // det.learn_stride, 1)  # a block's samples, as the main pass
+        for a in range(0, frames, per):
+            m = min(per, frames - a)
+            seg = np.asarray(x[i + a * hop : i + (a + m - 1) * hop + n], dtype=np.float32)
+            bad = ~np.isfinite(seg)
+            if bad.any():
+                seg = np.where(bad, np.float32(0.0), seg)
+            psd, floor, dropped, silent = det._spectra(seg, bad, hop, m, step)
+            keep = ~(dropped | silent)
+            det._learn_tones(learner, psd[keep], floor[keep])
+            learner.add_spectrum(psd[keep, : det.analyzer.used_bins])
 
 
 def _learn_recording(det: StreamingDetector, samples: Any, rate_hz: float | None) -> bool:

@@ -32,7 +32,8 @@ not be calibrated).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.fft
@@ -174,6 +175,7 @@ def short_time_psd(
     frame_len: int,
     hop: int,
     window: np.ndarray | None = None,
+    bins: int | None = None,
 ) -> np.ndarray:
     """One-sided power spectral density of every frame, all frames in one real FFT.
 
@@ -190,23 +192,28 @@ def short_time_psd(
         copy before windowing).
     window : numpy.ndarray, optional
         Window of `frame_len` points (default `hann`).
+    bins : int, optional
+        Only the first `bins` bins (the detector's analysed range: the squares of the rest
+        are not taken).
 
     Returns
     -------
     numpy.ndarray
-        (frames, frame_len // 2 + 1) float32, [unit^2 / Hz]: summed over the bins times the bin
-        spacing it is the frame's window-weighted mean square.
+        (frames, frame_len // 2 + 1 or `bins`) float32, [unit^2 / Hz]: summed over all the
+        bins times the bin spacing it is the frame's window-weighted mean square.
     """
     x = np.asarray(samples, dtype=np.float32)
+    total = frame_len // 2 + 1
+    bins = total if bins is None else min(bins, total)
     if x.size < frame_len:
-        return np.zeros((0, frame_len // 2 + 1), np.float32)
+        return np.zeros((0, bins), np.float32)
     w = hann(frame_len) if window is None else np.asarray(window, np.float32)
     frames = np.lib.stride_tricks.sliding_window_view(x, frame_len)[::hop]
-    spec = scipy.fft.rfft(frames * w, axis=1)
+    spec = scipy.fft.rfft(frames * w, axis=1, overwrite_x=True)[:, :bins]
     psd = spec.real**2 + spec.imag**2
     psd *= np.float32(2.0 / (sample_rate_hz * float(np.sum(w.astype(float) ** 2))))
     psd[:, 0] *= 0.5
-    if frame_len % 2 == 0:
+    if frame_len % 2 == 0 and bins == total:
         psd[:, -1] *= 0.5
     return psd
 
@@ -221,8 +228,14 @@ class ToneCandidates:
     tnr_db: np.ndarray  #: tone-to-noise ratio [dB]
     pr_db: np.ndarray  #: prominence ratio [dB]; nan where the upper band passes Nyquist
     valid: np.ndarray  #: a peak that no stronger one inside its critical band suppresses
-    prominent: np.ndarray  #: valid, TNR or PR at or above its limit, not a harmonic
     tonal: np.ndarray  #: valid, TNR or PR at or above its limit (a harmonic too)
+    analyzer: ToneAnalyzer = field(repr=False)  #: the analyzer that found them
+
+    @cached_property
+    def prominent(self) -> np.ndarray:
+        """Tonal and not a harmonic of a tonal one (`ToneAnalyzer.without_harmonics`, taken
+        when first asked: a gated detector does not)."""
+        return self.analyzer.without_harmonics(self.frequency_hz, self.power, self.tonal)
 
 
 class ToneAnalyzer:
@@ -290,6 +303,8 @@ class ToneAnalyzer:
         self.tnr_limit = tnr_limit_db(np.maximum(f[k], 1e-9))
         self._rank_scale = self.width_hz * 10.0 ** (self.tnr_limit / 10.0)
         self.pr_limit = pr_limit_db(np.maximum(f[k], 1e-9))
+        # a tone of its own stands this far over a stronger one's leakage, by their distance
+        self._leakage = hann_leakage(np.arange(self.n_bins)) * _LEAKAGE_MARGIN
 
     def _bins(self, f_hz: np.ndarray) -> np.ndarray:
         return np.rint(np.asarray(f_hz) / self.df).astype(np.int64)
@@ -324,7 +339,7 @@ class ToneAnalyzer:
         n_peaks = min(self.max_peaks, max(self.k_hi - self.k_lo + 1, 0))
         if n_frames == 0 or n_peaks == 0:
             z = np.zeros((n_frames, 0))
-            return ToneCandidates(z, z, z, z, z.astype(bool), z.astype(bool), z.astype(bool))
+            return ToneCandidates(z, z, z, z, z.astype(bool), z.astype(bool), self)
         p = psd[:, : self.used_bins]
         lo, hi = self.k_lo, self.k_hi + 1
         mid = p[:, lo:hi]
@@ -406,14 +421,14 @@ class ToneAnalyzer:
         if reference is None:
             valid &= ~np.any(valid[:, :, None] & stronger & inside, axis=1)
         else:  # anything stronger in the band, not only a candidate; and a loud tone's leakage
-            gap = np.abs(k[:, :, None] - k[:, None, :])
-            leak = p0[:, None, :] < p0[:, :, None] * hann_leakage(gap) * _LEAKAGE_MARGIN
+            leak = (
+                p0[:, None, :]
+                < p0[:, :, None] * self._leakage[np.abs(k[:, :, None] - k[:, None, :])]
+            )
             valid &= ~np.any(valid[:, :, None] & stronger & leak, axis=1)
             valid &= ~self._louder_in_band(p, k, p0, valid)
-        prominent = valid & ((tnr >= self.tnr_limit[rel]) | (pr >= self.pr_limit[rel]))
-        tonal = prominent.copy()
-        prominent = self.without_harmonics(freq, tone, prominent)
-        return ToneCandidates(freq, tone, tnr, pr, valid, prominent, tonal)
+        tonal = valid & ((tnr >= self.tnr_limit[rel]) | (pr >= self.pr_limit[rel]))
+        return ToneCandidates(freq, tone, tnr, pr, valid, tonal, self)
 
     def _louder_in_band(
         self, p: np.ndarray, k: np.ndarray, p0: np.ndarray, which: np.ndarray
