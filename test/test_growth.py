@@ -12,7 +12,7 @@ import pytest
 from leadscrew_ros.model.acoustics import detect
 from leadscrew_ros.model.acoustics.bench_sound import BenchSound, bench_microphone
 from leadscrew_ros.model.acoustics.envelope import ENVELOPE_RATE_HZ, squeak_envelope
-from leadscrew_ros.model.acoustics.growth import MIN_SNR_DB, onset_growth
+from leadscrew_ros.model.acoustics.growth import MIN_SNR_DB, hann_lowpass, onset_growth
 
 FS = 48000.0
 ON_S = 1.5  # sigma steps from -30 1/s to its value here and back at 3 s
@@ -129,3 +129,20 @@ def test_the_episode_fields_are_json_safe_and_live_says_not_measured():
     live = StreamingDetector(sample_rate_hz=FS)
     episodes = live.push(x.astype(np.float32), 0.0) + live.flush()
     assert episodes and all(e.as_dict()["growth_reason"] == "not measured" for e in episodes)
+
+
+@pytest.mark.parametrize(
+    "n, m, hop", [(82000, 4800, 96), (5000, 3, 7), (1000, 2000, 96), (500, 4, 1)]
+)
+def test_the_band_filter_is_the_hann_convolution_every_hop(n, m, hop):
+    """`hann_lowpass` (running sums) gives what an FFT convolution with the normalised Hann
+    window, centred, read every `hop` samples gives: windows longer than the signal too."""
+    from scipy import signal
+
+    rng = np.random.default_rng(n + m)
+    z = rng.normal(size=n) + 1j * rng.normal(size=n)
+    w = np.hanning(m)
+    ref = signal.fftconvolve(z, w / w.sum(), mode="same")[::hop]
+    got = hann_lowpass(z, m, hop)
+    assert got.shape == ref.shape
+    assert np.max(np.abs(got - ref)) <= 1e-12 * np.max(np.abs(ref))
