@@ -7,6 +7,7 @@ import pytest
 from leadscrew_ros.model.acoustics.tonality import (
     ToneAnalyzer,
     critical_band,
+    phasor,
     pr_limit_db,
     short_time_psd,
     tnr_limit_db,
@@ -40,6 +41,24 @@ def test_psd_keeps_the_mean_square():
     assert np.median(short_time_psd(s, FS, 4800, 480).sum(axis=1) * 10.0) == pytest.approx(
         0.125, rel=1e-3
     )
+
+
+def test_psd_of_the_analysed_bins_is_the_whole_psd_cut():
+    """`bins`: the first bins of the whole spectrum, the same values (the Nyquist bin's
+    halving only where it is kept)."""
+    x = np.random.default_rng(1).normal(0.0, 0.1, FS // 2).astype(np.float32)
+    whole = short_time_psd(x, FS, 4800, 480)
+    assert np.array_equal(short_time_psd(x, FS, 4800, 480, bins=1400), whole[:, :1400])
+    assert np.array_equal(short_time_psd(x, FS, 4800, 480, bins=9999), whole)
+
+
+def test_phasor_is_the_complex_exponential_within_float32_rounding():
+    """exp(-2 pi i cycles) over phases of thousands of cycles (a squeak's over seconds):
+    within 1e-6, as complex64."""
+    cycles = np.cumsum(np.full(96000, 2479.3 / FS)) + 0.123
+    got = phasor(cycles)
+    assert got.dtype == np.complex64
+    assert np.max(np.abs(got - np.exp(-2j * np.pi * cycles))) < 1e-6
 
 
 def _tone(f, snr_db, seed, n=FS):

@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -54,6 +55,7 @@ MAIN_SHARE = 0.7  # a pulse is the highest peak within 0.7 of the period
 REGULAR_FACTOR = 1.6  # consecutive intervals agree within this factor ...
 REGULAR_SHARE = 0.8  # ... in this share of the pairs (Poisson clicks: ~23 %; the level
 # fluctuations of a reverberant tone's 0.5 ms blocks reached 60 % on a realistic bench)
+SETTLE_S = 0.1  # the high-pass started from rest this long before the pulses it is read at
 RING_S = 0.02  # a pulse's ringing analysed over at most its first 20 ms
 RING_PROMINENCE_DB = 6.0  # a ringing frequency stands this far over its spectral neighbourhood
 RING_RANGE_DB = 20.0  # ... and within this of the strongest
@@ -212,7 +214,7 @@ def _creaks_in(
     if x.size < 2 * seg * block:
         return []
     hp = min(settings.creak_highpass_hz, 0.45 * fs)
-    sos = signal.butter(4, hp, btype="highpass", fs=fs, output="sos")
+    sos = _highpass(hp, fs)
     n_blocks = x.size // block
     energy = np.concatenate(
         [
@@ -291,6 +293,18 @@ def _period(at: np.ndarray, shortest: float, longest: float) -> float:
     return float(lags[np.argmax(share >= PERIOD_SHARE * share.max())])
 
 
+def _highpass(cutoff_hz: float, fs: float) -> np.ndarray:
+    """The creak's 4th-order Butterworth high-pass (second-order sections), designed once
+    per cut-off and rate (a copy: `sosfilt` wants a writable array)."""
+    return np.array(_butter_highpass(cutoff_hz, fs))
+
+
+@lru_cache(maxsize=8)
+def _butter_highpass(cutoff_hz: float, fs: float) -> tuple[tuple[float, ...], ...]:
+    sos = signal.butter(4, cutoff_hz, btype="highpass", fs=fs, output="sos")
+    return tuple(tuple(float(v) for v in row) for row in sos)
+
+
 def _highpassed(x: Samples, sos: np.ndarray, block: int) -> Iterator[tuple[int, np.ndarray]]:
     """`x` (non-finite samples as 0) through the filter `sos`, as (offset, piece) pieces of
     about `CHUNK_SAMPLES` (a multiple of `block`), the filter's state carried over: the same
@@ -298,9 +312,9 @@ def _highpassed(x: Samples, sos: np.ndarray, block: int) -> Iterator[tuple[int, 
     state = np.zeros((sos.shape[0], 2))
     step = max(CHUNK_SAMPLES // block, 1) * block
     for i in range(0, x.size, step):
-        piece = np.nan_to_num(
-            np.asarray(x[i : i + step], dtype=float), nan=0.0, posinf=0.0, neginf=0.0
-        )
+        piece = np.asarray(x[i : i + step], dtype=float)
+        if not np.isfinite(piece).all():
+            piece = np.where(np.isfinite(piece), piece, 0.0)
         y, state = signal.sosfilt(sos, piece, zi=state)
         yield i, y
 
@@ -318,7 +332,11 @@ def _ringing(
         return []
     segments = np.zeros((starts.size, n))
     end = int(starts.max()) + n
-    for i, y in _highpassed(span(x, 0, end), sos, 1):  # the pulses' pieces only are kept
+    # filtered from SETTLE_S before the first pulse, from rest: it has settled by then (the
+    # high-pass rings down within milliseconds), as if from the recording's start
+    first = max(int(starts.min()) - round(SETTLE_S * fs), 0)
+    for i0, y in _highpassed(span(x, first, end), sos, 1):  # the pulses' pieces only are kept
+        i = first + i0
         for k in np.flatnonzero((starts < i + y.size) & (starts + n > i)).tolist():
             a, b = max(int(starts[k]), i), min(int(starts[k]) + n, i + y.size)
             segments[k, a - int(starts[k]) : b - int(starts[k])] = y[a - i : b - i]

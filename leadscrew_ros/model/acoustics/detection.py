@@ -63,7 +63,7 @@ from .creak import Creak, find_creaks, sort_creaks
 from .growth import Growth, growth_fields, onset_growth
 from .samples import Samples, SampleTrack, span
 from .settings import DetectorSettings
-from .tonality import ToneAnalyzer, hann, hann_leakage, short_time_psd
+from .tonality import ToneAnalyzer, hann, hann_leakage, phasor, short_time_psd
 
 P_REF_PA = 20e-6  #: reference sound pressure of dB SPL
 #: Relative spacing of float32 numbers: the rounding of the samples the detector analyses.
@@ -923,10 +923,12 @@ class StreamingDetector:
             self._learn_tones(self.background, psd[learning], floor[learning])
         # per frame, its prominent candidates strongest first (ties: by column), as Python
         # floats: the tracks are followed frame by frame
+        n_found = np.count_nonzero(prominent, axis=1)
         order = np.argsort(np.where(prominent, -cand.power, np.inf), axis=1, kind="stable")
-        counts = np.count_nonzero(prominent, axis=1).tolist()
+        order = order[:, : int(n_found.max(initial=0))]
         fields = np.stack([cand.frequency_hz, cand.tnr_db, cand.pr_db, cand.power], axis=-1)
         ranked = np.take_along_axis(fields, order[..., None], axis=1).tolist()
+        counts = n_found.tolist()
         speeds = f1.tolist()
         for j in range(i1 - i0):
             if dropped[j]:
@@ -1570,9 +1572,7 @@ def _tone_basis(n: int, rate_hz: float, hz: np.ndarray) -> np.ndarray:
     conjugate phasor of each frequency [Hz]; a frame times a column is that frequency's DFT
     value."""
     k = np.arange(n) / rate_hz
-    return (hann(n)[:, None] * np.exp(-2j * np.pi * np.asarray(hz)[None, :] * k[:, None])).astype(
-        np.complex64
-    )
+    return hann(n)[:, None] * phasor(np.asarray(hz)[None, :] * k[:, None])
 
 
 def _tone_powers(
@@ -1862,10 +1862,8 @@ def _went_with_speed(
             kept.append(ep)
             continue
         frames = np.stack([samples[a : a + n] for a in first[use].tolist()]) * window
-        along = np.abs(
-            np.einsum("ij,ij->i", frames, np.exp(-2j * np.pi * path[use, None] * offsets))
-        )
-        stayed = np.abs(frames @ np.exp(-2j * np.pi * f0 * offsets))
+        along = np.abs(np.einsum("ij,ij->i", frames, phasor(path[use, None] * offsets)))
+        stayed = np.abs(frames @ phasor(f0 * offsets))
         along, stayed = np.median(along**2), np.median(stayed**2)
         if along >= 4.0 * stayed:
             ep.drive_ratio = r

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from .samples import Samples
+from .tonality import phasor
 
 HOP_S = 0.002  # P(t) every 2 ms: a fast onset (200 1/s, 17 dB in 10 ms) gets several points
 WINDOW_CYCLES = 60  # the band: a Hann window of 60 periods (+-3 %: a motor order 4 % away
@@ -166,8 +167,7 @@ def _measure(
         return Growth(None, None, None, None, "no usable sound around the onset")
     t = t0_s + (i0 + np.arange(seg.size)) / fs
     freq = np.interp(t, tt, f, left=f[0], right=f[-1])
-    phase = np.mod(2 * np.pi * np.cumsum(freq) / fs, 2 * np.pi)
-    z = seg * (np.cos(phase) - 1j * np.sin(phase))  # the squeak at 0 Hz
+    z = seg * phasor(np.cumsum(freq) / fs)  # the squeak at 0 Hz
     hop = max(1, round(HOP_S * fs))
     low = hann_lowpass(z, max(3, round(window * fs)), hop)
     p, tp = np.abs(low) ** 2, t[::hop]
@@ -241,7 +241,7 @@ def hann_lowpass(z: np.ndarray, m: int, hop: int) -> np.ndarray:
     a, b = np.clip(s, 0, n), np.clip(s + m, 0, n)
     theta = 2 * np.pi / (m - 1)
     period = np.exp(1j * theta * np.arange(m - 1))
-    turn, back = period[np.arange(n) % (m - 1)], period[np.mod(s, m - 1)].conj()
+    turn, back = np.tile(period, n // (m - 1) + 1)[:n], period[np.mod(s, m - 1)].conj()
     low = np.zeros(s.size, complex)
     c = np.zeros(n + 1, complex)
     for weight, rot in ((0.5, None), (-0.25, 1), (-0.25, -1)):

@@ -52,7 +52,7 @@ def _columns(selected: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     the most any row has (at least one): (columns, valid), both (rows, width)."""
     counts = np.count_nonzero(selected, axis=1)
     width = max(int(counts.max(initial=0)), 1)
-    f, c = np.nonzero(selected)
+    f, c = np.divmod(np.flatnonzero(selected), selected.shape[1])  # faster than a 2-D nonzero
     place = np.arange(f.size) - np.repeat(np.cumsum(counts) - counts, counts)
     columns = np.zeros((selected.shape[0], width), np.int64)
     valid = np.zeros((selected.shape[0], width), bool)
@@ -162,6 +162,26 @@ def upper_band(f_hz: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
     _, f1 = critical_band(f)
     f2 = np.where(f <= 1600.0, 149.5 + 1.035 * f + 7.7e-5 * f**2, 3.3 + 1.215 * f + 2.16e-5 * f**2)
     return f1, f2
+
+
+def phasor(cycles: np.ndarray) -> np.ndarray:
+    """exp(-2 pi i `cycles`), complex64: float32 sine and cosine (vectorised, several times
+    faster than a complex exponential) of the phase within its cycle, off by at most 4e-7
+    rad (1e-13, -130 dB, of a tone's power moved out of it).
+
+    Parameters
+    ----------
+    cycles : numpy.ndarray
+        Phase [cycles], any shape.
+
+    Returns
+    -------
+    numpy.ndarray
+        complex64, the shape of `cycles`.
+    """
+    c = np.asarray(cycles, dtype=np.float64)
+    phase = (2 * np.pi * (c - np.floor(c))).astype(np.float32)
+    return (np.cos(phase) - 1j * np.sin(phase)).astype(np.complex64)
 
 
 def hann(n: int) -> np.ndarray:
