@@ -229,7 +229,7 @@ def short_time_psd(
         return np.zeros((0, bins), np.float32)
     w = hann(frame_len) if window is None else np.asarray(window, np.float32)
     frames = np.lib.stride_tricks.sliding_window_view(x, frame_len)[::hop]
-    spec = scipy.fft.rfft(frames * w, axis=1, overwrite_x=True)[:, :bins]
+    spec = scipy.fft.rfft(frames * w, axis=1)[:, :bins]
     psd = spec.real**2 + spec.imag**2
     psd *= np.float32(2.0 / (sample_rate_hz * float(np.sum(w.astype(float) ** 2))))
     psd[:, 0] *= 0.5
