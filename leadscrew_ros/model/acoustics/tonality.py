@@ -229,8 +229,14 @@ def short_time_psd(
         return np.zeros((0, bins), np.float32)
     w = hann(frame_len) if window is None else np.asarray(window, np.float32)
     frames = np.lib.stride_tricks.sliding_window_view(x, frame_len)[::hop]
-    spec = scipy.fft.rfft(frames * w, axis=1)[:, :bins]
-    psd = spec.real**2 + spec.imag**2
+    psd = np.empty((frames.shape[0], bins), np.float32)
+    # by pieces of about a megabyte: the allocator reuses them, where a whole block's
+    # temporaries (megabytes each) were mapped afresh and page-faulted in, which cost more
+    # than their FFT
+    rows = max((1 << 20) // (4 * frame_len), 1)
+    for a in range(0, frames.shape[0], rows):
+        spec = scipy.fft.rfft(frames[a : a + rows] * w, axis=1)[:, :bins]
+        np.add(spec.real**2, spec.imag**2, out=psd[a : a + rows])
     psd *= np.float32(2.0 / (sample_rate_hz * float(np.sum(w.astype(float) ** 2))))
     psd[:, 0] *= 0.5
     if frame_len % 2 == 0 and bins == total:
