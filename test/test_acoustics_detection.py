@@ -634,6 +634,34 @@ def test_a_second_track_of_a_rejected_tone_is_that_tone():
     assert det.rejected[-1] is second and second.drive_ratio == 6.577
 
 
+def test_a_sweep_piece_teaches_its_ratio_for_the_held_fragments():
+    """A commutator at 57.3 x the screw's rotation (a bench of seed 2027): a 60-ms piece of it
+    while the speed ramps, whose sound went on along the speed (rejected by `_went_with_speed`),
+    and a 50-ms fragment of it at constant speed, too short and too steady to be seen moving.
+    The sweep's ratio is learned (`drive_orders`), so the fragment is drive noise too; a tone
+    at constant speed 5 % off that ratio is kept."""
+    from leadscrew_ros.model.acoustics.detection import Episode, _went_with_speed
+
+    r = 57.3
+    ts, vs = np.array([0.0, 2.0, 4.0]), np.array([20.0, 200.0, 200.0])
+    t = np.arange(4 * FS) / FS
+    x = SIGMA_ROOM * np.random.default_rng(5).standard_normal(t.size)
+    x += 0.02 * np.sin(r * np.cumsum(np.interp(t, ts, vs)) / FS)  # r |speed|, in rad/s
+
+    def piece(start, end, ratio=r):
+        tt = np.arange(start + 0.005, end, 0.01)
+        hz = ratio * np.interp(tt, ts, vs) / (2 * np.pi)
+        return Episode(start, end, float(np.median(hz)), 20.0, 20.0, -40.0, track_times_s=tt,
+                       track_hz=hz)  # fmt: skip
+
+    det = StreamingDetector(DetectorSettings(), FS)
+    sweep, held, other = piece(1.0, 1.06), piece(3.0, 3.05), piece(3.2, 3.25, 1.05 * r)
+    kept = _went_with_speed(det, [sweep, held, other], ts, vs, x.astype(np.float32), 0.0)
+    assert kept == [other]
+    assert [round(o.ratio, 1) for o in det.drive_orders] == [r]
+    assert held.drive_ratio == pytest.approx(r) and sweep.drive_ratio == pytest.approx(r, rel=0.01)
+
+
 def test_a_squeaks_harmonics_belong_to_its_episode():
     """A squeak at 700 Hz with its 2nd and 3rd harmonics, the 2nd louder than the fundamental
     from 0.9 s on (a frame then holds the harmonic stronger: not suppressed as one, it was a
