@@ -659,18 +659,17 @@ def test_traces_are_compact():
     assert len(trace) == 0 and trace.squeak_points().shape == (0, 3)
 
 
-def test_the_listening_page_shows_what_the_example_prints(tmp_path):
-    """doc/user/listening.md's worked example is tools/listening_example.py's output."""
+@pytest.mark.parametrize("example", ["listening_example", "listening_realistic"])
+def test_the_listening_page_shows_what_the_example_prints(example, tmp_path):
+    """doc/user/listening.md's worked examples are tools/listening_example.py's output (a
+    virtual-bench unit from three inputs) and tools/listening_realistic.py's (a realistic
+    bench unit heard by `listen`)."""
     import importlib.util
 
     root = Path(__file__).resolve().parents[1]
-    spec = importlib.util.spec_from_file_location(
-        "listening_example", root / "tools" / "listening_example.py"
-    )
+    spec = importlib.util.spec_from_file_location(example, root / "tools" / f"{example}.py")
     tool = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(tool)
     page = (root / "doc" / "user" / "listening.md").read_text(encoding="utf-8")
-    shown = page.split("% listening_example: begin\n", 1)[1].split("\n% listening_example: end", 1)[
-        0
-    ]
+    shown = page.split(f"% {example}: begin\n", 1)[1].split(f"\n% {example}: end", 1)[0]
     assert shown == tool.example(tmp_path)

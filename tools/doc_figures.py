@@ -20,7 +20,8 @@
    then `leadscrew-squeak calibrate BENCH --out DIR --workers 1` -> calibration.png.
 
 The PNGs are written smaller (palette PNG, at most `MAX_BYTES` each) so that they can live in
-git. doc/images/transient.png comes from tools/transient_table.py --plot (about 5 min).
+git. doc/images/transient.png comes from tools/transient_table.py --plot (about 5 min),
+doc/images/listening_realistic.png from tools/listening_realistic.py --image.
 """
 
 from __future__ import annotations
