@@ -4,9 +4,8 @@
 A fan, mains hum and its harmonics, a neighbouring machine: whatever is prominent while the
 drive is at rest is not squeak. `BackgroundLearner` collects the prominent tone candidates of
 the detector's frames taken at rest (|speed| below `DetectorSettings.motor_off_rad_s` for at
-least `motor_off_min_s`; half a frame apart, `StreamingDetector.learn_stride`), groups them
-by frequency (within `DetectorSettings.track_tolerance` or one and a half bins, whichever is
-wider) and keeps, per tone, how many rest frames held it
+least `motor_off_min_s`), groups them by frequency (within `DetectorSettings.track_tolerance`
+or one and a half bins, whichever is wider) and keeps, per tone, how many rest frames held it
 and its mean level. A tone held by at least `background_share` of the rest frames is a
 background tone (`tones`). A track of the detector is background (`match`) when its median
 frequency is within that tolerance of a background tone and its mean level is not more than

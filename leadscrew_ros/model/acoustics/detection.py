@@ -556,9 +556,6 @@ class StreamingDetector:
             self._level_offset_db,
         )
         self._rest_frames = 0  # consecutive frames at rest
-        #: the frames at rest are learned as background as they come (live); `detect` learns
-        #: every motor-off stretch before its main pass instead
-        self.learns_at_rest = True
         # every frame so far at a known speed under motor_off_rad_s: nothing has slid, so
         # nothing heard can be squeak (live, the rest's sound is not learned as background
         # before `motor_off_min_s` of it; offline it is, first)
@@ -602,9 +599,6 @@ class StreamingDetector:
             + self.frame_len
         )
         self._window = hann(self.frame_len)
-        # Rest frames learned as background half a frame apart: Hann frames overlapping by
-        # half are nearly independent (Welch's choice), the frames between add only cost
-        self.learn_stride = max(self.frame_len // (2 * self.hop), 1)
         self._new_segment(None)
 
     def _new_segment(self, t0_s: float | None) -> None:
@@ -909,14 +903,10 @@ class StreamingDetector:
         self._never_moved = self._never_moved and bool(rest.all())
         closed: list[Episode] = []
         learning: list[int] = []
-        stride = self.learn_stride
         for j in range(i1 - i0):
             self._rest_frames = self._rest_frames + 1 if rest[j] and not dropped[j] else 0
             if (
-                self._rest_frames >= rest_run
-                and not silent[j]  # no sound is no background
-                and (i0 + j) % stride == 0
-                and self.learns_at_rest
+                self._rest_frames >= rest_run and not silent[j]  # no sound is no background
             ):
                 learning.append(j)
         if learning:
@@ -1278,7 +1268,6 @@ def detect(
     if speed_times_s is not None and speed_rad_s is not None:
         frames = det.background.frames
         _learn_at_rest(det, samples, t0_s, speed_times_s, speed_rad_s)
-        det.learns_at_rest = False
         if source == "none" and det.background.frames > frames:
             source = "motor-off"
     if (
@@ -2034,19 +2023,18 @@ def _learn_spans(
 ) -> None:
     """The frames of the spans (start, end) [s] of the track `x` (first sample at `t0`) into
     `learner`, as `det` learns rest frames (each span is known to rest long enough): every
-    `learn_stride`-th frame from the span's start, its tones and its spectrum, unless it holds
-    a non-finite sample or no usable sound; spans shorter than a frame are skipped."""
+    frame from the span's start, its tones and its spectrum, unless it holds a non-finite
+    sample or no usable sound; spans shorter than a frame are skipped."""
     rate, n = det.sample_rate_hz, det.frame_len
-    hop = det.hop * det.learn_stride
+    hop = det.hop
     if det.analyzer.empty:
         return
     for start, end in spans:
         i, j = max(int(math.ceil((start - t0) * rate)), 0), min(int((end - t0) * rate), x.size)
         frames = (j - i - n) // hop + 1 if j - i >= n else 0
         step = format_step(span(x, i, j)) or 0.0
-        per = max(_BLOCK_FRAMES // det.learn_stride, 1)  # a block's samples, as the main pass
-        for a in range(0, frames, per):
-            m = min(per, frames - a)
+        for a in range(0, frames, _BLOCK_FRAMES):
+            m = min(_BLOCK_FRAMES, frames - a)
             seg = np.asarray(x[i + a * hop : i + (a + m - 1) * hop + n], dtype=np.float32)
             bad = ~np.isfinite(seg)
             if bad.any():
