@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -63,7 +64,7 @@ from .creak import Creak, find_creaks, sort_creaks
 from .growth import Growth, growth_fields, onset_growth
 from .samples import Samples, SampleTrack, span
 from .settings import DetectorSettings
-from .tonality import ToneAnalyzer, hann, hann_leakage, phasor, short_time_psd
+from .tonality import ToneAnalyzer, ToneCandidates, hann, hann_leakage, phasor, short_time_psd
 
 P_REF_PA = 20e-6  #: reference sound pressure of dB SPL
 #: Relative spacing of float32 numbers: the rounding of the samples the detector analyses.
@@ -905,12 +906,15 @@ class StreamingDetector:
         learning: list[int] = []
         for j in range(i1 - i0):
             self._rest_frames = self._rest_frames + 1 if rest[j] and not dropped[j] else 0
-            if (
-                self._rest_frames >= rest_run and not silent[j]  # no sound is no background
-            ):
+            if self._rest_frames >= rest_run and not silent[j]:  # no sound is no background
                 learning.append(j)
         if learning:
-            self._learn_tones(self.background, psd[learning], floor[learning])
+            # the background's tones are all ECMA-418-1's, not only those over the gate
+            if gated:
+                quiet = self.analyzer.candidates(psd[learning], floor=floor[learning])
+                _learn_tones(self.background, quiet, range(len(learning)))
+            else:
+                _learn_tones(self.background, cand, learning)
         # per frame, its prominent candidates strongest first (ties: by column), as Python
         # floats: the tracks are followed frame by frame
         n_found = np.count_nonzero(prominent, axis=1)
@@ -957,14 +961,6 @@ class StreamingDetector:
             dropped = np.zeros(frames, bool)
         silent = ~dropped & (variance <= SILENT_FACTOR * rounding)
         return psd, TONE_FLOOR_FACTOR * rounding, dropped, silent
-
-    def _learn_tones(self, learner: BackgroundLearner, psd: np.ndarray, floor: np.ndarray) -> None:
-        """Rest frames' tones into `learner`: all of ECMA-418-1's, not only those over the
-        gate (`psd`: their spectra; `floor`: their tone floors)."""
-        quiet = self.analyzer.candidates(psd, floor=floor)
-        for row in range(psd.shape[0]):
-            tones = np.flatnonzero(quiet.tonal[row])
-            learner.add(quiet.frequency_hz[row, tones], quiet.power[row, tones])
 
     def _gate(self) -> np.ndarray:
         """Per analysed bin, the power a peak's three bins must reach to be a candidate: the
@@ -2025,8 +2021,7 @@ def _learn_spans(
     `learner`, as `det` learns rest frames (each span is known to rest long enough): every
     frame from the span's start, its tones and its spectrum, unless it holds a non-finite
     sample or no usable sound; spans shorter than a frame are skipped."""
-    rate, n = det.sample_rate_hz, det.frame_len
-    hop = det.hop
+    rate, n, hop = det.sample_rate_hz, det.frame_len, det.hop
     if det.analyzer.empty:
         return
     for start, end in spans:
@@ -2041,8 +2036,17 @@ def _learn_spans(
                 seg = np.where(bad, np.float32(0.0), seg)
             psd, floor, dropped, silent = det._spectra(seg, bad, hop, m, step)
             keep = ~(dropped | silent)
-            det._learn_tones(learner, psd[keep], floor[keep])
+            quiet = det.analyzer.candidates(psd[keep], floor=floor[keep])
+            _learn_tones(learner, quiet, range(int(keep.sum())))
             learner.add_spectrum(psd[keep, : det.analyzer.used_bins])
+
+
+def _learn_tones(learner: BackgroundLearner, quiet: ToneCandidates, rows: Iterable[int]) -> None:
+    """The ECMA-418-1 tones (`ToneCandidates.tonal`) of the rows `rows` of `quiet`, rest
+    frames' candidates without a gate, into `learner`, a frame each."""
+    for row in rows:
+        tones = np.flatnonzero(quiet.tonal[row])
+        learner.add(quiet.frequency_hz[row, tones], quiet.power[row, tones])
 
 
 def _learn_recording(det: StreamingDetector, samples: Any, rate_hz: float | None) -> bool:
