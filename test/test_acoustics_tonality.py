@@ -175,3 +175,28 @@ def test_a_gate_measures_its_peaks_as_without_one():
             assert gated.tnr_db[j, k] == pytest.approx(ungated.tnr_db[j, i], abs=1e-9)
             assert gated.pr_db[j, k] == pytest.approx(ungated.pr_db[j, i], abs=1e-9)
             assert gated.tonal[j, k] and gated.prominent[j, k] == ungated.prominent[j, i]
+
+
+def test_a_block_ranks_as_many_peaks_as_its_most_tonal_frame_needs():
+    """Without a gate every frame of a block keeps as many columns as its most tonal frame
+    needs (ranked by pieces of frames, a piece ranked with fewer is ranked again): twelve
+    tones in the last frames are all found, and the first frames, a piece away, keep the
+    tonal candidates they have alone."""
+    rng = np.random.default_rng(3)
+    t = np.arange(2 * FS) / FS
+    x = rng.normal(0.0, 0.01, t.size)
+    series = 300.0 * 1.35 ** np.arange(12)  # 300 Hz .. 8.1 kHz, over a critical band apart
+    late = t >= 1.2
+    for k, f in enumerate(series):
+        x += (1.0 if k % 5 == 0 else late) * 0.05 * np.sin(2 * np.pi * f * t)
+    psd = short_time_psd(x.astype(np.float32), FS, 4800, 480)
+    an = ToneAnalyzer(FS, 4800, 89.1, 11200.0, 8)
+    whole = an.candidates(psd)
+    assert whole.frequency_hz.shape[1] >= 12
+    assert np.all(np.count_nonzero(whole.tonal[-20:], axis=1) == 12)
+    alone = an.candidates(psd[:40])
+    assert alone.frequency_hz.shape[1] < whole.frequency_hz.shape[1]
+    for j in range(40):
+        assert sorted(whole.frequency_hz[j, whole.tonal[j]]) == sorted(
+            alone.frequency_hz[j, alone.tonal[j]]
+        )

@@ -90,8 +90,8 @@ class BackgroundLearner:
         self._spectrum: np.ndarray | None = None  # sum of the rest frames' PSD
         self._spectra = 0  # rest frames summed into it
         # per group: [sum of frequencies, frames holding it, sum of levels (dB), sum of their
-        # squares]
-        self._groups = np.zeros((0, 4))
+        # squares]; Python floats: a rest frame holds a tone or two, a few groups in all
+        self._groups: list[list[float]] = []
         self._tones: list[BackgroundTone] | None = None  # `tones`, until the next frame
         # `band_power`'s tables until the next frame: (cumulative power of the floor at the
         # bin edges, learned tones' frequencies, their powers)
@@ -113,18 +113,28 @@ class BackgroundLearner:
         """
         self.frames += 1
         g = self._groups
-        for f, p in zip(np.asarray(frequency_hz, float), np.asarray(power, float), strict=True):
+        floor_hz = 1.5 * self.bin_hz  # `_width_hz`, in floats
+        freq, powers = np.asarray(frequency_hz, float).tolist(), np.asarray(power, float).tolist()
+        for f, p in zip(freq, powers, strict=True):
             level = 10.0 * math.log10(max(p, _TINY)) + self.level_offset_db
-            centre = g[:, 0] / g[:, 1] if g.size else np.zeros(0)
-            near = np.abs(centre - f) <= self._width_hz(f)
-            if near.any():
-                k = int(np.argmin(np.where(near, np.abs(centre - f), np.inf)))
-                g[k] += (f, 1.0, level, level * level)
+            width = max(self.tolerance * f, floor_hz)
+            best, k = math.inf, -1  # the nearest group within the width (ties: the first)
+            for i, (s, n, _, _) in enumerate(g):
+                d = abs(s / n - f)
+                if d <= width and d < best:
+                    best, k = d, i
+            if k >= 0:
+                row = g[k]
+                row[0] += f
+                row[1] += 1.0
+                row[2] += level
+                row[3] += level * level
             else:
-                g = np.vstack([g, [f, 1.0, level, level * level]])
-        if g.shape[0] > _MAX_TONES:
-            g = g[np.argsort(-g[:, 1], kind="stable")[:_MAX_TONES]]
-        self._groups, self._tones, self._bands = g, None, None
+                g.append([f, 1.0, level, level * level])
+        if len(g) > _MAX_TONES:
+            g.sort(key=lambda row: -row[1])  # stable: the rarest go, the first of a tie stays
+            del g[_MAX_TONES:]
+        self._tones, self._bands = None, None
 
     def add_spectrum(self, psd: np.ndarray) -> None:
         """Rest frames' power spectral densities (frames, bins) [unit^2/Hz], bins `bin_hz`
@@ -212,13 +222,12 @@ class BackgroundLearner:
         """
         if not self.frames:
             return []
-        g = self._groups
-        held = g[:, 1] >= (self.share if share is None else share) * self.frames
+        least = (self.share if share is None else share) * self.frames
         out = []
-        for s, n, lv, lv2 in g[held]:
+        for s, n, lv, lv2 in (row for row in self._groups if row[1] >= least):
             mean = lv / n
             sd = math.sqrt(max(lv2 / n - mean * mean, 0.0))
-            out.append(BackgroundTone(float(s / n), float(mean), float(n / self.frames), sd))
+            out.append(BackgroundTone(s / n, mean, n / self.frames, sd))
         return sorted(out, key=lambda t: t.frequency_hz)
 
     def include(self, tones: list[BackgroundTone]) -> None:

@@ -55,6 +55,7 @@ import math
 from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
+from itertools import compress
 from typing import Any
 
 import numpy as np
@@ -2044,9 +2045,14 @@ def _learn_spans(
 def _learn_tones(learner: BackgroundLearner, quiet: ToneCandidates, rows: Iterable[int]) -> None:
     """The ECMA-418-1 tones (`ToneCandidates.tonal`) of the rows `rows` of `quiet`, rest
     frames' candidates without a gate, into `learner`, a frame each."""
-    for row in rows:
-        tones = np.flatnonzero(quiet.tonal[row])
-        learner.add(quiet.frequency_hz[row, tones], quiet.power[row, tones])
+    at = list(rows)
+    for freq, power, tonal in zip(
+        quiet.frequency_hz[at].tolist(),
+        quiet.power[at].tolist(),
+        quiet.tonal[at].tolist(),
+        strict=True,
+    ):
+        learner.add(list(compress(freq, tonal)), list(compress(power, tonal)))
 
 
 def _learn_recording(det: StreamingDetector, samples: Any, rate_hz: float | None) -> bool:
