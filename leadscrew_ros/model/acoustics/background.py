@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 _MAX_TONES = 256  # tone groups kept (the rarest are dropped first): bounded memory
 _TINY = 1e-300
@@ -101,14 +102,14 @@ class BackgroundLearner:
     def _width_hz(self, f: np.ndarray | float) -> np.ndarray:
         return np.maximum(self.tolerance * np.asarray(f, dtype=float), 1.5 * self.bin_hz)
 
-    def add(self, frequency_hz: np.ndarray, power: np.ndarray) -> None:
+    def add(self, frequency_hz: ArrayLike, power: ArrayLike) -> None:
         """One rest frame's prominent tone candidates.
 
         Parameters
         ----------
-        frequency_hz : numpy.ndarray
+        frequency_hz : array_like
             Their frequencies [Hz].
-        power : numpy.ndarray
+        power : array_like
             Their mean squares (full scale^2).
         """
         self.frames += 1

@@ -477,7 +477,8 @@ class ToneAnalyzer:
         cum = np.zeros((p.shape[0], self.used_bins + 1))
         np.cumsum(p, axis=1, dtype=np.float64, out=cum[:, 1:])
         cum *= self.df
-        band = cum.take(self.b, axis=1) - cum.take(self.a, axis=1)  # (`take`: 5x faster)
+        # `take`, not fancy indexing, for the band edges: the same values, a fraction of the time
+        band = cum.take(self.b, axis=1) - cum.take(self.a, axis=1)
         density = np.maximum(band - tone3, _TINY) / self._noise_hz
         score = np.where(peak, tone3 / (density * self._rank_scale), 0.0)
         n_peaks = max(n_peaks, int(np.count_nonzero(score >= _NEAR_LIMIT, axis=1).max()))
