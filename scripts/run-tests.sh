@@ -28,9 +28,11 @@ fi
 # (branches, child processes too: .coveragerc) are in the output; then the coverage per layer
 # (tools/coverage_by_layer.py).
 rm -f .coverage .coverage.*
-# 1800 s: the suite takes ~14 min on a 2-core machine with the other core busy, and CI's
-# machines were seen 1.7x slower (doc/development/testing.md).
-export SESSION_DEADLINE_S="${SESSION_DEADLINE_S:-1800}"
+# 2700 s: the suite took 27-30 min on a slow 2-core machine (CI: 1630 s for all of .ci/run;
+# here 30:23 with the other core busy, which ran out the 1800 s it had: 44 tests never ran);
+# with the install, docs and benchmarks .ci/run stays well within CI's 90 minutes
+# (doc/development/testing.md).
+export SESSION_DEADLINE_S="${SESSION_DEADLINE_S:-2700}"
 FAILURES_FILE="$ROS_LOG_DIR/failures.txt"
 export FAILURES_FILE
 status=0
