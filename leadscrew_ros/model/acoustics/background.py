@@ -87,6 +87,7 @@ class BackgroundLearner:
     ) -> None:
         self.bin_hz, self.tolerance = bin_hz, tolerance
         self.share, self.margin_db, self.level_offset_db = share, margin_db, level_offset_db
+        self._narrowest_hz = 1.5 * bin_hz  # a group is at least one and a half bins wide
         self.frames = 0  #: rest frames seen
         self._spectrum: np.ndarray | None = None  # sum of the rest frames' PSD
         self._spectra = 0  # rest frames summed into it
@@ -100,7 +101,7 @@ class BackgroundLearner:
         self._given: list[BackgroundTone] = []  # `include`
 
     def _width_hz(self, f: np.ndarray | float) -> np.ndarray:
-        return np.maximum(self.tolerance * np.asarray(f, dtype=float), 1.5 * self.bin_hz)
+        return np.maximum(self.tolerance * np.asarray(f, dtype=float), self._narrowest_hz)
 
     def add(self, frequency_hz: ArrayLike, power: ArrayLike) -> None:
         """One rest frame's prominent tone candidates.
@@ -114,11 +115,10 @@ class BackgroundLearner:
         """
         self.frames += 1
         g = self._groups
-        floor_hz = 1.5 * self.bin_hz  # `_width_hz`, in floats
         freq, powers = np.asarray(frequency_hz, float).tolist(), np.asarray(power, float).tolist()
         for f, p in zip(freq, powers, strict=True):
             level = 10.0 * math.log10(max(p, _TINY)) + self.level_offset_db
-            width = max(self.tolerance * f, floor_hz)
+            width = max(self.tolerance * f, self._narrowest_hz)  # `_width_hz` of a float
             best, k = math.inf, -1  # the nearest group within the width (ties: the first)
             for i, (s, n, _, _) in enumerate(g):
                 d = abs(s / n - f)
