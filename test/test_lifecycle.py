@@ -174,6 +174,24 @@ def test_shutdown_from_unconfigured_and_inactive(ros, transition):
     assert entities(node) == unconfigured
 
 
+def test_a_timer_expiry_taken_before_shutdown_does_nothing_after_it(ros, tmp_path):
+    """The executor may take a timer's expiry in the same wait as the shutdown request and
+    run it after the transition destroyed the publishers (seen under load: the housekeeping
+    published /diagnostics on a destroyed publisher, and the timer callback raised). The
+    callbacks taken before, run after the shutdown, do nothing and raise nothing."""
+    from rclpy.timer import Timer
+
+    node = ros.start(False, **recording_params(tmp_path))
+    lc = lifecycle(ros)
+    assert lc.change("configure") and lc.change("activate")
+    at(ros, SQUEAK)
+    taken = [e.callback for e in node._owned if isinstance(e, Timer)]
+    assert len(taken) == 2  # the housekeeping and the rate limit
+    assert lc.change("shutdown")
+    for callback in taken:
+        callback()
+
+
 @pytest.mark.parametrize("state", ["unconfigured", "inactive", "active", "finalized"])
 def test_destroy_node_from_any_state_leaves_a_complete_recording(ros, tmp_path, state):
     node = ros.start(False, **recording_params(tmp_path))

@@ -185,9 +185,7 @@ class SqueakGuardNode(ManagedNode):
     def activate(self) -> None:
         """Start publishing (the guarded command, guard/active, guard/reason, /diagnostics)."""
         self._shown = self._verdict = None  # republish the state
-        self._timer = self.own(
-            self.create_timer(HOUSEKEEPING_PERIOD_S, self._housekeeping, clock=self._steady)
-        )
+        self._timer = self.own_timer(HOUSEKEEPING_PERIOD_S, self._housekeeping, clock=self._steady)
         self._diagnose(periodic=False)
 
     def deactivate(self) -> None:

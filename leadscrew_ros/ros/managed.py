@@ -130,6 +130,19 @@ class ManagedNode(LifecycleNode):
         self._owned.append(entity)
         return entity
 
+    def own_timer(self, period_s: float, callback: Callable[[], None], **kwargs: Any) -> Timer:
+        """A timer (`own`) whose callback does nothing once `destroy_owned` destroyed it: the
+        executor may have taken an expiry in the same wait as the transition (shutdown,
+        cleanup, deactivate) that destroys it, and run it after (it then published on a
+        destroyed publisher). `kwargs` go to `create_timer`."""
+
+        def tick() -> None:
+            if any(e is timer for e in self._owned):
+                callback()
+
+        timer = self.own(self.create_timer(period_s, tick, **kwargs))
+        return timer
+
     def destroy_owned(self, entity: object | None = None) -> None:
         """Destroy `entity` (one made by `own`), or all of them, newest first."""
         for e in [entity] if entity is not None else self._owned[::-1]:

@@ -406,8 +406,8 @@ class SqueakPredictorNode(ManagedNode):
 
         # Housekeeping (staleness, bad-input verdict, periodic diagnostics) at a fixed slow
         # rate; the rate-limit timer runs only while an input waits for the rate limit.
-        self.own(self.create_timer(HOUSEKEEPING_PERIOD_S, self._housekeeping, clock=self._steady))
-        self._rate_timer = self.own(self._create_rate_timer())
+        self.own_timer(HOUSEKEEPING_PERIOD_S, self._housekeeping, clock=self._steady)
+        self._rate_timer = self._create_rate_timer()
         self.own(self.create_service(SetBool, f"~/{RECORD_SERVICE}", self._on_record_service))
         if self._crash_recovery.bags and auto_recover:
             self._crash_recovery.start()
@@ -530,7 +530,7 @@ class SqueakPredictorNode(ManagedNode):
             self.live.set_model(model, self._live_settings({}))
             if "max_rate_hz" in names:
                 self.destroy_owned(self._rate_timer)
-                self._rate_timer = self.own(self._create_rate_timer())
+                self._rate_timer = self._create_rate_timer()
             if self.active:  # else at activation
                 self._recompute(time.monotonic())
         if names & names_of(JointSettings):
@@ -551,7 +551,7 @@ class SqueakPredictorNode(ManagedNode):
             self._set_recording(self.get_parameter("record.enabled").value)
 
     def _create_rate_timer(self):
-        timer = self.create_timer(
+        timer = self.own_timer(
             1.0 / self.live.settings.max_rate_hz, self._on_rate_timer, clock=self._steady
         )
         timer.cancel()
