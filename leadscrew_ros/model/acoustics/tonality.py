@@ -182,8 +182,18 @@ def phasor(cycles: np.ndarray) -> np.ndarray:
         complex64, the shape of `cycles`.
     """
     c = np.asarray(cycles, dtype=np.float64)
-    phase = (2 * np.pi * (c - np.floor(c))).astype(np.float32)
-    return (np.cos(phase) - 1j * np.sin(phase)).astype(np.complex64)
+    # in place, into the result's own halves: each temporary of a long segment is a fresh
+    # mapping page-faulted in, which cost more than the arithmetic
+    frac = np.empty_like(c)
+    np.floor(c, out=frac)
+    np.subtract(c, frac, out=frac)
+    frac *= 2 * np.pi
+    phase = frac.astype(np.float32)
+    out = np.empty(phase.shape, np.complex64)
+    np.cos(phase, out=out.real)
+    np.sin(phase, out=out.imag)
+    np.negative(out.imag, out=out.imag)
+    return out
 
 
 def hann(n: int) -> np.ndarray:
