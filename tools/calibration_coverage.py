@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from calibration_example import BENCH, CALIBRATE, widths  # tools/: the doc's example
+from leadscrew_ros.bag.virtual_bench import run
 from leadscrew_ros.cli import main as cli
 
 NAMES = ("friction_drop", "mu_static", "mu_kinetic", "friction_decay_s_m", "modal_damping")
@@ -146,8 +147,6 @@ def seeds(root: Path, chosen: list[int]) -> str:
     """`seed_table` of the example's bench, made in `root` unless it is there already."""
     bench = root / "example"
     if not (bench / "truth.json").exists():
-        from leadscrew_ros.bag.virtual_bench import run
-
         run(BENCH, bench)
     runs = []
     for seed in chosen:
